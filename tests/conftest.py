@@ -1,0 +1,39 @@
+"""Shared test fixtures: running the real command line, writing scenario files."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture
+def run_cli(tmp_path):
+    """Run `python -m vibroflow.cli ARGS...` in a fresh folder (tmp_path/"cwd" by default);
+    returns the CompletedProcess (text stdout/stderr, never raises on a non-zero exit)."""
+    cwd = tmp_path / "cwd"
+    cwd.mkdir(exist_ok=True)
+
+    def run(*args: str, cwd: Path = cwd, timeout: float = 300) -> subprocess.CompletedProcess:
+        env = dict(os.environ, NO_COLOR="1", COLUMNS="200", PYTHONDONTWRITEBYTECODE="1")
+        return subprocess.run([sys.executable, "-m", "vibroflow.cli", *map(str, args)],
+                              cwd=cwd, env=env, capture_output=True, text=True,
+                              timeout=timeout, stdin=subprocess.DEVNULL)
+
+    return run
+
+
+@pytest.fixture
+def write_toml(tmp_path):
+    """Write TOML text to tmp_path/NAME and return the path."""
+
+    def write(text: str, name: str = "scenario.toml") -> Path:
+        path = tmp_path / name
+        path.write_text(text, encoding="utf-8")
+        return path
+
+    return write

@@ -1,0 +1,487 @@
+"""Tests of vibroflow.analysis against known answers (tub47.md "What is measured").
+
+The lab-frame data are built here from the tub47 definition of the tub's motion (a tub point p
+sits at P + Rot(theta)(p - P) + (X, Z)), written out independently of vibroflow.tub.motion, so
+the analysis's use of the shared kinematics is checked, not just repeated.
+"""
+from __future__ import annotations
+
+import json
+import math
+import xml.etree.ElementTree as ET
+
+import h5py
+import numpy as np
+import pytest
+
+from vibroflow.analysis import (CellTable, batch_means, batches_of_whole_cycles, cell_table,
+                                circulation, field_difference, fields_agree, impact_stats,
+                                probe_values, read_csv, strengths_agree, stream_function,
+                                tub_summary, wall_contact_stats, write_csv)
+from vibroflow.analysis import vtk
+from vibroflow.analysis.contacts import mean_by_region
+from vibroflow.scenario.model import Scenario
+from vibroflow.tub.geometry import TubGeometry, cross_section_area, distance_to_wall_np
+from vibroflow.tub.motion import TubMotion, pose_np
+
+PIVOT = (0.0, -0.10)
+
+
+# ----------------------------------------------------------------------------------------------
+# helpers: tub-frame state -> lab frame, from tub47.md "Tub motion"
+
+def to_lab(p_tub, v_rel_tub, pose, pivot=PIVOT):
+    """Lab position and velocity of balls at tub-frame positions p_tub (N, 3) moving with
+    velocity v_rel_tub (N, 3) relative to the tub (tub axes), tub pose (X, Z, th, Xd, Zd, thd)."""
+    X, Z, th, Xd, Zd, thd = pose
+    c, s = math.cos(th), math.sin(th)
+    rx, rz = p_tub[:, 0] - pivot[0], p_tub[:, 2] - pivot[1]
+    # r = Rot(theta)(p - P) in lab axes
+    Rx, Rz = c * rx - s * rz, s * rx + c * rz
+    lab = p_tub.copy()
+    lab[:, 0] = pivot[0] + Rx + X
+    lab[:, 2] = pivot[1] + Rz + Z
+    # d/dt of the above: (Xd, Zd) + thd (-Rz, Rx) + Rot(theta) v_rel
+    v = v_rel_tub.copy()
+    v[:, 0] = Xd - thd * Rz + c * v_rel_tub[:, 0] - s * v_rel_tub[:, 2]
+    v[:, 2] = Zd + thd * Rx + s * v_rel_tub[:, 0] + c * v_rel_tub[:, 2]
+    return lab, v
+
+
+def rotation_velocity(p, omega, centre):
+    """Solid-body rotation in x-z, counterclockwise for omega > 0: v = omega (-(z-zc), x-xc)."""
+    v = np.zeros_like(p)
+    v[:, 0] = -omega * (p[:, 2] - centre[1])
+    v[:, 2] = omega * (p[:, 0] - centre[0])
+    return v
+
+
+def disc_lattice(centre, radius, spacing, y):
+    """Square lattice of points (x, y, z) inside a disc in x-z, symmetric about the centre."""
+    n = int(radius / spacing) + 1
+    g = (np.arange(-n, n + 1) + 0.5) * spacing
+    gx, gz = np.meshgrid(g, g, indexing="ij")
+    inside = gx**2 + gz**2 <= radius**2
+    p = np.zeros((inside.sum(), 3))
+    p[:, 0] = gx[inside] + centre[0]
+    p[:, 1] = y
+    p[:, 2] = gz[inside] + centre[1]
+    return p
+
+
+def table_from_cells(x, z, phi, vx, vz, h):
+    return CellTable(x=np.asarray(x, float), z=np.asarray(z, float),
+                     solid_fraction=np.asarray(phi, float), vx=np.asarray(vx, float),
+                     vz=np.asarray(vz, float), samples=np.ones(np.size(x), np.int64),
+                     cell_size=h)
+
+
+# ----------------------------------------------------------------------------------------------
+# stats
+
+def test_batches_of_whole_cycles_tub47_window():
+    f, p = 47.0, 8
+    t_start, t_end = 1.0, 3.0  # tub47: last 2.0 s of 3.0 s = 94 cycles
+    # snapshots j/(p f) from t_start, including one exactly at t_end and a few before the window
+    j = np.arange(-5, 94 * p + 1)
+    t = t_start + j / (p * f)
+    b = batches_of_whole_cycles(t, t_start, t_end, f, 4)
+    assert np.all(b[j < 0] == -1)
+    assert b[-1] == -1  # t_end is phase 0 of the next cycle
+    counts = np.bincount(b[b >= 0])
+    assert counts.tolist() == [24 * p, 23 * p, 24 * p, 23 * p]
+    # every batch is whole cycles: each phase appears equally often within a batch
+    phase = (j % p)[b >= 0]
+    for k in range(4):
+        assert np.all(np.bincount(phase[b[b >= 0] == k]) == counts[k] // p)
+    # a window that is not a whole number of cycles drops the incomplete trailing cycle
+    b2 = batches_of_whole_cycles(t, t_start, t_start + 10.5 / f, f, 2)
+    assert (b2 >= 0).sum() == 10 * p
+
+
+def test_batch_means_iid_normal_stderr_is_sigma_over_sqrt_n():
+    rng = np.random.default_rng(7)
+    sigma, S, nb, R = 2.0, 2000, 20, 400
+    values = rng.normal(5.0, sigma, size=(S, R))  # R independent experiments side by side
+    batch = np.repeat(np.arange(nb), S // nb)
+    mean, se = batch_means(values, batch, nb)
+    expected = sigma / math.sqrt(S)
+    # the average estimated variance of the mean matches sigma^2/S within its sampling scatter
+    assert np.sqrt(np.mean(se**2)) == pytest.approx(expected, rel=0.05)
+    # and it is the actual scatter of the means across experiments
+    assert np.std(mean - 5.0) == pytest.approx(expected, rel=0.1)
+    # the grand mean is the plain sample mean
+    assert np.allclose(mean, values.mean(axis=0))
+    # scalar values
+    m1, s1 = batch_means(values[:, 0], batch, nb)
+    assert m1 == pytest.approx(values[:, 0].mean()) and s1 == pytest.approx(se[0])
+
+
+# ----------------------------------------------------------------------------------------------
+# bulk: kinematics and solid fraction
+
+@pytest.mark.parametrize("theta", [0.0, 0.3])
+def test_relative_velocity_of_solid_body_rotation_in_moving_tub(theta):
+    """Balls rotating rigidly in the tub frame, tub translating and turning: the cell velocity
+    is exactly the rotation's velocity at the cell centre (tub velocity subtracted, tub axes)."""
+    h, L = 0.015, 0.0635
+    geo = TubGeometry(length=L)
+    centre = (0.0, 0.15)
+    omega = 3.0
+    # one ball per cell, at the cell centre, in the tub frame
+    ii, kk = np.meshgrid(np.arange(-6, 7), np.arange(4, 17), indexing="ij")
+    p = np.column_stack([ii.ravel() * h, np.full(ii.size, 0.3 * L), kk.ravel() * h])
+    v_rel = rotation_velocity(p, omega, centre)
+    rng = np.random.default_rng(3)
+    S = 6
+    poses = np.column_stack([rng.uniform(-2e-3, 2e-3, S), rng.uniform(-2e-3, 2e-3, S),
+                             theta + rng.uniform(-1e-3, 1e-3, S), rng.uniform(-0.5, 0.5, S),
+                             rng.uniform(-0.5, 0.5, S), rng.uniform(-2.0, 2.0, S)])
+    pos = np.empty((S, len(p), 3))
+    vel = np.empty((S, len(p), 3))
+    for s in range(S):
+        pos[s], vel[s] = to_lab(p, v_rel, poses[s])
+    radius = np.full(len(p), 0.003175)
+    t = cell_table(pos.astype(np.float32), vel.astype(np.float32), poses, radius, geo,
+                   cell_size=h, pivot=PIVOT)
+    assert len(t) == len(p)
+    assert np.all(t.samples == S)
+    exact = rotation_velocity(np.column_stack([t.x, np.zeros(len(t)), t.z]), omega, centre)
+    # float32 storage of lab positions/velocities limits the agreement to ~1e-6 m/s
+    assert np.allclose(t.vx, exact[:, 0], atol=2e-6)
+    assert np.allclose(t.vz, exact[:, 2], atol=2e-6)
+    # without subtracting the tub's motion the answer would be wrong by ~0.5 m/s: check that the
+    # lab velocities really differ from the relative ones (the test has teeth)
+    assert np.abs(vel[..., 0] - v_rel[None, :, 0]).max() > 0.05
+
+
+def test_solid_fraction_of_simple_cubic_packing():
+    """Simple cubic packing of touching balls: phi = pi/6 in every fully packed cell."""
+    h = 0.015
+    a = h / 3.0  # lattice spacing: 3 x 3 centres per cell in x-z
+    ny = 4
+    geo = TubGeometry(length=ny * a)
+    cx = np.arange(-7, 8) * a  # x: cells -2..2, 3 per cell (cell i holds 3i-1, 3i, 3i+1)
+    cz = np.arange(8, 23) * a  # z: cells 3..7
+    cy = (np.arange(ny) + 0.5) * a
+    X, Y, Z = np.meshgrid(cx, cy, cz, indexing="ij")
+    p = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])[None]
+    r = np.full(p.shape[1], a / 2)
+    t = cell_table(p, np.zeros_like(p), np.zeros((1, 6)), r, geo, cell_size=h)
+    full = t.samples == 9 * ny
+    assert full.sum() == 5 * 5
+    assert np.allclose(t.solid_fraction[full], np.pi / 6, rtol=1e-12)
+    assert np.allclose(t.vx, 0) and np.allclose(t.vz, 0)
+
+
+def test_chunked_h5_streaming_equals_in_memory(tmp_path):
+    rng = np.random.default_rng(11)
+    S, N = 9, 500
+    geo = TubGeometry(length=0.02)
+    p = np.column_stack([rng.uniform(-0.14, 0.14, N), rng.uniform(0, 0.02, N),
+                         rng.uniform(0.01, 0.3, N)])
+    pos = np.stack([p + rng.normal(0, 1e-3, p.shape) for _ in range(S)]).astype(np.float32)
+    vel = rng.normal(0, 0.1, (S, N, 3)).astype(np.float32)
+    poses = rng.normal(0, 1e-3, (S, 6))
+    batch = np.array([-1, 0, 0, 1, 1, 2, 2, -1, 2])
+    r = np.full(N, 0.003)
+    ref = cell_table(pos, vel, poses, r, geo, batch_of_sample=batch, n_batches=3,
+                     chunk_snapshots=100)
+    with h5py.File(tmp_path / "x.h5", "w") as f:
+        f["p"], f["v"] = pos, vel
+    with h5py.File(tmp_path / "x.h5", "r") as f:
+        t = cell_table(f["p"], f["v"], poses, r, geo, batch_of_sample=batch, n_batches=3,
+                       chunk_snapshots=2)
+    for k in ("x", "z", "solid_fraction", "vx", "vz", "samples"):
+        assert np.allclose(getattr(t, k), getattr(ref, k), rtol=1e-12, atol=1e-15)
+    assert np.allclose(t.batch_vx, ref.batch_vx, equal_nan=True)
+    assert t.n_snapshots == 7
+    # the grand mean is the snapshot-weighted mean of the batch solid fractions
+    w = np.array([2, 2, 3])
+    assert np.allclose(t.solid_fraction, (w[:, None] * t.batch_phi).sum(0) / w.sum())
+
+
+def test_csv_round_trip_and_probe(tmp_path):
+    h = 0.015
+    x = np.array([-0.105, 0.0, 0.0, 0.15])
+    z = np.array([0.15, 0.15, 0.045, 0.0])
+    t = table_from_cells(x, z, [0.5, 0.6, 0.55, 0.1], [0.1, -0.2, 0.3, 0.0],
+                         [0.01, 0.02, -0.03, 0.0], h)
+    path = tmp_path / "bulk_velocity.csv"
+    write_csv(t, path)
+    assert path.read_text().splitlines()[0] == "x,z,solid_fraction,vx,vz,samples"
+    back = read_csv(path)
+    assert back.cell_size == pytest.approx(h)
+    order = np.lexsort((x, z))
+    for k in ("x", "z", "solid_fraction", "vx", "vz"):
+        assert np.allclose(getattr(back, k), getattr(t, k)[order])
+    pv = probe_values(back, {"P1": (-0.10, 0.15), "P4": (0.0, 0.05), "far": (0.09, 0.3)})
+    assert pv["P1"]["vx"] == pytest.approx(0.1) and pv["P1"]["cell_x"] == pytest.approx(-0.105)
+    assert pv["P4"]["vz"] == pytest.approx(-0.03)
+    assert math.isnan(pv["far"]["vx"]) and pv["far"]["samples"] == 0
+
+
+# ----------------------------------------------------------------------------------------------
+# circulation
+
+def test_solid_body_rotation_stream_function():
+    """Balls in a disc rotating rigidly: psi = phi Omega (a^2 - r^2) / 2, counterclockwise."""
+    h, L = 0.015, 0.01
+    geo = TubGeometry(length=L)
+    centre, a, omega, phi0 = (0.0, 0.2), 0.09, 2.0, 0.6
+    spacing = 1.0e-3
+    p = disc_lattice(centre, a, spacing, 0.5 * L)
+    r = np.full(len(p), (3 * phi0 * spacing**2 * L / (4 * np.pi)) ** (1 / 3))
+    for sign, sense in ((1.0, "counterclockwise"), (-1.0, "clockwise")):
+        v = rotation_velocity(p, sign * omega, centre)
+        t = cell_table(p[None], v[None], np.zeros((1, 6)), r, geo, cell_size=h)
+        c = circulation(t)
+        peak = phi0 * omega * a**2 / 2
+        assert c.sense == sense
+        assert np.sign(c.psi_extreme) == sign
+        assert c.strength == pytest.approx(peak, rel=0.03)
+        # the extreme is at the cell centre nearest the disc's centre (0, 0.195)
+        assert (c.extreme_x, c.extreme_z) == pytest.approx((0.0, 0.195), abs=1e-9)
+        X, Z = np.meshgrid(c.x, c.z)
+        exact = sign * phi0 * omega * np.clip(a**2 - (X - centre[0]) ** 2
+                                             - (Z - centre[1]) ** 2, 0, None) / 2
+        # inside, O(h^2) error; the cells the disc's edge cuts smear psi's zero over a cell
+        inner = (X - centre[0]) ** 2 + (Z - centre[1]) ** 2 < (a - h) ** 2
+        assert np.abs(c.psi - exact)[inner].max() < 0.03 * peak
+        assert np.abs(c.psi - exact).max() < 0.1 * peak
+        assert c.residual < 0.05
+
+
+def test_bed_at_rest_and_divergence_free_field():
+    h = 0.01
+    ii, kk = np.meshgrid(np.arange(0, 21), np.arange(0, 11), indexing="ij")
+    x, z = ii.ravel() * h, kk.ravel() * h
+    phi = np.full(x.size, 0.6)
+    # at rest: psi = 0 everywhere
+    xg, zg, psi, bed, res = stream_function(x, z, phi, np.zeros_like(x), np.zeros_like(x), h)
+    assert np.all(psi == 0) and bed.sum() == x.size
+    assert circulation(table_from_cells(x, z, phi, 0 * x, 0 * x, h)).sense == "none"
+    # psi = A sin(pi x / W) sin(pi z / H) on the rectangle of the cells (zero on its edges, half
+    # a cell outside the outermost centres, where the bed ends): q_x = dpsi/dz, q_z = -dpsi/dx
+    W, H, A = 21 * h, 11 * h, 1e-3
+    xs, zs = x + h / 2, z + h / 2
+    qx = A * np.pi / H * np.sin(np.pi * xs / W) * np.cos(np.pi * zs / H)
+    qz = -A * np.pi / W * np.cos(np.pi * xs / W) * np.sin(np.pi * zs / H)
+    t = table_from_cells(x, z, phi, qx / phi, qz / phi, h)
+    c = circulation(t)
+    exact = (A * np.sin(np.pi * (c.x[None, :] + h / 2) / W)
+             * np.sin(np.pi * (c.z[:, None] + h / 2) / H))
+    exact[~c.bed] = 0
+    assert c.sense == "counterclockwise"
+    assert np.abs(c.psi - exact).max() < 0.03 * A
+    assert c.strength == pytest.approx(A, rel=0.03)
+
+
+# ----------------------------------------------------------------------------------------------
+# compare
+
+def test_field_difference_known_answers():
+    rng = np.random.default_rng(5)
+    h = 0.015
+    ii, kk = np.meshgrid(np.arange(-8, 9), np.arange(0, 15), indexing="ij")
+    x, z = ii.ravel() * h, kk.ravel() * h
+    phi = rng.uniform(0.35, 0.6, x.size)
+    ang = rng.uniform(0, 2 * np.pi, x.size)
+    U = 0.05  # uniform speed, random directions
+    b = table_from_cells(x, z, phi, U * np.cos(ang), U * np.sin(ang), h)
+    assert field_difference(b, b) == 0.0
+    eps = 0.07
+    a = table_from_cells(x, z, phi * 0.9, (1 + eps) * b.vx, (1 + eps) * b.vz, h)
+    assert field_difference(a, b) == pytest.approx(eps, rel=1e-12)
+    # cells below phi 0.3 in either table do not count; extra/missing cells and order neither
+    loose = phi.copy()
+    loose[:20] = 0.1
+    a2 = table_from_cells(x[::-1], z[::-1], loose[::-1], (b.vx + 10 * (loose < 0.3))[::-1],
+                          b.vz[::-1], h)
+    assert field_difference(a2, b) == pytest.approx(0.0, abs=1e-15)
+    with pytest.raises(ValueError):
+        field_difference(b, table_from_cells(x, z, phi, b.vx, b.vz, 0.01))
+
+
+def test_agreement_rules():
+    # within 10 % of the reference
+    assert strengths_agree(1.09e-3, 0.0, 1.0e-3, 0.0)
+    assert not strengths_agree(1.11e-3, 0.0, 1.0e-3, 0.0)
+    # or within twice the combined standard error (3e-4, 4e-4 -> 5e-4 -> 1e-3)
+    assert strengths_agree(1.9e-3, 3e-4, 1.0e-3, 4e-4)
+    assert not strengths_agree(2.1e-3, 3e-4, 1.0e-3, 4e-4)
+    assert not strengths_agree(1e-3, 0, 1e-3, 0, "clockwise", "counterclockwise")
+    assert fields_agree(0.15, 0.1) and not fields_agree(0.151, 0.1)
+
+
+# ----------------------------------------------------------------------------------------------
+# contacts
+
+def test_wall_contact_and_impact_statistics():
+    fn = np.array([1.0, 2.0, 4.0, 1.0, -0.5])
+    ft = np.array([0.4, 0.4, 0.8, 0.1, 0.2])
+    sl = np.array([True, False, False, False, True])
+    arc = np.array([-0.1, -0.1, 0.1, 0.1, 0.0])
+    w = wall_contact_stats(fn, ft, sl, arc=arc, arc_edges=np.array([-0.2, 0.0, 0.2]))
+    assert w.count == 4  # the pulling contact (fn < 0) is left out
+    assert w.mean_ft_over_fn == pytest.approx((0.4 + 0.2 + 0.2 + 0.1) / 4)
+    assert w.ratio_of_sums == pytest.approx(1.7 / 8.0)
+    assert w.sliding_fraction == pytest.approx(0.25)
+    assert w.histogram_counts.sum() == 4
+    assert w.arc_count.tolist() == [2, 2]
+    assert np.allclose(w.arc_mean_ft_over_fn, [0.3, 0.15])
+    assert np.allclose(w.arc_sliding_fraction, [0.5, 0.0])
+
+    kind = np.array([0, 0, 1, 1, 1, 2, 0])
+    v = np.array([0.1, 0.3, 0.2, 0.4, 0.6, 1.0, 9.0])
+    batch = np.array([0, 1, 0, 1, 1, 0, -1])  # the last is outside the window
+    im = impact_stats(kind, v, batch=batch, n_batches=2)
+    d = im.as_dict()
+    assert d["ball_ball_mean_normal_speed"] == pytest.approx(0.2)
+    assert d["ball_wall_mean_normal_speed"] == pytest.approx(0.4)
+    assert d["count"] == 6 and im.count_by_kind["ball_partition"] == 1
+    assert math.isnan(im.mean_normal_speed_by_kind["plane_wall"])
+    # batch means of ball-ball: batches 0.1 and 0.3 -> stderr = std([.1,.3], ddof=1)/sqrt 2
+    assert d["ball_ball_mean_normal_speed_stderr"] == pytest.approx(0.1)
+    x, z, n, m = mean_by_region(np.array([[0.001, 0, 0.002], [0.004, 0, -0.001],
+                                          [0.02, 0, 0.0]]), np.array([1.0, 3.0, 5.0]), 0.015)
+    assert n.tolist() == [2, 1] and m.tolist() == [2.0, 5.0]
+    assert x.tolist() == pytest.approx([0.0, 0.015])
+
+
+# ----------------------------------------------------------------------------------------------
+# summary end to end
+
+def test_tub_summary_end_to_end(tmp_path):
+    """A synthetic dem.h5: balls in a disc turning rigidly in the moving tub."""
+    f = 47.0
+    sc = Scenario().model_copy(update={
+        "run": Scenario().run.model_copy(update={"duration": 20 / f, "average_last": 8 / f,
+                                                 "batches": 4}),
+        "tub": Scenario().tub.model_copy(update={"length": 0.01})})
+    motion = TubMotion(frequency=f, pivot_x=PIVOT[0], pivot_z=PIVOT[1])
+    centre, a, omega, phi0, spacing = (0.0, 0.15), 0.125, 2.0, 0.55, 2.5e-3
+    L = sc.tub.length
+    p0 = disc_lattice(centre, a, spacing, 0.5 * L)
+    N = len(p0)
+    r = np.full(N, (3 * phi0 * spacing**2 * L / (4 * np.pi)) ** (1 / 3))
+    t_start, t_end = sc.run.duration - sc.run.average_last, sc.run.duration
+    times = t_start + np.arange(-8, 8 * 8 + 1) / (8 * f)  # one cycle before, one sample at end
+    S = times.size
+    pose = pose_np(motion, times)
+    poses = np.column_stack([pose[k] for k in ("X", "Z", "theta", "Xdot", "Zdot", "thetadot")])
+    pos = np.empty((S, N, 3), np.float32)
+    vel = np.empty((S, N, 3), np.float32)
+    for s, t in enumerate(times):
+        ang = omega * (t - t_start)
+        c, sn = math.cos(ang), math.sin(ang)
+        d = p0 - np.array([centre[0], 0, centre[1]])
+        p = p0.copy()
+        p[:, 0] = centre[0] + c * d[:, 0] - sn * d[:, 2]
+        p[:, 2] = centre[1] + sn * d[:, 0] + c * d[:, 2]
+        v = rotation_velocity(p, omega, centre)
+        if times[s] < t_start or times[s] >= t_end - 1e-9:
+            v[:] = 100.0  # garbage outside the window: must not be used
+        pos[s], vel[s] = to_lab(p, v, poses[s])
+    h5 = tmp_path / "dem.h5"
+    in_win = (times >= t_start) & (times < t_end - 1e-9)
+    snap = np.repeat(np.arange(S), 3).astype(np.int32)
+    nC = snap.size
+    wall = np.tile(np.array([0, 0, 1], np.int8), S)
+    fn = np.tile(np.array([2.0, 1.0, 5.0], np.float32), S)
+    ft = np.tile(np.array([0.8, 0.2, 5.0], np.float32), S)
+    sliding = np.tile(np.array([True, False, True]), S)
+    ft[~np.repeat(in_win, 3)] = 50.0  # outside the window: must not be used
+    imp_t = np.array([t_start - 0.001, t_start + 0.01, t_start + 0.05, t_start + 0.1,
+                      t_start + 0.15])
+    with h5py.File(h5, "w") as g:
+        g.attrs.update(case="synthetic", n_particles=N, dt=1e-5, frequency=f,
+                       scenario_toml="")
+        g["particles/radius"] = r
+        g["snapshots/time"] = times
+        g["snapshots/step"] = np.rint(times / 1e-5).astype(np.int64)
+        g["snapshots/phase"] = np.mod(times * f, 1.0)
+        g["snapshots/tub_pose"] = poses
+        g["snapshots/position"] = pos
+        g["snapshots/velocity"] = vel
+        g["snapshots/angular_velocity"] = np.zeros_like(vel)
+        g["wall_contacts/snapshot"] = snap
+        g["wall_contacts/particle"] = np.zeros(nC, np.int32)
+        g["wall_contacts/wall"] = wall
+        g["wall_contacts/position_tub"] = np.zeros((nC, 3), np.float32)
+        g["wall_contacts/arc"] = np.where(wall == 0, 0.05, np.nan).astype(np.float32)
+        g["wall_contacts/fn"] = fn
+        g["wall_contacts/ft"] = ft
+        g["wall_contacts/sliding"] = sliding
+        g["impacts/time"] = imp_t
+        g["impacts/kind"] = np.array([0, 0, 0, 1, 1], np.int8)
+        g["impacts/position_tub"] = np.zeros((5, 3), np.float32)
+        g["impacts/normal_speed"] = np.array([9.0, 0.2, 0.4, 0.5, 0.7], np.float32)
+    out = tub_summary(h5, sc)
+    json.dumps(out, allow_nan=False)  # valid JSON
+    assert out["window"]["snapshots"] == 64 and out["window"]["cycles"] == 8
+    for name, pr in sc.analysis.probes.items():
+        rec = out["probes"][name]
+        exact = rotation_velocity(np.array([[rec["cell_x"], 0, rec["cell_z"]]]), omega, centre)
+        assert rec["vx"] == pytest.approx(exact[0, 0], abs=0.01 * omega * a)
+        assert rec["vz"] == pytest.approx(exact[0, 2], abs=0.01 * omega * a)
+        assert rec["vx_stderr"] < 0.01 * omega * a
+    circ = out["circulation"]
+    assert circ["sense"] == "counterclockwise"
+    assert circ["strength"] == pytest.approx(phi0 * omega * a**2 / 2, rel=0.05)
+    assert circ["strength_stderr"] < 0.02 * circ["strength"]
+    wc = out["wall_contacts"]
+    assert wc["count"] == 2 * 64
+    assert wc["mean_ft_over_fn"] == pytest.approx(0.3, rel=1e-6)
+    assert wc["ratio_of_sums"] == pytest.approx(1.0 / 3.0, rel=1e-6)
+    assert wc["sliding_fraction"] == pytest.approx(0.5)
+    im = out["impacts"]
+    assert im["count"] == 4
+    assert im["ball_ball_mean_normal_speed"] == pytest.approx(0.3, rel=1e-6)
+    assert im["ball_wall_mean_normal_speed"] == pytest.approx(0.6, rel=1e-6)
+    # the table was written next to dem.h5 and reads back to the same probe values
+    back = read_csv(tmp_path / "bulk_velocity.csv")
+    pv = probe_values(back, sc.analysis.probes)
+    assert pv["P1"]["vz"] == pytest.approx(out["probes"]["P1"]["vz"], rel=1e-8)
+    # the same data as a dict of arrays gives the same summary
+    with h5py.File(h5, "r") as g:
+        arrays = {k: g[k][()] for k in ("particles/radius", "snapshots/time",
+                                        "snapshots/tub_pose", "snapshots/position",
+                                        "snapshots/velocity")}
+    out2 = tub_summary(arrays, sc)
+    assert out2["probes"] == out["probes"]
+    assert out2["wall_contacts"]["count"] == 0 and out2["bulk_velocity_csv"] is None
+
+
+# ----------------------------------------------------------------------------------------------
+# vtk
+
+def test_vtk_outputs(tmp_path):
+    rng = np.random.default_rng(1)
+    N = 50
+    pth = vtk.write_snapshot_vtu(tmp_path / "snap_0000", rng.random((N, 3)), rng.random((N, 3)),
+                                 rng.random((N, 3)), np.full(N, 0.003), np.arange(N))
+    head = open(pth, "rb").read(4000)
+    assert pth.endswith(".vtu") and head.startswith(b"<?xml")
+    assert f'NumberOfPoints="{N}"'.encode() in head
+    for name in (b"velocity", b"angular_velocity", b"radius", b"id"):
+        assert b'Name="' + name + b'"' in head
+    pvd = vtk.write_pvd(tmp_path / "balls.pvd", [(0.0, pth), (0.01, "snap_0001.vtu")])
+    root = ET.parse(pvd).getroot()
+    ds = root.findall("./Collection/DataSet")
+    assert [d.get("file") for d in ds] == ["snap_0000.vtu", "snap_0001.vtu"]
+    assert float(ds[1].get("timestep")) == pytest.approx(0.01)
+    # the tub mesh: U points on the wall; total area = U area + two cross-sections
+    geo = TubGeometry()
+    pts, quads, part = vtk.tub_surface_mesh(geo, 400)
+    assert np.abs(distance_to_wall_np(pts[:, 0], pts[:, 2], geo.radius)).max() < 1e-12
+    q = pts[quads]
+    area = 0.5 * (np.linalg.norm(np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]), axis=1)
+                  + np.linalg.norm(np.cross(q[:, 2] - q[:, 0], q[:, 3] - q[:, 0]), axis=1))
+    assert area[part == 0].sum() == pytest.approx(geo.wall_arc_length() * geo.length, rel=1e-4)
+    assert area[part == 1].sum() == pytest.approx(cross_section_area(geo.radius, geo.rim_height),
+                                                  rel=1e-4)
+    assert area[part == 2].sum() == pytest.approx(area[part == 1].sum())
+    surf = vtk.write_tub_surface(tmp_path / "tub.vtu", geo)
+    assert open(surf, "rb").read(5) == b"<?xml"
+    assert not list(tmp_path.glob(".tmp-*"))

@@ -1,0 +1,36 @@
+"""vibroflow: media flow in vibratory tub finishers.
+
+A 3D DEM of the steel-ball media (the ground truth), calibration of a continuum from it,
+continuum models (Lagrangian MPM and Eulerian) and comparisons, all on scenarios read from TOML
+(SI units).  The reference case is `tub47` (see `vibroflow scenario show tub47`).
+
+Importing the package is light: `load_scenario` and `Scenario` are loaded on first use, and
+nothing here imports numba.
+"""
+from __future__ import annotations
+
+from importlib import metadata as _metadata
+from typing import TYPE_CHECKING, Any
+
+try:
+    __version__ = _metadata.version("vibroflow")
+except _metadata.PackageNotFoundError:  # run from a source tree that is not installed
+    __version__ = "0.1.0"
+
+if TYPE_CHECKING:
+    from vibroflow.scenario.io import load_scenario
+    from vibroflow.scenario.model import Scenario
+
+__all__ = ["__version__", "load_scenario", "Scenario"]
+
+_LAZY = {"load_scenario": "vibroflow.scenario.io", "Scenario": "vibroflow.scenario.model"}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        import importlib
+
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'vibroflow' has no attribute {name!r}")

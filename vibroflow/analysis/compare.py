@@ -1,0 +1,82 @@
+"""Comparing two results cell by cell (tub47.md, "What is measured" and "Judging a comparison").
+
+Field difference between a result a and a reference b, over the cells where both have solid
+fraction >= 0.3 (scenario.analysis.min_solid_fraction):
+
+    E(a, b) = sqrt( sum phi_b |v_a - v_b|^2 / sum phi_b ) / V_b,
+    V_b     = sum phi_b |v_b| / sum phi_b,
+
+a phi_b-weighted rms velocity difference relative to b's phi_b-weighted mean speed (-).  It is not
+symmetric: b is the reference.  The DEM's seed-to-seed E is the floor every comparison is judged
+against.
+
+Judging (tub47.md): two circulation strengths agree when they differ by no more than 10 % or by no
+more than twice their combined standard error, whichever is larger; two fields agree when
+E(a, b) <= 1.5 E_seed of the reference method.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from vibroflow.analysis.bulk import CellTable
+
+#: tub47.md "Judging a comparison"
+STRENGTH_REL_TOL = 0.10
+STRENGTH_SIGMAS = 2.0
+FIELD_FACTOR = 1.5
+
+
+def matched_cells(a: CellTable, b: CellTable, min_solid_fraction: float = 0.3):
+    """Indices (ja, jb) of the cells present in both tables (same centre) where both solid
+    fractions are >= min_solid_fraction.  The tables must have the same cell size."""
+    if not np.isclose(a.cell_size, b.cell_size, rtol=1e-6, atol=0.0):
+        raise ValueError(f"cell sizes differ: {a.cell_size} m and {b.cell_size} m; the tables "
+                         "must be on the same grid")
+    ka = {(int(i), int(k)): j for j, (i, k) in enumerate(zip(a.ix, a.iz))}
+    ja, jb = [], []
+    for j, (i, k) in enumerate(zip(b.ix, b.iz)):
+        m = ka.get((int(i), int(k)))
+        if m is not None:
+            ja.append(m)
+            jb.append(j)
+    ja, jb = np.array(ja, dtype=np.int64), np.array(jb, dtype=np.int64)
+    keep = ((a.solid_fraction[ja] >= min_solid_fraction)
+            & (b.solid_fraction[jb] >= min_solid_fraction)) if ja.size else np.zeros(0, bool)
+    return ja[keep], jb[keep]
+
+
+def field_difference(a: CellTable, b: CellTable, min_solid_fraction: float = 0.3) -> float:
+    """E(a, b) of tub47.md (dimensionless), b the reference.  Raises ValueError when no cell has
+    solid fraction >= min_solid_fraction in both, or b does not move there."""
+    ja, jb = matched_cells(a, b, min_solid_fraction)
+    if ja.size == 0:
+        raise ValueError(f"no common cell with solid fraction >= {min_solid_fraction} in both "
+                         "tables")
+    w = b.solid_fraction[jb]
+    dvx = a.vx[ja] - b.vx[jb]
+    dvz = a.vz[ja] - b.vz[jb]
+    rms = np.sqrt(np.sum(w * (dvx**2 + dvz**2)) / np.sum(w))
+    V_b = np.sum(w * np.hypot(b.vx[jb], b.vz[jb])) / np.sum(w)
+    if V_b <= 0:
+        raise ValueError("the reference field b is at rest in the compared cells (V_b = 0)")
+    return float(rms / V_b)
+
+
+def strengths_agree(s_a: float, se_a: float, s_b: float, se_b: float,
+                    sense_a: str | None = None, sense_b: str | None = None) -> bool:
+    """Do two circulation strengths agree (tub47.md "Judging a comparison")?
+
+    s_a, s_b : strengths (m^2/s, magnitudes); se_a, se_b : their standard errors (m^2/s; NaN
+    counts as 0).  They agree when |s_a - s_b| <= max(0.10 |s_b|, 2 sqrt(se_a^2 + se_b^2)); the
+    10 % is taken of b, the reference (as in E).  When both senses are given they must also be
+    equal.
+    """
+    if sense_a is not None and sense_b is not None and sense_a != sense_b:
+        return False
+    se = np.hypot(np.nan_to_num(se_a), np.nan_to_num(se_b))
+    return bool(abs(s_a - s_b) <= max(STRENGTH_REL_TOL * abs(s_b), STRENGTH_SIGMAS * se))
+
+
+def fields_agree(E_ab: float, E_seed: float) -> bool:
+    """Do two fields agree: E(a, b) <= 1.5 x the seed-to-seed E of the reference method?"""
+    return bool(E_ab <= FIELD_FACTOR * E_seed)

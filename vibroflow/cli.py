@@ -1,0 +1,231 @@
+"""The `vibroflow` command line.
+
+    vibroflow scenario show tub47                     # the scenario as TOML
+    vibroflow scenario check my.toml --set run.dt=2e-5
+    vibroflow dem tub47-quick --out runs/tub47-quick  # the DEM (the main job)
+    vibroflow export liggghts tub47-quick deck/
+    vibroflow import liggghts deck/post --out runs/liggghts --scenario tub47-quick
+
+Bad input (a missing file, malformed TOML, a value out of range, an unknown key) prints one line
+"error: FIELD = VALUE: what is allowed" on stderr and exits with code 2, without a traceback and
+before anything is written.  Heavy modules (the DEM, numba) are imported inside the commands so
+that `--help` and the scenario commands stay quick.
+"""
+from __future__ import annotations
+
+import sys
+import tomllib
+from collections.abc import Callable
+from functools import wraps
+from pathlib import Path
+from typing import Annotated, Any, Optional
+
+import typer
+from pydantic import ValidationError
+
+from vibroflow import __version__
+from vibroflow.errors import InputError
+
+EXIT_INPUT = 2
+
+app = typer.Typer(
+    name="vibroflow",
+    help="Media flow in vibratory tub finishers: DEM, continuum models, comparisons.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+scenario_app = typer.Typer(help="Show and check scenarios.", no_args_is_help=True)
+export_app = typer.Typer(help="Write input decks for other codes.", no_args_is_help=True)
+import_app = typer.Typer(help="Read other codes' results.", no_args_is_help=True)
+app.add_typer(scenario_app, name="scenario")
+app.add_typer(export_app, name="export")
+app.add_typer(import_app, name="import")
+
+# repeatable --set; typer wants a list default of None
+SetOption = Annotated[
+    Optional[list[str]],
+    typer.Option("--set", "-s", metavar="KEY=VALUE",
+                 help="Override a scenario field, e.g. --set run.duration=0.2 "
+                      "--set contacts.0.friction=0.3 (repeatable; the value is read as TOML)."),
+]
+ScenarioArg = Annotated[
+    str, typer.Argument(metavar="SCENARIO", help="A preset (tub47, tub47-quick) or a TOML file.")
+]
+
+
+def input_error_message(exc: BaseException) -> str | None:
+    """The one-line message of an input error, or None if `exc` is not one (a bug)."""
+    if isinstance(exc, InputError):
+        return exc.message
+    if isinstance(exc, ValidationError):
+        from vibroflow.scenario.io import format_validation_error
+
+        return format_validation_error(exc)
+    if isinstance(exc, tomllib.TOMLDecodeError):
+        return f"malformed TOML: {exc}"
+    if isinstance(exc, FileNotFoundError):
+        what = (exc.strerror or "no such file or directory").lower()
+        return f"{exc.filename}: {what}" if exc.filename else str(exc)
+    return None
+
+
+def _fail(message: str) -> None:
+    # plain write, not rich: rich would wrap a long line and eat [brackets] as markup
+    sys.stderr.write("error: " + " ".join(message.split()) + "\n")
+    sys.stderr.flush()
+    raise typer.Exit(EXIT_INPUT)
+
+
+def input_errors(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """Run a command, turning input errors into one line on stderr and exit code 2."""
+
+    @wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(*args, **kwargs)
+        except (InputError, ValidationError, tomllib.TOMLDecodeError, FileNotFoundError) as e:
+            message = input_error_message(e)
+            assert message is not None
+            _fail(message)
+
+    return wrapper
+
+
+def _load(source: str | Path, overrides: list[str] | None):
+    from vibroflow.scenario.io import load_scenario
+
+    return load_scenario(source, overrides or [])
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"vibroflow {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(
+    version: Annotated[bool, typer.Option("--version", callback=_version, is_eager=True,
+                                          help="Print the version and exit.")] = False,
+) -> None:
+    """Media flow in vibratory tub finishers: DEM, continuum models, comparisons."""
+
+
+# ----------------------------------------------------------------------------------------------
+# scenario
+
+@scenario_app.command("show")
+@input_errors
+def scenario_show(scenario: ScenarioArg, set_: SetOption = None) -> None:
+    """Print a scenario (preset or file, with overrides) as complete TOML."""
+    from vibroflow.scenario.io import dump_scenario
+
+    typer.echo(dump_scenario(_load(scenario, set_)), nl=False)
+
+
+def summary_line(s) -> str:
+    """One line describing a valid scenario."""
+    from vibroflow.scenario.model import contact_times
+
+    if s.explicit:
+        what = (f"explicit mode, particles: {len(s.particles)}, plane walls: "
+                f"{len(s.walls or [])}, simulate {s.run.duration:g} s")
+    else:
+        what = (f"{s.fill.count} {s.fill.material} balls d = {s.fill.diameter * 1e3:g} mm in a "
+                f"tub of length {s.tub.length:g} m, settle {s.fill.settle_time:g} s, vibrate "
+                f"{s.run.duration:g} s at {s.motion.frequency:g} Hz x{s.motion.amplitude_factor:g}"
+                f", average the last {s.run.average_last:g} s")
+    steps = round(s.run.duration / s.run.dt)
+    line = f"{s.case}: ok: {what}; dt = {s.run.dt:g} s ({steps} steps)"
+    try:
+        times = contact_times(s)
+    except ModuleNotFoundError:
+        times = []
+    if times:
+        tp, t_c = times[0]
+        line += f", 1/{t_c / s.run.dt:.1f} of the {tp.label} contact time {t_c:.3g} s"
+    return line
+
+
+@scenario_app.command("check")
+@input_errors
+def scenario_check(scenario: ScenarioArg, set_: SetOption = None) -> None:
+    """Validate a scenario and print a one-line summary (exit code 2 if it is invalid)."""
+    typer.echo(summary_line(_load(scenario, set_)))
+
+
+# ----------------------------------------------------------------------------------------------
+# dem
+
+@app.command("dem")
+@input_errors
+def dem(
+    scenario: ScenarioArg,
+    out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")],
+    set_: SetOption = None,
+    vtk: Annotated[bool, typer.Option("--vtk", help="Also write VTK snapshots.")] = False,
+    resume: Annotated[bool, typer.Option("--resume", help="Go on from the last checkpoint "
+                                                          "in --out.")] = False,
+) -> None:
+    """Run the DEM of a scenario (fill, settle, vibrate, average) into --out."""
+    s = _load(scenario, set_)  # before anything is written: bad input leaves --out untouched
+    from vibroflow.dem.run import run_dem
+
+    run_dem(s, out_dir=out, vtk=vtk, resume=resume, progress=True)
+
+
+# ----------------------------------------------------------------------------------------------
+# LIGGGHTS round trip
+
+@export_app.command("liggghts")
+@input_errors
+def export_liggghts(
+    scenario: ScenarioArg,
+    directory: Annotated[Path, typer.Argument(metavar="DIR", help="Folder for the deck.")],
+    set_: SetOption = None,
+) -> None:
+    """Write a LIGGGHTS input deck (with STL walls) for a scenario into DIR."""
+    s = _load(scenario, set_)
+    from vibroflow.io.liggghts import export_deck
+
+    export_deck(s, Path(directory))
+
+
+def _import_scenario_source(dumpdir: Path, scenario: str | None) -> str | Path:
+    """The scenario of an import: the one given, else the deck's scenario.toml (written by the
+    export next to the deck, the dumps in the deck or a folder of it), else tub47."""
+    if scenario is not None:
+        return scenario
+    for folder in (dumpdir, dumpdir.parent):
+        if (folder / "scenario.toml").is_file():
+            return folder / "scenario.toml"
+    return "tub47"
+
+
+@import_app.command("liggghts")
+@input_errors
+def import_liggghts(
+    dumpdir: Annotated[Path, typer.Argument(metavar="DUMPDIR", help="LIGGGHTS dump folder.")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")],
+    scenario: Annotated[Optional[str], typer.Option(
+        "--scenario", help="The scenario run (preset or TOML file); default: the deck's "
+                           "scenario.toml, else tub47.")] = None,
+    set_: SetOption = None,
+) -> None:
+    """Convert a LIGGGHTS run's dumps into vibroflow results in --out."""
+    if not dumpdir.is_dir():
+        raise InputError(f"{dumpdir}: no such dump folder")
+    s = _load(_import_scenario_source(dumpdir, scenario), set_)
+    from vibroflow.io.liggghts import import_run
+
+    import_run(Path(dumpdir), s, Path(out))
+
+
+def main() -> None:
+    """Entry point of the `vibroflow` script."""
+    app()
+
+
+if __name__ == "__main__":
+    main()

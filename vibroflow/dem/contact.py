@@ -1,0 +1,166 @@
+"""The contact law: one kernel for ball-ball and ball-wall contacts (models.md).
+
+Convention: the unit normal n points from j (the other ball, or the wall) to i; delta > 0 is the
+overlap; (vx, vy, vz) is the velocity of i's material relative to j's at the contact point and
+(wx, wy, wz) = omega_i - omega_j the relative angular velocity.  The kernel returns the force on
+i (j receives its opposite), the torque on i and the torque on j, and updates the contact's
+history in place:
+
+    hist[0:3]  accumulated tangential spring displacement xi_t (m)
+    hist[3:6]  elastic rolling torque of the EPSD model (N m)
+
+Tangential: xi_t is first turned into the current tangent plane keeping its length (the contact
+plane rotates with the balls), then incremented by v_t dt; F_t = -k_t xi_t truncated at the
+Coulomb limit mu |F_n|, where xi_t is rescaled so that k_t |xi_t| = mu |F_n| (Cundall & Strack
+1979; the LAMMPS/LIGGGHTS "history" model).  No tangential damping (tub47.md).
+
+Rolling: CDT, M_r = -mu_r R_eff |F_n| w_r / |w_r|; or EPSD (Ai, Chen, Rotter, Ooi 2011, without
+its viscous part, as LIGGGHTS' epsd2): M_r += -k_r w_r dt, |M_r| <= mu_r R_eff |F_n|,
+k_r = 2.25 k_n mu_r^2 R_eff^2 (Iwashita & Oda 1998).  w_r is the relative angular velocity with
+its twisting (normal) part removed.
+"""
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from .laws import (MODEL_LINEAR, P_DAMP, P_KN, P_KT, P_MODEL, P_MU, P_MUR, P_ROLL, ROLL_CDT,
+                   ROLL_EPSD)
+
+
+@nb.njit(cache=True, inline="always", fastmath=False)
+def contact_force(delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, r_i, r_j, r_eff, m_eff, par,
+                  hist, dt):
+    """Force and torques of one contact; see the module docstring.
+
+    Returns (fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz, fn, ft, sliding):
+    force on i (N), torque on i and on j (N m), the normal force |F_n| (N, signed: the
+    damping may make it negative during the rebound), |F_t| (N), and 1 if at the Coulomb limit.
+    """
+    vn = vx * nx + vy * ny + vz * nz  # > 0 separating
+    if par[P_MODEL] == MODEL_LINEAR:
+        kn = par[P_KN]
+        gamma = 2.0 * par[P_DAMP] * np.sqrt(m_eff * kn)
+        fn = kn * delta - gamma * vn
+        kt = par[P_KT] * kn
+        kn_tangent = kn
+    else:
+        k = par[P_KN] * np.sqrt(r_eff)
+        sd = np.sqrt(delta)
+        c = par[P_DAMP] * np.sqrt(m_eff * k)
+        fn = k * delta * sd - c * np.sqrt(sd) * vn
+        kt = par[P_KT] * np.sqrt(r_eff * delta)
+        kn_tangent = 1.5 * k * sd
+
+    # tangential relative velocity
+    vtx = vx - vn * nx
+    vty = vy - vn * ny
+    vtz = vz - vn * nz
+
+    # turn the history into the current tangent plane, keeping its length
+    hx = hist[0]
+    hy = hist[1]
+    hz = hist[2]
+    h2 = hx * hx + hy * hy + hz * hz
+    if h2 > 0.0:
+        hn = hx * nx + hy * ny + hz * nz
+        hx -= hn * nx
+        hy -= hn * ny
+        hz -= hn * nz
+        p2 = hx * hx + hy * hy + hz * hz
+        if p2 > 0.0:
+            scale = np.sqrt(h2 / p2)
+            hx *= scale
+            hy *= scale
+            hz *= scale
+    hx += vtx * dt
+    hy += vty * dt
+    hz += vtz * dt
+    ftx = -kt * hx
+    fty = -kt * hy
+    ftz = -kt * hz
+    ft = np.sqrt(ftx * ftx + fty * fty + ftz * ftz)
+    limit = par[P_MU] * abs(fn)
+    sliding = 0
+    if ft > limit:
+        sliding = 1
+        if ft > 0.0:
+            s = limit / ft
+            ftx *= s
+            fty *= s
+            ftz *= s
+            ft = limit
+        if kt > 0.0:
+            hx = -ftx / kt
+            hy = -fty / kt
+            hz = -ftz / kt
+    hist[0] = hx
+    hist[1] = hy
+    hist[2] = hz
+
+    fx = fn * nx + ftx
+    fy = fn * ny + fty
+    fz = fn * nz + ftz
+
+    # torque of F_t about each centre: lever -r_i n for i, +r_j n for j with force -F_t
+    cx = ny * ftz - nz * fty
+    cy = nz * ftx - nx * ftz
+    cz = nx * fty - ny * ftx
+    tix = -r_i * cx
+    tiy = -r_i * cy
+    tiz = -r_i * cz
+    tjx = -r_j * cx
+    tjy = -r_j * cy
+    tjz = -r_j * cz
+
+    roll = par[P_ROLL]
+    if roll != 0.0:
+        wn = wx * nx + wy * ny + wz * nz
+        wrx = wx - wn * nx
+        wry = wy - wn * ny
+        wrz = wz - wn * nz
+        mlimit = par[P_MUR] * r_eff * abs(fn)
+        mx = 0.0
+        my = 0.0
+        mz = 0.0
+        if roll == ROLL_CDT:
+            wr = np.sqrt(wrx * wrx + wry * wry + wrz * wrz)
+            if wr > 1e-12:
+                mx = -mlimit * wrx / wr
+                my = -mlimit * wry / wr
+                mz = -mlimit * wrz / wr
+        elif roll == ROLL_EPSD:
+            kr = 2.25 * kn_tangent * par[P_MUR] * par[P_MUR] * r_eff * r_eff
+            mx = hist[3]
+            my = hist[4]
+            mz = hist[5]
+            m2 = mx * mx + my * my + mz * mz
+            mn = mx * nx + my * ny + mz * nz
+            mx -= mn * nx
+            my -= mn * ny
+            mz -= mn * nz
+            p2 = mx * mx + my * my + mz * mz
+            if p2 > 0.0:
+                scale = np.sqrt(m2 / p2)
+                mx *= scale
+                my *= scale
+                mz *= scale
+            mx -= kr * wrx * dt
+            my -= kr * wry * dt
+            mz -= kr * wrz * dt
+            mm = np.sqrt(mx * mx + my * my + mz * mz)
+            if mm > mlimit and mm > 0.0:
+                s = mlimit / mm
+                mx *= s
+                my *= s
+                mz *= s
+            hist[3] = mx
+            hist[4] = my
+            hist[5] = mz
+        tix += mx
+        tiy += my
+        tiz += mz
+        tjx -= mx
+        tjy -= my
+        tjz -= mz
+    return fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz, fn, ft, sliding

@@ -1,0 +1,331 @@
+"""The DEM simulator as a pair of plain functions over a state record (JAX-MD style):
+
+    system = make_system(scenario)          # what does not change: laws, walls, motion
+    state = init_state(system, positions, velocities, angular_velocities, radii, materials)
+    run_steps(system, state, n, ...)        # advance n steps in place
+
+`DEMState` holds every array the run needs to continue bit for bit (positions, velocities,
+forces, the neighbour list with its contact histories, the wall contacts' histories, the step
+count); checkpoints and the settled-fill cache are just saved states.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numba
+import numpy as np
+
+from ..tub.motion import TubMotion, lab_to_tub_np
+from . import step as K
+from .laws import contact_time, material_index, pair_table
+from .neighbours import NeighbourList
+from .walls import N_PLANE, WALL_PLANE0, wall_kind
+
+IMPACT_CAPACITY = 1 << 15  # per chunk, between flushes
+
+
+class BlowUp(RuntimeError):
+    """The run became unphysical; the message names the balls and the likely cause."""
+
+
+@dataclass
+class DEMSystem:
+    """Everything constant during a run (SI units)."""
+
+    dt: float
+    gravity: np.ndarray            # (3,) m/s^2
+    table: np.ndarray              # contact-law parameters, see laws.py
+    tub: np.ndarray                # [radius, rim, length, periodic, present]
+    wall_mat: np.ndarray           # material index of each wall slot
+    planes: np.ndarray             # (P, N_PLANE) explicit plane walls
+    motion: TubMotion              # the tub's vibration (amplitude factor applied)
+    skin: float                    # Verlet skin (m)
+    max_overlap: float             # blow-up bound (m)
+    nchunk: int                    # force-assembly chunks (fixes the summation order)
+    material_names: list[str]
+    notes: dict = field(default_factory=dict)
+
+    @property
+    def n_walls(self) -> int:
+        return WALL_PLANE0 + self.planes.shape[0]
+
+    @property
+    def periodic_length(self) -> float:
+        return float(self.tub[2]) if (self.tub[4] > 0 and self.tub[3] > 0) else 0.0
+
+    def motion_array(self, vibrating: bool) -> np.ndarray:
+        return (self.motion if vibrating else TubMotion.still()).as_array()
+
+
+@dataclass
+class DEMState:
+    step: int
+    time_origin_step: int          # t = (step - time_origin_step) dt
+    pos: np.ndarray
+    vel: np.ndarray
+    omg: np.ndarray
+    force: np.ndarray
+    torque: np.ndarray
+    radius: np.ndarray
+    mass: np.ndarray
+    mat: np.ndarray
+    nl: NeighbourList
+    ref_tub: np.ndarray            # tub-frame positions at the last list build
+    wall_hist: np.ndarray          # (N, W, 6)
+    wall_flag: np.ndarray          # (N, W) uint8
+    wall_fn: np.ndarray            # (N, W) N, at the last step
+    wall_ft: np.ndarray            # (N, W) N
+    wall_slide: np.ndarray         # (N, W) uint8
+    wall_point: np.ndarray         # (N, W, 3) contact point (tub frame for tub walls)
+    wall_arc: np.ndarray           # (N,) arc coordinate of the nearest U point (m)
+    vibrating: bool = False
+    scratch: object = field(default=None, repr=False, compare=False)  # not part of the state
+
+    @property
+    def n(self) -> int:
+        return self.pos.shape[0]
+
+    def time(self, dt: float) -> float:
+        return (self.step - self.time_origin_step) * dt
+
+    def kinetic_energy(self) -> float:
+        """Translational + rotational kinetic energy in the lab frame (J)."""
+        inertia = 0.4 * self.mass * self.radius**2
+        return float(0.5 * np.sum(self.mass * np.sum(self.vel**2, axis=1))
+                     + 0.5 * np.sum(inertia * np.sum(self.omg**2, axis=1)))
+
+
+def make_system(scenario, nchunk: int | None = None) -> DEMSystem:
+    """Constant parameters of a scenario's run."""
+    index = material_index(scenario)
+    table = pair_table(scenario)
+    if scenario.tub is not None:
+        t = scenario.tub
+        tub = np.array([t.radius, t.rim_height, t.length, float(t.periodic), 1.0])
+        wall_mats = [index[t.wall_material], index[t.partition_material],
+                     index[t.partition_material]]
+    else:
+        tub = np.array([1.0, 1.0, 1.0, 0.0, 0.0])
+        wall_mats = [0, 0, 0]
+    planes = np.zeros((len(scenario.walls or []), N_PLANE))
+    for k, w in enumerate(scenario.walls or []):
+        planes[k, 0:3] = w.point
+        planes[k, 3:6] = w.normal
+        planes[k, 6:9] = w.velocity
+        planes[k, 9:12] = w.amplitude
+        planes[k, 12] = 2.0 * math.pi * w.frequency
+        planes[k, 13] = w.phase
+        wall_mats.append(index[w.material])
+    m = scenario.motion
+    f = m.amplitude_factor
+    motion = TubMotion(frequency=m.frequency, amplitude_x=f * m.amplitude_x, phase_x=m.phase_x,
+                       amplitude_z=f * m.amplitude_z, phase_z=m.phase_z,
+                       amplitude_theta=f * m.amplitude_theta, phase_theta=m.phase_theta,
+                       pivot_x=m.pivot[0], pivot_z=m.pivot[1])
+    if scenario.explicit:
+        diam = max(p.diameter for p in scenario.particles)
+    else:
+        diam = scenario.fill.diameter
+    return DEMSystem(
+        dt=scenario.run.dt, gravity=np.array(scenario.gravity, dtype=float), table=table,
+        tub=tub, wall_mat=np.array(wall_mats, dtype=np.int64), planes=planes, motion=motion,
+        skin=scenario.run.skin * diam, max_overlap=scenario.run.max_overlap * diam,
+        nchunk=nchunk or max(numba.get_num_threads(), 1), material_names=list(index),
+    )
+
+
+def init_state(system: DEMSystem, pos, vel, omg, radius, density, mat) -> DEMState:
+    """A state at step 0 from initial positions etc.; computes the initial forces."""
+    pos = np.ascontiguousarray(pos, dtype=np.float64)
+    n = pos.shape[0]
+    radius = np.ascontiguousarray(radius, dtype=np.float64)
+    mass = 4.0 / 3.0 * math.pi * radius**3 * np.asarray(density, dtype=float)
+    w = system.n_walls
+    state = DEMState(
+        step=0, time_origin_step=0, pos=pos,
+        vel=np.array(vel, dtype=np.float64).reshape(n, 3),
+        omg=np.array(omg, dtype=np.float64).reshape(n, 3),
+        force=np.zeros((n, 3)), torque=np.zeros((n, 3)), radius=radius,
+        mass=np.ascontiguousarray(mass), mat=np.ascontiguousarray(mat, dtype=np.int64),
+        nl=NeighbourList(system.skin, system.periodic_length), ref_tub=np.zeros((n, 3)),
+        wall_hist=np.zeros((n, w, 6)), wall_flag=np.zeros((n, w), np.uint8),
+        wall_fn=np.zeros((n, w)), wall_ft=np.zeros((n, w)),
+        wall_slide=np.zeros((n, w), np.uint8), wall_point=np.zeros((n, w, 3)),
+        wall_arc=np.zeros(n),
+    )
+    rebuild(system, state)
+    _forces_now(system, state)
+    return state
+
+
+class _Buffers:
+    """Scratch arrays of the force assembly, made once per run."""
+
+    def __init__(self, system: DEMSystem, n: int):
+        self.fbuf = np.zeros((system.nchunk, n, 3))
+        self.tbuf = np.zeros((system.nchunk, n, 3))
+        self.imp_buf = np.zeros((system.nchunk, IMPACT_CAPACITY, 6))
+        self.imp_count = np.zeros(system.nchunk, np.int64)
+        self.diag = np.empty((system.nchunk, K.N_DIAG))
+        self.pose = np.zeros(8)
+        self.reset_diag()
+
+    def reset_diag(self):
+        self.diag[:] = -1.0
+        self.diag[:, K.D_BALL_OVERLAP] = 0.0
+        self.diag[:, K.D_WALL_OVERLAP] = 0.0
+
+
+def _buf(system: DEMSystem, state: DEMState) -> _Buffers:
+    b = state.scratch
+    if b is None or b.fbuf.shape[1] != state.n or b.fbuf.shape[0] != system.nchunk:
+        b = state.scratch = _Buffers(system, state.n)
+    return b
+
+
+def _tub_pose(system: DEMSystem, state: DEMState) -> np.ndarray:
+    pose = np.zeros(8)
+    pose[6], pose[7] = system.motion.pivot_x, system.motion.pivot_z
+    K._pose_array(system.motion_array(state.vibrating), pose[6], pose[7],
+                  state.time(system.dt), pose)
+    return pose
+
+
+def rebuild(system: DEMSystem, state: DEMState) -> None:
+    """Rebuild the neighbour list (keeping contact histories) and its reference positions."""
+    state.nl.build(state.pos, state.radius)
+    pose = _tub_pose(system, state)
+    state.ref_tub[:] = lab_to_tub_np(state.pos, pose[0], pose[1], pose[2],
+                                     (pose[6], pose[7]))
+
+
+def _forces_now(system: DEMSystem, state: DEMState) -> None:
+    b = _buf(system, state)
+    pose = _tub_pose(system, state)
+    K.compute_forces(state.time(system.dt), system.dt, pose, state.pos, state.vel, state.omg,
+                     state.radius, state.mass, state.mat, system.gravity, system.table,
+                     state.nl.start, state.nl.nbr, state.nl.hist, state.nl.flag, system.tub,
+                     system.wall_mat, system.planes, state.wall_hist, state.wall_flag,
+                     state.wall_fn, state.wall_ft, state.wall_slide, state.wall_point,
+                     state.wall_arc, state.force, state.torque, b.fbuf, b.tbuf, b.imp_buf,
+                     b.imp_count, False, b.diag)
+    b.imp_count[:] = 0
+
+
+def take_impacts(system: DEMSystem, state: DEMState) -> np.ndarray:
+    """Impacts recorded since the last call: (M, 6) [time, kind, x, y, z, speed] (lab), in a
+    fixed order (chunk by chunk)."""
+    b = _buf(system, state)
+    parts = [b.imp_buf[c, :min(b.imp_count[c], IMPACT_CAPACITY)] for c in range(system.nchunk)]
+    b.imp_count[:] = 0
+    return np.concatenate(parts) if parts else np.zeros((0, 6))
+
+
+def take_max_overlaps(system: DEMSystem, state: DEMState) -> tuple[float, float]:
+    """Largest ball-ball and ball-wall overlaps (m) since the last call."""
+    b = _buf(system, state)
+    out = (float(b.diag[:, K.D_BALL_OVERLAP].max()), float(b.diag[:, K.D_WALL_OVERLAP].max()))
+    b.reset_diag()
+    return out
+
+
+def _blowup_message(system: DEMSystem, state: DEMState, diag: np.ndarray) -> str:
+    t = state.time(system.dt)
+    d = 2.0 * float(state.radius.max())
+    nan = [int(x) for x in diag[:, K.D_NAN] if x >= 0]
+    lost = [int(x) for x in diag[:, K.D_LOST] if x >= 0]
+    c = int(np.argmax(diag[:, K.D_BALL_OVERLAP]))
+    cw = int(np.argmax(diag[:, K.D_WALL_OVERLAP]))
+    tc = system.notes.get("shortest_contact_time")
+    tc_txt = f" (shortest contact time {tc:.3g} s, {tc / system.dt:.1f} steps)" if tc else ""
+    if nan:
+        return (f"blow-up at t = {t:.6g} s: ball(s) {nan} have non-finite position; likely "
+                f"cause: time step dt = {system.dt:.3g} s too large for the contact "
+                f"stiffness{tc_txt}")
+    if diag[c, K.D_BALL_OVERLAP] > system.max_overlap:
+        i, j = int(diag[c, K.D_BALL_I]), int(diag[c, K.D_BALL_J])
+        return (f"blow-up at t = {t:.6g} s: balls {i} and {j} overlap by "
+                f"{diag[c, K.D_BALL_OVERLAP] / d:.1%} of d (bound "
+                f"{system.max_overlap / d:.0%}); likely cause: contact stiffness k_n too low "
+                f"for the load, or time step dt = {system.dt:.3g} s too large{tc_txt}")
+    if diag[cw, K.D_WALL_OVERLAP] > system.max_overlap:
+        i, w = int(diag[cw, K.D_WALL_I]), int(diag[cw, K.D_WALL_W])
+        return (f"blow-up at t = {t:.6g} s: ball {i} overlaps wall {w} by "
+                f"{diag[cw, K.D_WALL_OVERLAP] / d:.1%} of d (bound "
+                f"{system.max_overlap / d:.0%}); likely cause: wall stiffness k_n too low "
+                f"for the load, or time step dt = {system.dt:.3g} s too large{tc_txt}")
+    return (f"blow-up at t = {t:.6g} s: ball(s) {lost} left the tub; likely cause: time step "
+            f"dt = {system.dt:.3g} s or wall stiffness too low, so a fast ball passed through "
+            f"the wall{tc_txt}")
+
+
+def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: bool = False,
+              on_impacts: Callable[[np.ndarray], None] | None = None) -> None:
+    """Advance the state by `nsteps` steps in place (rebuilding the list as needed)."""
+    b = _buf(system, state)
+    motion = system.motion_array(state.vibrating)
+    b.pose[6], b.pose[7] = system.motion.pivot_x, system.motion.pivot_z
+    half_skin = 0.5 * system.skin
+    left = nsteps
+    while left > 0:
+        done, status = K.advance(
+            state.step, left, system.dt, state.time_origin_step, motion, state.pos, state.vel,
+            state.omg, state.radius, state.mass, state.mat, system.gravity, system.table,
+            state.nl.start, state.nl.nbr, state.nl.hist, state.nl.flag, system.tub,
+            system.wall_mat, system.planes, state.wall_hist, state.wall_flag, state.wall_fn,
+            state.wall_ft, state.wall_slide, state.wall_point, state.wall_arc, state.force,
+            state.torque, b.fbuf, b.tbuf, state.ref_tub, half_skin, b.imp_buf, b.imp_count,
+            record_impacts, b.diag, system.max_overlap, b.pose)
+        state.step += done
+        left -= done
+        if status == K.BLOWUP:
+            raise BlowUp(_blowup_message(system, state, b.diag))
+        if status == K.REBUILD:
+            rebuild(system, state)
+        if on_impacts is not None and (status == K.IMPACTS_FULL or left == 0):
+            imp = take_impacts(system, state)
+            if imp.shape[0]:
+                on_impacts(imp)
+        elif status == K.IMPACTS_FULL:
+            take_impacts(system, state)
+
+
+def wall_contacts_now(system: DEMSystem, state: DEMState) -> dict[str, np.ndarray]:
+    """The current ball-wall contacts: particle, wall slot, point (tub frame), arc, F_n,
+    |F_t|, sliding."""
+    i, w = np.nonzero(state.wall_flag)
+    arc = np.where(w == 0, state.wall_arc[i], np.nan)
+    return {"particle": i.astype(np.int32), "wall": w.astype(np.int8),
+            "position_tub": state.wall_point[i, w].astype(np.float32),
+            "arc": arc.astype(np.float32), "fn": state.wall_fn[i, w].astype(np.float32),
+            "ft": state.wall_ft[i, w].astype(np.float32),
+            "sliding": state.wall_slide[i, w].astype(bool),
+            "kind": np.array([wall_kind(int(x)) for x in w], dtype=np.int8)}
+
+
+def shortest_contact_time(scenario) -> float:
+    """Shortest head-on contact time (s) of the pairs that can touch in this scenario."""
+    times = []
+    mats = scenario.materials
+    if scenario.explicit:
+        balls = [(p.diameter, p.material) for p in scenario.particles]
+    else:
+        balls = [(scenario.fill.diameter, scenario.fill.material)]
+    walls = []
+    if scenario.tub is not None:
+        walls += [scenario.tub.wall_material, scenario.tub.partition_material]
+    walls += [w.material for w in (scenario.walls or [])]
+    for pair in scenario.contacts:
+        a, b = pair.pair
+        for d, m in balls:
+            r = 0.5 * d
+            mass = 4.0 / 3.0 * math.pi * r**3 * mats[m].density
+            if m in (a, b):
+                other = b if m == a else a
+                if any(other == m2 for _, m2 in balls):
+                    times.append(contact_time(pair, mats, 0.5 * mass, 0.5 * r))
+                if other in walls:
+                    times.append(contact_time(pair, mats, mass, r))
+    return min(times) if times else math.inf

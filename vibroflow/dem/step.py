@@ -1,0 +1,367 @@
+"""The DEM time step: velocity Verlet over flat arrays (LAMMPS' nve/sphere ordering).
+
+    v += dt/2 F/m,  w += dt/2 T/I,  x += dt v          (kick, drift)
+    F, T = contact forces at the new positions, with the half-step velocities
+    v += dt/2 F/m,  w += dt/2 T/I                     (kick)
+
+`advance` runs steps until it is asked to stop, the neighbour list needs a rebuild (some ball
+moved more than half the skin in the tub frame), the impact buffer fills, or the run blows up;
+the caller (dem/simulate.py) rebuilds and calls again.  All loops over balls are parallel.
+
+Parallel force assembly without races or atomics: balls are split into `nchunk` contiguous
+chunks; the pair forces of chunk c go to its own buffer fbuf[c], then the buffers are summed in
+a fixed order.  The result is reproducible bit for bit for a given chunk count (the checkpoint
+records it).
+"""
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from ..tub.motion import pose as tub_pose
+from .contact import contact_force
+from .walls import (KIND_BALL_BALL, KIND_BALL_PARTITION, KIND_BALL_PLANE, KIND_BALL_TUB,
+                    N_PLANE, TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT, WALL_PLANE0, plane_wall,
+                    u_wall)
+
+# columns of the per-chunk diagnostics
+D_BALL_OVERLAP, D_BALL_I, D_BALL_J, D_WALL_OVERLAP, D_WALL_I, D_WALL_W, D_NAN, D_LOST = range(8)
+N_DIAG = 8
+# status codes returned by advance
+DONE, REBUILD, IMPACTS_FULL, BLOWUP = 0, 1, 2, 3
+
+
+@nb.njit(cache=True, inline="always")
+def _chunk_range(c, nchunk, n):
+    return (c * n) // nchunk, ((c + 1) * n) // nchunk
+
+
+@nb.njit(cache=True, inline="always")
+def _record_impact(imp_buf, imp_count, c, t, kind, x, y, z, speed):
+    k = imp_count[c]
+    if k < imp_buf.shape[1]:
+        imp_buf[c, k, 0] = t
+        imp_buf[c, k, 1] = kind
+        imp_buf[c, k, 2] = x
+        imp_buf[c, k, 3] = y
+        imp_buf[c, k, 4] = z
+        imp_buf[c, k, 5] = speed
+    imp_count[c] = k + 1
+
+
+@nb.njit(cache=True)
+def _pair_chunk(c, nchunk, t, dt, pos, vel, omg, radius, mass, mat, table, nbr_start, nbr,
+                hist, flag, periodic_length, fbuf, tbuf, imp_buf, imp_count, record_impacts,
+                diag):
+    n = pos.shape[0]
+    lo, hi = _chunk_range(c, nchunk, n)
+    for i in range(lo, hi):
+        ri = radius[i]
+        mi = mass[i]
+        for k in range(nbr_start[i], nbr_start[i + 1]):
+            j = nbr[k]
+            dx = pos[i, 0] - pos[j, 0]
+            dy = pos[i, 1] - pos[j, 1]
+            dz = pos[i, 2] - pos[j, 2]
+            if periodic_length > 0.0:
+                dy -= periodic_length * np.rint(dy / periodic_length)
+            rsum = ri + radius[j]
+            d2 = dx * dx + dy * dy + dz * dz
+            if d2 >= rsum * rsum:
+                if flag[k]:
+                    flag[k] = 0
+                    for q in range(6):
+                        hist[k, q] = 0.0
+                continue
+            d = np.sqrt(d2)
+            delta = rsum - d
+            inv = 1.0 / d
+            nx = dx * inv
+            ny = dy * inv
+            nz = dz * inv
+            rj = radius[j]
+            # relative velocity of i's material to j's at the contact point
+            wsx = ri * omg[i, 0] + rj * omg[j, 0]
+            wsy = ri * omg[i, 1] + rj * omg[j, 1]
+            wsz = ri * omg[i, 2] + rj * omg[j, 2]
+            vx = vel[i, 0] - vel[j, 0] - (wsy * nz - wsz * ny)
+            vy = vel[i, 1] - vel[j, 1] - (wsz * nx - wsx * nz)
+            vz = vel[i, 2] - vel[j, 2] - (wsx * ny - wsy * nx)
+            if not flag[k]:
+                flag[k] = 1
+                if record_impacts:
+                    vn = vx * nx + vy * ny + vz * nz
+                    _record_impact(imp_buf, imp_count, c, t, KIND_BALL_BALL,
+                                   pos[i, 0] - ri * nx, pos[i, 1] - ri * ny,
+                                   pos[i, 2] - ri * nz, -vn)
+            mj = mass[j]
+            m_eff = mi * mj / (mi + mj)
+            r_eff = ri * rj / (ri + rj)
+            par = table[mat[i], mat[j]]
+            fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz, fn, ft, sl = contact_force(
+                delta, nx, ny, nz, vx, vy, vz,
+                omg[i, 0] - omg[j, 0], omg[i, 1] - omg[j, 1], omg[i, 2] - omg[j, 2],
+                ri, rj, r_eff, m_eff, par, hist[k], dt)
+            fbuf[c, i, 0] += fx
+            fbuf[c, i, 1] += fy
+            fbuf[c, i, 2] += fz
+            fbuf[c, j, 0] -= fx
+            fbuf[c, j, 1] -= fy
+            fbuf[c, j, 2] -= fz
+            tbuf[c, i, 0] += tix
+            tbuf[c, i, 1] += tiy
+            tbuf[c, i, 2] += tiz
+            tbuf[c, j, 0] += tjx
+            tbuf[c, j, 1] += tjy
+            tbuf[c, j, 2] += tjz
+            if delta > diag[c, D_BALL_OVERLAP]:
+                diag[c, D_BALL_OVERLAP] = delta
+                diag[c, D_BALL_I] = i
+                diag[c, D_BALL_J] = j
+
+
+@nb.njit(cache=True)
+def _one_wall(c, i, w, t, dt, kind, delta, nx, ny, nz, vwx, vwy, vwz, wwy, cx, cy, cz, pos,
+              vel, omg, radius, mass, mat, table, wall_mat, wall_hist, wall_flag, force, torque,
+              wall_fn, wall_ft, wall_slide, wall_point, imp_buf, imp_count, record_impacts,
+              diag):
+    """Apply one ball-wall contact (or clear its history when apart)."""
+    if delta <= 0.0:
+        if wall_flag[i, w]:
+            wall_flag[i, w] = 0
+            for q in range(6):
+                wall_hist[i, w, q] = 0.0
+        wall_fn[i, w] = 0.0
+        wall_ft[i, w] = 0.0
+        wall_slide[i, w] = 0
+        return
+    ri = radius[i]
+    vx = vel[i, 0] - ri * (omg[i, 1] * nz - omg[i, 2] * ny) - vwx
+    vy = vel[i, 1] - ri * (omg[i, 2] * nx - omg[i, 0] * nz) - vwy
+    vz = vel[i, 2] - ri * (omg[i, 0] * ny - omg[i, 1] * nx) - vwz
+    if not wall_flag[i, w]:
+        wall_flag[i, w] = 1
+        if record_impacts:
+            vn = vx * nx + vy * ny + vz * nz
+            _record_impact(imp_buf, imp_count, c, t, kind, pos[i, 0] - ri * nx,
+                           pos[i, 1] - ri * ny, pos[i, 2] - ri * nz, -vn)
+    par = table[mat[i], wall_mat[w]]
+    fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz, fn, ft, sl = contact_force(
+        delta, nx, ny, nz, vx, vy, vz, omg[i, 0], omg[i, 1] - wwy, omg[i, 2],
+        ri, 0.0, ri, mass[i], par, wall_hist[i, w], dt)
+    force[i, 0] += fx
+    force[i, 1] += fy
+    force[i, 2] += fz
+    torque[i, 0] += tix
+    torque[i, 1] += tiy
+    torque[i, 2] += tiz
+    wall_fn[i, w] = fn
+    wall_ft[i, w] = ft
+    wall_slide[i, w] = sl
+    wall_point[i, w, 0] = cx
+    wall_point[i, w, 1] = cy
+    wall_point[i, w, 2] = cz
+    if delta > diag[c, D_WALL_OVERLAP]:
+        diag[c, D_WALL_OVERLAP] = delta
+        diag[c, D_WALL_I] = i
+        diag[c, D_WALL_W] = w
+
+
+@nb.njit(cache=True)
+def _wall_chunk(c, nchunk, t, dt, pose, pos, vel, omg, radius, mass, mat, table, tub, wall_mat,
+                planes, wall_hist, wall_flag, force, torque, wall_fn, wall_ft, wall_slide,
+                wall_point, wall_arc, imp_buf, imp_count, record_impacts, diag):
+    n = pos.shape[0]
+    lo, hi = _chunk_range(c, nchunk, n)
+    has_tub = tub[TUB_PRESENT] > 0.0
+    partitions = has_tub and tub[TUB_PERIODIC] == 0.0
+    length = tub[TUB_LENGTH]
+    th = pose[2]
+    cth = np.cos(th)
+    sth = np.sin(th)
+    for i in range(lo, hi):
+        r = radius[i]
+        if has_tub:
+            delta, nx, nz, vwx, vwz, cxt, czt, s, outside = u_wall(pos[i, 0], pos[i, 2], r,
+                                                                   tub, pose)
+            if outside and diag[c, D_LOST] < 0.0:
+                diag[c, D_LOST] = i
+            wall_arc[i] = s
+            _one_wall(c, i, 0, t, dt, KIND_BALL_TUB, delta, nx, 0.0, nz, vwx, 0.0, vwz,
+                      -pose[5], cxt, pos[i, 1], czt, pos, vel, omg, radius, mass, mat, table,
+                      wall_mat, wall_hist, wall_flag, force, torque, wall_fn, wall_ft,
+                      wall_slide, wall_point, imp_buf, imp_count, record_impacts, diag)
+        if partitions:
+            y = pos[i, 1]
+            if (y < 0.0 or y > length) and diag[c, D_LOST] < 0.0:
+                diag[c, D_LOST] = i
+            d_lo = r - y
+            d_hi = r - (length - y)
+            if d_lo > 0.0 or d_hi > 0.0 or wall_flag[i, 1] or wall_flag[i, 2]:
+                vwx, vwz = rigid_velocity_at(pos[i, 0], pos[i, 2], pose)
+                tx = pose[6] + cth * (pos[i, 0] - pose[0] - pose[6]) + sth * (
+                    pos[i, 2] - pose[1] - pose[7])
+                tz = pose[7] - sth * (pos[i, 0] - pose[0] - pose[6]) + cth * (
+                    pos[i, 2] - pose[1] - pose[7])
+                _one_wall(c, i, 1, t, dt, KIND_BALL_PARTITION, d_lo, 0.0, 1.0, 0.0, vwx, 0.0,
+                          vwz, -pose[5], tx, 0.0, tz, pos, vel, omg, radius, mass, mat, table,
+                          wall_mat, wall_hist, wall_flag, force, torque, wall_fn, wall_ft,
+                          wall_slide, wall_point, imp_buf, imp_count, record_impacts, diag)
+                _one_wall(c, i, 2, t, dt, KIND_BALL_PARTITION, d_hi, 0.0, -1.0, 0.0, vwx, 0.0,
+                          vwz, -pose[5], tx, length, tz, pos, vel, omg, radius, mass, mat,
+                          table, wall_mat, wall_hist, wall_flag, force, torque, wall_fn,
+                          wall_ft, wall_slide, wall_point, imp_buf, imp_count, record_impacts,
+                          diag)
+        for k in range(planes.shape[0]):
+            w = WALL_PLANE0 + k
+            delta, vwx, vwy, vwz = plane_wall(pos[i, 0], pos[i, 1], pos[i, 2], r, planes[k], t)
+            nx = planes[k, 3]
+            ny = planes[k, 4]
+            nz = planes[k, 5]
+            _one_wall(c, i, w, t, dt, KIND_BALL_PLANE, delta, nx, ny, nz, vwx, vwy, vwz, 0.0,
+                      pos[i, 0] - (r - delta) * nx, pos[i, 1] - (r - delta) * ny,
+                      pos[i, 2] - (r - delta) * nz, pos, vel, omg, radius, mass, mat, table,
+                      wall_mat, wall_hist, wall_flag, force, torque, wall_fn, wall_ft,
+                      wall_slide, wall_point, imp_buf, imp_count, record_impacts, diag)
+
+
+@nb.njit(cache=True, inline="always")
+def rigid_velocity_at(lx, lz, pose):
+    rx = lx - pose[0] - pose[6]
+    rz = lz - pose[1] - pose[7]
+    return pose[3] - pose[5] * rz, pose[4] + pose[5] * rx
+
+
+@nb.njit(cache=True)
+def _pose_array(motion, pivot_x, pivot_z, t, out):
+    X, Z, th, Xd, Zd, thd, _ax, _az, _al = tub_pose(motion, t)
+    out[0] = X
+    out[1] = Z
+    out[2] = th
+    out[3] = Xd
+    out[4] = Zd
+    out[5] = thd
+    out[6] = pivot_x
+    out[7] = pivot_z
+
+
+@nb.njit(cache=True, parallel=True)
+def compute_forces(t, dt, pose, pos, vel, omg, radius, mass, mat, gravity, table, nbr_start,
+                   nbr, hist, flag, tub, wall_mat, planes, wall_hist, wall_flag, wall_fn,
+                   wall_ft, wall_slide, wall_point, wall_arc, force, torque, fbuf, tbuf,
+                   imp_buf, imp_count, record_impacts, diag):
+    """Forces and torques at the current positions (gravity, pairs, walls)."""
+    nchunk = fbuf.shape[0]
+    n = pos.shape[0]
+    periodic_length = tub[TUB_LENGTH] if (tub[TUB_PRESENT] > 0.0 and
+                                          tub[TUB_PERIODIC] > 0.0) else 0.0
+    for c in nb.prange(nchunk):
+        _pair_chunk(c, nchunk, t, dt, pos, vel, omg, radius, mass, mat, table, nbr_start, nbr,
+                    hist, flag, periodic_length, fbuf, tbuf, imp_buf, imp_count,
+                    record_impacts, diag)
+    for i in nb.prange(n):
+        fx = mass[i] * gravity[0]
+        fy = mass[i] * gravity[1]
+        fz = mass[i] * gravity[2]
+        tx = 0.0
+        ty = 0.0
+        tz = 0.0
+        for c in range(nchunk):
+            fx += fbuf[c, i, 0]
+            fy += fbuf[c, i, 1]
+            fz += fbuf[c, i, 2]
+            tx += tbuf[c, i, 0]
+            ty += tbuf[c, i, 1]
+            tz += tbuf[c, i, 2]
+            for a in range(3):
+                fbuf[c, i, a] = 0.0
+                tbuf[c, i, a] = 0.0
+        force[i, 0] = fx
+        force[i, 1] = fy
+        force[i, 2] = fz
+        torque[i, 0] = tx
+        torque[i, 1] = ty
+        torque[i, 2] = tz
+    for c in nb.prange(nchunk):
+        _wall_chunk(c, nchunk, t, dt, pose, pos, vel, omg, radius, mass, mat, table, tub,
+                    wall_mat, planes, wall_hist, wall_flag, force, torque, wall_fn, wall_ft,
+                    wall_slide, wall_point, wall_arc, imp_buf, imp_count, record_impacts, diag)
+
+
+@nb.njit(cache=True, parallel=True)
+def advance(step0, nsteps, dt, time_origin_step, motion, pos, vel, omg, radius, mass, mat,
+            gravity, table, nbr_start, nbr, hist, flag, tub, wall_mat, planes, wall_hist,
+            wall_flag, wall_fn, wall_ft, wall_slide, wall_point, wall_arc, force, torque, fbuf,
+            tbuf, ref_tub, half_skin, imp_buf, imp_count, record_impacts, diag, max_overlap,
+            pose):
+    """Run up to `nsteps` velocity-Verlet steps from step `step0`.
+
+    Time is t = (step - time_origin_step) dt, so that the vibration's phase comes from an
+    integer step count (exact on resume).  `pose` receives the tub pose of the last step.
+    Returns (steps done, status) with status DONE, REBUILD, IMPACTS_FULL or BLOWUP.
+    """
+    n = pos.shape[0]
+    nchunk = fbuf.shape[0]
+    half_dt = 0.5 * dt
+    hs2 = half_skin * half_skin
+    moved = np.zeros(nchunk)
+    cap = imp_buf.shape[1]
+    for k in range(nsteps):
+        # kick and drift
+        for i in nb.prange(n):
+            im = 1.0 / mass[i]
+            ii = 1.0 / (0.4 * mass[i] * radius[i] * radius[i])
+            for a in range(3):
+                vel[i, a] += half_dt * force[i, a] * im
+                omg[i, a] += half_dt * torque[i, a] * ii
+                pos[i, a] += dt * vel[i, a]
+        step = step0 + k + 1
+        t = (step - time_origin_step) * dt
+        _pose_array(motion, pose[6], pose[7], t, pose)
+        compute_forces(t, dt, pose, pos, vel, omg, radius, mass, mat, gravity, table,
+                       nbr_start, nbr, hist, flag, tub, wall_mat, planes, wall_hist, wall_flag,
+                       wall_fn, wall_ft, wall_slide, wall_point, wall_arc, force, torque, fbuf,
+                       tbuf, imp_buf, imp_count, record_impacts, diag)
+        # kick; find the largest move since the list was built (tub frame) and any NaN
+        c_th = np.cos(pose[2])
+        s_th = np.sin(pose[2])
+        for c in nb.prange(nchunk):
+            lo, hi = _chunk_range(c, nchunk, n)
+            m2 = 0.0
+            for i in range(lo, hi):
+                im = 1.0 / mass[i]
+                ii = 1.0 / (0.4 * mass[i] * radius[i] * radius[i])
+                for a in range(3):
+                    vel[i, a] += half_dt * force[i, a] * im
+                    omg[i, a] += half_dt * torque[i, a] * ii
+                rx = pos[i, 0] - pose[0] - pose[6]
+                rz = pos[i, 2] - pose[1] - pose[7]
+                dx = pose[6] + c_th * rx + s_th * rz - ref_tub[i, 0]
+                dy = pos[i, 1] - ref_tub[i, 1]
+                dz = pose[7] - s_th * rx + c_th * rz - ref_tub[i, 2]
+                d2 = dx * dx + dy * dy + dz * dz
+                if not (d2 < 1e300):  # NaN or infinite
+                    if diag[c, D_NAN] < 0.0:
+                        diag[c, D_NAN] = i
+                elif d2 > m2:
+                    m2 = d2
+            moved[c] = m2
+        blown = False
+        rebuild = False
+        full = False
+        for c in range(nchunk):
+            if diag[c, D_NAN] >= 0.0 or diag[c, D_LOST] >= 0.0:
+                blown = True
+            if diag[c, D_BALL_OVERLAP] > max_overlap or diag[c, D_WALL_OVERLAP] > max_overlap:
+                blown = True
+            if moved[c] > hs2:
+                rebuild = True
+            if imp_count[c] > cap // 2:
+                full = True
+        if blown:
+            return k + 1, BLOWUP
+        if rebuild:
+            return k + 1, REBUILD
+        if full:
+            return k + 1, IMPACTS_FULL
+    return nsteps, DONE

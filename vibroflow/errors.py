@@ -1,0 +1,22 @@
+"""Errors that mean "the input is wrong", as opposed to a bug.
+
+The CLI turns every `InputError` (and pydantic's `ValidationError`, a malformed TOML file or a
+missing file) into exactly one line on stderr and exit code 2, without a traceback.  So the
+message of an `InputError` must be one line that names the field, shows the value and says what
+is allowed:
+
+    run.dt = 0.0001: must be at most 2.27e-05 s (1/10 of the steel-steel contact time 2.27e-04 s)
+"""
+from __future__ import annotations
+
+
+class InputError(Exception):
+    """Bad input from the user: a one-line "FIELD = VALUE: what is allowed" message."""
+
+    def __init__(self, message: str):
+        # one line, always: the CLI prints the message as is and a newline would split it
+        super().__init__(" ".join(str(message).split()))
+
+    @property
+    def message(self) -> str:
+        return str(self.args[0])

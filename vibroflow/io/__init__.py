@@ -1,0 +1,2 @@
+"""Round trips with other codes: STL meshes of the tub and the LIGGGHTS deck exporter and dump
+importer (vibroflow.io.liggghts)."""

@@ -1,0 +1,68 @@
+"""Progress display of long runs: simulated time, particle-steps per second, time left."""
+from __future__ import annotations
+
+import sys
+import time
+
+from rich.console import Console
+from rich.progress import (BarColumn, Progress, ProgressColumn, TaskProgressColumn, TextColumn,
+                           TimeRemainingColumn)
+from rich.text import Text
+
+
+class _Rate(ProgressColumn):
+    def render(self, task):
+        rate = task.fields.get("rate")
+        return Text(f"{rate / 1e6:6.2f} M particle-steps/s" if rate else "", style="cyan")
+
+
+class _SimTime(ProgressColumn):
+    def render(self, task):
+        t = task.fields.get("sim_time")
+        end = task.fields.get("sim_end")
+        if t is None:
+            return Text("")
+        return Text(f"t = {t:.4f} / {end:.4f} s", style="green")
+
+
+class RunProgress:
+    """A rich progress bar over one stage at a time; silent when `enabled` is False."""
+
+    def __init__(self, enabled: bool = True, console: Console | None = None):
+        self.enabled = enabled
+        self.console = console or Console(file=sys.stderr)
+        self._progress = None
+        self._task = None
+        self._t0 = None
+        self._steps0 = 0
+
+    def __enter__(self):
+        if self.enabled:
+            self._progress = Progress(
+                TextColumn("[bold]{task.description}"), BarColumn(), TaskProgressColumn(),
+                _SimTime(), _Rate(), TextColumn("left"), TimeRemainingColumn(),
+                console=self.console, transient=False, refresh_per_second=4)
+            self._progress.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        if self._progress is not None:
+            self._progress.__exit__(*exc)
+
+    def stage(self, description: str, sim_end: float) -> None:
+        self._t0 = time.perf_counter()
+        self._steps0 = 0
+        if self._progress is not None:
+            self._task = self._progress.add_task(description, total=sim_end, sim_time=0.0,
+                                                 sim_end=sim_end, rate=None)
+
+    def update(self, sim_time: float, particle_steps: int) -> None:
+        if self._progress is None or self._task is None:
+            return
+        elapsed = time.perf_counter() - self._t0
+        rate = particle_steps / elapsed if elapsed > 0 else None
+        self._progress.update(self._task, completed=sim_time, sim_time=sim_time, rate=rate)
+
+    def log(self, message: str) -> None:
+        if self.enabled:
+            self.console.print(message)
