@@ -238,6 +238,17 @@ def test_set_on_a_user_file_takes_missing_tables_from_the_defaults(write_toml):
     assert s.contacts[1].friction == 0.5 and s.contacts[1].k_n == 5e4
 
 
+def test_apply_overrides_to_a_scenario():
+    from vibroflow.scenario import apply_overrides
+
+    base = load_scenario("tub47-quick")
+    s = apply_overrides(base, ["motion.amplitude_factor=1.25", "run.seed=4"])
+    assert isinstance(s, Scenario) and s.motion.amplitude_factor == 1.25 and s.run.seed == 4
+    assert s.model_copy(update={"motion": base.motion, "run": base.run}) == base
+    with pytest.raises(InputError, match=r"^run\.dt = 0\.001: must be at most"):
+        apply_overrides(base, ["run.dt=1e-3"])
+
+
 @pytest.mark.parametrize("override, message", [
     ("run.bogus=1", r"^run\.bogus: unknown key \(allowed: dt, duration, "),
     ("contacts.7.friction=0.3", r"^contacts\.7: no such entry"),

@@ -27,6 +27,7 @@ from vibroflow import __version__
 from vibroflow.errors import InputError
 
 EXIT_INPUT = 2
+EXIT_BLOWUP = 3
 
 app = typer.Typer(
     name="vibroflow",
@@ -138,10 +139,7 @@ def summary_line(s) -> str:
                 f", average the last {s.run.average_last:g} s")
     steps = round(s.run.duration / s.run.dt)
     line = f"{s.case}: ok: {what}; dt = {s.run.dt:g} s ({steps} steps)"
-    try:
-        times = contact_times(s)
-    except ModuleNotFoundError:
-        times = []
+    times = contact_times(s)
     if times:
         tp, t_c = times[0]
         line += f", 1/{t_c / s.run.dt:.1f} of the {tp.label} contact time {t_c:.3g} s"
@@ -171,8 +169,15 @@ def dem(
     """Run the DEM of a scenario (fill, settle, vibrate, average) into --out."""
     s = _load(scenario, set_)  # before anything is written: bad input leaves --out untouched
     from vibroflow.dem.run import run_dem
+    from vibroflow.dem.simulate import BlowUp
 
-    run_dem(s, out_dir=out, vtk=vtk, resume=resume, progress=True)
+    try:
+        run_dem(s, out_dir=out, vtk=vtk, resume=resume, progress=True)
+    except BlowUp as exc:
+        # a numerical blow-up is not bad input: its own exit code, the balls and the cause
+        sys.stderr.write("error: " + str(exc) + "\n")
+        raise typer.Exit(EXIT_BLOWUP)
+    typer.echo(f"results in {out}")
 
 
 # ----------------------------------------------------------------------------------------------

@@ -35,8 +35,13 @@ class RunProgress:
         self._task = None
         self._t0 = None
         self._steps0 = 0
+        self._plain_last = 0.0
+        self._desc = ""
+        self._end = 0.0
 
     def __enter__(self):
+        if self.enabled and not self.console.is_terminal:
+            return self  # a log file or a pipe: plain lines every few seconds instead
         if self.enabled:
             self._progress = Progress(
                 TextColumn("[bold]{task.description}"), BarColumn(), TaskProgressColumn(),
@@ -52,16 +57,27 @@ class RunProgress:
     def stage(self, description: str, sim_end: float) -> None:
         self._t0 = time.perf_counter()
         self._steps0 = 0
+        self._desc, self._end = description, sim_end
+        self._plain_last = self._t0
         if self._progress is not None:
             self._task = self._progress.add_task(description, total=sim_end, sim_time=0.0,
                                                  sim_end=sim_end, rate=None)
 
     def update(self, sim_time: float, particle_steps: int) -> None:
-        if self._progress is None or self._task is None:
+        if not self.enabled or self._t0 is None:
             return
-        elapsed = time.perf_counter() - self._t0
+        now = time.perf_counter()
+        elapsed = now - self._t0
         rate = particle_steps / elapsed if elapsed > 0 else None
-        self._progress.update(self._task, completed=sim_time, sim_time=sim_time, rate=rate)
+        if self._progress is not None and self._task is not None:
+            self._progress.update(self._task, completed=sim_time, sim_time=sim_time, rate=rate)
+            return
+        if now - self._plain_last >= 10.0:
+            self._plain_last = now
+            left = elapsed * (self._end - sim_time) / sim_time if sim_time > 0 else float("nan")
+            self.console.print(f"{self._desc}: t = {sim_time:.4f} / {self._end:.4f} s, "
+                               f"{(rate or 0) / 1e6:.2f} M particle-steps/s, "
+                               f"{left:.0f} s left", highlight=False)
 
     def log(self, message: str) -> None:
         if self.enabled:

@@ -180,7 +180,10 @@ def _run(scenario, out_dir: Path, system: DEMSystem, vtk: bool, resume: bool,
         summary = _vibrate(scenario, out_dir, system, state, writer, prog, settle_info,
                            wall_start, wall_before, explicit, vtk)
     except BlowUp:
+        # nothing half-written stays behind: a blown-up run has no result to resume
         writer.close()
+        writer.partial.unlink(missing_ok=True)
+        ckpt.unlink(missing_ok=True)
         raise
     except BaseException:
         writer.close()

@@ -183,14 +183,16 @@ def _wall_chunk(c, nchunk, t, dt, pose, pos, vel, omg, radius, mass, mat, table,
         r = radius[i]
         if has_tub:
             delta, nx, nz, vwx, vwz, cxt, czt, s, outside = u_wall(pos[i, 0], pos[i, 2], r,
-                                                                   tub, pose)
+                                                                   tub, pose, cth, sth)
             if outside and diag[c, D_LOST] < 0.0:
                 diag[c, D_LOST] = i
-            wall_arc[i] = s
-            _one_wall(c, i, 0, t, dt, KIND_BALL_TUB, delta, nx, 0.0, nz, vwx, 0.0, vwz,
-                      -pose[5], cxt, pos[i, 1], czt, pos, vel, omg, radius, mass, mat, table,
-                      wall_mat, wall_hist, wall_flag, force, torque, wall_fn, wall_ft,
-                      wall_slide, wall_point, imp_buf, imp_count, record_impacts, diag)
+            if delta > 0.0:
+                wall_arc[i] = s
+            if delta > 0.0 or wall_flag[i, 0]:
+                _one_wall(c, i, 0, t, dt, KIND_BALL_TUB, delta, nx, 0.0, nz, vwx, 0.0, vwz,
+                          -pose[5], cxt, pos[i, 1], czt, pos, vel, omg, radius, mass, mat, table,
+                          wall_mat, wall_hist, wall_flag, force, torque, wall_fn, wall_ft,
+                          wall_slide, wall_point, imp_buf, imp_count, record_impacts, diag)
         if partitions:
             y = pos[i, 1]
             if (y < 0.0 or y > length) and diag[c, D_LOST] < 0.0:

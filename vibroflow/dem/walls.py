@@ -16,7 +16,7 @@ import numba as nb
 import numpy as np
 
 from ..tub.geometry import u_wall_nearest
-from ..tub.motion import lab_to_tub, rigid_velocity, tub_to_lab
+from ..tub.motion import rigid_velocity, tub_to_lab
 
 # tub parameters packed for the kernels: [radius, rim_height, length, periodic, has_tub]
 TUB_RADIUS, TUB_RIM, TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT = range(5)
@@ -36,26 +36,37 @@ def wall_kind(w: int) -> int:
 
 
 @nb.njit(cache=True, inline="always")
-def u_wall(px, pz, r, tub, pose):
-    """Contact of a ball (lab x, z) with the U surface.
+def u_wall(px, pz, r, tub, pose, cos_th, sin_th):
+    """Contact of a ball (lab x, z) with the U surface; cos_th, sin_th of the tub's angle.
 
-    Returns (delta, nx, nz, vwx, vwz, cxt, czt, s, outside): overlap (m), lab normal (x, z),
-    wall velocity at the contact point (lab), the contact point in the tub frame, its arc
-    coordinate, and whether the ball's centre is outside the tub.
+    Returns (delta, nx, nz, vwx, vwz, cxt, czt, s, outside): overlap (m, <= 0 when apart, and
+    then the rest is not computed), lab normal (x, z), wall velocity at the contact point (lab),
+    the contact point in the tub frame, its arc coordinate, and whether the ball's centre is
+    outside the tub.
     """
-    X, Z, th, Xd, Zd, thd = pose[0], pose[1], pose[2], pose[3], pose[4], pose[5]
+    X, Z, Xd, Zd, thd = pose[0], pose[1], pose[3], pose[4], pose[5]
     pvx, pvz = pose[6], pose[7]
-    tx, tz = lab_to_tub(px, pz, X, Z, th, pvx, pvz)
+    # lab -> tub frame (tub/motion.py lab_to_tub, with the angle's cos and sin given)
+    rx = px - X - pvx
+    rz = pz - Z - pvz
+    tx = pvx + cos_th * rx + sin_th * rz
+    tz = pvz - sin_th * rx + cos_th * rz
+    R = tub[TUB_RADIUS]
     if tz > tub[TUB_RIM]:
         # above the rim: no wall; outside if beside the tub or flown far away
-        outside = abs(tx) > tub[TUB_RADIUS] or tz > tub[TUB_RIM] + 1.0
+        outside = abs(tx) > R or tz > tub[TUB_RIM] + 1.0
         return -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, outside
-    gap, ntx, ntz, cxt, czt, s = u_wall_nearest(tx, tz, tub[TUB_RADIUS])
-    c = np.cos(th)
-    sn = np.sin(th)
-    nx = c * ntx - sn * ntz
-    nz = sn * ntx + c * ntz
-    clx, clz = tub_to_lab(cxt, czt, X, Z, th, pvx, pvz)
+    # cheap gap first: most balls are not touching the wall
+    if tz <= R:
+        gap = R - np.sqrt(tx * tx + (tz - R) * (tz - R))
+    else:
+        gap = R - abs(tx)
+    if gap >= r:
+        return r - gap, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
+    gap, ntx, ntz, cxt, czt, s = u_wall_nearest(tx, tz, R)
+    nx = cos_th * ntx - sin_th * ntz
+    nz = sin_th * ntx + cos_th * ntz
+    clx, clz = tub_to_lab(cxt, czt, X, Z, pose[2], pvx, pvz)
     vwx, vwz = rigid_velocity(clx, clz, X, Z, Xd, Zd, thd, pvx, pvz)
     return r - gap, nx, nz, vwx, vwz, cxt, czt, s, gap < 0.0
 

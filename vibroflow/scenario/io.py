@@ -111,15 +111,24 @@ def parse_value(text: str) -> Any:
         return text.strip()
 
 
-def apply_overrides(raw: Mapping[str, Any], overrides: Iterable[str]) -> dict[str, Any]:
-    """A copy of raw scenario data with each `dotted.key=value` applied.
+@typing.overload
+def apply_overrides(base: Scenario, overrides: Iterable[str]) -> Scenario: ...
+@typing.overload
+def apply_overrides(base: Mapping[str, Any], overrides: Iterable[str]) -> dict[str, Any]: ...
+
+
+def apply_overrides(base, overrides):
+    """Apply `dotted.key=value` overrides to raw scenario data (returns a new dict) or to a
+    Scenario (returns a new, validated Scenario).
 
     Dotted keys go through tables by name and arrays by index (`contacts.0.friction=0.3`).  A
     table the data lacks is taken from the tub47 defaults first, so `--set
     materials.steel.density=8000` changes one number rather than replacing every material.  An
     unknown key is left for validation to reject by name.
     """
-    data = copy.deepcopy(dict(raw))
+    if isinstance(base, Scenario):
+        return parse_scenario(base.model_dump(mode="json", exclude_none=True), overrides)
+    data = copy.deepcopy(dict(base))
     for item in overrides:
         key, sep, text = str(item).partition("=")
         key = key.strip()

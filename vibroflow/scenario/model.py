@@ -13,7 +13,6 @@ The record is frozen after validation; use `scenario.model_copy(update=...)` or
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -236,6 +235,14 @@ class Scenario(_Strict):
         if self.run.average_last > self.run.duration:
             _fail(f"run.average_last = {self.run.average_last!r}: must be at most run.duration "
                   f"= {self.run.duration!r} s")
+        if not self.explicit and self.run.average_last > 0:
+            # batch means need at least `batches` whole cycles in the window (tub47.md)
+            cycles = math.floor(self.run.average_last * self.motion.frequency + 1e-9)
+            if cycles < self.run.batches:
+                _fail(f"run.average_last = {self.run.average_last!r}: holds {cycles} whole "
+                      f"cycles at {self.motion.frequency!r} Hz; must hold at least run.batches "
+                      f"= {self.run.batches} (i.e. >= "
+                      f"{self.run.batches / self.motion.frequency:.4g} s)")
         _check_time_step(self)
         return self
 
@@ -401,15 +408,7 @@ STEPS_PER_CONTACT = 10
 
 
 def _check_time_step(s: Scenario) -> None:
-    try:
-        times = contact_times(s)
-    except ModuleNotFoundError as e:
-        if e.name not in ("vibroflow.dem", "vibroflow.dem.laws"):
-            raise
-        # only while the DEM package is being written: say so rather than pass silently
-        warnings.warn("vibroflow.dem.laws is missing: run.dt is not checked against the "
-                      "contact time", stacklevel=2)
-        return
+    times = contact_times(s)
     if not times:
         return
     tp, t_c = times[0]

@@ -1,0 +1,154 @@
+"""End-to-end checks of DEM runs in the tub: outputs, reproducibility, resume, blow-up.
+
+The full tub47-quick check (no ball lost, largest overlaps below 2% of d between balls and 5% of
+d against the soft polyurethane wall) runs the whole case and is marked slow; the default suite
+runs the same checks on a small bed.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+SMALL = ["fill.count=300", "fill.settle_time=0.05", "fill.max_settle_time=0.05",
+         "run.duration=0.12", "run.average_last=0.09"]
+
+
+def _cli(*args, env=None, **kw):
+    return subprocess.run([sys.executable, "-m", "vibroflow.cli", *args], capture_output=True,
+                          text=True, env=env, **kw)
+
+
+def _env(tmp_path):
+    env = dict(os.environ)
+    env["VIBROFLOW_CACHE"] = str(tmp_path / "cache")
+    return env
+
+
+def _sets(items):
+    out = []
+    for s in items:
+        out += ["--set", s]
+    return out
+
+
+def _same_h5(a: Path, b: Path):
+    with h5py.File(a) as fa, h5py.File(b) as fb:
+        for group in ("snapshots", "wall_contacts", "impacts", "series"):
+            for name in fa[group]:
+                x, y = fa[group][name][()], fb[group][name][()]
+                assert x.shape == y.shape, f"{group}/{name}: {x.shape} != {y.shape}"
+                assert np.array_equal(x, y, equal_nan=True), f"{group}/{name} differs"
+
+
+def test_small_tub_run_outputs_and_bounds(tmp_path):
+    env = _env(tmp_path)
+    out = tmp_path / "run"
+    r = _cli("dem", "tub47-quick", "--out", str(out), *_sets(SMALL), env=env)
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    for key in ("case", "n_particles", "steps", "dt", "simulated_time_s", "wall_time_s",
+                "particle_steps_per_s", "max_overlap_over_d", "balls_lost", "probes",
+                "circulation", "wall_contacts", "impacts"):
+        assert key in summary, key
+    assert summary["n_particles"] == 300
+    assert summary["balls_lost"] == 0
+    assert summary["steps"] == 12000
+    assert summary["max_overlap_over_d"] < 0.02
+    assert summary["max_wall_overlap_over_d"] < 0.05
+    assert set(summary["probes"]) == {"P1", "P2", "P3", "P4", "P5"}
+    with h5py.File(out / "dem.h5") as f:
+        # 0.09 s at 47 Hz holds 4 whole cycles, 8 phases each
+        assert f["snapshots/position"].shape == (32, 300, 3)
+        phases = f["snapshots/phase"][()]
+        np.testing.assert_allclose(np.sort(phases[:8]), np.arange(8) / 8, atol=47 * 1e-5)
+        assert f["impacts/time"].shape[0] > 0
+        assert f["wall_contacts/fn"].shape[0] > 0
+        # every ball inside the tub at every snapshot
+        assert not (out / "dem.h5.partial").exists()
+    header = (out / "bulk_velocity.csv").read_text().splitlines()[0]
+    assert header.replace(" ", "") == "x,z,solid_fraction,vx,vz,samples"
+    # the same scenario and seed give the same numbers (the bed comes from the cache now)
+    out2 = tmp_path / "run2"
+    r = _cli("dem", "tub47-quick", "--out", str(out2), *_sets(SMALL), env=env)
+    assert r.returncode == 0, r.stderr
+    _same_h5(out / "dem.h5", out2 / "dem.h5")
+
+
+def test_killed_and_resumed_run_equals_uninterrupted(tmp_path):
+    env = _env(tmp_path)
+    sets = _sets(SMALL + ["run.checkpoint_every=1.0"])
+    ref = tmp_path / "ref"
+    r = _cli("dem", "tub47-quick", "--out", str(ref), *_sets(SMALL), env=env)
+    assert r.returncode == 0, r.stderr
+    out = tmp_path / "killed"
+    proc = subprocess.Popen([sys.executable, "-m", "vibroflow.cli", "dem", "tub47-quick",
+                             "--out", str(out), *sets], env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    deadline = time.time() + 300
+    while not (out / "checkpoint.h5").exists():
+        assert proc.poll() is None, "run ended before it wrote a checkpoint"
+        assert time.time() < deadline
+        time.sleep(0.05)
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert not (out / "dem.h5").exists(), "killed too late to test resume"
+    r = _cli("dem", "tub47-quick", "--out", str(out), "--resume", *sets, env=env)
+    assert r.returncode == 0, r.stderr
+    _same_h5(ref / "dem.h5", out / "dem.h5")
+    a = json.loads((ref / "summary.json").read_text())
+    b = json.loads((out / "summary.json").read_text())
+    assert a["probes"] == b["probes"]
+    assert a["circulation"] == b["circulation"]
+
+
+def test_blow_up_names_balls_and_cause(tmp_path):
+    scenario = tmp_path / "soft.toml"
+    scenario.write_text("""
+case = "soft"
+gravity = [0.0, 0.0, 0.0]
+[run]
+dt = 1.0e-5
+duration = 0.01
+average_last = 0.0
+[[contacts]]
+pair = ["steel", "steel"]
+k_n = 20.0
+restitution = 0.9
+friction = 0.2
+[[particles]]
+position = [0.0, 0.0, 0.0]
+velocity = [2.0, 0.0, 0.0]
+[[particles]]
+position = [0.0064, 0.0, 0.0]
+velocity = [-2.0, 0.0, 0.0]
+""")
+    out = tmp_path / "out"
+    r = _cli("dem", str(scenario), "--out", str(out), env=_env(tmp_path))
+    assert r.returncode != 0
+    line = r.stderr.strip().splitlines()[-1]
+    assert "Traceback" not in r.stderr
+    assert "balls 0 and 1" in line and "stiffness" in line
+    assert not (out / "summary.json").exists()
+
+
+@pytest.mark.slow
+def test_tub47_quick_full(tmp_path):
+    """tub47-quick as specified: no ball lost, overlaps within bounds."""
+    out = tmp_path / "quick"
+    r = _cli("dem", "tub47-quick", "--out", str(out), env=_env(tmp_path))
+    assert r.returncode == 0, r.stderr
+    s = json.loads((out / "summary.json").read_text())
+    assert s["balls_lost"] == 0
+    assert s["max_overlap_over_d"] < 0.02
+    assert s["max_wall_overlap_over_d"] < 0.05
+    assert s["circulation"]["strength"] > 0

@@ -1,0 +1,975 @@
+"""The LIGGGHTS round trip: write a LIGGGHTS 3.8 deck for a tub scenario, read its dumps back.
+
+    export_deck(scenario, DIR)      DIR/in.tub, tub_u.stl, partitions.stl, scenario.toml,
+                                    README.txt, post/ (where LIGGGHTS writes)
+    mpirun -np 2 liggghts -in in.tub    (in DIR; see README.txt and docs/liggghts.md)
+    import_run(DIR/post, scenario, OUT) OUT/dem.h5 (vibroflow's DEM layout, source "liggghts"),
+                                    OUT/summary.json, OUT/bulk_velocity.csv
+
+What the deck does, and why (details and the deviations from vibroflow's own DEM in
+docs/liggghts.md):
+
+* Contact law.  vibroflow's linear spring-dashpot is LIGGGHTS' `hooke/stiffness` with
+  `absolute_damping on` (so the damping coefficients are in N s/m, not per unit mass) and
+  `tangential_damping off`, per type pair: kn = k_n, kt = k_t_over_k_n k_n,
+  gamman_abs = 2 zeta sqrt(m_eff k_n) with zeta = -ln e / sqrt(pi^2 + ln^2 e) and m_eff = m/2
+  for ball-ball, m for ball-wall (models.md), gammat_abs = 0; Coulomb friction and the CDT rolling
+  resistance from the pair's mu and mu_r.  A scenario whose contacts are all Hertz gets LIGGGHTS'
+  `hertz` (moduli from the materials, restitution through LIGGGHTS' own damping formula).
+* Atom types: 1 = the balls' material, 2 = the tub wall's, 3 = the partitions'.
+* Walls: the U and the partitions as STL meshes (vibroflow.io.stl), moved rigidly with the tub
+  by two superposed `fix move/mesh` per mesh: `linear/variable` (the translation) then
+  `rotate/variable` about the pivot (whose origin rides with the translation).  Their velocity
+  variables are the exact derivatives of s(a, phi, t) = a [sin(omega t + phi) - sin(phi)], and
+  LIGGGHTS integrates them once a step with the step counter already advanced, so the variables
+  are evaluated at the middle of the step, t = (step - n0 - 1/2) dt: the midpoint rule, which
+  reproduces X(t), Z(t), theta(t) with every phase to O(dt^2) (measured: 1e-8 m).
+* Fill: `fix insert/rate/region` (random, no overlaps) in the U above insert_above, in events
+  0.05 s apart, repeated until all N balls are in; then settling with the tub at rest for
+  fill.settle_time and, like vibroflow, on in 0.01 s chunks until the kinetic energy per ball
+  is below fill.settle_kinetic_energy or fill.max_settle_time has passed.  Seeds are primes
+  derived from run.seed (`seed_primes`).
+* Vibration for run.duration from step n0 (written to post/vibration_start_step.txt), snapshots
+  (`dump custom`, post/balls.dump) and ball-wall contacts (`compute wall/gran/local`,
+  post/wall.dump) at exactly the vibration steps vibroflow samples (vibroflow.dem.run.
+  sample_steps: phases_per_cycle instants a cycle over the whole cycles of the last
+  average_last seconds, each rounded to the nearest step) through `dump_modify every v_...`
+  with a file-style variable; the kinetic energy every run.series_every steps
+  (post/series.txt).
+
+The importer recomputes the tub pose of every snapshot from the scenario (the pose is a known
+function of time), so no pose file is needed.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import shutil
+import subprocess
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from vibroflow.errors import InputError
+from vibroflow.io.stl import DEFAULT_MAX_SAGITTA, arc_segments, sagitta, write_tub_meshes
+from vibroflow.tub.geometry import TubGeometry
+from vibroflow.tub.motion import TubMotion, lab_to_tub_np, pose_np
+
+#: names the LIGGGHTS executable goes by (Debian: liggghts; source builds: lmp_auto)
+BINARY_NAMES = ("liggghts", "lmp_auto", "lmp_fedora", "lmp_ubuntu", "lmp")
+
+DECK_NAME = "in.tub"
+POST_DIR = "post"
+BALL_DUMP = "balls.dump"
+WALL_DUMP = "wall.dump"
+SERIES_FILE = "series.txt"
+START_FILE = "vibration_start_step.txt"
+FILL_FILE = "fill_done.txt"
+SETTLE_FILE = "settle_done.txt"
+
+#: seconds between insertion events of the fill
+FILL_EVENT_INTERVAL = 0.05
+#: fraction of the insertion region's volume one event tries to fill
+FILL_EVENT_FRACTION = 0.15
+#: settling chunk after settle_time (s), as vibroflow.dem.fill.settle
+SETTLE_CHUNK = 0.01
+
+#: wall slots of vibroflow.dem.walls
+WALL_U, WALL_PARTITION_LO, WALL_PARTITION_HI = 0, 1, 2
+
+
+# ----------------------------------------------------------------------------------------------
+# Running LIGGGHTS
+
+def find_liggghts() -> str | None:
+    """Path of the LIGGGHTS executable, or None.  $LIGGGHTS overrides the search."""
+    env = os.environ.get("LIGGGHTS")
+    if env:
+        return shutil.which(env) or (env if os.access(env, os.X_OK) else None)
+    for name in BINARY_NAMES:
+        path = shutil.which(name)
+        if path:
+            return path
+    return None
+
+
+def mpirun_command(nprocs: int = 2, binary: str | None = None,
+                   deck: str = DECK_NAME) -> list[str]:
+    """The command line that runs a deck on `nprocs` MPI ranks (Open MPI's mpirun; as root it
+    needs --allow-run-as-root, and --oversubscribe lets 2 ranks run on a 1-core machine)."""
+    binary = binary or find_liggghts()
+    if binary is None:
+        raise RuntimeError("LIGGGHTS not found (install the Debian package: apt-get install -y "
+                           "liggghts; or set $LIGGGHTS)")
+    cmd = [binary, "-in", deck]
+    if nprocs <= 1:
+        return cmd
+    mpirun = shutil.which("mpirun") or shutil.which("mpiexec")
+    if mpirun is None:
+        raise RuntimeError("mpirun not found (apt-get install -y openmpi-bin)")
+    extra = ["--oversubscribe"]
+    if hasattr(os, "geteuid") and os.geteuid() == 0:
+        extra.insert(0, "--allow-run-as-root")
+    return [mpirun, *extra, "-np", str(nprocs), *cmd]
+
+
+def run_deck(deck_dir, nprocs: int = 2, binary: str | None = None, timeout: float | None = None,
+             log_name: str = "log.liggghts") -> subprocess.CompletedProcess:
+    """Run DIR/in.tub in DIR on `nprocs` ranks; stdout+stderr go to DIR/screen.txt.  Raises
+    RuntimeError (with the tail of the output) when LIGGGHTS fails."""
+    deck_dir = Path(deck_dir)
+    cmd = mpirun_command(nprocs, binary)
+    cmd += ["-log", log_name]
+    env = dict(os.environ)
+    env.setdefault("OMPI_MCA_btl_vader_single_copy_mechanism", "none")  # containers
+    env.setdefault("OMP_NUM_THREADS", "1")
+    with open(deck_dir / "screen.txt", "w") as out:
+        proc = subprocess.run(cmd, cwd=deck_dir, stdout=out, stderr=subprocess.STDOUT,
+                              timeout=timeout, env=env)
+    text = (deck_dir / "screen.txt").read_text(errors="replace")
+    if proc.returncode != 0 or "ERROR" in text:
+        tail = "\n".join(text.splitlines()[-25:])
+        raise RuntimeError(f"LIGGGHTS failed (exit {proc.returncode}) in {deck_dir}:\n{tail}")
+    return proc
+
+
+@dataclass(frozen=True)
+class LoopTime:
+    """One "Loop time of T on P procs for S steps with N atoms" line of a LIGGGHTS log."""
+
+    seconds: float
+    procs: int
+    steps: int
+    atoms: int
+
+    @property
+    def particle_steps_per_s(self) -> float:
+        return self.atoms * self.steps / self.seconds if self.seconds > 0 else float("nan")
+
+
+_LOOP = re.compile(r"Loop time of ([0-9.eE+-]+) on (\d+) procs? for (\d+) steps with (\d+) atoms")
+
+
+def loop_times(log_path) -> list[LoopTime]:
+    """Every run's loop time in a LIGGGHTS log (or screen output), in order."""
+    text = Path(log_path).read_text(errors="replace")
+    return [LoopTime(float(a), int(b), int(c), int(d)) for a, b, c, d in _LOOP.findall(text)]
+
+
+# ----------------------------------------------------------------------------------------------
+# Parameters
+
+def next_prime(n: int) -> int:
+    """Smallest prime >= n."""
+    n = max(int(n), 2)
+    while not _is_prime(n):
+        n += 1
+    return n
+
+
+def _is_prime(n: int) -> bool:
+    if n < 2:
+        return False
+    if n % 2 == 0:
+        return n == 2
+    return all(n % p for p in range(3, math.isqrt(n) + 1, 2))
+
+
+def seed_primes(seed: int, count: int = 3) -> list[int]:
+    """`count` distinct primes > 10000 (what LIGGGHTS' random seeds must be) derived from a
+    scenario seed: the first prime at or above 1 000 003 + 10 000 (seed mod 200 000) + 1000 k
+    for k = 0 .. count-1 (prime gaps there are far below 1000, so they are distinct, and the
+    result stays below 2^31)."""
+    base = 1_000_003 + 10_000 * (int(seed) % 200_000)
+    return [next_prime(base + 1000 * k) for k in range(count)]
+
+
+def damping_ratio(restitution: float) -> float:
+    """zeta = -ln e / sqrt(pi^2 + ln^2 e) of the linear law (models.md)."""
+    if restitution >= 1.0:
+        return 0.0
+    ln_e = math.log(restitution)
+    return -ln_e / math.sqrt(math.pi**2 + ln_e**2)
+
+
+def tub_motion(scenario) -> TubMotion:
+    """The scenario's tub motion with the amplitude factor applied."""
+    m = scenario.motion
+    f = m.amplitude_factor
+    return TubMotion(frequency=m.frequency, amplitude_x=f * m.amplitude_x, phase_x=m.phase_x,
+                     amplitude_z=f * m.amplitude_z, phase_z=m.phase_z,
+                     amplitude_theta=f * m.amplitude_theta, phase_theta=m.phase_theta,
+                     pivot_x=m.pivot[0], pivot_z=m.pivot[1])
+
+
+def geometry_of(scenario) -> TubGeometry:
+    t = scenario.tub
+    return TubGeometry(radius=t.radius, rim_height=t.rim_height, length=t.length,
+                       periodic=t.periodic)
+
+
+def _find_pair(scenario, a: str, b: str):
+    for pair in scenario.contacts:
+        if {pair.pair[0], pair.pair[1]} == {a, b}:
+            return pair
+    return None
+
+
+def _check_exportable(scenario) -> None:
+    if scenario.explicit or scenario.tub is None or scenario.fill is None:
+        raise InputError("scenario.particles: the LIGGGHTS export handles tub scenarios only "
+                         "(no explicit particles or walls)")
+    if scenario.walls:
+        raise InputError("scenario.walls: the LIGGGHTS export handles tub scenarios only")
+
+
+def type_materials(scenario) -> list[str]:
+    """Material of atom types 1, 2, 3: the balls, the tub wall, the partitions."""
+    return [scenario.fill.material, scenario.tub.wall_material, scenario.tub.partition_material]
+
+
+def ball_mass(scenario) -> float:
+    r = 0.5 * scenario.fill.diameter
+    return 4.0 / 3.0 * math.pi * r**3 * scenario.materials[scenario.fill.material].density
+
+
+@dataclass(frozen=True)
+class PairTables:
+    """Per-type-pair property tables (3 x 3, symmetric) for `fix property/global`."""
+
+    model: str                  # "hooke/stiffness" or "hertz"
+    rolling: str                # "cdt", "epsd2" or "none"
+    kn: np.ndarray              # N/m
+    kt: np.ndarray              # N/m
+    gamman_abs: np.ndarray      # N s/m
+    gammat_abs: np.ndarray      # N s/m (zero: no tangential damping)
+    restitution: np.ndarray
+    friction: np.ndarray
+    rolling_friction: np.ndarray
+
+
+def pair_tables(scenario) -> PairTables:
+    """LIGGGHTS per-type-pair tables of a tub scenario (types: ball, tub wall, partition).
+
+    Ball-ball pairs use m_eff = m/2, ball-wall pairs m_eff = m (a wall is infinitely heavy), so
+    gamman_abs = 2 zeta sqrt(m_eff k_n) (models.md).  Pairs that never touch (wall-wall) copy the
+    ball-ball entry, since LIGGGHTS wants every entry to be valid.
+    """
+    _check_exportable(scenario)
+    mats = type_materials(scenario)
+    m = ball_mass(scenario)
+    needed = {(0, 0): 0.5 * m, (0, 1): m, (0, 2): m}
+    shape = (3, 3)
+    kn, kt, gn, gt = (np.zeros(shape) for _ in range(4))
+    e, mu, mur = (np.zeros(shape) for _ in range(3))
+    models, rolls = set(), set()
+    for (i, j), m_eff in needed.items():
+        pair = _find_pair(scenario, mats[i], mats[j])
+        if pair is None:
+            raise InputError(f"contacts: no contact law for the pair ({mats[i]}, {mats[j]}), "
+                             "which the LIGGGHTS deck needs")
+        models.add(pair.model)
+        rolls.add(pair.rolling_model)
+        for a, b in ((i, j), (j, i)):
+            if pair.model == "linear":
+                kn[a, b] = pair.k_n
+                kt[a, b] = pair.k_t_over_k_n * pair.k_n
+                gn[a, b] = 2.0 * damping_ratio(pair.restitution) * math.sqrt(m_eff * pair.k_n)
+            e[a, b] = pair.restitution
+            mu[a, b] = pair.friction
+            mur[a, b] = pair.rolling_friction
+    if len(models) > 1:
+        raise InputError(f"contacts.model = {sorted(models)}: LIGGGHTS uses one normal model for "
+                         "all pairs; make them all linear or all hertz")
+    if len(rolls) > 1:
+        raise InputError(f"contacts.rolling_model = {sorted(rolls)}: LIGGGHTS uses one rolling "
+                         "model for all pairs; make them equal")
+    for i in range(3):
+        for j in range(3):
+            if (min(i, j), max(i, j)) not in needed:
+                for arr in (kn, kt, gn, e, mu, mur):
+                    arr[i, j] = arr[0, 0]
+    model = "hooke/stiffness" if models == {"linear"} else "hertz"
+    rolling = {"cdt": "cdt", "epsd": "epsd2", "none": "none"}[rolls.pop()]
+    return PairTables(model, rolling, kn, kt, gn, gt, e, mu, mur)
+
+
+def model_arguments(tables: PairTables) -> tuple[str, str]:
+    """The model part and the keyword part of `pair_style gran` / `fix wall/gran`."""
+    rolling = "" if tables.rolling == "none" else f" rolling_friction {tables.rolling}"
+    if tables.model == "hooke/stiffness":
+        return (f"model hooke/stiffness tangential history{rolling}",
+                "absolute_damping on tangential_damping off limitForce off")
+    return (f"model hertz tangential history{rolling}", "tangential_damping off limitForce off")
+
+
+def contact_law_lines(scenario, tables: PairTables | None = None) -> list[str]:
+    """Deck lines that define the materials and the contact law: the `fix property/global`
+    tables (types 1 = balls, 2 = tub wall, 3 = partitions), `pair_style gran` and
+    `pair_coeff`.  The wall fix uses the same model (`model_arguments`)."""
+    tables = tables or pair_tables(scenario)
+    mats = type_materials(scenario)
+
+    def props(name: str) -> str:
+        return " ".join(_fmt(getattr(scenario.materials[mt], name)) for mt in mats)
+
+    out = [f"fix youngsModulus all property/global youngsModulus peratomtype "
+           f"{props('youngs_modulus')}",
+           f"fix poissonsRatio all property/global poissonsRatio peratomtype "
+           f"{props('poisson_ratio')}",
+           _table("coefficientRestitution", tables.restitution),
+           _table("coefficientFriction", tables.friction),
+           _table("coefficientRollingFriction", tables.rolling_friction)]
+    if tables.model == "hooke/stiffness":
+        out += ["# k_n (N/m); k_t = k_t_over_k_n k_n (N/m); gamma_n = 2 zeta sqrt(m_eff k_n) "
+                "(N s/m),",
+                f"# m_eff = m/2 ball-ball, m ball-wall, m = {_fmt(ball_mass(scenario))} kg; "
+                "no tangential damping",
+                _table("kn", tables.kn), _table("kt", tables.kt),
+                _table("gamman_abs", tables.gamman_abs), _table("gammat_abs", tables.gammat_abs)]
+    model_args, model_kw = model_arguments(tables)
+    out += ["", f"pair_style      gran {model_args} {model_kw}", "pair_coeff      * *"]
+    return out
+
+
+def dump_vibration_steps(scenario) -> np.ndarray:
+    """Vibration steps (from the start of vibration) of the snapshots: the same instants as
+    vibroflow's own DEM (vibroflow.dem.run.sample_steps)."""
+    run, f, dt = scenario.run, scenario.motion.frequency, scenario.run.dt
+    try:
+        from vibroflow.dem.run import sample_steps
+    except ImportError:  # pragma: no cover - dem package absent
+        sample_steps = None
+    if sample_steps is not None:
+        steps, _, _ = sample_steps(scenario, dt)
+        return np.asarray(steps, dtype=np.int64)
+    n_cycles = int(math.floor(run.average_last * f + 1e-9))
+    t0 = run.duration - n_cycles / f
+    k = np.arange(n_cycles * run.phases_per_cycle)
+    return np.round((t0 + k / (f * run.phases_per_cycle)) / dt).astype(np.int64)
+
+
+# ----------------------------------------------------------------------------------------------
+# The deck
+
+def _fmt(x: float) -> str:
+    return f"{float(x):.10g}"
+
+
+def _table(name: str, arr: np.ndarray) -> str:
+    vals = " ".join(_fmt(v) for v in np.asarray(arr).ravel())
+    return f"fix {name} all property/global {name} peratomtypepair 3 {vals}"
+
+
+def _scenario_toml(scenario) -> str:
+    try:
+        from vibroflow.scenario.io import dump_scenario
+    except ImportError:  # pragma: no cover
+        dump_scenario = None
+    if dump_scenario is not None:
+        return dump_scenario(scenario)
+    import tomli_w
+    return tomli_w.dumps(scenario.model_dump(mode="json", exclude_none=True))
+
+
+def _write_text_atomic(path: Path, text: str) -> None:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+@dataclass(frozen=True)
+class DeckInfo:
+    """What export_deck wrote and the numbers it chose."""
+
+    directory: Path
+    deck: Path
+    n_particles: int
+    dt: float
+    vibration_steps: int
+    dump_steps: np.ndarray       # vibration steps of the snapshots
+    arc_segments: int
+    max_sagitta: float
+    seeds: list[int]
+    fill_per_event: int
+    fill_event_steps: int
+    settle_steps: int
+    tables: PairTables
+
+
+def export_deck(scenario, out_dir, *, wall_contacts: bool = True,
+                max_sagitta: float = DEFAULT_MAX_SAGITTA, thermo_every: int | None = None,
+                processors: str = "* 1 1") -> DeckInfo:
+    """Write a LIGGGHTS 3.8 deck for a tub scenario into out_dir (see the module docstring).
+
+    wall_contacts: dump the ball-wall contacts at the snapshots (compute wall/gran/local).
+    processors: LIGGGHTS processor grid; the default splits the tub across x only, which
+    balances a symmetric bed.  Returns a DeckInfo.
+    """
+    _check_exportable(scenario)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / POST_DIR).mkdir(exist_ok=True)
+    run, fill, tub = scenario.run, scenario.fill, scenario.tub
+    geom = geometry_of(scenario)
+    motion = tub_motion(scenario)
+    tables = pair_tables(scenario)
+    dt = run.dt
+    d = fill.diameter
+    r = 0.5 * d
+    m = ball_mass(scenario)
+    skin = run.skin * d
+    R, rim, L = tub.radius, tub.rim_height, tub.length
+    periodic = tub.periodic
+    mats = type_materials(scenario)
+    seeds = seed_primes(run.seed, 3)
+
+    meshes = write_tub_meshes(geom, out_dir, max_sagitta)
+    n_arc = arc_segments(R, max_sagitta)
+
+    # simulation box: the tub plus room for its motion (translation <= 2 A, rotation about the
+    # pivot) and for balls thrown above the rim
+    reach = 2.0 * max(motion.amplitude_x, motion.amplitude_z)
+    lever = math.hypot(R + abs(motion.pivot_x), rim - motion.pivot_z)
+    swing = 2.0 * motion.amplitude_theta * lever
+    pad = reach + swing + 4.0 * d
+    x_lo, x_hi = -R - pad, R + pad
+    z_lo, z_hi = -pad, rim + max(0.2, 10.0 * d) + pad
+    if periodic:
+        y_lo, y_hi = 0.0, L
+    else:
+        y_lo, y_hi = -4.0 * d, L + 4.0 * d
+
+    # insertion region: ball centres at least r + skin/2 from every wall (LIGGGHTS' rule for
+    # mesh walls), above insert_above (ball bottoms) and below the rim
+    margin = r + 0.5 * skin
+    ins_z_lo = max(fill.insert_above + r, margin)
+    ins_z_hi = rim - margin
+    if periodic:
+        iy_lo, iy_hi = 0.0, L
+    else:
+        iy_lo, iy_hi = margin, L - margin
+    if iy_hi - iy_lo <= 0 or ins_z_hi <= ins_z_lo or R - margin <= 0:
+        raise InputError(f"tub.length = {L}: too short to insert balls of diameter {d} with "
+                         f"a skin of {skin:.3g} m away from the partitions")
+    # volume of the insertion region (centres), cross-section of the shrunk U above ins_z_lo
+    area = _shrunk_u_area(R, margin, ins_z_lo, ins_z_hi)
+    v_region = area * (iy_hi - iy_lo)
+    v_ball = 4.0 / 3.0 * math.pi * r**3
+    per_event = int(max(1, min(fill.count, math.floor(FILL_EVENT_FRACTION * v_region / v_ball))))
+    event_steps = max(1, int(round(FILL_EVENT_INTERVAL / dt)))
+    rate = per_event / (event_steps * dt)
+    max_passes = 4 * math.ceil(fill.count / per_event) + 20
+
+    settle_steps = int(round(fill.settle_time / dt))
+    chunk_steps = max(1, int(round(SETTLE_CHUNK / dt)))
+    extra_settle = max(0.0, fill.max_settle_time - fill.settle_time)
+    max_chunks = int(math.ceil(extra_settle / (chunk_steps * dt) - 1e-9))
+
+    vib_steps = int(round(run.duration / dt))
+    dsteps = dump_vibration_steps(scenario)
+    dsteps = dsteps[(dsteps >= 0) & (dsteps <= vib_steps)]
+    thermo_every = thermo_every or max(1, int(round(0.01 / dt)))
+
+    w = motion.omega
+    tp = out_dir / POST_DIR
+    # dump steps relative to the vibration start; a sentinel far beyond the run ends the list
+    first_now = dsteps.size and dsteps[0] == 0
+    rest = dsteps[1:] if first_now else dsteps
+    step_lines = "\n".join(str(int(s)) for s in rest) + ("\n" if rest.size else "")
+    # two sentinels: LIGGGHTS reads one line ahead of what next() returns
+    step_lines += f"{vib_steps + 10**9}\n{vib_steps + 10**9 + 1}\n"
+    _write_text_atomic(tp / "dump_steps.txt", step_lines)
+
+    ke_every = run.series_every
+    model_args, model_kw = model_arguments(tables)
+    mesh_ids = "tub" if periodic else "tub parts"
+    n_meshes = 1 if periodic else 2
+
+    L_ = []
+    add = L_.append
+    add(f"# LIGGGHTS 3.8 deck written by vibroflow.io.liggghts for case '{scenario.case}'")
+    add("# Run in this folder:  mpirun -np 2 liggghts -in in.tub   (see README.txt)")
+    add("# SI units.  Atom types: 1 = balls (" + mats[0] + "), 2 = tub wall (" + mats[1]
+        + "), 3 = partitions (" + mats[2] + ").")
+    add("")
+    add("atom_style      granular")
+    add("atom_modify     map array sort 0 0")
+    add(f"boundary        f {'p' if periodic else 'f'} f")
+    add("newton          off")
+    add("communicate     single vel yes")
+    add("units           si")
+    add("hard_particles  yes")
+    add(f"processors      {processors}")
+    add("")
+    add(f"region          domain block {_fmt(x_lo)} {_fmt(x_hi)} {_fmt(y_lo)} {_fmt(y_hi)} "
+        f"{_fmt(z_lo)} {_fmt(z_hi)} units box")
+    add("create_box      3 domain")
+    add(f"neighbor        {_fmt(skin)} bin")
+    add("neigh_modify    delay 0")
+    add("")
+    add("# ---- materials and contact law (per type pair; see docs/liggghts.md)")
+    for line in contact_law_lines(scenario, tables):
+        add(line)
+    add(f"timestep        {_fmt(dt)}")
+    g = np.asarray(scenario.gravity, dtype=float)
+    gn = float(np.linalg.norm(g))
+    if gn > 0:
+        gv = g / gn
+        add(f"fix gravi all gravity {_fmt(gn)} vector {_fmt(gv[0])} {_fmt(gv[1])} {_fmt(gv[2])}")
+    add("fix integr all nve/sphere")
+    add("")
+    add(f"# ---- walls: the U ({n_arc} arcs on the half circle, sagitta "
+        f"{sagitta(R, n_arc) * 1e3:.4f} mm) and the partitions, moving with the tub")
+    add(f"fix tub all mesh/surface file {meshes['u'].name} type 2")
+    if not periodic:
+        add(f"fix parts all mesh/surface file {meshes['partitions'].name} type 3")
+    add(f"fix walls all wall/gran {model_args} mesh n_meshes {n_meshes} meshes {mesh_ids} "
+        f"{model_kw}")
+    add("")
+    add("# ---- output between runs")
+    add("compute ke all ke")
+    add("compute rke all erotate/sphere")
+    add("variable ekin equal c_ke+c_rke")
+    add("variable natoms equal atoms")
+    add("variable keball equal (c_ke+c_rke)/(atoms+1.0e-300)")
+    if wall_contacts:
+        # (LIGGGHTS wants this compute defined before the first run)
+        add("compute wallc all wall/gran/local id force_normal force_tangential")
+    add("thermo_style    custom step atoms c_ke c_rke cpu")
+    add(f"thermo          {thermo_every}")
+    add("thermo_modify   lost error norm no")
+    add("")
+    add(f"# ---- fill: {fill.count} balls, d = {_fmt(d)} m, in events of {per_event} every "
+        f"{event_steps} steps, until all are in")
+    add(f"fix pts1 all particletemplate/sphere {seeds[0]} atom_type 1 density constant "
+        f"{_fmt(scenario.materials[fill.material].density)} radius constant {_fmt(r)}")
+    add(f"fix pdd1 all particledistribution/discrete {seeds[1]} 1 pts1 1.0")
+    add(f"region ucyl cylinder y 0 {_fmt(R)} {_fmt(R - margin)} {_fmt(iy_lo)} {_fmt(iy_hi)} "
+        "units box")
+    add(f"region ublk block {_fmt(-R + margin)} {_fmt(R - margin)} {_fmt(iy_lo)} {_fmt(iy_hi)} "
+        f"{_fmt(R)} {_fmt(ins_z_hi)} units box")
+    add("region uin union 2 ucyl ublk")
+    add(f"region zcut block INF INF INF INF {_fmt(ins_z_lo)} {_fmt(ins_z_hi)} units box")
+    add("region ins intersect 2 uin zcut")
+    add(f"fix ins all insert/rate/region seed {seeds[2]} distributiontemplate pdd1 "
+        f"nparticles {fill.count} particlerate {_fmt(rate)} insert_every {event_steps} "
+        "overlapcheck yes all_in no maxattempt 200 vel constant 0. 0. 0. "
+        "region ins ntry_mc 200000")
+    add(f"variable fillpass loop {max_passes}")
+    add("label fill_loop")
+    add(f"run {event_steps}")
+    add(f'if "${{natoms}} >= {fill.count}" then "jump SELF fill_done"')
+    add("next fillpass")
+    add("jump SELF fill_loop")
+    add("label fill_done")
+    add("variable fillpass delete")
+    add("unfix ins")
+    add("variable stepnow equal step")
+    add(f'print "${{stepnow}} ${{natoms}}" file {POST_DIR}/{FILL_FILE}')
+    add(f'if "${{natoms}} < {fill.count}" then "print \'WARNING: vibroflow fill inserted only '
+        f'${{natoms}} of {fill.count} balls\'"')
+    add("")
+    add(f"# ---- settle with the tub at rest: {_fmt(fill.settle_time)} s, then on in "
+        f"{_fmt(chunk_steps * dt)} s chunks until the kinetic energy per ball < "
+        f"{_fmt(fill.settle_kinetic_energy)} J (at most {_fmt(fill.max_settle_time)} s)")
+    if settle_steps > 0:
+        add(f"run {settle_steps}")
+    if max_chunks > 0:
+        add(f"variable settlepass loop {max_chunks}")
+        add("label settle_loop")
+        add(f'if "${{keball}} < {_fmt(fill.settle_kinetic_energy)}" then "jump SELF settle_done"')
+        add(f"run {chunk_steps}")
+        add("next settlepass")
+        add("jump SELF settle_loop")
+        add("label settle_done")
+        add("variable settlepass delete")
+    add(f'print "${{stepnow}} ${{keball}}" file {POST_DIR}/{SETTLE_FILE}')
+    add("")
+    add("# ---- vibration: t = (step - n0) dt")
+    add("variable n0 equal ${stepnow}")
+    add(f'print "${{n0}}" file {POST_DIR}/{START_FILE}')
+    add("# tub velocity = d/dt of s(a, phi, t) = a [sin(w t + phi) - sin(phi)], evaluated at the")
+    add("# middle of each step (LIGGGHTS advances the step counter before moving the mesh), so")
+    add("# the integrated pose is exact to O(dt^2) with every phase")
+    add(f"variable tmid equal (step-${{n0}}-0.5)*{_fmt(dt)}")
+    add(f"variable vX equal {_fmt(motion.amplitude_x * w)}*cos({_fmt(w)}*v_tmid+"
+        f"{_fmt(motion.phase_x)})")
+    add("variable vY equal 0.0")
+    add(f"variable vZ equal {_fmt(motion.amplitude_z * w)}*cos({_fmt(w)}*v_tmid+"
+        f"{_fmt(motion.phase_z)})")
+    add("# theta > 0 turns x towards z: a turn about -y")
+    add(f"variable wT equal {_fmt(motion.amplitude_theta * w)}*cos({_fmt(w)}*v_tmid+"
+        f"{_fmt(motion.phase_theta)})")
+    for mesh in (["tub"] if periodic else ["tub", "parts"]):
+        add(f"fix move_{mesh}_t all move/mesh mesh {mesh} linear/variable v_vX v_vY v_vZ")
+        add(f"fix move_{mesh}_r all move/mesh mesh {mesh} rotate/variable origin "
+            f"{_fmt(motion.pivot_x)} 0. {_fmt(motion.pivot_z)} axis 0. -1. 0. omega v_wT")
+    add("")
+    add(f"# snapshots at {dsteps.size} vibration steps (post/dump_steps.txt, relative to n0)")
+    add(f"variable dfile file {POST_DIR}/dump_steps.txt")
+    add("variable dnext equal ${n0}+next(dfile)")
+    add(f"dump dballs all custom 1 {POST_DIR}/{BALL_DUMP} id type x y z vx vy vz "
+        "omegax omegay omegaz radius")
+    fmt = "%d %d " + " ".join(["%.10g"] * 10)
+    add(f'dump_modify dballs every v_dnext sort id format "{fmt}"'
+        + (" first yes" if first_now else ""))
+    if wall_contacts:
+        add(f"variable wfile file {POST_DIR}/dump_steps.txt")
+        add("variable wnext equal ${n0}+next(wfile)")
+        add(f"dump dwall all local 1 {POST_DIR}/{WALL_DUMP} " + " ".join(
+            f"c_wallc[{k}]" for k in range(1, 10)))
+        add("dump_modify dwall every v_wnext" + (" first yes" if first_now else ""))
+    add(f"variable tvib equal (step-${{n0}})*{_fmt(dt)}")
+    add(f'fix series all print {ke_every} "${{tvib}} ${{ekin}}" file {POST_DIR}/{SERIES_FILE} '
+        'screen no title "# t_vibration_s kinetic_energy_J"')
+    add(f"run {vib_steps}")
+    add(f'print "vibroflow: vibration of {vib_steps} steps done"')
+    deck = "\n".join(L_) + "\n"
+    deck_path = out_dir / DECK_NAME
+    _write_text_atomic(deck_path, deck)
+    _write_text_atomic(out_dir / "scenario.toml", _scenario_toml(scenario))
+    _write_text_atomic(out_dir / "README.txt", _readme(scenario, vib_steps, dsteps.size,
+                                                       wall_contacts))
+    return DeckInfo(out_dir, deck_path, fill.count, dt, vib_steps, dsteps, n_arc,
+                    sagitta(R, n_arc), seeds, per_event, event_steps, settle_steps, tables)
+
+
+def _shrunk_u_area(R: float, margin: float, z_lo: float, z_hi: float) -> float:
+    """Area (m^2) of the U shrunk by `margin` (circle of radius R - margin centred at (0, R),
+    walls at x = +-(R - margin)) between heights z_lo and z_hi."""
+    rr = R - margin
+    zs = np.linspace(z_lo, z_hi, 4001)
+    half = np.where(zs >= R, rr, np.sqrt(np.clip(rr**2 - (zs - R) ** 2, 0.0, None)))
+    return float(np.trapezoid(2.0 * half, zs) if hasattr(np, "trapezoid")
+                 else np.trapz(2.0 * half, zs))
+
+
+def _readme(scenario, vib_steps: int, n_snap: int, wall_contacts: bool) -> str:
+    return f"""LIGGGHTS deck for the vibroflow scenario '{scenario.case}' (SI units)
+=====================================================================
+
+Files: in.tub (the deck), tub_u.stl (the U-shaped tub wall), partitions.stl (the glass
+partitions at y = 0 and y = L_y), scenario.toml (the scenario it was written from), post/ (where
+LIGGGHTS writes its output; post/dump_steps.txt lists the snapshot steps).
+
+Run it in this folder with LIGGGHTS 3.8 on 2 MPI ranks:
+
+    mpirun -np 2 liggghts -in in.tub
+
+(as root Open MPI also wants --allow-run-as-root, and --oversubscribe on a machine with fewer
+cores than ranks; the Debian package's executable is `liggghts`, a source build's `lmp_auto`).
+
+What it does: inserts {scenario.fill.count} balls at random in the tub, lets them settle with the
+tub at rest, then vibrates the tub for {scenario.run.duration} s ({vib_steps} steps of
+{scenario.run.dt} s) and writes {n_snap} snapshots of the balls to post/{BALL_DUMP}
+{'and the ball-wall contacts to post/' + WALL_DUMP if wall_contacts else ''}, and the kinetic
+energy every {scenario.run.series_every} steps to post/{SERIES_FILE}.
+
+Then convert the results into vibroflow's format (dem.h5, summary.json, bulk_velocity.csv):
+
+    vibroflow import liggghts post --out results
+
+(the scenario is read from scenario.toml next to post/).  The tub's pose is not written by
+LIGGGHTS: it is a known function of time, recomputed from the scenario by the importer.
+"""
+
+
+# ----------------------------------------------------------------------------------------------
+# Reading LIGGGHTS dumps
+
+def iter_dump(path):
+    """Snapshots of a LIGGGHTS/LAMMPS text dump (custom or local): yields (step, columns, data)
+    with data a float64 array (rows, columns)."""
+    with open(path, "r") as f:
+        while True:
+            line = f.readline()
+            if not line:
+                return
+            if not line.startswith("ITEM: TIMESTEP"):
+                continue
+            step = int(f.readline().split()[0])
+            line = f.readline()
+            if not line.startswith("ITEM: NUMBER OF"):
+                raise ValueError(f"{path}: malformed dump after step {step}")
+            n = int(f.readline().split()[0])
+            line = f.readline()
+            if line.startswith("ITEM: BOX BOUNDS"):
+                for _ in range(3):
+                    f.readline()
+                line = f.readline()
+            if not (line.startswith("ITEM: ATOMS") or line.startswith("ITEM: ENTRIES")):
+                raise ValueError(f"{path}: malformed dump at step {step}: {line.strip()!r}")
+            cols = line.split()[2:]
+            rows = [f.readline() for _ in range(n)]
+            if n:
+                data = np.array(" ".join(rows).split(), dtype=float)
+                if data.size != n * len(cols):
+                    raise ValueError(f"{path}: step {step}: expected {n} rows of {len(cols)} "
+                                     "values (truncated dump?)")
+                data = data.reshape(n, len(cols))
+            else:
+                data = np.zeros((0, len(cols)))
+            yield step, cols, data
+
+
+def _resolve_dump_dir(dump_dir: Path) -> Path:
+    dump_dir = Path(dump_dir)
+    for cand in (dump_dir, dump_dir / POST_DIR):
+        if (cand / BALL_DUMP).is_file():
+            return cand
+    raise InputError(f"{dump_dir}: no LIGGGHTS dump {BALL_DUMP} here or in {dump_dir / POST_DIR}")
+
+
+def _scenario_for(dump_dir: Path, scenario):
+    if scenario is not None:
+        return scenario
+    from vibroflow.scenario.io import load_scenario
+    for folder in (dump_dir, dump_dir.parent):
+        if (folder / "scenario.toml").is_file():
+            return load_scenario(folder / "scenario.toml")
+    raise InputError(f"{dump_dir}: no scenario given and no scenario.toml next to the dumps")
+
+
+def _arc_of(tx, tz, R):
+    """Arc coordinate (m, from the bottom, positive towards +x) of the point of the U nearest
+    to tub-frame points (tx, tz) (as vibroflow.tub.geometry.u_wall_nearest)."""
+    tx = np.asarray(tx, dtype=float)
+    tz = np.asarray(tz, dtype=float)
+    quarter = 0.5 * math.pi * R
+    on_circle = tz <= R
+    s_circle = R * np.arctan2(tx, -(tz - R))
+    s_side = np.sign(np.where(tx >= 0, 1.0, -1.0)) * (quarter + (tz - R))
+    return np.where(on_circle, s_circle, s_side)
+
+
+def _wall_rows(data, snap_index, ids, pos_lab, radius, pose, motion, scenario, geom):
+    """vibroflow wall_contacts rows from one snapshot of the wall/gran/local dump.
+
+    Columns (compute wall/gran/local id force_normal force_tangential): mesh id (0 = the U,
+    1 = the partitions), triangle id, particle id, F_n (3), F_t (3) on the ball, lab frame.
+    LIGGGHTS-PUBLIC 3.8 does not fill contactPoint (it dumps zeros), so the contact point is
+    taken as vibroflow does: the point of the analytic wall nearest to the ball's centre (tub
+    frame); it differs from the facet's by at most the facets' sagitta.  F_n is signed along
+    the analytic wall normal (positive pushing the ball into the tub), F_t is |F_t|, and a
+    contact slides when |F_t| >= mu |F_n| (LIGGGHTS truncates the tangential spring there).
+    """
+    if data.shape[0] == 0:
+        return None
+    mesh = data[:, 0].astype(np.int64)
+    tri = data[:, 1].astype(np.int64)
+    pid = data[:, 2].astype(np.int64)
+    fnv = data[:, 3:6]
+    ftv = data[:, 6:9]
+    k = np.clip(np.searchsorted(ids, pid), 0, ids.size - 1)
+    good = ids[k] == pid
+    mesh, tri, k, fnv, ftv = mesh[good], tri[good], k[good], fnv[good], ftv[good]
+    if scenario.tub.periodic:
+        wall = np.zeros(mesh.shape, np.int8)
+    else:
+        # partitions.stl: triangles 0, 1 at y = 0, triangles 2, 3 at y = L_y
+        wall = np.where(mesh == 0, WALL_U,
+                        np.where(tri < 2, WALL_PARTITION_LO, WALL_PARTITION_HI)).astype(np.int8)
+    X, Z, th = pose[0], pose[1], pose[2]
+    piv = (motion.pivot_x, motion.pivot_z)
+    ball = lab_to_tub_np(pos_lab[k], X, Z, th, piv)
+    R = geom.radius
+    # analytic nearest point and inward normal (tub frame)
+    tx, ty, tz = ball[:, 0], ball[:, 1], ball[:, 2]
+    rho = np.hypot(tx, tz - R)
+    rho = np.where(rho > 0, rho, 1.0)
+    on_circle = tz <= R
+    ux, uz = tx / rho, (tz - R) / rho
+    cx = np.where(on_circle, R * ux, np.where(tx >= 0, R, -R))
+    cz = np.where(on_circle, R + R * uz, tz)
+    nx = np.where(on_circle, -ux, np.where(tx >= 0, -1.0, 1.0))
+    nz = np.where(on_circle, -uz, 0.0)
+    ny = np.zeros_like(nx)
+    cy = ty.copy()
+    lo = wall == WALL_PARTITION_LO
+    hi = wall == WALL_PARTITION_HI
+    part = lo | hi
+    cx = np.where(part, tx, cx)
+    cz = np.where(part, tz, cz)
+    cy = np.where(lo, 0.0, np.where(hi, geom.length, cy))
+    nx = np.where(part, 0.0, nx)
+    nz = np.where(part, 0.0, nz)
+    ny = np.where(lo, 1.0, np.where(hi, -1.0, ny))
+    # normal in lab axes (the rotation turns x towards z)
+    c, s = math.cos(th), math.sin(th)
+    n_lab = np.stack([c * nx - s * nz, ny, s * nx + c * nz], axis=1)
+    fn = np.einsum("ij,ij->i", fnv, n_lab)
+    ft = np.linalg.norm(ftv, axis=1)
+    arc = np.where(wall == WALL_U, _arc_of(tx, tz, R), np.nan)
+    mats = type_materials(scenario)
+    mu_u = _find_pair(scenario, mats[0], mats[1]).friction
+    mu_p = mu_u if scenario.tub.periodic else _find_pair(scenario, mats[0], mats[2]).friction
+    mu = np.where(wall == WALL_U, mu_u, mu_p)
+    sliding = (ft > 0) & (ft >= mu * np.abs(fn) * (1.0 - 1.0e-6))
+    pos_tub = np.stack([cx, cy, cz], axis=1)
+    return {"snapshot": np.full(k.shape, snap_index, np.int32), "particle": k.astype(np.int32),
+            "wall": wall, "position_tub": pos_tub.astype(np.float32),
+            "arc": arc.astype(np.float32), "fn": fn.astype(np.float32),
+            "ft": ft.astype(np.float32), "sliding": sliding}
+
+
+def _read_start_step(post: Path) -> int:
+    p = post / START_FILE
+    if not p.is_file():
+        raise InputError(f"{post}: no {START_FILE} (did the LIGGGHTS run reach the vibration?)")
+    return int(float(p.read_text().split()[0]))
+
+
+def import_run(dump_dir, scenario=None, out_dir=None) -> dict:
+    """Convert a LIGGGHTS run of an exported deck into vibroflow results.
+
+    dump_dir: the deck's post/ folder (or the deck folder).  scenario: the Scenario run (default:
+    scenario.toml next to the dumps).  out_dir: where dem.h5, summary.json and bulk_velocity.csv
+    go (default: dump_dir).  Returns the summary dict.
+    """
+    from vibroflow.dem.output import ResultWriter
+
+    post = _resolve_dump_dir(Path(dump_dir))
+    scenario = _scenario_for(post, scenario)
+    _check_exportable(scenario)
+    out_dir = Path(out_dir) if out_dir is not None else post
+    out_dir.mkdir(parents=True, exist_ok=True)
+    run = scenario.run
+    dt = run.dt
+    f = scenario.motion.frequency
+    motion = tub_motion(scenario)
+    geom = geometry_of(scenario)
+    n0 = _read_start_step(post)
+    rho = scenario.materials[scenario.fill.material].density
+
+    wall_iter = None
+    wall_path = post / WALL_DUMP
+    if wall_path.is_file():
+        wall_iter = iter_dump(wall_path)
+    pending_wall = None
+
+    # a writer into a private temporary folder, renamed into place at the end (atomic)
+    tmp_dir = Path(tempfile.mkdtemp(prefix=".liggghts-import-", dir=out_dir))
+    writer = None
+    ids = None
+    ke_t, ke_v = [], []
+    n_snap = 0
+    try:
+        for step, cols, data in iter_dump(post / BALL_DUMP):
+            c = {name: i for i, name in enumerate(cols)}
+            need = ("id", "x", "y", "z", "vx", "vy", "vz", "omegax", "omegay", "omegaz",
+                    "radius")
+            missing = [n for n in need if n not in c]
+            if missing:
+                raise InputError(f"{post / BALL_DUMP}: columns {missing} missing (found {cols})")
+            order = np.argsort(data[:, c["id"]], kind="stable")
+            data = data[order]
+            these = data[:, c["id"]].astype(np.int64)
+            if ids is None:
+                ids = these
+                radius = data[:, c["radius"]].astype(np.float64)
+                n = ids.size
+                attrs = {"case": scenario.case, "n_particles": int(n), "dt": float(dt),
+                         "frequency": float(f), "scenario_toml": _scenario_toml(scenario),
+                         "source": "liggghts"}
+                writer = ResultWriter(tmp_dir, n, attrs, radius)
+            elif these.size != ids.size or np.any(these != ids):
+                raise InputError(f"{post / BALL_DUMP}: step {step} holds {these.size} balls, "
+                                 f"not the {ids.size} of the first snapshot (balls lost?)")
+            t = (step - n0) * dt
+            p = pose_np(motion, t)
+            pose = np.array([p["X"], p["Z"], p["theta"], p["Xdot"], p["Zdot"], p["thetadot"]],
+                            dtype=float)
+            pos = data[:, [c["x"], c["y"], c["z"]]]
+            vel = data[:, [c["vx"], c["vy"], c["vz"]]]
+            omg = data[:, [c["omegax"], c["omegay"], c["omegaz"]]]
+            writer.append("snapshots", time=[t], step=[step - n0], phase=[(t * f) % 1.0],
+                          tub_pose=pose[None], position=pos[None].astype(np.float32),
+                          velocity=vel[None].astype(np.float32),
+                          angular_velocity=omg[None].astype(np.float32))
+            mass = 4.0 / 3.0 * math.pi * radius**3 * rho
+            ke = 0.5 * np.sum(mass * np.sum(vel**2, axis=1)) + 0.5 * np.sum(
+                0.4 * mass * radius**2 * np.sum(omg**2, axis=1))
+            ke_t.append(t)
+            ke_v.append(ke)
+            # wall contacts of this step
+            if wall_iter is not None:
+                while True:
+                    if pending_wall is None:
+                        pending_wall = next(wall_iter, None)
+                    if pending_wall is None or pending_wall[0] > step:
+                        break
+                    wstep, wcols, wdata = pending_wall
+                    pending_wall = None
+                    if wstep == step:
+                        rows = _wall_rows(wdata, n_snap, ids, pos, radius, pose, motion,
+                                          scenario, geom)
+                        if rows is not None:
+                            writer.append("wall_contacts", **rows)
+                        break
+            n_snap += 1
+        if writer is None:
+            raise InputError(f"{post / BALL_DUMP}: no snapshot in the dump")
+        # time series: LIGGGHTS' own every series_every steps, else from the snapshots
+        series = post / SERIES_FILE
+        if series.is_file():
+            arr = np.loadtxt(series, comments="#", ndmin=2)
+            st, sv = arr[:, 0], arr[:, 1]
+        else:
+            st, sv = np.asarray(ke_t), np.asarray(ke_v)
+        nan = np.full(st.shape, np.nan)
+        writer.append("series", time=st, kinetic_energy=sv, max_overlap_ball=nan,
+                      max_overlap_wall=nan)
+        h5_tmp = writer.finish()
+        final = out_dir / "dem.h5"
+        os.replace(h5_tmp, final)
+    except BaseException:
+        if writer is not None:
+            writer.close()
+        shutil.rmtree(tmp_dir, ignore_errors=True)
+        raise
+    shutil.rmtree(tmp_dir, ignore_errors=True)
+
+    summary = {"case": scenario.case, "source": "liggghts", "n_particles": int(ids.size),
+               "dt": float(dt), "snapshots": n_snap}
+    steps = int(round(run.duration / dt))
+    summary["steps"] = steps
+    summary["simulated_time_s"] = steps * dt
+    log = _find_log(post)
+    if log is not None:
+        lt = loop_times(log)
+        if lt:
+            vib = lt[-1]
+            summary["wall_time_s"] = sum(x.seconds for x in lt)
+            summary["vibration_wall_time_s"] = vib.seconds
+            summary["mpi_ranks"] = vib.procs
+            summary["particle_steps_per_s"] = vib.particle_steps_per_s
+    summary["balls_lost"] = int(scenario.fill.count - ids.size)
+    summary["wall_contacts_available"] = wall_path.is_file()
+    summary["impacts_available"] = False
+    from vibroflow.analysis.summary import tub_summary
+    summary.update(tub_summary(final, scenario, bulk_csv=out_dir / "bulk_velocity.csv"))
+    _write_text_atomic(out_dir / "summary.json", json.dumps(_json_safe(summary), indent=2) + "\n")
+    return summary
+
+
+def _find_log(post: Path) -> Path | None:
+    for folder in (post, post.parent):
+        for name in ("log.liggghts", "log.lammps", "screen.txt"):
+            if (folder / name).is_file():
+                return folder / name
+    return None
+
+
+def _json_safe(obj):
+    try:
+        from vibroflow.analysis.summary import json_safe
+        return json_safe(obj)
+    except ImportError:  # pragma: no cover
+        return obj
