@@ -18,8 +18,9 @@ between the codes (LIGGGHTS against vibroflow, seed by seed) beside each code's 
 and the tub47.md verdicts (strengths agree within max(10 %, 2 sigma); fields agree when
 E(codes) <= 1.5 E_seed(vibroflow)).
 
-Results go to --out (default benchmarks/results/dem_vs_liggghts/) as speed.json or physics.json,
-with the runs' folders beside them.  Use a quiet machine: other processes on the cores distort both timings.
+Results go to --out (default runs/dem_vs_liggghts/, git-ignored) as speed.json or
+physics.json, with the runs' folders beside them.  Use a quiet machine: other processes on the
+cores distort both timings.
 """
 from __future__ import annotations
 
@@ -249,7 +250,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2], help="fill seeds (physics)")
     ap.add_argument("--nprocs", type=int, default=2, help="LIGGGHTS MPI ranks")
     ap.add_argument("--timeout", type=float, default=None, help="per LIGGGHTS run (s)")
-    ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "dem_vs_liggghts"))
+    ap.add_argument("--out", default=str(Path(__file__).resolve().parent.parent / "runs"
+                                         / "dem_vs_liggghts"))
     ap.add_argument("--reuse", action="store_true", help="physics: reuse finished runs in --out")
     ap.add_argument("--skip-liggghts", action="store_true")
     ap.add_argument("--skip-vibroflow", action="store_true")

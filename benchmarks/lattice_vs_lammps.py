@@ -122,9 +122,10 @@ def load1() -> float:
 # ----------------------------------------------------------------------------------------------
 # vibroflow worker
 
-def vibroflow_setup(args):
+def vibroflow_setup(args, with_walls: bool = True):
     """(system, state, lo, hi): the lattice as a vibroflow explicit scenario, forces computed.
-    numba's thread count must be set before (it fixes the force-assembly chunks)."""
+    numba's thread count must be set before (it fixes the force-assembly chunks).  Without
+    walls (a diagnostic only) the outer balls are free."""
     from vibroflow.dem import simulate as S
     from vibroflow.scenario.model import (ContactPair, Material, ParticleSpec, Run, Scenario,
                                           WallSpec)
@@ -148,7 +149,7 @@ def vibroflow_setup(args):
                               rolling_friction=0.0, rolling_model="none")],
         particles=[ParticleSpec(position=tuple(p), velocity=tuple(v), diameter=D,
                                 material="steel") for p, v in zip(pos.tolist(), vel.tolist())],
-        walls=walls,
+        walls=walls if with_walls else None,
         run=Run(dt=DT, duration=max(total_steps, 1) * DT, average_last=0.0, skin=SKIN_FRAC),
     )
     system = S.make_system(sc)
@@ -226,59 +227,31 @@ def _numba_layer() -> str:
 
 
 def _profile_vibroflow(system, state, args) -> dict:
-    """Time the parts of one step separately, on one chunk (serial), on a copy of the state.
+    """Where vibroflow's step time goes, through the public API only: the step time of this
+    lattice with its six plane walls and without them (same balls, same pairs; the outer balls
+    are then free, which over a few hundred steps does not change the pair work), and the time
+    of one neighbour-list build.  Serial or parallel as the worker's thread count."""
+    from vibroflow.dem import simulate as S
 
-    Uses the engine's kernels directly (vibroflow.dem.step internals), so it may need updating
-    when they change; a failure only drops the profile.
-    """
-    try:
-        from vibroflow.dem import step as K
-
-        n = state.n
-        hist = state.nl.hist.copy()
-        flag = state.nl.flag.copy()
-        whist = state.wall_hist.copy()
-        wflag = state.wall_flag.copy()
-        wfn, wft = state.wall_fn.copy(), state.wall_ft.copy()
-        wsl, wpt, warc = state.wall_slide.copy(), state.wall_point.copy(), state.wall_arc.copy()
-        force, torque = np.zeros((n, 3)), np.zeros((n, 3))
-        fbuf, tbuf = np.zeros((1, n, 3)), np.zeros((1, n, 3))
-        imp_buf, imp_count = np.zeros((1, 16, 6)), np.zeros(1, np.int64)
-        diag = np.zeros((1, K.N_DIAG))
-        pose = np.zeros(8)
-        t = state.time(system.dt)
-        reps = args.profile_reps
-
-        def pair():
-            K._pair_chunk(0, 1, t, system.dt, state.pos, state.vel, state.omg, state.radius,
-                          state.mass, state.mat, system.table, state.nl.start, state.nl.nbr,
-                          hist, flag, 0.0, fbuf, tbuf, imp_buf, imp_count, False, diag)
-
-        def wall():
-            K._wall_chunk(0, 1, t, system.dt, pose, state.pos, state.vel, state.omg,
-                          state.radius, state.mass, state.mat, system.table, system.tub,
-                          system.wall_mat, system.planes, whist, wflag, force, torque, wfn, wft,
-                          wsl, wpt, warc, imp_buf, imp_count, False, diag)
-
-        def nlist():
-            from vibroflow.dem.neighbours import NeighbourList
-
-            nl = NeighbourList(system.skin)
-            nl.build(state.pos.copy(), state.radius)
-
-        res = {}
-        for name, fn, k in (("pair_forces_per_step_s", pair, reps),
-                            ("wall_forces_per_step_s", wall, reps),
-                            ("neighbour_build_s", nlist, max(reps // 20, 3))):
-            fn()  # compile / warm
-            t0 = time.perf_counter()
-            for _ in range(k):
-                fn()
-            res[name] = (time.perf_counter() - t0) / k
-        res["contacts_in_list"] = int(state.nl.nbr.shape[0])
-        return res
-    except Exception as exc:  # noqa: BLE001 - the profile is optional
-        return {"error": repr(exc)}
+    k = args.profile_steps
+    res = {"steps": k}
+    for label, st, sy in (("with_walls", state, system),
+                          ("without_walls", None, None)):
+        if st is None:
+            sy, st, _, _ = vibroflow_setup(args, with_walls=False)
+            S.run_steps(sy, st, 20)
+        t0 = time.perf_counter()
+        S.run_steps(sy, st, k)
+        res[f"step_s_{label}"] = (time.perf_counter() - t0) / k
+    nl = type(state.nl)(system.skin)
+    pos = state.pos.copy()
+    nl.build(pos, state.radius)
+    t0 = time.perf_counter()
+    for _ in range(5):
+        nl.build(pos, state.radius)
+    res["neighbour_build_s"] = (time.perf_counter() - t0) / 5
+    res["wall_share_of_step"] = 1.0 - res["step_s_without_walls"] / res["step_s_with_walls"]
+    return res
 
 
 # ----------------------------------------------------------------------------------------------
@@ -439,7 +412,7 @@ def _worker_argv(args, code: str, threads: int, out: Path, pair: str) -> list[st
             "--warmup", str(args.warmup), "--sample", str(args.sample),
             "--repeat", str(args.repeat), "--overlap", repr(args.overlap),
             "--vel", repr(args.vel), "--seed", str(args.seed), "--gravity", repr(args.gravity),
-            "--lammps-pair", pair, "--profile-reps", str(args.profile_reps)] + (
+            "--lammps-pair", pair, "--profile-steps", str(args.profile_steps)] + (
                 ["--profile"] if args.profile else [])
 
 
@@ -483,8 +456,9 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--gravity", type=float, default=0.0, help="g (m/s^2), along -z")
     p.add_argument("--profile", action="store_true",
-                   help="also time vibroflow's pair/wall kernels and list build separately")
-    p.add_argument("--profile-reps", type=int, default=200)
+                   help="also time vibroflow's step with and without the walls, and a list "
+                   "build")
+    p.add_argument("--profile-steps", type=int, default=100)
     p.add_argument("--omp-wait-policy", default="passive",
                    help="OMP_WAIT_POLICY given to the workers unless already set ('' leaves it "
                    "unset): with active spinning, OpenMP threads on a shared machine can run "
@@ -588,7 +562,12 @@ def main(argv=None) -> int:
                   f"({b['rebuild_s']:.2f} s); threading layer {c['threading_layer']}; "
                   f"{c['neighbours_per_ball']:.2f} list entries per ball")
             if "profile" in c:
-                print(f"  serial kernel times: {c['profile']}")
+                pr = c["profile"]
+                if "step_s_with_walls" in pr:
+                    print(f"  step time with the walls {pr['step_s_with_walls'] * 1e3:.2f} ms, "
+                          f"without {pr['step_s_without_walls'] * 1e3:.2f} ms (walls: "
+                          f"{pr['wall_share_of_step']:.0%}); one list build "
+                          f"{pr['neighbour_build_s'] * 1e3:.1f} ms")
         else:
             print(f"{_label(c)} x{c['threads']}: breakdown of the best run (s): "
                   f"{b.get('breakdown_s')}")

@@ -185,7 +185,8 @@ def test_deck_holds_the_tub47_contact_parameters(tmp_path):
               (0, 2): (1.0e5, 0.85, 0.15, m)}
     kn, kt = _fix_table(deck, "kn"), _fix_table(deck, "kt")
     gn, gt = _fix_table(deck, "gamman_abs"), _fix_table(deck, "gammat_abs")
-    mu, mur = _fix_table(deck, "coefficientFriction"), _fix_table(deck, "coefficientRollingFriction")
+    mu = _fix_table(deck, "coefficientFriction")
+    mur = _fix_table(deck, "coefficientRollingFriction")
     for (i, j), (k, e, f, m_eff) in expect.items():
         for a, b in ((i, j), (j, i)):
             assert kn[a, b] == pytest.approx(k, rel=1e-9)
@@ -236,6 +237,19 @@ def test_deck_rejects_what_liggghts_cannot_do(tmp_path):
     missing = [c for c in s.contacts if c.pair != ("steel", "glass")]
     with pytest.raises(InputError, match="glass"):
         LG.export_deck(s.model_copy(update={"contacts": missing}), tmp_path)
+
+
+def test_deck_for_hertz_contacts_uses_liggghts_hertz(tmp_path):
+    s = quick()
+    hertz = [c.model_copy(update={"model": "hertz"}) for c in s.contacts]
+    LG.export_deck(s.model_copy(update={"contacts": hertz}), tmp_path)
+    deck = (tmp_path / "in.tub").read_text()
+    assert re.search(r"^pair_style\s+gran model hertz tangential history rolling_friction cdt "
+                     r"tangential_damping off", deck, re.MULTILINE)
+    assert "property/global kn " not in deck
+    # Hertz takes E and nu per type (steel, polyurethane, glass) and e per pair
+    assert "youngsModulus peratomtype 2e+11 25000000 6.3e+10" in deck
+    assert _fix_table(deck, "coefficientRestitution")[0, 1] == pytest.approx(0.60)
 
 
 def _variable(deck: str, name: str):
@@ -540,6 +554,15 @@ def test_liggghts_end_to_end_tiny_tub(tmp_path):
             gap = signed_distance_to_u(tub) - 0.003175
             assert gap.min() > -2.0e-4
             assert tub[:, 1].min() > 0.003175 - 2e-4 and tub[:, 1].max() < 0.01905 - 0.003175 + 2e-4
-        assert f["wall_contacts/fn"].shape[0] > 0
-        assert np.all(f["wall_contacts/fn"][()] > -1.0)
+        # wall contacts obey Coulomb's law with tub47's friction (0.40 tub, 0.15 partitions),
+        # many at its limit, and push on the whole (the damping may pull at the end of a contact)
+        fn, ft = f["wall_contacts/fn"][()], f["wall_contacts/ft"][()]
+        wall, sliding = f["wall_contacts/wall"][()], f["wall_contacts/sliding"][()]
+        assert fn.size > 20 and np.median(fn) > 0
+        for w, mu in ((0, 0.40), (1, 0.15), (2, 0.15)):
+            on = wall == w
+            assert on.sum() > 0
+            assert np.all(ft[on] <= mu * np.abs(fn[on]) * (1 + 1e-4) + 1e-9)
+            assert np.all(ft[on & sliding] >= mu * np.abs(fn[on & sliding]) * (1 - 1e-4))
+        assert sliding.sum() > 0
     assert json.loads((out / "summary.json").read_text())["source"] == "liggghts"

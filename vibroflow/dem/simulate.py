@@ -210,7 +210,8 @@ def _forces_now(system: DEMSystem, state: DEMState) -> None:
                      system.wall_mat, system.planes, state.wall_hist, state.wall_flag,
                      state.wall_fn, state.wall_ft, state.wall_slide, state.wall_point,
                      state.wall_arc, state.force, state.torque, b.fbuf, b.tbuf, b.imp_buf,
-                     b.imp_count, False, b.diag)
+                     b.imp_count, False, b.diag, False, state.ref_tub,
+                     np.zeros(system.nchunk))
     b.imp_count[:] = 0
 
 

@@ -168,18 +168,14 @@ def _one_wall(c, i, w, t, dt, kind, delta, nx, ny, nz, vwx, vwy, vwz, wwy, cx, c
 
 
 @nb.njit(cache=True)
-def _wall_chunk(c, nchunk, t, dt, pose, pos, vel, omg, radius, mass, mat, table, tub, wall_mat,
-                planes, wall_hist, wall_flag, force, torque, wall_fn, wall_ft, wall_slide,
-                wall_point, wall_arc, imp_buf, imp_count, record_impacts, diag):
-    n = pos.shape[0]
-    lo, hi = _chunk_range(c, nchunk, n)
+def _walls_of(i, c, t, dt, pose, cth, sth, pos, vel, omg, radius, mass, mat, table, tub,
+              wall_mat, planes, wall_hist, wall_flag, force, torque, wall_fn, wall_ft,
+              wall_slide, wall_point, wall_arc, imp_buf, imp_count, record_impacts, diag):
+    """Add ball i's wall contacts to its force and torque."""
     has_tub = tub[TUB_PRESENT] > 0.0
     partitions = has_tub and tub[TUB_PERIODIC] == 0.0
     length = tub[TUB_LENGTH]
-    th = pose[2]
-    cth = np.cos(th)
-    sth = np.sin(th)
-    for i in range(lo, hi):
+    if True:
         r = radius[i]
         if has_tub:
             delta, nx, nz, vwx, vwz, cxt, czt, s, outside = u_wall(pos[i, 0], pos[i, 2], r,
@@ -247,47 +243,86 @@ def _pose_array(motion, pivot_x, pivot_z, t, out):
     out[7] = pivot_z
 
 
-@nb.njit(cache=True, parallel=True)
-def compute_forces(t, dt, pose, pos, vel, omg, radius, mass, mat, gravity, table, nbr_start,
-                   nbr, hist, flag, tub, wall_mat, planes, wall_hist, wall_flag, wall_fn,
-                   wall_ft, wall_slide, wall_point, wall_arc, force, torque, fbuf, tbuf,
-                   imp_buf, imp_count, record_impacts, diag):
-    """Forces and torques at the current positions (gravity, pairs, walls)."""
-    nchunk = fbuf.shape[0]
+@nb.njit(cache=True)
+def _finish_chunk(c, nchunk, t, dt, pose, pos, vel, omg, radius, mass, mat, gravity, table,
+                  tub, wall_mat, planes, wall_hist, wall_flag, wall_fn, wall_ft, wall_slide,
+                  wall_point, wall_arc, force, torque, fbuf, tbuf, imp_buf, imp_count,
+                  record_impacts, diag, kick, ref_tub, moved):
+    """For the balls of chunk c: gather the pair forces from every chunk's buffer (and clear
+    it), add gravity and the walls, and with `kick` finish the step (second half kick) and
+    measure the largest move since the last list build (tub frame) into moved[c]."""
     n = pos.shape[0]
-    periodic_length = tub[TUB_LENGTH] if (tub[TUB_PRESENT] > 0.0 and
-                                          tub[TUB_PERIODIC] > 0.0) else 0.0
-    for c in nb.prange(nchunk):
-        _pair_chunk(c, nchunk, t, dt, pos, vel, omg, radius, mass, mat, table, nbr_start, nbr,
-                    hist, flag, periodic_length, fbuf, tbuf, imp_buf, imp_count,
-                    record_impacts, diag)
-    for i in nb.prange(n):
+    lo, hi = _chunk_range(c, nchunk, n)
+    cth = np.cos(pose[2])
+    sth = np.sin(pose[2])
+    half_dt = 0.5 * dt
+    m2 = 0.0
+    for i in range(lo, hi):
         fx = mass[i] * gravity[0]
         fy = mass[i] * gravity[1]
         fz = mass[i] * gravity[2]
         tx = 0.0
         ty = 0.0
         tz = 0.0
-        for c in range(nchunk):
-            fx += fbuf[c, i, 0]
-            fy += fbuf[c, i, 1]
-            fz += fbuf[c, i, 2]
-            tx += tbuf[c, i, 0]
-            ty += tbuf[c, i, 1]
-            tz += tbuf[c, i, 2]
+        for b in range(nchunk):
+            fx += fbuf[b, i, 0]
+            fy += fbuf[b, i, 1]
+            fz += fbuf[b, i, 2]
+            tx += tbuf[b, i, 0]
+            ty += tbuf[b, i, 1]
+            tz += tbuf[b, i, 2]
             for a in range(3):
-                fbuf[c, i, a] = 0.0
-                tbuf[c, i, a] = 0.0
+                fbuf[b, i, a] = 0.0
+                tbuf[b, i, a] = 0.0
         force[i, 0] = fx
         force[i, 1] = fy
         force[i, 2] = fz
         torque[i, 0] = tx
         torque[i, 1] = ty
         torque[i, 2] = tz
+        _walls_of(i, c, t, dt, pose, cth, sth, pos, vel, omg, radius, mass, mat, table, tub,
+                  wall_mat, planes, wall_hist, wall_flag, force, torque, wall_fn, wall_ft,
+                  wall_slide, wall_point, wall_arc, imp_buf, imp_count, record_impacts, diag)
+        if kick:
+            im = 1.0 / mass[i]
+            ii = 1.0 / (0.4 * mass[i] * radius[i] * radius[i])
+            for a in range(3):
+                vel[i, a] += half_dt * force[i, a] * im
+                omg[i, a] += half_dt * torque[i, a] * ii
+            rx = pos[i, 0] - pose[0] - pose[6]
+            rz = pos[i, 2] - pose[1] - pose[7]
+            dx = pose[6] + cth * rx + sth * rz - ref_tub[i, 0]
+            dy = pos[i, 1] - ref_tub[i, 1]
+            dz = pose[7] - sth * rx + cth * rz - ref_tub[i, 2]
+            d2 = dx * dx + dy * dy + dz * dz
+            if not (d2 < 1e300):  # NaN or infinite
+                if diag[c, D_NAN] < 0.0:
+                    diag[c, D_NAN] = i
+            elif d2 > m2:
+                m2 = d2
+    moved[c] = m2
+
+
+@nb.njit(cache=True, parallel=True)
+def compute_forces(t, dt, pose, pos, vel, omg, radius, mass, mat, gravity, table, nbr_start,
+                   nbr, hist, flag, tub, wall_mat, planes, wall_hist, wall_flag, wall_fn,
+                   wall_ft, wall_slide, wall_point, wall_arc, force, torque, fbuf, tbuf,
+                   imp_buf, imp_count, record_impacts, diag, kick, ref_tub, moved):
+    """Forces and torques at the current positions (gravity, pairs, walls); with `kick`, also
+    the step's second half kick.  Two parallel loops: pairs into the chunk buffers, then each
+    chunk's balls."""
+    nchunk = fbuf.shape[0]
+    periodic_length = tub[TUB_LENGTH] if (tub[TUB_PRESENT] > 0.0 and
+                                          tub[TUB_PERIODIC] > 0.0) else 0.0
     for c in nb.prange(nchunk):
-        _wall_chunk(c, nchunk, t, dt, pose, pos, vel, omg, radius, mass, mat, table, tub,
-                    wall_mat, planes, wall_hist, wall_flag, force, torque, wall_fn, wall_ft,
-                    wall_slide, wall_point, wall_arc, imp_buf, imp_count, record_impacts, diag)
+        _pair_chunk(c, nchunk, t, dt, pos, vel, omg, radius, mass, mat, table, nbr_start, nbr,
+                    hist, flag, periodic_length, fbuf, tbuf, imp_buf, imp_count,
+                    record_impacts, diag)
+    for c in nb.prange(nchunk):
+        _finish_chunk(c, nchunk, t, dt, pose, pos, vel, omg, radius, mass, mat, gravity, table,
+                      tub, wall_mat, planes, wall_hist, wall_flag, wall_fn, wall_ft, wall_slide,
+                      wall_point, wall_arc, force, torque, fbuf, tbuf, imp_buf, imp_count,
+                      record_impacts, diag, kick, ref_tub, moved)
 
 
 @nb.njit(cache=True, parallel=True)
@@ -323,31 +358,7 @@ def advance(step0, nsteps, dt, time_origin_step, motion, pos, vel, omg, radius, 
         compute_forces(t, dt, pose, pos, vel, omg, radius, mass, mat, gravity, table,
                        nbr_start, nbr, hist, flag, tub, wall_mat, planes, wall_hist, wall_flag,
                        wall_fn, wall_ft, wall_slide, wall_point, wall_arc, force, torque, fbuf,
-                       tbuf, imp_buf, imp_count, record_impacts, diag)
-        # kick; find the largest move since the list was built (tub frame) and any NaN
-        c_th = np.cos(pose[2])
-        s_th = np.sin(pose[2])
-        for c in nb.prange(nchunk):
-            lo, hi = _chunk_range(c, nchunk, n)
-            m2 = 0.0
-            for i in range(lo, hi):
-                im = 1.0 / mass[i]
-                ii = 1.0 / (0.4 * mass[i] * radius[i] * radius[i])
-                for a in range(3):
-                    vel[i, a] += half_dt * force[i, a] * im
-                    omg[i, a] += half_dt * torque[i, a] * ii
-                rx = pos[i, 0] - pose[0] - pose[6]
-                rz = pos[i, 2] - pose[1] - pose[7]
-                dx = pose[6] + c_th * rx + s_th * rz - ref_tub[i, 0]
-                dy = pos[i, 1] - ref_tub[i, 1]
-                dz = pose[7] - s_th * rx + c_th * rz - ref_tub[i, 2]
-                d2 = dx * dx + dy * dy + dz * dz
-                if not (d2 < 1e300):  # NaN or infinite
-                    if diag[c, D_NAN] < 0.0:
-                        diag[c, D_NAN] = i
-                elif d2 > m2:
-                    m2 = d2
-            moved[c] = m2
+                       tbuf, imp_buf, imp_count, record_impacts, diag, True, ref_tub, moved)
         blown = False
         rebuild = False
         full = False

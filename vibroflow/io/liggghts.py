@@ -17,8 +17,9 @@ docs/liggghts.md):
   resistance from the pair's mu and mu_r.  A scenario whose contacts are all Hertz gets LIGGGHTS'
   `hertz` (moduli from the materials, restitution through LIGGGHTS' own damping formula).
 * Atom types: 1 = the balls' material, 2 = the tub wall's, 3 = the partitions'.
-* Walls: the U and the partitions as STL meshes (vibroflow.io.stl), moved rigidly with the tub
-  by two superposed `fix move/mesh` per mesh: `linear/variable` (the translation) then
+* Walls: the U and the partitions as STL meshes (vibroflow.io.stl; the U's facets joined into
+  one smooth surface by `curvature`, so contact histories cross their creases), moved rigidly
+  with the tub by two superposed `fix move/mesh` per mesh: `linear/variable` (the translation) then
   `rotate/variable` about the pivot (whose origin rides with the translation).  Their velocity
   variables are the exact derivatives of s(a, phi, t) = a [sin(omega t + phi) - sin(phi)], and
   LIGGGHTS integrates them once a step with the step counter already advanced, so the variables
@@ -77,6 +78,9 @@ FILL_EVENT_INTERVAL = 0.05
 FILL_EVENT_FRACTION = 0.15
 #: settling chunk after settle_time (s), as vibroflow.dem.fill.settle
 SETTLE_CHUNK = 0.01
+
+#: relative tolerance of |F_t| = mu |F_n| that marks a wall contact as sliding
+SLIDING_TOLERANCE = 1.0e-4
 
 #: wall slots of vibroflow.dem.walls
 WALL_U, WALL_PARTITION_LO, WALL_PARTITION_HI = 0, 1, 2
@@ -405,12 +409,18 @@ class DeckInfo:
 
 def export_deck(scenario, out_dir, *, wall_contacts: bool = True,
                 max_sagitta: float = DEFAULT_MAX_SAGITTA, thermo_every: int | None = None,
-                processors: str = "* 1 1") -> DeckInfo:
+                processors: str = "* 1 1", mesh_curvature_deg: float | None = None) -> DeckInfo:
     """Write a LIGGGHTS 3.8 deck for a tub scenario into out_dir (see the module docstring).
 
     wall_contacts: dump the ball-wall contacts at the snapshots (compute wall/gran/local).
     processors: LIGGGHTS processor grid; the default splits the tub across x only, which
-    balances a symmetric bed.  Returns a DeckInfo.
+    balances a symmetric bed.
+    mesh_curvature_deg: `curvature` of the U's fix mesh/surface, the largest angle between two
+    facets that LIGGGHTS treats as one smooth surface (carrying a contact's tangential history
+    across their common edge, no edge contact).  Default: twice the angle between neighbouring
+    arc facets (5.9 degrees for tub47), so the faceted circle acts as one surface like the
+    analytic one; 0 keeps LIGGGHTS' default (0.26 degrees: every crease is an edge).
+    Returns a DeckInfo.
     """
     _check_exportable(scenario)
     out_dir = Path(out_dir)
@@ -432,6 +442,8 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True,
 
     meshes = write_tub_meshes(geom, out_dir, max_sagitta)
     n_arc = arc_segments(R, max_sagitta)
+    if mesh_curvature_deg is None:
+        mesh_curvature_deg = min(10.0, 2.0 * 180.0 / n_arc)
 
     # simulation box: the tub plus room for its motion (translation <= 2 A, rotation about the
     # pivot) and for balls thrown above the rim
@@ -527,7 +539,8 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True,
     add("")
     add(f"# ---- walls: the U ({n_arc} arcs on the half circle, sagitta "
         f"{sagitta(R, n_arc) * 1e3:.4f} mm) and the partitions, moving with the tub")
-    add(f"fix tub all mesh/surface file {meshes['u'].name} type 2")
+    curv = f" curvature {_fmt(mesh_curvature_deg)}" if mesh_curvature_deg > 0 else ""
+    add(f"fix tub all mesh/surface file {meshes['u'].name} type 2{curv}")
     if not periodic:
         add(f"fix parts all mesh/surface file {meshes['partitions'].name} type 3")
     add(f"fix walls all wall/gran {model_args} mesh n_meshes {n_meshes} meshes {mesh_ids} "
@@ -756,7 +769,7 @@ def _wall_rows(data, snap_index, ids, pos_lab, radius, pose, motion, scenario, g
     1 = the partitions), triangle id, particle id, F_n (3), F_t (3) on the ball, lab frame.
     LIGGGHTS-PUBLIC 3.8 does not fill contactPoint (it dumps zeros), so the contact point is
     taken as vibroflow does: the point of the analytic wall nearest to the ball's centre (tub
-    frame); it differs from the facet's by at most the facets' sagitta.  F_n is signed along
+    frame); it differs from the facet's by at most the facets' sagitta.  F_n is |F_n| signed by
     the analytic wall normal (positive pushing the ball into the tub), F_t is |F_t|, and a
     contact slides when |F_t| >= mu |F_n| (LIGGGHTS truncates the tangential spring there).
     """
@@ -804,14 +817,17 @@ def _wall_rows(data, snap_index, ids, pos_lab, radius, pose, motion, scenario, g
     # normal in lab axes (the rotation turns x towards z)
     c, s = math.cos(th), math.sin(th)
     n_lab = np.stack([c * nx - s * nz, ny, s * nx + c * nz], axis=1)
-    fn = np.einsum("ij,ij->i", fnv, n_lab)
+    # |F_n| as LIGGGHTS splits the force (along the line from the contact point to the centre,
+    # the facet's normal), its sign from the analytic wall normal (negative: the damping pulls)
+    fn = np.linalg.norm(fnv, axis=1) * np.where(np.einsum("ij,ij->i", fnv, n_lab) < 0, -1.0, 1.0)
     ft = np.linalg.norm(ftv, axis=1)
     arc = np.where(wall == WALL_U, _arc_of(tx, tz, R), np.nan)
     mats = type_materials(scenario)
     mu_u = _find_pair(scenario, mats[0], mats[1]).friction
     mu_p = mu_u if scenario.tub.periodic else _find_pair(scenario, mats[0], mats[2]).friction
     mu = np.where(wall == WALL_U, mu_u, mu_p)
-    sliding = (ft > 0) & (ft >= mu * np.abs(fn) * (1.0 - 1.0e-6))
+    # at the limit the ratio is mu to the dump's 6 significant digits
+    sliding = (ft > 0) & (ft >= mu * np.abs(fn) * (1.0 - SLIDING_TOLERANCE))
     pos_tub = np.stack([cx, cy, cz], axis=1)
     return {"snapshot": np.full(k.shape, snap_index, np.int32), "particle": k.astype(np.int32),
             "wall": wall, "position_tub": pos_tub.astype(np.float32),
