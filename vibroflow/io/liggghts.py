@@ -586,7 +586,7 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True,
     add("unfix ins")
     add("variable stepnow equal step")
     add(f'print "${{stepnow}} ${{natoms}}" file {POST_DIR}/{FILL_FILE}')
-    add(f'if "${{natoms}} < {fill.count}" then "print \'WARNING: vibroflow fill inserted only '
+    add(f'if "${{natoms}} < {fill.count}" then "print \'vibroflow: the fill inserted only '
         f'${{natoms}} of {fill.count} balls\'"')
     add("")
     add(f"# ---- settle with the tub at rest: {_fmt(fill.settle_time)} s, then on in "
@@ -762,7 +762,7 @@ def _arc_of(tx, tz, R):
     return np.where(on_circle, s_circle, s_side)
 
 
-def _wall_rows(data, snap_index, ids, pos_lab, radius, pose, motion, scenario, geom):
+def _wall_rows(data, snap_index, ids, pos_lab, pose, motion, scenario, geom):
     """vibroflow wall_contacts rows from one snapshot of the wall/gran/local dump.
 
     Columns (compute wall/gran/local id force_normal force_tangential): mesh id (0 = the U,
@@ -903,6 +903,8 @@ def import_run(dump_dir, scenario=None, out_dir=None) -> dict:
             pose = np.array([p["X"], p["Z"], p["theta"], p["Xdot"], p["Zdot"], p["thetadot"]],
                             dtype=float)
             pos = data[:, [c["x"], c["y"], c["z"]]]
+            if scenario.tub.periodic:  # LIGGGHTS wraps only when it re-neighbours
+                pos[:, 1] = np.mod(pos[:, 1], scenario.tub.length)
             vel = data[:, [c["vx"], c["vy"], c["vz"]]]
             omg = data[:, [c["omegax"], c["omegay"], c["omegaz"]]]
             writer.append("snapshots", time=[t], step=[step - n0], phase=[(t * f) % 1.0],
@@ -924,8 +926,8 @@ def import_run(dump_dir, scenario=None, out_dir=None) -> dict:
                     wstep, wcols, wdata = pending_wall
                     pending_wall = None
                     if wstep == step:
-                        rows = _wall_rows(wdata, n_snap, ids, pos, radius, pose, motion,
-                                          scenario, geom)
+                        rows = _wall_rows(wdata, n_snap, ids, pos, pose, motion, scenario,
+                                          geom)
                         if rows is not None:
                             writer.append("wall_contacts", **rows)
                         break
