@@ -154,6 +154,7 @@ class NeighbourList:
         self.hist = np.zeros((0, hist_width))
         self.flag = np.zeros(0, np.uint8)
         self.builds = 0
+        self._bounds = None
 
     def build(self, pos: np.ndarray, radius: np.ndarray) -> None:
         """Rebuild from the positions `pos` (wrapped in y in place when periodic)."""
@@ -176,4 +177,20 @@ class NeighbourList:
             hist = np.zeros((nbr.shape[0], self.hist.shape[1]))
             flag = np.zeros(nbr.shape[0], np.uint8)
         self.start, self.nbr, self.hist, self.flag = start, nbr, hist, flag
+        self._bounds = None
         self.builds += 1
+
+    def chunk_bounds(self, nchunk: int) -> np.ndarray:
+        """Split the balls into `nchunk` contiguous chunks of about equal work (list entries,
+        plus a few units a ball for its walls and its integration), so the threads finish
+        together however the contacts are spread (the balls are stored by height, and the
+        bed is denser at the bottom).  A function of the list alone: reproducible."""
+        cached = getattr(self, "_bounds", None)
+        if cached is not None and cached.shape[0] == nchunk + 1:
+            return cached
+        n = self.start.shape[0] - 1
+        work = self.start.astype(np.float64) + 4.0 * np.arange(n + 1)
+        targets = work[-1] * np.arange(1, nchunk) / nchunk
+        inner = np.searchsorted(work, targets)
+        self._bounds = np.concatenate([[0], inner, [n]]).astype(np.int64)
+        return self._bounds

@@ -176,6 +176,7 @@ class ResultWriter:
 
 _STATE_ARRAYS = ("pos", "vel", "omg", "force", "torque", "radius", "mass", "mat", "ref_tub",
                  "wall_hist", "wall_flag", "wall_fn", "wall_ft", "wall_slide", "wall_point",
+                 "wall_force",
                  "wall_arc")
 
 

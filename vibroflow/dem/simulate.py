@@ -79,6 +79,7 @@ class DEMState:
     wall_ft: np.ndarray            # (N, W) N
     wall_slide: np.ndarray         # (N, W) uint8
     wall_point: np.ndarray         # (N, W, 3) contact point (tub frame for tub walls)
+    wall_force: np.ndarray         # (N, W, 3) force on the ball (N, lab axes), last step
     wall_arc: np.ndarray           # (N,) arc coordinate of the nearest U point (m)
     vibrating: bool = False
     scratch: object = field(default=None, repr=False, compare=False)  # not part of the state
@@ -153,6 +154,7 @@ def init_state(system: DEMSystem, pos, vel, omg, radius, density, mat) -> DEMSta
         wall_hist=np.zeros((n, w, 6)), wall_flag=np.zeros((n, w), np.uint8),
         wall_fn=np.zeros((n, w)), wall_ft=np.zeros((n, w)),
         wall_slide=np.zeros((n, w), np.uint8), wall_point=np.zeros((n, w, 3)),
+        wall_force=np.zeros((n, w, 3)),
         wall_arc=np.zeros(n),
     )
     rebuild(system, state)
@@ -209,8 +211,9 @@ def _forces_now(system: DEMSystem, state: DEMState) -> None:
                      state.nl.start, state.nl.nbr, state.nl.hist, state.nl.flag, system.tub,
                      system.wall_mat, system.planes, state.wall_hist, state.wall_flag,
                      state.wall_fn, state.wall_ft, state.wall_slide, state.wall_point,
-                     state.wall_arc, state.force, state.torque, b.fbuf, b.tbuf, b.imp_buf,
-                     b.imp_count, False, b.diag, False, state.ref_tub,
+                     state.wall_force, state.wall_arc, state.force, state.torque, b.fbuf,
+                     b.tbuf, state.nl.chunk_bounds(system.nchunk), b.imp_buf, b.imp_count,
+                     False, b.diag, False, state.ref_tub,
                      np.zeros(system.nchunk))
     b.imp_count[:] = 0
 
@@ -276,8 +279,10 @@ def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: b
             state.omg, state.radius, state.mass, state.mat, system.gravity, system.table,
             state.nl.start, state.nl.nbr, state.nl.hist, state.nl.flag, system.tub,
             system.wall_mat, system.planes, state.wall_hist, state.wall_flag, state.wall_fn,
-            state.wall_ft, state.wall_slide, state.wall_point, state.wall_arc, state.force,
-            state.torque, b.fbuf, b.tbuf, state.ref_tub, half_skin, b.imp_buf, b.imp_count,
+            state.wall_ft, state.wall_slide, state.wall_point, state.wall_force, state.wall_arc,
+            state.force,
+            state.torque, b.fbuf, b.tbuf, state.nl.chunk_bounds(system.nchunk), state.ref_tub,
+            half_skin, b.imp_buf, b.imp_count,
             record_impacts, b.diag, system.max_overlap, b.pose)
         state.step += done
         left -= done
@@ -303,6 +308,7 @@ def wall_contacts_now(system: DEMSystem, state: DEMState) -> dict[str, np.ndarra
             "arc": arc.astype(np.float32), "fn": state.wall_fn[i, w].astype(np.float32),
             "ft": state.wall_ft[i, w].astype(np.float32),
             "sliding": state.wall_slide[i, w].astype(bool),
+            "force": state.wall_force[i, w],
             "kind": np.array([wall_kind(int(x)) for x in w], dtype=np.int8)}
 
 

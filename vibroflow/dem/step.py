@@ -32,11 +32,6 @@ DONE, REBUILD, IMPACTS_FULL, BLOWUP = 0, 1, 2, 3
 
 
 @nb.njit(cache=True, inline="always")
-def _chunk_range(c, nchunk, n):
-    return (c * n) // nchunk, ((c + 1) * n) // nchunk
-
-
-@nb.njit(cache=True, inline="always")
 def _record_impact(imp_buf, imp_count, c, t, kind, x, y, z, speed):
     k = imp_count[c]
     if k < imp_buf.shape[1]:
@@ -51,10 +46,10 @@ def _record_impact(imp_buf, imp_count, c, t, kind, x, y, z, speed):
 
 @nb.njit(cache=True)
 def _pair_chunk(c, nchunk, t, dt_hist, pos, vel, omg, radius, mass, mat, table, nbr_start, nbr,
-                hist, flag, periodic_length, fbuf, tbuf, imp_buf, imp_count, record_impacts,
-                diag):
+                hist, flag, periodic_length, fbuf, tbuf, bounds, imp_buf, imp_count,
+                record_impacts, diag):
     n = pos.shape[0]
-    lo, hi = _chunk_range(c, nchunk, n)
+    lo, hi = bounds[c], bounds[c + 1]
     for i in range(lo, hi):
         ri = radius[i]
         mi = mass[i]
@@ -136,8 +131,8 @@ def _pose_array(motion, pivot_x, pivot_z, t, out):
 @nb.njit(cache=True)
 def _finish_chunk(c, nchunk, t, dt, pose, pos, vel, omg, radius, mass, mat, gravity, table,
                   tub, wall_mat, planes, wall_hist, wall_flag, wall_fn, wall_ft, wall_slide,
-                  wall_point, wall_arc, force, torque, fbuf, tbuf, imp_buf, imp_count,
-                  record_impacts, diag, kick, ref_tub, moved):
+                  wall_point, wall_force, wall_arc, force, torque, fbuf, tbuf, bounds, imp_buf,
+                  imp_count, record_impacts, diag, kick, ref_tub, moved):
     """For the balls of chunk c: gather the pair forces from every chunk's buffer (and clear
     it), add gravity and the walls, and with `kick` finish the step (second half kick) and
     measure the largest move since the last list build (tub frame) into moved[c].
@@ -147,7 +142,7 @@ def _finish_chunk(c, nchunk, t, dt, pose, pos, vel, omg, radius, mass, mat, grav
     contact itself.  Without `kick` (the set-up force evaluation) contact histories are not
     advanced, as in LAMMPS' setup."""
     n = pos.shape[0]
-    lo, hi = _chunk_range(c, nchunk, n)
+    lo, hi = bounds[c], bounds[c + 1]
     cth = np.cos(pose[2])
     sth = np.sin(pose[2])
     half_dt = 0.5 * dt
@@ -269,6 +264,9 @@ def _finish_chunk(c, nchunk, t, dt, pose, pos, vel, omg, radius, mass, mat, grav
             wall_point[i, w, 0] = cx
             wall_point[i, w, 1] = cy
             wall_point[i, w, 2] = cz
+            wall_force[i, w, 0] = wfx
+            wall_force[i, w, 1] = wfy
+            wall_force[i, w, 2] = wfz
             if delta > diag[c, D_WALL_OVERLAP]:
                 diag[c, D_WALL_OVERLAP] = delta
                 diag[c, D_WALL_I] = i
@@ -302,8 +300,8 @@ def _finish_chunk(c, nchunk, t, dt, pose, pos, vel, omg, radius, mass, mat, grav
 @nb.njit(cache=True, parallel=True)
 def compute_forces(t, dt, pose, pos, vel, omg, radius, mass, mat, gravity, table, nbr_start,
                    nbr, hist, flag, tub, wall_mat, planes, wall_hist, wall_flag, wall_fn,
-                   wall_ft, wall_slide, wall_point, wall_arc, force, torque, fbuf, tbuf,
-                   imp_buf, imp_count, record_impacts, diag, kick, ref_tub, moved):
+                   wall_ft, wall_slide, wall_point, wall_force, wall_arc, force, torque, fbuf,
+                   tbuf, bounds, imp_buf, imp_count, record_impacts, diag, kick, ref_tub, moved):
     """Forces and torques at the current positions (gravity, pairs, walls); with `kick`, also
     the step's second half kick.  Two parallel loops: pairs into the chunk buffers, then each
     chunk's balls."""
@@ -313,21 +311,21 @@ def compute_forces(t, dt, pose, pos, vel, omg, radius, mass, mat, gravity, table
     dt_hist = dt if kick else 0.0  # the set-up evaluation does not advance histories
     for c in nb.prange(nchunk):
         _pair_chunk(c, nchunk, t, dt_hist, pos, vel, omg, radius, mass, mat, table, nbr_start,
-                    nbr, hist, flag, periodic_length, fbuf, tbuf, imp_buf, imp_count,
+                    nbr, hist, flag, periodic_length, fbuf, tbuf, bounds, imp_buf, imp_count,
                     record_impacts, diag)
     for c in nb.prange(nchunk):
         _finish_chunk(c, nchunk, t, dt, pose, pos, vel, omg, radius, mass, mat, gravity, table,
                       tub, wall_mat, planes, wall_hist, wall_flag, wall_fn, wall_ft, wall_slide,
-                      wall_point, wall_arc, force, torque, fbuf, tbuf, imp_buf, imp_count,
-                      record_impacts, diag, kick, ref_tub, moved)
+                      wall_point, wall_force, wall_arc, force, torque, fbuf, tbuf, bounds,
+                      imp_buf, imp_count, record_impacts, diag, kick, ref_tub, moved)
 
 
 @nb.njit(cache=True, parallel=True)
 def advance(step0, nsteps, dt, time_origin_step, motion, pos, vel, omg, radius, mass, mat,
             gravity, table, nbr_start, nbr, hist, flag, tub, wall_mat, planes, wall_hist,
-            wall_flag, wall_fn, wall_ft, wall_slide, wall_point, wall_arc, force, torque, fbuf,
-            tbuf, ref_tub, half_skin, imp_buf, imp_count, record_impacts, diag, max_overlap,
-            pose):
+            wall_flag, wall_fn, wall_ft, wall_slide, wall_point, wall_force, wall_arc, force,
+            torque, fbuf, tbuf, bounds, ref_tub, half_skin, imp_buf, imp_count, record_impacts,
+            diag, max_overlap, pose):
     """Run up to `nsteps` velocity-Verlet steps from step `step0`.
 
     Time is t = (step - time_origin_step) dt, so that the vibration's phase comes from an
@@ -354,8 +352,9 @@ def advance(step0, nsteps, dt, time_origin_step, motion, pos, vel, omg, radius, 
         _pose_array(motion, pose[6], pose[7], t, pose)
         compute_forces(t, dt, pose, pos, vel, omg, radius, mass, mat, gravity, table,
                        nbr_start, nbr, hist, flag, tub, wall_mat, planes, wall_hist, wall_flag,
-                       wall_fn, wall_ft, wall_slide, wall_point, wall_arc, force, torque, fbuf,
-                       tbuf, imp_buf, imp_count, record_impacts, diag, True, ref_tub, moved)
+                       wall_fn, wall_ft, wall_slide, wall_point, wall_force, wall_arc, force,
+                       torque, fbuf, tbuf, bounds, imp_buf, imp_count, record_impacts, diag,
+                       True, ref_tub, moved)
         blown = False
         rebuild = False
         full = False
