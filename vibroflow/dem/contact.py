@@ -171,3 +171,26 @@ def contact_force(delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, r_i, r_j, r_eff, m_
         tjy -= my
         tjz -= mz
     return fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz, fn, ft, sliding
+
+
+@nb.njit(cache=True, inline="always")
+def branch_vector(pos, i, j, periodic_length):
+    """r_i - r_j (m), with the minimum image along y when the length is periodic."""
+    dx = pos[i, 0] - pos[j, 0]
+    dy = pos[i, 1] - pos[j, 1]
+    dz = pos[i, 2] - pos[j, 2]
+    if periodic_length > 0.0:
+        dy -= periodic_length * np.rint(dy / periodic_length)
+    return dx, dy, dz
+
+
+@nb.njit(cache=True, inline="always")
+def pair_contact_velocity(vel, omg, i, j, ri, rj, nx, ny, nz):
+    """Velocity of i's material relative to j's at their contact point (normal n from j to i):
+    v_i - v_j - (r_i w_i + r_j w_j) x n."""
+    wsx = ri * omg[i, 0] + rj * omg[j, 0]
+    wsy = ri * omg[i, 1] + rj * omg[j, 1]
+    wsz = ri * omg[i, 2] + rj * omg[j, 2]
+    return (vel[i, 0] - vel[j, 0] - (wsy * nz - wsz * ny),
+            vel[i, 1] - vel[j, 1] - (wsz * nx - wsx * nz),
+            vel[i, 2] - vel[j, 2] - (wsx * ny - wsy * nx))

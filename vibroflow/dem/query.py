@@ -11,7 +11,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .contact import contact_force
+from .contact import branch_vector, contact_force, pair_contact_velocity
 
 
 @nb.njit(cache=True)
@@ -34,11 +34,7 @@ def _ball_ball(pos, vel, omg, radius, mass, mat, table, nbr_start, nbr, hist, fl
             if not flag[k]:
                 continue
             j = nbr[k]
-            dx = pos[i, 0] - pos[j, 0]
-            dy = pos[i, 1] - pos[j, 1]
-            dz = pos[i, 2] - pos[j, 2]
-            if periodic_length > 0.0:
-                dy -= periodic_length * np.rint(dy / periodic_length)
+            dx, dy, dz = branch_vector(pos, i, j, periodic_length)
             d = np.sqrt(dx * dx + dy * dy + dz * dz)
             ri = radius[i]
             rj = radius[j]
@@ -46,12 +42,7 @@ def _ball_ball(pos, vel, omg, radius, mass, mat, table, nbr_start, nbr, hist, fl
             nx = dx / d
             ny = dy / d
             nz = dz / d
-            wsx = ri * omg[i, 0] + rj * omg[j, 0]
-            wsy = ri * omg[i, 1] + rj * omg[j, 1]
-            wsz = ri * omg[i, 2] + rj * omg[j, 2]
-            vx = vel[i, 0] - vel[j, 0] - (wsy * nz - wsz * ny)
-            vy = vel[i, 1] - vel[j, 1] - (wsz * nx - wsx * nz)
-            vz = vel[i, 2] - vel[j, 2] - (wsx * ny - wsy * nx)
+            vx, vy, vz = pair_contact_velocity(vel, omg, i, j, ri, rj, nx, ny, nz)
             for q in range(6):
                 h[q] = hist[k, q]
             mi = mass[i]

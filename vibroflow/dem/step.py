@@ -19,7 +19,7 @@ import numba as nb
 import numpy as np
 
 from ..tub.motion import pose as tub_pose
-from .contact import contact_force
+from .contact import branch_vector, contact_force, pair_contact_velocity
 from .walls import (KIND_BALL_BALL, KIND_BALL_PARTITION, KIND_BALL_PLANE, KIND_BALL_TUB,
                     TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT, WALL_PLANE0, WALL_U, plane_wall,
                     u_wall)
@@ -55,11 +55,7 @@ def _pair_chunk(c, nchunk, t, dt_hist, pos, vel, omg, radius, mass, mat, table, 
         mi = mass[i]
         for k in range(nbr_start[i], nbr_start[i + 1]):
             j = nbr[k]
-            dx = pos[i, 0] - pos[j, 0]
-            dy = pos[i, 1] - pos[j, 1]
-            dz = pos[i, 2] - pos[j, 2]
-            if periodic_length > 0.0:
-                dy -= periodic_length * np.rint(dy / periodic_length)
+            dx, dy, dz = branch_vector(pos, i, j, periodic_length)
             rsum = ri + radius[j]
             d2 = dx * dx + dy * dy + dz * dz
             if d2 >= rsum * rsum:
@@ -75,13 +71,7 @@ def _pair_chunk(c, nchunk, t, dt_hist, pos, vel, omg, radius, mass, mat, table, 
             ny = dy * inv
             nz = dz * inv
             rj = radius[j]
-            # relative velocity of i's material to j's at the contact point
-            wsx = ri * omg[i, 0] + rj * omg[j, 0]
-            wsy = ri * omg[i, 1] + rj * omg[j, 1]
-            wsz = ri * omg[i, 2] + rj * omg[j, 2]
-            vx = vel[i, 0] - vel[j, 0] - (wsy * nz - wsz * ny)
-            vy = vel[i, 1] - vel[j, 1] - (wsz * nx - wsx * nz)
-            vz = vel[i, 2] - vel[j, 2] - (wsx * ny - wsy * nx)
+            vx, vy, vz = pair_contact_velocity(vel, omg, i, j, ri, rj, nx, ny, nz)
             if not flag[k]:
                 flag[k] = 1
                 if record_impacts:
