@@ -5,6 +5,7 @@
     vibroflow dem tub47-quick --out runs/tub47-quick  # the DEM (the main job)
     vibroflow export liggghts tub47-quick deck/
     vibroflow import liggghts deck/post --out runs/liggghts --scenario tub47-quick
+    vibroflow calibrate runs/tub47-quick [--shear-cell]   # continuum parameters from a DEM run
 
 Bad input (a missing file, malformed TOML, a value out of range, an unknown key) prints one line
 "error: FIELD = VALUE: what is allowed" on stderr and exits with code 2, without a traceback and
@@ -178,6 +179,48 @@ def dem(
         sys.stderr.write("error: " + str(exc) + "\n")
         raise typer.Exit(EXIT_BLOWUP)
     typer.echo(f"results in {out}")
+
+
+# ----------------------------------------------------------------------------------------------
+# calibrate
+
+@app.command("calibrate")
+@input_errors
+def calibrate(
+    run_dir: Annotated[Path, typer.Argument(metavar="RUN_DIR",
+                                            help="A DEM run folder (with dem.h5).")],
+    shear_cell: Annotated[bool, typer.Option(
+        "--shear-cell", help="Measure mu(I), phi(I) in Lees-Edwards simple-shear cells and the "
+                             "elastic moduli in DEM compression/shear tests at the bed's "
+                             "pressure (minutes); without it they come from the tub's own "
+                             "cells and the affine estimate.")] = False,
+    kernel: Annotated[str, typer.Option("--kernel", help="Coarse-graining kernel: gaussian "
+                                                         "or lucy.")] = "gaussian",
+    width: Annotated[Optional[float], typer.Option(
+        "--width", help="Kernel width w (m); default d/2.")] = None,
+) -> None:
+    """Calibrate the continuum on a DEM run: RUN_DIR/calibration.toml, fields.nc, pictures."""
+    if not run_dir.is_dir():
+        raise InputError(f"RUN_DIR = {str(run_dir)!r}: no such folder")
+    if kernel not in ("gaussian", "lucy"):
+        raise InputError(f"--kernel = {kernel!r}: must be gaussian or lucy")
+    if width is not None and not width > 0:
+        raise InputError(f"--width = {width!r}: must be a length > 0 m")
+    from vibroflow.calibration.calibrate import calibrate as run_calibration
+
+    cal = run_calibration(run_dir, shear_cell=shear_cell, kernel=kernel, width=width)
+    r, w = cal["rheology"], cal["wall"]
+    typer.echo(f"mu_s = {r['mu_s']:.3f} +- {r['mu_s_stderr']:.3f}, mu_2 = {r['mu_2']:.3f} +- "
+               f"{r['mu_2_stderr']:.3f}, I_0 = {r['I_0']:.3g} +- {r['I_0_stderr']:.2g} "
+               f"({r['source'].split(' (')[0]})")
+    typer.echo(f"wall friction (effective) = {w['friction']:.3f} +- {w['friction_stderr']:.3f}"
+               f", sliding fraction {w['sliding_fraction']:.2f}")
+    for name in ("ball_ball", "ball_wall"):
+        im = cal["impacts"].get(name)
+        if im:
+            typer.echo(f"impacts {name}: v = {im['c0_m_s']:.3f} + {im['c1']:.2f} d gamma_dot "
+                       f"(R2 = {im['r2']:.2f}), mean {im['mean_normal_speed_m_s']:.3f} m/s")
+    typer.echo(f"results in {run_dir}/calibration.toml, fields.nc, calibration/*.png")
 
 
 # ----------------------------------------------------------------------------------------------

@@ -186,6 +186,45 @@ def impact_stats(kind, normal_speed, batch=None, n_batches: int | None = None) -
                        mean_normal_speed_by_kind=means, mean_normal_speed_stderr_by_kind=ses)
 
 
+def impact_stats_chunked(kind, normal_speed, time, t_start: float, t_end: float,
+                         frequency: float, n_batches: int,
+                         chunk: int = 2_000_000) -> ImpactStats:
+    """impact_stats over impacts read in chunks (arrays or h5py datasets of M rows), so that a
+    tub47 run's tens of millions of impacts never sit in memory at once.
+
+    The impacts of the averaging window [t_start, t_end) are batched by whole cycles
+    (stats.batches_of_whole_cycles); the per-kind mean is the mean over all impacts used and its
+    standard error that of the batch means, exactly as impact_stats computes them.
+    """
+    from vibroflow.analysis.stats import batches_of_whole_cycles
+
+    nk = max(IMPACT_KINDS) + 1
+    sums = np.zeros((nk, n_batches))
+    counts = np.zeros((nk, n_batches))
+    m = int(kind.shape[0])
+    for a in range(0, m, chunk):
+        b = min(m, a + chunk)
+        k = np.asarray(kind[a:b], dtype=np.int64)
+        v = np.asarray(normal_speed[a:b], dtype=float)
+        bt = batches_of_whole_cycles(np.asarray(time[a:b], dtype=float), t_start, t_end,
+                                     frequency, n_batches)
+        use = (bt >= 0) & np.isfinite(v) & (k >= 0) & (k < nk)
+        flat = k[use] * n_batches + bt[use]
+        sums += np.bincount(flat, weights=v[use], minlength=nk * n_batches).reshape(nk, -1)
+        counts += np.bincount(flat, minlength=nk * n_batches).reshape(nk, -1)
+    out_c, out_m, out_se = {}, {}, {}
+    for k, name in IMPACT_KINDS.items():
+        c = counts[k]
+        out_c[name] = int(c.sum())
+        out_m[name] = float(sums[k].sum() / c.sum()) if c.sum() > 0 else float("nan")
+        if n_batches >= 2 and np.all(c > 0):
+            out_se[name] = float(stderr_of_batches(sums[k] / c))
+        else:
+            out_se[name] = float("nan")
+    return ImpactStats(count=int(counts.sum()), count_by_kind=out_c,
+                       mean_normal_speed_by_kind=out_m, mean_normal_speed_stderr_by_kind=out_se)
+
+
 def mean_by_region(position_tub, values, cell_size: float):
     """Mean of values by square region of the tub frame's x-z plane (cells of side cell_size
     centred on its multiples, as the bulk table).  Returns (x, z, count, mean) over the regions

@@ -30,7 +30,7 @@ import numpy as np
 
 from vibroflow.analysis.bulk import cell_table, probe_values, write_csv
 from vibroflow.analysis.circulation import circulation
-from vibroflow.analysis.contacts import impact_stats, wall_contact_stats
+from vibroflow.analysis.contacts import impact_stats, impact_stats_chunked, wall_contact_stats
 from vibroflow.analysis.stats import batches_of_whole_cycles, cycles_in_window
 from vibroflow.tub.geometry import TubGeometry
 
@@ -171,10 +171,9 @@ def _summary(src, scenario, bulk_csv, t_end) -> dict:
 
     kind = _get(src, "impacts/kind", required=False)
     if kind is not None and len(kind):
-        it = np.asarray(_get(src, "impacts/time"), dtype=float)
-        ib = batches_of_whole_cycles(it, t_start, t_end, freq, nb)
-        im = impact_stats(np.asarray(kind), np.asarray(_get(src, "impacts/normal_speed")),
-                          batch=ib, n_batches=nb)
+        # streamed: a tub47 run holds ~25 million impacts
+        im = impact_stats_chunked(kind, _get(src, "impacts/normal_speed"),
+                                  _get(src, "impacts/time"), t_start, t_end, freq, nb)
     else:
         im = impact_stats(np.zeros(0, np.int64), np.zeros(0), batch=np.zeros(0, np.int64),
                           n_batches=nb)

@@ -640,12 +640,10 @@ def snapshot_from_state(system, state, contacts: bool = True) -> dict:
     (vibroflow.dem.simulate.wall_contacts_now), forces and branches turned into tub axes.
 
     The tub's pose is the system's motion at the state's time (at rest unless the state is
-    vibrating).  Wall points of the tub's wall and partitions are already in the tub frame; a
-    plane wall's contact point is a lab point and is moved into the tub frame here.
+    vibrating); wall contact points are in the tub frame (wall_contacts_now).
     """
     from vibroflow.dem.query import ball_contacts_now
     from vibroflow.dem.simulate import wall_contacts_now
-    from vibroflow.dem.walls import WALL_PLANE0
     from vibroflow.tub.motion import TubMotion
 
     motion = system.motion if state.vibrating else TubMotion.still()
@@ -668,10 +666,6 @@ def snapshot_from_state(system, state, contacts: bool = True) -> dict:
         out.update(contacts_i=bc["i"], contacts_j=bc["j"], contact_force=axes(bc["force"]),
                    contact_branch=axes(bc["branch"]))
         wc = wall_contacts_now(system, state)
-        # exact contact points from the state (dem's record is float32)
-        point = state.wall_point[wc["particle"], wc["wall"].astype(np.int64)].copy()
-        plane = wc["wall"].astype(np.int64) >= WALL_PLANE0
-        if np.any(plane):
-            point[plane] = lab_to_tub_np(point[plane], X, Z, th, pivot)
-        out.update(wall_particle=wc["particle"], wall_force=axes(wc["force"]), wall_point=point)
+        out.update(wall_particle=wc["particle"], wall_force=axes(wc["force"]),
+                   wall_point=wc["point_tub"])
     return out

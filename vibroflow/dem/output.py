@@ -9,7 +9,13 @@ importer and read by vibroflow.analysis):
     /particles/radius (N,)
     /snapshots/time, step, phase (S,); tub_pose (S, 6) [X, Z, theta, Xdot, Zdot, thetadot];
                position, velocity, angular_velocity (S, N, 3) float32, lab frame
-    /wall_contacts/snapshot, particle, wall, position_tub, arc, fn, ft, sliding (C, ...)
+    /wall_contacts/snapshot, particle, wall, position_tub, arc, fn, ft, sliding, force_lab
+               (C, ...): every ball-wall contact at the snapshots; position_tub is the contact
+               point in the tub frame, force_lab the wall's force on the ball (N, lab axes)
+    /ball_contacts/snapshot, i, j, force_lab (B, ...): every touching ball pair (i < j) at the
+               snapshots, force_lab the force on i by j (N, lab axes); the branch vector
+               r_i - r_j is taken from the snapshot's positions (minimum image when the tub is
+               periodic).  For the coarse-grained contact stress (vibroflow.calibration).
     /impacts/time, kind, position_tub, normal_speed (M, ...)
     /series/time, kinetic_energy, max_overlap_ball, max_overlap_wall (K,)
 
@@ -33,13 +39,19 @@ _SCHEMA = {
                   "tub_pose": ((6,), "f8")},
     "wall_contacts": {"snapshot": ((), "i4"), "particle": ((), "i4"), "wall": ((), "i1"),
                       "position_tub": ((3,), "f4"), "arc": ((), "f4"), "fn": ((), "f4"),
-                      "ft": ((), "f4"), "sliding": ((), "?")},
+                      "ft": ((), "f4"), "sliding": ((), "?"), "force_lab": ((3,), "f4")},
+    "ball_contacts": {"snapshot": ((), "i4"), "i": ((), "i4"), "j": ((), "i4"),
+                      "force_lab": ((3,), "f4")},
     "impacts": {"time": ((), "f8"), "kind": ((), "i1"), "position_tub": ((3,), "f4"),
                 "normal_speed": ((), "f4")},
     "series": {"time": ((), "f8"), "kinetic_energy": ((), "f8"),
                "max_overlap_ball": ((), "f8"), "max_overlap_wall": ((), "f8")},
 }
 
+# groups of millions of rows: lzf keeps the file small at little cost
+_COMPRESSED = ("impacts", "ball_contacts")
+
+_COPY_ROWS = 1_000_000
 
 _PARTICLE_FIELDS = ("position", "velocity", "angular_velocity")
 
@@ -96,10 +108,9 @@ class ResultWriter:
         f = h5py.File(self._part(self.index), "w")
         for group, fields in _SCHEMA.items():
             for name, (shape, dtype) in fields.items():
-                # impacts run to millions of rows: lzf keeps the file small at little cost
                 f.create_dataset(f"{group}/{name}", shape=(0, *shape), maxshape=(None, *shape),
                                  dtype=dtype, chunks=(16384, *shape),
-                                 compression="lzf" if group == "impacts" else None)
+                                 compression="lzf" if group in _COMPRESSED else None)
         for name in _PARTICLE_FIELDS:
             f.create_dataset(f"snapshots/{name}", shape=(0, self.n, 3),
                              maxshape=(None, self.n, 3), dtype="f4", chunks=(1, self.n, 3))
@@ -147,16 +158,19 @@ class ResultWriter:
                     chunks = (1, self.n, 3) if key.split("/")[1] in _PARTICLE_FIELDS else True
                     out.create_dataset(key, shape=(total, *src.shape[1:]), dtype=src.dtype,
                                        chunks=chunks if total else None,
-                                       compression="lzf" if key.startswith("impacts") and total
-                                       else None)
+                                       compression="lzf" if key.split("/")[0] in _COMPRESSED
+                                       and total else None)
             offsets = {key: 0 for key in totals}
             for p in parts:
                 with h5py.File(p, "r") as f:
                     for key in totals:
                         m = f[key].shape[0]
-                        if m:
-                            out[key][offsets[key]:offsets[key] + m] = f[key][()]
-                            offsets[key] += m
+                        # copied in slices: a part of a tub47 run holds millions of impacts
+                        step = _COPY_ROWS if key.split("/")[1] not in _PARTICLE_FIELDS else 16
+                        for a in range(0, m, step):
+                            b = min(m, a + step)
+                            out[key][offsets[key] + a:offsets[key] + b] = f[key][a:b]
+                        offsets[key] += m
         os.replace(self.partial, self.final)
         shutil.rmtree(self.parts_dir, ignore_errors=True)
         return self.final

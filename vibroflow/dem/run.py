@@ -25,6 +25,7 @@ from ..progress import RunProgress
 from ..tub.motion import pose_np
 from . import fill as F
 from .output import ResultWriter, load_state_file, save_state_file
+from .query import ball_contacts_now
 from .simulate import (BlowUp, DEMState, DEMSystem, init_state, make_system, run_steps,
                        shortest_contact_time, take_max_overlaps, wall_contacts_now)
 
@@ -116,7 +117,14 @@ def _snapshot(writer: ResultWriter, system: DEMSystem, state: DEMState, index: i
         writer.append("wall_contacts", snapshot=np.full(m, index, np.int32),
                       particle=wc["particle"], wall=wc["wall"],
                       position_tub=wc["position_tub"], arc=wc["arc"], fn=wc["fn"],
-                      ft=wc["ft"], sliding=wc["sliding"])
+                      ft=wc["ft"], sliding=wc["sliding"],
+                      force_lab=wc["force"].astype(np.float32))
+    bc = ball_contacts_now(system, state)
+    b = bc["i"].shape[0]
+    if b:
+        writer.append("ball_contacts", snapshot=np.full(b, index, np.int32),
+                      i=bc["i"].astype(np.int32), j=bc["j"].astype(np.int32),
+                      force_lab=bc["force"].astype(np.float32))
 
 
 def run_dem(scenario, out_dir: Path, vtk: bool = False, resume: bool = False,

@@ -299,12 +299,21 @@ def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: b
 
 
 def wall_contacts_now(system: DEMSystem, state: DEMState) -> dict[str, np.ndarray]:
-    """The current ball-wall contacts: particle, wall slot, point (tub frame), arc, F_n,
-    |F_t|, sliding."""
+    """The current ball-wall contacts: particle, wall slot, contact point (tub frame), arc,
+    F_n, |F_t|, sliding, force (the wall's force on the ball, N, lab axes), impact kind."""
     i, w = np.nonzero(state.wall_flag)
     arc = np.where(w == 0, state.wall_arc[i], np.nan)
+    point = state.wall_point[i, w].copy()
+    plane = w >= WALL_PLANE0
+    if np.any(plane):
+        # a plane wall's contact point is kept in the lab frame by the kernel
+        from ..tub.motion import TubMotion, lab_to_tub_np, pose_np
+        motion = system.motion if state.vibrating else TubMotion.still()
+        pz = pose_np(motion, state.time(system.dt))
+        point[plane] = lab_to_tub_np(point[plane], float(pz["X"]), float(pz["Z"]),
+                                     float(pz["theta"]), (motion.pivot_x, motion.pivot_z))
     return {"particle": i.astype(np.int32), "wall": w.astype(np.int8),
-            "position_tub": state.wall_point[i, w].astype(np.float32),
+            "position_tub": point.astype(np.float32), "point_tub": point,
             "arc": arc.astype(np.float32), "fn": state.wall_fn[i, w].astype(np.float32),
             "ft": state.wall_ft[i, w].astype(np.float32),
             "sliding": state.wall_slide[i, w].astype(bool),

@@ -832,7 +832,8 @@ def _wall_rows(data, snap_index, ids, pos_lab, pose, motion, scenario, geom):
     return {"snapshot": np.full(k.shape, snap_index, np.int32), "particle": k.astype(np.int32),
             "wall": wall, "position_tub": pos_tub.astype(np.float32),
             "arc": arc.astype(np.float32), "fn": fn.astype(np.float32),
-            "ft": ft.astype(np.float32), "sliding": sliding}
+            "ft": ft.astype(np.float32), "sliding": sliding,
+            "force_lab": (fnv + ftv).astype(np.float32)}
 
 
 def _read_start_step(post: Path) -> int:

@@ -1,0 +1,216 @@
+"""Checks of the calibration from a DEM run (issue 3 sections 3 and 4): the impact statistics
+against kinetic theory, the wall-friction reduction against Coulomb's law and geometry, and the
+`vibroflow calibrate` command end to end on a small tub run (its files, their units and
+conservation of what the coarse-graining deposits).
+"""
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+
+import h5py
+import numpy as np
+import pytest
+
+from tests.dem_helpers import D_STEEL, RHO_STEEL, Sim, ball, contact, plane, scenario
+from vibroflow.calibration.impacts import weighted_linear_fit
+from vibroflow.calibration.wall_friction import wall_normal_tangent
+from vibroflow.dem import simulate as S
+
+SMALL = ["fill.count=300", "fill.settle_time=0.05", "fill.max_settle_time=0.05",
+         "run.duration=0.12", "run.average_last=0.09"]
+
+
+# ----------------------------------------------------------------------------------------------
+# Impact speeds of a Maxwellian gas (models.md "Impact velocity from the continuum")
+
+def test_impact_speeds_of_an_elastic_gas_follow_kinetic_theory():
+    """In a gas of elastic spheres with a Maxwellian velocity distribution of temperature T
+    (per-component variance), the normal approach speed u of the collisions is distributed as
+    the collision flux weights it: f(u) ~ u exp(-u^2 / 4T) between two balls (relative velocity
+    variance 2T per component) and f(u) ~ u exp(-u^2 / 2T) against a wall, so the mean impact
+    speeds are sqrt(pi T) and sqrt(pi T / 2) (Chapman & Cowling; models.md).  The relations the
+    calibration fits and the continuum uses rest on these; the DEM's impact recorder must
+    reproduce them.  A box of 6 plane walls, no gravity, e = 1, random Maxwellian start."""
+    rng = np.random.default_rng(7)
+    L = 0.08          # box side (m): 216 balls at solid fraction 0.06 (a gas)
+    n_side = 6
+    sigma = 0.3       # m/s per component
+    g = (np.arange(n_side) + 0.5) * L / n_side
+    pos = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
+    vel = rng.normal(0.0, sigma, pos.shape)
+    vel -= vel.mean(axis=0)
+    balls = [ball(p, v) for p, v in zip(pos, vel)]
+    walls = [plane((0, 0, 0), (1, 0, 0)), plane((L, 0, 0), (-1, 0, 0)),
+             plane((0, 0, 0), (0, 1, 0)), plane((0, L, 0), (0, -1, 0)),
+             plane((0, 0, 0), (0, 0, 1)), plane((0, 0, L), (0, 0, -1))]
+    sc = scenario(balls, [contact(e=1.0, mu=0.0)], walls=walls, dt=2e-5, duration=10.0)
+    sim = Sim(sc)
+    # let the lattice start relax into a gas (a few collision times), then record
+    sim.run(5000)
+    rows = []
+    temps = []
+    for _ in range(100):
+        S.run_steps(sim.system, sim.state, 1000, record_impacts=True,
+                    on_impacts=lambda imp: rows.append(imp.copy()))
+        v = sim.state.vel
+        temps.append(float(((v - v.mean(axis=0)) ** 2).sum(axis=1).mean() / 3.0))
+    imp = np.concatenate(rows)
+    T = float(np.mean(temps))
+    kind = imp[:, 1].astype(int)
+    bb = imp[kind == 0, 5]
+    bw = imp[kind == 3, 5]
+    assert bb.size > 5000 and bw.size > 3000, (bb.size, bw.size)
+    # the sample means have relative standard errors of about 0.5/sqrt(n): below 1 %
+    assert bb.mean() == pytest.approx(math.sqrt(math.pi * T), rel=0.03)
+    assert bw.mean() == pytest.approx(math.sqrt(math.pi * T / 2.0), rel=0.03)
+
+
+def test_weighted_linear_fit_recovers_known_coefficients_within_its_errors():
+    rng = np.random.default_rng(3)
+    x = np.linspace(0.0, 0.2, 40)
+    w = rng.integers(50, 500, x.size).astype(float)
+    noise = rng.normal(0.0, 0.01, x.size) / np.sqrt(w / 100.0)
+    y = 0.05 + 0.8 * x + noise
+    fit = weighted_linear_fit(x, y, w)
+    assert abs(fit["c0"] - 0.05) < 4 * fit["c0_stderr"]
+    assert abs(fit["c1"] - 0.8) < 4 * fit["c1_stderr"]
+    assert fit["r2"] > 0.95
+    through0 = weighted_linear_fit(x, 0.8 * x, w, intercept=False)
+    assert through0["c1"] == pytest.approx(0.8, rel=1e-12)
+
+
+def test_wall_normal_and_tangent_of_the_u_profile():
+    R = 0.15
+    # bottom: normal up, tangent +x; right side: normal -x, tangent up; left side: tangent down;
+    # on the circle at 45 degrees right of the bottom: normal towards the centre (0, R)
+    nx, nz, tx, tz = wall_normal_tangent([0.0, R, -R, R * math.sin(math.pi / 4)],
+                                         [0.0, 0.3, 0.3, R - R * math.cos(math.pi / 4)], R)
+    s = math.sqrt(0.5)
+    assert np.allclose(nx, [0.0, -1.0, 1.0, -s])
+    assert np.allclose(nz, [1.0, 0.0, 0.0, s])
+    assert np.allclose(tx, [1.0, 0.0, 0.0, s])
+    assert np.allclose(tz, [0.0, 1.0, -1.0, s])
+
+
+# ----------------------------------------------------------------------------------------------
+# `vibroflow calibrate` on a small tub run
+
+def _cli(*args, env):
+    return subprocess.run([sys.executable, "-m", "vibroflow.cli", *map(str, args)],
+                          capture_output=True, text=True, env=env, stdin=subprocess.DEVNULL)
+
+
+@pytest.fixture(scope="module")
+def calibrated_run(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("calibrate")
+    env = dict(os.environ, VIBROFLOW_CACHE=str(tmp / "cache"), NO_COLOR="1")
+    out = tmp / "run"
+    sets = []
+    for s in SMALL:
+        sets += ["--set", s]
+    r = _cli("dem", "tub47-quick", "--out", out, *sets, env=env)
+    assert r.returncode == 0, r.stderr
+    r = _cli("calibrate", out, env=env)
+    assert r.returncode == 0, r.stderr
+    return out, r
+
+
+def test_calibrate_writes_its_files_and_reads_back(calibrated_run):
+    from vibroflow.calibration.calibrate import read_calibration
+    from vibroflow.calibration.run_fields import read_fields
+
+    out, r = calibrated_run
+    assert "wall friction (effective)" in r.stdout
+    cal = read_calibration(out)
+    for table in ("source", "media", "rheology", "elastic", "drucker_prager", "wall",
+                  "partitions", "impacts"):
+        assert table in cal, table
+    assert cal["source"]["case"] == "tub47-quick"
+    assert cal["media"]["diameter_m"] == pytest.approx(D_STEEL)
+    for name in ("fields.png", "mu_I.png", "wall_friction.png", "impacts.png"):
+        p = out / "calibration" / name
+        assert p.is_file() and p.stat().st_size > 10_000, name
+    ds = read_fields(out / "fields.nc")
+    assert ds["pressure"].attrs["units"] == "Pa"
+    assert ds["velocity"].attrs["units"] == "m s-1"
+    ph = read_fields(out / "fields.nc", phase_resolved=True)
+    assert ph.sizes["phase"] == 8
+    assert not list(out.glob("*.tmp*"))
+
+
+def test_calibrated_wall_friction_obeys_coulomb(calibrated_run):
+    """Every contact has |F_t| <= mu F_n, so the ratio of sums and the coherent friction of
+    slipping patches cannot exceed the contact's mu; sliding contacts sit exactly at mu (to the
+    float32 of dem.h5)."""
+    from vibroflow.calibration.calibrate import read_calibration
+
+    out, _ = calibrated_run
+    cal = read_calibration(out)
+    w = cal["wall"]
+    mu = w["contact_friction"]
+    assert mu == pytest.approx(0.40)
+    assert 0.0 < w["ratio_of_sums"] <= mu * (1 + 1e-5)
+    assert w["friction"] == w["ratio_of_sums"]
+    if math.isfinite(w["coherent_slip_friction"]):
+        assert w["coherent_slip_friction"] <= mu * (1 + 1e-5)
+    with h5py.File(out / "dem.h5") as f:
+        fn = f["wall_contacts/fn"][()]
+        ft = f["wall_contacts/ft"][()]
+        sl = f["wall_contacts/sliding"][()]
+        wall = f["wall_contacts/wall"][()]
+    use = (fn > 0) & (wall == 0)
+    assert np.all(ft[use] <= mu * fn[use] * (1 + 1e-5))
+    slide = use & sl
+    assert slide.any()
+    assert np.allclose(ft[slide] / fn[slide], mu, rtol=1e-4)
+
+
+def test_coarse_grained_fields_of_the_run_conserve_mass_and_momentum(calibrated_run):
+    """The fields integrate back to what was deposited: the integral of rho over the x-z plane
+    times L_y is the balls' mass, and the integral of the momentum density the balls' momentum
+    relative to the tub (the time average over the window's snapshots), computed here from
+    dem.h5 independently of the calibration code."""
+    from vibroflow.analysis.stats import batches_of_whole_cycles
+    from vibroflow.calibration.run_fields import read_fields
+    from vibroflow.tub.motion import relative_velocity_tub_axes_np
+
+    out, _ = calibrated_run
+    ds = read_fields(out / "fields.nc")
+    h = float(ds.attrs["cell_size_m"])
+    depth = float(ds.attrs["depth_m"])
+    with h5py.File(out / "dem.h5") as f:
+        r = f["particles/radius"][()]
+        m = 4.0 / 3.0 * math.pi * r**3 * RHO_STEEL
+        t = f["snapshots/time"][()]
+        use = batches_of_whole_cycles(t, 0.03, 0.12, 47.0, 4) >= 0
+        mom, absmom = [], []
+        for s in np.nonzero(use)[0]:
+            X, Z, th, Xd, Zd, thd = f["snapshots/tub_pose"][s]
+            v = relative_velocity_tub_axes_np(f["snapshots/position"][s].astype(float),
+                                              f["snapshots/velocity"][s].astype(float),
+                                              X, Z, th, Xd, Zd, thd, (0.0, -0.10))
+            mom.append((m[:, None] * v).sum(axis=0))
+            absmom.append(float((m * np.linalg.norm(v, axis=1)).sum()))
+    mass = float(ds["density"].sum()) * h * h * depth
+    assert mass == pytest.approx(m.sum(), rel=3e-3)  # a sum over grid points
+    P = (ds["density"].values[..., None] * ds["velocity"].fillna(0.0).values).sum(axis=(0, 1))
+    P *= h * h * depth
+    ref = np.mean(mom, axis=0)
+    scale = float(np.mean(absmom))
+    assert np.all(np.abs(P - ref) <= 3e-3 * scale + 1e-12)
+
+
+def test_calibrate_bad_input_is_one_line_exit_2(tmp_path):
+    env = dict(os.environ, NO_COLOR="1")
+    r = _cli("calibrate", tmp_path / "nowhere", env=env)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "RUN_DIR" in r.stderr
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    (bad / "dem.h5").write_text("not hdf5")
+    r = _cli("calibrate", bad, env=env)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert "Traceback" not in r.stderr
+    assert not (bad / "calibration.toml").exists()

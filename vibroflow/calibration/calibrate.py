@@ -1,0 +1,401 @@
+"""`vibroflow calibrate RUN_DIR [--shear-cell]`: from a DEM run to the continuum's parameters
+(issue 3 section 4).
+
+Stages:
+1. coarse-grain the run's averaging window (run_fields) -> RUN_DIR/fields.nc;
+2. wall and partition friction from the wall contacts (wall_friction);
+3. impact speeds against the coarse-grained shear rate and temperature (impacts);
+4. the media's rheology: with --shear-cell, steady mu(I), phi(I) from Lees-Edwards simple-shear
+   cells at the bed's pressure (shear_cell) and the packed bed's elastic moduli from DEM
+   compression and shear tests (elastic); without it, mu(I) and phi(I) fitted to the tub's own
+   dense cells and the elastic moduli from the affine (effective-medium) estimate with the
+   bed's measured coordination number -- each result says where it came from;
+5. the equivalent Drucker-Prager with viscosity;
+6. RUN_DIR/calibration.toml (every parameter with its uncertainty and its provenance, read by
+   the continuum solvers with `read_calibration`), RUN_DIR/calibration/ pictures.
+
+All files are written atomically; a stage that fails leaves the files of the stages before it.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import math
+import os
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import tomli_w
+
+from vibroflow import __version__
+from vibroflow.analysis.summary import geometry_of
+from vibroflow.errors import InputError
+
+from .dem_result import DEMResult
+from .impacts import impact_relations
+from .run_fields import coarse_grain_run, write_fields
+from .tub_rheology import DENSE_SOLID_FRACTION, bed_pressure, tub_mu_i_scatter
+from .wall_friction import wall_friction
+
+CALIBRATION_FILE = "calibration.toml"
+FIELDS_FILE = "fields.nc"
+PICTURES_DIR = "calibration"
+
+
+def _f(x) -> float:
+    """A plain float for TOML (NaN stays NaN: TOML 1.0 has nan)."""
+    try:
+        return float(x)
+    except (TypeError, ValueError):
+        return float("nan")
+
+
+def _pair(scenario, a: str, b: str):
+    for c in scenario.contacts:
+        if set(c.pair) == {a, b}:
+            return c
+    raise InputError(f"contacts: no pair for materials {a!r} and {b!r}")
+
+
+def coordination(res: DEMResult) -> dict:
+    """Mean ball-ball coordination number of the sampled snapshots: Z = 2 C / N over all balls,
+    and Z_nr = 2 C / N' over the balls with at least two ball contacts (rattlers out)."""
+    if not res.has_ball_contacts or not res.has("ball_contacts/i"):
+        return {"z_all": float("nan"), "z_non_rattler": float("nan")}
+    f = res.file
+    batch = res.batches()
+    snap = f["ball_contacts/snapshot"][()]
+    i = f["ball_contacts/i"][()]
+    j = f["ball_contacts/j"][()]
+    n = res.n_particles
+    used = np.nonzero(batch >= 0)[0]
+    rows = np.searchsorted(snap, np.arange(snap.max(initial=0) + 2))
+    za, zn = [], []
+    for s in used[:: max(1, used.size // 64)]:  # 64 snapshots are plenty for a mean
+        a, b = rows[s], rows[s + 1]
+        if b <= a:
+            continue
+        deg = np.bincount(i[a:b], minlength=n) + np.bincount(j[a:b], minlength=n)
+        za.append(2.0 * (b - a) / n)
+        keep = deg >= 2
+        zn.append(deg[keep].sum() / max(keep.sum(), 1))
+    return {"z_all": float(np.mean(za)) if za else float("nan"),
+            "z_non_rattler": float(np.mean(zn)) if zn else float("nan")}
+
+
+def affine_moduli(phi: float, z: float, k_n: float, k_t: float, d: float) -> dict:
+    """Affine (Voigt, effective-medium) moduli of a packing of linear-spring spheres:
+    K = phi Z k_n / (3 pi d), G = phi Z (2 k_n + 3 k_t) / (10 pi d) (Pa).
+
+    Derivation: stress sigma = (1/V) sum_c f_c (x) l_c (l = d n), an affine strain eps changes
+    the contact's normal and tangential displacements by d (n.eps.n) and d (eps.n - n (n.eps.n));
+    averaging over isotropic contact directions (<n_i n_j n_k n_l> = (d_ij d_kl + d_ik d_jl +
+    d_il d_jk)/15) with N_c d^2 / V = 3 phi Z / (pi d) gives these (Walton 1987; Makse et al.
+    1999 for the Hertz analogue).  K is close to the measured bulk modulus of a compressed
+    packing; G is an upper bound (non-affine relaxation lowers it several-fold near jamming).
+    """
+    k = phi * z * k_n / (3.0 * math.pi * d)
+    g = phi * z * (2.0 * k_n + 3.0 * k_t) / (10.0 * math.pi * d)
+    return {"bulk_modulus": k, "shear_modulus": g}
+
+
+def young_poisson(K: float, G: float) -> tuple[float, float]:
+    """Young's modulus (Pa) and Poisson ratio of an isotropic solid with moduli K, G (3D)."""
+    E = 9.0 * K * G / (3.0 * K + G)
+    nu = (3.0 * K - 2.0 * G) / (2.0 * (3.0 * K + G))
+    return E, nu
+
+
+# ----------------------------------------------------------------------------------------------
+
+def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
+              width: float | None = None, progress: bool = True, shear_cell_options=None,
+              pictures: bool = True) -> dict:
+    """Calibrate the continuum on the DEM run in RUN (a run directory with dem.h5).
+
+    Returns the calibration as a dict (what calibration.toml holds).  See the module notes.
+    """
+    from vibroflow.progress import RunProgress
+
+    run_dir = Path(run)
+    with DEMResult.open(run_dir) as res, RunProgress(progress) as prog:
+        out_dir = res.path.parent
+        sc = res.scenario
+        n_used = int((res.batches() >= 0).sum())
+        prog.stage("coarse-grain", n_used, unit="snapshots")
+        avg, phases, cg_info = coarse_grain_run(res, kernel=kernel, width=width,
+                                                progress=lambda k, n: prog.update(k))
+        fields_path = write_fields(out_dir / FIELDS_FILE, avg, phases)
+        prog.log(f"coarse-grained {cg_info['snapshots']} snapshots in "
+                 f"{cg_info['wall_time_s']:.1f} s (contact stress: {cg_info['contact_stress']})"
+                 f" -> {fields_path}")
+        wf = wall_friction(res)
+        rel = impact_relations(res, avg)
+        scatter = tub_mu_i_scatter(avg, phases)
+        p_bed = bed_pressure(avg)
+        z = coordination(res)
+        phi_bed = float(np.nanmedian(np.where(
+            avg["solid_fraction"].values >= DENSE_SOLID_FRACTION,
+            avg["solid_fraction"].values, np.nan)))
+        d = res.diameter
+        rho_s = res.solid_density
+        ball_pair = _pair(sc, sc.fill.material, sc.fill.material)
+        if ball_pair.model != "linear" and not shear_cell:
+            k_n = float("nan")
+        else:
+            k_n = float(ball_pair.k_n) if ball_pair.model == "linear" else float("nan")
+        k_t = k_n * float(ball_pair.k_t_over_k_n)
+
+        if shear_cell:
+            rheo, elastic, cell_points = _dem_tests(sc, p_bed, prog, shear_cell_options or {})
+        else:
+            rheo = _fit_tub_cells(scatter)
+            cell_points = None
+            elastic = affine_moduli(phi_bed, z["z_non_rattler"], k_n, k_t, d)
+            elastic.update(source="affine (effective-medium) estimate with the tub's measured "
+                                  "solid fraction and coordination number; run --shear-cell "
+                                  "for DEM compression and shear tests",
+                           bulk_modulus_stderr=float("nan"), shear_modulus_stderr=float("nan"),
+                           pressure=p_bed, solid_fraction=phi_bed,
+                           coordination_number=z["z_non_rattler"])
+        from .rheology_fit import drucker_prager_equivalent
+        gam_ref = _median_dense(avg, "shear_rate")
+        dp = drucker_prager_equivalent(rheo["mu_s"], rheo["mu_2"], rheo["I_0"],
+                                       rheo["phi_max"], rheo["phi_min"], p_bed, d, rho_s,
+                                       gam_ref)
+        cal = _calibration_record(res, cg_info, wf, rel, rheo, elastic, dp, p_bed, phi_bed, z,
+                                  d, rho_s, gam_ref, shear_cell, kernel, width, avg)
+        write_calibration(out_dir / CALIBRATION_FILE, cal)
+        if pictures:
+            from . import plots
+            pic = out_dir / PICTURES_DIR
+            pic.mkdir(exist_ok=True)
+            geometry = geometry_of(sc)
+            plots.field_maps(pic / "fields.png", avg, geometry)
+            plots.mu_i_plot(pic / "mu_I.png", scatter, cell_points,
+                            {**rheo, "source": rheo["source"].split(" ")[0]}, rheo)
+            plots.wall_friction_plot(pic / "wall_friction.png", wf)
+            plots.impacts_plot(pic / "impacts.png", rel)
+        prog.log(f"calibration in {out_dir / CALIBRATION_FILE}")
+        return cal
+
+
+def _median_dense(ds, name: str) -> float:
+    v = np.asarray(ds[name].values, float)
+    phi = np.asarray(ds["solid_fraction"].values, float)
+    sel = np.isfinite(v) & (phi >= DENSE_SOLID_FRACTION)
+    return float(np.median(v[sel])) if sel.any() else float("nan")
+
+
+def _fit_tub_cells(scatter: dict) -> dict:
+    """mu(I), phi(I) fitted to the tub's dense phase-resolved cells (no shear cell)."""
+    from .rheology_fit import fit_mu_i, fit_phi_i
+
+    ph = scatter.get("phase") or scatter["time"]
+    d = ph["dense"]
+    out = {"source": "tub cells (dense phase-resolved coarse-grained cells; run --shear-cell "
+                     "for the Lees-Edwards simple-shear fit)", "points": int(d.sum())}
+    mu = fit_mu_i(ph["I"][d], ph["mu"][d])
+    phi = fit_phi_i(ph["I"][d], ph["phi"][d])
+    out.update(_mu_phi_keys(mu, phi))
+    return out
+
+
+def _mu_phi_keys(mu: dict, phi: dict) -> dict:
+    out = {}
+    for k in ("mu_s", "mu_2", "I_0"):
+        out[k] = _f(mu[k])
+        out[k + "_stderr"] = _f(mu.get(k + "_stderr"))
+    for k in ("phi_max", "phi_min"):
+        out[k] = _f(phi[k])
+        out[k + "_stderr"] = _f(phi.get(k + "_stderr"))
+    out["mu_fit_chi2_per_dof"] = _f(mu.get("chi2_per_dof"))
+    return out
+
+
+def _dem_tests(sc, pressure: float, prog, options: dict):
+    """Shear cells over a range of I and the elastic tests, at the bed's pressure."""
+    from .elastic import elastic_moduli
+    from .rheology_fit import fit_mu_i, fit_phi_i
+    from .shear_cell import run_shear_cell
+
+    if not (pressure > 0 and math.isfinite(pressure)):
+        raise InputError(f"bed pressure = {pressure!r} Pa: the coarse-grained run has no dense "
+                         f"cell with a positive pressure to run the shear cell at")
+    prog.log(f"shear cells at the bed's pressure p = {pressure:.0f} Pa")
+    rows = run_shear_cell(sc, pressure=pressure, progress=prog, **options)
+    steady = [r for r in rows if r.get("steady", True)]
+    for r in rows:
+        if not r.get("steady", True):
+            prog.log(f"shear cell at I = {r['I_target']:.3g} did not reach a steady state "
+                     f"({r.get('reason', '')}): left out of the fit")
+    if len(steady) < 3:
+        raise InputError(f"shear cell: {len(steady)} of {len(rows)} points reached a steady "
+                         f"state: need at least 3 for the mu(I) fit (give more strain)")
+    I = np.array([r["I"] for r in steady])
+    mu = fit_mu_i(I, np.array([r["mu"] for r in steady]),
+                  np.array([r.get("mu_stderr", np.nan) for r in steady]))
+    phi = fit_phi_i(I, np.array([r["phi"] for r in steady]),
+                    np.array([r.get("phi_stderr", np.nan) for r in steady]))
+    rheo = {"source": "shear cell (Lees-Edwards simple shear at imposed pressure)",
+            "points": len(steady), "pressure": pressure}
+    rheo.update(_mu_phi_keys(mu, phi))
+    prog.log("elastic tests (isotropic compression, simple shear)")
+    el = elastic_moduli(sc, pressure=pressure)
+    elastic = {"bulk_modulus": _f(el["bulk_modulus"]),
+               "bulk_modulus_stderr": _f(el.get("bulk_modulus_stderr")),
+               "shear_modulus": _f(el["shear_modulus"]),
+               "shear_modulus_stderr": _f(el.get("shear_modulus_stderr")),
+               "pressure": _f(el.get("pressure", pressure)),
+               "solid_fraction": _f(el.get("phi", el.get("solid_fraction"))),
+               "coordination_number": _f(el.get("coordination_number", el.get("Z"))),
+               "source": "DEM compression and shear tests of a packed periodic bed"}
+    return rheo, elastic, rows
+
+
+def _calibration_record(res, cg_info, wf, rel, rheo, elastic, dp, p_bed, phi_bed, z, d, rho_s,
+                        gam_ref, shear_cell, kernel, width, avg) -> dict:
+    sc = res.scenario
+    t0, t1 = res.window()
+    tw = wf["tub_wall"]
+    E, nu = young_poisson(elastic["bulk_modulus"], elastic["shear_modulus"])
+    wall_pair = _pair(sc, sc.fill.material, sc.tub.wall_material)
+    cal = {
+        "source": {
+            "run": str(res.path.parent.resolve()), "case": str(sc.case),
+            "dem_code": res.source, "snapshots": int(cg_info["snapshots"]),
+            "window_s": [t0, t1], "shear_cell": bool(shear_cell),
+            "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+            "vibroflow_version": __version__,
+            "coarse_graining": {"kernel": kernel, "width_m": _f(avg.attrs["width_m"]),
+                                "cell_size_m": _f(avg.attrs["cell_size_m"]),
+                                "contact_stress": cg_info["contact_stress"]},
+        },
+        "media": {"diameter_m": d, "solid_density_kg_m3": rho_s,
+                  "bed_solid_fraction": phi_bed, "bed_pressure_Pa": p_bed,
+                  "coordination_number": _f(z["z_non_rattler"]),
+                  "coordination_number_all_balls": _f(z["z_all"])},
+        "rheology": {
+            "model": "mu(I): mu = mu_s + (mu_2 - mu_s) / (1 + I_0 / I); "
+                     "phi(I) = phi_max - (phi_max - phi_min) I",
+            **{k: (v if isinstance(v, str) else _f(v)) for k, v in rheo.items()},
+            # Dunatunga & Kamrin 2015: below the critical density the material is disconnected
+            # (stress-free); the steady quasi-static packing phi(I -> 0) = phi_max
+            "critical_solid_fraction": _f(rheo["phi_max"]),
+        },
+        "elastic": {
+            "bulk_modulus_Pa": _f(elastic["bulk_modulus"]),
+            "bulk_modulus_stderr_Pa": _f(elastic.get("bulk_modulus_stderr")),
+            "shear_modulus_Pa": _f(elastic["shear_modulus"]),
+            "shear_modulus_stderr_Pa": _f(elastic.get("shear_modulus_stderr")),
+            "youngs_modulus_Pa": _f(E), "poisson_ratio": _f(nu),
+            "pressure_Pa": _f(elastic.get("pressure", p_bed)),
+            "solid_fraction": _f(elastic.get("solid_fraction", phi_bed)),
+            "coordination_number": _f(elastic.get("coordination_number")),
+            "source": str(elastic.get("source", "")),
+        },
+        "drucker_prager": {k: (v if isinstance(v, str) else _f(v)) for k, v in dp.items()},
+        "wall": {
+            "friction": _f(tw["effective_friction"]),
+            "friction_stderr": _f(tw["effective_friction_stderr"]),
+            "choice": tw["choice"],
+            "contact_friction": _f(tw["contact_friction"]),
+            "mean_ft_over_fn": _f(tw["mean_ft_over_fn"]),
+            "mean_ft_over_fn_stderr": _f(tw["mean_ft_over_fn_stderr"]),
+            "ratio_of_sums": _f(tw["ratio_of_sums"]),
+            "sliding_fraction": _f(tw["sliding_fraction"]),
+            "sliding_fraction_stderr": _f(tw["sliding_fraction_stderr"]),
+            "rolling_or_sticking_fraction": _f(tw["rolling_or_sticking_fraction"]),
+            "coherent_slip_friction": _f(tw["coherent_slip_friction"]),
+            "coherent_slip_friction_stderr": _f(tw["coherent_slip_friction_stderr"]),
+            "contacts": int(tw["count"]),
+            "dem_normal_stiffness_N_m": _f(wall_pair.k_n) if wall_pair.model == "linear"
+            else float("nan"),
+        },
+        "impacts": {"shear_rate_model": "v = c0 + c1 d gamma_dot (m/s), fitted over cells",
+                    "temperature_model": "v = a sqrt(T)"},
+    }
+    pw = wf["partitions"]
+    if pw is not None:
+        cal["partitions"] = {
+            "friction": _f(pw["effective_friction"]),
+            "friction_stderr": _f(pw["effective_friction_stderr"]),
+            "contact_friction": _f(pw["contact_friction"]),
+            "mean_ft_over_fn": _f(pw["mean_ft_over_fn"]),
+            "sliding_fraction": _f(pw["sliding_fraction"]),
+            "contacts": int(pw["count"]),
+            "body_force": "-2 friction p / L_y along the velocity (Jop, Forterre & Pouliquen "
+                          "2005)",
+            "spacing_m": _f(sc.tub.length)}
+    for name in ("ball_ball", "ball_wall"):
+        r = rel.get(name)
+        if r is None:
+            continue
+        g, t = r["fit_shear_rate"], r["fit_temperature"]
+        cal["impacts"][name] = {
+            "count": int(r["count"]), "mean_normal_speed_m_s": _f(r["mean_normal_speed"]),
+            "c0_m_s": _f(g["c0"]), "c0_stderr_m_s": _f(g["c0_stderr"]),
+            "c1": _f(g["c1"]), "c1_stderr": _f(g["c1_stderr"]),
+            "r2": _f(g["r2"]), "relative_rms_error": _f(g["relative_rms_error"]),
+            "cells": int(g["points"]),
+            "a_temperature": _f(t["c1"]), "a_temperature_stderr": _f(t["c1_stderr"]),
+            "r2_temperature": _f(t["r2"]), "a_maxwellian": _f(t["maxwell"]),
+        }
+    b = rel.get("bagnold")
+    if b is not None:
+        cal["impacts"]["bagnold_sqrtT_over_d_gamma_dot"] = _f(b["c1"])
+        cal["impacts"]["bagnold_r2"] = _f(b["r2"])
+    cal["impacts"]["reference_shear_rate_1_s"] = _f(gam_ref)
+    return cal
+
+
+def write_calibration(path, cal: dict) -> Path:
+    """calibration.toml, atomically, with a header saying what it is."""
+    path = Path(path)
+    head = ("# vibroflow calibration: continuum parameters measured on a DEM run (SI units).\n"
+            "# Read with vibroflow.calibration.read_calibration; every value has its standard\n"
+            "# error (*_stderr, NaN where none could be estimated) and [source] says where it\n"
+            "# came from.\n\n")
+    tmp = path.with_name(path.name + f".tmp{os.getpid()}")
+    tmp.write_text(head + tomli_w.dumps(_plain(cal)))
+    os.replace(tmp, path)
+    return path
+
+
+def _plain(obj):
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items() if v is not None}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, (np.floating, float)):
+        return float(obj)
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    return obj
+
+
+REQUIRED = {"rheology": ("mu_s", "mu_2", "I_0", "phi_max", "phi_min"),
+            "elastic": ("bulk_modulus_Pa", "shear_modulus_Pa"),
+            "wall": ("friction",), "media": ("diameter_m", "solid_density_kg_m3")}
+
+
+def read_calibration(path) -> dict:
+    """Read calibration.toml (a file, or a run directory holding one); InputError when it is
+    missing, malformed or lacks a parameter the continuum needs."""
+    p = Path(path)
+    if p.is_dir():
+        p = p / CALIBRATION_FILE
+    if not p.is_file():
+        raise InputError(f"calibration = {str(path)!r}: no such file (run `vibroflow calibrate`)")
+    try:
+        cal = tomllib.loads(p.read_text())
+    except tomllib.TOMLDecodeError as e:
+        raise InputError(f"{p}: malformed TOML ({e})") from None
+    for table, keys in REQUIRED.items():
+        for k in keys:
+            v = cal.get(table, {}).get(k)
+            if not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise InputError(f"{p}: {table}.{k} = {v!r}: must be a finite number")
+    return cal

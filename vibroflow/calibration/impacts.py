@@ -1,0 +1,159 @@
+"""Impact velocities from the DEM, and their relation to the local shear rate and granular
+temperature, so that the continuum can infer the impact velocity from its own fields (issue 3
+section 3; models.md "Impact velocity from the continuum").
+
+Data: every new contact of the averaging window with its normal approach speed and its contact
+point (dem.h5 /impacts), ball-ball and ball-tub-wall apart.  They are binned on the cells of the
+coarse-grained fields (the contact point's cell; tub frame) and each cell's mean impact speed is
+set against the cell's coarse-grained shear rate gamma_dot and granular temperature T
+(time averages of the same window, vibroflow.calibration.run_fields).
+
+Fits, weighted by the number of impacts in each cell (a cell's mean is that many samples):
+* linear in the shear rate: v = c0 + c1 d gamma_dot (the published study's form: a Bagnold
+  fluctuation ~ d gamma_dot plus a floor c0 from the vibration itself);
+* against the temperature: v = a sqrt(T), compared with the Maxwellian values a = sqrt(pi) for
+  two balls and sqrt(pi / 2) for a ball and a wall (models.md);
+* the Bagnold relation between the two fields: sqrt(T) = b d gamma_dot.
+Each fit comes with the standard errors of its coefficients, R^2 (weighted) and the relative
+RMS error of the predicted cell means, so a user can judge how far to trust it.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from vibroflow.dem.walls import KIND_BALL_BALL, KIND_BALL_TUB
+
+from .dem_result import DEMResult
+
+KINDS = {"ball_ball": KIND_BALL_BALL, "ball_wall": KIND_BALL_TUB}
+MAXWELL = {"ball_ball": math.sqrt(math.pi), "ball_wall": math.sqrt(math.pi / 2.0)}
+MIN_IMPACTS_PER_CELL = 50
+
+
+def weighted_linear_fit(x, y, w, intercept: bool = True) -> dict:
+    """Weighted least squares y = c0 + c1 x (or y = c1 x): coefficients, their standard errors
+    (from the weighted residual variance), weighted R^2 and relative RMS error (dimensionless).
+    """
+    x = np.asarray(x, float)
+    y = np.asarray(y, float)
+    w = np.asarray(w, float)
+    ok = np.isfinite(x) & np.isfinite(y) & (w > 0)
+    x, y, w = x[ok], y[ok], w[ok]
+    p = 2 if intercept else 1
+    nan = float("nan")
+    if x.size <= p:
+        return {"c0": nan, "c1": nan, "c0_stderr": nan, "c1_stderr": nan, "r2": nan,
+                "relative_rms_error": nan, "points": int(x.size)}
+    A = np.stack([np.ones_like(x), x], axis=1) if intercept else x[:, None]
+    sw = np.sqrt(w)
+    coef, *_ = np.linalg.lstsq(A * sw[:, None], y * sw, rcond=None)
+    pred = A @ coef
+    res = y - pred
+    dof = x.size - p
+    # weights are sample counts: the residual variance per unit weight estimates the scatter
+    s2 = float(np.sum(w * res**2) / dof)
+    cov = s2 * np.linalg.inv((A * w[:, None]).T @ A)
+    ybar = np.sum(w * y) / np.sum(w)
+    ss_tot = float(np.sum(w * (y - ybar) ** 2))
+    r2 = 1.0 - float(np.sum(w * res**2)) / ss_tot if ss_tot > 0 else nan
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rel = float(np.sqrt(np.sum(w * (res / y) ** 2) / np.sum(w)))
+    if intercept:
+        c0, c1 = float(coef[0]), float(coef[1])
+        e0, e1 = float(math.sqrt(cov[0, 0])), float(math.sqrt(cov[1, 1]))
+    else:
+        c0, e0 = 0.0, 0.0
+        c1, e1 = float(coef[0]), float(math.sqrt(cov[0, 0]))
+    return {"c0": c0, "c1": c1, "c0_stderr": e0, "c1_stderr": e1, "r2": r2,
+            "relative_rms_error": rel, "points": int(x.size)}
+
+
+def impact_relations(run, fields, min_impacts: int = MIN_IMPACTS_PER_CELL,
+                     min_solid_fraction: float = 0.1, histogram_bins: int = 60) -> dict:
+    """Impacts of a DEM run against its coarse-grained time-averaged fields.
+
+    run : DEMResult, run directory or dem.h5; fields : the time-averaged Dataset of
+    run_fields.coarse_grain_run (x, z cell centres; shear_rate, temperature, solid_fraction).
+    A cell enters the fits when it holds at least `min_impacts` impacts of the kind and its
+    solid fraction is at least `min_solid_fraction` (so the fields there are not a few stray
+    balls).
+
+    Returns {kind: {count, mean_normal_speed, histogram {edges, counts}, cells {x, z, count,
+    mean_speed, shear_rate, temperature}, fit_shear_rate {c0 (m/s), c1 (-), ...},
+    fit_temperature {c1 = a, ..., maxwell}, }, "bagnold": {c1 = b, ...}, "diameter": d}.
+    """
+    own = not isinstance(run, DEMResult)
+    res = DEMResult.open(run) if own else run
+    try:
+        return _relations(res, fields, min_impacts, min_solid_fraction, histogram_bins)
+    finally:
+        if own:
+            res.close()
+
+
+def _relations(res: DEMResult, fields, min_impacts, min_sf, histogram_bins) -> dict:
+    from vibroflow.analysis.stats import batches_of_whole_cycles
+
+    sc = res.scenario
+    d = res.diameter
+    f = res.file
+    x = np.asarray(fields["x"].values, float)
+    z = np.asarray(fields["z"].values, float)
+    h = float(x[1] - x[0]) if x.size > 1 else float(sc.analysis.cell_size)
+    gam = np.asarray(fields["shear_rate"].values, float)
+    T = np.asarray(fields["temperature"].values, float)
+    phi = np.asarray(fields["solid_fraction"].values, float)
+    out: dict = {"diameter": d}
+    if not res.has("impacts/kind"):
+        for name in KINDS:
+            out[name] = None
+        out["bagnold"] = None
+        return out
+    t0, t1 = res.window()
+    it = f["impacts/time"][()]
+    use = batches_of_whole_cycles(it, t0, t1, float(sc.motion.frequency),
+                                  int(sc.run.batches)) >= 0
+    kind = f["impacts/kind"][()][use]
+    speed = f["impacts/normal_speed"][()].astype(float)[use]
+    pos = f["impacts/position_tub"][()][use]
+    # the cell of each impact on the fields' grid (cell centres x0 + a h)
+    a = np.floor((pos[:, 0] - x[0]) / h + 0.5).astype(np.int64)
+    b = np.floor((pos[:, 2] - z[0]) / h + 0.5).astype(np.int64)
+    inside = (a >= 0) & (a < x.size) & (b >= 0) & (b < z.size)
+    top = float(np.percentile(speed, 99.9)) if speed.size else 1.0
+    edges = np.linspace(0.0, max(top, 1e-6), histogram_bins + 1)
+    for name, k in KINDS.items():
+        sel = (kind == k) & inside
+        v = speed[sel]
+        if v.size == 0:
+            out[name] = None
+            continue
+        flat = a[sel] * z.size + b[sel]
+        cnt = np.bincount(flat, minlength=x.size * z.size).reshape(x.size, z.size)
+        sm = np.bincount(flat, weights=v, minlength=x.size * z.size).reshape(x.size, z.size)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = np.where(cnt > 0, sm / cnt, np.nan)
+        ok = (cnt >= min_impacts) & np.isfinite(gam) & np.isfinite(T) & (phi >= min_sf)
+        ia, ib = np.nonzero(ok)
+        cells = {"x": x[ia], "z": z[ib], "count": cnt[ok], "mean_speed": mean[ok],
+                 "shear_rate": gam[ok], "temperature": T[ok],
+                 "solid_fraction": phi[ok]}
+        fit_g = weighted_linear_fit(d * gam[ok], mean[ok], cnt[ok])
+        fit_t = weighted_linear_fit(np.sqrt(T[ok]), mean[ok], cnt[ok], intercept=False)
+        fit_t["maxwell"] = MAXWELL[name]
+        hist, _ = np.histogram(v, bins=edges)
+        out[name] = {"count": int(v.size), "mean_normal_speed": float(v.mean()),
+                     "histogram": {"edges": edges, "counts": hist},
+                     "map": {"count": cnt, "mean_speed": mean},
+                     "cells": cells, "fit_shear_rate": fit_g, "fit_temperature": fit_t}
+    dense = np.isfinite(gam) & np.isfinite(T) & (phi >= max(min_sf, 0.3))
+    out["bagnold"] = weighted_linear_fit(d * gam[dense], np.sqrt(T[dense]), phi[dense],
+                                         intercept=False)
+    return out
+
+
+def impact_speed_from_shear_rate(shear_rate, fit: dict, diameter: float):
+    """The calibrated inference: v = c0 + c1 d gamma_dot (m/s) at shear rates (1/s)."""
+    return fit["c0"] + fit["c1"] * diameter * np.asarray(shear_rate, float)
