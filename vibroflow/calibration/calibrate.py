@@ -130,7 +130,7 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
                  f"{cg_info['wall_time_s']:.1f} s (contact stress: {cg_info['contact_stress']})"
                  f" -> {fields_path}")
         wf = wall_friction(res)
-        rel = impact_relations(res, avg)
+        rel = impact_relations(res, phases, avg)
         scatter = tub_mu_i_scatter(avg, phases)
         p_bed = bed_pressure(avg)
         z = coordination(res)

@@ -2,13 +2,15 @@
 temperature, so that the continuum can infer the impact velocity from its own fields (issue 3
 section 3; models.md "Impact velocity from the continuum").
 
-Data: every new contact of the averaging window with its normal approach speed and its contact
-point (dem.h5 /impacts), ball-ball and ball-tub-wall apart.  They are binned on the cells of the
-coarse-grained fields (the contact point's cell; tub frame) and each cell's mean impact speed is
-set against the cell's coarse-grained shear rate gamma_dot and granular temperature T
-(time averages of the same window, vibroflow.calibration.run_fields).
+Data: every new contact of the averaging window with its normal approach speed, its time and
+its contact point (dem.h5 /impacts), ball-ball and ball-tub-wall apart.  They are binned on the
+grid points of the coarse-grained fields (the contact point's nearest; tub frame) and on the
+phase bins of the cycle, and each bin's mean impact speed is set against the coarse-grained
+shear rate gamma_dot and granular temperature T at that point and phase (the phase-resolved
+fields of the same window, vibroflow.calibration.run_fields; see impact_relations for why
+phase-resolved).
 
-Fits, weighted by the number of impacts in each cell (a cell's mean is that many samples):
+Fits, weighted by the number of impacts in each bin (a bin's mean is that many samples):
 * linear in the shear rate: v = c0 + c1 d gamma_dot (the published study's form: a Bagnold
   fluctuation ~ d gamma_dot plus a floor c0 from the vibration itself);
 * against the temperature: v = a sqrt(T), compared with the Maxwellian values a = sqrt(pi) for
@@ -70,41 +72,54 @@ def weighted_linear_fit(x, y, w, intercept: bool = True) -> dict:
             "relative_rms_error": rel, "points": int(x.size)}
 
 
-def impact_relations(run, fields, min_impacts: int = MIN_IMPACTS_PER_CELL,
-                     min_solid_fraction: float = 0.1, histogram_bins: int = 60) -> dict:
-    """Impacts of a DEM run against its coarse-grained time-averaged fields.
+def impact_relations(run, phase_fields, time_fields=None,
+                     min_impacts: int = MIN_IMPACTS_PER_CELL, min_solid_fraction: float = 0.1,
+                     histogram_bins: int = 60, chunk: int = 2_000_000) -> dict:
+    """Impacts of a DEM run against its coarse-grained phase-resolved fields.
 
-    run : DEMResult, run directory or dem.h5; fields : the time-averaged Dataset of
-    run_fields.coarse_grain_run (x, z cell centres; shear_rate, temperature, solid_fraction).
-    A cell enters the fits when it holds at least `min_impacts` impacts of the kind and its
-    solid fraction is at least `min_solid_fraction` (so the fields there are not a few stray
-    balls).
+    The bed does not move rigidly with the tub: relative to it every ball oscillates at the
+    vibration frequency, with a speed of the order of the tub's (A omega ~ 0.4 m/s at tub47).
+    A time-averaged kinetic stress counts that oscillation as "temperature"; the fluctuation that
+    makes balls collide is the one about the local velocity *at the same phase*.  So impacts are
+    binned by cell and by the phase bin of their time (the snapshots' phases), and each (phase,
+    cell) mean impact speed is set against that phase's shear rate and temperature -- the
+    instantaneous quantities a cycle-resolving continuum computes.
 
-    Returns {kind: {count, mean_normal_speed, histogram {edges, counts}, cells {x, z, count,
-    mean_speed, shear_rate, temperature}, fit_shear_rate {c0 (m/s), c1 (-), ...},
-    fit_temperature {c1 = a, ..., maxwell}, }, "bagnold": {c1 = b, ...}, "diameter": d}.
+    run : DEMResult, run directory or dem.h5; phase_fields : the phase-resolved Dataset of
+    run_fields.coarse_grain_run (dims phase, x, z); time_fields : the time-averaged one (for the
+    per-cell maps; optional).  A (phase, cell) point enters the fits when it holds at least
+    `min_impacts` impacts of the kind and its solid fraction is at least `min_solid_fraction`.
+
+    Returns {kind: {count, mean_normal_speed, histogram {edges, counts}, map {count, mean_speed}
+    (x, z), points {x, z, phase, count, mean_speed, shear_rate, temperature, solid_fraction},
+    fit_shear_rate {c0 (m/s), c1 (-), ...}, fit_temperature {c1 = a, ..., maxwell}},
+    "bagnold": {c1 = b, ...}, "diameter": d}.
     """
     own = not isinstance(run, DEMResult)
     res = DEMResult.open(run) if own else run
     try:
-        return _relations(res, fields, min_impacts, min_solid_fraction, histogram_bins)
+        return _relations(res, phase_fields, min_impacts, min_solid_fraction, histogram_bins,
+                          chunk)
     finally:
         if own:
             res.close()
 
 
-def _relations(res: DEMResult, fields, min_impacts, min_sf, histogram_bins) -> dict:
+def _relations(res: DEMResult, pf, min_impacts, min_sf, histogram_bins, chunk) -> dict:
     from vibroflow.analysis.stats import batches_of_whole_cycles
+
+    from .coarse_grain import phase_bins
 
     sc = res.scenario
     d = res.diameter
     f = res.file
-    x = np.asarray(fields["x"].values, float)
-    z = np.asarray(fields["z"].values, float)
+    x = np.asarray(pf["x"].values, float)
+    z = np.asarray(pf["z"].values, float)
+    n_ph = int(pf.sizes["phase"])
     h = float(x[1] - x[0]) if x.size > 1 else float(sc.analysis.cell_size)
-    gam = np.asarray(fields["shear_rate"].values, float)
-    T = np.asarray(fields["temperature"].values, float)
-    phi = np.asarray(fields["solid_fraction"].values, float)
+    gam = np.asarray(pf["shear_rate"].values, float)          # (phase, x, z)
+    T = np.asarray(pf["temperature"].values, float)
+    phi = np.asarray(pf["solid_fraction"].values, float)
     out: dict = {"diameter": d}
     if not res.has("impacts/kind"):
         for name in KINDS:
@@ -112,42 +127,59 @@ def _relations(res: DEMResult, fields, min_impacts, min_sf, histogram_bins) -> d
         out["bagnold"] = None
         return out
     t0, t1 = res.window()
-    it = f["impacts/time"][()]
-    use = batches_of_whole_cycles(it, t0, t1, float(sc.motion.frequency),
-                                  int(sc.run.batches)) >= 0
-    kind = f["impacts/kind"][()][use]
-    speed = f["impacts/normal_speed"][()].astype(float)[use]
-    pos = f["impacts/position_tub"][()][use]
-    # the cell of each impact on the fields' grid (cell centres x0 + a h)
-    a = np.floor((pos[:, 0] - x[0]) / h + 0.5).astype(np.int64)
-    b = np.floor((pos[:, 2] - z[0]) / h + 0.5).astype(np.int64)
-    inside = (a >= 0) & (a < x.size) & (b >= 0) & (b < z.size)
-    top = float(np.percentile(speed, 99.9)) if speed.size else 1.0
-    edges = np.linspace(0.0, max(top, 1e-6), histogram_bins + 1)
-    for name, k in KINDS.items():
-        sel = (kind == k) & inside
-        v = speed[sel]
-        if v.size == 0:
+    freq = float(sc.motion.frequency)
+    ncell = n_ph * x.size * z.size
+    cnt = {name: np.zeros(ncell) for name in KINDS}
+    sm = {name: np.zeros(ncell) for name in KINDS}
+    hist = {name: None for name in KINDS}
+    edges = None
+    m = f["impacts/kind"].shape[0]
+    # streamed: a tub47 run holds ~25 million impacts
+    for a0 in range(0, m, chunk):
+        a1 = min(m, a0 + chunk)
+        it = f["impacts/time"][a0:a1]
+        use = batches_of_whole_cycles(it, t0, t1, freq, int(sc.run.batches)) >= 0
+        if not use.any():
+            continue
+        kind = f["impacts/kind"][a0:a1][use]
+        speed = f["impacts/normal_speed"][a0:a1].astype(float)[use]
+        pos = f["impacts/position_tub"][a0:a1][use]
+        ph = phase_bins(it[use], freq, n_ph)
+        if edges is None:
+            top = 2.0 * float(np.percentile(speed, 99.9)) if speed.size else 1.0
+            edges = np.linspace(0.0, max(top, 1e-6), histogram_bins + 1)
+        ia = np.floor((pos[:, 0] - x[0]) / h + 0.5).astype(np.int64)
+        ib = np.floor((pos[:, 2] - z[0]) / h + 0.5).astype(np.int64)
+        inside = (ia >= 0) & (ia < x.size) & (ib >= 0) & (ib < z.size)
+        flat = (ph * x.size + ia) * z.size + ib
+        for name, k in KINDS.items():
+            sel = (kind == k) & inside
+            cnt[name] += np.bincount(flat[sel], minlength=ncell)
+            sm[name] += np.bincount(flat[sel], weights=speed[sel], minlength=ncell)
+            hk, _ = np.histogram(np.minimum(speed[sel], edges[-1]), bins=edges)
+            hist[name] = hk if hist[name] is None else hist[name] + hk
+    for name in KINDS:
+        c = cnt[name].reshape(n_ph, x.size, z.size)
+        s = sm[name].reshape(n_ph, x.size, z.size)
+        if c.sum() == 0:
             out[name] = None
             continue
-        flat = a[sel] * z.size + b[sel]
-        cnt = np.bincount(flat, minlength=x.size * z.size).reshape(x.size, z.size)
-        sm = np.bincount(flat, weights=v, minlength=x.size * z.size).reshape(x.size, z.size)
         with np.errstate(invalid="ignore", divide="ignore"):
-            mean = np.where(cnt > 0, sm / cnt, np.nan)
-        ok = (cnt >= min_impacts) & np.isfinite(gam) & np.isfinite(T) & (phi >= min_sf)
-        ia, ib = np.nonzero(ok)
-        cells = {"x": x[ia], "z": z[ib], "count": cnt[ok], "mean_speed": mean[ok],
-                 "shear_rate": gam[ok], "temperature": T[ok],
-                 "solid_fraction": phi[ok]}
-        fit_g = weighted_linear_fit(d * gam[ok], mean[ok], cnt[ok])
-        fit_t = weighted_linear_fit(np.sqrt(T[ok]), mean[ok], cnt[ok], intercept=False)
+            mean = np.where(c > 0, s / c, np.nan)
+            cmap = c.sum(axis=0)
+            mmap = np.where(cmap > 0, s.sum(axis=0) / cmap, np.nan)
+        ok = (c >= min_impacts) & np.isfinite(gam) & np.isfinite(T) & (phi >= min_sf)
+        ip, ia, ib = np.nonzero(ok)
+        points = {"x": x[ia], "z": z[ib], "phase": np.asarray(pf["phase"].values)[ip],
+                  "count": c[ok], "mean_speed": mean[ok], "shear_rate": gam[ok],
+                  "temperature": T[ok], "solid_fraction": phi[ok]}
+        fit_g = weighted_linear_fit(d * gam[ok], mean[ok], c[ok])
+        fit_t = weighted_linear_fit(np.sqrt(T[ok]), mean[ok], c[ok], intercept=False)
         fit_t["maxwell"] = MAXWELL[name]
-        hist, _ = np.histogram(v, bins=edges)
-        out[name] = {"count": int(v.size), "mean_normal_speed": float(v.mean()),
-                     "histogram": {"edges": edges, "counts": hist},
-                     "map": {"count": cnt, "mean_speed": mean},
-                     "cells": cells, "fit_shear_rate": fit_g, "fit_temperature": fit_t}
+        out[name] = {"count": int(c.sum()), "mean_normal_speed": float(s.sum() / c.sum()),
+                     "histogram": {"edges": edges, "counts": hist[name]},
+                     "map": {"x": x, "z": z, "count": cmap, "mean_speed": mmap},
+                     "cells": points, "fit_shear_rate": fit_g, "fit_temperature": fit_t}
     dense = np.isfinite(gam) & np.isfinite(T) & (phi >= max(min_sf, 0.3))
     out["bagnold"] = weighted_linear_fit(d * gam[dense], np.sqrt(T[dense]), phi[dense],
                                          intercept=False)

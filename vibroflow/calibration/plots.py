@@ -49,15 +49,19 @@ def field_maps(path, fields, geometry, min_solid_fraction: float = 0.05) -> Path
     vx = np.where(bed, vel[..., 0], np.nan)
     vz = np.where(bed, vel[..., 2], np.nan)
     speed = np.hypot(vx, vz)
-    gam = np.where(bed, fields["shear_rate"].values, np.nan)
-    T = np.where(bed, fields["temperature"].values, np.nan)
+    # the cycle means of the instantaneous fields (run_fields.add_cycle_means: the time-averaged
+    # temperature would count the bed's oscillation relative to the tub)
+    gname = "shear_rate_cycle_mean" if "shear_rate_cycle_mean" in fields else "shear_rate"
+    tname = "temperature_cycle_mean" if "temperature_cycle_mean" in fields else "temperature"
+    gam = np.where(bed, fields[gname].values, np.nan)
+    T = np.where(bed, fields[tname].values, np.nan)
     X, Z = np.meshgrid(x, z, indexing="ij")
     fig, axes = plt.subplots(2, 2, figsize=(11, 9))
     panels = [
         (axes[0, 0], np.where(bed, phi, np.nan), "solid fraction", None, "viridis"),
         (axes[0, 1], speed, "|v| relative to the tub (m/s)", None, "magma"),
-        (axes[1, 0], gam, "shear rate (1/s)", "log", "plasma"),
-        (axes[1, 1], T, "granular temperature (m$^2$/s$^2$)", "log", "inferno"),
+        (axes[1, 0], gam, "shear rate, cycle mean (1/s)", "log", "plasma"),
+        (axes[1, 1], T, "granular temperature, cycle mean (m$^2$/s$^2$)", "log", "inferno"),
     ]
     for ax, data, title, scale, cmap in panels:
         norm = None

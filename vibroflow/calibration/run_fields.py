@@ -82,12 +82,35 @@ def _coarse_grain(res: DEMResult, kernel, width, cutoff, cell_size, n_phases, pr
             "source": res.source, "run": str(res.path)}
     avg = cg.fields(phase_resolved=False)
     phases = cg.fields(phase_resolved=True)
+    add_cycle_means(avg, phases)
     for ds in (avg, phases):
         ds.attrs["contact_stress"] = contact
         ds.attrs["case"] = str(sc.case)
         ds.attrs["source"] = res.source
     info["wall_time_s"] = time.perf_counter() - t_wall
     return avg, phases, info
+
+
+def add_cycle_means(time_averaged: xr.Dataset, phase_resolved: xr.Dataset) -> None:
+    """Add to the time averages the cycle means of the phase-resolved shear rate, temperature
+    and inertial number (mass-weighted over the phase bins).
+
+    Why: relative to the tub the bed oscillates at the vibration frequency (its balls do not
+    follow the tub rigidly), so the time-averaged kinetic stress counts that oscillation of the
+    local velocity as "temperature", and the time-averaged velocity field (the slow roll) has a
+    much smaller shear rate than the bed feels at any instant.  The cycle means of the
+    instantaneous fields are what collisions and the continuum's rheology respond to.
+    """
+    rho = phase_resolved["density"].fillna(0.0)
+    w = rho.sum("phase")
+    for name, unit, desc in (("shear_rate", "s-1", "cycle mean of the phase-resolved shear rate"),
+                             ("temperature", "m2 s-2", "cycle mean of the phase-resolved "
+                                                       "granular temperature"),
+                             ("inertial_number", "1", "cycle mean of the phase-resolved "
+                                                      "inertial number")):
+        v = (phase_resolved[name].fillna(0.0) * rho).sum("phase") / w.where(w > 0)
+        v.attrs.update(units=unit, long_name=desc + " (mass-weighted over the phase bins)")
+        time_averaged[name + "_cycle_mean"] = v
 
 
 def write_fields(path, time_averaged: xr.Dataset, phase_resolved: xr.Dataset | None) -> Path:
