@@ -457,6 +457,133 @@ def test_import_refuses_incomplete_runs(tmp_path):
     assert not (tmp_path / "out" / "dem.h5").exists()
 
 
+def _write_pairs(path: Path, snaps):
+    """A pair/gran/local dump (id1 id2 periodic-flag fx fy fz) as LIGGGHTS writes it."""
+    with open(path, "w") as f:
+        for step, rows in snaps:
+            f.write(f"ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF ENTRIES\n{len(rows)}\n")
+            f.write("ITEM: BOX BOUNDS ff pp ff\n-1 1\n-1 1\n-1 1\n")
+            f.write("ITEM: ENTRIES " + " ".join(f"c_pairc[{k}]" for k in range(1, 7)) + " \n")
+            for r in rows:
+                f.write(" ".join(repr(float(v)) for v in r) + "\n")
+
+
+def _pair_case(tmp_path, periodic: bool):
+    """A deck folder with a ball dump of three balls at rest (LIGGGHTS ids 17, 3, 9, written
+    out of order): 9 touches 3 along x; 17 touches 3 along z, or, in a periodic tub, along y
+    across the periodic boundary (17 near y = L, 3 near y = 0).  Returns (post, scenario,
+    steps, positions by id)."""
+    s = quick(duration=0.1, average_last=0.09, batches=2, seed=3)
+    s = s.model_copy(update={"fill": s.fill.model_copy(update={"count": 3}),
+                             "tub": s.tub.model_copy(update={"periodic": periodic})})
+    info = LG.export_deck(s, tmp_path / "deck")
+    post = tmp_path / "deck" / "post"
+    n0 = 5000
+    (post / "vibration_start_step.txt").write_text(f"{n0}\n")
+    L, gap = s.tub.length, 0.0063  # centre distance: 0.05 mm overlap for d = 6.35 mm
+    pos = {3: np.array([0.0, 0.002, 0.02]), 9: np.array([gap, 0.002, 0.02]),
+           17: (np.array([0.0, 0.002 - gap + L, 0.02]) if periodic
+                else np.array([0.0, 0.002, 0.02 + gap]))}
+    steps = [n0 + int(r) for r in info.dump_steps]
+    rows = [[i, 1, *pos[i], 0, 0, 0, 0, 0, 0, 0.003175] for i in (17, 3, 9)]
+    _write_dump(post / "balls.dump", [(st, rows) for st in steps],
+                "id type x y z vx vy vz omegax omegay omegaz radius")
+    return post, s, steps, pos
+
+
+@pytest.mark.parametrize("periodic", [False, True])
+def test_import_of_a_synthetic_pair_dump(tmp_path, periodic):
+    """Known answer: LIGGGHTS dumps each contact once, as (id1, id2, flag, force on id1), in
+    either id order.  The import maps the ids to the sorted snapshot (3 -> 0, 9 -> 1,
+    17 -> 2), orders each pair i < j with the force on i (negated when swapped: Newton's third
+    law), drops zero-force rows, and takes the branch as the minimum image."""
+    post, s, steps, pos = _pair_case(tmp_path, periodic)
+    f93 = np.array([0.50, 0.01, -0.02])     # on 9 by 3: pushes 9 towards +x, away from 3
+    f317 = np.array([0.0, 0.3, 0.0]) if periodic else np.array([0.01, 0.0, -0.4])
+    # (on 3 by 17: 17 sits on 3, or, periodic, lies at -y of 3 through the boundary)
+    rows = [[9, 3, 0, *f93], [3, 17, 1 if periodic else 0, *f317], [17, 9, 0, 0, 0, 0]]
+    _write_pairs(post / "pairs.dump", [(st, rows[k % 2:] + rows[:k % 2])
+                                       for k, st in enumerate(steps)])
+    out = tmp_path / "out"
+    summary = LG.import_run(post, s, out)
+    n = len(steps)
+    with h5py.File(out / "dem.h5", "r") as f:
+        bc = f["ball_contacts"]
+        assert np.array_equal(bc["snapshot"][()], np.repeat(np.arange(n), 2))
+        assert np.array_equal(bc["i"][()], np.tile([0, 0], n))
+        assert np.array_equal(bc["j"][()], np.tile([1, 2], n))
+        force = bc["force_lab"][()]
+        assert force.dtype == np.float32
+        assert np.allclose(force[0::2], -f93, rtol=1e-6)   # swapped: the force on 3 by 9
+        assert np.allclose(force[1::2], f317, rtol=1e-6)   # kept: the force on 3 by 17
+    assert summary["ball_contacts_available"] and summary["ball_contacts"] == 2 * n
+    assert summary["ball_contacts_repulsive_fraction"] == 1.0
+    from vibroflow.calibration.dem_result import DEMResult
+    with DEMResult.open(out) as res:
+        assert res.has_ball_contacts
+        _, snap = next(res.iter_snapshots([0]))
+        # the calibration's branch r_i - r_j: along the line of centres, |b| = 6.3 mm
+        assert np.allclose(np.linalg.norm(snap["contact_branch"], axis=1), 0.0063, rtol=1e-5)
+        assert np.all(np.einsum("ij,ij->i", snap["contact_force"], snap["contact_branch"]) > 0)
+
+
+def test_import_refuses_inconsistent_pair_dumps(tmp_path):
+    post, s, steps, pos = _pair_case(tmp_path, False)
+    f93 = [0.5, 0.0, 0.0]
+    cases = {
+        # the force taken on the second id: every contact would pull
+        "pull": [[9, 3, 0, *(-np.array(f93))], [3, 17, 0, 0.0, 0.0, 0.4]],
+        "not two balls": [[9, 42, 0, *f93]],
+        "twice": [[9, 3, 0, *f93], [3, 9, 0, *(-np.array(f93))]],
+        "apart": [[9, 17, 0, *f93]],
+    }
+    for message, rows in cases.items():
+        _write_pairs(post / "pairs.dump", [(st, rows) for st in steps])
+        with pytest.raises(InputError, match=message):
+            LG.import_run(post, s, tmp_path / "out")
+    _write_pairs(post / "pairs.dump", [(st, [[9, 3, 0, *f93]]) for st in steps[:-1]])
+    with pytest.raises(InputError, match=f"no entry for step {steps[-1]}"):
+        LG.import_run(post, s, tmp_path / "out")
+    assert not (tmp_path / "out" / "dem.h5").exists()
+    assert not list((tmp_path / "out").glob(".*"))
+
+
+def test_import_without_a_pair_dump_has_no_ball_contacts(tmp_path):
+    """A deck written before the pair dump: dem.h5 is complete, its ball_contacts group
+    empty, and the calibration sees no ball contacts (contact stress: walls only)."""
+    post, s, steps, pos = _pair_case(tmp_path, False)
+    out = tmp_path / "out"
+    summary = LG.import_run(post, s, out)
+    assert summary["ball_contacts_available"] is False
+    with h5py.File(out / "dem.h5", "r") as f:
+        for name in ("snapshot", "i", "j", "force_lab"):
+            assert f[f"ball_contacts/{name}"].shape[0] == 0
+        assert f["snapshots/position"].shape == (len(steps), 3, 3)
+    from vibroflow.calibration.dem_result import DEMResult
+    with DEMResult.open(out) as res:
+        assert not res.has_ball_contacts
+        _, snap = next(res.iter_snapshots([0]))
+        assert "contacts_i" not in snap
+
+
+def test_deck_dumps_the_ball_contacts_at_the_snapshot_steps(tmp_path):
+    s = quick()
+    LG.export_deck(s, tmp_path)
+    deck = (tmp_path / "in.tub").read_text()
+    lines = deck.splitlines()
+    # the compute before the first run (LIGGGHTS wants it so), next to the wall compute
+    i_compute = lines.index("compute pairc all pair/gran/local id force")
+    assert i_compute < min(k for k, ln in enumerate(lines) if ln.startswith("run "))
+    assert "variable pfile file post/dump_steps.txt" in lines
+    assert "variable pnext equal ${n0}+next(pfile)" in lines
+    assert ("dump dpairs all local 1 post/pairs.dump c_pairc[1] c_pairc[2] c_pairc[3] "
+            "c_pairc[4] c_pairc[5] c_pairc[6]") in lines
+    assert any(ln.startswith("dump_modify dpairs every v_pnext format") for ln in lines)
+    assert "post/pairs.dump" in (tmp_path / "README.txt").read_text()
+    LG.export_deck(s, tmp_path / "no", pair_contacts=False)
+    assert "pair/gran/local" not in (tmp_path / "no" / "in.tub").read_text()
+
+
 def test_loop_time_parsing(tmp_path):
     log = tmp_path / "log.liggghts"
     log.write_text("Loop time of 12.156 on 2 procs for 5000 steps with 4200 atoms, finish ...\n"

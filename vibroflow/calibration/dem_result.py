@@ -138,9 +138,10 @@ class DEMResult:
 
     @property
     def has_ball_contacts(self) -> bool:
-        """True when the file holds the ball-ball contact forces (vibroflow >= 0.2 runs; an
-        imported LIGGGHTS run has none: its contact stress is then the wall part only)."""
-        return "ball_contacts/i" in self.file
+        """True when the file holds ball-ball contact forces (vibroflow >= 0.2 runs, LIGGGHTS
+        imports of decks that dump them).  An import of an older deck has the group but no
+        rows: no ball contacts, its contact stress is then the wall part only."""
+        return self.has("ball_contacts/i")
 
     @property
     def has_wall_forces(self) -> bool:

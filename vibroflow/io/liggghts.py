@@ -31,15 +31,18 @@ docs/liggghts.md):
   is below fill.settle_kinetic_energy or fill.max_settle_time has passed.  Seeds are primes
   derived from run.seed (`seed_primes`).
 * Vibration for run.duration from step n0 (written to post/vibration_start_step.txt), snapshots
-  (`dump custom`, post/balls.dump) and ball-wall contacts (`compute wall/gran/local`,
-  post/wall.dump) at exactly the vibration steps vibroflow samples (vibroflow.dem.run.
-  sample_steps: phases_per_cycle instants a cycle over the whole cycles of the last
-  average_last seconds, each rounded to the nearest step) through `dump_modify every v_...`
-  with a file-style variable; the kinetic energy every run.series_every steps
-  (post/series.txt).
+  (`dump custom`, post/balls.dump), ball-wall contacts (`compute wall/gran/local`,
+  post/wall.dump) and ball-ball contacts (`compute pair/gran/local id force`, post/pairs.dump)
+  at exactly the vibration steps vibroflow samples (vibroflow.dem.run.sample_steps:
+  phases_per_cycle instants a cycle over the whole cycles of the last average_last seconds,
+  each rounded to the nearest step) through `dump_modify every v_...` with a file-style
+  variable; the kinetic energy every run.series_every steps (post/series.txt).
 
 The importer recomputes the tub pose of every snapshot from the scenario (the pose is a known
-function of time), so no pose file is needed.
+function of time), so no pose file is needed.  It maps the pair dump's atom ids to the sorted
+snapshot, orders each pair i < j (negating the force when it swaps them: the dumped force is
+the one on the first id, PAIR_FORCE_SIGN) and checks on every import that the contacts touch
+and push on the whole (PairCheck).
 """
 from __future__ import annotations
 
@@ -67,6 +70,7 @@ DECK_NAME = "in.tub"
 POST_DIR = "post"
 BALL_DUMP = "balls.dump"
 WALL_DUMP = "wall.dump"
+PAIR_DUMP = "pairs.dump"
 SERIES_FILE = "series.txt"
 START_FILE = "vibration_start_step.txt"
 FILL_FILE = "fill_done.txt"
@@ -407,12 +411,14 @@ class DeckInfo:
     tables: PairTables
 
 
-def export_deck(scenario, out_dir, *, wall_contacts: bool = True,
+def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts: bool = True,
                 max_sagitta: float = DEFAULT_MAX_SAGITTA, thermo_every: int | None = None,
                 processors: str = "* 1 1", mesh_curvature_deg: float | None = None) -> DeckInfo:
     """Write a LIGGGHTS 3.8 deck for a tub scenario into out_dir (see the module docstring).
 
     wall_contacts: dump the ball-wall contacts at the snapshots (compute wall/gran/local).
+    pair_contacts: dump the ball-ball contacts (the two ids and the contact force) at the
+    snapshots (compute pair/gran/local), for the contact stress of the calibration.
     processors: LIGGGHTS processor grid; the default splits the tub across x only, which
     balances a symmetric bed.
     mesh_curvature_deg: `curvature` of the U's fix mesh/surface, the largest angle between two
@@ -555,6 +561,10 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True,
     if wall_contacts:
         # (LIGGGHTS wants this compute defined before the first run)
         add("compute wallc all wall/gran/local id force_normal force_tangential")
+    if pair_contacts:
+        # id: the two atom ids and a periodic-image flag; force: the contact force on the
+        # first of them (checked at import, _pair_rows)
+        add("compute pairc all pair/gran/local id force")
     add("thermo_style    custom step atoms c_ke c_rke cpu")
     add(f"thermo          {thermo_every}")
     add("thermo_modify   lost error norm no")
@@ -639,6 +649,15 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True,
         add(f"dump dwall all local 1 {POST_DIR}/{WALL_DUMP} " + " ".join(
             f"c_wallc[{k}]" for k in range(1, 10)))
         add("dump_modify dwall every v_wnext" + (" first yes" if first_now else ""))
+    if pair_contacts:
+        # its own file variable: each next() advances the variable it is called on
+        add(f"variable pfile file {POST_DIR}/dump_steps.txt")
+        add("variable pnext equal ${n0}+next(pfile)")
+        add(f"dump dpairs all local 1 {POST_DIR}/{PAIR_DUMP} " + " ".join(
+            f"c_pairc[{k}]" for k in range(1, 7)))
+        # 10 digits: the default %g would round the ids above 999999 and the forces to 6 digits
+        add('dump_modify dpairs every v_pnext format "' + " ".join(["%.10g"] * 6) + '"'
+            + (" first yes" if first_now else ""))
     add(f"variable tvib equal (step-${{n0}})*{_fmt(dt)}")
     add(f'fix series all print {ke_every} "${{tvib}} ${{ekin}}" file {POST_DIR}/{SERIES_FILE} '
         'screen no title "# t_vibration_s kinetic_energy_J"')
@@ -649,7 +668,7 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True,
     _write_text_atomic(deck_path, deck)
     _write_text_atomic(out_dir / "scenario.toml", _scenario_toml(scenario))
     _write_text_atomic(out_dir / "README.txt", _readme(scenario, vib_steps, dsteps.size,
-                                                       wall_contacts))
+                                                       wall_contacts, pair_contacts))
     return DeckInfo(out_dir, deck_path, fill.count, dt, vib_steps, dsteps, n_arc,
                     sagitta(R, n_arc), seeds, per_event, event_steps, settle_steps, tables)
 
@@ -664,7 +683,14 @@ def _shrunk_u_area(R: float, margin: float, z_lo: float, z_hi: float) -> float:
                  else np.trapz(2.0 * half, zs))
 
 
-def _readme(scenario, vib_steps: int, n_snap: int, wall_contacts: bool) -> str:
+def _readme(scenario, vib_steps: int, n_snap: int, wall_contacts: bool,
+            pair_contacts: bool = True) -> str:
+    outputs = [f"{n_snap} snapshots of the balls to post/{BALL_DUMP}"]
+    if wall_contacts:
+        outputs.append(f"the ball-wall contacts to post/{WALL_DUMP}")
+    if pair_contacts:
+        outputs.append(f"the ball-ball contacts (ids, force) to post/{PAIR_DUMP}")
+    written = ", ".join(outputs[:-1]) + (" and " if len(outputs) > 1 else "") + outputs[-1]
     return f"""LIGGGHTS deck for the vibroflow scenario '{scenario.case}' (SI units)
 =====================================================================
 
@@ -681,9 +707,8 @@ cores than ranks; the Debian package's executable is `liggghts`, a source build'
 
 What it does: inserts {scenario.fill.count} balls at random in the tub, lets them settle with the
 tub at rest, then vibrates the tub for {scenario.run.duration} s ({vib_steps} steps of
-{scenario.run.dt} s) and writes {n_snap} snapshots of the balls to post/{BALL_DUMP}
-{'and the ball-wall contacts to post/' + WALL_DUMP if wall_contacts else ''}, and the kinetic
-energy every {scenario.run.series_every} steps to post/{SERIES_FILE}.
+{scenario.run.dt} s) and writes {written} (all at the same
+steps), and the kinetic energy every {scenario.run.series_every} steps to post/{SERIES_FILE}.
 
 Then convert the results into vibroflow's format (dem.h5, summary.json, bulk_velocity.csv):
 
@@ -836,6 +861,133 @@ def _wall_rows(data, snap_index, ids, pos_lab, pose, motion, scenario, geom):
             "force_lab": (fnv + ftv).astype(np.float32)}
 
 
+#: columns of the pair/gran/local dump: id (id1, id2, periodic-image flag), force (3)
+PAIR_COLUMNS = 6
+#: the `force` of compute pair/gran/local is the force on the first particle of its `id` pair
+#: (+1) or on the second (-1).  Established with LIGGGHTS 3.8.0 (Debian), 300 balls settled in
+#: a small tub (docs/liggghts.md): 99.97 % of the dumped contacts have F . (r_id1 - r_id2) > 0,
+#: and adding F to id1 and -F to id2, plus the wall forces and the weight, gives LIGGGHTS' own
+#: per-atom force to 1e-3 m g (tests/test_liggghts_io.py); the source agrees (add_pair(i, j, F)
+#: with F what pair gran adds to f[i]).  Checked again on every import (PairCheck).
+PAIR_FORCE_SIGN = 1.0
+#: the dumped contacts must touch: |r_i - r_j| <= (r_i + r_j)(1 + this) (10-digit positions;
+#: a wrong id mapping puts the partners a diameter or more apart)
+PAIR_TOUCH_TOLERANCE = 1.0e-3
+#: the smallest sum f_on_i . (r_i - r_j) / sum |f| |r_i - r_j| over an import's contacts
+#: accepted as repulsive: a bed's contact forces are mostly normal and pushing (+0.95 to +0.99
+#: measured, at rest and vibrated); the opposite convention gives the negative of that, ids
+#: mapped to the wrong balls about 0
+PAIR_MIN_REPULSION = 0.5
+
+
+@dataclass
+class PairCheck:
+    """What the pair rows of an import add up to, for the sign check (`verdict`)."""
+
+    contacts: int = 0
+    virial: float = 0.0          # sum f_on_i . (r_i - r_j) (J)
+    magnitude: float = 0.0       # sum |f| |r_i - r_j| (J)
+    repulsive: int = 0           # contacts with f_on_i . (r_i - r_j) > 0
+
+    def add(self, force: np.ndarray, branch: np.ndarray) -> None:
+        w = np.einsum("ij,ij->i", force, branch)
+        self.contacts += int(w.size)
+        self.virial += float(w.sum())
+        self.magnitude += float(np.sum(np.linalg.norm(force, axis=1)
+                                       * np.linalg.norm(branch, axis=1)))
+        self.repulsive += int(np.count_nonzero(w > 0))
+
+    @property
+    def repulsion(self) -> float:
+        """sum f . b / sum |f| |b|: +1 all pushing along the line of centres, -1 all pulling."""
+        return self.virial / self.magnitude if self.magnitude > 0 else float("nan")
+
+    def verdict(self, path) -> None:
+        """Raise InputError unless the contacts push on the whole."""
+        if self.contacts and not self.repulsion > PAIR_MIN_REPULSION:
+            raise InputError(
+                f"{path}: the ball-ball contact forces pull the balls together on the whole "
+                f"(sum f.(r_i - r_j) / sum |f||r_i - r_j| = {self.repulsion:.3g} over "
+                f"{self.contacts} contacts, a bed gives > {PAIR_MIN_REPULSION}): the force "
+                "column is not the force on the first id (another LIGGGHTS version or compute "
+                "layout?)")
+
+
+def _pair_rows(data, snap_index, ids, pos_lab, radius, period, path, check: PairCheck):
+    """vibroflow ball_contacts rows from one snapshot of the pair/gran/local dump.
+
+    Columns (compute pair/gran/local id force): id1, id2, periodic-image flag, F (3, lab axes)
+    with F the force on id1 by id2 (PAIR_FORCE_SIGN).  ids are mapped to the indices of the
+    sorted snapshot (`ids`), each pair ordered i < j (F negated when swapped: Newton's third
+    law), the rows sorted by (i, j) so the result does not depend on LIGGGHTS' rank order.
+    The branch r_i - r_j is the minimum image along y when the tub is periodic (period > 0),
+    as the calibration takes it; a pair across the periodic boundary (flag 1) is then as close
+    as any other, which the touch check verifies.  Rows with an exactly zero force (a pair in
+    the neighbour list that does not touch) are dropped: vibroflow stores touching pairs.
+    Raises InputError for an id not in the snapshot, a pair twice, or partners apart.
+    """
+    if data.shape[1] != PAIR_COLUMNS:
+        raise InputError(f"{path}: {data.shape[1]} columns, expected {PAIR_COLUMNS} "
+                         "(compute pair/gran/local id force)")
+    force = PAIR_FORCE_SIGN * data[:, 3:6]
+    keep = np.any(force != 0.0, axis=1)
+    id1 = data[keep, 0].astype(np.int64)
+    id2 = data[keep, 1].astype(np.int64)
+    force = force[keep]
+    a = np.clip(np.searchsorted(ids, id1), 0, ids.size - 1)
+    b = np.clip(np.searchsorted(ids, id2), 0, ids.size - 1)
+    bad = (ids[a] != id1) | (ids[b] != id2) | (id1 == id2)
+    if np.any(bad):
+        k = int(np.argmax(bad))
+        raise InputError(f"{path}: snapshot {snap_index}: contact of ids {id1[k]}, {id2[k]}, "
+                         "not two balls of the snapshot")
+    swap = a > b
+    i = np.where(swap, b, a)
+    j = np.where(swap, a, b)
+    force = np.where(swap[:, None], -force, force)
+    order = np.lexsort((j, i))
+    i, j, force = i[order], j[order], force[order]
+    if i.size > 1 and np.any((i[1:] == i[:-1]) & (j[1:] == j[:-1])):
+        k = int(np.argmax((i[1:] == i[:-1]) & (j[1:] == j[:-1])))
+        raise InputError(f"{path}: snapshot {snap_index}: the contact of ids {ids[i[k]]}, "
+                         f"{ids[j[k]]} appears twice (would count its force twice)")
+    branch = pos_lab[i] - pos_lab[j]
+    if period > 0.0:
+        branch[:, 1] -= period * np.round(branch[:, 1] / period)
+    dist = np.linalg.norm(branch, axis=1)
+    apart = dist > (radius[i] + radius[j]) * (1.0 + PAIR_TOUCH_TOLERANCE)
+    if np.any(apart):
+        k = int(np.argmax(apart))
+        raise InputError(f"{path}: snapshot {snap_index}: balls {ids[i[k]]} and {ids[j[k]]} "
+                         f"are {dist[k]:.6g} m apart, more than their radii "
+                         f"{radius[i[k]] + radius[j[k]]:.6g} m, yet in contact (ids not "
+                         "those of the ball dump?)")
+    check.add(force, branch)
+    return {"snapshot": np.full(i.shape, snap_index, np.int32), "i": i.astype(np.int32),
+            "j": j.astype(np.int32), "force_lab": force.astype(np.float32)}
+
+
+class _StepReader:
+    """A local dump read in step with the ball dump: `at(step)` returns the entries of that
+    step, or None when the dump has none (skipping the dump's earlier steps)."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self._it = iter_dump(path)
+        self._pending = None
+
+    def at(self, step: int):
+        while True:
+            if self._pending is None:
+                self._pending = next(self._it, None)
+            if self._pending is None or self._pending[0] > step:
+                return None
+            found = self._pending
+            self._pending = None
+            if found[0] == step:
+                return found[2]
+
+
 def _read_start_step(post: Path) -> int:
     p = post / START_FILE
     if not p.is_file():
@@ -865,11 +1017,14 @@ def import_run(dump_dir, scenario=None, out_dir=None) -> dict:
     n0 = _read_start_step(post)
     rho = scenario.materials[scenario.fill.material].density
 
-    wall_iter = None
     wall_path = post / WALL_DUMP
-    if wall_path.is_file():
-        wall_iter = iter_dump(wall_path)
-    pending_wall = None
+    walls = _StepReader(wall_path) if wall_path.is_file() else None
+    # ball-ball contacts: absent from decks written before they were dumped; then dem.h5 has
+    # an empty ball_contacts group, which the calibration reads as "no ball contacts"
+    pair_path = post / PAIR_DUMP
+    pairs = _StepReader(pair_path) if pair_path.is_file() else None
+    pair_check = PairCheck()
+    period = float(scenario.tub.length) if scenario.tub.periodic else 0.0
 
     # a writer into a private temporary folder, renamed into place at the end (atomic)
     tmp_dir = Path(tempfile.mkdtemp(prefix=".liggghts-import-", dir=out_dir))
@@ -918,23 +1073,24 @@ def import_run(dump_dir, scenario=None, out_dir=None) -> dict:
             ke_t.append(t)
             ke_v.append(ke)
             # wall contacts of this step
-            if wall_iter is not None:
-                while True:
-                    if pending_wall is None:
-                        pending_wall = next(wall_iter, None)
-                    if pending_wall is None or pending_wall[0] > step:
-                        break
-                    wstep, wcols, wdata = pending_wall
-                    pending_wall = None
-                    if wstep == step:
-                        rows = _wall_rows(wdata, n_snap, ids, pos, pose, motion, scenario,
-                                          geom)
-                        if rows is not None:
-                            writer.append("wall_contacts", **rows)
-                        break
+            wdata = walls.at(step) if walls is not None else None
+            if wdata is not None:
+                rows = _wall_rows(wdata, n_snap, ids, pos, pose, motion, scenario, geom)
+                if rows is not None:
+                    writer.append("wall_contacts", **rows)
+            # ball-ball contacts of this step: every snapshot must have its entry (a missing
+            # one would read as a snapshot without contacts and bias the contact stress)
+            if pairs is not None:
+                pdata = pairs.at(step)
+                if pdata is None:
+                    raise InputError(f"{pair_path}: no entry for step {step} of {BALL_DUMP} "
+                                     "(truncated dump?)")
+                writer.append("ball_contacts", **_pair_rows(pdata, n_snap, ids, pos, radius,
+                                                            period, pair_path, pair_check))
             n_snap += 1
         if writer is None:
             raise InputError(f"{post / BALL_DUMP}: no snapshot in the dump")
+        pair_check.verdict(pair_path)
         # time series: LIGGGHTS' own every series_every steps, else from the snapshots
         series = post / SERIES_FILE
         if series.is_file():
@@ -971,6 +1127,11 @@ def import_run(dump_dir, scenario=None, out_dir=None) -> dict:
             summary["particle_steps_per_s"] = vib.particle_steps_per_s
     summary["balls_lost"] = int(scenario.fill.count - ids.size)
     summary["wall_contacts_available"] = wall_path.is_file()
+    summary["ball_contacts_available"] = pairs is not None
+    if pairs is not None:
+        summary["ball_contacts"] = pair_check.contacts
+        summary["ball_contacts_repulsive_fraction"] = (
+            pair_check.repulsive / pair_check.contacts if pair_check.contacts else float("nan"))
     summary["impacts_available"] = False
     from vibroflow.analysis.summary import tub_summary
     summary.update(tub_summary(final, scenario, bulk_csv=out_dir / "bulk_velocity.csv"))
