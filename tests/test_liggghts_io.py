@@ -3,9 +3,12 @@
 Known answers used here: the analytic U surface of tub47.md (every STL vertex on it, every facet
 within the 0.05 mm chord tolerance of it, the facets' normals pointing into the tub); the contact
 parameters of tub47.md and models.md (computed here independently of the package); the tub motion
-s(a, phi, t) = a [sin(omega t + phi) - sin(phi)] of tub47.md; a synthetic LIGGGHTS dump whose
-numbers are known; and, with LIGGGHTS installed (slow), the textbook restitution and contact
-time of the linear spring-dashpot, and a tiny end-to-end run whose balls must stay in the tub.
+s(a, phi, t) = a [sin(omega t + phi) - sin(phi)] of tub47.md; synthetic LIGGGHTS dumps (balls,
+wall and pair contacts) whose numbers are known; and, with LIGGGHTS installed (slow), the
+textbook restitution and contact time of the linear spring-dashpot, a tiny end-to-end run whose
+balls must stay in the tub, and a bed at rest whose imported contact forces must balance
+LIGGGHTS' own per-atom forces ball by ball (Newton's laws), push, and give a compressive
+coarse-grained pressure.
 """
 from __future__ import annotations
 
@@ -702,4 +705,93 @@ def test_liggghts_end_to_end_tiny_tub(tmp_path):
             assert np.all(ft[on] <= mu * np.abs(fn[on]) * (1 + 1e-4) + 1e-9)
             assert np.all(ft[on & sliding] >= mu * np.abs(fn[on & sliding]) * (1 - 1e-4))
         assert sliding.sum() > 0
+        # ball-ball contacts at every snapshot, each pair once with i < j, which push on the
+        # whole even in the agitated bed (the damping pulls only at the end of a contact)
+        bs, bi, bj = (f[f"ball_contacts/{k}"][()] for k in ("snapshot", "i", "j"))
+        assert bs.size > 0 and np.all(bi < bj)
+        pairs = bs.astype(np.int64) * 150**2 + bi.astype(np.int64) * 150 + bj
+        assert np.unique(pairs).size == pairs.size
+    assert summary["ball_contacts_available"]
+    assert summary["ball_contacts_repulsive_fraction"] > 0.9
     assert json.loads((out / "summary.json").read_text())["source"] == "liggghts"
+
+
+@pytest.mark.slow
+@needs_liggghts
+@pytest.mark.parametrize("periodic", [False, True])
+def test_liggghts_ball_contacts_of_a_bed_at_rest(tmp_path, periodic):
+    """300 balls settled in a small tub (R = 5 cm) that stays at rest (amplitude factor 0),
+    2 MPI ranks.  Known answers: Newton's laws, ball by ball: the imported ball contact forces
+    (+F on i, -F on j) plus the wall forces and the weight add up to LIGGGHTS' own per-atom
+    total force (dumped beside, fx fy fz); contact forces at rest are repulsive,
+    F_on_i . (r_i - r_j) > 0; and the coarse-grained pressure of the bed is compressive."""
+    s = quick(duration=0.06, average_last=0.05, batches=2, seed=5)
+    s = s.model_copy(update={
+        "tub": s.tub.model_copy(update={"radius": 0.05, "rim_height": 0.15,
+                                        "periodic": periodic}),
+        "motion": s.motion.model_copy(update={"amplitude_factor": 0.0}),
+        "fill": s.fill.model_copy(update={"count": 300, "settle_time": 0.2,
+                                          "max_settle_time": 0.2})})
+    deck = tmp_path / "deck"
+    LG.export_deck(s, deck)
+    # LIGGGHTS' per-atom total force (pair + wall + gravity) in the ball dump, for the balance
+    text = (deck / "in.tub").read_text()
+    text, n1 = re.subn(r"(dump dballs .* radius)$", r"\1 fx fy fz", text, flags=re.MULTILINE)
+    text, n2 = re.subn(r'(dump_modify dballs .*format "[^"]*)"', r'\1 %.10g %.10g %.10g"', text)
+    assert n1 == n2 == 1
+    (deck / "in.tub").write_text(text)
+    LG.run_deck(deck, nprocs=2, timeout=600)
+    out = tmp_path / "out"
+    summary = LG.import_run(deck / "post", s, out)
+    assert summary["balls_lost"] == 0 and summary["ball_contacts_available"]
+    f_liggghts = []
+    for step, cols, data in LG.iter_dump(deck / "post" / "balls.dump"):
+        c = {name: k for k, name in enumerate(cols)}
+        data = data[np.argsort(data[:, c["id"]])]
+        f_liggghts.append(data[:, [c["fx"], c["fy"], c["fz"]]])
+    if periodic:  # some contacts across the periodic boundary, which the import must handle
+        flags = np.concatenate([d[:, 2] for _, _, d in LG.iter_dump(deck / "post" /
+                                                                     "pairs.dump")])
+        assert np.count_nonzero(flags == 1) > 0
+    L = s.tub.length
+    with h5py.File(out / "dem.h5", "r") as f:
+        radius = f["particles/radius"][()]
+        mass = 4.0 / 3.0 * math.pi * radius**3 * 7800.0
+        weight = mass[:, None] * np.array([0.0, 0.0, -9.81])
+        pos = f["snapshots/position"][()].astype(np.float64)
+        bs, bi, bj = (f[f"ball_contacts/{k}"][()] for k in ("snapshot", "i", "j"))
+        bf = f["ball_contacts/force_lab"][()].astype(np.float64)
+        ws, wp = f["wall_contacts/snapshot"][()], f["wall_contacts/particle"][()]
+        wf = f["wall_contacts/force_lab"][()].astype(np.float64)
+    n_snap = pos.shape[0]
+    assert len(f_liggghts) == n_snap
+    assert np.all(bi < bj)
+    # a settled bed: a few contacts per ball at every snapshot
+    assert np.all(np.bincount(bs, minlength=n_snap) > 300)
+    errors = []
+    for k in range(n_snap):
+        net = weight.copy()
+        on = bs == k
+        np.add.at(net, bi[on], bf[on])
+        np.add.at(net, bj[on], -bf[on])
+        on = ws == k
+        np.add.at(net, wp[on], wf[on])
+        errors.append(np.linalg.norm(net - f_liggghts[k], axis=1) / (mass * 9.81))
+    errors = np.concatenate(errors)
+    # measured: median 1e-3 m g, 99 % below 0.015 m g (the computes re-evaluate the contacts
+    # at output time, and the forces are stored in float32); a force on the wrong ball of a
+    # swapped pair would leave errors of several m g
+    assert np.median(errors) < 0.01
+    assert np.mean(errors < 0.1) > 0.99
+    branch = pos[bs, bi] - pos[bs, bj]
+    if periodic:
+        branch[:, 1] -= L * np.round(branch[:, 1] / L)
+    assert np.allclose(np.linalg.norm(branch, axis=1), 2 * radius[bi], rtol=2e-3)
+    push = np.einsum("ij,ij->i", bf, branch) > 0
+    assert push.mean() > 0.99
+    from vibroflow.calibration.run_fields import coarse_grain_run
+    avg, _, info = coarse_grain_run(out)
+    assert info["contact_stress"] == "ball and wall"
+    bed = avg["solid_fraction"].values > 0.5
+    assert bed.sum() > 10
+    assert np.all(avg["pressure"].values[bed] > 0)
