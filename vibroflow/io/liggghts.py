@@ -922,8 +922,10 @@ def _pair_rows(data, snap_index, ids, pos_lab, radius, period, path, check: Pair
     law), the rows sorted by (i, j) so the result does not depend on LIGGGHTS' rank order.
     The branch r_i - r_j is the minimum image along y when the tub is periodic (period > 0),
     as the calibration takes it; a pair across the periodic boundary (flag 1) is then as close
-    as any other, which the touch check verifies.  Rows with an exactly zero force (a pair in
-    the neighbour list that does not touch) are dropped: vibroflow stores touching pairs.
+    as any other, which the touch check verifies.  Rows with an exactly zero force carry no
+    stress and are dropped (a LIGGGHTS build whose compute also lists near pairs within a
+    contact distance factor may write untouching pairs so; 3.8.0 wrote none in our runs):
+    vibroflow stores touching pairs only.
     Raises InputError for an id not in the snapshot, a pair twice, or partners apart.
     """
     if data.shape[1] != PAIR_COLUMNS:
