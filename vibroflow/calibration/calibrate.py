@@ -99,6 +99,28 @@ def affine_moduli(phi: float, z: float, k_n: float, k_t: float, d: float) -> dic
     return {"bulk_modulus": k, "shear_modulus": g}
 
 
+def contact_stiffness_at(scenario, pressure: float, phi: float, z: float, d: float):
+    """Normal and tangential stiffness (N/m) of a ball-ball contact of the bed at `pressure`.
+
+    Linear law: k_n and k_t as given.  Hertz-Mindlin: the tangent stiffnesses at the mean
+    contact force f = pi d^2 p / (phi Z) (Rothenburg & Bathurst: p = phi Z <f> / (pi d^2)):
+    delta = (3 f / (4 E* sqrt(R)))^(2/3), k_n = 2 E* sqrt(R delta), k_t = 8 G* sqrt(R delta)
+    (Johnson, Contact Mechanics; Mindlin), R = d/4 for two equal balls.
+    """
+    pair = _pair(scenario, scenario.fill.material, scenario.fill.material)
+    if pair.model == "linear":
+        k_n = float(pair.k_n)
+        return k_n, k_n * float(pair.k_t_over_k_n)
+    mat = scenario.materials[scenario.fill.material]
+    E, nu = float(mat.youngs_modulus), float(mat.poisson_ratio)
+    e_star = E / (2.0 * (1.0 - nu**2))
+    g_star = (E / (2.0 * (1.0 + nu))) / (2.0 * (2.0 - nu))
+    R = 0.25 * d
+    f = math.pi * d**2 * pressure / (phi * z)
+    delta = (3.0 * f / (4.0 * e_star * math.sqrt(R))) ** (2.0 / 3.0)
+    return 2.0 * e_star * math.sqrt(R * delta), 8.0 * g_star * math.sqrt(R * delta)
+
+
 def young_poisson(K: float, G: float) -> tuple[float, float]:
     """Young's modulus (Pa) and Poisson ratio of an isotropic solid with moduli K, G (3D)."""
     E = 9.0 * K * G / (3.0 * K + G)
@@ -139,12 +161,7 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
             avg["solid_fraction"].values, np.nan)))
         d = res.diameter
         rho_s = res.solid_density
-        ball_pair = _pair(sc, sc.fill.material, sc.fill.material)
-        if ball_pair.model != "linear" and not shear_cell:
-            k_n = float("nan")
-        else:
-            k_n = float(ball_pair.k_n) if ball_pair.model == "linear" else float("nan")
-        k_t = k_n * float(ball_pair.k_t_over_k_n)
+        k_n, k_t = contact_stiffness_at(sc, p_bed, phi_bed, z["z_non_rattler"], d)
 
         if shear_cell:
             rheo, elastic, cell_points = _dem_tests(sc, p_bed, prog, shear_cell_options or {})

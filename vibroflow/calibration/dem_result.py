@@ -145,7 +145,8 @@ class DEMResult:
 
     @property
     def has_wall_forces(self) -> bool:
-        return "wall_contacts/force_lab" in self.file
+        """True when the wall contacts' force vectors are stored (and there are some)."""
+        return self.has("wall_contacts/force_lab")
 
     # ------------------------------------------------------------------------------------------
     def iter_snapshots(self, indices=None, contacts: bool = True):
