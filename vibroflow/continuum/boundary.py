@@ -1,0 +1,237 @@
+"""Boundaries of the continuum: small pluggable objects that add forces to the material points.
+
+Every boundary has `add_forces(state, t, dt)`: it adds its force on each point (N per metre of
+thickness, in the solver's frame) to `state.fext` before the particle-to-grid transfer, using
+the point's position and velocity at the start of the step; it may keep per-point history in
+`state.history[self.slot]` (allocated by `init_history`).
+
+Wall contact (`UWall`, `Plane`): a penalty contact with a constant normal stiffness, as the
+published finite element study of the tub did (a linear pressure-overclosure law), and Coulomb
+friction (the point-wall analogue of Bardenhagen, Brackbill & Sulsky 2000's frictional contact):
+
+* a point p of volume V_p (m^2) is a square of side l_p = sqrt(V_p); it touches the wall when its
+  centre is closer than l_p/2, with overclosure delta = l_p/2 - gap (m);
+* normal pressure k_n delta (k_n the contact stiffness, Pa/m) on the contact length l_p, plus a
+  dashpot of damping ratio zeta on the point's mass: F_n = max(0, k_n l_p delta -
+  2 zeta sqrt(m_p k_n l_p) v_n) (N/m), never adhesive;
+* tangential: an elastic slip spring on the accumulated tangential displacement xi (the point's
+  history, reset when it leaves the wall), F_t = -k_t l_p xi - 2 zeta sqrt(m_p k_t l_p) v_t, with
+  the Coulomb limit |F_t| <= mu_w F_n (then xi is rescaled to the limit and the point slides).
+  k_t = k_n by default.  A point sticks exactly when the friction needed is below mu_w F_n.
+
+`UWall` is the tub's U (vibroflow.tub.geometry.u_wall_nearest: the same surface the DEM's balls
+touch) fixed in the tub frame, where the solver works (grid_update.py); its motion enters through
+the frame's inertial forces, computed from vibroflow.tub.motion.  `Plane` is a flat wall moving
+with constant acceleration, for tests.
+
+`PartitionFriction`: the two partitions at y = 0 and y = L_y as a depth-averaged body force
+f = -2 mu_p p / L_y along the velocity relative to the tub, per unit volume (Jop, Forterre &
+Pouliquen 2005, models.md), with p the point's pressure; it is capped at the force that stops the
+point in one step, so it cannot reverse its velocity (a Coulomb-consistent regularisation).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+from vibroflow.errors import InputError
+from vibroflow.tub.geometry import u_wall_nearest
+
+NO_CONTACT, STICK, SLIDE = 0, 1, 2
+
+
+def damping_ratio_of_restitution(e: float) -> float:
+    """Damping ratio zeta of a linear spring-dashpot with restitution e (models.md)."""
+    if not 0 < e <= 1:
+        raise InputError(f"restitution = {e!r}: must be in (0, 1]")
+    le = math.log(e)
+    return -le / math.sqrt(math.pi**2 + le * le)
+
+
+@nb.njit(cache=True, inline="always")
+def _penalty(gap, nx, nz, vrx, vrz, mass, volume, xi, kn, kt, zeta, mu, dt):
+    """Penalty contact force (fx, fz, fn, ft, xi, state) of one point (module docstring)."""
+    l = np.sqrt(volume)
+    delta = 0.5 * l - gap
+    if delta <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0
+    kk = kn * l
+    vn = vrx * nx + vrz * nz
+    fn = kk * delta - 2.0 * zeta * np.sqrt(mass * kk) * vn
+    if fn < 0.0:
+        fn = 0.0
+    tx = nz
+    tz = -nx
+    vt = vrx * tx + vrz * tz
+    kkt = kt * l
+    xi = xi + vt * dt
+    ft = -kkt * xi - 2.0 * zeta * np.sqrt(mass * kkt) * vt
+    lim = mu * fn
+    state = 1
+    if abs(ft) > lim:
+        ft = lim if ft > 0.0 else -lim
+        xi = -ft / kkt if kkt > 0.0 else 0.0
+        state = 2
+    return fn * nx + ft * tx, fn * nz + ft * tz, fn, ft, xi, state
+
+
+@nb.njit(cache=True)
+def u_wall_forces(x, v, mass, volume, xi, fext, fn_out, ft_out, state_out, radius, kn, kt,
+                  zeta, mu, dt):
+    """Add the U wall's contact force to fext (N, 2) (N/m); history xi (N,) (m) in place;
+    fn_out, ft_out (N/m) and state_out (0 none, 1 stick, 2 slide) per point.  The wall is still
+    in the solver's (tub) frame; radius (m) of the U (tub.geometry)."""
+    for p in range(x.shape[0]):
+        gap, nx, nz, cx, cz, s = u_wall_nearest(x[p, 0], x[p, 1], radius)
+        fx, fz, fn, ft, xn, st = _penalty(gap, nx, nz, v[p, 0], v[p, 1], mass[p], volume[p],
+                                          xi[p], kn, kt, zeta, mu, dt)
+        fext[p, 0] += fx
+        fext[p, 1] += fz
+        xi[p] = xn
+        fn_out[p] = fn
+        ft_out[p] = ft
+        state_out[p] = st
+
+
+@nb.njit(cache=True)
+def plane_forces(x, v, mass, volume, xi, fext, fn_out, ft_out, state_out, px, pz, nx, nz,
+                 wvx, wvz, kn, kt, zeta, mu, dt):
+    """Add a plane wall's contact force (through (px, pz) m, unit normal (nx, nz) into the
+    material, moving at (wvx, wvz) m/s) to fext; as `u_wall_forces`."""
+    for p in range(x.shape[0]):
+        gap = (x[p, 0] - px) * nx + (x[p, 1] - pz) * nz
+        fx, fz, fn, ft, xn, st = _penalty(gap, nx, nz, v[p, 0] - wvx, v[p, 1] - wvz, mass[p],
+                                          volume[p], xi[p], kn, kt, zeta, mu, dt)
+        fext[p, 0] += fx
+        fext[p, 1] += fz
+        xi[p] = xn
+        fn_out[p] = fn
+        ft_out[p] = ft
+        state_out[p] = st
+
+
+@nb.njit(cache=True)
+def partition_forces(v, mass, volume, stress, fext, mu_p, length, dt):
+    """Add the partitions' friction -2 mu_p p V_p / L_y along -v (N/m) to fext, capped at
+    m_p |v| / dt (module docstring).  stress (N, 4) [xx, zz, xz, yy] Pa; length L_y (m)."""
+    for p in range(v.shape[0]):
+        pr = -(stress[p, 0] + stress[p, 1] + stress[p, 3]) / 3.0
+        if pr <= 0.0:
+            continue
+        sp = np.sqrt(v[p, 0] ** 2 + v[p, 1] ** 2)
+        if sp <= 0.0:
+            continue
+        f = 2.0 * mu_p * pr * volume[p] / length
+        cap = mass[p] * sp / dt
+        if f > cap:
+            f = cap
+        fext[p, 0] -= f * v[p, 0] / sp
+        fext[p, 1] -= f * v[p, 1] / sp
+
+
+class _Contact:
+    """Shared parts of the penalty walls: per-point slip history and last contact forces."""
+
+    slot: int = -1
+
+    def _check(self):
+        for name in ("stiffness", "friction", "damping_ratio"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise InputError(f"{type(self).__name__}.{name} = {v!r}: must be >= 0")
+        if not self.stiffness > 0:
+            raise InputError(f"{type(self).__name__}.stiffness = {self.stiffness!r}: must be "
+                             "> 0 Pa/m")
+
+    @property
+    def tangential_stiffness(self) -> float:
+        return self.stiffness * self.tangential_ratio
+
+    def init_history(self, n: int) -> dict:
+        """Per-point arrays: slip xi (m), last fn, ft (N/m), state (0/1/2)."""
+        return {"xi": np.zeros(n), "fn": np.zeros(n), "ft": np.zeros(n),
+                "state": np.zeros(n, np.int8)}
+
+
+@dataclass
+class UWall(_Contact):
+    """The tub's U wall (tub frame): radius (m) of tub.geometry, contact stiffness (Pa/m),
+    Coulomb friction mu_w (-), damping ratio (-), k_t / k_n."""
+
+    radius: float
+    stiffness: float
+    friction: float
+    damping_ratio: float = 0.16
+    tangential_ratio: float = 1.0
+
+    def __post_init__(self):
+        self._check()
+
+    def add_forces(self, state, t: float, dt: float) -> None:
+        h = state.history[self.slot]
+        u_wall_forces(state.x, state.v, state.mass, state.volume, h["xi"], state.fext, h["fn"],
+                      h["ft"], h["state"], self.radius, self.stiffness,
+                      self.tangential_stiffness, self.damping_ratio, self.friction, dt)
+
+
+@dataclass
+class Plane(_Contact):
+    """A flat wall through `point` (m) with unit `normal` towards the material, moving with
+    `velocity` + `acceleration` t (m/s, m/s^2) from t = 0; stiffness (Pa/m), friction (-)."""
+
+    point: tuple[float, float]
+    normal: tuple[float, float]
+    stiffness: float
+    friction: float = 0.0
+    damping_ratio: float = 0.5
+    tangential_ratio: float = 1.0
+    velocity: tuple[float, float] = (0.0, 0.0)
+    acceleration: tuple[float, float] = (0.0, 0.0)
+
+    def __post_init__(self):
+        self._check()
+        n = math.hypot(*self.normal)
+        if not n > 0:
+            raise InputError(f"Plane.normal = {self.normal!r}: must not be zero")
+        self.normal = (self.normal[0] / n, self.normal[1] / n)
+
+    def at(self, t: float):
+        """Point (m) and velocity (m/s) of the plane at time t (s)."""
+        px = self.point[0] + self.velocity[0] * t + 0.5 * self.acceleration[0] * t * t
+        pz = self.point[1] + self.velocity[1] * t + 0.5 * self.acceleration[1] * t * t
+        return (px, pz), (self.velocity[0] + self.acceleration[0] * t,
+                          self.velocity[1] + self.acceleration[1] * t)
+
+    def add_forces(self, state, t: float, dt: float) -> None:
+        (px, pz), (wvx, wvz) = self.at(t)
+        h = state.history[self.slot]
+        plane_forces(state.x, state.v, state.mass, state.volume, h["xi"], state.fext, h["fn"],
+                     h["ft"], h["state"], px, pz, self.normal[0], self.normal[1], wvx, wvz,
+                     self.stiffness, self.tangential_stiffness, self.damping_ratio,
+                     self.friction, dt)
+
+
+@dataclass
+class PartitionFriction:
+    """The partitions' friction as a depth-averaged body force: friction mu_p (-), partition
+    spacing L_y (m)."""
+
+    friction: float
+    length: float
+    slot: int = -1
+
+    def __post_init__(self):
+        if not (math.isfinite(self.friction) and self.friction >= 0):
+            raise InputError(f"partition friction = {self.friction!r}: must be >= 0")
+        if not self.length > 0:
+            raise InputError(f"partition spacing L_y = {self.length!r}: must be > 0 m")
+
+    def init_history(self, n: int) -> dict:
+        return {}
+
+    def add_forces(self, state, t: float, dt: float) -> None:
+        partition_forces(state.v, state.mass, state.volume, state.stress, state.fext,
+                         self.friction, self.length, dt)

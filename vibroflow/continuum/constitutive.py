@@ -1,0 +1,287 @@
+"""Elasto-visco-plastic constitutive law of the media, shared by every continuum formulation.
+
+One module for the Lagrangian (material point) and the Eulerian solvers: both call
+`elastic_predictor` then `return_map` on a material point's (or a cell's) stress.
+
+Conventions (SI): Cauchy stress sigma (Pa) with tension positive; pressure p = -tr(sigma)/3
+(compression positive); plane strain in the tub's x-z plane, so a stress is the four components
+(xx, zz, xz, yy): the out-of-plane normal stress yy is kept (D_yy = 0 but sigma_yy != 0).
+Deviatoric stress s = sigma + p I, equivalent shear stress tau = sqrt(s:s / 2), equivalent plastic
+shear rate gamma_dot_p = sqrt(2 D^p:D^p) (1/s), inertial number I = gamma_dot_p d / sqrt(p / rho_s).
+
+The model (Dunatunga & Kamrin 2015, J. Fluid Mech. 779, 483-513, "Continuum modelling and
+simulation of granular flows through their many phases", section 2):
+
+1. Disconnected state: where the density is below the critical density rho_c = rho_s phi_c the
+   grains are not in contact and the stress is zero (their eq. 2.9); so is any state whose trial
+   pressure is tensile (the media carries no tension).
+2. Elastic predictor: sigma_trial = sigma + dt (K tr(D) I + 2 G D' + W sigma - sigma W), a
+   hypoelastic (Jaumann) form of their elastic law with bulk modulus K and shear modulus G; D, W
+   the symmetric and skew parts of the velocity gradient L.  (Dunatunga & Kamrin use a Hencky
+   hyperelastic law; at the elastic strains of the tub, < 1 %, the two agree to O(strain^2).)
+3. Yield: tau_trial <= mu_s p (pressure-sensitive, their eq. 2.6): the trial stress stands.
+4. Flow (mu(I), GDR MiDi 2004; Jop, Forterre & Pouliquen 2006): otherwise the deviator is returned
+   radially, isochorically (p unchanged) to tau = mu(I) p with
+   mu(I) = mu_s + (mu_2 - mu_s) / (1 + I_0 / I) and tau = tau_trial - G dt gamma_dot_p.  With
+   xi = I_0 sqrt(p / rho_s) / d this is the quadratic (their eq. 3.7)
+       G dt gp^2 - B gp - C = 0,  B = tau_tr - mu_2 p - G dt xi,  C = (tau_tr - mu_s p) xi,
+   whose positive root is taken (in the cancellation-free form).
+
+Option: Drucker-Prager with viscosity (what a commercial finite element code would use):
+tau <= mu_dp p with mu_dp = tan(beta) / sqrt(3) and the plane-strain match (models.md)
+tan(beta) = 3 sqrt(3) tan(phi_f) / sqrt(9 + 12 tan^2 phi_f), phi_f = atan(mu_s); above yield a
+Bingham-like flow tau = mu_dp p + eta gamma_dot_p, i.e. gp = (tau_tr - mu_dp p) / (G dt + eta).
+
+The mu(I) law is ill-posed at very small and very large I (Barker et al. 2015); nothing here
+regularises it, so results must be checked for grid convergence.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numba as nb
+import numpy as np
+
+from vibroflow.errors import InputError
+
+#: rheology models (params[0])
+MU_I = 0
+DRUCKER_PRAGER = 1
+MODELS = {"mu_i": MU_I, "drucker_prager": DRUCKER_PRAGER}
+
+# packed parameter layout of `ContinuumMaterial.as_array()`
+P_MODEL, P_K, P_G, P_MU_S, P_MU_2, P_I0, P_D, P_RHO_S, P_RHO_C, P_MU_DP, P_ETA = range(11)
+N_PARAMS = 11
+
+# tub47 defaults (documented in ContinuumMaterial)
+_MU_S = math.tan(math.radians(20.9))
+_MU_2 = math.tan(math.radians(32.8))
+
+
+def drucker_prager_mu(mu_s: float) -> float:
+    """Plane-strain matched Drucker-Prager slope mu_dp = tan(beta)/sqrt(3) (-) of a material of
+    friction angle atan(mu_s) (models.md: tan beta = 3 sqrt(3) tan phi / sqrt(9 + 12 tan^2 phi))."""
+    t = mu_s
+    tan_beta = 3.0 * math.sqrt(3.0) * t / math.sqrt(9.0 + 12.0 * t * t)
+    return tan_beta / math.sqrt(3.0)
+
+
+@dataclass(frozen=True)
+class ContinuumMaterial:
+    """Parameters of the continuum (SI).
+
+    Defaults are tub47's (shared/reference/tub47.md, models.md) when no calibration is given:
+
+    * mu_s = tan 20.9 deg = 0.382, mu_2 = tan 32.8 deg = 0.644, I_0 = 0.279: the glass-bead mu(I)
+      of Jop, Forterre & Pouliquen (2006) quoted in models.md;
+    * phi_max = 0.60, phi_min = 0.30 (phi(I) = phi_max - (phi_max - phi_min) I, the slope 0.3 of
+      da Cruz et al. 2005); critical solid fraction phi_c = phi_max;
+    * bulk_modulus = 4.5e6 Pa: the affine estimate K = phi Z k_n / (3 pi d)
+      (vibroflow.calibration.calibrate.affine_moduli) at phi = 0.60, Z = 4.5 contacts per ball,
+      k_n = 1e5 N/m, d = 6.35 mm; shear_modulus = 1.3e6 Pa: the affine G (3.9e6 Pa) divided by 3
+      for non-affine relaxation (affine G is an upper bound, several times the measured one);
+    * diameter 6.35 mm, solid density 7800 kg/m^3 (steel balls);
+    * viscosity (Drucker-Prager option only) = (mu_2 - mu_s) d sqrt(rho_s p_ref) / I_0 at
+      p_ref = 5 kPa (mid-depth of tub47's bed): the slope d tau / d gamma_dot of mu(I) at I -> 0.
+    """
+
+    model: str = "mu_i"
+    bulk_modulus: float = 4.5e6
+    shear_modulus: float = 1.3e6
+    mu_s: float = _MU_S
+    mu_2: float = _MU_2
+    I_0: float = 0.279
+    phi_max: float = 0.60
+    phi_min: float = 0.30
+    critical_solid_fraction: float = 0.60
+    diameter: float = 0.00635
+    solid_density: float = 7800.0
+    viscosity: float | None = None
+
+    def __post_init__(self):
+        if self.model not in MODELS:
+            raise InputError(f"model = {self.model!r}: must be one of {', '.join(MODELS)}")
+        for name in ("bulk_modulus", "shear_modulus", "I_0", "diameter", "solid_density"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise InputError(f"{name} = {v!r}: must be a finite number > 0")
+        if not 0 <= self.mu_s <= self.mu_2:
+            raise InputError(f"mu_2 = {self.mu_2!r}: must be at least mu_s = {self.mu_s!r} >= 0")
+        if not 0 < self.critical_solid_fraction < 1:
+            raise InputError(f"critical_solid_fraction = {self.critical_solid_fraction!r}: "
+                             "must be in (0, 1)")
+        if self.viscosity is not None and not self.viscosity >= 0:
+            raise InputError(f"viscosity = {self.viscosity!r}: must be >= 0 Pa s")
+
+    @property
+    def critical_density(self) -> float:
+        """rho_c = rho_s phi_c (kg/m^3): below it the media is disconnected (stress-free)."""
+        return self.solid_density * self.critical_solid_fraction
+
+    @property
+    def mu_dp(self) -> float:
+        """Drucker-Prager slope tau/p (-), plane-strain matched to mu_s."""
+        return drucker_prager_mu(self.mu_s)
+
+    @property
+    def eta(self) -> float:
+        """Drucker-Prager viscosity (Pa s): `viscosity`, or the default of the class docstring."""
+        if self.viscosity is not None:
+            return float(self.viscosity)
+        p_ref = 5.0e3
+        return (self.mu_2 - self.mu_s) * self.diameter * math.sqrt(self.solid_density * p_ref) \
+            / self.I_0
+
+    def p_wave_speed(self, density: float | None = None) -> float:
+        """Elastic P-wave speed sqrt((K + 4G/3) / rho) (m/s), at rho_c by default."""
+        rho = self.critical_density if density is None else density
+        return math.sqrt((self.bulk_modulus + 4.0 * self.shear_modulus / 3.0) / rho)
+
+    def as_array(self) -> np.ndarray:
+        """Packed parameters for the kernels (layout P_MODEL .. P_ETA of this module)."""
+        a = np.zeros(N_PARAMS)
+        a[P_MODEL] = MODELS[self.model]
+        a[P_K] = self.bulk_modulus
+        a[P_G] = self.shear_modulus
+        a[P_MU_S] = self.mu_s
+        a[P_MU_2] = self.mu_2
+        a[P_I0] = self.I_0
+        a[P_D] = self.diameter
+        a[P_RHO_S] = self.solid_density
+        a[P_RHO_C] = self.critical_density
+        a[P_MU_DP] = self.mu_dp
+        a[P_ETA] = self.eta
+        return a
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["critical_density"] = self.critical_density
+        d["mu_dp"] = self.mu_dp
+        d["eta"] = self.eta
+        return d
+
+    @classmethod
+    def from_calibration(cls, cal: dict, model: str = "mu_i") -> "ContinuumMaterial":
+        """From a calibration record (the dict of `read_calibration`): [rheology] mu_s, mu_2,
+        I_0, phi_max, phi_min, critical_solid_fraction; [elastic] bulk_modulus_Pa,
+        shear_modulus_Pa; [media] diameter_m, solid_density_kg_m3.  Missing optional keys keep
+        the tub47 defaults."""
+        base = cls()
+        r = cal.get("rheology", {})
+        e = cal.get("elastic", {})
+        m = cal.get("media", {})
+
+        def num(table, key, default):
+            v = table.get(key, default)
+            if not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise InputError(f"calibration {key} = {v!r}: must be a finite number")
+            return float(v)
+
+        phi_max = num(r, "phi_max", base.phi_max)
+        return cls(model=model,
+                   bulk_modulus=num(e, "bulk_modulus_Pa", base.bulk_modulus),
+                   shear_modulus=num(e, "shear_modulus_Pa", base.shear_modulus),
+                   mu_s=num(r, "mu_s", base.mu_s), mu_2=num(r, "mu_2", base.mu_2),
+                   I_0=num(r, "I_0", base.I_0), phi_max=phi_max,
+                   phi_min=num(r, "phi_min", base.phi_min),
+                   critical_solid_fraction=num(r, "critical_solid_fraction", phi_max),
+                   diameter=num(m, "diameter_m", base.diameter),
+                   solid_density=num(m, "solid_density_kg_m3", base.solid_density))
+
+    @classmethod
+    def from_file(cls, path, model: str = "mu_i") -> "ContinuumMaterial":
+        """From calibration.toml (a file, or a run folder holding one)."""
+        from vibroflow.calibration.calibrate import read_calibration
+
+        return cls.from_calibration(read_calibration(path), model=model)
+
+
+def mu_of_I(I, mu_s: float, mu_2: float, I_0: float):
+    """mu(I) = mu_s + (mu_2 - mu_s) / (1 + I_0 / I) (-), numpy form (I >= 0)."""
+    I = np.asarray(I, dtype=float)
+    return mu_s + (mu_2 - mu_s) * I / (I + I_0)
+
+
+@nb.njit(cache=True, inline="always")
+def elastic_predictor(sxx, szz, sxz, syy, lxx, lxz, lzx, lzz, dt, K, G):
+    """Trial stress (Pa) after dt (s) of elastic deformation at velocity gradient L (1/s),
+    L_ab = d v_a / d x_b, plane strain (D_yy = 0), Jaumann-rotated (see the module docstring)."""
+    dxx = lxx
+    dzz = lzz
+    dxz = 0.5 * (lxz + lzx)
+    w = 0.5 * (lxz - lzx)  # W_xz
+    tr = dxx + dzz
+    lam = K - 2.0 * G / 3.0
+    nxx = sxx + dt * (lam * tr + 2.0 * G * dxx + 2.0 * w * sxz)
+    nzz = szz + dt * (lam * tr + 2.0 * G * dzz - 2.0 * w * sxz)
+    nxz = sxz + dt * (2.0 * G * dxz + w * (szz - sxx))
+    nyy = syy + dt * (lam * tr)
+    return nxx, nzz, nxz, nyy
+
+
+@nb.njit(cache=True, inline="always")
+def return_map(sxx, szz, sxz, syy, density, dt, params):
+    """Plastic correction of a trial stress (Pa) of a point of density `density` (kg/m^3) over a
+    step dt (s); params = `ContinuumMaterial.as_array()`.
+
+    Returns (sxx, szz, sxz, syy, gamma_dot_p, state) with gamma_dot_p the equivalent plastic
+    shear rate (1/s) and state 0 = disconnected (stress-free), 1 = elastic, 2 = flowing.
+    Dunatunga & Kamrin (2015) eqs. 2.6-2.9 and 3.7 (module docstring).
+    """
+    if density < params[P_RHO_C]:
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0
+    p = -(sxx + szz + syy) / 3.0
+    if p <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0
+    dxx = sxx + p
+    dzz = szz + p
+    dyy = syy + p
+    tau = np.sqrt(0.5 * (dxx * dxx + dzz * dzz + dyy * dyy + 2.0 * sxz * sxz))
+    S = params[P_G] * dt
+    if params[P_MODEL] == DRUCKER_PRAGER:
+        excess = tau - params[P_MU_DP] * p
+        if excess <= 0.0:
+            return sxx, szz, sxz, syy, 0.0, 1
+        gp = excess / (S + params[P_ETA])
+    else:
+        mu_s = params[P_MU_S]
+        excess = tau - mu_s * p
+        if excess <= 0.0:
+            return sxx, szz, sxz, syy, 0.0, 1
+        xi = params[P_I0] * np.sqrt(p / params[P_RHO_S]) / params[P_D]
+        B = tau - params[P_MU_2] * p - S * xi
+        C = excess * xi
+        disc = np.sqrt(B * B + 4.0 * S * C)
+        if B > 0.0:
+            gp = (B + disc) / (2.0 * S)
+        else:
+            gp = 2.0 * C / (disc - B) if disc - B > 0.0 else 0.0
+    tau_new = tau - S * gp
+    if tau_new < 0.0:
+        tau_new = 0.0
+    f = tau_new / tau
+    return (f * dxx - p, f * dzz - p, f * sxz, f * dyy - p, gp, 2)
+
+
+@nb.njit(cache=True)
+def update_stress_points(stress, L, density, dt, params, gamma_dot, state):
+    """Elastic predictor and return map for every point.
+
+    stress (N, 4) [xx, zz, xz, yy] (Pa, updated in place); L (N, 4) [xx, xz, zx, zz] velocity
+    gradient (1/s); density (N,) (kg/m^3, at the end of the step); gamma_dot (N,) plastic shear
+    rate out (1/s); state (N,) int8 out (0 disconnected, 1 elastic, 2 flowing).
+    """
+    K = params[P_K]
+    G = params[P_G]
+    for p in range(stress.shape[0]):
+        txx, tzz, txz, tyy = elastic_predictor(stress[p, 0], stress[p, 1], stress[p, 2],
+                                               stress[p, 3], L[p, 0], L[p, 1], L[p, 2], L[p, 3],
+                                               dt, K, G)
+        sxx, szz, sxz, syy, gp, st = return_map(txx, tzz, txz, tyy, density[p], dt, params)
+        stress[p, 0] = sxx
+        stress[p, 1] = szz
+        stress[p, 2] = sxz
+        stress[p, 3] = syy
+        gamma_dot[p] = gp
+        state[p] = st

@@ -1,0 +1,179 @@
+"""The material point method in 2D plane strain: the state record and the step.
+
+One step (Sulsky, Chen & Schreyer 1994 with the APIC transfers of Jiang et al. 2015; update the
+stress last, "USL"):
+
+1. boundaries add their forces on the points (boundary.py);
+2. particle to grid: mass, APIC momentum, stress divergence and point forces (p2g.py);
+3. grid velocity update with gravity and the frame's inertial forces (grid_update.py);
+4. grid to particle: velocity, affine matrix C, velocity gradient L; move the points (g2p.py);
+5. volume, density and stress of the points through the shared constitutive law
+   (plasticity.py -> constitutive.py).
+
+Units (SI, per metre of thickness along y): positions m, velocities m/s, masses kg/m, volumes
+m^2, stresses Pa [xx, zz, xz, yy] (tension positive), forces N/m.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numba as nb
+import numpy as np
+
+from vibroflow.errors import InputError
+
+from .constitutive import ContinuumMaterial
+from .g2p import g2p
+from .grid import Grid
+from .grid_update import LabFrame, grid_update
+from .p2g import p2g
+from .plasticity import plasticity_step
+
+
+class ContinuumBlowUp(RuntimeError):
+    """The explicit solution left the grid or became non-finite."""
+
+
+@dataclass
+class MPMSystem:
+    """What does not change during a run: the grid, the material, the frame (grid_update.py),
+    the boundaries (boundary.py) and the time step dt (s)."""
+
+    grid: Grid
+    material: ContinuumMaterial
+    dt: float
+    frame: object = field(default_factory=LabFrame)
+    boundaries: list = field(default_factory=list)
+
+    def __post_init__(self):
+        if not self.dt > 0:
+            raise InputError(f"dt = {self.dt!r}: must be > 0 s")
+        self.params = self.material.as_array()
+        for j, b in enumerate(self.boundaries):
+            b.slot = j
+        # grid work arrays (mass, momentum, force, velocity), reused every step
+        self.work = self.grid.zeros()
+
+
+@dataclass
+class MPMState:
+    """The material points and the clock (arrays over the N points).
+
+    x, v (N, 2) m, m/s; C, L (N, 4) [xx, xz, zx, zz] 1/s; mass (N,) kg/m; volume (N,) m^2;
+    density (N,) kg/m^3; stress (N, 4) Pa; gamma_dot (N,) plastic shear rate 1/s; phase (N,)
+    0 disconnected / 1 elastic / 2 flowing; fext (N, 2) N/m (work array); history: per-boundary
+    dicts of per-point arrays; t (s), step.
+    """
+
+    x: np.ndarray
+    v: np.ndarray
+    C: np.ndarray
+    L: np.ndarray
+    mass: np.ndarray
+    volume: np.ndarray
+    density: np.ndarray
+    stress: np.ndarray
+    gamma_dot: np.ndarray
+    phase: np.ndarray
+    fext: np.ndarray
+    history: list
+    t: float = 0.0
+    step: int = 0
+
+    @property
+    def n(self) -> int:
+        return int(self.x.shape[0])
+
+    def pressure(self) -> np.ndarray:
+        """p = -tr(sigma)/3 (Pa) per point."""
+        return -(self.stress[:, 0] + self.stress[:, 1] + self.stress[:, 3]) / 3.0
+
+    def momentum(self) -> np.ndarray:
+        """Total linear momentum (kg/s per m of thickness), [x, z]."""
+        return (self.mass[:, None] * self.v).sum(axis=0)
+
+    def angular_momentum(self, dx: float, origin=(0.0, 0.0)) -> float:
+        """Total angular momentum about `origin` (kg m/s per m; positive turning x into z) with
+        the APIC points' own spin m_p dx^2/4 (C_zx - C_xz) (Jiang et al. 2015, section 5.3)."""
+        rx = self.x[:, 0] - origin[0]
+        rz = self.x[:, 1] - origin[1]
+        orbital = self.mass * (rx * self.v[:, 1] - rz * self.v[:, 0])
+        spin = self.mass * 0.25 * dx * dx * (self.C[:, 2] - self.C[:, 1])
+        return float(orbital.sum() + spin.sum())
+
+    def kinetic_energy(self) -> float:
+        """0.5 sum m v^2 (J per m of thickness)."""
+        return float(0.5 * (self.mass * (self.v**2).sum(axis=1)).sum())
+
+
+def init_state(system: MPMSystem, x, volume, density, v=None, stress=None,
+               t: float = 0.0) -> MPMState:
+    """Points at x (N, 2) m with volumes (N,) m^2 and densities (N,) kg/m^3 (so masses
+    density * volume), velocities v (N, 2) m/s (default 0) and stresses (N, 4) Pa (default 0)."""
+    x = np.array(x, dtype=float, copy=True).reshape(-1, 2)
+    n = x.shape[0]
+    volume = np.broadcast_to(np.asarray(volume, dtype=float), (n,)).copy()
+    density = np.broadcast_to(np.asarray(density, dtype=float), (n,)).copy()
+    if np.any(volume <= 0) or np.any(density <= 0):
+        raise InputError("material points: volumes and densities must be > 0")
+    xmin, xmax, zmin, zmax = system.grid.inner_bounds()
+    if n and (x[:, 0].min() < xmin or x[:, 0].max() > xmax or x[:, 1].min() < zmin
+              or x[:, 1].max() > zmax):
+        raise InputError(f"material points span x [{x[:, 0].min():.4g}, {x[:, 0].max():.4g}], "
+                         f"z [{x[:, 1].min():.4g}, {x[:, 1].max():.4g}] m: must lie in the grid "
+                         f"[{xmin:.4g}, {xmax:.4g}] x [{zmin:.4g}, {zmax:.4g}] m")
+    vel = np.zeros((n, 2)) if v is None else np.array(v, dtype=float).reshape(n, 2)
+    sig = np.zeros((n, 4)) if stress is None else np.array(stress, dtype=float).reshape(n, 4)
+    state = MPMState(x=x, v=vel, C=np.zeros((n, 4)), L=np.zeros((n, 4)),
+                     mass=volume * density, volume=volume, density=density, stress=sig,
+                     gamma_dot=np.zeros(n), phase=np.ones(n, np.int8), fext=np.zeros((n, 2)),
+                     history=[b.init_history(n) for b in system.boundaries], t=float(t))
+    return state
+
+
+@nb.njit(cache=True)
+def _escaped(x, v, xmin, xmax, zmin, zmax):
+    """Number of points outside the box or with a non-finite velocity."""
+    bad = 0
+    for p in range(x.shape[0]):
+        if not (xmin <= x[p, 0] <= xmax and zmin <= x[p, 1] <= zmax):
+            bad += 1
+        elif not (np.isfinite(v[p, 0]) and np.isfinite(v[p, 1])):
+            bad += 1
+    return bad
+
+
+def step(system: MPMSystem, state: MPMState) -> None:
+    """Advance the state by one step system.dt (module docstring); raises ContinuumBlowUp."""
+    g = system.grid
+    dt = system.dt
+    gm, gmv, gf, gv = system.work
+    state.fext[:] = 0.0
+    for b in system.boundaries:
+        b.add_forces(state, state.t, dt)
+    gm[:] = 0.0
+    gmv[:] = 0.0
+    gf[:] = 0.0
+    p2g(state.x, state.v, state.C, state.mass, state.volume, state.stress, state.fext,
+        g.x0, g.z0, g.dx, g.periodic, gm, gmv, gf)
+    a0x, a0z, om, al, px, pz = system.frame.body(state.t)
+    grid_update(gm, gmv, gf, gv, g.x0, g.z0, g.dx, dt, a0x, a0z, om, al, px, pz, g.periodic)
+    g2p(state.x, state.v, state.C, state.L, gv, g.x0, g.z0, g.dx, dt, g.periodic)
+    plasticity_step(state.L, state.mass, state.volume, state.density, state.stress, dt,
+                    system.params, state.gamma_dot, state.phase)
+    state.t += dt
+    state.step += 1
+    xmin, xmax, zmin, zmax = g.inner_bounds()
+    pad = 0.0 if g.periodic else g.dx
+    bad = _escaped(state.x, state.v, xmin - pad, xmax + pad, zmin - g.dx, zmax + g.dx)
+    if bad:
+        raise ContinuumBlowUp(f"t = {state.t:.6g} s: {bad} material points left the grid or "
+                              "became non-finite (time step too large for the stiffness?)")
+
+
+def run_steps(system: MPMSystem, state: MPMState, n: int, callback=None) -> None:
+    """n steps; callback(state) after each if given."""
+    for _ in range(int(n)):
+        step(system, state)
+        if callback is not None:
+            callback(state)
