@@ -265,3 +265,59 @@ def test_bagnold_inclined_layer_profile_and_convergence():
 def test_bagnold_inclined_layer_fine_grid():
     """32 cells across the layer: within 1.5%."""
     assert bagnold_error(32) < 0.015
+
+
+# ----------------------------------------------------------------------------------------------
+# the tub run and its command
+
+def test_tub_bed_holds_the_dem_solid_volume_and_its_weight():
+    """The initial bed holds the DEM's solid volume (fill.count balls over L_y) at the critical
+    solid fraction, and its lithostatic stress carries its weight: sigma_zz at the bottom is
+    rho_c g h."""
+    from vibroflow.continuum.run import settled_bed
+    from vibroflow.scenario.io import load_scenario
+
+    s = load_scenario("tub47-quick")
+    mat = ContinuumMaterial(diameter=s.fill.diameter)
+    x, volume, density, stress, h = settled_bed(s, mat, 0.00375)
+    solid = s.fill.count * math.pi * s.fill.diameter**3 / 6 / s.tub.length
+    assert (volume * density).sum() / mat.solid_density == pytest.approx(solid, rel=0.01)
+    assert 0.18 < h < 0.21  # tub47.md: "a settled bed about 0.2 m deep"
+    bottom = np.argmin(x[:, 1])
+    assert -stress[bottom, 1] == pytest.approx(mat.critical_density * 9.81 * (h - x[bottom, 1]),
+                                               rel=1e-9)
+
+
+def test_continuum_command_writes_dem_comparable_results(run_cli, tmp_path):
+    """`vibroflow continuum` on a short tub47-quick: bulk_velocity.csv on the 15 mm cells and
+    summary.json with the DEM's keys, readable by the analysis code."""
+    import json
+
+    from vibroflow.analysis.bulk import read_csv
+
+    out = tmp_path / "cont"
+    r = run_cli("continuum", "tub47-quick", "--method", "lagrangian", "--out", out,
+                "--set", "run.duration=0.15", "--set", "run.average_last=0.1")
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    for key in ("probes", "circulation", "wall_contacts", "impacts", "window", "cells",
+                "n_particles", "wall_time_s"):
+        assert key in summary
+    assert set(summary["probes"]) == {"P1", "P2", "P3", "P4", "P5"}
+    assert summary["window"]["snapshots"] == 4 * 8
+    table = read_csv(out / "bulk_velocity.csv", cell_size=0.015)
+    assert len(table) == summary["cells"]
+    assert np.allclose(np.round(table.x / 0.015) * 0.015, table.x)
+    # the bed's solid fraction where it is dense is the continuum's, about phi_c = 0.6
+    dense = table.solid_fraction[table.z < 0.1]
+    assert 0.5 < np.median(dense) < 0.7
+
+
+def test_continuum_command_bad_input(run_cli, tmp_path):
+    r = run_cli("continuum", "tub47-quick", "--method", "eulerian", "--out", tmp_path / "o")
+    assert r.returncode == 2
+    assert r.stderr.strip().splitlines() == ["error: --method = 'eulerian': must be lagrangian"]
+    r = run_cli("continuum", "tub47-quick", "--out", tmp_path / "o", "--calibration",
+                tmp_path / "missing.toml")
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()

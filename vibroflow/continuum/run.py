@@ -1,0 +1,361 @@
+"""Orchestration of a Lagrangian continuum (material point method) run of a tub scenario.
+
+Timeline (tub47.md "Procedure", the DEM's clock: t = 0 when the vibration starts):
+
+1. The settled bed: the DEM's solid volume (fill.count balls of fill.diameter, over the slice
+   L_y) at the critical solid fraction fills the U to the height h that holds it; material
+   points on a square lattice of side dx/2 (4 a grid cell) inside the U, at rest, with the
+   lithostatic stress sigma_zz = -rho_c g (h - z) and sigma_xx = sigma_yy = K0 sigma_zz,
+   K0 = 1 - sin(atan mu_s) (Jaky), so its weight is carried from the start; their densities
+   rho_c exp(p / K) are those the elastic law gives that pressure.  It then settles for
+   `settle_time` in the still tub, where the walls take up the load.
+2. Vibrate for run.duration in the tub frame (grid_update.py: the tub's motion from
+   vibroflow.tub.motion enters as the frame's inertial force), sampling `run.phases_per_cycle`
+   instants a cycle over the whole cycles of the last run.average_last seconds, at exactly the
+   DEM's sample phases (m / (P f)); the time step divides the sampling interval.
+3. Results, through vibroflow.analysis (the DEM's own code): each point is a "ball" of the
+   point's solid volume m_p L_y / rho_s at its centre, with its lab position and velocity at the
+   sample; bulk_velocity.csv (CellTable / write_csv on the scenario's cells) and summary.json
+   with the DEM's keys (probes, circulation, wall_contacts from the points touching the U,
+   impacts: none, window, cells), plus a "continuum" block: the method, numerics, material,
+   and the shear rate with the impact speed and granular temperature it implies through the
+   calibrated relations (calibration.toml [impacts]), when a calibration is given.
+
+Parameters come from calibration.toml (vibroflow.calibration.calibrate.read_calibration) or the
+tub47 defaults (ContinuumMaterial): the wall friction [wall] friction (default: the scenario's
+ball-wall contact friction), the partitions' [partitions] friction (default: the scenario's
+ball-partition friction), the diameter and solid density (default: the scenario's fill).
+The wall's normal stiffness is constant: (K + 4G/3) / l0 with l0 the point spacing (the bed's
+elastic stiffness over one point), its damping ratio that of the scenario's ball-wall
+restitution.  Not done here: checkpoints and resume, VTK output.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numba as nb
+import numpy as np
+
+from vibroflow.analysis.summary import geometry_of, json_safe, tub_summary
+from vibroflow.errors import InputError
+from vibroflow.progress import RunProgress
+from vibroflow.tub.geometry import cross_section_area, distance_to_wall_np, u_wall_nearest
+from vibroflow.tub.motion import TubMotion, rigid_velocity, tub_to_lab
+
+from .boundary import PartitionFriction, UWall, damping_ratio_of_restitution
+from .constitutive import ContinuumMaterial
+from .grid import Grid
+from .grid_update import LabFrame, TubFrame
+from .mpm import MPMState, MPMSystem, init_state, step
+from .timestep import stable_dt
+
+SUMMARY_NAME = "summary.json"
+BULK_CSV_NAME = "bulk_velocity.csv"
+
+
+@dataclass(frozen=True)
+class LagrangianOptions:
+    """Numerical options (SI): grid spacing dx (m; default half the analysis cell), Courant
+    number, rheology model ("mu_i" or "drucker_prager"), settling time in the still tub (s),
+    wall stiffness (Pa/m; default (K + 4G/3) / point spacing)."""
+
+    dx: float | None = None
+    cfl: float = 0.3
+    model: str = "mu_i"
+    settle_time: float = 0.05
+    wall_stiffness: float | None = None
+
+    def __post_init__(self):
+        if self.dx is not None and not self.dx > 0:
+            raise InputError(f"dx = {self.dx!r}: must be a length > 0 m")
+        if not 0 < self.cfl <= 1:
+            raise InputError(f"cfl = {self.cfl!r}: must be in (0, 1]")
+        if not self.settle_time >= 0:
+            raise InputError(f"settle_time = {self.settle_time!r}: must be >= 0 s")
+        if self.wall_stiffness is not None and not self.wall_stiffness > 0:
+            raise InputError(f"wall_stiffness = {self.wall_stiffness!r}: must be > 0 Pa/m")
+
+
+def tub_motion(scenario) -> TubMotion:
+    """The scenario's rigid tub motion (amplitudes times the amplitude factor)."""
+    m = scenario.motion
+    f = m.amplitude_factor
+    return TubMotion(frequency=m.frequency, amplitude_x=f * m.amplitude_x, phase_x=m.phase_x,
+                     amplitude_z=f * m.amplitude_z, phase_z=m.phase_z,
+                     amplitude_theta=f * m.amplitude_theta, phase_theta=m.phase_theta,
+                     pivot_x=m.pivot[0], pivot_z=m.pivot[1])
+
+
+def _contact(scenario, a: str, b: str):
+    from vibroflow.scenario.model import find_contact
+
+    return find_contact(scenario, a, b)
+
+
+def material_of(scenario, calibration: dict | None, model: str = "mu_i") -> ContinuumMaterial:
+    """The continuum material: the calibration's, else tub47's defaults with the scenario's
+    ball diameter and density."""
+    if calibration is not None:
+        return ContinuumMaterial.from_calibration(calibration, model=model)
+    rho_s = scenario.materials[scenario.fill.material].density
+    return ContinuumMaterial(model=model, diameter=scenario.fill.diameter, solid_density=rho_s)
+
+
+def bed_height(radius: float, area: float, rim: float) -> float:
+    """Height h (m) whose U cross-section below it has the given area (m^2)."""
+    if area >= cross_section_area(radius, rim):
+        raise InputError(f"bed area = {area:.4g} m^2: more than the tub holds below its rim")
+    lo, hi = 0.0, rim
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        if cross_section_area(radius, mid) < area:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def settled_bed(scenario, material: ContinuumMaterial, spacing: float):
+    """Points of the settled bed (tub frame): positions (N, 2) m, volumes (N,) m^2, densities
+    (N,) kg/m^3, stresses (N, 4) Pa, and the bed height h (m) (module docstring, step 1)."""
+    geo = geometry_of(scenario)
+    fill = scenario.fill
+    solid = fill.count * math.pi * fill.diameter**3 / 6.0 / geo.length  # m^2 of solid
+    area = solid / material.critical_solid_fraction
+    h = bed_height(geo.radius, area, geo.rim_height)
+    xs = np.arange(-geo.radius + spacing / 2, geo.radius, spacing)
+    zs = np.arange(spacing / 2, h, spacing)
+    X, Z = np.meshgrid(xs, zs, indexing="ij")
+    X, Z = X.ravel(), Z.ravel()
+    keep = distance_to_wall_np(X, Z, geo.radius) >= 0.5 * spacing  # the square inside the U
+    x = np.stack([X[keep], Z[keep]], axis=1)
+    n = x.shape[0]
+    if n == 0:
+        raise InputError(f"fill.count = {fill.count}: the bed is thinner than one point "
+                         f"({spacing:.3g} m); refine dx")
+    g = math.hypot(scenario.gravity[0], scenario.gravity[2])
+    rho_c = material.critical_density
+    szz = -rho_c * g * np.clip(h - x[:, 1], 0.0, None)
+    k0 = 1.0 - math.sin(math.atan(material.mu_s))
+    stress = np.zeros((n, 4))
+    stress[:, 1] = szz
+    stress[:, 0] = stress[:, 3] = k0 * szz
+    p = -(stress[:, 0] + stress[:, 1] + stress[:, 3]) / 3.0
+    density = rho_c * np.exp(p / material.bulk_modulus)
+    # the points share the bed's area (their lattice misses a sliver along the curved wall)
+    volume = np.full(n, area / n) * rho_c / density
+    return x, volume, density, stress, h
+
+
+def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
+                options: LagrangianOptions, frame) -> tuple[MPMSystem, float]:
+    """The MPM system of a tub scenario in `frame`; returns (system, point spacing m)."""
+    geo = geometry_of(scenario)
+    dx = options.dx if options.dx is not None else 0.5 * scenario.analysis.cell_size
+    spacing = 0.5 * dx
+    grid = Grid.covering(-geo.radius, geo.radius, 0.0, geo.rim_height, dx)
+    cal = calibration or {}
+    wall_pair = _contact(scenario, scenario.fill.material, scenario.tub.wall_material)
+    mu_w = float(cal.get("wall", {}).get("friction", wall_pair.friction))
+    M = material.bulk_modulus + 4.0 * material.shear_modulus / 3.0
+    k_wall = options.wall_stiffness if options.wall_stiffness is not None else M / spacing
+    boundaries: list = [UWall(radius=geo.radius, stiffness=k_wall, friction=mu_w,
+                              damping_ratio=damping_ratio_of_restitution(wall_pair.restitution))]
+    if not geo.periodic:
+        part_pair = _contact(scenario, scenario.fill.material, scenario.tub.partition_material)
+        mu_p = float(cal.get("partitions", {}).get("friction", part_pair.friction))
+        boundaries.append(PartitionFriction(friction=mu_p, length=geo.length))
+    dt = stable_dt(material, dx, spacing, boundaries, v_max=2.0, cfl=options.cfl)
+    # a whole number of steps between samples, so every sample falls on a step
+    f, per = scenario.motion.frequency, scenario.run.phases_per_cycle
+    interval = 1.0 / (f * per)
+    dt = interval / math.ceil(interval / dt)
+    return MPMSystem(grid, material, dt, frame=frame, boundaries=boundaries), spacing
+
+
+def sample_times(scenario) -> tuple[np.ndarray, float, float]:
+    """The DEM's sample instants (s): phases m / (P f) over the whole cycles of the window
+    [duration - average_last, ...) (as vibroflow.dem.run.sample_steps, before its rounding to
+    the DEM's step), and the window (t0, t1)."""
+    run, f = scenario.run, scenario.motion.frequency
+    t0 = run.duration - run.average_last
+    n_cycles = int(math.floor(run.average_last * f + 1e-9))
+    per = run.phases_per_cycle
+    m0 = math.ceil(t0 * f * per - 1e-9)
+    return (m0 + np.arange(n_cycles * per)) / (f * per), t0, t0 + n_cycles / f
+
+
+@nb.njit(cache=True)
+def _to_lab(x, v, pose6, pivx, pivz, pos_out, vel_out, y):
+    """Lab positions and velocities (3D, y = the slice's middle) of tub-frame points (x, v) at
+    the tub pose (X, Z, theta, Xdot, Zdot, thetadot), through vibroflow.tub.motion."""
+    X, Z, th, Xd, Zd, thd = pose6[0], pose6[1], pose6[2], pose6[3], pose6[4], pose6[5]
+    c = np.cos(th)
+    s = np.sin(th)
+    for p in range(x.shape[0]):
+        lx, lz = tub_to_lab(x[p, 0], x[p, 1], X, Z, th, pivx, pivz)
+        rvx, rvz = rigid_velocity(lx, lz, X, Z, Xd, Zd, thd, pivx, pivz)
+        pos_out[p, 0] = lx
+        pos_out[p, 1] = y
+        pos_out[p, 2] = lz
+        vel_out[p, 0] = rvx + c * v[p, 0] - s * v[p, 1]
+        vel_out[p, 1] = 0.0
+        vel_out[p, 2] = rvz + s * v[p, 0] + c * v[p, 1]
+
+
+@nb.njit(cache=True)
+def _wall_arc(x, radius, arc_out):
+    """Arc-length coordinate (m) of each point's nearest U wall point (tub.geometry)."""
+    for p in range(x.shape[0]):
+        arc_out[p] = u_wall_nearest(x[p, 0], x[p, 1], radius)[5]
+
+
+def shear_rate(L: np.ndarray) -> np.ndarray:
+    """gamma_dot = sqrt(2 D':D') (1/s) of velocity gradients L (N, 4) [xx, xz, zx, zz], plane
+    strain (D_yy = 0) (models.md)."""
+    dxx, dzz = L[:, 0], L[:, 3]
+    dxz = 0.5 * (L[:, 1] + L[:, 2])
+    tr = (dxx + dzz) / 3.0
+    return np.sqrt(2.0 * ((dxx - tr) ** 2 + (dzz - tr) ** 2 + tr**2 + 2.0 * dxz**2))
+
+
+def _write_json_atomic(path: Path, data: dict) -> None:
+    tmp = path.with_name(".tmp-" + path.name)
+    tmp.write_text(json.dumps(data, indent=2) + "\n")
+    os.replace(tmp, path)
+
+
+def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
+                   options: LagrangianOptions | None = None, progress: bool = False) -> dict:
+    """Run the Lagrangian continuum of a tub scenario into out_dir (module docstring); returns
+    the summary (also written to out_dir/summary.json with out_dir/bulk_velocity.csv)."""
+    if scenario.tub is None or scenario.fill is None:
+        raise InputError("scenario: the continuum needs a tub-mode scenario (with [tub] and "
+                         "[fill]), not explicit particles")
+    options = options or LagrangianOptions()
+    material = material_of(scenario, calibration, options.model)
+    motion = tub_motion(scenario)
+    gravity = (float(scenario.gravity[0]), float(scenario.gravity[2]))
+    system, spacing = make_system(scenario, material, calibration, options,
+                                  TubFrame(motion, gravity))
+    geo = geometry_of(scenario)
+    x, volume, density, stress, h = settled_bed(scenario, material, spacing)
+    times, t0, t1 = sample_times(scenario)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+
+    wall0 = time.perf_counter()
+    state = settle(scenario, material, calibration, options, x, volume, density, stress,
+                   progress)
+    state.t = 0.0
+    state.step = 0
+    n = state.n
+    S = times.size
+    pos = np.zeros((S, n, 3), np.float32)
+    vel = np.zeros((S, n, 3), np.float32)
+    poses = np.zeros((S, 6))
+    contacts: dict[str, list] = {k: [] for k in ("snapshot", "particle", "fn", "ft", "sliding",
+                                                  "arc", "position_tub")}
+    gamma = []
+    pv = (motion.pivot_x, motion.pivot_z)
+    sample_step = np.rint(times / system.dt).astype(np.int64)
+    n_steps = int(round(scenario.run.duration / system.dt))
+    buf_p, buf_v = np.zeros((n, 3)), np.zeros((n, 3))
+    arc = np.zeros(n)
+    wall_hist = state.history[0]
+    j = 0
+    with RunProgress(progress) as prog:
+        prog.stage("continuum (lagrangian)", scenario.run.duration)
+        for k in range(n_steps + 1):
+            while j < S and sample_step[j] == k:
+                pose6 = np.array(system.frame.pose(state.t))
+                _to_lab(state.x, state.v, pose6, pv[0], pv[1], buf_p, buf_v, 0.5 * geo.length)
+                pos[j], vel[j], poses[j] = buf_p, buf_v, pose6
+                touching = np.nonzero(wall_hist["state"] > 0)[0]
+                _wall_arc(state.x, geo.radius, arc)
+                contacts["snapshot"].append(np.full(touching.size, j, np.int32))
+                contacts["particle"].append(touching.astype(np.int32))
+                # per metre of thickness -> over the slice (N), the DEM's unit
+                contacts["fn"].append(wall_hist["fn"][touching] * geo.length)
+                contacts["ft"].append(np.abs(wall_hist["ft"][touching]) * geo.length)
+                contacts["sliding"].append(wall_hist["state"][touching] == 2)
+                contacts["arc"].append(arc[touching].copy())
+                contacts["position_tub"].append(np.stack(
+                    [state.x[touching, 0], np.full(touching.size, 0.5 * geo.length),
+                     state.x[touching, 1]], axis=1))
+                gamma.append(shear_rate(state.L))
+                j += 1
+            if k == n_steps:
+                break
+            step(system, state)
+            if k % 200 == 0:
+                prog.update(state.t, (k + 1) * n)
+    wall_time = time.perf_counter() - wall0
+
+    radius = np.cbrt(3.0 * state.mass * geo.length / (4.0 * math.pi * material.solid_density))
+    source = {"attrs": {"frequency": scenario.motion.frequency},
+              "snapshots/time": times, "snapshots/position": pos, "snapshots/velocity": vel,
+              "snapshots/tub_pose": poses, "particles/radius": radius}
+    if S:
+        source.update({"wall_contacts/" + k: np.concatenate(v) for k, v in contacts.items()})
+        source["wall_contacts/wall"] = np.zeros(source["wall_contacts/fn"].size, np.int8)
+    # the DEM's top-level keys (vibroflow.dem.run), with the points as its particles
+    summary = {"case": scenario.case, "source": "vibroflow continuum", "method": "lagrangian",
+               "n_particles": n, "steps": n_steps, "dt": system.dt,
+               "simulated_time_s": n_steps * system.dt, "wall_time_s": wall_time,
+               "particle_steps_per_s": n * n_steps / wall_time if wall_time > 0 else None}
+    summary.update(tub_summary(source, scenario, bulk_csv=out / BULK_CSV_NAME))
+    summary["continuum"] = _continuum_block(scenario, material, calibration, system, state,
+                                            spacing, h, n_steps, wall_time, gamma)
+    summary = json_safe(summary)
+    _write_json_atomic(out / SUMMARY_NAME, summary)
+    return summary
+
+
+def settle(scenario, material, calibration, options, x, volume, density, stress,
+           progress: bool = False) -> MPMState:
+    """The bed after options.settle_time in the still tub (module docstring, step 1)."""
+    gravity = (float(scenario.gravity[0]), float(scenario.gravity[2]))
+    system, _ = make_system(scenario, material, calibration, options, LabFrame(gravity))
+    state = init_state(system, x, volume, density, stress=stress)
+    for _ in range(int(math.ceil(options.settle_time / system.dt))):
+        step(system, state)
+    return state
+
+
+def _continuum_block(scenario, material, calibration, system, state, spacing, h, n_steps,
+                     wall_time, gamma) -> dict:
+    d = material.diameter
+    g = np.concatenate(gamma) if gamma else np.zeros(0)
+    mean_rate = float(np.mean(g)) if g.size else float("nan")
+    block = {
+        "method": "lagrangian (material point method, APIC, 2D plane strain, tub frame)",
+        "rheology": material.model,
+        "material": material.to_dict(),
+        "grid_spacing_m": system.grid.dx, "point_spacing_m": spacing,
+        "points": state.n, "bed_height_m": h, "dt_s": system.dt, "steps": n_steps,
+        "wall_time_s": wall_time,
+        "wall_friction": system.boundaries[0].friction,
+        "wall_stiffness_Pa_m": system.boundaries[0].stiffness,
+        "partition_friction": (system.boundaries[1].friction if len(system.boundaries) > 1
+                               else None),
+        "mean_shear_rate_1_s": mean_rate,
+    }
+    im = (calibration or {}).get("impacts", {})
+    inferred = {}
+    for name in ("ball_ball", "ball_wall"):
+        rel = im.get(name)
+        if isinstance(rel, dict) and "c0_m_s" in rel and "c1" in rel and g.size:
+            # the calibrated relation v = c0 + c1 d gamma_dot, averaged over points and samples
+            inferred[name + "_mean_normal_speed_m_s"] = float(
+                np.mean(rel["c0_m_s"] + rel["c1"] * d * g))
+    if "bagnold_sqrtT_over_d_gamma_dot" in im and g.size:
+        a = im["bagnold_sqrtT_over_d_gamma_dot"]
+        inferred["granular_temperature_m2_s2"] = float(np.mean((a * d * g) ** 2))
+    block["impacts_from_shear_rate"] = inferred or None
+    return block
