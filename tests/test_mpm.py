@@ -321,3 +321,111 @@ def test_continuum_command_bad_input(run_cli, tmp_path):
                 tmp_path / "missing.toml")
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "o").exists()
+
+
+# ----------------------------------------------------------------------------------------------
+# the tub frame
+
+def test_free_flight_in_the_vibrating_tub_frame_is_ballistic_in_the_lab():
+    """A stress-free point integrated in the vibrating, rotating tub frame (inertial forces of
+    grid_update.py from vibroflow.tub.motion), seen from the lab, flies on the parabola
+    r0 + v0 t + g t^2 / 2; the error falls with dt."""
+    from vibroflow.continuum.grid_update import TubFrame
+    from vibroflow.continuum.run import _to_lab
+    from vibroflow.tub.motion import TubMotion, pose, rigid_velocity
+
+    motion = TubMotion(amplitude_theta=0.05)  # a large turn, so the rotation terms matter
+    mat = ContinuumMaterial()
+    grid = Grid.covering(-0.3, 0.3, -0.3, 0.5, 0.01)
+    frame = TubFrame(motion, (0.0, -G_ACC))
+    p0, v_lab0, T = np.array([0.05, 0.2]), np.array([0.1, 1.0]), 0.1
+    X, Z, th, Xd, Zd, thd, *_ = pose(motion.as_array(), 0.0)
+    v_tub0 = np.array(rigid_velocity(p0[0], p0[1], X, Z, Xd, Zd, thd, motion.pivot_x,
+                                     motion.pivot_z))
+    errors = []
+    for dt in (1e-4, 1e-5):
+        system = MPMSystem(grid, mat, dt, frame=frame)
+        state = init_state(system, p0[None], 1e-6, 0.5 * mat.critical_density,
+                           v=(v_lab0 - v_tub0)[None])
+        run_steps(system, state, int(round(T / dt)))
+        pos, vel = np.zeros((1, 3)), np.zeros((1, 3))
+        _to_lab(state.x, state.v, np.array(frame.pose(state.t)), motion.pivot_x,
+                motion.pivot_z, pos, vel, 0.0)
+        r_exact = p0 + v_lab0 * T + 0.5 * np.array([0.0, -G_ACC]) * T * T
+        v_exact = v_lab0 + np.array([0.0, -G_ACC]) * T
+        errors.append((np.abs(pos[0, [0, 2]] - r_exact).max(),
+                       np.abs(vel[0, [0, 2]] - v_exact).max()))
+    (r1, v1), (r2, v2) = errors
+    assert r2 < 2e-4 and v2 < 3e-3  # m, m/s after 0.1 m of flight at 1 m/s
+    assert r2 < 0.2 * r1 and v2 < 0.2 * v1
+
+
+def first_flight(gamma: float, cycles: float):
+    """A 2 cm bed on a plate vibrating vertically at 20 Hz with peak acceleration gamma g (the
+    tub frame of a purely vertical TubMotion, periodic along x); returns the phases (deg) of its
+    first take-off and landing, from the plate's normal force."""
+    from vibroflow.continuum.grid_update import TubFrame
+    from vibroflow.tub.motion import TubMotion
+
+    f = 20.0
+    w = 2 * math.pi * f
+    motion = TubMotion(frequency=f, amplitude_x=0.0, amplitude_z=gamma * G_ACC / w**2,
+                       phase_z=0.0, amplitude_theta=0.0)
+    mat = ContinuumMaterial()
+    dx, H = 0.0025, 0.02
+    sp = dx / 2
+    grid = Grid.periodic_strip(4 * dx, 0.0, 0.1, dx)
+    x = lattice(0.0, 4 * dx, 0.0, H, sp)
+    rho_c = mat.critical_density
+    p = rho_c * G_ACC * (H - x[:, 1])
+    rho = rho_c * np.exp(p / mat.bulk_modulus)
+    k0 = 1 - math.sin(math.atan(mat.mu_s))
+    stress = np.zeros((len(x), 4))
+    stress[:, 1] = -p
+    stress[:, 0] = stress[:, 3] = -k0 * p
+    kn = (mat.bulk_modulus + 4 * mat.shear_modulus / 3) / sp
+    plate = Plane((0.0, rho_c * G_ACC * H / kn), (0.0, 1.0), kn, friction=0.4,
+                  damping_ratio=0.5)
+    system = MPMSystem(grid, mat, stable_dt(mat, dx, sp, [plate]),
+                       frame=TubFrame(motion, (0.0, -G_ACC)), boundaries=[plate])
+    state = init_state(system, x, sp * sp * rho_c / rho, rho, stress=stress)
+    t, force = [], []
+
+    def record(s):
+        t.append(s.t)
+        force.append(s.history[0]["fn"].sum())
+
+    run_steps(system, state, int(cycles / f / system.dt), record)
+    t, on = np.array(t), np.array(force) > 1e-3 * rho_c * G_ACC * H * 4 * dx
+    off = int(np.argmax(on[:-1] & ~on[1:])) + 1
+    land = off + int(np.argmax(on[off:]))
+    return np.degrees(w * t[off]), np.degrees(w * t[land])
+
+
+def bouncing_ball(gamma: float):
+    """Take-off and landing phases (deg) of the completely inelastic bouncing ball on a plate
+    z = A sin(phase), A omega^2 = gamma g, starting at rest (Mehta & Luck 1990): it leaves at
+    sin(phase) = 1/gamma and flies freely until the plate catches it."""
+    from scipy.optimize import brentq
+
+    t0 = math.asin(1 / gamma)
+
+    def gap(t):  # ball minus plate height, in units g / omega^2
+        return (gamma * math.sin(t0) + gamma * math.cos(t0) * (t - t0) - 0.5 * (t - t0) ** 2
+                - gamma * math.sin(t))
+
+    ts = np.linspace(t0 + 1e-3, t0 + 4 * math.pi, 4000)
+    g = np.array([gap(s) for s in ts])
+    i = int(np.argmax((g[:-1] > 0) & (g[1:] <= 0)))
+    return math.degrees(t0), math.degrees(brentq(gap, ts[i], ts[i + 1]))
+
+
+@pytest.mark.parametrize("gamma, cycles", [(2.0, 1.0), (3.0, 1.2)])
+def test_bed_on_vibrating_plate_leaves_and_lands_as_the_bouncing_ball(gamma, cycles):
+    """Above 1 g the bed leaves the plate where the plate's downward acceleration reaches g and
+    lands where the inelastic bouncing ball model says (the disconnected, stress-free state lets
+    it fly), within 3 degrees of phase."""
+    takeoff, landing = first_flight(gamma, cycles)
+    takeoff_ball, landing_ball = bouncing_ball(gamma)
+    assert takeoff == pytest.approx(takeoff_ball, abs=3.0)
+    assert landing == pytest.approx(landing_ball, abs=3.0)

@@ -5,7 +5,8 @@ stress last, "USL"):
 
 1. boundaries add their forces on the points (boundary.py);
 2. particle to grid: mass, APIC momentum, stress divergence and point forces (p2g.py);
-3. grid velocity update with gravity and the frame's inertial forces (grid_update.py);
+3. grid velocity update with gravity and the frame's inertial forces, the frame's motion taken
+   at mid-step (grid_update.py);
 4. grid to particle: velocity, affine matrix C, velocity gradient L; move the points (g2p.py);
 5. volume, density and stress of the points through the shared constitutive law
    (plasticity.py -> constitutive.py).
@@ -156,7 +157,8 @@ def step(system: MPMSystem, state: MPMState) -> None:
     gf[:] = 0.0
     p2g(state.x, state.v, state.C, state.mass, state.volume, state.stress, state.fext,
         g.x0, g.z0, g.dx, g.periodic, gm, gmv, gf)
-    a0x, a0z, om, al, px, pz = system.frame.body(state.t)
+    # the frame's prescribed acceleration at mid-step: second order in dt for the vibration
+    a0x, a0z, om, al, px, pz = system.frame.body(state.t + 0.5 * dt)
     grid_update(gm, gmv, gf, gv, g.x0, g.z0, g.dx, dt, a0x, a0z, om, al, px, pz, g.periodic)
     g2p(state.x, state.v, state.C, state.L, gv, g.x0, g.z0, g.dx, dt, g.periodic)
     plasticity_step(state.L, state.mass, state.volume, state.density, state.stress, dt,
