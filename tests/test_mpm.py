@@ -288,6 +288,27 @@ def test_tub_bed_holds_the_dem_solid_volume_and_its_weight():
                                                rel=1e-9)
 
 
+def test_settled_bed_weight_is_carried_by_the_u_wall():
+    """A bed in the still U (tub47-quick without partitions, so nothing else can hold it) comes
+    to rest with the U wall's penalty contacts carrying its weight: the vertical wall force,
+    averaged over the last 0.1 s of 0.3 s, equals sum m g within 2%."""
+    from vibroflow.continuum.run import make_system, material_of, settled_bed, LagrangianOptions
+    from vibroflow.scenario.io import load_scenario
+
+    s = load_scenario("tub47-quick", ["tub.periodic=true"])
+    mat = material_of(s, None)
+    system, spacing = make_system(s, mat, None, LagrangianOptions(), LabFrame((0.0, -G_ACC)))
+    x, volume, density, stress, h = settled_bed(s, mat, spacing)
+    state = init_state(system, x, volume, density, stress=stress)
+    weight = state.mass.sum() * G_ACC
+    fz = []
+    run_steps(system, state, int(0.3 / system.dt),
+              lambda st: fz.append(st.history[0]["f"][:, 1].sum()))
+    late = np.array(fz[-int(0.1 / system.dt):])
+    assert late.mean() == pytest.approx(weight, rel=0.02)
+    assert state.kinetic_energy() < 1e-5 * weight * h  # at rest
+
+
 def test_continuum_command_writes_dem_comparable_results(run_cli, tmp_path):
     """`vibroflow continuum` on a short tub47-quick: bulk_velocity.csv on the 15 mm cells and
     summary.json with the DEM's keys, readable by the analysis code."""

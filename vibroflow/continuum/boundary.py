@@ -79,10 +79,11 @@ def _penalty(gap, nx, nz, vrx, vrz, mass, volume, xi, kn, kt, zeta, mu, dt):
 
 
 @nb.njit(cache=True)
-def u_wall_forces(x, v, mass, volume, xi, fext, fn_out, ft_out, state_out, radius, kn, kt,
-                  zeta, mu, dt):
+def u_wall_forces(x, v, mass, volume, xi, fext, f_out, fn_out, ft_out, state_out, radius, kn,
+                  kt, zeta, mu, dt):
     """Add the U wall's contact force to fext (N, 2) (N/m); history xi (N,) (m) in place;
-    fn_out, ft_out (N/m) and state_out (0 none, 1 stick, 2 slide) per point.  The wall is still
+    the force f_out (N, 2), its normal and tangential parts fn_out, ft_out (N/m) and state_out
+    (0 none, 1 stick, 2 slide) per point.  The wall is still
     in the solver's (tub) frame; radius (m) of the U (tub.geometry)."""
     for p in range(x.shape[0]):
         gap, nx, nz, cx, cz, s = u_wall_nearest(x[p, 0], x[p, 1], radius)
@@ -90,6 +91,8 @@ def u_wall_forces(x, v, mass, volume, xi, fext, fn_out, ft_out, state_out, radiu
                                           xi[p], kn, kt, zeta, mu, dt)
         fext[p, 0] += fx
         fext[p, 1] += fz
+        f_out[p, 0] = fx
+        f_out[p, 1] = fz
         xi[p] = xn
         fn_out[p] = fn
         ft_out[p] = ft
@@ -97,8 +100,8 @@ def u_wall_forces(x, v, mass, volume, xi, fext, fn_out, ft_out, state_out, radiu
 
 
 @nb.njit(cache=True)
-def plane_forces(x, v, mass, volume, xi, fext, fn_out, ft_out, state_out, px, pz, nx, nz,
-                 wvx, wvz, kn, kt, zeta, mu, dt):
+def plane_forces(x, v, mass, volume, xi, fext, f_out, fn_out, ft_out, state_out, px, pz, nx,
+                 nz, wvx, wvz, kn, kt, zeta, mu, dt):
     """Add a plane wall's contact force (through (px, pz) m, unit normal (nx, nz) into the
     material, moving at (wvx, wvz) m/s) to fext; as `u_wall_forces`."""
     for p in range(x.shape[0]):
@@ -107,6 +110,8 @@ def plane_forces(x, v, mass, volume, xi, fext, fn_out, ft_out, state_out, px, pz
                                           volume[p], xi[p], kn, kt, zeta, mu, dt)
         fext[p, 0] += fx
         fext[p, 1] += fz
+        f_out[p, 0] = fx
+        f_out[p, 1] = fz
         xi[p] = xn
         fn_out[p] = fn
         ft_out[p] = ft
@@ -151,8 +156,9 @@ class _Contact:
         return self.stiffness * self.tangential_ratio
 
     def init_history(self, n: int) -> dict:
-        """Per-point arrays: slip xi (m), last fn, ft (N/m), state (0/1/2)."""
-        return {"xi": np.zeros(n), "fn": np.zeros(n), "ft": np.zeros(n),
+        """Per-point arrays: slip xi (m), last force f (N, 2) with its normal and tangential
+        parts fn, ft (N/m), state (0 none, 1 stick, 2 slide)."""
+        return {"xi": np.zeros(n), "f": np.zeros((n, 2)), "fn": np.zeros(n), "ft": np.zeros(n),
                 "state": np.zeros(n, np.int8)}
 
 
@@ -172,8 +178,8 @@ class UWall(_Contact):
 
     def add_forces(self, state, t: float, dt: float) -> None:
         h = state.history[self.slot]
-        u_wall_forces(state.x, state.v, state.mass, state.volume, h["xi"], state.fext, h["fn"],
-                      h["ft"], h["state"], self.radius, self.stiffness,
+        u_wall_forces(state.x, state.v, state.mass, state.volume, h["xi"], state.fext, h["f"],
+                      h["fn"], h["ft"], h["state"], self.radius, self.stiffness,
                       self.tangential_stiffness, self.damping_ratio, self.friction, dt)
 
 
@@ -208,8 +214,8 @@ class Plane(_Contact):
     def add_forces(self, state, t: float, dt: float) -> None:
         (px, pz), (wvx, wvz) = self.at(t)
         h = state.history[self.slot]
-        plane_forces(state.x, state.v, state.mass, state.volume, h["xi"], state.fext, h["fn"],
-                     h["ft"], h["state"], px, pz, self.normal[0], self.normal[1], wvx, wvz,
+        plane_forces(state.x, state.v, state.mass, state.volume, h["xi"], state.fext, h["f"],
+                     h["fn"], h["ft"], h["state"], px, pz, self.normal[0], self.normal[1], wvx, wvz,
                      self.stiffness, self.tangential_stiffness, self.damping_ratio,
                      self.friction, dt)
 
