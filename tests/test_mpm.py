@@ -317,10 +317,24 @@ def test_continuum_command_writes_dem_comparable_results(run_cli, tmp_path):
     from vibroflow.analysis.bulk import read_csv
 
     out = tmp_path / "cont"
+    cal = tmp_path / "calibration.toml"
+    cal.write_text("[rheology]\nmu_s = 0.35\nmu_2 = 0.60\nI_0 = 0.3\nphi_max = 0.61\n"
+                   "phi_min = 0.45\ncritical_solid_fraction = 0.61\n"
+                   "[elastic]\nbulk_modulus_Pa = 4.0e6\nshear_modulus_Pa = 1.5e6\n"
+                   "[wall]\nfriction = 0.3\n[partitions]\nfriction = 0.1\n"
+                   "[media]\ndiameter_m = 0.00635\nsolid_density_kg_m3 = 7800.0\n"
+                   "[impacts.ball_ball]\nc0_m_s = 0.05\nc1 = 0.8\n")
     r = run_cli("continuum", "tub47-quick", "--method", "lagrangian", "--out", out,
-                "--set", "run.duration=0.15", "--set", "run.average_last=0.1")
+                "--calibration", cal, "--set", "run.duration=0.15",
+                "--set", "run.average_last=0.1")
     assert r.returncode == 0, r.stderr
     summary = json.loads((out / "summary.json").read_text())
+    cont = summary["continuum"]
+    assert (cont["material"]["mu_s"], cont["material"]["bulk_modulus"]) == (0.35, 4.0e6)
+    assert (cont["wall_friction"], cont["partition_friction"]) == (0.3, 0.1)
+    # impact speed through the calibrated relation v = c0 + c1 d gamma_dot (mean over points)
+    v = cont["impacts_from_shear_rate"]["ball_ball_mean_normal_speed_m_s"]
+    assert v == pytest.approx(0.05 + 0.8 * 0.00635 * cont["mean_shear_rate_1_s"], rel=1e-9)
     for key in ("probes", "circulation", "wall_contacts", "impacts", "window", "cells",
                 "n_particles", "wall_time_s"):
         assert key in summary
