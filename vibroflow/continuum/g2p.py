@@ -7,6 +7,7 @@ by the constitutive update, and x_p += dt v_p (Sulsky et al. 1994's update with 
 from __future__ import annotations
 
 import numba as nb
+import numpy as np
 
 from .grid import bspline_weights
 
@@ -19,13 +20,17 @@ def g2p(x, v, C, L, gv, x0, z0, dx, dt, periodic):
     inv = 4.0 / (dx * dx)
     nxg = gv.shape[0]
     period = nxg * dx
+    wx = np.empty(3)
+    wz = np.empty(3)
+    gx = np.empty(3)
+    gz = np.empty(3)
     for p in range(x.shape[0]):
         bx, fx, wx0, wx1, wx2, gx0, gx1, gx2 = bspline_weights(x[p, 0], x0, dx)
         bz, fz, wz0, wz1, wz2, gz0, gz1, gz2 = bspline_weights(x[p, 1], z0, dx)
-        wx = (wx0, wx1, wx2)
-        wz = (wz0, wz1, wz2)
-        gx = (gx0, gx1, gx2)
-        gz = (gz0, gz1, gz2)
+        wx[0], wx[1], wx[2] = wx0, wx1, wx2
+        wz[0], wz[1], wz[2] = wz0, wz1, wz2
+        gx[0], gx[1], gx[2] = gx0, gx1, gx2
+        gz[0], gz[1], gz[2] = gz0, gz1, gz2
         vx = 0.0
         vz = 0.0
         cxx = 0.0

@@ -14,6 +14,7 @@ Units: 2D per metre of thickness (y): masses kg/m, volumes m^2, forces N/m.
 from __future__ import annotations
 
 import numba as nb
+import numpy as np
 
 from .grid import bspline_weights
 
@@ -28,13 +29,17 @@ def p2g(x, v, C, mass, volume, stress, fext, x0, z0, dx, periodic, gm, gmv, gf):
     the grid wraps around along x (period nx dx); gm (nx, nz), gmv (nx, nz, 2), gf (nx, nz, 2).
     """
     nxg = gm.shape[0]
+    wx = np.empty(3)
+    wz = np.empty(3)
+    gx = np.empty(3)
+    gz = np.empty(3)
     for p in range(x.shape[0]):
         bx, fx, wx0, wx1, wx2, gx0, gx1, gx2 = bspline_weights(x[p, 0], x0, dx)
         bz, fz, wz0, wz1, wz2, gz0, gz1, gz2 = bspline_weights(x[p, 1], z0, dx)
-        wx = (wx0, wx1, wx2)
-        wz = (wz0, wz1, wz2)
-        gx = (gx0, gx1, gx2)
-        gz = (gz0, gz1, gz2)
+        wx[0], wx[1], wx[2] = wx0, wx1, wx2
+        wz[0], wz[1], wz[2] = wz0, wz1, wz2
+        gx[0], gx[1], gx[2] = gx0, gx1, gx2
+        gz[0], gz[1], gz[2] = gz0, gz1, gz2
         m = mass[p]
         vol = volume[p]
         sxx = stress[p, 0]
