@@ -334,7 +334,10 @@ def test_continuum_command_writes_dem_comparable_results(run_cli, tmp_path):
     assert (cont["wall_friction"], cont["partition_friction"]) == (0.3, 0.1)
     # impact speed through the calibrated relation v = c0 + c1 d gamma_dot (mean over points)
     v = cont["impacts_from_shear_rate"]["ball_ball_mean_normal_speed_m_s"]
-    assert v == pytest.approx(0.05 + 0.8 * 0.00635 * cont["mean_shear_rate_1_s"], rel=1e-9)
+    assert v == pytest.approx(0.05 + 0.8 * 0.00635 * cont["shear_rate"]["mean_1_s"], rel=1e-9)
+    assert summary["impacts"]["ball_ball_mean_normal_speed"] == pytest.approx(v, rel=1e-12)
+    assert cont["shear_rate"]["mean_1_s"] > 0
+    assert set(cont["probes"]) == {"P1", "P2", "P3", "P4", "P5"}
     for key in ("probes", "circulation", "wall_contacts", "impacts", "window", "cells",
                 "n_particles", "wall_time_s"):
         assert key in summary

@@ -41,6 +41,7 @@ from pathlib import Path
 import numba as nb
 import numpy as np
 
+from vibroflow.analysis.stats import batch_means, batches_of_whole_cycles
 from vibroflow.analysis.summary import geometry_of, json_safe, tub_summary
 from vibroflow.errors import InputError
 from vibroflow.progress import RunProgress
@@ -209,10 +210,13 @@ def _to_lab(x, v, pose6, pivx, pivz, pos_out, vel_out, y):
 
 
 @nb.njit(cache=True)
-def _wall_arc(x, radius, arc_out):
-    """Arc-length coordinate (m) of each point's nearest U wall point (tub.geometry)."""
+def _wall_gap_arc(x, radius, gap_out, arc_out):
+    """Distance (m) of each point from the U wall and the arc-length coordinate (m) of its
+    nearest wall point (tub.geometry)."""
     for p in range(x.shape[0]):
-        arc_out[p] = u_wall_nearest(x[p, 0], x[p, 1], radius)[5]
+        r = u_wall_nearest(x[p, 0], x[p, 1], radius)
+        gap_out[p] = r[0]
+        arc_out[p] = r[5]
 
 
 def shear_rate(L: np.ndarray) -> np.ndarray:
@@ -261,12 +265,18 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
     poses = np.zeros((S, 6))
     contacts: dict[str, list] = {k: [] for k in ("snapshot", "particle", "fn", "ft", "sliding",
                                                   "arc", "position_tub")}
-    gamma = []
+    probes = scenario.analysis.probes
+    cell = scenario.analysis.cell_size
+    probe_cells = [(math.floor(pr.x / cell + 0.5), math.floor(pr.z / cell + 0.5))
+                   for pr in probes.values()]
+    rate_all = np.full(S, np.nan)
+    rate_wall = np.full(S, np.nan)
+    rate_probe = np.full((S, len(probe_cells)), np.nan)
     pv = (motion.pivot_x, motion.pivot_z)
     sample_step = np.rint(times / system.dt).astype(np.int64)
     n_steps = int(round(scenario.run.duration / system.dt))
     buf_p, buf_v = np.zeros((n, 3)), np.zeros((n, 3))
-    arc = np.zeros(n)
+    arc, gap = np.zeros(n), np.zeros(n)
     wall_hist = state.history[0]
     j = 0
     with RunProgress(progress) as prog:
@@ -277,7 +287,7 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
                 _to_lab(state.x, state.v, pose6, pv[0], pv[1], buf_p, buf_v, 0.5 * geo.length)
                 pos[j], vel[j], poses[j] = buf_p, buf_v, pose6
                 touching = np.nonzero(wall_hist["state"] > 0)[0]
-                _wall_arc(state.x, geo.radius, arc)
+                _wall_gap_arc(state.x, geo.radius, gap, arc)
                 contacts["snapshot"].append(np.full(touching.size, j, np.int32))
                 contacts["particle"].append(touching.astype(np.int32))
                 # per metre of thickness -> over the slice (N), the DEM's unit
@@ -288,7 +298,17 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
                 contacts["position_tub"].append(np.stack(
                     [state.x[touching, 0], np.full(touching.size, 0.5 * geo.length),
                      state.x[touching, 1]], axis=1))
-                gamma.append(shear_rate(state.L))
+                rate = shear_rate(state.L)
+                rate_all[j] = rate.mean()
+                near = gap < 0.5 * cell
+                if near.any():
+                    rate_wall[j] = rate[near].mean()
+                ci = np.floor(state.x[:, 0] / cell + 0.5)
+                ck = np.floor(state.x[:, 1] / cell + 0.5)
+                for q, (pi, pk) in enumerate(probe_cells):
+                    inside = (ci == pi) & (ck == pk)
+                    if inside.any():
+                        rate_probe[j, q] = rate[inside].mean()
                 j += 1
             if k == n_steps:
                 break
@@ -310,8 +330,14 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
                "simulated_time_s": n_steps * system.dt, "wall_time_s": wall_time,
                "particle_steps_per_s": n * n_steps / wall_time if wall_time > 0 else None}
     summary.update(tub_summary(source, scenario, bulk_csv=out / BULK_CSV_NAME))
-    summary["continuum"] = _continuum_block(scenario, material, calibration, system, state,
-                                            spacing, h, n_steps, wall_time, gamma)
+    batch = batches_of_whole_cycles(times, scenario.run.duration - scenario.run.average_last,
+                                    scenario.run.duration, scenario.motion.frequency,
+                                    scenario.run.batches) if S else np.zeros(0, np.int64)
+    summary["continuum"] = _continuum_block(material, system, state, spacing, h, n_steps,
+                                            wall_time)
+    summary["continuum"].update(_shear_rate_outputs(
+        material, calibration, list(probes), batch, scenario.run.batches, rate_all, rate_wall,
+        rate_probe, summary["impacts"]))
     summary = json_safe(summary)
     _write_json_atomic(out / SUMMARY_NAME, summary)
     return summary
@@ -328,12 +354,8 @@ def settle(scenario, material, calibration, options, x, volume, density, stress,
     return state
 
 
-def _continuum_block(scenario, material, calibration, system, state, spacing, h, n_steps,
-                     wall_time, gamma) -> dict:
-    d = material.diameter
-    g = np.concatenate(gamma) if gamma else np.zeros(0)
-    mean_rate = float(np.mean(g)) if g.size else float("nan")
-    block = {
+def _continuum_block(material, system, state, spacing, h, n_steps, wall_time) -> dict:
+    return {
         "method": "lagrangian (material point method, APIC, 2D plane strain, tub frame)",
         "rheology": material.model,
         "material": material.to_dict(),
@@ -344,18 +366,51 @@ def _continuum_block(scenario, material, calibration, system, state, spacing, h,
         "wall_stiffness_Pa_m": system.boundaries[0].stiffness,
         "partition_friction": (system.boundaries[1].friction if len(system.boundaries) > 1
                                else None),
-        "mean_shear_rate_1_s": mean_rate,
     }
+
+
+def _shear_rate_outputs(material, calibration, probe_names, batch, n_batches, rate_all,
+                        rate_wall, rate_probe, impacts: dict) -> dict:
+    """Shear rate (1/s) over the bed, near the wall (points within half a cell of the U) and in
+    the probe cells, with batch-means standard errors; with a calibration, the granular
+    temperature sqrt(T) = a d gamma_dot (models.md, Bagnold scaling; a from [impacts]
+    bagnold_sqrtT_over_d_gamma_dot) and the mean impact speeds v = c0 + c1 d gamma_dot
+    ([impacts.ball_ball] over the bed, [impacts.ball_wall] near the wall), written into the
+    DEM's impact keys (`impacts` is updated in place; its counts stay 0: no impact is seen)."""
+    d = material.diameter
+
+    def mean_se(values):
+        ok = np.isfinite(values)
+        if not ok.any():
+            return float("nan"), float("nan")
+        return batch_means(values[ok], batch[ok], n_batches)
+
+    out: dict = {}
+    m, se = mean_se(rate_all)
+    out["shear_rate"] = {"mean_1_s": m, "mean_1_s_stderr": se}
+    mw, sew = mean_se(rate_wall)
+    out["shear_rate"].update(near_wall_1_s=mw, near_wall_1_s_stderr=sew)
     im = (calibration or {}).get("impacts", {})
+    a = im.get("bagnold_sqrtT_over_d_gamma_dot")
+    probes = {}
+    for q, name in enumerate(probe_names):
+        pm, pse = mean_se(rate_probe[:, q])
+        probes[name] = {"shear_rate_1_s": pm, "shear_rate_1_s_stderr": pse,
+                        "granular_temperature_m2_s2": (a * d * pm) ** 2 if a else None}
+    out["probes"] = probes
     inferred = {}
-    for name in ("ball_ball", "ball_wall"):
+    for name, rate, rate_se in (("ball_ball", m, se), ("ball_wall", mw, sew)):
         rel = im.get(name)
-        if isinstance(rel, dict) and "c0_m_s" in rel and "c1" in rel and g.size:
-            # the calibrated relation v = c0 + c1 d gamma_dot, averaged over points and samples
-            inferred[name + "_mean_normal_speed_m_s"] = float(
-                np.mean(rel["c0_m_s"] + rel["c1"] * d * g))
-    if "bagnold_sqrtT_over_d_gamma_dot" in im and g.size:
-        a = im["bagnold_sqrtT_over_d_gamma_dot"]
-        inferred["granular_temperature_m2_s2"] = float(np.mean((a * d * g) ** 2))
-    block["impacts_from_shear_rate"] = inferred or None
-    return block
+        if isinstance(rel, dict) and "c0_m_s" in rel and "c1" in rel:
+            v = rel["c0_m_s"] + rel["c1"] * d * rate
+            v_se = abs(rel["c1"]) * d * rate_se
+            impacts[name + "_mean_normal_speed"] = v
+            impacts[name + "_mean_normal_speed_stderr"] = v_se
+            inferred[name + "_mean_normal_speed_m_s"] = v
+    if inferred:
+        impacts["inferred_from_shear_rate"] = ("v = c0 + c1 d gamma_dot (calibration.toml "
+                                               "[impacts]); count = 0: no impact is seen")
+    if a:
+        inferred["granular_temperature_m2_s2"] = (a * d * m) ** 2
+    out["impacts_from_shear_rate"] = inferred or None
+    return out
