@@ -241,6 +241,9 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
     if scenario.tub is None or scenario.fill is None:
         raise InputError("scenario: the continuum needs a tub-mode scenario (with [tub] and "
                          "[fill]), not explicit particles")
+    if sample_times(scenario)[0].size == 0:
+        raise InputError(f"run.average_last = {scenario.run.average_last!r}: must hold at least "
+                         "one whole vibration cycle to average over")
     options = options or LagrangianOptions()
     material = material_of(scenario, calibration, options.model)
     motion = tub_motion(scenario)
