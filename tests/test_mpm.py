@@ -220,6 +220,45 @@ def test_block_on_accelerating_plate_sticks_or_slips(plate_acc_g, sticks):
         assert np.all(contact[contact > 0] == 2)
 
 
+def test_partition_friction_decelerates_a_sliding_layer_then_holds_it():
+    """A pressurised layer (between frictionless plates, periodic along x) sliding between two
+    partitions L_y apart: the depth-averaged partition friction -2 mu_p p / L_y (Jop, Forterre
+    & Pouliquen 2005) decelerates it uniformly at 2 mu_p p / (rho L_y) until it stops, and it
+    stays stopped (Coulomb: the friction never reverses the motion)."""
+    from vibroflow.continuum.boundary import PartitionFriction
+
+    mat = ContinuumMaterial()
+    dx, H = 0.005, 0.02
+    sp = dx / 2
+    grid = Grid.periodic_strip(4 * dx, 0.0, H, dx)
+    x = lattice(0.0, 4 * dx, 0.0, H, sp)
+    p0 = 5e3
+    rho = mat.critical_density * math.exp(p0 / mat.bulk_modulus)
+    kn = (mat.bulk_modulus + 4 * mat.shear_modulus / 3) / sp
+    plates = [Plane((0.0, p0 / kn), (0.0, 1.0), kn), Plane((0.0, H - p0 / kn), (0.0, -1.0), kn)]
+    mu_p, L_y, v0 = 0.15, 0.0635, 0.5
+    system = MPMSystem(grid, mat, stable_dt(mat, dx, sp, plates), frame=LabFrame((0.0, 0.0)),
+                       boundaries=plates + [PartitionFriction(mu_p, L_y)])
+    stress = np.zeros((len(x), 4))
+    stress[:, [0, 1, 3]] = -p0
+    state = init_state(system, x, sp * sp, rho, v=np.tile([v0, 0.0], (len(x), 1)),
+                       stress=stress)
+    t, v, p = [], [], []
+
+    def record(s):
+        t.append(s.t)
+        v.append(np.average(s.v[:, 0], weights=s.mass))
+        p.append(np.average(s.pressure(), weights=s.volume))
+
+    stop = v0 / (2 * mu_p * p0 / (rho * L_y))
+    run_steps(system, state, int(1.5 * stop / system.dt), record)
+    t, v, p = np.array(t), np.array(v), np.array(p)
+    sliding = v > 0.1 * v0
+    decel = -np.polyfit(t[sliding], v[sliding], 1)[0]
+    assert decel == pytest.approx(2 * mu_p * p[sliding].mean() / (rho * L_y), rel=0.01)
+    assert np.abs(state.v).max() < 1e-6 and v.min() > -1e-6
+
+
 def bagnold_error(nz: int) -> float:
     """Steady flow down a rough incline (theta = 25 deg, layer H = 1 cm of d = 2 mm grains,
     periodic along the slope) from rest: max |u - u_analytic| / u_analytic(H) after 1 s, with
