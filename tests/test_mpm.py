@@ -365,7 +365,7 @@ def test_continuum_command_writes_dem_comparable_results(run_cli, tmp_path):
                    "[impacts.ball_ball]\nc0_m_s = 0.05\nc1 = 0.8\n")
     r = run_cli("continuum", "tub47-quick", "--method", "lagrangian", "--out", out,
                 "--calibration", cal, "--set", "run.duration=0.15",
-                "--set", "run.average_last=0.1")
+                "--set", "run.average_last=0.1", "--vtk")
     assert r.returncode == 0, r.stderr
     summary = json.loads((out / "summary.json").read_text())
     cont = summary["continuum"]
@@ -377,6 +377,9 @@ def test_continuum_command_writes_dem_comparable_results(run_cli, tmp_path):
     assert summary["impacts"]["ball_ball_mean_normal_speed"] == pytest.approx(v, rel=1e-12)
     assert cont["shear_rate"]["mean_1_s"] > 0
     assert set(cont["probes"]) == {"P1", "P2", "P3", "P4", "P5"}
+    # ParaView: the points at the 8 samples of the last cycle, their collection, the tub
+    assert len(list((out / "vtk").glob("points_*.vtu"))) == 8
+    assert (out / "vtk" / "points.pvd").is_file() and (out / "vtk" / "tub.vtu").is_file()
     for key in ("probes", "circulation", "wall_contacts", "impacts", "window", "cells",
                 "n_particles", "wall_time_s"):
         assert key in summary

@@ -241,6 +241,8 @@ def continuum(
     dx: Annotated[Optional[float], typer.Option(
         "--dx", help="Grid spacing (m); default half the analysis cell.")] = None,
     set_: SetOption = None,
+    vtk: Annotated[bool, typer.Option("--vtk", help="Also write ParaView files of the material "
+                                                    "points over the last cycle.")] = False,
 ) -> None:
     """Run a continuum model of a tub scenario: --out/summary.json, bulk_velocity.csv."""
     if method != "lagrangian":
@@ -257,7 +259,8 @@ def continuum(
     options = LagrangianOptions(dx=dx, model=rheology)
     material_of(s, cal, rheology)  # validates the parameters before --out is made
     try:
-        summary = run_lagrangian(s, out, calibration=cal, options=options, progress=True)
+        summary = run_lagrangian(s, out, calibration=cal, options=options, progress=True,
+                                 vtk=vtk)
     except ContinuumBlowUp as exc:
         sys.stderr.write("error: " + str(exc) + "\n")
         raise typer.Exit(EXIT_BLOWUP)

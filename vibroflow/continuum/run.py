@@ -27,7 +27,8 @@ ball-wall contact friction), the partitions' [partitions] friction (default: the
 ball-partition friction), the diameter and solid density (default: the scenario's fill).
 The wall's normal stiffness is constant: (K + 4G/3) / l0 with l0 the point spacing (the bed's
 elastic stiffness over one point), its damping ratio that of the scenario's ball-wall
-restitution.  Not done here: checkpoints and resume, VTK output.
+restitution.  With vtk, ParaView files of the points over the last cycle (run_lagrangian).
+Not done here: checkpoints and resume, grid fields in ParaView.
 """
 from __future__ import annotations
 
@@ -57,6 +58,7 @@ from .timestep import stable_dt
 
 SUMMARY_NAME = "summary.json"
 BULK_CSV_NAME = "bulk_velocity.csv"
+VTK_DIR = "vtk"
 
 
 @dataclass(frozen=True)
@@ -228,6 +230,21 @@ def shear_rate(L: np.ndarray) -> np.ndarray:
     return np.sqrt(2.0 * ((dxx - tr) ** 2 + (dzz - tr) ** 2 + tr**2 + 2.0 * dxz**2))
 
 
+def _write_points_vtu(path: Path, state: MPMState, rate: np.ndarray, length: float,
+                      solid_density: float) -> str:
+    """The material points as a ParaView point cloud (tub frame, y = the slice's middle)."""
+    from vibroflow.analysis.vtk import write_snapshot_vtu
+
+    n = state.n
+    pos = np.stack([state.x[:, 0], np.full(n, 0.5 * length), state.x[:, 1]], axis=1)
+    vel = np.stack([state.v[:, 0], np.zeros(n), state.v[:, 1]], axis=1)
+    side = np.sqrt(state.volume)
+    return write_snapshot_vtu(path, pos, vel, np.zeros((n, 3)), 0.5 * side,
+                              extra={"pressure": state.pressure(), "shear_rate": rate,
+                                     "solid_fraction": state.density / solid_density,
+                                     "state": state.phase.astype(np.float64)})
+
+
 def _write_json_atomic(path: Path, data: dict) -> None:
     tmp = path.with_name(".tmp-" + path.name)
     tmp.write_text(json.dumps(data, indent=2) + "\n")
@@ -235,9 +252,14 @@ def _write_json_atomic(path: Path, data: dict) -> None:
 
 
 def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
-                   options: LagrangianOptions | None = None, progress: bool = False) -> dict:
+                   options: LagrangianOptions | None = None, progress: bool = False,
+                   vtk: bool = False) -> dict:
     """Run the Lagrangian continuum of a tub scenario into out_dir (module docstring); returns
-    the summary (also written to out_dir/summary.json with out_dir/bulk_velocity.csv)."""
+    the summary (also written to out_dir/summary.json with out_dir/bulk_velocity.csv).
+
+    vtk: also write ParaView files in out_dir/vtk: the material points (tub frame, velocity
+    relative to the tub, pressure, shear rate, solid fraction, state) at the samples of the
+    last vibration cycle (points_NNNNN.vtu, points.pvd) and the tub's surface (tub.vtu)."""
     if scenario.tub is None or scenario.fill is None:
         raise InputError("scenario: the continuum needs a tub-mode scenario (with [tub] and "
                          "[fill]), not explicit particles")
@@ -280,6 +302,12 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
     n_steps = int(round(scenario.run.duration / system.dt))
     buf_p, buf_v = np.zeros((n, 3)), np.zeros((n, 3))
     arc, gap = np.zeros(n), np.zeros(n)
+    vtk_entries: list = []
+    if vtk:
+        from vibroflow.analysis.vtk import write_tub_surface
+
+        (out / VTK_DIR).mkdir(exist_ok=True)
+        write_tub_surface(out / VTK_DIR / "tub.vtu", geo)
     wall_hist = state.history[0]
     j = 0
     with RunProgress(progress) as prog:
@@ -302,6 +330,10 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
                     [state.x[touching, 0], np.full(touching.size, 0.5 * geo.length),
                      state.x[touching, 1]], axis=1))
                 rate = shear_rate(state.L)
+                if vtk and j >= S - scenario.run.phases_per_cycle:
+                    vtk_entries.append((state.t, _write_points_vtu(
+                        out / VTK_DIR / f"points_{j:05d}.vtu", state, rate, geo.length,
+                        material.solid_density)))
                 rate_all[j] = rate.mean()
                 near = gap < 0.5 * cell
                 if near.any():
@@ -319,6 +351,10 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
             if k % 200 == 0:
                 prog.update(state.t, (k + 1) * n)
     wall_time = time.perf_counter() - wall0
+    if vtk:
+        from vibroflow.analysis.vtk import write_pvd
+
+        write_pvd(out / VTK_DIR / "points.pvd", vtk_entries)
 
     radius = np.cbrt(3.0 * state.mass * geo.length / (4.0 * math.pi * material.solid_density))
     source = {"attrs": {"frequency": scenario.motion.frequency},
