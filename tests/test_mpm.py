@@ -509,3 +509,21 @@ def test_bed_on_vibrating_plate_leaves_and_lands_as_the_bouncing_ball(gamma, cyc
     takeoff_ball, landing_ball = bouncing_ball(gamma)
     assert takeoff == pytest.approx(takeoff_ball, abs=3.0)
     assert landing == pytest.approx(landing_ball, abs=3.0)
+
+
+def test_continuum_run_is_reproducible(tmp_path):
+    """The same scenario gives the same numbers (DEVELOPERS.md): two runs write identical cell
+    tables and summaries (wall times aside)."""
+    from vibroflow.continuum.run import run_lagrangian
+    from vibroflow.scenario.io import load_scenario
+
+    s = load_scenario("tub47-quick", ["run.duration=0.1", "run.average_last=0.1"])
+    runs = []
+    for k in range(2):
+        summary = run_lagrangian(s, tmp_path / f"r{k}")
+        for key in ("wall_time_s", "particle_steps_per_s", "bulk_velocity_csv"):
+            summary.pop(key)
+        summary["continuum"].pop("wall_time_s")
+        runs.append((summary, (tmp_path / f"r{k}" / "bulk_velocity.csv").read_bytes()))
+    assert runs[0][1] == runs[1][1]
+    assert runs[0][0] == runs[1][0]
