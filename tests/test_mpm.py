@@ -106,10 +106,12 @@ def test_material_from_calibration_record():
     cal = {"rheology": {"mu_s": 0.30, "mu_2": 0.55, "I_0": 0.3, "phi_max": 0.61,
                         "phi_min": 0.5, "critical_solid_fraction": 0.605},
            "elastic": {"bulk_modulus_Pa": 2e6, "shear_modulus_Pa": 1e6},
-           "media": {"diameter_m": 0.006, "solid_density_kg_m3": 7700.0}}
+           "media": {"diameter_m": 0.006, "solid_density_kg_m3": 7700.0},
+           "drucker_prager": {"viscosity_Pa_s": 3.5}}
     mat = ContinuumMaterial.from_calibration(cal)
     assert (mat.mu_s, mat.mu_2, mat.I_0, mat.bulk_modulus) == (0.30, 0.55, 0.3, 2e6)
     assert mat.critical_density == pytest.approx(0.605 * 7700.0)
+    assert ContinuumMaterial.from_calibration(cal, model="drucker_prager").eta == 3.5
 
 
 # ----------------------------------------------------------------------------------------------

@@ -165,12 +165,16 @@ class ContinuumMaterial:
     def from_calibration(cls, cal: dict, model: str = "mu_i") -> "ContinuumMaterial":
         """From a calibration record (the dict of `read_calibration`): [rheology] mu_s, mu_2,
         I_0, phi_max, phi_min, critical_solid_fraction; [elastic] bulk_modulus_Pa,
-        shear_modulus_Pa; [media] diameter_m, solid_density_kg_m3.  Missing optional keys keep
-        the tub47 defaults."""
+        shear_modulus_Pa; [media] diameter_m, solid_density_kg_m3; [drucker_prager]
+        viscosity_Pa_s (the Drucker-Prager option's viscosity, when finite).  Missing optional
+        keys keep the tub47 defaults."""
         base = cls()
         r = cal.get("rheology", {})
         e = cal.get("elastic", {})
         m = cal.get("media", {})
+        eta = cal.get("drucker_prager", {}).get("viscosity_Pa_s")
+        if not (isinstance(eta, (int, float)) and math.isfinite(eta) and eta >= 0):
+            eta = None
 
         def num(table, key, default):
             v = table.get(key, default)
@@ -187,7 +191,8 @@ class ContinuumMaterial:
                    phi_min=num(r, "phi_min", base.phi_min),
                    critical_solid_fraction=num(r, "critical_solid_fraction", phi_max),
                    diameter=num(m, "diameter_m", base.diameter),
-                   solid_density=num(m, "solid_density_kg_m3", base.solid_density))
+                   solid_density=num(m, "solid_density_kg_m3", base.solid_density),
+                   viscosity=None if eta is None else float(eta))
 
     @classmethod
     def from_file(cls, path, model: str = "mu_i") -> "ContinuumMaterial":
