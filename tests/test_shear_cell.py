@@ -155,18 +155,25 @@ def test_sheared_gas_conserves_unwrapped_momentum_and_is_reproducible():
 
 @pytest.fixture(scope="module")
 def frictional_cell():
-    """tub47's ball-ball law at I = 0.3 and 0.02: a short sweep (p = 20 kPa, k_n/(p d) = 790:
+    """tub47's ball-ball law at I = 0.02 and 0.3: a short sweep (p = 20 kPa, k_n/(p d) = 790:
     still rigid, overlaps ~ 0.1% of d)."""
     from vibroflow.calibration.shear_cell import run_shear_cell
     return run_shear_cell(scenario(), inertial_numbers=(0.02, 0.3), pressure=2.0e4,
                           n_balls=200, seed=3, strain=2.0, transient_strain=0.6)
 
 
-def test_barostat_holds_the_imposed_normal_stress(frictional_cell):
-    """The measured sigma_zz over the steady window is the imposed pressure (the control law
-    has no steady-state error; 2%), and the measured I is the target one accordingly."""
-    for r in frictional_cell:
-        assert r["pressure"] == pytest.approx(2.0e4, rel=0.02)
+def test_barostat_holds_the_imposed_normal_stress():
+    """Over 5 strain units of steady shear the measured sigma_zz is the imposed pressure: the
+    control law has no steady-state error, so only the box's remaining breathing over the
+    window shows, within 3% and within 3 standard errors; the measured I is the target one
+    accordingly (I ~ sigma_zz^(-1/2))."""
+    from vibroflow.calibration.shear_cell import run_shear_cell
+    rows = run_shear_cell(scenario(), inertial_numbers=(0.1, 0.3), pressure=2.0e4,
+                          n_balls=200, seed=4, strain=6.0, transient_strain=1.0)
+    for r in rows:
+        assert r["steady"], r["reason"]
+        err = abs(r["pressure"] - 2.0e4)
+        assert err < 0.03 * 2.0e4 and err < 3 * r["pressure_stderr"] + 1e-9, r
         assert r["I"] == pytest.approx(r["I_target"], rel=0.02)
 
 
@@ -177,18 +184,24 @@ def test_mu_increases_and_phi_decreases_with_I(frictional_cell):
     assert hi["mu"] - lo["mu"] > 3 * math.hypot(hi["mu_stderr"], lo["mu_stderr"])
     assert lo["phi"] - hi["phi"] > 3 * math.hypot(hi["phi_stderr"], lo["phi_stderr"])
     # and in the range of weakly frictional spheres (between frictionless, 0.1, and rough)
-    assert 0.2 < lo["mu"] < 0.45 and 0.53 < lo["phi"] < 0.64
+    assert 0.2 < lo["mu"] < 0.45 and 0.55 < lo["phi"] < 0.64
+    for r in (lo, hi):
+        assert r["pressure"] == pytest.approx(2.0e4, rel=0.1)
 
 
 def test_frictionless_spheres_have_peyneau_roux_friction():
-    """Frictionless spheres (friction = 0, rolling = 0) at I = 0.01: mu = 0.10 + the small rise
-    with I (Peyneau & Roux 2008): 0.08 < mu < 0.15; phi near phi_c = 0.64 (0.61 to 0.65)."""
+    """Frictionless spheres (friction = 0, rolling = 0) at I = 0.01.  Peyneau & Roux (2008):
+    mu* = 0.10 in the quasi-static limit, rising as a power of I (mu - mu* ~ I^0.35 or so in
+    frictionless inertial flows, DeGiuli et al. 2015 PRE 91:062206), by some 0.02 to 0.05 at
+    I = 0.01; so 0.10 <= mu < 0.16, a third of the frictional value.  phi stays near
+    phi_c = 0.637 ("no dilatancy"): 0.625 to 0.645."""
     from vibroflow.calibration.shear_cell import run_shear_cell
     sc = scenario(friction=0.0, rolling=0.0)
     (r,) = run_shear_cell(sc, inertial_numbers=(0.01,), pressure=2.0e4, n_balls=200, seed=5,
                           strain=1.5, transient_strain=0.5)
-    assert 0.08 < r["mu"] < 0.15, r
-    assert 0.61 < r["phi"] < 0.65, r
+    assert r["steady"], r["reason"]
+    assert 0.10 - 2 * r["mu_stderr"] <= r["mu"] < 0.16, r
+    assert 0.625 < r["phi"] < 0.645, r
 
 
 def test_shear_cell_input_errors_are_one_line():
@@ -206,22 +219,31 @@ def test_shear_cell_input_errors_are_one_line():
 # elastic moduli
 
 def test_bulk_modulus_matches_the_affine_prediction():
-    """Bulk modulus of a packing of linear springs against the affine (effective-medium)
-    prediction K = phi Z k_n / (3 pi d) (Walton 1987; Makse et al. 1999 for Hertz).
+    """Bulk modulus of a packing of linear springs against the affine (effective-medium, Voigt)
+    prediction K_aff = phi Z k_n / (3 pi d) (Walton 1987; Makse et al. 1999 for Hertz).
 
     Derivation: the contact stress is sigma = (1/V) sum_c f_c (x) l_c, l_c = d n_c for equal
-    spheres.  An affine isotropic compression eps (per axis) closes every contact by d eps, so
-    each normal force grows by k_n d eps along n and sigma by (k_n d^2 eps / V) sum_c n (x) n,
-    whose trace / 3 is dp = N_c k_n d^2 eps / (3 V).  With eps_v = 3 eps and the contact
-    density N_c / V = (N Z / 2) / V = 3 phi Z / (pi d^3): K = dp / deps_v = phi Z k_n / (3 pi d).
-    Relaxation of the non-affine motion lowers it only a little for a compression (the balls
-    have no net force to rearrange along), so 15%.  The shear modulus relaxes much more
-    (Makse et al. 1999: the effective-medium G is far too high): positive, below G_aff."""
+    spheres.  An affine isotropic compression eps (per axis) closes every contact by d eps and
+    moves no contact point sideways, so each normal force grows by k_n d eps along n and sigma
+    by (k_n d^2 eps / V) sum_c n (x) n, whose trace / 3 is dp = N_c k_n d^2 eps / (3 V).  With
+    eps_v = 3 eps and the contact density N_c / V = (N Z / 2) / V = 3 phi Z / (pi d^3):
+    K_aff = dp / deps_v = phi Z k_n / (3 pi d), Z = 2 C / N counting every ball.
+
+    The affine field is kinematically admissible, so by the principle of minimum potential
+    energy the relaxed (non-affine) response is softer: K <= K_aff, up to the O(p / K) terms
+    of the pre-stress.  For compression the balls have little to rearrange along and, in
+    packings well above the isostatic coordination, the relaxation takes off some 10-25%
+    (Agnolin & Roux 2007, PRE 76:061304, elastic moduli against the Voigt bound), so
+    0.7 K_aff < K <= K_aff.  The shear modulus relaxes much more (Makse et al. 1999: the
+    effective-medium G is far too high): positive, below G_aff = phi Z (2 k_n + 3 k_t) /
+    (10 pi d), the same bound for simple shear."""
     from vibroflow.calibration.elastic import elastic_moduli
     el = elastic_moduli(scenario(), pressure=2.0e4, n_balls=200, seed=2)
+    assert el["converged"]
     assert el["pressure"] == pytest.approx(2.0e4, rel=0.02)
     k_aff = el["solid_fraction"] * el["coordination_number"] * 1.0e5 / (3 * math.pi * D)
-    assert el["bulk_modulus"] == pytest.approx(k_aff, rel=0.15), el
+    assert 0.7 * k_aff < el["bulk_modulus"] <= 1.01 * k_aff, el
+    assert el["bulk_modulus"] > 10 * el["bulk_modulus_stderr"], el
     g_aff = el["solid_fraction"] * el["coordination_number"] * (2 + 3 * 2 / 7) * 1.0e5 / (
         10 * math.pi * D)
     assert 0 < el["shear_modulus"] < g_aff, el

@@ -5,10 +5,12 @@ continuum (Dunatunga & Kamrin 2015).
 
 Protocol (reusing the Lees-Edwards box of vibroflow.calibration.periodic):
 
-1. a random fill compressed isotropically to p (shear_cell.packed_box), brought to rest under a
-   background viscous damping -c m v, -c I w (c about the lowest acoustic frequency of the box,
-   2 pi c_s / L, so that its slowest modes are near critically damped), then relaxed with the
-   box fixed until the stress no longer changes: the reference state;
+1. a random fill compressed isotropically to p (shear_cell.packed_box, no damping), brought to
+   rest at p under the isotropic box control and a light background viscous damping, then
+   relaxed with the box fixed under the full damping -c m v, -c I w (c about the lowest
+   acoustic frequency of the box, 2 pi c_s / L, so that its slowest modes are near critically
+   damped) until the stress no longer changes: the reference state (redone if the pressure
+   moved by more than 2% at fixed box);
 2. isotropic compression: from the reference state, an affine strain ramp of all three axes
    (over 100 steps, so that the tangential springs register it: the dilation rate enters the
    contacts' relative velocity) by -eps (compression) and, from the reference state again, by
@@ -38,7 +40,8 @@ from vibroflow.dem.laws import P_KT, P_MODEL, MODEL_LINEAR
 from vibroflow.errors import InputError
 
 from .periodic import MODE_FIXED, Q_SXX, Q_SXZ, Q_SYY, Q_SZX, Q_SZZ, S_STRAIN, PeriodicBox
-from .shear_cell import BallSetup, _check, ball_setup, packed_box, tub_mid_depth_pressure
+from .shear_cell import (BallSetup, _check, ball_setup, compress, packed_box,
+                         tub_mid_depth_pressure)
 
 DEFAULT_N_BALLS = 400
 RAMP_STEPS = 100
@@ -126,11 +129,18 @@ def elastic_moduli(scenario, pressure: float | None = None, n_balls: int = DEFAU
     damping = 2.0 * math.pi * c_s / side
     f0 = pressure * d * d
     rest_ke = 1e-4 * f0 * f0 / k_n  # J per ball: 1e-4 of a contact's elastic energy
-    box, setup = packed_box(scenario, pressure, int(n_balls), seed, damping=damping,
-                            tolerance=0.01, rest_ke=rest_ke)
+    # compress without damping (a viscous background would freeze a loose, fragile structure
+    # in place), then bring to rest at p under light damping with the isotropic control still
+    # on, then relax at fixed box under the full damping; repeated while the relaxation at
+    # fixed box moves the pressure by more than 2%
+    box, setup = packed_box(scenario, pressure, int(n_balls), seed)
     chunk = max(int(round(10.0 / (damping * setup.dt))), 200)
     tol = 1e-3 * stress_step * pressure
-    ref, ref_drift, ok0 = _relax(box, damping, chunk, tol, 60)
+    for _ in range(4):
+        compress(box, setup, pressure, damping=0.1 * damping, tolerance=0.005, rest_ke=rest_ke)
+        ref, ref_drift, ok0 = _relax(box, damping, chunk, tol, 60)
+        if abs(_pressure(ref) - pressure) <= 0.02 * pressure:
+            break
     p0 = _pressure(ref)
     nc, _ = box.evaluate()
     z_all = 2.0 * nc / box.n

@@ -6,9 +6,19 @@ A Lees-Edwards periodic box of the scenario's balls (vibroflow.calibration.perio
 1. filled at random without overlap at solid fraction 0.3 (reproducible from the seed),
 2. compressed affinely at a fixed strain rate to solid fraction 0.5 (a gas: nothing jams below
    it), then isotropically under the box control to the pressure p,
-3. sheared at gamma_dot = I sqrt(p / rho_s) / d for each inertial number I, from the largest I
-   down (each point starts from the steady state of the one before, which shortens the
-   transient), with L_x, L_y fixed and L_z under the barostat on sigma_zz = p.
+3. sheared at gamma_dot = I sqrt(p / rho_s) / d for each inertial number I, from the smallest I
+   up, with L_x, L_y fixed and L_z under the barostat on sigma_zz = p.  Each point starts from
+   the steady state of the one before: going up in I the bed must dilate, which shear does
+   within a fraction of a strain unit, whereas compacting a flowing bed takes many strain units
+   at small I.  The first point starts from the isotropically packed state (whose density is
+   close to the quasi-static one) and is pre-sheared by 1 strain unit more, not counted, to
+   build up its shear fabric.
+
+Polydispersity: monodisperse spheres sheared in a small periodic cell order into sliding
+layers (Peyneau & Roux 2008, appendix on crystallisation under shear), most readily at large I,
+which shows as a dense (phi ~ 0.62), weak (mu ~ 0.35) flow at I = 0.3; the usual remedy, kept
+here, is a slight polydispersity: diameters uniform in d (1 +- 0.1) by default, mean d (I uses
+the mean d).  polydispersity = 0 gives the scenario's monodisperse balls.
 
 Barostat (periodic.py): eps_dot_zz = (sigma_zz - p) / (K_ref t_b) with K_ref = k_eff / d, k_eff
 the contact's normal stiffness at the force p d^2 (linear law: k_n).  The time t_b sets how
@@ -58,6 +68,8 @@ DEFAULT_INERTIAL_NUMBERS = (0.005, 0.01, 0.03, 0.1, 0.3)
 DEFAULT_N_BALLS = 400
 DEFAULT_STRAIN = 2.0            # shear strain per point
 DEFAULT_TRANSIENT = 0.5         # strain discarded at the start of each point
+DEFAULT_POLYDISPERSITY = 0.1   # diameters uniform in d (1 +- 0.1): see the module notes
+PRESHEAR_STRAIN = 1.0           # extra strain before the first (smallest) I, from the packing
 FILL_SOLID_FRACTION = 0.3
 GAS_SOLID_FRACTION = 0.5
 FAST_COMPRESSION_RATE = 5.0     # 1/s per axis, from the fill to GAS_SOLID_FRACTION
@@ -211,18 +223,21 @@ def compress(box: PeriodicBox, setup: BallSetup, pressure: float, damping: float
 
 
 def packed_box(scenario, pressure: float, n_balls: int, seed: int, damping: float = 0.0,
-               tolerance: float = 0.05, rest_ke: float | None = None):
+               tolerance: float = 0.05, rest_ke: float | None = None,
+               polydispersity: float = 0.0):
     """A cubic periodic box of `n_balls` balls filled at random (seed) and compressed to the
-    pressure (see `compress`).  Returns (box, setup)."""
+    pressure (see `compress`).  Diameters are the scenario's, or with `polydispersity` w > 0
+    uniform in d (1 - w, 1 + w) (drawn from the seed; mean d).  Returns (box, setup)."""
     setup = ball_setup(scenario, pressure)
     n = int(n_balls)
     rng = np.random.default_rng(int(seed))
-    v_ball = math.pi * setup.diameter**3 / 6.0
-    side = (n * v_ball / FILL_SOLID_FRACTION) ** (1.0 / 3.0)
-    radius = np.full(n, 0.5 * setup.diameter)
+    diam = setup.diameter * (1.0 + polydispersity * (2.0 * rng.random(n) - 1.0)) \
+        if polydispersity > 0 else np.full(n, setup.diameter)
+    side = ((math.pi / 6.0 * diam**3).sum() / FILL_SOLID_FRACTION) ** (1.0 / 3.0)
+    radius = 0.5 * diam
     pos = random_fill(n, radius, (side, side, side), rng)
-    box = PeriodicBox(pos, radius, np.full(n, setup.mass), setup.par, (side, side, side),
-                      setup.dt, setup.skin, setup.max_overlap)
+    box = PeriodicBox(pos, radius, setup.density * math.pi / 6.0 * diam**3, setup.par,
+                      (side, side, side), setup.dt, setup.skin, setup.max_overlap)
     try:
         compress(box, setup, pressure, damping=damping, tolerance=tolerance, rest_ke=rest_ke)
     except FloatingPointError as e:
@@ -239,8 +254,8 @@ def batch_means(values: np.ndarray, batches: int) -> tuple[np.ndarray, float, fl
     return b, float(b.mean()), float(b.std(ddof=1) / math.sqrt(batches))
 
 
-def _observables(s: np.ndarray, n: int, v_ball: float, mass: float, d: float, rho: float,
-                 gamma_dot: float) -> dict[str, np.ndarray]:
+def _observables(s: np.ndarray, solid_volume: float, total_mass: float
+                 ) -> dict[str, np.ndarray]:
     """Per-sample observables from block means (see the module notes)."""
     szz = s[:, Q_SZZ]
     tau = -0.5 * (s[:, Q_SXZ] + s[:, Q_SZX])
@@ -252,17 +267,17 @@ def _observables(s: np.ndarray, n: int, v_ball: float, mass: float, d: float, rh
     tau_eq = np.sqrt(0.5 * (dev[:, 0] ** 2 + dev[:, 1] ** 2 + dev[:, 2] ** 2)
                      + dev[:, 3] ** 2 + dev[:, 4] ** 2 + dev[:, 5] ** 2)
     vol = s[:, Q_LX] * s[:, Q_LY] * s[:, Q_LZ]
-    T = 2.0 * s[:, Q_KE] / (3.0 * n * mass)
+    T = 2.0 * s[:, Q_KE] / (3.0 * total_mass)
     return {"szz": szz, "tau": tau, "p_mean": p_mean, "tau_eq": tau_eq, "sxx": s[:, Q_SXX],
-            "syy": s[:, Q_SYY], "phi": n * v_ball / vol, "Z": s[:, Q_Z], "Znr": s[:, Q_ZNR],
+            "syy": s[:, Q_SYY], "phi": solid_volume / vol, "Z": s[:, Q_Z], "Znr": s[:, Q_ZNR],
             "T": T}
 
 
 def _point_record(s: np.ndarray, I_target: float, gamma_dot: float, pressure: float,
-                  setup: BallSetup, n: int, batches: int) -> dict:
+                  setup: BallSetup, box: PeriodicBox, batches: int) -> dict:
     d, rho = setup.diameter, setup.density
-    v_ball = math.pi * d**3 / 6.0
-    ob = _observables(s, n, v_ball, setup.mass, d, rho, gamma_dot)
+    ob = _observables(s, float((4.0 / 3.0 * math.pi * box.radius**3).sum()),
+                      float(box.mass.sum()))
     k = len(s) // batches
     if k < 1:
         raise InputError(f"strain: the steady window holds {len(s)} samples, fewer than "
@@ -340,7 +355,7 @@ def run_shear_cell(scenario, inertial_numbers=DEFAULT_INERTIAL_NUMBERS,
                    pressure: float | None = None, n_balls: int = DEFAULT_N_BALLS,
                    seed: int | None = None, strain: float = DEFAULT_STRAIN,
                    transient_strain: float = DEFAULT_TRANSIENT, batches: int | None = None,
-                   progress=None) -> list[dict]:
+                   polydispersity: float = DEFAULT_POLYDISPERSITY, progress=None) -> list[dict]:
     """Steady simple shear at imposed pressure for each inertial number (see the module notes).
 
     scenario: a vibroflow Scenario (its ball-ball contact law, ball diameter and density,
@@ -351,6 +366,8 @@ def run_shear_cell(scenario, inertial_numbers=DEFAULT_INERTIAL_NUMBERS,
         (`tub_mid_depth_pressure`, tub47: 4.5 kPa);
     n_balls: balls in the box (>= 100); seed: of the random fill (None: scenario.run.seed);
     strain: shear strain per point; transient_strain: the part of it discarded;
+    polydispersity: w, diameters uniform in d (1 +- w) (0: the scenario's monodisperse balls;
+        the default 0.1 keeps the small periodic cell from crystallising under shear);
     progress: None, a RunProgress (stage/update/log) or a callable f(done_strain, total).
 
     Returns one dict per I (in the order given): I_target; I, mu, mu_eq, phi, pressure
@@ -386,12 +403,14 @@ def run_shear_cell(scenario, inertial_numbers=DEFAULT_INERTIAL_NUMBERS,
     seed = int(scenario.run.seed if seed is None else seed)
     prog = _Progress(progress)
     t0 = time.perf_counter()
-    box, setup = packed_box(scenario, pressure, n_balls, seed)
+    _check("polydispersity", polydispersity, 0.0, 0.3)
+    box, setup = packed_box(scenario, pressure, n_balls, seed,
+                            polydispersity=float(polydispersity))
     prep_time = time.perf_counter() - t0
     prog.log(f"shear cell: {n_balls} balls packed at p = {pressure:.4g} Pa, phi = "
              f"{box.solid_fraction:.3f} in {prep_time:.1f} s (dt = {setup.dt:.3g} s)")
     d, rho = setup.diameter, setup.density
-    order = sorted(range(len(I_list)), key=lambda k: -I_list[k])
+    order = sorted(range(len(I_list)), key=lambda k: I_list[k])
     total = strain * len(I_list)
     prog.stage("shear cell", total, unit="strain")
     records: dict[int, dict] = {}
@@ -413,6 +432,9 @@ def run_shear_cell(scenario, inertial_numbers=DEFAULT_INERTIAL_NUMBERS,
             return False
 
         try:
+            if k == order[0]:
+                box.run(int(math.ceil(PRESHEAR_STRAIN / (gd * setup.dt))), MODE_Z,
+                        pressure=pressure, gain=gain, sample_every=1000)
             s = box.run(steps, MODE_Z, pressure=pressure, gain=gain, sample_every=every,
                         stop=stop if progress is not None else None)
         except FloatingPointError as e:
@@ -421,10 +443,10 @@ def run_shear_cell(scenario, inertial_numbers=DEFAULT_INERTIAL_NUMBERS,
         wall = time.perf_counter() - t1
         done_strain += strain
         kept = s[(skip + every - 1) // every:]
-        rec = _point_record(kept, I, gd, pressure, setup, box.n, int(batches))
+        rec = _point_record(kept, I, gd, pressure, setup, box, int(batches))
         rec.update(strain=float(strain), transient_strain=float(transient_strain),
                    steps=int(steps), dt=float(setup.dt), wall_time_s=float(wall),
-                   n_balls=int(box.n), seed=seed,
+                   n_balls=int(box.n), seed=seed, polydispersity=float(polydispersity),
                    box_L_z=float(kept[:, Q_LZ].mean()), box_L_x=float(box.box[0]),
                    barostat_time_s=float(t_b))
         records[k] = rec
