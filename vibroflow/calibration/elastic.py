@@ -37,7 +37,6 @@ import time
 import numpy as np
 
 from vibroflow.dem.laws import P_KT, P_MODEL, MODEL_LINEAR
-from vibroflow.errors import InputError
 
 from .periodic import MODE_FIXED, Q_SXX, Q_SXZ, Q_SYY, Q_SZX, Q_SZZ, S_STRAIN, PeriodicBox
 from .shear_cell import (BallSetup, _check, ball_setup, compress, packed_box,
