@@ -112,7 +112,9 @@ def elastic_moduli(scenario, pressure: float | None = None, n_balls: int = DEFAU
     pressure = float(pressure)
     _check("n_balls", n_balls, 100, integer=True)
     _check("stress_step", stress_step, 1e-6, 0.5)
-    seed = int(scenario.run.seed if seed is None else seed)
+    seed = scenario.run.seed if seed is None else seed
+    _check("seed", seed, 0, integer=True)
+    seed = int(seed)
     log = getattr(progress, "log", None)
     t0 = time.perf_counter()
 

@@ -14,9 +14,10 @@ residual variance (chi^2/dof then is the residual variance itself, not a goodnes
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
-from scipy.optimize import curve_fit
+from scipy.optimize import OptimizeWarning, curve_fit
 
 from vibroflow.errors import InputError
 
@@ -81,20 +82,31 @@ def fit_mu_i(I, mu, mu_stderr=None) -> dict:
     Returns {mu_s, mu_2, I_0, *_stderr, chi2, dof, chi2_per_dof, residuals, covariance,
     points, weighted}.  Several starting values of I_0 (a log grid over the data's range) are
     tried and the lowest chi^2 kept, since the fit is non-linear in I_0.  Raises InputError
-    with fewer than 3 usable points.  With exactly 3 points and weights, the parameter errors
-    are the propagated point errors (chi2/dof undefined: NaN)."""
+    with fewer than 3 usable points.  mu_2 >= mu_s is imposed (fitted as mu_s and
+    mu_2 - mu_s >= 0, errors transformed back through the covariance).  With exactly 3 points
+    and weights, the parameter errors are the propagated point errors (chi2/dof undefined:
+    NaN)."""
     I, y, se = _points("mu(I) fit", I, mu, mu_stderr, 3)
+
+    # fitted as (mu_s, mu_2 - mu_s, I_0) with mu_2 - mu_s >= 0: mu(I) never falls with I
+    def model(x, mu_s, dmu, i0):
+        return mu_of_i(x, mu_s, mu_s + dmu, i0)
+
     lo = [0.0, 0.0, 1e-8]
     hi = [10.0, 10.0, 1e3]
     best = None
     for i0 in np.geomspace(max(I.min(), 1e-6), max(I.max(), 1e-5), 7):
-        p0 = [max(float(y.min()) - 0.01, 0.0), float(y.max()) + 0.05, float(i0)]
+        p0 = [max(float(y.min()) - 0.01, 0.0), max(float(y.max() - y.min()), 0.0) + 0.05,
+              float(i0)]
         try:
-            p, cov = curve_fit(mu_of_i, I, y, p0=p0, sigma=se, absolute_sigma=se is not None,
-                               bounds=(lo, hi), method="trf", maxfev=20000)
+            with warnings.catch_warnings():
+                # an exactly determined unweighted fit has no covariance: handled below
+                warnings.simplefilter("ignore", OptimizeWarning)
+                p, cov = curve_fit(model, I, y, p0=p0, sigma=se, absolute_sigma=se is not None,
+                                   bounds=(lo, hi), method="trf", maxfev=20000)
         except (RuntimeError, ValueError):
             continue
-        r = (y - mu_of_i(I, *p)) / (se if se is not None else 1.0)
+        r = (y - model(I, *p)) / (se if se is not None else 1.0)
         c2 = float(np.sum(r * r))
         if best is None or c2 < best[0] - 1e-12 * max(c2, 1.0):
             best = (c2, p, cov)
@@ -104,7 +116,9 @@ def fit_mu_i(I, mu, mu_stderr=None) -> dict:
     _, p, cov = best
     if I.size == 3 and se is None:
         cov = np.full((3, 3), np.nan)  # no residual left to scale an unweighted covariance
-    return _summary(mu_of_i, p, cov, I, y, se, ("mu_s", "mu_2", "I_0"))
+    # back to (mu_s, mu_2, I_0): mu_2 = mu_s + dmu, covariance J C J^T
+    J = np.array([[1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    return _summary(mu_of_i, J @ p, J @ cov @ J.T, I, y, se, ("mu_s", "mu_2", "I_0"))
 
 
 def fit_phi_i(I, phi, phi_stderr=None) -> dict:

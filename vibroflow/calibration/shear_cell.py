@@ -405,7 +405,9 @@ def run_shear_cell(scenario, inertial_numbers=DEFAULT_INERTIAL_NUMBERS,
     for x in I_list:
         if not (math.isfinite(x) and 0.0 < x <= 1.0):
             raise InputError(f"inertial_numbers: {x!r}: each must be in (0, 1]")
-    seed = int(scenario.run.seed if seed is None else seed)
+    seed = scenario.run.seed if seed is None else seed
+    _check("seed", seed, 0, integer=True)
+    seed = int(seed)
     prog = _Progress(progress)
     t0 = time.perf_counter()
     _check("polydispersity", polydispersity, 0.0, 0.3)
