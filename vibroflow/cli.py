@@ -210,6 +210,8 @@ def calibrate(
 
     cal = run_calibration(run_dir, shear_cell=shear_cell, kernel=kernel, width=width)
     r, w = cal["rheology"], cal["wall"]
+    if r.get("status", "measured") != "measured":
+        sys.stderr.write(f"warning: rheology {r['status']}\n")
     typer.echo(f"mu_s = {r['mu_s']:.3f} +- {r['mu_s_stderr']:.3f}, mu_2 = {r['mu_2']:.3f} +- "
                f"{r['mu_2_stderr']:.3f}, I_0 = {r['I_0']:.3g} +- {r['I_0_stderr']:.2g} "
                f"({r['source'].split(' (')[0]})")

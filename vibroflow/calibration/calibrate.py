@@ -83,22 +83,6 @@ def coordination(res: DEMResult) -> dict:
             "z_non_rattler": float(np.mean(zn)) if zn else float("nan")}
 
 
-def affine_moduli(phi: float, z: float, k_n: float, k_t: float, d: float) -> dict:
-    """Affine (Voigt, effective-medium) moduli of a packing of linear-spring spheres:
-    K = phi Z k_n / (3 pi d), G = phi Z (2 k_n + 3 k_t) / (10 pi d) (Pa).
-
-    Derivation: stress sigma = (1/V) sum_c f_c (x) l_c (l = d n), an affine strain eps changes
-    the contact's normal and tangential displacements by d (n.eps.n) and d (eps.n - n (n.eps.n));
-    averaging over isotropic contact directions (<n_i n_j n_k n_l> = (d_ij d_kl + d_ik d_jl +
-    d_il d_jk)/15) with N_c d^2 / V = 3 phi Z / (pi d) gives these (Walton 1987; Makse et al.
-    1999 for the Hertz analogue).  K is close to the measured bulk modulus of a compressed
-    packing; G is an upper bound (non-affine relaxation lowers it several-fold near jamming).
-    """
-    k = phi * z * k_n / (3.0 * math.pi * d)
-    g = phi * z * (2.0 * k_n + 3.0 * k_t) / (10.0 * math.pi * d)
-    return {"bulk_modulus": k, "shear_modulus": g}
-
-
 def contact_stiffness_at(scenario, pressure: float, phi: float, z: float, d: float):
     """Normal and tangential stiffness (N/m) of a ball-ball contact of the bed at `pressure`.
 
@@ -168,13 +152,16 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
         else:
             rheo = _fit_tub_cells(scatter)
             cell_points = None
-            elastic = affine_moduli(phi_bed, z["z_non_rattler"], k_n, k_t, d)
-            elastic.update(source="affine (effective-medium) estimate with the tub's measured "
-                                  "solid fraction and coordination number; run --shear-cell "
-                                  "for DEM compression and shear tests",
+            from .elastic import affine_moduli_linear
+            K_aff, G_aff = affine_moduli_linear(phi_bed, z["z_all"], k_n, k_t, d)
+            elastic = {"bulk_modulus": K_aff, "shear_modulus": G_aff}
+            elastic.update(source="affine (effective-medium, Walton 1987) estimate with the "
+                                  "tub's measured solid fraction and coordination number: "
+                                  "close for K, an upper bound for G; run --shear-cell for "
+                                  "DEM compression and shear tests",
                            bulk_modulus_stderr=float("nan"), shear_modulus_stderr=float("nan"),
                            pressure=p_bed, solid_fraction=phi_bed,
-                           coordination_number=z["z_non_rattler"])
+                           coordination_number=z["z_all"])
         from .rheology_fit import drucker_prager_equivalent
         gam_ref = _median_dense(avg, "shear_rate")
         dp = drucker_prager_equivalent(rheo["mu_s"], rheo["mu_2"], rheo["I_0"],
@@ -212,9 +199,18 @@ def _fit_tub_cells(scatter: dict) -> dict:
     d = ph["dense"]
     out = {"source": "tub cells (dense phase-resolved coarse-grained cells; run --shear-cell "
                      "for the Lees-Edwards simple-shear fit)", "points": int(d.sum())}
-    mu = fit_mu_i(ph["I"][d], ph["mu"][d])
-    phi = fit_phi_i(ph["I"][d], ph["phi"][d])
+    try:
+        mu = fit_mu_i(ph["I"][d], ph["mu"][d])
+        phi = fit_phi_i(ph["I"][d], ph["phi"][d])
+    except InputError as e:
+        # a bed too thin or too agitated to have dense cells: say so, do not invent numbers
+        nan = float("nan")
+        out.update({k: nan for k in ("mu_s", "mu_2", "I_0", "phi_max", "phi_min")})
+        out.update({k + "_stderr": nan for k in ("mu_s", "mu_2", "I_0", "phi_max", "phi_min")})
+        out["status"] = f"not measured: {e} (no dense cell in the tub; run --shear-cell)"
+        return out
     out.update(_mu_phi_keys(mu, phi))
+    out["status"] = "measured"
     return out
 
 
@@ -255,7 +251,8 @@ def _dem_tests(sc, pressure: float, prog, options: dict):
     phi = fit_phi_i(I, np.array([r["phi"] for r in steady]),
                     np.array([r.get("phi_stderr", np.nan) for r in steady]))
     rheo = {"source": "shear cell (Lees-Edwards simple shear at imposed pressure)",
-            "points": len(steady), "pressure": pressure}
+            "points": len(steady), "pressure": pressure, "status": "measured",
+            "points_not_steady": len(rows) - len(steady)}
     rheo.update(_mu_phi_keys(mu, phi))
     prog.log("elastic tests (isotropic compression, simple shear)")
     el = elastic_moduli(sc, pressure=pressure)
@@ -264,8 +261,8 @@ def _dem_tests(sc, pressure: float, prog, options: dict):
                "shear_modulus": _f(el["shear_modulus"]),
                "shear_modulus_stderr": _f(el.get("shear_modulus_stderr")),
                "pressure": _f(el.get("pressure", pressure)),
-               "solid_fraction": _f(el.get("phi", el.get("solid_fraction"))),
-               "coordination_number": _f(el.get("coordination_number", el.get("Z"))),
+               "solid_fraction": _f(el.get("solid_fraction")),
+               "coordination_number": _f(el.get("coordination_number_non_rattler")),
                "source": "DEM compression and shear tests of a packed periodic bed"}
     return rheo, elastic, rows
 
@@ -414,5 +411,7 @@ def read_calibration(path) -> dict:
         for k in keys:
             v = cal.get(table, {}).get(k)
             if not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise InputError(f"{p}: {table}.{k} = {v!r}: must be a finite number")
+                why = cal.get(table, {}).get("status", "")
+                raise InputError(f"{p}: {table}.{k} = {v!r}: must be a finite number"
+                                 + (f" ({why})" if why and why != "measured" else ""))
     return cal
