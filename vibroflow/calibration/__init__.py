@@ -1,21 +1,30 @@
-"""Calibration of continuum models on DEM results (issue 3).
+"""Calibration of continuum models on DEM results (issue 3), one concept per module:
 
-* coarse_grain -- coarse-grained continuum fields (density, velocity, stresses, strain rate,
-                  inertial number, friction coefficient) on a grid of the tub's x-z plane
+* coarse_grain  -- coarse-grained continuum fields (density, velocity, stresses, strain rate,
+                   inertial number, stress ratio) on a grid of the tub's x-z plane
+* dem_result    -- a DEM result on disk (dem.h5) read back in the tub frame
+* run_fields    -- the coarse-grained fields of a whole run (time-averaged, phase-resolved),
+                   fields.nc
+* wall_friction -- the effective Coulomb friction of the wall and partitions
+* impacts       -- impact speeds against the local shear rate and temperature
+* tub_rheology  -- mu(I) read from the tub's own cells
+* periodic, shear_cell, elastic -- Lees-Edwards simple-shear cells and elastic tests of the media
+* rheology_fit  -- mu(I), phi(I) fits and the equivalent Drucker-Prager model
+* calibrate     -- `vibroflow calibrate`: all of the above into calibration.toml
+* plots         -- the pictures
 """
+from vibroflow.calibration.calibrate import calibrate, read_calibration
 from vibroflow.calibration.coarse_grain import (CoarseGrainer, kernel_value, phase_bins,
                                                 rheology, snapshot_from_state,
                                                 velocity_gradient_on_grid)
+from vibroflow.calibration.elastic import elastic_moduli
+from vibroflow.calibration.rheology_fit import (drucker_prager_equivalent, fit_mu_i, fit_phi_i,
+                                                mu_of_i, phi_of_i)
+from vibroflow.calibration.run_fields import coarse_grain_run, read_fields, write_fields
+from vibroflow.calibration.shear_cell import run_shear_cell, tub_mid_depth_pressure
 
-__all__ = ["CoarseGrainer", "kernel_value", "phase_bins", "rheology", "snapshot_from_state",
-           "velocity_gradient_on_grid"]
-
-# the media's rheology from DEM (issue 3 section 2): Lees-Edwards shear cell, elastic moduli,
-# mu(I) / phi(I) fits and the equivalent Drucker-Prager model
-from vibroflow.calibration.elastic import elastic_moduli  # noqa: E402
-from vibroflow.calibration.rheology_fit import (drucker_prager_equivalent, fit_mu_i,  # noqa: E402
-                                                fit_phi_i, mu_of_i, phi_of_i)
-from vibroflow.calibration.shear_cell import run_shear_cell, tub_mid_depth_pressure  # noqa: E402
-
-__all__ += ["drucker_prager_equivalent", "elastic_moduli", "fit_mu_i", "fit_phi_i", "mu_of_i",
-            "phi_of_i", "run_shear_cell", "tub_mid_depth_pressure"]
+__all__ = ["CoarseGrainer", "calibrate", "coarse_grain_run", "drucker_prager_equivalent",
+           "elastic_moduli", "fit_mu_i", "fit_phi_i", "kernel_value", "mu_of_i", "phase_bins",
+           "phi_of_i", "read_calibration", "read_fields", "rheology", "run_shear_cell",
+           "snapshot_from_state", "tub_mid_depth_pressure", "velocity_gradient_on_grid",
+           "write_fields"]

@@ -106,9 +106,10 @@ def mu_i_plot(path, scatter: dict, shear_cell_points=None, fit=None, phi_fit=Non
     Ilo, Ihi = 1e-4, 1.0
     if shear_cell_points:
         I = np.array([p["I"] for p in shear_cell_points])
-        a1.errorbar(I, [p["mu"] for p in shear_cell_points],
+        a1.errorbar(I, [p.get("mu_eq", p["mu"]) for p in shear_cell_points],
                     xerr=[p.get("I_stderr", 0.0) for p in shear_cell_points],
-                    yerr=[p.get("mu_stderr", 0.0) for p in shear_cell_points], fmt="o",
+                    yerr=[p.get("mu_eq_stderr", p.get("mu_stderr", 0.0))
+                          for p in shear_cell_points], fmt="o",
                     color="tab:red", ms=6, capsize=3, label="shear cell (steady)")
         a2.errorbar(I, [p["phi"] for p in shear_cell_points],
                     yerr=[p.get("phi_stderr", 0.0) for p in shear_cell_points], fmt="o",
@@ -121,7 +122,7 @@ def mu_i_plot(path, scatter: dict, shear_cell_points=None, fit=None, phi_fit=Non
     if phi_fit is not None and np.isfinite(phi_fit.get("phi_max", np.nan)):
         a2.plot(Ic, phi_fit["phi_max"] - (phi_fit["phi_max"] - phi_fit["phi_min"]) * Ic, "k-",
                 label=f"fit: phi_max={phi_fit['phi_max']:.3f}, phi_min={phi_fit['phi_min']:.3f}")
-    for ax, lab in ((a1, "mu = tau / p"), (a2, "solid fraction phi")):
+    for ax, lab in ((a1, "mu = tau_eq / p"), (a2, "solid fraction phi")):
         ax.set_xscale("log")
         ax.set_xlim(Ilo, Ihi)
         ax.set_xlabel("inertial number I")
