@@ -382,6 +382,10 @@ def test_continuum_command_writes_dem_comparable_results(run_cli, tmp_path):
     # ParaView: the points at the 8 samples of the last cycle, their collection, the tub
     assert len(list((out / "vtk").glob("points_*.vtu"))) == 8
     assert (out / "vtk" / "points.pvd").is_file() and (out / "vtk" / "tub.vtu").is_file()
+    # and the grid fields at the same instants, as rectilinear grids in a collection
+    assert len(list((out / "vtk").glob("grid_*.vtr"))) == 8
+    assert (out / "vtk" / "grid.pvd").read_text().count("grid_0") == 8
+    assert not (out / "checkpoint.npz").exists()
     for key in ("probes", "circulation", "wall_contacts", "impacts", "window", "cells",
                 "n_particles", "wall_time_s"):
         assert key in summary
@@ -529,3 +533,88 @@ def test_continuum_run_is_reproducible(tmp_path):
         runs.append((summary, (tmp_path / f"r{k}" / "bulk_velocity.csv").read_bytes()))
     assert runs[0][1] == runs[1][1]
     assert runs[0][0] == runs[1][0]
+
+
+# ----------------------------------------------------------------------------------------------
+# checkpoints, resume, blow-ups, grid fields
+
+def test_continuum_resume_gives_the_uninterrupted_numbers_bit_for_bit(tmp_path):
+    """A run stopped twice (checkpoint, then resume) inside its averaging window, with
+    checkpoints at every step in between, writes the same bulk_velocity.csv, summary (wall
+    times aside) and ParaView files as the run never interrupted; a stopped run leaves no
+    summary.json; a checkpoint of other options is refused."""
+    import json
+
+    from vibroflow.continuum.run import CHECKPOINT_NAME, LagrangianOptions, run_lagrangian
+    from vibroflow.scenario.io import load_scenario
+
+    over = ["run.duration=0.05", "run.average_last=0.043", "run.batches=2"]
+    s = load_scenario("tub47-quick", over)
+    full = run_lagrangian(s, tmp_path / "full", vtk=True)
+    n_steps = full["steps"]
+    split = tmp_path / "split"
+    busy = load_scenario("tub47-quick", over + ["run.checkpoint_every=1e-9"])
+    assert run_lagrangian(s, split, vtk=True, stop_after_steps=n_steps // 2 + 7) is None
+    assert (split / CHECKPOINT_NAME).is_file() and not (split / "summary.json").exists()
+    with pytest.raises(InputError, match="another scenario, calibration or options"):
+        run_lagrangian(s, split, options=LagrangianOptions(cfl=0.25), resume=True)
+    assert run_lagrangian(busy, split, vtk=True, resume=True, stop_after_steps=60) is None
+    resumed = run_lagrangian(s, split, vtk=True, resume=True)
+    assert not (split / CHECKPOINT_NAME).exists()
+    for summary in (full, resumed):
+        for key in ("wall_time_s", "particle_steps_per_s", "bulk_velocity_csv"):
+            summary.pop(key)
+        summary["continuum"].pop("wall_time_s")
+    assert json.dumps(resumed, sort_keys=True) == json.dumps(full, sort_keys=True)
+    for name in ("bulk_velocity.csv", "vtk/grid.pvd", "vtk/points.pvd", "vtk/grid_00010.vtr",
+                 "vtk/points_00012.vtu"):
+        assert (split / name).read_bytes() == (tmp_path / "full" / name).read_bytes(), name
+
+
+def test_continuum_grid_fields_carry_mass_momentum_and_uniform_values():
+    """The grid fields scatter with the solver's B-splines: total node mass is the points'
+    mass, node momentum their momentum; a uniform point velocity, pressure and shear rate give
+    exactly those values wherever there is mass, and the bulk density inside a uniform block
+    is the points' mass per area."""
+    from vibroflow.continuum.fields import grid_fields
+
+    dx = 0.01
+    grid = Grid.covering(-0.1, 0.1, 0.0, 0.1, dx)
+    x = lattice(-0.05, 0.05, 0.02, 0.08, dx / 2)
+    n = len(x)
+    rho = 1500.0
+    mass = np.full(n, rho * (dx / 2) ** 2)
+    v = np.tile([0.3, -0.1], (n, 1))
+    f = grid_fields(grid, x, v, mass, np.full(n, 2.0e3), np.full(n, 7.0), 7800.0)
+    node_mass = f["density"] * dx**2
+    assert node_mass.sum() == pytest.approx(mass.sum(), rel=1e-12)
+    has = node_mass > 0
+    assert np.allclose(f["velocity"][has], [0.3, -0.1], rtol=1e-12)
+    assert np.allclose(f["pressure"][has], 2.0e3) and np.allclose(f["shear_rate"][has], 7.0)
+    xi = grid.node_x()[:, None]
+    zi = grid.node_z()[None, :]
+    inside = (np.abs(xi) < 0.03) & (zi > 0.04) & (zi < 0.06)
+    assert np.allclose(f["density"][inside], rho, rtol=1e-12)
+    assert np.allclose(f["solid_fraction"][inside], rho / 7800.0, rtol=1e-12)
+
+
+def test_continuum_blowup_names_the_points_and_the_time_step():
+    """A block dropped on a stiff plate with 30 times the stable time step blows up; the error
+    names the points and says the time step is too large for the stiffness."""
+    from vibroflow.continuum.mpm import ContinuumBlowUp
+
+    mat = ContinuumMaterial()
+    dx = 0.01
+    grid = Grid.covering(-0.1, 0.1, 0.0, 0.2, dx)
+    x = lattice(-0.03, 0.03, 0.01, 0.05, dx / 2)
+    kn = (mat.bulk_modulus + 4 * mat.shear_modulus / 3) / (dx / 2)
+    plate = Plane((0.0, 0.0), (0.0, 1.0), kn, friction=0.3)
+    dt = 30 * stable_dt(mat, dx, dx / 2, [plate])
+    system = MPMSystem(grid, mat, dt, boundaries=[plate])
+    state = init_state(system, x, (dx / 2) ** 2, mat.critical_density, v=np.tile([0.0, -1.0],
+                                                                                (len(x), 1)))
+    with pytest.raises(ContinuumBlowUp) as err:
+        run_steps(system, state, 2000)
+    message = str(err.value)
+    assert "material point(s) " in message and f"of {len(x)})" in message
+    assert "time step is too large for the stiffness" in message

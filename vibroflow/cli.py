@@ -244,11 +244,19 @@ def continuum(
         "--dx", help="Grid spacing (m); default half the analysis cell.")] = None,
     set_: SetOption = None,
     vtk: Annotated[bool, typer.Option("--vtk", help="Also write ParaView files of the material "
-                                                    "points over the last cycle.")] = False,
+                                                    "points and the grid fields over the last "
+                                                    "cycle.")] = False,
+    resume: Annotated[bool, typer.Option("--resume", help="Go on from the last checkpoint "
+                                                          "in --out.")] = False,
+    stop_after_steps: Annotated[Optional[int], typer.Option(
+        "--stop-after-steps", help="Write a checkpoint and stop after this many vibration "
+                                   "steps (to split a run; go on with --resume).")] = None,
 ) -> None:
     """Run a continuum model of a tub scenario: --out/summary.json, bulk_velocity.csv."""
     if method != "lagrangian":
         raise InputError(f"--method = {method!r}: must be lagrangian")
+    if stop_after_steps is not None and stop_after_steps < 0:
+        raise InputError(f"--stop-after-steps = {stop_after_steps}: must be >= 0")
     s = _load(scenario, set_)  # before anything is written: bad input leaves --out untouched
     from vibroflow.continuum.mpm import ContinuumBlowUp
     from vibroflow.continuum.run import LagrangianOptions, material_of, run_lagrangian
@@ -262,10 +270,15 @@ def continuum(
     material_of(s, cal, rheology)  # validates the parameters before --out is made
     try:
         summary = run_lagrangian(s, out, calibration=cal, options=options, progress=True,
-                                 vtk=vtk)
+                                 vtk=vtk, resume=resume, stop_after_steps=stop_after_steps)
     except ContinuumBlowUp as exc:
+        # a numerical blow-up is not bad input: its own exit code, the points and the cause
         sys.stderr.write("error: " + str(exc) + "\n")
         raise typer.Exit(EXIT_BLOWUP)
+    if summary is None:
+        typer.echo(f"stopped after {stop_after_steps} steps; checkpoint in {out}, go on with "
+                   "--resume")
+        return
     c = summary["circulation"]
     typer.echo(f"circulation {c['sense']}, strength {c['strength']:.4g} m^2/s; "
                f"{summary['n_particles']} points, {summary['wall_time_s']:.1f} s")

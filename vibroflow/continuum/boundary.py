@@ -3,7 +3,9 @@
 Every boundary has `add_forces(state, t, dt)`: it adds its force on each point (N per metre of
 thickness, in the solver's frame) to `state.fext` before the particle-to-grid transfer, using
 the point's position and velocity at the start of the step; it may keep per-point history in
-`state.history[self.slot]` (allocated by `init_history`).
+`state.history[self.slot]` (allocated by `init_history`).  The penalty walls also have
+`lost(state)`: the ids of the points the last `add_forces` found through the wall by more than
+their own side, which the solver reports as a blow-up (mpm.py).
 
 Wall contact (`UWall`, `Plane`): a penalty contact with a constant normal stiffness, as the
 published finite element study of the tub did (a linear pressure-overclosure law), and Coulomb
@@ -84,9 +86,13 @@ def u_wall_forces(x, v, mass, volume, xi, fext, f_out, fn_out, ft_out, state_out
     """Add the U wall's contact force to fext (N, 2) (N/m); history xi (N,) (m) in place;
     the force f_out (N, 2), its normal and tangential parts fn_out, ft_out (N/m) and state_out
     (0 none, 1 stick, 2 slide) per point.  The wall is still
-    in the solver's (tub) frame; radius (m) of the U (tub.geometry)."""
+    in the solver's (tub) frame; radius (m) of the U (tub.geometry).  Returns the number of
+    points gone through the wall (centre beyond it by more than the point's side)."""
+    deep = 0
     for p in range(x.shape[0]):
         gap, nx, nz, cx, cz, s = u_wall_nearest(x[p, 0], x[p, 1], radius)
+        if gap < -np.sqrt(volume[p]):
+            deep += 1
         fx, fz, fn, ft, xn, st = _penalty(gap, nx, nz, v[p, 0], v[p, 1], mass[p], volume[p],
                                           xi[p], kn, kt, zeta, mu, dt)
         fext[p, 0] += fx
@@ -97,15 +103,19 @@ def u_wall_forces(x, v, mass, volume, xi, fext, f_out, fn_out, ft_out, state_out
         fn_out[p] = fn
         ft_out[p] = ft
         state_out[p] = st
+    return deep
 
 
 @nb.njit(cache=True)
 def plane_forces(x, v, mass, volume, xi, fext, f_out, fn_out, ft_out, state_out, px, pz, nx,
                  nz, wvx, wvz, kn, kt, zeta, mu, dt):
     """Add a plane wall's contact force (through (px, pz) m, unit normal (nx, nz) into the
-    material, moving at (wvx, wvz) m/s) to fext; as `u_wall_forces`."""
+    material, moving at (wvx, wvz) m/s) to fext; as `u_wall_forces` (with its return)."""
+    deep = 0
     for p in range(x.shape[0]):
         gap = (x[p, 0] - px) * nx + (x[p, 1] - pz) * nz
+        if gap < -np.sqrt(volume[p]):
+            deep += 1
         fx, fz, fn, ft, xn, st = _penalty(gap, nx, nz, v[p, 0] - wvx, v[p, 1] - wvz, mass[p],
                                           volume[p], xi[p], kn, kt, zeta, mu, dt)
         fext[p, 0] += fx
@@ -116,6 +126,7 @@ def plane_forces(x, v, mass, volume, xi, fext, f_out, fn_out, ft_out, state_out,
         fn_out[p] = fn
         ft_out[p] = ft
         state_out[p] = st
+    return deep
 
 
 @nb.njit(cache=True)
@@ -151,6 +162,13 @@ class _Contact:
             raise InputError(f"{type(self).__name__}.stiffness = {self.stiffness!r}: must be "
                              "> 0 Pa/m")
 
+    def lost(self, state) -> np.ndarray | None:
+        """Ids of the points that the last add_forces found through the wall (centre beyond
+        it by more than their side sqrt(V_p)): the solution has blown up; None if none."""
+        if not getattr(self, "_deep", 0):
+            return None
+        return np.nonzero(self._gap(state) < -np.sqrt(state.volume))[0]
+
     @property
     def tangential_stiffness(self) -> float:
         return self.stiffness * self.tangential_ratio
@@ -178,9 +196,15 @@ class UWall(_Contact):
 
     def add_forces(self, state, t: float, dt: float) -> None:
         h = state.history[self.slot]
-        u_wall_forces(state.x, state.v, state.mass, state.volume, h["xi"], state.fext, h["f"],
-                      h["fn"], h["ft"], h["state"], self.radius, self.stiffness,
-                      self.tangential_stiffness, self.damping_ratio, self.friction, dt)
+        self._deep = u_wall_forces(
+            state.x, state.v, state.mass, state.volume, h["xi"], state.fext, h["f"], h["fn"],
+            h["ft"], h["state"], self.radius, self.stiffness, self.tangential_stiffness,
+            self.damping_ratio, self.friction, dt)
+
+    def _gap(self, state) -> np.ndarray:
+        from vibroflow.tub.geometry import distance_to_wall_np
+
+        return distance_to_wall_np(state.x[:, 0], state.x[:, 1], self.radius)
 
 
 @dataclass
@@ -214,10 +238,15 @@ class Plane(_Contact):
     def add_forces(self, state, t: float, dt: float) -> None:
         (px, pz), (wvx, wvz) = self.at(t)
         h = state.history[self.slot]
-        plane_forces(state.x, state.v, state.mass, state.volume, h["xi"], state.fext, h["f"],
-                     h["fn"], h["ft"], h["state"], px, pz, self.normal[0], self.normal[1], wvx, wvz,
-                     self.stiffness, self.tangential_stiffness, self.damping_ratio,
-                     self.friction, dt)
+        self._t_last = t
+        self._deep = plane_forces(
+            state.x, state.v, state.mass, state.volume, h["xi"], state.fext, h["f"], h["fn"],
+            h["ft"], h["state"], px, pz, self.normal[0], self.normal[1], wvx, wvz,
+            self.stiffness, self.tangential_stiffness, self.damping_ratio, self.friction, dt)
+
+    def _gap(self, state) -> np.ndarray:
+        (px, pz), _ = self.at(self._t_last)
+        return (state.x[:, 0] - px) * self.normal[0] + (state.x[:, 1] - pz) * self.normal[1]
 
 
 @dataclass

@@ -144,14 +144,66 @@ def _escaped(x, v, xmin, xmax, zmin, zmax):
     return bad
 
 
+def _escaped_ids(x, v, xmin, xmax, zmin, zmax) -> np.ndarray:
+    """Ids of the points outside the box or with a non-finite position or velocity."""
+    with np.errstate(invalid="ignore"):
+        out = ~((x[:, 0] >= xmin) & (x[:, 0] <= xmax) & (x[:, 1] >= zmin) & (x[:, 1] <= zmax))
+    out |= ~np.isfinite(v).all(axis=1)
+    return np.nonzero(out)[0]
+
+
+def blowup_message(system: MPMSystem, state: MPMState, ids, what: str) -> str:
+    """One paragraph for a ContinuumBlowUp: when, which points (ids, at most 10 named), what
+    happened to them, and the likely cause, judged against the stability limits of timestep.py
+    (elastic waves over dx, penalty walls) at the points' fastest finite speed."""
+    from .timestep import stable_dt
+
+    ids = np.asarray(ids, dtype=np.int64)
+    named = ", ".join(str(int(i)) for i in ids[:10]) + (", ..." if ids.size > 10 else "")
+    mat = system.material
+    dx = system.grid.dx
+    speed = np.hypot(state.v[:, 0], state.v[:, 1])
+    finite = speed[np.isfinite(speed)]
+    v_max = float(finite.max()) if finite.size else 0.0
+    side = np.sqrt(state.volume[np.isfinite(state.volume) & (state.volume > 0)])
+    side_min = float(side.min()) if side.size else dx / 2
+    walls = [b for b in system.boundaries if hasattr(b, "stiffness")]
+    limit_elastic = stable_dt(mat, dx, side_min, (), v_max=0.0, cfl=1.0)
+    limit = stable_dt(mat, dx, side_min, walls, v_max=0.0, cfl=1.0)
+    k_text = ", ".join(f"{type(b).__name__} stiffness {b.stiffness:.3g} Pa/m" for b in walls)
+    where = (f"t = {state.t:.6g} s (step {state.step}): material point(s) {named} "
+             f"({ids.size} of {state.n}) {what}")
+    numbers = (f"dt = {system.dt:.3g} s against the stability limits {limit_elastic:.3g} s "
+               f"(P-wave speed {mat.p_wave_speed():.3g} m/s over dx = {dx:.3g} m) and "
+               f"{limit:.3g} s with the walls" + (f" ({k_text})" if k_text else "")
+               + f"; fastest finite point speed {v_max:.3g} m/s")
+    if system.dt > limit:
+        cause = ("likely cause: the time step is too large for the stiffness (lower the "
+                 "Courant number cfl, or the wall stiffness or elastic moduli)")
+    elif v_max * system.dt > 0.5 * dx:
+        cause = ("likely cause: points crossing half a grid cell a step (speed x dt > dx/2): "
+                 "the time step is too large for the speeds reached (lower cfl)")
+    else:
+        cause = ("likely cause: the wall stiffness too low to hold the bed (points pushed "
+                 "through it), or an unstable stiffness / time step combination")
+    return f"{where}; {numbers}; {cause}"
+
+
 def step(system: MPMSystem, state: MPMState) -> None:
-    """Advance the state by one step system.dt (module docstring); raises ContinuumBlowUp."""
+    """Advance the state by one step system.dt (module docstring); raises ContinuumBlowUp
+    naming the points and the likely cause when a point leaves the grid or a wall's side
+    (boundary.py `lost`), or its position or velocity stops being finite."""
     g = system.grid
     dt = system.dt
     gm, gmv, gf, gv = system.work
     state.fext[:] = 0.0
     for b in system.boundaries:
         b.add_forces(state, state.t, dt)
+        lost = b.lost(state) if hasattr(b, "lost") else None
+        if lost is not None and lost.size:
+            raise ContinuumBlowUp(blowup_message(
+                system, state, lost, f"went through the {type(b).__name__} wall by more "
+                                     "than their own size"))
     gm[:] = 0.0
     gmv[:] = 0.0
     gf[:] = 0.0
@@ -167,10 +219,10 @@ def step(system: MPMSystem, state: MPMState) -> None:
     state.step += 1
     xmin, xmax, zmin, zmax = g.inner_bounds()
     pad = 0.0 if g.periodic else g.dx
-    bad = _escaped(state.x, state.v, xmin - pad, xmax + pad, zmin - g.dx, zmax + g.dx)
-    if bad:
-        raise ContinuumBlowUp(f"t = {state.t:.6g} s: {bad} material points left the grid or "
-                              "became non-finite (time step too large for the stiffness?)")
+    box = (xmin - pad, xmax + pad, zmin - g.dx, zmax + g.dx)
+    if _escaped(state.x, state.v, *box):
+        raise ContinuumBlowUp(blowup_message(system, state, _escaped_ids(state.x, state.v, *box),
+                                             "left the grid or became non-finite"))
 
 
 def run_steps(system: MPMSystem, state: MPMState, n: int, callback=None) -> None:

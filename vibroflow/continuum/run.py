@@ -27,11 +27,19 @@ ball-wall contact friction), the partitions' [partitions] friction (default: the
 ball-partition friction), the diameter and solid density (default: the scenario's fill).
 The wall's normal stiffness is constant: (K + 4G/3) / l0 with l0 the point spacing (the bed's
 elastic stiffness over one point), its damping ratio that of the scenario's ball-wall
-restitution.  With vtk, ParaView files of the points over the last cycle (run_lagrangian).
-Not done here: checkpoints and resume, grid fields in ParaView.
+restitution.  With vtk, ParaView files of the points and of the grid fields (fields.py) over
+the last cycle (run_lagrangian).
+
+Checkpoints (checkpoint.py) every run.checkpoint_every wall seconds of the vibration; a resumed
+run gives the numbers of an uninterrupted one bit for bit; results are written atomically and
+summary.json last (run_lagrangian).  A blow-up (mpm.ContinuumBlowUp: a point non-finite, off the
+grid or through the wall) ends the run with the points' ids and the likely cause, and removes
+the checkpoint.
 """
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import json
 import math
 import os
@@ -50,15 +58,18 @@ from vibroflow.tub.geometry import cross_section_area, distance_to_wall_np, u_wa
 from vibroflow.tub.motion import TubMotion, rigid_velocity, tub_to_lab
 
 from .boundary import PartitionFriction, UWall, damping_ratio_of_restitution
+from .checkpoint import load_checkpoint, save_checkpoint
 from .constitutive import ContinuumMaterial
+from .fields import grid_fields, write_grid_vtr
 from .grid import Grid
 from .grid_update import LabFrame, TubFrame
-from .mpm import MPMState, MPMSystem, init_state, step
+from .mpm import ContinuumBlowUp, MPMState, MPMSystem, init_state, step
 from .timestep import stable_dt
 
 SUMMARY_NAME = "summary.json"
 BULK_CSV_NAME = "bulk_velocity.csv"
 VTK_DIR = "vtk"
+CHECKPOINT_NAME = "checkpoint.npz"
 
 
 @dataclass(frozen=True)
@@ -251,21 +262,98 @@ def _write_json_atomic(path: Path, data: dict) -> None:
     os.replace(tmp, path)
 
 
+def run_fingerprint(scenario, calibration: dict | None, options: LagrangianOptions,
+                    vtk: bool) -> str:
+    """A hash of everything that fixes a run's numbers (the scenario but for
+    run.checkpoint_every, the calibration, the options, vtk): a checkpoint resumes only the run
+    that wrote it."""
+    s = scenario.model_dump(mode="json")
+    s.get("run", {}).pop("checkpoint_every", None)
+    text = json.dumps({"scenario": s, "calibration": calibration,
+                       "options": dataclasses.asdict(options), "vtk": bool(vtk)},
+                      sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+class _Samples:
+    """What the samples of the vibration have recorded so far: the points as the DEM's
+    snapshots (lab position and velocity, tub pose), the wall contacts, the shear rates and the
+    ParaView files written; `arrays` / `from_arrays` carry it through a checkpoint unchanged."""
+
+    CONTACTS = {"snapshot": ((), np.int32), "particle": ((), np.int32), "fn": ((), np.float64),
+                "ft": ((), np.float64), "sliding": ((), np.bool_), "arc": ((), np.float64),
+                "position_tub": ((3,), np.float64)}
+
+    def __init__(self, n_samples: int, n_points: int, n_probes: int):
+        self.j = 0
+        self.pos = np.zeros((n_samples, n_points, 3), np.float32)
+        self.vel = np.zeros((n_samples, n_points, 3), np.float32)
+        self.poses = np.zeros((n_samples, 6))
+        self.contacts: dict[str, list] = {k: [] for k in self.CONTACTS}
+        self.rate_all = np.full(n_samples, np.nan)
+        self.rate_wall = np.full(n_samples, np.nan)
+        self.rate_probe = np.full((n_samples, n_probes), np.nan)
+        self.vtk: dict[str, list] = {"points": [], "grid": []}  # (t s, file name)
+
+    def contact_arrays(self) -> dict[str, np.ndarray]:
+        return {k: (np.concatenate(v) if v else np.zeros((0, *shape), dtype))
+                for (k, (shape, dtype)), v in zip(self.CONTACTS.items(),
+                                                  self.contacts.values())}
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        j = self.j
+        out = {"pos": self.pos[:j], "vel": self.vel[:j], "poses": self.poses[:j],
+               "rate_all": self.rate_all, "rate_wall": self.rate_wall,
+               "rate_probe": self.rate_probe}
+        out.update({"contact_" + k: v for k, v in self.contact_arrays().items()})
+        for kind, entries in self.vtk.items():
+            out[f"vtk_{kind}_t"] = np.array([t for t, _ in entries], dtype=np.float64)
+            out[f"vtk_{kind}_name"] = np.array([name for _, name in entries], dtype=np.str_)
+        return out
+
+    @classmethod
+    def from_arrays(cls, a: dict, n_samples: int, n_points: int, n_probes: int) -> "_Samples":
+        s = cls(n_samples, n_points, n_probes)
+        j = s.j = int(a["pos"].shape[0])
+        s.pos[:j], s.vel[:j], s.poses[:j] = a["pos"], a["vel"], a["poses"]
+        s.rate_all[:], s.rate_wall[:], s.rate_probe[:] = (a["rate_all"], a["rate_wall"],
+                                                          a["rate_probe"])
+        s.contacts = {k: [a["contact_" + k]] for k in cls.CONTACTS}
+        for kind in s.vtk:
+            s.vtk[kind] = [(float(t), str(name)) for t, name in
+                           zip(a[f"vtk_{kind}_t"], a[f"vtk_{kind}_name"])]
+        return s
+
+
 def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
                    options: LagrangianOptions | None = None, progress: bool = False,
-                   vtk: bool = False) -> dict:
+                   vtk: bool = False, resume: bool = False,
+                   stop_after_steps: int | None = None) -> dict | None:
     """Run the Lagrangian continuum of a tub scenario into out_dir (module docstring); returns
     the summary (also written to out_dir/summary.json with out_dir/bulk_velocity.csv).
 
-    vtk: also write ParaView files in out_dir/vtk: the material points (tub frame, velocity
-    relative to the tub, pressure, shear rate, solid fraction, state) at the samples of the
-    last vibration cycle (points_NNNNN.vtu, points.pvd) and the tub's surface (tub.vtu)."""
+    vtk: also write ParaView files in out_dir/vtk at the samples of the last vibration cycle:
+    the material points (tub frame, velocity relative to the tub, pressure, shear rate, solid
+    fraction, state; points_NNNNN.vtu, points.pvd), the grid fields of fields.py (velocity
+    relative to the tub, solid fraction, density, pressure, shear rate on the background grid;
+    grid_NNNNN.vtr, grid.pvd) and the tub's surface (tub.vtu).
+
+    Checkpoints: every run.checkpoint_every wall seconds of the vibration the whole state and
+    what has been sampled go to out_dir/checkpoint.npz (checkpoint.py, atomic); resume=True
+    continues from it (a run killed while settling starts afresh) and gives the same numbers,
+    bit for bit, as a run never interrupted; the checkpoint of another scenario, calibration or
+    options is an input error.  stop_after_steps: write a checkpoint and return None after that
+    many vibration steps of this call (to split a run; go on with resume=True).  A fresh run
+    first removes the folder's summary.json and bulk_velocity.csv, so a run killed before its
+    end never leaves results that look complete; summary.json is written last."""
     if scenario.tub is None or scenario.fill is None:
         raise InputError("scenario: the continuum needs a tub-mode scenario (with [tub] and "
                          "[fill]), not explicit particles")
     if sample_times(scenario)[0].size == 0:
         raise InputError(f"run.average_last = {scenario.run.average_last!r}: must hold at least "
                          "one whole vibration cycle to average over")
+    if stop_after_steps is not None and not int(stop_after_steps) >= 0:
+        raise InputError(f"stop_after_steps = {stop_after_steps!r}: must be >= 0")
     options = options or LagrangianOptions()
     material = material_of(scenario, calibration, options.model)
     motion = tub_motion(scenario)
@@ -275,93 +363,59 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
     geo = geometry_of(scenario)
     x, volume, density, stress, h = settled_bed(scenario, material, spacing)
     times, t0, t1 = sample_times(scenario)
+    S = times.size
+    probes = scenario.analysis.probes
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    ckpt = out / CHECKPOINT_NAME
+    fingerprint = run_fingerprint(scenario, calibration, options, vtk)
 
     wall0 = time.perf_counter()
-    state = settle(scenario, material, calibration, options, x, volume, density, stress,
-                   progress)
-    state.t = 0.0
-    state.step = 0
-    n = state.n
-    S = times.size
-    pos = np.zeros((S, n, 3), np.float32)
-    vel = np.zeros((S, n, 3), np.float32)
-    poses = np.zeros((S, 6))
-    contacts: dict[str, list] = {k: [] for k in ("snapshot", "particle", "fn", "ft", "sliding",
-                                                  "arc", "position_tub")}
-    probes = scenario.analysis.probes
-    cell = scenario.analysis.cell_size
-    probe_cells = [(math.floor(pr.x / cell + 0.5), math.floor(pr.z / cell + 0.5))
-                   for pr in probes.values()]
-    rate_all = np.full(S, np.nan)
-    rate_wall = np.full(S, np.nan)
-    rate_probe = np.full((S, len(probe_cells)), np.nan)
-    pv = (motion.pivot_x, motion.pivot_z)
-    sample_step = np.rint(times / system.dt).astype(np.int64)
-    n_steps = int(round(scenario.run.duration / system.dt))
-    buf_p, buf_v = np.zeros((n, 3)), np.zeros((n, 3))
-    arc, gap = np.zeros(n), np.zeros(n)
-    vtk_entries: list = []
-    if vtk:
-        from vibroflow.analysis.vtk import write_tub_surface
-
-        (out / VTK_DIR).mkdir(exist_ok=True)
-        write_tub_surface(out / VTK_DIR / "tub.vtu", geo)
-    wall_hist = state.history[0]
-    j = 0
     with RunProgress(progress) as prog:
-        prog.stage("continuum (lagrangian)", scenario.run.duration)
-        for k in range(n_steps + 1):
-            while j < S and sample_step[j] == k:
-                pose6 = np.array(system.frame.pose(state.t))
-                _to_lab(state.x, state.v, pose6, pv[0], pv[1], buf_p, buf_v, 0.5 * geo.length)
-                pos[j], vel[j], poses[j] = buf_p, buf_v, pose6
-                touching = np.nonzero(wall_hist["state"] > 0)[0]
-                _wall_gap_arc(state.x, geo.radius, gap, arc)
-                contacts["snapshot"].append(np.full(touching.size, j, np.int32))
-                contacts["particle"].append(touching.astype(np.int32))
-                # per metre of thickness -> over the slice (N), the DEM's unit
-                contacts["fn"].append(wall_hist["fn"][touching] * geo.length)
-                contacts["ft"].append(np.abs(wall_hist["ft"][touching]) * geo.length)
-                contacts["sliding"].append(wall_hist["state"][touching] == 2)
-                contacts["arc"].append(arc[touching].copy())
-                contacts["position_tub"].append(np.stack(
-                    [state.x[touching, 0], np.full(touching.size, 0.5 * geo.length),
-                     state.x[touching, 1]], axis=1))
-                rate = shear_rate(state.L)
-                if vtk and j >= S - scenario.run.phases_per_cycle:
-                    vtk_entries.append((state.t, _write_points_vtu(
-                        out / VTK_DIR / f"points_{j:05d}.vtu", state, rate, geo.length,
-                        material.solid_density)))
-                rate_all[j] = rate.mean()
-                near = gap < 0.5 * cell
-                if near.any():
-                    rate_wall[j] = rate[near].mean()
-                ci = np.floor(state.x[:, 0] / cell + 0.5)
-                ck = np.floor(state.x[:, 1] / cell + 0.5)
-                for q, (pi, pk) in enumerate(probe_cells):
-                    inside = (ci == pi) & (ck == pk)
-                    if inside.any():
-                        rate_probe[j, q] = rate[inside].mean()
-                j += 1
-            if k == n_steps:
-                break
-            step(system, state)
-            if k % 200 == 0:
-                prog.update(state.t, (k + 1) * n)
-    wall_time = time.perf_counter() - wall0
+        if resume and ckpt.exists():
+            state, arrays, meta = load_checkpoint(ckpt)
+            if meta.get("fingerprint") != fingerprint:
+                raise InputError(f"--resume: {ckpt} is the checkpoint of another scenario, "
+                                 "calibration or options; run without --resume to start "
+                                 "afresh")
+            samples = _Samples.from_arrays(arrays, S, state.n, len(probes))
+            wall_before = float(meta["wall_time_s"])
+            prog.log(f"resuming from {ckpt} at t = {state.t:.4f} s")
+        else:
+            if resume:
+                prog.log(f"no checkpoint in {out}: starting afresh")
+            for name in (SUMMARY_NAME, BULK_CSV_NAME, CHECKPOINT_NAME):
+                (out / name).unlink(missing_ok=True)
+            state = settle(scenario, material, calibration, options, x, volume, density,
+                           stress, prog)
+            state.t = 0.0
+            state.step = 0
+            samples = _Samples(S, state.n, len(probes))
+            wall_before = 0.0
+        try:
+            done = _vibrate(scenario, system, state, samples, geo, material, times, out, vtk,
+                            prog, ckpt, fingerprint, wall_before, wall0, stop_after_steps)
+        except ContinuumBlowUp:
+            ckpt.unlink(missing_ok=True)  # a blown-up run has nothing to resume
+            raise
+    if not done:
+        return None
+    wall_time = wall_before + time.perf_counter() - wall0
+    n = state.n
+    n_steps = state.step
     if vtk:
         from vibroflow.analysis.vtk import write_pvd
 
-        write_pvd(out / VTK_DIR / "points.pvd", vtk_entries)
+        write_pvd(out / VTK_DIR / "points.pvd", samples.vtk["points"])
+        write_pvd(out / VTK_DIR / "grid.pvd", samples.vtk["grid"])
 
     radius = np.cbrt(3.0 * state.mass * geo.length / (4.0 * math.pi * material.solid_density))
     source = {"attrs": {"frequency": scenario.motion.frequency},
-              "snapshots/time": times, "snapshots/position": pos, "snapshots/velocity": vel,
-              "snapshots/tub_pose": poses, "particles/radius": radius}
+              "snapshots/time": times, "snapshots/position": samples.pos,
+              "snapshots/velocity": samples.vel, "snapshots/tub_pose": samples.poses,
+              "particles/radius": radius}
     if S:
-        source.update({"wall_contacts/" + k: np.concatenate(v) for k, v in contacts.items()})
+        source.update({"wall_contacts/" + k: v for k, v in samples.contact_arrays().items()})
         source["wall_contacts/wall"] = np.zeros(source["wall_contacts/fn"].size, np.int8)
     # the DEM's top-level keys (vibroflow.dem.run), with the points as its particles
     summary = {"case": scenario.case, "source": "vibroflow continuum", "method": "lagrangian",
@@ -375,21 +429,117 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
     summary["continuum"] = _continuum_block(material, system, state, spacing, h, n_steps,
                                             wall_time)
     summary["continuum"].update(_shear_rate_outputs(
-        material, calibration, list(probes), batch, scenario.run.batches, rate_all, rate_wall,
-        rate_probe, summary["impacts"]))
+        material, calibration, list(probes), batch, scenario.run.batches, samples.rate_all,
+        samples.rate_wall, samples.rate_probe, summary["impacts"]))
     summary = json_safe(summary)
     _write_json_atomic(out / SUMMARY_NAME, summary)
+    ckpt.unlink(missing_ok=True)
     return summary
 
 
+def _vibrate(scenario, system, state, samples: _Samples, geo, material, times, out: Path,
+             vtk: bool, prog: RunProgress, ckpt: Path, fingerprint: str, wall_before: float,
+             wall0: float, stop_after_steps: int | None) -> bool:
+    """Vibrate from state.step to the end of run.duration, sampling at `times` and writing a
+    checkpoint every run.checkpoint_every wall seconds; False when stopped by
+    stop_after_steps (after its checkpoint)."""
+    run = scenario.run
+    S = times.size
+    n = state.n
+    motion = system.frame.motion
+    pv = (motion.pivot_x, motion.pivot_z)
+    cell = scenario.analysis.cell_size
+    probe_cells = [(math.floor(pr.x / cell + 0.5), math.floor(pr.z / cell + 0.5))
+                   for pr in scenario.analysis.probes.values()]
+    sample_step = np.rint(times / system.dt).astype(np.int64)
+    n_steps = int(round(run.duration / system.dt))
+    buf_p, buf_v = np.zeros((n, 3)), np.zeros((n, 3))
+    arc, gap = np.zeros(n), np.zeros(n)
+    if vtk:
+        from vibroflow.analysis.vtk import write_tub_surface
+
+        (out / VTK_DIR).mkdir(exist_ok=True)
+        write_tub_surface(out / VTK_DIR / "tub.vtu", geo)
+    wall_hist = state.history[0]
+    k0 = state.step
+    last_ckpt = time.perf_counter()
+
+    def checkpoint():
+        save_checkpoint(ckpt, state, samples.arrays(), {
+            "fingerprint": fingerprint,
+            "wall_time_s": wall_before + time.perf_counter() - wall0})
+
+    prog.stage("continuum (lagrangian)", run.duration)
+    for k in range(k0, n_steps + 1):
+        while samples.j < S and sample_step[samples.j] == k:
+            j = samples.j
+            pose6 = np.array(system.frame.pose(state.t))
+            _to_lab(state.x, state.v, pose6, pv[0], pv[1], buf_p, buf_v, 0.5 * geo.length)
+            samples.pos[j], samples.vel[j], samples.poses[j] = buf_p, buf_v, pose6
+            touching = np.nonzero(wall_hist["state"] > 0)[0]
+            _wall_gap_arc(state.x, geo.radius, gap, arc)
+            c = samples.contacts
+            c["snapshot"].append(np.full(touching.size, j, np.int32))
+            c["particle"].append(touching.astype(np.int32))
+            # per metre of thickness -> over the slice (N), the DEM's unit
+            c["fn"].append(wall_hist["fn"][touching] * geo.length)
+            c["ft"].append(np.abs(wall_hist["ft"][touching]) * geo.length)
+            c["sliding"].append(wall_hist["state"][touching] == 2)
+            c["arc"].append(arc[touching].copy())
+            c["position_tub"].append(np.stack(
+                [state.x[touching, 0], np.full(touching.size, 0.5 * geo.length),
+                 state.x[touching, 1]], axis=1))
+            rate = shear_rate(state.L)
+            if vtk and j >= S - run.phases_per_cycle:
+                name = f"points_{j:05d}.vtu"
+                _write_points_vtu(out / VTK_DIR / name, state, rate, geo.length,
+                                  material.solid_density)
+                samples.vtk["points"].append((state.t, name))
+                name = f"grid_{j:05d}.vtr"
+                fields = grid_fields(system.grid, state.x, state.v, state.mass,
+                                     state.pressure(), rate, material.solid_density)
+                write_grid_vtr(out / VTK_DIR / name, system.grid, fields, 0.5 * geo.length)
+                samples.vtk["grid"].append((state.t, name))
+            samples.rate_all[j] = rate.mean()
+            near = gap < 0.5 * cell
+            if near.any():
+                samples.rate_wall[j] = rate[near].mean()
+            ci = np.floor(state.x[:, 0] / cell + 0.5)
+            ck = np.floor(state.x[:, 1] / cell + 0.5)
+            for q, (pi, pk) in enumerate(probe_cells):
+                inside = (ci == pi) & (ck == pk)
+                if inside.any():
+                    samples.rate_probe[j, q] = rate[inside].mean()
+            samples.j += 1
+        if k == n_steps:
+            break
+        if stop_after_steps is not None and k - k0 >= stop_after_steps:
+            checkpoint()
+            prog.log(f"stopped at t = {state.t:.4f} s (step {k}); go on with --resume")
+            return False
+        if time.perf_counter() - last_ckpt > run.checkpoint_every:
+            checkpoint()
+            last_ckpt = time.perf_counter()
+        step(system, state)
+        if k % 200 == 0:
+            prog.update(state.t, (k + 1 - k0) * n)
+    prog.update(state.t, (n_steps - k0) * n)
+    return True
+
+
 def settle(scenario, material, calibration, options, x, volume, density, stress,
-           progress: bool = False) -> MPMState:
+           prog: RunProgress | None = None) -> MPMState:
     """The bed after options.settle_time in the still tub (module docstring, step 1)."""
     gravity = (float(scenario.gravity[0]), float(scenario.gravity[2]))
     system, _ = make_system(scenario, material, calibration, options, LabFrame(gravity))
     state = init_state(system, x, volume, density, stress=stress)
-    for _ in range(int(math.ceil(options.settle_time / system.dt))):
+    steps = int(math.ceil(options.settle_time / system.dt))
+    if prog is not None:
+        prog.stage("continuum: settle (still tub)", options.settle_time)
+    for k in range(steps):
         step(system, state)
+        if prog is not None and k % 200 == 0:
+            prog.update(state.t, (k + 1) * state.n)
     return state
 
 
