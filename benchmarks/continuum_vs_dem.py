@@ -1,0 +1,286 @@
+"""The Lagrangian continuum (material point method) against vibroflow's DEM on the tub case.
+
+    python benchmarks/continuum_vs_dem.py [--case tub47-quick|tub47] [--factors 0.5 1.0 1.5]
+        [--calibration FILE] [--dem-dir DIR ...] [--run-dem] [--seeds 1 2] [--e-seed E]
+        [--dx M] [--rheology mu_i|drucker_prager] [--out DIR]
+
+For each amplitude factor s (tub47.md "Amplitude sweep": the three amplitudes times s) the
+script needs the DEM of the case at s for each seed of --seeds, and runs the Lagrangian continuum
+(vibroflow.continuum.run.run_lagrangian) of the same scenario, so for the same simulated time
+and on the same cells and probes, with the parameters of --calibration (a calibration.toml from
+`vibroflow calibrate`; without it tub47's defaults).
+
+The DEM runs come from --dem-dir (existing `vibroflow dem` folders, each matched to its case,
+amplitude factor and seed through the scenario stored in its dem.h5; a folder whose scenario
+differs from the case's in anything else is refused), else from --out/dem_s<factor>_seed<seed>
+when a finished run is there, else, with --run-dem, they are run there now (tub47-quick: minutes
+each; tub47: about half an hour each).  A factor with no DEM run is reported without it.
+
+Printed for each factor: the probe velocities (vx, vz +- batch-means standard errors) of the DEM
+and of the continuum; the circulation strengths with their standard errors and senses; the field
+difference E(continuum, DEM) of tub47.md (vibroflow.analysis.compare, the DEM of the first seed
+the reference) beside the DEM's seed-to-seed E (E(DEM seed 2, DEM seed 1) when two seeds are
+there, else the value of --e-seed, marked "given"); the tub47.md verdicts (strengths agree within
+max(10 %, 2 combined standard errors) and the same sense; fields agree when E(continuum, DEM) <=
+1.5 E_seed); and the wall times of both and their ratio (the issue's target: the continuum at
+least 100 times cheaper at equal accuracy).  Wall times are those the runs recorded in their
+summary.json ("wall_time_s": the DEM's from its start, fill from the cache or not, the
+continuum's with its settling); the DEM's were taken whenever and with whatever load its run
+had, so the ratio is indicative unless both ran on a quiet machine.
+
+Everything also goes to --out/report.json (default runs/continuum_vs_dem/<case>/, git-ignored),
+with the continuum runs' folders beside it.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import sys
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+PROBES = ("P1", "P2", "P3", "P4", "P5")
+
+
+def _write_json(path: Path, data) -> None:
+    from vibroflow.analysis.summary import json_safe
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(".tmp-" + path.name)
+    tmp.write_text(json.dumps(json_safe(data), indent=2) + "\n")
+    os.replace(tmp, path)
+
+
+def scenario_at(case: str, factor: float, seed: int, overrides: list[str]):
+    from vibroflow.scenario.io import load_scenario
+
+    return load_scenario(case, [*overrides, f"motion.amplitude_factor={factor!r}",
+                                f"run.seed={seed}"])
+
+
+def _comparable(s) -> dict:
+    """A scenario's fields that must agree between a reused DEM run and the case (all but
+    the amplitude factor, the seed and the run's bookkeeping)."""
+    d = s.model_dump(mode="json")
+    d["motion"].pop("amplitude_factor", None)
+    for key in ("seed", "checkpoint_every", "series_every", "record_impacts"):
+        d["run"].pop(key, None)
+    return d
+
+
+def dem_run_scenario(folder: Path):
+    """The scenario a `vibroflow dem` folder was run with (from dem.h5)."""
+    import h5py
+
+    from vibroflow.scenario.io import parse_scenario
+
+    with h5py.File(folder / "dem.h5", "r") as f:
+        text = f.attrs["scenario_toml"]
+    return parse_scenario(tomllib.loads(text if isinstance(text, str) else text.decode()))
+
+
+def collect_dem_dirs(dirs: list[Path], case: str, overrides: list[str]) -> dict:
+    """{(factor, seed): folder} of the given DEM folders, checked against the case."""
+    found = {}
+    for d in dirs:
+        if not (d / "summary.json").is_file() or not (d / "dem.h5").is_file():
+            sys.exit(f"error: --dem-dir = {str(d)!r}: no finished DEM run (summary.json, "
+                     "dem.h5) there")
+        s = dem_run_scenario(d)
+        ref = scenario_at(case, s.motion.amplitude_factor, s.run.seed, overrides)
+        if _comparable(s) != _comparable(ref):
+            sys.exit(f"error: --dem-dir = {str(d)!r}: its scenario ({s.case}) is not {case} "
+                     "(with these --set) but for the amplitude factor and seed")
+        found[(round(float(s.motion.amplitude_factor), 6), int(s.run.seed))] = d
+    return found
+
+
+def run_dem_here(scenario, folder: Path) -> None:
+    from vibroflow.dem.run import run_dem
+
+    print(f"  DEM {scenario.case} x{scenario.motion.amplitude_factor:g} seed "
+          f"{scenario.run.seed} -> {folder}", flush=True)
+    run_dem(scenario, folder, resume=True, progress=True)
+
+
+def load_result(folder: Path, cell_size: float) -> dict:
+    """A run's summary.json with its bulk_velocity.csv (cells of cell_size m) as "_table"."""
+    from vibroflow.analysis.bulk import read_csv
+
+    summary = json.loads((folder / "summary.json").read_text())
+    summary["_table"] = read_csv(folder / "bulk_velocity.csv", cell_size=cell_size)
+    summary["_folder"] = str(folder)
+    return summary
+
+
+def _f(x, fmt="{:+.4f}") -> str:
+    return "n/a" if x is None or (isinstance(x, float) and not math.isfinite(x)) else fmt.format(x)
+
+
+def _pm(v, se, fmt="{:+.4f}") -> str:
+    return f"{_f(v, fmt)} +- {_f(se, fmt.replace('+', ''))}"
+
+
+def compare_factor(factor: float, cont: dict, dems: list[dict],
+                   e_seed_given: float | None) -> dict:
+    """The numbers and verdicts of one amplitude factor (module docstring)."""
+    from vibroflow.analysis.compare import (FIELD_FACTOR, field_difference, fields_agree,
+                                            strengths_agree)
+
+    out: dict = {"factor": factor, "continuum": _brief(cont),
+                 "dem": [_brief(d) for d in dems]}
+    if not dems:
+        return out
+    ref = dems[0]
+    cc, dc = cont["circulation"], ref["circulation"]
+    out["strengths_agree"] = strengths_agree(cc["strength"], cc["strength_stderr"],
+                                             dc["strength"], dc["strength_stderr"],
+                                             cc["sense"], dc["sense"])
+    out["strength_ratio"] = cc["strength"] / dc["strength"] if dc["strength"] else None
+    out["E_continuum_dem"] = field_difference(cont["_table"], ref["_table"])
+    if len(dems) > 1:
+        out["E_seed"] = field_difference(dems[1]["_table"], ref["_table"])
+        out["E_seed_source"] = "DEM seed 2 against seed 1"
+    elif e_seed_given is not None:
+        out["E_seed"] = e_seed_given
+        out["E_seed_source"] = "given (--e-seed)"
+    else:
+        out["E_seed"] = None
+        out["E_seed_source"] = "one DEM seed only"
+    out["fields_agree"] = (fields_agree(out["E_continuum_dem"], out["E_seed"])
+                           if out["E_seed"] is not None else None)
+    out["field_factor_limit"] = FIELD_FACTOR
+    wd, wc = ref.get("wall_time_s"), cont.get("wall_time_s")
+    out["wall_time_ratio_dem_over_continuum"] = wd / wc if wd and wc else None
+    return out
+
+
+def _brief(r: dict) -> dict:
+    return {"folder": r["_folder"], "source": r.get("source"),
+            "n_particles": r.get("n_particles"), "simulated_time_s": r.get("simulated_time_s"),
+            "wall_time_s": r.get("wall_time_s"), "circulation": r.get("circulation"),
+            "probes": r.get("probes")}
+
+
+def print_factor(res: dict, cont: dict, dems: list[dict], seeds: list[int]) -> None:
+    f = res["factor"]
+    print(f"\n=== amplitude factor {f:g} ===")
+    rows = [("continuum", cont)] + [(f"DEM seed {s}", d) for s, d in zip(seeds, dems)]
+    print(f"{'probe':<6}" + "".join(f"{name + ' vx, vz (m/s)':>42}" for name, _ in rows))
+    for p in PROBES:
+        line = f"{p:<6}"
+        for _, r in rows:
+            q = r["probes"].get(p, {})
+            pair = (f"{_pm(q.get('vx'), q.get('vx_stderr'))}, "
+                    f"{_pm(q.get('vz'), q.get('vz_stderr'))}")
+            line += pair.rjust(42)
+        print(line)
+    for name, r in rows:
+        c = r["circulation"]
+        print(f"{name:<12} circulation {c['sense']:<16} strength "
+              f"{_pm(c['strength'], c['strength_stderr'], '{:.4e}')} m^2/s"
+              f"   wall {r.get('wall_time_s', float('nan')):8.1f} s"
+              f"   simulated {r.get('simulated_time_s', float('nan')):.3f} s"
+              f"   {r.get('n_particles')} {'points' if name == 'continuum' else 'balls'}")
+    if not dems:
+        print("no DEM run for this factor: nothing to compare")
+        return
+    ratio = res.get("strength_ratio")
+    print(f"strength continuum / DEM = {_f(ratio, '{:.3f}')}; strengths agree (tub47.md): "
+          f"{'yes' if res['strengths_agree'] else 'no'}")
+    es = res["E_seed"]
+    verdict = {True: "yes", False: "no",
+               None: "cannot say (no seed-to-seed E)"}[res["fields_agree"]]
+    print(f"E(continuum, DEM) = {res['E_continuum_dem']:.3f}; DEM seed-to-seed E = "
+          f"{_f(es, '{:.3f}')} ({res['E_seed_source']}); limit 1.5 E_seed = "
+          f"{_f(1.5 * es if es is not None else None, '{:.3f}')}; fields agree: {verdict}")
+    r = res["wall_time_ratio_dem_over_continuum"]
+    print(f"wall time DEM / continuum = {_f(r, '{:.1f}')} (target >= 100)")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--case", default="tub47-quick", choices=["tub47-quick", "tub47"])
+    ap.add_argument("--factors", type=float, nargs="+", default=[0.5, 1.0, 1.5])
+    ap.add_argument("--calibration", type=Path, default=None,
+                    help="calibration.toml (or a run folder holding one)")
+    ap.add_argument("--dem-dir", type=Path, action="append", default=[],
+                    help="an existing `vibroflow dem` folder of the case (repeatable)")
+    ap.add_argument("--run-dem", action="store_true",
+                    help="run the DEM runs that are missing into --out")
+    ap.add_argument("--seeds", type=int, nargs="+", default=[1],
+                    help="DEM fill seeds (the first is the reference)")
+    ap.add_argument("--e-seed", type=float, default=None,
+                    help="the DEM's seed-to-seed E to judge with when only one seed is there")
+    ap.add_argument("--dx", type=float, default=None, help="continuum grid spacing (m)")
+    ap.add_argument("--rheology", default="mu_i", choices=["mu_i", "drucker_prager"])
+    ap.add_argument("--reuse-continuum", action="store_true",
+                    help="reuse finished continuum runs in --out instead of running them")
+    ap.add_argument("--set", dest="overrides", action="append", default=[],
+                    metavar="KEY=VALUE", help="scenario override for both methods")
+    ap.add_argument("--out", type=Path, default=None)
+    args = ap.parse_args(argv)
+    out = args.out or Path("runs") / "continuum_vs_dem" / args.case
+    out.mkdir(parents=True, exist_ok=True)
+
+    from vibroflow.continuum.run import LagrangianOptions, run_lagrangian
+    from vibroflow.errors import InputError
+
+    try:
+        cal = None
+        if args.calibration is not None:
+            from vibroflow.calibration.calibrate import read_calibration
+
+            cal = read_calibration(args.calibration)
+        dem_dirs = collect_dem_dirs(args.dem_dir, args.case, args.overrides)
+        options = LagrangianOptions(dx=args.dx, model=args.rheology)
+    except InputError as e:
+        print(f"error: {e.message}", file=sys.stderr)
+        return 2
+
+    report = {"case": args.case, "calibration": str(args.calibration) if args.calibration
+              else None, "options": {"dx": args.dx, "rheology": args.rheology},
+              "seeds": args.seeds, "overrides": args.overrides,
+              "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
+                          "load_1min_start": os.getloadavg()[0]}, "factors": []}
+    print(f"{args.case}: continuum (lagrangian, {args.rheology}) against the DEM; calibration "
+          f"{args.calibration or 'none (tub47 defaults)'}; load {os.getloadavg()[0]:.2f}")
+    cell = scenario_at(args.case, 1.0, args.seeds[0], args.overrides).analysis.cell_size
+    for factor in args.factors:
+        key_f = round(factor, 6)
+        dems = []
+        for seed in args.seeds:
+            folder = dem_dirs.get((key_f, seed)) or out / f"dem_s{factor:g}_seed{seed}"
+            if not (folder / "summary.json").is_file():
+                if not args.run_dem:
+                    print(f"  (no DEM run of x{factor:g} seed {seed}: give --dem-dir or "
+                          "--run-dem)")
+                    continue
+                run_dem_here(scenario_at(args.case, factor, seed, args.overrides), folder)
+            dems.append(load_result(folder, cell))
+        seeds_found = [s for s in args.seeds
+                       if (dem_dirs.get((key_f, s)) or out / f"dem_s{factor:g}_seed{s}"
+                           ).joinpath("summary.json").is_file()]
+        cfolder = out / f"continuum_s{factor:g}"
+        if not (args.reuse_continuum and (cfolder / "summary.json").is_file()):
+            s = scenario_at(args.case, factor, args.seeds[0], args.overrides)
+            print(f"  continuum x{factor:g} -> {cfolder}", flush=True)
+            run_lagrangian(s, cfolder, calibration=cal, options=options, progress=True)
+        cont = load_result(cfolder, cell)
+        res = compare_factor(factor, cont, dems, args.e_seed)
+        print_factor(res, cont, dems, seeds_found)
+        report["factors"].append(res)
+        _write_json(out / "report.json", report)
+    report["machine"]["load_1min_end"] = os.getloadavg()[0]
+    _write_json(out / "report.json", report)
+    print(f"\nreport in {out / 'report.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
