@@ -42,7 +42,6 @@ import sys
 import tomllib
 from pathlib import Path
 
-import numpy as np
 
 PROBES = ("P1", "P2", "P3", "P4", "P5")
 
