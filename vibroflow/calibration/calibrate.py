@@ -163,7 +163,8 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
                            pressure=p_bed, solid_fraction=phi_bed,
                            coordination_number=z["z_all"])
         from .rheology_fit import drucker_prager_equivalent
-        gam_ref = _median_dense(avg, "shear_rate")
+        # the bed's typical instantaneous shear rate (cycle mean of the phase-resolved field)
+        gam_ref = _median_dense(avg, "shear_rate_cycle_mean")
         dp = drucker_prager_equivalent(rheo["mu_s"], rheo["mu_2"], rheo["I_0"],
                                        rheo["phi_max"], rheo["phi_min"], p_bed, d, rho_s,
                                        gam_ref)
@@ -301,7 +302,7 @@ def _calibration_record(res, cg_info, wf, rel, rheo, elastic, dp, p_bed, phi_bed
         "rheology": {
             "model": "mu(I): mu = mu_s + (mu_2 - mu_s) / (1 + I_0 / I); "
                      "phi(I) = phi_max - (phi_max - phi_min) I",
-            **{k: (v if isinstance(v, str) else _f(v)) for k, v in rheo.items()},
+            **{k: (v if isinstance(v, (str, int)) else _f(v)) for k, v in rheo.items()},
             # Dunatunga & Kamrin 2015: below the critical density the material is disconnected
             # (stress-free); the steady quasi-static packing phi(I -> 0) = phi_max
             "critical_solid_fraction": _f(rheo["phi_max"]),

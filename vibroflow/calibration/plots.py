@@ -75,7 +75,12 @@ def field_maps(path, fields, geometry, min_solid_fraction: float = 0.05) -> Path
         _outline(ax, geometry)
         ax.set_title(title)
     ax = axes[0, 1]
-    ax.quiver(X[bed], Z[bed], vx[bed], vz[bed], color="white", scale=None, width=0.004)
+    # arrows about every 15 mm, so that they can be read on a fine grid
+    step = max(1, int(round(0.015 / max(float(x[1] - x[0]), 1e-12)))) if x.size > 1 else 1
+    sub = np.zeros_like(bed)
+    sub[::step, ::step] = True
+    sel = bed & sub
+    ax.quiver(X[sel], Z[sel], vx[sel], vz[sel], color="white", scale=None, width=0.004)
     case = fields.attrs.get("case", "")
     fig.suptitle(f"{case}: coarse-grained fields, time-averaged over the window "
                  f"({fields.attrs.get('n_snapshots', '?')} snapshots, kernel "
