@@ -43,7 +43,8 @@ if TYPE_CHECKING:
 
 __all__ = ["__version__", "load_scenario", "Scenario"]
 
-_LAZY = {"load_scenario": "vibroflow.scenario.io", "Scenario": "vibroflow.scenario.model"}
+_LAZY = {"load_scenario": "vibroflow.scenario.io", "Scenario": "vibroflow.scenario.model",
+         "load": "vibroflow.study.results"}
 
 
 def __getattr__(name: str) -> Any:

@@ -286,6 +286,55 @@ def continuum(
 
 
 # ----------------------------------------------------------------------------------------------
+# run: the whole study
+
+@app.command("run")
+@input_errors
+def run(
+    scenario: Annotated[str, typer.Argument(
+        metavar="[SCENARIO]", help="A preset (tub47, tub47-quick) or a TOML file.")] = "tub47-quick",
+    out: Annotated[Path, typer.Option("--out", "-o", help="Study folder.")] = ...,
+    set_: Annotated[Optional[list[str]], typer.Option(
+        "--set", "-s", metavar="KEY=VALUE",
+        help="Override a scenario field (run.duration=0.2) or set a continuum method's option "
+             "(lagrangian.dx=0.004, lagrangian.model=\"drucker_prager\"); repeatable, the "
+             "value is read as TOML.")] = None,
+    shear_cell: Annotated[bool, typer.Option(
+        "--shear-cell", help="Calibrate mu(I) and the moduli in DEM shear-cell tests "
+                             "(minutes) instead of the tub's own cells.")] = False,
+) -> None:
+    """DEM, calibration, every continuum formulation and their comparison into --out; a rerun
+    redoes only the stages whose inputs changed (DIR/summary.json, vibroflow.load(DIR))."""
+    from vibroflow.study.pipeline import check_study_dir, split_settings
+
+    scenario_sets, method_sets = split_settings(set_)
+    s = _load(scenario, scenario_sets)  # before anything is written
+    check_study_dir(out)
+    from vibroflow.continuum.mpm import ContinuumBlowUp
+    from vibroflow.dem.simulate import BlowUp
+    from vibroflow.study.pipeline import run_study
+
+    try:
+        summary = run_study(s, out, method_sets, shear_cell=shear_cell, progress=True,
+                            echo=typer.echo)
+    except (BlowUp, ContinuumBlowUp) as exc:
+        sys.stderr.write("error: " + str(exc) + "\n")
+        raise typer.Exit(EXIT_BLOWUP)
+    for name, m in summary["methods"].items():
+        c = m["circulation"]
+        line = (f"{name}: circulation {c['sense']} {c['strength']:.4g} m^2/s, wall time "
+                f"{m['wall_time_s']:.1f} s")
+        a = m.get("against_dem")
+        if a:
+            E = a["field_difference_E"]
+            line += (f", E vs DEM = {E:.3f}" if E is not None else ", E vs DEM: n/a")
+            line += (", circulation " + ("agrees" if a["circulation_agrees"] else "differs")
+                     + f", cost x{a['cost_ratio']:.3g}")
+        typer.echo(line)
+    typer.echo(f"results in {out}/summary.json")
+
+
+# ----------------------------------------------------------------------------------------------
 # LIGGGHTS round trip
 
 @export_app.command("liggghts")

@@ -1,0 +1,141 @@
+"""`vibroflow run`: the study pipeline (DEM, calibration, continuum, comparison) with kept
+stages, on a tiny tub (400 balls, 0.2 s of vibration)."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from tests.test_calibrate import SMALL
+
+STAGES = ("dem", "calibration", "lagrangian", "comparison")
+
+
+def _mtimes(out):
+    return {s: (out / s / "stage.json").stat().st_mtime_ns for s in STAGES}
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    from vibroflow.scenario.io import load_scenario
+    from vibroflow.study import run_study
+
+    tmp = tmp_path_factory.mktemp("study")
+    old = os.environ.get("VIBROFLOW_CACHE")
+    os.environ["VIBROFLOW_CACHE"] = str(tmp / "cache")
+    try:
+        scenario = load_scenario("tub47-quick", SMALL)
+        lines: list[str] = []
+        out = tmp / "run"
+        summary = run_study(scenario, out, echo=lines.append)
+        yield scenario, out, summary, lines
+    finally:
+        if old is None:
+            os.environ.pop("VIBROFLOW_CACHE", None)
+        else:
+            os.environ["VIBROFLOW_CACHE"] = old
+
+
+def test_pipeline_runs_end_to_end(study):
+    import xarray as xr
+
+    import vibroflow
+    from vibroflow.analysis.bulk import read_csv
+    from vibroflow.analysis.compare import field_difference
+
+    scenario, out, summary, lines = study
+    assert len(lines) == len(STAGES)  # one progress line per stage
+    assert all("done in" in line and "time left" in line for line in lines)
+    for s in STAGES:
+        rec = json.loads((out / s / "stage.json").read_text())
+        assert rec["stage"] == s and len(rec["hash"]) == 64
+        assert not (out / s / "pending.json").exists()
+    assert set(summary["methods"]) == {"dem", "lagrangian"}
+    for name, m in summary["methods"].items():
+        assert set(m["probes"]) == set(scenario.analysis.probes), name
+        assert m["circulation"]["sense"] in ("clockwise", "counterclockwise")
+        assert m["wall_time_s"] > 0
+        assert "ball_ball_mean_normal_speed" in m["impacts"]
+    a = summary["methods"]["lagrangian"]["against_dem"]
+    assert a["field_difference_E"] is not None and a["field_difference_E"] > 0
+    assert isinstance(a["circulation_agrees"], bool)
+    assert a["cost_ratio"] == pytest.approx(summary["methods"]["lagrangian"]["wall_time_s"]
+                                            / summary["methods"]["dem"]["wall_time_s"])
+    # E of a field against itself is 0 (the definition), and the DEM's is the reference
+    dem = read_csv(out / "dem" / "bulk_velocity.csv", cell_size=scenario.analysis.cell_size)
+    assert field_difference(dem, dem) == 0.0
+
+    loaded = vibroflow.load(out)
+    assert loaded["methods"] == summary["methods"]
+    for name in ("dem", "lagrangian"):
+        ds = loaded["fields"][name]
+        assert isinstance(ds, xr.Dataset)
+        # every cell of the table lands on its own grid point of the Dataset
+        table = read_csv(out / name / "bulk_velocity.csv")
+        assert int(np.isfinite(ds["vx"].values).sum()) == len(table)
+        assert ds["samples"].values.sum() == pytest.approx(table.samples.sum())
+        phi = ds["solid_fraction"].values
+        assert np.all((phi >= 0) & (phi <= 1))
+
+
+def test_rerun_recomputes_nothing(study):
+    from vibroflow.study import run_study
+
+    scenario, out, _, _ = study
+    before = _mtimes(out)
+    lines: list[str] = []
+    t0 = time.perf_counter()
+    summary = run_study(scenario, out, echo=lines.append)
+    assert time.perf_counter() - t0 < 5.0
+    assert _mtimes(out) == before
+    assert all("kept" in line for line in lines)
+    assert set(summary["methods"]) == {"dem", "lagrangian"}
+
+
+def test_continuum_setting_reruns_only_continuum_and_comparison(study):
+    from vibroflow.study import run_study
+
+    scenario, out, _, _ = study
+    before = _mtimes(out)
+    lines: list[str] = []
+    run_study(scenario, out, settings={"lagrangian": {"cfl": 0.25}}, echo=lines.append)
+    after = _mtimes(out)
+    assert after["dem"] == before["dem"] and after["calibration"] == before["calibration"]
+    assert after["lagrangian"] != before["lagrangian"]
+    assert after["comparison"] != before["comparison"]
+    rec = json.loads((out / "lagrangian" / "stage.json").read_text())
+    assert rec["inputs"]["options"]["cfl"] == 0.25
+
+
+def _cli(*args):
+    env = dict(os.environ, NO_COLOR="1")
+    return subprocess.run([sys.executable, "-m", "vibroflow.cli", *map(str, args)],
+                          capture_output=True, text=True, env=env, stdin=subprocess.DEVNULL)
+
+
+def test_foreign_or_corrupt_dir_is_a_one_line_error(tmp_path):
+    import vibroflow
+    from vibroflow.errors import InputError
+
+    foreign = tmp_path / "foreign"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("mine\n")
+    corrupt = tmp_path / "corrupt"
+    corrupt.mkdir()
+    (corrupt / "study.json").write_text("{not json")
+    for folder in (foreign, corrupt):
+        r = _cli("run", "tub47-quick", "--out", folder, "--set", "run.duration=0.2")
+        assert r.returncode == 2, r.stderr
+        assert r.stderr.startswith("error: ") and r.stderr.count("\n") == 1, r.stderr
+        assert "Traceback" not in r.stderr
+        with pytest.raises(InputError):
+            vibroflow.load(folder)
+    assert sorted(p.name for p in foreign.iterdir()) == ["notes.txt"]  # nothing written
+    r = _cli("run", "--out", tmp_path / "new", "--set", "lagrangian.nope=1")
+    assert r.returncode == 2 and "lagrangian.nope" in r.stderr
+    assert not (tmp_path / "new").exists()

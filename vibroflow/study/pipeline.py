@@ -1,0 +1,205 @@
+"""Running a study's stages with kept results (see the package notes).
+
+A stage is kept when DIR/<stage>/stage.json exists, holds the hash of the stage's inputs now,
+and its outputs exist.  Otherwise it runs: DIR/<stage>/pending.json first records the hash it
+runs for; an interrupted stage found again with the same hash resumes (the DEM and the
+continuum from their checkpoints), one with another hash starts afresh in an emptied folder.
+stage.json is written atomically and last, so a killed stage never looks finished.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+import time
+import tomllib
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from vibroflow.errors import InputError
+from vibroflow.study.methods import METHODS, method
+from vibroflow.study.stages import Stage, Study, stages_of, write_json_atomic
+
+STUDY_FILE = "study.json"
+STAGE_FILE = "stage.json"
+PENDING_FILE = "pending.json"
+KIND = "vibroflow study"
+
+
+def _read_json(path: Path, what: str) -> dict:
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"{path}: corrupt {what} ({type(exc).__name__}); remove the folder "
+                         "or give another --out") from None
+    if not isinstance(data, dict):
+        raise InputError(f"{path}: corrupt {what} (not a JSON table); remove the folder or "
+                         "give another --out")
+    return data
+
+
+def check_study_dir(out: Path, must_exist: bool = False) -> None:
+    """Raise an InputError (one line) unless `out` is new, empty, or a study folder."""
+    out = Path(out)
+    if not out.exists():
+        if must_exist:
+            raise InputError(f"DIR = {str(out)!r}: no such folder")
+        return
+    if not out.is_dir():
+        raise InputError(f"DIR = {str(out)!r}: not a folder")
+    marker = out / STUDY_FILE
+    if not marker.exists():
+        if any(out.iterdir()) or must_exist:
+            raise InputError(f"DIR = {str(out)!r}: not a vibroflow study folder (no "
+                             f"{STUDY_FILE}); give a new or empty folder")
+        return
+    data = _read_json(marker, "study record")
+    if data.get("kind") != KIND:
+        raise InputError(f"{marker}: not a vibroflow study record (kind = "
+                         f"{data.get('kind')!r}); give a new or empty folder")
+
+
+def split_settings(settings: list[str] | None) -> tuple[list[str], dict[str, dict[str, Any]]]:
+    """--set KEY=VALUE settings split into the scenario's overrides and each method's options
+    (keys that start with a registered method's name: lagrangian.dx=0.004)."""
+    scenario: list[str] = []
+    options: dict[str, dict[str, Any]] = {name: {} for name in METHODS}
+    for item in settings or []:
+        key, sep, value = item.partition("=")
+        head, dot, rest = key.strip().partition(".")
+        if head in METHODS and dot:
+            if not sep or not rest:
+                raise InputError(f"--set {item!r}: must be {head}.OPTION=VALUE")
+            try:
+                options[head][rest] = tomllib.loads(f"v = {value.strip()}")["v"]
+            except tomllib.TOMLDecodeError:
+                raise InputError(f"--set {key} = {value!r}: not a TOML value (a number, "
+                                 "true/false or a quoted string)") from None
+        else:
+            scenario.append(item)
+    return scenario, options
+
+
+def stage_hash(stage: Stage, study: Study, hashes: dict[str, str]) -> str:
+    """The hash of a stage's inputs, its upstream stages' hashes and the vibroflow version."""
+    from vibroflow import __version__
+
+    text = json.dumps({"stage": stage.name, "inputs": stage.inputs(study),
+                       "upstream": {u: hashes[u] for u in stage.upstream},
+                       "vibroflow_version": __version__}, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _kept(study: Study, stage: Stage, h: str) -> dict | None:
+    path = study.folder(stage.name) / STAGE_FILE
+    if not path.exists():
+        return None
+    record = _read_json(path, "stage record")
+    if record.get("hash") != h:
+        return None
+    if not all((study.out / p).exists() for p in stage.outputs):
+        return None
+    return record
+
+
+def _previous_wall(study: Study, stage: Stage) -> float | None:
+    path = study.folder(stage.name) / STAGE_FILE
+    try:
+        return float(json.loads(path.read_text())["wall_time_s"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def _run_stage(study: Study, stage: Stage, h: str) -> dict:
+    from vibroflow import __version__
+
+    folder = study.folder(stage.name)
+    pending = folder / PENDING_FILE
+    resume = pending.exists() and _read_json(pending, "stage record").get("hash") == h
+    if not resume and folder.exists():
+        shutil.rmtree(folder)  # another run's leftovers: start afresh
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / STAGE_FILE).unlink(missing_ok=True)
+    for p in stage.outputs:
+        target = study.out / p
+        if target.is_file() and target.suffix == ".json":
+            target.unlink()  # a result that would look complete before the stage ends
+    write_json_atomic(pending, {"stage": stage.name, "hash": h})
+    t0 = time.perf_counter()
+    result = stage.run(study, resume)
+    wall = time.perf_counter() - t0
+    record = {"stage": stage.name, "hash": h, "vibroflow_version": __version__,
+              "upstream": {u: study.records[u]["hash"] for u in stage.upstream},
+              "inputs": stage.inputs(study), "resumed": resume, "wall_time_s": wall,
+              "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "result": result}
+    write_json_atomic(folder / STAGE_FILE, record)  # last: the stage is finished
+    pending.unlink(missing_ok=True)
+    return record
+
+
+def _fmt(seconds: float) -> str:
+    seconds = max(0.0, seconds)
+    if seconds < 60:
+        return f"{seconds:.0f} s"
+    if seconds < 3600:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def run_study(scenario, out: Path, settings: dict[str, dict[str, Any]] | None = None,
+              shear_cell: bool = False, progress: bool = False,
+              echo: Callable[[str], None] | None = print) -> dict:
+    """Run (or bring up to date) the study of `scenario` in `out`; returns the summary.
+
+    settings: method name -> its options (`--set lagrangian.dx=0.004` gives
+    {"lagrangian": {"dx": 0.004}}); echo: where the one line per stage goes (None: nowhere).
+    """
+    out = Path(out)
+    check_study_dir(out)
+    settings = settings or {}
+    methods = []
+    for name in METHODS:
+        m = method(name)
+        methods.append((m, m.make_options(settings.get(name, {}))))
+    if scenario.tub is None or scenario.fill is None:
+        raise InputError("scenario: a study needs a tub-mode scenario (with [tub] and [fill]), "
+                         "not explicit particles")
+    from vibroflow import __version__
+
+    out.mkdir(parents=True, exist_ok=True)
+    if not (out / STUDY_FILE).exists():
+        write_json_atomic(out / STUDY_FILE, {"kind": KIND, "vibroflow_version": __version__,
+                                             "case": scenario.case})
+    study = Study(out=out, scenario=scenario, methods=methods, shear_cell=shear_cell,
+                  progress=progress)
+    stages = stages_of(study)
+    hashes: dict[str, str] = {}
+    for s in stages:  # a hash depends on the upstream hashes only, not on their results
+        hashes[s.name] = stage_hash(s, study, hashes)
+    kept = {s.name: _kept(study, s, hashes[s.name]) for s in stages}
+    estimates = {s.name: (_previous_wall(study, s) or s.estimate(study)) for s in stages}
+    spent_est = spent_real = 0.0
+    n = len(stages)
+    for i, stage in enumerate(stages, 1):
+        h = hashes[stage.name]
+        record = kept[stage.name]
+        if record is not None and any(kept[u] is None for u in stage.upstream):
+            record = kept[stage.name] = None  # an upstream stage ran: its outputs are new
+        if record is not None:
+            what = "up to date, kept"
+            spent = 0.0
+        else:
+            record = _run_stage(study, stage, h)
+            spent = record["wall_time_s"]
+            what = f"done in {_fmt(spent)}" + (" (resumed)" if record["resumed"] else "")
+            spent_est += estimates[stage.name]
+            spent_real += spent
+        study.records[stage.name] = record
+        scale = min(5.0, max(0.2, spent_real / spent_est)) if spent_est > 0 else 1.0
+        left = scale * sum(estimates[s.name] for s in stages[i:] if kept[s.name] is None)
+        if echo is not None:
+            echo(f"[{i}/{n}] {stage.name:<12} {what}; time left ~ {_fmt(left)}")
+    from vibroflow.study.results import read_summary
+
+    return read_summary(out)

@@ -1,0 +1,225 @@
+"""The stages of a study: what each depends on, what it runs, what it leaves in DIR.
+
+A `Stage` is a small record: its name (its folder DIR/<name>), the JSON-ready inputs that fix
+its result (`inputs(study)`: scenario fields and options), its upstream stages (their hashes
+join its own), its outputs (paths under DIR that must exist for a kept result), a cost estimate
+for the time left, and `run(study, resume)` returning a JSON-ready result record.  Making the
+list is `stages_of(study)`: one stage per registered continuum method.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from vibroflow.study.methods import ContinuumMethod
+
+DEM = "dem"
+CALIBRATION = "calibration"
+COMPARISON = "comparison"
+SUMMARY_NAME = "summary.json"
+#: DEM particle-steps per wall second assumed for the first estimate of the time left
+ASSUMED_RATE = 2.0e6
+
+
+def write_json_atomic(path: Path, data: Any) -> None:
+    """Write JSON so that a reader sees the old file or the whole new one, never a part."""
+    path = Path(path)
+    tmp = path.with_name(f".tmp-{os.getpid()}-{path.name}")
+    tmp.write_text(json.dumps(data, indent=2, allow_nan=True) + "\n")
+    os.replace(tmp, path)
+
+
+def scenario_inputs(scenario) -> dict:
+    """The scenario's fields that fix the numbers (all but run.checkpoint_every)."""
+    s = scenario.model_dump(mode="json")
+    s.get("run", {}).pop("checkpoint_every", None)
+    return s
+
+
+@dataclass
+class Study:
+    """What the stages share: the output folder, the scenario, the options, the progress flag,
+    and (filled as stages finish or are kept) each stage's record and hash."""
+
+    out: Path
+    scenario: Any
+    methods: list[tuple[ContinuumMethod, Any]]  # (method, its options)
+    shear_cell: bool = False
+    progress: bool = False
+    records: dict[str, dict] = dataclasses.field(default_factory=dict)
+
+    def folder(self, name: str) -> Path:
+        return self.out / name
+
+
+@dataclass
+class Stage:
+    name: str
+    inputs: Callable[[Study], dict]
+    run: Callable[[Study, bool], dict]
+    upstream: tuple[str, ...] = ()
+    outputs: tuple[str, ...] = ()
+    estimate: Callable[[Study], float] = lambda study: 1.0
+
+
+# ----------------------------------------------------------------------------------------------
+# DEM
+
+def _dem_cost(study: Study) -> float:
+    s = study.scenario
+    n = s.fill.count if s.fill is not None else len(s.particles or [])
+    t = s.run.duration + (s.fill.settle_time if s.fill is not None else 0.0)
+    return n * t / s.run.dt / ASSUMED_RATE
+
+
+def _run_dem(study: Study, resume: bool) -> dict:
+    from vibroflow.dem.run import run_dem
+
+    summary = run_dem(study.scenario, out_dir=study.folder(DEM), resume=resume,
+                      progress=study.progress)
+    return {"summary": f"{DEM}/summary.json", "wall_time_s": summary["wall_time_s"]}
+
+
+def dem_stage() -> Stage:
+    return Stage(DEM, inputs=lambda st: {"scenario": scenario_inputs(st.scenario)},
+                 run=_run_dem, outputs=(f"{DEM}/summary.json", f"{DEM}/bulk_velocity.csv",
+                                        f"{DEM}/dem.h5"),
+                 estimate=_dem_cost)
+
+
+# ----------------------------------------------------------------------------------------------
+# calibration (its files go next to the DEM's, where `vibroflow calibrate` puts them)
+
+def _run_calibration(study: Study, resume: bool) -> dict:
+    from vibroflow.calibration.calibrate import calibrate
+
+    cal = calibrate(study.folder(DEM), shear_cell=study.shear_cell, progress=study.progress)
+    r = cal["rheology"]
+    return {"calibration": f"{DEM}/calibration.toml",
+            "rheology": {k: r.get(k) for k in ("mu_s", "mu_2", "I_0", "source")}}
+
+
+def calibration_stage() -> Stage:
+    return Stage(CALIBRATION, inputs=lambda st: {"shear_cell": bool(st.shear_cell)},
+                 run=_run_calibration, upstream=(DEM,),
+                 outputs=(f"{DEM}/calibration.toml",),
+                 estimate=lambda st: 0.15 * _dem_cost(st) + 5.0
+                 + (600.0 if st.shear_cell else 0.0))
+
+
+# ----------------------------------------------------------------------------------------------
+# continuum methods
+
+def continuum_stage(method: ContinuumMethod, options) -> Stage:
+    def inputs(study: Study) -> dict:
+        return {"scenario": scenario_inputs(study.scenario),
+                "options": dataclasses.asdict(options)}
+
+    def run(study: Study, resume: bool) -> dict:
+        from vibroflow.calibration.calibrate import read_calibration
+
+        cal = read_calibration(study.folder(DEM) / "calibration.toml")
+        summary = method.run(study.scenario, study.folder(method.name), cal, options,
+                             study.progress, resume)
+        return {"summary": f"{method.name}/summary.json",
+                "wall_time_s": summary["wall_time_s"]}
+
+    return Stage(method.name, inputs=inputs, run=run, upstream=(CALIBRATION,),
+                 outputs=(f"{method.name}/summary.json", f"{method.name}/bulk_velocity.csv"),
+                 estimate=lambda st: 0.3 * _dem_cost(st) + 5.0)
+
+
+# ----------------------------------------------------------------------------------------------
+# comparison: DIR/summary.json
+
+def _finite(x) -> float | None:
+    return float(x) if x is not None and math.isfinite(float(x)) else None
+
+
+def _method_entry(summary: dict, folder: str) -> dict:
+    return {"probes": summary["probes"], "circulation": summary["circulation"],
+            "impacts": summary["impacts"], "wall_time_s": summary["wall_time_s"],
+            "n_particles": summary.get("n_particles"),
+            "bulk_velocity_csv": f"{folder}/bulk_velocity.csv"}
+
+
+def compare(study: Study) -> dict:
+    """The study's summary: every method's probes, circulation, impacts and wall time; each
+    continuum method's field difference E against the DEM, circulation verdict (tub47.md
+    "Judging a comparison"), probe differences and cost ratio."""
+    from vibroflow import __version__
+    from vibroflow.analysis.bulk import read_csv
+    from vibroflow.analysis.compare import field_difference, strengths_agree
+
+    out = study.out
+    sc = study.scenario
+    h = sc.analysis.cell_size
+    dem = json.loads((out / DEM / "summary.json").read_text())
+    dem_table = read_csv(out / DEM / "bulk_velocity.csv", cell_size=h)
+    methods = {DEM: _method_entry(dem, DEM)}
+    dc = dem["circulation"]
+    for m, _ in study.methods:
+        s = json.loads((out / m.name / "summary.json").read_text())
+        entry = _method_entry(s, m.name)
+        table = read_csv(out / m.name / "bulk_velocity.csv", cell_size=h)
+        try:
+            E = field_difference(table, dem_table, sc.analysis.min_solid_fraction)
+            E_note = None
+        except ValueError as exc:
+            E, E_note = None, str(exc)
+        c = s["circulation"]
+        agree = strengths_agree(c["strength"], _nan(c.get("strength_stderr")),
+                                dc["strength"], _nan(dc.get("strength_stderr")),
+                                c.get("sense"), dc.get("sense"))
+        probes = {}
+        for name, p in s["probes"].items():
+            q = dem["probes"].get(name)
+            if q is not None:
+                probes[name] = {"dvx": _finite(_nan(p["vx"]) - _nan(q["vx"])),
+                                "dvz": _finite(_nan(p["vz"]) - _nan(q["vz"]))}
+        entry["against_dem"] = {
+            "field_difference_E": E, "field_difference_note": E_note,
+            "min_solid_fraction": sc.analysis.min_solid_fraction,
+            "circulation_strength": c["strength"], "dem_circulation_strength": dc["strength"],
+            "circulation_agrees": agree,
+            "probe_differences_m_s": probes,
+            "cost_ratio": (s["wall_time_s"] / dem["wall_time_s"]
+                           if dem["wall_time_s"] > 0 else None),
+        }
+        methods[m.name] = entry
+    return {"kind": "vibroflow study summary", "vibroflow_version": __version__,
+            "case": sc.case, "units": "SI (m, m/s, m^2/s, s)",
+            "reference": DEM, "methods": methods}
+
+
+def _nan(x) -> float:
+    return float("nan") if x is None else float(x)
+
+
+def _run_comparison(study: Study, resume: bool) -> dict:
+    summary = compare(study)
+    write_json_atomic(study.out / SUMMARY_NAME, summary)
+    return {"summary": SUMMARY_NAME,
+            "E": {k: v["against_dem"]["field_difference_E"]
+                  for k, v in summary["methods"].items() if "against_dem" in v}}
+
+
+def comparison_stage(study: Study) -> Stage:
+    names = tuple(m.name for m, _ in study.methods)
+    return Stage(COMPARISON,
+                 inputs=lambda st: {"methods": list(names),
+                                    "min_solid_fraction": st.scenario.analysis.min_solid_fraction,
+                                    "cell_size": st.scenario.analysis.cell_size},
+                 run=_run_comparison, upstream=(DEM, *names), outputs=(SUMMARY_NAME,))
+
+
+def stages_of(study: Study) -> list[Stage]:
+    """The study's stages in order: DEM, calibration, each continuum method, comparison."""
+    return [dem_stage(), calibration_stage(),
+            *(continuum_stage(m, o) for m, o in study.methods), comparison_stage(study)]
