@@ -21,19 +21,17 @@ from pyevtk.vtk import VtkQuad
 from vibroflow.tub.geometry import TubGeometry
 
 
-def _vtu_path(path) -> str:
+def atomic_vtk(path, writer, suffix: str = ".vtu") -> str:
+    """Run writer(base_without_extension) (a pyevtk writer, which appends `suffix` and returns
+    the file it wrote) on a temporary name, then move the file to path: a reader never sees a
+    half-written file."""
     path = os.fspath(path)
-    return path if path.endswith(".vtu") else path + ".vtu"
-
-
-def _atomic_vtk(path, writer) -> str:
-    """Run writer(base_without_extension) on a temporary name, then move it to path."""
-    final = _vtu_path(path)
+    final = path if path.endswith(suffix) else path + suffix
     d = os.path.dirname(os.path.abspath(final))
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".vtu", dir=d)
+    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=suffix, dir=d)
     os.close(fd)
     try:
-        written = writer(tmp[:-4])
+        written = writer(tmp[:-len(suffix)])
         os.replace(written, final)
     except BaseException:
         if os.path.exists(tmp):
@@ -68,7 +66,7 @@ def write_snapshot_vtu(path, positions, velocities, angular_velocities, radius, 
     for name, a in (extra or {}).items():
         a = np.asarray(a)
         data[name] = (tuple(_c(a[:, j]) for j in range(3)) if a.ndim == 2 else _c(a))
-    return _atomic_vtk(path, lambda base: pointsToVTK(base, _c(p[:, 0]), _c(p[:, 1]),
+    return atomic_vtk(path, lambda base: pointsToVTK(base, _c(p[:, 0]), _c(p[:, 1]),
                                                       _c(p[:, 2]), data=data))
 
 
@@ -131,6 +129,6 @@ def write_tub_surface(path, geometry: TubGeometry, n_profile: int = 200) -> str:
     conn = _c(quads.ravel(), np.int64)
     offsets = _c(np.arange(1, quads.shape[0] + 1) * 4, np.int64)
     types = np.full(quads.shape[0], VtkQuad.tid, dtype=np.uint8)
-    return _atomic_vtk(path, lambda base: unstructuredGridToVTK(
+    return atomic_vtk(path, lambda base: unstructuredGridToVTK(
         base, _c(pts[:, 0]), _c(pts[:, 1]), _c(pts[:, 2]), connectivity=conn, offsets=offsets,
         cell_types=types, cellData={"part": _c(part, np.int64)}))

@@ -15,8 +15,6 @@ and moved into place, so a reader never sees half a file.
 """
 from __future__ import annotations
 
-import os
-import tempfile
 
 import numba as nb
 import numpy as np
@@ -73,9 +71,7 @@ def write_grid_vtr(path, grid: Grid, fields: dict, y: float = 0.0) -> str:
     shear_rate."""
     from pyevtk.hl import gridToVTK
 
-    path = os.fspath(path)
-    final = path if path.endswith(".vtr") else path + ".vtr"
-    folder = os.path.dirname(os.path.abspath(final))
+    from vibroflow.analysis.vtk import atomic_vtk
 
     def c(a):  # (nx, nz) -> contiguous (nx, 1, nz)
         return np.ascontiguousarray(np.asarray(a, dtype=np.float64)[:, None, :])
@@ -84,14 +80,6 @@ def write_grid_vtr(path, grid: Grid, fields: dict, y: float = 0.0) -> str:
     data = {"velocity": (c(vel[:, :, 0]), c(np.zeros(vel.shape[:2])), c(vel[:, :, 1]))}
     for name in ("solid_fraction", "density", "pressure", "shear_rate"):
         data[name] = c(fields[name])
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".vtr", dir=folder)
-    os.close(fd)
-    try:
-        written = gridToVTK(tmp[:-4], grid.node_x(), np.array([y]), grid.node_z(),
-                            pointData=data)
-        os.replace(written, final)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return final
+    return atomic_vtk(path, lambda base: gridToVTK(base, grid.node_x(), np.array([y]),
+                                                   grid.node_z(), pointData=data),
+                      suffix=".vtr")

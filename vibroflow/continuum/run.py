@@ -95,16 +95,6 @@ class LagrangianOptions:
             raise InputError(f"wall_stiffness = {self.wall_stiffness!r}: must be > 0 Pa/m")
 
 
-def tub_motion(scenario) -> TubMotion:
-    """The scenario's rigid tub motion (amplitudes times the amplitude factor)."""
-    m = scenario.motion
-    f = m.amplitude_factor
-    return TubMotion(frequency=m.frequency, amplitude_x=f * m.amplitude_x, phase_x=m.phase_x,
-                     amplitude_z=f * m.amplitude_z, phase_z=m.phase_z,
-                     amplitude_theta=f * m.amplitude_theta, phase_theta=m.phase_theta,
-                     pivot_x=m.pivot[0], pivot_z=m.pivot[1])
-
-
 def _contact(scenario, a: str, b: str):
     from vibroflow.scenario.model import find_contact
 
@@ -356,7 +346,7 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
         raise InputError(f"stop_after_steps = {stop_after_steps!r}: must be >= 0")
     options = options or LagrangianOptions()
     material = material_of(scenario, calibration, options.model)
-    motion = tub_motion(scenario)
+    motion = TubMotion.of_scenario(scenario)
     gravity = (float(scenario.gravity[0]), float(scenario.gravity[2]))
     system, spacing = make_system(scenario, material, calibration, options,
                                   TubFrame(motion, gravity))

@@ -119,12 +119,7 @@ def make_system(scenario, nchunk: int | None = None) -> DEMSystem:
         planes[k, 12] = 2.0 * math.pi * w.frequency
         planes[k, 13] = w.phase
         wall_mats.append(index[w.material])
-    m = scenario.motion
-    f = m.amplitude_factor
-    motion = TubMotion(frequency=m.frequency, amplitude_x=f * m.amplitude_x, phase_x=m.phase_x,
-                       amplitude_z=f * m.amplitude_z, phase_z=m.phase_z,
-                       amplitude_theta=f * m.amplitude_theta, phase_theta=m.phase_theta,
-                       pivot_x=m.pivot[0], pivot_z=m.pivot[1])
+    motion = TubMotion.of_scenario(scenario)
     if scenario.explicit:
         diam = max(p.diameter for p in scenario.particles)
     else:

@@ -204,16 +204,6 @@ def damping_ratio(restitution: float) -> float:
     return -ln_e / math.sqrt(math.pi**2 + ln_e**2)
 
 
-def tub_motion(scenario) -> TubMotion:
-    """The scenario's tub motion with the amplitude factor applied."""
-    m = scenario.motion
-    f = m.amplitude_factor
-    return TubMotion(frequency=m.frequency, amplitude_x=f * m.amplitude_x, phase_x=m.phase_x,
-                     amplitude_z=f * m.amplitude_z, phase_z=m.phase_z,
-                     amplitude_theta=f * m.amplitude_theta, phase_theta=m.phase_theta,
-                     pivot_x=m.pivot[0], pivot_z=m.pivot[1])
-
-
 def geometry_of(scenario) -> TubGeometry:
     t = scenario.tub
     return TubGeometry(radius=t.radius, rim_height=t.rim_height, length=t.length,
@@ -434,7 +424,7 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     (out_dir / POST_DIR).mkdir(exist_ok=True)
     run, fill, tub = scenario.run, scenario.fill, scenario.tub
     geom = geometry_of(scenario)
-    motion = tub_motion(scenario)
+    motion = TubMotion.of_scenario(scenario)
     tables = pair_tables(scenario)
     dt = run.dt
     d = fill.diameter
@@ -1014,7 +1004,7 @@ def import_run(dump_dir, scenario=None, out_dir=None) -> dict:
     run = scenario.run
     dt = run.dt
     f = scenario.motion.frequency
-    motion = tub_motion(scenario)
+    motion = TubMotion.of_scenario(scenario)
     geom = geometry_of(scenario)
     n0 = _read_start_step(post)
     rho = scenario.materials[scenario.fill.material].density

@@ -50,6 +50,18 @@ class TubMotion:
         )
 
     @staticmethod
+    def of_scenario(scenario) -> "TubMotion":
+        """The scenario's rigid tub motion, every amplitude times motion.amplitude_factor
+        (tub47.md "Tub motion"); the one mapping the DEM, the continuum and the LIGGGHTS deck
+        use."""
+        m = scenario.motion
+        f = m.amplitude_factor
+        return TubMotion(frequency=m.frequency, amplitude_x=f * m.amplitude_x,
+                         phase_x=m.phase_x, amplitude_z=f * m.amplitude_z, phase_z=m.phase_z,
+                         amplitude_theta=f * m.amplitude_theta, phase_theta=m.phase_theta,
+                         pivot_x=m.pivot[0], pivot_z=m.pivot[1])
+
+    @staticmethod
     def still() -> "TubMotion":
         return TubMotion(amplitude_x=0.0, amplitude_z=0.0, amplitude_theta=0.0)
 
