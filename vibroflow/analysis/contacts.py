@@ -158,60 +158,20 @@ class ImpactStats:
                 "mean_normal_speed_by_kind": dict(m)}
 
 
-def impact_stats(kind, normal_speed, batch=None, n_batches: int | None = None) -> ImpactStats:
-    """Mean normal approach speed (m/s) and counts by kind.
-
-    kind (M,) int (see IMPACT_KINDS), normal_speed (M,) m/s, batch (M,) batch index of the
-    impact's time (negative = outside the averaging window, dropped; default all, one batch).
-    A kind with no impact gets NaN mean and 0 count.
-    """
-    kind = np.asarray(kind, dtype=np.int64)
-    v = np.asarray(normal_speed, dtype=float)
-    use = np.isfinite(v)
-    if batch is not None:
-        batch = np.asarray(batch, dtype=np.int64)
-        use &= batch >= 0
-        if n_batches is None:
-            n_batches = int(batch.max(initial=-1)) + 1
-    counts, means, ses = {}, {}, {}
-    for k, name in IMPACT_KINDS.items():
-        sel = use & (kind == k)
-        counts[name] = int(sel.sum())
-        means[name] = float(v[sel].mean()) if sel.any() else float("nan")
-        if batch is not None and sel.any() and n_batches and n_batches >= 2:
-            ses[name] = float(batch_means(v[sel], batch[sel], n_batches)[1])
-        else:
-            ses[name] = float("nan")
-    return ImpactStats(count=int(use.sum()), count_by_kind=counts,
-                       mean_normal_speed_by_kind=means, mean_normal_speed_stderr_by_kind=ses)
+def _accumulate_impacts(sums, counts, kind, v, batch) -> None:
+    """Add impacts (kind (M,) int, normal speed v (M,) m/s, batch (M,) int, negative = outside
+    the window) to the per-kind, per-batch sums and counts (arrays (kinds, batches))."""
+    nk, nb_ = sums.shape
+    use = (batch >= 0) & (batch < nb_) & np.isfinite(v) & (kind >= 0) & (kind < nk)
+    flat = kind[use] * nb_ + batch[use]
+    sums += np.bincount(flat, weights=v[use], minlength=nk * nb_).reshape(nk, -1)
+    counts += np.bincount(flat, minlength=nk * nb_).reshape(nk, -1)
 
 
-def impact_stats_chunked(kind, normal_speed, time, t_start: float, t_end: float,
-                         frequency: float, n_batches: int,
-                         chunk: int = 2_000_000) -> ImpactStats:
-    """impact_stats over impacts read in chunks (arrays or h5py datasets of M rows), so that a
-    tub47 run's tens of millions of impacts never sit in memory at once.
-
-    The impacts of the averaging window [t_start, t_end) are batched by whole cycles
-    (stats.batches_of_whole_cycles); the per-kind mean is the mean over all impacts used and its
-    standard error that of the batch means, exactly as impact_stats computes them.
-    """
-    from vibroflow.analysis.stats import batches_of_whole_cycles
-
-    nk = max(IMPACT_KINDS) + 1
-    sums = np.zeros((nk, n_batches))
-    counts = np.zeros((nk, n_batches))
-    m = int(kind.shape[0])
-    for a in range(0, m, chunk):
-        b = min(m, a + chunk)
-        k = np.asarray(kind[a:b], dtype=np.int64)
-        v = np.asarray(normal_speed[a:b], dtype=float)
-        bt = batches_of_whole_cycles(np.asarray(time[a:b], dtype=float), t_start, t_end,
-                                     frequency, n_batches)
-        use = (bt >= 0) & np.isfinite(v) & (k >= 0) & (k < nk)
-        flat = k[use] * n_batches + bt[use]
-        sums += np.bincount(flat, weights=v[use], minlength=nk * n_batches).reshape(nk, -1)
-        counts += np.bincount(flat, minlength=nk * n_batches).reshape(nk, -1)
+def _impact_stats_of(sums, counts) -> ImpactStats:
+    """ImpactStats from per-kind, per-batch sums and counts: the mean over all impacts used and
+    the standard error of the batch means (NaN with fewer than 2 batches or an empty batch)."""
+    n_batches = sums.shape[1]
     out_c, out_m, out_se = {}, {}, {}
     for k, name in IMPACT_KINDS.items():
         c = counts[k]
@@ -223,6 +183,50 @@ def impact_stats_chunked(kind, normal_speed, time, t_start: float, t_end: float,
             out_se[name] = float("nan")
     return ImpactStats(count=int(counts.sum()), count_by_kind=out_c,
                        mean_normal_speed_by_kind=out_m, mean_normal_speed_stderr_by_kind=out_se)
+
+
+def impact_stats(kind, normal_speed, batch=None, n_batches: int | None = None) -> ImpactStats:
+    """Mean normal approach speed (m/s) and counts by kind.
+
+    kind (M,) int (see IMPACT_KINDS), normal_speed (M,) m/s, batch (M,) batch index of the
+    impact's time (negative = outside the averaging window, dropped; default all, one batch).
+    A kind with no impact gets NaN mean and 0 count.
+    """
+    kind = np.asarray(kind, dtype=np.int64)
+    v = np.asarray(normal_speed, dtype=float)
+    if batch is None:
+        batch = np.zeros(kind.shape[0], np.int64)
+        n_batches = 1
+    batch = np.asarray(batch, dtype=np.int64)
+    if n_batches is None:
+        n_batches = max(1, int(batch.max(initial=-1)) + 1)
+    nk = max(IMPACT_KINDS) + 1
+    sums, counts = np.zeros((nk, n_batches)), np.zeros((nk, n_batches))
+    _accumulate_impacts(sums, counts, kind, v, batch)
+    return _impact_stats_of(sums, counts)
+
+
+def impact_stats_chunked(kind, normal_speed, time, t_start: float, t_end: float,
+                         frequency: float, n_batches: int,
+                         chunk: int = 2_000_000) -> ImpactStats:
+    """impact_stats over impacts read in chunks (arrays or h5py datasets of M rows), so that a
+    tub47 run's tens of millions of impacts never sit in memory at once.
+
+    The impacts of the averaging window [t_start, t_end) are batched by whole cycles
+    (stats.batches_of_whole_cycles) and reduced exactly as impact_stats does.
+    """
+    from vibroflow.analysis.stats import batches_of_whole_cycles
+
+    nk = max(IMPACT_KINDS) + 1
+    sums, counts = np.zeros((nk, n_batches)), np.zeros((nk, n_batches))
+    m = int(kind.shape[0])
+    for a in range(0, m, chunk):
+        b = min(m, a + chunk)
+        bt = batches_of_whole_cycles(np.asarray(time[a:b], dtype=float), t_start, t_end,
+                                     frequency, n_batches)
+        _accumulate_impacts(sums, counts, np.asarray(kind[a:b], dtype=np.int64),
+                            np.asarray(normal_speed[a:b], dtype=float), bt)
+    return _impact_stats_of(sums, counts)
 
 
 def mean_by_region(position_tub, values, cell_size: float):

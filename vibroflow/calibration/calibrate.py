@@ -29,6 +29,7 @@ import tomli_w
 
 from vibroflow import __version__
 from vibroflow.analysis.summary import geometry_of
+from vibroflow.scenario.model import find_contact
 from vibroflow.errors import InputError
 
 from .dem_result import DEMResult
@@ -51,9 +52,10 @@ def _f(x) -> float:
 
 
 def _pair(scenario, a: str, b: str):
-    for c in scenario.contacts:
-        if set(c.pair) == {a, b}:
-            return c
+    """The contact law of materials a and b; an InputError when the scenario lacks it."""
+    c = find_contact(scenario, a, b)
+    if c is not None:
+        return c
     raise InputError(f"contacts: no pair for materials {a!r} and {b!r}")
 
 

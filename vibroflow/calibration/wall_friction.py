@@ -37,6 +37,7 @@ import numpy as np
 from vibroflow.analysis.contacts import wall_contact_stats
 from vibroflow.analysis.stats import batch_means
 from vibroflow.analysis.summary import geometry_of
+from vibroflow.scenario.model import find_contact
 from vibroflow.dem.walls import WALL_PARTITION_HI, WALL_PARTITION_LO, WALL_U
 
 from .dem_result import DEMResult
@@ -81,10 +82,9 @@ def wall_friction(run, arc_bins: int | None = None, histogram_bins: int = 40) ->
 
 
 def _pair_friction(scenario, a: str, b: str) -> float:
-    for c in scenario.contacts:
-        if set(c.pair) == {a, b} and (a != b or c.pair[0] == c.pair[1]):
-            return float(c.friction)
-    return float("nan")
+    """The contact friction of materials a and b (NaN when the scenario has no such pair)."""
+    pair = find_contact(scenario, a, b)
+    return float("nan") if pair is None else float(pair.friction)
 
 
 def _wall_friction(res: DEMResult, arc_bins, histogram_bins) -> dict:

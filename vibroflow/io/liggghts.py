@@ -58,9 +58,11 @@ from pathlib import Path
 
 import numpy as np
 
+from vibroflow.analysis.summary import geometry_of
+from vibroflow.dem.laws import damping_ratio
 from vibroflow.errors import InputError
+from vibroflow.scenario.model import find_contact
 from vibroflow.io.stl import DEFAULT_MAX_SAGITTA, arc_segments, sagitta, write_tub_meshes
-from vibroflow.tub.geometry import TubGeometry
 from vibroflow.tub.motion import TubMotion, lab_to_tub_np, pose_np
 
 #: names the LIGGGHTS executable goes by (Debian: liggghts; source builds: lmp_auto)
@@ -196,27 +198,6 @@ def seed_primes(seed: int, count: int = 3) -> list[int]:
     return [next_prime(base + 1000 * k) for k in range(count)]
 
 
-def damping_ratio(restitution: float) -> float:
-    """zeta = -ln e / sqrt(pi^2 + ln^2 e) of the linear law (models.md)."""
-    if restitution >= 1.0:
-        return 0.0
-    ln_e = math.log(restitution)
-    return -ln_e / math.sqrt(math.pi**2 + ln_e**2)
-
-
-def geometry_of(scenario) -> TubGeometry:
-    t = scenario.tub
-    return TubGeometry(radius=t.radius, rim_height=t.rim_height, length=t.length,
-                       periodic=t.periodic)
-
-
-def _find_pair(scenario, a: str, b: str):
-    for pair in scenario.contacts:
-        if {pair.pair[0], pair.pair[1]} == {a, b}:
-            return pair
-    return None
-
-
 def _check_exportable(scenario) -> None:
     if scenario.explicit or scenario.tub is None or scenario.fill is None:
         raise InputError("scenario.particles: the LIGGGHTS export handles tub scenarios only "
@@ -266,7 +247,7 @@ def pair_tables(scenario) -> PairTables:
     e, mu, mur = (np.zeros(shape) for _ in range(3))
     models, rolls = set(), set()
     for (i, j), m_eff in needed.items():
-        pair = _find_pair(scenario, mats[i], mats[j])
+        pair = find_contact(scenario, mats[i], mats[j])
         if pair is None:
             raise InputError(f"contacts: no contact law for the pair ({mats[i]}, {mats[j]}), "
                              "which the LIGGGHTS deck needs")
@@ -838,8 +819,8 @@ def _wall_rows(data, snap_index, ids, pos_lab, pose, motion, scenario, geom):
     ft = np.linalg.norm(ftv, axis=1)
     arc = np.where(wall == WALL_U, _arc_of(tx, tz, R), np.nan)
     mats = type_materials(scenario)
-    mu_u = _find_pair(scenario, mats[0], mats[1]).friction
-    mu_p = mu_u if scenario.tub.periodic else _find_pair(scenario, mats[0], mats[2]).friction
+    mu_u = find_contact(scenario, mats[0], mats[1]).friction
+    mu_p = mu_u if scenario.tub.periodic else find_contact(scenario, mats[0], mats[2]).friction
     mu = np.where(wall == WALL_U, mu_u, mu_p)
     # at the limit the ratio is mu to the dump's 6 significant digits
     sliding = (ft > 0) & (ft >= mu * np.abs(fn) * (1.0 - SLIDING_TOLERANCE))
