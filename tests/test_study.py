@@ -13,7 +13,7 @@ import pytest
 
 from tests.test_calibrate import SMALL
 
-STAGES = ("dem", "calibration", "lagrangian", "comparison")
+STAGES = ("dem", "calibration", "lagrangian", "comparison", "report")
 
 
 def _mtimes(out):

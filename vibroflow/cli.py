@@ -334,6 +334,19 @@ def run(
     typer.echo(f"results in {out}/summary.json")
 
 
+@app.command("report")
+@input_errors
+def report(
+    directory: Annotated[Path, typer.Argument(metavar="DIR", help="A finished study folder "
+                                                                  "(vibroflow run --out DIR).")],
+) -> None:
+    """Write DIR/report.html: the study side by side for the DEM and each continuum method
+    (one self-contained page) and the DEM animation DIR/report/dem_slice.gif."""
+    from vibroflow.report import write_report
+
+    typer.echo(f"report in {write_report(directory)}")
+
+
 # ----------------------------------------------------------------------------------------------
 # LIGGGHTS round trip
 

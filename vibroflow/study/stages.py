@@ -219,7 +219,29 @@ def comparison_stage(study: Study) -> Stage:
                  run=_run_comparison, upstream=(DEM, *names), outputs=(SUMMARY_NAME,))
 
 
+# ----------------------------------------------------------------------------------------------
+# report: DIR/report.html (vibroflow.report), the DEM animation in DIR/report/
+
+REPORT = "report"
+
+
+def _run_report(study: Study, resume: bool) -> dict:
+    from vibroflow.report import GIF_NAME, write_report
+
+    path = write_report(study.out)
+    gif = study.folder(REPORT) / GIF_NAME
+    return {"report": path.name,
+            "animation": f"{REPORT}/{GIF_NAME}" if gif.is_file() else None}
+
+
+def report_stage() -> Stage:
+    return Stage(REPORT, inputs=lambda st: {}, run=_run_report, upstream=(COMPARISON,),
+                 outputs=("report.html",), estimate=lambda st: 20.0)
+
+
 def stages_of(study: Study) -> list[Stage]:
-    """The study's stages in order: DEM, calibration, each continuum method, comparison."""
+    """The study's stages in order: DEM, calibration, each continuum method, comparison,
+    report."""
     return [dem_stage(), calibration_stage(),
-            *(continuum_stage(m, o) for m, o in study.methods), comparison_stage(study)]
+            *(continuum_stage(m, o) for m, o in study.methods), comparison_stage(study),
+            report_stage()]

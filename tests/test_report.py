@@ -1,0 +1,259 @@
+"""The study report (DIR/report.html, `vibroflow report DIR`): the helpers against known
+answers (the shear rate of analytic flows, impacts binned by cell against the DEM summary's own
+count and mean), and the page of a tiny study (tests.test_study's fixture, which now ends with
+the report stage): self-contained, every image a valid PNG/GIF, the probe table equal to
+summary.json, rendered by headless Chromium with every figure loaded; bad folders are a one-line
+error that writes nothing."""
+from __future__ import annotations
+
+import base64
+import io
+import json
+import math
+import os
+import re
+import shutil
+import subprocess
+import sys
+from html.parser import HTMLParser
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from tests.test_study import study  # noqa: F401  (the module-scoped tiny study fixture)
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMEDRIVER = Path("/usr/bin/chromedriver")
+
+
+# ----------------------------------------------------------------------------------------------
+# known answers
+
+def test_mean_flow_shear_rate_of_analytic_flows():
+    """gamma_dot = sqrt(2 D':D') with the 3D deviator: simple shear v_x = g z gives g, a rigid
+    rotation 0, plane extension v = (e x, -e z) gives 2 e, on every cell (linear fields: the
+    one-sided differences at the edges are exact too)."""
+    from vibroflow.report.data import mean_flow_shear_rate
+
+    h = 0.015
+    x = np.arange(-4, 5) * h
+    z = np.arange(0, 7) * h
+    X, Z = np.meshgrid(x, z)  # [z, x], as field_dataset's arrays
+    g, w, e = 3.0, 5.0, 2.0
+    np.testing.assert_allclose(mean_flow_shear_rate(g * Z, 0 * X, h), g, rtol=1e-12)
+    np.testing.assert_allclose(mean_flow_shear_rate(-w * Z, w * X, h), 0.0, atol=1e-12)
+    np.testing.assert_allclose(mean_flow_shear_rate(e * X, -e * Z, h), 2 * e, rtol=1e-12)
+    # cells outside the bed (NaN velocity) stay NaN; their neighbours use one-sided differences
+    vx = g * Z
+    vx[3, 4] = np.nan
+    out = mean_flow_shear_rate(vx, 0 * X, h)
+    assert np.isnan(out[3, 4])
+    np.testing.assert_allclose(np.delete(out.ravel(), 3 * x.size + 4), g, rtol=1e-12)
+
+
+def test_impacts_binned_by_analysis_cell():
+    """Impacts land in the cell whose centre (a multiple of h) is nearest, chunks add up."""
+    from vibroflow.report.data import bin_impacts
+
+    h = 0.015
+    pos = np.array([[0.001, 0.01, 0.002], [-0.007, 0.0, 0.007], [0.008, 0.0, 0.0],
+                    [0.031, 0.0, 0.046]])
+    speed = np.array([0.1, 0.3, 0.5, 0.7])
+    cells = bin_impacts([(pos[:2], speed[:2]), (pos[2:], speed[2:])], h)
+    assert cells.at(0.0, 0.0) == (pytest.approx(0.2), 2)       # first two: cell (0, 0)
+    assert cells.at(0.015, 0.0) == (pytest.approx(0.5), 1)     # x = 8 mm > h/2
+    assert cells.at(0.03, 0.045) == (pytest.approx(0.7), 1)
+    v, n = cells.at(-0.03, 0.03)
+    assert math.isnan(v) and n == 0
+    assert int(cells.count.sum()) == 4
+
+
+def test_report_impacts_are_the_summarys_impacts(study):  # noqa: F811
+    """The impact map counts exactly the ball-ball impacts the DEM summary averages (another
+    code path: vibroflow.analysis.contacts.impact_stats_chunked), with the same mean speed."""
+    from vibroflow.report.data import StudyData
+
+    _, out, summary, _ = study
+    data = StudyData.read(out)
+    im = summary["methods"]["dem"]["impacts"]
+    cells = data.impacts
+    assert int(cells.count.sum()) == im["count_by_kind"]["ball_ball"]
+    mean = float(np.sum(cells.mean_speed * cells.count) / cells.count.sum())
+    assert mean == pytest.approx(im["ball_ball_mean_normal_speed"], rel=1e-6)
+
+
+# ----------------------------------------------------------------------------------------------
+# the page
+
+class _Page(HTMLParser):
+    def __init__(self):
+        super().__init__()
+        self.imgs, self.links, self.tags, self.h2, self.cells = [], [], [], [], []
+        self._h2 = self._td = None
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        self.tags.append(tag)
+        if tag == "img":
+            self.imgs.append(a.get("src", ""))
+        for key in ("src", "href"):
+            if key in a:
+                self.links.append(a[key] or "")
+        if tag == "h2":
+            self._h2 = ""
+        if tag == "td" and "data-probe" in a:
+            self._td = [a, ""]
+
+    def handle_data(self, d):
+        if self._h2 is not None:
+            self._h2 += d
+        if self._td is not None:
+            self._td[1] += d
+
+    def handle_endtag(self, tag):
+        if tag == "h2" and self._h2 is not None:
+            self.h2.append(self._h2.strip())
+            self._h2 = None
+        if tag == "td" and self._td is not None:
+            self.cells.append(tuple(self._td))
+            self._td = None
+
+
+def _cli(*args):
+    env = dict(os.environ, NO_COLOR="1")
+    return subprocess.run([sys.executable, "-m", "vibroflow.cli", *map(str, args)],
+                          capture_output=True, text=True, env=env, stdin=subprocess.DEVNULL)
+
+
+def test_report_is_self_contained_and_shows_the_summary(study):  # noqa: F811
+    from PIL import Image
+
+    from vibroflow.report.animation import MAX_FRAMES
+    from vibroflow.report.html import SECTIONS
+
+    _, out, summary, _ = study
+    assert json.loads((out / "report" / "stage.json").read_text())["stage"] == "report"
+    before = (out / "report.html").stat().st_mtime_ns
+    r = _cli("report", out)  # the command rewrites the page the pipeline's stage wrote
+    assert r.returncode == 0, r.stderr
+    assert (out / "report.html").stat().st_mtime_ns != before
+    assert not [p for p in out.rglob("*") if ".tmp" in p.name]  # written atomically
+    page = _Page()
+    page.feed((out / "report.html").read_text(encoding="utf-8"))
+    assert page.h2[:len(SECTIONS)] == list(SECTIONS.values())
+    assert "script" not in page.tags and "link" not in page.tags
+    assert not [u for u in page.links if re.match(r"\s*(https?:)?//", u, re.I)]
+    gifs = []
+    for src in page.imgs:
+        m = re.fullmatch(r"data:image/(png|gif);base64,([A-Za-z0-9+/=]+)", src)
+        assert m, src[:60]
+        raw = base64.b64decode(m.group(2), validate=True)
+        with Image.open(io.BytesIO(raw)) as im:
+            im.verify()
+        with Image.open(io.BytesIO(raw)) as im:
+            assert im.format == m.group(1).upper() and im.width > 0 and im.height > 0
+            if im.format == "GIF":
+                assert 300 <= im.width <= 500
+                gifs.append(im.n_frames)
+    # velocity, shear, impacts, wall friction, mu(I), the animation
+    assert len(page.imgs) >= 6
+    with h5py.File(out / "dem" / "dem.h5", "r") as f:
+        snaps = f["snapshots/time"].shape[0]
+    assert gifs == [min(MAX_FRAMES, snaps)]  # one animation, a frame per snapshot
+    assert (out / "report" / "dem_slice.gif").stat().st_size < 3e6
+    # the probe table holds summary.json's numbers (exact in data-value, rounded in the text)
+    methods = summary["methods"]
+    seen = 0
+    for attrs, text in page.cells:
+        name, probe, q = attrs["data-method"], attrs["data-probe"], attrs["data-q"]
+        if q in ("vx", "vz"):
+            want = methods[name]["probes"][probe][q]
+            se = methods[name]["probes"][probe][q + "_stderr"]
+        else:
+            want = methods[name]["against_dem"]["probe_differences_m_s"][probe][q]
+            se = None
+        assert float(attrs["data-value"]) == want
+        shown = float(text.split("±")[0])
+        assert shown == pytest.approx(want, rel=1e-3, abs=1e-12)
+        if se is not None and math.isfinite(se):
+            assert float(attrs["data-stderr"]) == se
+        seen += 1
+    n_probes = len(methods["dem"]["probes"])
+    assert seen == n_probes * (2 + 4 * (len(methods) - 1))
+    assert "No sweep in this folder" in (out / "report.html").read_text()
+
+
+def test_report_renders_in_headless_chromium(study):  # noqa: F811
+    if not (CHROMIUM.exists() and CHROMEDRIVER.exists()):
+        pytest.skip("headless Chromium needs the Debian packages chromium and chromium-driver "
+                    f"({CHROMIUM}, {CHROMEDRIVER})")
+    webdriver = pytest.importorskip("selenium.webdriver", reason="selenium not installed "
+                                    "(pip install -e '.[test]')")
+    from selenium.webdriver.chrome.service import Service
+
+    from vibroflow.report.html import SECTIONS
+
+    _, out, _, _ = study
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = str(CHROMIUM)
+    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
+                "--window-size=1400,1000"):
+        opts.add_argument(arg)
+    driver = webdriver.Chrome(service=Service(str(CHROMEDRIVER)), options=opts)
+    try:
+        driver.set_page_load_timeout(60)
+        driver.get((out / "report.html").resolve().as_uri())
+        state = driver.execute_script("return document.readyState")
+        assert state == "complete"
+        imgs = driver.execute_script(
+            "return Array.from(document.images).map(i => [i.alt, i.complete, i.naturalWidth,"
+            " i.naturalHeight])")
+        assert len(imgs) >= 6
+        bad = [i for i in imgs if not (i[1] and i[2] > 0 and i[3] > 0)]
+        assert not bad, bad
+        heads = driver.execute_script(
+            "return Array.from(document.querySelectorAll('h2')).map(h => h.textContent.trim())")
+        assert heads[:len(SECTIONS)] == list(SECTIONS.values())
+    finally:
+        driver.quit()
+
+
+def test_report_of_a_bad_folder_is_a_one_line_error(tmp_path):
+    foreign = tmp_path / "foreign"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("mine\n")
+    corrupt = tmp_path / "corrupt"
+    corrupt.mkdir()
+    (corrupt / "study.json").write_text(json.dumps({"kind": "vibroflow study"}))
+    (corrupt / "summary.json").write_text("{not json")
+    unfinished = tmp_path / "unfinished"
+    unfinished.mkdir()
+    (unfinished / "study.json").write_text(json.dumps({"kind": "vibroflow study"}))
+    missing = tmp_path / "missing"
+    for folder in (foreign, corrupt, unfinished, missing):
+        before = sorted(p.name for p in folder.iterdir()) if folder.exists() else None
+        r = _cli("report", folder)
+        assert r.returncode == 2, (folder, r.stderr)
+        assert r.stderr.startswith("error: ") and r.stderr.count("\n") == 1, r.stderr
+        assert "Traceback" not in r.stderr
+        after = sorted(p.name for p in folder.iterdir()) if folder.exists() else None
+        assert after == before  # nothing written
+    assert not missing.exists()
+
+
+def test_a_study_without_dem_h5_still_gets_a_page_that_says_so(study, tmp_path):  # noqa: F811
+    """Optional pieces missing (no dem.h5: no animation, no measured impacts; no fields.nc; no
+    calibration pictures) are stated in the page, not a crash."""
+    from vibroflow.report import write_report
+
+    _, out, _, _ = study
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy, ignore=shutil.ignore_patterns("dem.h5", "fields.nc", "*.png",
+                                                             "report*"))
+    page = write_report(copy).read_text(encoding="utf-8")
+    assert "No animation" in page
+    assert "mu_I.png is missing" in page
+    assert "no dem/fields.nc" in page
+    assert not (copy / "report" / "dem_slice.gif").exists()

@@ -1,0 +1,53 @@
+"""The study report: DIR/report.html of a finished `vibroflow run --out DIR` (also
+`vibroflow report DIR`), one self-contained page (images inline, no external link) showing
+side by side for the DEM and each continuum method the velocity field, the probes with their
+errors, the circulation verdicts, the shear-rate and impact-speed maps, the wall friction, the
+mu(I) fit, any sweep, the cost and the scenario, with an animation of the DEM slice.
+
+    data.py       what the page shows, read from the study folder (validated first)
+    figures.py    the side-by-side figures (PNG bytes)
+    animation.py  the DEM slice over the last cycles (GIF, DIR/report/dem_slice.gif)
+    html.py       the page
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+REPORT_NAME = "report.html"
+REPORT_DIR = "report"
+GIF_NAME = "dem_slice.gif"
+
+
+def write_report(study_dir) -> Path:
+    """Write DIR/report.html (and DIR/report/dem_slice.gif) for the finished study in
+    study_dir; returns the page's path.  A missing, foreign, corrupt or unfinished folder is an
+    InputError (one line) and nothing is written.  Both files are written atomically."""
+    from vibroflow.report.animation import write_slice_gif
+    from vibroflow.report.data import StudyData
+    from vibroflow.report.html import render
+
+    out = Path(study_dir)
+    data = StudyData.read(out)  # validates the folder before anything is written
+    gif, why = None, None
+    dem_dir = out / "dem"
+    if (dem_dir / "dem.h5").is_file():
+        try:
+            gif = write_slice_gif(dem_dir, out / REPORT_DIR / GIF_NAME)
+        except ValueError as exc:
+            why = str(exc)
+    else:
+        why = "no dem/dem.h5 in the study"
+    text = render(data, gif, why)
+    path = out / REPORT_NAME
+    tmp = path.with_name(f".tmp{os.getpid()}-{path.name}")
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+__all__ = ["write_report", "REPORT_NAME", "GIF_NAME"]

@@ -1,0 +1,335 @@
+"""What the report shows, read from a finished study folder (`vibroflow run --out DIR`).
+
+`StudyData.read(DIR)` validates the folder first (`vibroflow.study.results.read_summary`: a
+missing, foreign or corrupt DIR is a one-line InputError, and nothing is read further), then
+gathers the pieces the page draws: the summary, the scenario, each method's bulk velocity field,
+the stage records (cost), the calibration and the DEM's coarse-grained fields, the DEM's measured
+impacts binned on the analysis cells, and any sweep results.  Optional pieces that are missing
+(no fields.nc, a calibration that could not fit impacts, no sweep) are None, with a line in
+`notes` saying why, so the page states them instead of failing.
+
+Units: SI (m, m/s, 1/s, s).
+"""
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from vibroflow.errors import InputError
+
+DEM = "dem"
+#: impacts a cell needs before its mean impact speed is drawn (a cell mean of fewer is mostly
+#: noise: the speeds' spread is about their mean, so 20 impacts give a ~ 20 % standard error)
+MIN_IMPACTS_PER_CELL = 20
+
+
+@dataclass
+class ImpactCells:
+    """Mean normal approach speed (m/s) of the DEM's ball-ball impacts of the averaging window,
+    by analysis cell (tub frame, cell centres x, z in m), with the impacts counted per cell."""
+
+    x: np.ndarray
+    z: np.ndarray
+    mean_speed: np.ndarray
+    count: np.ndarray
+    cell_size: float
+
+    def at(self, px: float, pz: float) -> tuple[float, int]:
+        """(mean speed m/s, count) of the cell holding the point (px, pz); (nan, 0) if none."""
+        h = self.cell_size
+        i, k = math.floor(px / h + 0.5), math.floor(pz / h + 0.5)
+        hit = (np.rint(self.x / h) == i) & (np.rint(self.z / h) == k)
+        if not hit.any():
+            return float("nan"), 0
+        j = int(np.argmax(hit))
+        return float(self.mean_speed[j]), int(self.count[j])
+
+
+def bin_impacts(chunks, cell_size: float) -> ImpactCells:
+    """Mean speed and count per square cell of side cell_size (m) centred on its multiples
+    (the analysis cells of tub47.md "Bulk velocity"), from an iterable of (position_tub (M, 3)
+    m, normal_speed (M,) m/s) chunks of impacts (a tub47 run holds tens of millions: they are
+    never all in memory).  The per-chunk means are vibroflow.analysis.contacts.mean_by_region."""
+    from vibroflow.analysis.contacts import mean_by_region
+
+    h = float(cell_size)
+    acc: dict[tuple[int, int], list[float]] = {}
+    for pos, speed in chunks:
+        x, z, cnt, mean = mean_by_region(pos, speed, h)
+        for xi, zi, c, m in zip(np.rint(x / h).astype(int), np.rint(z / h).astype(int), cnt,
+                                mean):
+            a = acc.setdefault((int(xi), int(zi)), [0.0, 0.0])
+            a[0] += float(c)
+            a[1] += float(c) * float(m)
+    keys = sorted(acc)
+    count = np.array([acc[k][0] for k in keys], dtype=np.int64)
+    total = np.array([acc[k][1] for k in keys], dtype=float)
+    x = np.array([k[0] for k in keys], dtype=float) * h
+    z = np.array([k[1] for k in keys], dtype=float) * h
+    return ImpactCells(x, z, total / np.maximum(count, 1), count, h)
+
+
+def mean_flow_shear_rate(vx: np.ndarray, vz: np.ndarray, h: float) -> np.ndarray:
+    """Shear rate gamma_dot = sqrt(2 D':D') (1/s) of a plane velocity field (vx, vz) (m/s) given
+    on a square grid of spacing h (m), arrays indexed [z, x] (NaN outside the bed).
+
+    D is the symmetric part of the in-plane velocity gradient (central differences, one-sided
+    at the bed's edge; NaN where a cell has no neighbour along an axis), D_yy = 0 (plane flow),
+    and D' = D - tr(D)/3 I its deviator in 3D, the definition of the DEM's coarse-grained
+    shear rate (vibroflow.calibration.coarse_grain), so simple shear v_x = g z gives g and a
+    rigid rotation 0.
+    """
+    vx = np.asarray(vx, dtype=float)
+    vz = np.asarray(vz, dtype=float)
+
+    def grad(a, axis):
+        out = np.full(a.shape, np.nan)
+        n = a.shape[axis]
+        if n < 2:
+            return out
+        a_m = np.moveaxis(a, axis, 0)
+        o = np.moveaxis(out, axis, 0)
+        central = (a_m[2:] - a_m[:-2]) / (2.0 * h)
+        fwd = (a_m[1:] - a_m[:-1]) / h
+        o[1:-1] = central
+        # where a central difference lacks a side, the one-sided difference on the other
+        o[1:-1] = np.where(np.isnan(o[1:-1]), fwd[1:], o[1:-1])
+        o[1:-1] = np.where(np.isnan(o[1:-1]), fwd[:-1], o[1:-1])
+        o[0] = fwd[0]
+        o[-1] = fwd[-1]
+        return out
+
+    dvx_dx, dvx_dz = grad(vx, 1), grad(vx, 0)
+    dvz_dx, dvz_dz = grad(vz, 1), grad(vz, 0)
+    dxx, dzz = dvx_dx, dvz_dz
+    dxz = 0.5 * (dvx_dz + dvz_dx)
+    tr3 = (dxx + dzz) / 3.0
+    dd = (dxx - tr3) ** 2 + (dzz - tr3) ** 2 + tr3**2 + 2.0 * dxz**2
+    g = np.sqrt(2.0 * dd)
+    return np.where(np.isfinite(vx) & np.isfinite(vz), g, np.nan)
+
+
+@dataclass
+class StudyData:
+    """A finished study, as the report reads it (see the module notes)."""
+
+    out: Path
+    summary: dict
+    scenario: Any
+    scenario_toml: str | None
+    fields: dict                      # method -> xarray Dataset of bulk_velocity.csv (z, x)
+    stages: dict                      # stage name -> its stage.json record
+    calibration: dict | None
+    dem_fields: Any | None            # the DEM's time-averaged coarse-grained fields (fields.nc)
+    impacts: ImpactCells | None       # the DEM's measured ball-ball impacts by cell
+    sweep_table: Path | None
+    sweep_images: list[Path]
+    notes: dict = field(default_factory=dict)
+
+    @property
+    def methods(self) -> list[str]:
+        """The DEM first, then the continuum methods in the summary's order."""
+        names = list(self.summary["methods"])
+        return [DEM] + [n for n in names if n != DEM] if DEM in names else names
+
+    @property
+    def continuum_methods(self) -> list[str]:
+        return [n for n in self.methods if n != DEM]
+
+    @property
+    def geometry(self):
+        from vibroflow.analysis.summary import geometry_of
+
+        return geometry_of(self.scenario)
+
+    @property
+    def min_solid_fraction(self) -> float:
+        return float(self.scenario.analysis.min_solid_fraction)
+
+    @property
+    def diameter(self) -> float:
+        return float(self.scenario.fill.diameter)
+
+    # ------------------------------------------------------------------------------------------
+    @classmethod
+    def read(cls, out) -> "StudyData":
+        """Read the study in `out` (InputError, one line, for a missing, foreign, corrupt or
+        unfinished folder)."""
+        from vibroflow.study.results import load
+
+        out = Path(out)
+        loaded = load(out)  # validates DIR and every method's bulk velocity table
+        fields = loaded.pop("fields")
+        summary = loaded
+        notes: dict[str, str] = {}
+        scenario, text = _scenario(out)
+        stages = {}
+        for rec_path in sorted(out.glob("*/stage.json")):
+            try:
+                rec = json.loads(rec_path.read_text())
+            except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+                notes[f"stage {rec_path.parent.name}"] = "corrupt stage.json"
+                continue
+            if isinstance(rec, dict) and "stage" in rec:
+                stages[str(rec["stage"])] = rec
+        calibration = None
+        cal_path = out / DEM / "calibration.toml"
+        if cal_path.is_file():
+            try:
+                calibration = tomllib.loads(cal_path.read_text())
+            except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+                notes["calibration"] = f"{cal_path}: unreadable ({type(exc).__name__})"
+        else:
+            notes["calibration"] = f"no {DEM}/calibration.toml in the study"
+        dem_fields = None
+        fpath = out / DEM / "fields.nc"
+        if fpath.is_file():
+            from vibroflow.calibration.run_fields import read_fields
+
+            try:
+                dem_fields = read_fields(fpath)
+            except InputError as exc:
+                notes["dem_fields"] = exc.message
+        else:
+            notes["dem_fields"] = f"no {DEM}/fields.nc (the calibration's coarse-grained fields)"
+        impacts = None
+        if scenario is not None:
+            impacts, why = _dem_impacts(out / DEM / "dem.h5", scenario)
+            if why:
+                notes["impacts"] = why
+        table, images = _sweep(out)
+        return cls(out=out, summary=summary, scenario=scenario, scenario_toml=text,
+                   fields=fields, stages=stages, calibration=calibration,
+                   dem_fields=dem_fields, impacts=impacts, sweep_table=table,
+                   sweep_images=images, notes=notes)
+
+    # ------------------------------------------------------------------------------------------
+    def impact_fit(self, kind: str = "ball_ball") -> dict | None:
+        """The calibrated v = c0 + c1 d gamma_dot of `kind` (calibration.toml [impacts.KIND]),
+        or None when the calibration has none with finite coefficients."""
+        rel = ((self.calibration or {}).get("impacts") or {}).get(kind)
+        if not isinstance(rel, dict):
+            return None
+        c0, c1 = rel.get("c0_m_s"), rel.get("c1")
+        if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in (c0, c1)):
+            return None
+        return {"c0": float(c0), "c1": float(c1)}
+
+    def continuum_block(self, name: str) -> dict:
+        """The `continuum` block of a continuum method's own summary.json ({} if none)."""
+        entry = self.summary["methods"].get(name, {})
+        rel = entry.get("bulk_velocity_csv", f"{name}/bulk_velocity.csv")
+        path = self.out / Path(rel).parent / "summary.json"
+        try:
+            s = json.loads(path.read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+            return {}
+        block = s.get("continuum") if isinstance(s, dict) else None
+        return block if isinstance(block, dict) else {}
+
+    def dem_shear_rate_at(self, px: float, pz: float) -> float:
+        """The DEM's cycle-mean shear rate (1/s) in the analysis cell holding (px, pz): the
+        mass-weighted mean of fields.nc's grid points inside that cell (NaN without fields)."""
+        ds = self.dem_fields
+        if ds is None:
+            return float("nan")
+        name = "shear_rate_cycle_mean" if "shear_rate_cycle_mean" in ds else "shear_rate"
+        h = float(self.scenario.analysis.cell_size)
+        cx, cz = math.floor(px / h + 0.5) * h, math.floor(pz / h + 0.5) * h
+        x = ds["x"].values
+        z = ds["z"].values
+        tol = 1e-9
+        sx = (x >= cx - 0.5 * h - tol) & (x < cx + 0.5 * h - tol)
+        sz = (z >= cz - 0.5 * h - tol) & (z < cz + 0.5 * h - tol)
+        g = ds[name].values[np.ix_(sx, sz)]
+        w = ds["density"].values[np.ix_(sx, sz)]
+        ok = np.isfinite(g) & (w > 0)
+        if not ok.any():
+            return float("nan")
+        return float(np.sum(g[ok] * w[ok]) / np.sum(w[ok]))
+
+
+def _scenario(out: Path):
+    """The study's scenario and its TOML text (as `vibroflow scenario show` prints it): dem.h5's
+    scenario_toml attribute, else the DEM stage record's inputs."""
+    from vibroflow.scenario.io import dump_scenario, parse_scenario
+
+    h5 = out / DEM / "dem.h5"
+    if h5.is_file():
+        import h5py
+
+        try:
+            with h5py.File(h5, "r") as f:
+                text = f.attrs.get("scenario_toml")
+            if isinstance(text, bytes):
+                text = text.decode()
+            if text:
+                return parse_scenario(tomllib.loads(str(text))), str(text)
+        except (OSError, ValueError, tomllib.TOMLDecodeError):
+            pass
+    try:
+        rec = json.loads((out / DEM / "stage.json").read_text())
+        s = parse_scenario(rec["inputs"]["scenario"])
+        return s, dump_scenario(s)
+    except (OSError, ValueError, KeyError, TypeError):
+        raise InputError(f"DIR = {str(out)!r}: the study's scenario is unreadable (no "
+                         f"{DEM}/dem.h5 scenario_toml and no {DEM}/stage.json inputs)") from None
+
+
+def _dem_impacts(h5: Path, scenario, chunk: int = 2_000_000):
+    """The DEM's ball-ball impacts of the averaging window's whole cycles (the impacts its
+    summary averages: vibroflow.analysis.stats.batches_of_whole_cycles) by analysis cell."""
+    if not h5.is_file():
+        return None, f"no {DEM}/dem.h5: no measured impacts"
+    import h5py
+
+    from vibroflow.analysis.stats import batches_of_whole_cycles
+    from vibroflow.dem.walls import KIND_BALL_BALL
+
+    run = scenario.run
+    t0, t1 = run.duration - run.average_last, run.duration
+    f_hz = float(scenario.motion.frequency)
+
+    def chunks(f):
+        n = f["impacts/time"].shape[0]
+        for a in range(0, n, chunk):
+            b = min(n, a + chunk)
+            t = f["impacts/time"][a:b]
+            use = (batches_of_whole_cycles(t, t0, t1, f_hz, int(run.batches)) >= 0) & (
+                f["impacts/kind"][a:b] == KIND_BALL_BALL)
+            yield f["impacts/position_tub"][a:b][use], f["impacts/normal_speed"][a:b][use]
+
+    try:
+        with h5py.File(h5, "r") as f:
+            if "impacts/time" not in f or f["impacts/time"].shape[0] == 0:
+                return None, ("the DEM result holds no impacts (a LIGGGHTS import does not "
+                              "report them)")
+            return bin_impacts(chunks(f), float(scenario.analysis.cell_size)), None
+    except (OSError, KeyError, ValueError) as exc:
+        return None, f"{h5}: impacts unreadable ({type(exc).__name__})"
+
+
+def _sweep(out: Path) -> tuple[Path | None, list[Path]]:
+    """A sweep's table and plots (vibroflow sweep: sweep.csv, plots/sweep_*.png) in the study
+    folder, or in the sweep folder holding it as one of its points (SWEEP/points/NAME)."""
+    places = [out]
+    parent = out.parent.parent
+    if out.parent.name == "points" and (parent / "sweep.json").is_file():
+        try:
+            kind = json.loads((parent / "sweep.json").read_text()).get("kind")
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError, AttributeError):
+            kind = None
+        if kind == "vibroflow sweep":
+            places.append(parent)
+    for place in places:
+        table = place / "sweep.csv"
+        images = sorted({*place.glob("sweep*.png"), *place.glob("plots/sweep*.png")})
+        if table.is_file() or images:
+            return (table if table.is_file() else None), images
+    return None, []

@@ -1,0 +1,306 @@
+"""The report's figures (matplotlib, Agg backend): each a function of the study's data
+(`vibroflow.report.data.StudyData`) returning PNG bytes, one panel per method side by side, the
+DEM first, on the tub's U outline (tub frame: x across, z up from the bottom of the U, m).
+
+The continuum methods write their shear rate and the impact speed it implies at the probe cells
+and over the bed (their summary's `continuum` block), not as a map, so their panels of the
+shear-rate and impact maps colour the probe cells on the DEM's colour scale; the mean-flow
+shear-rate row compares every method cell by cell from its bulk_velocity.csv.
+"""
+from __future__ import annotations
+
+import io
+import math
+
+import numpy as np
+
+from vibroflow.report.data import MIN_IMPACTS_PER_CELL, StudyData, mean_flow_shear_rate
+
+DPI = 90
+
+
+def _plt():
+    import matplotlib
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def png_bytes(fig) -> bytes:
+    """The figure as PNG bytes (closed afterwards)."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=DPI, bbox_inches="tight")
+    _plt().close(fig)
+    return buf.getvalue()
+
+
+def _outline(ax, data: StudyData, bed_top: float | None = None) -> None:
+    geo = data.geometry
+    prof = geo.profile(300)
+    ax.plot(prof[:, 0], prof[:, 1], "k-", lw=1.2)
+    ax.set_aspect("equal")
+    top = geo.rim_height if bed_top is None else min(geo.rim_height, bed_top)
+    ax.set_xlim(-1.05 * geo.radius, 1.05 * geo.radius)
+    ax.set_ylim(-0.03 * geo.radius, top)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("z (m)")
+
+
+def _bed_top(data: StudyData) -> float:
+    """A height (m) above every method's bed, to crop the empty upper tub."""
+    top = 0.0
+    for ds in data.fields.values():
+        z = ds["z"].values
+        has = (ds["samples"].values > 0).any(axis=1)
+        if has.any():
+            top = max(top, float(z[has].max()))
+    h = float(data.scenario.analysis.cell_size)
+    return top + 2.0 * h if top > 0 else data.geometry.rim_height
+
+
+def _probes(ax, data: StudyData, labels: bool = True) -> None:
+    for name, p in data.scenario.analysis.probes.items():
+        ax.plot(p.x, p.z, "k+", ms=8, mew=1.5)
+        if labels:
+            ax.annotate(name, (p.x, p.z), xytext=(4, 4), textcoords="offset points",
+                        fontsize=8)
+
+
+def _panels(n: int, width: float = 4.6, height: float = 4.2):
+    plt = _plt()
+    # constrained layout: two-line panel titles, the suptitle and the colour bar never overlap
+    fig, axes = plt.subplots(1, n, figsize=(width * n, height), squeeze=False,
+                             layout="constrained")
+    return fig, list(axes[0])
+
+
+def _method_title(data: StudyData, name: str) -> str:
+    c = data.summary["methods"][name].get("circulation", {})
+    s, se = c.get("strength"), c.get("strength_stderr")
+    if s is None:
+        return name
+    txt = f"{name}\n{c.get('sense', '?')}, strength {s:.3g}"
+    if se is not None and math.isfinite(se):
+        txt += f" ± {se:.2g}"
+    return txt + " m²/s"
+
+
+# ----------------------------------------------------------------------------------------------
+
+def velocity_fields(data: StudyData) -> bytes:
+    """The bulk velocity relative to the tub of every method: arrows on the cells holding bed
+    (solid fraction >= the analysis' min_solid_fraction / 2), over |v| in colour on one scale."""
+    from matplotlib.colors import Normalize
+
+    names = data.methods
+    fig, axes = _panels(len(names))
+    top = _bed_top(data)
+    vmax = 0.0
+    for name in names:
+        ds = data.fields[name]
+        sp = np.hypot(ds["vx"].values, ds["vz"].values)
+        if np.isfinite(sp).any():
+            vmax = max(vmax, float(np.nanmax(sp)))
+    norm = Normalize(0.0, vmax if vmax > 0 else 1.0)
+    h = float(data.scenario.analysis.cell_size)
+    scale = (vmax if vmax > 0 else 1.0) / (1.2 * h)  # the fastest arrow 1.2 cells long
+    mesh = None
+    for ax, name in zip(axes, names):
+        ds = data.fields[name]
+        x, z = ds["x"].values, ds["z"].values
+        vx, vz = ds["vx"].values, ds["vz"].values
+        bed = ds["solid_fraction"].values >= 0.5 * data.min_solid_fraction
+        sp = np.where(bed, np.hypot(vx, vz), np.nan)
+        mesh = ax.pcolormesh(x, z, sp, shading="nearest", cmap="viridis", norm=norm)
+        X, Z = np.meshgrid(x, z)
+        ax.quiver(X[bed], Z[bed], vx[bed], vz[bed], color="white", angles="xy",
+                  scale_units="xy", scale=scale, width=0.006, edgecolor="k", linewidth=0.3)
+        _outline(ax, data, top)
+        _probes(ax, data)
+        ax.set_title(_method_title(data, name), fontsize=9)
+    if mesh is not None:
+        fig.colorbar(mesh, ax=axes, shrink=0.8, label="|v| relative to the tub (m/s)")
+    fig.suptitle("bulk (circulation) velocity relative to the tub, time-averaged, "
+                 f"{1e3 * data.scenario.analysis.cell_size:g} mm cells")
+    return png_bytes(fig)
+
+
+def _cell_squares(ax, data: StudyData, values: dict, norm, cmap):
+    """Colour the probe cells by values (probe name -> value); returns the mappable."""
+    from matplotlib.collections import PatchCollection
+    from matplotlib.patches import Rectangle
+
+    h = float(data.scenario.analysis.cell_size)
+    patches, vals = [], []
+    for name, p in data.scenario.analysis.probes.items():
+        v = values.get(name)
+        if v is None or not math.isfinite(v):
+            continue
+        cx, cz = math.floor(p.x / h + 0.5) * h, math.floor(p.z / h + 0.5) * h
+        patches.append(Rectangle((cx - 0.5 * h, cz - 0.5 * h), h, h))
+        vals.append(v)
+    pc = PatchCollection(patches, cmap=cmap, norm=norm, edgecolor="k", linewidth=0.6)
+    pc.set_array(np.asarray(vals, dtype=float))
+    ax.add_collection(pc)
+    return pc, len(vals)
+
+
+def _log_norm(values):
+    from matplotlib.colors import LogNorm
+
+    v = np.concatenate([np.ravel(np.asarray(a, dtype=float)) for a in values] or [np.zeros(0)])
+    v = v[np.isfinite(v) & (v > 0)]
+    if v.size == 0:
+        return LogNorm(0.1, 1.0)
+    hi = float(v.max())
+    return LogNorm(max(float(v.min()), hi * 1e-3), hi)
+
+
+def shear_rate_maps(data: StudyData) -> bytes:
+    """Top row: the cycle-mean shear rate the bed feels (DEM: the coarse-grained fields.nc map;
+    continuum: its own cycle-mean shear rate in the probe cells).  Bottom row: the shear rate of
+    the mean (circulation) flow, from every method's bulk_velocity.csv by the same finite
+    differences (data.mean_flow_shear_rate)."""
+    plt = _plt()
+    names = data.methods
+    n = len(names)
+    fig, axes = plt.subplots(2, n, figsize=(4.6 * n, 8.4), squeeze=False, layout="constrained")
+    top = _bed_top(data)
+    # top row
+    ds = data.dem_fields
+    dem_map = None
+    if ds is not None:
+        gname = "shear_rate_cycle_mean" if "shear_rate_cycle_mean" in ds else "shear_rate"
+        bed = ds["solid_fraction"].values >= 0.05
+        dem_map = np.where(bed, ds[gname].values, np.nan)
+    cont = {name: {k: v.get("shear_rate_1_s") for k, v in
+                   (data.continuum_block(name).get("probes") or {}).items()}
+            for name in data.continuum_methods}
+    norm = _log_norm([dem_map if dem_map is not None else np.zeros(0)]
+                     + [list(c.values()) for c in cont.values()])
+    cmap = "plasma"
+    mappable = None
+    for ax, name in zip(axes[0], names):
+        if name == data.methods[0] and name == "dem":
+            if dem_map is None:
+                ax.text(0.5, 0.5, "no coarse-grained fields\n(dem/fields.nc)",
+                        ha="center", va="center", transform=ax.transAxes)
+            else:
+                x, z = ds["x"].values, ds["z"].values
+                mappable = ax.pcolormesh(x, z, dem_map.T, shading="nearest", cmap=cmap,
+                                         norm=norm)
+            ax.set_title("dem: cycle-mean shear rate (fields.nc)", fontsize=9)
+        else:
+            pc, k = _cell_squares(ax, data, cont.get(name, {}), norm, cmap)
+            mappable = mappable or pc
+            block = data.continuum_block(name).get("shear_rate") or {}
+            m, se = block.get("mean_1_s"), block.get("mean_1_s_stderr")
+            txt = (f"bed mean {m:.3g} ± {se:.2g} 1/s" if isinstance(m, (int, float))
+                   and math.isfinite(m) else "no shear rate written")
+            if k == 0:
+                txt += "\nno probe shear rates"
+            ax.text(0.03, 0.97, txt, ha="left", va="top", transform=ax.transAxes, fontsize=8)
+            ax.set_title(f"{name}: cycle-mean shear rate in the probe cells", fontsize=9)
+        _outline(ax, data, top)
+        _probes(ax, data)
+    if mappable is not None:
+        fig.colorbar(mappable, ax=list(axes[0]), shrink=0.8, label="shear rate (1/s)")
+    # bottom row: the mean flow's shear rate
+    maps = {}
+    for name in names:
+        f = data.fields[name]
+        h = float(f.attrs.get("cell_size_m", data.scenario.analysis.cell_size))
+        g = mean_flow_shear_rate(f["vx"].values, f["vz"].values, h)
+        bed = f["solid_fraction"].values >= 0.5 * data.min_solid_fraction
+        maps[name] = np.where(bed, g, np.nan)
+    norm2 = _log_norm(list(maps.values()))
+    m2 = None
+    for ax, name in zip(axes[1], names):
+        f = data.fields[name]
+        m2 = ax.pcolormesh(f["x"].values, f["z"].values, maps[name], shading="nearest",
+                           cmap=cmap, norm=norm2)
+        _outline(ax, data, top)
+        ax.set_title(f"{name}: shear rate of the mean flow", fontsize=9)
+    if m2 is not None:
+        fig.colorbar(m2, ax=list(axes[1]), shrink=0.8, label="shear rate (1/s)")
+    fig.suptitle("shear rate gamma_dot = sqrt(2 D':D')")
+    return png_bytes(fig)
+
+
+def inferred_impact_speeds(data: StudyData, name: str) -> dict:
+    """A continuum method's ball-ball impact speeds (m/s) inferred in the probe cells from its
+    shear rate there by the calibrated v = c0 + c1 d gamma_dot (calibration.toml
+    [impacts.ball_ball], the relation its run uses for the bed mean); {} without a fit."""
+    fit = data.impact_fit("ball_ball")
+    if fit is None:
+        return {}
+    d = data.diameter
+    out = {}
+    for probe, rec in (data.continuum_block(name).get("probes") or {}).items():
+        g = rec.get("shear_rate_1_s")
+        if isinstance(g, (int, float)) and math.isfinite(g):
+            out[probe] = fit["c0"] + fit["c1"] * d * g
+    return out
+
+
+def impact_maps(data: StudyData) -> bytes:
+    """Mean ball-ball normal impact speed: the DEM's measured impacts of the averaging window by
+    cell (cells with at least MIN_IMPACTS_PER_CELL impacts), against each continuum method's
+    inference in the probe cells, on one colour scale."""
+    from matplotlib.colors import Normalize
+
+    names = data.methods
+    fig, axes = _panels(len(names))
+    top = _bed_top(data)
+    imp = data.impacts
+    inferred = {name: inferred_impact_speeds(data, name) for name in data.continuum_methods}
+    vals = []
+    if imp is not None:
+        vals.append(imp.mean_speed[imp.count >= MIN_IMPACTS_PER_CELL])
+    vals += [np.asarray(list(v.values()), dtype=float) for v in inferred.values()]
+    allv = np.concatenate(vals) if vals else np.zeros(0)
+    allv = allv[np.isfinite(allv)]
+    norm = Normalize(0.0, float(allv.max()) if allv.size else 1.0)
+    cmap = "cividis"
+    mappable = None
+    h = float(data.scenario.analysis.cell_size)
+    for ax, name in zip(axes, names):
+        if name == "dem":
+            if imp is None:
+                ax.text(0.5, 0.5, data.notes.get("impacts", "no measured impacts"),
+                        ha="center", va="center", transform=ax.transAxes, wrap=True)
+            else:
+                ok = imp.count >= MIN_IMPACTS_PER_CELL
+                ix = np.rint(imp.x[ok] / h).astype(int)
+                iz = np.rint(imp.z[ok] / h).astype(int)
+                if ok.any():
+                    grid = np.full((iz.max() - iz.min() + 1, ix.max() - ix.min() + 1), np.nan)
+                    grid[iz - iz.min(), ix - ix.min()] = imp.mean_speed[ok]
+                    xs = np.arange(ix.min(), ix.max() + 1) * h
+                    zs = np.arange(iz.min(), iz.max() + 1) * h
+                    mappable = ax.pcolormesh(xs, zs, grid, shading="nearest", cmap=cmap,
+                                             norm=norm)
+                ax.text(0.03, 0.97, f"{int(imp.count.sum())} impacts measured",
+                        ha="left", va="top", transform=ax.transAxes, fontsize=8)
+            ax.set_title("dem: measured ball-ball impacts", fontsize=9)
+        else:
+            pc, k = _cell_squares(ax, data, inferred[name], norm, cmap)
+            mappable = mappable or pc
+            if k == 0:
+                why = ("no calibrated impact relation" if data.impact_fit("ball_ball") is None
+                       else "no probe shear rates")
+                ax.text(0.5, 0.6, f"no inferred impacts:\n{why}", ha="center", va="center",
+                        transform=ax.transAxes, fontsize=9)
+            v = data.summary["methods"][name].get("impacts", {}).get(
+                "ball_ball_mean_normal_speed")
+            if isinstance(v, (int, float)) and math.isfinite(v):
+                ax.text(0.03, 0.97, f"bed mean (inferred) {v:.3g} m/s", ha="left", va="top",
+                        transform=ax.transAxes, fontsize=8)
+            ax.set_title(f"{name}: inferred from its shear rate", fontsize=9)
+        _outline(ax, data, top)
+        _probes(ax, data)
+    if mappable is not None:
+        fig.colorbar(mappable, ax=axes, shrink=0.8, label="mean normal impact speed (m/s)")
+    fig.suptitle("ball-ball impact speed: DEM measured vs continuum inferred "
+                 "(v = c0 + c1 d gamma_dot)")
+    return png_bytes(fig)
