@@ -243,17 +243,30 @@ def test_report_of_a_bad_folder_is_a_one_line_error(tmp_path):
     assert not missing.exists()
 
 
-def test_a_study_without_dem_h5_still_gets_a_page_that_says_so(study, tmp_path):  # noqa: F811
+def test_missing_pieces_are_stated_and_a_sweep_point_shows_its_sweep(study, tmp_path):  # noqa: F811,E501
     """Optional pieces missing (no dem.h5: no animation, no measured impacts; no fields.nc; no
-    calibration pictures) are stated in the page, not a crash."""
+    calibration pictures) are stated in the page, not a crash; a study that is a point of a
+    sweep (SWEEP/points/NAME, `vibroflow sweep`) shows the sweep's plots and table."""
+    from PIL import Image
+
     from vibroflow.report import write_report
 
     _, out, _, _ = study
-    copy = tmp_path / "copy"
+    sweep = tmp_path / "sweep"
+    copy = sweep / "points" / "factor-1"
     shutil.copytree(out, copy, ignore=shutil.ignore_patterns("dem.h5", "fields.nc", "*.png",
                                                              "report*"))
+    (sweep / "sweep.json").write_text(json.dumps({"kind": "vibroflow sweep"}))
+    (sweep / "sweep.csv").write_text("point,method,circulation_strength\n"
+                                     "factor-1,dem,0.00073\nfactor-1,lagrangian,0.0017\n")
+    (sweep / "plots").mkdir()
+    Image.new("RGB", (40, 30), "white").save(sweep / "plots" / "sweep_circulation.png")
     page = write_report(copy).read_text(encoding="utf-8")
     assert "No animation" in page
     assert "mu_I.png is missing" in page
     assert "no dem/fields.nc" in page
+    assert "the DEM result holds no impacts" not in page and "no measured impacts" in page
     assert not (copy / "report" / "dem_slice.gif").exists()
+    assert "No sweep in this folder" not in page
+    assert "sweep_circulation.png" in page and "<td>factor-1</td>" not in page
+    assert '<td class="l">factor-1</td><td>lagrangian</td><td>0.0017</td>' in page

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 #: frames at most (the last snapshots of the run), and the frame duration (ms)
-MAX_FRAMES = 64
+MAX_FRAMES = 48
 FRAME_MS = 90
 COLORS = 48      # GIF palette size: enough for the colour scale, keeps the file small
 WIDTH_IN = 4.6   # figure width (inches) at DPI: ~ 410 px

@@ -88,9 +88,11 @@ def _method_title(data: StudyData, name: str) -> str:
 # ----------------------------------------------------------------------------------------------
 
 def velocity_fields(data: StudyData) -> bytes:
-    """The bulk velocity relative to the tub of every method: arrows on the cells holding bed
-    (solid fraction >= the analysis' min_solid_fraction / 2), over |v| in colour on one scale."""
-    from matplotlib.colors import Normalize
+    """The bulk velocity relative to the tub of every method: streamlines of the mean flow over
+    |v| in colour (one square-root scale for all methods: the fast surface layer would
+    otherwise leave the slow bulk in one colour), on the cells holding bed (solid fraction >=
+    half the analysis' min_solid_fraction)."""
+    from matplotlib.colors import PowerNorm
 
     names = data.methods
     fig, axes = _panels(len(names))
@@ -101,27 +103,28 @@ def velocity_fields(data: StudyData) -> bytes:
         sp = np.hypot(ds["vx"].values, ds["vz"].values)
         if np.isfinite(sp).any():
             vmax = max(vmax, float(np.nanmax(sp)))
-    norm = Normalize(0.0, vmax if vmax > 0 else 1.0)
-    h = float(data.scenario.analysis.cell_size)
-    scale = (vmax if vmax > 0 else 1.0) / (1.2 * h)  # the fastest arrow 1.2 cells long
+    norm = PowerNorm(0.5, 0.0, vmax if vmax > 0 else 1.0)
     mesh = None
     for ax, name in zip(axes, names):
         ds = data.fields[name]
         x, z = ds["x"].values, ds["z"].values
         vx, vz = ds["vx"].values, ds["vz"].values
-        bed = ds["solid_fraction"].values >= 0.5 * data.min_solid_fraction
+        bed = (ds["solid_fraction"].values >= 0.5 * data.min_solid_fraction) & np.isfinite(
+            vx) & np.isfinite(vz)
         sp = np.where(bed, np.hypot(vx, vz), np.nan)
         mesh = ax.pcolormesh(x, z, sp, shading="nearest", cmap="viridis", norm=norm)
-        X, Z = np.meshgrid(x, z)
-        ax.quiver(X[bed], Z[bed], vx[bed], vz[bed], color="white", angles="xy",
-                  scale_units="xy", scale=scale, width=0.006, edgecolor="k", linewidth=0.3)
+        if x.size > 1 and z.size > 1 and bed.sum() > 1:
+            # the streamlines stop where the bed ends (masked cells)
+            ax.streamplot(x, z, np.ma.masked_where(~bed, np.where(bed, vx, 0.0)),
+                          np.ma.masked_where(~bed, np.where(bed, vz, 0.0)), color="white",
+                          density=1.1, linewidth=0.8, arrowsize=0.8)
         _outline(ax, data, top)
         _probes(ax, data)
         ax.set_title(_method_title(data, name), fontsize=9)
     if mesh is not None:
         fig.colorbar(mesh, ax=axes, shrink=0.8, label="|v| relative to the tub (m/s)")
     fig.suptitle("bulk (circulation) velocity relative to the tub, time-averaged, "
-                 f"{1e3 * data.scenario.analysis.cell_size:g} mm cells")
+                 f"{1e3 * data.scenario.analysis.cell_size:g} mm cells: streamlines")
     return png_bytes(fig)
 
 

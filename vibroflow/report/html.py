@@ -279,9 +279,15 @@ def _animation(data: StudyData, gif: Path | None, why: str | None) -> str:
 def _sweep(data: StudyData) -> str:
     if data.sweep_table is None and not data.sweep_images:
         return "<p>No sweep in this folder (run <code>vibroflow sweep</code> for one).</p>"
+    where = (data.sweep_table or data.sweep_images[0]).parent
+    if where.name == "plots" and data.sweep_table is None:
+        where = where.parent
     out = []
+    if where.resolve() != data.out.resolve():
+        out.append(f"<p>From the sweep this study is a point of: {_e(where.resolve())}.</p>")
     for p in data.sweep_images:
-        out.append(f"<p>{_e(p.name)}</p>" + _img(p.read_bytes(), p.stem))
+        stamp = time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime(p.stat().st_mtime))
+        out.append(f"<p>{_e(p.name)} (written {stamp})</p>" + _img(p.read_bytes(), p.stem))
     if data.sweep_table is not None:
         try:
             with open(data.sweep_table, newline="") as f:
