@@ -24,8 +24,9 @@ import pytest
 
 from tests.test_study import study  # noqa: F401  (the module-scoped tiny study fixture)
 
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMEDRIVER = Path("/usr/bin/chromedriver")
+# Debian's packages chromium and chromium-driver
+CHROMIUM = Path(shutil.which("chromium") or "/usr/bin/chromium")
+CHROMEDRIVER = Path(shutil.which("chromedriver") or "/usr/bin/chromedriver")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -232,12 +233,18 @@ def test_report_of_a_bad_folder_is_a_one_line_error(tmp_path):
     unfinished.mkdir()
     (unfinished / "study.json").write_text(json.dumps({"kind": "vibroflow study"}))
     missing = tmp_path / "missing"
-    for folder in (foreign, corrupt, unfinished, missing):
+    # valid JSON that is not a study's summary
+    odd = tmp_path / "odd"
+    odd.mkdir()
+    (odd / "study.json").write_text(json.dumps({"kind": "vibroflow study"}))
+    (odd / "summary.json").write_text(json.dumps({"methods": {"dem": {"probes": 3}}}))
+    for folder in (foreign, corrupt, unfinished, missing, odd):
         before = sorted(p.name for p in folder.iterdir()) if folder.exists() else None
         r = _cli("report", folder)
         assert r.returncode == 2, (folder, r.stderr)
         assert r.stderr.startswith("error: ") and r.stderr.count("\n") == 1, r.stderr
         assert "Traceback" not in r.stderr
+        assert str(folder) in r.stderr  # the line names the folder (or its file)
         after = sorted(p.name for p in folder.iterdir()) if folder.exists() else None
         assert after == before  # nothing written
     assert not missing.exists()

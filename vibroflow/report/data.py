@@ -164,9 +164,17 @@ class StudyData:
         from vibroflow.study.results import load
 
         out = Path(out)
+        if out.is_dir() and not (out / "study.json").exists():
+            raise InputError(f"DIR = {str(out)!r}: not a vibroflow study folder (no study.json); "
+                             "give the --out folder of a finished `vibroflow run`")
         loaded = load(out)  # validates DIR and every method's bulk velocity table
         fields = loaded.pop("fields")
         summary = loaded
+        for name, entry in summary["methods"].items():
+            for key in ("probes", "circulation"):
+                if not isinstance(entry, dict) or not isinstance(entry.get(key), dict):
+                    raise InputError(f"{out / 'summary.json'}: corrupt summary (method {name!r} "
+                                     f"has no {key} table)")
         notes: dict[str, str] = {}
         scenario, text = _scenario(out)
         stages = {}
