@@ -234,7 +234,8 @@ def continuum(
     scenario: ScenarioArg,
     out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")],
     method: Annotated[str, typer.Option(
-        "--method", help="Formulation: lagrangian (material point method).")] = "lagrangian",
+        "--method", help="Formulation: lagrangian (material point method) or eulerian (fixed "
+                         "mesh of the tub).")] = "lagrangian",
     calibration: Annotated[Optional[Path], typer.Option(
         "--calibration", help="calibration.toml, or a run folder holding one; default: "
                               "tub47's parameters.")] = None,
@@ -253,24 +254,30 @@ def continuum(
                                    "steps (to split a run; go on with --resume).")] = None,
 ) -> None:
     """Run a continuum model of a tub scenario: --out/summary.json, bulk_velocity.csv."""
-    if method != "lagrangian":
-        raise InputError(f"--method = {method!r}: must be lagrangian")
+    if method not in ("lagrangian", "eulerian"):
+        raise InputError(f"--method = {method!r}: must be lagrangian or eulerian")
     if stop_after_steps is not None and stop_after_steps < 0:
         raise InputError(f"--stop-after-steps = {stop_after_steps}: must be >= 0")
     s = _load(scenario, set_)  # before anything is written: bad input leaves --out untouched
     from vibroflow.continuum.mpm import ContinuumBlowUp
     from vibroflow.continuum.run import LagrangianOptions, material_of, run_lagrangian
 
+    options_class, run_method = LagrangianOptions, run_lagrangian
+    if method == "eulerian":
+        from vibroflow.continuum.eulerian.run import EulerianOptions, run_eulerian
+
+        options_class, run_method = EulerianOptions, run_eulerian
+
     cal = None
     if calibration is not None:
         from vibroflow.calibration.calibrate import read_calibration
 
         cal = read_calibration(calibration)
-    options = LagrangianOptions(dx=dx, model=rheology)
+    options = options_class(dx=dx, model=rheology)
     material_of(s, cal, rheology)  # validates the parameters before --out is made
     try:
-        summary = run_lagrangian(s, out, calibration=cal, options=options, progress=True,
-                                 vtk=vtk, resume=resume, stop_after_steps=stop_after_steps)
+        summary = run_method(s, out, calibration=cal, options=options, progress=True,
+                             vtk=vtk, resume=resume, stop_after_steps=stop_after_steps)
     except ContinuumBlowUp as exc:
         # a numerical blow-up is not bad input: its own exit code, the points and the cause
         sys.stderr.write("error: " + str(exc) + "\n")
@@ -332,6 +339,69 @@ def run(
                      + f", cost x{a['cost_ratio']:.3g}")
         typer.echo(line)
     typer.echo(f"results in {out}/summary.json")
+
+
+# ----------------------------------------------------------------------------------------------
+# sweep: the study at every amplitude factor (and other values), on Dask distributed
+
+@app.command("sweep")
+@input_errors
+def sweep(
+    scenario: Annotated[str, typer.Argument(
+        metavar="[SCENARIO]", help="A preset (tub47, tub47-quick) or a TOML file.")] = "tub47-quick",
+    out: Annotated[Path, typer.Option("--out", "-o", help="Sweep folder.")] = ...,
+    factors: Annotated[str, typer.Option(
+        "--factors", metavar="F1,F2,...",
+        help="Amplitude factors (motion.amplitude_factor), comma-separated.")
+    ] = "0.5,0.75,1,1.25,1.5",
+    vary: Annotated[Optional[list[str]], typer.Option(
+        "--vary", metavar="KEY=V1,V2,...",
+        help="Also vary a scenario field (fill.count=300,400) or a continuum option "
+             "(lagrangian.dx=0.004,0.002); the points are every combination; repeatable.")
+    ] = None,
+    set_: Annotated[Optional[list[str]], typer.Option(
+        "--set", "-s", metavar="KEY=VALUE",
+        help="Fix a scenario field or a continuum method's option for every point, as "
+             "`vibroflow run --set`; repeatable.")] = None,
+    scheduler: Annotated[Optional[str], typer.Option(
+        "--scheduler", metavar="ADDRESS",
+        help="Run the points on the Dask cluster at ADDRESS (tcp://host:8786, started with "
+             "`dask scheduler` and `dask worker`); default: a local cluster.")] = None,
+    workers: Annotated[Optional[int], typer.Option(
+        "--workers", help="Local cluster: worker processes (one thread each); default: one "
+                          "per core.")] = None,
+    shear_cell: Annotated[bool, typer.Option(
+        "--shear-cell", help="Calibrate mu(I) and the moduli in DEM shear-cell tests at every "
+                             "point (minutes each).")] = False,
+) -> None:
+    """The whole study (DEM, calibration, continuum, comparison) at every point of the sweep,
+    as Dask tasks: DIR/points/<point>, DIR/sweep.csv, DIR/sweep.json, DIR/plots/sweep_*.png.
+    A rerun computes only the missing points; a failed point does not stop the others."""
+    import os
+
+    from vibroflow.study.sweep_points import parse_factors, parse_vary, plan_sweep
+
+    if workers is not None and workers < 1:
+        raise InputError(f"--workers = {workers}: must be at least 1")
+    if workers is not None and scheduler:
+        raise InputError("--workers: only for the local cluster, not with --scheduler")
+    plan = plan_sweep(scenario, parse_factors(factors), parse_vary(vary), set_, shear_cell)
+    from vibroflow.study.sweep import (check_sweep_dir, failed_points, print_table, run_sweep,
+                                       summary_of)
+
+    check_sweep_dir(out, plan)  # before anything is written or started
+    where = scheduler or f"a local cluster of {workers or os.cpu_count()} worker(s)"
+    typer.echo(f"{len(plan.points)} point(s) of {', '.join(plan.varied)} on {where}")
+    record = run_sweep(plan, out, scheduler=scheduler, workers=workers, echo=typer.echo)
+    print_table(record)
+    counts = summary_of(record)
+    typer.echo(", ".join(f"{v} {k}" for k, v in sorted(counts.items()))
+               + f"; results in {out}/sweep.csv, {out}/plots")
+    failed = failed_points(record)
+    if failed:
+        sys.stderr.write(f"{len(failed)} of {len(record['points'])} point(s) failed: "
+                         f"{', '.join(failed)} (see {out}/points/<point>/failed.json)\n")
+        raise typer.Exit(1)
 
 
 @app.command("report")

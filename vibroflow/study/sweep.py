@@ -1,0 +1,234 @@
+"""`vibroflow sweep`: the whole study at every point of an amplitude (and any field) sweep, the
+points run as tasks on Dask distributed.
+
+    run_sweep(plan, out)      plan = sweep_points.plan_sweep(...), checked before anything runs
+
+The cluster is a local one, one single-threaded worker process per core (at most one per point
+to compute), or the one at `scheduler` (`dask scheduler` + `dask worker`, see the README); the
+workers must see DIR at the same path.  Each point is a study folder DIR/points/<name> run by
+`run_study`, so a finished point is kept by its stage hashes and an interrupted one resumes.
+
+A failed point is written to its failed.json and reported, and the others go on.  A point
+whose lock another sweep holds ("running elsewhere") is waited for: this sweep polls the lock
+and, once it is free, submits the point again, which then finds it kept (or runs it, if the
+other sweep died); so both sweeps end with the whole table and every point runs once.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from vibroflow.errors import InputError
+from vibroflow.study.sweep_folder import (KIND, PLOTS, POINT_LOCK, TABLE_FILE, check_same_sweep,
+                                          dir_lock, is_locked, point_dir, read_record,
+                                          write_record)
+from vibroflow.study.sweep_points import SweepPlan
+from vibroflow.study.sweep_worker import THREAD_ENV, record_lost, run_point
+
+#: seconds between two looks at the lock of a point running elsewhere
+POLL_S = 1.0
+
+
+def _fmt(seconds: float) -> str:
+    seconds = max(0.0, seconds)
+    if seconds < 60:
+        return f"{seconds:.0f} s"
+    if seconds < 3600:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def check_sweep_dir(out: Path, plan: SweepPlan) -> dict | None:
+    """The folder's sweep record (None for a new or empty folder); an InputError (one line)
+    for a foreign or corrupt folder or one holding a sweep of another base."""
+    record = read_record(out)
+    if record is not None:
+        check_same_sweep(record, plan.base, plan.varied, out)
+    return record
+
+
+def _merge_record(out: Path, plan: SweepPlan) -> dict:
+    """Create or extend DIR/sweep.json with this sweep's points (under the folder lock: two
+    sweeps starting together both see one folder, one base, every point)."""
+    from vibroflow import __version__
+
+    with dir_lock(out):
+        record = check_sweep_dir(out, plan)
+        now = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+        if record is None:
+            record = {"kind": KIND, "vibroflow_version": __version__, "created": now,
+                      "source": plan.source, "base": plan.base, "varied": plan.varied,
+                      "fixed_settings": plan.fixed, "points": {}}
+        for p in plan.points:
+            record["points"].setdefault(p.name, {"values": p.values,
+                                                 "overrides": list(p.overrides)})
+        record["updated"] = now
+        record["vibroflow_version"] = __version__
+        write_record(out, record)
+    return record
+
+
+def finish_outputs(out: Path, results: dict[str, dict] | None = None) -> dict:
+    """Write sweep.csv, the plots and sweep.json from what the points' folders hold now (under
+    the folder lock, so two sweeps never interleave); returns the record with the rows."""
+    from vibroflow.study.sweep_plots import write_plots
+    from vibroflow.study.sweep_table import sweep_rows, write_csv_atomic
+
+    with dir_lock(out):
+        record = read_record(out)
+        assert record is not None  # written by _merge_record before any point ran
+        varied = list(record["varied"])
+        rows = sweep_rows(out, record["points"], varied)
+        write_csv_atomic(out / TABLE_FILE, rows, varied)
+        plots = write_plots(out / PLOTS, rows, varied)
+        for name, p in record["points"].items():
+            st = [r for r in rows if r["point"] == name]
+            p["status"] = st[0]["status"] if st else "pending"
+            p["error"] = st[0].get("error") or None if st else None
+            p["folder"] = f"points/{name}"
+            if results and name in results:
+                r = results[name]
+                p["last_run"] = {k: r.get(k) for k in ("status", "wall_time_s", "ran",
+                                                       "worker")}
+        record["table"] = TABLE_FILE
+        record["plots"] = [f"{PLOTS}/{n}" for n in plots]
+        record["updated"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+        write_record(out, record)
+    return {**record, "rows": rows}
+
+
+def make_client(scheduler: str | None, workers: int):
+    """(client, cluster): the cluster at `scheduler`, or a local one of `workers` processes
+    with one thread each and NUMBA_NUM_THREADS=1 in their environment."""
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            return Client(scheduler, timeout="15s"), None
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise InputError(f"--scheduler = {scheduler!r}: cannot connect "
+                             f"({' '.join(str(exc).split())[:160]})") from None
+    # memory_limit=0: the nanny would kill a worker above its share of the memory (total /
+    # workers) even with the machine's memory free; a point's memory is the OS's business
+    # silence_logs: the nanny's warnings (a worker slow to stop on a busy machine) are noise
+    # in the sweep's output; errors still show
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                           dashboard_address=None, memory_limit=0, env=dict(THREAD_ENV),
+                           silence_logs=logging.ERROR)
+    return Client(cluster), cluster
+
+
+def run_sweep(plan: SweepPlan, out: Path, scheduler: str | None = None,
+              workers: int | None = None, client=None,
+              echo: Callable[[str], None] | None = print) -> dict:
+    """Run (or bring up to date) every point of `plan` in `out`; write the table and plots.
+
+    workers: local worker processes (default one per core, at most one per point); client: a
+    dask.distributed Client to use as it is (tests); echo: where the one line per finished
+    point goes.  Returns the sweep record (sweep.json) with "rows" (the table) and "results"
+    (this run's result per point)."""
+    from distributed import wait
+
+    out = Path(out)
+    check_sweep_dir(out, plan)  # before anything is written or started
+    out.mkdir(parents=True, exist_ok=True)
+    _merge_record(out, plan)
+    jobs = {p.name: {"name": p.name, "values": p.values, "scenario": p.scenario,
+                     "settings": p.settings, "overrides": list(p.overrides),
+                     "shear_cell": plan.shear_cell} for p in plan.points}
+    n = len(jobs)
+    own_client = client is None
+    cluster = None
+    if own_client:
+        nw = workers or os.cpu_count() or 1
+        client, cluster = make_client(scheduler, max(1, min(nw, n)))
+    results: dict[str, dict] = {}
+    try:
+        concurrency = max(1, sum(client.nthreads().values()))
+        pending = {client.submit(run_point, str(out), job, pure=False, retries=0): name
+                   for name, job in jobs.items()}
+        waiting: dict[str, float] = {}  # point running elsewhere -> since when
+        finished = 0
+        computed: list[float] = []
+        t_start = time.perf_counter()
+        while pending or waiting:
+            done = []
+            if pending:
+                try:
+                    done = list(wait(list(pending), timeout=POLL_S,
+                                     return_when="FIRST_COMPLETED").done)
+                except TimeoutError:
+                    done = []
+            else:
+                time.sleep(POLL_S)
+            for fut in done:
+                name = pending.pop(fut)
+                if fut.status == "finished":
+                    r = fut.result()
+                else:  # the worker died or the task was lost: its handler never ran
+                    exc = fut.exception() if fut.status == "error" else None
+                    msg = (f"{type(exc).__name__}: {' '.join(str(exc).split())}" if exc
+                           else f"task {fut.status}")
+                    record_lost(str(out), name, msg)
+                    r = {"name": name, "status": "failed", "error": msg, "wall_time_s": 0.0,
+                         "ran": [], "worker": None}
+                if r["status"] == "busy":
+                    if name not in waiting and echo is not None:
+                        echo(f"        {name}: running elsewhere (another sweep); waiting")
+                    waiting.setdefault(name, time.perf_counter())
+                    continue
+                results[name] = r
+                finished += 1
+                if r["status"] == "done":
+                    computed.append(r["wall_time_s"])
+                if echo is not None:
+                    what = {"done": f"done in {_fmt(r['wall_time_s'])} "
+                                    f"({', '.join(r['ran'])})",
+                            "kept": "up to date, kept",
+                            "failed": f"FAILED: {r['error']}"}[r["status"]]
+                    per = (sum(computed) / len(computed)) if computed else plan.estimate_s
+                    left_n = n - finished
+                    left = per * -(-left_n // concurrency) if left_n else 0.0
+                    echo(f"[{finished}/{n}] {name}: {what}; time left ~ {_fmt(left)}")
+            for name in list(waiting):
+                if not is_locked(point_dir(out, name) / POINT_LOCK):
+                    del waiting[name]
+                    fut = client.submit(run_point, str(out), jobs[name], pure=False,
+                                        retries=0)
+                    pending[fut] = name
+        wall = time.perf_counter() - t_start
+    finally:
+        if own_client:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    record = finish_outputs(out, results)
+    record["results"] = results
+    record["wall_time_s"] = wall
+    return record
+
+
+def print_table(record: dict, file=None) -> None:
+    """The sweep's table on the terminal (rich)."""
+    from rich.console import Console
+
+    from vibroflow.study.sweep_table import rich_table
+
+    Console(file=file or sys.stdout).print(rich_table(record["rows"], record["varied"]))
+
+
+def failed_points(record: dict) -> list[str]:
+    return [name for name, p in record["points"].items() if p.get("status") == "failed"]
+
+
+def summary_of(record: dict) -> dict[str, Any]:
+    """Counts of the points by status."""
+    counts: dict[str, int] = {}
+    for p in record["points"].values():
+        counts[p.get("status", "pending")] = counts.get(p.get("status", "pending"), 0) + 1
+    return counts
