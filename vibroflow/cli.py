@@ -234,8 +234,7 @@ def continuum(
     scenario: ScenarioArg,
     out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")],
     method: Annotated[str, typer.Option(
-        "--method", help="Formulation: lagrangian (material point method) or eulerian (fixed "
-                         "mesh of the tub).")] = "lagrangian",
+        "--method", help="Formulation: lagrangian (material point method).")] = "lagrangian",
     calibration: Annotated[Optional[Path], typer.Option(
         "--calibration", help="calibration.toml, or a run folder holding one; default: "
                               "tub47's parameters.")] = None,
@@ -254,30 +253,24 @@ def continuum(
                                    "steps (to split a run; go on with --resume).")] = None,
 ) -> None:
     """Run a continuum model of a tub scenario: --out/summary.json, bulk_velocity.csv."""
-    if method not in ("lagrangian", "eulerian"):
-        raise InputError(f"--method = {method!r}: must be lagrangian or eulerian")
+    if method != "lagrangian":
+        raise InputError(f"--method = {method!r}: must be lagrangian")
     if stop_after_steps is not None and stop_after_steps < 0:
         raise InputError(f"--stop-after-steps = {stop_after_steps}: must be >= 0")
     s = _load(scenario, set_)  # before anything is written: bad input leaves --out untouched
     from vibroflow.continuum.mpm import ContinuumBlowUp
     from vibroflow.continuum.run import LagrangianOptions, material_of, run_lagrangian
 
-    options_class, run_method = LagrangianOptions, run_lagrangian
-    if method == "eulerian":
-        from vibroflow.continuum.eulerian.run import EulerianOptions, run_eulerian
-
-        options_class, run_method = EulerianOptions, run_eulerian
-
     cal = None
     if calibration is not None:
         from vibroflow.calibration.calibrate import read_calibration
 
         cal = read_calibration(calibration)
-    options = options_class(dx=dx, model=rheology)
+    options = LagrangianOptions(dx=dx, model=rheology)
     material_of(s, cal, rheology)  # validates the parameters before --out is made
     try:
-        summary = run_method(s, out, calibration=cal, options=options, progress=True,
-                             vtk=vtk, resume=resume, stop_after_steps=stop_after_steps)
+        summary = run_lagrangian(s, out, calibration=cal, options=options, progress=True,
+                                 vtk=vtk, resume=resume, stop_after_steps=stop_after_steps)
     except ContinuumBlowUp as exc:
         # a numerical blow-up is not bad input: its own exit code, the points and the cause
         sys.stderr.write("error: " + str(exc) + "\n")
