@@ -1,0 +1,289 @@
+"""The granular column collapse: the Lagrangian continuum (material point method) against the
+published scaling with aspect ratio and against vibroflow's own DEM of the same column.
+
+A column of width L0 and height H0 (a = H0/L0) against a wall, on a rough floor, released at
+t = 0, spreads to a deposit of run-out L_inf and height H_inf (vibroflow.analysis.column, which
+measures every method alike and holds the published laws).
+
+What is checked, and against what:
+
+* the measurement itself, on deposits whose run-out and height are known by geometry;
+* the continuum (vibroflow.continuum.column, tub47's media: d = 6.35 mm, the glass-bead mu(I) of
+  `ContinuumMaterial()`) at the experiments' scale, L0 = 1 m = 157 d (the laws were fitted on
+  columns of tens to hundreds of grains across): the published planar scaling of Lube et al.
+  (2005) -- the height of a low column (H_inf = H0, its top never moves) and of a tall one
+  (H_inf/L0 = a^(2/5)), and the run-out's growth (L_inf - L0)/L0 ~ a^(2/3) at large a -- each
+  within 10 %.  The run-out's prefactor is not met: the plane-strain continuum runs out about
+  twice as far as the channel experiments (module constant MPM_OVER_LUBE_2005 and the report in
+  the test's docstring), as other plane-strain mu(I) continua do (Dunatunga & Kamrin 2015;
+  Lagree, Staron & Popinet 2011);
+* the continuum against the DEM of the same column of steel balls (a quasi-2D slab between
+  frictionless walls, on a floor of glued balls), at the DEM's size (L0 of 10 to 13 balls,
+  where the mu(I) continuum's rate dependence and the balls' size both matter, so neither can be
+  judged by the large-scale laws).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from dem_helpers import one_thread
+from vibroflow.analysis.column import (LAJEUNESSE_2004, LAJEUNESSE_2005, LUBE_2004, LUBE_2005,
+                                       measure_deposit, quasistatic_runout, slab_areas)
+from vibroflow.continuum.column import run_column
+from vibroflow.dem import simulate as S
+from vibroflow.dem.neighbours import transfer_history
+from vibroflow.errors import InputError
+from vibroflow.scenario.model import ContactPair, Material, ParticleSpec, Run, Scenario, WallSpec
+
+D = 0.00635          # tub47's ball diameter (m)
+R = 0.5 * D
+RHO = 7800.0         # steel (kg/m^3)
+G_ACC = 9.81
+
+
+# ----------------------------------------------------------------------------------------------
+# the measurement, on deposits whose run-out and height are known exactly
+
+def lattice_points(top, x_end, spacing):
+    """Points on a square lattice of `spacing` (m) under the surface z = top(x), 0 < x < x_end
+    (m), each standing for spacing^2 of area."""
+    xs = (np.arange(int(round(x_end / spacing))) + 0.5) * spacing
+    pts = []
+    for x in xs:
+        nz = int(np.floor(top(x) / spacing + 0.5))
+        pts += [(x, (k + 0.5) * spacing) for k in range(nz)]
+    return np.array(pts)
+
+
+def trapezoid(H0, x_top, slope):
+    """z = H0 up to x_top, then falling at `slope` to the floor."""
+    return lambda x: H0 if x < x_top else max(H0 - slope * (x - x_top), 0.0)
+
+
+def test_rectangle_reads_its_own_width_and_height():
+    """An undisturbed column is its own deposit: run-out L0, height H0, area L0 H0."""
+    L0, H0, sp = 0.10, 0.05, 0.001
+    pts = lattice_points(lambda x: H0, L0, sp)
+    dep = measure_deposit(pts[:, 0], sp * sp, D, bin_width=5 * sp)
+    assert dep.runout == pytest.approx(L0, abs=sp)
+    assert dep.height == pytest.approx(H0, rel=1e-9)
+    assert (dep.h * (dep.x[1] - dep.x[0])).sum() == pytest.approx(L0 * H0, rel=1e-9)
+    assert dep.normalised(L0) == pytest.approx((0.0, 0.5), abs=0.01)
+
+
+def test_trapezoid_front_where_it_thins_below_one_grain():
+    """A deposit flat at H0 up to x_top, then sloping at tan(theta) to its toe: the thickness
+    falls through one grain diameter at toe - d / tan(theta).  Two grains flung far ahead (each
+    thinner than a grain on its own) are the farthest points but do not move the front."""
+    H0, x_top, slope, sp = 0.05, 0.06, 0.4, 0.0005
+    toe = x_top + H0 / slope
+    pts = lattice_points(trapezoid(H0, x_top, slope), toe, sp)
+    x = np.concatenate([pts[:, 0], [toe + 0.05, toe + 0.11]])
+    area = np.concatenate([np.full(len(pts), sp * sp), np.full(2, 0.3 * D * D)])
+    dep = measure_deposit(x, area, D, bin_width=4 * sp)
+    assert dep.runout == pytest.approx(toe - D / slope, abs=2 * sp)
+    assert dep.height == pytest.approx(H0, rel=0.01)
+    assert x.max() > toe + 0.1 and dep.runout < toe
+    # the mass-fraction front: 99 % of the area lies behind it, inside the trapezoid
+    assert x_top < dep.runout_mass < toe
+
+
+def test_quasistatic_trapezoid_holds_the_column_area():
+    """quasistatic_runout(a, tan theta) = a / (2 tan theta): the trapezoid of height H0 and
+    slope tan(theta) that holds the column's area L0 H0 has its toe at L0 (1 + that)."""
+    L0, a, slope, sp = 0.1, 0.5, 0.38, 0.0005
+    H0 = a * L0
+    x_top = L0 - H0 / (2 * slope)
+    toe = x_top + H0 / slope
+    pts = lattice_points(trapezoid(H0, x_top, slope), toe + sp, sp)
+    assert len(pts) * sp * sp == pytest.approx(L0 * H0, rel=0.01)
+    assert (toe - L0) / L0 == pytest.approx(quasistatic_runout(a, slope), rel=1e-12)
+    dep = measure_deposit(pts[:, 0], sp * sp, D, bin_width=4 * sp, threshold=2 * sp)
+    assert dep.runout == pytest.approx(toe - 2 * sp / slope, abs=2 * sp)
+
+
+def test_slab_areas_add_up_to_the_column():
+    """Balls of a slab W at solid fraction phi_0 filling L0 x H0 stand for L0 H0 in all."""
+    W, phi0, L0, H0 = 3 * D, 0.58, 0.1, 0.05
+    n = phi0 * L0 * H0 * W / (math.pi * D**3 / 6)
+    assert slab_areas(np.full(1, R), W, phi0).sum() * n == pytest.approx(L0 * H0, rel=1e-12)
+
+
+def test_published_laws():
+    """The fits as published (module docstring of vibroflow.analysis.column)."""
+    assert LUBE_2005.runout(0.5) == pytest.approx(0.6)
+    assert LUBE_2005.runout(3.0) == pytest.approx(1.9 * 3.0 ** (2 / 3))
+    assert LUBE_2005.height(0.5) == 0.5
+    assert LUBE_2005.height(3.0) == pytest.approx(3.0 ** 0.4)
+    assert LAJEUNESSE_2005.runout(0.5) == pytest.approx(0.9)
+    assert LUBE_2004.runout(4.0) == pytest.approx(3.2)
+    assert LAJEUNESSE_2004.height(2.0) == pytest.approx(0.74)
+    assert LUBE_2005.runout_length(0.1, 0.05) == pytest.approx(0.16)
+    # the linear branch: lambda = 1 / (2 tan theta) of a low column's trapezoidal deposit
+    assert quasistatic_runout(0.5, 1 / 2.4) == pytest.approx(LUBE_2005.runout(0.5))
+    with pytest.raises(InputError, match="transition"):
+        LUBE_2005.runout(2.0)
+    with pytest.raises(InputError, match="aspect ratio"):
+        LUBE_2005.runout(-1.0)
+    with pytest.raises(InputError, match="no final-height law"):
+        LUBE_2004.height(1.0)
+
+
+def test_bad_input_is_one_line_naming_the_field():
+    with pytest.raises(InputError, match="bin_width"):
+        measure_deposit([0.0, 0.01], 1e-6, D, bin_width=0.0)
+    with pytest.raises(InputError, match="grain_diameter"):
+        measure_deposit([0.0, 0.01], 1e-6, -1.0)
+    with pytest.raises(InputError, match="mass fraction"):
+        measure_deposit([0.0, 0.01], 1e-6, D, mass_fraction=1.5)
+    with pytest.raises(InputError, match="slab_thickness"):
+        slab_areas([R], 0.0, 0.6)
+    with pytest.raises(InputError, match="column L0"):
+        run_column(0.1001, 0.05, 0.005)
+    with pytest.raises(InputError, match="floor_friction"):
+        run_column(0.1, 0.05, 0.005, floor_friction=-0.1)
+
+
+# ----------------------------------------------------------------------------------------------
+# the DEM column: steel balls in a quasi-2D slab
+#
+# The slab: W = 3 d between two frictionless plane walls (y = 0, y = W), so the collapse is
+# planar without a side-wall friction that the plane-strain continuum does not have; three balls
+# across is the thinnest slab that does not crystallise into a single layer of discs.  The
+# floor: tub47's lining (steel-polyurethane k_n = 5e4 N/m, e = 0.6, mu = 0.40) under a layer of
+# glued balls, three rows across the slab at random gaps of 0.02 to 0.14 d along x: the published
+# experiments' rough floor, which a flat floor is not (on it the balls, with tub47's rolling
+# resistance of 0.002, roll away one by one).  The glued balls are steel balls 1e4 times as dense
+# (they do not move under the column; tub47's ball-ball law with them, a stiff contact with the
+# floor).  The wall behind the column and the gate in front are frictionless, like the
+# continuum's back wall (vibroflow.continuum.column: a symmetry plane).  Every other contact is
+# tub47's (ball-ball k_n = 1e5 N/m, e = 0.85, mu = 0.20, mu_r = 0.002, dt = 1e-5 s).
+#
+# Fill: balls on a loose lattice (spacing 1.06 d, jitter 0.45 of the gap) behind the gate, let
+# settle until their kinetic energy is below 1e-8 J a ball; the column's solid fraction phi_0 is
+# measured inside it (a grain away from the walls, three below the top) and its height is
+# H0 = N V_ball / (W L0 phi_0), the height of the same area at that fraction.  Release: the gate
+# goes at once (a second scenario, identical but for the gate, started from the settled state
+# with every contact history carried over).  At rest: the deposit's kinetic energy (the balls
+# behind its front; a few balls roll on ahead over the glued layer for a long time and are not
+# part of the deposit) below 1e-4 of the column's potential energy, after at least 3 sqrt(H0/g).
+
+BASE_DENSITY_FACTOR = 1.0e4
+
+
+def _column_contacts():
+    r = 2.0 / 7.0
+    steel = dict(k_n=1.0e5, k_t_over_k_n=r, restitution=0.85, friction=0.20,
+                 rolling_friction=0.002)
+    smooth = dict(k_n=1.0e5, k_t_over_k_n=r, restitution=0.85, friction=0.0,
+                  rolling_friction=0.0, rolling_model="none")
+    return [ContactPair(pair=("steel", "steel"), **steel),
+            ContactPair(pair=("steel", "glued"), **steel),
+            ContactPair(pair=("glued", "glued"), **steel),
+            ContactPair(pair=("steel", "lining"), k_n=5.0e4, k_t_over_k_n=r, restitution=0.60,
+                        friction=0.40, rolling_friction=0.002),
+            ContactPair(pair=("glued", "lining"), k_n=1.0e9, k_t_over_k_n=r, restitution=0.5,
+                        friction=1.0, rolling_friction=0.0, rolling_model="none"),
+            ContactPair(pair=("steel", "smooth"), **smooth),
+            ContactPair(pair=("glued", "smooth"), **smooth)]
+
+
+def _column_scenario(balls, glued, W, gate_x, dt):
+    materials = {"steel": Material(density=RHO),
+                 "glued": Material(density=RHO * BASE_DENSITY_FACTOR),
+                 "lining": Material(density=1200.0, youngs_modulus=2.5e7, poisson_ratio=0.45),
+                 "smooth": Material(density=2500.0, youngs_modulus=6.3e10, poisson_ratio=0.23)}
+    walls = [WallSpec(point=(0.0, 0.0, 0.0), normal=(0.0, 0.0, 1.0), material="lining"),
+             WallSpec(point=(0.0, 0.0, 0.0), normal=(1.0, 0.0, 0.0), material="smooth"),
+             WallSpec(point=(0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0), material="smooth"),
+             WallSpec(point=(0.0, W, 0.0), normal=(0.0, -1.0, 0.0), material="smooth"),
+             WallSpec(point=(gate_x, 0.0, 0.0), normal=(-1.0, 0.0, 0.0), material="smooth")]
+    parts = [ParticleSpec(position=tuple(p), diameter=D, material="glued" if g else "steel")
+             for p, g in zip(balls, glued)]
+    return Scenario(case="column-collapse", gravity=(0.0, 0.0, -G_ACC), tub=None, fill=None,
+                    particles=parts, walls=walls, contacts=_column_contacts(),
+                    materials=materials, run=Run(dt=dt, duration=1.0, average_last=0.0))
+
+
+def _column_state(system, balls, glued):
+    n = len(balls)
+    names = system.material_names
+    mat = np.where(glued, names.index("glued"), names.index("steel")).astype(np.int64)
+    zero = np.zeros((n, 3))
+    return S.init_state(system, np.array(balls, dtype=float), zero, zero.copy(), np.full(n, R),
+                        np.where(glued, RHO * BASE_DENSITY_FACTOR, RHO), mat)
+
+
+def _glued_row(rng, x_end, y):
+    out, x = [], R + rng.uniform(0.0, 0.1 * D)
+    while x < x_end:
+        out.append((x, y, R))
+        x += D * (1.02 + rng.uniform(0.0, 0.12))
+    return out
+
+
+def dem_column(L0, a, slab=3, seed=1, dt=1.0e-5, ke_fraction=1.0e-4, t_max_tau=15.0):
+    """Fill, settle and release a DEM column of width L0 (m) and aspect ratio about a (block
+    comment above); returns a dict: L0, H0 (m), a, phi0, W (m), n, x (n,) final ball x (m),
+    radius (n,), settled, t (s of collapse), tau = sqrt(H0/g) (s)."""
+    W = slab * D
+    rng = np.random.default_rng(seed)
+    vball = math.pi * D**3 / 6
+    n = int(round(0.57 * a * L0 * L0 * W / vball))
+    s = 1.06 * D
+    nx, ny = int((L0 - D) // s) + 1, int((W - D) // s) + 1
+    xs = R + 0.5 * (L0 - D - (nx - 1) * s) + np.arange(nx) * s
+    ys = R + 0.5 * (W - D - (ny - 1) * s) + np.arange(ny) * s
+    zs = D + R + 0.001 + np.arange(math.ceil(n / (nx * ny))) * s
+    col = np.array([(x, y, z) for z in zs for x in xs for y in ys])[:n]
+    col += rng.uniform(-0.45 * (s - D), 0.45 * (s - D), col.shape)
+    rows = [_glued_row(rng, L0 * (2.0 + 3.0 * a), y) for y in (R, 0.5 * W, W - R)]
+    under = [p for row in rows for p in row if p[0] < L0 - R]
+    beyond = [p for row in rows for p in row if p[0] >= L0 + R]   # none under the gate
+    chunk = int(round(0.01 / dt))
+    with one_thread():
+        # 1. fill behind the gate and settle
+        balls = [tuple(p) for p in col] + under
+        glued = np.arange(len(balls)) >= n
+        system = S.make_system(_column_scenario(balls, glued, W, L0, dt), nchunk=1)
+        st = _column_state(system, balls, glued)
+        while True:
+            S.run_steps(system, st, chunk)
+            ke = 0.5 * float((st.mass[:n] * (st.vel[:n] ** 2).sum(axis=1)).sum())
+            if (st.step * dt > 0.1 and ke / n < 1e-8) or st.step * dt > 0.6:
+                break
+        x, z = st.pos[:n, 0], st.pos[:n, 2] - D    # heights above the glued layer
+        top = z.max()
+        inner = (x > 1.5 * D) & (x < L0 - 1.5 * D) & (z > 1.5 * D) & (z < top - 3 * D)
+        phi0 = inner.sum() * vball / ((L0 - 3 * D) * (top - 4.5 * D) * W)
+        H0 = n * vball / (W * L0 * phi0)
+        # 2. release: the gate gone, the rest of the glued floor laid, the histories kept
+        balls2 = [tuple(p) for p in st.pos] + beyond
+        glued2 = np.concatenate([glued, np.ones(len(beyond), bool)])
+        system2 = S.make_system(_column_scenario(balls2, glued2, W, 1.0e3, dt), nchunk=1)
+        st2 = _column_state(system2, balls2, glued2)
+        k = len(balls)
+        st2.vel[:k], st2.omg[:k] = st.vel, st.omg
+        old_start = np.concatenate([st.nl.start, np.full(len(beyond), st.nl.start[-1])])
+        st2.nl.hist, st2.nl.flag = transfer_history(old_start, st.nl.nbr, st.nl.hist,
+                                                    st.nl.flag, st2.nl.start, st2.nl.nbr)
+        st2.wall_hist[:k], st2.wall_flag[:k] = st.wall_hist, st.wall_flag
+        st2.wall_hist[:, 4], st2.wall_flag[:, 4] = 0.0, 0    # the gate's slot, now far away
+        tau = math.sqrt(H0 / G_ACC)
+        pe0 = float((st2.mass[:n] * G_ACC * (st2.pos[:n, 2] - D)).sum())
+        areas = slab_areas(np.full(n, R), W, phi0)
+        settled = False
+        while st2.step * dt < t_max_tau * tau:
+            S.run_steps(system2, st2, chunk)
+            front = measure_deposit(st2.pos[:n, 0], areas, D).runout
+            behind = st2.pos[:n, 0] < front + 2 * D
+            ke = 0.5 * float((st2.mass[:n][behind] * (st2.vel[:n][behind] ** 2).sum(axis=1)).sum())
+            if st2.step * dt >= 3 * tau and ke < ke_fraction * pe0:
+                settled = True
+                break
+    return dict(L0=L0, H0=H0, a=H0 / L0, phi0=phi0, W=W, n=n, x=st2.pos[:n, 0].copy(),
+                radius=st2.radius[:n].copy(), settled=settled, t=st2.step * dt, tau=tau,
+                areas=areas)

@@ -1,0 +1,183 @@
+"""The granular column collapse with the material point method (plane strain, lab frame).
+
+A rectangular column of the continuum, width L0 and height H0 (m), stands on a floor z = 0
+against a rigid wall x = 0 and is released at t = 0 under gravity: it slumps and spreads along
++x until it comes to rest.  This is the planar (half-)column of the channel experiments (Lube,
+Huppert, Sparks & Freundt 2005, Phys. Rev. E 72, 041301; Lajeunesse, Monnier & Homsy 2005, Phys.
+Fluids 17, 103302) and of the mu(I) continuum simulations of Lagree, Staron & Popinet (2011,
+J. Fluid Mech. 686, 378) and Dunatunga & Kamrin (2015, J. Fluid Mech. 779, 483, section 5.2,
+the same elasto-viscoplastic MPM as this package's); its deposit is measured by
+`vibroflow.analysis.column`.
+
+Set-up choices, and why:
+
+* floor and wall: the penalty `Plane` walls of boundary.py with Coulomb friction.  The
+  experiments used rough floors (basal friction at least the grains' internal friction); the
+  default floor friction mu_w = 0.40 is tub47's ball-lining friction, just above the glass-bead
+  mu_s = 0.382 of the default material.  The wall behind the column is frictionless by default:
+  it stands for the symmetry plane of a column released on both sides (Lube et al. 2005's
+  channel collapses; the half-column of Lagree et al. 2011), where nothing can shear; with
+  friction it holds a ridge of material up against it, which is a different deposit.  The
+  walls' stiffness is the P-wave modulus over the point side (the stiffness of the continuum
+  itself across one point), as in the block test of tests/test_mpm.py;
+* initial state: the column at the critical density, pre-stressed as it stood behind a gate,
+  sigma_zz = -rho g (H0 - z) and sigma_xx = sigma_yy = K_0 sigma_zz with Jaky's
+  K_0 = 1 - sin(atan mu_s), and the density rho_c exp(p / K) of that pressure (just above the
+  critical density, so every point carries stress); releasing a stress-free column instead would
+  first ring with elastic waves of the weight's size;
+* points: 2 x 2 a cell (spacing dx/2), as in the other MPM checks;
+* time step: the stable step of timestep.py with the free-fall speed sqrt(2 g H0) as the
+  material speed bound;
+* at rest: after at least `t_min` (default 3 sqrt(H0/g), the collapse time scale of the
+  experiments), the run stops at the first check where the kinetic energy is below `ke_fraction`
+  of the column's initial potential energy M g H0 / 2; a run that has not come to rest by
+  `t_max` says so (`settled` False) instead of pretending.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from vibroflow.errors import InputError
+
+from .boundary import Plane
+from .constitutive import ContinuumMaterial
+from .grid import Grid
+from .grid_update import LabFrame
+from .mpm import MPMState, MPMSystem, init_state, run_steps
+from .timestep import stable_dt
+
+G_ACC = 9.81  # m/s^2
+
+
+@dataclass
+class ColumnRun:
+    """A finished column collapse: the final material points and how the run went.
+
+    x (N, 2) m; volume (N,) m^2 per metre of thickness; mass (N,) kg/m; t_end (s); settled: the
+    kinetic energy fell below the threshold before t_max; ke_ratio: the last kinetic energy over
+    the initial potential energy; history: (t, kinetic energy, front x) at each check."""
+
+    L0: float
+    H0: float
+    dx: float
+    material: ContinuumMaterial
+    floor_friction: float
+    wall_friction: float
+    state: MPMState
+    t_end: float
+    settled: bool
+    ke_ratio: float
+    steps: int
+    history: list
+
+    @property
+    def aspect_ratio(self) -> float:
+        return self.H0 / self.L0
+
+
+def column_points(L0: float, H0: float, spacing: float) -> np.ndarray:
+    """Points on a square lattice of `spacing` (m) filling [0, L0] x [0, H0] (m), each at the
+    centre of its own square."""
+    xs = (np.arange(int(round(L0 / spacing))) + 0.5) * spacing
+    zs = (np.arange(int(round(H0 / spacing))) + 0.5) * spacing
+    X, Z = np.meshgrid(xs, zs, indexing="ij")
+    return np.stack([X.ravel(), Z.ravel()], axis=1)
+
+
+def _check_size(L0, H0, dx):
+    for name, v in (("L0", L0), ("H0", H0), ("dx", dx)):
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            raise InputError(f"column {name} = {v!r}: must be a finite length > 0 m")
+    for name, v in (("L0", L0), ("H0", H0)):
+        n = v / (0.5 * dx)
+        if abs(n - round(n)) > 1e-6 * n or round(n) < 2:
+            raise InputError(f"column {name} = {v!r} m: must be a whole number (>= 2) of point "
+                             f"spacings dx/2 = {0.5 * dx!r} m")
+
+
+def column_system(L0: float, H0: float, dx: float, material: ContinuumMaterial | None = None,
+                  floor_friction: float = 0.40, wall_friction: float = 0.0,
+                  reach: float | None = None, cfl: float = 0.3) -> MPMSystem:
+    """The MPM system of a column of width L0 and height H0 (m) on grid spacing dx (m): floor
+    z = 0 with Coulomb friction `floor_friction`, wall x = 0 with `wall_friction`, a grid
+    reaching `reach` (m, default L0 (2 + 3 H0/L0)) along x."""
+    _check_size(L0, H0, dx)
+    mat = material or ContinuumMaterial()
+    for name, mu in (("floor_friction", floor_friction), ("wall_friction", wall_friction)):
+        if not (isinstance(mu, (int, float)) and math.isfinite(mu) and mu >= 0):
+            raise InputError(f"{name} = {mu!r}: must be a finite number >= 0")
+    a = H0 / L0
+    reach = L0 * (2.0 + 3.0 * a) if reach is None else float(reach)
+    if not reach > L0:
+        raise InputError(f"reach = {reach!r} m: must exceed the column width L0 = {L0!r} m")
+    sp = 0.5 * dx
+    kn = (mat.bulk_modulus + 4.0 * mat.shear_modulus / 3.0) / sp
+    walls = [Plane((0.0, 0.0), (0.0, 1.0), kn, friction=floor_friction),   # floor
+             Plane((0.0, 0.0), (1.0, 0.0), kn, friction=wall_friction)]    # wall behind
+    grid = Grid.covering(-dx, reach, -dx, H0 + 2.0 * dx, dx)
+    v_fall = math.sqrt(2.0 * G_ACC * H0)
+    dt = stable_dt(mat, dx, sp, walls, v_max=v_fall, cfl=cfl)
+    return MPMSystem(grid, mat, dt, frame=LabFrame((0.0, -G_ACC)), boundaries=walls)
+
+
+def column_state(system: MPMSystem, L0: float, H0: float) -> MPMState:
+    """The column at rest behind its gate (module docstring): points, lithostatic stress with
+    Jaky's K_0, density of that pressure."""
+    mat = system.material
+    sp = 0.5 * system.grid.dx
+    x = column_points(L0, H0, sp)
+    rho_c = mat.critical_density
+    k0 = 1.0 - math.sin(math.atan(mat.mu_s))
+    szz = -rho_c * G_ACC * (H0 - x[:, 1])
+    stress = np.zeros((len(x), 4))
+    stress[:, 1] = szz
+    stress[:, 0] = stress[:, 3] = k0 * szz
+    p = -(stress[:, 0] + stress[:, 1] + stress[:, 3]) / 3.0
+    rho = rho_c * np.exp(p / mat.bulk_modulus) * 1.001
+    # each point's volume holds the mass of its square at rho_c (mass conserved: m = rho_c sp^2)
+    volume = rho_c * sp * sp / rho
+    return init_state(system, x, volume, rho, stress=stress)
+
+
+def front_position(x: np.ndarray) -> float:
+    """The farthest point's x (m): a cheap progress indicator (the deposit's run-out is measured
+    by vibroflow.analysis.column)."""
+    return float(x[:, 0].max())
+
+
+def run_column(L0: float, H0: float, dx: float, material: ContinuumMaterial | None = None,
+               floor_friction: float = 0.40, wall_friction: float = 0.0, t_min: float | None = None,
+               t_max: float | None = None, ke_fraction: float = 1.0e-4,
+               check_every: float | None = None, reach: float | None = None,
+               cfl: float = 0.3) -> ColumnRun:
+    """Release the column and run until it is at rest (module docstring).  Times in s; default
+    t_min = 3 sqrt(H0/g), t_max = 30 sqrt(H0/g), checks every 0.1 sqrt(H0/g)."""
+    system = column_system(L0, H0, dx, material, floor_friction, wall_friction, reach, cfl)
+    state = column_state(system, L0, H0)
+    tau = math.sqrt(H0 / G_ACC)
+    t_min = 3.0 * tau if t_min is None else float(t_min)
+    t_max = 30.0 * tau if t_max is None else float(t_max)
+    check = 0.1 * tau if check_every is None else float(check_every)
+    if not 0 < ke_fraction < 1:
+        raise InputError(f"ke_fraction = {ke_fraction!r}: must be in (0, 1)")
+    if not 0 < t_min <= t_max:
+        raise InputError(f"t_min = {t_min!r} s, t_max = {t_max!r} s: need 0 < t_min <= t_max")
+    pe0 = float(state.mass.sum()) * G_ACC * 0.5 * H0
+    n_check = max(int(round(check / system.dt)), 1)
+    history = []
+    settled = False
+    ke = state.kinetic_energy()
+    while state.t < t_max - 0.5 * system.dt:
+        run_steps(system, state, n_check)
+        ke = state.kinetic_energy()
+        history.append((state.t, ke, front_position(state.x)))
+        if state.t >= t_min - 0.5 * system.dt and ke < ke_fraction * pe0:
+            settled = True
+            break
+    return ColumnRun(L0=L0, H0=H0, dx=dx, material=system.material,
+                     floor_friction=floor_friction, wall_friction=wall_friction, state=state,
+                     t_end=state.t, settled=settled, ke_ratio=ke / pe0, steps=state.step,
+                     history=history)
