@@ -198,6 +198,10 @@ def calibrate(
                                                          "or lucy.")] = "gaussian",
     width: Annotated[Optional[float], typer.Option(
         "--width", help="Kernel width w (m); default d/2.")] = None,
+    cyclic: Annotated[bool, typer.Option(
+        "--cyclic/--no-cyclic", help="Give the continuum the secant shear modulus of cyclic "
+                                     "simple shear at the tub's frequency and strain amplitude "
+                                     "(default; seconds), or the small-strain one.")] = True,
 ) -> None:
     """Calibrate the continuum on a DEM run: RUN_DIR/calibration.toml, fields.nc, pictures."""
     if not run_dir.is_dir():
@@ -208,13 +212,19 @@ def calibrate(
         raise InputError(f"--width = {width!r}: must be a length > 0 m")
     from vibroflow.calibration.calibrate import calibrate as run_calibration
 
-    cal = run_calibration(run_dir, shear_cell=shear_cell, kernel=kernel, width=width)
+    cal = run_calibration(run_dir, shear_cell=shear_cell, kernel=kernel, width=width,
+                          cyclic=cyclic)
     r, w = cal["rheology"], cal["wall"]
     if r.get("status", "measured") != "measured":
         sys.stderr.write(f"warning: rheology {r['status']}\n")
     typer.echo(f"mu_s = {r['mu_s']:.3f} +- {r['mu_s_stderr']:.3f}, mu_2 = {r['mu_2']:.3f} +- "
                f"{r['mu_2_stderr']:.3f}, I_0 = {r['I_0']:.3g} +- {r['I_0_stderr']:.2g} "
                f"({r['source'].split(' (')[0]})")
+    e = cal["elastic"]
+    typer.echo(f"K = {e['bulk_modulus_Pa'] / 1e6:.3g} MPa, G = {e['shear_modulus_Pa'] / 1e6:.3g} MPa"
+               + (f" (cyclic secant at strain {cal['cyclic_shear']['tub_strain_amplitude']:.3g};"
+                  f" small-strain {e['shear_modulus_small_strain_Pa'] / 1e6:.3g} MPa)"
+                  if "cyclic_shear" in cal else ""))
     typer.echo(f"wall friction (effective) = {w['friction']:.3f} +- {w['friction_stderr']:.3f}"
                f", sliding fraction {w['sliding_fraction']:.2f}")
     for name in ("ball_ball", "ball_wall"):
@@ -234,7 +244,8 @@ def continuum(
     scenario: ScenarioArg,
     out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")],
     method: Annotated[str, typer.Option(
-        "--method", help="Formulation: lagrangian (material point method).")] = "lagrangian",
+        "--method", help="Formulation: lagrangian (material point method) or eulerian (fixed "
+                         "mesh of the tub).")] = "lagrangian",
     calibration: Annotated[Optional[Path], typer.Option(
         "--calibration", help="calibration.toml, or a run folder holding one; default: "
                               "tub47's parameters.")] = None,
@@ -253,24 +264,30 @@ def continuum(
                                    "steps (to split a run; go on with --resume).")] = None,
 ) -> None:
     """Run a continuum model of a tub scenario: --out/summary.json, bulk_velocity.csv."""
-    if method != "lagrangian":
-        raise InputError(f"--method = {method!r}: must be lagrangian")
+    if method not in ("lagrangian", "eulerian"):
+        raise InputError(f"--method = {method!r}: must be lagrangian or eulerian")
     if stop_after_steps is not None and stop_after_steps < 0:
         raise InputError(f"--stop-after-steps = {stop_after_steps}: must be >= 0")
     s = _load(scenario, set_)  # before anything is written: bad input leaves --out untouched
     from vibroflow.continuum.mpm import ContinuumBlowUp
     from vibroflow.continuum.run import LagrangianOptions, material_of, run_lagrangian
 
+    options_class, run_method = LagrangianOptions, run_lagrangian
+    if method == "eulerian":
+        from vibroflow.continuum.eulerian.run import EulerianOptions, run_eulerian
+
+        options_class, run_method = EulerianOptions, run_eulerian
+
     cal = None
     if calibration is not None:
         from vibroflow.calibration.calibrate import read_calibration
 
         cal = read_calibration(calibration)
-    options = LagrangianOptions(dx=dx, model=rheology)
+    options = options_class(dx=dx, model=rheology)
     material_of(s, cal, rheology)  # validates the parameters before --out is made
     try:
-        summary = run_lagrangian(s, out, calibration=cal, options=options, progress=True,
-                                 vtk=vtk, resume=resume, stop_after_steps=stop_after_steps)
+        summary = run_method(s, out, calibration=cal, options=options, progress=True,
+                             vtk=vtk, resume=resume, stop_after_steps=stop_after_steps)
     except ContinuumBlowUp as exc:
         # a numerical blow-up is not bad input: its own exit code, the points and the cause
         sys.stderr.write("error: " + str(exc) + "\n")

@@ -124,13 +124,19 @@ def bed_height(radius: float, area: float, rim: float) -> float:
     return 0.5 * (lo + hi)
 
 
+def bed_area(scenario, material: ContinuumMaterial) -> float:
+    """Cross-section (m^2) of the settled bed: the DEM's solid volume (fill.count balls of
+    fill.diameter) over the slice L_y, at the critical solid fraction."""
+    fill = scenario.fill
+    solid = fill.count * math.pi * fill.diameter**3 / 6.0 / geometry_of(scenario).length
+    return solid / material.critical_solid_fraction
+
+
 def settled_bed(scenario, material: ContinuumMaterial, spacing: float):
     """Points of the settled bed (tub frame): positions (N, 2) m, volumes (N,) m^2, densities
     (N,) kg/m^3, stresses (N, 4) Pa, and the bed height h (m) (module docstring, step 1)."""
     geo = geometry_of(scenario)
-    fill = scenario.fill
-    solid = fill.count * math.pi * fill.diameter**3 / 6.0 / geo.length  # m^2 of solid
-    area = solid / material.critical_solid_fraction
+    area = bed_area(scenario, material)
     h = bed_height(geo.radius, area, geo.rim_height)
     xs = np.arange(-geo.radius + spacing / 2, geo.radius, spacing)
     zs = np.arange(spacing / 2, h, spacing)
@@ -195,7 +201,7 @@ def sample_times(scenario) -> tuple[np.ndarray, float, float]:
 
 
 @nb.njit(cache=True)
-def _to_lab(x, v, pose6, pivx, pivz, pos_out, vel_out, y):
+def to_lab(x, v, pose6, pivx, pivz, pos_out, vel_out, y):
     """Lab positions and velocities (3D, y = the slice's middle) of tub-frame points (x, v) at
     the tub pose (X, Z, theta, Xdot, Zdot, thetadot), through vibroflow.tub.motion."""
     X, Z, th, Xd, Zd, thd = pose6[0], pose6[1], pose6[2], pose6[3], pose6[4], pose6[5]
@@ -210,6 +216,9 @@ def _to_lab(x, v, pose6, pivx, pivz, pos_out, vel_out, y):
         vel_out[p, 0] = rvx + c * v[p, 0] - s * v[p, 1]
         vel_out[p, 1] = 0.0
         vel_out[p, 2] = rvz + s * v[p, 0] + c * v[p, 1]
+
+
+_to_lab = to_lab  # the name tests/test_mpm.py imports
 
 
 @nb.njit(cache=True)
@@ -246,7 +255,7 @@ def _write_points_vtu(path: Path, state: MPMState, rate: np.ndarray, length: flo
                                      "state": state.phase.astype(np.float64)})
 
 
-def _write_json_atomic(path: Path, data: dict) -> None:
+def write_json_atomic(path: Path, data: dict) -> None:
     tmp = path.with_name(".tmp-" + path.name)
     tmp.write_text(json.dumps(data, indent=2) + "\n")
     os.replace(tmp, path)
@@ -265,7 +274,7 @@ def run_fingerprint(scenario, calibration: dict | None, options: LagrangianOptio
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-class _Samples:
+class Samples:
     """What the samples of the vibration have recorded so far: the points as the DEM's
     snapshots (lab position and velocity, tub pose), the wall contacts, the shear rates and the
     ParaView files written; `arrays` / `from_arrays` carry it through a checkpoint unchanged."""
@@ -302,7 +311,7 @@ class _Samples:
         return out
 
     @classmethod
-    def from_arrays(cls, a: dict, n_samples: int, n_points: int, n_probes: int) -> "_Samples":
+    def from_arrays(cls, a: dict, n_samples: int, n_points: int, n_probes: int) -> "Samples":
         s = cls(n_samples, n_points, n_probes)
         j = s.j = int(a["pos"].shape[0])
         s.pos[:j], s.vel[:j], s.poses[:j] = a["pos"], a["vel"], a["poses"]
@@ -313,6 +322,19 @@ class _Samples:
             s.vtk[kind] = [(float(t), str(name)) for t, name in
                            zip(a[f"vtk_{kind}_t"], a[f"vtk_{kind}_name"])]
         return s
+
+
+def samples_source(scenario, samples: Samples, times: np.ndarray, radius: np.ndarray) -> dict:
+    """The samples as the dem.h5 layout that analysis.summary.tub_summary reads: snapshots of
+    "balls" of the given radii (m), the wall contacts on the tub's U."""
+    source = {"attrs": {"frequency": scenario.motion.frequency},
+              "snapshots/time": times, "snapshots/position": samples.pos,
+              "snapshots/velocity": samples.vel, "snapshots/tub_pose": samples.poses,
+              "particles/radius": radius}
+    if times.size:
+        source.update({"wall_contacts/" + k: v for k, v in samples.contact_arrays().items()})
+        source["wall_contacts/wall"] = np.zeros(source["wall_contacts/fn"].size, np.int8)
+    return source
 
 
 def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
@@ -368,7 +390,7 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
                 raise InputError(f"--resume: {ckpt} is the checkpoint of another scenario, "
                                  "calibration or options; run without --resume to start "
                                  "afresh")
-            samples = _Samples.from_arrays(arrays, S, state.n, len(probes))
+            samples = Samples.from_arrays(arrays, S, state.n, len(probes))
             wall_before = float(meta["wall_time_s"])
             prog.log(f"resuming from {ckpt} at t = {state.t:.4f} s")
         else:
@@ -380,7 +402,7 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
                            stress, prog)
             state.t = 0.0
             state.step = 0
-            samples = _Samples(S, state.n, len(probes))
+            samples = Samples(S, state.n, len(probes))
             wall_before = 0.0
         try:
             done = _vibrate(scenario, system, state, samples, geo, material, times, out, vtk,
@@ -400,13 +422,7 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
         write_pvd(out / VTK_DIR / "grid.pvd", samples.vtk["grid"])
 
     radius = np.cbrt(3.0 * state.mass * geo.length / (4.0 * math.pi * material.solid_density))
-    source = {"attrs": {"frequency": scenario.motion.frequency},
-              "snapshots/time": times, "snapshots/position": samples.pos,
-              "snapshots/velocity": samples.vel, "snapshots/tub_pose": samples.poses,
-              "particles/radius": radius}
-    if S:
-        source.update({"wall_contacts/" + k: v for k, v in samples.contact_arrays().items()})
-        source["wall_contacts/wall"] = np.zeros(source["wall_contacts/fn"].size, np.int8)
+    source = samples_source(scenario, samples, times, radius)
     # the DEM's top-level keys (vibroflow.dem.run), with the points as its particles
     summary = {"case": scenario.case, "source": "vibroflow continuum", "method": "lagrangian",
                "n_particles": n, "steps": n_steps, "dt": system.dt,
@@ -418,16 +434,16 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
                                     scenario.run.batches) if S else np.zeros(0, np.int64)
     summary["continuum"] = _continuum_block(material, system, state, spacing, h, n_steps,
                                             wall_time)
-    summary["continuum"].update(_shear_rate_outputs(
+    summary["continuum"].update(shear_rate_outputs(
         material, calibration, list(probes), batch, scenario.run.batches, samples.rate_all,
         samples.rate_wall, samples.rate_probe, summary["impacts"]))
     summary = json_safe(summary)
-    _write_json_atomic(out / SUMMARY_NAME, summary)
+    write_json_atomic(out / SUMMARY_NAME, summary)
     ckpt.unlink(missing_ok=True)
     return summary
 
 
-def _vibrate(scenario, system, state, samples: _Samples, geo, material, times, out: Path,
+def _vibrate(scenario, system, state, samples: Samples, geo, material, times, out: Path,
              vtk: bool, prog: RunProgress, ckpt: Path, fingerprint: str, wall_before: float,
              wall0: float, stop_after_steps: int | None) -> bool:
     """Vibrate from state.step to the end of run.duration, sampling at `times` and writing a
@@ -464,7 +480,7 @@ def _vibrate(scenario, system, state, samples: _Samples, geo, material, times, o
         while samples.j < S and sample_step[samples.j] == k:
             j = samples.j
             pose6 = np.array(system.frame.pose(state.t))
-            _to_lab(state.x, state.v, pose6, pv[0], pv[1], buf_p, buf_v, 0.5 * geo.length)
+            to_lab(state.x, state.v, pose6, pv[0], pv[1], buf_p, buf_v, 0.5 * geo.length)
             samples.pos[j], samples.vel[j], samples.poses[j] = buf_p, buf_v, pose6
             touching = np.nonzero(wall_hist["state"] > 0)[0]
             _wall_gap_arc(state.x, geo.radius, gap, arc)
@@ -548,7 +564,7 @@ def _continuum_block(material, system, state, spacing, h, n_steps, wall_time) ->
     }
 
 
-def _shear_rate_outputs(material, calibration, probe_names, batch, n_batches, rate_all,
+def shear_rate_outputs(material, calibration, probe_names, batch, n_batches, rate_all,
                         rate_wall, rate_probe, impacts: dict) -> dict:
     """Shear rate (1/s) over the bed, near the wall (points within half a cell of the U) and in
     the probe cells, with batch-means standard errors; with a calibration, the granular

@@ -61,8 +61,32 @@ def _lagrangian() -> ContinuumMethod:
                            options=_lagrangian_options(), run=_run_lagrangian)
 
 
+def _run_eulerian(scenario, out_dir: Path, calibration: dict | None, options,
+                  progress: bool, resume: bool) -> dict:
+    from vibroflow.continuum.eulerian.run import run_eulerian
+    from vibroflow.continuum.run import material_of
+
+    material_of(scenario, calibration, options.model)  # bad parameters: an input error first
+    return run_eulerian(scenario, out_dir, calibration=calibration, options=options,
+                        progress=progress, resume=resume)
+
+
+def _eulerian_options():
+    from vibroflow.continuum.eulerian.run import EulerianOptions
+
+    return EulerianOptions
+
+
+def _eulerian() -> ContinuumMethod:
+    return ContinuumMethod(name="eulerian",
+                           description="fixed mesh of the tub, volume fraction transport "
+                                       "(vibroflow.continuum.eulerian)",
+                           options=_eulerian_options(), run=_run_eulerian)
+
+
 #: name -> factory of the method (factories keep `import vibroflow.study` free of numba)
-METHODS: dict[str, Callable[[], ContinuumMethod]] = {"lagrangian": _lagrangian}
+METHODS: dict[str, Callable[[], ContinuumMethod]] = {"lagrangian": _lagrangian,
+                                                     "eulerian": _eulerian}
 
 
 def method(name: str) -> ContinuumMethod:

@@ -1,0 +1,126 @@
+"""The granular column collapse on the Eulerian mesh (plane strain, lab frame).
+
+The set-up of the Lagrangian check (vibroflow.continuum.column: a column of width L0 and height
+H0 (m) against a wall x = 0 on a floor z = 0, released at t = 0 under gravity, pre-stressed as
+it stood behind its gate, run until its kinetic energy falls below a fraction of its initial
+potential energy), on a fixed box mesh (mesh.EulerianMesh.box) whose walls are the floor, the
+wall behind the column, a far end wall at `reach` and a lid at 2 H0, all with the Coulomb
+friction `wall_friction` and the Lagrangian check's stiffness (the P-wave modulus over the cell
+side).  The deposit is measured by vibroflow.analysis.column from the cells, each standing for
+its material volume m / rho (m^2 per metre of thickness).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from vibroflow.errors import InputError
+
+from ..constitutive import ContinuumMaterial
+from ..grid_update import LabFrame
+from ..timestep import stable_dt
+from .mesh import EulerianMesh
+from .solver import EulerianState, EulerianSystem, init_state, run_steps
+from .wall import MeshWall
+
+G_ACC = 9.81  # m/s^2
+
+
+@dataclass
+class EulerianColumnRun:
+    """A finished column collapse: the final state, and how the run went (t_end s; settled:
+    the kinetic energy fell below the threshold before t_max; ke_ratio: the last kinetic energy
+    over the initial potential energy; mass_error: (M_end - M_0) / M_0)."""
+
+    L0: float
+    H0: float
+    dx: float
+    system: EulerianSystem
+    state: EulerianState
+    t_end: float
+    settled: bool
+    ke_ratio: float
+    mass_error: float
+
+    @property
+    def aspect_ratio(self) -> float:
+        return self.H0 / self.L0
+
+    def areas(self) -> tuple[np.ndarray, np.ndarray]:
+        """Cell centres x (N,) m and material areas m / rho (N,) m^2 of the cells holding
+        material."""
+        st = self.state
+        has = (st.mass > 0) & (st.density > 0)
+        return st.x[has, 0], st.mass[has] / st.density[has]
+
+
+def column_system(L0: float, H0: float, dx: float, material: ContinuumMaterial | None = None,
+                  wall_friction: float = 0.40, reach: float | None = None,
+                  cfl: float = 0.3) -> EulerianSystem:
+    """The Eulerian system of the column (module docstring); reach (m) default
+    L0 (2 + 3 H0/L0), the Lagrangian check's."""
+    for name, v in (("L0", L0), ("H0", H0), ("dx", dx)):
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            raise InputError(f"column {name} = {v!r}: must be a finite length > 0 m")
+    mat = material or ContinuumMaterial()
+    h = 0.5 * dx
+    reach = L0 * (2.0 + 3.0 * H0 / L0) if reach is None else float(reach)
+    reach = h * math.ceil(reach / h - 1e-9)
+    top = h * math.ceil(2.0 * H0 / h - 1e-9)
+    mesh = EulerianMesh.box(0.0, reach, 0.0, top, dx)
+    kn = (mat.bulk_modulus + 4.0 * mat.shear_modulus / 3.0) / h
+    wall = MeshWall(stiffness=kn, friction=wall_friction, damping_ratio=0.5)
+    dt = stable_dt(mat, dx, h, [wall], v_max=math.sqrt(2.0 * G_ACC * H0), cfl=cfl)
+    return EulerianSystem(mesh, mat, dt, frame=LabFrame((0.0, -G_ACC)), wall=wall)
+
+
+def column_state(system: EulerianSystem, L0: float, H0: float) -> EulerianState:
+    """The column at rest behind its gate: cells of [0, L0] x [0, H0] filled (partly at its
+    edges) at the critical density, the lithostatic stress with Jaky's K_0 and the density of
+    that pressure (the Lagrangian check's column_state)."""
+    mesh = system.mesh
+    mat = system.material
+    h = mesh.h
+    c = system.x
+    fx = np.clip((L0 - (c[:, 0] - 0.5 * h)) / h, 0.0, 1.0)
+    fz = np.clip((H0 - (c[:, 1] - 0.5 * h)) / h, 0.0, 1.0)
+    frac = fx * fz
+    rho_c = mat.critical_density
+    k0 = 1.0 - math.sin(math.atan(mat.mu_s))
+    szz = -rho_c * G_ACC * np.clip(H0 - c[:, 1], 0.0, None) * (frac > 0)
+    stress = np.zeros((mesh.n, 4))
+    stress[:, 1] = szz
+    stress[:, 0] = stress[:, 3] = k0 * szz
+    p = -(stress[:, 0] + stress[:, 1] + stress[:, 3]) / 3.0
+    rho = rho_c * np.exp(p / mat.bulk_modulus) * 1.001
+    return init_state(system, frac * rho * h * h, rho, stress=stress)
+
+
+def run_column(L0: float, H0: float, dx: float, material: ContinuumMaterial | None = None,
+               wall_friction: float = 0.40, t_min: float | None = None,
+               t_max: float | None = None, ke_fraction: float = 1.0e-4,
+               reach: float | None = None, cfl: float = 0.3) -> EulerianColumnRun:
+    """Release the column and run until it is at rest (the Lagrangian run_column's rule:
+    after t_min = 3 sqrt(H0/g), the first check, every 0.1 sqrt(H0/g), with kinetic energy
+    below ke_fraction M g H0 / 2; at most t_max = 30 sqrt(H0/g))."""
+    system = column_system(L0, H0, dx, material, wall_friction, reach, cfl)
+    state = column_state(system, L0, H0)
+    tau = math.sqrt(H0 / G_ACC)
+    t_min = 3.0 * tau if t_min is None else float(t_min)
+    t_max = 30.0 * tau if t_max is None else float(t_max)
+    if not 0 < ke_fraction < 1:
+        raise InputError(f"ke_fraction = {ke_fraction!r}: must be in (0, 1)")
+    pe0 = state.total_mass() * G_ACC * 0.5 * H0
+    n_check = max(int(round(0.1 * tau / system.dt)), 1)
+    settled = False
+    ke = state.kinetic_energy()
+    while state.t < t_max - 0.5 * system.dt:
+        run_steps(system, state, n_check)
+        ke = state.kinetic_energy()
+        if state.t >= t_min - 0.5 * system.dt and ke < ke_fraction * pe0:
+            settled = True
+            break
+    return EulerianColumnRun(L0=L0, H0=H0, dx=dx, system=system, state=state, t_end=state.t,
+                             settled=settled, ke_ratio=ke / pe0, mass_error=state.mass_error())

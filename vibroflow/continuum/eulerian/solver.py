@@ -1,0 +1,243 @@
+"""The Eulerian continuum in 2D plane strain: the state record and the step.
+
+Why this design.  A coupled-Eulerian-Lagrangian operator split (Benson 1992; as Abaqus/CEL and
+the Eulerian hydrocodes do), with the material point method's own pieces as the Lagrangian step:
+
+1. Lagrangian step on the fixed mesh (lagrangian_step.py): the nodes of the solver's grid carry
+   the momentum; the mesh's cells (mesh.py, side dx/2: 2 x 2 fixed integration points per
+   element of quadratic B-splines) carry mass, stress and the APIC affine velocity; forces,
+   the frame's inertial forces, the wall and the stress update are the Lagrangian
+   formulation's kernels (p2g, grid_update, g2p, constitutive, boundary), so the two
+   formulations differ only in what an Eulerian method must do differently.  Quadratic
+   B-splines at 2 x 2 points a cell are fully integrated: bilinear elements with one point
+   would need an hourglass control, these do not.
+2. Remap (advection.py): the material moved by v dt is transported back onto the fixed cells by
+   a conservative, limited second-order finite-volume scheme: the mass exactly (to round-off),
+   velocity, affine matrix and stress mass-weighted (the stress advection that the rate form of
+   the elasto-plastic law needs in a fixed mesh).
+
+Volume fraction.  Each cell carries its mass m and its material's density rho (transported
+with the mass, like the stress); its volume fraction f = min(1, m / (rho h^2)) is the share of
+the cell the material fills, the volume of fluid of coupled Eulerian-Lagrangian codes.  The
+material and the empty space above it are told apart by it, and it is computed from the
+transported mass, so it moves without losing mass.  A partly filled cell at the free surface
+carries the stress of its material on the volume f h^2 = m / rho it fills (the material
+point's m_p / rho_p); its material expands with the cell, and is compressed by it once the
+cell's empty part has closed (lagrangian_step.void_first), so material dilated below the
+critical density rho_c is disconnected (stress-free, Dunatunga & Kamrin 2015) until it is
+compacted again, while a half-filled surface cell at rho_c is not: the two states that a
+density alone would confuse.
+
+Rheology: the elastic part is kept (the shared elasto-visco-plastic law, not a regularised
+visco-plastic mu(I)): the same constitutive module as the Lagrangian formulation, so that the
+two formulations can be compared as formulations, and the elastic stress is what carries the
+bed's weight at rest and its impacts on the wall, which a purely visco-plastic law of Barker &
+Gray (2017) would have to regularise.  Its rate form in a fixed mesh needs the stress advected,
+step 2.
+
+Units (SI, per metre of thickness along y): positions m, velocities m/s, masses kg/m, volumes
+m^2, stresses Pa [xx, zz, xz, yy] (tension positive), forces N/m.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from vibroflow.errors import InputError
+
+from ..constitutive import ContinuumMaterial
+from ..grid_update import LabFrame
+from ..mpm import ContinuumBlowUp
+from .advection import advect
+from .lagrangian_step import fill_limit, lagrangian_step, material_fraction
+from .mesh import EulerianMesh
+from .wall import MeshWall, empty_history
+
+#: number of intensive fields transported with the mass: v (2), C (4), stress (4), density
+NQ = 11
+
+
+@dataclass
+class EulerianSystem:
+    """What does not change during a run: the mesh, the material, the time step dt (s), the
+    frame (grid_update.LabFrame or TubFrame), the wall (wall.MeshWall or None) and the
+    partitions' friction (boundary.PartitionFriction or None)."""
+
+    mesh: EulerianMesh
+    material: ContinuumMaterial
+    dt: float
+    frame: object = field(default_factory=LabFrame)
+    wall: MeshWall | None = None
+    partitions: object = None
+
+    def __post_init__(self):
+        if not self.dt > 0:
+            raise InputError(f"dt = {self.dt!r}: must be > 0 s")
+        m = self.mesh
+        self.params = self.material.as_array()
+        self.x = m.centres()
+        self.x_scratch = np.empty_like(self.x)
+        self.density = np.zeros(m.n)
+        self.work = m.grid.zeros()
+        self.wall_cells = np.nonzero(m.wall)[0].astype(np.int64)
+        self.ux = np.zeros((m.ncx + 1, m.ncz))
+        self.uz = np.zeros((m.ncx, m.ncz + 1))
+        s2 = (m.ncx, m.ncz)
+        self.adv = (np.zeros(s2), np.zeros(s2), np.zeros(s2), np.zeros(s2 + (NQ,)),
+                    np.zeros(s2 + (NQ,)), np.zeros(s2), np.zeros(s2 + (NQ,)))
+        self.q = np.zeros((m.n, NQ))
+
+
+@dataclass
+class EulerianState:
+    """The fields on the mesh's cells (arrays over the N cells, p = i * ncz + k) and the clock.
+
+    x (N, 2) the fixed cell centres (m); mass (N,) kg/m; v (N, 2) m/s; C, L (N, 4)
+    [xx, xz, zx, zz] 1/s; stress (N, 4) Pa; gamma_dot (N,) plastic shear rate 1/s; phase (N,)
+    0 disconnected / 1 elastic / 2 flowing; frac (N,) material fraction; volume (N,) material
+    volume m^2; density (N,) material density kg/m^3 at the end of the last step; fext (N, 2)
+    N/m (work array); history: [the wall's per-cell arrays (wall.empty_history)]; mass0: the
+    initial total mass (kg/m); mass_error_max: the largest |M - M0| / M0 seen; t (s), step.
+    The field names are those of mpm.MPMState, so checkpoint.py stores it."""
+
+    x: np.ndarray
+    mass: np.ndarray
+    v: np.ndarray
+    C: np.ndarray
+    L: np.ndarray
+    stress: np.ndarray
+    gamma_dot: np.ndarray
+    phase: np.ndarray
+    frac: np.ndarray
+    volume: np.ndarray
+    density: np.ndarray
+    fext: np.ndarray
+    history: list
+    mass0: float = 0.0
+    mass_error_max: float = 0.0
+    t: float = 0.0
+    step: int = 0
+
+    @property
+    def n(self) -> int:
+        return int(self.mass.shape[0])
+
+    @property
+    def wall(self) -> dict:
+        return self.history[0]
+
+    def total_mass(self) -> float:
+        return float(self.mass.sum())
+
+    def mass_error(self) -> float:
+        """(M - M0) / M0 (-)."""
+        return (self.total_mass() - self.mass0) / self.mass0 if self.mass0 > 0 else 0.0
+
+    def pressure(self) -> np.ndarray:
+        return -(self.stress[:, 0] + self.stress[:, 1] + self.stress[:, 3]) / 3.0
+
+    def momentum(self) -> np.ndarray:
+        return (self.mass[:, None] * self.v).sum(axis=0)
+
+    def kinetic_energy(self) -> float:
+        return float(0.5 * (self.mass * (self.v**2).sum(axis=1)).sum())
+
+
+def init_state(system: EulerianSystem, mass, density=None, v=None, stress=None,
+               t: float = 0.0):
+    """A state with cell masses (N,) kg/m (zero outside the mesh's domain), material densities
+    (N,) kg/m^3 (default the critical density), velocities (N, 2) m/s and stresses (N, 4) Pa
+    (default 0)."""
+    mesh = system.mesh
+    n = mesh.n
+    mass = np.array(mass, dtype=float).reshape(n)
+    if np.any(mass < 0) or not np.all(np.isfinite(mass)):
+        raise InputError("cell masses: must be finite and >= 0")
+    if np.any(mass[~mesh.inside] > 0):
+        raise InputError("cell masses: material in cells outside the container")
+    vel = np.zeros((n, 2)) if v is None else np.array(v, dtype=float).reshape(n, 2)
+    sig = np.zeros((n, 4)) if stress is None else np.array(stress, dtype=float).reshape(n, 4)
+    rho = np.full(n, system.material.critical_density) if density is None else \
+        np.broadcast_to(np.asarray(density, dtype=float), (n,)).copy()
+    if np.any(rho <= 0):
+        raise InputError("cell densities: must be > 0 kg/m^3")
+    fill_limit(mass, rho, system.mesh.h)
+    st = EulerianState(x=system.x.copy(), mass=mass, v=vel, C=np.zeros((n, 4)),
+                       L=np.zeros((n, 4)), stress=sig, gamma_dot=np.zeros(n),
+                       phase=np.ones(n, np.int8), frac=np.zeros(n), volume=np.zeros(n),
+                       density=rho, fext=np.zeros((n, 2)),
+                       history=[empty_history(n)], t=float(t))
+    st.mass0 = st.total_mass()
+    material_fraction(st.mass, st.density, mesh.h, st.frac, st.volume)
+    return st
+
+
+def state_from_checkpoint(system: EulerianSystem, saved, meta: dict) -> EulerianState:
+    """The state stored by checkpoint.save_checkpoint (its MPMState record and meta)."""
+    st = EulerianState(x=saved.x, mass=saved.mass, v=saved.v, C=saved.C, L=saved.L,
+                       stress=saved.stress, gamma_dot=saved.gamma_dot, phase=saved.phase,
+                       frac=np.zeros(saved.mass.shape[0]), volume=saved.volume,
+                       density=saved.density, fext=saved.fext, history=saved.history,
+                       mass0=float(meta["mass0"]), mass_error_max=float(meta["mass_error_max"]),
+                       t=saved.t, step=saved.step)
+    material_fraction(st.mass, st.density, system.mesh.h, st.frac, st.volume)
+    return st
+
+
+def _blowup(system, state, ids, what):
+    ids = np.asarray(ids)
+    named = ", ".join(str(int(i)) for i in ids[:10]) + (", ..." if ids.size > 10 else "")
+    xs = system.x[ids[:3]] if ids.size else np.zeros((0, 2))
+    where = "; ".join(f"({a:.4g}, {b:.4g}) m" for a, b in xs)
+    speed = np.hypot(state.v[:, 0], state.v[:, 1])
+    finite = speed[np.isfinite(speed)]
+    vmax = float(finite.max()) if finite.size else 0.0
+    return ContinuumBlowUp(
+        f"t = {state.t:.6g} s (step {state.step}): cell(s) {named} ({ids.size} of {state.n}; "
+        f"at {where}) {what}; dt = {system.dt:.3g} s, cell side {system.mesh.h:.3g} m, "
+        f"fastest finite speed {vmax:.3g} m/s (advective Courant number "
+        f"{vmax * system.dt / system.mesh.h:.3g}); likely cause: the time step too large for "
+        "the stiffness or the speeds reached (lower cfl), or the wall stiffness too low")
+
+
+def step(system: EulerianSystem, state: EulerianState) -> None:
+    """Advance the state by one step system.dt: the Lagrangian step, then the remap (module
+    docstring); raises mpm.ContinuumBlowUp when a cell's mass goes negative or its velocity
+    non-finite."""
+    lagrangian_step(system, state)
+    mesh = system.mesh
+    q = system.q
+    q[:, 0:2] = state.v
+    q[:, 2:6] = state.C
+    q[:, 6:10] = state.stress
+    q[:, 10] = state.density
+    s2 = (mesh.ncx, mesh.ncz)
+    lowest = advect(state.mass.reshape(s2), q.reshape(s2 + (NQ,)), system.ux, system.uz,
+                    mesh.h, system.dt, mesh.open_x, mesh.open_z, mesh.periodic, *system.adv)
+    state.v[:] = q[:, 0:2]
+    state.C[:] = q[:, 2:6]
+    state.stress[:] = q[:, 6:10]
+    state.density[:] = q[:, 10]
+    fill_limit(state.mass, state.density, mesh.h)
+    state.t += system.dt
+    state.step += 1
+    if lowest < -1e-9 * system.material.critical_density * mesh.h**2 or not np.isfinite(lowest):
+        bad = np.nonzero(~(state.mass >= -1e-9 * system.material.critical_density
+                           * mesh.h**2))[0]
+        raise _blowup(system, state, bad, "lost more mass than they held (negative mass)")
+    if not np.isfinite(state.v).all():
+        raise _blowup(system, state, np.nonzero(~np.isfinite(state.v).all(axis=1))[0],
+                      "reached a non-finite velocity")
+    if state.mass0 > 0:
+        err = abs(state.mass.sum() - state.mass0) / state.mass0
+        if err > state.mass_error_max:
+            state.mass_error_max = err
+
+
+def run_steps(system: EulerianSystem, state: EulerianState, n: int, callback=None) -> None:
+    """n steps; callback(state) after each if given."""
+    for _ in range(int(n)):
+        step(system, state)
+        if callback is not None:
+            callback(state)
