@@ -13,7 +13,8 @@ of each, so one sees which parameter, if any, the mismatch is sensitive to.
 A case is `base` or `NAME=VALUE` with NAME one of
   wall_friction, partition_friction             (calibration [wall], [partitions] friction)
   mu_scale                                      (mu_s and mu_2 both multiplied)
-  bulk_modulus_scale, moduli_scale              (K, or K and G, multiplied)
+  bulk_modulus_scale, shear_modulus_scale,
+  moduli_scale                                  (K, G, or K and G, multiplied)
   critical_solid_fraction                       ([rheology])
   wall_stiffness (Pa/m), cfl, dx (m), model     (LagrangianOptions)
 The default list is the one whose figures benchmarks/README.md records.  Wall times are printed
@@ -59,6 +60,8 @@ def apply_case(case: str, calibration: dict) -> tuple[dict, dict]:
         cal["rheology"]["mu_2"] *= value
     elif name == "bulk_modulus_scale":
         cal["elastic"]["bulk_modulus_Pa"] *= value
+    elif name == "shear_modulus_scale":
+        cal["elastic"]["shear_modulus_Pa"] *= value
     elif name == "moduli_scale":
         cal["elastic"]["bulk_modulus_Pa"] *= value
         cal["elastic"]["shear_modulus_Pa"] *= value

@@ -147,6 +147,31 @@ def test_calibrate_writes_its_files_and_reads_back(calibrated_run):
     assert not list(out.glob("*.tmp*"))
 
 
+def test_continuum_gets_the_cyclic_secant_modulus_at_the_tubs_strain(calibrated_run):
+    """The continuum's shear modulus is the cyclic shear cell's secant modulus at the strain
+    amplitude the bed's measured cycle-mean shear rate implies (gamma_0 = pi gamma_dot / (2
+    omega)), below the small-strain modulus (modulus reduction), and between the measured
+    amplitudes' moduli."""
+    import math
+
+    from vibroflow.calibration.calibrate import read_calibration
+
+    out, r = calibrated_run
+    cal = read_calibration(out)
+    cs, el = cal["cyclic_shear"], cal["elastic"]
+    f = cs["frequency_Hz"]
+    assert cs["tub_strain_amplitude"] == pytest.approx(
+        math.pi * cs["tub_shear_rate_cycle_mean_1_s"] / (4 * math.pi * f))
+    assert el["shear_modulus_Pa"] == pytest.approx(cs["secant_shear_modulus_at_tub_amplitude_Pa"])
+    assert el["shear_modulus_Pa"] < el["shear_modulus_small_strain_Pa"]
+    amps, G = cs["strain_amplitude"], cs["secant_shear_modulus"]
+    assert amps == sorted(amps)
+    # the reduction curve, over amplitudes far enough apart to beat the cycle-to-cycle scatter
+    assert all(G[j] < G[i] for i in range(len(amps)) for j in range(len(amps))
+               if amps[j] >= 2.5 * amps[i])
+    assert "cyclic secant" in r.stdout
+
+
 def test_calibrated_wall_friction_obeys_coulomb(calibrated_run):
     """Every contact has |F_t| <= mu F_n, so the ratio of sums and the coherent friction of
     slipping patches cannot exceed the contact's mu; sliding contacts sit exactly at mu (to the

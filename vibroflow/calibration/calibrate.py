@@ -10,8 +10,12 @@ Stages:
    compression and shear tests (elastic); without it, mu(I) and phi(I) fitted to the tub's own
    dense cells and the elastic moduli from the affine (effective-medium) estimate with the
    bed's measured coordination number -- each result says where it came from;
-5. the equivalent Drucker-Prager with viscosity;
-6. RUN_DIR/calibration.toml (every parameter with its uncertainty and its provenance, read by
+5. the shear modulus the continuum gets: the secant modulus of the packed media in cyclic simple
+   shear at the tub's frequency and at the strain amplitude the DEM's bed sees (cyclic_shear;
+   the amplitude from the bed's cycle-mean shear rate), not the small-strain modulus of step 4,
+   which [elastic] keeps as shear_modulus_small_strain_Pa (cyclic=False: the small-strain one);
+6. the equivalent Drucker-Prager with viscosity;
+7. RUN_DIR/calibration.toml (every parameter with its uncertainty and its provenance, read by
    the continuum solvers with `read_calibration`), RUN_DIR/calibration/ pictures.
 
 All files are written atomically; a stage that fails leaves the files of the stages before it.
@@ -118,7 +122,7 @@ def young_poisson(K: float, G: float) -> tuple[float, float]:
 
 def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
               width: float | None = None, progress: bool = True, shear_cell_options=None,
-              pictures: bool = True) -> dict:
+              pictures: bool = True, cyclic: bool = True) -> dict:
     """Calibrate the continuum on the DEM run in RUN (a run directory with dem.h5).
 
     Returns the calibration as a dict (what calibration.toml holds).  See the module notes.
@@ -167,11 +171,14 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
         from .rheology_fit import drucker_prager_equivalent
         # the bed's typical instantaneous shear rate (cycle mean of the phase-resolved field)
         gam_ref = _median_dense(avg, "shear_rate_cycle_mean")
+        cyclic_rec = _cyclic_modulus(sc, p_bed, gam_ref, elastic, prog) if cyclic else None
         dp = drucker_prager_equivalent(rheo["mu_s"], rheo["mu_2"], rheo["I_0"],
                                        rheo["phi_max"], rheo["phi_min"], p_bed, d, rho_s,
                                        gam_ref)
         cal = _calibration_record(res, cg_info, wf, rel, rheo, elastic, dp, p_bed, phi_bed, z,
                                   d, rho_s, gam_ref, shear_cell, kernel, width, avg)
+        if cyclic_rec is not None:
+            cal["cyclic_shear"] = cyclic_rec
         write_calibration(out_dir / CALIBRATION_FILE, cal)
         if pictures:
             from . import plots
@@ -185,6 +192,45 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
             plots.impacts_plot(pic / "impacts.png", rel)
         prog.log(f"calibration in {out_dir / CALIBRATION_FILE}")
         return cal
+
+
+def _cyclic_modulus(sc, pressure: float, shear_rate: float, elastic: dict, prog) -> dict | None:
+    """Run the cyclic shear cell (cyclic_shear) at the bed's pressure and the tub's frequency over
+    the default amplitudes and the tub's own strain amplitude; replace elastic["shear_modulus"]
+    (in place) by the secant modulus at the tub's amplitude, keeping the small-strain one.
+    Returns the [cyclic_shear] table, or None when the bed has no measured shear rate."""
+    from .cyclic_shear import DEFAULT_AMPLITUDES, run_cyclic_shear, tub_strain_amplitude
+
+    if not (math.isfinite(shear_rate) and shear_rate > 0) or sc.motion is None:
+        prog.log("cyclic shear skipped: no cycle-mean shear rate measured in the bed")
+        return None
+    f = float(sc.motion.frequency)
+    g_tub = tub_strain_amplitude(shear_rate, f)
+    amps = sorted({*DEFAULT_AMPLITUDES, g_tub})
+    prog.log(f"cyclic shear at {f:g} Hz, p = {pressure:.4g} Pa; the tub's strain amplitude "
+             f"{g_tub:.3g} (cycle-mean shear rate {shear_rate:.3g} 1/s)")
+    recs = run_cyclic_shear(sc, amps, frequency=f, pressure=pressure, progress=prog)
+    at = next(r for r in recs if r["strain_amplitude"] == g_tub)
+    small = (elastic["shear_modulus"], elastic.get("shear_modulus_stderr", float("nan")),
+             elastic.get("source", ""))
+    elastic["shear_modulus_small_strain"], elastic["shear_modulus_small_strain_stderr"] = \
+        small[0], small[1]
+    elastic["shear_modulus"] = at["secant_shear_modulus"]
+    elastic["shear_modulus_stderr"] = at["secant_shear_modulus_stderr"]
+    elastic["source"] = (f"bulk modulus: {small[2]}; shear modulus: secant modulus of cyclic "
+                         f"simple shear at {f:g} Hz and the tub's strain amplitude {g_tub:.3g} "
+                         "(vibroflow.calibration.cyclic_shear; the small-strain one is "
+                         "shear_modulus_small_strain_Pa)")
+    cols = ("strain_amplitude", "secant_shear_modulus", "secant_shear_modulus_stderr",
+            "damping_ratio", "damping_ratio_stderr", "peak_stress_ratio", "solid_fraction")
+    return {"frequency_Hz": f, "pressure_Pa": _f(pressure),
+            "tub_shear_rate_cycle_mean_1_s": _f(shear_rate), "tub_strain_amplitude": _f(g_tub),
+            "secant_shear_modulus_at_tub_amplitude_Pa": _f(at["secant_shear_modulus"]),
+            "damping_ratio_at_tub_amplitude": _f(at["damping_ratio"]),
+            "n_balls": int(at["n_balls"]), "cycles_kept": int(at["cycles_kept"]),
+            "units": "strain_amplitude -, secant_shear_modulus Pa, damping_ratio -, "
+                     "peak_stress_ratio -, solid_fraction -",
+            **{c: [_f(r[c]) for r in recs] for c in cols}}
 
 
 def _median_dense(ds, name: str) -> float:
@@ -314,6 +360,10 @@ def _calibration_record(res, cg_info, wf, rel, rheo, elastic, dp, p_bed, phi_bed
             "bulk_modulus_stderr_Pa": _f(elastic.get("bulk_modulus_stderr")),
             "shear_modulus_Pa": _f(elastic["shear_modulus"]),
             "shear_modulus_stderr_Pa": _f(elastic.get("shear_modulus_stderr")),
+            **({"shear_modulus_small_strain_Pa": _f(elastic["shear_modulus_small_strain"]),
+                "shear_modulus_small_strain_stderr_Pa":
+                    _f(elastic["shear_modulus_small_strain_stderr"])}
+               if "shear_modulus_small_strain" in elastic else {}),
             "youngs_modulus_Pa": _f(E), "poisson_ratio": _f(nu),
             "pressure_Pa": _f(elastic.get("pressure", p_bed)),
             "solid_fraction": _f(elastic.get("solid_fraction", phi_bed)),
