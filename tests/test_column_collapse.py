@@ -11,12 +11,14 @@ What is checked, and against what:
 * the continuum (vibroflow.continuum.column, tub47's media: d = 6.35 mm, the glass-bead mu(I) of
   `ContinuumMaterial()`) at the experiments' scale, L0 = 1 m = 157 d (the laws were fitted on
   columns of tens to hundreds of grains across): the published planar scaling of Lube et al.
-  (2005) -- the height of a low column (H_inf = H0, its top never moves) and of a tall one
-  (H_inf/L0 = a^(2/5)), and the run-out's growth (L_inf - L0)/L0 ~ a^(2/3) at large a -- each
-  within 10 %.  The run-out's prefactor is not met: the plane-strain continuum runs out about
-  twice as far as the channel experiments (module constant MPM_OVER_LUBE_2005 and the report in
-  the test's docstring), as other plane-strain mu(I) continua do (Dunatunga & Kamrin 2015;
-  Lagree, Staron & Popinet 2011);
+  (2005) -- the height of a low column (H_inf = H0, its top never moves) and the run-out's
+  growth (L_inf - L0)/L0 ~ a^(2/3) at large a -- each within 10 %.  Not met, and said so in the
+  tests' docstrings with the numbers: the run-out's prefactor (the plane-strain continuum with
+  tub47's glass-bead friction runs out about 1.8 times as far as the channel experiments; the
+  prefactor depends on the grains' friction, and with the friction of the experiments' sand the
+  continuum comes within 25 %), the tall columns' height (16 % above a^(2/5) at a = 3, 46 % at
+  a = 6: a taller peak is left at the wall), and the
+  low column's run-out, which is not grid-converged;
 * the continuum against the DEM of the same column of steel balls (a quasi-2D slab between
   frictionless walls, on a floor of glued balls), at the DEM's size (L0 of 10 to 13 balls,
   where the mu(I) continuum's rate dependence and the balls' size both matter, so neither can be
@@ -287,3 +289,162 @@ def dem_column(L0, a, slab=3, seed=1, dt=1.0e-5, ke_fraction=1.0e-4, t_max_tau=1
     return dict(L0=L0, H0=H0, a=H0 / L0, phi0=phi0, W=W, n=n, x=st2.pos[:n, 0].copy(),
                 radius=st2.radius[:n].copy(), settled=settled, t=st2.step * dt, tau=tau,
                 areas=areas)
+
+
+# ----------------------------------------------------------------------------------------------
+# the continuum against the published scaling, at the experiments' scale
+
+L_BIG = 1.0   # m: 157 of tub47's balls across, as the experiments' columns are tens to hundreds
+
+
+def mpm_deposit(run):
+    """The deposit of a finished MPM column run (vibroflow.continuum.column.ColumnRun): each
+    point stands for its mass over the column's initial density (so the areas add up to L0 H0);
+    bins of a whole number of point spacings, at least two and one grain; the front where the
+    deposit is thinner than one grain or one point, whichever is thicker."""
+    st = run.state
+    area = st.mass / run.material.critical_density
+    sp = 0.5 * run.dx
+    bw = sp * max(2, math.ceil(D / sp - 1e-9))
+    return measure_deposit(st.x[:, 0], area, D, bin_width=bw, threshold=max(D, sp))
+
+
+def test_mpm_low_column_keeps_its_top_and_runs_past_the_experiments():
+    """a = 0.5, L0 = 1 m, dx = L0/20 (tub47's media): the top of a low column never moves, so
+    H_inf = H0 (H_inf/L0 = a, the small-a branch of every planar law) within 2 %; the run-out
+    is past Lube et al. 2005's 1.2 a, the shortest of the planar fits (the plane-strain
+    continuum has no channel side walls to brake it; its run-out at this a also grows with the
+    grid refinement, see test_mpm_grid_refinement)."""
+    a = 0.5
+    run = run_column(L_BIG, a * L_BIG, L_BIG / 20)
+    assert run.settled
+    runout, height = mpm_deposit(run).normalised(L_BIG)
+    assert height == pytest.approx(LUBE_2005.height(a), rel=0.02)
+    assert height == pytest.approx(a, rel=0.02)
+    assert runout > LUBE_2005.runout(a)
+
+
+def test_mpm_runout_prefactor_falls_with_the_grain_friction():
+    """a = 3 (the power-law branch, a > 2.8), L0 = 1 m, dx = L0/10.  The run-out's prefactor
+    depends on the grains' friction: the tub47 material (glass-bead mu(I), mu_s = tan 20.9 deg)
+    runs out 1.8 times Lube et al.'s 1.9 a^(2/3); given the friction of Lube et al.'s quartz sand
+    (its angle of repose 29.5 deg as mu_s, the same mu_2 - mu_s and I_0), within 25 % of it, the
+    rest the friction of their channel's side walls, which a plane-strain continuum does not
+    feel (and the grid: the finer L0/20 runs out 8 % further).  Published: the mu(I) continuum
+    of Lagree, Staron & Popinet (2011) also outruns the channel experiments."""
+    from vibroflow.continuum.constitutive import ContinuumMaterial
+
+    a = 3.0
+    law = LUBE_2005.runout(a)
+    glass = mpm_deposit(run_column(L_BIG, a * L_BIG, L_BIG / 10)).normalised(L_BIG)[0]
+    mu_s = math.tan(math.radians(29.5))
+    base = ContinuumMaterial()
+    sand = ContinuumMaterial(mu_s=mu_s, mu_2=mu_s + base.mu_2 - base.mu_s)
+    sandy = mpm_deposit(run_column(L_BIG, a * L_BIG, L_BIG / 10, material=sand))
+    sandy = sandy.normalised(L_BIG)[0]
+    assert glass > 1.5 * law
+    assert sandy < glass
+    assert sandy == pytest.approx(law, rel=0.25)
+
+
+@pytest.mark.slow
+def test_mpm_runout_grows_as_a_to_two_thirds():
+    """a = 3 and a = 6 (both on the power-law branch, a > 2.8), L0 = 1 m, dx = L0/20: the
+    run-out grows as Lube et al.'s (L_inf - L0)/L0 ~ a^(2/3), the ratio within 10 % of
+    2^(2/3) = 1.587 (measured 1.58; on the coarser L0/10, 1.73).  Neither the prefactor (1.9
+    times Lube's, test_mpm_runout_prefactor_falls_with_the_grain_friction) nor the tall
+    columns' heights (H_inf/L0 = 1.80 at a = 3, 2.99 at a = 6 against a^(2/5) = 1.55, 2.05: the
+    continuum leaves a taller peak at the wall) are met."""
+    out = {}
+    for a in (3.0, 6.0):
+        run = run_column(L_BIG, a * L_BIG, L_BIG / 20)
+        assert run.settled
+        out[a] = mpm_deposit(run).normalised(L_BIG)
+        print(f"\na = {a}: MPM run-out {out[a][0]:.3f} (Lube 2005 {LUBE_2005.runout(a):.3f}, "
+              f"Lajeunesse 2005 {LAJEUNESSE_2005.runout(a):.3f}), height {out[a][1]:.3f} "
+              f"(Lube 2005 {LUBE_2005.height(a):.3f})")
+    ratio = out[6.0][0] / out[3.0][0]
+    assert ratio == pytest.approx(LUBE_2005.runout(6.0) / LUBE_2005.runout(3.0), rel=0.10)
+    assert ratio == pytest.approx(2.0 ** (2.0 / 3.0), rel=0.10)
+
+
+@pytest.mark.slow
+def test_mpm_grid_refinement():
+    """Grid dependence at L0 = 1 m.  a = 3: the run-out is grid-converged (L0/10 -> L0/20: the
+    99 % mass front within 2 %, the one-grain front within 10 %).  a = 0.5: the top stays at H0
+    on every grid, but the run-out is not converged (one-grain front 0.65, 0.99, 1.20 at
+    L0/20, L0/40, L0/80; the 99 % mass front 0.56, 0.78, 0.87): the low column fails along a
+    shear band as wide as a cell, and the thin front keeps spreading as the cells shrink."""
+    fronts = {}
+    for a, cells in ((3.0, (10, 20)), (0.5, (20, 40))):
+        for n in cells:
+            run = run_column(L_BIG, a * L_BIG, L_BIG / n)
+            assert run.settled
+            dep = mpm_deposit(run)
+            fronts[a, n] = (dep.normalised(L_BIG)[0], (dep.runout_mass - L_BIG) / L_BIG)
+            print(f"\na = {a}, dx = L0/{n}: run-out {fronts[a, n][0]:.3f}, 99 % mass front "
+                  f"{fronts[a, n][1]:.3f}, height {dep.height / L_BIG:.3f}")
+            if a == 0.5:
+                assert dep.height / L_BIG == pytest.approx(a, rel=0.02)
+    assert fronts[3.0, 20][1] == pytest.approx(fronts[3.0, 10][1], rel=0.02)
+    assert fronts[3.0, 20][0] == pytest.approx(fronts[3.0, 10][0], rel=0.10)
+
+
+# ----------------------------------------------------------------------------------------------
+# the continuum against the DEM of the same column
+
+L_DEM = 0.064   # m: 10 balls across
+
+
+def dem_and_mpm(a, dx_cells=32):
+    """The DEM column of aspect ratio about a (width L_DEM), and the MPM column of the same
+    width and the DEM's measured height (rounded to a point spacing), on dx = L_DEM/dx_cells,
+    with the same floor (the glued balls' roughness: mu_w = 0.40, above the continuum's mu_s)
+    and the same frictionless wall behind.  Returns ((L-L0)/L0, H/L0) of each and the DEM
+    record."""
+    dem = dem_column(L_DEM, a)
+    assert dem["settled"]
+    dem_dep = measure_deposit(dem["x"], dem["areas"], D)
+    dx = L_DEM / dx_cells
+    sp = 0.5 * dx
+    H0 = sp * round(dem["H0"] / sp)
+    run = run_column(L_DEM, H0, dx)
+    assert run.settled
+    return dem_dep.normalised(L_DEM), mpm_deposit(run).normalised(L_DEM), dem
+
+
+def mpm_dem_tolerance(value_dem):
+    """How far the continuum's (L-L0)/L0 or H/L0 may be from the DEM's: 25 % of the DEM's, or
+    two grain diameters over L0, whichever is larger.  Why: (1) both deposits are read to about
+    a grain, at either end of the front and at the top (2 d / L0 = 0.2 here); (2) the continuum
+    is tub47's glass-bead mu(I) (mu_s = 0.38), not a calibration on these balls (the shear cell
+    puts their mu_s anywhere in 0.15 - 0.45), and a change of 0.1 in mu_s moves the continuum's
+    run-out by 25 % (test_mpm_runout_prefactor_falls_with_the_grain_friction: 0.38 -> 0.57
+    shortens it by 35 %); (3) one DEM column of a few hundred balls is one sample: two fill
+    seeds gave run-outs 2.97 and 2.82, heights 0.88 and 0.96 at a = 2.14, and run-outs 0.30
+    and 0.38 (a = 0.47, 0.49; one grain is 0.08 L0 there) for a 12.6-ball column."""
+    return max(0.25 * abs(value_dem), 2.0 * D / L_DEM)
+
+
+def test_mpm_against_dem_low_column():
+    """a ~ 0.47, L0 = 10 balls: the DEM of tub47's balls (block comment above the DEM helpers)
+    and the MPM column of the same size agree on the run-out and the height within
+    `mpm_dem_tolerance`; the DEM's top stays near H0 too (within two grains)."""
+    (ro_dem, h_dem), (ro_mpm, h_mpm), dem = dem_and_mpm(0.5)
+    print(f"\na = {dem['a']:.3f}: DEM run-out {ro_dem:.3f} height {h_dem:.3f}; "
+          f"MPM run-out {ro_mpm:.3f} height {h_mpm:.3f}")
+    assert abs(ro_mpm - ro_dem) <= mpm_dem_tolerance(ro_dem)
+    assert abs(h_mpm - h_dem) <= mpm_dem_tolerance(h_dem)
+    assert h_dem == pytest.approx(dem["a"], abs=2 * D / L_DEM)
+
+
+@pytest.mark.slow
+def test_mpm_against_dem_tall_column():
+    """a ~ 2.1, L0 = 10 balls (about 660 balls and 220 glued ones; a minute of DEM): run-out
+    and height of the continuum and the DEM agree within `mpm_dem_tolerance`."""
+    # L0/16 suffices at this a: the run-out and height change by < 1 % on L0/32
+    (ro_dem, h_dem), (ro_mpm, h_mpm), dem = dem_and_mpm(2.0, dx_cells=16)
+    print(f"\na = {dem['a']:.3f}: DEM run-out {ro_dem:.3f} height {h_dem:.3f}; "
+          f"MPM run-out {ro_mpm:.3f} height {h_mpm:.3f}")
+    assert abs(ro_mpm - ro_dem) <= mpm_dem_tolerance(ro_dem)
+    assert abs(h_mpm - h_dem) <= mpm_dem_tolerance(h_dem)
