@@ -99,14 +99,17 @@ def dem_stage() -> Stage:
 def _run_calibration(study: Study, resume: bool) -> dict:
     from vibroflow.calibration.calibrate import calibrate
 
-    cal = calibrate(study.folder(DEM), shear_cell=study.shear_cell, progress=study.progress)
+    cal = calibrate(study.folder(DEM), shear_cell=study.shear_cell, progress=study.progress,
+                    cyclic=True)
     r = cal["rheology"]
     return {"calibration": f"{DEM}/calibration.toml",
             "rheology": {k: r.get(k) for k in ("mu_s", "mu_2", "I_0", "source")}}
 
 
 def calibration_stage() -> Stage:
-    return Stage(CALIBRATION, inputs=lambda st: {"shear_cell": bool(st.shear_cell)},
+    # cyclic: the continuum's shear modulus is the cyclic secant one (calibrate.py step 5)
+    return Stage(CALIBRATION, inputs=lambda st: {"shear_cell": bool(st.shear_cell),
+                                                 "cyclic_shear_modulus": True},
                  run=_run_calibration, upstream=(DEM,),
                  outputs=(f"{DEM}/calibration.toml",),
                  estimate=lambda st: 0.15 * _dem_cost(st) + 5.0
