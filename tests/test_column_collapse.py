@@ -33,7 +33,8 @@ import pytest
 
 from dem_helpers import one_thread
 from vibroflow.analysis.column import (LAJEUNESSE_2004, LAJEUNESSE_2005, LUBE_2004, LUBE_2005,
-                                       measure_deposit, quasistatic_runout, slab_areas)
+                                       measure_continuum_deposit, measure_deposit,
+                                       quasistatic_runout, slab_areas)
 from vibroflow.continuum.column import run_column
 from vibroflow.dem import simulate as S
 from vibroflow.dem.neighbours import transfer_history
@@ -74,6 +75,9 @@ def test_rectangle_reads_its_own_width_and_height():
     assert dep.height == pytest.approx(H0, rel=1e-9)
     assert (dep.h * (dep.x[1] - dep.x[0])).sum() == pytest.approx(L0 * H0, rel=1e-9)
     assert dep.normalised(L0) == pytest.approx((0.0, 0.5), abs=0.01)
+    # a continuum's settings (bins of whole point spacings, a front no thinner than a point)
+    cont = measure_continuum_deposit(pts[:, 0], sp * sp, sp, D)
+    assert (cont.runout, cont.height) == pytest.approx((L0, H0), abs=sp)
 
 
 def test_trapezoid_front_where_it_thins_below_one_grain():
@@ -298,15 +302,11 @@ L_BIG = 1.0   # m: 157 of tub47's balls across, as the experiments' columns are 
 
 
 def mpm_deposit(run):
-    """The deposit of a finished MPM column run (vibroflow.continuum.column.ColumnRun): each
-    point stands for its mass over the column's initial density (so the areas add up to L0 H0);
-    bins of a whole number of point spacings, at least two and one grain; the front where the
-    deposit is thinner than one grain or one point, whichever is thicker."""
+    """The deposit of a finished MPM column run (vibroflow.continuum.column.ColumnRun), each
+    point standing for its mass over the column's initial density (critical, to 1e-3)."""
     st = run.state
-    area = st.mass / run.material.critical_density
-    sp = 0.5 * run.dx
-    bw = sp * max(2, math.ceil(D / sp - 1e-9))
-    return measure_deposit(st.x[:, 0], area, D, bin_width=bw, threshold=max(D, sp))
+    return measure_continuum_deposit(st.x[:, 0], st.mass / run.material.critical_density,
+                                     0.5 * run.dx, D)
 
 
 def test_mpm_low_column_keeps_its_top_and_runs_past_the_experiments():

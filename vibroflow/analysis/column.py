@@ -18,7 +18,10 @@ continua, the DEM) is judged by the same ruler:
   point would not do; `front_by_mass_fraction` gives the position behind which a stated fraction
   of the mass lies, for a second, threshold-free reading;
 * the height H_inf is the profile's mean over a window next to the wall (default two grain
-  diameters, at least one bin).
+  diameters, at least one bin);
+* `measure_continuum_deposit` picks these settings for material points or grid cells of a
+  given side (bins of whole point sides, a front no thinner than a point), `slab_areas` the
+  areas of the balls of a quasi-2D slab.
 
 The published scaling laws, all of the form (L_inf - L0)/L0 = lambda a (a <= a_lin) or
 lambda' a^alpha (a >= a_pow), and H_inf/L0 = a (a <= a_h) or kappa a^beta (a >= a_h), with
@@ -263,6 +266,24 @@ def measure_deposit(x, area, grain_diameter: float, bin_width: float | None = No
     runout_mass = front_by_mass_fraction(x, m, mass_fraction, x_wall)
     return Deposit(runout=runout, height=height, runout_mass=runout_mass,
                    mass_fraction=mass_fraction, threshold=thr, x=centres, h=h)
+
+
+def measure_continuum_deposit(x, area, point_side: float, grain_diameter: float,
+                              x_wall: float = 0.0, mass=None) -> Deposit:
+    """`measure_deposit` with the settings a continuum needs: x (N,) m the positions of
+    material points (or cell centres) each standing for `area` (N,) m^2 per metre of thickness
+    (its mass over the column's initial density, so the areas add up to L0 H0), on a lattice
+    (or grid) of side `point_side` (m).  Bins are a whole number of point sides, at least two
+    and at least one grain diameter (no aliasing); the front is where the deposit gets thinner
+    than one grain or one point side, whichever is thicker (a continuum holds no thinner
+    layer); the height is read within two grain diameters of the wall, at least one bin."""
+    if not (isinstance(point_side, (int, float)) and point_side > 0):
+        raise InputError(f"point_side = {point_side!r}: must be > 0 m")
+    if not (isinstance(grain_diameter, (int, float)) and grain_diameter > 0):
+        raise InputError(f"grain_diameter = {grain_diameter!r}: must be > 0 m")
+    bins = max(2, math.ceil(grain_diameter / point_side - 1e-9))
+    return measure_deposit(x, area, grain_diameter, bin_width=bins * point_side, x_wall=x_wall,
+                           threshold=max(grain_diameter, point_side), mass=mass)
 
 
 def slab_areas(radius, slab_thickness: float, solid_fraction: float) -> np.ndarray:
