@@ -115,6 +115,12 @@ def _slopes(rho, q, open_x, open_z, rho_empty, periodic, srx, srz, sqx, sqz):
     nq = q.shape[2]
     for i in range(ncx):
         for k in range(ncz):
+            if rho[i, k] <= 0.0:
+                # an empty cell is never upwind of a flux (advect skips it), so its slopes are
+                # never used
+                srx[i, k] = 0.0
+                srz[i, k] = 0.0
+                continue
             # x: left face i, right face i + 1
             il = i - 1
             ir = i + 1
@@ -188,6 +194,8 @@ def advect(m, q, ux, uz, h, dt, open_x, open_z, periodic, work_rho, srx, srz, sq
             else:
                 up = ir
                 sgn = -1.0
+            if work_rho[up, k] <= 0.0:
+                continue  # nothing to carry (the limited slope of an empty cell is 0 too)
             rf = work_rho[up, k] + sgn * 0.5 * (1.0 - c) * srx[up, k]
             F = u * dt * h * rf  # kg/m from left to right
             dm[il, k] -= F
@@ -211,6 +219,8 @@ def advect(m, q, ux, uz, h, dt, open_x, open_z, periodic, work_rho, srx, srz, sq
             else:
                 up = k
                 sgn = -1.0
+            if work_rho[i, up] <= 0.0:
+                continue
             rf = work_rho[i, up] + sgn * 0.5 * (1.0 - c) * srz[i, up]
             F = u * dt * h * rf
             dm[i, k - 1] -= F

@@ -263,6 +263,8 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
         "rheology": material.model,
         "material": material.to_dict(),
         "grid_spacing_m": mesh.grid.dx, "cell_size_m": h, "cells": n_cells,
+        # the Lagrangian block's names: the cells are the fixed integration points
+        "point_spacing_m": h, "points": n_cells,
         "bed_height_m": top, "dt_s": system.dt, "steps": n_steps, "wall_time_s": wall_time,
         "wall_friction": system.wall.friction, "wall_stiffness_Pa_m": system.wall.stiffness,
         "partition_friction": (system.partitions.friction if system.partitions is not None
