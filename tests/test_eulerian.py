@@ -143,6 +143,48 @@ def test_bed_held_in_a_translating_rotating_box_stays_at_rest_relative_to_it():
 
 
 # ----------------------------------------------------------------------------------------------
+# the wall: Coulomb friction
+
+@pytest.mark.parametrize("pull_g, slides", [(0.1, False), (0.35, True)])
+def test_layer_on_a_floor_sticks_or_slides_as_coulomb_says(pull_g, slides):
+    """A layer (2 cm of media, periodic along x) on a floor of wall friction mu_w = 0.2 under
+    gravity and a horizontal pull a (the frame of a plate accelerating at -a): below mu_w g it
+    sticks (mean speed below 1 % of a t), above it slides as a block at a - mu_w g (within
+    3 %): the wall's penalty law with the Coulomb limit on the fixed mesh's wall layer (the
+    media's own friction, mu_s = 0.38, is above mu_w, so it shears at the wall, not inside)."""
+    mat = ContinuumMaterial()
+    dx = 0.005
+    h = dx / 2
+    mesh = EulerianMesh.box(0.0, 0.04, 0.0, 0.04, dx, periodic=True)
+    kn = (mat.bulk_modulus + 4 * mat.shear_modulus / 3) / h
+    mu_w = 0.2
+    wall = MeshWall(kn, friction=mu_w, damping_ratio=0.5)
+    system = EulerianSystem(mesh, mat, stable_dt(mat, dx, h, [wall]),
+                            frame=LabFrame((0.0, -G_ACC)), wall=wall)
+    c = system.x
+    H = 0.02
+    filled = c[:, 1] < H
+    rho_c = mat.critical_density
+    p = rho_c * G_ACC * np.clip(H - c[:, 1], 0.0, None) * filled
+    rho = rho_c * np.exp(p / mat.bulk_modulus)
+    stress = np.zeros((mesh.n, 4))
+    stress[:, 1] = -p
+    stress[:, 0] = stress[:, 3] = -(1 - math.sin(math.atan(mat.mu_s))) * p
+    state = init_state(system, np.where(filled, rho * h * h, 0.0), rho, stress=stress)
+    run_steps(system, state, int(0.03 / system.dt))  # settle under gravity alone
+    system.frame = LabFrame((pull_g * G_ACC, -G_ACC))
+    v0 = state.momentum()[0] / state.total_mass()
+    t = 0.1
+    run_steps(system, state, int(round(t / system.dt)))
+    v = state.momentum()[0] / state.total_mass() - v0
+    a = pull_g * G_ACC
+    if slides:
+        assert v == pytest.approx((a - mu_w * G_ACC) * t, rel=0.03)
+    else:
+        assert abs(v) < 0.01 * a * t
+
+
+# ----------------------------------------------------------------------------------------------
 # the steady inclined layer
 
 def bagnold_error(nz: int) -> float:
