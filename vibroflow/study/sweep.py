@@ -136,19 +136,19 @@ def run_sweep(plan: SweepPlan, out: Path, scheduler: str | None = None,
 
     out = Path(out)
     check_sweep_dir(out, plan)  # before anything is written or started
-    out.mkdir(parents=True, exist_ok=True)
-    _merge_record(out, plan)
     jobs = {p.name: {"name": p.name, "values": p.values, "scenario": p.scenario,
                      "settings": p.settings, "overrides": list(p.overrides),
                      "shear_cell": plan.shear_cell} for p in plan.points}
     n = len(jobs)
     own_client = client is None
     cluster = None
-    if own_client:
+    if own_client:  # first: a scheduler that cannot be reached leaves DIR untouched
         nw = workers or os.cpu_count() or 1
         client, cluster = make_client(scheduler, max(1, min(nw, n)))
     results: dict[str, dict] = {}
     try:
+        out.mkdir(parents=True, exist_ok=True)
+        _merge_record(out, plan)
         concurrency = max(1, sum(client.nthreads().values()))
         pending = {client.submit(run_point, str(out), job, pure=False, retries=0): name
                    for name, job in jobs.items()}
