@@ -224,6 +224,7 @@ def _cyclic_modulus(sc, pressure: float, shear_rate: float, elastic: dict, prog)
     cols = ("strain_amplitude", "secant_shear_modulus", "secant_shear_modulus_stderr",
             "damping_ratio", "damping_ratio_stderr", "peak_stress_ratio", "solid_fraction")
     return {"frequency_Hz": f, "pressure_Pa": _f(pressure),
+            "amplitude_factor": _f(sc.motion.amplitude_factor),
             "tub_shear_rate_cycle_mean_1_s": _f(shear_rate), "tub_strain_amplitude": _f(g_tub),
             "secant_shear_modulus_at_tub_amplitude_Pa": _f(at["secant_shear_modulus"]),
             "damping_ratio_at_tub_amplitude": _f(at["damping_ratio"]),

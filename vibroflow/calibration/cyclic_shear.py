@@ -220,3 +220,4 @@ def hardin_drnevich_fit(records: list[dict]) -> dict:
     model = G_max / (1.0 + g0 / gamma_r)
     return {"G_max": float(G_max), "gamma_r": float(gamma_r),
             "max_relative_misfit": float(np.max(np.abs(model - G) / G))}
+
