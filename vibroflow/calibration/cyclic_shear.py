@@ -206,18 +206,3 @@ def secant_modulus_at(records: list[dict], strain_amplitude: float) -> tuple[flo
     x = math.log(max(float(strain_amplitude), 1e-300))
     return float(np.interp(x, a, G)), float(np.interp(x, a, se))
 
-
-def hardin_drnevich_fit(records: list[dict]) -> dict:
-    """Least-squares fit of G_sec = G_max / (1 + gamma_0 / gamma_r) (Hardin & Drnevich 1972) to
-    the records: G_max (Pa), reference strain gamma_r (-) and the largest relative misfit."""
-    g0 = np.array([r["strain_amplitude"] for r in records], float)
-    G = np.array([r["secant_shear_modulus"] for r in records], float)
-    # 1/G = 1/G_max + gamma_0 / (G_max gamma_r): linear in gamma_0
-    A = np.stack([np.ones_like(g0), g0], axis=1)
-    (c0, c1), *_ = np.linalg.lstsq(A, 1.0 / G, rcond=None)
-    G_max = 1.0 / c0
-    gamma_r = c0 / c1 if c1 > 0 else float("inf")
-    model = G_max / (1.0 + g0 / gamma_r)
-    return {"G_max": float(G_max), "gamma_r": float(gamma_r),
-            "max_relative_misfit": float(np.max(np.abs(model - G) / G))}
-
