@@ -1,8 +1,9 @@
 """Granular column collapse: the deposit measured from points, and the published scaling laws.
 
 A column of width L0 and height H0 (aspect ratio a = H0 / L0) standing against a wall at
-x = x_wall on a floor z = z_floor is released and spreads along +x; at rest it leaves a deposit
-of run-out L_inf (the front's distance from the wall) and height H_inf (at the wall).  This
+x = x_wall (or the half of a column of width 2 L0 about its symmetry plane, the positions then
+folded onto one side) is released and spreads along +x; at rest it leaves a deposit of run-out
+L_inf (the front's distance from the wall) and height H_inf (at the wall).  This
 module measures both from any set of points, so that every method (the Lagrangian and Eulerian
 continua, the DEM) is judged by the same ruler:
 

@@ -1,25 +1,28 @@
 """The granular column collapse with the material point method (plane strain, lab frame).
 
-A rectangular column of the continuum, width L0 and height H0 (m), stands on a floor z = 0
-against a rigid wall x = 0 and is released at t = 0 under gravity: it slumps and spreads along
-+x until it comes to rest.  This is the planar (half-)column of the channel experiments (Lube,
-Huppert, Sparks & Freundt 2005, Phys. Rev. E 72, 041301; Lajeunesse, Monnier & Homsy 2005, Phys.
-Fluids 17, 103302) and of the mu(I) continuum simulations of Lagree, Staron & Popinet (2011,
-J. Fluid Mech. 686, 378) and Dunatunga & Kamrin (2015, J. Fluid Mech. 779, 483, section 5.2,
-the same elasto-viscoplastic MPM as this package's); its deposit is measured by
-`vibroflow.analysis.column`.
+A rectangular column of the continuum, half-width L0 and height H0 (m), stands on a floor z = 0
+and is released at t = 0 under gravity: it slumps and spreads until it comes to rest.  This is
+the planar column of the channel experiments (Lube, Huppert, Sparks & Freundt 2005, Phys. Rev. E
+72, 041301, released on both sides; Lajeunesse, Monnier & Homsy 2005, Phys. Fluids 17, 103302,
+against a wall) and of the mu(I) continuum simulations of Lagree, Staron & Popinet (2011,
+J. Fluid Mech. 686, 378) and Dunatunga & Kamrin (2015, J. Fluid Mech. 779, 483, section 5.2, the
+same elasto-viscoplastic MPM as this package's); its deposit is measured by
+`vibroflow.analysis.column` from `ColumnRun.deposit_points()`.
 
 Set-up choices, and why:
 
-* floor and wall: the penalty `Plane` walls of boundary.py with Coulomb friction.  The
-  experiments used rough floors (basal friction at least the grains' internal friction); the
-  default floor friction mu_w = 0.40 is tub47's ball-lining friction, just above the glass-bead
-  mu_s = 0.382 of the default material.  The wall behind the column is frictionless by default:
-  it stands for the symmetry plane of a column released on both sides (Lube et al. 2005's
-  channel collapses; the half-column of Lagree et al. 2011), where nothing can shear; with
-  friction it holds a ridge of material up against it, which is a different deposit.  The
-  walls' stiffness is the P-wave modulus over the point side (the stiffness of the continuum
-  itself across one point), as in the block test of tests/test_mpm.py;
+* symmetric (default): the whole column, width 2 L0 centred on x = 0, spreads both ways, and the
+  deposit is folded about x = 0; this is the half-column against a frictionless wall without a
+  wall.  The wall variant (`symmetric=False`: the column [0, L0] against a penalty `Plane` at
+  x = 0) is kept, but the point-wise penalty contact of boundary.py packs the points that reach
+  the wall into a sheet one cell thick, overlapping one another (at a = 3 on L0/20, 3 % of the
+  mass stood in the first half cell, up to 0.85 H0, beside a void), which makes a spurious peak
+  of the deposit's height at the wall;
+* floor: a penalty `Plane` with Coulomb friction.  The experiments used rough floors (basal
+  friction at least the grains' internal friction); the default floor friction mu_w = 0.40 is
+  tub47's ball-lining friction, just above the glass-bead mu_s = 0.382 of the default material.
+  Its stiffness is the P-wave modulus over the point side (the stiffness of the continuum itself
+  across one point), as in the block test of tests/test_mpm.py;
 * initial state: the column at the critical density, pre-stressed as it stood behind a gate,
   sigma_zz = -rho g (H0 - z) and sigma_xx = sigma_yy = K_0 sigma_zz with Jaky's
   K_0 = 1 - sin(atan mu_s), and the density rho_c exp(p / K) of that pressure (just above the
@@ -56,9 +59,10 @@ G_ACC = 9.81  # m/s^2
 class ColumnRun:
     """A finished column collapse: the final material points and how the run went.
 
-    x (N, 2) m; volume (N,) m^2 per metre of thickness; mass (N,) kg/m; t_end (s); settled: the
+    state: the MPM state (points x (N, 2) m, mass (N,) kg/m, ...); t_end (s); settled: the
     kinetic energy fell below the threshold before t_max; ke_ratio: the last kinetic energy over
-    the initial potential energy; history: (t, kinetic energy, front x) at each check."""
+    the initial potential energy; history: (t, kinetic energy, front distance (m)) at each
+    check."""
 
     L0: float
     H0: float
@@ -66,6 +70,7 @@ class ColumnRun:
     material: ContinuumMaterial
     floor_friction: float
     wall_friction: float
+    symmetric: bool
     state: MPMState
     t_end: float
     settled: bool
@@ -77,11 +82,27 @@ class ColumnRun:
     def aspect_ratio(self) -> float:
         return self.H0 / self.L0
 
+    @property
+    def point_side(self) -> float:
+        """The initial point spacing dx/2 (m)."""
+        return 0.5 * self.dx
 
-def column_points(L0: float, H0: float, spacing: float) -> np.ndarray:
-    """Points on a square lattice of `spacing` (m) filling [0, L0] x [0, H0] (m), each at the
+    def deposit_points(self) -> tuple[np.ndarray, np.ndarray]:
+        """(distance from the wall or symmetry plane (m), area (m^2 per metre)) of every point,
+        for vibroflow.analysis.column: the area is the point's mass over the critical density
+        (the column's, to 1e-3), so the areas of a half-column add up to L0 H0; a symmetric
+        run's points are folded about x = 0 with half their area each."""
+        x = self.state.x[:, 0]
+        area = self.state.mass / self.material.critical_density
+        if self.symmetric:
+            return np.abs(x), 0.5 * area
+        return x.copy(), area
+
+
+def column_points(x0: float, x1: float, H0: float, spacing: float) -> np.ndarray:
+    """Points on a square lattice of `spacing` (m) filling [x0, x1] x [0, H0] (m), each at the
     centre of its own square."""
-    xs = (np.arange(int(round(L0 / spacing))) + 0.5) * spacing
+    xs = x0 + (np.arange(int(round((x1 - x0) / spacing))) + 0.5) * spacing
     zs = (np.arange(int(round(H0 / spacing))) + 0.5) * spacing
     X, Z = np.meshgrid(xs, zs, indexing="ij")
     return np.stack([X.ravel(), Z.ravel()], axis=1)
@@ -100,10 +121,12 @@ def _check_size(L0, H0, dx):
 
 def column_system(L0: float, H0: float, dx: float, material: ContinuumMaterial | None = None,
                   floor_friction: float = 0.40, wall_friction: float = 0.0,
-                  reach: float | None = None, cfl: float = 0.3) -> MPMSystem:
-    """The MPM system of a column of width L0 and height H0 (m) on grid spacing dx (m): floor
-    z = 0 with Coulomb friction `floor_friction`, wall x = 0 with `wall_friction`, a grid
-    reaching `reach` (m, default L0 (2 + 3 H0/L0)) along x."""
+                  symmetric: bool = True, reach: float | None = None,
+                  cfl: float = 0.3) -> MPMSystem:
+    """The MPM system of a column of half-width L0 and height H0 (m) on grid spacing dx (m):
+    floor z = 0 with Coulomb friction `floor_friction`; symmetric (module docstring), or a wall
+    x = 0 with `wall_friction`; a grid reaching `reach` (m, default L0 (2 + 3 H0/L0)) from
+    x = 0 (both ways when symmetric)."""
     _check_size(L0, H0, dx)
     mat = material or ContinuumMaterial()
     for name, mu in (("floor_friction", floor_friction), ("wall_friction", wall_friction)):
@@ -112,23 +135,25 @@ def column_system(L0: float, H0: float, dx: float, material: ContinuumMaterial |
     a = H0 / L0
     reach = L0 * (2.0 + 3.0 * a) if reach is None else float(reach)
     if not reach > L0:
-        raise InputError(f"reach = {reach!r} m: must exceed the column width L0 = {L0!r} m")
+        raise InputError(f"reach = {reach!r} m: must exceed the column's half-width L0 = "
+                         f"{L0!r} m")
     sp = 0.5 * dx
     kn = (mat.bulk_modulus + 4.0 * mat.shear_modulus / 3.0) / sp
-    walls = [Plane((0.0, 0.0), (0.0, 1.0), kn, friction=floor_friction),   # floor
-             Plane((0.0, 0.0), (1.0, 0.0), kn, friction=wall_friction)]    # wall behind
-    grid = Grid.covering(-dx, reach, -dx, H0 + 2.0 * dx, dx)
+    walls = [Plane((0.0, 0.0), (0.0, 1.0), kn, friction=floor_friction)]   # floor
+    if not symmetric:
+        walls.append(Plane((0.0, 0.0), (1.0, 0.0), kn, friction=wall_friction))  # wall behind
+    grid = Grid.covering(-reach if symmetric else -dx, reach, -dx, H0 + 2.0 * dx, dx)
     v_fall = math.sqrt(2.0 * G_ACC * H0)
     dt = stable_dt(mat, dx, sp, walls, v_max=v_fall, cfl=cfl)
     return MPMSystem(grid, mat, dt, frame=LabFrame((0.0, -G_ACC)), boundaries=walls)
 
 
-def column_state(system: MPMSystem, L0: float, H0: float) -> MPMState:
-    """The column at rest behind its gate (module docstring): points, lithostatic stress with
+def column_state(system: MPMSystem, L0: float, H0: float, symmetric: bool = True) -> MPMState:
+    """The column at rest behind its gate(s) (module docstring): points, lithostatic stress with
     Jaky's K_0, density of that pressure."""
     mat = system.material
     sp = 0.5 * system.grid.dx
-    x = column_points(L0, H0, sp)
+    x = column_points(-L0 if symmetric else 0.0, L0, H0, sp)
     rho_c = mat.critical_density
     k0 = 1.0 - math.sin(math.atan(mat.mu_s))
     szz = -rho_c * G_ACC * (H0 - x[:, 1])
@@ -142,21 +167,16 @@ def column_state(system: MPMSystem, L0: float, H0: float) -> MPMState:
     return init_state(system, x, volume, rho, stress=stress)
 
 
-def front_position(x: np.ndarray) -> float:
-    """The farthest point's x (m): a cheap progress indicator (the deposit's run-out is measured
-    by vibroflow.analysis.column)."""
-    return float(x[:, 0].max())
-
-
 def run_column(L0: float, H0: float, dx: float, material: ContinuumMaterial | None = None,
-               floor_friction: float = 0.40, wall_friction: float = 0.0, t_min: float | None = None,
-               t_max: float | None = None, ke_fraction: float = 1.0e-4,
-               check_every: float | None = None, reach: float | None = None,
-               cfl: float = 0.3) -> ColumnRun:
+               floor_friction: float = 0.40, wall_friction: float = 0.0,
+               symmetric: bool = True, t_min: float | None = None, t_max: float | None = None,
+               ke_fraction: float = 1.0e-4, check_every: float | None = None,
+               reach: float | None = None, cfl: float = 0.3) -> ColumnRun:
     """Release the column and run until it is at rest (module docstring).  Times in s; default
     t_min = 3 sqrt(H0/g), t_max = 30 sqrt(H0/g), checks every 0.1 sqrt(H0/g)."""
-    system = column_system(L0, H0, dx, material, floor_friction, wall_friction, reach, cfl)
-    state = column_state(system, L0, H0)
+    system = column_system(L0, H0, dx, material, floor_friction, wall_friction, symmetric,
+                           reach, cfl)
+    state = column_state(system, L0, H0, symmetric)
     tau = math.sqrt(H0 / G_ACC)
     t_min = 3.0 * tau if t_min is None else float(t_min)
     t_max = 30.0 * tau if t_max is None else float(t_max)
@@ -173,11 +193,11 @@ def run_column(L0: float, H0: float, dx: float, material: ContinuumMaterial | No
     while state.t < t_max - 0.5 * system.dt:
         run_steps(system, state, n_check)
         ke = state.kinetic_energy()
-        history.append((state.t, ke, front_position(state.x)))
+        history.append((state.t, ke, float(np.abs(state.x[:, 0]).max())))
         if state.t >= t_min - 0.5 * system.dt and ke < ke_fraction * pe0:
             settled = True
             break
     return ColumnRun(L0=L0, H0=H0, dx=dx, material=system.material,
-                     floor_friction=floor_friction, wall_friction=wall_friction, state=state,
-                     t_end=state.t, settled=settled, ke_ratio=ke / pe0, steps=state.step,
-                     history=history)
+                     floor_friction=floor_friction, wall_friction=wall_friction,
+                     symmetric=symmetric, state=state, t_end=state.t, settled=settled,
+                     ke_ratio=ke / pe0, steps=state.step, history=history)
