@@ -15,9 +15,10 @@ Set-up choices, and why:
   deposit is folded about x = 0; this is the half-column against a frictionless wall without a
   wall.  The wall variant (`symmetric=False`: the column [0, L0] against a penalty `Plane` at
   x = 0) is kept, but the point-wise penalty contact of boundary.py packs the points that reach
-  the wall into a sheet one cell thick, overlapping one another (at a = 3 on L0/20, 3 % of the
-  mass stood in the first half cell, up to 0.85 H0, beside a void), which makes a spurious peak
-  of the deposit's height at the wall;
+  the wall into a sheet half a cell thick, overlapping one another (at a = 3 on L0/20, 2.5 % of
+  the mass, 120 points of full volume, stood within half a cell of the wall, up to 0.85 L0 high,
+  beside a void), which read as a peak of the deposit's height at the wall (1.8 L0, against
+  0.90 L0 for the symmetric column; the run-out is the same either way);
 * floor: a penalty `Plane` with Coulomb friction.  The experiments used rough floors (basal
   friction at least the grains' internal friction); the default floor friction mu_w = 0.40 is
   tub47's ball-lining friction, just above the glass-bead mu_s = 0.382 of the default material.
