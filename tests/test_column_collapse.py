@@ -158,7 +158,8 @@ def test_bad_input_is_one_line_naming_the_field():
 #
 # The slab: W = 3 d between two frictionless plane walls (y = 0, y = W), so the collapse is
 # planar without a side-wall friction that the plane-strain continuum does not have; three balls
-# across is the thinnest slab that does not crystallise into a single layer of discs.  The
+# across keeps it cheap while not being a single layer of discs (a 2D packing); a thicker slab
+# has not been compared.  The
 # floor: tub47's lining (steel-polyurethane k_n = 5e4 N/m, e = 0.6, mu = 0.40) under a layer of
 # glued balls, three rows across the slab at random gaps of 0.02 to 0.14 d along x: the published
 # experiments' rough floor, which a flat floor is not (on it the balls, with tub47's rolling
@@ -166,8 +167,8 @@ def test_bad_input_is_one_line_naming_the_field():
 # (they do not move under the column; tub47's ball-ball law with them, a stiff contact with the
 # floor).  The wall behind the column and the gate in front are frictionless: the wall stands
 # for the symmetry plane of the continuum's whole column (vibroflow.continuum.column, released
-# on both sides).  Every other contact is
-# tub47's (ball-ball k_n = 1e5 N/m, e = 0.85, mu = 0.20, mu_r = 0.002, dt = 1e-5 s).
+# on both sides).  Every other contact is tub47's (ball-ball k_n = 1e5 N/m, e = 0.85,
+# mu = 0.20, mu_r = 0.002, dt = 1e-5 s).
 #
 # Fill: balls on a loose lattice (spacing 1.06 d, jitter 0.45 of the gap) behind the gate, let
 # settle until their kinetic energy is below 1e-8 J a ball; the column's solid fraction phi_0 is
