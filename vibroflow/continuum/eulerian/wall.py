@@ -12,13 +12,12 @@ while it presses on it (v_n = v . n, n the inward normal) and released as it lea
 exactly the Lagrangian point's overclosure for material that stays in contact, and it is a
 property of the place (the wall), so it is kept per cell and not transported.
 
-Contact: a wall-layer cell touches the wall when it holds at least half the mass of a cell
-full at the critical density, fill = min(1, m / (rho_c h^2)) >= 1/2 (as a material point
-touches when its centre is within half its side of the wall); below that its overclosure and
-slip are reset (the material that carried them has left).  Contact length l = fill h, so a
-partly filled cell presses with its share, and the contact's frequency
-sqrt(k_n l / m) <= sqrt(k_n / (rho_c h)) whatever the cell holds (dilated material included):
-the Lagrangian time-step limit (timestep.py, point size h) holds for every cell.
+Contact: every wall-layer cell holding material presses on the wall, with the contact length
+l = fill h, fill = min(1, m / (rho_c h^2)) its share of a cell full at the critical density: a
+thin film on the floor is held up by its share of the wall, as a thin material point would be
+(below FILL_MIN the cell is empty and its overclosure and slip are reset).  The contact's
+frequency sqrt(k_n l / m) <= sqrt(k_n / (rho_c h)) whatever the cell holds (dilated material
+included), so the Lagrangian time-step limit (timestep.py, point size h) holds for every cell.
 """
 from __future__ import annotations
 
@@ -31,6 +30,9 @@ import numpy as np
 from vibroflow.errors import InputError
 
 from ..boundary import _penalty
+
+#: a wall-layer cell holding less than this share of a full cell's mass is empty
+FILL_MIN = 1.0e-6
 
 
 @nb.njit(cache=True)
@@ -48,7 +50,7 @@ def wall_forces(cells, normal, v, mass, rho_c, h, delta, xi, fext, fn_out, ft_ou
         fill = mass[p] / (rho_c * h * h)
         if fill > 1.0:
             fill = 1.0
-        if mass[p] <= 0.0 or fill < 0.5:
+        if mass[p] <= 0.0 or fill < FILL_MIN:
             delta[p] = 0.0
             xi[p] = 0.0
             fn_out[p] = 0.0
