@@ -16,8 +16,8 @@ import math
 import numpy as np
 import pytest
 
-from vibroflow.continuum.constitutive import ContinuumMaterial, mu_of_I
-from vibroflow.continuum.eulerian.advection import advect, face_velocities
+from vibroflow.continuum.constitutive import ContinuumMaterial
+from vibroflow.continuum.eulerian.advection import advect
 from vibroflow.continuum.eulerian.mesh import EulerianMesh
 from vibroflow.continuum.eulerian.solver import NQ, EulerianSystem, init_state, run_steps
 from vibroflow.continuum.eulerian.wall import MeshWall
@@ -58,8 +58,9 @@ def _advect_blob(u, w, t_end):
 
 def test_advection_conserves_mass_and_translates_a_blob():
     """Uniform velocity: the total mass is conserved to round-off, the centre of mass moves by
-    u t (to 1% of the displacement), a uniform carried field stays uniform (no new extrema), and the second-order limited scheme keeps the disc compact (its peak cell
-    stays more than 90 % full after crossing 7 cells)."""
+    u t (to 1% of the displacement), a uniform carried field stays uniform (no new extrema),
+    and the second-order limited scheme keeps the disc compact (its peak cell stays more than
+    90 % full after crossing 7 cells)."""
     u, w = 0.4, 0.3
     c, m0, m, q, t = _advect_blob(u, w, 0.1)
     M0, M = m0.sum(), m.sum()
@@ -375,7 +376,7 @@ def _big_deposit(a: float, n: int, method: str):
 def test_eulerian_low_column_keeps_its_top_at_the_experiments_scale():
     """a = 0.5, L0 = 1 m, dx = L0/20 (about 30 s): the top of a low column never moves, so
     H_inf = H0 (H_inf/L0 = a, the small-a branch of Lube et al. 2005's planar law) within 2 %;
-    the run-out is past Lube et al.'s 1.2 a (0.72 against 0.60; the Lagrangian formulation on
+    the run-out is past Lube et al.'s 1.2 a (0.75 against 0.60; the Lagrangian formulation on
     the same grid gives 0.65 and its run-out grows with the refinement,
     tests/test_column_collapse.py: the plane-strain continuum has no channel side walls)."""
     from vibroflow.analysis.column import LUBE_2005
@@ -384,3 +385,20 @@ def test_eulerian_low_column_keeps_its_top_at_the_experiments_scale():
     runout, height = _big_deposit(a, 20, "eulerian")
     assert height == pytest.approx(LUBE_2005.height(a), rel=0.02)
     assert runout > LUBE_2005.runout(a)
+
+
+@pytest.mark.slow
+def test_eulerian_tall_column_runs_out_as_the_lagrangian():
+    """a = 3 (the power-law branch of Lube et al. 2005, a > 2.8), L0 = 1 m, dx = L0/10 (about
+    80 s): the run-out agrees with the material point method's on the same grid within 10 %
+    (measured 7.17 against 7.17), and, as there, runs past Lube et al.'s 1.9 a^(2/3) = 3.95 by
+    more than half (tests/test_column_collapse.py: the tub47 glass-bead friction and no
+    channel side walls); the height at the wall is not compared (1.11 against 0.90, Lube's
+    a^(2/5) = 1.55: neither formulation meets it)."""
+    from vibroflow.analysis.column import LUBE_2005
+
+    a = 3.0
+    r_e, _ = _big_deposit(a, 10, "eulerian")
+    r_l, _ = _big_deposit(a, 10, "lagrangian")
+    assert r_e == pytest.approx(r_l, rel=0.10)
+    assert r_e > 1.5 * LUBE_2005.runout(a)

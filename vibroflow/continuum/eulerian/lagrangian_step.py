@@ -26,7 +26,6 @@ with its kernels:
 from __future__ import annotations
 
 import numba as nb
-import numpy as np
 
 from ..boundary import partition_forces
 from ..constitutive import update_stress_points

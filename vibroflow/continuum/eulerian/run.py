@@ -17,10 +17,11 @@ and outputs, vibroflow.continuum.run, on the fixed mesh of solver.py).
    next half unit (error diffusion in time): over the samples a cell then counts its mass to
    within one unit, so the cell table's solid fraction and its ball-averaged velocity are the
    mass-weighted ones to within 1 / samples, with the shared code unchanged.  Wall contacts:
-   the wall-layer cells pressing on the U (wall.py), their force over the slice (N).  The
-   summary's "continuum" block holds the method, numerics, material, shear rates (as the
-   Lagrangian's, from the cells holding at least half a cell of material) and the mass error
-   (M_end - M_0) / M_0 with its largest magnitude over the run.
+   the wall-layer cells holding at least half a cell of material pressing on the U (wall.py),
+   their force over the slice (N).  The summary's "continuum" block holds the method,
+   numerics, material, shear rates (as the Lagrangian's, from the cells holding at least half
+   a cell of material) and the mass error (M_end - M_0) / M_0 with its largest magnitude over
+   the run.
 
 Checkpoints (continuum.checkpoint) every run.checkpoint_every wall seconds of the vibration,
 --resume gives the uninterrupted numbers bit for bit, results are written atomically and
@@ -338,7 +339,10 @@ def _vibrate(scenario, system: EulerianSystem, state: EulerianState, samples: Sa
             dither[take] -= 1.0
             buf_p[~take] = far
             samples.pos[j], samples.vel[j], samples.poses[j] = buf_p, buf_v, pose6
-            touching = np.nonzero(hist["state"][wall_cells] > 0)[0]
+            # contacts as the Lagrangian run counts them: cells holding at least half a
+            # cell of material (a material point's size), pressing on the U
+            touching = np.nonzero((hist["state"][wall_cells] > 0)
+                                  & (state.mass[wall_cells] >= 0.5 * full))[0]
             tc = wall_cells[touching]
             where = np.searchsorted(cells, tc)
             c = samples.contacts
