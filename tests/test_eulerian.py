@@ -402,3 +402,18 @@ def test_eulerian_tall_column_runs_out_as_the_lagrangian():
     r_l, _ = _big_deposit(a, 10, "lagrangian")
     assert r_e == pytest.approx(r_l, rel=0.10)
     assert r_e > 1.5 * LUBE_2005.runout(a)
+
+
+def test_continuum_command_eulerian_bad_input(run_cli, tmp_path):
+    """A mesh that does not fit the tub, or an unknown method: one line naming the value and
+    what is allowed, exit code 2, nothing written."""
+    r = run_cli("continuum", "tub47-quick", "--method", "eulerian", "--dx", "0.007", "--out",
+                tmp_path / "o")
+    assert r.returncode == 2
+    assert r.stderr.strip().splitlines() == [
+        "error: dx = 0.007 m: must divide the tub's width 0.3 m into whole cells of dx/2"]
+    r = run_cli("continuum", "tub47-quick", "--method", "euler", "--out", tmp_path / "o")
+    assert r.returncode == 2
+    assert r.stderr.strip().splitlines() == [
+        "error: --method = 'euler': must be lagrangian or eulerian"]
+    assert not (tmp_path / "o").exists()
