@@ -409,7 +409,7 @@ def sweep(
                + f"; results in {out}/sweep.csv, {out}/plots")
     failed = failed_points(record)
     if failed:
-        sys.stderr.write(f"{len(failed)} of {len(record['points'])} point(s) failed: "
+        sys.stderr.write(f"{len(failed)} of {len(record['results'])} point(s) failed: "
                          f"{', '.join(failed)} (see {out}/points/<point>/failed.json)\n")
         raise typer.Exit(1)
 

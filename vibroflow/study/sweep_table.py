@@ -128,7 +128,7 @@ def rich_table(rows: list[dict[str, Any]], varied: list[str]):
     t = Table(title="vibroflow sweep", show_lines=False)
     for k in varied:
         t.add_column("factor" if k == FACTOR_KEY else k, justify="right")
-    t.add_column("method")
+    t.add_column("method", no_wrap=True, min_width=10)
     t.add_column("status")
     t.add_column("circulation (1e-4 m²/s)", justify="right")
     t.add_column("E vs DEM", justify="right")
