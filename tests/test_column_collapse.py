@@ -16,9 +16,9 @@ What is checked, and against what:
   tests' docstrings with the numbers: the run-out's prefactor (the plane-strain continuum with
   tub47's glass-bead friction on a floor of mu_w = 0.40 runs out about 1.9 times as far as the
   channel experiments; the prefactor depends on the grains' and the floor's friction, and with
-  the friction of the experiments' sand the continuum comes within 25 %), the tall columns' height (it hardly grows with a: 0.90 L0 at
-  a = 3, 1.05 L0 at a = 6, 42 % and 49 % below a^(2/5)), and the
-  low column's run-out, which is not grid-converged;
+  the friction of the experiments' sand the continuum comes within 25 %), the tall columns'
+  height (it hardly grows with a: 0.90 L0 at a = 3, 1.05 L0 at a = 6, 42 % and 49 % below
+  a^(2/5)), and the low column's run-out, which is not grid-converged;
 * the continuum against the DEM of the same column of steel balls (a quasi-2D slab between
   frictionless walls, on a floor of glued balls), at the DEM's size (L0 of 10 to 13 balls,
   where the mu(I) continuum's rate dependence and the balls' size both matter, so neither can be
