@@ -123,6 +123,12 @@ def test_sweep_table_matches_points_and_tub_speed_scales_with_factor(swept):
             if row["method"] != "dem":
                 assert _num(row["E_against_dem"]) == m["against_dem"]["field_difference_E"]
 
+    # a point's folder is a study folder like `vibroflow run`'s: vibroflow.load reads it
+    import vibroflow
+
+    loaded = vibroflow.load(out / "points" / _good(1.0))
+    assert set(loaded["fields"]) == set(loaded["methods"]) >= {"dem", "lagrangian"}
+
     # physics: every tub amplitude is the factor times the preset's (tub47.md "Tub motion"),
     # so the tub's velocities at the same sampled phases scale exactly with the factor
     peak = {}
