@@ -26,6 +26,7 @@ with its kernels:
 from __future__ import annotations
 
 import numba as nb
+import numpy as np
 
 from ..boundary import partition_forces
 from ..constitutive import update_stress_points
@@ -123,14 +124,20 @@ def lagrangian_step(system, state) -> None:
     gm[:] = 0.0
     gmv[:] = 0.0
     gf[:] = 0.0
-    x = system.x
-    p2g(x, state.v, state.C, state.mass, state.volume, state.stress, state.fext, g.x0, g.z0,
-        g.dx, g.periodic, gm, gmv, gf)
+    # only the cells holding material take part: an empty cell adds exactly nothing to the
+    # nodes, and its velocity is never used (the remap gives a filling cell what flows in)
+    act = np.flatnonzero(state.mass > 0.0)
+    x = system.x[act]
+    v, C = state.v[act], state.C[act]
+    p2g(x, v, C, state.mass[act], state.volume[act], state.stress[act], state.fext[act],
+        g.x0, g.z0, g.dx, g.periodic, gm, gmv, gf)
     a0x, a0z, om, al, px, pz = system.frame.body(state.t + 0.5 * dt)
     grid_update(gm, gmv, gf, gv, g.x0, g.z0, g.dx, dt, a0x, a0z, om, al, px, pz, g.periodic)
-    xs = system.x_scratch
-    xs[:] = x
-    g2p(xs, state.v, state.C, state.L, gv, g.x0, g.z0, g.dx, dt, g.periodic)
+    L = state.L[act]
+    g2p(x, v, C, L, gv, g.x0, g.z0, g.dx, dt, g.periodic)  # x: a copy, the cells stay put
+    state.v[act] = v
+    state.C[act] = C
+    state.L[act] = L
     face_velocities(gv, g.x0, g.z0, g.dx, g.periodic, mesh.xmin, mesh.zmin, mesh.h,
                     mesh.open_x, mesh.open_z, system.ux, system.uz)
     match_divergence(state.L, system.ux, system.uz, mesh.h, g.periodic)

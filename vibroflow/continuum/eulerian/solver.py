@@ -77,7 +77,6 @@ class EulerianSystem:
         m = self.mesh
         self.params = self.material.as_array()
         self.x = m.centres()
-        self.x_scratch = np.empty_like(self.x)
         self.density = np.zeros(m.n)
         self.work = m.grid.zeros()
         self.wall_cells = np.nonzero(m.wall)[0].astype(np.int64)
