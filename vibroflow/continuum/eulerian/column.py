@@ -1,13 +1,20 @@
 """The granular column collapse on the Eulerian mesh (plane strain, lab frame).
 
-The set-up of the Lagrangian check (vibroflow.continuum.column: a column of width L0 and height
-H0 (m) against a wall x = 0 on a floor z = 0, released at t = 0 under gravity, pre-stressed as
-it stood behind its gate, run until its kinetic energy falls below a fraction of its initial
-potential energy), on a fixed box mesh (mesh.EulerianMesh.box) whose walls are the floor, the
-wall behind the column, a far end wall at `reach` and a lid at 2 H0, all with the Coulomb
-friction `wall_friction` and the Lagrangian check's stiffness (the P-wave modulus over the cell
-side).  The deposit is measured by vibroflow.analysis.column from the cells, each standing for
-its material volume m / rho (m^2 per metre of thickness).
+The set-up of the Lagrangian check (vibroflow.continuum.column: a column of half-width L0 and
+height H0 (m) on a floor z = 0, released at t = 0 under gravity, pre-stressed as it stood
+behind its gates, run until its kinetic energy falls below a fraction of its initial potential
+energy), on a fixed box mesh (mesh.EulerianMesh.box):
+
+* symmetric (default, as the Lagrangian check): the whole column [-L0, L0] spreads both ways
+  and the deposit is folded about x = 0 (the half-column against a frictionless wall); or the
+  column [0, L0] against the mesh's wall at x = 0 (`symmetric=False`), which has the floor's
+  friction (the mesh's walls share one law);
+* the box's walls are the floor, the far ends at +-`reach` and a lid at 2 H0, all with the
+  Coulomb friction `floor_friction` (0.40 by default, the Lagrangian check's) and the
+  Lagrangian check's stiffness (the P-wave modulus over the cell side).
+
+The deposit is measured by vibroflow.analysis.column from `deposit_points()`: each cell stands
+for its mass over the critical density (m^2 per metre of thickness), as the Lagrangian's points.
 """
 from __future__ import annotations
 
@@ -37,6 +44,7 @@ class EulerianColumnRun:
     L0: float
     H0: float
     dx: float
+    symmetric: bool
     system: EulerianSystem
     state: EulerianState
     t_end: float
@@ -48,18 +56,24 @@ class EulerianColumnRun:
     def aspect_ratio(self) -> float:
         return self.H0 / self.L0
 
-    def areas(self) -> tuple[np.ndarray, np.ndarray]:
-        """Cell centres x (N,) m and material areas m / rho (N,) m^2 of the cells holding
-        material."""
+    def deposit_points(self) -> tuple[np.ndarray, np.ndarray]:
+        """(distance from the wall or symmetry plane (m), area (m^2 per metre)) of every cell
+        holding material, for vibroflow.analysis.column: its mass over the critical density
+        (so the areas of a half-column add up to L0 H0); a symmetric run's cells are folded
+        about x = 0 with half their area each."""
         st = self.state
-        has = (st.mass > 0) & (st.density > 0)
-        return st.x[has, 0], st.mass[has] / st.density[has]
+        has = st.mass > 0
+        x = st.x[has, 0]
+        area = st.mass[has] / self.system.material.critical_density
+        if self.symmetric:
+            return np.abs(x), 0.5 * area
+        return x.copy(), area
 
 
 def column_system(L0: float, H0: float, dx: float, material: ContinuumMaterial | None = None,
-                  wall_friction: float = 0.40, reach: float | None = None,
-                  cfl: float = 0.3) -> EulerianSystem:
-    """The Eulerian system of the column (module docstring); reach (m) default
+                  floor_friction: float = 0.40, symmetric: bool = True,
+                  reach: float | None = None, cfl: float = 0.3) -> EulerianSystem:
+    """The Eulerian system of the column (module docstring); reach (m, from x = 0) default
     L0 (2 + 3 H0/L0), the Lagrangian check's."""
     for name, v in (("L0", L0), ("H0", H0), ("dx", dx)):
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
@@ -69,22 +83,24 @@ def column_system(L0: float, H0: float, dx: float, material: ContinuumMaterial |
     reach = L0 * (2.0 + 3.0 * H0 / L0) if reach is None else float(reach)
     reach = h * math.ceil(reach / h - 1e-9)
     top = h * math.ceil(2.0 * H0 / h - 1e-9)
-    mesh = EulerianMesh.box(0.0, reach, 0.0, top, dx)
+    mesh = EulerianMesh.box(-reach if symmetric else 0.0, reach, 0.0, top, dx)
     kn = (mat.bulk_modulus + 4.0 * mat.shear_modulus / 3.0) / h
-    wall = MeshWall(stiffness=kn, friction=wall_friction, damping_ratio=0.5)
+    wall = MeshWall(stiffness=kn, friction=floor_friction, damping_ratio=0.5)
     dt = stable_dt(mat, dx, h, [wall], v_max=math.sqrt(2.0 * G_ACC * H0), cfl=cfl)
     return EulerianSystem(mesh, mat, dt, frame=LabFrame((0.0, -G_ACC)), wall=wall)
 
 
-def column_state(system: EulerianSystem, L0: float, H0: float) -> EulerianState:
-    """The column at rest behind its gate: cells of [0, L0] x [0, H0] filled (partly at its
-    edges) at the critical density, the lithostatic stress with Jaky's K_0 and the density of
-    that pressure (the Lagrangian check's column_state)."""
+def column_state(system: EulerianSystem, L0: float, H0: float,
+                 symmetric: bool = True) -> EulerianState:
+    """The column at rest behind its gates: cells of [-L0 or 0, L0] x [0, H0] filled (partly at
+    its edges) at the critical density, the lithostatic stress with Jaky's K_0 and the density
+    of that pressure (the Lagrangian check's column_state)."""
     mesh = system.mesh
     mat = system.material
     h = mesh.h
     c = system.x
-    fx = np.clip((L0 - (c[:, 0] - 0.5 * h)) / h, 0.0, 1.0)
+    xc = np.abs(c[:, 0]) if symmetric else c[:, 0]
+    fx = np.clip((L0 - (xc - 0.5 * h)) / h, 0.0, 1.0)
     fz = np.clip((H0 - (c[:, 1] - 0.5 * h)) / h, 0.0, 1.0)
     frac = fx * fz
     rho_c = mat.critical_density
@@ -99,14 +115,15 @@ def column_state(system: EulerianSystem, L0: float, H0: float) -> EulerianState:
 
 
 def run_column(L0: float, H0: float, dx: float, material: ContinuumMaterial | None = None,
-               wall_friction: float = 0.40, t_min: float | None = None,
-               t_max: float | None = None, ke_fraction: float = 1.0e-4,
-               reach: float | None = None, cfl: float = 0.3) -> EulerianColumnRun:
+               floor_friction: float = 0.40, symmetric: bool = True,
+               t_min: float | None = None, t_max: float | None = None,
+               ke_fraction: float = 1.0e-4, reach: float | None = None,
+               cfl: float = 0.3) -> EulerianColumnRun:
     """Release the column and run until it is at rest (the Lagrangian run_column's rule:
     after t_min = 3 sqrt(H0/g), the first check, every 0.1 sqrt(H0/g), with kinetic energy
     below ke_fraction M g H0 / 2; at most t_max = 30 sqrt(H0/g))."""
-    system = column_system(L0, H0, dx, material, wall_friction, reach, cfl)
-    state = column_state(system, L0, H0)
+    system = column_system(L0, H0, dx, material, floor_friction, symmetric, reach, cfl)
+    state = column_state(system, L0, H0, symmetric)
     tau = math.sqrt(H0 / G_ACC)
     t_min = 3.0 * tau if t_min is None else float(t_min)
     t_max = 30.0 * tau if t_max is None else float(t_max)
@@ -122,5 +139,6 @@ def run_column(L0: float, H0: float, dx: float, material: ContinuumMaterial | No
         if state.t >= t_min - 0.5 * system.dt and ke < ke_fraction * pe0:
             settled = True
             break
-    return EulerianColumnRun(L0=L0, H0=H0, dx=dx, system=system, state=state, t_end=state.t,
+    return EulerianColumnRun(L0=L0, H0=H0, dx=dx, symmetric=symmetric, system=system,
+                             state=state, t_end=state.t,
                              settled=settled, ke_ratio=ke / pe0, mass_error=state.mass_error())
