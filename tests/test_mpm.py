@@ -400,9 +400,10 @@ def test_continuum_command_writes_dem_comparable_results(run_cli, tmp_path):
 
 
 def test_continuum_command_bad_input(run_cli, tmp_path):
-    r = run_cli("continuum", "tub47-quick", "--method", "eulerian", "--out", tmp_path / "o")
+    r = run_cli("continuum", "tub47-quick", "--method", "euler", "--out", tmp_path / "o")
     assert r.returncode == 2
-    assert r.stderr.strip().splitlines() == ["error: --method = 'eulerian': must be lagrangian"]
+    assert r.stderr.strip().splitlines() == [
+        "error: --method = 'euler': must be lagrangian or eulerian"]
     r = run_cli("continuum", "tub47-quick", "--out", tmp_path / "o", "--calibration",
                 tmp_path / "missing.toml")
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1

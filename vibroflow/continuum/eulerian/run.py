@@ -85,6 +85,13 @@ class EulerianOptions:
             raise InputError(f"wall_stiffness = {self.wall_stiffness!r}: must be > 0 Pa/m")
 
 
+def default_dx(radius: float, cell_size: float) -> float:
+    """The default node spacing (m): the largest dx <= half the analysis cell whose cells of
+    dx/2 fill the tub's width 2R exactly (the mesh's requirement; tub47: 7.5 mm itself)."""
+    n = math.ceil(2.0 * radius / (0.25 * cell_size) - 1e-9)
+    return 2.0 * (2.0 * radius / n)
+
+
 def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
                 options: EulerianOptions, frame) -> EulerianSystem:
     """The Eulerian system of a tub scenario in `frame`: the U's mesh, the wall and partitions
@@ -92,7 +99,8 @@ def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
     from vibroflow.scenario.model import find_contact
 
     geo = geometry_of(scenario)
-    dx = options.dx if options.dx is not None else 0.5 * scenario.analysis.cell_size
+    dx = options.dx if options.dx is not None else default_dx(geo.radius,
+                                                               scenario.analysis.cell_size)
     mesh = EulerianMesh.tub(geo, dx)
     cal = calibration or {}
     wall_pair = find_contact(scenario, scenario.fill.material, scenario.tub.wall_material)
