@@ -114,6 +114,29 @@ def test_killed_and_resumed_run_equals_uninterrupted(tmp_path):
     assert a["circulation"] == b["circulation"]
 
 
+def test_same_numbers_on_one_thread_and_on_two(tmp_path):
+    """Reproducible means: the same scenario and seed give the same numbers bit for bit however
+    many threads run them (a sweep's one-thread Dask worker and a two-thread `vibroflow run`
+    alike): the force assembly's summation order is fixed by run.force_chunks, not the threads.
+    1600 balls: above the size below which the run uses one thread anyway."""
+    import numba
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("numba has a single thread here")
+    sets = ["fill.count=1600", "fill.settle_time=0.05", "fill.max_settle_time=0.05",
+            "run.duration=0.1", "run.average_last=0.086"]
+    outs = []
+    for threads in (1, 2):
+        env = dict(_env(tmp_path), NUMBA_NUM_THREADS=str(threads))
+        out = tmp_path / f"threads{threads}"
+        r = _cli("dem", "tub47-quick", "--out", str(out), *_sets(sets), env=env)
+        assert r.returncode == 0, r.stderr
+        outs.append(out)
+    s1, s2 = (json.loads((o / "summary.json").read_text()) for o in outs)
+    assert (s1["threads"], s2["threads"]) == (1, 2) and s1["chunks"] == s2["chunks"] == 2
+    _same_h5(outs[0] / "dem.h5", outs[1] / "dem.h5")
+
+
 def test_periodic_length_and_vtk_output(tmp_path):
     """A periodic length instead of partitions: no ball lost, none against a partition; and the
     ParaView files."""

@@ -14,7 +14,6 @@ import math
 from dataclasses import dataclass, field
 from typing import Callable
 
-import numba
 import numpy as np
 
 from ..tub.motion import TubMotion, lab_to_tub_np
@@ -99,7 +98,8 @@ class DEMState:
 
 
 def make_system(scenario, nchunk: int | None = None) -> DEMSystem:
-    """Constant parameters of a scenario's run."""
+    """Constant parameters of a scenario's run (nchunk: force-assembly chunks, default
+    run.force_chunks: a scenario's numbers do not depend on the number of threads)."""
     index = material_index(scenario)
     table = pair_table(scenario)
     if scenario.tub is not None:
@@ -128,7 +128,7 @@ def make_system(scenario, nchunk: int | None = None) -> DEMSystem:
         dt=scenario.run.dt, gravity=np.array(scenario.gravity, dtype=float), table=table,
         tub=tub, wall_mat=np.array(wall_mats, dtype=np.int64), planes=planes, motion=motion,
         skin=scenario.run.skin * diam, max_overlap=scenario.run.max_overlap * diam,
-        nchunk=nchunk or max(numba.get_num_threads(), 1), material_names=list(index),
+        nchunk=nchunk or scenario.run.force_chunks, material_names=list(index),
     )
 
 

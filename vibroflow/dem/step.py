@@ -11,7 +11,8 @@ the caller (dem/simulate.py) rebuilds and calls again.  All loops over balls are
 Parallel force assembly without races or atomics: balls are split into `nchunk` contiguous
 chunks; the pair forces of chunk c go to its own buffer fbuf[c], then the buffers are summed in
 a fixed order.  The result is reproducible bit for bit for a given chunk count (the checkpoint
-records it).
+records it), whatever the number of threads: the chunk count is a constant
+(the scenario's run.force_chunks), not the thread count.
 """
 from __future__ import annotations
 
