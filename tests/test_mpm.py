@@ -619,3 +619,30 @@ def test_continuum_blowup_names_the_points_and_the_time_step():
     message = str(err.value)
     assert "material point(s) " in message and f"of {len(x)})" in message
     assert "time step is too large for the stiffness" in message
+
+
+def test_shear_rate_map_is_the_cell_mean_and_infers_impacts(tmp_path):
+    """The continuum's shear-rate map (continuum.run.Samples.add_cell_rates and
+    write_shear_rate_csv): each analysis cell holds the mean over samples of the mean shear rate
+    of the points inside it; a linear field gamma_dot = a + b x over points symmetric in each
+    cell gives a + b x_cell exactly, and the impact columns are the calibrated c0 + c1 d g."""
+    from vibroflow.continuum.run import Samples, write_shear_rate_csv
+
+    h, a, b = 0.015, 2.0, 40.0
+    s = Samples(2, 1, 1, cell_grid=(h, 3, 4))
+    offsets = np.array([-0.25, 0.25]) * h
+    cx, cz = np.meshgrid(np.arange(-2, 3) * h, np.arange(0, 3) * h, indexing="ij")
+    px = (cx.ravel()[:, None] + offsets[None, :]).ravel()
+    pz = np.repeat(cz.ravel(), 2)
+    x = np.stack([px, pz], axis=1)
+    for _ in range(2):
+        s.add_cell_rates(x, a + b * x[:, 0])
+    cal = {"impacts": {"ball_ball": {"c0_m_s": 0.01, "c1": 3.0},
+                       "ball_wall": {"c0_m_s": 0.02, "c1": 5.0}}}
+    d = 0.00635
+    write_shear_rate_csv(tmp_path / "shear_rate.csv", s, cal, d)
+    rows = np.genfromtxt(tmp_path / "shear_rate.csv", delimiter=",", names=True)
+    assert rows.size == 15 and np.all(rows["samples"] == 2)
+    assert np.allclose(rows["shear_rate"], a + b * rows["x"], rtol=0, atol=1e-12)
+    assert np.allclose(rows["impact_ball_ball"], 0.01 + 3.0 * d * rows["shear_rate"])
+    assert np.allclose(rows["impact_ball_wall"], 0.02 + 5.0 * d * rows["shear_rate"])

@@ -283,8 +283,16 @@ class Samples:
                 "ft": ((), np.float64), "sliding": ((), np.bool_), "arc": ((), np.float64),
                 "position_tub": ((3,), np.float64)}
 
-    def __init__(self, n_samples: int, n_points: int, n_probes: int):
+    def __init__(self, n_samples: int, n_points: int, n_probes: int, cell_grid=None):
         self.j = 0
+        # the shear-rate map on the analysis cells: cell_grid = (cell size h m, cells either
+        # side of x = 0, cells up from z = 0); per cell the sum over samples of the sample's
+        # mean shear rate there, and the number of samples that held material there
+        self.cell_grid = cell_grid
+        if cell_grid is not None:
+            h, nxh, nz = cell_grid
+            self.rate_cell_sum = np.zeros((nz, 2 * nxh + 1))
+            self.rate_cell_n = np.zeros((nz, 2 * nxh + 1))
         self.pos = np.zeros((n_samples, n_points, 3), np.float32)
         self.vel = np.zeros((n_samples, n_points, 3), np.float32)
         self.poses = np.zeros((n_samples, 6))
@@ -305,14 +313,19 @@ class Samples:
                "rate_all": self.rate_all, "rate_wall": self.rate_wall,
                "rate_probe": self.rate_probe}
         out.update({"contact_" + k: v for k, v in self.contact_arrays().items()})
+        if self.cell_grid is not None:
+            out["rate_cell_sum"], out["rate_cell_n"] = self.rate_cell_sum, self.rate_cell_n
         for kind, entries in self.vtk.items():
             out[f"vtk_{kind}_t"] = np.array([t for t, _ in entries], dtype=np.float64)
             out[f"vtk_{kind}_name"] = np.array([name for _, name in entries], dtype=np.str_)
         return out
 
     @classmethod
-    def from_arrays(cls, a: dict, n_samples: int, n_points: int, n_probes: int) -> "Samples":
-        s = cls(n_samples, n_points, n_probes)
+    def from_arrays(cls, a: dict, n_samples: int, n_points: int, n_probes: int,
+                    cell_grid=None) -> "Samples":
+        s = cls(n_samples, n_points, n_probes, cell_grid)
+        if cell_grid is not None and "rate_cell_sum" in a:
+            s.rate_cell_sum[:], s.rate_cell_n[:] = a["rate_cell_sum"], a["rate_cell_n"]
         j = s.j = int(a["pos"].shape[0])
         s.pos[:j], s.vel[:j], s.poses[:j] = a["pos"], a["vel"], a["poses"]
         s.rate_all[:], s.rate_wall[:], s.rate_probe[:] = (a["rate_all"], a["rate_wall"],
@@ -322,6 +335,60 @@ class Samples:
             s.vtk[kind] = [(float(t), str(name)) for t, name in
                            zip(a[f"vtk_{kind}_t"], a[f"vtk_{kind}_name"])]
         return s
+
+
+    def add_cell_rates(self, x: np.ndarray, rate: np.ndarray) -> None:
+        """Add one sample's shear rates (1/s) at tub-frame positions x (N, 2) m to the map: the
+        mean over the points (or cells) in each analysis cell."""
+        if self.cell_grid is None:
+            return
+        h, nxh, nz = self.cell_grid
+        ix = np.floor(x[:, 0] / h + 0.5).astype(np.int64) + nxh
+        iz = np.floor(x[:, 1] / h + 0.5).astype(np.int64)
+        ok = (ix >= 0) & (ix <= 2 * nxh) & (iz >= 0) & (iz < nz) & np.isfinite(rate)
+        flat = iz[ok] * (2 * nxh + 1) + ix[ok]
+        size = nz * (2 * nxh + 1)
+        total = np.bincount(flat, weights=rate[ok], minlength=size).reshape(nz, -1)
+        count = np.bincount(flat, minlength=size).reshape(nz, -1)
+        held = count > 0
+        self.rate_cell_sum[held] += total[held] / count[held]
+        self.rate_cell_n[held] += 1
+
+
+def cell_grid_of(geo, cell_size: float) -> tuple[float, int, int]:
+    """The analysis cells covering a tub (see Samples): (h m, cells either side, cells up)."""
+    h = float(cell_size)
+    return h, int(math.ceil(geo.radius / h)) + 1, int(math.ceil(geo.rim_height / h)) + 2
+
+
+SHEAR_RATE_CSV_NAME = "shear_rate.csv"
+
+
+def write_shear_rate_csv(path: Path, samples: Samples, calibration: dict | None,
+                         diameter: float) -> None:
+    """The continuum's cycle-mean shear-rate map on the analysis cells (the DEM's cells), with
+    the impact speeds it implies by the calibrated v = c0 + c1 d gamma_dot ([impacts.ball_ball],
+    [impacts.ball_wall]; empty without a calibration), atomically: columns x, z (m, cell
+    centres), shear_rate (1/s, mean over the samples that held material in the cell), samples,
+    impact_ball_ball, impact_ball_wall (m/s)."""
+    if samples.cell_grid is None:
+        return
+    h, nxh, nz = samples.cell_grid
+    im = (calibration or {}).get("impacts", {})
+    fits = [im.get(k) if isinstance(im.get(k), dict) else None for k in ("ball_ball", "ball_wall")]
+    lines = ["x,z,shear_rate,samples,impact_ball_ball,impact_ball_wall"]
+    for k in range(nz):
+        for i in range(2 * nxh + 1):
+            n = samples.rate_cell_n[k, i]
+            if n <= 0:
+                continue
+            g = float(samples.rate_cell_sum[k, i] / n)
+            v = ["" if f is None or "c0_m_s" not in f
+                 else repr(float(f["c0_m_s"] + f["c1"] * diameter * g)) for f in fits]
+            lines.append(f"{(i - nxh) * h!r},{k * h!r},{g!r},{int(n)},{v[0]},{v[1]}")
+    tmp = path.with_name(f".tmp-{os.getpid()}-{path.name}")
+    tmp.write_text("\n".join(lines) + "\n")
+    os.replace(tmp, path)
 
 
 def samples_source(scenario, samples: Samples, times: np.ndarray, radius: np.ndarray) -> dict:
@@ -390,19 +457,21 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
                 raise InputError(f"--resume: {ckpt} is the checkpoint of another scenario, "
                                  "calibration or options; run without --resume to start "
                                  "afresh")
-            samples = Samples.from_arrays(arrays, S, state.n, len(probes))
+            samples = Samples.from_arrays(arrays, S, state.n, len(probes),
+                                          cell_grid_of(geo, scenario.analysis.cell_size))
             wall_before = float(meta["wall_time_s"])
             prog.log(f"resuming from {ckpt} at t = {state.t:.4f} s")
         else:
             if resume:
                 prog.log(f"no checkpoint in {out}: starting afresh")
-            for name in (SUMMARY_NAME, BULK_CSV_NAME, CHECKPOINT_NAME):
+            for name in (SUMMARY_NAME, BULK_CSV_NAME, CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME):
                 (out / name).unlink(missing_ok=True)
             state = settle(scenario, material, calibration, options, x, volume, density,
                            stress, prog)
             state.t = 0.0
             state.step = 0
-            samples = Samples(S, state.n, len(probes))
+            samples = Samples(S, state.n, len(probes),
+                              cell_grid_of(geo, scenario.analysis.cell_size))
             wall_before = 0.0
         try:
             done = _vibrate(scenario, system, state, samples, geo, material, times, out, vtk,
@@ -437,6 +506,7 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
     summary["continuum"].update(shear_rate_outputs(
         material, calibration, list(probes), batch, scenario.run.batches, samples.rate_all,
         samples.rate_wall, samples.rate_probe, summary["impacts"]))
+    write_shear_rate_csv(out / SHEAR_RATE_CSV_NAME, samples, calibration, material.diameter)
     summary = json_safe(summary)
     write_json_atomic(out / SUMMARY_NAME, summary)
     ckpt.unlink(missing_ok=True)
@@ -507,6 +577,7 @@ def _vibrate(scenario, system, state, samples: Samples, geo, material, times, ou
                 write_grid_vtr(out / VTK_DIR / name, system.grid, fields, 0.5 * geo.length)
                 samples.vtk["grid"].append((state.t, name))
             samples.rate_all[j] = rate.mean()
+            samples.add_cell_rates(state.x, rate)
             near = gap < 0.5 * cell
             if near.any():
                 samples.rate_wall[j] = rate[near].mean()

@@ -241,6 +241,43 @@ class StudyData:
         block = s.get("continuum") if isinstance(s, dict) else None
         return block if isinstance(block, dict) else {}
 
+    def continuum_shear_map(self, name: str, column: str = "shear_rate"):
+        """A continuum method's map on the analysis cells from its shear_rate.csv (continuum
+        run.write_shear_rate_csv): (x (m), z (m), values (z, x) with NaN where no material),
+        column "shear_rate" (1/s, cycle mean) or "impact_ball_ball" (m/s, inferred); None when
+        the run wrote no map or the column is empty."""
+        entry = self.summary["methods"].get(name, {})
+        rel = entry.get("bulk_velocity_csv", f"{name}/bulk_velocity.csv")
+        path = self.out / Path(rel).parent / "shear_rate.csv"
+        try:
+            lines = path.read_text().splitlines()
+        except (OSError, UnicodeDecodeError):
+            return None
+        if len(lines) < 2:
+            return None
+        head = lines[0].split(",")
+        if column not in head or "x" not in head or "z" not in head:
+            return None
+        ci, xi, zi = head.index(column), head.index("x"), head.index("z")
+        rows = []
+        for line in lines[1:]:
+            parts = line.split(",")
+            try:
+                rows.append((float(parts[xi]), float(parts[zi]),
+                             float(parts[ci]) if parts[ci] else float("nan")))
+            except (ValueError, IndexError):
+                return None
+        a = np.asarray(rows, dtype=float)
+        if not np.isfinite(a[:, 2]).any():
+            return None
+        h = float(self.scenario.analysis.cell_size)
+        ix = np.rint(a[:, 0] / h).astype(int)
+        iz = np.rint(a[:, 1] / h).astype(int)
+        grid = np.full((iz.max() - iz.min() + 1, ix.max() - ix.min() + 1), np.nan)
+        grid[iz - iz.min(), ix - ix.min()] = a[:, 2]
+        return (np.arange(ix.min(), ix.max() + 1) * h, np.arange(iz.min(), iz.max() + 1) * h,
+                grid)
+
     def dem_shear_rate_at(self, px: float, pz: float) -> float:
         """The DEM's cycle-mean shear rate (1/s) in the analysis cell holding (px, pz): the
         mass-weighted mean of fields.nc's grid points inside that cell (NaN without fields)."""

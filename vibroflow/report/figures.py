@@ -2,10 +2,11 @@
 (`vibroflow.report.data.StudyData`) returning PNG bytes, one panel per method side by side, the
 DEM first, on the tub's U outline (tub frame: x across, z up from the bottom of the U, m).
 
-The continuum methods write their shear rate and the impact speed it implies at the probe cells
-and over the bed (their summary's `continuum` block), not as a map, so their panels of the
-shear-rate and impact maps colour the probe cells on the DEM's colour scale; the mean-flow
-shear-rate row compares every method cell by cell from its bulk_velocity.csv.
+The continuum methods write their cycle-mean shear rate and the impact speed it implies on the
+analysis cells (their shear_rate.csv); their panels of the shear-rate and impact maps draw those
+maps on the DEM's colour scale (a run older than that map: its probe cells only, from its
+summary's `continuum` block); the mean-flow shear-rate row compares every method cell by cell
+from its bulk_velocity.csv.
 """
 from __future__ import annotations
 
@@ -179,8 +180,10 @@ def shear_rate_maps(data: StudyData) -> bytes:
     cont = {name: {k: v.get("shear_rate_1_s") for k, v in
                    (data.continuum_block(name).get("probes") or {}).items()}
             for name in data.continuum_methods}
+    cmaps = {name: data.continuum_shear_map(name) for name in data.continuum_methods}
     norm = _log_norm([dem_map if dem_map is not None else np.zeros(0)]
-                     + [list(c.values()) for c in cont.values()])
+                     + [list(c.values()) for c in cont.values()]
+                     + [m[2] for m in cmaps.values() if m is not None])
     cmap = "plasma"
     mappable = None
     for ax, name in zip(axes[0], names):
@@ -193,6 +196,10 @@ def shear_rate_maps(data: StudyData) -> bytes:
                 mappable = ax.pcolormesh(x, z, dem_map.T, shading="nearest", cmap=cmap,
                                          norm=norm)
             ax.set_title("dem: cycle-mean shear rate (fields.nc)", fontsize=9)
+        elif cmaps.get(name) is not None:
+            xs, zs, grid = cmaps[name]
+            mappable = ax.pcolormesh(xs, zs, grid, shading="nearest", cmap=cmap, norm=norm)
+            ax.set_title(f"{name}: cycle-mean shear rate (shear_rate.csv)", fontsize=9)
         else:
             pc, k = _cell_squares(ax, data, cont.get(name, {}), norm, cmap)
             mappable = mappable or pc
@@ -257,7 +264,9 @@ def impact_maps(data: StudyData) -> bytes:
     top = _bed_top(data)
     imp = data.impacts
     inferred = {name: inferred_impact_speeds(data, name) for name in data.continuum_methods}
-    vals = []
+    imaps = {name: data.continuum_shear_map(name, "impact_ball_ball")
+             for name in data.continuum_methods}
+    vals = [m[2].ravel() for m in imaps.values() if m is not None]
     if imp is not None:
         vals.append(imp.mean_speed[imp.count >= MIN_IMPACTS_PER_CELL])
     vals += [np.asarray(list(v.values()), dtype=float) for v in inferred.values()]
@@ -286,6 +295,10 @@ def impact_maps(data: StudyData) -> bytes:
                 ax.text(0.03, 0.97, f"{int(imp.count.sum())} impacts measured",
                         ha="left", va="top", transform=ax.transAxes, fontsize=8)
             ax.set_title("dem: measured ball-ball impacts", fontsize=9)
+        elif imaps.get(name) is not None:
+            xs, zs, grid = imaps[name]
+            mappable = ax.pcolormesh(xs, zs, grid, shading="nearest", cmap=cmap, norm=norm)
+            ax.set_title(f"{name}: inferred from its shear-rate map", fontsize=9)
         else:
             pc, k = _cell_squares(ax, data, inferred[name], norm, cmap)
             mappable = mappable or pc

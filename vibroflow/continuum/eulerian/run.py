@@ -49,7 +49,8 @@ from ..constitutive import ContinuumMaterial
 from ..fields import grid_fields, write_grid_vtr
 from ..grid_update import LabFrame, TubFrame
 from ..mpm import ContinuumBlowUp
-from ..run import (BULK_CSV_NAME, CHECKPOINT_NAME, SUMMARY_NAME, VTK_DIR, Samples, bed_area,
+from ..run import (BULK_CSV_NAME, CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME, SUMMARY_NAME, VTK_DIR,
+                   Samples, bed_area, cell_grid_of, write_shear_rate_csv,
                    material_of, run_fingerprint, sample_times, samples_source, shear_rate,
                    shear_rate_outputs, to_lab, write_json_atomic)
 from ..timestep import stable_dt
@@ -222,7 +223,8 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
                                  "calibration, method or options; run without --resume to "
                                  "start afresh")
             state = state_from_checkpoint(system, saved, meta)
-            samples = Samples.from_arrays(arrays, S, n_cells, len(probes))
+            samples = Samples.from_arrays(arrays, S, n_cells, len(probes),
+                                          cell_grid_of(geo, scenario.analysis.cell_size))
             dither = arrays["dither"].copy()
             top = float(meta["bed_height_m"])
             wall_before = float(meta["wall_time_s"])
@@ -230,12 +232,13 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
         else:
             if resume:
                 prog.log(f"no checkpoint in {out}: starting afresh")
-            for name in (SUMMARY_NAME, BULK_CSV_NAME, CHECKPOINT_NAME):
+            for name in (SUMMARY_NAME, BULK_CSV_NAME, CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME):
                 (out / name).unlink(missing_ok=True)
             state, top = settle(scenario, material, calibration, options, prog)
             state.t = 0.0
             state.step = 0
-            samples = Samples(S, n_cells, len(probes))
+            samples = Samples(S, n_cells, len(probes),
+                              cell_grid_of(geo, scenario.analysis.cell_size))
             dither = np.zeros(n_cells)
             wall_before = 0.0
         try:
@@ -285,6 +288,7 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
     summary["continuum"].update(shear_rate_outputs(
         material, calibration, list(probes), batch, scenario.run.batches, samples.rate_all,
         samples.rate_wall, samples.rate_probe, summary["impacts"]))
+    write_shear_rate_csv(out / SHEAR_RATE_CSV_NAME, samples, calibration, material.diameter)
     summary = json_safe(summary)
     write_json_atomic(out / SUMMARY_NAME, summary)
     ckpt.unlink(missing_ok=True)
@@ -374,6 +378,7 @@ def _vibrate(scenario, system: EulerianSystem, state: EulerianState, samples: Sa
             held = state.mass[cells] >= 0.5 * full
             if held.any():
                 samples.rate_all[j] = rate[held].mean()
+                samples.add_cell_rates(system.x[cells][held], rate[held])
             if (held & near_wall).any():
                 samples.rate_wall[j] = rate[held & near_wall].mean()
             for q, inside in enumerate(in_probe):
