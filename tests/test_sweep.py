@@ -17,17 +17,14 @@ from pathlib import Path
 import pytest
 
 from tests.test_calibrate import SMALL
-from vibroflow.study.methods import METHODS
 
 # SMALL, shorter (0.13 s window = 6 cycles at 47 Hz >= 4 batches) and with 250 balls; fill.count
 # is varied by the fixture, so it is not fixed here
 FIXED = [s for s in SMALL if not s.startswith(("fill.count=", "run.duration=",
                                                "run.average_last="))]
 FIXED += ["run.duration=0.15", "run.average_last=0.13"]
-if "eulerian" in METHODS:
-    # the Eulerian mesh must cut the 80 mm wide tub into whole cells of dx/2: its default (half
-    # the 15 mm analysis cell) does not; every point of a sweep takes a fixed method option
-    FIXED += ["eulerian.dx=0.005"]
+# a fixed continuum option every point takes, as `vibroflow run --set` does
+FIXED += ["lagrangian.cfl=0.3"]
 GOOD = 250
 BAD = 1_000_000  # valid, but no tub holds it: the fill fails at run time ("too large to insert")
 STAGES = ("dem", "calibration", "lagrangian", "comparison")

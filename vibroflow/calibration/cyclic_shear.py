@@ -39,7 +39,8 @@ import numpy as np
 from vibroflow.errors import InputError
 
 from .periodic import MODE_Z, Q_SXZ, Q_SZX, Q_SZZ
-from .shear_cell import DEFAULT_POLYDISPERSITY, _check, packed_box, tub_mid_depth_pressure
+from .shear_cell import (DEFAULT_POLYDISPERSITY, _check, check_values, packed_box,
+                         tub_mid_depth_pressure)
 
 DEFAULT_AMPLITUDES = (1.0e-4, 1.0e-3, 3.0e-3, 1.0e-2, 3.0e-2)
 DEFAULT_N_BALLS = 300
@@ -121,16 +122,7 @@ def run_cyclic_shear(scenario, strain_amplitudes=DEFAULT_AMPLITUDES,
         raise InputError(f"discard_cycles = {discard_cycles!r}: must leave at least two of the "
                          f"{cycles} cycles")
     _check("segments", segments, 8, integer=True)
-    try:
-        amps = [float(a) for a in strain_amplitudes]
-    except (TypeError, ValueError):
-        raise InputError(f"strain_amplitudes = {strain_amplitudes!r}: must be a list of "
-                         "numbers in (0, 0.5]") from None
-    if not amps:
-        raise InputError("strain_amplitudes = []: give at least one amplitude")
-    for a in amps:
-        if not (math.isfinite(a) and 0.0 < a <= 0.5):
-            raise InputError(f"strain_amplitudes: {a!r}: each must be in (0, 0.5]")
+    amps = check_values("strain_amplitudes", strain_amplitudes, 0.5)
     seed = scenario.run.seed if seed is None else seed
     _check("seed", seed, 0, integer=True)
     f, p = float(frequency), float(pressure)

@@ -181,6 +181,21 @@ def tub_mid_depth_pressure(scenario, solid_fraction: float = 0.6) -> float:
     return solid_fraction * rho * g * h / 2.0
 
 
+def check_values(name: str, values, hi: float) -> list[float]:
+    """A non-empty list of numbers in (0, hi] from `values` (an InputError naming `name`)."""
+    try:
+        out = [float(x) for x in values]
+    except (TypeError, ValueError):
+        raise InputError(f"{name} = {values!r}: must be a list of numbers in (0, {hi:g}]") \
+            from None
+    if not out:
+        raise InputError(f"{name} = []: give at least one value")
+    for x in out:
+        if not (math.isfinite(x) and 0.0 < x <= hi):
+            raise InputError(f"{name}: {x!r}: each must be in (0, {hi:g}]")
+    return out
+
+
 def _check(name: str, value, lo: float, hi: float = math.inf, integer: bool = False):
     ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
     if ok and integer:
@@ -395,16 +410,7 @@ def run_shear_cell(scenario, inertial_numbers=DEFAULT_INERTIAL_NUMBERS,
     if batches is None:
         batches = max(int(scenario.run.batches), 4)
     _check("batches", batches, 2, integer=True)
-    try:
-        I_list = [float(x) for x in inertial_numbers]
-    except (TypeError, ValueError):
-        raise InputError(f"inertial_numbers = {inertial_numbers!r}: must be a list of "
-                         f"numbers in (0, 1]") from None
-    if not I_list:
-        raise InputError("inertial_numbers = []: give at least one inertial number")
-    for x in I_list:
-        if not (math.isfinite(x) and 0.0 < x <= 1.0):
-            raise InputError(f"inertial_numbers: {x!r}: each must be in (0, 1]")
+    I_list = check_values("inertial_numbers", inertial_numbers, 1.0)
     seed = scenario.run.seed if seed is None else seed
     _check("seed", seed, 0, integer=True)
     seed = int(seed)

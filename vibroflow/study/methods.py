@@ -40,53 +40,36 @@ class ContinuumMethod:
             raise InputError(f"--set {self.name}: {exc}") from None
 
 
-def _run_lagrangian(scenario, out_dir: Path, calibration: dict | None, options,
-                    progress: bool, resume: bool) -> dict:
-    from vibroflow.continuum.run import material_of, run_lagrangian
+def _method(name: str, description: str, module: str, options: str, run: str):
+    """The factory of a registered method whose options class and run function live in
+    `module` (imported only when the method is used, so `import vibroflow.study` stays free of
+    numba); its run first builds the material, so bad parameters are an input error first."""
+    def factory() -> ContinuumMethod:
+        import importlib
 
-    material_of(scenario, calibration, options.model)  # bad parameters: an input error first
-    return run_lagrangian(scenario, out_dir, calibration=calibration, options=options,
-                          progress=progress, resume=resume)
+        mod = importlib.import_module(module)
 
+        def run_method(scenario, out_dir: Path, calibration: dict | None, opts,
+                       progress: bool, resume: bool) -> dict:
+            from vibroflow.continuum.run import material_of
 
-def _lagrangian_options():
-    from vibroflow.continuum.run import LagrangianOptions
+            material_of(scenario, calibration, opts.model)
+            return getattr(mod, run)(scenario, out_dir, calibration=calibration, options=opts,
+                                     progress=progress, resume=resume)
 
-    return LagrangianOptions
-
-
-def _lagrangian() -> ContinuumMethod:
-    return ContinuumMethod(name="lagrangian",
-                           description="material point method (vibroflow.continuum)",
-                           options=_lagrangian_options(), run=_run_lagrangian)
-
-
-def _run_eulerian(scenario, out_dir: Path, calibration: dict | None, options,
-                  progress: bool, resume: bool) -> dict:
-    from vibroflow.continuum.eulerian.run import run_eulerian
-    from vibroflow.continuum.run import material_of
-
-    material_of(scenario, calibration, options.model)  # bad parameters: an input error first
-    return run_eulerian(scenario, out_dir, calibration=calibration, options=options,
-                        progress=progress, resume=resume)
-
-
-def _eulerian_options():
-    from vibroflow.continuum.eulerian.run import EulerianOptions
-
-    return EulerianOptions
-
-
-def _eulerian() -> ContinuumMethod:
-    return ContinuumMethod(name="eulerian",
-                           description="fixed mesh of the tub, volume fraction transport "
-                                       "(vibroflow.continuum.eulerian)",
-                           options=_eulerian_options(), run=_run_eulerian)
+        return ContinuumMethod(name=name, description=description,
+                               options=getattr(mod, options), run=run_method)
+    return factory
 
 
 #: name -> factory of the method (factories keep `import vibroflow.study` free of numba)
-METHODS: dict[str, Callable[[], ContinuumMethod]] = {"lagrangian": _lagrangian,
-                                                     "eulerian": _eulerian}
+METHODS: dict[str, Callable[[], ContinuumMethod]] = {
+    "lagrangian": _method("lagrangian", "material point method (vibroflow.continuum)",
+                          "vibroflow.continuum.run", "LagrangianOptions", "run_lagrangian"),
+    "eulerian": _method("eulerian", "fixed mesh of the tub, volume fraction transport "
+                        "(vibroflow.continuum.eulerian)", "vibroflow.continuum.eulerian.run",
+                        "EulerianOptions", "run_eulerian"),
+}
 
 
 def method(name: str) -> ContinuumMethod:

@@ -138,7 +138,8 @@ def _run_stage(study: Study, stage: Stage, h: str) -> dict:
     return record
 
 
-def _fmt(seconds: float) -> str:
+def format_duration(seconds: float) -> str:
+    """A wall time for the progress lines: s, min or h."""
     seconds = max(0.0, seconds)
     if seconds < 60:
         return f"{seconds:.0f} s"
@@ -192,14 +193,14 @@ def run_study(scenario, out: Path, settings: dict[str, dict[str, Any]] | None = 
         else:
             record = _run_stage(study, stage, h)
             spent = record["wall_time_s"]
-            what = f"done in {_fmt(spent)}" + (" (resumed)" if record["resumed"] else "")
+            what = f"done in {format_duration(spent)}" + (" (resumed)" if record["resumed"] else "")
             spent_est += estimates[stage.name]
             spent_real += spent
         study.records[stage.name] = record
         scale = min(5.0, max(0.2, spent_real / spent_est)) if spent_est > 0 else 1.0
         left = scale * sum(estimates[s.name] for s in stages[i:] if kept[s.name] is None)
         if echo is not None:
-            echo(f"[{i}/{n}] {stage.name:<12} {what}; time left ~ {_fmt(left)}")
+            echo(f"[{i}/{n}] {stage.name:<12} {what}; time left ~ {format_duration(left)}")
     from vibroflow.study.results import read_summary
 
     return read_summary(out)

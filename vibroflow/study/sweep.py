@@ -27,20 +27,12 @@ from vibroflow.errors import InputError
 from vibroflow.study.sweep_folder import (KIND, PLOTS, POINT_LOCK, TABLE_FILE, check_same_sweep,
                                           dir_lock, is_locked, point_dir, read_record,
                                           write_record)
+from vibroflow.study.pipeline import format_duration
 from vibroflow.study.sweep_points import SweepPlan
 from vibroflow.study.sweep_worker import THREAD_ENV, record_lost, run_point
 
 #: seconds between two looks at the lock of a point running elsewhere
 POLL_S = 1.0
-
-
-def _fmt(seconds: float) -> str:
-    seconds = max(0.0, seconds)
-    if seconds < 60:
-        return f"{seconds:.0f} s"
-    if seconds < 3600:
-        return f"{seconds / 60:.1f} min"
-    return f"{seconds / 3600:.1f} h"
 
 
 def check_sweep_dir(out: Path, plan: SweepPlan) -> dict | None:
@@ -187,14 +179,14 @@ def run_sweep(plan: SweepPlan, out: Path, scheduler: str | None = None,
                 if r["status"] == "done":
                     computed.append(r["wall_time_s"])
                 if echo is not None:
-                    what = {"done": f"done in {_fmt(r['wall_time_s'])} "
+                    what = {"done": f"done in {format_duration(r['wall_time_s'])} "
                                     f"({', '.join(r['ran'])})",
                             "kept": "up to date, kept",
                             "failed": f"FAILED: {r['error']}"}[r["status"]]
                     per = (sum(computed) / len(computed)) if computed else plan.estimate_s
                     left_n = n - finished
                     left = per * -(-left_n // concurrency) if left_n else 0.0
-                    echo(f"[{finished}/{n}] {name}: {what}; time left ~ {_fmt(left)}")
+                    echo(f"[{finished}/{n}] {name}: {what}; time left ~ {format_duration(left)}")
             for name in list(waiting):
                 if not is_locked(point_dir(out, name) / POINT_LOCK):
                     del waiting[name]

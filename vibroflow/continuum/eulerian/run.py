@@ -50,7 +50,7 @@ from ..fields import grid_fields, write_grid_vtr
 from ..grid_update import LabFrame, TubFrame
 from ..mpm import ContinuumBlowUp
 from ..run import (BULK_CSV_NAME, CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME, SUMMARY_NAME, VTK_DIR,
-                   Samples, bed_area, cell_grid_of, write_shear_rate_csv,
+                   LagrangianOptions, Samples, bed_area, cell_grid_of, write_shear_rate_csv,
                    material_of, run_fingerprint, sample_times, samples_source, shear_rate,
                    shear_rate_outputs, to_lab, write_json_atomic)
 from ..timestep import stable_dt
@@ -63,27 +63,11 @@ UNIT = 1.1
 
 
 @dataclass(frozen=True)
-class EulerianOptions:
-    """Numerical options (SI): node spacing dx (m; the mesh's cells are dx/2; default half the
-    analysis cell), Courant number, rheology model ("mu_i" or "drucker_prager"), settling time
-    in the still tub (s), wall stiffness (Pa/m; default (K + 4G/3) / (dx/2), the Lagrangian
-    default at the same dx)."""
-
-    dx: float | None = None
-    cfl: float = 0.3
-    model: str = "mu_i"
-    settle_time: float = 0.05
-    wall_stiffness: float | None = None
-
-    def __post_init__(self):
-        if self.dx is not None and not self.dx > 0:
-            raise InputError(f"dx = {self.dx!r}: must be a length > 0 m")
-        if not 0 < self.cfl <= 1:
-            raise InputError(f"cfl = {self.cfl!r}: must be in (0, 1]")
-        if not self.settle_time >= 0:
-            raise InputError(f"settle_time = {self.settle_time!r}: must be >= 0 s")
-        if self.wall_stiffness is not None and not self.wall_stiffness > 0:
-            raise InputError(f"wall_stiffness = {self.wall_stiffness!r}: must be > 0 Pa/m")
+class EulerianOptions(LagrangianOptions):
+    """Numerical options (SI), the Lagrangian's fields and checks: node spacing dx (m; the
+    mesh's cells are dx/2; default `default_dx`: about half the analysis cell), Courant number,
+    rheology model ("mu_i" or "drucker_prager"), settling time in the still tub (s), wall
+    stiffness (Pa/m; default (K + 4G/3) / (dx/2), the Lagrangian default at the same dx)."""
 
 
 def default_dx(radius: float, cell_size: float) -> float:
