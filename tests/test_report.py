@@ -206,8 +206,11 @@ def test_report_renders_in_headless_chromium(study):  # noqa: F811
     try:
         driver.set_page_load_timeout(60)
         driver.get((out / "report.html").resolve().as_uri())
-        state = driver.execute_script("return document.readyState")
-        assert state == "complete"
+        # driver.get returned before the load event on the CI machine (large embedded images):
+        # wait for it, as a reader's browser would, up to the page-load timeout
+        from selenium.webdriver.support.ui import WebDriverWait
+        WebDriverWait(driver, 60, poll_frequency=0.2).until(
+            lambda d: d.execute_script("return document.readyState") == "complete")
         imgs = driver.execute_script(
             "return Array.from(document.images).map(i => [i.alt, i.complete, i.naturalWidth,"
             " i.naturalHeight])")

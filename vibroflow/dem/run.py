@@ -15,6 +15,7 @@ import json
 import math
 import os
 import shutil
+import signal
 import time
 from pathlib import Path
 
@@ -271,6 +272,16 @@ def _checkpoint(path, state, writer, system, settle_info, wall):
                                   "settle_info": json.dumps(settle_info),
                                   "diag": json.dumps(diag.tolist() if diag is not None
                                                      else None)})
+    _fault_after_checkpoint()
+
+
+def _fault_after_checkpoint() -> None:
+    """Fault injection for the resume tests: with VIBROFLOW_FAULT_KILL_AFTER_CHECKPOINT=1 in
+    the environment the process SIGKILLs itself as soon as its first checkpoint is on disk,
+    the deterministic version of a power cut (a test that kills from outside races a fast
+    machine, which may finish the run between the checkpoint and the signal)."""
+    if os.environ.get("VIBROFLOW_FAULT_KILL_AFTER_CHECKPOINT") == "1":
+        os.kill(os.getpid(), signal.SIGKILL)
 
 
 def _summary(scenario, system, state, h5path, out_dir, wall, settle_info, explicit) -> dict:
