@@ -1,14 +1,15 @@
-"""The Lagrangian continuum (material point method) against vibroflow's DEM on the tub case.
+"""Both continuum formulations (Lagrangian material point method, Eulerian fixed mesh) against
+vibroflow's DEM on the tub case.
 
     python benchmarks/continuum_vs_dem.py [--case tub47-quick|tub47] [--factors 0.5 1.0 1.5]
-        [--calibration FILE] [--dem-dir DIR ...] [--run-dem] [--seeds 1 2] [--e-seed E]
-        [--dx M] [--rheology mu_i|drucker_prager] [--out DIR]
+        [--methods lagrangian eulerian] [--calibration FILE] [--dem-dir DIR ...] [--run-dem]
+        [--seeds 1 2] [--e-seed E] [--dx M] [--rheology mu_i|drucker_prager] [--out DIR]
 
 For each amplitude factor s (tub47.md "Amplitude sweep": the three amplitudes times s) the
-script needs the DEM of the case at s for each seed of --seeds, and runs the Lagrangian continuum
-(vibroflow.continuum.run.run_lagrangian) of the same scenario, so for the same simulated time
-and on the same cells and probes, with the parameters of --calibration (a calibration.toml from
-`vibroflow calibrate`; without it tub47's defaults).
+script needs the DEM of the case at s for each seed of --seeds, and runs every continuum method
+of --methods (the study's registry, vibroflow.study.methods: default all of them) on the same
+scenario, so for the same simulated time and on the same cells and probes, with the parameters
+of --calibration (a calibration.toml from `vibroflow calibrate`; without it tub47's defaults).
 
 The DEM runs come from --dem-dir (existing `vibroflow dem` folders, each matched to its case,
 amplitude factor and seed through the scenario stored in its dem.h5; a folder whose scenario
@@ -17,7 +18,7 @@ when a finished run is there, else, with --run-dem, they are run there now (tub4
 each; tub47: about half an hour each).  A factor with no DEM run is reported without it.
 
 Printed for each factor: the probe velocities (vx, vz +- batch-means standard errors) of the DEM
-and of the continuum; the circulation strengths with their standard errors and senses; the field
+and of each continuum method, one column each; the circulation strengths with their standard errors and senses; the field
 difference E(continuum, DEM) of tub47.md (vibroflow.analysis.compare, the DEM of the first seed
 the reference) beside the DEM's seed-to-seed E (E(DEM seed 2, DEM seed 1) when two seeds are
 there, else the value of --e-seed, marked "given"); the tub47.md verdicts (strengths agree within
@@ -29,7 +30,7 @@ continuum's with its settling); the DEM's were taken whenever and with whatever 
 had, so the ratio is indicative unless both ran on a quiet machine.
 
 Everything also goes to --out/report.json (default runs/continuum_vs_dem/<case>/, git-ignored),
-with the continuum runs' folders beside it.
+with the continuum runs' folders (<method>_s<factor>) beside it.
 """
 from __future__ import annotations
 
@@ -166,10 +167,12 @@ def _brief(r: dict) -> dict:
             "probes": r.get("probes")}
 
 
-def print_factor(res: dict, cont: dict, dems: list[dict], seeds: list[int]) -> None:
-    f = res["factor"]
-    print(f"\n=== amplitude factor {f:g} ===")
-    rows = [("continuum", cont)] + [(f"DEM seed {s}", d) for s, d in zip(seeds, dems)]
+def print_factor(factor: float, results: dict[str, dict], conts: dict[str, dict],
+                 dems: list[dict], seeds: list[int]) -> None:
+    """One factor's table: a column of probe velocities per method and DEM seed, then each
+    continuum method's strength ratio, E and wall-time ratio against the DEM."""
+    print(f"\n=== amplitude factor {factor:g} ===")
+    rows = list(conts.items()) + [(f"DEM seed {s}", d) for s, d in zip(seeds, dems)]
     print(f"{'probe':<6}" + "".join(f"{name + ' vx, vz (m/s)':>42}" for name, _ in rows))
     for p in PROBES:
         line = f"{p:<6}"
@@ -185,27 +188,30 @@ def print_factor(res: dict, cont: dict, dems: list[dict], seeds: list[int]) -> N
               f"{_pm(c['strength'], c['strength_stderr'], '{:.4e}')} m^2/s"
               f"   wall {r.get('wall_time_s', float('nan')):8.1f} s"
               f"   simulated {r.get('simulated_time_s', float('nan')):.3f} s"
-              f"   {r.get('n_particles')} {'points' if name == 'continuum' else 'balls'}")
+              f"   {r.get('n_particles')} {'balls' if name.startswith('DEM') else 'points'}")
     if not dems:
         print("no DEM run for this factor: nothing to compare")
         return
-    ratio = res.get("strength_ratio")
-    print(f"strength continuum / DEM = {_f(ratio, '{:.3f}')}; strengths agree (tub47.md): "
-          f"{'yes' if res['strengths_agree'] else 'no'}")
-    es = res["E_seed"]
-    verdict = {True: "yes", False: "no",
-               None: "cannot say (no seed-to-seed E)"}[res["fields_agree"]]
-    print(f"E(continuum, DEM) = {res['E_continuum_dem']:.3f}; DEM seed-to-seed E = "
-          f"{_f(es, '{:.3f}')} ({res['E_seed_source']}); limit 1.5 E_seed = "
-          f"{_f(1.5 * es if es is not None else None, '{:.3f}')}; fields agree: {verdict}")
-    r = res["wall_time_ratio_dem_over_continuum"]
-    print(f"wall time DEM / continuum = {_f(r, '{:.1f}')} (target >= 100)")
+    for name, res in results.items():
+        ratio = res.get("strength_ratio")
+        print(f"{name}: strength / DEM = {_f(ratio, '{:.3f}')}; strengths agree (tub47.md): "
+              f"{'yes' if res['strengths_agree'] else 'no'}")
+        es = res["E_seed"]
+        verdict = {True: "yes", False: "no",
+                   None: "cannot say (no seed-to-seed E)"}[res["fields_agree"]]
+        print(f"{name}: E(continuum, DEM) = {res['E_continuum_dem']:.3f}; DEM seed-to-seed E = "
+              f"{_f(es, '{:.3f}')} ({res['E_seed_source']}); limit 1.5 E_seed = "
+              f"{_f(1.5 * es if es is not None else None, '{:.3f}')}; fields agree: {verdict}")
+        r = res["wall_time_ratio_dem_over_continuum"]
+        print(f"{name}: wall time DEM / continuum = {_f(r, '{:.1f}')} (target >= 100)")
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--case", default="tub47-quick", choices=["tub47-quick", "tub47"])
     ap.add_argument("--factors", type=float, nargs="+", default=[0.5, 1.0, 1.5])
+    ap.add_argument("--methods", nargs="+", default=None,
+                    help="continuum methods of the study's registry (default: all)")
     ap.add_argument("--calibration", type=Path, default=None,
                     help="calibration.toml (or a run folder holding one)")
     ap.add_argument("--dem-dir", type=Path, action="append", default=[],
@@ -227,8 +233,8 @@ def main(argv=None) -> int:
     out = args.out or Path("runs") / "continuum_vs_dem" / args.case
     out.mkdir(parents=True, exist_ok=True)
 
-    from vibroflow.continuum.run import LagrangianOptions, run_lagrangian
     from vibroflow.errors import InputError
+    from vibroflow.study.methods import METHODS, method
 
     try:
         cal = None
@@ -237,7 +243,11 @@ def main(argv=None) -> int:
 
             cal = read_calibration(args.calibration)
         dem_dirs = collect_dem_dirs(args.dem_dir, args.case, args.overrides)
-        options = LagrangianOptions(dx=args.dx, model=args.rheology)
+        methods = {name: method(name) for name in (args.methods or list(METHODS))}
+        # each method's own options from the shared ones (its default dx when --dx is absent)
+        options = {name: m.make_options({"model": args.rheology,
+                                         **({"dx": args.dx} if args.dx else {})})
+                   for name, m in methods.items()}
     except InputError as e:
         print(f"error: {e.message}", file=sys.stderr)
         return 2
@@ -247,7 +257,8 @@ def main(argv=None) -> int:
               "seeds": args.seeds, "overrides": args.overrides,
               "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
                           "load_1min_start": os.getloadavg()[0]}, "factors": []}
-    print(f"{args.case}: continuum (lagrangian, {args.rheology}) against the DEM; calibration "
+    print(f"{args.case}: continuum ({', '.join(methods)}; {args.rheology}) against the DEM; "
+          "calibration "
           f"{args.calibration or 'none (tub47 defaults)'}; load {os.getloadavg()[0]:.2f}")
     cell = scenario_at(args.case, 1.0, args.seeds[0], args.overrides).analysis.cell_size
     for factor in args.factors:
@@ -265,15 +276,17 @@ def main(argv=None) -> int:
         seeds_found = [s for s in args.seeds
                        if (dem_dirs.get((key_f, s)) or out / f"dem_s{factor:g}_seed{s}"
                            ).joinpath("summary.json").is_file()]
-        cfolder = out / f"continuum_s{factor:g}"
-        if not (args.reuse_continuum and (cfolder / "summary.json").is_file()):
-            s = scenario_at(args.case, factor, args.seeds[0], args.overrides)
-            print(f"  continuum x{factor:g} -> {cfolder}", flush=True)
-            run_lagrangian(s, cfolder, calibration=cal, options=options, progress=True)
-        cont = load_result(cfolder, cell)
-        res = compare_factor(factor, cont, dems, args.e_seed)
-        print_factor(res, cont, dems, seeds_found)
-        report["factors"].append(res)
+        conts, results = {}, {}
+        for name, m in methods.items():
+            cfolder = out / f"{name}_s{factor:g}"
+            if not (args.reuse_continuum and (cfolder / "summary.json").is_file()):
+                s = scenario_at(args.case, factor, args.seeds[0], args.overrides)
+                print(f"  {name} x{factor:g} -> {cfolder}", flush=True)
+                m.run(s, cfolder, cal, options[name], True, False)
+            conts[name] = load_result(cfolder, cell)
+            results[name] = compare_factor(factor, conts[name], dems, args.e_seed)
+        print_factor(factor, results, conts, dems, seeds_found)
+        report["factors"].append({"factor": factor, "methods": results})
         _write_json(out / "report.json", report)
     report["machine"]["load_1min_end"] = os.getloadavg()[0]
     _write_json(out / "report.json", report)

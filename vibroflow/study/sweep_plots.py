@@ -21,6 +21,7 @@ NAMES = ("sweep_probes.png", "sweep_circulation.png", "sweep_impacts.png",
          "sweep_wall_time.png")
 _STYLES = ("-", "--", ":", "-.")
 _MARKERS = ("o", "s", "^", "D", "v", "P")
+XLABEL = "amplitude factor (motion.amplitude_factor)"
 
 
 def _series(rows: list[dict[str, Any]], varied: list[str]) -> dict[tuple, list[dict]]:
@@ -63,6 +64,21 @@ def _draw(ax, series, varied, column: str, scale: float = 1.0, errors: bool = Tr
                     label=_label(key, varied))
 
 
+def _one_panel(plt, path: Path, series, varied, column: str, scale: float, ylabel: str,
+               title: str, errors: bool = True) -> None:
+    """A one-axes picture of `column` against the amplitude factor."""
+    fig, ax = plt.subplots(figsize=(6.5, 4.2))
+    _draw(ax, series, varied, column, scale=scale, errors=errors)
+    ax.set_xlabel(XLABEL)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    if series:
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    _save(fig, path)
+    plt.close(fig)
+
+
 def write_plots(folder: Path, rows: list[dict[str, Any]], varied: list[str]) -> list[str]:
     """The four pictures in `folder` (made if missing); returns their file names."""
     import matplotlib
@@ -77,7 +93,6 @@ def write_plots(folder: Path, rows: list[dict[str, Any]], varied: list[str]) -> 
         for k in r:
             if k.endswith("_vx") and k[:-3] not in probes:
                 probes.append(k[:-3])
-    xlabel = "amplitude factor (motion.amplitude_factor)"
 
     n = max(len(probes), 1)
     fig, axes = plt.subplots(n, 2, figsize=(10, 2.4 * n + 0.8), sharex=True, squeeze=False)
@@ -88,7 +103,7 @@ def write_plots(folder: Path, rows: list[dict[str, Any]], varied: list[str]) -> 
             ax.axhline(0.0, color="0.7", lw=0.6)
             ax.set_ylabel(f"{p} {c} (mm/s)")
     for ax in axes[-1]:
-        ax.set_xlabel(xlabel)
+        ax.set_xlabel(XLABEL)
     if series:
         axes[0][0].legend(fontsize=7)
     fig.suptitle("bulk velocity at the probes (tub frame), mean ± standard error")
@@ -96,21 +111,13 @@ def write_plots(folder: Path, rows: list[dict[str, Any]], varied: list[str]) -> 
     _save(fig, folder / NAMES[0])
     plt.close(fig)
 
-    fig, ax = plt.subplots(figsize=(6.5, 4.2))
-    _draw(ax, series, varied, "circulation_strength", scale=1e4)
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel("circulation strength (1e-4 m²/s)")
-    ax.set_title("circulation strength ± standard error")
-    if series:
-        ax.legend(fontsize=7)
-    fig.tight_layout()
-    _save(fig, folder / NAMES[1])
-    plt.close(fig)
+    _one_panel(plt, folder / NAMES[1], series, varied, "circulation_strength", 1e4,
+               "circulation strength (1e-4 m²/s)", "circulation strength ± standard error")
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), squeeze=False)
     for ax, kind in zip(axes[0], ("ball_ball", "ball_wall")):
         _draw(ax, series, varied, f"impact_{kind}")
-        ax.set_xlabel(xlabel)
+        ax.set_xlabel(XLABEL)
         ax.set_ylabel(f"mean normal impact speed {kind.replace('_', '-')} (m/s)")
     if series:
         axes[0][0].legend(fontsize=7)
@@ -119,14 +126,6 @@ def write_plots(folder: Path, rows: list[dict[str, Any]], varied: list[str]) -> 
     _save(fig, folder / NAMES[2])
     plt.close(fig)
 
-    fig, ax = plt.subplots(figsize=(6.5, 4.2))
-    _draw(ax, series, varied, "wall_time_s", errors=False)
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel("wall time (s)")
-    ax.set_title("wall time per method and point")
-    if series:
-        ax.legend(fontsize=7)
-    fig.tight_layout()
-    _save(fig, folder / NAMES[3])
-    plt.close(fig)
+    _one_panel(plt, folder / NAMES[3], series, varied, "wall_time_s", 1.0, "wall time (s)",
+               "wall time per method and point", errors=False)
     return list(NAMES)
