@@ -26,6 +26,13 @@ Set-up choices, and why:
   (mu_w >= mu_2) runs out much less (at a = 3 on L0/10, 4.5 L0 instead of 7.2 L0).  Its
   stiffness is the P-wave modulus over the point side (the stiffness of the continuum itself
   across one point), as in the block test of tests/test_mpm.py;
+* rough floor (`rough_floor=True`): the experiments' rough bed as a no-slip grid condition, the
+  nodes on and below z = 0 held still (MPMSystem.no_slip_below; the no-slip base of Lagree,
+  Staron & Popinet 2011), on top of the penalty floor that carries the normal load.  A penalty
+  floor with mu_w >= mu_2 is not the same: it brakes only the row of points touching the floor,
+  and the next row shears past within one cell, so its run-out is not grid-converged (a = 3:
+  4.53 L0 on L0/10, 5.80 L0 on L0/20), where the no-slip grid floor's is (5.72, 5.65), though
+  still 45 % above Lube et al. 2005 (tests/test_column_collapse.py);
 * initial state: the column at the critical density, pre-stressed as it stood behind a gate,
   sigma_zz = -rho g (H0 - z) and sigma_xx = sigma_yy = K_0 sigma_zz with Jaky's
   K_0 = 1 - sin(atan mu_s), and the density rho_c exp(p / K) of that pressure (just above the
@@ -125,11 +132,11 @@ def _check_size(L0, H0, dx):
 def column_system(L0: float, H0: float, dx: float, material: ContinuumMaterial | None = None,
                   floor_friction: float = 0.40, wall_friction: float = 0.0,
                   symmetric: bool = True, reach: float | None = None,
-                  cfl: float = 0.3) -> MPMSystem:
+                  cfl: float = 0.3, rough_floor: bool = False) -> MPMSystem:
     """The MPM system of a column of half-width L0 and height H0 (m) on grid spacing dx (m):
-    floor z = 0 with Coulomb friction `floor_friction`; symmetric (module docstring), or a wall
-    x = 0 with `wall_friction`; a grid reaching `reach` (m, default L0 (2 + 3 H0/L0)) from
-    x = 0 (both ways when symmetric)."""
+    floor z = 0 with Coulomb friction `floor_friction`, and no slip if `rough_floor`;
+    symmetric (module docstring), or a wall x = 0 with `wall_friction`; a grid reaching
+    `reach` (m, default L0 (2 + 3 H0/L0)) from x = 0 (both ways when symmetric)."""
     _check_size(L0, H0, dx)
     mat = material or ContinuumMaterial()
     for name, mu in (("floor_friction", floor_friction), ("wall_friction", wall_friction)):
@@ -148,7 +155,8 @@ def column_system(L0: float, H0: float, dx: float, material: ContinuumMaterial |
     grid = Grid.covering(-reach if symmetric else -dx, reach, -dx, H0 + 2.0 * dx, dx)
     v_fall = math.sqrt(2.0 * G_ACC * H0)
     dt = stable_dt(mat, dx, sp, walls, v_max=v_fall, cfl=cfl)
-    return MPMSystem(grid, mat, dt, frame=LabFrame((0.0, -G_ACC)), boundaries=walls)
+    return MPMSystem(grid, mat, dt, frame=LabFrame((0.0, -G_ACC)), boundaries=walls,
+                     no_slip_below=0.0 if rough_floor else None)
 
 
 def column_state(system: MPMSystem, L0: float, H0: float, symmetric: bool = True) -> MPMState:
@@ -174,11 +182,12 @@ def run_column(L0: float, H0: float, dx: float, material: ContinuumMaterial | No
                floor_friction: float = 0.40, wall_friction: float = 0.0,
                symmetric: bool = True, t_min: float | None = None, t_max: float | None = None,
                ke_fraction: float = 1.0e-4, check_every: float | None = None,
-               reach: float | None = None, cfl: float = 0.3) -> ColumnRun:
+               reach: float | None = None, cfl: float = 0.3,
+               rough_floor: bool = False) -> ColumnRun:
     """Release the column and run until it is at rest (module docstring).  Times in s; default
     t_min = 3 sqrt(H0/g), t_max = 30 sqrt(H0/g), checks every 0.1 sqrt(H0/g)."""
     system = column_system(L0, H0, dx, material, floor_friction, wall_friction, symmetric,
-                           reach, cfl)
+                           reach, cfl, rough_floor)
     state = column_state(system, L0, H0, symmetric)
     tau = math.sqrt(H0 / G_ACC)
     t_min = 3.0 * tau if t_min is None else float(t_min)

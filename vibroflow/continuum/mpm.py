@@ -16,6 +16,7 @@ m^2, stresses Pa [xx, zz, xz, yy] (tension positive), forces N/m.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numba as nb
@@ -38,17 +39,33 @@ class ContinuumBlowUp(RuntimeError):
 @dataclass
 class MPMSystem:
     """What does not change during a run: the grid, the material, the frame (grid_update.py),
-    the boundaries (boundary.py) and the time step dt (s)."""
+    the boundaries (boundary.py) and the time step dt (s).
+
+    no_slip_below (m, optional): a rough, no-slip floor as a grid boundary condition, the
+    nodes at heights z <= no_slip_below held still after every grid update (the usual MPM
+    Dirichlet condition, Sulsky et al. 1994; the no-slip base of the mu(I) column collapses
+    of Lagree, Staron & Popinet 2011).  Unlike a point-wise penalty contact, which brakes only
+    the row of points touching the wall and lets the next row shear past it within one cell,
+    it holds the grid's velocity at the wall, so the basal shear is resolved by the grid."""
 
     grid: Grid
     material: ContinuumMaterial
     dt: float
     frame: object = field(default_factory=LabFrame)
     boundaries: list = field(default_factory=list)
+    no_slip_below: float | None = None
 
     def __post_init__(self):
         if not self.dt > 0:
             raise InputError(f"dt = {self.dt!r}: must be > 0 s")
+        self.no_slip_rows = 0
+        if self.no_slip_below is not None:
+            z = float(self.no_slip_below)
+            if not (math.isfinite(z) and self.grid.z0 <= z):
+                raise InputError(f"no_slip_below = {self.no_slip_below!r} m: must be a finite "
+                                 f"height at or above the grid's bottom {self.grid.z0!r} m")
+            # node rows k with z0 + k dx <= z (a node on the floor included)
+            self.no_slip_rows = int(math.floor((z - self.grid.z0) / self.grid.dx + 1e-9)) + 1
         self.params = self.material.as_array()
         for j, b in enumerate(self.boundaries):
             b.slot = j
@@ -212,6 +229,8 @@ def step(system: MPMSystem, state: MPMState) -> None:
     # the frame's prescribed acceleration at mid-step: second order in dt for the vibration
     a0x, a0z, om, al, px, pz = system.frame.body(state.t + 0.5 * dt)
     grid_update(gm, gmv, gf, gv, g.x0, g.z0, g.dx, dt, a0x, a0z, om, al, px, pz, g.periodic)
+    if system.no_slip_rows:
+        gv[:, :system.no_slip_rows, :] = 0.0
     g2p(state.x, state.v, state.C, state.L, gv, g.x0, g.z0, g.dx, dt, g.periodic)
     plasticity_step(state.L, state.mass, state.volume, state.density, state.stress, dt,
                     system.params, state.gamma_dot, state.phase)
