@@ -49,7 +49,7 @@ DEFAULT_N_BALLS = 300
 DEFAULT_STRAIN = 1.5
 DEFAULT_SEGMENT_STRAIN = 0.01
 DEFAULT_STEADY_FRACTION = 0.4
-DEFAULT_SEEDS = (1, 2)
+DEFAULT_SEEDS = (1, 2, 3, 4)
 #: shear strain over which the stress-ratio fluctuations of a 300-ball box stay correlated
 CORRELATION_STRAIN = 0.05
 

@@ -110,7 +110,10 @@ class ContinuumMaterial:
     * viscosity (Drucker-Prager option only) = (mu_2 - mu_s) d sqrt(rho_s p_ref) / I_0 at
       p_ref = 5 kPa (mid-depth of tub47's bed): the slope d tau / d gamma_dot of mu(I) at I -> 0;
     * dilatancy = K_dil (-) of the peak-friction option (module docstring), 0 = off (default);
-      measured on DEM by vibroflow.calibration.dilatancy (calibration.toml [dilatancy]).
+      measured on DEM by vibroflow.calibration.dilatancy (calibration.toml [dilatancy]);
+    * initial_solid_fraction: the unloaded packing phi_0 of the settled bed the continuum runs
+      start from (None: the critical one, phi_c); a bed denser than phi_c matters only with
+      the dilatancy option (its peak friction K_dil (phi_0 - phi_c)).
     """
 
     model: str = "mu_i"
@@ -126,6 +129,7 @@ class ContinuumMaterial:
     solid_density: float = 7800.0
     viscosity: float | None = None
     dilatancy: float = 0.0
+    initial_solid_fraction: float | None = None
 
     def __post_init__(self):
         if self.model not in MODELS:
@@ -148,6 +152,11 @@ class ContinuumMaterial:
         if self.dilatancy > 0 and self.model != "mu_i":
             raise InputError(f"dilatancy = {self.dilatancy!r} with model = {self.model!r}: the "
                              "dilatancy option is part of the mu_i model only (0 = off)")
+        if self.initial_solid_fraction is not None and not (
+                self.critical_solid_fraction <= self.initial_solid_fraction < 1.0):
+            raise InputError(f"initial_solid_fraction = {self.initial_solid_fraction!r}: must "
+                             f"be in [critical_solid_fraction = {self.critical_solid_fraction!r}"
+                             ", 1)")
         if not self.phi_max > self.phi_min:
             raise InputError(f"phi_min = {self.phi_min!r}: must be below phi_max = "
                              f"{self.phi_max!r}")
@@ -156,6 +165,12 @@ class ContinuumMaterial:
     def critical_density(self) -> float:
         """rho_c = rho_s phi_c (kg/m^3): below it the media is disconnected (stress-free)."""
         return self.solid_density * self.critical_solid_fraction
+
+    @property
+    def initial_density(self) -> float:
+        """rho_0 = rho_s phi_0 (kg/m^3) of the unloaded settled bed (rho_c by default)."""
+        phi0 = self.initial_solid_fraction
+        return self.critical_density if phi0 is None else self.solid_density * phi0
 
     @property
     def mu_dp(self) -> float:
