@@ -188,3 +188,20 @@ def test_run_option_takes_k_dil_from_the_calibration():
         assert bed_area(sc, m) * m.initial_density == pytest.approx(solid * 7800.0, rel=1e-12)
     with pytest.raises(InputError, match="dilatancy"):
         LagrangianOptions(dilatancy="yes")
+
+
+@pytest.mark.slow
+def test_dem_dense_packing_peaks_dilates_and_gives_k_dil_of_published_order():
+    """The DEM measurement (vibroflow.calibration.dilatancy) on tub47's balls: a dense packing
+    sheared at constant pressure peaks above its steady friction and dilates to its steady
+    solid fraction (Reynolds; Pailha & Pouliquen 2009 figs. 4-5), and the post-peak slope
+    K_dil is positive and of the order of Pailha & Pouliquen's 4.09 (glass beads)."""
+    from vibroflow.calibration.dilatancy import run_dilatancy
+    from vibroflow.scenario.io import load_scenario
+
+    sc = load_scenario("tub47-quick", [])
+    r = run_dilatancy(sc, pressure=3370.0, inertial_number=0.02, seeds=(1, 2), strain=1.2)
+    for peak, ss, f0, fss in zip(r["mu_peak"], r["mu_ss"], r["phi_start"], r["phi_ss"]):
+        assert peak > ss + 0.05
+        assert f0 > fss + 0.01
+    assert 4.09 / 3 < r["K_dil"] < 4.09 * 3

@@ -52,8 +52,10 @@ dilation's pressure change applied after it, first order in dt):
     tau = mu_y p + (mu_2 - mu_s) p gp / (gp + xi) + K_dil a I p   (I = I_0 gp / xi),
 the last term linear in gp (a viscosity K_dil a I_0 p / xi); so the quadratic keeps its form
 with mu_s -> mu_y, mu_2 -> mu_2 + K_dil dphi and S -> S + K_dil a I_0 p / xi in B and in
-gp^2's coefficient, while tau_new = tau_tr - G dt gp.  Then p_new = p + K dt tan(psi) gp (the
-plastic dilation is isotropic, so it changes only the pressure).  K_dil = 0 is the plain law,
+gp^2's coefficient, while tau_new = tau_tr - G dt gp.  Then p_new = p + K ln(phi / phi_1) (the
+plastic dilation is isotropic, so it changes only the pressure), phi_1 the packing after the
+step's plastic shear gp dt by the exact solution of d phi / d gamma = -K_dil phi (phi - phi_eq)
+(to first order K dt tan(psi) gp; the exact form cannot overshoot phi_eq).  K_dil = 0 is the plain law,
 bit for bit.
 
 The mu(I) law is ill-posed at very small and very large I (Barker et al. 2015); nothing here
@@ -358,9 +360,19 @@ def _dilatant_return(dxx, dzz, sxz, dyy, p, tau, density, dt, params):
     if tau_new < 0.0:
         tau_new = 0.0
     f = tau_new / tau
-    # the plastic dilation tr D^p = tan(psi) gp, isotropic: only the pressure changes
-    tan_psi = kd * (dphi + params[P_PHI_SLOPE] * params[P_I0] * gp / xi)
-    p_new = p + K * dt * tan_psi * gp
+    # the plastic dilation tr D^p = tan(psi) gp, isotropic: only the pressure changes.  Over
+    # the step's plastic shear dg = gp dt the packing relaxes by d phi / d g = -K_dil phi
+    # (phi - phi_eq) towards phi_eq, a logistic equation solved exactly (an explicit
+    # tan(psi) gp dt overshoots phi_eq once K_dil phi dg > 1, which the Eulerian solver's
+    # thin surface cells reach at once); I in phi_eq is capped at 1, where the phi(I) fit
+    # reaches phi_min (the dense-flow law says nothing beyond)
+    I = params[P_I0] * gp / xi
+    if I > 1.0:
+        I = 1.0
+    phi0 = params[P_RHO_C] / params[P_RHO_S] + dphi
+    phi_eq = params[P_RHO_C] / params[P_RHO_S] - params[P_PHI_SLOPE] * I
+    phi1 = phi_eq / (1.0 - (1.0 - phi_eq / phi0) * np.exp(-kd * phi_eq * gp * dt))
+    p_new = p + K * np.log(phi0 / phi1)
     if p_new < 0.0:
         p_new = 0.0
     return f * dxx - p_new, f * dzz - p_new, f * sxz, f * dyy - p_new, gp, 2
