@@ -134,8 +134,11 @@ def calibration_stage() -> Stage:
 
 def continuum_stage(method: ContinuumMethod, options) -> Stage:
     def inputs(study: Study) -> dict:
-        return {"scenario": scenario_inputs(study.scenario),
-                "options": dataclasses.asdict(options)}
+        opts = dataclasses.asdict(options)
+        if not opts.get("dilatancy", False):
+            # off (the default): left out so that studies run before the option keep their hashes
+            opts.pop("dilatancy", None)
+        return {"scenario": scenario_inputs(study.scenario), "options": opts}
 
     def run(study: Study, resume: bool) -> dict:
         from vibroflow.calibration.calibrate import read_calibration
