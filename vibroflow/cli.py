@@ -202,6 +202,10 @@ def calibrate(
         "--cyclic/--no-cyclic", help="Give the continuum the secant shear modulus of cyclic "
                                      "simple shear at the tub's frequency and strain amplitude "
                                      "(default; seconds), or the small-strain one.")] = True,
+    dilatancy: Annotated[bool, typer.Option(
+        "--dilatancy", help="Also measure the dilatancy constant K_dil of the continuum's "
+                            "peak-friction option on dense sheared DEM packings (about a "
+                            "minute) -> [dilatancy].")] = False,
 ) -> None:
     """Calibrate the continuum on a DEM run: RUN_DIR/calibration.toml, fields.nc, pictures."""
     if not run_dir.is_dir():
@@ -213,7 +217,7 @@ def calibrate(
     from vibroflow.calibration.calibrate import calibrate as run_calibration
 
     cal = run_calibration(run_dir, shear_cell=shear_cell, kernel=kernel, width=width,
-                          cyclic=cyclic)
+                          cyclic=cyclic, dilatancy=dilatancy)
     r, w = cal["rheology"], cal["wall"]
     if r.get("status", "measured") != "measured":
         sys.stderr.write(f"warning: rheology {r['status']}\n")
@@ -251,6 +255,10 @@ def continuum(
                               "tub47's parameters.")] = None,
     rheology: Annotated[str, typer.Option(
         "--rheology", help="mu_i (Dunatunga & Kamrin) or drucker_prager.")] = "mu_i",
+    dilatancy: Annotated[bool, typer.Option(
+        "--dilatancy", help="mu_i with peak friction and dilation (Pailha & Pouliquen 2009), "
+                            "K_dil from the calibration's [dilatancy] (vibroflow calibrate "
+                            "--dilatancy).")] = False,
     dx: Annotated[Optional[float], typer.Option(
         "--dx", help="Grid spacing (m); default half the analysis cell.")] = None,
     set_: SetOption = None,
@@ -283,8 +291,8 @@ def continuum(
         from vibroflow.calibration.calibrate import read_calibration
 
         cal = read_calibration(calibration)
-    options = options_class(dx=dx, model=rheology)
-    material_of(s, cal, rheology)  # validates the parameters before --out is made
+    options = options_class(dx=dx, model=rheology, dilatancy=dilatancy)
+    material_of(s, cal, rheology, dilatancy)  # validates the parameters before --out is made
     try:
         summary = run_method(s, out, calibration=cal, options=options, progress=True,
                              vtk=vtk, resume=resume, stop_after_steps=stop_after_steps)

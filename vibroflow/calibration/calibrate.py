@@ -14,7 +14,10 @@ Stages:
    shear at the tub's frequency and at the strain amplitude the DEM's bed sees (cyclic_shear;
    the amplitude from the bed's cycle-mean shear rate), not the small-strain modulus of step 4,
    which [elastic] keeps as shear_modulus_small_strain_Pa (cyclic=False: the small-strain one);
-6. the equivalent Drucker-Prager with viscosity;
+6. the equivalent Drucker-Prager with viscosity; with dilatancy=True (opt-in, ~1 minute), the
+   dilatancy constant K_dil of the continuum's peak-friction option, measured on dense
+   sheared packings of the balls at the bed's pressure and the tub's I (dilatancy.py) ->
+   [dilatancy];
 7. RUN_DIR/calibration.toml (every parameter with its uncertainty and its provenance, read by
    the continuum solvers with `read_calibration`), RUN_DIR/calibration/ pictures.
 
@@ -122,7 +125,7 @@ def young_poisson(K: float, G: float) -> tuple[float, float]:
 
 def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
               width: float | None = None, progress: bool = True, shear_cell_options=None,
-              pictures: bool = True, cyclic: bool = True) -> dict:
+              pictures: bool = True, cyclic: bool = True, dilatancy: bool = False) -> dict:
     """Calibrate the continuum on the DEM run in RUN (a run directory with dem.h5).
 
     Returns the calibration as a dict (what calibration.toml holds).  See the module notes.
@@ -179,6 +182,8 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
                                   d, rho_s, gam_ref, shear_cell, kernel, width, avg)
         if cyclic_rec is not None:
             cal["cyclic_shear"] = cyclic_rec
+        if dilatancy:
+            cal["dilatancy"] = _dilatancy(sc, p_bed, dp.get("inertial_number"), prog)
         write_calibration(out_dir / CALIBRATION_FILE, cal)
         if pictures:
             from . import plots
@@ -232,6 +237,35 @@ def _cyclic_modulus(sc, pressure: float, shear_rate: float, elastic: dict, prog)
             "units": "strain_amplitude -, secant_shear_modulus Pa, damping_ratio -, "
                      "peak_stress_ratio -, solid_fraction -",
             **{c: [_f(r[c]) for r in recs] for c in cols}}
+
+
+def _dilatancy(sc, pressure: float, inertial_number, prog) -> dict:
+    """The [dilatancy] table: K_dil of mu = mu(I) + K_dil (phi - phi_eq(I)) measured on a dense
+    packing of the scenario's balls sheared at the bed's pressure and the tub's inertial number
+    (vibroflow.calibration.dilatancy; I clipped to [0.005, 0.1], the dense regime the test
+    resolves; 0.02 when the tub gave none)."""
+    from .dilatancy import DEFAULT_INERTIAL_NUMBER, run_dilatancy
+
+    I = inertial_number if (isinstance(inertial_number, float) and math.isfinite(inertial_number)
+                            and inertial_number > 0) else DEFAULT_INERTIAL_NUMBER
+    I = min(max(I, 0.005), 0.1)
+    prog.log(f"dilatancy: dense packings sheared at p = {pressure:.4g} Pa, I = {I:.3g}")
+    r = run_dilatancy(sc, pressure=pressure, inertial_number=I, progress=prog)
+    prog.log(f"dilatancy: K_dil = {r['K_dil']:.2f} +- {r['K_dil_stderr']:.2f}")
+    return {"model": "mu = mu(I) + K_dil (phi - phi_eq(I)), phi_eq(I) = phi_c - (phi_max - "
+                     "phi_min) I, d phi / d gamma = -phi K_dil (phi - phi_eq(I)) (Pailha & "
+                     "Pouliquen 2009)",
+            "source": "post-peak stress ratio against solid fraction of dense (frictionless-"
+                      "compressed) Lees-Edwards packings sheared at constant I and sigma_zz "
+                      "(vibroflow.calibration.dilatancy)",
+            "K_dil": _f(r["K_dil"]), "K_dil_stderr": _f(r["K_dil_stderr"]),
+            "excess_solid_fraction_dense": _f(r["excess_solid_fraction"]),
+            "pressure_Pa": _f(r["pressure_Pa"]), "inertial_number": _f(r["inertial_number"]),
+            "n_balls": int(r["n_balls"]), "strain": _f(r["strain"]), "seeds": r["seeds"],
+            "K_dil_per_seed": [_f(v) for v in r["K_dil_per_seed"]],
+            "mu_peak": [_f(v) for v in r["mu_peak"]], "mu_ss": [_f(v) for v in r["mu_ss"]],
+            "phi_start": [_f(v) for v in r["phi_start"]],
+            "phi_ss": [_f(v) for v in r["phi_ss"]]}
 
 
 def _median_dense(ds, name: str) -> float:

@@ -32,6 +32,32 @@ tau <= mu_dp p with mu_dp = tan(beta) / sqrt(3) and the plane-strain match (mode
 tan(beta) = 3 sqrt(3) tan(phi_f) / sqrt(9 + 12 tan^2 phi_f), phi_f = atan(mu_s); above yield a
 Bingham-like flow tau = mu_dp p + eta gamma_dot_p, i.e. gp = (tau_tr - mu_dp p) / (G dt + eta).
 
+Option: dilatancy (peak friction; `dilatancy` = K_dil > 0, mu(I) model only).  Pailha &
+Pouliquen (2009, J. Fluid Mech. 633, 115-135, eqs. 2.4-2.6), after Roux & Radjai (1998) and
+Rowe's stress-dilatancy: the friction of a bed depends on how far its solid fraction phi is from
+the steady one phi_eq(I) of the phi(I) law,
+    mu = mu(I) + tan(psi),  tan(psi) = K_dil (phi - phi_eq(I)),  phi_eq(I) = phi_c - a I,
+with a = phi_max - phi_min (the calibrated phi(I) slope) and psi the dilatancy angle; and the
+plastic flow carries the matching volume change (non-associated: the yield surface's slope in
+p is mu, the flow's is tan psi), tr D^p = tan(psi) gamma_dot_p, so that a dense bed sheared
+under a free surface dilates towards phi_eq(I) (d phi / dt = -phi tan(psi) gamma_dot_p) and
+relaxes to mu(I), and a confined one builds pressure (Reynolds dilatancy).  phi is the point's
+own density (det F in the MPM, the transported density in the Eulerian solver) over rho_s,
+less its elastic compression: phi = rho exp(-p / K) / rho_s, the packing of the unloaded
+skeleton that the disconnection threshold rho_c also refers to (the DEM measures phi_c and
+phi(I) at the bed's pressure, where its stiff contacts compress the packing by ~1e-4 only).
+In the return map (Dunatunga & Kamrin's quadratic with the pressure held at the trial one, the
+dilation's pressure change applied after it, first order in dt):
+    mu_y = mu_s + K_dil dphi  (dphi = phi - phi_c; the static yield),
+    tau = mu_y p + (mu_2 - mu_s) p gp / (gp + xi) + K_dil a I p   (I = I_0 gp / xi),
+the last term linear in gp (a viscosity K_dil a I_0 p / xi); so the quadratic keeps its form
+with mu_s -> mu_y, mu_2 -> mu_2 + K_dil dphi and S -> S + K_dil a I_0 p / xi in B and in
+gp^2's coefficient, while tau_new = tau_tr - G dt gp.  Then p_new = p + K ln(phi / phi_1) (the
+plastic dilation is isotropic, so it changes only the pressure), phi_1 the packing after the
+step's plastic shear gp dt by the exact solution of d phi / d gamma = -K_dil phi (phi - phi_eq)
+(to first order K dt tan(psi) gp; the exact form cannot overshoot phi_eq).  K_dil = 0 is the plain law,
+bit for bit.
+
 The mu(I) law is ill-posed at very small and very large I (Barker et al. 2015); nothing here
 regularises it, so results must be checked for grid convergence.
 """
@@ -51,8 +77,9 @@ DRUCKER_PRAGER = 1
 MODELS = {"mu_i": MU_I, "drucker_prager": DRUCKER_PRAGER}
 
 # packed parameter layout of `ContinuumMaterial.as_array()`
-P_MODEL, P_K, P_G, P_MU_S, P_MU_2, P_I0, P_D, P_RHO_S, P_RHO_C, P_MU_DP, P_ETA = range(11)
-N_PARAMS = 11
+(P_MODEL, P_K, P_G, P_MU_S, P_MU_2, P_I0, P_D, P_RHO_S, P_RHO_C, P_MU_DP, P_ETA, P_KDIL,
+ P_PHI_SLOPE) = range(13)
+N_PARAMS = 13
 
 # tub47 defaults (documented in ContinuumMaterial)
 _MU_S = math.tan(math.radians(20.9))
@@ -83,7 +110,12 @@ class ContinuumMaterial:
       for non-affine relaxation (affine G is an upper bound, several times the measured one);
     * diameter 6.35 mm, solid density 7800 kg/m^3 (steel balls);
     * viscosity (Drucker-Prager option only) = (mu_2 - mu_s) d sqrt(rho_s p_ref) / I_0 at
-      p_ref = 5 kPa (mid-depth of tub47's bed): the slope d tau / d gamma_dot of mu(I) at I -> 0.
+      p_ref = 5 kPa (mid-depth of tub47's bed): the slope d tau / d gamma_dot of mu(I) at I -> 0;
+    * dilatancy = K_dil (-) of the peak-friction option (module docstring), 0 = off (default);
+      measured on DEM by vibroflow.calibration.dilatancy (calibration.toml [dilatancy]);
+    * initial_solid_fraction: the unloaded packing phi_0 of the settled bed the continuum runs
+      start from (None: the critical one, phi_c); a bed denser than phi_c matters only with
+      the dilatancy option (its peak friction K_dil (phi_0 - phi_c)).
     """
 
     model: str = "mu_i"
@@ -98,6 +130,8 @@ class ContinuumMaterial:
     diameter: float = 0.00635
     solid_density: float = 7800.0
     viscosity: float | None = None
+    dilatancy: float = 0.0
+    initial_solid_fraction: float | None = None
 
     def __post_init__(self):
         if self.model not in MODELS:
@@ -113,11 +147,32 @@ class ContinuumMaterial:
                              "must be in (0, 1)")
         if self.viscosity is not None and not self.viscosity >= 0:
             raise InputError(f"viscosity = {self.viscosity!r}: must be >= 0 Pa s")
+        if not (isinstance(self.dilatancy, (int, float)) and math.isfinite(self.dilatancy)
+                and self.dilatancy >= 0):
+            raise InputError(f"dilatancy = {self.dilatancy!r}: must be a finite number >= 0 "
+                             "(K_dil; 0 = off)")
+        if self.dilatancy > 0 and self.model != "mu_i":
+            raise InputError(f"dilatancy = {self.dilatancy!r} with model = {self.model!r}: the "
+                             "dilatancy option is part of the mu_i model only (0 = off)")
+        if self.initial_solid_fraction is not None and not (
+                self.critical_solid_fraction <= self.initial_solid_fraction < 1.0):
+            raise InputError(f"initial_solid_fraction = {self.initial_solid_fraction!r}: must "
+                             f"be in [critical_solid_fraction = {self.critical_solid_fraction!r}"
+                             ", 1)")
+        if not self.phi_max > self.phi_min:
+            raise InputError(f"phi_min = {self.phi_min!r}: must be below phi_max = "
+                             f"{self.phi_max!r}")
 
     @property
     def critical_density(self) -> float:
         """rho_c = rho_s phi_c (kg/m^3): below it the media is disconnected (stress-free)."""
         return self.solid_density * self.critical_solid_fraction
+
+    @property
+    def initial_density(self) -> float:
+        """rho_0 = rho_s phi_0 (kg/m^3) of the unloaded settled bed (rho_c by default)."""
+        phi0 = self.initial_solid_fraction
+        return self.critical_density if phi0 is None else self.solid_density * phi0
 
     @property
     def mu_dp(self) -> float:
@@ -152,6 +207,8 @@ class ContinuumMaterial:
         a[P_RHO_C] = self.critical_density
         a[P_MU_DP] = self.mu_dp
         a[P_ETA] = self.eta
+        a[P_KDIL] = self.dilatancy
+        a[P_PHI_SLOPE] = self.phi_max - self.phi_min
         return a
 
     def to_dict(self) -> dict:
@@ -167,7 +224,9 @@ class ContinuumMaterial:
         I_0, phi_max, phi_min, critical_solid_fraction; [elastic] bulk_modulus_Pa,
         shear_modulus_Pa; [media] diameter_m, solid_density_kg_m3; [drucker_prager]
         viscosity_Pa_s (the Drucker-Prager option's viscosity, when finite).  Missing optional
-        keys keep the tub47 defaults."""
+        keys keep the tub47 defaults.  The dilatancy option stays off (K_dil = 0) here: the
+        caller switches it on with `dataclasses.replace(mat, dilatancy=...)` (run options,
+        calibration.toml [dilatancy] K_dil)."""
         base = cls()
         r = cal.get("rheology", {})
         e = cal.get("elastic", {})
@@ -249,6 +308,8 @@ def return_map(sxx, szz, sxz, syy, density, dt, params):
         if excess <= 0.0:
             return sxx, szz, sxz, syy, 0.0, 1
         gp = excess / (S + params[P_ETA])
+    elif params[P_KDIL] > 0.0:
+        return _dilatant_return(dxx, dzz, sxz, dyy, p, tau, density, dt, params)
     else:
         mu_s = params[P_MU_S]
         excess = tau - mu_s * p
@@ -267,6 +328,54 @@ def return_map(sxx, szz, sxz, syy, density, dt, params):
         tau_new = 0.0
     f = tau_new / tau
     return (f * dxx - p, f * dzz - p, f * sxz, f * dyy - p, gp, 2)
+
+
+@nb.njit(cache=True, inline="always")
+def _dilatant_return(dxx, dzz, sxz, dyy, p, tau, density, dt, params):
+    """The mu(I) return map with dilatancy (module docstring, "Option: dilatancy"), from the
+    trial deviator (dxx, dzz, sxz, dyy) (Pa), pressure p > 0 (Pa) and tau (Pa) of a connected
+    point of density `density` (kg/m^3).  Same returns as `return_map`."""
+    K = params[P_K]
+    S = params[P_G] * dt
+    kd = params[P_KDIL]
+    # packing of the unloaded skeleton over the critical one (the elastic compression removed)
+    dphi = (density * np.exp(-p / K) - params[P_RHO_C]) / params[P_RHO_S]
+    mu_y = params[P_MU_S] + kd * dphi
+    if mu_y < 0.0:
+        mu_y = 0.0
+    excess = tau - mu_y * p
+    if excess <= 0.0:
+        return dxx - p, dzz - p, sxz, dyy - p, 0.0, 1
+    xi = params[P_I0] * np.sqrt(p / params[P_RHO_S]) / params[P_D]
+    # K_dil a I p = (K_dil a I_0 p / xi) gp: a viscosity added to G dt in the quadratic
+    S2 = S + kd * params[P_PHI_SLOPE] * params[P_I0] * p / xi
+    B = tau - (params[P_MU_2] + kd * dphi) * p - S2 * xi
+    C = excess * xi
+    disc = np.sqrt(B * B + 4.0 * S2 * C)
+    if B > 0.0:
+        gp = (B + disc) / (2.0 * S2)
+    else:
+        gp = 2.0 * C / (disc - B) if disc - B > 0.0 else 0.0
+    tau_new = tau - S * gp
+    if tau_new < 0.0:
+        tau_new = 0.0
+    f = tau_new / tau
+    # the plastic dilation tr D^p = tan(psi) gp, isotropic: only the pressure changes.  Over
+    # the step's plastic shear dg = gp dt the packing relaxes by d phi / d g = -K_dil phi
+    # (phi - phi_eq) towards phi_eq, a logistic equation solved exactly (an explicit
+    # tan(psi) gp dt overshoots phi_eq once K_dil phi dg > 1, which the Eulerian solver's
+    # thin surface cells reach at once); I in phi_eq is capped at 1, where the phi(I) fit
+    # reaches phi_min (the dense-flow law says nothing beyond)
+    I = params[P_I0] * gp / xi
+    if I > 1.0:
+        I = 1.0
+    phi0 = params[P_RHO_C] / params[P_RHO_S] + dphi
+    phi_eq = params[P_RHO_C] / params[P_RHO_S] - params[P_PHI_SLOPE] * I
+    phi1 = phi_eq / (1.0 - (1.0 - phi_eq / phi0) * np.exp(-kd * phi_eq * gp * dt))
+    p_new = p + K * np.log(phi0 / phi1)
+    if p_new < 0.0:
+        p_new = 0.0
+    return f * dxx - p_new, f * dzz - p_new, f * sxz, f * dyy - p_new, gp, 2
 
 
 @nb.njit(cache=True)

@@ -76,13 +76,15 @@ CHECKPOINT_NAME = "checkpoint.npz"
 class LagrangianOptions:
     """Numerical options (SI): grid spacing dx (m; default half the analysis cell), Courant
     number, rheology model ("mu_i" or "drucker_prager"), settling time in the still tub (s),
-    wall stiffness (Pa/m; default (K + 4G/3) / point spacing)."""
+    wall stiffness (Pa/m; default (K + 4G/3) / point spacing); dilatancy: the mu_i model's
+    peak-friction option with the calibration's [dilatancy] K_dil (constitutive.py)."""
 
     dx: float | None = None
     cfl: float = 0.3
     model: str = "mu_i"
     settle_time: float = 0.05
     wall_stiffness: float | None = None
+    dilatancy: bool = False
 
     def __post_init__(self):
         if self.dx is not None and not self.dx > 0:
@@ -93,6 +95,8 @@ class LagrangianOptions:
             raise InputError(f"settle_time = {self.settle_time!r}: must be >= 0 s")
         if self.wall_stiffness is not None and not self.wall_stiffness > 0:
             raise InputError(f"wall_stiffness = {self.wall_stiffness!r}: must be > 0 Pa/m")
+        if not isinstance(self.dilatancy, bool):
+            raise InputError(f"dilatancy = {self.dilatancy!r}: must be true or false")
 
 
 def _contact(scenario, a: str, b: str):
@@ -101,13 +105,29 @@ def _contact(scenario, a: str, b: str):
     return find_contact(scenario, a, b)
 
 
-def material_of(scenario, calibration: dict | None, model: str = "mu_i") -> ContinuumMaterial:
+def material_of(scenario, calibration: dict | None, model: str = "mu_i",
+                dilatancy: bool = False) -> ContinuumMaterial:
     """The continuum material: the calibration's, else tub47's defaults with the scenario's
-    ball diameter and density."""
+    ball diameter and density; with `dilatancy`, the calibration's [dilatancy] K_dil (measured
+    on DEM, vibroflow.calibration.dilatancy) switches the peak-friction option on."""
     if calibration is not None:
-        return ContinuumMaterial.from_calibration(calibration, model=model)
-    rho_s = scenario.materials[scenario.fill.material].density
-    return ContinuumMaterial(model=model, diameter=scenario.fill.diameter, solid_density=rho_s)
+        mat = ContinuumMaterial.from_calibration(calibration, model=model)
+    else:
+        rho_s = scenario.materials[scenario.fill.material].density
+        mat = ContinuumMaterial(model=model, diameter=scenario.fill.diameter,
+                                solid_density=rho_s)
+    if not dilatancy:
+        return mat
+    k = (calibration or {}).get("dilatancy", {}).get("K_dil")
+    if not (isinstance(k, (int, float)) and math.isfinite(k) and k > 0):
+        raise InputError(f"dilatancy = true: needs a calibration with a measured [dilatancy] "
+                         f"K_dil > 0 (vibroflow calibrate --dilatancy); got {k!r}")
+    excess = calibration["dilatancy"].get("initial_excess_solid_fraction", 0.0)
+    if not (isinstance(excess, (int, float)) and math.isfinite(excess) and excess >= 0):
+        raise InputError(f"calibration [dilatancy] initial_excess_solid_fraction = {excess!r}: "
+                         "must be a number >= 0")
+    return dataclasses.replace(mat, dilatancy=float(k), initial_solid_fraction=(
+        mat.critical_solid_fraction + float(excess)) if excess > 0 else None)
 
 
 def bed_height(radius: float, area: float, rim: float) -> float:
@@ -126,10 +146,11 @@ def bed_height(radius: float, area: float, rim: float) -> float:
 
 def bed_area(scenario, material: ContinuumMaterial) -> float:
     """Cross-section (m^2) of the settled bed: the DEM's solid volume (fill.count balls of
-    fill.diameter) over the slice L_y, at the critical solid fraction."""
+    fill.diameter) over the slice L_y, at the critical solid fraction (or the material's
+    initial_solid_fraction)."""
     fill = scenario.fill
     solid = fill.count * math.pi * fill.diameter**3 / 6.0 / geometry_of(scenario).length
-    return solid / material.critical_solid_fraction
+    return solid * material.solid_density / material.initial_density
 
 
 def settled_bed(scenario, material: ContinuumMaterial, spacing: float):
@@ -149,7 +170,7 @@ def settled_bed(scenario, material: ContinuumMaterial, spacing: float):
         raise InputError(f"fill.count = {fill.count}: the bed is thinner than one point "
                          f"({spacing:.3g} m); refine dx")
     g = math.hypot(scenario.gravity[0], scenario.gravity[2])
-    rho_c = material.critical_density
+    rho_c = material.initial_density  # rho_c unless the bed starts denser (dilatancy)
     szz = -rho_c * g * np.clip(h - x[:, 1], 0.0, None)
     k0 = 1.0 - math.sin(math.atan(material.mu_s))
     stress = np.zeros((n, 4))
@@ -434,7 +455,7 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
     if stop_after_steps is not None and not int(stop_after_steps) >= 0:
         raise InputError(f"stop_after_steps = {stop_after_steps!r}: must be >= 0")
     options = options or LagrangianOptions()
-    material = material_of(scenario, calibration, options.model)
+    material = material_of(scenario, calibration, options.model, options.dilatancy)
     motion = TubMotion.of_scenario(scenario)
     gravity = (float(scenario.gravity[0]), float(scenario.gravity[2]))
     system, spacing = make_system(scenario, material, calibration, options,

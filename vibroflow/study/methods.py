@@ -53,7 +53,7 @@ def _method(name: str, description: str, module: str, options: str, run: str):
                        progress: bool, resume: bool) -> dict:
             from vibroflow.continuum.run import material_of
 
-            material_of(scenario, calibration, opts.model)
+            material_of(scenario, calibration, opts.model, opts.dilatancy)
             return getattr(mod, run)(scenario, out_dir, calibration=calibration, options=opts,
                                      progress=progress, resume=resume)
 

@@ -100,20 +100,33 @@ def _run_calibration(study: Study, resume: bool) -> dict:
     from vibroflow.calibration.calibrate import calibrate
 
     cal = calibrate(study.folder(DEM), shear_cell=study.shear_cell, progress=study.progress,
-                    cyclic=True)
+                    cyclic=True, dilatancy=needs_dilatancy(study))
     r = cal["rheology"]
     return {"calibration": f"{DEM}/calibration.toml",
             "rheology": {k: r.get(k) for k in ("mu_s", "mu_2", "I_0", "source")}}
 
 
+def needs_dilatancy(study: Study) -> bool:
+    """Whether a method runs with the dilatancy option, so the calibration must measure K_dil
+    (calibration/dilatancy.py)."""
+    return any(bool(getattr(opts, "dilatancy", False)) for _, opts in study.methods)
+
+
+def _calibration_inputs(study: Study) -> dict:
+    # cyclic: the continuum's shear modulus is the cyclic secant one (calibrate.py step 5);
+    # "dilatancy" only when measured, so that studies without it keep their hashes
+    inputs = {"shear_cell": bool(study.shear_cell), "cyclic_shear_modulus": True}
+    if needs_dilatancy(study):
+        inputs["dilatancy"] = True
+    return inputs
+
+
 def calibration_stage() -> Stage:
-    # cyclic: the continuum's shear modulus is the cyclic secant one (calibrate.py step 5)
-    return Stage(CALIBRATION, inputs=lambda st: {"shear_cell": bool(st.shear_cell),
-                                                 "cyclic_shear_modulus": True},
+    return Stage(CALIBRATION, inputs=_calibration_inputs,
                  run=_run_calibration, upstream=(DEM,),
                  outputs=(f"{DEM}/calibration.toml",),
                  estimate=lambda st: 0.15 * _dem_cost(st) + 5.0
-                 + (600.0 if st.shear_cell else 0.0))
+                 + (600.0 if st.shear_cell else 0.0) + (60.0 if needs_dilatancy(st) else 0.0))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -121,8 +134,11 @@ def calibration_stage() -> Stage:
 
 def continuum_stage(method: ContinuumMethod, options) -> Stage:
     def inputs(study: Study) -> dict:
-        return {"scenario": scenario_inputs(study.scenario),
-                "options": dataclasses.asdict(options)}
+        opts = dataclasses.asdict(options)
+        if not opts.get("dilatancy", False):
+            # off (the default): left out so that studies run before the option keep their hashes
+            opts.pop("dilatancy", None)
+        return {"scenario": scenario_inputs(study.scenario), "options": opts}
 
     def run(study: Study, resume: bool) -> dict:
         from vibroflow.calibration.calibrate import read_calibration

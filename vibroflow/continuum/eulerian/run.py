@@ -114,7 +114,7 @@ def bed_masses(system: EulerianSystem, area: float, gravity: float):
     the elastic law gives the lithostatic pressure, rho_c exp(p / K), as the Lagrangian bed's."""
     mesh = system.mesh
     mat = system.material
-    rho_c = mat.critical_density
+    rho_c = mat.initial_density  # rho_c unless the bed starts denser (dilatancy)
     c = system.x
     h = mesh.h
     inside = mesh.inside
@@ -184,7 +184,7 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
     if stop_after_steps is not None and not int(stop_after_steps) >= 0:
         raise InputError(f"stop_after_steps = {stop_after_steps!r}: must be >= 0")
     options = options or EulerianOptions()
-    material = material_of(scenario, calibration, options.model)
+    material = material_of(scenario, calibration, options.model, options.dilatancy)
     motion = TubMotion.of_scenario(scenario)
     gravity = (float(scenario.gravity[0]), float(scenario.gravity[2]))
     system = make_system(scenario, material, calibration, options, TubFrame(motion, gravity))
