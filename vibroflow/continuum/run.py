@@ -63,7 +63,7 @@ from .constitutive import ContinuumMaterial
 from .fields import grid_fields, write_grid_vtr
 from .grid import Grid
 from .grid_update import LabFrame, TubFrame
-from .mpm import ContinuumBlowUp, MPMState, MPMSystem, init_state, step
+from .mpm import ContinuumBlowUp, MPMState, MPMSystem, advance, init_state
 from .timestep import stable_dt
 
 SUMMARY_NAME = "summary.json"
@@ -185,7 +185,8 @@ def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
     f, per = scenario.motion.frequency, scenario.run.phases_per_cycle
     interval = 1.0 / (f * per)
     dt = interval / math.ceil(interval / dt)
-    return MPMSystem(grid, material, dt, frame=frame, boundaries=boundaries), spacing
+    return MPMSystem(grid, material, dt, frame=frame, boundaries=boundaries,
+                     chunks=scenario.run.force_chunks), spacing
 
 
 def sample_times(scenario) -> tuple[np.ndarray, float, float]:
@@ -546,7 +547,8 @@ def _vibrate(scenario, system, state, samples: Samples, geo, material, times, ou
             "wall_time_s": wall_before + time.perf_counter() - wall0})
 
     prog.stage("continuum (lagrangian)", run.duration)
-    for k in range(k0, n_steps + 1):
+    k = k0
+    while True:
         while samples.j < S and sample_step[samples.j] == k:
             j = samples.j
             pose6 = np.array(system.frame.pose(state.t))
@@ -597,11 +599,30 @@ def _vibrate(scenario, system, state, samples: Samples, geo, material, times, ou
         if time.perf_counter() - last_ckpt > run.checkpoint_every:
             checkpoint()
             last_ckpt = time.perf_counter()
-        step(system, state)
-        if k % 200 == 0:
-            prog.update(state.t, (k + 1 - k0) * n)
+        # the steps up to the next sample, stop or progress report, in one compiled call
+        nxt = next_event(k, n_steps, sample_step, samples.j, k0, stop_after_steps)
+        advance(system, state, nxt - k)
+        k = nxt
+        prog.update(state.t, (k - k0) * n)
     prog.update(state.t, (n_steps - k0) * n)
     return True
+
+
+#: steps between progress reports (and the checks for a checkpoint's wall time)
+REPORT_EVERY = 200
+
+
+def next_event(k: int, n_steps: int, sample_step, j: int, k0: int,
+               stop_after_steps: int | None) -> int:
+    """The step after k at which a vibration loop must look again: the next sample (sample
+    steps sample_step[j:]), the end n_steps, the stop after stop_after_steps steps from k0, or
+    the next multiple of REPORT_EVERY."""
+    nxt = min(n_steps, (k // REPORT_EVERY + 1) * REPORT_EVERY)
+    if j < len(sample_step):
+        nxt = min(nxt, int(sample_step[j]))
+    if stop_after_steps is not None:
+        nxt = min(nxt, k0 + int(stop_after_steps))
+    return max(nxt, k + 1)
 
 
 def settle(scenario, material, calibration, options, x, volume, density, stress,
@@ -613,10 +634,10 @@ def settle(scenario, material, calibration, options, x, volume, density, stress,
     steps = int(math.ceil(options.settle_time / system.dt))
     if prog is not None:
         prog.stage("continuum: settle (still tub)", options.settle_time)
-    for k in range(steps):
-        step(system, state)
-        if prog is not None and k % 200 == 0:
-            prog.update(state.t, (k + 1) * state.n)
+    for k in range(0, steps, REPORT_EVERY):
+        advance(system, state, min(REPORT_EVERY, steps - k))
+        if prog is not None:
+            prog.update(state.t, state.step * state.n)
     return state
 
 
