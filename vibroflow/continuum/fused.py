@@ -96,6 +96,32 @@ def _escaped_range(a, b, x, v, xmin, xmax, zmin, zmax):
     return bad
 
 
+@nb.njit(cache=True)
+def sum_chunk_rows(i0, i1, cm, cmv, cf, gm, gmv, gf):
+    """Grid rows i0:i1 of mass gm, momentum gmv and force gf: the sums of the per-chunk
+    buffers cm, cmv, cf in the fixed order chunk 0, 1, ... (module docstring)."""
+    nchunk = cm.shape[0]
+    nz = gm.shape[1]
+    for i in range(i0, i1):
+        for k in range(nz):
+            sm = cm[0, i, k]
+            s0 = cmv[0, i, k, 0]
+            s1 = cmv[0, i, k, 1]
+            f0 = cf[0, i, k, 0]
+            f1 = cf[0, i, k, 1]
+            for c in range(1, nchunk):
+                sm += cm[c, i, k]
+                s0 += cmv[c, i, k, 0]
+                s1 += cmv[c, i, k, 1]
+                f0 += cf[c, i, k, 0]
+                f1 += cf[c, i, k, 1]
+            gm[i, k] = sm
+            gmv[i, k, 0] = s0
+            gmv[i, k, 1] = s1
+            gf[i, k, 0] = f0
+            gf[i, k, 1] = f1
+
+
 @nb.njit(cache=True, parallel=True)
 def advance_kernel(nsteps, t, dt, x, v, C, L, mass, volume, density, stress, gamma_dot, phase,
                    fext, bseq, wpar, wxi, wf, wfn, wft, wst, ppar, frame, x0, z0, dx,
@@ -111,7 +137,7 @@ def advance_kernel(nsteps, t, dt, x, v, C, L, mass, volume, density, stress, gam
     point is off the box or non-finite."""
     nchunk = bounds.shape[0] - 1
     nb_ = bseq.shape[0]
-    nx, nz = gm.shape
+    nx = gm.shape[0]
     deep = np.zeros((nchunk, max(nb_, 1)), np.int64)
     bad = np.zeros(nchunk, np.int64)
     for s in range(nsteps):
@@ -133,25 +159,8 @@ def advance_kernel(nsteps, t, dt, x, v, C, L, mass, volume, density, stress, gam
                     n_deep += deep[c, j]
                 if n_deep > 0:
                     return s, t, THROUGH_WALL, j
-        # the chunks' grid sums in the fixed order 0, 1, ... (module docstring)
         for i in nb.prange(nx):
-            for k in range(nz):
-                sm = cm[0, i, k]
-                s0 = cmv[0, i, k, 0]
-                s1 = cmv[0, i, k, 1]
-                f0 = cf[0, i, k, 0]
-                f1 = cf[0, i, k, 1]
-                for c in range(1, nchunk):
-                    sm += cm[c, i, k]
-                    s0 += cmv[c, i, k, 0]
-                    s1 += cmv[c, i, k, 1]
-                    f0 += cf[c, i, k, 0]
-                    f1 += cf[c, i, k, 1]
-                gm[i, k] = sm
-                gmv[i, k, 0] = s0
-                gmv[i, k, 1] = s1
-                gf[i, k, 0] = f0
-                gf[i, k, 1] = f1
+            sum_chunk_rows(i, i + 1, cm, cmv, cf, gm, gmv, gf)
         # 3: the frame's acceleration at mid-step
         a0x, a0z, om, al, pvx, pvz = frame_body(frame, t + 0.5 * dt)
         grid_update(gm, gmv, gf, gv, x0, z0, dx, dt, a0x, a0z, om, al, pvx, pvz, periodic)

@@ -49,13 +49,14 @@ from ..constitutive import ContinuumMaterial
 from ..fields import grid_fields, write_grid_vtr
 from ..grid_update import LabFrame, TubFrame
 from ..mpm import ContinuumBlowUp
-from ..run import (BULK_CSV_NAME, CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME, SUMMARY_NAME, VTK_DIR,
-                   LagrangianOptions, Samples, bed_area, cell_grid_of, write_shear_rate_csv,
-                   material_of, run_fingerprint, sample_times, samples_source, shear_rate,
-                   shear_rate_outputs, to_lab, write_json_atomic)
+from ..run import (BULK_CSV_NAME, CHECKPOINT_NAME, REPORT_EVERY, SHEAR_RATE_CSV_NAME,
+                   SUMMARY_NAME, VTK_DIR, LagrangianOptions, Samples, bed_area, cell_grid_of,
+                   material_of, next_event, run_fingerprint, sample_times, samples_source,
+                   shear_rate, shear_rate_outputs, to_lab, write_json_atomic,
+                   write_shear_rate_csv)
 from ..timestep import stable_dt
 from .mesh import EulerianMesh
-from .solver import EulerianState, EulerianSystem, init_state, state_from_checkpoint, step
+from .solver import EulerianState, EulerianSystem, advance, init_state, state_from_checkpoint
 from .wall import MeshWall
 
 #: the pseudo-ball's mass in full cells at the critical density (module docstring, 3)
@@ -104,7 +105,8 @@ def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
     f, per = scenario.motion.frequency, scenario.run.phases_per_cycle
     interval = 1.0 / (f * per)
     dt = interval / math.ceil(interval / dt)
-    return EulerianSystem(mesh, material, dt, frame=frame, wall=wall, partitions=partitions)
+    return EulerianSystem(mesh, material, dt, frame=frame, wall=wall, partitions=partitions,
+                          chunks=scenario.run.force_chunks)
 
 
 def bed_masses(system: EulerianSystem, area: float, gravity: float):
@@ -156,10 +158,10 @@ def settle(scenario, material, calibration, options, prog: RunProgress | None = 
     steps = int(math.ceil(options.settle_time / system.dt))
     if prog is not None:
         prog.stage("continuum (eulerian): settle (still tub)", options.settle_time)
-    for k in range(steps):
-        step(system, state)
-        if prog is not None and k % 200 == 0:
-            prog.update(state.t, (k + 1) * state.n)
+    for k in range(0, steps, REPORT_EVERY):
+        advance(system, state, min(REPORT_EVERY, steps - k))
+        if prog is not None:
+            prog.update(state.t, state.step * state.n)
     return state, top
 
 
@@ -324,7 +326,8 @@ def _vibrate(scenario, system: EulerianSystem, state: EulerianState, samples: Sa
             "wall_time_s": wall_before + time.perf_counter() - wall0})
 
     prog.stage("continuum (eulerian)", run.duration)
-    for k in range(k0, n_steps + 1):
+    k = k0
+    while True:
         while samples.j < S and sample_step[samples.j] == k:
             j = samples.j
             pose6 = np.array(system.frame.pose(state.t))
@@ -378,8 +381,10 @@ def _vibrate(scenario, system: EulerianSystem, state: EulerianState, samples: Sa
         if time.perf_counter() - last_ckpt > run.checkpoint_every:
             checkpoint()
             last_ckpt = time.perf_counter()
-        step(system, state)
-        if k % 200 == 0:
-            prog.update(state.t, (k + 1 - k0) * n)
+        # the steps up to the next sample, stop or progress report, in one compiled call
+        nxt = next_event(k, n_steps, sample_step, samples.j, k0, stop_after_steps)
+        advance(system, state, nxt - k)
+        k = nxt
+        prog.update(state.t, (k - k0) * n)
     prog.update(state.t, (n_steps - k0) * n)
     return True
