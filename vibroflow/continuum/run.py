@@ -76,13 +76,22 @@ CHECKPOINT_NAME = "checkpoint.npz"
 class LagrangianOptions:
     """Numerical options (SI): grid spacing dx (m; default half the analysis cell), Courant
     number, rheology model ("mu_i" or "drucker_prager"), settling time in the still tub (s),
-    wall stiffness (Pa/m; default (K + 4G/3) / point spacing)."""
+    wall stiffness (Pa/m; default (K + 4G/3) / point spacing), stiffness factor (-).
+
+    stiffness_factor s < 1 is the continuum's counterpart of the DEM's reduced Young's modulus:
+    the elastic moduli K and G (and with them the default wall stiffness) are multiplied by s,
+    so the P-wave speed, and the stable time step's inverse (timestep.py), by sqrt(s), and a
+    run takes sqrt(s) times the steps.  It is a physics change, not a numerical one: the elastic
+    strains grow as 1/s and the bed's elastic waves slow down; its effect on the flow must be
+    checked against the DEM (benchmarks/continuum_speed.py prints E for it).  Default 1: the
+    calibrated moduli."""
 
     dx: float | None = None
     cfl: float = 0.3
     model: str = "mu_i"
     settle_time: float = 0.05
     wall_stiffness: float | None = None
+    stiffness_factor: float = 1.0
 
     def __post_init__(self):
         if self.dx is not None and not self.dx > 0:
@@ -93,6 +102,8 @@ class LagrangianOptions:
             raise InputError(f"settle_time = {self.settle_time!r}: must be >= 0 s")
         if self.wall_stiffness is not None and not self.wall_stiffness > 0:
             raise InputError(f"wall_stiffness = {self.wall_stiffness!r}: must be > 0 Pa/m")
+        if not (math.isfinite(self.stiffness_factor) and 0 < self.stiffness_factor <= 1):
+            raise InputError(f"stiffness_factor = {self.stiffness_factor!r}: must be in (0, 1]")
 
 
 def _contact(scenario, a: str, b: str):
@@ -101,13 +112,20 @@ def _contact(scenario, a: str, b: str):
     return find_contact(scenario, a, b)
 
 
-def material_of(scenario, calibration: dict | None, model: str = "mu_i") -> ContinuumMaterial:
+def material_of(scenario, calibration: dict | None, model: str = "mu_i",
+                stiffness_factor: float = 1.0) -> ContinuumMaterial:
     """The continuum material: the calibration's, else tub47's defaults with the scenario's
-    ball diameter and density."""
+    ball diameter and density; its elastic moduli times stiffness_factor (LagrangianOptions)."""
     if calibration is not None:
-        return ContinuumMaterial.from_calibration(calibration, model=model)
-    rho_s = scenario.materials[scenario.fill.material].density
-    return ContinuumMaterial(model=model, diameter=scenario.fill.diameter, solid_density=rho_s)
+        mat = ContinuumMaterial.from_calibration(calibration, model=model)
+    else:
+        rho_s = scenario.materials[scenario.fill.material].density
+        mat = ContinuumMaterial(model=model, diameter=scenario.fill.diameter,
+                                solid_density=rho_s)
+    if stiffness_factor == 1.0:
+        return mat
+    return dataclasses.replace(mat, bulk_modulus=mat.bulk_modulus * stiffness_factor,
+                               shear_modulus=mat.shear_modulus * stiffness_factor)
 
 
 def bed_height(radius: float, area: float, rim: float) -> float:
@@ -435,7 +453,7 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
     if stop_after_steps is not None and not int(stop_after_steps) >= 0:
         raise InputError(f"stop_after_steps = {stop_after_steps!r}: must be >= 0")
     options = options or LagrangianOptions()
-    material = material_of(scenario, calibration, options.model)
+    material = material_of(scenario, calibration, options.model, options.stiffness_factor)
     motion = TubMotion.of_scenario(scenario)
     gravity = (float(scenario.gravity[0]), float(scenario.gravity[2]))
     system, spacing = make_system(scenario, material, calibration, options,
@@ -503,7 +521,7 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
                                     scenario.run.duration, scenario.motion.frequency,
                                     scenario.run.batches) if S else np.zeros(0, np.int64)
     summary["continuum"] = _continuum_block(material, system, state, spacing, h, n_steps,
-                                            wall_time)
+                                            wall_time, options)
     summary["continuum"].update(shear_rate_outputs(
         material, calibration, list(probes), batch, scenario.run.batches, samples.rate_all,
         samples.rate_wall, samples.rate_probe, summary["impacts"]))
@@ -641,14 +659,15 @@ def settle(scenario, material, calibration, options, x, volume, density, stress,
     return state
 
 
-def _continuum_block(material, system, state, spacing, h, n_steps, wall_time) -> dict:
+def _continuum_block(material, system, state, spacing, h, n_steps, wall_time,
+                     options: LagrangianOptions) -> dict:
     return {
         "method": "lagrangian (material point method, APIC, 2D plane strain, tub frame)",
         "rheology": material.model,
         "material": material.to_dict(),
         "grid_spacing_m": system.grid.dx, "point_spacing_m": spacing,
         "points": state.n, "bed_height_m": h, "dt_s": system.dt, "steps": n_steps,
-        "wall_time_s": wall_time,
+        "wall_time_s": wall_time, "stiffness_factor": options.stiffness_factor,
         "wall_friction": system.boundaries[0].friction,
         "wall_stiffness_Pa_m": system.boundaries[0].stiffness,
         "partition_friction": (system.boundaries[1].friction if len(system.boundaries) > 1

@@ -68,7 +68,8 @@ class EulerianOptions(LagrangianOptions):
     """Numerical options (SI), the Lagrangian's fields and checks: node spacing dx (m; the
     mesh's cells are dx/2; default `default_dx`: about half the analysis cell), Courant number,
     rheology model ("mu_i" or "drucker_prager"), settling time in the still tub (s), wall
-    stiffness (Pa/m; default (K + 4G/3) / (dx/2), the Lagrangian default at the same dx)."""
+    stiffness (Pa/m; default (K + 4G/3) / (dx/2), the Lagrangian default at the same dx),
+    stiffness factor (-; LagrangianOptions)."""
 
 
 def default_dx(radius: float, cell_size: float) -> float:
@@ -186,7 +187,7 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
     if stop_after_steps is not None and not int(stop_after_steps) >= 0:
         raise InputError(f"stop_after_steps = {stop_after_steps!r}: must be >= 0")
     options = options or EulerianOptions()
-    material = material_of(scenario, calibration, options.model)
+    material = material_of(scenario, calibration, options.model, options.stiffness_factor)
     motion = TubMotion.of_scenario(scenario)
     gravity = (float(scenario.gravity[0]), float(scenario.gravity[2]))
     system = make_system(scenario, material, calibration, options, TubFrame(motion, gravity))
@@ -264,6 +265,7 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
         # the Lagrangian block's names: the cells are the fixed integration points
         "point_spacing_m": h, "points": n_cells,
         "bed_height_m": top, "dt_s": system.dt, "steps": n_steps, "wall_time_s": wall_time,
+        "stiffness_factor": options.stiffness_factor,
         "wall_friction": system.wall.friction, "wall_stiffness_Pa_m": system.wall.stiffness,
         "partition_friction": (system.partitions.friction if system.partitions is not None
                                else None),
