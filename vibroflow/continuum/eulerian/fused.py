@@ -116,7 +116,7 @@ def advance_kernel(nsteps, t, dt, mass0, mass_error_max, x, mass, v, C, L, stres
             for c in range(4):
                 C[p, c] = cC[j, c]
                 L[p, c] = cL[j, c]
-        face_velocities(gv, x0, z0, dx, periodic, xmin, zmin, h, open_x, open_z, ux, uz)
+        face_velocities(gv, x0, z0, dx, periodic, xmin, zmin, h, open_x, open_z, m2, ux, uz)
         match_divergence(L, ux, uz, h, periodic)
         void_first(L, frac, dt)
         end_density(density, L, dt, end_rho)
