@@ -11,6 +11,10 @@ stress last, "USL"):
 5. volume, density and stress of the points through the shared constitutive law
    (plasticity.py -> constitutive.py).
 
+The steps are made by one compiled loop (fused.py, `advance`): many steps a call, parallel
+over the system's fixed point chunks, so the numbers depend on `MPMSystem.chunks` and never on
+the number of threads; one chunk gives the serial scatter's numbers.
+
 Units (SI, per metre of thickness along y): positions m, velocities m/s, masses kg/m, volumes
 m^2, stresses Pa [xx, zz, xz, yy] (tension positive), forces N/m.
 """
