@@ -253,6 +253,11 @@ def continuum(
         "--rheology", help="mu_i (Dunatunga & Kamrin) or drucker_prager.")] = "mu_i",
     dx: Annotated[Optional[float], typer.Option(
         "--dx", help="Grid spacing (m); default half the analysis cell.")] = None,
+    stiffness_factor: Annotated[float, typer.Option(
+        "--stiffness-factor", help="Multiply the elastic moduli (and the default wall "
+                                   "stiffness) by this factor in (0, 1]: sqrt(factor) times "
+                                   "the steps, a physics change like the DEM's reduced "
+                                   "Young's modulus (LagrangianOptions).")] = 1.0,
     set_: SetOption = None,
     vtk: Annotated[bool, typer.Option("--vtk", help="Also write ParaView files of the material "
                                                     "points and the grid fields over the last "
@@ -283,7 +288,7 @@ def continuum(
         from vibroflow.calibration.calibrate import read_calibration
 
         cal = read_calibration(calibration)
-    options = options_class(dx=dx, model=rheology)
+    options = options_class(dx=dx, model=rheology, stiffness_factor=stiffness_factor)
     material_of(s, cal, rheology)  # validates the parameters before --out is made
     try:
         summary = run_method(s, out, calibration=cal, options=options, progress=True,
