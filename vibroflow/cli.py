@@ -253,6 +253,9 @@ def continuum(
         "--rheology", help="mu_i (Dunatunga & Kamrin) or drucker_prager.")] = "mu_i",
     dx: Annotated[Optional[float], typer.Option(
         "--dx", help="Grid spacing (m); default half the analysis cell.")] = None,
+    cfl: Annotated[float, typer.Option(
+        "--cfl", help="Courant number of the time step in (0, 1] (continuum/timestep.py: 0.3 "
+                      "keeps a factor 3 from the stability limit).")] = 0.3,
     stiffness_factor: Annotated[float, typer.Option(
         "--stiffness-factor", help="Multiply the elastic moduli (and the default wall "
                                    "stiffness) by this factor in (0, 1]: sqrt(factor) times "
@@ -288,7 +291,7 @@ def continuum(
         from vibroflow.calibration.calibrate import read_calibration
 
         cal = read_calibration(calibration)
-    options = options_class(dx=dx, model=rheology, stiffness_factor=stiffness_factor)
+    options = options_class(dx=dx, cfl=cfl, model=rheology, stiffness_factor=stiffness_factor)
     material_of(s, cal, rheology)  # validates the parameters before --out is made
     try:
         summary = run_method(s, out, calibration=cal, options=options, progress=True,

@@ -83,8 +83,11 @@ class LagrangianOptions:
     so the P-wave speed, and the stable time step's inverse (timestep.py), by sqrt(s), and a
     run takes sqrt(s) times the steps.  It is a physics change, not a numerical one: the elastic
     strains grow as 1/s and the bed's elastic waves slow down; its effect on the flow must be
-    checked against the DEM (benchmarks/continuum_speed.py prints E for it).  Default 1: the
-    calibrated moduli."""
+    checked against the DEM (benchmarks/continuum_speed.py prints E for it).  On tub47-quick
+    (four settling times each; benchmarks/README.md "Continuum speed") E against the DEM was
+    0.89 +- 0.09 at s = 1, 1.07 +- 0.01 at s = 0.5 and 0.68 +- 0.01 at s = 0.25, whose
+    circulation, though, is 0.62 of the DEM's (s = 1: 1.14): not monotonic, so no default
+    other than 1.  Default 1: the calibrated moduli."""
 
     dx: float | None = None
     cfl: float = 0.3

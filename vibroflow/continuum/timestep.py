@@ -19,9 +19,11 @@ its highest elastic frequency sqrt(4/3) c / dx (the grid-scale mode's Fourier sy
 damped explicit update is stable to about 0.85 x 2 / (2.3 c / dx) = 0.74 dx / c, 3 times the
 default step (0.25 dx / c); the mu(I) viscous stress adds no bound, the return map being
 implicit in the plastic rate (constitutive.py), so its tangent never exceeds G.  The default
-cfl = 0.3 is an accuracy choice: the field difference E against the DEM was the same at
-cfl 0.2 and 0.3 (0.62) and drifted at 0.45 and 0.6 (0.82, 0.85) where the wall contact's
-damping is resolved by fewer than 6 steps (benchmarks/README.md, continuum_speed.py).
+cfl = 0.3 is kept as a margin, not for accuracy: on tub47-quick (four settling times each, the
+continuum's own scatter) E against the DEM was 0.89 +- 0.09 at cfl 0.3, 0.81 +- 0.06 at 0.45
+and 0.83 +- 0.09 at 0.6 (benchmarks/README.md, "Continuum speed"), so cfl 0.6 (half the steps)
+is as accurate there; it is an option (`vibroflow continuum --cfl`), not the default, until the
+stronger motions (amplitude factor 1.5, tub47) are checked against their stability margin.
 """
 from __future__ import annotations
 
