@@ -1,9 +1,9 @@
 """Many Eulerian steps in one numba call, parallel over fixed chunks of cells.
 
 The step is solver.py's (lagrangian_step.py's Lagrangian step, then advection.py's remap) with
-the same kernels, but run as one compiled loop over `nsteps` steps: a Python step spent about as
-long in its own bookkeeping (gathering the cells that hold material, packing the remap's
-fields, dispatching a dozen kernels, the frame's pose) as in the kernels.
+the same kernels, but run as one compiled loop over `nsteps` steps: a Python step spent about a
+third of its time in its own bookkeeping (gathering the cells that hold material with fancy
+indexing, packing the remap's fields, dispatching a dozen kernels, the frame's pose).
 
 Threads, as the Lagrangian step's (vibroflow.continuum.fused): the per-cell kernels write only
 their own cells and the remap works on whole rows and columns (advection.advect), so they give
