@@ -261,6 +261,14 @@ def continuum(
                             "--dilatancy).")] = False,
     dx: Annotated[Optional[float], typer.Option(
         "--dx", help="Grid spacing (m); default half the analysis cell.")] = None,
+    cfl: Annotated[float, typer.Option(
+        "--cfl", help="Courant number of the time step in (0, 1] (continuum/timestep.py: 0.3 "
+                      "keeps a factor 3 from the stability limit).")] = 0.3,
+    stiffness_factor: Annotated[float, typer.Option(
+        "--stiffness-factor", help="Multiply the elastic moduli (and the default wall "
+                                   "stiffness) by this factor in (0, 1]: sqrt(factor) times "
+                                   "the steps, a physics change like the DEM's reduced "
+                                   "Young's modulus (LagrangianOptions).")] = 1.0,
     set_: SetOption = None,
     vtk: Annotated[bool, typer.Option("--vtk", help="Also write ParaView files of the material "
                                                     "points and the grid fields over the last "
@@ -291,8 +299,10 @@ def continuum(
         from vibroflow.calibration.calibrate import read_calibration
 
         cal = read_calibration(calibration)
-    options = options_class(dx=dx, model=rheology, dilatancy=dilatancy)
-    material_of(s, cal, rheology, dilatancy)  # validates the parameters before --out is made
+    options = options_class(dx=dx, cfl=cfl, model=rheology, dilatancy=dilatancy,
+                            stiffness_factor=stiffness_factor)
+    material_of(s, cal, rheology, dilatancy=dilatancy, stiffness_factor=stiffness_factor)
+    # (validates the parameters before --out is made)
     try:
         summary = run_method(s, out, calibration=cal, options=options, progress=True,
                              vtk=vtk, resume=resume, stop_after_steps=stop_after_steps)

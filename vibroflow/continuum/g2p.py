@@ -7,7 +7,6 @@ by the constitutive update, and x_p += dt v_p (Sulsky et al. 1994's update with 
 from __future__ import annotations
 
 import numba as nb
-import numpy as np
 
 from .grid import bspline_weights
 
@@ -20,17 +19,9 @@ def g2p(x, v, C, L, gv, x0, z0, dx, dt, periodic):
     inv = 4.0 / (dx * dx)
     nxg = gv.shape[0]
     period = nxg * dx
-    wx = np.empty(3)
-    wz = np.empty(3)
-    gx = np.empty(3)
-    gz = np.empty(3)
     for p in range(x.shape[0]):
         bx, fx, wx0, wx1, wx2, gx0, gx1, gx2 = bspline_weights(x[p, 0], x0, dx)
         bz, fz, wz0, wz1, wz2, gz0, gz1, gz2 = bspline_weights(x[p, 1], z0, dx)
-        wx[0], wx[1], wx[2] = wx0, wx1, wx2
-        wz[0], wz[1], wz[2] = wz0, wz1, wz2
-        gx[0], gx[1], gx[2] = gx0, gx1, gx2
-        gz[0], gz[1], gz[2] = gz0, gz1, gz2
         vx = 0.0
         vz = 0.0
         cxx = 0.0
@@ -43,14 +34,19 @@ def g2p(x, v, C, L, gv, x0, z0, dx, dt, periodic):
         lzz = 0.0
         for a in range(3):
             rx = (a - fx) * dx
+            # the weights as selects, not small arrays: they stay in registers
+            wa = wx0 if a == 0 else (wx1 if a == 1 else wx2)
+            ga = gx0 if a == 0 else (gx1 if a == 1 else gx2)
+            i = bx + a
+            if periodic:
+                i = i % nxg
             for b in range(3):
                 rz = (b - fz) * dx
-                w = wx[a] * wz[b]
-                gwx = gx[a] * wz[b]
-                gwz = wx[a] * gz[b]
-                i = bx + a
-                if periodic:
-                    i = i % nxg
+                wb = wz0 if b == 0 else (wz1 if b == 1 else wz2)
+                gb = gz0 if b == 0 else (gz1 if b == 1 else gz2)
+                w = wa * wb
+                gwx = ga * wb
+                gwz = wa * gb
                 ux = gv[i, bz + b, 0]
                 uz = gv[i, bz + b, 1]
                 vx += w * ux

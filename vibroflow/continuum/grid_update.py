@@ -34,6 +34,28 @@ from vibroflow.tub.motion import TubMotion, pose
 #: a node with less mass than this (kg/m) is empty
 MASS_EPS = 1.0e-14
 
+#: a frame packed for the kernels (`frame_body`): kind (FRAME_LAB or FRAME_TUB), lab gravity
+#: (gx, gz) m/s^2, then the tub's motion (TubMotion.as_array(): omega, amplitudes and phases,
+#: pivot) for FRAME_TUB
+F_KIND, F_GX, F_GZ, F_MOTION = 0, 1, 2, 3
+FRAME_FIELDS = 12
+FRAME_LAB, FRAME_TUB = 0, 1
+
+
+@nb.njit(cache=True)
+def frame_body(frame, t):
+    """(a0x, a0z, thetadot, thetaddot, pivot_x, pivot_z) of a packed frame at time t (s)
+    (LabFrame.body, TubFrame.body): a0 = Rot^T (g - X'') (m/s^2) in the frame's axes."""
+    if frame[F_KIND] == FRAME_LAB:
+        return frame[F_GX], frame[F_GZ], 0.0, 0.0, 0.0, 0.0
+    X, Z, th, Xd, Zd, thd, Xdd, Zdd, thdd = pose(frame[F_MOTION:], t)
+    gx = frame[F_GX] - Xdd
+    gz = frame[F_GZ] - Zdd
+    c = np.cos(th)
+    s = np.sin(th)
+    return (c * gx + s * gz, -s * gx + c * gz, thd, thdd, frame[F_MOTION + 7],
+            frame[F_MOTION + 8])
+
 
 @dataclass(frozen=True)
 class LabFrame:
@@ -44,6 +66,13 @@ class LabFrame:
     def body(self, t: float):
         """(a0x, a0z, thetadot, thetaddot, pivot_x, pivot_z) at time t (s)."""
         return float(self.gravity[0]), float(self.gravity[1]), 0.0, 0.0, 0.0, 0.0
+
+    def as_array(self) -> np.ndarray:
+        """Packed for `frame_body` (FRAME_FIELDS)."""
+        a = np.zeros(FRAME_FIELDS)
+        a[F_KIND] = FRAME_LAB
+        a[F_GX], a[F_GZ] = self.gravity
+        return a
 
     def pose(self, t: float):
         """(X, Z, theta, Xdot, Zdot, thetadot) of this frame in the lab: the identity."""
@@ -61,12 +90,15 @@ class TubFrame:
     def body(self, t: float):
         """(a0x, a0z, thetadot, thetaddot, pivot_x, pivot_z) at time t (s): a0 = Rot^T (g - X'')
         (m/s^2) in tub axes, the rotation rate and acceleration (rad/s, rad/s^2), the pivot (m)."""
-        X, Z, th, Xd, Zd, thd, Xdd, Zdd, thdd = pose(self.motion.as_array(), t)
-        gx = self.gravity[0] - Xdd
-        gz = self.gravity[1] - Zdd
-        c, s = np.cos(th), np.sin(th)
-        return (c * gx + s * gz, -s * gx + c * gz, float(thd), float(thdd),
-                self.motion.pivot_x, self.motion.pivot_z)
+        return frame_body(self.as_array(), float(t))
+
+    def as_array(self) -> np.ndarray:
+        """Packed for `frame_body` (FRAME_FIELDS)."""
+        a = np.zeros(FRAME_FIELDS)
+        a[F_KIND] = FRAME_TUB
+        a[F_GX], a[F_GZ] = self.gravity
+        a[F_MOTION:] = self.motion.as_array()
+        return a
 
     def pose(self, t: float):
         """(X, Z, theta, Xdot, Zdot, thetadot) of the tub at time t (s) (tub.motion.pose)."""

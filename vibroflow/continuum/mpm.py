@@ -11,6 +11,10 @@ stress last, "USL"):
 5. volume, density and stress of the points through the shared constitutive law
    (plasticity.py -> constitutive.py).
 
+The steps are made by one compiled loop (fused.py, `advance`): many steps a call, parallel
+over the system's fixed point chunks, so the numbers depend on `MPMSystem.chunks` and never on
+the number of threads; one chunk gives the serial scatter's numbers.
+
 Units (SI, per metre of thickness along y): positions m, velocities m/s, masses kg/m, volumes
 m^2, stresses Pa [xx, zz, xz, yy] (tension positive), forces N/m.
 """
@@ -19,17 +23,15 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-import numba as nb
 import numpy as np
 
 from vibroflow.errors import InputError
 
+from . import fused
+from .boundary import PartitionFriction, Plane, UWall
 from .constitutive import ContinuumMaterial
-from .g2p import g2p
 from .grid import Grid
-from .grid_update import LabFrame, grid_update
-from .p2g import p2g
-from .plasticity import plasticity_step
+from .grid_update import LabFrame
 
 
 class ContinuumBlowUp(RuntimeError):
@@ -39,7 +41,9 @@ class ContinuumBlowUp(RuntimeError):
 @dataclass
 class MPMSystem:
     """What does not change during a run: the grid, the material, the frame (grid_update.py),
-    the boundaries (boundary.py) and the time step dt (s).
+    the boundaries (boundary.py), the time step dt (s) and the number of point chunks of the
+    parallel step (fused.py: the numbers depend on it, never on the number of threads; a tub
+    run takes the scenario's run.force_chunks).
 
     no_slip_below (m, optional): a rough, no-slip floor as a grid boundary condition, the
     nodes at heights z <= no_slip_below held still after every grid update (the usual MPM
@@ -54,6 +58,7 @@ class MPMSystem:
     frame: object = field(default_factory=LabFrame)
     boundaries: list = field(default_factory=list)
     no_slip_below: float | None = None
+    chunks: int = 2
 
     def __post_init__(self):
         if not self.dt > 0:
@@ -66,11 +71,18 @@ class MPMSystem:
                                  f"height at or above the grid's bottom {self.grid.z0!r} m")
             # node rows k with z0 + k dx <= z (a node on the floor included)
             self.no_slip_rows = int(math.floor((z - self.grid.z0) / self.grid.dx + 1e-9)) + 1
+        if not (isinstance(self.chunks, int) and self.chunks >= 1):
+            raise InputError(f"chunks = {self.chunks!r}: must be an integer >= 1")
         self.params = self.material.as_array()
         for j, b in enumerate(self.boundaries):
             b.slot = j
         # grid work arrays (mass, momentum, force, velocity), reused every step
         self.work = self.grid.zeros()
+        # per-chunk scatter buffers of the parallel p2g (fused.py)
+        g = self.grid
+        self.chunk_work = (np.zeros((self.chunks, g.nx, g.nz)),
+                           np.zeros((self.chunks, g.nx, g.nz, 2)),
+                           np.zeros((self.chunks, g.nx, g.nz, 2)))
 
 
 @dataclass
@@ -149,18 +161,6 @@ def init_state(system: MPMSystem, x, volume, density, v=None, stress=None,
     return state
 
 
-@nb.njit(cache=True)
-def _escaped(x, v, xmin, xmax, zmin, zmax):
-    """Number of points outside the box or with a non-finite velocity."""
-    bad = 0
-    for p in range(x.shape[0]):
-        if not (xmin <= x[p, 0] <= xmax and zmin <= x[p, 1] <= zmax):
-            bad += 1
-        elif not (np.isfinite(v[p, 0]) and np.isfinite(v[p, 1])):
-            bad += 1
-    return bad
-
-
 def _escaped_ids(x, v, xmin, xmax, zmin, zmax) -> np.ndarray:
     """Ids of the points outside the box or with a non-finite position or velocity."""
     with np.errstate(invalid="ignore"):
@@ -206,47 +206,112 @@ def blowup_message(system: MPMSystem, state: MPMState, ids, what: str) -> str:
     return f"{where}; {numbers}; {cause}"
 
 
-def step(system: MPMSystem, state: MPMState) -> None:
-    """Advance the state by one step system.dt (module docstring); raises ContinuumBlowUp
-    naming the points and the likely cause when a point leaves the grid or a wall's side
-    (boundary.py `lost`), or its position or velocity stops being finite."""
+def pack_boundaries(boundaries, n: int):
+    """The boundaries as fused.py's numbers: (bseq, wpar, history arrays (xi, f, fn, ft,
+    state) with one row per penalty wall, ppar, walls) for n points; the history rows are
+    views of the walls' own arrays when there is one wall, else stacked copies (write them
+    back with `unpack_history`)."""
+    bseq = np.zeros((len(boundaries), 2), np.int64)
+    wpar, ppar, walls = [], [], []
+    for j, b in enumerate(boundaries):
+        if isinstance(b, PartitionFriction):
+            bseq[j] = (fused.B_PARTITION, len(ppar))
+            ppar.append((b.friction, b.length))
+            continue
+        if not isinstance(b, (UWall, Plane)):
+            raise InputError(f"boundary {type(b).__name__}: the MPM step knows UWall, Plane "
+                             "and PartitionFriction")
+        w = np.zeros(fused.WALL_FIELDS)
+        w[[fused.W_KN, fused.W_KT, fused.W_ZETA, fused.W_MU]] = (
+            b.stiffness, b.tangential_stiffness, b.damping_ratio, b.friction)
+        if isinstance(b, UWall):
+            w[fused.W_KIND] = fused.WALL_U
+            w[fused.W_RADIUS] = b.radius
+        else:
+            w[fused.W_KIND] = fused.WALL_PLANE
+            w[[fused.W_PX, fused.W_PZ]] = b.point
+            w[[fused.W_NX, fused.W_NZ]] = b.normal
+            w[[fused.W_VX, fused.W_VZ]] = b.velocity
+            w[[fused.W_AX, fused.W_AZ]] = b.acceleration
+        bseq[j] = (fused.B_WALL, len(wpar))
+        wpar.append(w)
+        walls.append(b)
+    return (bseq, np.array(wpar).reshape(len(wpar), fused.WALL_FIELDS),
+            np.array(ppar, dtype=float).reshape(len(ppar), 2), walls)
+
+
+_HISTORY = (("xi", np.float64, ()), ("f", np.float64, (2,)), ("fn", np.float64, ()),
+            ("ft", np.float64, ()), ("state", np.int8, ()))
+
+
+def _stack_history(state: MPMState, walls) -> list:
+    """Per history field, a (walls, N, ...) array: a view of the one wall's arrays, or a
+    stacked copy of several walls' (written back by `_unstack_history`)."""
+    out = []
+    for name, dtype, tail in _HISTORY:
+        if len(walls) == 1:
+            a = state.history[walls[0].slot][name]
+            out.append(a.reshape((1,) + a.shape))
+        elif walls:
+            out.append(np.stack([state.history[w.slot][name] for w in walls]))
+        else:
+            out.append(np.zeros((0, state.n) + tail, dtype))
+    return out
+
+
+def _unstack_history(state: MPMState, walls, stacked) -> None:
+    if len(walls) > 1:
+        for (name, _, _), a in zip(_HISTORY, stacked):
+            for j, w in enumerate(walls):
+                state.history[w.slot][name][...] = a[j]
+
+
+def advance(system: MPMSystem, state: MPMState, n: int) -> None:
+    """n steps (module docstring) in one compiled call (fused.py), parallel over the system's
+    point chunks; raises ContinuumBlowUp naming the points and the likely cause when a point
+    goes through a wall (boundary.py `lost`), leaves the grid or stops being finite."""
+    n = int(n)
+    if n <= 0:
+        return
     g = system.grid
-    dt = system.dt
-    gm, gmv, gf, gv = system.work
-    state.fext[:] = 0.0
-    for b in system.boundaries:
-        b.add_forces(state, state.t, dt)
-        lost = b.lost(state) if hasattr(b, "lost") else None
-        if lost is not None and lost.size:
-            raise ContinuumBlowUp(blowup_message(
-                system, state, lost, f"went through the {type(b).__name__} wall by more "
-                                     "than their own size"))
-    gm[:] = 0.0
-    gmv[:] = 0.0
-    gf[:] = 0.0
-    p2g(state.x, state.v, state.C, state.mass, state.volume, state.stress, state.fext,
-        g.x0, g.z0, g.dx, g.periodic, gm, gmv, gf)
-    # the frame's prescribed acceleration at mid-step: second order in dt for the vibration
-    a0x, a0z, om, al, px, pz = system.frame.body(state.t + 0.5 * dt)
-    grid_update(gm, gmv, gf, gv, g.x0, g.z0, g.dx, dt, a0x, a0z, om, al, px, pz, g.periodic)
-    if system.no_slip_rows:
-        gv[:, :system.no_slip_rows, :] = 0.0
-    g2p(state.x, state.v, state.C, state.L, gv, g.x0, g.z0, g.dx, dt, g.periodic)
-    plasticity_step(state.L, state.mass, state.volume, state.density, state.stress, dt,
-                    system.params, state.gamma_dot, state.phase)
-    state.t += dt
-    state.step += 1
+    bseq, wpar, ppar, walls = pack_boundaries(system.boundaries, state.n)
+    hist = _stack_history(state, walls)
     xmin, xmax, zmin, zmax = g.inner_bounds()
     pad = 0.0 if g.periodic else g.dx
-    box = (xmin - pad, xmax + pad, zmin - g.dx, zmax + g.dx)
-    if _escaped(state.x, state.v, *box):
+    box = np.array([xmin - pad, xmax + pad, zmin - g.dx, zmax + g.dx])
+    bounds = fused.chunk_bounds(state.n, system.chunks)
+    cm, cmv, cf = system.chunk_work
+    gm, gmv, gf, gv = system.work
+    done, t, status, which = fused.advance_kernel(
+        n, state.t, system.dt, state.x, state.v, state.C, state.L, state.mass, state.volume,
+        state.density, state.stress, state.gamma_dot, state.phase, state.fext, bseq, wpar,
+        *hist, ppar, system.frame.as_array(), g.x0, g.z0, g.dx, g.periodic, system.params, box,
+        bounds, cm, cmv, cf, gm, gmv, gf, gv, system.no_slip_rows)
+    _unstack_history(state, walls, hist)
+    state.t = t
+    state.step += done
+    if status == fused.THROUGH_WALL:
+        b = system.boundaries[which]
+        b._deep = 1
+        b._t_last = state.t
+        raise ContinuumBlowUp(blowup_message(
+            system, state, b.lost(state), f"went through the {type(b).__name__} wall by more "
+                                          "than their own size"))
+    if status == fused.ESCAPED:
         raise ContinuumBlowUp(blowup_message(system, state, _escaped_ids(state.x, state.v, *box),
                                              "left the grid or became non-finite"))
 
 
+def step(system: MPMSystem, state: MPMState) -> None:
+    """Advance the state by one step system.dt (module docstring; `advance`)."""
+    advance(system, state, 1)
+
+
 def run_steps(system: MPMSystem, state: MPMState, n: int, callback=None) -> None:
-    """n steps; callback(state) after each if given."""
+    """n steps; callback(state) after each if given (else all in one compiled call)."""
+    if callback is None:
+        advance(system, state, n)
+        return
     for _ in range(int(n)):
         step(system, state)
-        if callback is not None:
-            callback(state)
+        callback(state)

@@ -63,7 +63,7 @@ from .constitutive import ContinuumMaterial
 from .fields import grid_fields, write_grid_vtr
 from .grid import Grid
 from .grid_update import LabFrame, TubFrame
-from .mpm import ContinuumBlowUp, MPMState, MPMSystem, init_state, step
+from .mpm import ContinuumBlowUp, MPMState, MPMSystem, advance, init_state
 from .timestep import stable_dt
 
 SUMMARY_NAME = "summary.json"
@@ -76,8 +76,20 @@ CHECKPOINT_NAME = "checkpoint.npz"
 class LagrangianOptions:
     """Numerical options (SI): grid spacing dx (m; default half the analysis cell), Courant
     number, rheology model ("mu_i" or "drucker_prager"), settling time in the still tub (s),
-    wall stiffness (Pa/m; default (K + 4G/3) / point spacing); dilatancy: the mu_i model's
-    peak-friction option with the calibration's [dilatancy] K_dil (constitutive.py)."""
+    wall stiffness (Pa/m; default (K + 4G/3) / point spacing), stiffness factor (-); dilatancy:
+    the mu_i model's peak-friction option with the calibration's [dilatancy] K_dil
+    (constitutive.py).
+
+    stiffness_factor s < 1 is the continuum's counterpart of the DEM's reduced Young's modulus:
+    the elastic moduli K and G (and with them the default wall stiffness) are multiplied by s,
+    so the P-wave speed, and the stable time step's inverse (timestep.py), by sqrt(s), and a
+    run takes sqrt(s) times the steps.  It is a physics change, not a numerical one: the elastic
+    strains grow as 1/s and the bed's elastic waves slow down; its effect on the flow must be
+    checked against the DEM (benchmarks/continuum_speed.py prints E for it).  On tub47-quick
+    (four settling times each; benchmarks/README.md "Continuum speed") E against the DEM was
+    0.89 +- 0.09 at s = 1, 1.07 +- 0.01 at s = 0.5 and 0.68 +- 0.01 at s = 0.25, whose
+    circulation, though, is 0.62 of the DEM's (s = 1: 1.14): not monotonic, so no default
+    other than 1.  Default 1: the calibrated moduli."""
 
     dx: float | None = None
     cfl: float = 0.3
@@ -85,6 +97,7 @@ class LagrangianOptions:
     settle_time: float = 0.05
     wall_stiffness: float | None = None
     dilatancy: bool = False
+    stiffness_factor: float = 1.0
 
     def __post_init__(self):
         if self.dx is not None and not self.dx > 0:
@@ -97,6 +110,8 @@ class LagrangianOptions:
             raise InputError(f"wall_stiffness = {self.wall_stiffness!r}: must be > 0 Pa/m")
         if not isinstance(self.dilatancy, bool):
             raise InputError(f"dilatancy = {self.dilatancy!r}: must be true or false")
+        if not (math.isfinite(self.stiffness_factor) and 0 < self.stiffness_factor <= 1):
+            raise InputError(f"stiffness_factor = {self.stiffness_factor!r}: must be in (0, 1]")
 
 
 def _contact(scenario, a: str, b: str):
@@ -106,16 +121,20 @@ def _contact(scenario, a: str, b: str):
 
 
 def material_of(scenario, calibration: dict | None, model: str = "mu_i",
-                dilatancy: bool = False) -> ContinuumMaterial:
+                dilatancy: bool = False, stiffness_factor: float = 1.0) -> ContinuumMaterial:
     """The continuum material: the calibration's, else tub47's defaults with the scenario's
-    ball diameter and density; with `dilatancy`, the calibration's [dilatancy] K_dil (measured
-    on DEM, vibroflow.calibration.dilatancy) switches the peak-friction option on."""
+    ball diameter and density; its elastic moduli times stiffness_factor (LagrangianOptions);
+    with `dilatancy`, the calibration's [dilatancy] K_dil (measured on DEM,
+    vibroflow.calibration.dilatancy) switches the peak-friction option on."""
     if calibration is not None:
         mat = ContinuumMaterial.from_calibration(calibration, model=model)
     else:
         rho_s = scenario.materials[scenario.fill.material].density
         mat = ContinuumMaterial(model=model, diameter=scenario.fill.diameter,
                                 solid_density=rho_s)
+    if stiffness_factor != 1.0:
+        mat = dataclasses.replace(mat, bulk_modulus=mat.bulk_modulus * stiffness_factor,
+                                  shear_modulus=mat.shear_modulus * stiffness_factor)
     if not dilatancy:
         return mat
     k = (calibration or {}).get("dilatancy", {}).get("K_dil")
@@ -206,7 +225,8 @@ def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
     f, per = scenario.motion.frequency, scenario.run.phases_per_cycle
     interval = 1.0 / (f * per)
     dt = interval / math.ceil(interval / dt)
-    return MPMSystem(grid, material, dt, frame=frame, boundaries=boundaries), spacing
+    return MPMSystem(grid, material, dt, frame=frame, boundaries=boundaries,
+                     chunks=scenario.run.force_chunks), spacing
 
 
 def sample_times(scenario) -> tuple[np.ndarray, float, float]:
@@ -455,7 +475,8 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
     if stop_after_steps is not None and not int(stop_after_steps) >= 0:
         raise InputError(f"stop_after_steps = {stop_after_steps!r}: must be >= 0")
     options = options or LagrangianOptions()
-    material = material_of(scenario, calibration, options.model, options.dilatancy)
+    material = material_of(scenario, calibration, options.model, dilatancy=options.dilatancy,
+                           stiffness_factor=options.stiffness_factor)
     motion = TubMotion.of_scenario(scenario)
     gravity = (float(scenario.gravity[0]), float(scenario.gravity[2]))
     system, spacing = make_system(scenario, material, calibration, options,
@@ -523,7 +544,7 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
                                     scenario.run.duration, scenario.motion.frequency,
                                     scenario.run.batches) if S else np.zeros(0, np.int64)
     summary["continuum"] = _continuum_block(material, system, state, spacing, h, n_steps,
-                                            wall_time)
+                                            wall_time, options)
     summary["continuum"].update(shear_rate_outputs(
         material, calibration, list(probes), batch, scenario.run.batches, samples.rate_all,
         samples.rate_wall, samples.rate_probe, summary["impacts"]))
@@ -567,7 +588,8 @@ def _vibrate(scenario, system, state, samples: Samples, geo, material, times, ou
             "wall_time_s": wall_before + time.perf_counter() - wall0})
 
     prog.stage("continuum (lagrangian)", run.duration)
-    for k in range(k0, n_steps + 1):
+    k = k0
+    while True:
         while samples.j < S and sample_step[samples.j] == k:
             j = samples.j
             pose6 = np.array(system.frame.pose(state.t))
@@ -618,11 +640,30 @@ def _vibrate(scenario, system, state, samples: Samples, geo, material, times, ou
         if time.perf_counter() - last_ckpt > run.checkpoint_every:
             checkpoint()
             last_ckpt = time.perf_counter()
-        step(system, state)
-        if k % 200 == 0:
-            prog.update(state.t, (k + 1 - k0) * n)
+        # the steps up to the next sample, stop or progress report, in one compiled call
+        nxt = next_event(k, n_steps, sample_step, samples.j, k0, stop_after_steps)
+        advance(system, state, nxt - k)
+        k = nxt
+        prog.update(state.t, (k - k0) * n)
     prog.update(state.t, (n_steps - k0) * n)
     return True
+
+
+#: steps between progress reports (and the checks for a checkpoint's wall time)
+REPORT_EVERY = 200
+
+
+def next_event(k: int, n_steps: int, sample_step, j: int, k0: int,
+               stop_after_steps: int | None) -> int:
+    """The step after k at which a vibration loop must look again: the next sample (sample
+    steps sample_step[j:]), the end n_steps, the stop after stop_after_steps steps from k0, or
+    the next multiple of REPORT_EVERY."""
+    nxt = min(n_steps, (k // REPORT_EVERY + 1) * REPORT_EVERY)
+    if j < len(sample_step):
+        nxt = min(nxt, int(sample_step[j]))
+    if stop_after_steps is not None:
+        nxt = min(nxt, k0 + int(stop_after_steps))
+    return max(nxt, k + 1)
 
 
 def settle(scenario, material, calibration, options, x, volume, density, stress,
@@ -634,21 +675,22 @@ def settle(scenario, material, calibration, options, x, volume, density, stress,
     steps = int(math.ceil(options.settle_time / system.dt))
     if prog is not None:
         prog.stage("continuum: settle (still tub)", options.settle_time)
-    for k in range(steps):
-        step(system, state)
-        if prog is not None and k % 200 == 0:
-            prog.update(state.t, (k + 1) * state.n)
+    for k in range(0, steps, REPORT_EVERY):
+        advance(system, state, min(REPORT_EVERY, steps - k))
+        if prog is not None:
+            prog.update(state.t, state.step * state.n)
     return state
 
 
-def _continuum_block(material, system, state, spacing, h, n_steps, wall_time) -> dict:
+def _continuum_block(material, system, state, spacing, h, n_steps, wall_time,
+                     options: LagrangianOptions) -> dict:
     return {
         "method": "lagrangian (material point method, APIC, 2D plane strain, tub frame)",
         "rheology": material.model,
         "material": material.to_dict(),
         "grid_spacing_m": system.grid.dx, "point_spacing_m": spacing,
         "points": state.n, "bed_height_m": h, "dt_s": system.dt, "steps": n_steps,
-        "wall_time_s": wall_time,
+        "wall_time_s": wall_time, "stiffness_factor": options.stiffness_factor,
         "wall_friction": system.boundaries[0].friction,
         "wall_stiffness_Pa_m": system.boundaries[0].stiffness,
         "partition_friction": (system.boundaries[1].friction if len(system.boundaries) > 1

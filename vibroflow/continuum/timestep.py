@@ -7,6 +7,23 @@
   frequency omega = sqrt(k_n l / m) = sqrt(k_n / (rho l)); the explicit update of a damped
   oscillator is stable for omega dt < 2 (sqrt(1 + zeta^2) - zeta); the step keeps the fraction
   cfl of that.
+
+Which bound binds, and how tight it is (tub47-quick with its DEM calibration: K = 1.04 MPa,
+G = 0.097 MPa, rho_c = 4434 kg/m^3, so c = 16.2 m/s; dx = 7.5 mm, points of side dx/2): the
+default wall stiffness (K + 4G/3) / (dx/2) makes the wall oscillator's omega = 2 c / dx, and its
+limit cfl 2 (sqrt(1 + zeta^2) - zeta) / omega = 0.85 cfl dx / c (zeta = 0.16) is a little below
+the elastic cfl dx / (c + v_max); the step is then rounded down to divide the sampling interval.
+Neither is the stability limit itself: the quadratic B-spline stiffness with lumped mass has
+its highest elastic frequency sqrt(4/3) c / dx (the grid-scale mode's Fourier symbol,
+4/3 (K + 4G/3) / (rho dx^2)), the wall adds at most omega = 2 c / dx in quadrature, so the
+damped explicit update is stable to about 0.85 x 2 / (2.3 c / dx) = 0.74 dx / c, 3 times the
+default step (0.25 dx / c); the mu(I) viscous stress adds no bound, the return map being
+implicit in the plastic rate (constitutive.py), so its tangent never exceeds G.  The default
+cfl = 0.3 is kept as a margin, not for accuracy: on tub47-quick (four settling times each, the
+continuum's own scatter) E against the DEM was 0.89 +- 0.09 at cfl 0.3, 0.81 +- 0.06 at 0.45
+and 0.83 +- 0.09 at 0.6 (benchmarks/README.md, "Continuum speed"), so cfl 0.6 (half the steps)
+is as accurate there; it is an option (`vibroflow continuum --cfl`), not the default, until the
+stronger motions (amplitude factor 1.5, tub47) are checked against their stability margin.
 """
 from __future__ import annotations
 

@@ -81,7 +81,8 @@ class Run(_Strict):
     max_overlap: float = Field(0.25, gt=0, description="blow-up bound on overlap / diameter")
     record_impacts: bool = True
     force_chunks: int = Field(2, ge=1, le=1024, description="chunks of the DEM's parallel force "
-                              "assembly: they fix the summation order, so the numbers depend on "
+                              "assembly and of the continuum's parallel particle-to-grid "
+                              "scatter: they fix the summation order, so the numbers depend on "
                               "them and not on the thread count; threads beyond them idle")
 
 

@@ -53,7 +53,8 @@ def _method(name: str, description: str, module: str, options: str, run: str):
                        progress: bool, resume: bool) -> dict:
             from vibroflow.continuum.run import material_of
 
-            material_of(scenario, calibration, opts.model, opts.dilatancy)
+            material_of(scenario, calibration, opts.model, dilatancy=opts.dilatancy,
+                        stiffness_factor=opts.stiffness_factor)
             return getattr(mod, run)(scenario, out_dir, calibration=calibration, options=opts,
                                      progress=progress, resume=resume)
 

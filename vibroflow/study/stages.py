@@ -135,9 +135,12 @@ def calibration_stage() -> Stage:
 def continuum_stage(method: ContinuumMethod, options) -> Stage:
     def inputs(study: Study) -> dict:
         opts = dataclasses.asdict(options)
+        # options at their defaults that came after the first studies (dilatancy off, the
+        # calibrated stiffness) are left out, so that those studies keep their hashes
         if not opts.get("dilatancy", False):
-            # off (the default): left out so that studies run before the option keep their hashes
             opts.pop("dilatancy", None)
+        if opts.get("stiffness_factor", 1.0) == 1.0:
+            opts.pop("stiffness_factor", None)
         return {"scenario": scenario_inputs(study.scenario), "options": opts}
 
     def run(study: Study, resume: bool) -> dict:

@@ -2,7 +2,8 @@
 
 With the material at the fixed cells (mesh.py), one explicit step of the elasto-plastic
 continuum, the same operations as the material point method's step (vibroflow.continuum.mpm),
-with its kernels:
+with its kernels (run, with the remap, by fused.advance_kernel; this module holds the kernels
+proper to the fixed mesh):
 
 1. forces on the cells: the wall's penalty contact with Coulomb friction (wall.py) and the
    partitions' friction as a body force (boundary.partition_forces, on the cell's material
@@ -26,15 +27,6 @@ with its kernels:
 from __future__ import annotations
 
 import numba as nb
-import numpy as np
-
-from ..boundary import partition_forces
-from ..constitutive import update_stress_points
-from ..g2p import g2p
-from ..grid_update import grid_update
-from ..p2g import p2g
-from .advection import face_velocities, match_divergence
-from .wall import wall_forces
 
 
 @nb.njit(cache=True)
@@ -97,52 +89,3 @@ def fill_limit(mass, density, h):
         full = mass[p] / area
         if mass[p] > 0.0 and 0.0 < density[p] < full:
             density[p] = full
-
-
-def lagrangian_step(system, state) -> None:
-    """Steps 1-5 of the module docstring for system (solver.EulerianSystem) and state
-    (solver.EulerianState), in place (the cells' v, C, L, stress, gamma_dot, phase; the
-    wall's history)."""
-    mesh = system.mesh
-    g = mesh.grid
-    dt = system.dt
-    material_fraction(state.mass, state.density, mesh.h, state.frac, state.volume)
-    state.fext[:] = 0.0
-    w = system.wall
-    if w is not None:
-        hist = state.wall
-        wall_forces(system.wall_cells, mesh.normal, state.v, state.mass,
-                    system.material.critical_density, mesh.h,
-                    hist["delta"], hist["xi"], state.fext, hist["fn"], hist["ft"],
-                    hist["state"], w.stiffness, w.tangential_stiffness, w.damping_ratio,
-                    w.friction, dt)
-    if system.partitions is not None:
-        pf = system.partitions
-        partition_forces(state.v, state.mass, state.volume, state.stress, state.fext,
-                         pf.friction, pf.length, dt)
-    gm, gmv, gf, gv = system.work
-    gm[:] = 0.0
-    gmv[:] = 0.0
-    gf[:] = 0.0
-    # only the cells holding material take part: an empty cell adds exactly nothing to the
-    # nodes, and its velocity is never used (the remap gives a filling cell what flows in)
-    act = np.flatnonzero(state.mass > 0.0)
-    x = system.x[act]
-    v, C = state.v[act], state.C[act]
-    p2g(x, v, C, state.mass[act], state.volume[act], state.stress[act], state.fext[act],
-        g.x0, g.z0, g.dx, g.periodic, gm, gmv, gf)
-    a0x, a0z, om, al, px, pz = system.frame.body(state.t + 0.5 * dt)
-    grid_update(gm, gmv, gf, gv, g.x0, g.z0, g.dx, dt, a0x, a0z, om, al, px, pz, g.periodic)
-    L = state.L[act]
-    g2p(x, v, C, L, gv, g.x0, g.z0, g.dx, dt, g.periodic)  # x: a copy, the cells stay put
-    state.v[act] = v
-    state.C[act] = C
-    state.L[act] = L
-    face_velocities(gv, g.x0, g.z0, g.dx, g.periodic, mesh.xmin, mesh.zmin, mesh.h,
-                    mesh.open_x, mesh.open_z, system.ux, system.uz)
-    match_divergence(state.L, system.ux, system.uz, mesh.h, g.periodic)
-    void_first(state.L, state.frac, dt)
-    end_density(state.density, state.L, dt, system.density)
-    update_stress_points(state.stress, state.L, system.density, dt, system.params,
-                         state.gamma_dot, state.phase)
-    state.density[:] = system.density

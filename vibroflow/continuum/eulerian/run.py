@@ -49,13 +49,14 @@ from ..constitutive import ContinuumMaterial
 from ..fields import grid_fields, write_grid_vtr
 from ..grid_update import LabFrame, TubFrame
 from ..mpm import ContinuumBlowUp
-from ..run import (BULK_CSV_NAME, CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME, SUMMARY_NAME, VTK_DIR,
-                   LagrangianOptions, Samples, bed_area, cell_grid_of, write_shear_rate_csv,
-                   material_of, run_fingerprint, sample_times, samples_source, shear_rate,
-                   shear_rate_outputs, to_lab, write_json_atomic)
+from ..run import (BULK_CSV_NAME, CHECKPOINT_NAME, REPORT_EVERY, SHEAR_RATE_CSV_NAME,
+                   SUMMARY_NAME, VTK_DIR, LagrangianOptions, Samples, bed_area, cell_grid_of,
+                   material_of, next_event, run_fingerprint, sample_times, samples_source,
+                   shear_rate, shear_rate_outputs, to_lab, write_json_atomic,
+                   write_shear_rate_csv)
 from ..timestep import stable_dt
 from .mesh import EulerianMesh
-from .solver import EulerianState, EulerianSystem, init_state, state_from_checkpoint, step
+from .solver import EulerianState, EulerianSystem, advance, init_state, state_from_checkpoint
 from .wall import MeshWall
 
 #: the pseudo-ball's mass in full cells at the critical density (module docstring, 3)
@@ -67,7 +68,8 @@ class EulerianOptions(LagrangianOptions):
     """Numerical options (SI), the Lagrangian's fields and checks: node spacing dx (m; the
     mesh's cells are dx/2; default `default_dx`: about half the analysis cell), Courant number,
     rheology model ("mu_i" or "drucker_prager"), settling time in the still tub (s), wall
-    stiffness (Pa/m; default (K + 4G/3) / (dx/2), the Lagrangian default at the same dx)."""
+    stiffness (Pa/m; default (K + 4G/3) / (dx/2), the Lagrangian default at the same dx),
+    stiffness factor (-; LagrangianOptions)."""
 
 
 def default_dx(radius: float, cell_size: float) -> float:
@@ -104,7 +106,8 @@ def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
     f, per = scenario.motion.frequency, scenario.run.phases_per_cycle
     interval = 1.0 / (f * per)
     dt = interval / math.ceil(interval / dt)
-    return EulerianSystem(mesh, material, dt, frame=frame, wall=wall, partitions=partitions)
+    return EulerianSystem(mesh, material, dt, frame=frame, wall=wall, partitions=partitions,
+                          chunks=scenario.run.force_chunks)
 
 
 def bed_masses(system: EulerianSystem, area: float, gravity: float):
@@ -156,10 +159,10 @@ def settle(scenario, material, calibration, options, prog: RunProgress | None = 
     steps = int(math.ceil(options.settle_time / system.dt))
     if prog is not None:
         prog.stage("continuum (eulerian): settle (still tub)", options.settle_time)
-    for k in range(steps):
-        step(system, state)
-        if prog is not None and k % 200 == 0:
-            prog.update(state.t, (k + 1) * state.n)
+    for k in range(0, steps, REPORT_EVERY):
+        advance(system, state, min(REPORT_EVERY, steps - k))
+        if prog is not None:
+            prog.update(state.t, state.step * state.n)
     return state, top
 
 
@@ -184,7 +187,8 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
     if stop_after_steps is not None and not int(stop_after_steps) >= 0:
         raise InputError(f"stop_after_steps = {stop_after_steps!r}: must be >= 0")
     options = options or EulerianOptions()
-    material = material_of(scenario, calibration, options.model, options.dilatancy)
+    material = material_of(scenario, calibration, options.model, dilatancy=options.dilatancy,
+                           stiffness_factor=options.stiffness_factor)
     motion = TubMotion.of_scenario(scenario)
     gravity = (float(scenario.gravity[0]), float(scenario.gravity[2]))
     system = make_system(scenario, material, calibration, options, TubFrame(motion, gravity))
@@ -262,6 +266,7 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
         # the Lagrangian block's names: the cells are the fixed integration points
         "point_spacing_m": h, "points": n_cells,
         "bed_height_m": top, "dt_s": system.dt, "steps": n_steps, "wall_time_s": wall_time,
+        "stiffness_factor": options.stiffness_factor,
         "wall_friction": system.wall.friction, "wall_stiffness_Pa_m": system.wall.stiffness,
         "partition_friction": (system.partitions.friction if system.partitions is not None
                                else None),
@@ -324,7 +329,8 @@ def _vibrate(scenario, system: EulerianSystem, state: EulerianState, samples: Sa
             "wall_time_s": wall_before + time.perf_counter() - wall0})
 
     prog.stage("continuum (eulerian)", run.duration)
-    for k in range(k0, n_steps + 1):
+    k = k0
+    while True:
         while samples.j < S and sample_step[samples.j] == k:
             j = samples.j
             pose6 = np.array(system.frame.pose(state.t))
@@ -378,8 +384,10 @@ def _vibrate(scenario, system: EulerianSystem, state: EulerianState, samples: Sa
         if time.perf_counter() - last_ckpt > run.checkpoint_every:
             checkpoint()
             last_ckpt = time.perf_counter()
-        step(system, state)
-        if k % 200 == 0:
-            prog.update(state.t, (k + 1 - k0) * n)
+        # the steps up to the next sample, stop or progress report, in one compiled call
+        nxt = next_event(k, n_steps, sample_step, samples.j, k0, stop_after_steps)
+        advance(system, state, nxt - k)
+        k = nxt
+        prog.update(state.t, (k - k0) * n)
     prog.update(state.t, (n_steps - k0) * n)
     return True

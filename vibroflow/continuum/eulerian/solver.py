@@ -49,8 +49,8 @@ from vibroflow.errors import InputError
 from ..constitutive import ContinuumMaterial
 from ..grid_update import LabFrame
 from ..mpm import ContinuumBlowUp
-from .advection import advect
-from .lagrangian_step import fill_limit, lagrangian_step, material_fraction
+from . import fused
+from .lagrangian_step import fill_limit, material_fraction
 from .mesh import EulerianMesh
 from .wall import MeshWall, empty_history
 
@@ -70,10 +70,13 @@ class EulerianSystem:
     frame: object = field(default_factory=LabFrame)
     wall: MeshWall | None = None
     partitions: object = None
+    chunks: int = 2
 
     def __post_init__(self):
         if not self.dt > 0:
             raise InputError(f"dt = {self.dt!r}: must be > 0 s")
+        if not (isinstance(self.chunks, int) and self.chunks >= 1):
+            raise InputError(f"chunks = {self.chunks!r}: must be an integer >= 1")
         m = self.mesh
         self.params = self.material.as_array()
         self.x = m.centres()
@@ -86,6 +89,17 @@ class EulerianSystem:
         self.adv = (np.zeros(s2), np.zeros(s2), np.zeros(s2), np.zeros(s2 + (NQ,)),
                     np.zeros(s2 + (NQ,)), np.zeros(s2), np.zeros(s2 + (NQ,)))
         self.q = np.zeros((m.n, NQ))
+        # fused.py's work arrays: the end-of-step density, the cells holding material and
+        # their compact copies, the per-chunk scatter buffers
+        n = m.n
+        self.end_rho = np.zeros(n)
+        self.compact = (np.zeros(n, np.int64), np.zeros((n, 2)), np.zeros((n, 2)),
+                        np.zeros((n, 4)), np.zeros((n, 4)), np.zeros(n), np.zeros(n),
+                        np.zeros((n, 4)), np.zeros((n, 2)))
+        g = m.grid
+        self.chunk_work = (np.zeros((self.chunks, g.nx, g.nz)),
+                           np.zeros((self.chunks, g.nx, g.nz, 2)),
+                           np.zeros((self.chunks, g.nx, g.nz, 2)))
 
 
 @dataclass
@@ -200,43 +214,51 @@ def _blowup(system, state, ids, what):
         "the stiffness or the speeds reached (lower cfl), or the wall stiffness too low")
 
 
-def step(system: EulerianSystem, state: EulerianState) -> None:
-    """Advance the state by one step system.dt: the Lagrangian step, then the remap (module
-    docstring); raises mpm.ContinuumBlowUp when a cell's mass goes negative or its velocity
-    non-finite."""
-    lagrangian_step(system, state)
+def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
+    """n steps of system.dt (the Lagrangian step, then the remap: module docstring) in one
+    compiled call (fused.py); raises mpm.ContinuumBlowUp when a cell's mass goes negative or
+    its velocity non-finite."""
+    n = int(n)
+    if n <= 0:
+        return
     mesh = system.mesh
-    q = system.q
-    q[:, 0:2] = state.v
-    q[:, 2:6] = state.C
-    q[:, 6:10] = state.stress
-    q[:, 10] = state.density
-    s2 = (mesh.ncx, mesh.ncz)
-    lowest = advect(state.mass.reshape(s2), q.reshape(s2 + (NQ,)), system.ux, system.uz,
-                    mesh.h, system.dt, mesh.open_x, mesh.open_z, mesh.periodic, *system.adv)
-    state.v[:] = q[:, 0:2]
-    state.C[:] = q[:, 2:6]
-    state.stress[:] = q[:, 6:10]
-    state.density[:] = q[:, 10]
-    fill_limit(state.mass, state.density, mesh.h)
-    state.t += system.dt
-    state.step += 1
-    if lowest < -1e-9 * system.material.critical_density * mesh.h**2 or not np.isfinite(lowest):
-        bad = np.nonzero(~(state.mass >= -1e-9 * system.material.critical_density
-                           * mesh.h**2))[0]
+    g = mesh.grid
+    mat = system.material
+    w = system.wall
+    hist = state.wall
+    pf = system.partitions
+    done, t, status, lowest, err_max = fused.advance_kernel(
+        n, state.t, system.dt, state.mass0, state.mass_error_max, system.x, state.mass,
+        state.v, state.C, state.L, state.stress, state.gamma_dot, state.phase, state.frac,
+        state.volume, state.density, state.fext, w is not None, system.wall_cells, mesh.normal,
+        mat.critical_density, hist["delta"], hist["xi"], hist["fn"], hist["ft"],
+        hist["state"], *((w.stiffness, w.tangential_stiffness, w.damping_ratio, w.friction)
+                         if w is not None else (0.0, 0.0, 0.0, 0.0)),
+        pf is not None, *((pf.friction, pf.length) if pf is not None else (0.0, 1.0)),
+        system.frame.as_array(), g.x0, g.z0, g.dx, g.periodic, mesh.xmin, mesh.zmin, mesh.h,
+        mesh.open_x, mesh.open_z, system.params, system.ux, system.uz, *system.adv, system.q,
+        system.end_rho, *system.compact, *system.chunk_work, *system.work)
+    state.t = t
+    state.step += done
+    state.mass_error_max = err_max
+    if status == fused.NEGATIVE_MASS:
+        bad = np.nonzero(~(state.mass >= -1e-9 * mat.critical_density * mesh.h**2))[0]
         raise _blowup(system, state, bad, "lost more mass than they held (negative mass)")
-    if not np.isfinite(state.v).all():
+    if status == fused.NON_FINITE:
         raise _blowup(system, state, np.nonzero(~np.isfinite(state.v).all(axis=1))[0],
                       "reached a non-finite velocity")
-    if state.mass0 > 0:
-        err = abs(state.mass.sum() - state.mass0) / state.mass0
-        if err > state.mass_error_max:
-            state.mass_error_max = err
+
+
+def step(system: EulerianSystem, state: EulerianState) -> None:
+    """Advance the state by one step system.dt (`advance`)."""
+    advance(system, state, 1)
 
 
 def run_steps(system: EulerianSystem, state: EulerianState, n: int, callback=None) -> None:
-    """n steps; callback(state) after each if given."""
+    """n steps; callback(state) after each if given (else all in one compiled call)."""
+    if callback is None:
+        advance(system, state, n)
+        return
     for _ in range(int(n)):
         step(system, state)
-        if callback is not None:
-            callback(state)
+        callback(state)

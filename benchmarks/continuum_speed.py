@@ -1,0 +1,302 @@
+"""Wall time of the continuum formulations on a tub case, against the DEM's (issues 4 and 6).
+
+    python benchmarks/continuum_speed.py [--case tub47-quick] [--calibration FILE]
+        [--dem-dir DIR] [--methods lagrangian,eulerian] [--threads 1,2] [--cfl 0.3]
+        [--dx M] [--stiffness-factor 1.0] [--set KEY=VALUE ...] [--kernels] [--json PATH]
+
+Every (method, thread count) case runs in its own process (NUMBA_NUM_THREADS set before numba
+is imported): it first times the compiled kernels' first call (numba's cache load, or the
+compilation when the cache is cold) on a few steps of the settled bed, then the whole run
+(vibroflow.continuum.run.run_lagrangian / eulerian.run.run_eulerian: settling, vibration,
+sampling, the analysis) into a temporary folder.  Printed per case: points (material points, or
+the Eulerian mesh's cells), steps (settling + vibration), the run's wall time (its summary's
+wall_time_s, as the DEM's), steps/s and point-steps/s, the DEM's wall time and the ratio (the
+issue's target: >= 100 at equal accuracy), and, with a DEM folder, the field difference E of
+tub47.md against the DEM and the circulation (equal accuracy is judged on these).  The 1-minute
+load average before and after each case is printed: on a shared machine the ratio is only
+indicative.
+
+--kernels: one thread, in this process, on the settled bed: microseconds per call of each kernel
+of a step (the Lagrangian's boundaries, p2g, grid update, g2p, volume and stress; the Eulerian's
+p2g and g2p over the cells holding material, face velocities, remap) and of a whole step made
+by the compiled loop (mpm.advance / eulerian.solver.advance), so the step's overhead beyond its
+kernels shows.
+
+--dem-dir: a `vibroflow dem` folder (or a study's dem/) of the same case: its summary.json's
+wall_time_s and bulk_velocity.csv.  --calibration: a calibration.toml (default: the DEM
+folder's calibration.toml when there is one, else tub47's defaults).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _load() -> float:
+    return os.getloadavg()[0]
+
+
+def _options(method: str, a):
+    from vibroflow.continuum.eulerian.run import EulerianOptions
+    from vibroflow.continuum.run import LagrangianOptions
+
+    cls = LagrangianOptions if method == "lagrangian" else EulerianOptions
+    return cls(dx=a.dx, cfl=a.cfl, stiffness_factor=a.stiffness_factor)
+
+
+def _inputs(a):
+    from vibroflow.calibration.calibrate import read_calibration
+    from vibroflow.scenario.io import load_scenario
+
+    scenario = load_scenario(a.case, a.set)
+    cal = None
+    if a.calibration:
+        cal = read_calibration(a.calibration)
+    elif a.dem_dir and (Path(a.dem_dir) / "calibration.toml").exists():
+        cal = read_calibration(Path(a.dem_dir) / "calibration.toml")
+    return scenario, cal
+
+
+def _settled(method: str, scenario, cal, opts):
+    """(system, state, advance) of the settled bed in the vibrating tub's frame (the state
+    after the run's settling stage)."""
+    from vibroflow.continuum.grid_update import TubFrame
+    from vibroflow.tub.motion import TubMotion
+
+    frame = TubFrame(TubMotion.of_scenario(scenario),
+                     (float(scenario.gravity[0]), float(scenario.gravity[2])))
+    if method == "lagrangian":
+        from vibroflow.continuum import run as R
+        from vibroflow.continuum.mpm import advance
+
+        mat = R.material_of(scenario, cal, opts.model, stiffness_factor=opts.stiffness_factor)
+        system, spacing = R.make_system(scenario, mat, cal, opts, frame)
+        x, volume, density, stress, _ = R.settled_bed(scenario, mat, spacing)
+        state = R.settle(scenario, mat, cal, opts, x, volume, density, stress)
+        return system, state, advance
+    from vibroflow.continuum.eulerian import run as ER
+    from vibroflow.continuum.eulerian.solver import advance
+    from vibroflow.continuum.run import material_of
+
+    mat = material_of(scenario, cal, opts.model, stiffness_factor=opts.stiffness_factor)
+    system = ER.make_system(scenario, mat, cal, opts, frame)
+    state, _ = ER.settle(scenario, mat, cal, opts)
+    return system, state, advance
+
+
+def worker(a) -> dict:
+    """One case in this process (NUMBA_NUM_THREADS set by the parent)."""
+    import numba
+
+    from vibroflow.analysis.bulk import read_csv
+    from vibroflow.analysis.compare import field_difference
+
+    scenario, cal = _inputs(a)
+    opts = _options(a.method, a)
+    t0 = time.perf_counter()
+    system, state, advance = _settled(a.method, scenario, cal, opts)
+    t1 = time.perf_counter()
+    advance(system, state, 2)
+    first = time.perf_counter() - t1
+    if a.method == "lagrangian":
+        from vibroflow.continuum.run import run_lagrangian as run
+    else:
+        from vibroflow.continuum.eulerian.run import run_eulerian as run
+    load0 = _load()
+    res = {}
+    with tempfile.TemporaryDirectory() as out:
+        summary = run(scenario, out, calibration=cal, options=opts)
+        dem_csv = Path(a.dem_dir) / "bulk_velocity.csv" if a.dem_dir else None
+        if dem_csv is not None and dem_csv.exists():
+            h = scenario.analysis.cell_size
+            res["E"] = field_difference(read_csv(Path(out) / "bulk_velocity.csv", cell_size=h),
+                                        read_csv(dem_csv, cell_size=h),
+                                        scenario.analysis.min_solid_fraction)
+    load1 = _load()
+    c = summary["continuum"]
+    steps = summary["steps"] + int(math.ceil(opts.settle_time / c["dt_s"]))
+    wall = summary["wall_time_s"]
+    res.update({"method": a.method, "threads": numba.get_num_threads(), "points": c["points"],
+                "steps": steps, "dt_s": c["dt_s"], "wall_time_s": wall,
+                "steps_per_s": steps / wall, "point_steps_per_s": c["points"] * steps / wall,
+                "first_call_s": first, "load_before": load0, "load_after": load1,
+                "circulation": summary["circulation"]["strength"],
+                "circulation_stderr": summary["circulation"]["strength_stderr"]})
+    return res
+
+
+def _per_call(f, n: int) -> float:
+    """Microseconds per call of f (best of 3 batches of n)."""
+    f()
+    best = math.inf
+    for _ in range(3):
+        t = time.perf_counter()
+        for _ in range(n):
+            f()
+        best = min(best, (time.perf_counter() - t) / n)
+    return 1e6 * best
+
+
+def kernels(a) -> dict:
+    """Microseconds per call of each kernel of a step and of a whole step (module docstring),
+    one thread, on the settled bed."""
+    import numba
+    import numpy as np
+
+    from vibroflow.continuum.g2p import g2p
+    from vibroflow.continuum.p2g import p2g
+
+    numba.set_num_threads(1)
+    scenario, cal = _inputs(a)
+    out = {}
+    for method in a.methods:
+        opts = _options(method, a)
+        system, state, advance = _settled(method, scenario, cal, opts)
+        t = {}
+        if method == "lagrangian":
+            from vibroflow.continuum.boundary import partition_forces, u_wall_forces
+            from vibroflow.continuum.constitutive import update_stress_points
+            from vibroflow.continuum.grid_update import grid_update
+            from vibroflow.continuum.plasticity import update_volume
+
+            g = system.grid
+            gm, gmv, gf, gv = system.work
+            wall, part = system.boundaries[0], system.boundaries[-1]
+            h = state.history[0]
+            x, v, C, L = state.x.copy(), state.v.copy(), state.C.copy(), state.L.copy()
+            stress, vol, rho = state.stress.copy(), state.volume.copy(), state.density.copy()
+            t["boundaries"] = _per_call(lambda: (
+                u_wall_forces(x, v, state.mass, vol, h["xi"].copy(), state.fext, h["f"],
+                              h["fn"], h["ft"], h["state"], wall.radius, wall.stiffness,
+                              wall.tangential_stiffness, wall.damping_ratio, wall.friction,
+                              system.dt),
+                partition_forces(v, state.mass, vol, stress, state.fext, part.friction,
+                                 part.length, system.dt)), 200)
+            t["p2g"] = _per_call(lambda: p2g(x, v, C, state.mass, vol, stress, state.fext,
+                                             g.x0, g.z0, g.dx, g.periodic, gm, gmv, gf), 200)
+            t["grid_update"] = _per_call(lambda: grid_update(
+                gm, gmv, gf, gv, g.x0, g.z0, g.dx, system.dt, 0.0, -9.81, 0.0, 0.0, 0.0, 0.0,
+                g.periodic), 200)
+            t["g2p"] = _per_call(lambda: g2p(x.copy(), v.copy(), C.copy(), L, gv, g.x0, g.z0,
+                                             g.dx, 0.0, g.periodic), 200)
+            t["volume_and_stress"] = _per_call(lambda: (
+                update_volume(L, state.mass, vol.copy(), rho, 0.0),
+                update_stress_points(stress.copy(), L, rho, system.dt, system.params,
+                                     state.gamma_dot.copy(), state.phase.copy())), 200)
+        else:
+            from vibroflow.continuum.eulerian.advection import advect, face_velocities
+            from vibroflow.continuum.eulerian.solver import NQ
+
+            mesh = system.mesh
+            g = mesh.grid
+            gm, gmv, gf, gv = system.work
+            act = np.flatnonzero(state.mass > 0)
+            x, v, C, L = system.x[act], state.v[act], state.C[act], state.L[act]
+            m, vol, st, fe = state.mass[act], state.volume[act], state.stress[act], \
+                state.fext[act]
+            t["p2g"] = _per_call(lambda: p2g(x, v, C, m, vol, st, fe, g.x0, g.z0, g.dx,
+                                             g.periodic, gm, gmv, gf), 200)
+            t["g2p"] = _per_call(lambda: g2p(x.copy(), v.copy(), C.copy(), L.copy(), gv, g.x0,
+                                             g.z0, g.dx, 0.0, g.periodic), 200)
+            t["face_velocities"] = _per_call(lambda: face_velocities(
+                gv, g.x0, g.z0, g.dx, g.periodic, mesh.xmin, mesh.zmin, mesh.h, mesh.open_x,
+                mesh.open_z, state.mass.reshape(mesh.ncx, mesh.ncz), system.ux, system.uz), 200)
+            s2 = (mesh.ncx, mesh.ncz)
+            q = np.zeros(s2 + (NQ,))
+            q[..., 0:2] = state.v.reshape(s2 + (2,))
+            q[..., 6:10] = state.stress.reshape(s2 + (4,))
+            q[..., 10] = state.density.reshape(s2)
+            mass = state.mass.reshape(s2)
+            t["remap"] = _per_call(lambda: advect(
+                mass.copy(), q.copy(), system.ux, system.uz, mesh.h, system.dt, mesh.open_x,
+                mesh.open_z, mesh.periodic, *system.adv), 200)
+        t["whole step (compiled loop, 20 steps a call)"] = _per_call(
+            lambda: advance(system, state, 20), 10) / 20
+        t["whole step (one step a call)"] = _per_call(lambda: advance(system, state, 1), 100)
+        out[method] = {"points": int(state.n if method == "lagrangian"
+                                     else (state.mass > 0).sum()), "us_per_call": t}
+    return out
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--case", default="tub47-quick")
+    p.add_argument("--calibration")
+    p.add_argument("--dem-dir")
+    p.add_argument("--methods", default="lagrangian,eulerian")
+    p.add_argument("--threads", default="1,2")
+    p.add_argument("--cfl", type=float, default=0.3)
+    p.add_argument("--dx", type=float)
+    p.add_argument("--stiffness-factor", type=float, default=1.0)
+    p.add_argument("--set", action="append", default=[])
+    p.add_argument("--kernels", action="store_true")
+    p.add_argument("--json", default=str(ROOT / "runs" / "continuum_speed.json"))
+    p.add_argument("--method", help=argparse.SUPPRESS)  # a worker's case
+    a = p.parse_args(argv)
+    a.methods = [m for m in a.methods.split(",") if m]
+    if a.method:
+        print("RESULT " + json.dumps(worker(a)))
+        return 0
+    dem_wall = None
+    if a.dem_dir:
+        dem_wall = json.loads((Path(a.dem_dir) / "summary.json").read_text())["wall_time_s"]
+    report = {"case": a.case, "options": {"cfl": a.cfl, "dx": a.dx,
+                                          "stiffness_factor": a.stiffness_factor},
+              "dem_wall_time_s": dem_wall, "cases": []}
+    if a.kernels:
+        report["kernels"] = kernels(a)
+        for method, k in report["kernels"].items():
+            print(f"{method}: {k['points']} points, one thread, us per call")
+            for name, us in k["us_per_call"].items():
+                print(f"  {name:45s} {us:9.1f}")
+    head = (f"{'method':11s} {'thr':>3s} {'points':>6s} {'steps':>6s} {'wall s':>7s} "
+            f"{'steps/s':>8s} {'Mpt-st/s':>8s} {'1st call':>8s} {'DEM/cont':>8s} {'E':>6s} "
+            f"{'circ':>8s} {'load':>9s}")
+    print(head)
+    for method in a.methods:
+        for th in [int(t) for t in a.threads.split(",") if t]:
+            cmd = [sys.executable, __file__, "--method", method, "--case", a.case,
+                   "--cfl", str(a.cfl), "--stiffness-factor", str(a.stiffness_factor)]
+            for flag, val in (("--calibration", a.calibration), ("--dem-dir", a.dem_dir),
+                              ("--dx", a.dx)):
+                if val is not None:
+                    cmd += [flag, str(val)]
+            for kv in a.set:
+                cmd += ["--set", kv]
+            env = dict(os.environ, NUMBA_NUM_THREADS=str(th))
+            r = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=ROOT)
+            line = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
+            if r.returncode != 0 or not line:
+                print(f"{method} threads {th}: failed\n{r.stderr[-2000:]}")
+                continue
+            res = json.loads(line[-1][7:])
+            res["dem_over_continuum"] = dem_wall / res["wall_time_s"] if dem_wall else None
+            report["cases"].append(res)
+            ratio = f"{res['dem_over_continuum']:8.1f}" if dem_wall else f"{'-':>8s}"
+            E = f"{res['E']:6.3f}" if "E" in res else f"{'-':>6s}"
+            print(f"{method:11s} {th:3d} {res['points']:6d} {res['steps']:6d} "
+                  f"{res['wall_time_s']:7.2f} {res['steps_per_s']:8.0f} "
+                  f"{res['point_steps_per_s'] / 1e6:8.2f} {res['first_call_s']:8.2f} {ratio} "
+                  f"{E} {res['circulation']:8.5f} "
+                  f"{res['load_before']:4.1f}/{res['load_after']:4.1f}")
+    if dem_wall:
+        print(f"DEM wall time {dem_wall:.1f} s ({a.dem_dir})")
+    path = Path(a.json)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(report, indent=2) + "\n")
+    print(f"written {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
