@@ -186,7 +186,7 @@ def settled_bed(scenario, material: ContinuumMaterial, spacing: float):
     x = np.stack([X[keep], Z[keep]], axis=1)
     n = x.shape[0]
     if n == 0:
-        raise InputError(f"fill.count = {fill.count}: the bed is thinner than one point "
+        raise InputError(f"fill.count = {scenario.fill.count}: the bed is thinner than one point "
                          f"({spacing:.3g} m); refine dx")
     g = math.hypot(scenario.gravity[0], scenario.gravity[2])
     rho_c = material.initial_density  # rho_c unless the bed starts denser (dilatancy)

@@ -49,7 +49,6 @@ def _record_impact(imp_buf, imp_count, c, t, kind, x, y, z, speed):
 def _pair_chunk(c, nchunk, t, dt_hist, pos, vel, omg, radius, mass, mat, table, nbr_start, nbr,
                 hist, flag, periodic_length, fbuf, tbuf, bounds, imp_buf, imp_count,
                 record_impacts, diag):
-    n = pos.shape[0]
     lo, hi = bounds[c], bounds[c + 1]
     for i in range(lo, hi):
         ri = radius[i]
