@@ -101,7 +101,8 @@ def main(argv=None) -> int:
                  "fraction_elastic": float(np.mean(ph == 1)),
                  "fraction_flowing": float(np.mean(ph == 2)),
                  "connected_dphi_p5_p50_p95": [float(v) for v in
-                                               np.percentile(dphi, [5, 50, 95])]}
+                                               np.percentile(dphi, [5, 50, 95])],
+                 "pressure_mean_Pa": float(np.mean(p))}
     print(json.dumps({"amplitude_factor": sc.motion.amplitude_factor, "method": args.method,
                       "K_dil": args.k_dil, "excess": args.excess, "cfl": args.cfl,
                       "compaction": ({k: cal["compaction"].get(k) for k in (
