@@ -5,6 +5,11 @@ ratio and the field difference E (tub47.md; vibroflow.analysis.compare.field_dif
 
     .venv/bin/python benchmarks/dilatancy_vs_dem.py --dem-dir runs/study-quick/dem \
         --calibration runs/study-quick/dem/calibration.toml --k-dil 6.71 --out runs/dil/L1
+
+--compaction adds the cyclic compaction option with the calibration's [compaction] (or
+--gamma-c / --dphi-cyc); --diagnose (Lagrangian) also prints, over the samples of the last
+cycle, the fractions of disconnected / elastic / flowing points and percentiles of the connected
+points' unloaded packing phi = rho exp(-p / K) / rho_s minus phi_c.
 """
 from __future__ import annotations
 
@@ -25,6 +30,13 @@ def main(argv=None) -> int:
     ap.add_argument("--excess", type=float, default=0.0,
                     help="initial_excess_solid_fraction of the bed over phi_c")
     ap.add_argument("--cfl", type=float, default=0.3)
+    ap.add_argument("--compaction", action="store_true", help="the cyclic compaction option")
+    ap.add_argument("--gamma-c", type=float, default=None, help="override [compaction] "
+                    "compaction_strain")
+    ap.add_argument("--dphi-cyc", type=float, default=None, help="override [compaction] "
+                    "excess_solid_fraction")
+    ap.add_argument("--diagnose", action="store_true", help="point states and packing over "
+                    "the last cycle (Lagrangian)")
     ap.add_argument("--out", required=True, type=Path)
     args = ap.parse_args(argv)
 
@@ -42,10 +54,31 @@ def main(argv=None) -> int:
     if args.k_dil > 0:
         cal["dilatancy"] = {**cal.get("dilatancy", {}), "K_dil": args.k_dil,
                             "initial_excess_solid_fraction": args.excess}
-    opts = dict(dilatancy=args.k_dil > 0, cfl=args.cfl)
+    if args.compaction:
+        comp = dict(cal.get("compaction", {}))
+        if args.gamma_c is not None:
+            comp["compaction_strain"] = args.gamma_c
+        if args.dphi_cyc is not None:
+            comp["excess_solid_fraction"] = args.dphi_cyc
+        cal["compaction"] = comp
+    opts = dict(dilatancy=args.k_dil > 0, cfl=args.cfl, compaction=args.compaction)
+    diag = []
+    if args.diagnose:
+        import numpy as np
+
+        import vibroflow.continuum.run as lrun
+
+        write_points = lrun._write_points_vtu
+
+        def spy(path, state, rate, length, solid_density):
+            diag.append((state.phase.copy(), state.density.copy(), state.pressure().copy()))
+            return write_points(path, state, rate, length, solid_density)
+
+        lrun._write_points_vtu = spy
     t0 = time.perf_counter()
     if args.method == "lagrangian":
-        s = run_lagrangian(sc, args.out, calibration=cal, options=LagrangianOptions(**opts))
+        s = run_lagrangian(sc, args.out, calibration=cal, options=LagrangianOptions(**opts),
+                           vtk=args.diagnose)
     else:
         s = run_eulerian(sc, args.out, calibration=cal, options=EulerianOptions(**opts))
     h = sc.analysis.cell_size
@@ -53,12 +86,32 @@ def main(argv=None) -> int:
                          read_csv(args.dem_dir / "bulk_velocity.csv", cell_size=h),
                          sc.analysis.min_solid_fraction)
     c, dc = s["circulation"], dem["circulation"]
+    extra = {}
+    if diag:
+        from vibroflow.continuum.run import material_of
+
+        mat = material_of(sc, cal, dilatancy=args.k_dil > 0, compaction=args.compaction)
+        ph = np.concatenate([d[0] for d in diag])
+        rho = np.concatenate([d[1] for d in diag])
+        p = np.concatenate([d[2] for d in diag])
+        conn = ph != 0
+        dphi = rho[conn] * np.exp(-p[conn] / mat.bulk_modulus) / mat.solid_density \
+            - mat.critical_solid_fraction
+        extra = {"fraction_disconnected": float(np.mean(ph == 0)),
+                 "fraction_elastic": float(np.mean(ph == 1)),
+                 "fraction_flowing": float(np.mean(ph == 2)),
+                 "connected_dphi_p5_p50_p95": [float(v) for v in
+                                               np.percentile(dphi, [5, 50, 95])],
+                 "pressure_mean_Pa": float(np.mean(p))}
     print(json.dumps({"amplitude_factor": sc.motion.amplitude_factor, "method": args.method,
                       "K_dil": args.k_dil, "excess": args.excess, "cfl": args.cfl,
+                      "compaction": ({k: cal["compaction"].get(k) for k in (
+                          "compaction_strain", "excess_solid_fraction")}
+                                     if args.compaction else None),
                       "strength": c["strength"], "strength_stderr": c["strength_stderr"],
                       "dem_strength": dc["strength"], "dem_strength_stderr": dc["strength_stderr"],
                       "ratio": c["strength"] / dc["strength"], "E": E,
-                      "wall_time_s": time.perf_counter() - t0}))
+                      "wall_time_s": time.perf_counter() - t0, **extra}))
     return 0
 
 

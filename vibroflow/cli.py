@@ -259,6 +259,10 @@ def continuum(
         "--dilatancy", help="mu_i with peak friction and dilation (Pailha & Pouliquen 2009), "
                             "K_dil from the calibration's [dilatancy] (vibroflow calibrate "
                             "--dilatancy).")] = False,
+    compaction: Annotated[bool, typer.Option(
+        "--compaction", help="Cyclic compaction of the connected bed towards the cyclic shear "
+                             "cell's packing (Sawicki & Swidzinski 1989), from the calibration's "
+                             "[compaction] (vibroflow calibrate --dilatancy).")] = False,
     dx: Annotated[Optional[float], typer.Option(
         "--dx", help="Grid spacing (m); default half the analysis cell.")] = None,
     cfl: Annotated[float, typer.Option(
@@ -300,8 +304,9 @@ def continuum(
 
         cal = read_calibration(calibration)
     options = options_class(dx=dx, cfl=cfl, model=rheology, dilatancy=dilatancy,
-                            stiffness_factor=stiffness_factor)
-    material_of(s, cal, rheology, dilatancy=dilatancy, stiffness_factor=stiffness_factor)
+                            stiffness_factor=stiffness_factor, compaction=compaction)
+    material_of(s, cal, rheology, dilatancy=dilatancy, stiffness_factor=stiffness_factor,
+                compaction=compaction)
     # (validates the parameters before --out is made)
     try:
         summary = run_method(s, out, calibration=cal, options=options, progress=True,

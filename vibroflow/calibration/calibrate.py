@@ -17,7 +17,8 @@ Stages:
 6. the equivalent Drucker-Prager with viscosity; with dilatancy=True (opt-in, ~1 minute), the
    dilatancy constant K_dil of the continuum's peak-friction option, measured on dense
    sheared packings of the balls at the bed's pressure and the tub's I (dilatancy.py) ->
-   [dilatancy];
+   [dilatancy], and with it the cyclic compaction of the continuum's compaction option from
+   the cyclic cell's per-cycle packing at the tub's amplitude (compaction.py) -> [compaction];
 7. RUN_DIR/calibration.toml (every parameter with its uncertainty and its provenance, read by
    the continuum solvers with `read_calibration`), RUN_DIR/calibration/ pictures.
 
@@ -184,6 +185,14 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
             cal["cyclic_shear"] = cyclic_rec
         if dilatancy:
             cal["dilatancy"] = _dilatancy(sc, p_bed, dp.get("inertial_number"), prog)
+            if cyclic_rec is not None:
+                from .compaction import compaction_table
+                try:
+                    cal["compaction"] = compaction_table(cyclic_rec, cal["dilatancy"], rheo)
+                    prog.log(f"compaction: gamma_c = {cal['compaction']['compaction_strain']:.3g}"
+                             f", dphi_cyc = {cal['compaction']['excess_solid_fraction']:.4f}")
+                except InputError as e:
+                    prog.log(f"compaction not measured: {e}")
         write_calibration(out_dir / CALIBRATION_FILE, cal)
         if pictures:
             from . import plots
@@ -234,6 +243,10 @@ def _cyclic_modulus(sc, pressure: float, shear_rate: float, elastic: dict, prog)
             "secant_shear_modulus_at_tub_amplitude_Pa": _f(at["secant_shear_modulus"]),
             "damping_ratio_at_tub_amplitude": _f(at["damping_ratio"]),
             "n_balls": int(at["n_balls"]), "cycles_kept": int(at["cycles_kept"]),
+            # how the packing shakes down at the tub's amplitude (calibration.compaction)
+            "solid_fraction_start_at_tub_amplitude": _f(at["solid_fraction_start"]),
+            "solid_fraction_cycle_end_at_tub_amplitude": [
+                _f(v) for v in at["solid_fraction_cycle_end"]],
             "units": "strain_amplitude -, secant_shear_modulus Pa, damping_ratio -, "
                      "peak_stress_ratio -, solid_fraction -",
             **{c: [_f(r[c]) for r in recs] for c in cols}}

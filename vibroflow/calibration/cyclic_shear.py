@@ -104,7 +104,9 @@ def run_cyclic_shear(scenario, strain_amplitudes=DEFAULT_AMPLITUDES,
 
     Returns one dict per amplitude in the order given: strain_amplitude, frequency_Hz,
     pressure_Pa, secant_shear_modulus (Pa), damping_ratio, peak_stress_ratio, each with
-    *_stderr, solid_fraction (mean over the kept cycles), solid_fraction_start, cycles_kept,
+    *_stderr, solid_fraction (mean over the kept cycles), solid_fraction_start,
+    solid_fraction_cycle_end (the packing at the end of each cycle, discarded ones included),
+    cycles_kept,
     n_balls, seed, dt, wall_time_s.  Deterministic for a given seed.
     """
     if frequency is None:
@@ -174,7 +176,11 @@ def run_cyclic_shear(scenario, strain_amplitudes=DEFAULT_AMPLITUDES,
             m, se = _mean_se([pc[key] for pc in per_cycle])
             rec[key], rec[key + "_stderr"] = m, se
         kept = r[r[:, 0] >= discard_cycles]
+        # the packing at the end of every cycle, discarded ones included: how fast the box shakes
+        # down to its cyclic packing (calibration.compaction fits the compaction rate to it)
+        ends = [float(r[r[:, 0] == c, 4][-1]) for c in range(int(cycles))]
         rec.update(solid_fraction=float(kept[:, 4].mean()), solid_fraction_start=phi_start,
+                   solid_fraction_cycle_end=ends,
                    mean_sigma_zz_Pa=float(kept[:, 3].mean()),
                    cycles_kept=int(cycles) - int(discard_cycles), n_balls=int(box.n),
                    seed=int(seed), dt=float(setup.dt),

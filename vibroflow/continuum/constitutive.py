@@ -58,6 +58,31 @@ step's plastic shear gp dt by the exact solution of d phi / d gamma = -K_dil phi
 (to first order K dt tan(psi) gp; the exact form cannot overshoot phi_eq).  K_dil = 0 is the plain law,
 bit for bit.
 
+Option: compaction under cyclic loading (`compaction_strain` = gamma_c > 0; any model).  Under
+the tub's vibration a connected granular bed shakes down towards a packing denser than its
+steady-shear one: soil mechanics' cyclic densification (Youd 1972; Sawicki & Swidzinski 1989,
+"Mechanics of a sandy subsoil subjected to cyclic loadings", Int. J. Numer. Anal. Meth.
+Geomech. 13, 273-285: the compaction per cycle proportional to the distance from the cyclic
+limit packing; Bauer 1996; for tapped beads Knight et al. 1995).  D&K's law has no such
+mechanism (every landing reconnects at rho_c with zero stress and stays at phi_c), so its bed
+is never dense and the dilatancy option's peak friction K_dil (phi - phi_eq) never engages.
+Here, in the rate form of Sawicki & Swidzinski's law with the cycle count replaced by the
+accumulated shear strain (a cycle of amplitude gamma_0 is 4 gamma_0 of it):
+    d phi / d gamma = (phi_cyc - phi) / gamma_c   for phi < phi_cyc,  phi_cyc = phi_c + dphi_cyc,
+gamma the equivalent total shear strain (rate sqrt(2 D':D') from the velocity gradient,
+elastic and plastic: the cyclic cell compacts below yield too), phi = rho exp(-p / K) / rho_s the
+unloaded packing as in the dilatancy option.  The densification is plastic and isotropic: over a
+step phi goes to phi_1 = phi_cyc - (phi_cyc - phi) exp(-gamma_dot dt / gamma_c) (exact) and the
+pressure drops by K ln(phi_1 / phi) (the skeleton is denser, so the same density carries less
+elastic compression; the loading then squeezes the point to a higher density), the deviator
+scaled with it (the stress ratio kept, so the yield condition still holds); the drop stops at
+p = 0 (a stress-free packing does not compact).  Only connected points (state 1 or 2), after
+the return map.  dphi_cyc and gamma_c are measured in the cyclic shear cell at the tub's strain
+amplitude (vibroflow.calibration.compaction; calibration.toml [compaction]); dphi_cyc is the
+cyclic packing's excess over the same balls' steady-shear packing phi_ss (the dilatancy cell),
+both referred to I = 0, so that the continuum's phi_c (the tub cells' phi(I -> 0)) carries it.
+gamma_c = 0 (default) is the law without compaction, bit for bit.
+
 The mu(I) law is ill-posed at very small and very large I (Barker et al. 2015); nothing here
 regularises it, so results must be checked for grid convergence.
 """
@@ -78,8 +103,8 @@ MODELS = {"mu_i": MU_I, "drucker_prager": DRUCKER_PRAGER}
 
 # packed parameter layout of `ContinuumMaterial.as_array()`
 (P_MODEL, P_K, P_G, P_MU_S, P_MU_2, P_I0, P_D, P_RHO_S, P_RHO_C, P_MU_DP, P_ETA, P_KDIL,
- P_PHI_SLOPE) = range(13)
-N_PARAMS = 13
+ P_PHI_SLOPE, P_GAMMA_C, P_DPHI_CYC) = range(15)
+N_PARAMS = 15
 
 # tub47 defaults (documented in ContinuumMaterial)
 _MU_S = math.tan(math.radians(20.9))
@@ -113,6 +138,9 @@ class ContinuumMaterial:
       p_ref = 5 kPa (mid-depth of tub47's bed): the slope d tau / d gamma_dot of mu(I) at I -> 0;
     * dilatancy = K_dil (-) of the peak-friction option (module docstring), 0 = off (default);
       measured on DEM by vibroflow.calibration.dilatancy (calibration.toml [dilatancy]);
+    * compaction_strain = gamma_c (-) and compaction_excess = dphi_cyc (-) of the cyclic
+      compaction option (module docstring), gamma_c = 0 = off (default); measured on DEM by
+      vibroflow.calibration.compaction (calibration.toml [compaction]);
     * initial_solid_fraction: the unloaded packing phi_0 of the settled bed the continuum runs
       start from (None: the critical one, phi_c); a bed denser than phi_c matters only with
       the dilatancy option (its peak friction K_dil (phi_0 - phi_c)).
@@ -131,6 +159,8 @@ class ContinuumMaterial:
     solid_density: float = 7800.0
     viscosity: float | None = None
     dilatancy: float = 0.0
+    compaction_strain: float = 0.0
+    compaction_excess: float = 0.0
     initial_solid_fraction: float | None = None
 
     def __post_init__(self):
@@ -154,6 +184,13 @@ class ContinuumMaterial:
         if self.dilatancy > 0 and self.model != "mu_i":
             raise InputError(f"dilatancy = {self.dilatancy!r} with model = {self.model!r}: the "
                              "dilatancy option is part of the mu_i model only (0 = off)")
+        for name in ("compaction_strain", "compaction_excess"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise InputError(f"{name} = {v!r}: must be a finite number >= 0 (0 = off)")
+        if not self.critical_solid_fraction + self.compaction_excess < 1.0:
+            raise InputError(f"compaction_excess = {self.compaction_excess!r}: phi_c + it must "
+                             "stay below 1")
         if self.initial_solid_fraction is not None and not (
                 self.critical_solid_fraction <= self.initial_solid_fraction < 1.0):
             raise InputError(f"initial_solid_fraction = {self.initial_solid_fraction!r}: must "
@@ -209,6 +246,8 @@ class ContinuumMaterial:
         a[P_ETA] = self.eta
         a[P_KDIL] = self.dilatancy
         a[P_PHI_SLOPE] = self.phi_max - self.phi_min
+        a[P_GAMMA_C] = self.compaction_strain
+        a[P_DPHI_CYC] = self.compaction_excess
         return a
 
     def to_dict(self) -> dict:
@@ -378,9 +417,34 @@ def _dilatant_return(dxx, dzz, sxz, dyy, p, tau, density, dt, params):
     return f * dxx - p_new, f * dzz - p_new, f * sxz, f * dyy - p_new, gp, 2
 
 
+@nb.njit(cache=True, inline="always")
+def compact(sxx, szz, sxz, syy, density, gamma_dot, dt, params):
+    """Cyclic compaction (module docstring, "Option: compaction") of the stress (Pa) of a
+    connected point of density `density` (kg/m^3) sheared at the total equivalent shear rate
+    gamma_dot (1/s) over dt (s): the unloaded packing relaxes towards phi_cyc by
+    d phi / d gamma = (phi_cyc - phi) / gamma_c (exact over the step), the pressure dropping by
+    K ln(phi_1 / phi), not below 0, the deviator scaled with it.  Returns the stress."""
+    p = -(sxx + szz + syy) / 3.0
+    if p <= 0.0 or gamma_dot <= 0.0:
+        return sxx, szz, sxz, syy
+    K = params[P_K]
+    rho_s = params[P_RHO_S]
+    phi0 = density * np.exp(-p / K) / rho_s
+    phi_cyc = params[P_RHO_C] / rho_s + params[P_DPHI_CYC]
+    if phi0 >= phi_cyc:
+        return sxx, szz, sxz, syy
+    phi1 = phi_cyc - (phi_cyc - phi0) * np.exp(-gamma_dot * dt / params[P_GAMMA_C])
+    p_new = p - K * np.log(phi1 / phi0)
+    if p_new < 0.0:
+        p_new = 0.0
+    f = p_new / p
+    return (f * (sxx + p) - p_new, f * (szz + p) - p_new, f * sxz, f * (syy + p) - p_new)
+
+
 @nb.njit(cache=True)
 def update_stress_points(stress, L, density, dt, params, gamma_dot, state):
-    """Elastic predictor and return map for every point.
+    """Elastic predictor and return map for every point (and the cyclic compaction where its
+    option is on, `compact`).
 
     stress (N, 4) [xx, zz, xz, yy] (Pa, updated in place); L (N, 4) [xx, xz, zx, zz] velocity
     gradient (1/s); density (N,) (kg/m^3, at the end of the step); gamma_dot (N,) plastic shear
@@ -388,11 +452,20 @@ def update_stress_points(stress, L, density, dt, params, gamma_dot, state):
     """
     K = params[P_K]
     G = params[P_G]
+    compaction = params[P_GAMMA_C] > 0.0
     for p in range(stress.shape[0]):
         txx, tzz, txz, tyy = elastic_predictor(stress[p, 0], stress[p, 1], stress[p, 2],
                                                stress[p, 3], L[p, 0], L[p, 1], L[p, 2], L[p, 3],
                                                dt, K, G)
         sxx, szz, sxz, syy, gp, st = return_map(txx, tzz, txz, tyy, density[p], dt, params)
+        if compaction and st != 0:
+            # total equivalent shear rate sqrt(2 D':D'), plane strain (D_yy = 0)
+            third = (L[p, 0] + L[p, 3]) / 3.0
+            exx = L[p, 0] - third
+            ezz = L[p, 3] - third
+            exz = 0.5 * (L[p, 1] + L[p, 2])
+            gd = np.sqrt(2.0 * (exx * exx + ezz * ezz + third * third + 2.0 * exz * exz))
+            sxx, szz, sxz, syy = compact(sxx, szz, sxz, syy, density[p], gd, dt, params)
         stress[p, 0] = sxx
         stress[p, 1] = szz
         stress[p, 2] = sxz

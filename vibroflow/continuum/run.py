@@ -78,7 +78,8 @@ class LagrangianOptions:
     number, rheology model ("mu_i" or "drucker_prager"), settling time in the still tub (s),
     wall stiffness (Pa/m; default (K + 4G/3) / point spacing), stiffness factor (-); dilatancy:
     the mu_i model's peak-friction option with the calibration's [dilatancy] K_dil
-    (constitutive.py).
+    (constitutive.py); compaction: the cyclic compaction option with the calibration's
+    [compaction] gamma_c and dphi_cyc (constitutive.py, vibroflow.calibration.compaction).
 
     stiffness_factor s < 1 is the continuum's counterpart of the DEM's reduced Young's modulus:
     the elastic moduli K and G (and with them the default wall stiffness) are multiplied by s,
@@ -98,6 +99,7 @@ class LagrangianOptions:
     wall_stiffness: float | None = None
     dilatancy: bool = False
     stiffness_factor: float = 1.0
+    compaction: bool = False
 
     def __post_init__(self):
         if self.dx is not None and not self.dx > 0:
@@ -110,6 +112,8 @@ class LagrangianOptions:
             raise InputError(f"wall_stiffness = {self.wall_stiffness!r}: must be > 0 Pa/m")
         if not isinstance(self.dilatancy, bool):
             raise InputError(f"dilatancy = {self.dilatancy!r}: must be true or false")
+        if not isinstance(self.compaction, bool):
+            raise InputError(f"compaction = {self.compaction!r}: must be true or false")
         if not (math.isfinite(self.stiffness_factor) and 0 < self.stiffness_factor <= 1):
             raise InputError(f"stiffness_factor = {self.stiffness_factor!r}: must be in (0, 1]")
 
@@ -121,11 +125,14 @@ def _contact(scenario, a: str, b: str):
 
 
 def material_of(scenario, calibration: dict | None, model: str = "mu_i",
-                dilatancy: bool = False, stiffness_factor: float = 1.0) -> ContinuumMaterial:
+                dilatancy: bool = False, stiffness_factor: float = 1.0,
+                compaction: bool = False) -> ContinuumMaterial:
     """The continuum material: the calibration's, else tub47's defaults with the scenario's
     ball diameter and density; its elastic moduli times stiffness_factor (LagrangianOptions);
     with `dilatancy`, the calibration's [dilatancy] K_dil (measured on DEM,
-    vibroflow.calibration.dilatancy) switches the peak-friction option on."""
+    vibroflow.calibration.dilatancy) switches the peak-friction option on; with `compaction`,
+    the calibration's [compaction] compaction_strain and excess_solid_fraction (measured on DEM,
+    vibroflow.calibration.compaction) switch the cyclic compaction option on."""
     if calibration is not None:
         mat = ContinuumMaterial.from_calibration(calibration, model=model)
     else:
@@ -135,6 +142,16 @@ def material_of(scenario, calibration: dict | None, model: str = "mu_i",
     if stiffness_factor != 1.0:
         mat = dataclasses.replace(mat, bulk_modulus=mat.bulk_modulus * stiffness_factor,
                                   shear_modulus=mat.shear_modulus * stiffness_factor)
+    if compaction:
+        c = (calibration or {}).get("compaction", {})
+        gc, ex = c.get("compaction_strain"), c.get("excess_solid_fraction")
+        if not (isinstance(gc, (int, float)) and math.isfinite(gc) and gc > 0
+                and isinstance(ex, (int, float)) and math.isfinite(ex) and ex >= 0):
+            raise InputError(f"compaction = true: needs a calibration with a measured "
+                             f"[compaction] compaction_strain > 0 and excess_solid_fraction >= 0"
+                             f" (vibroflow calibrate --dilatancy); got {gc!r}, {ex!r}")
+        mat = dataclasses.replace(mat, compaction_strain=float(gc),
+                                  compaction_excess=float(ex))
     if not dilatancy:
         return mat
     k = (calibration or {}).get("dilatancy", {}).get("K_dil")
@@ -476,6 +493,7 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
         raise InputError(f"stop_after_steps = {stop_after_steps!r}: must be >= 0")
     options = options or LagrangianOptions()
     material = material_of(scenario, calibration, options.model, dilatancy=options.dilatancy,
+                           compaction=options.compaction,
                            stiffness_factor=options.stiffness_factor)
     motion = TubMotion.of_scenario(scenario)
     gravity = (float(scenario.gravity[0]), float(scenario.gravity[2]))

@@ -54,6 +54,7 @@ def _method(name: str, description: str, module: str, options: str, run: str):
             from vibroflow.continuum.run import material_of
 
             material_of(scenario, calibration, opts.model, dilatancy=opts.dilatancy,
+                        compaction=opts.compaction,
                         stiffness_factor=opts.stiffness_factor)
             return getattr(mod, run)(scenario, out_dir, calibration=calibration, options=opts,
                                      progress=progress, resume=resume)

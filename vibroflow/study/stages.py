@@ -109,7 +109,9 @@ def _run_calibration(study: Study, resume: bool) -> dict:
 def needs_dilatancy(study: Study) -> bool:
     """Whether a method runs with the dilatancy option, so the calibration must measure K_dil
     (calibration/dilatancy.py)."""
-    return any(bool(getattr(opts, "dilatancy", False)) for _, opts in study.methods)
+    # the compaction option's excess packing is referred to the dilatancy cell's steady one
+    return any(bool(getattr(opts, "dilatancy", False)) or bool(getattr(opts, "compaction", False))
+               for _, opts in study.methods)
 
 
 def _calibration_inputs(study: Study) -> dict:
@@ -139,6 +141,8 @@ def continuum_stage(method: ContinuumMethod, options) -> Stage:
         # calibrated stiffness) are left out, so that those studies keep their hashes
         if not opts.get("dilatancy", False):
             opts.pop("dilatancy", None)
+        if not opts.get("compaction", False):
+            opts.pop("compaction", None)
         if opts.get("stiffness_factor", 1.0) == 1.0:
             opts.pop("stiffness_factor", None)
         return {"scenario": scenario_inputs(study.scenario), "options": opts}

@@ -188,6 +188,7 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
         raise InputError(f"stop_after_steps = {stop_after_steps!r}: must be >= 0")
     options = options or EulerianOptions()
     material = material_of(scenario, calibration, options.model, dilatancy=options.dilatancy,
+                           compaction=options.compaction,
                            stiffness_factor=options.stiffness_factor)
     motion = TubMotion.of_scenario(scenario)
     gravity = (float(scenario.gravity[0]), float(scenario.gravity[2]))
