@@ -189,7 +189,7 @@ def kernels(a) -> dict:
             t["g2p"] = _per_call(lambda: g2p(x.copy(), v.copy(), C.copy(), L, gv, g.x0, g.z0,
                                              g.dx, 0.0, g.periodic), 200)
             t["volume_and_stress"] = _per_call(lambda: (
-                update_volume(L, state.mass, vol.copy(), rho, 0.0),
+                update_volume(L, state.mass, vol.copy(), rho, 0.0, 0.0),
                 update_stress_points(stress.copy(), L, rho, system.dt, system.params,
                                      state.gamma_dot.copy(), state.phase.copy())), 200)
         else:

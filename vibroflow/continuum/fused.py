@@ -39,11 +39,11 @@ import numba as nb
 import numpy as np
 
 from .boundary import partition_forces, plane_forces, u_wall_forces
-from .constitutive import update_stress_points
+from .constitutive import P_RHO_C, update_stress_points
 from .g2p import g2p
 from .grid_update import frame_body, grid_update
 from .p2g import p2g
-from .plasticity import update_volume
+from .plasticity import DILUTE_DENSITY_FLOOR, update_volume
 
 #: wall rows of `wpar` (module docstring)
 W_KIND, W_KN, W_KT, W_ZETA, W_MU, W_RADIUS, W_PX, W_PZ, W_NX, W_NZ, W_VX, W_VZ, W_AX, W_AZ = \
@@ -194,7 +194,8 @@ def _make_advance_kernel(sources: int):
                 a = bounds[c]
                 b = bounds[c + 1]
                 g2p(x[a:b], v[a:b], C[a:b], L[a:b], gv, x0, z0, dx, dt, periodic)
-                update_volume(L[a:b], mass[a:b], volume[a:b], density[a:b], dt)
+                update_volume(L[a:b], mass[a:b], volume[a:b], density[a:b], dt,
+                              DILUTE_DENSITY_FLOOR * params[P_RHO_C])
                 update_stress_points(stress[a:b], L[a:b], density[a:b], dt, params,
                                      gamma_dot[a:b], phase[a:b])
                 bad[c] = _escaped_range(a, b, x, v, box[0], box[1], box[2], box[3])
