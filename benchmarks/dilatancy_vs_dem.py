@@ -88,6 +88,7 @@ def main(argv=None) -> int:
     c, dc = s["circulation"], dem["circulation"]
     extra = {}
     if diag:
+        from vibroflow.continuum.constitutive import unloaded_packing
         from vibroflow.continuum.run import material_of
 
         mat = material_of(sc, cal, dilatancy=args.k_dil > 0, compaction=args.compaction)
@@ -95,7 +96,7 @@ def main(argv=None) -> int:
         rho = np.concatenate([d[1] for d in diag])
         p = np.concatenate([d[2] for d in diag])
         conn = ph != 0
-        dphi = rho[conn] * np.exp(-p[conn] / mat.bulk_modulus) / mat.solid_density \
+        dphi = unloaded_packing(rho[conn], p[conn], mat.bulk_modulus, mat.solid_density) \
             - mat.critical_solid_fraction
         extra = {"fraction_disconnected": float(np.mean(ph == 0)),
                  "fraction_elastic": float(np.mean(ph == 1)),

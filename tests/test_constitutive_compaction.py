@@ -18,6 +18,7 @@ import pytest
 from vibroflow.calibration.compaction import compaction_table, fit_compaction
 from vibroflow.continuum.constitutive import ContinuumMaterial, update_stress_points
 from vibroflow.errors import InputError
+from tests.test_constitutive_dilatancy import barostat_step
 
 MAT = dict(bulk_modulus=2.0e6, shear_modulus=1.0e6, critical_solid_fraction=0.60)
 P0 = 5.0e3       # Pa
@@ -46,11 +47,7 @@ def cycled_point(mat, phi0, cycles, p0=P0):
     gamma = 0.0
     for c in range(cycles):
         for sgn in signs:
-            p = -(stress[0, 0] + stress[0, 1] + stress[0, 3]) / 3.0
-            e = 0.5 * (p - p0) / (K * DT)   # trial pressure p - K dt tr(D) = p0
-            L = np.array([[e, sgn * RATE, 0.0, e]])
-            rho[0] /= (1.0 + DT * e) ** 2   # det F of the step (plane strain)
-            update_stress_points(stress, L, rho, DT, params, gd, st)
+            e = barostat_step(stress, rho, sgn * RATE, p0, K, DT, params, gd, st)
             gamma += math.sqrt(RATE**2 + 4.0 * e * e / 3.0) * DT
         pr = -(stress[0, 0] + stress[0, 1] + stress[0, 3]) / 3.0
         out.append((gamma, rho[0] * math.exp(-pr / K) / mat.solid_density,

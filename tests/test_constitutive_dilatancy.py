@@ -26,6 +26,18 @@ RATE = 1.0      # 1/s
 DT = 1.0e-5     # s (the dilation's pressure change lags the yield by K dt tan(psi) gp: first order)
 
 
+def barostat_step(stress, rho, rate, p0, K, dt, params, gd, st):
+    """One constitutive step of a point (stress (1, 4), density rho (1,)) in simple shear
+    L_xz = rate with an in-plane isotropic strain rate e that brings the trial pressure back to
+    p0 (a perfect barostat: p - K dt tr(D) = p0, tr(D) = 2 e); the density follows det F.
+    Returns e (1/s)."""
+    p = -(stress[0, 0] + stress[0, 1] + stress[0, 3]) / 3.0
+    e = 0.5 * (p - p0) / (K * dt)
+    rho[0] /= (1.0 + dt * e) ** 2   # det F of the step (plane strain)
+    update_stress_points(stress, np.array([[e, rate, 0.0, e]]), rho, dt, params, gd, st)
+    return e
+
+
 def pressure_controlled_shear(mat, phi0, strain, p0=P0, rate=RATE, dt=DT):
     """One point in simple shear L_xz = rate from the isotropic stress -p0 at the unloaded
     packing phi0, with an in-plane isotropic strain rate that brings the trial pressure back to
@@ -41,12 +53,7 @@ def pressure_controlled_shear(mat, phi0, strain, p0=P0, rate=RATE, dt=DT):
     out = np.zeros((n, 3))
     gp_sum = 0.0
     for k in range(n):
-        p = -(stress[0, 0] + stress[0, 1] + stress[0, 3]) / 3.0
-        tr = (p - p0) / (K * dt)        # the trial pressure p - K dt tr(D) = p0
-        e = 0.5 * tr
-        L = np.array([[e, rate, 0.0, e]])
-        rho[0] /= (1.0 + dt * e) ** 2   # det F of the step (plane strain)
-        update_stress_points(stress, L, rho, dt, params, gd, st)
+        barostat_step(stress, rho, rate, p0, K, dt, params, gd, st)
         s = stress[0]
         pr = -(s[0] + s[1] + s[3]) / 3.0
         dev = np.array([s[0] + pr, s[1] + pr, s[3] + pr])

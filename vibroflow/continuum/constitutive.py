@@ -355,18 +355,46 @@ def return_map(sxx, szz, sxz, syy, density, dt, params):
         if excess <= 0.0:
             return sxx, szz, sxz, syy, 0.0, 1
         xi = params[P_I0] * np.sqrt(p / params[P_RHO_S]) / params[P_D]
-        B = tau - params[P_MU_2] * p - S * xi
-        C = excess * xi
-        disc = np.sqrt(B * B + 4.0 * S * C)
-        if B > 0.0:
-            gp = (B + disc) / (2.0 * S)
-        else:
-            gp = 2.0 * C / (disc - B) if disc - B > 0.0 else 0.0
+        gp = _mu_i_flow_rate(tau, excess, params[P_MU_2] * p, S, xi)
     tau_new = tau - S * gp
     if tau_new < 0.0:
         tau_new = 0.0
     f = tau_new / tau
     return (f * dxx - p, f * dzz - p, f * sxz, f * dyy - p, gp, 2)
+
+
+@nb.njit(cache=True, inline="always")
+def _mu_i_flow_rate(tau, excess, mu_2p, S, xi):
+    """The plastic shear rate gp (1/s) of Dunatunga & Kamrin's mu(I) return map: the positive
+    root of S gp^2 - B gp - excess xi = 0 with B = tau - mu_2p - S xi, i.e. of
+    tau - S gp = mu_y p + (mu_2 - mu_y) p gp / (gp + xi) (excess = tau - mu_y p > 0; mu_2p the
+    term mu_2 p, Pa; S = G dt (+ the dilatancy's viscosity), Pa s; xi = I_0 sqrt(p/rho_s) / d,
+    1/s).  The root is taken in the form that does not cancel for either sign of B."""
+    B = tau - mu_2p - S * xi
+    C = excess * xi
+    disc = np.sqrt(B * B + 4.0 * S * C)
+    if B > 0.0:
+        return (B + disc) / (2.0 * S)
+    return 2.0 * C / (disc - B) if disc - B > 0.0 else 0.0
+
+
+@nb.njit(cache=True, inline="always")
+def unloaded_packing(density, p, K, rho_s):
+    """phi = rho exp(-p / K) / rho_s (-): the solid fraction of a point of density rho (kg/m^3)
+    with its elastic compression under pressure p (Pa, bulk modulus K) removed, the packing the
+    disconnection threshold rho_c, the dilatancy and the compaction options refer to."""
+    return density * np.exp(-p / K) / rho_s
+
+
+@nb.njit(cache=True)
+def equivalent_shear_rate(lxx, lxz, lzx, lzz):
+    """gamma_dot = sqrt(2 D':D') (1/s) of the velocity gradient [[lxx, lxz], [lzx, lzz]] (1/s),
+    plane strain (D_yy = 0) (models.md); scalars or arrays alike."""
+    third = (lxx + lzz) / 3.0
+    exx = lxx - third
+    ezz = lzz - third
+    exz = 0.5 * (lxz + lzx)
+    return np.sqrt(2.0 * (exx * exx + ezz * ezz + third * third + 2.0 * exz * exz))
 
 
 @nb.njit(cache=True, inline="always")
@@ -378,7 +406,8 @@ def _dilatant_return(dxx, dzz, sxz, dyy, p, tau, density, dt, params):
     S = params[P_G] * dt
     kd = params[P_KDIL]
     # packing of the unloaded skeleton over the critical one (the elastic compression removed)
-    dphi = (density * np.exp(-p / K) - params[P_RHO_C]) / params[P_RHO_S]
+    phi0 = unloaded_packing(density, p, K, params[P_RHO_S])
+    dphi = phi0 - params[P_RHO_C] / params[P_RHO_S]
     mu_y = params[P_MU_S] + kd * dphi
     if mu_y < 0.0:
         mu_y = 0.0
@@ -388,13 +417,7 @@ def _dilatant_return(dxx, dzz, sxz, dyy, p, tau, density, dt, params):
     xi = params[P_I0] * np.sqrt(p / params[P_RHO_S]) / params[P_D]
     # K_dil a I p = (K_dil a I_0 p / xi) gp: a viscosity added to G dt in the quadratic
     S2 = S + kd * params[P_PHI_SLOPE] * params[P_I0] * p / xi
-    B = tau - (params[P_MU_2] + kd * dphi) * p - S2 * xi
-    C = excess * xi
-    disc = np.sqrt(B * B + 4.0 * S2 * C)
-    if B > 0.0:
-        gp = (B + disc) / (2.0 * S2)
-    else:
-        gp = 2.0 * C / (disc - B) if disc - B > 0.0 else 0.0
+    gp = _mu_i_flow_rate(tau, excess, (params[P_MU_2] + kd * dphi) * p, S2, xi)
     tau_new = tau - S * gp
     if tau_new < 0.0:
         tau_new = 0.0
@@ -408,7 +431,6 @@ def _dilatant_return(dxx, dzz, sxz, dyy, p, tau, density, dt, params):
     I = params[P_I0] * gp / xi
     if I > 1.0:
         I = 1.0
-    phi0 = params[P_RHO_C] / params[P_RHO_S] + dphi
     phi_eq = params[P_RHO_C] / params[P_RHO_S] - params[P_PHI_SLOPE] * I
     phi1 = phi_eq / (1.0 - (1.0 - phi_eq / phi0) * np.exp(-kd * phi_eq * gp * dt))
     p_new = p + K * np.log(phi0 / phi1)
@@ -429,7 +451,7 @@ def compact(sxx, szz, sxz, syy, density, gamma_dot, dt, params):
         return sxx, szz, sxz, syy
     K = params[P_K]
     rho_s = params[P_RHO_S]
-    phi0 = density * np.exp(-p / K) / rho_s
+    phi0 = unloaded_packing(density, p, K, rho_s)
     phi_cyc = params[P_RHO_C] / rho_s + params[P_DPHI_CYC]
     if phi0 >= phi_cyc:
         return sxx, szz, sxz, syy
@@ -459,12 +481,7 @@ def update_stress_points(stress, L, density, dt, params, gamma_dot, state):
                                                dt, K, G)
         sxx, szz, sxz, syy, gp, st = return_map(txx, tzz, txz, tyy, density[p], dt, params)
         if compaction and st != 0:
-            # total equivalent shear rate sqrt(2 D':D'), plane strain (D_yy = 0)
-            third = (L[p, 0] + L[p, 3]) / 3.0
-            exx = L[p, 0] - third
-            ezz = L[p, 3] - third
-            exz = 0.5 * (L[p, 1] + L[p, 2])
-            gd = np.sqrt(2.0 * (exx * exx + ezz * ezz + third * third + 2.0 * exz * exz))
+            gd = equivalent_shear_rate(L[p, 0], L[p, 1], L[p, 2], L[p, 3])
             sxx, szz, sxz, syy = compact(sxx, szz, sxz, syy, density[p], gd, dt, params)
         stress[p, 0] = sxx
         stress[p, 1] = szz

@@ -59,7 +59,7 @@ from vibroflow.tub.motion import TubMotion, rigid_velocity, tub_to_lab
 
 from .boundary import PartitionFriction, UWall, damping_ratio_of_restitution
 from .checkpoint import load_checkpoint, save_checkpoint
-from .constitutive import ContinuumMaterial
+from .constitutive import ContinuumMaterial, equivalent_shear_rate
 from .fields import grid_fields, write_grid_vtr
 from .grid import Grid
 from .grid_update import LabFrame, TubFrame
@@ -292,10 +292,8 @@ def _wall_gap_arc(x, radius, gap_out, arc_out):
 def shear_rate(L: np.ndarray) -> np.ndarray:
     """gamma_dot = sqrt(2 D':D') (1/s) of velocity gradients L (N, 4) [xx, xz, zx, zz], plane
     strain (D_yy = 0) (models.md)."""
-    dxx, dzz = L[:, 0], L[:, 3]
-    dxz = 0.5 * (L[:, 1] + L[:, 2])
-    tr = (dxx + dzz) / 3.0
-    return np.sqrt(2.0 * ((dxx - tr) ** 2 + (dzz - tr) ** 2 + tr**2 + 2.0 * dxz**2))
+    L = np.ascontiguousarray(L, dtype=np.float64)
+    return equivalent_shear_rate(L[:, 0], L[:, 1], L[:, 2], L[:, 3])
 
 
 def _write_points_vtu(path: Path, state: MPMState, rate: np.ndarray, length: float,
