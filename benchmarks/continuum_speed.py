@@ -102,7 +102,6 @@ def worker(a) -> dict:
 
     scenario, cal = _inputs(a)
     opts = _options(a.method, a)
-    t0 = time.perf_counter()
     system, state, advance = _settled(a.method, scenario, cal, opts)
     t1 = time.perf_counter()
     advance(system, state, 2)

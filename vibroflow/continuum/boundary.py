@@ -1,11 +1,14 @@
 """Boundaries of the continuum: small pluggable objects that add forces to the material points.
 
-Every boundary has `add_forces(state, t, dt)`: it adds its force on each point (N per metre of
-thickness, in the solver's frame) to `state.fext` before the particle-to-grid transfer, using
-the point's position and velocity at the start of the step; it may keep per-point history in
-`state.history[self.slot]` (allocated by `init_history`).  The penalty walls also have
-`lost(state)`: the ids of the points the last `add_forces` found through the wall by more than
-their own side, which the solver reports as a blow-up (mpm.py).
+Every boundary adds its force on each point (N per metre of thickness, in the solver's frame)
+to the points' external force before the particle-to-grid transfer, using the point's position
+and velocity at the start of the step, through this module's kernels (`u_wall_forces`,
+`plane_forces`, `partition_forces`), which the MPM's compiled step loop calls (fused.py).  A
+boundary object says how: `packed()` gives its kind (B_WALL or B_PARTITION) and its row of
+numbers (the WALL_FIELDS layout below for a penalty wall; friction and spacing for the
+partitions); `init_history(n)` allocates its per-point history (`state.history[self.slot]`).
+The penalty walls also have `lost(state)`: the ids of the points the last step found through
+the wall by more than their own side, which the solver reports as a blow-up (mpm.py).
 
 Wall contact (`UWall`, `Plane`): a penalty contact with a constant normal stiffness, as the
 published finite element study of the tub did (a linear pressure-overclosure law), and Coulomb
@@ -43,6 +46,16 @@ from vibroflow.errors import InputError
 from vibroflow.tub.geometry import u_wall_nearest
 
 NO_CONTACT, STICK, SLIDE = 0, 1, 2
+
+#: a penalty wall's packed row (`packed()`): kind (WALL_U the tub's U of radius W_RADIUS,
+#: WALL_PLANE a plane through (px, pz) + (vx, vz) t + (ax, az) t^2 / 2 with unit normal
+#: (nx, nz)), k_n, k_t (Pa/m), damping ratio, friction
+W_KIND, W_KN, W_KT, W_ZETA, W_MU, W_RADIUS, W_PX, W_PZ, W_NX, W_NZ, W_VX, W_VZ, W_AX, W_AZ = \
+    range(14)
+WALL_FIELDS = 14
+WALL_U, WALL_PLANE = 0, 1
+#: kinds of boundary (`packed()`)
+B_WALL, B_PARTITION = 0, 1
 
 
 def damping_ratio_of_restitution(e: float) -> float:
@@ -173,6 +186,13 @@ class _Contact:
     def tangential_stiffness(self) -> float:
         return self.stiffness * self.tangential_ratio
 
+    def _row(self, kind: int) -> np.ndarray:
+        w = np.zeros(WALL_FIELDS)
+        w[W_KIND] = kind
+        w[[W_KN, W_KT, W_ZETA, W_MU]] = (self.stiffness, self.tangential_stiffness,
+                                         self.damping_ratio, self.friction)
+        return w
+
     def init_history(self, n: int) -> dict:
         """Per-point arrays: slip xi (m), last force f (N, 2) with its normal and tangential
         parts fn, ft (N/m), state (0 none, 1 stick, 2 slide)."""
@@ -194,12 +214,11 @@ class UWall(_Contact):
     def __post_init__(self):
         self._check()
 
-    def add_forces(self, state, t: float, dt: float) -> None:
-        h = state.history[self.slot]
-        self._deep = u_wall_forces(
-            state.x, state.v, state.mass, state.volume, h["xi"], state.fext, h["f"], h["fn"],
-            h["ft"], h["state"], self.radius, self.stiffness, self.tangential_stiffness,
-            self.damping_ratio, self.friction, dt)
+    def packed(self) -> tuple[int, np.ndarray]:
+        """(B_WALL, its WALL_FIELDS row) (module docstring)."""
+        w = self._row(WALL_U)
+        w[W_RADIUS] = self.radius
+        return B_WALL, w
 
     def _gap(self, state) -> np.ndarray:
         from vibroflow.tub.geometry import distance_to_wall_np
@@ -235,14 +254,14 @@ class Plane(_Contact):
         return (px, pz), (self.velocity[0] + self.acceleration[0] * t,
                           self.velocity[1] + self.acceleration[1] * t)
 
-    def add_forces(self, state, t: float, dt: float) -> None:
-        (px, pz), (wvx, wvz) = self.at(t)
-        h = state.history[self.slot]
-        self._t_last = t
-        self._deep = plane_forces(
-            state.x, state.v, state.mass, state.volume, h["xi"], state.fext, h["f"], h["fn"],
-            h["ft"], h["state"], px, pz, self.normal[0], self.normal[1], wvx, wvz,
-            self.stiffness, self.tangential_stiffness, self.damping_ratio, self.friction, dt)
+    def packed(self) -> tuple[int, np.ndarray]:
+        """(B_WALL, its WALL_FIELDS row) (module docstring)."""
+        w = self._row(WALL_PLANE)
+        w[[W_PX, W_PZ]] = self.point
+        w[[W_NX, W_NZ]] = self.normal
+        w[[W_VX, W_VZ]] = self.velocity
+        w[[W_AX, W_AZ]] = self.acceleration
+        return B_WALL, w
 
     def _gap(self, state) -> np.ndarray:
         (px, pz), _ = self.at(self._t_last)
@@ -267,6 +286,6 @@ class PartitionFriction:
     def init_history(self, n: int) -> dict:
         return {}
 
-    def add_forces(self, state, t: float, dt: float) -> None:
-        partition_forces(state.v, state.mass, state.volume, state.stress, state.fext,
-                         self.friction, self.length, dt)
+    def packed(self) -> tuple[int, np.ndarray]:
+        """(B_PARTITION, (friction, spacing L_y m))."""
+        return B_PARTITION, np.array([self.friction, self.length])

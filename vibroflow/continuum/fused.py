@@ -17,9 +17,8 @@ vibroflow.dem.step).  With one chunk the scatter is the serial p2g's, bit for bi
 Boundaries are packed as numbers (mpm.pack_boundaries): `bseq` (nb, 2) the boundaries in the
 system's order as (kind, index) with kind 0 a penalty wall (row `index` of `wpar`, its history
 row `index` of wxi, wf, wfn, wft, wst) and kind 1 the partitions' friction (row `index` of
-`ppar`: friction, spacing L_y m).  A wall row of `wpar` is WALL_FIELDS: kind (0 the tub's U of
-radius `radius`, 1 a plane through (px, pz) + (vx, vz) t + (ax, az) t^2 / 2 with unit normal
-(nx, nz), boundary.Plane), k_n, k_t (Pa/m), damping ratio, friction.
+`ppar`: friction, spacing L_y m); a wall row of `wpar` is boundary.py's WALL_FIELDS layout
+(each boundary's `packed()`).
 
 The frame (grid_update.frame_body) is a packed array too: FRAME_FIELDS.
 
@@ -38,20 +37,13 @@ from pathlib import Path
 import numba as nb
 import numpy as np
 
-from .boundary import partition_forces, plane_forces, u_wall_forces
-from .constitutive import P_RHO_C, update_stress_points
+from .boundary import (B_PARTITION, B_WALL, W_AX, W_AZ, W_KIND, W_KN, W_KT, W_MU, W_NX, W_NZ,
+                       W_PX, W_PZ, W_RADIUS, W_VX, W_VZ, W_ZETA, WALL_U, partition_forces,
+                       plane_forces, u_wall_forces)
 from .g2p import g2p
 from .grid_update import frame_body, grid_update
 from .p2g import p2g
-from .plasticity import DILUTE_DENSITY_FLOOR, update_volume
-
-#: wall rows of `wpar` (module docstring)
-W_KIND, W_KN, W_KT, W_ZETA, W_MU, W_RADIUS, W_PX, W_PZ, W_NX, W_NZ, W_VX, W_VZ, W_AX, W_AZ = \
-    range(14)
-WALL_FIELDS = 14
-WALL_U, WALL_PLANE = 0, 1
-#: kinds of `bseq`
-B_WALL, B_PARTITION = 0, 1
+from .plasticity import plasticity_step
 
 #: status of `advance_kernel`
 OK, THROUGH_WALL, ESCAPED = 0, 1, 2
@@ -194,10 +186,8 @@ def _make_advance_kernel(sources: int):
                 a = bounds[c]
                 b = bounds[c + 1]
                 g2p(x[a:b], v[a:b], C[a:b], L[a:b], gv, x0, z0, dx, dt, periodic)
-                update_volume(L[a:b], mass[a:b], volume[a:b], density[a:b], dt,
-                              DILUTE_DENSITY_FLOOR * params[P_RHO_C])
-                update_stress_points(stress[a:b], L[a:b], density[a:b], dt, params,
-                                     gamma_dot[a:b], phase[a:b])
+                plasticity_step(L[a:b], mass[a:b], volume[a:b], density[a:b], stress[a:b], dt,
+                                params, gamma_dot[a:b], phase[a:b])
                 bad[c] = _escaped_range(a, b, x, v, box[0], box[1], box[2], box[3])
             t += dt
             n_bad = 0

@@ -28,7 +28,7 @@ import numpy as np
 from vibroflow.errors import InputError
 
 from . import fused
-from .boundary import PartitionFriction, Plane, UWall
+from .boundary import B_PARTITION, B_WALL, WALL_FIELDS
 from .constitutive import ContinuumMaterial
 from .grid import Grid
 from .grid_update import LabFrame
@@ -214,29 +214,18 @@ def pack_boundaries(boundaries, n: int):
     bseq = np.zeros((len(boundaries), 2), np.int64)
     wpar, ppar, walls = [], [], []
     for j, b in enumerate(boundaries):
-        if isinstance(b, PartitionFriction):
-            bseq[j] = (fused.B_PARTITION, len(ppar))
-            ppar.append((b.friction, b.length))
-            continue
-        if not isinstance(b, (UWall, Plane)):
-            raise InputError(f"boundary {type(b).__name__}: the MPM step knows UWall, Plane "
-                             "and PartitionFriction")
-        w = np.zeros(fused.WALL_FIELDS)
-        w[[fused.W_KN, fused.W_KT, fused.W_ZETA, fused.W_MU]] = (
-            b.stiffness, b.tangential_stiffness, b.damping_ratio, b.friction)
-        if isinstance(b, UWall):
-            w[fused.W_KIND] = fused.WALL_U
-            w[fused.W_RADIUS] = b.radius
+        if not hasattr(b, "packed"):
+            raise InputError(f"boundary {type(b).__name__}: has no packed() row for the MPM "
+                             "step (boundary.py: UWall, Plane, PartitionFriction)")
+        kind, row = b.packed()
+        if kind == B_PARTITION:
+            bseq[j] = (B_PARTITION, len(ppar))
+            ppar.append(row)
         else:
-            w[fused.W_KIND] = fused.WALL_PLANE
-            w[[fused.W_PX, fused.W_PZ]] = b.point
-            w[[fused.W_NX, fused.W_NZ]] = b.normal
-            w[[fused.W_VX, fused.W_VZ]] = b.velocity
-            w[[fused.W_AX, fused.W_AZ]] = b.acceleration
-        bseq[j] = (fused.B_WALL, len(wpar))
-        wpar.append(w)
-        walls.append(b)
-    return (bseq, np.array(wpar).reshape(len(wpar), fused.WALL_FIELDS),
+            bseq[j] = (B_WALL, len(wpar))
+            wpar.append(row)
+            walls.append(b)
+    return (bseq, np.array(wpar).reshape(len(wpar), WALL_FIELDS),
             np.array(ppar, dtype=float).reshape(len(ppar), 2), walls)
 
 

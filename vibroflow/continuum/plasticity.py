@@ -43,6 +43,7 @@ def update_volume(L, mass, volume, density, dt, rho_min):
         density[p] = mass[p] / volume[p]
 
 
+@nb.njit(cache=True)
 def plasticity_step(L, mass, volume, density, stress, dt, params, gamma_dot, phase):
     """Volume, density and stress of every point after a step dt (s); see the module docstring.
     params = ContinuumMaterial.as_array(); gamma_dot (1/s) and phase (0 disconnected, 1 elastic,
