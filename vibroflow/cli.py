@@ -290,7 +290,7 @@ def continuum(
         raise InputError(f"--stop-after-steps = {stop_after_steps}: must be >= 0")
     s = _load(scenario, set_)  # before anything is written: bad input leaves --out untouched
     from vibroflow.continuum.mpm import ContinuumBlowUp
-    from vibroflow.continuum.run import LagrangianOptions, material_of, run_lagrangian
+    from vibroflow.continuum.run import LagrangianOptions, material_for, run_lagrangian
 
     options_class, run_method = LagrangianOptions, run_lagrangian
     if method == "eulerian":
@@ -305,9 +305,7 @@ def continuum(
         cal = read_calibration(calibration)
     options = options_class(dx=dx, cfl=cfl, model=rheology, dilatancy=dilatancy,
                             stiffness_factor=stiffness_factor, compaction=compaction)
-    material_of(s, cal, rheology, dilatancy=dilatancy, stiffness_factor=stiffness_factor,
-                compaction=compaction)
-    # (validates the parameters before --out is made)
+    material_for(s, cal, options)  # validates the parameters before --out is made
     try:
         summary = run_method(s, out, calibration=cal, options=options, progress=True,
                              vtk=vtk, resume=resume, stop_after_steps=stop_after_steps)

@@ -51,11 +51,9 @@ def _method(name: str, description: str, module: str, options: str, run: str):
 
         def run_method(scenario, out_dir: Path, calibration: dict | None, opts,
                        progress: bool, resume: bool) -> dict:
-            from vibroflow.continuum.run import material_of
+            from vibroflow.continuum.run import material_for
 
-            material_of(scenario, calibration, opts.model, dilatancy=opts.dilatancy,
-                        compaction=opts.compaction,
-                        stiffness_factor=opts.stiffness_factor)
+            material_for(scenario, calibration, opts)
             return getattr(mod, run)(scenario, out_dir, calibration=calibration, options=opts,
                                      progress=progress, resume=resume)
 

@@ -137,14 +137,12 @@ def calibration_stage() -> Stage:
 def continuum_stage(method: ContinuumMethod, options) -> Stage:
     def inputs(study: Study) -> dict:
         opts = dataclasses.asdict(options)
-        # options at their defaults that came after the first studies (dilatancy off, the
-        # calibrated stiffness) are left out, so that those studies keep their hashes
-        if not opts.get("dilatancy", False):
-            opts.pop("dilatancy", None)
-        if not opts.get("compaction", False):
-            opts.pop("compaction", None)
-        if opts.get("stiffness_factor", 1.0) == 1.0:
-            opts.pop("stiffness_factor", None)
+        # the options that came after the first studies are left out at their defaults, so
+        # that those studies keep their hashes (the options class's LATER_OPTIONS)
+        defaults = {f.name: f.default for f in dataclasses.fields(options)}
+        for name in getattr(options, "LATER_OPTIONS", ()):
+            if opts.get(name) == defaults.get(name):
+                opts.pop(name, None)
         return {"scenario": scenario_inputs(study.scenario), "options": opts}
 
     def run(study: Study, resume: bool) -> dict:

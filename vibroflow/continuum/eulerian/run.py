@@ -51,7 +51,7 @@ from ..grid_update import LabFrame, TubFrame
 from ..mpm import ContinuumBlowUp
 from ..run import (BULK_CSV_NAME, CHECKPOINT_NAME, REPORT_EVERY, SHEAR_RATE_CSV_NAME,
                    SUMMARY_NAME, VTK_DIR, LagrangianOptions, Samples, bed_area, cell_grid_of,
-                   material_of, next_event, run_fingerprint, sample_times, samples_source,
+                   material_for, next_event, run_fingerprint, sample_times, samples_source,
                    shear_rate, shear_rate_outputs, to_lab, write_json_atomic,
                    write_shear_rate_csv)
 from ..timestep import stable_dt
@@ -187,9 +187,7 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
     if stop_after_steps is not None and not int(stop_after_steps) >= 0:
         raise InputError(f"stop_after_steps = {stop_after_steps!r}: must be >= 0")
     options = options or EulerianOptions()
-    material = material_of(scenario, calibration, options.model, dilatancy=options.dilatancy,
-                           compaction=options.compaction,
-                           stiffness_factor=options.stiffness_factor)
+    material = material_for(scenario, calibration, options)
     motion = TubMotion.of_scenario(scenario)
     gravity = (float(scenario.gravity[0]), float(scenario.gravity[2]))
     system = make_system(scenario, material, calibration, options, TubFrame(motion, gravity))
