@@ -273,6 +273,10 @@ def continuum(
                                    "stiffness) by this factor in (0, 1]: sqrt(factor) times "
                                    "the steps, a physics change like the DEM's reduced "
                                    "Young's modulus (LagrangianOptions).")] = 1.0,
+    flip: Annotated[float, typer.Option(
+        "--flip", help="Lagrangian only: the FLIP fraction in [0, 1] of the points' velocity "
+                       "update (0: APIC, whose transfers damp the flow at every step; "
+                       "LagrangianOptions).")] = 0.0,
     set_: SetOption = None,
     vtk: Annotated[bool, typer.Option("--vtk", help="Also write ParaView files of the material "
                                                     "points and the grid fields over the last "
@@ -304,7 +308,7 @@ def continuum(
 
         cal = read_calibration(calibration)
     options = options_class(dx=dx, cfl=cfl, model=rheology, dilatancy=dilatancy,
-                            stiffness_factor=stiffness_factor, compaction=compaction)
+                            stiffness_factor=stiffness_factor, compaction=compaction, flip=flip)
     material_for(s, cal, options)  # validates the parameters before --out is made
     try:
         summary = run_method(s, out, calibration=cal, options=options, progress=True,

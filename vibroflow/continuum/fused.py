@@ -115,7 +115,7 @@ def _make_advance_kernel(sources: int):
     def advance_kernel(nsteps, t, dt, x, v, C, L, mass, volume, density, stress, gamma_dot, phase,
                        fext, bseq, wpar, wxi, wf, wfn, wft, wst, ppar, frame, x0, z0, dx,
                        periodic, params, box, bounds, cm, cmv, cf, gm, gmv, gf, gv,
-                       no_slip_rows):
+                       no_slip_rows, flip):
         """Up to nsteps MPM steps of dt (s) from time t (s), in place (module docstring; the
         state's arrays as mpm.MPMState, the grid's as mpm.MPMSystem.work).  box (4,) the region
         (m) a point may occupy (mpm.step); bounds (nchunk + 1,) chunk_bounds; cm (nchunk, nx, nz),
@@ -185,7 +185,8 @@ def _make_advance_kernel(sources: int):
             for c in nb.prange(nchunk):
                 a = bounds[c]
                 b = bounds[c + 1]
-                g2p(x[a:b], v[a:b], C[a:b], L[a:b], gv, x0, z0, dx, dt, periodic)
+                g2p(x[a:b], v[a:b], C[a:b], L[a:b], gv, x0, z0, dx, dt, periodic, gm, gmv,
+                    flip)
                 plasticity_step(L[a:b], mass[a:b], volume[a:b], density[a:b], stress[a:b], dt,
                                 params, gamma_dot[a:b], phase[a:b])
                 bad[c] = _escaped_range(a, b, x, v, box[0], box[1], box[2], box[3])

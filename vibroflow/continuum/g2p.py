@@ -12,7 +12,7 @@ from .grid import bspline_weights
 
 
 @nb.njit(cache=True)
-def g2p(x, v, C, L, gv, x0, z0, dx, dt, periodic):
+def g2p(x, v, C, L, gv, x0, z0, dx, dt, periodic, gm, gmv, flip):
     """Gather the grid velocity gv (nx, nz, 2) (m/s) to the points: v (N, 2) m/s, C (N, 4) and
     L (N, 4) [xx, xz, zx, zz] 1/s, written in place; then move the points x (N, 2) by dt v (m).
     periodic: the grid wraps around along x (period nx dx) and so do the points."""
@@ -32,6 +32,8 @@ def g2p(x, v, C, L, gv, x0, z0, dx, dt, periodic):
         lxz = 0.0
         lzx = 0.0
         lzz = 0.0
+        ox = 0.0
+        oz = 0.0
         for a in range(3):
             rx = (a - fx) * dx
             # the weights as selects, not small arrays: they stay in registers
@@ -59,8 +61,19 @@ def g2p(x, v, C, L, gv, x0, z0, dx, dt, periodic):
                 lxz += ux * gwz
                 lzx += uz * gwx
                 lzz += uz * gwz
-        v[p, 0] = vx
-        v[p, 1] = vz
+                if flip > 0.0:
+                    mi = gm[i, bz + b]
+                    if mi > 0.0:
+                        ox += w * gmv[i, bz + b, 0] / mi
+                        oz += w * gmv[i, bz + b, 1] / mi
+        if flip > 0.0:
+            # FLIP-APIC blend: the point keeps the part of its own velocity that the grid's
+            # old velocity did not hold, a fraction `flip` of it
+            v[p, 0] = vx + flip * (v[p, 0] - ox)
+            v[p, 1] = vz + flip * (v[p, 1] - oz)
+        else:
+            v[p, 0] = vx
+            v[p, 1] = vz
         C[p, 0] = inv * cxx
         C[p, 1] = inv * cxz
         C[p, 2] = inv * czx

@@ -50,7 +50,19 @@ class MPMSystem:
     Dirichlet condition, Sulsky et al. 1994; the no-slip base of the mu(I) column collapses
     of Lagree, Staron & Popinet 2011).  Unlike a point-wise penalty contact, which brakes only
     the row of points touching the wall and lets the next row shear past it within one cell,
-    it holds the grid's velocity at the wall, so the basal shear is resolved by the grid."""
+    it holds the grid's velocity at the wall, so the basal shear is resolved by the grid.
+
+    flip (-, in [0, 1]): the FLIP fraction of the points' velocity update (g2p.py): 0 is APIC
+    (Jiang et al. 2015), v_p = sum_i w_ip v_i; f > 0 adds f (v_p - sum_i w_ip v_i^old), the
+    part of the point's own velocity that the grid's velocity before the step did not hold
+    (Brackbill & Ruppel 1986's FLIP for f = 1; the FLIP-APIC blends of Fei et al. 2021).  APIC
+    replaces the point's velocity by the grid's smooth field at every step and so damps the
+    grid-scale motion at every step: its results depend on the number of steps, a numerical
+    viscosity that shrinks with the Courant number only by growing elsewhere (the column
+    collapse's run-out, vibroflow.continuum.column; tub47-quick's circulation, 0.75 of the
+    DEM's at cfl 0.3, 1.04 at cfl 0.1).  A blend near 1 keeps the momentum exactly (the FLIP
+    part sums to zero over the points) and makes the results time-step converged, at the cost
+    of FLIP's point noise.  Default 0, the studies' setting so far."""
 
     grid: Grid
     material: ContinuumMaterial
@@ -59,6 +71,7 @@ class MPMSystem:
     boundaries: list = field(default_factory=list)
     no_slip_below: float | None = None
     chunks: int = 2
+    flip: float = 0.0
 
     def __post_init__(self):
         if not self.dt > 0:
@@ -275,7 +288,7 @@ def advance(system: MPMSystem, state: MPMState, n: int) -> None:
         n, state.t, system.dt, state.x, state.v, state.C, state.L, state.mass, state.volume,
         state.density, state.stress, state.gamma_dot, state.phase, state.fext, bseq, wpar,
         *hist, ppar, system.frame.as_array(), g.x0, g.z0, g.dx, g.periodic, system.params, box,
-        bounds, cm, cmv, cf, gm, gmv, gf, gv, system.no_slip_rows)
+        bounds, cm, cmv, cf, gm, gmv, gf, gv, system.no_slip_rows, system.flip)
     _unstack_history(state, walls, hist)
     state.t = t
     state.step += done

@@ -95,7 +95,8 @@ class LagrangianOptions:
 
     #: options added after the first studies: left out of a study stage's inputs (its hash)
     #: while at their defaults, so that those studies stay up to date (vibroflow.study.stages)
-    LATER_OPTIONS: ClassVar[tuple[str, ...]] = ("dilatancy", "stiffness_factor", "compaction")
+    LATER_OPTIONS: ClassVar[tuple[str, ...]] = ("dilatancy", "stiffness_factor", "compaction",
+                                                "flip")
 
     dx: float | None = None
     cfl: float = 0.3
@@ -105,8 +106,11 @@ class LagrangianOptions:
     dilatancy: bool = False
     stiffness_factor: float = 1.0
     compaction: bool = False
+    flip: float = 0.0
 
     def __post_init__(self):
+        if not (isinstance(self.flip, (int, float)) and 0.0 <= self.flip <= 1.0):
+            raise InputError(f"flip = {self.flip!r}: must be in [0, 1] (0: APIC, 1: FLIP)")
         if self.dx is not None and not self.dx > 0:
             raise InputError(f"dx = {self.dx!r}: must be a length > 0 m")
         if not 0 < self.cfl <= 1:
@@ -257,7 +261,7 @@ def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
     interval = 1.0 / (f * per)
     dt = interval / math.ceil(interval / dt)
     return MPMSystem(grid, material, dt, frame=frame, boundaries=boundaries,
-                     chunks=scenario.run.force_chunks), spacing
+                     chunks=scenario.run.force_chunks, flip=float(options.flip)), spacing
 
 
 def sample_times(scenario) -> tuple[np.ndarray, float, float]:

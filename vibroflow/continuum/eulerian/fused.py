@@ -115,7 +115,8 @@ def _make_advance_kernel(sources: int):
                 a = (c * na) // nchunk
                 b = ((c + 1) * na) // nchunk
                 # cx: a copy, the cells stay put
-                g2p(cx[a:b], cv[a:b], cC[a:b], cL[a:b], gv, x0, z0, dx, dt, periodic)
+                g2p(cx[a:b], cv[a:b], cC[a:b], cL[a:b], gv, x0, z0, dx, dt, periodic, gm, gmv,
+                    0.0)
             for j in range(na):
                 p = act[j]
                 v[p, 0] = cv[j, 0]

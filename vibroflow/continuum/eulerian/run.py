@@ -69,7 +69,14 @@ class EulerianOptions(LagrangianOptions):
     mesh's cells are dx/2; default `default_dx`: about half the analysis cell), Courant number,
     rheology model ("mu_i" or "drucker_prager"), settling time in the still tub (s), wall
     stiffness (Pa/m; default (K + 4G/3) / (dx/2), the Lagrangian default at the same dx),
-    stiffness factor (-; LagrangianOptions)."""
+    stiffness factor (-; LagrangianOptions).  No FLIP fraction: the mesh's cells are fresh
+    copies of the fields at every step, with no velocity of their own to keep."""
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.flip != 0.0:
+            raise InputError(f"flip = {self.flip!r}: the Eulerian formulation has no FLIP "
+                             "option (only 0)")
 
 
 def default_dx(radius: float, cell_size: float) -> float:
