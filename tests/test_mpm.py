@@ -151,10 +151,10 @@ def test_elastic_p_wave_speed():
     assert speed == pytest.approx(c, rel=0.02)
 
 
-def test_momentum_and_angular_momentum_conserved_without_walls():
-    """A spinning, translating, pre-compressed elastic disc in free space: the APIC transfers
-    and the stress divergence keep linear and angular momentum (with the points' spin) to
-    round-off (Jiang et al. 2015)."""
+def spinning_compressed_disc(flip: float):
+    """A disc of radius 6 cm (dx = 5 mm, 2 x 2 points a cell) in free space, translating at
+    (0.3, 0.1) m/s and spinning at 15 rad/s, pre-compressed to p0 = 20 kPa, elastic (mu_s = 2);
+    returns (system, state, p0) with the system's FLIP fraction `flip`."""
     mat = ContinuumMaterial(mu_s=2.0, mu_2=2.5)
     dx = 0.005
     sp = dx / 2
@@ -167,8 +167,16 @@ def test_momentum_and_angular_momentum_conserved_without_walls():
     v = np.stack([0.3 - omega * x[:, 1], 0.1 + omega * x[:, 0]], axis=1)
     stress = np.zeros((len(x), 4))
     stress[:, [0, 1, 3]] = -p0
-    system = MPMSystem(grid, mat, stable_dt(mat, dx, sp), frame=LabFrame((0.0, 0.0)))
-    state = init_state(system, x, sp * sp, rho, v=v, stress=stress)
+    system = MPMSystem(grid, mat, stable_dt(mat, dx, sp), frame=LabFrame((0.0, 0.0)), flip=flip)
+    return system, init_state(system, x, sp * sp, rho, v=v, stress=stress), p0
+
+
+def test_momentum_and_angular_momentum_conserved_without_walls():
+    """A spinning, translating, pre-compressed elastic disc in free space: the APIC transfers
+    and the stress divergence keep linear and angular momentum (with the points' spin) to
+    round-off (Jiang et al. 2015)."""
+    system, state, p0 = spinning_compressed_disc(flip=0.0)
+    dx = system.grid.dx
     P0, L0 = state.momentum(), state.angular_momentum(dx)
     run_steps(system, state, 10)
     assert np.abs(state.pressure()).max() > 0.5 * p0  # the stress acts ...
@@ -724,22 +732,11 @@ def test_free_grains_keep_their_velocities_with_flip_and_lose_them_with_apic():
 
 
 def test_flip_blend_conserves_momentum_of_a_spinning_compressed_disc():
-    """The disc of test_momentum_and_angular_momentum_conserved_without_walls with flip = 0.95:
+    """The disc of test_momentum_and_angular_momentum_conserved_without_walls (the shared
+    `spinning_compressed_disc`) with flip = 0.95:
     the stress acts and the linear momentum stays to round-off (angular momentum is APIC's
     exact property only, not FLIP's, so it is not asserted)."""
-    mat = ContinuumMaterial(mu_s=2.0, mu_2=2.5)
-    dx = 0.005
-    sp = dx / 2
-    grid = Grid.covering(-0.12, 0.12, -0.12, 0.12, dx)
-    x = lattice(-0.06, 0.06, -0.06, 0.06, sp)
-    x = x[np.hypot(x[:, 0], x[:, 1]) < 0.06]
-    p0 = 2.0e4
-    rho = mat.critical_density * math.exp(p0 / mat.bulk_modulus)
-    v = np.stack([0.3 - 15.0 * x[:, 1], 0.1 + 15.0 * x[:, 0]], axis=1)
-    stress = np.zeros((len(x), 4))
-    stress[:, [0, 1, 3]] = -p0
-    system = MPMSystem(grid, mat, stable_dt(mat, dx, sp), frame=LabFrame((0.0, 0.0)), flip=0.95)
-    state = init_state(system, x, sp * sp, rho, v=v, stress=stress)
+    system, state, p0 = spinning_compressed_disc(flip=0.95)
     P0 = state.momentum()
     run_steps(system, state, 10)
     assert np.abs(state.pressure()).max() > 0.5 * p0
