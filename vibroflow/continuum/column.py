@@ -50,6 +50,13 @@ Set-up choices, and why:
   time-step converged to 10 % (5.35 at cfl 0.3, 5.88 at 0.03): the mu(I) continuum itself,
   undamped, runs out 35 - 50 % farther than Lube et al. 2005 and stands 40 % lower (height
   0.90 - 0.93 L0 at the symmetry plane against a^(2/5) = 1.55), tests/test_column_collapse.py;
+* axisymmetric (`axisymmetric=True`): the cylindrical column of radius L0 = R0 of Lube,
+  Huppert, Sparks & Hallworth (2004, J. Fluid Mech. 508, 175) and Lajeunesse, Mangeney-Castelnau
+  & Vilotte (2004, Phys. Fluids 16, 2371), the experiments the laws of vibroflow.analysis.column
+  LUBE_2004 and LAJEUNESSE_2004 were fitted on, as the axisymmetric MPM of
+  MPMSystem.axisymmetric: the half-plane r >= 0 of the section, points of mass rho_c sp^2 r
+  per radian, the hoop stress K_0 sigma_zz at the start like sigma_xx; the floor is the rough
+  (no-slip grid) floor, since the penalty floor is a plane-strain object;
 * at rest: after at least `t_min` (default 3 sqrt(H0/g), the collapse time scale of the
   experiments), the run stops at the first check where the kinetic energy is below `ke_fraction`
   of the column's initial potential energy M g H0 / 2; a run that has not come to rest by
@@ -96,6 +103,7 @@ class ColumnRun:
     ke_ratio: float
     steps: int
     history: list
+    axisymmetric: bool = False
 
     @property
     def aspect_ratio(self) -> float:
@@ -107,12 +115,17 @@ class ColumnRun:
         return 0.5 * self.dx
 
     def deposit_points(self) -> tuple[np.ndarray, np.ndarray]:
-        """(distance from the wall or symmetry plane (m), area (m^2 per metre)) of every point,
-        for vibroflow.analysis.column: the area is the point's mass over the critical density
-        (the column's, to 1e-3), so the areas of a half-column add up to L0 H0; a symmetric
-        run's points are folded about x = 0 with half their area each."""
+        """(distance from the wall, symmetry plane or axis (m), area (m^2 per metre)) of every
+        point, for vibroflow.analysis.column: the area is the point's mass over the critical
+        density (the column's, to 1e-3), so the areas of a half-column add up to L0 H0; a
+        symmetric run's points are folded about x = 0 with half their area each; an
+        axisymmetric run's area is the meridian area V / r of its volume per radian V, so that
+        the thickness profile (area per bin width) is the deposit's thickness h(r) (the volume
+        h r dr per radian of an annulus over r dr)."""
         x = self.state.x[:, 0]
         area = self.state.mass / self.material.critical_density
+        if self.axisymmetric:
+            return x.copy(), area / x
         if self.symmetric:
             return np.abs(x), 0.5 * area
         return x.copy(), area
@@ -142,12 +155,14 @@ def column_system(L0: float, H0: float, dx: float, material: ContinuumMaterial |
                   floor_friction: float = 0.40, wall_friction: float = 0.0,
                   symmetric: bool = True, reach: float | None = None,
                   cfl: float = 0.3, rough_floor: bool = False,
-                  flip: float = 0.0) -> MPMSystem:
+                  flip: float = 0.0, axisymmetric: bool = False) -> MPMSystem:
     """The MPM system of a column of half-width L0 and height H0 (m) on grid spacing dx (m):
     floor z = 0 with Coulomb friction `floor_friction`, and no slip if `rough_floor`;
     symmetric (module docstring), or a wall x = 0 with `wall_friction`; a grid reaching
     `reach` (m, default L0 (2 + 3 H0/L0)) from x = 0 (both ways when symmetric); `flip` the
-    FLIP fraction of the points' velocity update (MPMSystem.flip; module docstring)."""
+    FLIP fraction of the points' velocity update (MPMSystem.flip; module docstring);
+    `axisymmetric`: the cylindrical column of radius L0 (module docstring; needs the rough
+    floor, `symmetric` does not apply)."""
     _check_size(L0, H0, dx)
     mat = material or ContinuumMaterial()
     for name, mu in (("floor_friction", floor_friction), ("wall_friction", wall_friction)):
@@ -160,16 +175,24 @@ def column_system(L0: float, H0: float, dx: float, material: ContinuumMaterial |
                          f"{L0!r} m")
     sp = 0.5 * dx
     kn = (mat.bulk_modulus + 4.0 * mat.shear_modulus / 3.0) / sp
-    walls = [Plane((0.0, 0.0), (0.0, 1.0), kn, friction=floor_friction)]   # floor
-    if not symmetric:
-        walls.append(Plane((0.0, 0.0), (1.0, 0.0), kn, friction=wall_friction))  # wall behind
-    grid = Grid.covering(-reach if symmetric else -dx, reach, -dx, H0 + 2.0 * dx, dx)
+    if axisymmetric:
+        if not rough_floor:
+            raise InputError("axisymmetric = True needs rough_floor = True: the floor of an "
+                             "axisymmetric column is the no-slip grid floor")
+        walls = []
+        grid = Grid.covering(-dx, reach, -dx, H0 + 2.0 * dx, dx)
+    else:
+        walls = [Plane((0.0, 0.0), (0.0, 1.0), kn, friction=floor_friction)]   # floor
+        if not symmetric:
+            walls.append(Plane((0.0, 0.0), (1.0, 0.0), kn, friction=wall_friction))  # wall
+        grid = Grid.covering(-reach if symmetric else -dx, reach, -dx, H0 + 2.0 * dx, dx)
     v_fall = math.sqrt(2.0 * G_ACC * H0)
     dt = stable_dt(mat, dx, sp, walls, v_max=v_fall, cfl=cfl)
     if not (isinstance(flip, (int, float)) and 0.0 <= flip <= 1.0):
         raise InputError(f"flip = {flip!r}: must be in [0, 1] (0: APIC, 1: FLIP)")
     return MPMSystem(grid, mat, dt, frame=LabFrame((0.0, -G_ACC)), boundaries=walls,
-                     no_slip_below=0.0 if rough_floor else None, flip=float(flip))
+                     no_slip_below=0.0 if rough_floor else None, flip=float(flip),
+                     axisymmetric=bool(axisymmetric))
 
 
 def column_state(system: MPMSystem, L0: float, H0: float, symmetric: bool = True) -> MPMState:
@@ -177,7 +200,8 @@ def column_state(system: MPMSystem, L0: float, H0: float, symmetric: bool = True
     Jaky's K_0, density of that pressure."""
     mat = system.material
     sp = 0.5 * system.grid.dx
-    x = column_points(-L0 if symmetric else 0.0, L0, H0, sp)
+    axi = system.axisymmetric
+    x = column_points(-L0 if symmetric and not axi else 0.0, L0, H0, sp)
     rho_c = mat.critical_density
     k0 = 1.0 - math.sin(math.atan(mat.mu_s))
     szz = -rho_c * G_ACC * (H0 - x[:, 1])
@@ -186,8 +210,11 @@ def column_state(system: MPMSystem, L0: float, H0: float, symmetric: bool = True
     stress[:, 0] = stress[:, 3] = k0 * szz
     p = -(stress[:, 0] + stress[:, 1] + stress[:, 3]) / 3.0
     rho = rho_c * np.exp(p / mat.bulk_modulus) * 1.001
-    # each point's volume holds the mass of its square at rho_c (mass conserved: m = rho_c sp^2)
+    # each point's volume holds the mass of its square at rho_c (mass conserved: m = rho_c sp^2,
+    # per radian m = rho_c sp^2 r in an axisymmetric section)
     volume = rho_c * sp * sp / rho
+    if axi:
+        volume = volume * x[:, 0]
     return init_state(system, x, volume, rho, stress=stress)
 
 
@@ -196,11 +223,12 @@ def run_column(L0: float, H0: float, dx: float, material: ContinuumMaterial | No
                symmetric: bool = True, t_min: float | None = None, t_max: float | None = None,
                ke_fraction: float = 1.0e-4, check_every: float | None = None,
                reach: float | None = None, cfl: float = 0.3,
-               rough_floor: bool = False, flip: float = 0.0) -> ColumnRun:
+               rough_floor: bool = False, flip: float = 0.0,
+               axisymmetric: bool = False) -> ColumnRun:
     """Release the column and run until it is at rest (module docstring).  Times in s; default
     t_min = 3 sqrt(H0/g), t_max = 30 sqrt(H0/g), checks every 0.1 sqrt(H0/g)."""
     system = column_system(L0, H0, dx, material, floor_friction, wall_friction, symmetric,
-                           reach, cfl, rough_floor, flip)
+                           reach, cfl, rough_floor, flip, axisymmetric)
     state = column_state(system, L0, H0, symmetric)
     tau = math.sqrt(H0 / G_ACC)
     t_min = 3.0 * tau if t_min is None else float(t_min)
@@ -210,7 +238,7 @@ def run_column(L0: float, H0: float, dx: float, material: ContinuumMaterial | No
         raise InputError(f"ke_fraction = {ke_fraction!r}: must be in (0, 1)")
     if not 0 < t_min <= t_max:
         raise InputError(f"t_min = {t_min!r} s, t_max = {t_max!r} s: need 0 < t_min <= t_max")
-    pe0 = float(state.mass.sum()) * G_ACC * 0.5 * H0
+    pe0 = float(state.mass.sum()) * G_ACC * 0.5 * H0   # per metre, or per radian
     n_check = max(int(round(check / system.dt)), 1)
     history = []
     settled = False
@@ -225,4 +253,5 @@ def run_column(L0: float, H0: float, dx: float, material: ContinuumMaterial | No
     return ColumnRun(L0=L0, H0=H0, dx=dx, material=system.material,
                      floor_friction=floor_friction, wall_friction=wall_friction,
                      symmetric=symmetric, state=state, t_end=state.t, settled=settled,
-                     ke_ratio=ke / pe0, steps=state.step, history=history)
+                     ke_ratio=ke / pe0, steps=state.step, history=history,
+                     axisymmetric=bool(axisymmetric))

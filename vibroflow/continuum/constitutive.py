@@ -307,19 +307,21 @@ def mu_of_I(I, mu_s: float, mu_2: float, I_0: float):
 
 
 @nb.njit(cache=True, inline="always")
-def elastic_predictor(sxx, szz, sxz, syy, lxx, lxz, lzx, lzz, dt, K, G):
+def elastic_predictor(sxx, szz, sxz, syy, lxx, lxz, lzx, lzz, lyy, dt, K, G):
     """Trial stress (Pa) after dt (s) of elastic deformation at velocity gradient L (1/s),
-    L_ab = d v_a / d x_b, plane strain (D_yy = 0), Jaumann-rotated (see the module docstring)."""
+    L_ab = d v_a / d x_b, Jaumann-rotated (see the module docstring).  lyy = D_yy (1/s): 0 in
+    plane strain; the hoop rate v_r / r in an axisymmetric section (x = r, y = theta; the
+    rotation W has no theta part there either, so the hoop stress is not rotated)."""
     dxx = lxx
     dzz = lzz
     dxz = 0.5 * (lxz + lzx)
     w = 0.5 * (lxz - lzx)  # W_xz
-    tr = dxx + dzz
+    tr = dxx + dzz + lyy
     lam = K - 2.0 * G / 3.0
     nxx = sxx + dt * (lam * tr + 2.0 * G * dxx + 2.0 * w * sxz)
     nzz = szz + dt * (lam * tr + 2.0 * G * dzz - 2.0 * w * sxz)
     nxz = sxz + dt * (2.0 * G * dxz + w * (szz - sxx))
-    nyy = syy + dt * (lam * tr)
+    nyy = syy + dt * (lam * tr + 2.0 * G * lyy)
     return nxx, nzz, nxz, nyy
 
 
@@ -469,16 +471,19 @@ def update_stress_points(stress, L, density, dt, params, gamma_dot, state):
     option is on, `compact`).
 
     stress (N, 4) [xx, zz, xz, yy] (Pa, updated in place); L (N, 4) [xx, xz, zx, zz] velocity
-    gradient (1/s); density (N,) (kg/m^3, at the end of the step); gamma_dot (N,) plastic shear
+    gradient (1/s), or (N, 5) with the out-of-plane rate D_yy (the hoop rate v_r / r of an
+    axisymmetric run, vibroflow.continuum.mpm.MPMSystem.axisymmetric) last; density (N,) (kg/m^3, at the end of the step); gamma_dot (N,) plastic shear
     rate out (1/s); state (N,) int8 out (0 disconnected, 1 elastic, 2 flowing).
     """
     K = params[P_K]
     G = params[P_G]
     compaction = params[P_GAMMA_C] > 0.0
+    hoop = L.shape[1] > 4
     for p in range(stress.shape[0]):
+        lyy = L[p, 4] if hoop else 0.0
         txx, tzz, txz, tyy = elastic_predictor(stress[p, 0], stress[p, 1], stress[p, 2],
                                                stress[p, 3], L[p, 0], L[p, 1], L[p, 2], L[p, 3],
-                                               dt, K, G)
+                                               lyy, dt, K, G)
         sxx, szz, sxz, syy, gp, st = return_map(txx, tzz, txz, tyy, density[p], dt, params)
         if compaction and st != 0:
             gd = equivalent_shear_rate(L[p, 0], L[p, 1], L[p, 2], L[p, 3])

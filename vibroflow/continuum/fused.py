@@ -115,13 +115,15 @@ def _make_advance_kernel(sources: int):
     def advance_kernel(nsteps, t, dt, x, v, C, L, mass, volume, density, stress, gamma_dot, phase,
                        fext, bseq, wpar, wxi, wf, wfn, wft, wst, ppar, frame, x0, z0, dx,
                        periodic, params, box, bounds, cm, cmv, cf, gm, gmv, gf, gv,
-                       no_slip_rows, flip):
+                       no_slip_rows, flip, axis_cols):
         """Up to nsteps MPM steps of dt (s) from time t (s), in place (module docstring; the
         state's arrays as mpm.MPMState, the grid's as mpm.MPMSystem.work).  box (4,) the region
         (m) a point may occupy (mpm.step); bounds (nchunk + 1,) chunk_bounds; cm (nchunk, nx, nz),
         cmv, cf (nchunk, nx, nz, 2) per-chunk scatter buffers; no_slip_rows: the grid's lowest
         node rows held still after every grid update (mpm.MPMSystem.no_slip_below, a rough
-        floor), 0 for none.
+        floor), 0 for none; axis_cols: an axisymmetric section's node columns on or left of
+        the axis r = 0, whose radial velocity is held at 0 after every grid update (mpm.
+        MPMSystem.axisymmetric), 0 for a plane-strain section.
 
         Returns (steps done, t after them, status, boundary): status OK; THROUGH_WALL when points
         went through the boundary `boundary` (the step was not made: t is its start; the
@@ -166,7 +168,7 @@ def _make_advance_kernel(sources: int):
                 cmv[c] = 0.0
                 cf[c] = 0.0
                 p2g(x[a:b], v[a:b], C[a:b], mass[a:b], volume[a:b], stress[a:b], fext[a:b], x0,
-                    z0, dx, periodic, cm[c], cmv[c], cf[c])
+                    z0, dx, periodic, cm[c], cmv[c], cf[c], axis_cols > 0)
             for j in range(nb_):
                 if bseq[j, 0] == B_WALL:
                     n_deep = 0
@@ -181,6 +183,8 @@ def _make_advance_kernel(sources: int):
             grid_update(gm, gmv, gf, gv, x0, z0, dx, dt, a0x, a0z, om, al, pvx, pvz, periodic)
             if no_slip_rows > 0:
                 gv[:, :no_slip_rows, :] = 0.0
+            if axis_cols > 0:
+                gv[:axis_cols, :, 0] = 0.0
             # 4-5: gather, move, volume and stress, per chunk
             for c in nb.prange(nchunk):
                 a = bounds[c]

@@ -15,7 +15,10 @@ from .grid import bspline_weights
 def g2p(x, v, C, L, gv, x0, z0, dx, dt, periodic, gm, gmv, flip):
     """Gather the grid velocity gv (nx, nz, 2) (m/s) to the points: v (N, 2) m/s, C (N, 4) and
     L (N, 4) [xx, xz, zx, zz] 1/s, written in place; then move the points x (N, 2) by dt v (m).
-    periodic: the grid wraps around along x (period nx dx) and so do the points."""
+    periodic: the grid wraps around along x (period nx dx) and so do the points.  L of
+    shape (N, 5): an axisymmetric section (x = r >= 0), whose fifth column gets the hoop rate
+    L_theta = sum_i w_ip v_r,i / r_p (1/s; Nairn & Guilkey 2015, Int. J. Numer. Meth. Eng.
+    101, 127, eq. 20), the point's radius taken before its move."""
     inv = 4.0 / (dx * dx)
     nxg = gv.shape[0]
     period = nxg * dx
@@ -82,6 +85,8 @@ def g2p(x, v, C, L, gv, x0, z0, dx, dt, periodic, gm, gmv, flip):
         L[p, 1] = lxz
         L[p, 2] = lzx
         L[p, 3] = lzz
+        if L.shape[1] > 4:
+            L[p, 4] = vx / x[p, 0]
         x[p, 0] += dt * vx
         x[p, 1] += dt * vz
         if periodic:

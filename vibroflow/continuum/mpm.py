@@ -62,7 +62,19 @@ class MPMSystem:
     collapse's run-out, vibroflow.continuum.column; tub47-quick's circulation, 0.75 of the
     DEM's at cfl 0.3, 1.04 at cfl 0.1).  A blend near 1 keeps the momentum exactly (the FLIP
     part sums to zero over the points) and makes the results time-step converged, at the cost
-    of FLIP's point noise.  Default 0, the studies' setting so far."""
+    of FLIP's point noise.  Default 0, the studies' setting so far.
+
+    axisymmetric: the section is a half-plane x = r >= 0 of a body of revolution about the z
+    axis (the axisymmetric column collapses of Lube et al. 2004 and Lajeunesse et al. 2004),
+    not a plane-strain slice: the points' masses and volumes are per radian (kg, m^3; a point
+    of meridian area A at radius r has V = A r), the hoop stress sigma_theta is the stress's
+    yy slot, the velocity gradient gains the hoop rate v_r / r (state.L has five columns;
+    g2p.py), which enters the volume and the elastic predictor, and the hoop stress the radial
+    force (p2g.py) -- the axisymmetric MPM of Nairn & Guilkey (2015, Int. J. Numer. Meth. Eng.
+    101, 127).  The axis is a grid condition: nodes at r <= 0 have no radial velocity.  Plane
+    penalty walls and the partitions are plane-strain objects (their force scales with the
+    point's side sqrt(V)) and are refused here: a floor is the no-slip grid floor
+    (`no_slip_below`)."""
 
     grid: Grid
     material: ContinuumMaterial
@@ -72,6 +84,7 @@ class MPMSystem:
     no_slip_below: float | None = None
     chunks: int = 2
     flip: float = 0.0
+    axisymmetric: bool = False
 
     def __post_init__(self):
         if not self.dt > 0:
@@ -84,6 +97,21 @@ class MPMSystem:
                                  f"height at or above the grid's bottom {self.grid.z0!r} m")
             # node rows k with z0 + k dx <= z (a node on the floor included)
             self.no_slip_rows = int(math.floor((z - self.grid.z0) / self.grid.dx + 1e-9)) + 1
+        self.axis_cols = 0
+        if self.axisymmetric:
+            if self.grid.periodic:
+                raise InputError("axisymmetric = True with a periodic grid: the section must "
+                                 "start at the axis r = 0, not wrap around")
+            if self.boundaries:
+                raise InputError(f"axisymmetric = True with boundaries "
+                                 f"{[type(b).__name__ for b in self.boundaries]}: none allowed "
+                                 "(the penalty walls and partitions are plane-strain; use "
+                                 "no_slip_below for a floor)")
+            if not self.grid.x0 <= 0.0:
+                raise InputError(f"axisymmetric = True with the grid's left edge at x0 = "
+                                 f"{self.grid.x0!r} m: the grid must reach the axis (x0 <= 0)")
+            # node columns i with x0 + i dx <= 0 (the node on the axis included)
+            self.axis_cols = int(math.floor(-self.grid.x0 / self.grid.dx + 1e-9)) + 1
         if not (isinstance(self.chunks, int) and self.chunks >= 1):
             raise InputError(f"chunks = {self.chunks!r}: must be an integer >= 1")
         self.params = self.material.as_array()
@@ -167,7 +195,12 @@ def init_state(system: MPMSystem, x, volume, density, v=None, stress=None,
                          f"[{xmin:.4g}, {xmax:.4g}] x [{zmin:.4g}, {zmax:.4g}] m")
     vel = np.zeros((n, 2)) if v is None else np.array(v, dtype=float).reshape(n, 2)
     sig = np.zeros((n, 4)) if stress is None else np.array(stress, dtype=float).reshape(n, 4)
-    state = MPMState(x=x, v=vel, C=np.zeros((n, 4)), L=np.zeros((n, 4)),
+    if system.axisymmetric and n and not x[:, 0].min() > 0:
+        raise InputError(f"material points at r = {x[:, 0].min():.4g} m: an axisymmetric "
+                         "section's points must lie at r > 0")
+    # an axisymmetric state's velocity gradient carries the hoop rate v_r / r as a fifth column
+    ncol = 5 if system.axisymmetric else 4
+    state = MPMState(x=x, v=vel, C=np.zeros((n, 4)), L=np.zeros((n, ncol)),
                      mass=volume * density, volume=volume, density=density, stress=sig,
                      gamma_dot=np.zeros(n), phase=np.ones(n, np.int8), fext=np.zeros((n, 2)),
                      history=[b.init_history(n) for b in system.boundaries], t=float(t))
@@ -281,6 +314,9 @@ def advance(system: MPMSystem, state: MPMState, n: int) -> None:
     xmin, xmax, zmin, zmax = g.inner_bounds()
     pad = 0.0 if g.periodic else g.dx
     box = np.array([xmin - pad, xmax + pad, zmin - g.dx, zmax + g.dx])
+    if system.axisymmetric:
+        # a point on or across the axis r = 0 has no hoop rate v_r / r: stop there
+        box[0] = 1.0e-9 * g.dx
     bounds = fused.chunk_bounds(state.n, system.chunks)
     cm, cmv, cf = system.chunk_work
     gm, gmv, gf, gv = system.work
@@ -288,7 +324,8 @@ def advance(system: MPMSystem, state: MPMState, n: int) -> None:
         n, state.t, system.dt, state.x, state.v, state.C, state.L, state.mass, state.volume,
         state.density, state.stress, state.gamma_dot, state.phase, state.fext, bseq, wpar,
         *hist, ppar, system.frame.as_array(), g.x0, g.z0, g.dx, g.periodic, system.params, box,
-        bounds, cm, cmv, cf, gm, gmv, gf, gv, system.no_slip_rows, system.flip)
+        bounds, cm, cmv, cf, gm, gmv, gf, gv, system.no_slip_rows, system.flip,
+        system.axis_cols)
     _unstack_history(state, walls, hist)
     state.t = t
     state.step += done

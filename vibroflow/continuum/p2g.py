@@ -19,13 +19,19 @@ from .grid import bspline_weights
 
 
 @nb.njit(cache=True)
-def p2g(x, v, C, mass, volume, stress, fext, x0, z0, dx, periodic, gm, gmv, gf):
+def p2g(x, v, C, mass, volume, stress, fext, x0, z0, dx, periodic, gm, gmv, gf,
+        axisymmetric=False):
     """Scatter the points to the grid (accumulates into gm, gmv, gf; zero them first).
 
     x, v (N, 2) position (m) and velocity (m/s) [x, z]; C (N, 4) affine matrix [xx, xz, zx, zz]
     (1/s) with C_ab multiplying r_b; mass (N,) kg/m; volume (N,) m^2; stress (N, 4)
     [xx, zz, xz, yy] (Pa); fext (N, 2) N/m.  Grid origin (x0, z0) and spacing dx (m); periodic:
     the grid wraps around along x (period nx dx); gm (nx, nz), gmv (nx, nz, 2), gf (nx, nz, 2).
+
+    axisymmetric: x is the radius r >= 0 of a section of revolution about the z axis, masses
+    (kg), volumes (m^3) and forces (N) are per radian, and the hoop stress sigma_yy =
+    sigma_theta adds the radial force -V_p sigma_theta w_ip / r_p (the 1/r term of the
+    divergence in cylindrical coordinates; Nairn & Guilkey 2015, eq. 16).
     """
     nxg = gm.shape[0]
     for p in range(x.shape[0]):
@@ -47,6 +53,7 @@ def p2g(x, v, C, mass, volume, stress, fext, x0, z0, dx, periodic, gm, gmv, gf):
         czz = C[p, 3]
         fex = fext[p, 0]
         fez = fext[p, 1]
+        hoop = -vol * stress[p, 3] / x[p, 0] if axisymmetric else 0.0
         for a in range(3):
             rx = (a - fx) * dx
             wa = wx0 if a == 0 else (wx1 if a == 1 else wx2)
@@ -65,5 +72,5 @@ def p2g(x, v, C, mass, volume, stress, fext, x0, z0, dx, periodic, gm, gmv, gf):
                 gm[i, k] += w * m
                 gmv[i, k, 0] += w * m * (vx + cxx * rx + cxz * rz)
                 gmv[i, k, 1] += w * m * (vz + czx * rx + czz * rz)
-                gf[i, k, 0] += -vol * (sxx * gwx + sxz * gwz) + w * fex
+                gf[i, k, 0] += -vol * (sxx * gwx + sxz * gwz) + w * (fex + hoop)
                 gf[i, k, 1] += -vol * (sxz * gwx + szz * gwz) + w * fez

@@ -20,7 +20,8 @@ DILUTE_DENSITY_FLOOR = 0.25
 @nb.njit(cache=True)
 def update_volume(L, mass, volume, density, dt, rho_min):
     """V_p *= det(I + dt L_p) and rho_p = m_p / V_p for every point (in place), with V_p at most
-    m_p / rho_min.  L (N, 4) [xx, xz, zx, zz] 1/s; mass kg/m; volume m^2; density kg/m^3;
+    m_p / rho_min.  L (N, 4) [xx, xz, zx, zz] 1/s, or (N, 5) with the hoop rate v_r / r last
+    (axisymmetric: volumes and masses per radian, m^3 and kg); mass kg/m; volume m^2; density kg/m^3;
     rho_min (kg/m^3; 0: no bound).
 
     Why the bound: a point flying alone keeps the affine velocity field APIC gives it (C is
@@ -32,12 +33,16 @@ def update_volume(L, mass, volume, density, dt, rho_min):
     rho_c (solid fraction about 0.15, a granular gas) is far below any density of the flowing
     bed (tub47-quick: every point above 0.5 rho_c at all times), so the bed's numbers do not
     change; the point stays stress-free, since it is far below rho_c."""
+    hoop = L.shape[1] > 4
     for p in range(volume.shape[0]):
         fxx = 1.0 + dt * L[p, 0]
         fxz = dt * L[p, 1]
         fzx = dt * L[p, 2]
         fzz = 1.0 + dt * L[p, 3]
         volume[p] *= fxx * fzz - fxz * fzx
+        if hoop:
+            # axisymmetric: the hoop stretch 1 + dt v_r / r (F_yy of the section)
+            volume[p] *= 1.0 + dt * L[p, 4]
         if rho_min > 0.0 and mass[p] < rho_min * volume[p]:
             volume[p] = mass[p] / rho_min
         density[p] = mass[p] / volume[p]

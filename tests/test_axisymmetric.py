@@ -1,0 +1,179 @@
+"""The axisymmetric material point method (vibroflow.continuum.mpm.MPMSystem.axisymmetric) against
+known answers: the divergence of a stress in cylindrical coordinates, the kinematics of a radial
+stretch, and the cylindrical column collapse of Lube et al. (2004) and Lajeunesse et al. (2004).
+
+In a section x = r >= 0 of a body of revolution the points' masses and volumes are per radian
+(V = A r), the hoop stress sigma_theta is the stress's yy slot, the velocity gradient gains the
+hoop rate v_r / r and the internal force the term -V sigma_theta w / r (Nairn & Guilkey 2015).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vibroflow.analysis.column import LAJEUNESSE_2004, LUBE_2004, LUBE_2005
+from vibroflow.continuum.boundary import Plane
+from vibroflow.continuum.column import run_column
+from vibroflow.continuum.constitutive import ContinuumMaterial, update_stress_points
+from vibroflow.continuum.g2p import g2p
+from vibroflow.continuum.grid import Grid
+from vibroflow.continuum.mpm import MPMSystem, init_state
+from vibroflow.continuum.p2g import p2g
+from vibroflow.continuum.plasticity import update_volume
+from vibroflow.errors import InputError
+
+DX = 0.05
+SP = 0.5 * DX
+
+
+def ring_points(r0, r1, z1):
+    """Points 2 x 2 a cell filling [r0, r1] x [0, z1] (m), and their volumes per radian."""
+    rs = np.arange(r0 + 0.5 * SP, r1, SP)
+    zs = np.arange(0.5 * SP, z1, SP)
+    R, Z = np.meshgrid(rs, zs, indexing="ij")
+    x = np.stack([R.ravel(), Z.ravel()], axis=1)
+    return x, SP * SP * x[:, 0]
+
+
+def test_uniform_stress_is_in_equilibrium_in_cylindrical_coordinates():
+    """An isotropic stress -p0 I is divergence-free in any coordinates: in cylindrical ones
+    d sigma_rr / dr + (sigma_rr - sigma_theta) / r = 0.  A thick ring of points under it
+    scatters no force to the nodes whose support lies inside it: with the hoop term, zero to
+    round-off (the quadratic B-spline's weights summed over 2 x 2 points a cell integrate
+    d(r w)/dr exactly); without it (the plane-strain scatter of the same volumes) every such
+    node keeps the radial force p0 dx^2 of the missing -V sigma_theta w / r."""
+    x, vol = ring_points(0.2, 0.8, 0.4)
+    n = len(x)
+    p0 = 1.0e4
+    stress = np.zeros((n, 4))
+    stress[:, [0, 1, 3]] = -p0
+    g = Grid.covering(0.0, 1.0, -0.1, 0.5, DX)
+    ri = g.x0 + np.arange(g.nx) * DX
+    zk = g.z0 + np.arange(g.nz) * DX
+    R, Z = np.meshgrid(ri, zk, indexing="ij")
+    inner = (R >= 0.2 + 1.5 * DX) & (R <= 0.8 - 1.5 * DX) & (Z >= 1.5 * DX) & (Z <= 0.4 - 1.5 * DX)
+    assert inner.sum() > 20
+    scale = p0 * DX * R[inner]
+    out = {}
+    for axi in (True, False):
+        gm, gmv, gf, _ = g.zeros()
+        p2g(x, np.zeros((n, 2)), np.zeros((n, 4)), 4680.0 * vol, vol, stress, np.zeros((n, 2)),
+            g.x0, g.z0, DX, False, gm, gmv, gf, axi)
+        out[axi] = (np.abs(gf[inner, 0]) / scale, np.abs(gf[inner, 1]) / scale)
+    assert out[True][0].max() < 1e-12
+    assert out[True][1].max() < 1e-12
+    # the missing hoop term: p0 sum_p A_p w_ip = p0 dx^2 at every interior node
+    np.testing.assert_allclose(out[False][0] * scale, p0 * DX * DX, rtol=1e-9)
+
+
+def test_hoop_rate_volume_and_stress_of_a_radial_compression():
+    """The grid velocity v = (eps r, 0) (a uniform radial compression, eps < 0): every point
+    gets L_rr = eps and the hoop rate L_theta = v_r / r = eps exactly (the B-spline reproduces
+    a linear field), its volume per radian changes by (1 + dt eps)^2 (the radial and the hoop
+    stretch), and the elastic predictor adds dt (2 lambda eps + 2 G eps) to sigma_rr and
+    sigma_theta and dt 2 lambda eps to sigma_zz (Hooke's law with D = diag(eps, 0, eps))."""
+    x, vol = ring_points(0.1, 0.6, 0.3)
+    n = len(x)
+    eps, dt = -0.5, 1.0e-4
+    g = Grid.covering(0.0, 0.8, -0.1, 0.4, DX)
+    gv = np.zeros((g.nx, g.nz, 2))
+    gv[:, :, 0] = eps * (g.x0 + np.arange(g.nx) * DX)[:, None]
+    L = np.zeros((n, 5))
+    r_before = x[:, 0].copy()
+    xx = x.copy()
+    g2p(xx, np.zeros((n, 2)), np.zeros((n, 4)), L, gv, g.x0, g.z0, DX, dt, False,
+        np.zeros((g.nx, g.nz)), np.zeros((g.nx, g.nz, 2)), 0.0)
+    np.testing.assert_allclose(L[:, 0], eps, rtol=1e-12)
+    np.testing.assert_allclose(L[:, 4], eps, rtol=1e-12)
+    np.testing.assert_allclose(L[:, 1:4], 0.0, atol=1e-12)
+    np.testing.assert_allclose(xx[:, 0], r_before * (1.0 + dt * eps), rtol=1e-12)
+
+    mat = ContinuumMaterial()
+    rho = np.full(n, 1.02 * mat.critical_density)
+    mass = rho * vol
+    volume = vol.copy()
+    update_volume(L, mass, volume, rho, dt, 0.0)
+    np.testing.assert_allclose(volume / vol, (1.0 + dt * eps) ** 2, rtol=1e-12)
+
+    p0 = 5.0e3
+    stress = np.zeros((n, 4))
+    stress[:, [0, 1, 3]] = -p0
+    gd = np.zeros(n)
+    st = np.zeros(n, np.int8)
+    update_stress_points(stress, L, rho, dt, mat.as_array(), gd, st)
+    K, G = mat.bulk_modulus, mat.shear_modulus
+    lam = K - 2.0 * G / 3.0
+    assert np.all(st == 1)     # compressed isotropically: elastic
+    np.testing.assert_allclose(stress[:, 0], -p0 + dt * (2 * lam * eps + 2 * G * eps), rtol=1e-12)
+    np.testing.assert_allclose(stress[:, 3], -p0 + dt * (2 * lam * eps + 2 * G * eps), rtol=1e-12)
+    np.testing.assert_allclose(stress[:, 1], -p0 + dt * 2 * lam * eps, rtol=1e-12)
+
+
+def test_axisymmetric_low_column_keeps_its_top():
+    """a = 0.5 < 0.74, R0 = 1 m, dx = R0/20, rough floor: the top of a low cylinder never
+    moves, so H_inf = H0 (Lajeunesse et al. 2004's small-a branch, H_inf / R0 = a), within the
+    issue's 10 %.  Measured 0.466 (-7 %; 0.488 with flip = 0.99, 0.474 on R0/40): the
+    continuum's centre subsides, its top 0.453 at the axis and 0.41 at r = 0.3 R0, where the
+    plane-strain column's sinks by 2.6 % only (0.487 at the symmetry plane, same grid and floor);
+    a 15-degree cone stands (largest displacement 3 mm over 6 sqrt(H/g)), so this is the
+    continuum's low-confinement creep, not a lost equilibrium.  The run-out is not
+    grid-converged (0.45, 0.60, 0.73 on R0/10, /20, /40 against Lube et al. 2004's 1.24 a =
+    0.62), as the planar low column's is not."""
+    a = 0.5
+    run = run_column(1.0, a, 1.0 / 20, rough_floor=True, axisymmetric=True)
+    assert run.settled
+    dep = _deposit(run)
+    runout, height = dep.normalised(1.0)
+    print(f"\naxisymmetric a = {a}: run-out {runout:.3f} (Lube 2004 {LUBE_2004.runout(a):.3f}),"
+          f" height {height:.3f} (Lajeunesse 2004 {LAJEUNESSE_2004.height(a):.3f})")
+    assert height == pytest.approx(LAJEUNESSE_2004.height(a), rel=0.10)
+    # mass per radian is carried by the points: the deposit holds the column's volume R0^2 H0/2
+    x, area = run.deposit_points()
+    assert float(np.sum(area * x)) == pytest.approx(0.5 * a, rel=2e-3)
+
+
+def test_axisymmetric_column_spreads_less_than_the_planar_one():
+    """a = 3, R0 = L0 = 1 m, dx = L0/20, rough floor, APIC: the cylinder's run-out is shorter
+    than the plane-strain column's, as the experiments' are (Lube et al. 2004's 1.6 a^(1/2) =
+    2.77 against Lube et al. 2005's 1.9 a^(2/3) = 3.95: 0.70), because its spreading layer
+    thins as 1/r.  Measured: 3.46 against 5.65 (0.61).  Not met, and said here: Lube et al.
+    2004 within 10 %.  The continuum runs out 25 % (APIC) to 37 % (flip 0.99, R0/40) past
+    2.77 and stands at 0.52 - 0.60 R0 against Lajeunesse et al. 2004's 0.74: the same excess
+    mobility as the planar column's (vibroflow.continuum.column), so not a matter of the
+    geometry."""
+    a = 3.0
+    axi = run_column(1.0, a, 1.0 / 20, rough_floor=True, axisymmetric=True)
+    plane = run_column(1.0, a, 1.0 / 20, rough_floor=True)
+    assert axi.settled and plane.settled
+    ra, ha = _deposit(axi).normalised(1.0)
+    rp, hp = _deposit(plane).normalised(1.0)
+    print(f"\na = {a}: axisymmetric run-out {ra:.3f} (Lube 2004 {LUBE_2004.runout(a):.3f}), "
+          f"height {ha:.3f} (Lajeunesse 2004 {LAJEUNESSE_2004.height(a):.3f}); planar run-out "
+          f"{rp:.3f} (Lube 2005 {LUBE_2005.runout(a):.3f}), height {hp:.3f}")
+    assert ra < 0.75 * rp
+    assert ha < hp
+
+
+def _deposit(run):
+    from vibroflow.analysis.column import measure_continuum_deposit
+
+    x, area = run.deposit_points()
+    return measure_continuum_deposit(x, area, run.point_side, run.material.diameter)
+
+
+def test_bad_axisymmetric_set_ups_are_one_line_errors():
+    mat = ContinuumMaterial()
+    g = Grid.covering(0.0, 1.0, 0.0, 1.0, DX)
+    with pytest.raises(InputError, match="boundaries"):
+        MPMSystem(g, mat, 1e-4, boundaries=[Plane((0.0, 0.0), (0.0, 1.0), 1e6)],
+                  axisymmetric=True)
+    with pytest.raises(InputError, match="periodic"):
+        MPMSystem(Grid.periodic_strip(1.0, 0.0, 1.0, DX), mat, 1e-4, axisymmetric=True)
+    with pytest.raises(InputError, match="x0"):
+        MPMSystem(Grid(0.1, 0.0, DX, 20, 20), mat, 1e-4, axisymmetric=True)
+    system = MPMSystem(g, mat, 1e-4, axisymmetric=True)
+    with pytest.raises(InputError, match="r > 0"):
+        init_state(system, [[0.0, 0.5]], 1e-4, mat.critical_density)
+    with pytest.raises(InputError, match="rough_floor") as err:
+        run_column(1.0, 1.0, 0.1, axisymmetric=True)
+    assert "\n" not in str(err.value)
