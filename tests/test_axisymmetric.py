@@ -220,7 +220,7 @@ def test_pile_stands_below_the_friction_angle_and_slumps_to_it_above(axisymmetri
     degrees; asin mu_s = 22.5 in plane-strain flow), stands: its largest displacement over
     6 sqrt(H/g) is below 1 % of its height (measured 1.2 and 2.7 mm of 0.54 m); one of 30
     degrees slumps to a mean slope top / front within 4 degrees of that angle (measured 24.8
-    and 19.8 degrees).  So the material is not too weak at rest: the column collapse's much
+    and 19.7 degrees).  So the material is not too weak at rest: the column collapse's much
     flatter deposits (mean slope about 8 degrees at a = 3, vibroflow.continuum.column) come
     from the dynamics of the collapse, not from the yield condition."""
     top, H, _, moved = _pile(15.0, axisymmetric)
