@@ -122,14 +122,15 @@ def test_axisymmetric_low_column_keeps_its_top():
     a = 0.5
     run = run_column(1.0, a, 1.0 / 20, rough_floor=True, axisymmetric=True)
     assert run.settled
-    dep = _deposit(run)
+    dep = run.deposit()
     runout, height = dep.normalised(1.0)
     print(f"\naxisymmetric a = {a}: run-out {runout:.3f} (Lube 2004 {LUBE_2004.runout(a):.3f}),"
           f" height {height:.3f} (Lajeunesse 2004 {LAJEUNESSE_2004.height(a):.3f})")
     assert height == pytest.approx(LAJEUNESSE_2004.height(a), rel=0.10)
-    # mass per radian is carried by the points: the deposit holds the column's volume R0^2 H0/2
-    x, area = run.deposit_points()
-    assert float(np.sum(area * x)) == pytest.approx(0.5 * a, rel=2e-3)
+    # the thickness profile h(r) of the meridian areas holds the cylinder's volume per radian,
+    # int h r dr = R0^2 H0 / 2 (to the bins' midpoint rule)
+    bw = dep.x[1] - dep.x[0]
+    assert float(np.sum(dep.h * dep.x) * bw) == pytest.approx(0.5 * a, rel=0.01)
 
 
 def test_axisymmetric_column_spreads_less_than_the_planar_one():
@@ -145,20 +146,13 @@ def test_axisymmetric_column_spreads_less_than_the_planar_one():
     axi = run_column(1.0, a, 1.0 / 20, rough_floor=True, axisymmetric=True)
     plane = run_column(1.0, a, 1.0 / 20, rough_floor=True)
     assert axi.settled and plane.settled
-    ra, ha = _deposit(axi).normalised(1.0)
-    rp, hp = _deposit(plane).normalised(1.0)
+    ra, ha = axi.deposit().normalised(1.0)
+    rp, hp = plane.deposit().normalised(1.0)
     print(f"\na = {a}: axisymmetric run-out {ra:.3f} (Lube 2004 {LUBE_2004.runout(a):.3f}), "
           f"height {ha:.3f} (Lajeunesse 2004 {LAJEUNESSE_2004.height(a):.3f}); planar run-out "
           f"{rp:.3f} (Lube 2005 {LUBE_2005.runout(a):.3f}), height {hp:.3f}")
     assert ra < 0.75 * rp
     assert ha < hp
-
-
-def _deposit(run):
-    from vibroflow.analysis.column import measure_continuum_deposit
-
-    x, area = run.deposit_points()
-    return measure_continuum_deposit(x, area, run.point_side, run.material.diameter)
 
 
 def test_bad_axisymmetric_set_ups_are_one_line_errors():
@@ -183,7 +177,8 @@ def _pile(theta_deg, axisymmetric, n=10, duration_tau=6.0):
     """A pile of half-width (or radius) W = 2 m and slope theta (deg) of the default material on
     the rough floor, lithostatic with Jaky's K_0, run for `duration_tau` sqrt(H/g).  Returns
     (top at the centre, initial height H, front, largest displacement), m."""
-    from vibroflow.continuum.column import G_ACC, column_points, column_system
+    from vibroflow.continuum.column import (G_ACC, column_points, column_system,
+                                            lithostatic_state)
     from vibroflow.continuum.mpm import run_steps
 
     mat = ContinuumMaterial()
@@ -196,16 +191,7 @@ def _pile(theta_deg, axisymmetric, n=10, duration_tau=6.0):
                            axisymmetric=axisymmetric)
     x = column_points(0.0 if axisymmetric else -W, W, Hc, sp)
     x = x[x[:, 1] < H * (1.0 - np.abs(x[:, 0]) / W)]
-    h = H * (1.0 - np.abs(x[:, 0]) / W)
-    rho_c = mat.critical_density
-    k0 = 1.0 - np.sin(np.arctan(mat.mu_s))
-    stress = np.zeros((len(x), 4))
-    stress[:, 1] = -rho_c * G_ACC * (h - x[:, 1])
-    stress[:, 0] = stress[:, 3] = k0 * stress[:, 1]
-    p = -(stress[:, 0] + stress[:, 1] + stress[:, 3]) / 3.0
-    rho = rho_c * np.exp(p / mat.bulk_modulus) * 1.001
-    volume = rho_c * sp * sp / rho * (x[:, 0] if axisymmetric else 1.0)
-    state = init_state(system, x, volume, rho, stress=stress)
+    state = lithostatic_state(system, x, H * (1.0 - np.abs(x[:, 0]) / W))
     x0 = state.x.copy()
     run_steps(system, state, int(duration_tau * np.sqrt(H / G_ACC) / system.dt))
     top = float(state.x[np.abs(state.x[:, 0]) < 0.1, 1].max())

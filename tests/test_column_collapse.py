@@ -309,8 +309,10 @@ L_BIG = 1.0   # m: 157 of tub47's balls across, as the experiments' columns are 
 
 
 def mpm_deposit(run):
-    """The deposit of a finished MPM column run (vibroflow.continuum.column.ColumnRun)."""
-    return measure_continuum_deposit(*run.deposit_points(), run.point_side, D)
+    """The deposit of a finished MPM column run (vibroflow.continuum.column.ColumnRun; its
+    material's grains are tub47's balls, d = D)."""
+    assert run.material.diameter == D
+    return run.deposit()
 
 
 def test_mpm_low_column_keeps_its_top_and_runs_past_the_experiments():

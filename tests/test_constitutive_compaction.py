@@ -18,7 +18,7 @@ import pytest
 from vibroflow.calibration.compaction import compaction_table, fit_compaction
 from vibroflow.continuum.constitutive import ContinuumMaterial, update_stress_points
 from vibroflow.errors import InputError
-from tests.test_constitutive_dilatancy import barostat_step
+from tests.test_constitutive_dilatancy import barostat_point, barostat_step
 
 MAT = dict(bulk_modulus=2.0e6, shear_modulus=1.0e6, critical_solid_fraction=0.60)
 P0 = 5.0e3       # Pa
@@ -35,12 +35,7 @@ def cycled_point(mat, phi0, cycles, p0=P0):
     imposed motion (sqrt(2 D':D') dt summed: the shear RATE and the barostat's in-plane
     isotropic rate e, which plane strain makes partly deviatoric, sqrt(RATE^2 + 4 e^2 / 3)), the
     unloaded packing rho exp(-p / K) / rho_s and the state at the end of each cycle."""
-    K = mat.bulk_modulus
-    stress = np.array([[-p0, -p0, 0.0, -p0]])
-    rho = np.array([phi0 * math.exp(p0 / K) * mat.solid_density])
-    gd = np.zeros(1)
-    st = np.zeros(1, np.int8)
-    params = mat.as_array()
+    K, stress, rho, gd, st, params = barostat_point(mat, phi0, p0)
     quarter = int(round(GAMMA_0 / (RATE * DT)))
     signs = [1.0] * quarter + [-1.0] * (2 * quarter) + [1.0] * quarter
     out = []

@@ -38,17 +38,22 @@ def barostat_step(stress, rho, rate, p0, K, dt, params, gd, st):
     return e
 
 
+def barostat_point(mat, phi0, p0):
+    """One point under the isotropic stress -p0 (Pa) at the unloaded packing phi0: (bulk
+    modulus K, stress (1, 4), density (1,) = phi0 exp(p0 / K) rho_s, gamma_dot and state work
+    arrays, the material's packed parameters), for barostat_step."""
+    K = mat.bulk_modulus
+    stress = np.array([[-p0, -p0, 0.0, -p0]])
+    rho = np.array([phi0 * math.exp(p0 / K) * mat.solid_density])
+    return K, stress, rho, np.zeros(1), np.zeros(1, np.int8), mat.as_array()
+
+
 def pressure_controlled_shear(mat, phi0, strain, p0=P0, rate=RATE, dt=DT):
     """One point in simple shear L_xz = rate from the isotropic stress -p0 at the unloaded
     packing phi0, with an in-plane isotropic strain rate that brings the trial pressure back to
     p0 every step (a perfect barostat): returns plastic strain, stress ratio tau/p and unloaded
     packing phi rho exp(-p/K) / rho_s per step."""
-    K = mat.bulk_modulus
-    stress = np.array([[-p0, -p0, 0.0, -p0]])
-    rho = np.array([phi0 * math.exp(p0 / K) * mat.solid_density])
-    gd = np.zeros(1)
-    st = np.zeros(1, np.int8)
-    params = mat.as_array()
+    K, stress, rho, gd, st, params = barostat_point(mat, phi0, p0)
     n = int(round(strain / (rate * dt)))
     out = np.zeros((n, 3))
     gp_sum = 0.0

@@ -130,6 +130,14 @@ class ColumnRun:
             return np.abs(x), 0.5 * area
         return x.copy(), area
 
+    def deposit(self):
+        """The deposit measured as every continuum's is (vibroflow.analysis.column.
+        measure_continuum_deposit of `deposit_points`, grains of the material's diameter)."""
+        from vibroflow.analysis.column import measure_continuum_deposit
+
+        return measure_continuum_deposit(*self.deposit_points(), self.point_side,
+                                         self.material.diameter)
+
 
 def column_points(x0: float, x1: float, H0: float, spacing: float) -> np.ndarray:
     """Points on a square lattice of `spacing` (m) filling [x0, x1] x [0, H0] (m), each at the
@@ -174,7 +182,6 @@ def column_system(L0: float, H0: float, dx: float, material: ContinuumMaterial |
         raise InputError(f"reach = {reach!r} m: must exceed the column's half-width L0 = "
                          f"{L0!r} m")
     sp = 0.5 * dx
-    kn = (mat.bulk_modulus + 4.0 * mat.shear_modulus / 3.0) / sp
     if axisymmetric:
         if not rough_floor:
             raise InputError("axisymmetric = True needs rough_floor = True: the floor of an "
@@ -182,6 +189,7 @@ def column_system(L0: float, H0: float, dx: float, material: ContinuumMaterial |
         walls = []
         grid = Grid.covering(-dx, reach, -dx, H0 + 2.0 * dx, dx)
     else:
+        kn = (mat.bulk_modulus + 4.0 * mat.shear_modulus / 3.0) / sp
         walls = [Plane((0.0, 0.0), (0.0, 1.0), kn, friction=floor_friction)]   # floor
         if not symmetric:
             walls.append(Plane((0.0, 0.0), (1.0, 0.0), kn, friction=wall_friction))  # wall
@@ -198,13 +206,24 @@ def column_system(L0: float, H0: float, dx: float, material: ContinuumMaterial |
 def column_state(system: MPMSystem, L0: float, H0: float, symmetric: bool = True) -> MPMState:
     """The column at rest behind its gate(s) (module docstring): points, lithostatic stress with
     Jaky's K_0, density of that pressure."""
+    sp = 0.5 * system.grid.dx
+    x = column_points(-L0 if symmetric and not system.axisymmetric else 0.0, L0, H0, sp)
+    return lithostatic_state(system, x, np.full(len(x), H0))
+
+
+def lithostatic_state(system: MPMSystem, x, surface) -> MPMState:
+    """Points at x (N, 2) m on the lattice of spacing dx/2, at rest under a free surface at
+    height surface (N,) m above each: sigma_zz = -rho_c g (surface - z), sigma_xx = sigma_yy =
+    K_0 sigma_zz with Jaky's K_0 = 1 - sin(atan mu_s), the density rho_c exp(p / K) of that
+    pressure (module docstring, "initial state"); masses rho_c (dx/2)^2 each, per metre, or
+    times r per radian in an axisymmetric section."""
     mat = system.material
     sp = 0.5 * system.grid.dx
     axi = system.axisymmetric
-    x = column_points(-L0 if symmetric and not axi else 0.0, L0, H0, sp)
+    x = np.asarray(x, dtype=float)
     rho_c = mat.critical_density
     k0 = 1.0 - math.sin(math.atan(mat.mu_s))
-    szz = -rho_c * G_ACC * (H0 - x[:, 1])
+    szz = -rho_c * G_ACC * (np.asarray(surface, dtype=float) - x[:, 1])
     stress = np.zeros((len(x), 4))
     stress[:, 1] = szz
     stress[:, 0] = stress[:, 3] = k0 * szz
