@@ -11,7 +11,11 @@ energy), on a fixed box mesh (mesh.EulerianMesh.box):
   friction (the mesh's walls share one law);
 * the box's walls are the floor, the far ends at +-`reach` and a lid at 2 H0, all with the
   Coulomb friction `floor_friction` (0.40 by default, the Lagrangian check's) and the
-  Lagrangian check's stiffness (the P-wave modulus over the cell side).
+  Lagrangian check's stiffness (the P-wave modulus over the cell side);
+* rough floor (`rough_floor=True`): the experiments' rough bed as the Lagrangian check's
+  no-slip grid condition (EulerianSystem.no_slip_below = 0: the solver grid's nodes on and
+  below the floor held still), on top of the floor wall that carries the normal load, so that
+  both formulations are run on the same floor (vibroflow.continuum.column, "rough floor").
 
 The deposit is measured by vibroflow.analysis.column from `deposit_points()`: each cell stands
 for its mass over the critical density (m^2 per metre of thickness), as the Lagrangian's points.
@@ -72,9 +76,10 @@ class EulerianColumnRun:
 
 def column_system(L0: float, H0: float, dx: float, material: ContinuumMaterial | None = None,
                   floor_friction: float = 0.40, symmetric: bool = True,
-                  reach: float | None = None, cfl: float = 0.3) -> EulerianSystem:
+                  reach: float | None = None, cfl: float = 0.3,
+                  rough_floor: bool = False) -> EulerianSystem:
     """The Eulerian system of the column (module docstring); reach (m, from x = 0) default
-    L0 (2 + 3 H0/L0), the Lagrangian check's."""
+    L0 (2 + 3 H0/L0), the Lagrangian check's; `rough_floor`: the no-slip grid floor."""
     for name, v in (("L0", L0), ("H0", H0), ("dx", dx)):
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
             raise InputError(f"column {name} = {v!r}: must be a finite length > 0 m")
@@ -87,7 +92,8 @@ def column_system(L0: float, H0: float, dx: float, material: ContinuumMaterial |
     kn = (mat.bulk_modulus + 4.0 * mat.shear_modulus / 3.0) / h
     wall = MeshWall(stiffness=kn, friction=floor_friction, damping_ratio=0.5)
     dt = stable_dt(mat, dx, h, [wall], v_max=math.sqrt(2.0 * G_ACC * H0), cfl=cfl)
-    return EulerianSystem(mesh, mat, dt, frame=LabFrame((0.0, -G_ACC)), wall=wall)
+    return EulerianSystem(mesh, mat, dt, frame=LabFrame((0.0, -G_ACC)), wall=wall,
+                          no_slip_below=0.0 if rough_floor else None)
 
 
 def column_state(system: EulerianSystem, L0: float, H0: float,
@@ -118,11 +124,12 @@ def run_column(L0: float, H0: float, dx: float, material: ContinuumMaterial | No
                floor_friction: float = 0.40, symmetric: bool = True,
                t_min: float | None = None, t_max: float | None = None,
                ke_fraction: float = 1.0e-4, reach: float | None = None,
-               cfl: float = 0.3) -> EulerianColumnRun:
+               cfl: float = 0.3, rough_floor: bool = False) -> EulerianColumnRun:
     """Release the column and run until it is at rest (the Lagrangian run_column's rule:
     after t_min = 3 sqrt(H0/g), the first check, every 0.1 sqrt(H0/g), with kinetic energy
     below ke_fraction M g H0 / 2; at most t_max = 30 sqrt(H0/g))."""
-    system = column_system(L0, H0, dx, material, floor_friction, symmetric, reach, cfl)
+    system = column_system(L0, H0, dx, material, floor_friction, symmetric, reach, cfl,
+                           rough_floor)
     state = column_state(system, L0, H0, symmetric)
     tau = math.sqrt(H0 / G_ACC)
     t_min = 3.0 * tau if t_min is None else float(t_min)

@@ -62,12 +62,15 @@ def _make_advance_kernel(sources: int):
                        delta, xi, wfn, wft, wst, kn, kt, zeta, mu_w, part_on, mu_p, length,
                        frame, x0, z0, dx, periodic, xmin, zmin, h, open_x, open_z, params,
                        ux, uz, adv_rho, srx, srz, sqx, sqz, dm, dq, q, end_rho, act, cx, cv,
-                       cC, cL, cmass, cvol, cstress, cfext, cm, cmv, cf, gm, gmv, gf, gv):
+                       cC, cL, cmass, cvol, cstress, cfext, cm, cmv, cf, gm, gmv, gf, gv,
+                       no_slip_rows):
         """Up to nsteps steps of dt (s) from time t (s) of the state's arrays (solver.EulerianState,
         flat per cell; q (N, NQ), end_rho (N,) work arrays), in place; the mesh's faces and the
         remap's work arrays as solver.EulerianSystem's; act (N,) int64 and the compact c* arrays
         (N, ...) work arrays for the cells holding material; cm (nchunk, nx, nz), cmv, cf
-        (nchunk, nx, nz, 2) per-chunk scatter buffers.
+        (nchunk, nx, nz, 2) per-chunk scatter buffers; no_slip_rows: the grid's lowest node rows
+        held still after every grid update (solver.EulerianSystem.no_slip_below, a rough floor;
+        the Lagrangian loop's), 0 for none.
 
         Returns (steps done, t, status, lowest cell mass kg/m, largest |M - M0| / M0 so far):
         status OK, NEGATIVE_MASS (a cell lost more mass than it held) or NON_FINITE (a velocity),
@@ -111,6 +114,8 @@ def _make_advance_kernel(sources: int):
                 sum_chunk_rows(i, i + 1, cm, cmv, cf, gm, gmv, gf)
             a0x, a0z, om, al, pvx, pvz = frame_body(frame, t + 0.5 * dt)
             grid_update(gm, gmv, gf, gv, x0, z0, dx, dt, a0x, a0z, om, al, pvx, pvz, periodic)
+            if no_slip_rows > 0:
+                gv[:, :no_slip_rows, :] = 0.0
             for c in nb.prange(nchunk):
                 a = (c * na) // nchunk
                 b = ((c + 1) * na) // nchunk

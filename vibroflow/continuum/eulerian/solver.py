@@ -40,6 +40,7 @@ m^2, stresses Pa [xx, zz, xz, yy] (tension positive), forces N/m.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -61,8 +62,15 @@ NQ = 11
 @dataclass
 class EulerianSystem:
     """What does not change during a run: the mesh, the material, the time step dt (s), the
-    frame (grid_update.LabFrame or TubFrame), the wall (wall.MeshWall or None) and the
-    partitions' friction (boundary.PartitionFriction or None)."""
+    frame (grid_update.LabFrame or TubFrame), the wall (wall.MeshWall or None), the
+    partitions' friction (boundary.PartitionFriction or None) and an optional rough floor.
+
+    no_slip_below (m, optional): a rough, no-slip floor as a grid boundary condition, the
+    solver grid's nodes at heights z <= no_slip_below held still after every grid update, as
+    the Lagrangian formulation's (mpm.MPMSystem.no_slip_below; the no-slip base of Lagree,
+    Staron & Popinet 2011).  The mesh's wall still carries the normal load; the nodes held
+    still make the cells next to the floor stick to it, where the wall's Coulomb friction acts
+    only on the row of cells touching it."""
 
     mesh: EulerianMesh
     material: ContinuumMaterial
@@ -71,10 +79,20 @@ class EulerianSystem:
     wall: MeshWall | None = None
     partitions: object = None
     chunks: int = 2
+    no_slip_below: float | None = None
 
     def __post_init__(self):
         if not self.dt > 0:
             raise InputError(f"dt = {self.dt!r}: must be > 0 s")
+        grid = self.mesh.grid
+        self.no_slip_rows = 0
+        if self.no_slip_below is not None:
+            z = self.no_slip_below
+            if not (isinstance(z, (int, float)) and math.isfinite(z) and grid.z0 <= z):
+                raise InputError(f"no_slip_below = {z!r} m: must be a finite height at or "
+                                 f"above the grid's bottom {grid.z0!r} m")
+            # node rows k with z0 + k dx <= z (a node on the floor included)
+            self.no_slip_rows = int(math.floor((z - grid.z0) / grid.dx + 1e-9)) + 1
         if not (isinstance(self.chunks, int) and self.chunks >= 1):
             raise InputError(f"chunks = {self.chunks!r}: must be an integer >= 1")
         m = self.mesh
@@ -237,7 +255,7 @@ def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
         pf is not None, *((pf.friction, pf.length) if pf is not None else (0.0, 1.0)),
         system.frame.as_array(), g.x0, g.z0, g.dx, g.periodic, mesh.xmin, mesh.zmin, mesh.h,
         mesh.open_x, mesh.open_z, system.params, system.ux, system.uz, *system.adv, system.q,
-        system.end_rho, *system.compact, *system.chunk_work, *system.work)
+        system.end_rho, *system.compact, *system.chunk_work, *system.work, system.no_slip_rows)
     state.t = t
     state.step += done
     state.mass_error_max = err_max
