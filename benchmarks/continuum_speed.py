@@ -186,7 +186,7 @@ def kernels(a) -> dict:
                 gm, gmv, gf, gv, g.x0, g.z0, g.dx, system.dt, 0.0, -9.81, 0.0, 0.0, 0.0, 0.0,
                 g.periodic), 200)
             t["g2p"] = _per_call(lambda: g2p(x.copy(), v.copy(), C.copy(), L, gv, g.x0, g.z0,
-                                             g.dx, 0.0, g.periodic), 200)
+                                             g.dx, 0.0, g.periodic, gm, gmv, 0.0), 200)
             t["volume_and_stress"] = _per_call(lambda: (
                 update_volume(L, state.mass, vol.copy(), rho, 0.0, 0.0),
                 update_stress_points(stress.copy(), L, rho, system.dt, system.params,
@@ -205,7 +205,7 @@ def kernels(a) -> dict:
             t["p2g"] = _per_call(lambda: p2g(x, v, C, m, vol, st, fe, g.x0, g.z0, g.dx,
                                              g.periodic, gm, gmv, gf), 200)
             t["g2p"] = _per_call(lambda: g2p(x.copy(), v.copy(), C.copy(), L.copy(), gv, g.x0,
-                                             g.z0, g.dx, 0.0, g.periodic), 200)
+                                             g.z0, g.dx, 0.0, g.periodic, gm, gmv, 0.0), 200)
             t["face_velocities"] = _per_call(lambda: face_velocities(
                 gv, g.x0, g.z0, g.dx, g.periodic, mesh.xmin, mesh.zmin, mesh.h, mesh.open_x,
                 mesh.open_z, state.mass.reshape(mesh.ncx, mesh.ncz), system.ux, system.uz), 200)
