@@ -147,22 +147,19 @@ def test_bed_held_in_a_translating_rotating_box_stays_at_rest_relative_to_it():
 # ----------------------------------------------------------------------------------------------
 # the wall: Coulomb friction
 
-@pytest.mark.parametrize("pull_g, slides", [(0.1, False), (0.35, True)])
-def test_layer_on_a_floor_sticks_or_slides_as_coulomb_says(pull_g, slides):
-    """A layer (2 cm of media, periodic along x) on a floor of wall friction mu_w = 0.2 under
-    gravity and a horizontal pull a (the frame of a plate accelerating at -a): below mu_w g it
-    sticks (mean speed below 1 % of a t), above it slides as a block at a - mu_w g (within
-    3 %): the wall's penalty law with the Coulomb limit on the fixed mesh's wall layer (the
-    media's own friction, mu_s = 0.38, is above mu_w, so it shears at the wall, not inside)."""
+def _layer_on_floor(mu_w: float, no_slip_below: float | None = None):
+    """(system, state): a 2 cm layer of the default media, periodic along x, at rest on a
+    floor wall of friction mu_w (optionally the rough floor too), settled 0.03 s under
+    gravity."""
     mat = ContinuumMaterial()
     dx = 0.005
     h = dx / 2
     mesh = EulerianMesh.box(0.0, 0.04, 0.0, 0.04, dx, periodic=True)
     kn = (mat.bulk_modulus + 4 * mat.shear_modulus / 3) / h
-    mu_w = 0.2
     wall = MeshWall(kn, friction=mu_w, damping_ratio=0.5)
     system = EulerianSystem(mesh, mat, stable_dt(mat, dx, h, [wall]),
-                            frame=LabFrame((0.0, -G_ACC)), wall=wall)
+                            frame=LabFrame((0.0, -G_ACC)), wall=wall,
+                            no_slip_below=no_slip_below)
     c = system.x
     H = 0.02
     filled = c[:, 1] < H
@@ -174,11 +171,29 @@ def test_layer_on_a_floor_sticks_or_slides_as_coulomb_says(pull_g, slides):
     stress[:, 0] = stress[:, 3] = -(1 - math.sin(math.atan(mat.mu_s))) * p
     state = init_state(system, np.where(filled, rho * h * h, 0.0), rho, stress=stress)
     run_steps(system, state, int(0.03 / system.dt))  # settle under gravity alone
+    return system, state
+
+
+def _pulled_speed(system, state, pull_g: float, t: float) -> float:
+    """The layer's mean x velocity gained (m/s) over t (s) of a horizontal pull pull_g g (the
+    frame of a plate accelerating at -pull_g g)."""
     system.frame = LabFrame((pull_g * G_ACC, -G_ACC))
     v0 = state.momentum()[0] / state.total_mass()
-    t = 0.1
     run_steps(system, state, int(round(t / system.dt)))
-    v = state.momentum()[0] / state.total_mass() - v0
+    return state.momentum()[0] / state.total_mass() - v0
+
+
+@pytest.mark.parametrize("pull_g, slides", [(0.1, False), (0.35, True)])
+def test_layer_on_a_floor_sticks_or_slides_as_coulomb_says(pull_g, slides):
+    """A layer (2 cm of media, periodic along x) on a floor of wall friction mu_w = 0.2 under
+    gravity and a horizontal pull a (the frame of a plate accelerating at -a): below mu_w g it
+    sticks (mean speed below 1 % of a t), above it slides as a block at a - mu_w g (within
+    3 %): the wall's penalty law with the Coulomb limit on the fixed mesh's wall layer (the
+    media's own friction, mu_s = 0.38, is above mu_w, so it shears at the wall, not inside)."""
+    mu_w = 0.2
+    system, state = _layer_on_floor(mu_w)
+    t = 0.1
+    v = _pulled_speed(system, state, pull_g, t)
     a = pull_g * G_ACC
     if slides:
         assert v == pytest.approx((a - mu_w * G_ACC) * t, rel=0.03)
@@ -420,32 +435,12 @@ def test_rough_floor_holds_a_layer_the_wall_friction_alone_lets_slide():
     floor (EulerianSystem.no_slip_below = 0, the Lagrangian formulation's no-slip grid
     condition) the cells next to the floor cannot slip, the failure would have to run through
     the media, and the media holds: the layer sticks (mean speed below 1 % of a t)."""
-    mat = ContinuumMaterial()
-    dx = 0.005
-    h = dx / 2
-    mesh = EulerianMesh.box(0.0, 0.04, 0.0, 0.04, dx, periodic=True)
-    kn = (mat.bulk_modulus + 4 * mat.shear_modulus / 3) / h
-    wall = MeshWall(kn, friction=0.2, damping_ratio=0.5)
-    system = EulerianSystem(mesh, mat, stable_dt(mat, dx, h, [wall]),
-                            frame=LabFrame((0.0, -G_ACC)), wall=wall, no_slip_below=0.0)
-    assert system.no_slip_rows == int(round(-mesh.grid.z0 / dx)) + 1   # rows at z <= 0
-    c = system.x
-    H = 0.02
-    filled = c[:, 1] < H
-    rho_c = mat.critical_density
-    p = rho_c * G_ACC * np.clip(H - c[:, 1], 0.0, None) * filled
-    rho = rho_c * np.exp(p / mat.bulk_modulus)
-    stress = np.zeros((mesh.n, 4))
-    stress[:, 1] = -p
-    stress[:, 0] = stress[:, 3] = -(1 - math.sin(math.atan(mat.mu_s))) * p
-    state = init_state(system, np.where(filled, rho * h * h, 0.0), rho, stress=stress)
-    run_steps(system, state, int(0.03 / system.dt))
-    a = 0.35 * G_ACC
-    system.frame = LabFrame((a, -G_ACC))
-    v0 = state.momentum()[0] / state.total_mass()
+    system, state = _layer_on_floor(0.2, no_slip_below=0.0)
+    grid = system.mesh.grid
+    assert system.no_slip_rows == int(round(-grid.z0 / grid.dx)) + 1   # the rows at z <= 0
     t = 0.1
-    run_steps(system, state, int(round(t / system.dt)))
-    v = state.momentum()[0] / state.total_mass() - v0
+    v = _pulled_speed(system, state, 0.35, t)
+    a = 0.35 * G_ACC
     assert abs(v) < 0.01 * a * t
     assert abs(state.mass_error()) < 1e-12
 

@@ -11,6 +11,8 @@ the solver reuses them every step.
 """
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 
 import numba as nb
@@ -77,6 +79,14 @@ class Grid:
 
     def node_z(self) -> np.ndarray:
         return self.z0 + self.dx * np.arange(self.nz)
+
+    def rows_at_or_below(self, z, name: str = "no_slip_below") -> int:
+        """The number of node rows k with z0 + k dx <= z (m; a node on z included): the rows a
+        no-slip floor at height z holds still.  `name` is the field the one-line error names."""
+        if not (isinstance(z, (int, float)) and math.isfinite(z) and self.z0 <= z):
+            raise InputError(f"{name} = {z!r} m: must be a finite height at or above the "
+                             f"grid's bottom {self.z0!r} m")
+        return int(math.floor((z - self.z0) / self.dx + 1e-9)) + 1
 
     def inner_bounds(self):
         """(xmin, xmax, zmin, zmax) (m) of the region points may occupy (GUARD nodes in; the

@@ -89,14 +89,8 @@ class MPMSystem:
     def __post_init__(self):
         if not self.dt > 0:
             raise InputError(f"dt = {self.dt!r}: must be > 0 s")
-        self.no_slip_rows = 0
-        if self.no_slip_below is not None:
-            z = float(self.no_slip_below)
-            if not (math.isfinite(z) and self.grid.z0 <= z):
-                raise InputError(f"no_slip_below = {self.no_slip_below!r} m: must be a finite "
-                                 f"height at or above the grid's bottom {self.grid.z0!r} m")
-            # node rows k with z0 + k dx <= z (a node on the floor included)
-            self.no_slip_rows = int(math.floor((z - self.grid.z0) / self.grid.dx + 1e-9)) + 1
+        self.no_slip_rows = 0 if self.no_slip_below is None else \
+            self.grid.rows_at_or_below(self.no_slip_below)
         self.axis_cols = 0
         if self.axisymmetric:
             if self.grid.periodic:

@@ -40,7 +40,6 @@ m^2, stresses Pa [xx, zz, xz, yy] (tension positive), forces N/m.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -84,15 +83,8 @@ class EulerianSystem:
     def __post_init__(self):
         if not self.dt > 0:
             raise InputError(f"dt = {self.dt!r}: must be > 0 s")
-        grid = self.mesh.grid
-        self.no_slip_rows = 0
-        if self.no_slip_below is not None:
-            z = self.no_slip_below
-            if not (isinstance(z, (int, float)) and math.isfinite(z) and grid.z0 <= z):
-                raise InputError(f"no_slip_below = {z!r} m: must be a finite height at or "
-                                 f"above the grid's bottom {grid.z0!r} m")
-            # node rows k with z0 + k dx <= z (a node on the floor included)
-            self.no_slip_rows = int(math.floor((z - grid.z0) / grid.dx + 1e-9)) + 1
+        self.no_slip_rows = 0 if self.no_slip_below is None else \
+            self.mesh.grid.rows_at_or_below(self.no_slip_below)
         if not (isinstance(self.chunks, int) and self.chunks >= 1):
             raise InputError(f"chunks = {self.chunks!r}: must be an integer >= 1")
         m = self.mesh
