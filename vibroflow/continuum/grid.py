@@ -12,7 +12,6 @@ the solver reuses them every step.
 from __future__ import annotations
 
 import math
-
 from dataclasses import dataclass
 
 import numba as nb
