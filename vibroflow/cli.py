@@ -264,7 +264,7 @@ def continuum(
                              "cell's packing (Sawicki & Swidzinski 1989), from the calibration's "
                              "[compaction] (vibroflow calibrate --dilatancy).")] = False,
     dx: Annotated[Optional[float], typer.Option(
-        "--dx", help="Grid spacing (m); default half the analysis cell.")] = None,
+        "--dx", help="Grid spacing (m); default the analysis cell (15 mm in tub47).")] = None,
     cfl: Annotated[float, typer.Option(
         "--cfl", help="Courant number of the time step in (0, 1] (continuum/timestep.py: 0.3 "
                       "keeps a factor 3 from the stability limit).")] = 0.3,

@@ -75,7 +75,7 @@ CHECKPOINT_NAME = "checkpoint.npz"
 
 @dataclass(frozen=True)
 class LagrangianOptions:
-    """Numerical options (SI): grid spacing dx (m; default half the analysis cell), Courant
+    """Numerical options (SI): grid spacing dx (m; default the analysis cell, DEFAULT_GRID), Courant
     number, rheology model ("mu_i" or "drucker_prager"), settling time in the still tub (s),
     wall stiffness (Pa/m; default (K + 4G/3) / point spacing), stiffness factor (-); dilatancy:
     the mu_i model's peak-friction option with the calibration's [dilatancy] K_dil
@@ -241,7 +241,7 @@ def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
                 options: LagrangianOptions, frame) -> tuple[MPMSystem, float]:
     """The MPM system of a tub scenario in `frame`; returns (system, point spacing m)."""
     geo = geometry_of(scenario)
-    dx = options.dx if options.dx is not None else 0.5 * scenario.analysis.cell_size
+    dx = options.dx if options.dx is not None else scenario.analysis.cell_size
     spacing = 0.5 * dx
     grid = Grid.covering(-geo.radius, geo.radius, 0.0, geo.rim_height, dx)
     cal = calibration or {}
@@ -335,6 +335,27 @@ def write_json_atomic(path: Path, data: dict) -> None:
     os.replace(tmp, path)
 
 
+#: the rule that fixes the grid spacing when the options leave dx out.  The analysis cell of
+#: tub47.md (15 mm, 2.4 ball diameters), not half of it as before session 8: the local mu(I)
+#: law has no length of its own, and on a finer grid it forms a tighter roll on the right half
+#: of the tub with the left half still, further from the DEM's bed-wide roll (tub47, four
+#: settling times each: E against the DEM 1.28 at dx = 7.5 mm, 0.82 at 15 mm; at amplitude
+#: factors 0.5 / 1.5: 1.80 / 1.15 against 1.03 / 0.83; benchmarks/README.md "Session 8").  The
+#: grid is the length the law lacks; a nonlocal law's cooperativity length (Kamrin & Koval
+#: 2012) would be its physical form.  Named in a run's fingerprint and a study stage's inputs,
+#: so that a run made under the former rule is never taken for one made under this one.
+DEFAULT_GRID = "analysis cell"
+
+
+def options_record(options: LagrangianOptions) -> dict:
+    """The options as a plain dict for a fingerprint or a study's inputs, an unset dx spelled
+    out as the rule that sets it (DEFAULT_GRID)."""
+    record = dataclasses.asdict(options)
+    if record.get("dx") is None:
+        record["dx"] = DEFAULT_GRID
+    return record
+
+
 def run_fingerprint(scenario, calibration: dict | None, options: LagrangianOptions,
                     vtk: bool) -> str:
     """A hash of everything that fixes a run's numbers (the scenario but for
@@ -343,7 +364,7 @@ def run_fingerprint(scenario, calibration: dict | None, options: LagrangianOptio
     s = scenario.model_dump(mode="json")
     s.get("run", {}).pop("checkpoint_every", None)
     text = json.dumps({"scenario": s, "calibration": calibration,
-                       "options": dataclasses.asdict(options), "vtk": bool(vtk)},
+                       "options": options_record(options), "vtk": bool(vtk)},
                       sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()
 

@@ -9,7 +9,7 @@
   cfl of that.
 
 Which bound binds, and how tight it is (tub47-quick with its DEM calibration: K = 1.04 MPa,
-G = 0.097 MPa, rho_c = 4434 kg/m^3, so c = 16.2 m/s; dx = 7.5 mm, points of side dx/2): the
+G = 0.097 MPa, rho_c = 4434 kg/m^3, so c = 16.2 m/s; dx the grid, points of side dx/2): the
 default wall stiffness (K + 4G/3) / (dx/2) makes the wall oscillator's omega = 2 c / dx, and its
 limit cfl 2 (sqrt(1 + zeta^2) - zeta) / omega = 0.85 cfl dx / c (zeta = 0.16) is a little below
 the elastic cfl dx / (c + v_max); the step is then rounded down to divide the sampling interval.

@@ -136,7 +136,9 @@ def calibration_stage() -> Stage:
 
 def continuum_stage(method: ContinuumMethod, options) -> Stage:
     def inputs(study: Study) -> dict:
-        opts = dataclasses.asdict(options)
+        from vibroflow.continuum.run import options_record
+
+        opts = options_record(options)
         # the options that came after the first studies are left out at their defaults, so
         # that those studies keep their hashes (the options class's LATER_OPTIONS)
         defaults = {f.name: f.default for f in dataclasses.fields(options)}

@@ -66,7 +66,7 @@ UNIT = 1.1
 @dataclass(frozen=True)
 class EulerianOptions(LagrangianOptions):
     """Numerical options (SI), the Lagrangian's fields and checks: node spacing dx (m; the
-    mesh's cells are dx/2; default `default_dx`: about half the analysis cell), Courant number,
+    mesh's cells are dx/2; default `default_dx`: about the analysis cell), Courant number,
     rheology model ("mu_i" or "drucker_prager"), settling time in the still tub (s), wall
     stiffness (Pa/m; default (K + 4G/3) / (dx/2), the Lagrangian default at the same dx),
     stiffness factor (-; LagrangianOptions).  No FLIP fraction: the mesh's cells are fresh
@@ -80,9 +80,10 @@ class EulerianOptions(LagrangianOptions):
 
 
 def default_dx(radius: float, cell_size: float) -> float:
-    """The default node spacing (m): the largest dx <= half the analysis cell whose cells of
-    dx/2 fill the tub's width 2R exactly (the mesh's requirement; tub47: 7.5 mm itself)."""
-    n = math.ceil(2.0 * radius / (0.25 * cell_size) - 1e-9)
+    """The default node spacing (m): the largest dx <= the analysis cell whose cells of dx/2
+    fill the tub's width 2R exactly (the mesh's requirement; tub47: 15 mm itself; why the
+    analysis cell: continuum.run.DEFAULT_GRID)."""
+    n = math.ceil(2.0 * radius / (0.5 * cell_size) - 1e-9)
     return 2.0 * (2.0 * radius / n)
 
 
