@@ -1,7 +1,7 @@
 """Wall time of the continuum formulations on a tub case, against the DEM's (issues 4 and 6).
 
     python benchmarks/continuum_speed.py [--case tub47-quick] [--calibration FILE]
-        [--dem-dir DIR] [--methods lagrangian,eulerian] [--threads 1,2] [--cfl 0.3]
+        [--dem-dir DIR] [--methods lagrangian,eulerian] [--threads 1,2] [--cfl C]
         [--dx M] [--stiffness-factor 1.0] [--set KEY=VALUE ...] [--kernels] [--json PATH]
 
 Every (method, thread count) case runs in its own process (NUMBA_NUM_THREADS set before numba
@@ -50,7 +50,8 @@ def _options(method: str, a):
     from vibroflow.continuum.run import LagrangianOptions
 
     cls = LagrangianOptions if method == "lagrangian" else EulerianOptions
-    return cls(dx=a.dx, cfl=a.cfl, stiffness_factor=a.stiffness_factor)
+    extra = {} if a.cfl is None else {"cfl": a.cfl}  # None: the options' default
+    return cls(dx=a.dx, stiffness_factor=a.stiffness_factor, **extra)
 
 
 def _inputs(a):
@@ -234,7 +235,7 @@ def main(argv=None) -> int:
     p.add_argument("--dem-dir")
     p.add_argument("--methods", default="lagrangian,eulerian")
     p.add_argument("--threads", default="1,2")
-    p.add_argument("--cfl", type=float, default=0.3)
+    p.add_argument("--cfl", type=float, default=None)
     p.add_argument("--dx", type=float)
     p.add_argument("--stiffness-factor", type=float, default=1.0)
     p.add_argument("--set", action="append", default=[])
@@ -265,9 +266,9 @@ def main(argv=None) -> int:
     for method in a.methods:
         for th in [int(t) for t in a.threads.split(",") if t]:
             cmd = [sys.executable, __file__, "--method", method, "--case", a.case,
-                   "--cfl", str(a.cfl), "--stiffness-factor", str(a.stiffness_factor)]
+                   "--stiffness-factor", str(a.stiffness_factor)]
             for flag, val in (("--calibration", a.calibration), ("--dem-dir", a.dem_dir),
-                              ("--dx", a.dx)):
+                              ("--dx", a.dx), ("--cfl", a.cfl)):
                 if val is not None:
                     cmd += [flag, str(val)]
             for kv in a.set:

@@ -264,10 +264,12 @@ def continuum(
                              "cell's packing (Sawicki & Swidzinski 1989), from the calibration's "
                              "[compaction] (vibroflow calibrate --dilatancy).")] = False,
     dx: Annotated[Optional[float], typer.Option(
-        "--dx", help="Grid spacing (m); default the analysis cell (15 mm in tub47).")] = None,
+        "--dx", help="Grid spacing (m); default 3 ball diameters (why: continuum/run.py, "
+                    "DEFAULT_CFL).")] = None,
     cfl: Annotated[float, typer.Option(
-        "--cfl", help="Courant number of the time step in (0, 1] (continuum/timestep.py: 0.3 "
-                      "keeps a factor 3 from the stability limit).")] = 0.3,
+        "--cfl", help="Courant number of the time step in (0, 1]; default 0.075: with APIC the "
+                      "step sets the transfers' damping, chosen with the grid to match the DEM "
+                      "(continuum/run.py DEFAULT_CFL).")] = 0.075,
     stiffness_factor: Annotated[float, typer.Option(
         "--stiffness-factor", help="Multiply the elastic moduli (and the default wall "
                                    "stiffness) by this factor in (0, 1]: sqrt(factor) times "

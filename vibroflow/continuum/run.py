@@ -73,11 +73,44 @@ VTK_DIR = "vtk"
 CHECKPOINT_NAME = "checkpoint.npz"
 
 
+#: The default grid and time step of a tub run (session 8; benchmarks/README.md "Session 8"):
+#: dx = DEFAULT_DX_DIAMETERS ball diameters (19 mm in tub47) and the Courant number
+#: DEFAULT_CFL, where they were half the 15 mm analysis cell and 0.3 before.  Both are model
+#: choices, not only numerical ones, and are stated as such:
+#:
+#: * the local mu(I) law has no length of its own; on a fine grid it forms a tight roll on the
+#:   tub's right half with the left half still, unlike the DEM's bed-wide roll.  A grid of a
+#:   few grains is the length it lacks (a nonlocal law's cooperativity length, Kamrin & Koval
+#:   2012, would be its physical form; not built);
+#: * with APIC transfers (flip = 0) the point velocities are filtered through the grid once a
+#:   step, so the damping per second grows as the step shrinks (session 5): the run is not
+#:   time-step converged, and its step sets how dissipative the bed is.  More of that damping
+#:   brings the field closer to the DEM's, where neither a Newtonian shear viscosity
+#:   (20 - 2000 Pa s) nor a bulk viscosity (200 - 4000 Pa s) in the stress did: the DEM's
+#:   dissipation that the continuum lacks is at the grid's scale, not the roll's.
+#:
+#: Chosen on tub47 at amplitude factor 1.0, four settling times each, E against the DEM (the
+#: DEM's seed-to-seed E 0.135) and strength over the DEM's: dx 7.5 mm, cfl 0.3 (the former
+#: default) 1.28, 1.50; 15 mm, 0.3: 0.82, 1.31; 15 mm, 0.075: 0.55, 1.26; 19 mm, 0.075: 0.47,
+#: 1.08; then checked where not chosen: factors 0.5 and 1.5 (at 20 mm, 0.075: 0.65 and 0.51
+#: against 1.80 and 1.15 before) and tub47-quick (19 mm: 0.43 against 0.89).  Named in a run's fingerprint and a study
+#: stage's inputs (options_record), so that a run made under the former rule is never taken
+#: for one made under this one.
+DEFAULT_DX_DIAMETERS = 3.0
+DEFAULT_CFL = 0.075
+DEFAULT_GRID = f"{DEFAULT_DX_DIAMETERS:g} ball diameters"
+
+
+def default_dx(scenario) -> float:
+    """The default grid spacing (m) of a tub run: DEFAULT_DX_DIAMETERS fill.diameter."""
+    return DEFAULT_DX_DIAMETERS * scenario.fill.diameter
+
+
 @dataclass(frozen=True)
 class LagrangianOptions:
-    """Numerical options (SI): grid spacing dx (m; default the analysis cell, DEFAULT_GRID), Courant
-    number, rheology model ("mu_i" or "drucker_prager"), settling time in the still tub (s),
-    wall stiffness (Pa/m; default (K + 4G/3) / point spacing), stiffness factor (-); dilatancy:
+    """Numerical options (SI): grid spacing dx (m; default `default_dx`, 3 ball diameters),
+    Courant number (default DEFAULT_CFL; both defaults are model choices, see there), rheology
+    model ("mu_i" or "drucker_prager"), settling time in the still tub (s), wall stiffness (Pa/m; default (K + 4G/3) / point spacing), stiffness factor (-); dilatancy:
     the mu_i model's peak-friction option with the calibration's [dilatancy] K_dil
     (constitutive.py); compaction: the cyclic compaction option with the calibration's
     [compaction] gamma_c and dphi_cyc (constitutive.py, vibroflow.calibration.compaction).
@@ -88,7 +121,7 @@ class LagrangianOptions:
     run takes sqrt(s) times the steps.  It is a physics change, not a numerical one: the elastic
     strains grow as 1/s and the bed's elastic waves slow down; its effect on the flow must be
     checked against the DEM (benchmarks/continuum_speed.py prints E for it).  On tub47-quick
-    (four settling times each; benchmarks/README.md "Continuum speed") E against the DEM was
+    at the grid and step of sessions 3 - 7 (7.5 mm, cfl 0.3; four settling times each; benchmarks/README.md "Continuum speed") E against the DEM was
     0.89 +- 0.09 at s = 1, 1.07 +- 0.01 at s = 0.5 and 0.68 +- 0.01 at s = 0.25, whose
     circulation, though, is 0.62 of the DEM's (s = 1: 1.14): not monotonic, so no default
     other than 1.  Default 1: the calibrated moduli."""
@@ -99,7 +132,7 @@ class LagrangianOptions:
                                                 "flip")
 
     dx: float | None = None
-    cfl: float = 0.3
+    cfl: float = DEFAULT_CFL
     model: str = "mu_i"
     settle_time: float = 0.05
     wall_stiffness: float | None = None
@@ -241,7 +274,7 @@ def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
                 options: LagrangianOptions, frame) -> tuple[MPMSystem, float]:
     """The MPM system of a tub scenario in `frame`; returns (system, point spacing m)."""
     geo = geometry_of(scenario)
-    dx = options.dx if options.dx is not None else scenario.analysis.cell_size
+    dx = options.dx if options.dx is not None else default_dx(scenario)
     spacing = 0.5 * dx
     grid = Grid.covering(-geo.radius, geo.radius, 0.0, geo.rim_height, dx)
     cal = calibration or {}
@@ -333,18 +366,6 @@ def write_json_atomic(path: Path, data: dict) -> None:
     tmp = path.with_name(".tmp-" + path.name)
     tmp.write_text(json.dumps(data, indent=2) + "\n")
     os.replace(tmp, path)
-
-
-#: the rule that fixes the grid spacing when the options leave dx out.  The analysis cell of
-#: tub47.md (15 mm, 2.4 ball diameters), not half of it as before session 8: the local mu(I)
-#: law has no length of its own, and on a finer grid it forms a tighter roll on the right half
-#: of the tub with the left half still, further from the DEM's bed-wide roll (tub47, four
-#: settling times each: E against the DEM 1.28 at dx = 7.5 mm, 0.82 at 15 mm; at amplitude
-#: factors 0.5 / 1.5: 1.80 / 1.15 against 1.03 / 0.83; benchmarks/README.md "Session 8").  The
-#: grid is the length the law lacks; a nonlocal law's cooperativity length (Kamrin & Koval
-#: 2012) would be its physical form.  Named in a run's fingerprint and a study stage's inputs,
-#: so that a run made under the former rule is never taken for one made under this one.
-DEFAULT_GRID = "analysis cell"
 
 
 def options_record(options: LagrangianOptions) -> dict:

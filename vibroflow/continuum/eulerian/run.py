@@ -49,6 +49,7 @@ from ..constitutive import ContinuumMaterial
 from ..fields import grid_fields, write_grid_vtr
 from ..grid_update import LabFrame, TubFrame
 from ..mpm import ContinuumBlowUp
+from ..run import default_dx as lagrangian_default_dx
 from ..run import (BULK_CSV_NAME, CHECKPOINT_NAME, REPORT_EVERY, SHEAR_RATE_CSV_NAME,
                    SUMMARY_NAME, VTK_DIR, LagrangianOptions, Samples, bed_area, cell_grid_of,
                    material_for, next_event, run_fingerprint, sample_times, samples_source,
@@ -66,7 +67,7 @@ UNIT = 1.1
 @dataclass(frozen=True)
 class EulerianOptions(LagrangianOptions):
     """Numerical options (SI), the Lagrangian's fields and checks: node spacing dx (m; the
-    mesh's cells are dx/2; default `default_dx`: about the analysis cell), Courant number,
+    mesh's cells are dx/2; default `default_dx`: about 3 ball diameters), Courant number,
     rheology model ("mu_i" or "drucker_prager"), settling time in the still tub (s), wall
     stiffness (Pa/m; default (K + 4G/3) / (dx/2), the Lagrangian default at the same dx),
     stiffness factor (-; LagrangianOptions).  No FLIP fraction: the mesh's cells are fresh
@@ -79,11 +80,11 @@ class EulerianOptions(LagrangianOptions):
                              "option (only 0)")
 
 
-def default_dx(radius: float, cell_size: float) -> float:
-    """The default node spacing (m): the largest dx <= the analysis cell whose cells of dx/2
-    fill the tub's width 2R exactly (the mesh's requirement; tub47: 15 mm itself; why the
-    analysis cell: continuum.run.DEFAULT_GRID)."""
-    n = math.ceil(2.0 * radius / (0.5 * cell_size) - 1e-9)
+def default_dx(radius: float, target: float) -> float:
+    """The default node spacing (m): the largest dx <= target (the Lagrangian default,
+    continuum.run.default_dx: 3 ball diameters) whose cells of dx/2 fill the tub's width 2R
+    exactly (the mesh's requirement; tub47: 18.75 mm for 19.05 mm)."""
+    n = math.ceil(2.0 * radius / (0.5 * target) - 1e-9)
     return 2.0 * (2.0 * radius / n)
 
 
@@ -95,7 +96,7 @@ def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
 
     geo = geometry_of(scenario)
     dx = options.dx if options.dx is not None else default_dx(geo.radius,
-                                                               scenario.analysis.cell_size)
+                                                               lagrangian_default_dx(scenario))
     mesh = EulerianMesh.tub(geo, dx)
     cal = calibration or {}
     wall_pair = find_contact(scenario, scenario.fill.material, scenario.tub.wall_material)
