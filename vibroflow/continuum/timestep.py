@@ -17,13 +17,13 @@ Neither is the stability limit itself: the quadratic B-spline stiffness with lum
 its highest elastic frequency sqrt(4/3) c / dx (the grid-scale mode's Fourier symbol,
 4/3 (K + 4G/3) / (rho dx^2)), the wall adds at most omega = 2 c / dx in quadrature, so the
 damped explicit update is stable to about 0.85 x 2 / (2.3 c / dx) = 0.74 dx / c, 3 times the
-default step (0.25 dx / c); the mu(I) viscous stress adds no bound, the return map being
-implicit in the plastic rate (constitutive.py), so its tangent never exceeds G.  The default
-cfl = 0.3 is kept as a margin, not for accuracy: on tub47-quick (four settling times each, the
-continuum's own scatter) E against the DEM was 0.89 +- 0.09 at cfl 0.3, 0.81 +- 0.06 at 0.45
-and 0.83 +- 0.09 at 0.6 (benchmarks/README.md, "Continuum speed"), so cfl 0.6 (half the steps)
-is as accurate there; it is an option (`vibroflow continuum --cfl`), not the default, until the
-stronger motions (amplitude factor 1.5, tub47) are checked against their stability margin.
+step at cfl 0.3 (0.25 dx / c); the mu(I) viscous stress adds no bound, the return map being
+implicit in the plastic rate (constitutive.py), so its tangent never exceeds G.  A tub run's
+default cfl (0.075, continuum.run.DEFAULT_CFL) is far inside these bounds; it is not set by
+stability but by the APIC transfers' damping per second, which grows as the step shrinks and
+which brings the tub's field closer to the DEM's (continuum.run, benchmarks/README.md "Session
+8").  The column collapse and the other checks keep this function's default 0.3.  At 0.6 (the
+stability margin alone) tub47 at amplitude factor 1.5 once put a point through the U wall.
 """
 from __future__ import annotations
 
