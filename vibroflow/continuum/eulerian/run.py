@@ -11,12 +11,19 @@ and outputs, vibroflow.continuum.run, on the fixed mesh of solver.py).
    vibroflow.tub.motion enters as the frame's inertial forces), sampling at the DEM's sample
    instants (continuum.run.sample_times); the time step divides the sampling interval.
 3. Results through the DEM's analysis (analysis.summary.tub_summary), as the Lagrangian run:
-   the cells are sampled as pseudo-balls at their fixed centres, each of the solid volume
+   the cells are sampled as pseudo-balls, each of the solid volume
    m_unit L_y / rho_s of a unit mass m_unit = 1.1 rho_c h^2 (a little above a full cell's), and
    a cell is in a sample when its accumulated mass in units, sum m / m_unit, has reached the
    next half unit (error diffusion in time): over the samples a cell then counts its mass to
    within one unit, so the cell table's solid fraction and its ball-averaged velocity are the
-   mass-weighted ones to within 1 / samples, with the shared code unchanged.  Wall contacts:
+   mass-weighted ones to within 1 / samples, with the shared code unchanged.  A pseudo-ball
+   sits at its cell's centre shifted by the same offset for every cell of a sample, the
+   sample's point of a two-dimensional low-discrepancy sequence over the cell (`cell_offset`):
+   over the samples each cell's mass is spread evenly over its square, so the analysis cells
+   (15 mm, not a multiple of the mesh's cells) each receive the material of the area they
+   cover, where pseudo-balls at the fixed centres gave some analysis cells two rows of
+   centres and some one (a striped solid-fraction map).  The offset depends on the sample's
+   index only, so a resumed run places the balls as the uninterrupted one.  Wall contacts:
    the wall-layer cells holding at least half a cell of material pressing on the U (wall.py),
    their force over the slice (N).  The summary's "continuum" block holds the method,
    numerics, material, shear rates (as the Lagrangian's, from the cells holding at least half
@@ -78,6 +85,17 @@ class EulerianOptions(LagrangianOptions):
         if self.flip != 0.0:
             raise InputError(f"flip = {self.flip!r}: the Eulerian formulation has no FLIP "
                              "option (only 0)")
+
+
+#: the additive recurrence of Roberts' R2 sequence (the plastic number's inverse powers), whose
+#: points cover the unit square with the lowest discrepancy of its kind
+R2 = (0.7548776662466927, 0.5698402909980532)
+
+
+def cell_offset(j: int) -> tuple[float, float]:
+    """The sample j's offset (-0.5 .. 0.5 of a cell side, x and z) of every pseudo-ball from its
+    cell's centre (module docstring, 3): the j-th point of the R2 sequence."""
+    return ((0.5 + j * R2[0]) % 1.0 - 0.5, (0.5 + j * R2[1]) % 1.0 - 0.5)
 
 
 def default_dx(radius: float, target: float) -> float:
@@ -343,7 +361,9 @@ def _vibrate(scenario, system: EulerianSystem, state: EulerianState, samples: Sa
             j = samples.j
             pose6 = np.array(system.frame.pose(state.t))
             v = np.ascontiguousarray(state.v[cells])
-            to_lab(xc, v, pose6, pv[0], pv[1], buf_p, buf_v, 0.5 * geo.length)
+            ox, oz = cell_offset(j)
+            x_ball = xc + np.array([ox * mesh.h, oz * mesh.h])
+            to_lab(x_ball, v, pose6, pv[0], pv[1], buf_p, buf_v, 0.5 * geo.length)
             dither += state.mass[cells] / unit
             take = dither >= 0.5
             dither[take] -= 1.0
