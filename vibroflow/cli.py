@@ -266,10 +266,10 @@ def continuum(
     dx: Annotated[Optional[float], typer.Option(
         "--dx", help="Grid spacing (m); default 3 ball diameters (why: continuum/run.py, "
                     "DEFAULT_CFL).")] = None,
-    cfl: Annotated[float, typer.Option(
+    cfl: Annotated[Optional[float], typer.Option(
         "--cfl", help="Courant number of the time step in (0, 1]; default 0.075: with APIC the "
                       "step sets the transfers' damping, chosen with the grid to match the DEM "
-                      "(continuum/run.py DEFAULT_CFL).")] = 0.075,
+                      "(continuum/run.py DEFAULT_CFL).")] = None,
     stiffness_factor: Annotated[float, typer.Option(
         "--stiffness-factor", help="Multiply the elastic moduli (and the default wall "
                                    "stiffness) by this factor in (0, 1]: sqrt(factor) times "
@@ -309,8 +309,11 @@ def continuum(
         from vibroflow.calibration.calibrate import read_calibration
 
         cal = read_calibration(calibration)
-    options = options_class(dx=dx, cfl=cfl, model=rheology, dilatancy=dilatancy,
-                            stiffness_factor=stiffness_factor, compaction=compaction, flip=flip)
+    # an unset --cfl takes the options' own default (DEFAULT_CFL), kept in one place
+    step = {} if cfl is None else {"cfl": cfl}
+    options = options_class(dx=dx, model=rheology, dilatancy=dilatancy,
+                            stiffness_factor=stiffness_factor, compaction=compaction, flip=flip,
+                            **step)
     material_for(s, cal, options)  # validates the parameters before --out is made
     try:
         summary = run_method(s, out, calibration=cal, options=options, progress=True,
