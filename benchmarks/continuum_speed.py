@@ -250,7 +250,7 @@ def main(argv=None) -> int:
     dem_wall = None
     if a.dem_dir:
         dem_wall = json.loads((Path(a.dem_dir) / "summary.json").read_text())["wall_time_s"]
-    report = {"case": a.case, "options": {"cfl": a.cfl, "dx": a.dx,
+    report = {"case": a.case, "options": {"cfl": _options("lagrangian", a).cfl, "dx": a.dx,
                                           "stiffness_factor": a.stiffness_factor},
               "dem_wall_time_s": dem_wall, "cases": []}
     if a.kernels:

@@ -93,9 +93,9 @@ CHECKPOINT_NAME = "checkpoint.npz"
 #: DEM's seed-to-seed E 0.135) and strength over the DEM's: dx 7.5 mm, cfl 0.3 (the former
 #: default) 1.28, 1.50; 15 mm, 0.3: 0.82, 1.31; 15 mm, 0.075: 0.55, 1.26; 19 mm, 0.075: 0.47,
 #: 1.08; then checked where not chosen: factors 0.5 and 1.5 (at 20 mm, 0.075: 0.65 and 0.51
-#: against 1.80 and 1.15 before) and tub47-quick (19 mm: 0.43 against 0.89).  Named in a run's fingerprint and a study
-#: stage's inputs (options_record), so that a run made under the former rule is never taken
-#: for one made under this one.
+#: against 1.80 and 1.15 before) and tub47-quick (19 mm: 0.43 against 0.89).  Named in a
+#: run's fingerprint and a study stage's inputs (options_record), so that a run made under the
+#: former rule is never taken for one made under this one.
 DEFAULT_DX_DIAMETERS = 3.0
 DEFAULT_CFL = 0.075
 DEFAULT_GRID = f"{DEFAULT_DX_DIAMETERS:g} ball diameters"
@@ -110,8 +110,9 @@ def default_dx(scenario) -> float:
 class LagrangianOptions:
     """Numerical options (SI): grid spacing dx (m; default `default_dx`, 3 ball diameters),
     Courant number (default DEFAULT_CFL; both defaults are model choices, see there), rheology
-    model ("mu_i" or "drucker_prager"), settling time in the still tub (s), wall stiffness (Pa/m; default (K + 4G/3) / point spacing), stiffness factor (-); dilatancy:
-    the mu_i model's peak-friction option with the calibration's [dilatancy] K_dil
+    model ("mu_i" or "drucker_prager"), settling time in the still tub (s), wall stiffness
+    (Pa/m; default (K + 4G/3) / point spacing), stiffness factor (-); dilatancy: the mu_i
+    model's peak-friction option with the calibration's [dilatancy] K_dil
     (constitutive.py); compaction: the cyclic compaction option with the calibration's
     [compaction] gamma_c and dphi_cyc (constitutive.py, vibroflow.calibration.compaction).
 
@@ -121,7 +122,8 @@ class LagrangianOptions:
     run takes sqrt(s) times the steps.  It is a physics change, not a numerical one: the elastic
     strains grow as 1/s and the bed's elastic waves slow down; its effect on the flow must be
     checked against the DEM (benchmarks/continuum_speed.py prints E for it).  On tub47-quick
-    at the grid and step of sessions 3 - 7 (7.5 mm, cfl 0.3; four settling times each; benchmarks/README.md "Continuum speed") E against the DEM was
+    at the grid and step of sessions 3 - 7 (7.5 mm, cfl 0.3; four settling times each;
+    benchmarks/README.md "Continuum speed") E against the DEM was
     0.89 +- 0.09 at s = 1, 1.07 +- 0.01 at s = 0.5 and 0.68 +- 0.01 at s = 0.25, whose
     circulation, though, is 0.62 of the DEM's (s = 1: 1.14): not monotonic, so no default
     other than 1.  Default 1: the calibrated moduli."""
