@@ -1,0 +1,181 @@
+"""The bed's force balance by phase of the cycle: what the tub wall and the partitions exert on
+the bed, DEM against the Lagrangian continuum (benchmarks/README.md, "Session 9").
+
+    python benchmarks/force_balance.py --dem-dir runs/study-quick/dem [--calibration FILE]
+        [--skip-cycles 20] [--cycles 40] [--set NAME=VALUE ...]
+
+Averaged over a cycle, the vertical forces on the bed balance its weight (the tub's mean
+acceleration is zero): the U wall's upward push plus the partitions' friction equals m g.  How
+the two share it, and when in the cycle each acts, is what drives the bed (a vibratory
+conveyor's ratchet is friction that acts harder in one half-cycle than in the other).  This
+script prints, for each of the phases_per_cycle sampled phases, in the tub's axes (N over the
+slice between the partitions, the DEM's unit):
+
+* the U wall's normal force in five regions (the vertical side walls above z = 0.15 m, right
+  and left; the arc of the half circle beyond 30 degrees from the bottom, right and left; the
+  floor within 30 degrees of it) and its total vertical component;
+* the partitions' total vertical force (their friction: their normal force is horizontal).
+
+DEM: every ball-wall contact sampled in DIR/dem.h5 (wall_contacts: force in the lab frame,
+rotated into the tub's axes with the tub's angle at its snapshot).  Continuum: a Lagrangian run
+of the same scenario and calibration (vibroflow.continuum.run: make_system, settled_bed,
+settle), advanced one sampling interval at a time from the start of the vibration; after
+--skip-cycles cycles, at every sample, the U wall's force on each point (the penalty law's last
+force, boundary.UWall's history) and the partitions' friction (boundary.partition_forces on the
+state) over the next --cycles cycles.
+
+--set NAME=VALUE changes the calibration (`section.key`, e.g. partitions.friction=0.05) or a
+LagrangianOptions field (`opt.NAME`, e.g. opt.cfl=0.3) for the continuum.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+#: region bounds: the side walls start at the U's centre height; the floor is the arc within
+#: FLOOR_DEG of the bottom
+FLOOR_DEG = 30.0
+REGIONS = ("R-wall", "R-arc", "floor", "L-arc", "L-wall")
+
+
+def regions_of(x, z, radius):
+    """Region index (REGIONS) of wall-contact points at tub-frame (x, z) (m) of a U of
+    `radius` (m) whose half circle is centred at (0, radius)."""
+    angle = np.degrees(np.arctan2(x, radius - z))  # 0 at the bottom, +90 at the right wall
+    out = np.where(angle > FLOOR_DEG, 1, np.where(angle < -FLOOR_DEG, 3, 2))
+    side = z > radius
+    out = np.where(side & (x > 0), 0, out)
+    return np.where(side & (x <= 0), 4, out)
+
+
+def by_phase(values, phase_index, per, n_samples_by_phase):
+    """Sum of `values` per phase index, over the number of samples at that phase: the mean
+    total per sample (per,)."""
+    tot = np.bincount(phase_index, weights=values, minlength=per)
+    return tot / np.maximum(n_samples_by_phase, 1)
+
+
+def dem_balance(dem_dir: Path, per: int, radius: float) -> dict:
+    """{name: (per,) mean total per sample} of the DEM run's sampled wall contacts."""
+    import h5py
+
+    with h5py.File(dem_dir / "dem.h5", "r") as h:
+        phase = h["snapshots/phase"][:]
+        theta = h["snapshots/tub_pose"][:, 2]
+        w = h["wall_contacts"]
+        snap = w["snapshot"][:]
+        wall = w["wall"][:]
+        pos = w["position_tub"][:].astype(float)
+        fn = w["fn"][:].astype(float)
+        f_lab = w["force_lab"][:].astype(float)
+    k_snap = np.rint(phase * per).astype(np.int64) % per
+    n_by_phase = np.bincount(k_snap, minlength=per)
+    k = k_snap[snap]
+    th = theta[snap]
+    fz_tub = -np.sin(th) * f_lab[:, 0] + np.cos(th) * f_lab[:, 2]
+    u = wall == 0  # vibroflow.dem.walls: 0 the U, 1 and 2 the partitions
+    reg = regions_of(pos[u, 0], pos[u, 2], radius)
+    out = {name: by_phase(fn[u][reg == r], k[u][reg == r], per, n_by_phase)
+           for r, name in enumerate(REGIONS)}
+    out["U wall Fz"] = by_phase(fz_tub[u], k[u], per, n_by_phase)
+    out["partitions Fz"] = by_phase(fz_tub[~u], k[~u], per, n_by_phase)
+    return out
+
+
+def continuum_balance(scenario, calibration, options, per: int, skip: int, cycles: int) -> dict:
+    """{name: (per,) mean per sample} of a Lagrangian run (module docstring)."""
+    import vibroflow.continuum.run as R
+    from vibroflow.analysis.summary import geometry_of
+    from vibroflow.continuum.boundary import partition_forces
+    from vibroflow.continuum.grid_update import TubFrame
+    from vibroflow.continuum.mpm import advance
+    from vibroflow.tub.motion import TubMotion
+
+    material = R.material_for(scenario, calibration, options)
+    gravity = (float(scenario.gravity[0]), float(scenario.gravity[2]))
+    system, spacing = R.make_system(scenario, material, calibration, options,
+                                    TubFrame(TubMotion.of_scenario(scenario), gravity))
+    x, volume, density, stress, _ = R.settled_bed(scenario, material, spacing)
+    state = R.settle(scenario, material, calibration, options, x, volume, density, stress)
+    state.t, state.step = 0.0, 0
+    geo = geometry_of(scenario)
+    length = geo.length
+    f = scenario.motion.frequency
+    steps = int(round(1.0 / (f * per) / system.dt))  # make_system's dt divides the interval
+    mu_p = next((b.friction for b in system.boundaries if hasattr(b, "length")), None)
+    sums = {name: np.zeros(per) for name in (*REGIONS, "U wall Fz", "partitions Fz")}
+    count = np.zeros(per)
+    fext = np.zeros((state.n, 2))
+    for s in range((skip + cycles) * per):
+        advance(system, state, steps)
+        if s < skip * per:
+            continue
+        k = int(round(state.t * f * per)) % per
+        hist = state.history[0]
+        f_wall = hist["f"] * length  # N/m of thickness -> N over the slice
+        fn = hist["fn"] * length
+        reg = regions_of(state.x[:, 0], state.x[:, 1], geo.radius)
+        for r, name in enumerate(REGIONS):
+            sums[name][k] += fn[reg == r].sum()
+        sums["U wall Fz"][k] += f_wall[:, 1].sum()
+        if mu_p is not None:
+            fext[:] = 0.0
+            partition_forces(state.v, state.mass, state.volume, state.stress, fext, mu_p,
+                             length, system.dt)
+            sums["partitions Fz"][k] += fext[:, 1].sum() * length
+        count[k] += 1
+    return {name: v / np.maximum(count, 1) for name, v in sums.items()}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--dem-dir", required=True, type=Path)
+    ap.add_argument("--calibration", type=Path)
+    ap.add_argument("--skip-cycles", type=int, default=20)
+    ap.add_argument("--cycles", type=int, default=40)
+    ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
+    a = ap.parse_args(argv)
+
+    import vibroflow.continuum.run as R
+    from vibroflow.calibration.calibrate import read_calibration
+    from vibroflow.calibration.dem_result import DEMResult
+
+    with DEMResult.open(a.dem_dir) as res:
+        scenario = res.scenario
+    calibration = read_calibration(a.calibration or a.dem_dir / "calibration.toml")
+    opts = {}
+    for item in a.set:
+        name, _, value = item.partition("=")
+        if name.startswith("opt."):
+            opts[name[4:]] = float(value)
+        else:
+            section, _, key = name.partition(".")
+            calibration[section][key] = float(value)
+    per = scenario.run.phases_per_cycle
+    radius = scenario.tub.radius
+    dem = dem_balance(a.dem_dir, per, radius)
+    cont = continuum_balance(scenario, calibration, R.LagrangianOptions(**opts), per,
+                             a.skip_cycles, a.cycles)
+    fill = scenario.fill
+    weight = fill.count * np.pi * fill.diameter**3 / 6.0 * fill_density(scenario) * 9.81
+    print(f"{scenario.case}: forces on the bed by phase of the cycle (N over the slice, tub "
+          f"axes; the DEM's balls weigh {weight:.1f} N){' ' + ' '.join(a.set) if a.set else ''}")
+    print(f"{'':>24} " + " ".join(f"{k}/{per}".rjust(7) for k in range(per)) + "     mean")
+    for name in (*REGIONS, "U wall Fz", "partitions Fz"):
+        for label, r in (("DEM", dem), ("Lagrangian", cont)):
+            row = r[name]
+            print(f"{label:>10} {name:>13} " + " ".join(f"{x:7.1f}" for x in row)
+                  + f"  {row.mean():7.1f}")
+    return 0
+
+
+def fill_density(scenario) -> float:
+    """The fill material's density (kg/m^3)."""
+    return float(scenario.materials[scenario.fill.material].density)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
