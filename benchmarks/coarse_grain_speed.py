@@ -131,7 +131,8 @@ def main(argv=None) -> int:
           f"{n_contacts:.0f} ball contacts a snapshot")
     print(f"vibroflow coarse_grain_run (read + deposit + fields): {t_vf:.1f} s "
           f"({1e3 * t_vf / n_used:.1f} ms a snapshot)")
-    print(f"deposit only, {len(snaps)} snapshots: vibroflow {1e3 * out['vibroflow_deposit_s_per_snapshot']:.1f}"
+    dep_vf = 1e3 * out['vibroflow_deposit_s_per_snapshot']
+    print(f"deposit only, {len(snaps)} snapshots: vibroflow {dep_vf:.1f}"
           f" ms, NumPy peer {1e3 * out['numpy_peer_deposit_s_per_snapshot']:.1f} ms a snapshot; "
           f"ratio {out['ratio_numpy_over_vibroflow_deposit']:.1f}x; reading "
           f"{1e3 * out['read_s_per_snapshot']:.1f} ms a snapshot")

@@ -18,7 +18,8 @@ when a finished run is there, else, with --run-dem, they are run there now (tub4
 each; tub47: about half an hour each).  A factor with no DEM run is reported without it.
 
 Printed for each factor: the probe velocities (vx, vz +- batch-means standard errors) of the DEM
-and of each continuum method, one column each; the circulation strengths with their standard errors and senses; the field
+and of each continuum method, one column each; the circulation strengths with their standard
+errors and senses; the field
 difference E(continuum, DEM) of tub47.md (vibroflow.analysis.compare, the DEM of the first seed
 the reference) beside the DEM's seed-to-seed E (E(DEM seed 2, DEM seed 1) when two seeds are
 there, else the value of --e-seed, marked "given"); the tub47.md verdicts (strengths agree within

@@ -2,7 +2,8 @@
 "Option: compaction") against the rate form of Sawicki & Swidzinski's (1989) compaction law
 integrated by hand,
 
-    d phi / d gamma = (phi_cyc - phi) / gamma_c  ->  phi(gamma) = phi_cyc - (phi_cyc - phi_0) e^(-gamma / gamma_c),
+    d phi / d gamma = (phi_cyc - phi) / gamma_c
+        ->  phi(gamma) = phi_cyc - (phi_cyc - phi_0) e^(-gamma / gamma_c),
 
 for one point cycled in simple shear below yield at constant pressure (gamma the accumulated
 |shear strain|, 4 gamma_0 a cycle); and the calibration's fit (vibroflow.calibration.compaction)

@@ -36,10 +36,10 @@ mu = 0.092) hits a flat wall (E 1000 times larger) at |v| = 3.9 m/s, at angles t
 normal; the later tests vary the tangential speed at a fixed normal speed.
 
 Analytic answers.  A sphere (radius R, mass m, I = 2/5 m R^2) hits a wall with normal speed
-v_n and tangential speed v_t, no spin.  Every contact force acts at the contact point, so the tangential impulse J_t
-changes v_t by -J_t / m and R omega by +(5/2) J_t / m; the contact-point slip speed
-u = v_t - R omega changes by -(7/2) J_t / m.  If the contact slides throughout (Coulomb),
-J_t = mu J_n = mu (1 + e) m v_n and
+v_n and tangential speed v_t, no spin.  Every contact force acts at the contact point, so the
+tangential impulse J_t changes v_t by -J_t / m and R omega by +(5/2) J_t / m; the
+contact-point slip speed u = v_t - R omega changes by -(7/2) J_t / m.  If the contact slides
+throughout (Coulomb), J_t = mu J_n = mu (1 + e) m v_n and
     v_t' = v_t - mu (1 + e) v_n,   omega' = 5 mu (1 + e) v_n / (2 R),
 whatever the stiffness; it does slide throughout when the slip does not stop,
 u' = v_t - (7/2) mu (1 + e) v_n > 0, i.e. tan(theta) > (7/2) mu (1 + e) (Maw, Barber &

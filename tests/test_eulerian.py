@@ -383,7 +383,8 @@ def test_eulerian_low_column_keeps_its_top_at_the_experiments_scale():
 
 @pytest.mark.slow
 def test_eulerian_tall_column_runs_out_as_the_lagrangian():
-    """a = 3 (the power-law branch of Lube et al. 2005, a > 2.8), L0 = 1 m, dx = L0/10: the run-out agrees with the material point method's on the same grid within 10 %
+    """a = 3 (the power-law branch of Lube et al. 2005, a > 2.8), L0 = 1 m, dx = L0/10: the
+    run-out agrees with the material point method's on the same grid within 10 %
     (measured 7.22 against 7.17), and, as there, runs past Lube et al.'s 1.9 a^(2/3) = 3.95 by
     more than half (tests/test_column_collapse.py: the tub47 glass-bead friction and no
     channel side walls); the height at the symmetry plane is not compared (1.13 against 0.90,

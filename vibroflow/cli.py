@@ -225,7 +225,8 @@ def calibrate(
                f"{r['mu_2_stderr']:.3f}, I_0 = {r['I_0']:.3g} +- {r['I_0_stderr']:.2g} "
                f"({r['source'].split(' (')[0]})")
     e = cal["elastic"]
-    typer.echo(f"K = {e['bulk_modulus_Pa'] / 1e6:.3g} MPa, G = {e['shear_modulus_Pa'] / 1e6:.3g} MPa"
+    typer.echo(f"K = {e['bulk_modulus_Pa'] / 1e6:.3g} MPa, "
+               f"G = {e['shear_modulus_Pa'] / 1e6:.3g} MPa"
                + (f" (cyclic secant at strain {cal['cyclic_shear']['tub_strain_amplitude']:.3g};"
                   f" small-strain {e['shear_modulus_small_strain_Pa'] / 1e6:.3g} MPa)"
                   if "cyclic_shear" in cal else ""))
@@ -339,7 +340,8 @@ def continuum(
 @input_errors
 def run(
     scenario: Annotated[str, typer.Argument(
-        metavar="[SCENARIO]", help="A preset (tub47, tub47-quick) or a TOML file.")] = "tub47-quick",
+        metavar="[SCENARIO]",
+        help="A preset (tub47, tub47-quick) or a TOML file.")] = "tub47-quick",
     out: Annotated[Path, typer.Option("--out", "-o", help="Study folder.")] = ...,
     set_: Annotated[Optional[list[str]], typer.Option(
         "--set", "-s", metavar="KEY=VALUE",
@@ -388,7 +390,8 @@ def run(
 @input_errors
 def sweep(
     scenario: Annotated[str, typer.Argument(
-        metavar="[SCENARIO]", help="A preset (tub47, tub47-quick) or a TOML file.")] = "tub47-quick",
+        metavar="[SCENARIO]",
+        help="A preset (tub47, tub47-quick) or a TOML file.")] = "tub47-quick",
     out: Annotated[Path, typer.Option("--out", "-o", help="Sweep folder.")] = ...,
     factors: Annotated[str, typer.Option(
         "--factors", metavar="F1,F2,...",

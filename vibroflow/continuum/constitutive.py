@@ -55,8 +55,8 @@ with mu_s -> mu_y, mu_2 -> mu_2 + K_dil dphi and S -> S + K_dil a I_0 p / xi in 
 gp^2's coefficient, while tau_new = tau_tr - G dt gp.  Then p_new = p + K ln(phi / phi_1) (the
 plastic dilation is isotropic, so it changes only the pressure), phi_1 the packing after the
 step's plastic shear gp dt by the exact solution of d phi / d gamma = -K_dil phi (phi - phi_eq)
-(to first order K dt tan(psi) gp; the exact form cannot overshoot phi_eq).  K_dil = 0 is the plain law,
-bit for bit.
+(to first order K dt tan(psi) gp; the exact form cannot overshoot phi_eq).  K_dil = 0 is the
+plain law, bit for bit.
 
 Option: compaction under cyclic loading (`compaction_strain` = gamma_c > 0; any model).  Under
 the tub's vibration a connected granular bed shakes down towards a packing denser than its
@@ -472,8 +472,9 @@ def update_stress_points(stress, L, density, dt, params, gamma_dot, state):
 
     stress (N, 4) [xx, zz, xz, yy] (Pa, updated in place); L (N, 4) [xx, xz, zx, zz] velocity
     gradient (1/s), or (N, 5) with the out-of-plane rate D_yy (the hoop rate v_r / r of an
-    axisymmetric run, vibroflow.continuum.mpm.MPMSystem.axisymmetric) last; density (N,) (kg/m^3, at the end of the step); gamma_dot (N,) plastic shear
-    rate out (1/s); state (N,) int8 out (0 disconnected, 1 elastic, 2 flowing).
+    axisymmetric run, vibroflow.continuum.mpm.MPMSystem.axisymmetric) last; density (N,)
+    (kg/m^3, at the end of the step); gamma_dot (N,) plastic shear rate out (1/s); state (N,)
+    int8 out (0 disconnected, 1 elastic, 2 flowing).
     """
     K = params[P_K]
     G = params[P_G]

@@ -21,8 +21,8 @@ DILUTE_DENSITY_FLOOR = 0.25
 def update_volume(L, mass, volume, density, dt, rho_min):
     """V_p *= det(I + dt L_p) and rho_p = m_p / V_p for every point (in place), with V_p at most
     m_p / rho_min.  L (N, 4) [xx, xz, zx, zz] 1/s, or (N, 5) with the hoop rate v_r / r last
-    (axisymmetric: volumes and masses per radian, m^3 and kg); mass kg/m; volume m^2; density kg/m^3;
-    rho_min (kg/m^3; 0: no bound).
+    (axisymmetric: volumes and masses per radian, m^3 and kg); mass kg/m; volume m^2; density
+    kg/m^3; rho_min (kg/m^3; 0: no bound).
 
     Why the bound: a point flying alone keeps the affine velocity field APIC gives it (C is
     carried unchanged by a point with no neighbours), so its volume grows exponentially,
