@@ -152,9 +152,6 @@ def kernels(a) -> dict:
     import numba
     import numpy as np
 
-    from vibroflow.continuum.g2p import g2p
-    from vibroflow.continuum.p2g import p2g
-
     numba.set_num_threads(1)
     scenario, cal = _inputs(a)
     out = {}
@@ -167,6 +164,8 @@ def kernels(a) -> dict:
             from vibroflow.continuum.constitutive import update_stress_points
             from vibroflow.continuum.grid_update import grid_update
             from vibroflow.continuum.plasticity import update_volume
+            from vibroflow.continuum.g2p import g2p
+            from vibroflow.continuum.p2g import p2g
 
             g = system.grid
             gm, gmv, gf, gv = system.work
@@ -193,32 +192,64 @@ def kernels(a) -> dict:
                 update_stress_points(stress.copy(), L, rho, system.dt, system.params,
                                      state.gamma_dot.copy(), state.phase.copy())), 200)
         else:
-            from vibroflow.continuum.eulerian.advection import advect, face_velocities
+            from vibroflow.continuum.boundary import partition_forces
+            from vibroflow.continuum.constitutive import update_stress_points
+            from vibroflow.continuum.eulerian.advection import face_velocities, remap
+            from vibroflow.continuum.eulerian.lagrangian_step import (end_density,
+                                                                      material_fraction)
             from vibroflow.continuum.eulerian.solver import NQ
+            from vibroflow.continuum.eulerian.transfer import g2p_cells, p2g_cells
+            from vibroflow.continuum.eulerian.wall import wall_forces
+            from vibroflow.continuum.fused import sum_chunk_rows
+            from vibroflow.continuum.grid_update import grid_update
 
             mesh = system.mesh
             g = mesh.grid
+            n = mesh.n
             gm, gmv, gf, gv = system.work
+            cm, cmv, cf = system.chunk_work
             act = np.flatnonzero(state.mass > 0)
-            x, v, C, L = system.x[act], state.v[act], state.C[act], state.L[act]
-            m, vol, st, fe = state.mass[act], state.volume[act], state.stress[act], \
-                state.fext[act]
-            t["p2g"] = _per_call(lambda: p2g(x, v, C, m, vol, st, fe, g.x0, g.z0, g.dx,
-                                             g.periodic, gm, gmv, gf), 200)
-            t["g2p"] = _per_call(lambda: g2p(x.copy(), v.copy(), C.copy(), L.copy(), gv, g.x0,
-                                             g.z0, g.dx, 0.0, g.periodic, gm, gmv, 0.0), 200)
+            tcx, tcz = system.tables[0], system.tables[1]
+            w, pf, hist = system.wall, system.partitions, state.wall
+            frac, vol, fext = state.frac.copy(), state.volume.copy(), state.fext.copy()
+            t["material fraction"] = _per_call(lambda: material_fraction(
+                state.mass, state.density, mesh.h, frac, vol), 200)
+            t["wall"] = _per_call(lambda: wall_forces(
+                system.wall_cells, mesh.normal, state.v, state.mass,
+                system.material.critical_density, mesh.h, hist["delta"].copy(),
+                hist["xi"].copy(), fext, hist["fn"].copy(), hist["ft"].copy(),
+                hist["state"].copy(), w.stiffness, w.tangential_stiffness, w.damping_ratio,
+                w.friction, system.dt), 200)
+            t["partitions"] = _per_call(lambda: partition_forces(
+                state.v, state.mass, state.volume, state.stress, fext, pf.friction, pf.length,
+                system.dt), 200)
+            t["p2g (cells holding material)"] = _per_call(lambda: p2g_cells(
+                act, mesh.ncz, tcx, tcz, state.v, state.C, state.mass, state.volume,
+                state.stress, state.fext, g.dx, g.periodic, gm, gmv, gf), 200)
+            t["chunk sums and grid update"] = _per_call(lambda: (
+                sum_chunk_rows(0, g.nx, cm, cmv, cf, gm, gmv, gf),
+                grid_update(gm, gmv, gf, gv, g.x0, g.z0, g.dx, system.dt, 0.0, -9.81, 0.0, 0.0,
+                            0.0, 0.0, g.periodic)), 200)
+            v, C, L = state.v.copy(), state.C.copy(), state.L.copy()
+            t["g2p (cells holding material)"] = _per_call(lambda: g2p_cells(
+                act, mesh.ncz, tcx, tcz, v, C, L, gv, g.dx, g.periodic), 200)
+            m2 = state.mass.reshape(mesh.ncx, mesh.ncz)
             t["face_velocities"] = _per_call(lambda: face_velocities(
-                gv, g.x0, g.z0, g.dx, g.periodic, mesh.xmin, mesh.zmin, mesh.h, mesh.open_x,
-                mesh.open_z, state.mass.reshape(mesh.ncx, mesh.ncz), system.ux, system.uz), 200)
+                gv, system.tables, g.periodic, mesh.open_x, mesh.open_z, m2, system.ux,
+                system.uz), 200)
+            rho = np.zeros(n)
+            end_density(state.density, state.L, system.dt, rho)
+            t["stress update (every cell)"] = _per_call(lambda: update_stress_points(
+                state.stress.copy(), state.L, rho, system.dt, system.params,
+                state.gamma_dot.copy(), state.phase.copy()), 200)
+            q = np.zeros((NQ, n))
+            q[0:2] = state.v.T
+            q[6:10] = state.stress.T
+            q[10] = state.density
             s2 = (mesh.ncx, mesh.ncz)
-            q = np.zeros(s2 + (NQ,))
-            q[..., 0:2] = state.v.reshape(s2 + (2,))
-            q[..., 6:10] = state.stress.reshape(s2 + (4,))
-            q[..., 10] = state.density.reshape(s2)
-            mass = state.mass.reshape(s2)
-            t["remap"] = _per_call(lambda: advect(
-                mass.copy(), q.copy(), system.ux, system.uz, mesh.h, system.dt, mesh.open_x,
-                mesh.open_z, mesh.periodic, *system.adv), 200)
+            t["remap"] = _per_call(lambda: remap(
+                m2.copy(), q.copy().reshape((NQ,) + s2), system.ux, system.uz, mesh.h,
+                system.dt, mesh.open_x, mesh.open_z, mesh.periodic, system.remap_work), 200)
         t["whole step (compiled loop, 20 steps a call)"] = _per_call(
             lambda: advance(system, state, 20), 10) / 20
         t["whole step (one step a call)"] = _per_call(lambda: advance(system, state, 1), 100)

@@ -25,6 +25,13 @@ Each face flux is added to one cell and taken from the other, so the total mass 
 round-off; nothing is clipped (the Courant numbers keep every cell's mass >= 0; a negative one
 is reported by the solver).  The volume fraction f = min(1, m / (rho h^2)) (solver.py) is
 computed from the transported mass and density, so it is transported without losing mass too.
+
+Speed (issue 6: the remap was the Eulerian step's largest part).  The arithmetic is that of a
+face-by-face loop (every cell's fluxes summed in the order x-faces by ascending i, then z-faces
+by ascending k), but it runs field by field over flat arrays, each pass a long branch-free loop
+(`_pick`) that the compiler vectorises; a loop over one row of cells was too short for it.
+What does not depend on the carried fields (the mass fluxes, the upwind factors, the masks of
+the slopes) is computed once a step (`_prepare`), not once per field.
 """
 from __future__ import annotations
 
@@ -33,7 +40,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ..grid import bspline_weights
+from .transfer import T_BASE, T_W0, T_W1, T_W2
 
 #: a cell with less mass than this fraction of a full cell is empty
 EMPTY = 1.0e-12
@@ -50,16 +57,19 @@ def _mc(a, b):
     return r if a * b > 0.0 else 0.0
 
 
-#: cell rows (x) or columns (z) per block of the parallel loops: blocks own whole rows or
-#: columns, so every cell's sums run in the serial order whatever thread takes them
-BLOCK = 8
-
-
-@nb.njit(cache=True)
-def _interp(gv, xp, zp, x0, z0, dx, periodic, comp):
+@nb.njit(cache=True, inline="always")
+def _interp(gv, tx, ix, tz, kz, periodic, comp):
+    """Component comp of the node velocities gv (nx, nz, 2) at the point whose B-spline
+    weights are rows tx[ix] and tz[kz] of transfer.weight_table tables."""
     nxg = gv.shape[0]
-    bx, fx, wx0, wx1, wx2, _, _, _ = bspline_weights(xp, x0, dx)
-    bz, fz, wz0, wz1, wz2, _, _, _ = bspline_weights(zp, z0, dx)
+    bx = int(tx[ix, T_BASE])
+    wx0 = tx[ix, T_W0]
+    wx1 = tx[ix, T_W1]
+    wx2 = tx[ix, T_W2]
+    bz = int(tz[kz, T_BASE])
+    wz0 = tz[kz, T_W0]
+    wz1 = tz[kz, T_W1]
+    wz2 = tz[kz, T_W2]
     s = 0.0
     for a in range(3):
         wa = wx0 if a == 0 else (wx1 if a == 1 else wx2)
@@ -72,38 +82,47 @@ def _interp(gv, xp, zp, x0, z0, dx, periodic, comp):
     return s
 
 
-@nb.njit(cache=True, parallel=True)
-def face_velocities(gv, x0, z0, dx, periodic, xmin, zmin, h, open_x, open_z, m, ux, uz):
-    """Face-normal velocities (m/s): ux (ncx + 1, ncz) on the x-faces (x = xmin + i h),
-    uz (ncx, ncz + 1) on the z-faces, the node velocities gv (nx, nz, 2) of the grid (origin
-    (x0, z0), spacing dx, m) interpolated at the face midpoints, on the open faces of a cell
-    holding material (mass m (ncx, ncz) kg/m > 0); 0 elsewhere.  A face between two empty
-    cells carries no flux (`advect` takes nothing from an empty upwind cell), and its
-    divergence would only reach the velocity gradient of empty cells, which carry no stress
-    (density 0: disconnected) and no weight in any output: skipping it spares about half the
-    interpolations (the tub above the bed is empty).  Each face on its own (parallel over
-    rows)."""
-    ncx1, ncz = ux.shape
-    ncx = ncx1 - 1
-    for i in nb.prange(ncx1):
-        # the cells left and right of face i (wrapped on a periodic mesh; a closed face's
-        # neighbours are never read)
-        il = (i + ncx - 1) % ncx
-        ir = i % ncx
-        for k in range(ncz):
-            if open_x[i, k] and (m[il, k] > 0.0 or m[ir, k] > 0.0):
-                ux[i, k] = _interp(gv, xmin + i * h, zmin + (k + 0.5) * h, x0, z0, dx,
-                                   periodic, 0)
-            else:
-                ux[i, k] = 0.0
-    ncz1 = uz.shape[1]
-    for i in nb.prange(ncx):
-        for k in range(ncz1):
-            if open_z[i, k] and (m[i, k - 1] > 0.0 or m[i, k] > 0.0):
-                uz[i, k] = _interp(gv, xmin + (i + 0.5) * h, zmin + k * h, x0, z0, dx,
-                                   periodic, 1)
-            else:
-                uz[i, k] = 0.0
+def _make_face_velocities(parallel: bool):
+    """face_velocities, parallel over rows or serial (fused.py's loop on one thread)."""
+
+    @nb.njit(cache=True, parallel=parallel)
+    def face_velocities(gv, tables, periodic, open_x, open_z, m, ux, uz):
+        """Face-normal velocities (m/s): ux (ncx + 1, ncz) on the x-faces (x = xmin + i h),
+        uz (ncx, ncz + 1) on the z-faces, the node velocities gv (nx, nz, 2) interpolated at
+        the face midpoints with the mesh's weight tables (transfer.WeightTables as a tuple
+        (cx, cz, fx, fz)), on the open faces of a cell holding material (mass m (ncx, ncz)
+        kg/m > 0); 0 elsewhere.  A face between two empty cells carries no flux (`advect`
+        takes nothing from an empty upwind cell), and its divergence would only reach the
+        velocity gradient of empty cells, which carry no stress (density 0: disconnected) and
+        no weight in any output: skipping it spares about half the interpolations (the tub
+        above the bed is empty).  Each face on its own (parallel over rows)."""
+        _ = parallel
+        tcx, tcz, tfx, tfz = tables
+        ncx1, ncz = ux.shape
+        ncx = ncx1 - 1
+        for i in nb.prange(ncx1):
+            # the cells left and right of face i (wrapped on a periodic mesh; a closed face's
+            # neighbours are never read)
+            il = (i + ncx - 1) % ncx
+            ir = i % ncx
+            for k in range(ncz):
+                if open_x[i, k] and (m[il, k] > 0.0 or m[ir, k] > 0.0):
+                    ux[i, k] = _interp(gv, tfx, i, tcz, k, periodic, 0)
+                else:
+                    ux[i, k] = 0.0
+        ncz1 = uz.shape[1]
+        for i in nb.prange(ncx):
+            for k in range(ncz1):
+                if open_z[i, k] and (m[i, k - 1] > 0.0 or m[i, k] > 0.0):
+                    uz[i, k] = _interp(gv, tcx, i, tfz, k, periodic, 1)
+                else:
+                    uz[i, k] = 0.0
+
+    return face_velocities
+
+
+face_velocities = _make_face_velocities(True)
+face_velocities_serial = _make_face_velocities(False)
 
 
 @nb.njit(cache=True)
@@ -125,189 +144,314 @@ def match_divergence(L, ux, uz, h, periodic):
             L[p, 3] += d
 
 
+@nb.njit(cache=True, inline="always")
+def _pick(flag, a, b):
+    """a where flag else b: both already computed, so the loops stay free of branches and
+    vectorise (the selects compile to masked moves)."""
+    return a if flag else b
+
+
+# The remap works on flat arrays over the cells, p = i * ncz + k, field after field, so that
+# its loops run over whole fields and vectorise (one row of ncz cells is too short a loop).
+# A face is stored at the index of the cell above or right of it: x-face (i, k) at i * ncz + k
+# ((ncx + 1) ncz of them), z-face (i, k) below cell (i, k) at i * ncz + k (n + 1 of them, the
+# last a dummy: the top face of every column is the wall, and index (i + 1) ncz, the top of
+# row i, is the floor of row i + 1, also shut).
+
+
+@nb.njit(cache=True, inline="always")
+def _x_neighbours(i, ncx, periodic):
+    """The rows left and right of row i: wrapped on a periodic mesh, else clamped (a closed
+    edge's neighbour is read but masked off)."""
+    if periodic:
+        return (i + ncx - 1) % ncx, (i + 1) % ncx
+    return max(i - 1, 0), min(i + 1, ncx - 1)
+
+
 @nb.njit(cache=True)
-def _slopes(i0, i1, rho, q, open_x, open_z, rho_empty, periodic, srx, srz, sqx, sqz):
-    """Limited slopes (per cell, times h) of rho and of each q field along x and z, rows
-    i0:i1."""
-    ncx, ncz = rho.shape
-    nq = q.shape[2]
-    for i in range(i0, i1):
+def _slopes(qj, ncx, ncz, periodic, ml, mr, md, mu, sx, sz):
+    """Limited slopes (times h) along x and z of the field qj (n,): sx, sz (n,); a one-sided
+    difference is taken only where its mask (ml, mr, md, mu (n,): left, right, down, up) is
+    set, else it is 0.  The loops run over views shifted by the neighbour's offset, indices
+    from 0 (a shifted index would be checked for wrapping around, and not vectorise)."""
+    n = ncx * ncz
+    for i in (0, ncx - 1):
+        il, ir = _x_neighbours(i, ncx, periodic)
         for k in range(ncz):
-            if rho[i, k] <= 0.0:
-                # an empty cell is never upwind of a flux (advect skips it), so its slopes are
-                # never used
-                srx[i, k] = 0.0
-                srz[i, k] = 0.0
-                continue
-            # x: left face i, right face i + 1
-            il = i - 1
-            ir = i + 1
-            if periodic:
-                il = il % ncx
-                ir = ir % ncx
-            okl = open_x[i, k]
-            okr = open_x[i + 1, k]
-            a = rho[i, k] - rho[il, k] if okl else 0.0
-            b = rho[ir, k] - rho[i, k] if okr else 0.0
-            srx[i, k] = _mc(a, b)
-            okl = okl and rho[il, k] > rho_empty
-            okr = okr and rho[ir, k] > rho_empty
-            for j in range(nq):
-                a = q[i, k, j] - q[il, k, j] if okl else 0.0
-                b = q[ir, k, j] - q[i, k, j] if okr else 0.0
-                sqx[i, k, j] = _mc(a, b)
-            # z
-            okd = open_z[i, k]
-            oku = open_z[i, k + 1]
-            a = rho[i, k] - rho[i, k - 1] if okd else 0.0
-            b = rho[i, k + 1] - rho[i, k] if oku else 0.0
-            srz[i, k] = _mc(a, b)
-            okd = okd and rho[i, k - 1] > rho_empty
-            oku = oku and rho[i, k + 1] > rho_empty
-            for j in range(nq):
-                a = q[i, k, j] - q[i, k - 1, j] if okd else 0.0
-                b = q[i, k + 1, j] - q[i, k, j] if oku else 0.0
-                sqz[i, k, j] = _mc(a, b)
+            p = i * ncz + k
+            a = _pick(ml[p], qj[p] - qj[il * ncz + k], 0.0)
+            b = _pick(mr[p], qj[ir * ncz + k] - qj[p], 0.0)
+            sx[p] = _mc(a, b)
+    w = n - 2 * ncz
+    ql, qc, qr = qj[:w], qj[ncz:ncz + w], qj[2 * ncz:]
+    l, r, out = ml[ncz:ncz + w], mr[ncz:ncz + w], sx[ncz:ncz + w]
+    for p in range(w):
+        out[p] = _mc(_pick(l[p], qc[p] - ql[p], 0.0), _pick(r[p], qr[p] - qc[p], 0.0))
+    # z: the first and last cells' outer neighbours are the floor and the lid (masked off)
+    sz[0] = _mc(0.0, _pick(mu[0], qj[1] - qj[0], 0.0))
+    w = n - 2
+    qd, qc, qu = qj[:w], qj[1:1 + w], qj[2:]
+    d, u, out = md[1:1 + w], mu[1:1 + w], sz[1:1 + w]
+    for p in range(w):
+        out[p] = _mc(_pick(d[p], qc[p] - qd[p], 0.0), _pick(u[p], qu[p] - qc[p], 0.0))
+    sz[n - 1] = _mc(_pick(md[n - 1], qj[n - 1] - qj[n - 2], 0.0), 0.0)
 
 
 @nb.njit(cache=True)
-def _x_fluxes(k0, k1, q, ux, h, dt, periodic, work_rho, srx, sqx, dm, dq):
-    """Fluxes through the x-faces of columns k0:k1 into dm, dq (face i between cells i - 1
-    and i), faces in ascending i."""
-    ncx = work_rho.shape[0]
-    nq = q.shape[2]
-    for i in range(ux.shape[0]):
-        for k in range(k0, k1):
-            u = ux[i, k]
-            if u == 0.0:
-                continue
-            il = i - 1
-            ir = i
-            if periodic:
-                il = il % ncx
-                ir = ir % ncx
-            elif i == 0 or i == ncx:
-                continue
-            c = abs(u) * dt / h
-            if u > 0.0:
-                up = il
-                sgn = 1.0
-            else:
-                up = ir
-                sgn = -1.0
-            if work_rho[up, k] <= 0.0:
-                continue  # nothing to carry (the limited slope of an empty cell is 0 too)
-            rf = work_rho[up, k] + sgn * 0.5 * (1.0 - c) * srx[up, k]
-            F = u * dt * h * rf  # kg/m from left to right
-            dm[il, k] -= F
-            dm[ir, k] += F
-            for j in range(nq):
-                qf = q[up, k, j] + sgn * 0.5 * (1.0 - c) * sqx[up, k, j]
-                dq[il, k, j] -= F * qf
-                dq[ir, k, j] += F * qf
-        if periodic and i == ux.shape[0] - 2:
-            break  # face ncx is face 0 on a periodic mesh
+def _combine(ncx, ncz, periodic, ax, gx, az, gz, d):
+    """The net inflow d (n,) of every cell from its face fluxes gx (x-faces) and gz (z-faces)
+    (from the lower to the higher index), counting only the faces flagged in ax, az: each
+    cell's sum in the scheme's face order (x-faces by ascending i, then z-faces by ascending k,
+    each flux added to one cell and taken from the other), every operation as in a
+    face-by-face loop, so the numbers are that loop's, bit for bit.  (Views from 0, as in
+    `_slopes`.)"""
+    n = ncx * ncz
+    w = n - ncz if periodic else n
+    al, gl, ar, gr = ax[:w], gx[:w], ax[ncz:ncz + w], gx[ncz:ncz + w]
+    ad, gd, au, gu = az[:w], gz[:w], az[1:1 + w], gz[1:1 + w]
+    for p in range(w):
+        v = 0.0
+        v = _pick(al[p], v + gl[p], v)
+        v = _pick(ar[p], v - gr[p], v)
+        v = _pick(ad[p], v + gd[p], v)
+        d[p] = _pick(au[p], v - gu[p], v)
+    for p in range(w, n):
+        # the last row of a periodic mesh: its right face is face 0, whose flux comes first
+        k = p - w
+        v = 0.0
+        v = _pick(ax[k], v - gx[k], v)
+        v = _pick(ax[p], v + gx[p], v)
+        v = _pick(az[p], v + gz[p], v)
+        d[p] = _pick(az[p + 1], v - gz[p + 1], v)
 
 
 @nb.njit(cache=True)
-def _z_fluxes(i0, i1, q, uz, h, dt, work_rho, srz, sqz, dm, dq):
-    """Fluxes through the z-faces of rows i0:i1 into dm, dq (face k between cells k - 1 and
-    k), faces in ascending k."""
-    ncz = work_rho.shape[1]
-    nq = q.shape[2]
-    for i in range(i0, i1):
-        for k in range(1, ncz):
-            u = uz[i, k]
-            if u == 0.0:
-                continue
-            c = abs(u) * dt / h
-            if u > 0.0:
-                up = k - 1
-                sgn = 1.0
-            else:
-                up = k
-                sgn = -1.0
-            if work_rho[i, up] <= 0.0:
-                continue
-            rf = work_rho[i, up] + sgn * 0.5 * (1.0 - c) * srz[i, up]
-            F = u * dt * h * rf
-            dm[i, k - 1] -= F
-            dm[i, k] += F
-            for j in range(nq):
-                qf = q[i, up, j] + sgn * 0.5 * (1.0 - c) * sqz[i, up, j]
-                dq[i, k - 1, j] -= F * qf
-                dq[i, k, j] += F * qf
+def _faces(u, r_lo, s_lo, r_hi, s_hi, h, dt, on, pos, fac, flux):
+    """Faces j (m,) between cells lo and hi (mass per area r (kg/m^3), limited slope s) with
+    normal velocity u (m/s, from lo to hi): on, whether it carries a flux (u != 0 and its
+    upwind cell is not empty: nothing to carry from an empty cell, whose limited slope is 0
+    too); pos, whether its upwind cell is lo; fac = sgn (1 - c) / 2, its upwind
+    reconstruction's factor (c = |u| dt / h); flux F = u dt h (r + fac s)_upwind (kg/m)."""
+    for j in range(u.shape[0]):
+        uj = u[j]
+        p = uj > 0.0
+        ru = _pick(p, r_lo[j], r_hi[j])
+        su = _pick(p, s_lo[j], s_hi[j])
+        c = abs(uj) * dt / h
+        sgn = _pick(p, 1.0, -1.0)
+        f = sgn * 0.5 * (1.0 - c)
+        pos[j] = p
+        on[j] = uj != 0.0 and ru > 0.0
+        fac[j] = f
+        flux[j] = uj * dt * h * (ru + f * su)
 
 
 @nb.njit(cache=True)
-def _update(i0, i1, m, q, dm, dq, m_empty):
-    """New masses and mass-weighted fields of rows i0:i1; returns their smallest mass."""
-    ncz = m.shape[1]
-    nq = q.shape[2]
-    lowest = np.inf
-    for i in range(i0, i1):
-        for k in range(ncz):
-            mo = m[i, k]
-            mn = mo + dm[i, k]
-            if mn < lowest:
-                lowest = mn
-            if mn > m_empty and mo > m_empty:
-                inv = 1.0 / mn
-                for j in range(nq):
-                    q[i, k, j] = (mo * q[i, k, j] + dq[i, k, j]) * inv
-            elif mn > m_empty:
-                # an empty cell filling: what it holds is what came in (its round-off mass
-                # carried no properties)
-                inv = 1.0 / dm[i, k]
-                for j in range(nq):
-                    q[i, k, j] = dq[i, k, j] * inv
-            else:
-                for j in range(nq):
-                    q[i, k, j] = 0.0
-            m[i, k] = mn
-    return lowest
-
-
-@nb.njit(cache=True, parallel=True)
-def advect(m, q, ux, uz, h, dt, open_x, open_z, periodic, work_rho, srx, srz, sqx, sqz,
-           dm, dq):
-    """One transport step (module docstring), in place.  m (ncx, ncz) cell masses (kg/m);
-    q (ncx, ncz, nq) intensive fields carried with the mass; ux, uz face velocities (m/s) of
-    face_velocities; h cell side (m); dt (s).  work_rho, srx, srz (ncx, ncz), sqx, sqz, dq
-    (ncx, ncz, nq), dm (ncx, ncz): work arrays.  Returns the smallest cell mass after the step
-    (kg/m; negative means the Courant number was too large).
-
-    Parallel over blocks of whole rows or columns (BLOCK): an x-face's flux goes to two cells
-    of one column, a z-face's to two cells of one row, so each cell receives its fluxes in the
-    serial order (x-faces by ascending i, then z-faces by ascending k) whatever the threads:
-    the numbers are the serial loop's, bit for bit."""
-    ncx, ncz = m.shape
+def _prepare(m, ux, uz, h, dt, ncx, ncz, open_x, open_z, periodic, cells, masks, xf, xb, zf,
+             zb):
+    """Everything of a transport step that does not depend on the carried fields, on the flat
+    layout (above): cells = (rho, srx, srz, ...) the mass per area (kg/m^3) and its limited
+    slopes; masks = (ol, orr, od, ou, okl, okr, okd, oku): the cells' open faces and the
+    neighbours a field's slope may be taken against (an open face to a cell that is not
+    empty); per face, xf, zf = (c, F): the upwind reconstruction's factor sgn (1 - c) / 2 and
+    the mass flux F (kg/m, from the lower to the higher index), xb, zb = (on, pos): whether it
+    carries a flux and whether its upwind cell is the lower-index one.  Returns m_empty, the
+    mass (kg/m) at or below which a cell is empty."""
+    rho, srx, srz = cells[0], cells[1], cells[2]
+    ol, orr, od, ou, okl, okr, okd, oku = masks
+    cx, fx = xf
+    ax, px = xb
+    cz, fz = zf
+    az, pz = zb
+    n = ncx * ncz
     area = h * h
     full = 0.0
-    for i in range(ncx):
-        for k in range(ncz):
-            work_rho[i, k] = m[i, k] / area
-            if work_rho[i, k] > full:
-                full = work_rho[i, k]
+    for p in range(n):
+        rho[p] = m[p] / area
+        if rho[p] > full:
+            full = rho[p]
     rho_empty = EMPTY * full
-    m_empty = rho_empty * area
-    nbx = (ncx + BLOCK - 1) // BLOCK
-    nbz = (ncz + BLOCK - 1) // BLOCK
-    for b in nb.prange(nbx):
-        i0 = b * BLOCK
-        i1 = min(ncx, i0 + BLOCK)
-        _slopes(i0, i1, work_rho, q, open_x, open_z, rho_empty, periodic, srx, srz, sqx, sqz)
-        dm[i0:i1] = 0.0
-        dq[i0:i1] = 0.0
-    for b in nb.prange(nbz):
-        k0 = b * BLOCK
-        _x_fluxes(k0, min(ncz, k0 + BLOCK), q, ux, h, dt, periodic, work_rho, srx, sqx, dm,
-                  dq)
-    for b in nb.prange(nbx):
-        i0 = b * BLOCK
-        _z_fluxes(i0, min(ncx, i0 + BLOCK), q, uz, h, dt, work_rho, srz, sqz, dm, dq)
-    low = np.empty(nbx)
-    for b in nb.prange(nbx):
-        i0 = b * BLOCK
-        low[b] = _update(i0, min(ncx, i0 + BLOCK), m, q, dm, dq, m_empty)
-    return low.min()
+    for i in range(ncx):
+        il, ir = _x_neighbours(i, ncx, periodic)
+        for k in range(ncz):
+            p = i * ncz + k
+            ol[p] = open_x[i, k]
+            orr[p] = open_x[i + 1, k]
+            od[p] = open_z[i, k]
+            ou[p] = open_z[i, k + 1]
+            okl[p] = ol[p] and rho[il * ncz + k] > rho_empty
+            okr[p] = orr[p] and rho[ir * ncz + k] > rho_empty
+    # the neighbours below and above (views from 0, as in `_slopes`)
+    w = n - 1
+    od_, ou_, rd, ru = od[1:], ou[:w], rho[:w], rho[1:]
+    okd_, oku_ = okd[1:], oku[:w]
+    for p in range(w):
+        okd_[p] = od_[p] and rd[p] > rho_empty
+        oku_[p] = ou_[p] and ru[p] > rho_empty
+    okd[0] = False
+    oku[n - 1] = False
+    _slopes(rho, ncx, ncz, periodic, ol, orr, od, ou, srx, srz)
+    for p in range(n):
+        # an empty cell is never upwind of a flux, so its slopes are never used
+        srx[p] = _pick(rho[p] > 0.0, srx[p], 0.0)
+        srz[p] = _pick(rho[p] > 0.0, srz[p], 0.0)
+    # x-faces: face i * ncz + k between cells (i - 1, k) and (i, k); the outer ones of a closed
+    # mesh are shut, and a periodic mesh's face ncx is its face 0
+    for f in range(n, n + ncz):
+        ax[f] = False
+        fx[f] = 0.0
+    if periodic:
+        _faces(ux[:ncz], rho[n - ncz:], srx[n - ncz:], rho[:ncz], srx[:ncz], h, dt, ax[:ncz],
+               px[:ncz], cx[:ncz], fx[:ncz])
+    else:
+        for f in range(ncz):
+            ax[f] = False
+            fx[f] = 0.0
+    w = n - ncz
+    _faces(ux[ncz:n], rho[:w], srx[:w], rho[ncz:], srx[ncz:], h, dt, ax[ncz:n], px[ncz:n],
+           cx[ncz:n], fx[ncz:n])
+    # z-faces: below cell p, between cells p - 1 and p (the floor of a column is shut)
+    az[n] = False
+    fz[n] = 0.0
+    for i in range(ncx):
+        p = i * ncz
+        az[p] = False
+        fz[p] = 0.0
+        _faces(uz[i, 1:ncz], rho[p:p + ncz - 1], srz[p:p + ncz - 1], rho[p + 1:p + ncz],
+               srz[p + 1:p + ncz], h, dt, az[p + 1:p + ncz], pz[p + 1:p + ncz],
+               cz[p + 1:p + ncz], fz[p + 1:p + ncz])
+    return rho_empty * area
+
+
+@nb.njit(cache=True)
+def _field_fluxes(qj, ncx, ncz, periodic, masks, xf, xb, zf, zb, sx, sz, gx, gz, d):
+    """The net inflow d (n,) (kg/m times the field's unit) of the field qj (n,) into every
+    cell: the limited slopes sx, sz, the face fluxes gx, gz (work arrays), then `_combine`."""
+    okl, okr, okd, oku = masks[4], masks[5], masks[6], masks[7]
+    cx, fx = xf
+    px = xb[1]
+    cz, fz = zf
+    pz = zb[1]
+    n = ncx * ncz
+    _slopes(qj, ncx, ncz, periodic, okl, okr, okd, oku, sx, sz)
+    # the upwind reconstruction q + sgn (1 - c) / 2 slope on either side of the face; the
+    # face's own pos picks its upwind one
+    for f in range(ncz):
+        left = f - ncz + n
+        gx[f] = fx[f] * _pick(px[f], qj[left] + cx[f] * sx[left], qj[f] + cx[f] * sx[f])
+    w = n - ncz
+    ql, sl, qr, sr = qj[:w], sx[:w], qj[ncz:], sx[ncz:]
+    c, fl, pos, g = cx[ncz:ncz + w], fx[ncz:ncz + w], px[ncz:ncz + w], gx[ncz:ncz + w]
+    for f in range(w):
+        g[f] = fl[f] * _pick(pos[f], ql[f] + c[f] * sl[f], qr[f] + c[f] * sr[f])
+    gz[0] = 0.0
+    w = n - 1
+    qd, sd, qu, su = qj[:w], sz[:w], qj[1:], sz[1:]
+    c, fl, pos, g = cz[1:1 + w], fz[1:1 + w], pz[1:1 + w], gz[1:1 + w]
+    for p in range(w):
+        g[p] = fl[p] * _pick(pos[p], qd[p] + c[p] * sd[p], qu[p] + c[p] * su[p])
+    _combine(ncx, ncz, periodic, xb[0], gx, zb[0], gz, d)
+
+
+@nb.njit(cache=True)
+def _modes(m, dm, m_empty, mode, inv):
+    """How each cell's fields are renewed (`_renew`): mode 1, a cell that held material and
+    still does, q = (m q + dq) / m_new; 2, an empty cell filling, q = dq / dm (what it holds is
+    what came in: its round-off mass carried no properties); 0, a cell left empty, q = 0; inv
+    the reciprocal used (1/kg)."""
+    for p in range(m.shape[0]):
+        mo = m[p]
+        mn = mo + dm[p]
+        if mn > m_empty and mo > m_empty:
+            mode[p] = 1
+            inv[p] = 1.0 / mn
+        elif mn > m_empty:
+            mode[p] = 2
+            inv[p] = 1.0 / dm[p]
+        else:
+            mode[p] = 0
+            inv[p] = 0.0
+
+
+@nb.njit(cache=True)
+def _renew(qj, dqj, m, mode, inv):
+    """Field qj (n,) after the step from its inflow dqj and the cells' modes (`_modes`)."""
+    for p in range(qj.shape[0]):
+        mk = mode[p]
+        a = (m[p] * qj[p] + dqj[p]) * inv[p]
+        b = dqj[p] * inv[p]
+        qj[p] = _pick(mk == 1, a, _pick(mk == 2, b, 0.0))
+
+
+def remap_work(ncx: int, ncz: int, nq: int):
+    """The work arrays of `remap` on a mesh of ncx x ncz cells carrying nq fields."""
+    n = ncx * ncz
+    nf = (ncx + 1) * ncz
+    return (tuple(np.zeros(n) for _ in range(5)), tuple(np.zeros(n, bool) for _ in range(8)),
+            (np.zeros(nf), np.zeros(nf)), (np.zeros(nf, bool), np.zeros(nf, bool)),
+            (np.zeros(n + 1), np.zeros(n + 1)), (np.zeros(n + 1, bool), np.zeros(n + 1, bool)),
+            np.zeros(n, np.int8), (np.zeros((nq, n)), np.zeros((nq, n))),
+            (np.zeros((nq, nf)), np.zeros((nq, n + 1))), np.zeros((nq, n)))
+
+
+def _make_remap(parallel: bool):
+    """remap, parallel over the carried fields or serial (fused.py's loop on one thread)."""
+
+    @nb.njit(cache=True, parallel=parallel)
+    def remap(m, q, ux, uz, h, dt, open_x, open_z, periodic, work):
+        """One transport step (module docstring), in place.  m (ncx, ncz) cell masses (kg/m);
+        q (nq, ncx, ncz) intensive fields carried with the mass, field after field (the flat
+        layout above); ux, uz face velocities (m/s) of face_velocities; h cell side (m); dt
+        (s); work: remap_work's arrays.  Returns the smallest cell mass after the step (kg/m;
+        negative means the Courant number was too large).
+
+        Parallel over the fields: each field's fluxes and new values are one thread's, so the
+        numbers are the serial loop's, bit for bit, whatever the threads."""
+        _ = parallel
+        cells, masks, xf, xb, zf, zb, mode, (sx, sz), (gx, gz), dq = work
+        ncx, ncz = m.shape
+        nq = q.shape[0]
+        n = ncx * ncz
+        mf = m.reshape(n)
+        qf = q.reshape((nq, n))
+        dm, inv = cells[3], cells[4]
+        m_empty = _prepare(mf, ux.reshape((ncx + 1) * ncz), uz, h, dt, ncx, ncz, open_x,
+                           open_z, periodic, cells, masks, xf, xb, zf, zb)
+        for j in nb.prange(nq + 1):
+            if j == nq:
+                _combine(ncx, ncz, periodic, xb[0], xf[1], zb[0], zf[1], dm)
+            else:
+                _field_fluxes(qf[j], ncx, ncz, periodic, masks, xf, xb, zf, zb, sx[j], sz[j],
+                              gx[j], gz[j], dq[j])
+        _modes(mf, dm, m_empty, mode, inv)
+        for j in nb.prange(nq):
+            _renew(qf[j], dq[j], mf, mode, inv)
+        lowest = np.inf
+        for p in range(n):
+            mn = mf[p] + dm[p]
+            if mn < lowest:
+                lowest = mn
+            mf[p] = mn
+        return lowest
+
+    return remap
+
+
+remap = _make_remap(True)
+remap_serial = _make_remap(False)
+
+
+def advect(m, q, ux, uz, h, dt, open_x, open_z, periodic, work_rho, srx, srz, sqx, sqz, dm,
+           dq):
+    """`remap` of fields q (ncx, ncz, nq) stored cell after cell; work_rho, srx, srz, dm
+    (ncx, ncz) and sqx, sqz, dq (ncx, ncz, nq) serve as remap_work's arrays of their sizes."""
+    ncx, ncz, nq = q.shape
+    n = ncx * ncz
+    w = remap_work(ncx, ncz, nq)
+    cells = (work_rho.reshape(n), srx.reshape(n), srz.reshape(n), dm.reshape(n), w[0][4])
+    work = (cells,) + w[1:7] + ((sqx.reshape(nq, n), sqz.reshape(nq, n)), w[8],
+                                dq.reshape(nq, n))
+    qf = np.ascontiguousarray(np.moveaxis(q, 2, 0))
+    lowest = remap_serial(m, qf, ux, uz, h, dt, open_x, open_z, periodic, work)
+    q[...] = np.moveaxis(qf, 0, 2)
+    return lowest

@@ -6,10 +6,17 @@ third of its time in its own bookkeeping (gathering the cells that hold material
 indexing, packing the remap's fields, dispatching a dozen kernels, the frame's pose).
 
 Threads, as the Lagrangian step's (vibroflow.continuum.fused): the per-cell kernels write only
-their own cells and the remap works on whole rows and columns (advection.advect), so they give
-the serial numbers whatever the threads; the cells holding material are scattered to the nodes
-in `nchunk` fixed chunks of per-chunk buffers summed in a fixed order, so the run depends on the
-number of chunks, never on the number of threads (one chunk: the serial p2g's numbers).
+their own cells and the remap works field by field (advection.remap), so they give the serial
+numbers whatever the threads; the cells holding material are scattered to the nodes in `nchunk`
+fixed chunks of per-chunk buffers summed in a fixed order, so the run depends on the number of
+chunks, never on the number of threads (one chunk: the serial p2g's numbers).  On one thread
+the loop is compiled without numba's parallel loops (`advance_kernel_serial`, the same code):
+on tub47's ~1000 cells a parallel loop's launch, even with one thread, cost ~1.5 us, and a step
+has eight of them.
+
+The cells' B-spline weights on the grid are the mesh's constant tables (transfer.py), and the
+cells holding material are scattered and gathered in place through their indices (no compact
+copies of their fields).
 
 The loop's numba cache is keyed on the source of every kernel it calls, as the Lagrangian's
 (vibroflow.continuum.fused, `sources_key`).
@@ -22,52 +29,34 @@ import numpy as np
 from ..boundary import partition_forces
 from ..constitutive import update_stress_points
 from ..fused import KERNEL_MODULES, sources_key, sum_chunk_rows
-from ..g2p import g2p
 from ..grid_update import frame_body, grid_update
-from ..p2g import p2g
-from .advection import advect, face_velocities, match_divergence
+from .advection import (face_velocities, face_velocities_serial, match_divergence, remap,
+                        remap_serial)
 from .lagrangian_step import end_density, fill_limit, material_fraction, void_first
+from .transfer import g2p_cells, p2g_cells
 from .wall import wall_forces
 
 #: status of `advance_kernel`
 OK, NEGATIVE_MASS, NON_FINITE = 0, 1, 2
 
 
-@nb.njit(cache=True)
-def _gather(act, x, v, C, mass, volume, stress, fext, cx, cv, cC, cmass, cvol, cstress,
-            cfext):
-    """The cells `act` (indices) of the per-cell arrays into the first act.size rows of the
-    compact ones."""
-    for j in range(act.shape[0]):
-        p = act[j]
-        cx[j, 0] = x[p, 0]
-        cx[j, 1] = x[p, 1]
-        cv[j, 0] = v[p, 0]
-        cv[j, 1] = v[p, 1]
-        for c in range(4):
-            cC[j, c] = C[p, c]
-            cstress[j, c] = stress[p, c]
-        cmass[j] = mass[p]
-        cvol[j] = volume[p]
-        cfext[j, 0] = fext[p, 0]
-        cfext[j, 1] = fext[p, 1]
+def _make_advance_kernel(sources: int, parallel: bool):
+    """The compiled loop, its cache keyed on `sources` (module docstring); numba's parallel
+    loops, or the same loops run serially (`parallel` False: the one-thread loop, module
+    docstring)."""
 
-
-def _make_advance_kernel(sources: int):
-    """The compiled loop, its cache keyed on `sources` (module docstring)."""
-
-    @nb.njit(cache=True, parallel=True)
-    def advance_kernel(nsteps, t, dt, mass0, mass_error_max, x, mass, v, C, L, stress, gamma_dot,
+    @nb.njit(cache=True, parallel=parallel)
+    def advance_kernel(nsteps, t, dt, mass0, mass_error_max, mass, v, C, L, stress, gamma_dot,
                        phase, frac, volume, density, fext, wall_on, wall_cells, normal, rho_c,
                        delta, xi, wfn, wft, wst, kn, kt, zeta, mu_w, part_on, mu_p, length,
-                       frame, x0, z0, dx, periodic, xmin, zmin, h, open_x, open_z, params,
-                       ux, uz, adv_rho, srx, srz, sqx, sqz, dm, dq, q, end_rho, act, cx, cv,
-                       cC, cL, cmass, cvol, cstress, cfext, cm, cmv, cf, gm, gmv, gf, gv,
-                       no_slip_rows):
-        """Up to nsteps steps of dt (s) from time t (s) of the state's arrays (solver.EulerianState,
-        flat per cell; q (N, NQ), end_rho (N,) work arrays), in place; the mesh's faces and the
-        remap's work arrays as solver.EulerianSystem's; act (N,) int64 and the compact c* arrays
-        (N, ...) work arrays for the cells holding material; cm (nchunk, nx, nz), cmv, cf
+                       frame, x0, z0, dx, periodic, h, open_x, open_z, params,
+                       tables, ux, uz, work, q, end_rho, act,
+                       cm, cmv, cf, gm, gmv, gf, gv, no_slip_rows):
+        """Up to nsteps steps of dt (s) from time t (s) of the state's arrays
+        (solver.EulerianState, flat per cell; q (NQ, N), end_rho (N,) work arrays), in place;
+        the mesh's faces, its weight tables (transfer.WeightTables as a tuple (cx, cz, fx, fz))
+        and the remap's work arrays (advection.remap_work) as solver.EulerianSystem's; act (N,)
+        int64 a work array for the cells holding material; cm (nchunk, nx, nz), cmv, cf
         (nchunk, nx, nz, 2) per-chunk scatter buffers; no_slip_rows: the grid's lowest node rows
         held still after every grid update (solver.EulerianSystem.no_slip_below, a rough floor;
         the Lagrangian loop's), 0 for none.
@@ -75,16 +64,17 @@ def _make_advance_kernel(sources: int):
         Returns (steps done, t, status, lowest cell mass kg/m, largest |M - M0| / M0 so far):
         status OK, NEGATIVE_MASS (a cell lost more mass than it held) or NON_FINITE (a velocity),
         found at the end of the last step made."""
-        _ = sources
+        _ = (sources, parallel)
         n = mass.shape[0]
+        tcx, tcz = tables[0], tables[1]
         ncx = open_z.shape[0]
         ncz = open_x.shape[1]
-        nq = q.shape[1]
+        nq = q.shape[0]
         nchunk = cm.shape[0]
         nx = gm.shape[0]
         mtol = -1e-9 * rho_c * h * h
         m2 = mass.reshape((ncx, ncz))
-        q3 = q.reshape((ncx, ncz, nq))
+        q3 = q.reshape((nq, ncx, ncz))
         nblk = (n + 1023) // 1024
         for s in range(nsteps):
             # lagrangian_step.lagrangian_step: forces, the cells holding material to the nodes
@@ -100,16 +90,14 @@ def _make_advance_kernel(sources: int):
                 if mass[p] > 0.0:
                     act[na] = p
                     na += 1
-            _gather(act[:na], x, v, C, mass, volume, stress, fext, cx, cv, cC, cmass, cvol,
-                    cstress, cfext)
             for c in nb.prange(nchunk):
                 a = (c * na) // nchunk
                 b = ((c + 1) * na) // nchunk
                 cm[c] = 0.0
                 cmv[c] = 0.0
                 cf[c] = 0.0
-                p2g(cx[a:b], cv[a:b], cC[a:b], cmass[a:b], cvol[a:b], cstress[a:b], cfext[a:b],
-                    x0, z0, dx, periodic, cm[c], cmv[c], cf[c])
+                p2g_cells(act[a:b], ncz, tcx, tcz, v, C, mass, volume, stress, fext, dx,
+                          periodic, cm[c], cmv[c], cf[c])
             for i in nb.prange(nx):
                 sum_chunk_rows(i, i + 1, cm, cmv, cf, gm, gmv, gf)
             a0x, a0z, om, al, pvx, pvz = frame_body(frame, t + 0.5 * dt)
@@ -119,17 +107,11 @@ def _make_advance_kernel(sources: int):
             for c in nb.prange(nchunk):
                 a = (c * na) // nchunk
                 b = ((c + 1) * na) // nchunk
-                # cx: a copy, the cells stay put
-                g2p(cx[a:b], cv[a:b], cC[a:b], cL[a:b], gv, x0, z0, dx, dt, periodic, gm, gmv,
-                    0.0)
-            for j in range(na):
-                p = act[j]
-                v[p, 0] = cv[j, 0]
-                v[p, 1] = cv[j, 1]
-                for c in range(4):
-                    C[p, c] = cC[j, c]
-                    L[p, c] = cL[j, c]
-            face_velocities(gv, x0, z0, dx, periodic, xmin, zmin, h, open_x, open_z, m2, ux, uz)
+                g2p_cells(act[a:b], ncz, tcx, tcz, v, C, L, gv, dx, periodic)
+            if parallel:
+                face_velocities(gv, tables, periodic, open_x, open_z, m2, ux, uz)
+            else:
+                face_velocities_serial(gv, tables, periodic, open_x, open_z, m2, ux, uz)
             match_divergence(L, ux, uz, h, periodic)
             void_first(L, frac, dt)
             end_density(density, L, dt, end_rho)
@@ -140,22 +122,24 @@ def _make_advance_kernel(sources: int):
                                      gamma_dot[a:b], phase[a:b])
             # solver.step: the remap of mass and of the fields it carries
             for p in range(n):
-                q[p, 0] = v[p, 0]
-                q[p, 1] = v[p, 1]
+                q[0, p] = v[p, 0]
+                q[1, p] = v[p, 1]
                 for c in range(4):
-                    q[p, 2 + c] = C[p, c]
-                    q[p, 6 + c] = stress[p, c]
-                q[p, 10] = end_rho[p]
-            lowest = advect(m2, q3, ux, uz, h, dt, open_x, open_z, periodic, adv_rho, srx, srz,
-                            sqx, sqz, dm, dq)
+                    q[2 + c, p] = C[p, c]
+                    q[6 + c, p] = stress[p, c]
+                q[10, p] = end_rho[p]
+            if parallel:
+                lowest = remap(m2, q3, ux, uz, h, dt, open_x, open_z, periodic, work)
+            else:
+                lowest = remap_serial(m2, q3, ux, uz, h, dt, open_x, open_z, periodic, work)
             finite = True
             for p in range(n):
-                v[p, 0] = q[p, 0]
-                v[p, 1] = q[p, 1]
+                v[p, 0] = q[0, p]
+                v[p, 1] = q[1, p]
                 for c in range(4):
-                    C[p, c] = q[p, 2 + c]
-                    stress[p, c] = q[p, 6 + c]
-                density[p] = q[p, 10]
+                    C[p, c] = q[2 + c, p]
+                    stress[p, c] = q[6 + c, p]
+                density[p] = q[10, p]
                 if not (np.isfinite(v[p, 0]) and np.isfinite(v[p, 1])):
                     finite = False
             fill_limit(mass, density, h)
@@ -173,6 +157,9 @@ def _make_advance_kernel(sources: int):
     return advance_kernel
 
 
-advance_kernel = _make_advance_kernel(sources_key(
+_SOURCES = sources_key(
     *KERNEL_MODULES, "vibroflow.continuum.fused", "vibroflow.continuum.eulerian.advection",
-    "vibroflow.continuum.eulerian.lagrangian_step", "vibroflow.continuum.eulerian.wall"))
+    "vibroflow.continuum.eulerian.lagrangian_step", "vibroflow.continuum.eulerian.transfer",
+    "vibroflow.continuum.eulerian.wall")
+advance_kernel = _make_advance_kernel(_SOURCES, True)
+advance_kernel_serial = _make_advance_kernel(_SOURCES, False)

@@ -42,6 +42,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numba as nb
 import numpy as np
 
 from vibroflow.errors import InputError
@@ -50,8 +51,10 @@ from ..constitutive import ContinuumMaterial
 from ..grid_update import LabFrame
 from ..mpm import ContinuumBlowUp
 from . import fused
+from .advection import remap_work
 from .lagrangian_step import fill_limit, material_fraction
 from .mesh import EulerianMesh
+from .transfer import WeightTables
 from .wall import MeshWall, empty_history
 
 #: number of intensive fields transported with the mass: v (2), C (4), stress (4), density
@@ -95,17 +98,18 @@ class EulerianSystem:
         self.wall_cells = np.nonzero(m.wall)[0].astype(np.int64)
         self.ux = np.zeros((m.ncx + 1, m.ncz))
         self.uz = np.zeros((m.ncx, m.ncz + 1))
-        s2 = (m.ncx, m.ncz)
-        self.adv = (np.zeros(s2), np.zeros(s2), np.zeros(s2), np.zeros(s2 + (NQ,)),
-                    np.zeros(s2 + (NQ,)), np.zeros(s2), np.zeros(s2 + (NQ,)))
-        self.q = np.zeros((m.n, NQ))
-        # fused.py's work arrays: the end-of-step density, the cells holding material and
-        # their compact copies, the per-chunk scatter buffers
+        # the remap's work arrays and its fields, one after the other (advection.remap)
+        self.remap_work = remap_work(m.ncx, m.ncz, NQ)
+        self.q = np.zeros((NQ, m.n))
+        # the B-spline weights of the fixed cell centres and face midpoints (transfer.py), as
+        # the tuple the compiled loop takes
+        t = WeightTables.of_mesh(m, self.x)
+        self.tables = (t.cx, t.cz, t.fx, t.fz)
+        # fused.py's work arrays: the end-of-step density, the cells holding material, the
+        # per-chunk scatter buffers
         n = m.n
         self.end_rho = np.zeros(n)
-        self.compact = (np.zeros(n, np.int64), np.zeros((n, 2)), np.zeros((n, 2)),
-                        np.zeros((n, 4)), np.zeros((n, 4)), np.zeros(n), np.zeros(n),
-                        np.zeros((n, 4)), np.zeros((n, 2)))
+        self.active = np.zeros(n, np.int64)
         g = m.grid
         self.chunk_work = (np.zeros((self.chunks, g.nx, g.nz)),
                            np.zeros((self.chunks, g.nx, g.nz, 2)),
@@ -237,17 +241,20 @@ def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
     w = system.wall
     hist = state.wall
     pf = system.partitions
-    done, t, status, lowest, err_max = fused.advance_kernel(
-        n, state.t, system.dt, state.mass0, state.mass_error_max, system.x, state.mass,
+    # one thread: the loop without numba's parallel loops (their launches cost time even then)
+    kernel = fused.advance_kernel if nb.get_num_threads() > 1 else fused.advance_kernel_serial
+    done, t, status, lowest, err_max = kernel(
+        n, state.t, system.dt, state.mass0, state.mass_error_max, state.mass,
         state.v, state.C, state.L, state.stress, state.gamma_dot, state.phase, state.frac,
         state.volume, state.density, state.fext, w is not None, system.wall_cells, mesh.normal,
         mat.critical_density, hist["delta"], hist["xi"], hist["fn"], hist["ft"],
         hist["state"], *((w.stiffness, w.tangential_stiffness, w.damping_ratio, w.friction)
                          if w is not None else (0.0, 0.0, 0.0, 0.0)),
         pf is not None, *((pf.friction, pf.length) if pf is not None else (0.0, 1.0)),
-        system.frame.as_array(), g.x0, g.z0, g.dx, g.periodic, mesh.xmin, mesh.zmin, mesh.h,
-        mesh.open_x, mesh.open_z, system.params, system.ux, system.uz, *system.adv, system.q,
-        system.end_rho, *system.compact, *system.chunk_work, *system.work, system.no_slip_rows)
+        system.frame.as_array(), g.x0, g.z0, g.dx, g.periodic, mesh.h, mesh.open_x,
+        mesh.open_z, system.params, system.tables, system.ux, system.uz, system.remap_work,
+        system.q,
+        system.end_rho, system.active, *system.chunk_work, *system.work, system.no_slip_rows)
     state.t = t
     state.step += done
     state.mass_error_max = err_max

@@ -1,0 +1,199 @@
+"""The Eulerian formulation's own kernels against the generic ones they stand in for.
+
+transfer.py's p2g_cells and g2p_cells read the B-spline weights of the fixed cell centres from
+tables made once a run; on any field they must give what the material point method's p2g and
+g2p (vibroflow.continuum.p2g, g2p) give for points at those centres.  The face velocities are
+the nodal field interpolated at the face midpoints, which g2p's velocity of a point there is.
+The remap (advection.remap, flat and field by field) must give the numbers of the scheme's
+face-by-face loop, written out plainly here (the module docstring of advection.py).  Random
+fields on a closed box and on a mesh periodic along x, whose wrapped faces have their own code.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from vibroflow.continuum.eulerian.advection import face_velocities, remap, remap_work
+from vibroflow.continuum.eulerian.mesh import EulerianMesh
+from vibroflow.continuum.eulerian.transfer import WeightTables, g2p_cells, p2g_cells
+from vibroflow.continuum.g2p import g2p
+from vibroflow.continuum.p2g import p2g
+
+NQ = 11
+
+
+def _mesh(periodic):
+    return EulerianMesh.box(0.0, 0.16, 0.0, 0.12, 0.02, periodic=periodic)
+
+
+def _fields(mesh, seed):
+    """Random cell fields; a third of the cells empty, as above a bed."""
+    rng = np.random.default_rng(seed)
+    n = mesh.n
+    mass = np.where(rng.random(n) > 0.33, rng.random(n), 0.0)
+    return (mass, rng.normal(size=(n, 2)), rng.normal(size=(n, 4)), rng.random(n) * 1e-4,
+            rng.normal(size=(n, 4)) * 1e3, rng.normal(size=(n, 2)))
+
+
+def _tables(mesh):
+    t = WeightTables.of_mesh(mesh, mesh.centres())
+    return (t.cx, t.cz, t.fx, t.fz)
+
+
+def _close(a, b):
+    scale = max(np.abs(b).max(), 1e-300)
+    assert np.abs(a - b).max() <= 1e-14 * scale
+
+
+@pytest.mark.parametrize("periodic", [False, True])
+def test_cells_to_nodes_and_back_as_the_generic_transfers(periodic):
+    mesh = _mesh(periodic)
+    g = mesh.grid
+    x = mesh.centres()
+    mass, v, C, volume, stress, fext = _fields(mesh, 1)
+    cells = np.flatnonzero(mass > 0)
+    tx, tz = _tables(mesh)[:2]
+    got, want = g.zeros()[:3], g.zeros()[:3]
+    p2g_cells(cells, mesh.ncz, tx, tz, v, C, mass, volume, stress, fext, g.dx, g.periodic, *got)
+    p2g(x[cells], v[cells], C[cells], mass[cells], volume[cells], stress[cells], fext[cells],
+        g.x0, g.z0, g.dx, g.periodic, *want)
+    for a, b in zip(got, want):
+        _close(a, b)
+    assert want[0].sum() == pytest.approx(mass.sum())  # the check is not vacuous
+    gv = np.random.default_rng(2).normal(size=(g.nx, g.nz, 2))
+    vg, Cg, Lg = np.zeros((mesh.n, 2)), np.zeros((mesh.n, 4)), np.zeros((mesh.n, 4))
+    g2p_cells(cells, mesh.ncz, tx, tz, vg, Cg, Lg, gv, g.dx, g.periodic)
+    xw, vw, Cw, Lw = x[cells].copy(), v[cells].copy(), C[cells].copy(), np.zeros((cells.size, 4))
+    g2p(xw, vw, Cw, Lw, gv, g.x0, g.z0, g.dx, 0.0, g.periodic, want[0], want[1], 0.0)
+    _close(vg[cells], vw)
+    _close(Cg[cells], Cw)
+    _close(Lg[cells], Lw)
+
+
+@pytest.mark.parametrize("periodic", [False, True])
+def test_face_velocities_are_the_nodal_field_at_the_face_midpoints(periodic):
+    mesh = _mesh(periodic)
+    g = mesh.grid
+    gv = np.random.default_rng(3).normal(size=(g.nx, g.nz, 2))
+    m = np.ones((mesh.ncx, mesh.ncz))  # every cell holds material: every open face counts
+    ux, uz = np.zeros(mesh.open_x.shape), np.zeros(mesh.open_z.shape)
+    face_velocities(gv, _tables(mesh), g.periodic, mesh.open_x, mesh.open_z, m, ux, uz)
+
+    def at(xs, zs, comp):
+        pts = np.stack(np.broadcast_arrays(xs, zs), axis=-1).reshape(-1, 2).copy()
+        v = np.zeros_like(pts)
+        n = len(pts)
+        g2p(pts, v, np.zeros((n, 4)), np.zeros((n, 4)), gv, g.x0, g.z0, g.dx, 0.0, g.periodic,
+            np.zeros((g.nx, g.nz)), np.zeros((g.nx, g.nz, 2)), 0.0)
+        return v[:, comp].reshape(np.broadcast_shapes(np.shape(xs), np.shape(zs)))
+
+    h = mesh.h
+    xf = mesh.xmin + np.arange(mesh.ncx + 1)[:, None] * h
+    zc = mesh.zmin + (np.arange(mesh.ncz)[None, :] + 0.5) * h
+    want_x = np.where(mesh.open_x, at(xf % (g.nx * g.dx) if periodic else xf, zc, 0), 0.0)
+    xc = mesh.xmin + (np.arange(mesh.ncx)[:, None] + 0.5) * h
+    zf = mesh.zmin + np.arange(mesh.ncz + 1)[None, :] * h
+    want_z = np.where(mesh.open_z, at(xc, zf, 1), 0.0)
+    _close(ux, want_x)
+    _close(uz, want_z)
+    assert np.abs(ux).max() > 0 and np.abs(uz).max() > 0
+
+
+def _mc(a, b):
+    """The monotonised-central limited slope of the one-sided differences a, b."""
+    if a * b <= 0.0:
+        return 0.0
+    return math.copysign(min(abs(0.5 * (a + b)), 2.0 * min(abs(a), abs(b))), a + b)
+
+
+def _remap_face_by_face(m, q, ux, uz, h, dt, open_x, open_z, periodic):
+    """The scheme face by face (advection.py's module docstring), q (ncx, ncz, nq)."""
+    ncx, ncz, nq = q.shape
+    rho = m / (h * h)
+    rho_empty = 1e-12 * rho.max()
+    m_empty = rho_empty * h * h
+    srx, srz = np.zeros_like(rho), np.zeros_like(rho)
+    sqx, sqz = np.zeros_like(q), np.zeros_like(q)
+    for i in range(ncx):
+        il, ir = ((i - 1) % ncx, (i + 1) % ncx) if periodic else (i - 1, i + 1)
+        for k in range(ncz):
+            if rho[i, k] <= 0.0:
+                continue
+            okl, okr, okd, oku = open_x[i, k], open_x[i + 1, k], open_z[i, k], open_z[i, k + 1]
+            srx[i, k] = _mc(rho[i, k] - rho[il, k] if okl else 0.0,
+                            rho[ir, k] - rho[i, k] if okr else 0.0)
+            srz[i, k] = _mc(rho[i, k] - rho[i, k - 1] if okd else 0.0,
+                            rho[i, k + 1] - rho[i, k] if oku else 0.0)
+            okl = okl and rho[il, k] > rho_empty
+            okr = okr and rho[ir, k] > rho_empty
+            okd = okd and rho[i, k - 1] > rho_empty
+            oku = oku and rho[i, k + 1] > rho_empty
+            for j in range(nq):
+                sqx[i, k, j] = _mc(q[i, k, j] - q[il, k, j] if okl else 0.0,
+                                   q[ir, k, j] - q[i, k, j] if okr else 0.0)
+                sqz[i, k, j] = _mc(q[i, k, j] - q[i, k - 1, j] if okd else 0.0,
+                                   q[i, k + 1, j] - q[i, k, j] if oku else 0.0)
+    dm, dq = np.zeros_like(m), np.zeros_like(q)
+
+    def flux(u, lo, hi, r, sr, sq):
+        if u == 0.0:
+            return
+        c = abs(u) * dt / h
+        up, sgn = (lo, 1.0) if u > 0.0 else (hi, -1.0)
+        if r[up] <= 0.0:
+            return
+        F = u * dt * h * (r[up] + sgn * 0.5 * (1.0 - c) * sr[up])
+        dm[lo] -= F
+        dm[hi] += F
+        for j in range(nq):
+            qf = q[up + (j,)] + sgn * 0.5 * (1.0 - c) * sq[up + (j,)]
+            dq[lo + (j,)] -= F * qf
+            dq[hi + (j,)] += F * qf
+
+    for i in range(0 if periodic else 1, ncx):
+        for k in range(ncz):
+            flux(ux[i, k], ((i - 1) % ncx, k), (i, k), rho, srx, sqx)
+    for i in range(ncx):
+        for k in range(1, ncz):
+            flux(uz[i, k], (i, k - 1), (i, k), rho, srz, sqz)
+    lowest = np.inf
+    for i in range(ncx):
+        for k in range(ncz):
+            mo, mn = m[i, k], m[i, k] + dm[i, k]
+            lowest = min(lowest, mn)
+            if mn > m_empty and mo > m_empty:
+                q[i, k] = (mo * q[i, k] + dq[i, k]) * (1.0 / mn)
+            elif mn > m_empty:
+                q[i, k] = dq[i, k] * (1.0 / dm[i, k])
+            else:
+                q[i, k] = 0.0
+            m[i, k] = mn
+    return lowest
+
+
+@pytest.mark.parametrize("periodic", [False, True])
+def test_remap_gives_the_face_by_face_numbers(periodic):
+    mesh = _mesh(periodic)
+    rng = np.random.default_rng(4)
+    s2 = (mesh.ncx, mesh.ncz)
+    h = mesh.h
+    m = np.where(rng.random(s2) > 0.3, rng.random(s2) * 4000 * h * h, 0.0)
+    m[:, -2:] = 0.0  # an empty top, as above a bed
+    q = rng.normal(size=s2 + (NQ,)) * (m > 0)[..., None]
+    ux = np.where(mesh.open_x & (rng.random(mesh.open_x.shape) > 0.2),
+                  rng.normal(size=mesh.open_x.shape) * 0.3, 0.0)
+    uz = np.where(mesh.open_z, rng.normal(size=mesh.open_z.shape) * 0.3, 0.0)
+    work = remap_work(mesh.ncx, mesh.ncz, NQ)
+    m_got, q_got = m.copy(), np.ascontiguousarray(np.moveaxis(q, 2, 0))
+    m_want, q_want = m.copy(), q.copy()
+    for _ in range(3):
+        low = remap(m_got, q_got, ux, uz, h, 2e-3, mesh.open_x, mesh.open_z, periodic, work)
+        low_want = _remap_face_by_face(m_want, q_want, ux, uz, h, 2e-3, mesh.open_x,
+                                       mesh.open_z, periodic)
+        assert low == low_want
+    np.testing.assert_array_equal(m_got, m_want)
+    np.testing.assert_array_equal(np.moveaxis(q_got, 0, 2), q_want)
+    assert m_got.sum() == pytest.approx(m.sum(), rel=1e-13)
+    assert np.abs(m_got - m).max() > 1e-3 * m.max()  # the material moved

@@ -1,0 +1,218 @@
+"""Cells to nodes and back with the B-spline weights of the fixed mesh, computed once a run.
+
+The Eulerian mesh never moves on the solver's grid (mesh.py), so the quadratic B-spline weights
+of its cell centres and face midpoints are constants of the run; the generic transfers
+(vibroflow.continuum.p2g, g2p) recompute them for every point and every step, which was a
+third of their time.  A cell (i, k) is centred at (xc_i, zc_k), so its weights are the product
+of a weight of row i and one of column k: four one-dimensional tables (`WeightTables`: cell
+centres and face midpoints along x and along z, a few hundred numbers) hold them all.
+
+The kernels here are p2g.p2g and g2p.g2p on the cells holding material, the weights read from
+the tables instead of computed, every other operation written as there and in the same order,
+so they give the generic kernels' numbers bit for bit (tests/test_eulerian_kernels.py); they
+read and write the per-cell arrays through the cells' indices, so the cells' fields need not be
+copied into compact arrays first.  The cells stay put: no point advection, no FLIP blend (the
+Eulerian's g2p is APIC), plane strain.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+from ..grid import bspline_weights
+
+#: columns of a weight table's row: the base node (an integer stored as a float), fx, the
+#: three weights and their three derivatives (1/m), as grid.bspline_weights returns them
+T_BASE, T_FX, T_W0, T_W1, T_W2, T_G0, T_G1, T_G2 = range(8)
+
+
+@nb.njit(cache=True)
+def weight_table(coords, x0, dx):
+    """(n, 8) rows of grid.bspline_weights (T_* columns) of the coordinates (n,) (m) on a grid
+    axis of origin x0 and spacing dx (m)."""
+    out = np.empty((coords.shape[0], 8))
+    for j in range(coords.shape[0]):
+        b, f, w0, w1, w2, g0, g1, g2 = bspline_weights(coords[j], x0, dx)
+        out[j, T_BASE] = b
+        out[j, T_FX] = f
+        out[j, T_W0] = w0
+        out[j, T_W1] = w1
+        out[j, T_W2] = w2
+        out[j, T_G0] = g0
+        out[j, T_G1] = g1
+        out[j, T_G2] = g2
+    return out
+
+
+@nb.njit(cache=True)
+def _face_coords(lo, h, n):
+    """lo + i h for i < n (m): the face positions as advection.face_velocities computed them,
+    the same floating-point operations, so the tables hold the same weights."""
+    out = np.empty(n)
+    for i in range(n):
+        out[i] = lo + i * h
+    return out
+
+
+@dataclass
+class WeightTables:
+    """B-spline weight tables (weight_table rows) of a mesh on its grid: cx (ncx, 8) of the
+    cell centres' x, cz (ncz, 8) of their z, fx (ncx + 1, 8) of the x-faces' x, fz (ncz + 1, 8)
+    of the z-faces' z."""
+
+    cx: np.ndarray
+    cz: np.ndarray
+    fx: np.ndarray
+    fz: np.ndarray
+
+    @classmethod
+    def of_mesh(cls, mesh, centres) -> "WeightTables":
+        """The tables of an EulerianMesh whose cell centres are `centres` (N, 2) (m, mesh.
+        centres(): cell (i, k)'s x is the same number for every k, its z for every i)."""
+        g = mesh.grid
+        c = centres.reshape(mesh.ncx, mesh.ncz, 2)
+        return cls(weight_table(np.ascontiguousarray(c[:, 0, 0]), g.x0, g.dx),
+                   weight_table(np.ascontiguousarray(c[0, :, 1]), g.z0, g.dx),
+                   weight_table(_face_coords(mesh.xmin, mesh.h, mesh.ncx + 1), g.x0, g.dx),
+                   weight_table(_face_coords(mesh.zmin, mesh.h, mesh.ncz + 1), g.z0, g.dx))
+
+
+@nb.njit(cache=True)
+def p2g_cells(cells, ncz, tx, tz, v, C, mass, volume, stress, fext, dx, periodic, gm, gmv, gf):
+    """p2g.p2g (plane strain) of the cells `cells` (indices p = i * ncz + k, in the order
+    given) with the weights of rows tx[i] and tz[k] (WeightTables.cx, cz): accumulates into
+    gm, gmv, gf (zero them first).  v (N, 2), C (N, 4), mass, volume (N,), stress (N, 4),
+    fext (N, 2) the per-cell arrays (units as p2g.p2g)."""
+    nxg = gm.shape[0]
+    for j in range(cells.shape[0]):
+        p = cells[j]
+        ic = p // ncz
+        kc = p - ic * ncz
+        bx = int(tx[ic, T_BASE])
+        fx = tx[ic, T_FX]
+        wx0 = tx[ic, T_W0]
+        wx1 = tx[ic, T_W1]
+        wx2 = tx[ic, T_W2]
+        gx0 = tx[ic, T_G0]
+        gx1 = tx[ic, T_G1]
+        gx2 = tx[ic, T_G2]
+        bz = int(tz[kc, T_BASE])
+        fz = tz[kc, T_FX]
+        wz0 = tz[kc, T_W0]
+        wz1 = tz[kc, T_W1]
+        wz2 = tz[kc, T_W2]
+        gz0 = tz[kc, T_G0]
+        gz1 = tz[kc, T_G1]
+        gz2 = tz[kc, T_G2]
+        # the cell's values in locals (p2g.p2g: the grid arrays written below might alias them)
+        m = mass[p]
+        vol = volume[p]
+        sxx = stress[p, 0]
+        szz = stress[p, 1]
+        sxz = stress[p, 2]
+        vx = v[p, 0]
+        vz = v[p, 1]
+        cxx = C[p, 0]
+        cxz = C[p, 1]
+        czx = C[p, 2]
+        czz = C[p, 3]
+        fex = fext[p, 0]
+        fez = fext[p, 1]
+        for a in range(3):
+            rx = (a - fx) * dx
+            wa = wx0 if a == 0 else (wx1 if a == 1 else wx2)
+            ga = gx0 if a == 0 else (gx1 if a == 1 else gx2)
+            i = bx + a
+            if periodic:
+                i = i % nxg
+            for b in range(3):
+                rz = (b - fz) * dx
+                wb = wz0 if b == 0 else (wz1 if b == 1 else wz2)
+                gb = gz0 if b == 0 else (gz1 if b == 1 else gz2)
+                w = wa * wb
+                gwx = ga * wb
+                gwz = wa * gb
+                k = bz + b
+                gm[i, k] += w * m
+                gmv[i, k, 0] += w * m * (vx + cxx * rx + cxz * rz)
+                gmv[i, k, 1] += w * m * (vz + czx * rx + czz * rz)
+                # p2g.p2g's w * (fex + hoop) with no hoop stress (plane strain): fex + 0.0
+                gf[i, k, 0] += -vol * (sxx * gwx + sxz * gwz) + w * (fex + 0.0)
+                gf[i, k, 1] += -vol * (sxz * gwx + szz * gwz) + w * fez
+
+
+@nb.njit(cache=True)
+def g2p_cells(cells, ncz, tx, tz, v, C, L, gv, dx, periodic):
+    """g2p.g2p (APIC, no FLIP blend, the points not moved) of the cells `cells` (indices) with
+    the weights of rows tx[i] and tz[k]: their v (N, 2) m/s, C and L (N, 4) 1/s written in
+    place from the grid velocity gv (nx, nz, 2) (m/s)."""
+    inv = 4.0 / (dx * dx)
+    nxg = gv.shape[0]
+    for j in range(cells.shape[0]):
+        p = cells[j]
+        ic = p // ncz
+        kc = p - ic * ncz
+        bx = int(tx[ic, T_BASE])
+        fx = tx[ic, T_FX]
+        wx0 = tx[ic, T_W0]
+        wx1 = tx[ic, T_W1]
+        wx2 = tx[ic, T_W2]
+        gx0 = tx[ic, T_G0]
+        gx1 = tx[ic, T_G1]
+        gx2 = tx[ic, T_G2]
+        bz = int(tz[kc, T_BASE])
+        fz = tz[kc, T_FX]
+        wz0 = tz[kc, T_W0]
+        wz1 = tz[kc, T_W1]
+        wz2 = tz[kc, T_W2]
+        gz0 = tz[kc, T_G0]
+        gz1 = tz[kc, T_G1]
+        gz2 = tz[kc, T_G2]
+        vx = 0.0
+        vz = 0.0
+        cxx = 0.0
+        cxz = 0.0
+        czx = 0.0
+        czz = 0.0
+        lxx = 0.0
+        lxz = 0.0
+        lzx = 0.0
+        lzz = 0.0
+        for a in range(3):
+            rx = (a - fx) * dx
+            wa = wx0 if a == 0 else (wx1 if a == 1 else wx2)
+            ga = gx0 if a == 0 else (gx1 if a == 1 else gx2)
+            i = bx + a
+            if periodic:
+                i = i % nxg
+            for b in range(3):
+                rz = (b - fz) * dx
+                wb = wz0 if b == 0 else (wz1 if b == 1 else wz2)
+                gb = gz0 if b == 0 else (gz1 if b == 1 else gz2)
+                w = wa * wb
+                gwx = ga * wb
+                gwz = wa * gb
+                ux = gv[i, bz + b, 0]
+                uz = gv[i, bz + b, 1]
+                vx += w * ux
+                vz += w * uz
+                cxx += w * ux * rx
+                cxz += w * ux * rz
+                czx += w * uz * rx
+                czz += w * uz * rz
+                lxx += ux * gwx
+                lxz += ux * gwz
+                lzx += uz * gwx
+                lzz += uz * gwz
+        v[p, 0] = vx
+        v[p, 1] = vz
+        C[p, 0] = inv * cxx
+        C[p, 1] = inv * cxz
+        C[p, 2] = inv * czx
+        C[p, 3] = inv * czz
+        L[p, 0] = lxx
+        L[p, 1] = lxz
+        L[p, 2] = lzx
+        L[p, 3] = lzz
