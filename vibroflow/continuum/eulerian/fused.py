@@ -27,12 +27,12 @@ import numba as nb
 import numpy as np
 
 from ..boundary import partition_forces
-from ..constitutive import update_stress_points
 from ..fused import KERNEL_MODULES, sources_key, sum_chunk_rows
 from ..grid_update import frame_body, grid_update
 from .advection import (face_velocities, face_velocities_serial, match_divergence, remap,
                         remap_serial)
-from .lagrangian_step import end_density, fill_limit, material_fraction, void_first
+from .lagrangian_step import (end_density, fill_limit, material_fraction,
+                              update_stress_cells, void_first)
 from .transfer import g2p_cells, p2g_cells
 from .wall import wall_forces
 
@@ -75,7 +75,6 @@ def _make_advance_kernel(sources: int, parallel: bool):
         mtol = -1e-9 * rho_c * h * h
         m2 = mass.reshape((ncx, ncz))
         q3 = q.reshape((nq, ncx, ncz))
-        nblk = (n + 1023) // 1024
         for s in range(nsteps):
             # lagrangian_step.lagrangian_step: forces, the cells holding material to the nodes
             material_fraction(mass, density, h, frac, volume)
@@ -115,11 +114,9 @@ def _make_advance_kernel(sources: int, parallel: bool):
             match_divergence(L, ux, uz, h, periodic)
             void_first(L, frac, dt)
             end_density(density, L, dt, end_rho)
-            for blk in nb.prange(nblk):
-                a = blk * 1024
-                b = min(n, a + 1024)
-                update_stress_points(stress[a:b], L[a:b], end_rho[a:b], dt, params,
-                                     gamma_dot[a:b], phase[a:b])
+            for c in nb.prange(nchunk):
+                update_stress_cells((c * n) // nchunk, ((c + 1) * n) // nchunk, stress, L,
+                                    end_rho, dt, params, gamma_dot, phase)
             # solver.step: the remap of mass and of the fields it carries
             for p in range(n):
                 q[0, p] = v[p, 0]

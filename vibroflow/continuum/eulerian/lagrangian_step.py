@@ -28,6 +28,8 @@ from __future__ import annotations
 
 import numba as nb
 
+from ..constitutive import P_RHO_C, update_stress_points
+
 
 @nb.njit(cache=True)
 def material_fraction(mass, density, h, frac, volume):
@@ -89,3 +91,29 @@ def fill_limit(mass, density, h):
         full = mass[p] / area
         if mass[p] > 0.0 and 0.0 < density[p] < full:
             density[p] = full
+
+
+@nb.njit(cache=True)
+def update_stress_cells(a, b, stress, L, density, dt, params, gamma_dot, state):
+    """constitutive.update_stress_points (the arguments as there) on the cells a:b, with the
+    cells whose end-of-step density is below the critical one (the empty cells, density 0, and
+    the disconnected ones) given that kernel's result for them directly: stress 0, plastic
+    rate 0, state 0 (constitutive.return_map's first branch, which discards the elastic
+    predictor's trial stress).  A third of tub47's cells are empty at any time; the others
+    go to the shared kernel in runs of consecutive cells."""
+    rho_c = params[P_RHO_C]
+    p = a
+    while p < b:
+        if density[p] < rho_c:
+            for c in range(4):
+                stress[p, c] = 0.0
+            gamma_dot[p] = 0.0
+            state[p] = 0
+            p += 1
+            continue
+        e = p + 1
+        while e < b and not density[e] < rho_c:
+            e += 1
+        update_stress_points(stress[p:e], L[p:e], density[p:e], dt, params, gamma_dot[p:e],
+                             state[p:e])
+        p = e
