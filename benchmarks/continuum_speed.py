@@ -18,9 +18,10 @@ indicative.
 
 --kernels: one thread, in this process, on the settled bed: microseconds per call of each kernel
 of a step (the Lagrangian's boundaries, p2g, grid update, g2p, volume and stress; the Eulerian's
-p2g and g2p over the cells holding material, face velocities, remap) and of a whole step made
-by the compiled loop (mpm.advance / eulerian.solver.advance), so the step's overhead beyond its
-kernels shows.
+material fraction, wall, partitions, p2g over the cells holding material, the chunk sums and
+grid update, g2p, face velocities, stress update, remap) and of a whole step made by the
+compiled loop (mpm.advance / eulerian.solver.advance), so the step's overhead beyond its
+kernels shows.  A kernel timed from Python pays its call (~1 us with these many arguments).
 
 --dem-dir: a `vibroflow dem` folder (or a study's dem/) of the same case: its summary.json's
 wall_time_s and bulk_velocity.csv.  --calibration: a calibration.toml (default: the DEM
@@ -162,10 +163,10 @@ def kernels(a) -> dict:
         if method == "lagrangian":
             from vibroflow.continuum.boundary import partition_forces, u_wall_forces
             from vibroflow.continuum.constitutive import update_stress_points
-            from vibroflow.continuum.grid_update import grid_update
-            from vibroflow.continuum.plasticity import update_volume
             from vibroflow.continuum.g2p import g2p
+            from vibroflow.continuum.grid_update import grid_update
             from vibroflow.continuum.p2g import p2g
+            from vibroflow.continuum.plasticity import update_volume
 
             g = system.grid
             gm, gmv, gf, gv = system.work
@@ -249,7 +250,7 @@ def kernels(a) -> dict:
             s2 = (mesh.ncx, mesh.ncz)
             t["remap"] = _per_call(lambda: remap(
                 m2.copy(), q.copy().reshape((NQ,) + s2), system.ux, system.uz, mesh.h,
-                system.dt, mesh.open_x, mesh.open_z, mesh.periodic, system.remap_work), 200)
+                system.dt, mesh.periodic, system.remap_work), 200)
         t["whole step (compiled loop, 20 steps a call)"] = _per_call(
             lambda: advance(system, state, 20), 10) / 20
         t["whole step (one step a call)"] = _per_call(lambda: advance(system, state, 1), 100)

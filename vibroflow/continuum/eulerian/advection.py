@@ -82,47 +82,43 @@ def _interp(gv, tx, ix, tz, kz, periodic, comp):
     return s
 
 
-def _make_face_velocities(parallel: bool):
-    """face_velocities, parallel over rows or serial (fused.py's loop on one thread)."""
-
-    @nb.njit(cache=True, parallel=parallel)
-    def face_velocities(gv, tables, periodic, open_x, open_z, m, ux, uz):
-        """Face-normal velocities (m/s): ux (ncx + 1, ncz) on the x-faces (x = xmin + i h),
-        uz (ncx, ncz + 1) on the z-faces, the node velocities gv (nx, nz, 2) interpolated at
-        the face midpoints with the mesh's weight tables (transfer.WeightTables as a tuple
-        (cx, cz, fx, fz)), on the open faces of a cell holding material (mass m (ncx, ncz)
-        kg/m > 0); 0 elsewhere.  A face between two empty cells carries no flux (`advect`
-        takes nothing from an empty upwind cell), and its divergence would only reach the
-        velocity gradient of empty cells, which carry no stress (density 0: disconnected) and
-        no weight in any output: skipping it spares about half the interpolations (the tub
-        above the bed is empty).  Each face on its own (parallel over rows)."""
-        _ = parallel
-        tcx, tcz, tfx, tfz = tables
-        ncx1, ncz = ux.shape
-        ncx = ncx1 - 1
-        for i in nb.prange(ncx1):
-            # the cells left and right of face i (wrapped on a periodic mesh; a closed face's
-            # neighbours are never read)
-            il = (i + ncx - 1) % ncx
-            ir = i % ncx
-            for k in range(ncz):
-                if open_x[i, k] and (m[il, k] > 0.0 or m[ir, k] > 0.0):
-                    ux[i, k] = _interp(gv, tfx, i, tcz, k, periodic, 0)
-                else:
-                    ux[i, k] = 0.0
-        ncz1 = uz.shape[1]
-        for i in nb.prange(ncx):
-            for k in range(ncz1):
-                if open_z[i, k] and (m[i, k - 1] > 0.0 or m[i, k] > 0.0):
-                    uz[i, k] = _interp(gv, tcx, i, tfz, k, periodic, 1)
-                else:
-                    uz[i, k] = 0.0
-
-    return face_velocities
+@nb.njit(cache=True)
+def face_velocity_rows(i0, i1, gv, tables, periodic, open_x, open_z, m, ux, uz):
+    """Face-normal velocities (m/s) of rows i0:i1: ux (ncx + 1, ncz) on the x-faces
+    (x = xmin + i h), uz (ncx, ncz + 1) on the z-faces, the node velocities gv (nx, nz, 2)
+    interpolated at the face midpoints with the mesh's weight tables (transfer.WeightTables as
+    a tuple (cx, cz, fx, fz)), on the open faces of a cell holding material (mass m (ncx, ncz)
+    kg/m > 0); 0 elsewhere.  A face between two empty cells carries no flux (`remap` takes
+    nothing from an empty upwind cell), and its divergence would only reach the velocity
+    gradient of empty cells, which carry no stress (density 0: disconnected) and no weight in
+    any output: skipping it spares about half the interpolations (the tub above the bed is
+    empty).  Each face on its own, so rows may be shared out among threads (fused.py)."""
+    tcx, tcz, tfx, tfz = tables
+    ncx1, ncz = ux.shape
+    ncx = ncx1 - 1
+    for i in range(i0, i1):
+        # the cells left and right of face i (wrapped on a periodic mesh; a closed face's
+        # neighbours are never read)
+        il = (i + ncx - 1) % ncx
+        ir = i % ncx
+        for k in range(ncz):
+            if open_x[i, k] and (m[il, k] > 0.0 or m[ir, k] > 0.0):
+                ux[i, k] = _interp(gv, tfx, i, tcz, k, periodic, 0)
+            else:
+                ux[i, k] = 0.0
+        if i == ncx:
+            continue
+        for k in range(ncz + 1):
+            if open_z[i, k] and (m[i, k - 1] > 0.0 or m[i, k] > 0.0):
+                uz[i, k] = _interp(gv, tcx, i, tfz, k, periodic, 1)
+            else:
+                uz[i, k] = 0.0
 
 
-face_velocities = _make_face_velocities(True)
-face_velocities_serial = _make_face_velocities(False)
+@nb.njit(cache=True)
+def face_velocities(gv, tables, periodic, open_x, open_z, m, ux, uz):
+    """Every face's velocity (`face_velocity_rows`, the same arguments)."""
+    face_velocity_rows(0, ux.shape[0], gv, tables, periodic, open_x, open_z, m, ux, uz)
 
 
 @nb.njit(cache=True)
@@ -247,17 +243,17 @@ def _faces(u, r_lo, s_lo, r_hi, s_hi, h, dt, on, pos, fac, flux):
 
 
 @nb.njit(cache=True)
-def _prepare(m, ux, uz, h, dt, ncx, ncz, open_x, open_z, periodic, cells, masks, xf, xb, zf,
-             zb):
+def _prepare(m, ux, uz, h, dt, ncx, ncz, periodic, cells, masks, xf, xb, zf, zb):
     """Everything of a transport step that does not depend on the carried fields, on the flat
-    layout (above): cells = (rho, srx, srz, ...) the mass per area (kg/m^3) and its limited
-    slopes; masks = (ol, orr, od, ou, okl, okr, okd, oku): the cells' open faces and the
-    neighbours a field's slope may be taken against (an open face to a cell that is not
-    empty); per face, xf, zf = (c, F): the upwind reconstruction's factor sgn (1 - c) / 2 and
-    the mass flux F (kg/m, from the lower to the higher index), xb, zb = (on, pos): whether it
-    carries a flux and whether its upwind cell is the lower-index one.  Returns m_empty, the
-    mass (kg/m) at or below which a cell is empty."""
-    rho, srx, srz = cells[0], cells[1], cells[2]
+    layout (above): cells = (rho, srx, srz, _, _, uzc) the mass per area (kg/m^3), its limited
+    slopes and a work array; masks = (ol, orr, od, ou, okl, okr, okd, oku): the cells' open
+    faces (the mesh's, `remap_work`) and the neighbours a field's slope may be taken against
+    (an open face to a cell that is not empty); per face, xf, zf = (c, F): the upwind
+    reconstruction's factor sgn (1 - c) / 2 and the mass flux F (kg/m, from the lower to the
+    higher index), xb, zb = (on, pos): whether it carries a flux and whether its upwind cell is
+    the lower-index one.  Returns m_empty, the mass (kg/m) at or below which a cell is
+    empty."""
+    rho, srx, srz, uzc = cells[0], cells[1], cells[2], cells[5]
     ol, orr, od, ou, okl, okr, okd, oku = masks
     cx, fx = xf
     ax, px = xb
@@ -271,16 +267,19 @@ def _prepare(m, ux, uz, h, dt, ncx, ncz, open_x, open_z, periodic, cells, masks,
         if rho[p] > full:
             full = rho[p]
     rho_empty = EMPTY * full
-    for i in range(ncx):
+    # the neighbours left and right (views from 0, as in `_slopes`)
+    for i in (0, ncx - 1):
         il, ir = _x_neighbours(i, ncx, periodic)
         for k in range(ncz):
             p = i * ncz + k
-            ol[p] = open_x[i, k]
-            orr[p] = open_x[i + 1, k]
-            od[p] = open_z[i, k]
-            ou[p] = open_z[i, k + 1]
             okl[p] = ol[p] and rho[il * ncz + k] > rho_empty
             okr[p] = orr[p] and rho[ir * ncz + k] > rho_empty
+    w = n - 2 * ncz
+    ol_, or_, rl, rr = ol[ncz:ncz + w], orr[ncz:ncz + w], rho[:w], rho[2 * ncz:]
+    okl_, okr_ = okl[ncz:ncz + w], okr[ncz:ncz + w]
+    for p in range(w):
+        okl_[p] = ol_[p] and rl[p] > rho_empty
+        okr_[p] = or_[p] and rr[p] > rho_empty
     # the neighbours below and above (views from 0, as in `_slopes`)
     w = n - 1
     od_, ou_, rd, ru = od[1:], ou[:w], rho[:w], rho[1:]
@@ -310,16 +309,18 @@ def _prepare(m, ux, uz, h, dt, ncx, ncz, open_x, open_z, periodic, cells, masks,
     w = n - ncz
     _faces(ux[ncz:n], rho[:w], srx[:w], rho[ncz:], srx[ncz:], h, dt, ax[ncz:n], px[ncz:n],
            cx[ncz:n], fx[ncz:n])
-    # z-faces: below cell p, between cells p - 1 and p (the floor of a column is shut)
+    # z-faces: below cell p, between cells p - 1 and p, their velocities copied to that
+    # layout first (one flat pass, not one per column); the floor of a column is shut (u = 0)
+    for i in range(ncx):
+        for k in range(ncz):
+            uzc[i * ncz + k] = uz[i, k]
+    az[0] = False
+    fz[0] = 0.0
     az[n] = False
     fz[n] = 0.0
-    for i in range(ncx):
-        p = i * ncz
-        az[p] = False
-        fz[p] = 0.0
-        _faces(uz[i, 1:ncz], rho[p:p + ncz - 1], srz[p:p + ncz - 1], rho[p + 1:p + ncz],
-               srz[p + 1:p + ncz], h, dt, az[p + 1:p + ncz], pz[p + 1:p + ncz],
-               cz[p + 1:p + ncz], fz[p + 1:p + ncz])
+    w = n - 1
+    _faces(uzc[1:], rho[:w], srz[:w], rho[1:], srz[1:], h, dt, az[1:n], pz[1:n], cz[1:n],
+           fz[1:n])
     return rho_empty * area
 
 
@@ -383,11 +384,17 @@ def _renew(qj, dqj, m, mode, inv):
         qj[p] = _pick(mk == 1, a, _pick(mk == 2, b, 0.0))
 
 
-def remap_work(ncx: int, ncz: int, nq: int):
-    """The work arrays of `remap` on a mesh of ncx x ncz cells carrying nq fields."""
+def remap_work(open_x, open_z, nq: int):
+    """The work arrays of `remap` on a mesh with open faces open_x (ncx + 1, ncz), open_z
+    (ncx, ncz + 1) carrying nq fields, with each cell's open faces (left, right, down, up: the
+    mesh's constants)."""
+    ncx, ncz = open_z.shape[0], open_x.shape[1]
     n = ncx * ncz
     nf = (ncx + 1) * ncz
-    return (tuple(np.zeros(n) for _ in range(5)), tuple(np.zeros(n, bool) for _ in range(8)),
+    faces = (open_x[:-1].ravel(), open_x[1:].ravel(), open_z[:, :-1].ravel(),
+             open_z[:, 1:].ravel())
+    masks = tuple(np.array(f, bool) for f in faces) + tuple(np.zeros(n, bool) for _ in range(4))
+    return (tuple(np.zeros(n) for _ in range(6)), masks,
             (np.zeros(nf), np.zeros(nf)), (np.zeros(nf, bool), np.zeros(nf, bool)),
             (np.zeros(n + 1), np.zeros(n + 1)), (np.zeros(n + 1, bool), np.zeros(n + 1, bool)),
             np.zeros(n, np.int8), (np.zeros((nq, n)), np.zeros((nq, n))),
@@ -398,12 +405,13 @@ def _make_remap(parallel: bool):
     """remap, parallel over the carried fields or serial (fused.py's loop on one thread)."""
 
     @nb.njit(cache=True, parallel=parallel)
-    def remap(m, q, ux, uz, h, dt, open_x, open_z, periodic, work):
+    def remap(m, q, ux, uz, h, dt, periodic, work):
         """One transport step (module docstring), in place.  m (ncx, ncz) cell masses (kg/m);
         q (nq, ncx, ncz) intensive fields carried with the mass, field after field (the flat
         layout above); ux, uz face velocities (m/s) of face_velocities; h cell side (m); dt
-        (s); work: remap_work's arrays.  Returns the smallest cell mass after the step (kg/m;
-        negative means the Courant number was too large).
+        (s); work: remap_work's arrays (the mesh's open faces with them).  Returns the
+        smallest cell mass after the step (kg/m; negative means the Courant number was too
+        large).
 
         Parallel over the fields: each field's fluxes and new values are one thread's, so the
         numbers are the serial loop's, bit for bit, whatever the threads."""
@@ -415,8 +423,8 @@ def _make_remap(parallel: bool):
         mf = m.reshape(n)
         qf = q.reshape((nq, n))
         dm, inv = cells[3], cells[4]
-        m_empty = _prepare(mf, ux.reshape((ncx + 1) * ncz), uz, h, dt, ncx, ncz, open_x,
-                           open_z, periodic, cells, masks, xf, xb, zf, zb)
+        m_empty = _prepare(mf, ux.reshape((ncx + 1) * ncz), uz, h, dt, ncx, ncz, periodic,
+                           cells, masks, xf, xb, zf, zb)
         for j in nb.prange(nq + 1):
             if j == nq:
                 _combine(ncx, ncz, periodic, xb[0], xf[1], zb[0], zf[1], dm)
@@ -447,11 +455,12 @@ def advect(m, q, ux, uz, h, dt, open_x, open_z, periodic, work_rho, srx, srz, sq
     (ncx, ncz) and sqx, sqz, dq (ncx, ncz, nq) serve as remap_work's arrays of their sizes."""
     ncx, ncz, nq = q.shape
     n = ncx * ncz
-    w = remap_work(ncx, ncz, nq)
-    cells = (work_rho.reshape(n), srx.reshape(n), srz.reshape(n), dm.reshape(n), w[0][4])
+    w = remap_work(open_x, open_z, nq)
+    cells = (work_rho.reshape(n), srx.reshape(n), srz.reshape(n), dm.reshape(n), w[0][4],
+             w[0][5])
     work = (cells,) + w[1:7] + ((sqx.reshape(nq, n), sqz.reshape(nq, n)), w[8],
                                 dq.reshape(nq, n))
     qf = np.ascontiguousarray(np.moveaxis(q, 2, 0))
-    lowest = remap_serial(m, qf, ux, uz, h, dt, open_x, open_z, periodic, work)
+    lowest = remap_serial(m, qf, ux, uz, h, dt, periodic, work)
     q[...] = np.moveaxis(qf, 0, 2)
     return lowest

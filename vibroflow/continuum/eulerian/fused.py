@@ -9,10 +9,10 @@ Threads, as the Lagrangian step's (vibroflow.continuum.fused): the per-cell kern
 their own cells and the remap works field by field (advection.remap), so they give the serial
 numbers whatever the threads; the cells holding material are scattered to the nodes in `nchunk`
 fixed chunks of per-chunk buffers summed in a fixed order, so the run depends on the number of
-chunks, never on the number of threads (one chunk: the serial p2g's numbers).  On one thread
-the loop is compiled without numba's parallel loops (`advance_kernel_serial`, the same code):
-on tub47's ~1000 cells a parallel loop's launch, even with one thread, cost ~1.5 us, and a step
-has eight of them.
+chunks, never on the number of threads (one chunk: the serial p2g's numbers).  On one thread,
+and on a small mesh (solver.SERIAL_BELOW), the loop is compiled without numba's parallel loops
+(`advance_kernel_serial`, the same code): on tub47's ~1000 cells a parallel loop's launch,
+even with one thread, cost ~1.5 us, and a step has seven of them.
 
 The cells' B-spline weights on the grid are the mesh's constant tables (transfer.py), and the
 cells holding material are scattered and gathered in place through their indices (no compact
@@ -29,8 +29,7 @@ import numpy as np
 from ..boundary import partition_forces
 from ..fused import KERNEL_MODULES, sources_key, sum_chunk_rows
 from ..grid_update import frame_body, grid_update
-from .advection import (face_velocities, face_velocities_serial, match_divergence, remap,
-                        remap_serial)
+from .advection import face_velocity_rows, match_divergence, remap, remap_serial
 from .lagrangian_step import (end_density, fill_limit, material_fraction,
                               update_stress_cells, void_first)
 from .transfer import g2p_cells, p2g_cells
@@ -107,10 +106,10 @@ def _make_advance_kernel(sources: int, parallel: bool):
                 a = (c * na) // nchunk
                 b = ((c + 1) * na) // nchunk
                 g2p_cells(act[a:b], ncz, tcx, tcz, v, C, L, gv, dx, periodic)
-            if parallel:
-                face_velocities(gv, tables, periodic, open_x, open_z, m2, ux, uz)
-            else:
-                face_velocities_serial(gv, tables, periodic, open_x, open_z, m2, ux, uz)
+                # and the remap's face velocities, which need only the grid's velocities: in
+                # the same parallel loop, one launch fewer
+                face_velocity_rows((c * (ncx + 1)) // nchunk, ((c + 1) * (ncx + 1)) // nchunk,
+                                   gv, tables, periodic, open_x, open_z, m2, ux, uz)
             match_divergence(L, ux, uz, h, periodic)
             void_first(L, frac, dt)
             end_density(density, L, dt, end_rho)
@@ -126,9 +125,9 @@ def _make_advance_kernel(sources: int, parallel: bool):
                     q[6 + c, p] = stress[p, c]
                 q[10, p] = end_rho[p]
             if parallel:
-                lowest = remap(m2, q3, ux, uz, h, dt, open_x, open_z, periodic, work)
+                lowest = remap(m2, q3, ux, uz, h, dt, periodic, work)
             else:
-                lowest = remap_serial(m2, q3, ux, uz, h, dt, open_x, open_z, periodic, work)
+                lowest = remap_serial(m2, q3, ux, uz, h, dt, periodic, work)
             finite = True
             for p in range(n):
                 v[p, 0] = q[0, p]

@@ -99,7 +99,7 @@ def update_stress_cells(a, b, stress, L, density, dt, params, gamma_dot, state):
     cells whose end-of-step density is below the critical one (the empty cells, density 0, and
     the disconnected ones) given that kernel's result for them directly: stress 0, plastic
     rate 0, state 0 (constitutive.return_map's first branch, which discards the elastic
-    predictor's trial stress).  A third of tub47's cells are empty at any time; the others
+    predictor's trial stress).  A quarter of tub47's cells are empty at any time; the others
     go to the shared kernel in runs of consecutive cells."""
     rho_c = params[P_RHO_C]
     p = a

@@ -60,6 +60,14 @@ from .wall import MeshWall, empty_history
 #: number of intensive fields transported with the mass: v (2), C (4), stress (4), density
 NQ = 11
 
+#: meshes of fewer cells step on one thread whatever numba's thread count (the serial loop,
+#: fused.advance_kernel_serial, whose numbers are the parallel loop's).  Measured on tub47
+#: (1376 cells, ~150 us a step): a step holds seven parallel loops, each a launch and a
+#: barrier; two threads gained ~10 % on a quiet machine, and on the shared two-core machine,
+#: with another process busy, a barrier waited for the scheduler: the whole run took 17.0 s
+#: on two threads against 10.7 s on one, and single steps up to 40 ms
+SERIAL_BELOW = 10_000
+
 
 @dataclass
 class EulerianSystem:
@@ -72,7 +80,10 @@ class EulerianSystem:
     the Lagrangian formulation's (mpm.MPMSystem.no_slip_below; the no-slip base of Lagree,
     Staron & Popinet 2011).  The mesh's wall still carries the normal load; the nodes held
     still make the cells next to the floor stick to it, where the wall's Coulomb friction acts
-    only on the row of cells touching it."""
+    only on the row of cells touching it.
+
+    serial_below: a mesh of fewer cells steps on one thread (SERIAL_BELOW); chunks: the
+    cells' scatter chunks (fused.py), which alone fix the numbers."""
 
     mesh: EulerianMesh
     material: ContinuumMaterial
@@ -82,6 +93,7 @@ class EulerianSystem:
     partitions: object = None
     chunks: int = 2
     no_slip_below: float | None = None
+    serial_below: int = SERIAL_BELOW
 
     def __post_init__(self):
         if not self.dt > 0:
@@ -90,6 +102,8 @@ class EulerianSystem:
             self.mesh.grid.rows_at_or_below(self.no_slip_below)
         if not (isinstance(self.chunks, int) and self.chunks >= 1):
             raise InputError(f"chunks = {self.chunks!r}: must be an integer >= 1")
+        if not (isinstance(self.serial_below, int) and self.serial_below >= 0):
+            raise InputError(f"serial_below = {self.serial_below!r}: must be an integer >= 0")
         m = self.mesh
         self.params = self.material.as_array()
         self.x = m.centres()
@@ -99,7 +113,7 @@ class EulerianSystem:
         self.ux = np.zeros((m.ncx + 1, m.ncz))
         self.uz = np.zeros((m.ncx, m.ncz + 1))
         # the remap's work arrays and its fields, one after the other (advection.remap)
-        self.remap_work = remap_work(m.ncx, m.ncz, NQ)
+        self.remap_work = remap_work(m.open_x, m.open_z, NQ)
         self.q = np.zeros((NQ, m.n))
         # the B-spline weights of the fixed cell centres and face midpoints (transfer.py), as
         # the tuple the compiled loop takes
@@ -241,8 +255,10 @@ def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
     w = system.wall
     hist = state.wall
     pf = system.partitions
-    # one thread: the loop without numba's parallel loops (their launches cost time even then)
-    kernel = fused.advance_kernel if nb.get_num_threads() > 1 else fused.advance_kernel_serial
+    # the loop without numba's parallel loops on one thread (their launches cost time even
+    # then) and on a small mesh (SERIAL_BELOW)
+    parallel = nb.get_num_threads() > 1 and mesh.n >= system.serial_below
+    kernel = fused.advance_kernel if parallel else fused.advance_kernel_serial
     done, t, status, lowest, err_max = kernel(
         n, state.t, system.dt, state.mass0, state.mass_error_max, state.mass,
         state.v, state.C, state.L, state.stress, state.gamma_dot, state.phase, state.frac,
