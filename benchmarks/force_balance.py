@@ -62,6 +62,8 @@ def dem_balance(dem_dir: Path, per: int, radius: float) -> dict:
     """{name: (per,) mean total per sample} of the DEM run's sampled wall contacts."""
     import h5py
 
+    from vibroflow.dem.walls import WALL_U
+
     with h5py.File(dem_dir / "dem.h5", "r") as h:
         phase = h["snapshots/phase"][:]
         theta = h["snapshots/tub_pose"][:, 2]
@@ -76,7 +78,7 @@ def dem_balance(dem_dir: Path, per: int, radius: float) -> dict:
     k = k_snap[snap]
     th = theta[snap]
     fz_tub = -np.sin(th) * f_lab[:, 0] + np.cos(th) * f_lab[:, 2]
-    u = wall == 0  # vibroflow.dem.walls: 0 the U, 1 and 2 the partitions
+    u = wall == WALL_U  # the other slots of a tub run are the partitions
     reg = regions_of(pos[u, 0], pos[u, 2], radius)
     out = {name: by_phase(fn[u][reg == r], k[u][reg == r], per, n_by_phase)
            for r, name in enumerate(REGIONS)}

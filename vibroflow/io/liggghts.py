@@ -60,6 +60,7 @@ import numpy as np
 
 from vibroflow.analysis.summary import geometry_of
 from vibroflow.dem.laws import damping_ratio
+from vibroflow.dem.walls import WALL_PARTITION_HI, WALL_PARTITION_LO, WALL_U
 from vibroflow.errors import InputError
 from vibroflow.scenario.model import find_contact
 from vibroflow.io.stl import DEFAULT_MAX_SAGITTA, arc_segments, sagitta, write_tub_meshes
@@ -87,9 +88,6 @@ SETTLE_CHUNK = 0.01
 
 #: relative tolerance of |F_t| = mu |F_n| that marks a wall contact as sliding
 SLIDING_TOLERANCE = 1.0e-4
-
-#: wall slots of vibroflow.dem.walls
-WALL_U, WALL_PARTITION_LO, WALL_PARTITION_HI = 0, 1, 2
 
 
 # ----------------------------------------------------------------------------------------------
@@ -410,7 +408,6 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     dt = run.dt
     d = fill.diameter
     r = 0.5 * d
-    m = ball_mass(scenario)
     skin = run.skin * d
     R, rim, L = tub.radius, tub.rim_height, tub.length
     periodic = tub.periodic
