@@ -14,8 +14,8 @@ right wall carries the layer up more than down over a cycle (a vibratory conveyo
 this script shows by how much, and how much of it the continuum has.
 
 The continuum's sampled points are taken from the run's sampler (vibroflow.continuum.run
-.Samples, which keeps every point at every sample instant), by recording the sampler the run
-creates; the run itself is the ordinary run_lagrangian into a temporary folder.
+.Samples, which keeps every point at every sample instant; run_lagrangian's keep_samples); the
+run itself is the ordinary run_lagrangian into a temporary folder.
 """
 from __future__ import annotations
 
@@ -82,20 +82,11 @@ def main(argv=None) -> int:
         dem_phase0 = float(h["snapshots/phase"][0])
 
     samplers = []
-    init = R.Samples.__init__
-
-    def recording_init(self, *args, **kw):
-        init(self, *args, **kw)
-        samplers.append(self)
-
-    R.Samples.__init__ = recording_init
-    try:
-        cal = read_calibration(a.calibration or a.dem_dir / "calibration.toml")
-        with tempfile.TemporaryDirectory() as tmp:
-            R.run_lagrangian(sc, Path(tmp) / "lagrangian", calibration=cal,
-                             options=R.LagrangianOptions(settle_time=a.settle_time))
-    finally:
-        R.Samples.__init__ = init
+    cal = read_calibration(a.calibration or a.dem_dir / "calibration.toml")
+    with tempfile.TemporaryDirectory() as tmp:
+        R.run_lagrangian(sc, Path(tmp) / "lagrangian", calibration=cal,
+                         options=R.LagrangianOptions(settle_time=a.settle_time),
+                         keep_samples=samplers)
     smp = samplers[-1]
     times, _, _ = R.sample_times(sc)
     n = smp.j

@@ -525,7 +525,8 @@ def samples_source(scenario, samples: Samples, times: np.ndarray, radius: np.nda
 def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
                    options: LagrangianOptions | None = None, progress: bool = False,
                    vtk: bool = False, resume: bool = False,
-                   stop_after_steps: int | None = None) -> dict | None:
+                   stop_after_steps: int | None = None,
+                   keep_samples: list | None = None) -> dict | None:
     """Run the Lagrangian continuum of a tub scenario into out_dir (module docstring); returns
     the summary (also written to out_dir/summary.json with out_dir/bulk_velocity.csv).
 
@@ -542,7 +543,11 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
     options is an input error.  stop_after_steps: write a checkpoint and return None after that
     many vibration steps of this call (to split a run; go on with resume=True).  A fresh run
     first removes the folder's summary.json and bulk_velocity.csv, so a run killed before its
-    end never leaves results that look complete; summary.json is written last."""
+    end never leaves results that look complete; summary.json is written last.
+
+    keep_samples: a list that receives the run's `Samples` (every point at every sample
+    instant, the wall contacts) for an analysis beyond the summary's (benchmarks/wall_layer.py).
+    """
     if scenario.tub is None or scenario.fill is None:
         raise InputError("scenario: the continuum needs a tub-mode scenario (with [tub] and "
                          "[fill]), not explicit particles")
@@ -597,6 +602,8 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
         except ContinuumBlowUp:
             ckpt.unlink(missing_ok=True)  # a blown-up run has nothing to resume
             raise
+    if keep_samples is not None:
+        keep_samples.append(samples)
     if not done:
         return None
     wall_time = wall_before + time.perf_counter() - wall0
