@@ -120,6 +120,14 @@ def u_wall_forces(x, v, mass, volume, xi, fext, f_out, fn_out, ft_out, state_out
 
 
 @nb.njit(cache=True)
+def plane_motion(px0, pz0, vx, vz, ax, az, t):
+    """(px, pz, vx, vz) at time t (s) of a plane through (px0, pz0) (m) at t = 0 moving with
+    the velocity (vx, vz) + (ax, az) t (m/s): Plane.at, and the compiled step's (fused.py)."""
+    return (px0 + vx * t + 0.5 * ax * t * t, pz0 + vz * t + 0.5 * az * t * t, vx + ax * t,
+            vz + az * t)
+
+
+@nb.njit(cache=True)
 def plane_forces(x, v, mass, volume, xi, fext, f_out, fn_out, ft_out, state_out, px, pz, nx,
                  nz, wvx, wvz, kn, kt, zeta, mu, dt):
     """Add a plane wall's contact force (through (px, pz) m, unit normal (nx, nz) into the
@@ -249,10 +257,10 @@ class Plane(_Contact):
 
     def at(self, t: float):
         """Point (m) and velocity (m/s) of the plane at time t (s)."""
-        px = self.point[0] + self.velocity[0] * t + 0.5 * self.acceleration[0] * t * t
-        pz = self.point[1] + self.velocity[1] * t + 0.5 * self.acceleration[1] * t * t
-        return (px, pz), (self.velocity[0] + self.acceleration[0] * t,
-                          self.velocity[1] + self.acceleration[1] * t)
+        px, pz, wvx, wvz = plane_motion(self.point[0], self.point[1], self.velocity[0],
+                                        self.velocity[1], self.acceleration[0],
+                                        self.acceleration[1], t)
+        return (px, pz), (wvx, wvz)
 
     def packed(self) -> tuple[int, np.ndarray]:
         """(B_WALL, its WALL_FIELDS row) (module docstring)."""

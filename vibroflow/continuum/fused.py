@@ -39,7 +39,7 @@ import numpy as np
 
 from .boundary import (B_PARTITION, B_WALL, W_AX, W_AZ, W_KIND, W_KN, W_KT, W_MU, W_NX, W_NZ,
                        W_PX, W_PZ, W_RADIUS, W_VX, W_VZ, W_ZETA, WALL_U, partition_forces,
-                       plane_forces, u_wall_forces)
+                       plane_forces, plane_motion, u_wall_forces)
 from .g2p import g2p
 from .grid_update import frame_body, grid_update
 from .p2g import p2g
@@ -155,11 +155,8 @@ def _make_advance_kernel(sources: int):
                             wf[q, a:b], wfn[q, a:b], wft[q, a:b], wst[q, a:b], w[W_RADIUS],
                             w[W_KN], w[W_KT], w[W_ZETA], w[W_MU], dt)
                     else:
-                        # boundary.Plane.at(t)
-                        px = w[W_PX] + w[W_VX] * t + 0.5 * w[W_AX] * t * t
-                        pz = w[W_PZ] + w[W_VZ] * t + 0.5 * w[W_AZ] * t * t
-                        wvx = w[W_VX] + w[W_AX] * t
-                        wvz = w[W_VZ] + w[W_AZ] * t
+                        px, pz, wvx, wvz = plane_motion(w[W_PX], w[W_PZ], w[W_VX], w[W_VZ],
+                                                        w[W_AX], w[W_AZ], t)
                         deep[c, j] = plane_forces(
                             x[a:b], v[a:b], mass[a:b], volume[a:b], wxi[q, a:b], fext[a:b],
                             wf[q, a:b], wfn[q, a:b], wft[q, a:b], wst[q, a:b], px, pz, w[W_NX],
