@@ -1,8 +1,8 @@
 """The bed's force balance by phase of the cycle: what the tub wall and the partitions exert on
-the bed, DEM against the Lagrangian continuum (benchmarks/README.md, "Session 9").
+the bed, DEM against the continuum formulations (benchmarks/README.md, "Session 9").
 
     python benchmarks/force_balance.py --dem-dir runs/study-quick/dem [--calibration FILE]
-        [--skip-cycles 20] [--cycles 40] [--set NAME=VALUE ...]
+        [--methods lagrangian,eulerian] [--skip-cycles 20] [--cycles 40] [--set NAME=VALUE ...]
 
 Averaged over a cycle, the vertical forces on the bed balance its weight (the tub's mean
 acceleration is zero): the U wall's upward push plus the partitions' friction equals m g.  How
@@ -17,15 +17,16 @@ slice between the partitions, the DEM's unit):
 * the partitions' total vertical force (their friction: their normal force is horizontal).
 
 DEM: every ball-wall contact sampled in DIR/dem.h5 (wall_contacts: force in the lab frame,
-rotated into the tub's axes with the tub's angle at its snapshot).  Continuum: a Lagrangian run
-of the same scenario and calibration (vibroflow.continuum.run: make_system, settled_bed,
-settle), advanced one sampling interval at a time from the start of the vibration; after
---skip-cycles cycles, at every sample, the U wall's force on each point (the penalty law's last
-force, boundary.UWall's history) and the partitions' friction (boundary.partition_forces on the
-state) over the next --cycles cycles.
+rotated into the tub's axes with the tub's angle at its snapshot).  Continuum: a run of the same
+scenario and calibration, set up as vibroflow.continuum.run.run_lagrangian (or
+eulerian.run.run_eulerian) does, advanced one sampling interval at a time from the start of the
+vibration; after --skip-cycles cycles, at every sample, the U wall's force on each point (the
+penalty law's last force, boundary.UWall's history) or wall-layer cell (eulerian.wall: fn along
+the cell's inward normal n, ft along (n_z, -n_x)) and the partitions' friction
+(boundary.partition_forces on the state) over the next --cycles cycles.
 
---set NAME=VALUE changes the calibration (`section.key`, e.g. partitions.friction=0.05) or a
-LagrangianOptions field (`opt.NAME`, e.g. opt.cfl=0.3) for the continuum.
+--set NAME=VALUE changes the calibration (`section.key`, e.g. partitions.friction=0.05) or an
+options field (`opt.NAME`, e.g. opt.cfl=0.3) for the continuum.
 """
 from __future__ import annotations
 
@@ -87,6 +88,54 @@ def dem_balance(dem_dir: Path, per: int, radius: float) -> dict:
     return out
 
 
+def _sums(per):
+    return {name: np.zeros(per) for name in (*REGIONS, "U wall Fz", "partitions Fz")}
+
+
+def eulerian_balance(scenario, calibration, options, per: int, skip: int, cycles: int) -> dict:
+    """{name: (per,) mean per sample} of an Eulerian run (module docstring)."""
+    from vibroflow.analysis.summary import geometry_of
+    from vibroflow.continuum.boundary import partition_forces
+    from vibroflow.continuum.eulerian import run as E
+    from vibroflow.continuum.eulerian.solver import advance
+    from vibroflow.continuum.grid_update import TubFrame
+    from vibroflow.tub.motion import TubMotion
+
+    material = E.material_for(scenario, calibration, options)
+    gravity = (float(scenario.gravity[0]), float(scenario.gravity[2]))
+    system = E.make_system(scenario, material, calibration, options,
+                           TubFrame(TubMotion.of_scenario(scenario), gravity))
+    state, _ = E.settle(scenario, material, calibration, options)
+    state.t, state.step = 0.0, 0
+    geo = geometry_of(scenario)
+    length = geo.length
+    f = scenario.motion.frequency
+    steps = int(round(1.0 / (f * per) / system.dt))  # make_system's dt divides the interval
+    normal = system.mesh.normal
+    reg = regions_of(system.x[:, 0], system.x[:, 1], geo.radius)
+    sums = _sums(per)
+    count = np.zeros(per)
+    fext = np.zeros((state.n, 2))
+    for s in range((skip + cycles) * per):
+        advance(system, state, steps)
+        if s < skip * per:
+            continue
+        k = int(round(state.t * f * per)) % per
+        hist = state.wall
+        fn = hist["fn"] * length  # N/m of thickness -> N over the slice
+        ft = hist["ft"] * length
+        for r, name in enumerate(REGIONS):
+            sums[name][k] += fn[reg == r].sum()
+        sums["U wall Fz"][k] += (fn * normal[:, 1] - ft * normal[:, 0]).sum()
+        if system.partitions is not None:
+            fext[:] = 0.0
+            partition_forces(state.v, state.mass, state.volume, state.stress, fext,
+                             system.partitions.friction, length, system.dt)
+            sums["partitions Fz"][k] += fext[:, 1].sum() * length
+        count[k] += 1
+    return {name: v / np.maximum(count, 1) for name, v in sums.items()}
+
+
 def continuum_balance(scenario, calibration, options, per: int, skip: int, cycles: int) -> dict:
     """{name: (per,) mean per sample} of a Lagrangian run (module docstring)."""
     import vibroflow.continuum.run as R
@@ -108,7 +157,7 @@ def continuum_balance(scenario, calibration, options, per: int, skip: int, cycle
     f = scenario.motion.frequency
     steps = int(round(1.0 / (f * per) / system.dt))  # make_system's dt divides the interval
     mu_p = next((b.friction for b in system.boundaries if hasattr(b, "length")), None)
-    sums = {name: np.zeros(per) for name in (*REGIONS, "U wall Fz", "partitions Fz")}
+    sums = _sums(per)
     count = np.zeros(per)
     fext = np.zeros((state.n, 2))
     for s in range((skip + cycles) * per):
@@ -136,6 +185,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--dem-dir", required=True, type=Path)
     ap.add_argument("--calibration", type=Path)
+    ap.add_argument("--methods", default="lagrangian",
+                    help="comma-separated: lagrangian, eulerian")
     ap.add_argument("--skip-cycles", type=int, default=20)
     ap.add_argument("--cycles", type=int, default=40)
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
@@ -143,6 +194,7 @@ def main(argv=None) -> int:
 
     import vibroflow.continuum.run as R
     from vibroflow.calibration.calibrate import read_calibration
+    from vibroflow.continuum.eulerian.run import EulerianOptions
     from vibroflow.calibration.dem_result import DEMResult
 
     with DEMResult.open(a.dem_dir) as res:
@@ -158,16 +210,23 @@ def main(argv=None) -> int:
             calibration[section][key] = float(value)
     per = scenario.run.phases_per_cycle
     radius = scenario.tub.radius
-    dem = dem_balance(a.dem_dir, per, radius)
-    cont = continuum_balance(scenario, calibration, R.LagrangianOptions(**opts), per,
-                             a.skip_cycles, a.cycles)
+    results = {"DEM": dem_balance(a.dem_dir, per, radius)}
+    for method in a.methods.split(","):
+        if method == "lagrangian":
+            results["Lagrangian"] = continuum_balance(
+                scenario, calibration, R.LagrangianOptions(**opts), per, a.skip_cycles, a.cycles)
+        elif method == "eulerian":
+            results["Eulerian"] = eulerian_balance(
+                scenario, calibration, EulerianOptions(**opts), per, a.skip_cycles, a.cycles)
+        else:
+            ap.error(f"--methods: {method!r} is not lagrangian or eulerian")
     fill = scenario.fill
     weight = fill.count * np.pi * fill.diameter**3 / 6.0 * fill_density(scenario) * 9.81
     print(f"{scenario.case}: forces on the bed by phase of the cycle (N over the slice, tub "
           f"axes; the DEM's balls weigh {weight:.1f} N){' ' + ' '.join(a.set) if a.set else ''}")
     print(f"{'':>24} " + " ".join(f"{k}/{per}".rjust(7) for k in range(per)) + "     mean")
     for name in (*REGIONS, "U wall Fz", "partitions Fz"):
-        for label, r in (("DEM", dem), ("Lagrangian", cont)):
+        for label, r in results.items():
             row = r[name]
             print(f"{label:>10} {name:>13} " + " ".join(f"{x:7.1f}" for x in row)
                   + f"  {row.mean():7.1f}")
