@@ -40,7 +40,7 @@ import math
 import numba as nb
 import numpy as np
 
-from .transfer import T_BASE, T_W0, T_W1, T_W2
+from .transfer import table_row
 
 #: a cell with less mass than this fraction of a full cell is empty
 EMPTY = 1.0e-12
@@ -62,14 +62,8 @@ def _interp(gv, tx, ix, tz, kz, periodic, comp):
     """Component comp of the node velocities gv (nx, nz, 2) at the point whose B-spline
     weights are rows tx[ix] and tz[kz] of transfer.weight_table tables."""
     nxg = gv.shape[0]
-    bx = int(tx[ix, T_BASE])
-    wx0 = tx[ix, T_W0]
-    wx1 = tx[ix, T_W1]
-    wx2 = tx[ix, T_W2]
-    bz = int(tz[kz, T_BASE])
-    wz0 = tz[kz, T_W0]
-    wz1 = tz[kz, T_W1]
-    wz2 = tz[kz, T_W2]
+    bx, _, wx0, wx1, wx2, _, _, _ = table_row(tx, ix)
+    bz, _, wz0, wz1, wz2, _, _, _ = table_row(tz, kz)
     s = 0.0
     for a in range(3):
         wa = wx0 if a == 0 else (wx1 if a == 1 else wx2)

@@ -79,6 +79,14 @@ class WeightTables:
                    weight_table(_face_coords(mesh.zmin, mesh.h, mesh.ncz + 1), g.z0, g.dx))
 
 
+@nb.njit(cache=True, inline="always")
+def table_row(table, j):
+    """Row j of a weight_table as grid.bspline_weights returns it: (base node, fx, the three
+    weights, their three derivatives)."""
+    return (int(table[j, T_BASE]), table[j, T_FX], table[j, T_W0], table[j, T_W1],
+            table[j, T_W2], table[j, T_G0], table[j, T_G1], table[j, T_G2])
+
+
 @nb.njit(cache=True)
 def p2g_cells(cells, ncz, tx, tz, v, C, mass, volume, stress, fext, dx, periodic, gm, gmv, gf):
     """p2g.p2g (plane strain) of the cells `cells` (indices p = i * ncz + k, in the order
@@ -90,22 +98,8 @@ def p2g_cells(cells, ncz, tx, tz, v, C, mass, volume, stress, fext, dx, periodic
         p = cells[j]
         ic = p // ncz
         kc = p - ic * ncz
-        bx = int(tx[ic, T_BASE])
-        fx = tx[ic, T_FX]
-        wx0 = tx[ic, T_W0]
-        wx1 = tx[ic, T_W1]
-        wx2 = tx[ic, T_W2]
-        gx0 = tx[ic, T_G0]
-        gx1 = tx[ic, T_G1]
-        gx2 = tx[ic, T_G2]
-        bz = int(tz[kc, T_BASE])
-        fz = tz[kc, T_FX]
-        wz0 = tz[kc, T_W0]
-        wz1 = tz[kc, T_W1]
-        wz2 = tz[kc, T_W2]
-        gz0 = tz[kc, T_G0]
-        gz1 = tz[kc, T_G1]
-        gz2 = tz[kc, T_G2]
+        bx, fx, wx0, wx1, wx2, gx0, gx1, gx2 = table_row(tx, ic)
+        bz, fz, wz0, wz1, wz2, gz0, gz1, gz2 = table_row(tz, kc)
         # the cell's values in locals (p2g.p2g: the grid arrays written below might alias them)
         m = mass[p]
         vol = volume[p]
@@ -154,22 +148,8 @@ def g2p_cells(cells, ncz, tx, tz, v, C, L, gv, dx, periodic):
         p = cells[j]
         ic = p // ncz
         kc = p - ic * ncz
-        bx = int(tx[ic, T_BASE])
-        fx = tx[ic, T_FX]
-        wx0 = tx[ic, T_W0]
-        wx1 = tx[ic, T_W1]
-        wx2 = tx[ic, T_W2]
-        gx0 = tx[ic, T_G0]
-        gx1 = tx[ic, T_G1]
-        gx2 = tx[ic, T_G2]
-        bz = int(tz[kc, T_BASE])
-        fz = tz[kc, T_FX]
-        wz0 = tz[kc, T_W0]
-        wz1 = tz[kc, T_W1]
-        wz2 = tz[kc, T_W2]
-        gz0 = tz[kc, T_G0]
-        gz1 = tz[kc, T_G1]
-        gz2 = tz[kc, T_G2]
+        bx, fx, wx0, wx1, wx2, gx0, gx1, gx2 = table_row(tx, ic)
+        bz, fz, wz0, wz1, wz2, gz0, gz1, gz2 = table_row(tz, kc)
         vx = 0.0
         vz = 0.0
         cxx = 0.0
