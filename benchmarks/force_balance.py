@@ -88,14 +88,44 @@ def dem_balance(dem_dir: Path, per: int, radius: float) -> dict:
     return out
 
 
-def _sums(per):
-    return {name: np.zeros(per) for name in (*REGIONS, "U wall Fz", "partitions Fz")}
+def phase_means(scenario, system, state, advance, wall_of, mu_p, per: int, skip: int,
+                cycles: int) -> dict:
+    """{name: (per,) mean per sample} of a continuum run from the start of the vibration
+    (module docstring): `advance(system, state, n)` steps it; `wall_of(state)` gives the tub
+    frame positions (N, 2) m of its points or cells, their wall normal force and the wall
+    force's z component (N,) in N/m of thickness; mu_p the partitions' friction (None: no
+    partitions)."""
+    from vibroflow.analysis.summary import geometry_of
+    from vibroflow.continuum.boundary import partition_forces
+
+    geo = geometry_of(scenario)
+    length = geo.length
+    f = scenario.motion.frequency
+    steps = int(round(1.0 / (f * per) / system.dt))  # make_system's dt divides the interval
+    sums = {name: np.zeros(per) for name in (*REGIONS, "U wall Fz", "partitions Fz")}
+    count = np.zeros(per)
+    fext = np.zeros((state.n, 2))
+    for s in range((skip + cycles) * per):
+        advance(system, state, steps)
+        if s < skip * per:
+            continue
+        k = int(round(state.t * f * per)) % per
+        x, fn, fz = wall_of(state)
+        reg = regions_of(x[:, 0], x[:, 1], geo.radius)
+        for r, name in enumerate(REGIONS):
+            sums[name][k] += fn[reg == r].sum() * length  # N/m of thickness -> N over the slice
+        sums["U wall Fz"][k] += fz.sum() * length
+        if mu_p is not None:
+            fext[:] = 0.0
+            partition_forces(state.v, state.mass, state.volume, state.stress, fext, mu_p,
+                             length, system.dt)
+            sums["partitions Fz"][k] += fext[:, 1].sum() * length
+        count[k] += 1
+    return {name: v / np.maximum(count, 1) for name, v in sums.items()}
 
 
 def eulerian_balance(scenario, calibration, options, per: int, skip: int, cycles: int) -> dict:
-    """{name: (per,) mean per sample} of an Eulerian run (module docstring)."""
-    from vibroflow.analysis.summary import geometry_of
-    from vibroflow.continuum.boundary import partition_forces
+    """phase_means of an Eulerian run set up as eulerian.run.run_eulerian sets it up."""
     from vibroflow.continuum.eulerian import run as E
     from vibroflow.continuum.eulerian.solver import advance
     from vibroflow.continuum.grid_update import TubFrame
@@ -107,40 +137,20 @@ def eulerian_balance(scenario, calibration, options, per: int, skip: int, cycles
                            TubFrame(TubMotion.of_scenario(scenario), gravity))
     state, _ = E.settle(scenario, material, calibration, options)
     state.t, state.step = 0.0, 0
-    geo = geometry_of(scenario)
-    length = geo.length
-    f = scenario.motion.frequency
-    steps = int(round(1.0 / (f * per) / system.dt))  # make_system's dt divides the interval
-    normal = system.mesh.normal
-    reg = regions_of(system.x[:, 0], system.x[:, 1], geo.radius)
-    sums = _sums(per)
-    count = np.zeros(per)
-    fext = np.zeros((state.n, 2))
-    for s in range((skip + cycles) * per):
-        advance(system, state, steps)
-        if s < skip * per:
-            continue
-        k = int(round(state.t * f * per)) % per
-        hist = state.wall
-        fn = hist["fn"] * length  # N/m of thickness -> N over the slice
-        ft = hist["ft"] * length
-        for r, name in enumerate(REGIONS):
-            sums[name][k] += fn[reg == r].sum()
-        sums["U wall Fz"][k] += (fn * normal[:, 1] - ft * normal[:, 0]).sum()
-        if system.partitions is not None:
-            fext[:] = 0.0
-            partition_forces(state.v, state.mass, state.volume, state.stress, fext,
-                             system.partitions.friction, length, system.dt)
-            sums["partitions Fz"][k] += fext[:, 1].sum() * length
-        count[k] += 1
-    return {name: v / np.maximum(count, 1) for name, v in sums.items()}
+    n = system.mesh.normal
+
+    def wall_of(st):
+        # eulerian/wall.py: fn along the inward normal n, ft along (n_z, -n_x)
+        fn, ft = st.wall["fn"], st.wall["ft"]
+        return system.x, fn, fn * n[:, 1] - ft * n[:, 0]
+
+    mu_p = system.partitions.friction if system.partitions is not None else None
+    return phase_means(scenario, system, state, advance, wall_of, mu_p, per, skip, cycles)
 
 
 def continuum_balance(scenario, calibration, options, per: int, skip: int, cycles: int) -> dict:
-    """{name: (per,) mean per sample} of a Lagrangian run (module docstring)."""
+    """phase_means of a Lagrangian run set up as continuum.run.run_lagrangian sets it up."""
     import vibroflow.continuum.run as R
-    from vibroflow.analysis.summary import geometry_of
-    from vibroflow.continuum.boundary import partition_forces
     from vibroflow.continuum.grid_update import TubFrame
     from vibroflow.continuum.mpm import advance
     from vibroflow.tub.motion import TubMotion
@@ -152,33 +162,13 @@ def continuum_balance(scenario, calibration, options, per: int, skip: int, cycle
     x, volume, density, stress, _ = R.settled_bed(scenario, material, spacing)
     state = R.settle(scenario, material, calibration, options, x, volume, density, stress)
     state.t, state.step = 0.0, 0
-    geo = geometry_of(scenario)
-    length = geo.length
-    f = scenario.motion.frequency
-    steps = int(round(1.0 / (f * per) / system.dt))  # make_system's dt divides the interval
+
+    def wall_of(st):
+        hist = st.history[0]  # boundary.UWall's: the penalty law's last force on each point
+        return st.x, hist["fn"], hist["f"][:, 1]
+
     mu_p = next((b.friction for b in system.boundaries if hasattr(b, "length")), None)
-    sums = _sums(per)
-    count = np.zeros(per)
-    fext = np.zeros((state.n, 2))
-    for s in range((skip + cycles) * per):
-        advance(system, state, steps)
-        if s < skip * per:
-            continue
-        k = int(round(state.t * f * per)) % per
-        hist = state.history[0]
-        f_wall = hist["f"] * length  # N/m of thickness -> N over the slice
-        fn = hist["fn"] * length
-        reg = regions_of(state.x[:, 0], state.x[:, 1], geo.radius)
-        for r, name in enumerate(REGIONS):
-            sums[name][k] += fn[reg == r].sum()
-        sums["U wall Fz"][k] += f_wall[:, 1].sum()
-        if mu_p is not None:
-            fext[:] = 0.0
-            partition_forces(state.v, state.mass, state.volume, state.stress, fext, mu_p,
-                             length, system.dt)
-            sums["partitions Fz"][k] += fext[:, 1].sum() * length
-        count[k] += 1
-    return {name: v / np.maximum(count, 1) for name, v in sums.items()}
+    return phase_means(scenario, system, state, advance, wall_of, mu_p, per, skip, cycles)
 
 
 def main(argv=None) -> int:
