@@ -14,7 +14,9 @@ slice between the partitions, the DEM's unit):
 * the U wall's normal force in five regions (the vertical side walls above z = 0.15 m, right
   and left; the arc of the half circle beyond 30 degrees from the bottom, right and left; the
   floor within 30 degrees of it) and its total vertical component;
-* the partitions' total vertical force (their friction: their normal force is horizontal).
+* the partitions' total vertical force (their friction: their normal force is horizontal), and
+  their total normal force (both partitions; the continuum's is the 2 p V_p over its points
+  that its friction is taken from, boundary.partition_forces).
 
 DEM: every ball-wall contact sampled in DIR/dem.h5 (wall_contacts: force in the lab frame,
 rotated into the tub's axes with the tub's angle at its snapshot).  Continuum: a run of the same
@@ -24,6 +26,13 @@ vibration; after --skip-cycles cycles, at every sample, the U wall's force on ea
 penalty law's last force, boundary.UWall's history) or wall-layer cell (eulerian.wall: fn along
 the cell's inward normal n, ft along (n_z, -n_x)) and the partitions' friction
 (boundary.partition_forces on the state) over the next --cycles cycles.
+
+And the bed's state by phase, the same measures for both codes: its mass-weighted mean
+velocity relative to the tub (vx, vz, mm/s, tub axes), its centre of mass's height (mm, from
+its cycle mean), and its internal virial P V = sum_contacts f . b / 3 (J; the DEM's ball-ball
+contacts at the snapshot, f the force on i by j and b the branch vector r_i - r_j; the
+continuum's sum of p V over its points or cells): the bed's mean pressure times its volume,
+which tells when in the cycle the bed is loaded and how fast it unloads.
 
 --set NAME=VALUE changes the calibration (`section.key`, e.g. partitions.friction=0.05) or an
 options field (`opt.NAME`, e.g. opt.cfl=0.3) for the continuum.
@@ -40,6 +49,8 @@ import numpy as np
 #: FLOOR_DEG of the bottom
 FLOOR_DEG = 30.0
 REGIONS = ("R-wall", "R-arc", "floor", "L-arc", "L-wall")
+#: the bed's state by phase (module docstring)
+BED = ("bed vx mm/s", "bed vz mm/s", "bed z_cm mm", "bed P V (J)")
 
 
 def regions_of(x, z, radius):
@@ -85,7 +96,43 @@ def dem_balance(dem_dir: Path, per: int, radius: float) -> dict:
            for r, name in enumerate(REGIONS)}
     out["U wall Fz"] = by_phase(fz_tub[u], k[u], per, n_by_phase)
     out["partitions Fz"] = by_phase(fz_tub[~u], k[~u], per, n_by_phase)
+    out["partitions Fn"] = by_phase(fn[~u], k[~u], per, n_by_phase)
+    out.update(dem_bed(dem_dir, per))
     return out
+
+
+def dem_bed(dem_dir: Path, per: int) -> dict:
+    """{BED name: (per,) mean per sample} of the DEM run's snapshots (module docstring)."""
+    from vibroflow.calibration.dem_result import DEMResult
+
+    sums = {name: np.zeros(per) for name in BED}
+    count = np.zeros(per)
+    with DEMResult.open(dem_dir) as res:
+        phase = res.file["snapshots/phase"][()]
+        for s, snap in res.iter_snapshots():
+            k = int(np.rint(phase[s] * per)) % per
+            m = snap["mass"]
+            x, v = snap["positions_tub"], snap["velocities_rel_tub"]
+            rows = _bed_rows(m, v[:, 0], v[:, 2], x[:, 2],
+                             (snap["contact_force"] * snap["contact_branch"]).sum() / 3.0)
+            for name, value in zip(BED, rows):
+                sums[name][k] += value
+            count[k] += 1
+    return _centred({name: v / np.maximum(count, 1) for name, v in sums.items()})
+
+
+def _bed_rows(mass, vx, vz, z, virial):
+    """The BED values of one sample: mass-weighted mean vx, vz (mm/s), centre of mass z (mm),
+    the virial (J) as given."""
+    mt = mass.sum()
+    return ((mass * vx).sum() / mt * 1e3, (mass * vz).sum() / mt * 1e3,
+            (mass * z).sum() / mt * 1e3, virial)
+
+
+def _centred(rows: dict) -> dict:
+    """The centre of mass's height from its cycle mean."""
+    rows["bed z_cm mm"] = rows["bed z_cm mm"] - rows["bed z_cm mm"].mean()
+    return rows
 
 
 def phase_means(scenario, system, state, advance, wall_of, mu_p, per: int, skip: int,
@@ -102,7 +149,8 @@ def phase_means(scenario, system, state, advance, wall_of, mu_p, per: int, skip:
     length = geo.length
     f = scenario.motion.frequency
     steps = int(round(1.0 / (f * per) / system.dt))  # make_system's dt divides the interval
-    sums = {name: np.zeros(per) for name in (*REGIONS, "U wall Fz", "partitions Fz")}
+    names = (*REGIONS, "U wall Fz", "partitions Fz", "partitions Fn", *BED)
+    sums = {name: np.zeros(per) for name in names}
     count = np.zeros(per)
     fext = np.zeros((state.n, 2))
     for s in range((skip + cycles) * per):
@@ -120,8 +168,16 @@ def phase_means(scenario, system, state, advance, wall_of, mu_p, per: int, skip:
             partition_forces(state.v, state.mass, state.volume, state.stress, fext, mu_p,
                              length, system.dt)
             sums["partitions Fz"][k] += fext[:, 1].sum() * length
+            # the normal stress the friction is taken from (partition_forces: p where p > 0)
+            # on both partitions, 2 p V_p / L_y per metre, so 2 p V_p over the slice
+            sums["partitions Fn"][k] += 2.0 * np.clip(state.pressure(), 0.0, None) @ state.volume
+        # the continuum's virial sum p V (V in m^2 per metre of thickness, so times length)
+        rows = _bed_rows(state.mass, state.v[:, 0], state.v[:, 1], x[:, 1],
+                         (state.pressure() * state.volume).sum() * length)
+        for name, value in zip(BED, rows):
+            sums[name][k] += value
         count[k] += 1
-    return {name: v / np.maximum(count, 1) for name, v in sums.items()}
+    return _centred({name: v / np.maximum(count, 1) for name, v in sums.items()})
 
 
 def eulerian_balance(scenario, calibration, options, per: int, skip: int, cycles: int) -> dict:
@@ -215,11 +271,12 @@ def main(argv=None) -> int:
     print(f"{scenario.case}: forces on the bed by phase of the cycle (N over the slice, tub "
           f"axes; the DEM's balls weigh {weight:.1f} N){' ' + ' '.join(a.set) if a.set else ''}")
     print(f"{'':>24} " + " ".join(f"{k}/{per}".rjust(7) for k in range(per)) + "     mean")
-    for name in (*REGIONS, "U wall Fz", "partitions Fz"):
+    for name in (*REGIONS, "U wall Fz", "partitions Fz", "partitions Fn", *BED):
+        fmt = "{:7.2f}" if name == "bed P V (J)" else "{:7.1f}"
         for label, r in results.items():
             row = r[name]
-            print(f"{label:>10} {name:>13} " + " ".join(f"{x:7.1f}" for x in row)
-                  + f"  {row.mean():7.1f}")
+            print(f"{label:>10} {name:>13} " + " ".join(fmt.format(x) for x in row)
+                  + "  " + fmt.format(row.mean()))
     return 0
 
 
