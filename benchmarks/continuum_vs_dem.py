@@ -24,7 +24,9 @@ difference E(continuum, DEM) of tub47.md (vibroflow.analysis.compare, the DEM of
 the reference) beside the DEM's seed-to-seed E (E(DEM seed 2, DEM seed 1) when two seeds are
 there, else the value of --e-seed, marked "given"); the tub47.md verdicts (strengths agree within
 max(10 %, 2 combined standard errors) and the same sense; fields agree when E(continuum, DEM) <=
-1.5 E_seed); and the wall times of both and their ratio (the issue's target: the continuum at
+1.5 E_seed); where E comes from (each continuum's share of E^2 in the tub's width and the
+DEM bed's depth in thirds, vibroflow.analysis.compare.difference_by_region); and the wall times
+of both and their ratio (the issue's target: the continuum at
 least 100 times cheaper at equal accuracy).  Wall times are those the runs recorded in their
 summary.json ("wall_time_s": the DEM's from its start, fill from the cache or not, the
 continuum's with its settling); the DEM's were taken whenever and with whatever load its run
@@ -128,10 +130,13 @@ def _pm(v, se, fmt="{:+.4f}") -> str:
 
 
 def compare_factor(factor: float, cont: dict, dems: list[dict],
-                   e_seed_given: float | None) -> dict:
-    """The numbers and verdicts of one amplitude factor (module docstring)."""
-    from vibroflow.analysis.compare import (FIELD_FACTOR, field_difference, fields_agree,
-                                            strengths_agree)
+                   e_seed_given: float | None, half_width: float) -> dict:
+    """The numbers and verdicts of one amplitude factor (module docstring); half_width the
+    tub's (m), for the regions of E."""
+    from dataclasses import asdict
+
+    from vibroflow.analysis.compare import (FIELD_FACTOR, bed_thirds, difference_by_region,
+                                            field_difference, fields_agree, strengths_agree)
 
     out: dict = {"factor": factor, "continuum": _brief(cont),
                  "dem": [_brief(d) for d in dems]}
@@ -144,6 +149,8 @@ def compare_factor(factor: float, cont: dict, dems: list[dict],
                                              cc["sense"], dc["sense"])
     out["strength_ratio"] = cc["strength"] / dc["strength"] if dc["strength"] else None
     out["E_continuum_dem"] = field_difference(cont["_table"], ref["_table"])
+    out["E_by_region"] = [asdict(r) for r in difference_by_region(
+        cont["_table"], ref["_table"], *bed_thirds(ref["_table"], half_width))]
     if len(dems) > 1:
         out["E_seed"] = field_difference(dems[1]["_table"], ref["_table"])
         out["E_seed_source"] = "DEM seed 2 against seed 1"
@@ -205,6 +212,25 @@ def print_factor(factor: float, results: dict[str, dict], conts: dict[str, dict]
               f"{_f(1.5 * es if es is not None else None, '{:.3f}')}; fields agree: {verdict}")
         r = res["wall_time_ratio_dem_over_continuum"]
         print(f"{name}: wall time DEM / continuum = {_f(r, '{:.1f}')} (target >= 100)")
+    for name, res in results.items():
+        print_regions(name, res["E_by_region"])
+
+
+def print_regions(name: str, regions: list[dict]) -> None:
+    """Where E comes from (vibroflow.analysis.compare.difference_by_region on the tub's width
+    and the DEM bed's depth in thirds): each region's share of E^2, the DEM's and the
+    continuum's mean speed there and the continuum's mean velocity difference, mm/s."""
+    print(f"{name}: where E comes from (share of E^2; |v| DEM / continuum; continuum - DEM "
+          "vx, vz; mm/s)")
+    names = ("left", "centre", "right")
+    for k, z_name in enumerate(("bottom", "middle", "top")):
+        row = regions[3 * k: 3 * k + 3]
+        z0, z1 = row[0]["z_range"]
+        cells = "  ".join(
+            f"{names[i]:>6} {r['share']:4.2f} ({1e3 * r['speed_b']:3.0f} / "
+            f"{1e3 * r['speed_a']:3.0f}; {1e3 * r['dvx']:+4.0f}, {1e3 * r['dvz']:+4.0f})"
+            for i, r in enumerate(row))
+        print(f"  {z_name:>6} z {z0:.3f}-{z1:.3f} m: {cells}")
 
 
 def main(argv=None) -> int:
@@ -261,7 +287,8 @@ def main(argv=None) -> int:
     print(f"{args.case}: continuum ({', '.join(methods)}; {args.rheology}) against the DEM; "
           "calibration "
           f"{args.calibration or 'none (tub47 defaults)'}; load {os.getloadavg()[0]:.2f}")
-    cell = scenario_at(args.case, 1.0, args.seeds[0], args.overrides).analysis.cell_size
+    base = scenario_at(args.case, 1.0, args.seeds[0], args.overrides)
+    cell, radius = base.analysis.cell_size, base.tub.radius
     for factor in args.factors:
         key_f = round(factor, 6)
         dems = []
@@ -285,7 +312,7 @@ def main(argv=None) -> int:
                 print(f"  {name} x{factor:g} -> {cfolder}", flush=True)
                 m.run(s, cfolder, cal, options[name], True, False)
             conts[name] = load_result(cfolder, cell)
-            results[name] = compare_factor(factor, conts[name], dems, args.e_seed)
+            results[name] = compare_factor(factor, conts[name], dems, args.e_seed, radius)
         print_factor(factor, results, conts, dems, seeds_found)
         report["factors"].append({"factor": factor, "methods": results})
         _write_json(out / "report.json", report)

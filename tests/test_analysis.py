@@ -19,6 +19,7 @@ from vibroflow.analysis import (CellTable, batch_means, batches_of_whole_cycles,
                                 probe_values, read_csv, strengths_agree, stream_function,
                                 tub_summary, wall_contact_stats, write_csv)
 from vibroflow.analysis import vtk
+from vibroflow.analysis.compare import bed_thirds, difference_by_region
 from vibroflow.analysis.contacts import mean_by_region
 from vibroflow.scenario.model import Scenario
 from vibroflow.tub.geometry import TubGeometry, cross_section_area, distance_to_wall_np
@@ -301,6 +302,44 @@ def test_field_difference_known_answers():
     assert field_difference(a2, b) == pytest.approx(0.0, abs=1e-15)
     with pytest.raises(ValueError):
         field_difference(b, table_from_cells(x, z, phi, b.vx, b.vz, 0.01))
+
+
+def test_difference_by_region_locates_a_known_difference():
+    """A field that differs from its reference in one known rectangle only: that region holds
+    the whole of E^2, with the difference's mean and the speeds as built; the shares of a
+    uniform difference are the regions' phi-weights; and E^2 is the sum over the regions."""
+    rng = np.random.default_rng(11)
+    h = 0.015
+    ii, kk = np.meshgrid(np.arange(-9, 10), np.arange(1, 14), indexing="ij")
+    x, z = ii.ravel() * h, kk.ravel() * h
+    phi = rng.uniform(0.35, 0.6, x.size)
+    vx, vz = rng.normal(0, 0.04, x.size), rng.normal(0, 0.04, x.size)
+    b = table_from_cells(x, z, phi, vx, vz, h)
+    xe, ze = bed_thirds(b, 0.15)
+    np.testing.assert_allclose(xe, [-0.15, -0.05, 0.05, 0.15])
+    np.testing.assert_allclose(ze, [0.0075, 0.0725, 0.1375, 0.2025])
+    # +0.03 m/s on vx in the top right region only
+    top_right = (x >= 0.05) & (z >= ze[2])
+    a = table_from_cells(x, z, phi, vx + 0.03 * top_right, vz, h)
+    regions = difference_by_region(a, b, xe, ze)
+    assert len(regions) == 9 and sum(r.cells for r in regions) == x.size
+    hit = regions[-1]  # the last row's last region: top, right
+    assert hit.x_range == pytest.approx((0.05, 0.15)) and hit.z_range[0] == ze[2]
+    assert hit.share == pytest.approx(1.0, abs=1e-12) and hit.cells == top_right.sum()
+    assert hit.dvx == pytest.approx(0.03, rel=1e-12) and hit.dvz == 0.0
+    w = phi[top_right]
+    assert hit.speed_b == pytest.approx((w * np.hypot(vx, vz)[top_right]).sum() / w.sum())
+    assert all(r.share == 0.0 for r in regions[:-1])
+    # a uniform difference: each region's share is its share of the phi-weights, and the
+    # regions' E^2 add up to E^2
+    a2 = table_from_cells(x, z, phi, vx + 0.01, vz - 0.02, h)
+    shares = difference_by_region(a2, b, xe, ze)
+    for r in shares:
+        m = ((x >= r.x_range[0]) & (x < r.x_range[1]) & (z >= r.z_range[0])
+             & (z < r.z_range[1]))
+        assert r.share == pytest.approx(phi[m].sum() / phi.sum(), rel=1e-12)
+        assert (r.dvx, r.dvz) == (pytest.approx(0.01), pytest.approx(-0.02))
+    assert sum(r.share for r in shares) == pytest.approx(1.0, rel=1e-12)
 
 
 def test_agreement_rules():

@@ -10,11 +10,17 @@ a phi_b-weighted rms velocity difference relative to b's phi_b-weighted mean spe
 symmetric: b is the reference.  The DEM's seed-to-seed E is the floor every comparison is judged
 against.
 
+Where the difference lies: difference_by_region splits the sum under E's square root over
+rectangles of the tub's cross-section (bed_thirds: the width and the reference bed's depth in
+thirds), each region's share of E^2 beside its mean speeds and mean velocity difference.
+
 Judging (tub47.md): two circulation strengths agree when they differ by no more than 10 % or by no
 more than twice their combined standard error, whichever is larger; two fields agree when
 E(a, b) <= 1.5 E_seed of the reference method.
 """
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -60,6 +66,74 @@ def field_difference(a: CellTable, b: CellTable, min_solid_fraction: float = 0.3
     if V_b <= 0:
         raise ValueError("the reference field b is at rest in the compared cells (V_b = 0)")
     return float(rms / V_b)
+
+
+@dataclass(frozen=True)
+class RegionDifference:
+    """One region's part of E(a, b) (difference_by_region): x and z bounds of the cell centres
+    (m, tub frame, [lo, hi)); cells compared; share of E^2 (-, the region's sum of
+    phi_b |v_a - v_b|^2 over the whole sum, so the shares add up to 1); the phi_b-weighted mean
+    speeds |v_b|, |v_a| (m/s) and mean differences of vx and vz, a - b (m/s)."""
+
+    x_range: tuple[float, float]
+    z_range: tuple[float, float]
+    cells: int
+    share: float
+    speed_b: float
+    speed_a: float
+    dvx: float
+    dvz: float
+
+
+def bed_thirds(b: CellTable, half_width: float, min_solid_fraction: float = 0.3):
+    """Region edges for difference_by_region: the tub's width in thirds (x from -half_width to
+    +half_width, m) and the reference's bed in thirds of its depth (z from the lowest to the
+    highest cell edge holding solid fraction >= min_solid_fraction): the floor's conveyor,
+    the roll's core and the surface's return flow, each on the left, in the centre and on the
+    right."""
+    dense = b.solid_fraction >= min_solid_fraction
+    if not dense.any():
+        raise ValueError(f"no cell of the reference has solid fraction >= {min_solid_fraction}")
+    lo = float(b.z[dense].min()) - 0.5 * b.cell_size
+    hi = float(b.z[dense].max()) + 0.5 * b.cell_size
+    return (np.linspace(-half_width, half_width, 4), np.linspace(lo, hi, 4))
+
+
+def difference_by_region(a: CellTable, b: CellTable, x_edges, z_edges,
+                         min_solid_fraction: float = 0.3) -> list[RegionDifference]:
+    """Where E(a, b) comes from: the cells of field_difference split by their centres into the
+    rectangles of x_edges x z_edges (m, ascending; a centre on an inner edge goes to the upper
+    region, one outside every region to none, so the shares then add up to less than 1).
+    Regions in the order z band by z band from the bottom, x from the left within each."""
+    ja, jb = matched_cells(a, b, min_solid_fraction)
+    if ja.size == 0:
+        raise ValueError(f"no common cell with solid fraction >= {min_solid_fraction} in both "
+                         "tables")
+    w = b.solid_fraction[jb]
+    dvx = a.vx[ja] - b.vx[jb]
+    dvz = a.vz[ja] - b.vz[jb]
+    sq = w * (dvx**2 + dvz**2)
+    total = sq.sum()
+    sb = np.hypot(b.vx[jb], b.vz[jb])
+    sa = np.hypot(a.vx[ja], a.vz[ja])
+    xc, zc = b.x[jb], b.z[jb]
+    out = []
+    x_edges, z_edges = np.asarray(x_edges, float), np.asarray(z_edges, float)
+    for k in range(z_edges.size - 1):
+        for i in range(x_edges.size - 1):
+            m = ((xc >= x_edges[i]) & (xc < x_edges[i + 1])
+                 & (zc >= z_edges[k]) & (zc < z_edges[k + 1]))
+            wm = w[m].sum()
+
+            def mean(v):
+                return float((w[m] * v[m]).sum() / wm) if wm > 0 else float("nan")
+
+            out.append(RegionDifference(
+                x_range=(float(x_edges[i]), float(x_edges[i + 1])),
+                z_range=(float(z_edges[k]), float(z_edges[k + 1])), cells=int(m.sum()),
+                share=float(sq[m].sum() / total) if total > 0 else 0.0,
+                speed_b=mean(sb), speed_a=mean(sa), dvx=mean(dvx), dvz=mean(dvz)))
+    return out
 
 
 def strengths_agree(s_a: float, se_a: float, s_b: float, se_b: float,
