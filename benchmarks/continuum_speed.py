@@ -69,29 +69,15 @@ def _inputs(a):
 
 
 def _settled(method: str, scenario, cal, opts):
-    """(system, state, advance) of the settled bed in the vibrating tub's frame (the state
-    after the run's settling stage)."""
-    from vibroflow.continuum.grid_update import TubFrame
-    from vibroflow.tub.motion import TubMotion
-
-    frame = TubFrame(TubMotion.of_scenario(scenario),
-                     (float(scenario.gravity[0]), float(scenario.gravity[2])))
+    """(system, state, advance) of the settled bed in the vibrating tub's frame: the bed the
+    run starts vibrating (vibration_start of the method's run module)."""
     if method == "lagrangian":
-        from vibroflow.continuum import run as R
         from vibroflow.continuum.mpm import advance
-
-        mat = R.material_of(scenario, cal, opts.model, stiffness_factor=opts.stiffness_factor)
-        system, spacing = R.make_system(scenario, mat, cal, opts, frame)
-        x, volume, density, stress, _ = R.settled_bed(scenario, mat, spacing)
-        state = R.settle(scenario, mat, cal, opts, x, volume, density, stress)
-        return system, state, advance
-    from vibroflow.continuum.eulerian import run as ER
-    from vibroflow.continuum.eulerian.solver import advance
-    from vibroflow.continuum.run import material_of
-
-    mat = material_of(scenario, cal, opts.model, stiffness_factor=opts.stiffness_factor)
-    system = ER.make_system(scenario, mat, cal, opts, frame)
-    state, _ = ER.settle(scenario, mat, cal, opts)
+        from vibroflow.continuum.run import vibration_start
+    else:
+        from vibroflow.continuum.eulerian.run import vibration_start
+        from vibroflow.continuum.eulerian.solver import advance
+    system, state = vibration_start(scenario, cal, opts)
     return system, state, advance
 
 

@@ -20,9 +20,9 @@ slice between the partitions, the DEM's unit):
 
 DEM: every ball-wall contact sampled in DIR/dem.h5 (wall_contacts: force in the lab frame,
 rotated into the tub's axes with the tub's angle at its snapshot).  Continuum: a run of the same
-scenario and calibration, set up as vibroflow.continuum.run.run_lagrangian (or
-eulerian.run.run_eulerian) does, advanced one sampling interval at a time from the start of the
-vibration; after --skip-cycles cycles, at every sample, the U wall's force on each point (the
+scenario and calibration, from the bed that vibroflow.continuum.run.run_lagrangian (or
+eulerian.run.run_eulerian) starts vibrating (their vibration_start), advanced one sampling
+interval at a time from the start of the vibration; after --skip-cycles cycles, at every sample, the U wall's force on each point (the
 penalty law's last force, boundary.UWall's history) or wall-layer cell (eulerian.wall: fn along
 the cell's inward normal n, ft along (n_z, -n_x)) and the partitions' friction
 (boundary.partition_forces on the state) over the next --cycles cycles.
@@ -181,18 +181,11 @@ def phase_means(scenario, system, state, advance, wall_of, mu_p, per: int, skip:
 
 
 def eulerian_balance(scenario, calibration, options, per: int, skip: int, cycles: int) -> dict:
-    """phase_means of an Eulerian run set up as eulerian.run.run_eulerian sets it up."""
-    from vibroflow.continuum.eulerian import run as E
+    """phase_means of an Eulerian run, from the bed run_eulerian starts vibrating."""
+    from vibroflow.continuum.eulerian.run import vibration_start
     from vibroflow.continuum.eulerian.solver import advance
-    from vibroflow.continuum.grid_update import TubFrame
-    from vibroflow.tub.motion import TubMotion
 
-    material = E.material_for(scenario, calibration, options)
-    gravity = (float(scenario.gravity[0]), float(scenario.gravity[2]))
-    system = E.make_system(scenario, material, calibration, options,
-                           TubFrame(TubMotion.of_scenario(scenario), gravity))
-    state, _ = E.settle(scenario, material, calibration, options)
-    state.t, state.step = 0.0, 0
+    system, state = vibration_start(scenario, calibration, options)
     n = system.mesh.normal
 
     def wall_of(st):
@@ -205,19 +198,11 @@ def eulerian_balance(scenario, calibration, options, per: int, skip: int, cycles
 
 
 def continuum_balance(scenario, calibration, options, per: int, skip: int, cycles: int) -> dict:
-    """phase_means of a Lagrangian run set up as continuum.run.run_lagrangian sets it up."""
-    import vibroflow.continuum.run as R
-    from vibroflow.continuum.grid_update import TubFrame
+    """phase_means of a Lagrangian run, from the bed run_lagrangian starts vibrating."""
     from vibroflow.continuum.mpm import advance
-    from vibroflow.tub.motion import TubMotion
+    from vibroflow.continuum.run import vibration_start
 
-    material = R.material_for(scenario, calibration, options)
-    gravity = (float(scenario.gravity[0]), float(scenario.gravity[2]))
-    system, spacing = R.make_system(scenario, material, calibration, options,
-                                    TubFrame(TubMotion.of_scenario(scenario), gravity))
-    x, volume, density, stress, _ = R.settled_bed(scenario, material, spacing)
-    state = R.settle(scenario, material, calibration, options, x, volume, density, stress)
-    state.t, state.step = 0.0, 0
+    system, state = vibration_start(scenario, calibration, options)
 
     def wall_of(st):
         hist = st.history[0]  # boundary.UWall's: the penalty law's last force on each point

@@ -557,11 +557,7 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
     if stop_after_steps is not None and not int(stop_after_steps) >= 0:
         raise InputError(f"stop_after_steps = {stop_after_steps!r}: must be >= 0")
     options = options or LagrangianOptions()
-    material = material_for(scenario, calibration, options)
-    motion = TubMotion.of_scenario(scenario)
-    gravity = (float(scenario.gravity[0]), float(scenario.gravity[2]))
-    system, spacing = make_system(scenario, material, calibration, options,
-                                  TubFrame(motion, gravity))
+    system, material, spacing = tub_system(scenario, calibration, options)
     geo = geometry_of(scenario)
     x, volume, density, stress, h = settled_bed(scenario, material, spacing)
     times, t0, t1 = sample_times(scenario)
@@ -747,6 +743,29 @@ def next_event(k: int, n_steps: int, sample_step, j: int, k0: int,
     if stop_after_steps is not None:
         nxt = min(nxt, k0 + int(stop_after_steps))
     return max(nxt, k + 1)
+
+
+def tub_system(scenario, calibration: dict | None, options: LagrangianOptions
+               ) -> tuple[MPMSystem, ContinuumMaterial, float]:
+    """What a run vibrates: the MPM system of the scenario in the vibrating tub's frame, its
+    material (material_for) and the point spacing (m)."""
+    material = material_for(scenario, calibration, options)
+    gravity = (float(scenario.gravity[0]), float(scenario.gravity[2]))
+    system, spacing = make_system(scenario, material, calibration, options,
+                                  TubFrame(TubMotion.of_scenario(scenario), gravity))
+    return system, material, spacing
+
+
+def vibration_start(scenario, calibration: dict | None, options: LagrangianOptions,
+                    prog: RunProgress | None = None) -> tuple[MPMSystem, MPMState]:
+    """The system in the vibrating tub's frame and the bed it starts vibrating from: settled
+    for options.settle_time in the still tub, its clock set to t = 0, step 0 (run_lagrangian's
+    first two steps, for a diagnostic that drives the run itself: benchmarks/)."""
+    system, material, spacing = tub_system(scenario, calibration, options)
+    x, volume, density, stress, _ = settled_bed(scenario, material, spacing)
+    state = settle(scenario, material, calibration, options, x, volume, density, stress, prog)
+    state.t, state.step = 0.0, 0
+    return system, state
 
 
 def settle(scenario, material, calibration, options, x, volume, density, stress,

@@ -176,6 +176,28 @@ def bed_masses(system: EulerianSystem, area: float, gravity: float):
     return mass, density, stress, top
 
 
+def tub_system(scenario, calibration: dict | None, options: EulerianOptions
+               ) -> tuple[EulerianSystem, ContinuumMaterial]:
+    """What a run vibrates: the Eulerian system of the scenario in the vibrating tub's frame
+    and its material (material_for)."""
+    material = material_for(scenario, calibration, options)
+    gravity = (float(scenario.gravity[0]), float(scenario.gravity[2]))
+    system = make_system(scenario, material, calibration, options,
+                         TubFrame(TubMotion.of_scenario(scenario), gravity))
+    return system, material
+
+
+def vibration_start(scenario, calibration: dict | None, options: EulerianOptions,
+                    prog: RunProgress | None = None) -> tuple[EulerianSystem, EulerianState]:
+    """The system in the vibrating tub's frame and the bed it starts vibrating from: settled
+    for options.settle_time in the still tub, its clock set to t = 0, step 0 (run_eulerian's
+    first two steps, for a diagnostic that drives the run itself: benchmarks/)."""
+    system, material = tub_system(scenario, calibration, options)
+    state, _ = settle(scenario, material, calibration, options, prog)
+    state.t, state.step = 0.0, 0
+    return system, state
+
+
 def settle(scenario, material, calibration, options, prog: RunProgress | None = None):
     """The bed after options.settle_time in the still tub; returns (state, bed height m)."""
     gravity = (float(scenario.gravity[0]), float(scenario.gravity[2]))
@@ -214,10 +236,7 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
     if stop_after_steps is not None and not int(stop_after_steps) >= 0:
         raise InputError(f"stop_after_steps = {stop_after_steps!r}: must be >= 0")
     options = options or EulerianOptions()
-    material = material_for(scenario, calibration, options)
-    motion = TubMotion.of_scenario(scenario)
-    gravity = (float(scenario.gravity[0]), float(scenario.gravity[2]))
-    system = make_system(scenario, material, calibration, options, TubFrame(motion, gravity))
+    system, material = tub_system(scenario, calibration, options)
     geo = geometry_of(scenario)
     times, t0, t1 = sample_times(scenario)
     S = times.size
