@@ -51,16 +51,20 @@ def matched_cells(a: CellTable, b: CellTable, min_solid_fraction: float = 0.3):
     return ja[keep], jb[keep]
 
 
-def field_difference(a: CellTable, b: CellTable, min_solid_fraction: float = 0.3) -> float:
-    """E(a, b) of tub47.md (dimensionless), b the reference.  Raises ValueError when no cell has
-    solid fraction >= min_solid_fraction in both, or b does not move there."""
+def _differences(a: CellTable, b: CellTable, min_solid_fraction: float):
+    """(ja, jb, w, dvx, dvz) of the compared cells (matched_cells): the weights phi_b and the
+    differences v_a - v_b (m/s); a ValueError when there is no compared cell."""
     ja, jb = matched_cells(a, b, min_solid_fraction)
     if ja.size == 0:
         raise ValueError(f"no common cell with solid fraction >= {min_solid_fraction} in both "
                          "tables")
-    w = b.solid_fraction[jb]
-    dvx = a.vx[ja] - b.vx[jb]
-    dvz = a.vz[ja] - b.vz[jb]
+    return ja, jb, b.solid_fraction[jb], a.vx[ja] - b.vx[jb], a.vz[ja] - b.vz[jb]
+
+
+def field_difference(a: CellTable, b: CellTable, min_solid_fraction: float = 0.3) -> float:
+    """E(a, b) of tub47.md (dimensionless), b the reference.  Raises ValueError when no cell has
+    solid fraction >= min_solid_fraction in both, or b does not move there."""
+    ja, jb, w, dvx, dvz = _differences(a, b, min_solid_fraction)
     rms = np.sqrt(np.sum(w * (dvx**2 + dvz**2)) / np.sum(w))
     V_b = np.sum(w * np.hypot(b.vx[jb], b.vz[jb])) / np.sum(w)
     if V_b <= 0:
@@ -105,13 +109,7 @@ def difference_by_region(a: CellTable, b: CellTable, x_edges, z_edges,
     rectangles of x_edges x z_edges (m, ascending; a centre on an inner edge goes to the upper
     region, one outside every region to none, so the shares then add up to less than 1).
     Regions in the order z band by z band from the bottom, x from the left within each."""
-    ja, jb = matched_cells(a, b, min_solid_fraction)
-    if ja.size == 0:
-        raise ValueError(f"no common cell with solid fraction >= {min_solid_fraction} in both "
-                         "tables")
-    w = b.solid_fraction[jb]
-    dvx = a.vx[ja] - b.vx[jb]
-    dvz = a.vz[ja] - b.vz[jb]
+    ja, jb, w, dvx, dvz = _differences(a, b, min_solid_fraction)
     sq = w * (dvx**2 + dvz**2)
     total = sq.sum()
     sb = np.hypot(b.vx[jb], b.vz[jb])
@@ -124,15 +122,15 @@ def difference_by_region(a: CellTable, b: CellTable, x_edges, z_edges,
             m = ((xc >= x_edges[i]) & (xc < x_edges[i + 1])
                  & (zc >= z_edges[k]) & (zc < z_edges[k + 1]))
             wm = w[m].sum()
-
-            def mean(v):
-                return float((w[m] * v[m]).sum() / wm) if wm > 0 else float("nan")
-
+            # phi_b-weighted means over the region of |v_b|, |v_a|, dvx, dvz
+            means = ((w[m] * np.stack([sb[m], sa[m], dvx[m], dvz[m]])).sum(axis=1) / wm
+                     if wm > 0 else np.full(4, np.nan))
             out.append(RegionDifference(
                 x_range=(float(x_edges[i]), float(x_edges[i + 1])),
                 z_range=(float(z_edges[k]), float(z_edges[k + 1])), cells=int(m.sum()),
                 share=float(sq[m].sum() / total) if total > 0 else 0.0,
-                speed_b=mean(sb), speed_a=mean(sa), dvx=mean(dvx), dvz=mean(dvz)))
+                speed_b=float(means[0]), speed_a=float(means[1]), dvx=float(means[2]),
+                dvz=float(means[3])))
     return out
 
 
