@@ -151,10 +151,11 @@ def test_elastic_p_wave_speed():
     assert speed == pytest.approx(c, rel=0.02)
 
 
-def spinning_compressed_disc(flip: float):
+def spinning_compressed_disc(flip: float, transfers: int = 1):
     """A disc of radius 6 cm (dx = 5 mm, 2 x 2 points a cell) in free space, translating at
     (0.3, 0.1) m/s and spinning at 15 rad/s, pre-compressed to p0 = 20 kPa, elastic (mu_s = 2);
-    returns (system, state, p0) with the system's FLIP fraction `flip`."""
+    returns (system, state, p0) with the system's FLIP fraction `flip` and its transfers a
+    step."""
     mat = ContinuumMaterial(mu_s=2.0, mu_2=2.5)
     dx = 0.005
     sp = dx / 2
@@ -167,7 +168,8 @@ def spinning_compressed_disc(flip: float):
     v = np.stack([0.3 - omega * x[:, 1], 0.1 + omega * x[:, 0]], axis=1)
     stress = np.zeros((len(x), 4))
     stress[:, [0, 1, 3]] = -p0
-    system = MPMSystem(grid, mat, stable_dt(mat, dx, sp), frame=LabFrame((0.0, 0.0)), flip=flip)
+    system = MPMSystem(grid, mat, stable_dt(mat, dx, sp), frame=LabFrame((0.0, 0.0)), flip=flip,
+                       transfers=transfers)
     return system, init_state(system, x, sp * sp, rho, v=v, stress=stress), p0
 
 

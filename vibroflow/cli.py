@@ -266,11 +266,17 @@ def continuum(
                              "[compaction] (vibroflow calibrate --dilatancy).")] = False,
     dx: Annotated[Optional[float], typer.Option(
         "--dx", help="Grid spacing (m); default 3 ball diameters (why: continuum/run.py, "
-                    "DEFAULT_CFL).")] = None,
+                    "DEFAULT_TRANSFER_CFL).")] = None,
     cfl: Annotated[Optional[float], typer.Option(
-        "--cfl", help="Courant number of the time step in (0, 1]; default 0.075: with APIC the "
-                      "step sets the transfers' damping, chosen with the grid to match the DEM "
-                      "(continuum/run.py DEFAULT_CFL).")] = None,
+        "--cfl", help="Courant number of the time step in (0, 1]; default 0.3 (continuum/run.py "
+                      "DEFAULT_CFL).")] = None,
+    transfer_cfl: Annotated[Optional[float], typer.Option(
+        "--transfer-cfl", help="Courant number of the APIC transfers (> 0): each step makes "
+                               "round(cfl / transfer_cfl) of them, so their damping of the "
+                               "grid-scale motion does not depend on the step; default 0.015 "
+                               "(Lagrangian) and 0.0375 (Eulerian), chosen with the grid to "
+                               "match the DEM (continuum/run.py DEFAULT_TRANSFER_CFL); 0 or a "
+                               "value >= cfl: one transfer a step.")] = None,
     stiffness_factor: Annotated[float, typer.Option(
         "--stiffness-factor", help="Multiply the elastic moduli (and the default wall "
                                    "stiffness) by this factor in (0, 1]: sqrt(factor) times "
@@ -310,8 +316,14 @@ def continuum(
         from vibroflow.calibration.calibrate import read_calibration
 
         cal = read_calibration(calibration)
-    # an unset --cfl takes the options' own default (DEFAULT_CFL), kept in one place
+    # an unset --cfl or --transfer-cfl takes the options' own default (continuum/run.py and
+    # eulerian/run.py), kept in one place; --transfer-cfl 0: one transfer a step
     step = {} if cfl is None else {"cfl": cfl}
+    if transfer_cfl is not None:
+        if transfer_cfl < 0:
+            raise InputError(f"--transfer-cfl = {transfer_cfl!r}: must be >= 0 (0: one "
+                             "transfer a step)")
+        step["transfer_cfl"] = transfer_cfl if transfer_cfl > 0 else None
     options = options_class(dx=dx, model=rheology, dilatancy=dilatancy,
                             stiffness_factor=stiffness_factor, compaction=compaction, flip=flip,
                             **step)

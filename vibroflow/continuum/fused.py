@@ -44,6 +44,7 @@ from .g2p import g2p
 from .grid_update import frame_body, grid_update
 from .p2g import p2g
 from .plasticity import plasticity_step
+from .transfer_operator import operator_of_points, sum_operator_rows, transfer_rows
 
 #: status of `advance_kernel`
 OK, THROUGH_WALL, ESCAPED = 0, 1, 2
@@ -66,8 +67,8 @@ def sources_key(*module_names: str) -> int:
 KERNEL_MODULES = ("vibroflow.continuum.boundary", "vibroflow.continuum.constitutive",
                   "vibroflow.continuum.g2p", "vibroflow.continuum.grid",
                   "vibroflow.continuum.grid_update", "vibroflow.continuum.p2g",
-                  "vibroflow.continuum.plasticity", "vibroflow.tub.geometry",
-                  "vibroflow.tub.motion")
+                  "vibroflow.continuum.plasticity", "vibroflow.continuum.transfer_operator",
+                  "vibroflow.tub.geometry", "vibroflow.tub.motion")
 
 
 @nb.njit(cache=True)
@@ -115,7 +116,7 @@ def _make_advance_kernel(sources: int):
     def advance_kernel(nsteps, t, dt, x, v, C, L, mass, volume, density, stress, gamma_dot, phase,
                        fext, bseq, wpar, wxi, wf, wfn, wft, wst, ppar, frame, x0, z0, dx,
                        periodic, params, box, bounds, cm, cmv, cf, gm, gmv, gf, gv,
-                       no_slip_rows, flip, axis_cols):
+                       no_slip_rows, flip, axis_cols, transfers, cb, B, gtmp):
         """Up to nsteps MPM steps of dt (s) from time t (s), in place (module docstring; the
         state's arrays as mpm.MPMState, the grid's as mpm.MPMSystem.work).  box (4,) the region
         (m) a point may occupy (mpm.step); bounds (nchunk + 1,) chunk_bounds; cm (nchunk, nx, nz),
@@ -123,7 +124,10 @@ def _make_advance_kernel(sources: int):
         node rows held still after every grid update (mpm.MPMSystem.no_slip_below, a rough
         floor), 0 for none; axis_cols: an axisymmetric section's node columns on or left of
         the axis r = 0, whose radial velocity is held at 0 after every grid update (mpm.
-        MPMSystem.axisymmetric), 0 for a plane-strain section.
+        MPMSystem.axisymmetric), 0 for a plane-strain section; transfers: the APIC transfers
+        a step makes (mpm.MPMSystem.transfers; transfer_operator.py), with cb (nchunk, nx, nz,
+        5, 5) the per-chunk operators, B (nx, nz, 5, 5) their sum and gtmp (nx, nz, 2) a work
+        grid (unused for one transfer).
 
         Returns (steps done, t after them, status, boundary): status OK; THROUGH_WALL when points
         went through the boundary `boundary` (the step was not made: t is its start; the
@@ -166,6 +170,9 @@ def _make_advance_kernel(sources: int):
                 cf[c] = 0.0
                 p2g(x[a:b], v[a:b], C[a:b], mass[a:b], volume[a:b], stress[a:b], fext[a:b], x0,
                     z0, dx, periodic, cm[c], cmv[c], cf[c], axis_cols > 0)
+                if transfers > 1:
+                    cb[c] = 0.0
+                    operator_of_points(x[a:b], mass[a:b], x0, z0, dx, periodic, cb[c])
             for j in range(nb_):
                 if bseq[j, 0] == B_WALL:
                     n_deep = 0
@@ -175,6 +182,8 @@ def _make_advance_kernel(sources: int):
                         return s, t, THROUGH_WALL, j
             for i in nb.prange(nx):
                 sum_chunk_rows(i, i + 1, cm, cmv, cf, gm, gmv, gf)
+                if transfers > 1:
+                    sum_operator_rows(i, i + 1, cb, B)
             # 3: the frame's acceleration at mid-step
             a0x, a0z, om, al, pvx, pvz = frame_body(frame, t + 0.5 * dt)
             grid_update(gm, gmv, gf, gv, x0, z0, dx, dt, a0x, a0z, om, al, pvx, pvz, periodic)
@@ -182,6 +191,17 @@ def _make_advance_kernel(sources: int):
                 gv[:, :no_slip_rows, :] = 0.0
             if axis_cols > 0:
                 gv[:axis_cols, :, 0] = 0.0
+            # 3b: the step's further transfers (transfer_operator.py), each followed by the
+            # grid's conditions as the update was
+            for _ in range(transfers - 1):
+                for i in nb.prange(nx):
+                    transfer_rows(i, i + 1, B, gm, gv, gtmp, periodic)
+                for i in nb.prange(nx):
+                    gv[i] = gtmp[i]
+                if no_slip_rows > 0:
+                    gv[:, :no_slip_rows, :] = 0.0
+                if axis_cols > 0:
+                    gv[:axis_cols, :, 0] = 0.0
             # 4-5: gather, move, volume and stress, per chunk
             for c in nb.prange(nchunk):
                 a = bounds[c]

@@ -64,6 +64,11 @@ class MPMSystem:
     part sums to zero over the points) and makes the results time-step converged, at the cost
     of FLIP's point noise.  Default 0, the studies' setting so far.
 
+    transfers (integer >= 1): the APIC transfers a step makes (transfer_operator.py): the
+    updated grid velocities go through the transfer pair transfers - 1 times before the
+    gather, so the grid-scale damping that APIC's transfers make is transfers / dt per second,
+    set apart from the step.  Default 1: the plain APIC (or FLIP-blended) step.
+
     axisymmetric: the section is a half-plane x = r >= 0 of a body of revolution about the z
     axis (the axisymmetric column collapses of Lube et al. 2004 and Lajeunesse et al. 2004),
     not a plane-strain slice: the points' masses and volumes are per radian (kg, m^3; a point
@@ -85,6 +90,7 @@ class MPMSystem:
     chunks: int = 2
     flip: float = 0.0
     axisymmetric: bool = False
+    transfers: int = 1
 
     def __post_init__(self):
         if not self.dt > 0:
@@ -108,6 +114,9 @@ class MPMSystem:
             self.axis_cols = int(math.floor(-self.grid.x0 / self.grid.dx + 1e-9)) + 1
         if not (isinstance(self.chunks, int) and self.chunks >= 1):
             raise InputError(f"chunks = {self.chunks!r}: must be an integer >= 1")
+        if not (isinstance(self.transfers, int) and self.transfers >= 1):
+            raise InputError(f"transfers = {self.transfers!r}: must be an integer >= 1 (APIC "
+                             "transfers a step)")
         self.params = self.material.as_array()
         for j, b in enumerate(self.boundaries):
             b.slot = j
@@ -118,6 +127,11 @@ class MPMSystem:
         self.chunk_work = (np.zeros((self.chunks, g.nx, g.nz)),
                            np.zeros((self.chunks, g.nx, g.nz, 2)),
                            np.zeros((self.chunks, g.nx, g.nz, 2)))
+        # the transfer operator's per-chunk buffers, sum and work grid (transfer_operator.py),
+        # empty for one transfer a step
+        t = (g.nx, g.nz) if self.transfers > 1 else (0, 0)
+        self.transfer_work = (np.zeros((self.chunks, *t, 5, 5)), np.zeros((*t, 5, 5)),
+                              np.zeros((*t, 2)))
 
 
 @dataclass
@@ -319,7 +333,7 @@ def advance(system: MPMSystem, state: MPMState, n: int) -> None:
         state.density, state.stress, state.gamma_dot, state.phase, state.fext, bseq, wpar,
         *hist, ppar, system.frame.as_array(), g.x0, g.z0, g.dx, g.periodic, system.params, box,
         bounds, cm, cmv, cf, gm, gmv, gf, gv, system.no_slip_rows, system.flip,
-        system.axis_cols)
+        system.axis_cols, system.transfers, *system.transfer_work)
     _unstack_history(state, walls, hist)
     state.t = t
     state.step += done

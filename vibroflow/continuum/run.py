@@ -65,7 +65,7 @@ from .fields import grid_fields, write_grid_vtr
 from .grid import Grid
 from .grid_update import LabFrame, TubFrame
 from .mpm import ContinuumBlowUp, MPMState, MPMSystem, advance, init_state
-from .timestep import stable_dt
+from .timestep import stable_dt, transfers_per_step
 
 SUMMARY_NAME = "summary.json"
 BULK_CSV_NAME = "bulk_velocity.csv"
@@ -73,31 +73,38 @@ VTK_DIR = "vtk"
 CHECKPOINT_NAME = "checkpoint.npz"
 
 
-#: The default grid and time step of a tub run (session 8; benchmarks/README.md "Session 8"):
-#: dx = DEFAULT_DX_DIAMETERS ball diameters (19 mm in tub47) and the Courant number
-#: DEFAULT_CFL, where they were half the 15 mm analysis cell and 0.3 before.  Both are model
-#: choices, not only numerical ones, and are stated as such:
+#: The default grid, time step and APIC transfers of a tub run (sessions 8 and 11;
+#: benchmarks/README.md "Session 8", "Session 11"): dx = DEFAULT_DX_DIAMETERS ball diameters
+#: (19 mm in tub47), steps of Courant number DEFAULT_CFL, and round(DEFAULT_CFL /
+#: DEFAULT_TRANSFER_CFL) = 20 APIC transfers a step (transfer_operator.py).  The grid and the
+#: transfers' rate are model choices, not only numerical ones, and are stated as such:
 #:
 #: * the local mu(I) law has no length of its own; on a fine grid it forms a tight roll on the
 #:   tub's right half with the left half still, unlike the DEM's bed-wide roll.  A grid of a
 #:   few grains is the length it lacks (a nonlocal law's cooperativity length, Kamrin & Koval
 #:   2012, would be its physical form; not built);
-#: * with APIC transfers (flip = 0) the point velocities are filtered through the grid once a
-#:   step, so the damping per second grows as the step shrinks (session 5): the run is not
-#:   time-step converged, and its step sets how dissipative the bed is.  More of that damping
-#:   brings the field closer to the DEM's, where neither a Newtonian shear viscosity
-#:   (20 - 2000 Pa s) nor a bulk viscosity (200 - 4000 Pa s) in the stress did: the DEM's
-#:   dissipation that the continuum lacks is at the grid's scale, not the roll's.
+#: * each APIC transfer filters the velocities through the grid, a damping of the grid-scale
+#:   motion, and more of it brings the field closer to the DEM's, where neither a Newtonian
+#:   shear viscosity (20 - 2000 Pa s) nor a bulk viscosity (200 - 4000 Pa s) in the stress did:
+#:   the dissipation the continuum lacks is at the grid's scale, not the roll's (its physical
+#:   form would be the collisional decay of the bed's agitation; not built).  Until session 10
+#:   the step set it (one transfer a step, cfl 0.075: the run depended on the step); now the
+#:   transfers' rate does, given as the Courant number of the equivalent one-transfer step,
+#:   DEFAULT_TRANSFER_CFL, and the step is set by stability alone (0.3, timestep.py), so a run
+#:   no longer depends on its step (tests/test_transfer_operator.py).
 #:
 #: Chosen on tub47 at amplitude factor 1.0, four settling times each, E against the DEM (the
-#: DEM's seed-to-seed E 0.135) and strength over the DEM's: dx 7.5 mm, cfl 0.3 (the former
-#: default) 1.28, 1.50; 15 mm, 0.3: 0.82, 1.31; 15 mm, 0.075: 0.55, 1.26; 19 mm, 0.075: 0.47,
-#: 1.08; then checked where not chosen: factors 0.5 and 1.5 (at 20 mm, 0.075: 0.65 and 0.51
-#: against 1.80 and 1.15 before) and tub47-quick (19 mm: 0.43 against 0.89).  Named in a
-#: run's fingerprint and a study stage's inputs (options_record), so that a run made under the
-#: former rule is never taken for one made under this one.
+#: DEM's seed-to-seed E 0.135) and strength over the DEM's: one transfer a step at cfl 0.075
+#: (the session-8 default) 0.470 +- 0.015, 1.08; at cfl 0.3 with 4, 8, 12, 16, 20, 24 and 32
+#: transfers (transfer Courant number 0.075 to 0.0094): 0.497, 0.435, 0.425, 0.379, 0.347 +-
+#: 0.006, 0.350, 0.410 (strengths 1.10, 0.98, 1.10, 1.04, 0.98, 0.87, 0.76); then checked where
+#: not chosen: factors 0.5 and 1.5 (0.434 and 0.326, against 0.839 and 0.487 before) and
+#: tub47-quick, which is worse (0.477 and a roll 0.59 of the DEM's, against 0.431 and 0.83).
+#: Named in a run's fingerprint and a study stage's inputs (options_record), so that a run made
+#: under the former rule is never taken for one made under this one.
 DEFAULT_DX_DIAMETERS = 3.0
-DEFAULT_CFL = 0.075
+DEFAULT_CFL = 0.3
+DEFAULT_TRANSFER_CFL = 0.015
 DEFAULT_GRID = f"{DEFAULT_DX_DIAMETERS:g} ball diameters"
 
 
@@ -109,7 +116,10 @@ def default_dx(scenario) -> float:
 @dataclass(frozen=True)
 class LagrangianOptions:
     """Numerical options (SI): grid spacing dx (m; default `default_dx`, 3 ball diameters),
-    Courant number (default DEFAULT_CFL; both defaults are model choices, see there), rheology
+    Courant number of the step (default DEFAULT_CFL), Courant number of the APIC transfers
+    transfer_cfl (each step makes round(cfl / transfer_cfl) transfers, timestep.
+    transfers_per_step; None: one a step; default DEFAULT_TRANSFER_CFL; the grid and the
+    transfers' rate are model choices, see there), rheology
     model ("mu_i" or "drucker_prager"), settling time in the still tub (s), wall stiffness
     (Pa/m; default (K + 4G/3) / point spacing), stiffness factor (-); dilatancy: the mu_i
     model's peak-friction option with the calibration's [dilatancy] K_dil
@@ -142,6 +152,7 @@ class LagrangianOptions:
     stiffness_factor: float = 1.0
     compaction: bool = False
     flip: float = 0.0
+    transfer_cfl: float | None = DEFAULT_TRANSFER_CFL
 
     def __post_init__(self):
         if not (isinstance(self.flip, (int, float)) and 0.0 <= self.flip <= 1.0):
@@ -150,6 +161,7 @@ class LagrangianOptions:
             raise InputError(f"dx = {self.dx!r}: must be a length > 0 m")
         if not 0 < self.cfl <= 1:
             raise InputError(f"cfl = {self.cfl!r}: must be in (0, 1]")
+        transfers_per_step(self.cfl, self.transfer_cfl)  # its checks
         if not self.settle_time >= 0:
             raise InputError(f"settle_time = {self.settle_time!r}: must be >= 0 s")
         if self.wall_stiffness is not None and not self.wall_stiffness > 0:
@@ -296,7 +308,8 @@ def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
     interval = 1.0 / (f * per)
     dt = interval / math.ceil(interval / dt)
     return MPMSystem(grid, material, dt, frame=frame, boundaries=boundaries,
-                     chunks=scenario.run.force_chunks, flip=float(options.flip)), spacing
+                     chunks=scenario.run.force_chunks, flip=float(options.flip),
+                     transfers=transfers_per_step(options.cfl, options.transfer_cfl)), spacing
 
 
 def sample_times(scenario) -> tuple[np.ndarray, float, float]:

@@ -19,11 +19,13 @@ its highest elastic frequency sqrt(4/3) c / dx (the grid-scale mode's Fourier sy
 damped explicit update is stable to about 0.85 x 2 / (2.3 c / dx) = 0.74 dx / c, 3 times the
 step at cfl 0.3 (0.25 dx / c); the mu(I) viscous stress adds no bound, the return map being
 implicit in the plastic rate (constitutive.py), so its tangent never exceeds G.  A tub run's
-default cfl (0.075, continuum.run.DEFAULT_CFL) is far inside these bounds; it is not set by
-stability but by the APIC transfers' damping per second, which grows as the step shrinks and
-which brings the tub's field closer to the DEM's (continuum.run, benchmarks/README.md "Session
-8").  The column collapse and the other checks keep this function's default 0.3.  At 0.6 (the
-stability margin alone) tub47 at amplitude factor 1.5 once put a point through the U wall.
+default cfl is this function's 0.3 (continuum.run.DEFAULT_CFL), inside these bounds.  At 0.6
+(the stability margin alone) tub47 at amplitude factor 1.5 once put a point through the U wall.
+
+The APIC transfers' damping is not the step's business any more: a step makes
+`transfers_per_step` transfers (mpm.MPMSystem.transfers, transfer_operator.py), so that the
+damping per second is that of a one-transfer step of Courant number transfer_cfl, whatever the
+step (until session 10 a tub run stepped at cfl 0.075 for that damping alone).
 """
 from __future__ import annotations
 
@@ -52,3 +54,16 @@ def stable_dt(material, dx: float, point_size: float, boundaries=(), v_max: floa
             z = b.damping_ratio
             dt = min(dt, cfl * 2.0 * (math.sqrt(1.0 + z * z) - z) / omega)
     return dt
+
+
+def transfers_per_step(cfl: float, transfer_cfl: float | None) -> int:
+    """The APIC transfers a step of Courant number cfl makes (mpm.MPMSystem.transfers,
+    transfer_operator.py) so that they damp as a one-transfer APIC step of Courant number
+    transfer_cfl would: round(cfl / transfer_cfl), at least 1; None: one transfer a step."""
+    if transfer_cfl is None:
+        return 1
+    if not (isinstance(transfer_cfl, (int, float)) and math.isfinite(transfer_cfl)
+            and transfer_cfl > 0):
+        raise InputError(f"transfer_cfl = {transfer_cfl!r}: must be a Courant number > 0, or "
+                         "unset for one transfer a step")
+    return max(1, int(round(cfl / transfer_cfl)))

@@ -32,7 +32,8 @@ from ..grid_update import frame_body, grid_update
 from .advection import face_velocity_rows, match_divergence, remap, remap_serial
 from .lagrangian_step import (end_density, fill_limit, material_fraction,
                               update_stress_cells, void_first)
-from .transfer import g2p_cells, p2g_cells
+from ..transfer_operator import sum_operator_rows, transfer_rows
+from .transfer import g2p_cells, operator_of_cells, p2g_cells
 from .wall import wall_forces
 
 #: status of `advance_kernel`
@@ -50,7 +51,7 @@ def _make_advance_kernel(sources: int, parallel: bool):
                        delta, xi, wfn, wft, wst, kn, kt, zeta, mu_w, part_on, mu_p, length,
                        frame, x0, z0, dx, periodic, h, open_x, open_z, params,
                        tables, ux, uz, work, q, end_rho, act,
-                       cm, cmv, cf, gm, gmv, gf, gv, no_slip_rows):
+                       cm, cmv, cf, gm, gmv, gf, gv, no_slip_rows, transfers, cb, B, gtmp):
         """Up to nsteps steps of dt (s) from time t (s) of the state's arrays
         (solver.EulerianState, flat per cell; q (NQ, N), end_rho (N,) work arrays), in place;
         the mesh's faces, its weight tables (transfer.WeightTables as a tuple (cx, cz, fx, fz))
@@ -58,7 +59,9 @@ def _make_advance_kernel(sources: int, parallel: bool):
         int64 a work array for the cells holding material; cm (nchunk, nx, nz), cmv, cf
         (nchunk, nx, nz, 2) per-chunk scatter buffers; no_slip_rows: the grid's lowest node rows
         held still after every grid update (solver.EulerianSystem.no_slip_below, a rough floor;
-        the Lagrangian loop's), 0 for none.
+        the Lagrangian loop's), 0 for none; transfers, cb, B, gtmp: the APIC transfers a step
+        makes and their operator's buffers (solver.EulerianSystem.transfers, the Lagrangian
+        loop's: vibroflow.continuum.fused).
 
         Returns (steps done, t, status, lowest cell mass kg/m, largest |M - M0| / M0 so far):
         status OK, NEGATIVE_MASS (a cell lost more mass than it held) or NON_FINITE (a velocity),
@@ -96,12 +99,25 @@ def _make_advance_kernel(sources: int, parallel: bool):
                 cf[c] = 0.0
                 p2g_cells(act[a:b], ncz, tcx, tcz, v, C, mass, volume, stress, fext, dx,
                           periodic, cm[c], cmv[c], cf[c])
+                if transfers > 1:
+                    cb[c] = 0.0
+                    operator_of_cells(act[a:b], ncz, tcx, tcz, mass, dx, periodic, cb[c])
             for i in nb.prange(nx):
                 sum_chunk_rows(i, i + 1, cm, cmv, cf, gm, gmv, gf)
+                if transfers > 1:
+                    sum_operator_rows(i, i + 1, cb, B)
             a0x, a0z, om, al, pvx, pvz = frame_body(frame, t + 0.5 * dt)
             grid_update(gm, gmv, gf, gv, x0, z0, dx, dt, a0x, a0z, om, al, pvx, pvz, periodic)
             if no_slip_rows > 0:
                 gv[:, :no_slip_rows, :] = 0.0
+            # the step's further transfers (vibroflow.continuum.transfer_operator)
+            for _ in range(transfers - 1):
+                for i in nb.prange(nx):
+                    transfer_rows(i, i + 1, B, gm, gv, gtmp, periodic)
+                for i in nb.prange(nx):
+                    gv[i] = gtmp[i]
+                if no_slip_rows > 0:
+                    gv[:, :no_slip_rows, :] = 0.0
             for c in nb.prange(nchunk):
                 a = (c * na) // nchunk
                 b = ((c + 1) * na) // nchunk

@@ -62,13 +62,24 @@ from ..run import (BULK_CSV_NAME, CHECKPOINT_NAME, REPORT_EVERY, SHEAR_RATE_CSV_
                    material_for, next_event, run_fingerprint, sample_times, samples_source,
                    shear_rate, shear_rate_outputs, to_lab, write_json_atomic,
                    write_shear_rate_csv)
-from ..timestep import stable_dt
+from ..timestep import stable_dt, transfers_per_step
 from .mesh import EulerianMesh
 from .solver import EulerianState, EulerianSystem, advance, init_state, state_from_checkpoint
 from .wall import MeshWall
 
 #: the pseudo-ball's mass in full cells at the critical density (module docstring, 3)
 UNIT = 1.1
+
+#: the Courant number of the APIC transfers (LagrangianOptions.transfer_cfl, continuum.run
+#: DEFAULT_TRANSFER_CFL): round(0.3 / 0.0375) = 8 transfers a step at the default cfl 0.3.
+#: The Eulerian formulation's own, since its remap damps too: at the Lagrangian's 20 transfers
+#: its roll is 0.43 of the DEM's.  Chosen on tub47 at amplitude factor 1.0 (E against the DEM,
+#: strength over the DEM's): one transfer a step at cfl 0.075 (the session-8 default) 0.613,
+#: 1.40; at cfl 0.3 with 6, 8, 10 transfers: 0.490, 1.17; 0.462, 1.06; 0.466, 0.99; checked at
+#: factors 0.5 (0.448, 0.77, against 0.453, 1.01 before) and 1.5 (0.517, 1.09, against 0.647,
+#: 1.44) and on tub47-quick, which is worse (0.612, 0.51, against 0.540, 0.68)
+#: (benchmarks/README.md "Session 11").
+DEFAULT_TRANSFER_CFL = 0.0375
 
 
 @dataclass(frozen=True)
@@ -78,7 +89,10 @@ class EulerianOptions(LagrangianOptions):
     rheology model ("mu_i" or "drucker_prager"), settling time in the still tub (s), wall
     stiffness (Pa/m; default (K + 4G/3) / (dx/2), the Lagrangian default at the same dx),
     stiffness factor (-; LagrangianOptions).  No FLIP fraction: the mesh's cells are fresh
-    copies of the fields at every step, with no velocity of their own to keep."""
+    copies of the fields at every step, with no velocity of their own to keep.  Its own
+    default transfer Courant number, DEFAULT_TRANSFER_CFL (module docstring)."""
+
+    transfer_cfl: float | None = DEFAULT_TRANSFER_CFL
 
     def __post_init__(self):
         super().__post_init__()
@@ -134,7 +148,8 @@ def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
     interval = 1.0 / (f * per)
     dt = interval / math.ceil(interval / dt)
     return EulerianSystem(mesh, material, dt, frame=frame, wall=wall, partitions=partitions,
-                          chunks=scenario.run.force_chunks)
+                          chunks=scenario.run.force_chunks,
+                          transfers=transfers_per_step(options.cfl, options.transfer_cfl))
 
 
 def bed_masses(system: EulerianSystem, area: float, gravity: float):

@@ -83,7 +83,10 @@ class EulerianSystem:
     only on the row of cells touching it.
 
     serial_below: a mesh of fewer cells steps on one thread (SERIAL_BELOW); chunks: the
-    cells' scatter chunks (fused.py), which alone fix the numbers."""
+    cells' scatter chunks (fused.py), which alone fix the numbers.
+
+    transfers (integer >= 1): the APIC transfers a step makes, as the Lagrangian formulation's
+    (mpm.MPMSystem.transfers, vibroflow.continuum.transfer_operator).  Default 1."""
 
     mesh: EulerianMesh
     material: ContinuumMaterial
@@ -94,6 +97,7 @@ class EulerianSystem:
     chunks: int = 2
     no_slip_below: float | None = None
     serial_below: int = SERIAL_BELOW
+    transfers: int = 1
 
     def __post_init__(self):
         if not self.dt > 0:
@@ -104,6 +108,9 @@ class EulerianSystem:
             raise InputError(f"chunks = {self.chunks!r}: must be an integer >= 1")
         if not (isinstance(self.serial_below, int) and self.serial_below >= 0):
             raise InputError(f"serial_below = {self.serial_below!r}: must be an integer >= 0")
+        if not (isinstance(self.transfers, int) and self.transfers >= 1):
+            raise InputError(f"transfers = {self.transfers!r}: must be an integer >= 1 (APIC "
+                             "transfers a step)")
         m = self.mesh
         self.params = self.material.as_array()
         self.x = m.centres()
@@ -128,6 +135,11 @@ class EulerianSystem:
         self.chunk_work = (np.zeros((self.chunks, g.nx, g.nz)),
                            np.zeros((self.chunks, g.nx, g.nz, 2)),
                            np.zeros((self.chunks, g.nx, g.nz, 2)))
+        # the transfer operator's buffers (vibroflow.continuum.transfer_operator), empty for
+        # one transfer a step
+        t = (g.nx, g.nz) if self.transfers > 1 else (0, 0)
+        self.transfer_work = (np.zeros((self.chunks, *t, 5, 5)), np.zeros((*t, 5, 5)),
+                              np.zeros((*t, 2)))
 
 
 @dataclass
@@ -270,7 +282,8 @@ def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
         system.frame.as_array(), g.x0, g.z0, g.dx, g.periodic, mesh.h, mesh.open_x,
         mesh.open_z, system.params, system.tables, system.ux, system.uz, system.remap_work,
         system.q,
-        system.end_rho, system.active, *system.chunk_work, *system.work, system.no_slip_rows)
+        system.end_rho, system.active, *system.chunk_work, *system.work, system.no_slip_rows,
+        system.transfers, *system.transfer_work)
     state.t = t
     state.step += done
     state.mass_error_max = err_max

@@ -22,6 +22,7 @@ import numba as nb
 import numpy as np
 
 from ..grid import bspline_weights
+from ..transfer_operator import add_point
 
 #: columns of a weight table's row: the base node (an integer stored as a float), fx, the
 #: three weights and their three derivatives (1/m), as grid.bspline_weights returns them
@@ -196,3 +197,17 @@ def g2p_cells(cells, ncz, tx, tz, v, C, L, gv, dx, periodic):
         L[p, 1] = lxz
         L[p, 2] = lzx
         L[p, 3] = lzz
+
+
+@nb.njit(cache=True)
+def operator_of_cells(cells, ncz, tx, tz, mass, dx, periodic, B):
+    """Accumulate the transfer operator (vibroflow.continuum.transfer_operator) of the cells
+    `cells` (indices p = i * ncz + k) of masses mass (N,) (kg/m) into B (nx, nz, 5, 5) (zero it
+    first), with the weights of rows tx[i] and tz[k]."""
+    for j in range(cells.shape[0]):
+        p = cells[j]
+        ic = p // ncz
+        kc = p - ic * ncz
+        bx, fx, wx0, wx1, wx2, _, _, _ = table_row(tx, ic)
+        bz, fz, wz0, wz1, wz2, _, _, _ = table_row(tz, kc)
+        add_point(B, mass[p], bx, fx, wx0, wx1, wx2, bz, fz, wz0, wz1, wz2, dx, periodic)

@@ -1,0 +1,168 @@
+"""The APIC transfer pair as a grid operator (vibroflow.continuum.transfer_operator) and the
+steps that make several transfers (mpm.MPMSystem.transfers, timestep.transfers_per_step).
+
+Known answers: the operator is the transfer pair itself (g2p then p2g with no force and no
+motion, Jiang et al. 2015), so it must give the explicit pair's grid velocities; it keeps an
+affine velocity field and the grid's momentum exactly (APIC's properties); and a step of
+Courant number cfl making n transfers must damp the grid-scale motion as a one-transfer APIC
+step of Courant number cfl / n does, whatever the step: the property the tub runs' default
+rests on (continuum/run.py, DEFAULT_TRANSFER_CFL).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from test_mpm import lattice, spinning_compressed_disc
+from vibroflow.continuum.constitutive import ContinuumMaterial
+from vibroflow.continuum.g2p import g2p
+from vibroflow.continuum.grid import Grid
+from vibroflow.continuum.grid_update import MASS_EPS, LabFrame
+from vibroflow.continuum.mpm import MPMSystem, init_state, run_steps
+from vibroflow.continuum.p2g import p2g
+from vibroflow.continuum.timestep import stable_dt, transfers_per_step
+from vibroflow.continuum.transfer_operator import operator_of_points, transfer_rows
+from vibroflow.errors import InputError
+
+DX = 0.01
+
+
+def cloud(seed=3, n=400):
+    """A grid of 20 x 16 cells and n points of random masses scattered over its middle, their
+    B-spline stencils clear of the grid's edge nodes (so every node they touch is updated)."""
+    grid = Grid.covering(0.0, 0.2, 0.0, 0.16, DX)
+    rng = np.random.default_rng(seed)
+    lo = np.array([grid.x0, grid.z0]) + 3.0 * DX
+    hi = np.array([grid.x0 + (grid.nx - 4) * DX, grid.z0 + (grid.nz - 4) * DX])
+    x = lo + (hi - lo) * rng.random((n, 2))
+    mass = rng.uniform(0.5, 2.0, n)
+    return grid, x, mass
+
+
+def operator(grid, x, mass):
+    B = np.zeros((grid.nx, grid.nz, 5, 5))
+    operator_of_points(x, mass, grid.x0, grid.z0, grid.dx, grid.periodic, B)
+    return B
+
+
+def explicit_pair(grid, x, mass, gv):
+    """g2p (APIC) of the grid velocities gv to the points, then p2g with no stress and no
+    force: the grid masses and the new grid velocities (momentum / mass; 0 where no mass)."""
+    n = len(x)
+    v, C, L = np.zeros((n, 2)), np.zeros((n, 4)), np.zeros((n, 4))
+    gm, gmv, gf, _ = grid.zeros()
+    g2p(x.copy(), v, C, L, gv, grid.x0, grid.z0, grid.dx, 0.0, grid.periodic, gm, gmv, 0.0)
+    gm[:] = 0.0
+    gmv[:] = 0.0
+    p2g(x, v, C, mass, np.ones(n), np.zeros((n, 4)), np.zeros((n, 2)), grid.x0, grid.z0,
+        grid.dx, grid.periodic, gm, gmv, gf)
+    out = np.where(gm[..., None] > MASS_EPS, gmv / np.maximum(gm, MASS_EPS)[..., None], 0.0)
+    return gm, out
+
+
+def test_operator_is_the_apic_transfer_pair():
+    """One application of the operator gives, at every node holding mass, the grid velocity
+    that the explicit g2p then p2g gives (to round-off), for a random grid velocity field."""
+    grid, x, mass = cloud()
+    gv = np.random.default_rng(5).normal(0.0, 1.0, (grid.nx, grid.nz, 2))
+    gm, expected = explicit_pair(grid, x, mass, gv)
+    out = np.zeros_like(gv)
+    transfer_rows(0, grid.nx, operator(grid, x, mass), gm, gv, out, grid.periodic)
+    held = gm > MASS_EPS
+    assert held.sum() > 100
+    assert np.allclose(out[held], expected[held], rtol=1e-12, atol=1e-12)
+    assert np.all(out[~held] == 0.0)
+
+
+def test_operator_keeps_affine_fields_and_momentum():
+    """An affine grid velocity v = a + M x comes back unchanged at every node holding mass
+    (APIC reproduces affine fields), and a random field's momentum sum_i m_i v_i is kept to
+    round-off (sum_i w_ip (x_i - x_p) = 0), while the field's kinetic energy falls (a white
+    noise is mostly grid-scale motion, which the transfer pair damps)."""
+    grid, x, mass = cloud(seed=7)
+    B = operator(grid, x, mass)
+    gm, _ = explicit_pair(grid, x, mass, np.zeros((grid.nx, grid.nz, 2)))
+    held = gm > MASS_EPS
+    X = grid.x0 + np.arange(grid.nx)[:, None] * grid.dx + 0.0 * np.arange(grid.nz)[None, :]
+    Z = grid.z0 + np.arange(grid.nz)[None, :] * grid.dx + 0.0 * np.arange(grid.nx)[:, None]
+    affine = np.stack([0.3 + 2.0 * X - 1.5 * Z, -0.2 + 0.7 * X + 4.0 * Z], axis=-1)
+    out = np.zeros_like(affine)
+    transfer_rows(0, grid.nx, B, gm, affine, out, grid.periodic)
+    assert np.allclose(out[held], affine[held], rtol=0, atol=1e-12)
+
+    rng = np.random.default_rng(11)
+    gv = np.where(held[..., None], rng.normal(0.0, 1.0, (grid.nx, grid.nz, 2)), 0.0)
+    transfer_rows(0, grid.nx, B, gm, gv, out, grid.periodic)
+    P0 = (gm[..., None] * gv).sum(axis=(0, 1))
+    P1 = (gm[..., None] * out).sum(axis=(0, 1))
+    assert np.allclose(P1, P0, rtol=1e-12, atol=1e-12)
+    # ... while the field's grid-scale noise is damped: its kinetic energy falls
+    E0 = (gm[..., None] * gv**2).sum()
+    E1 = (gm[..., None] * out**2).sum()
+    assert E1 < 0.5 * E0
+
+
+def test_transfers_per_step():
+    """round(cfl / transfer_cfl), at least one; None: one; a bad value: an InputError naming
+    the field."""
+    assert transfers_per_step(0.3, 0.015) == 20
+    assert transfers_per_step(0.3, 0.0375) == 8
+    assert transfers_per_step(0.3, None) == 1
+    assert transfers_per_step(0.075, 0.3) == 1
+    for bad in (0.0, -0.1, float("nan")):
+        with pytest.raises(InputError, match="transfer_cfl"):
+            transfers_per_step(0.3, bad)
+    with pytest.raises(InputError, match="transfers"):
+        MPMSystem(Grid.covering(0.0, 0.1, 0.0, 0.1, DX), ContinuumMaterial(), 1e-4,
+                  transfers=0)
+
+
+def test_momentum_and_angular_momentum_conserved_with_transfers():
+    """The spinning, translating, pre-compressed elastic disc of test_mpm, four transfers a
+    step: linear and angular momentum (with the points' affine spin) kept to round-off."""
+    system, state, p0 = spinning_compressed_disc(flip=0.0, transfers=4)
+    dx = system.grid.dx
+    P0, L0 = state.momentum(), state.angular_momentum(dx)
+    run_steps(system, state, 200)
+    assert np.allclose(state.momentum(), P0, rtol=1e-12, atol=0)
+    assert state.angular_momentum(dx) == pytest.approx(L0, rel=1e-12)
+
+
+def _shear_wave_energy(cfl: float, transfers: int, T: float = 0.004) -> float:
+    """Kinetic energy left (mean over [T/2, T], over the initial) of a free, stress-free elastic
+    disc (radius 6 cm, dx = 5 mm, 2 x 2 points a cell) started with a shear wave of 8 cells'
+    wavelength, vx = 0.01 sin(2 pi z / (8 dx)) m/s, at Courant number cfl with `transfers`
+    transfers a step."""
+    mat = ContinuumMaterial(mu_s=2.0, mu_2=2.5)  # stays elastic: the transfers alone dissipate
+    dx = 0.005
+    sp = dx / 2
+    grid = Grid.covering(-0.12, 0.12, -0.12, 0.12, dx)
+    x = lattice(-0.06, 0.06, -0.06, 0.06, sp)
+    x = x[np.hypot(x[:, 0], x[:, 1]) < 0.06]
+    v = np.zeros_like(x)
+    v[:, 0] = 0.01 * np.sin(2.0 * math.pi * x[:, 1] / (8 * dx))
+    dt = stable_dt(mat, dx, sp, cfl=cfl)
+    system = MPMSystem(grid, mat, dt, frame=LabFrame((0.0, 0.0)), transfers=transfers)
+    state = init_state(system, x, sp * sp, mat.critical_density * 1.0001, v=v)
+    e0 = state.kinetic_energy()
+    ke = []
+    run_steps(system, state, int(round(T / dt)), lambda s: ke.append(s.kinetic_energy()))
+    return float(np.mean(ke[len(ke) // 2:])) / e0
+
+
+def test_damping_is_set_by_the_transfer_rate_not_the_step():
+    """The grid-scale shear wave's energy after 4 ms at the same transfer rate (transfer_cfl
+    0.05: cfl 0.1, 0.2, 0.4 with 2, 4, 8 transfers a step) is the same within 5 % (measured
+    0.0384, 0.0379, 0.0374), and that of the one-transfer APIC step at cfl 0.05 (0.0388);
+    one transfer a step at cfl 0.1, 0.2, 0.4 leaves 0.060, 0.098, 0.151: the plain APIC
+    step's damping depends on the step, a factor 2.5 here."""
+    reference = _shear_wave_energy(0.05, 1)
+    same_rate = [_shear_wave_energy(c, transfers_per_step(c, 0.05)) for c in (0.1, 0.2, 0.4)]
+    for e in same_rate:
+        assert e == pytest.approx(reference, rel=0.05)
+    plain = [_shear_wave_energy(c, 1) for c in (0.1, 0.4)]
+    assert plain[0] > 1.3 * reference
+    assert plain[1] > 2.0 * plain[0]
+    assert plain[1] > 3.0 * reference

@@ -1,0 +1,130 @@
+"""The APIC transfer pair as an operator on the grid's velocities, and the extra transfers a step
+can make with it.
+
+Why.  An APIC step (p2g.py, g2p.py; Jiang et al. 2015) replaces every point's velocity by the
+grid's smooth field: whatever the points' velocities held below the grid's resolution (beyond
+each point's affine part) is lost at every transfer.  That loss is a damping of the grid-scale
+motion whose rate is the number of transfers per second, 1/dt: the tub's continuum fields
+depend on the time step through it (benchmarks/README.md, sessions 5 and 8: E(continuum, DEM)
+0.82, 0.71, 0.55, 0.42 as the step halves from cfl 0.3; a FLIP blend, which keeps the
+sub-grid motion, is step-converged and does not improve).  The step was the model's
+dissipation parameter.  Here the two are parted: a step of any size can make n transfers, so
+the damping is set by the transfers' rate n/dt, a model parameter of its own (the tub drivers'
+`transfer_cfl`: the Courant number of the equivalent one-transfer APIC step), and the step
+only by stability.
+
+What a transfer is.  With the point velocities v_p = sum_j w_jp v_j and affine matrices
+C_p = (4/dx^2) sum_j w_jp v_j (x_j - x_p)^T that g2p gives from grid velocities v_j, the next
+p2g's grid momentum is m_i v_i' = sum_p m_p w_ip (v_p + C_p (x_i - x_p)), so
+
+    v_i' = (1/m_i) sum_j B_ij v_j,   B_ij = sum_p m_p w_ip w_jp (1 + (4/dx^2) r_ip . r_jp),
+
+with r_ip = x_i - x_p and m_i = sum_p m_p w_ip (Jiang et al. 2015's transfer pair with no force
+and no motion in between).  Each velocity component is transferred alone.  B is symmetric, and
+its rows sum to m_i (sum_j w_jp = 1 and sum_j w_jp r_jp = 0 for the quadratic B-spline), so a
+transfer keeps a uniform velocity; it keeps every affine velocity field exactly (APIC's
+property), and the grid's momentum sum_i m_i v_i exactly (sum_i w_ip r_ip = 0).  The points'
+neighbourhoods span 5 x 5 nodes, so B is stored as (nx, nz, 5, 5): B[i, k, a, b] couples node
+(i, k) with node (i + a - 2, k + b - 2).
+
+Built once a step from the points' positions before they move (the positions p2g used), it is
+applied n - 1 times to the updated grid velocities before the gather: the step then makes n
+transfers, the last one g2p's own.  Building costs about one p2g; an application, a few
+microseconds on a tub grid, against a whole p2g and g2p for a transfer made with the points.
+The operator is built per chunk of points into per-chunk buffers summed in a fixed order (as
+p2g's scatter, fused.py), so the numbers do not depend on the number of threads.
+"""
+from __future__ import annotations
+
+import numba as nb
+
+from .grid import bspline_weights
+from .grid_update import MASS_EPS
+
+
+@nb.njit(cache=True)
+def add_point(B, m, bx, fx, wx0, wx1, wx2, bz, fz, wz0, wz1, wz2, dx, periodic):
+    """Add one point's part m w_ip w_jp (1 + 4/dx^2 r_ip . r_jp) to the operator B
+    (nx, nz, 5, 5) (module docstring): mass m (kg/m), its base nodes bx, bz, offsets fx, fz and
+    three weights per axis as grid.bspline_weights returns them, spacing dx (m)."""
+    nxg = B.shape[0]
+    inv = 4.0 / (dx * dx)
+    for a in range(3):
+        wa = wx0 if a == 0 else (wx1 if a == 1 else wx2)
+        rax = (a - fx) * dx
+        i = bx + a
+        if periodic:
+            i = i % nxg
+        for b in range(3):
+            wb = wz0 if b == 0 else (wz1 if b == 1 else wz2)
+            raz = (b - fz) * dx
+            mw = m * wa * wb
+            k = bz + b
+            for c in range(3):
+                wc = wx0 if c == 0 else (wx1 if c == 1 else wx2)
+                rcx = (c - fx) * dx
+                for d in range(3):
+                    wd = wz0 if d == 0 else (wz1 if d == 1 else wz2)
+                    rdz = (d - fz) * dx
+                    B[i, k, c - a + 2, d - b + 2] += mw * wc * wd * (
+                        1.0 + inv * (rax * rcx + raz * rdz))
+
+
+@nb.njit(cache=True)
+def operator_of_points(x, mass, x0, z0, dx, periodic, B):
+    """Accumulate the transfer operator of the points x (N, 2) (m) of masses mass (N,) (kg/m)
+    into B (nx, nz, 5, 5) (zero it first), on the grid of origin (x0, z0) and spacing dx (m)."""
+    for p in range(x.shape[0]):
+        bx, fx, wx0, wx1, wx2, _, _, _ = bspline_weights(x[p, 0], x0, dx)
+        bz, fz, wz0, wz1, wz2, _, _, _ = bspline_weights(x[p, 1], z0, dx)
+        add_point(B, mass[p], bx, fx, wx0, wx1, wx2, bz, fz, wz0, wz1, wz2, dx, periodic)
+
+
+@nb.njit(cache=True)
+def sum_operator_rows(i0, i1, cb, B):
+    """Grid rows i0:i1 of B: the sums of the per-chunk operators cb (nchunk, nx, nz, 5, 5) in
+    the fixed order chunk 0, 1, ... (module docstring)."""
+    nchunk = cb.shape[0]
+    nz = B.shape[1]
+    for i in range(i0, i1):
+        for k in range(nz):
+            for a in range(5):
+                for b in range(5):
+                    s = cb[0, i, k, a, b]
+                    for c in range(1, nchunk):
+                        s += cb[c, i, k, a, b]
+                    B[i, k, a, b] = s
+
+
+@nb.njit(cache=True)
+def transfer_rows(i0, i1, B, gm, gv, out, periodic):
+    """One transfer of the grid velocities gv (nx, nz, 2) (m/s) for the node rows i0:i1, into
+    out: v_i' = sum_j B_ij v_j / m_i at nodes holding mass (gm > MASS_EPS, kg/m) and off the
+    grid's edge, 0 elsewhere (as grid_update leaves them)."""
+    nx, nz = gm.shape
+    for i in range(i0, i1):
+        for k in range(nz):
+            m = gm[i, k]
+            edge = k < 1 or k >= nz - 1 or (not periodic and (i < 1 or i >= nx - 1))
+            if m <= MASS_EPS or edge:
+                out[i, k, 0] = 0.0
+                out[i, k, 1] = 0.0
+                continue
+            sx = 0.0
+            sz = 0.0
+            for a in range(5):
+                j = i + a - 2
+                if periodic:
+                    j = j % nx
+                elif j < 0 or j >= nx:
+                    continue
+                for b in range(5):
+                    l = k + b - 2
+                    if l < 0 or l >= nz:
+                        continue
+                    bij = B[i, k, a, b]
+                    if bij != 0.0:
+                        sx += bij * gv[j, l, 0]
+                        sz += bij * gv[j, l, 1]
+            out[i, k, 0] = sx / m
+            out[i, k, 1] = sz / m
