@@ -52,6 +52,8 @@ def _options(method: str, a):
 
     cls = LagrangianOptions if method == "lagrangian" else EulerianOptions
     extra = {} if a.cfl is None else {"cfl": a.cfl}  # None: the options' default
+    if a.transfer_cfl is not None:  # 0: one transfer a step
+        extra["transfer_cfl"] = a.transfer_cfl
     return cls(dx=a.dx, stiffness_factor=a.stiffness_factor, **extra)
 
 
@@ -139,6 +141,9 @@ def kernels(a) -> dict:
     import numba
     import numpy as np
 
+    from vibroflow.continuum.eulerian.transfer import operator_of_cells
+    from vibroflow.continuum.transfer_operator import operator_of_points, transfer_rows
+
     numba.set_num_threads(1)
     scenario, cal = _inputs(a)
     out = {}
@@ -178,6 +183,17 @@ def kernels(a) -> dict:
                 update_volume(L, state.mass, vol.copy(), rho, 0.0, 0.0),
                 update_stress_points(stress.copy(), L, rho, system.dt, system.params,
                                      state.gamma_dot.copy(), state.phase.copy())), 200)
+            B = np.zeros((g.nx, g.nz, 5, 5))
+            gtmp = np.zeros_like(gv)
+
+            def build():
+                B[:] = 0.0
+                operator_of_points(x, state.mass, g.x0, g.z0, g.dx, g.periodic, B)
+
+            t["transfer operator (build)"] = _per_call(build, 200)
+            mass = B.sum(axis=(2, 3))  # the nodes' masses: the operator's row sums
+            t[f"one transfer (x {system.transfers - 1} a step)"] = _per_call(
+                lambda: transfer_rows(0, g.nx, B, mass, gv, gtmp, g.periodic, 0, 0), 200)
         else:
             from vibroflow.continuum.boundary import partition_forces
             from vibroflow.continuum.constitutive import update_stress_points
@@ -237,6 +253,17 @@ def kernels(a) -> dict:
             t["remap"] = _per_call(lambda: remap(
                 m2.copy(), q.copy().reshape((NQ,) + s2), system.ux, system.uz, mesh.h,
                 system.dt, mesh.periodic, system.remap_work), 200)
+            B = np.zeros((g.nx, g.nz, 5, 5))
+            gtmp = np.zeros_like(gv)
+
+            def build():
+                B[:] = 0.0
+                operator_of_cells(act, mesh.ncz, tcx, tcz, state.mass, g.dx, g.periodic, B)
+
+            t["transfer operator (build)"] = _per_call(build, 200)
+            mass = B.sum(axis=(2, 3))  # the nodes' masses: the operator's row sums
+            t[f"one transfer (x {system.transfers - 1} a step)"] = _per_call(
+                lambda: transfer_rows(0, g.nx, B, mass, gv, gtmp, g.periodic, 0, 0), 200)
         t["whole step (compiled loop, 20 steps a call)"] = _per_call(
             lambda: advance(system, state, 20), 10) / 20
         t["whole step (one step a call)"] = _per_call(lambda: advance(system, state, 1), 100)
@@ -254,6 +281,7 @@ def main(argv=None) -> int:
     p.add_argument("--methods", default="lagrangian,eulerian")
     p.add_argument("--threads", default="1,2")
     p.add_argument("--cfl", type=float, default=None)
+    p.add_argument("--transfer-cfl", type=float, default=None)
     p.add_argument("--dx", type=float)
     p.add_argument("--stiffness-factor", type=float, default=1.0)
     p.add_argument("--set", action="append", default=[])
@@ -269,7 +297,10 @@ def main(argv=None) -> int:
     if a.dem_dir:
         dem_wall = json.loads((Path(a.dem_dir) / "summary.json").read_text())["wall_time_s"]
     report = {"case": a.case, "options": {"cfl": _options("lagrangian", a).cfl, "dx": a.dx,
-                                          "stiffness_factor": a.stiffness_factor},
+                                          "stiffness_factor": a.stiffness_factor,
+                                          "transfers_per_step": {
+                                              m: _options(m, a).transfers()
+                                              for m in ("lagrangian", "eulerian")}},
               "dem_wall_time_s": dem_wall, "cases": []}
     if a.kernels:
         report["kernels"] = kernels(a)
@@ -286,7 +317,8 @@ def main(argv=None) -> int:
             cmd = [sys.executable, __file__, "--method", method, "--case", a.case,
                    "--stiffness-factor", str(a.stiffness_factor)]
             for flag, val in (("--calibration", a.calibration), ("--dem-dir", a.dem_dir),
-                              ("--dx", a.dx), ("--cfl", a.cfl)):
+                              ("--dx", a.dx), ("--cfl", a.cfl),
+                              ("--transfer-cfl", a.transfer_cfl)):
                 if val is not None:
                     cmd += [flag, str(val)]
             for kv in a.set:

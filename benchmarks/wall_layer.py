@@ -58,6 +58,11 @@ def main(argv=None) -> int:
     ap.add_argument("--dem-dir", required=True, type=Path)
     ap.add_argument("--calibration", type=Path)
     ap.add_argument("--settle-time", type=float, default=0.05)
+    ap.add_argument("--cfl", type=float, default=None,
+                    help="the continuum's Courant number (default: LagrangianOptions')")
+    ap.add_argument("--transfer-cfl", type=float, default=None,
+                    help="its transfers' Courant number (default: LagrangianOptions'; 0: one "
+                         "transfer a step, as session 8's defaults with --cfl 0.075)")
     ap.add_argument("--layer-diameters", type=float, default=2.0)
     ap.add_argument("--above", type=float, default=0.15)
     a = ap.parse_args(argv)
@@ -85,7 +90,9 @@ def main(argv=None) -> int:
     cal = read_calibration(a.calibration or a.dem_dir / "calibration.toml")
     with tempfile.TemporaryDirectory() as tmp:
         R.run_lagrangian(sc, Path(tmp) / "lagrangian", calibration=cal,
-                         options=R.LagrangianOptions(settle_time=a.settle_time),
+                         options=R.LagrangianOptions(settle_time=a.settle_time, **{
+                             k: v for k, v in (("cfl", a.cfl), ("transfer_cfl", a.transfer_cfl))
+                             if v is not None}),
                          keep_samples=samplers)
     smp = samplers[-1]
     times, _, _ = R.sample_times(sc)

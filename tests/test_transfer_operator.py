@@ -69,7 +69,7 @@ def test_operator_is_the_apic_transfer_pair():
     gv = np.random.default_rng(5).normal(0.0, 1.0, (grid.nx, grid.nz, 2))
     gm, expected = explicit_pair(grid, x, mass, gv)
     out = np.zeros_like(gv)
-    transfer_rows(0, grid.nx, operator(grid, x, mass), gm, gv, out, grid.periodic)
+    transfer_rows(0, grid.nx, operator(grid, x, mass), gm, gv, out, grid.periodic, 0, 0)
     held = gm > MASS_EPS
     assert held.sum() > 100
     assert np.allclose(out[held], expected[held], rtol=1e-12, atol=1e-12)
@@ -89,12 +89,12 @@ def test_operator_keeps_affine_fields_and_momentum():
     Z = grid.z0 + np.arange(grid.nz)[None, :] * grid.dx + 0.0 * np.arange(grid.nx)[:, None]
     affine = np.stack([0.3 + 2.0 * X - 1.5 * Z, -0.2 + 0.7 * X + 4.0 * Z], axis=-1)
     out = np.zeros_like(affine)
-    transfer_rows(0, grid.nx, B, gm, affine, out, grid.periodic)
+    transfer_rows(0, grid.nx, B, gm, affine, out, grid.periodic, 0, 0)
     assert np.allclose(out[held], affine[held], rtol=0, atol=1e-12)
 
     rng = np.random.default_rng(11)
     gv = np.where(held[..., None], rng.normal(0.0, 1.0, (grid.nx, grid.nz, 2)), 0.0)
-    transfer_rows(0, grid.nx, B, gm, gv, out, grid.periodic)
+    transfer_rows(0, grid.nx, B, gm, gv, out, grid.periodic, 0, 0)
     P0 = (gm[..., None] * gv).sum(axis=(0, 1))
     P1 = (gm[..., None] * out).sum(axis=(0, 1))
     assert np.allclose(P1, P0, rtol=1e-12, atol=1e-12)
@@ -105,15 +105,23 @@ def test_operator_keeps_affine_fields_and_momentum():
 
 
 def test_transfers_per_step():
-    """round(cfl / transfer_cfl), at least one; None: one; a bad value: an InputError naming
-    the field."""
+    """round(cfl / transfer_cfl), at least one; None or 0: one; a FLIP blend: one, whatever
+    transfer_cfl; a bad value: an InputError naming the field."""
     assert transfers_per_step(0.3, 0.015) == 20
     assert transfers_per_step(0.3, 0.0375) == 8
     assert transfers_per_step(0.3, None) == 1
     assert transfers_per_step(0.075, 0.3) == 1
-    for bad in (0.0, -0.1, float("nan")):
+    assert transfers_per_step(0.3, 0.0) == 1
+    for bad in (-0.1, float("nan"), float("inf"), True):
         with pytest.raises(InputError, match="transfer_cfl"):
             transfers_per_step(0.3, bad)
+    from vibroflow.continuum.eulerian.run import EulerianOptions
+    from vibroflow.continuum.run import LagrangianOptions
+
+    assert LagrangianOptions().transfers() == 20
+    assert EulerianOptions().transfers() == 8
+    assert LagrangianOptions(flip=0.99).transfers() == 1
+    assert LagrangianOptions(transfer_cfl=0).transfers() == 1
     with pytest.raises(InputError, match="transfers"):
         MPMSystem(Grid.covering(0.0, 0.1, 0.0, 0.1, DX), ContinuumMaterial(), 1e-4,
                   transfers=0)
@@ -166,3 +174,60 @@ def test_damping_is_set_by_the_transfer_rate_not_the_step():
     assert plain[0] > 1.3 * reference
     assert plain[1] > 2.0 * plain[0]
     assert plain[1] > 3.0 * reference
+
+
+@pytest.mark.parametrize("transfers", [2, 3])
+@pytest.mark.parametrize("axisymmetric", [False, True])
+def test_grid_conditions_hold_after_the_transfers(transfers, axisymmetric):
+    """A column collapsing on the rough (no-slip) floor, plane or axisymmetric, with 2 and 3
+    transfers a step (the even count ends with a copy back, the odd one in place): after every
+    step the grid's floor rows are still (and the axis has no radial velocity), as after the
+    update itself, while the column above them moves."""
+    import dataclasses
+
+    from vibroflow.continuum.column import column_state, column_system
+    from vibroflow.continuum.mpm import advance
+
+    base = column_system(0.2, 0.2, 0.02, axisymmetric=axisymmetric, rough_floor=True)
+    system = dataclasses.replace(base, transfers=transfers)
+    state = column_state(system, 0.2, 0.2)
+    gv = system.work[3]
+    for _ in range(20):
+        advance(system, state, 5)
+        assert system.no_slip_rows > 0
+        assert np.all(gv[:, :system.no_slip_rows, :] == 0.0)
+        if axisymmetric:
+            assert np.all(gv[:system.axis_cols, :, 0] == 0.0)
+    assert np.abs(gv).max() > 1e-2
+
+
+def test_eulerian_parallel_loop_gives_the_serial_numbers_with_transfers_and_a_rough_floor():
+    """The Eulerian column on the rough floor with 3 transfers a step: the loop with numba's
+    parallel loops (forced, serial_below = 0) gives the serial loop's numbers bit for bit, and
+    the floor's node rows are still after every step."""
+    import dataclasses
+
+    import numba as nb
+
+    from vibroflow.continuum.eulerian import solver
+    from vibroflow.continuum.eulerian.column import column_state, column_system
+
+    def run(serial_below, threads):
+        base = column_system(0.2, 0.2, 0.02, rough_floor=True)
+        system = dataclasses.replace(base, transfers=3, serial_below=serial_below)
+        state = column_state(system, 0.2, 0.2)
+        old = nb.get_num_threads()
+        nb.set_num_threads(threads)
+        try:
+            for _ in range(10):
+                solver.advance(system, state, 10)
+                assert np.all(system.work[3][:, :system.no_slip_rows, :] == 0.0)
+        finally:
+            nb.set_num_threads(old)
+        return state
+
+    serial = run(solver.SERIAL_BELOW, 1)
+    assert np.abs(serial.v).max() > 1e-2
+    parallel = run(0, min(2, nb.config.NUMBA_NUM_THREADS))
+    for f in ("mass", "v", "C", "stress"):
+        np.testing.assert_array_equal(getattr(parallel, f), getattr(serial, f), err_msg=f)

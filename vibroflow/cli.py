@@ -14,6 +14,7 @@ that `--help` and the scenario commands stay quick.
 """
 from __future__ import annotations
 
+import math
 import sys
 import tomllib
 from collections.abc import Callable
@@ -266,7 +267,7 @@ def continuum(
                              "[compaction] (vibroflow calibrate --dilatancy).")] = False,
     dx: Annotated[Optional[float], typer.Option(
         "--dx", help="Grid spacing (m); default 3 ball diameters (why: continuum/run.py, "
-                    "DEFAULT_TRANSFER_CFL).")] = None,
+                    "DEFAULT_DX_DIAMETERS).")] = None,
     cfl: Annotated[Optional[float], typer.Option(
         "--cfl", help="Courant number of the time step in (0, 1]; default 0.3 (continuum/run.py "
                       "DEFAULT_CFL).")] = None,
@@ -275,8 +276,8 @@ def continuum(
                                "round(cfl / transfer_cfl) of them, so their damping of the "
                                "grid-scale motion does not depend on the step; default 0.015 "
                                "(Lagrangian) and 0.0375 (Eulerian), chosen with the grid to "
-                               "match the DEM (continuum/run.py DEFAULT_TRANSFER_CFL); 0 or a "
-                               "value >= cfl: one transfer a step.")] = None,
+                               "match the DEM (continuum/run.py DEFAULT_TRANSFER_CFL); 0: one "
+                               "transfer a step (always so with --flip > 0).")] = None,
     stiffness_factor: Annotated[float, typer.Option(
         "--stiffness-factor", help="Multiply the elastic moduli (and the default wall "
                                    "stiffness) by this factor in (0, 1]: sqrt(factor) times "
@@ -320,10 +321,10 @@ def continuum(
     # eulerian/run.py), kept in one place; --transfer-cfl 0: one transfer a step
     step = {} if cfl is None else {"cfl": cfl}
     if transfer_cfl is not None:
-        if transfer_cfl < 0:
-            raise InputError(f"--transfer-cfl = {transfer_cfl!r}: must be >= 0 (0: one "
-                             "transfer a step)")
-        step["transfer_cfl"] = transfer_cfl if transfer_cfl > 0 else None
+        if not (math.isfinite(transfer_cfl) and transfer_cfl >= 0):
+            raise InputError(f"--transfer-cfl = {transfer_cfl!r}: must be a Courant number > 0, "
+                             "or 0 for one transfer a step")
+        step["transfer_cfl"] = transfer_cfl
     options = options_class(dx=dx, model=rheology, dilatancy=dilatancy,
                             stiffness_factor=stiffness_factor, compaction=compaction, flip=flip,
                             **step)

@@ -193,17 +193,21 @@ def _make_advance_kernel(sources: int):
                 gv[:axis_cols, :, 0] = 0.0
             # 3b: the step's further transfers (transfer_operator.py), each followed by the
             # grid's conditions as the update was
-            # (from gv to gtmp and back, one parallel loop a transfer, the last copied back)
+            # (from gv to gtmp and back, one parallel loop a transfer, the last copied back;
+            # the conditions inside transfer_rows: numba's parallel build dropped slice
+            # assignments to the alternating buffer)
             for j in range(transfers - 1):
-                src, dst = (gv, gtmp) if j % 2 == 0 else (gtmp, gv)
-                for i in nb.prange(nx):
-                    transfer_rows(i, i + 1, B, gm, src, dst, periodic)
-                if no_slip_rows > 0:
-                    dst[:, :no_slip_rows, :] = 0.0
-                if axis_cols > 0:
-                    dst[:axis_cols, :, 0] = 0.0
+                if j % 2 == 0:
+                    for i in nb.prange(nx):
+                        transfer_rows(i, i + 1, B, gm, gv, gtmp, periodic, no_slip_rows,
+                                      axis_cols)
+                else:
+                    for i in nb.prange(nx):
+                        transfer_rows(i, i + 1, B, gm, gtmp, gv, periodic, no_slip_rows,
+                                      axis_cols)
             if transfers % 2 == 0:
-                gv[:] = gtmp
+                for i in nb.prange(nx):
+                    gv[i] = gtmp[i]
             # 4-5: gather, move, volume and stress, per chunk
             for c in nb.prange(nchunk):
                 a = bounds[c]

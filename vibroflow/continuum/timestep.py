@@ -59,11 +59,16 @@ def stable_dt(material, dx: float, point_size: float, boundaries=(), v_max: floa
 def transfers_per_step(cfl: float, transfer_cfl: float | None) -> int:
     """The APIC transfers a step of Courant number cfl makes (mpm.MPMSystem.transfers,
     transfer_operator.py) so that they damp as a one-transfer APIC step of Courant number
-    transfer_cfl would: round(cfl / transfer_cfl), at least 1; None: one transfer a step."""
+    transfer_cfl would: round(cfl / transfer_cfl), at least 1; None or 0: one transfer a step.
+    The rate of transfers is then that of the one-transfer step to within the rounding,
+    1 / (2 n) of it at most (and the step's own rounding to divide the sampling interval)."""
     if transfer_cfl is None:
         return 1
-    if not (isinstance(transfer_cfl, (int, float)) and math.isfinite(transfer_cfl)
-            and transfer_cfl > 0):
-        raise InputError(f"transfer_cfl = {transfer_cfl!r}: must be a Courant number > 0, or "
-                         "unset for one transfer a step")
+    if isinstance(transfer_cfl, bool) or not (
+            isinstance(transfer_cfl, (int, float)) and math.isfinite(transfer_cfl)
+            and transfer_cfl >= 0):
+        raise InputError(f"transfer_cfl = {transfer_cfl!r}: must be a Courant number > 0, or 0 "
+                         "(or none) for one transfer a step")
+    if transfer_cfl == 0:
+        return 1
     return max(1, int(round(cfl / transfer_cfl)))

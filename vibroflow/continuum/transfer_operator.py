@@ -97,13 +97,16 @@ def sum_operator_rows(i0, i1, cb, B):
 
 
 @nb.njit(cache=True, fastmath={"reassoc", "contract", "nsz", "arcp"})
-def transfer_rows(i0, i1, B, gm, gv, out, periodic):
+def transfer_rows(i0, i1, B, gm, gv, out, periodic, no_slip_rows, axis_cols):
     """One transfer of the grid velocities gv (nx, nz, 2) (m/s) for the node rows i0:i1, into
     out: v_i' = sum_j B_ij v_j / m_i at nodes holding mass (gm > MASS_EPS, kg/m) and off the
-    grid's edge, 0 elsewhere (as grid_update leaves them).  The sums may be reassociated
+    grid's edge, 0 elsewhere (as grid_update leaves them); then the grid's conditions as after
+    the update: the lowest no_slip_rows node rows held still (a rough floor), the radial
+    velocity of the first axis_cols columns 0 (an axisymmetric section's axis).  The sums may be reassociated
     (fastmath reassoc, contract, nsz and arcp, no other licence: NaN and infinities pass
     through), which lets them vectorise: a third less time; the numbers still do not depend on
-    the threads."""
+    the threads, but may on the processor's vector instructions (a checkpoint resumed on
+    another kind of processor may then not continue bit for bit)."""
     nx, nz = gm.shape
     for i in range(i0, i1):
         for k in range(nz):
@@ -138,3 +141,8 @@ def transfer_rows(i0, i1, B, gm, gv, out, periodic):
                         sz += bij * gv[j, l, 1]
             out[i, k, 0] = sx / m
             out[i, k, 1] = sz / m
+            if k < no_slip_rows:
+                out[i, k, 0] = 0.0
+                out[i, k, 1] = 0.0
+            if i < axis_cols:
+                out[i, k, 0] = 0.0

@@ -111,15 +111,18 @@ def _make_advance_kernel(sources: int, parallel: bool):
             if no_slip_rows > 0:
                 gv[:, :no_slip_rows, :] = 0.0
             # the step's further transfers (vibroflow.continuum.transfer_operator)
-            # (from gv to gtmp and back, one parallel loop a transfer, the last copied back)
+            # (from gv to gtmp and back, one parallel loop a transfer, the last copied back;
+            # the floor's rows held inside transfer_rows, as the Lagrangian loop's)
             for j in range(transfers - 1):
-                src, dst = (gv, gtmp) if j % 2 == 0 else (gtmp, gv)
-                for i in nb.prange(nx):
-                    transfer_rows(i, i + 1, B, gm, src, dst, periodic)
-                if no_slip_rows > 0:
-                    dst[:, :no_slip_rows, :] = 0.0
+                if j % 2 == 0:
+                    for i in nb.prange(nx):
+                        transfer_rows(i, i + 1, B, gm, gv, gtmp, periodic, no_slip_rows, 0)
+                else:
+                    for i in nb.prange(nx):
+                        transfer_rows(i, i + 1, B, gm, gtmp, gv, periodic, no_slip_rows, 0)
             if transfers % 2 == 0:
-                gv[:] = gtmp
+                for i in nb.prange(nx):
+                    gv[i] = gtmp[i]
             for c in nb.prange(nchunk):
                 a = (c * na) // nchunk
                 b = ((c + 1) * na) // nchunk

@@ -62,7 +62,7 @@ from ..run import (BULK_CSV_NAME, CHECKPOINT_NAME, REPORT_EVERY, SHEAR_RATE_CSV_
                    material_for, next_event, run_fingerprint, sample_times, samples_source,
                    shear_rate, shear_rate_outputs, to_lab, write_json_atomic,
                    write_shear_rate_csv)
-from ..timestep import stable_dt, transfers_per_step
+from ..timestep import stable_dt
 from .mesh import EulerianMesh
 from .solver import EulerianState, EulerianSystem, advance, init_state, state_from_checkpoint
 from .wall import MeshWall
@@ -149,7 +149,7 @@ def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
     dt = interval / math.ceil(interval / dt)
     return EulerianSystem(mesh, material, dt, frame=frame, wall=wall, partitions=partitions,
                           chunks=scenario.run.force_chunks,
-                          transfers=transfers_per_step(options.cfl, options.transfer_cfl))
+                          transfers=options.transfers())
 
 
 def bed_masses(system: EulerianSystem, area: float, gravity: float):
@@ -325,7 +325,9 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
         "grid_spacing_m": mesh.grid.dx, "cell_size_m": h, "cells": n_cells,
         # the Lagrangian block's names: the cells are the fixed integration points
         "point_spacing_m": h, "points": n_cells,
-        "bed_height_m": top, "dt_s": system.dt, "steps": n_steps, "wall_time_s": wall_time,
+        "bed_height_m": top, "dt_s": system.dt, "steps": n_steps,
+        "transfers_per_step": system.transfers, "transfer_cfl": options.transfer_cfl,
+        "wall_time_s": wall_time,
         "stiffness_factor": options.stiffness_factor,
         "wall_friction": system.wall.friction, "wall_stiffness_Pa_m": system.wall.stiffness,
         "partition_friction": (system.partitions.friction if system.partitions is not None
