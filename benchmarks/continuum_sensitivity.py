@@ -16,7 +16,8 @@ A case is `base` or `NAME=VALUE` with NAME one of
   bulk_modulus_scale, shear_modulus_scale,
   moduli_scale                                  (K, G, or K and G, multiplied)
   critical_solid_fraction                       ([rheology])
-  wall_stiffness (Pa/m), cfl, dx (m), model     (LagrangianOptions)
+  wall_stiffness (Pa/m), cfl, dx (m), model,
+  transfer_cfl (0: one APIC transfer a step)    (LagrangianOptions)
 The default list is the one whose figures benchmarks/README.md records.  Wall times are printed
 but say little unless the machine is quiet.  Results also go to --out/sensitivity.json.
 """
@@ -35,7 +36,7 @@ DEFAULT_CASES = ["base", "wall_friction=0.10", "wall_friction=0.40", "partition_
                  "critical_solid_fraction=0.54", "critical_solid_fraction=0.60",
                  "wall_stiffness=5.9e7", "model=drucker_prager", "cfl=0.6", "dx=0.010",
                  "dx=0.015"]
-OPTION_NAMES = ("wall_stiffness", "cfl", "dx", "model")
+OPTION_NAMES = ("wall_stiffness", "cfl", "dx", "model", "transfer_cfl")
 
 
 def apply_case(case: str, calibration: dict) -> tuple[dict, dict]:

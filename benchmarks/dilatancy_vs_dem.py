@@ -30,6 +30,9 @@ def main(argv=None) -> int:
     ap.add_argument("--excess", type=float, default=0.0,
                     help="initial_excess_solid_fraction of the bed over phi_c")
     ap.add_argument("--cfl", type=float, default=0.3)
+    ap.add_argument("--transfer-cfl", type=float, default=0.0,
+                    help="the APIC transfers' Courant number (LagrangianOptions.transfer_cfl); "
+                         "default 0: one transfer a step, as the figures of sessions 4 and 5")
     ap.add_argument("--compaction", action="store_true", help="the cyclic compaction option")
     ap.add_argument("--gamma-c", type=float, default=None, help="override [compaction] "
                     "compaction_strain")
@@ -61,7 +64,8 @@ def main(argv=None) -> int:
         if args.dphi_cyc is not None:
             comp["excess_solid_fraction"] = args.dphi_cyc
         cal["compaction"] = comp
-    opts = dict(dilatancy=args.k_dil > 0, cfl=args.cfl, compaction=args.compaction)
+    opts = dict(dilatancy=args.k_dil > 0, cfl=args.cfl, compaction=args.compaction,
+                transfer_cfl=args.transfer_cfl)
     diag = []
     if args.diagnose:
         import numpy as np
@@ -106,6 +110,7 @@ def main(argv=None) -> int:
                  "pressure_mean_Pa": float(np.mean(p))}
     print(json.dumps({"amplitude_factor": sc.motion.amplitude_factor, "method": args.method,
                       "K_dil": args.k_dil, "excess": args.excess, "cfl": args.cfl,
+                      "transfer_cfl": args.transfer_cfl,
                       "compaction": ({k: cal["compaction"].get(k) for k in (
                           "compaction_strain", "excess_solid_fraction")}
                                      if args.compaction else None),
