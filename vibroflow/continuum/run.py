@@ -683,8 +683,6 @@ def _vibrate(scenario, system, state, samples: Samples, geo, material, times, ou
         (out / VTK_DIR).mkdir(exist_ok=True)
         write_tub_surface(out / VTK_DIR / "tub.vtu", geo)
     wall_hist = state.history[0]
-    k0 = state.step
-    last_ckpt = time.perf_counter()
 
     def checkpoint():
         save_checkpoint(ckpt, state, samples.arrays(), {
@@ -692,48 +690,68 @@ def _vibrate(scenario, system, state, samples: Samples, geo, material, times, ou
             "wall_time_s": wall_before + time.perf_counter() - wall0})
 
     prog.stage("continuum (lagrangian)", run.duration)
-    k = k0
+
+    def record(j):
+        """Sample j, at step sample_step[j]."""
+        pose6 = np.array(system.frame.pose(state.t))
+        to_lab(state.x, state.v, pose6, pv[0], pv[1], buf_p, buf_v, 0.5 * geo.length)
+        samples.pos[j], samples.vel[j], samples.poses[j] = buf_p, buf_v, pose6
+        touching = np.nonzero(wall_hist["state"] > 0)[0]
+        _wall_gap_arc(state.x, geo.radius, gap, arc)
+        c = samples.contacts
+        c["snapshot"].append(np.full(touching.size, j, np.int32))
+        c["particle"].append(touching.astype(np.int32))
+        # per metre of thickness -> over the slice (N), the DEM's unit
+        c["fn"].append(wall_hist["fn"][touching] * geo.length)
+        c["ft"].append(np.abs(wall_hist["ft"][touching]) * geo.length)
+        c["sliding"].append(wall_hist["state"][touching] == 2)
+        c["arc"].append(arc[touching].copy())
+        c["position_tub"].append(np.stack(
+            [state.x[touching, 0], np.full(touching.size, 0.5 * geo.length),
+             state.x[touching, 1]], axis=1))
+        rate = shear_rate(state.L)
+        if vtk and j >= S - run.phases_per_cycle:
+            name = f"points_{j:05d}.vtu"
+            _write_points_vtu(out / VTK_DIR / name, state, rate, geo.length,
+                              material.solid_density)
+            samples.vtk["points"].append((state.t, name))
+            name = f"grid_{j:05d}.vtr"
+            fields = grid_fields(system.grid, state.x, state.v, state.mass,
+                                 state.pressure(), rate, material.solid_density)
+            write_grid_vtr(out / VTK_DIR / name, system.grid, fields, 0.5 * geo.length)
+            samples.vtk["grid"].append((state.t, name))
+        samples.rate_all[j] = rate.mean()
+        samples.add_cell_rates(state.x, rate)
+        near = gap < 0.5 * cell
+        if near.any():
+            samples.rate_wall[j] = rate[near].mean()
+        ci = np.floor(state.x[:, 0] / cell + 0.5)
+        ck = np.floor(state.x[:, 1] / cell + 0.5)
+        for q, (pi, pk) in enumerate(probe_cells):
+            inside = (ci == pi) & (ck == pk)
+            if inside.any():
+                samples.rate_probe[j, q] = rate[inside].mean()
+
+    return vibration_timeline(state, n_steps, sample_step, samples, record,
+                              lambda m: advance(system, state, m), checkpoint, prog, n,
+                              run.checkpoint_every, stop_after_steps)
+
+
+def vibration_timeline(state, n_steps: int, sample_step: np.ndarray, samples: Samples,
+                       record, advance_steps, checkpoint, prog: RunProgress, per_step: int,
+                       checkpoint_every: float, stop_after_steps: int | None) -> bool:
+    """The vibration's timeline, the same for both formulations: from state.step to n_steps,
+    record(j) at each sample step sample_step[j] (samples.j counts them, so a resumed run goes
+    on where it stopped), checkpoint() every checkpoint_every wall seconds, the steps between
+    two events (next_event) in one advance_steps(m) call, progress reported as simulated time
+    and per_step particle-steps a step.  False when stopped by stop_after_steps (after its
+    checkpoint), True at the end."""
+    S = sample_step.size
+    k0 = k = state.step
+    last_ckpt = time.perf_counter()
     while True:
         while samples.j < S and sample_step[samples.j] == k:
-            j = samples.j
-            pose6 = np.array(system.frame.pose(state.t))
-            to_lab(state.x, state.v, pose6, pv[0], pv[1], buf_p, buf_v, 0.5 * geo.length)
-            samples.pos[j], samples.vel[j], samples.poses[j] = buf_p, buf_v, pose6
-            touching = np.nonzero(wall_hist["state"] > 0)[0]
-            _wall_gap_arc(state.x, geo.radius, gap, arc)
-            c = samples.contacts
-            c["snapshot"].append(np.full(touching.size, j, np.int32))
-            c["particle"].append(touching.astype(np.int32))
-            # per metre of thickness -> over the slice (N), the DEM's unit
-            c["fn"].append(wall_hist["fn"][touching] * geo.length)
-            c["ft"].append(np.abs(wall_hist["ft"][touching]) * geo.length)
-            c["sliding"].append(wall_hist["state"][touching] == 2)
-            c["arc"].append(arc[touching].copy())
-            c["position_tub"].append(np.stack(
-                [state.x[touching, 0], np.full(touching.size, 0.5 * geo.length),
-                 state.x[touching, 1]], axis=1))
-            rate = shear_rate(state.L)
-            if vtk and j >= S - run.phases_per_cycle:
-                name = f"points_{j:05d}.vtu"
-                _write_points_vtu(out / VTK_DIR / name, state, rate, geo.length,
-                                  material.solid_density)
-                samples.vtk["points"].append((state.t, name))
-                name = f"grid_{j:05d}.vtr"
-                fields = grid_fields(system.grid, state.x, state.v, state.mass,
-                                     state.pressure(), rate, material.solid_density)
-                write_grid_vtr(out / VTK_DIR / name, system.grid, fields, 0.5 * geo.length)
-                samples.vtk["grid"].append((state.t, name))
-            samples.rate_all[j] = rate.mean()
-            samples.add_cell_rates(state.x, rate)
-            near = gap < 0.5 * cell
-            if near.any():
-                samples.rate_wall[j] = rate[near].mean()
-            ci = np.floor(state.x[:, 0] / cell + 0.5)
-            ck = np.floor(state.x[:, 1] / cell + 0.5)
-            for q, (pi, pk) in enumerate(probe_cells):
-                inside = (ci == pi) & (ck == pk)
-                if inside.any():
-                    samples.rate_probe[j, q] = rate[inside].mean()
+            record(samples.j)
             samples.j += 1
         if k == n_steps:
             break
@@ -741,15 +759,15 @@ def _vibrate(scenario, system, state, samples: Samples, geo, material, times, ou
             checkpoint()
             prog.log(f"stopped at t = {state.t:.4f} s (step {k}); go on with --resume")
             return False
-        if time.perf_counter() - last_ckpt > run.checkpoint_every:
+        if time.perf_counter() - last_ckpt > checkpoint_every:
             checkpoint()
             last_ckpt = time.perf_counter()
         # the steps up to the next sample, stop or progress report, in one compiled call
         nxt = next_event(k, n_steps, sample_step, samples.j, k0, stop_after_steps)
-        advance(system, state, nxt - k)
+        advance_steps(nxt - k)
         k = nxt
-        prog.update(state.t, (k - k0) * n)
-    prog.update(state.t, (n_steps - k0) * n)
+        prog.update(state.t, (k - k0) * per_step)
+    prog.update(state.t, (n_steps - k0) * per_step)
     return True
 
 

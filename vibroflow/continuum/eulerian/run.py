@@ -59,9 +59,9 @@ from ..mpm import ContinuumBlowUp
 from ..run import default_dx as lagrangian_default_dx
 from ..run import (BULK_CSV_NAME, CHECKPOINT_NAME, REPORT_EVERY, SHEAR_RATE_CSV_NAME,
                    SUMMARY_NAME, VTK_DIR, LagrangianOptions, Samples, bed_area, cell_grid_of,
-                   material_for, next_event, run_fingerprint, sample_times, samples_source,
-                   shear_rate, shear_rate_outputs, to_lab, write_json_atomic,
-                   write_shear_rate_csv)
+                   material_for, run_fingerprint, sample_times, samples_source,
+                   shear_rate, shear_rate_outputs, to_lab, vibration_timeline,
+                   write_json_atomic, write_shear_rate_csv)
 from ..timestep import stable_dt
 from .mesh import EulerianMesh
 from .solver import EulerianState, EulerianSystem, advance, init_state, state_from_checkpoint
@@ -381,8 +381,6 @@ def _vibrate(scenario, system: EulerianSystem, state: EulerianState, samples: Sa
         (out / VTK_DIR).mkdir(exist_ok=True)
         write_tub_surface(out / VTK_DIR / "tub.vtu", geo)
     hist = state.wall
-    k0 = state.step
-    last_ckpt = time.perf_counter()
 
     def checkpoint():
         save_checkpoint(ckpt, state, {**samples.arrays(), "dither": dither}, {
@@ -391,67 +389,53 @@ def _vibrate(scenario, system: EulerianSystem, state: EulerianState, samples: Sa
             "wall_time_s": wall_before + time.perf_counter() - wall0})
 
     prog.stage("continuum (eulerian)", run.duration)
-    k = k0
-    while True:
-        while samples.j < S and sample_step[samples.j] == k:
-            j = samples.j
-            pose6 = np.array(system.frame.pose(state.t))
-            v = np.ascontiguousarray(state.v[cells])
-            ox, oz = cell_offset(j)
-            x_ball = xc + np.array([ox * mesh.h, oz * mesh.h])
-            to_lab(x_ball, v, pose6, pv[0], pv[1], buf_p, buf_v, 0.5 * geo.length)
-            dither += state.mass[cells] / unit
-            take = dither >= 0.5
-            dither[take] -= 1.0
-            buf_p[~take] = far
-            samples.pos[j], samples.vel[j], samples.poses[j] = buf_p, buf_v, pose6
-            # contacts as the Lagrangian run counts them: cells holding at least half a
-            # cell of material (a material point's size), pressing on the U
-            touching = np.nonzero((hist["state"][wall_cells] > 0)
-                                  & (state.mass[wall_cells] >= 0.5 * full))[0]
-            tc = wall_cells[touching]
-            where = np.searchsorted(cells, tc)
-            c = samples.contacts
-            c["snapshot"].append(np.full(tc.size, j, np.int32))
-            c["particle"].append(where.astype(np.int32))
-            c["fn"].append(hist["fn"][tc] * geo.length)
-            c["ft"].append(np.abs(hist["ft"][tc]) * geo.length)
-            c["sliding"].append(hist["state"][tc] == 2)
-            c["arc"].append(mesh.arc[tc].copy())
-            c["position_tub"].append(np.stack(
-                [system.x[tc, 0], np.full(tc.size, 0.5 * geo.length), system.x[tc, 1]],
-                axis=1))
-            rate_all = shear_rate(state.L)
-            if vtk and j >= S - run.phases_per_cycle:
-                name = f"grid_{j:05d}.vtr"
-                fields = grid_fields(mesh.grid, system.x, state.v, state.mass,
-                                     state.pressure(), rate_all, material.solid_density)
-                write_grid_vtr(out / VTK_DIR / name, mesh.grid, fields, 0.5 * geo.length)
-                samples.vtk["grid"].append((state.t, name))
-            rate = rate_all[cells]
-            held = state.mass[cells] >= 0.5 * full
-            if held.any():
-                samples.rate_all[j] = rate[held].mean()
-                samples.add_cell_rates(system.x[cells][held], rate[held])
-            if (held & near_wall).any():
-                samples.rate_wall[j] = rate[held & near_wall].mean()
-            for q, inside in enumerate(in_probe):
-                if (inside & held).any():
-                    samples.rate_probe[j, q] = rate[inside & held].mean()
-            samples.j += 1
-        if k == n_steps:
-            break
-        if stop_after_steps is not None and k - k0 >= stop_after_steps:
-            checkpoint()
-            prog.log(f"stopped at t = {state.t:.4f} s (step {k}); go on with --resume")
-            return False
-        if time.perf_counter() - last_ckpt > run.checkpoint_every:
-            checkpoint()
-            last_ckpt = time.perf_counter()
-        # the steps up to the next sample, stop or progress report, in one compiled call
-        nxt = next_event(k, n_steps, sample_step, samples.j, k0, stop_after_steps)
-        advance(system, state, nxt - k)
-        k = nxt
-        prog.update(state.t, (k - k0) * n)
-    prog.update(state.t, (n_steps - k0) * n)
-    return True
+
+    def record(j):
+        """Sample j, at step sample_step[j]."""
+        pose6 = np.array(system.frame.pose(state.t))
+        v = np.ascontiguousarray(state.v[cells])
+        ox, oz = cell_offset(j)
+        x_ball = xc + np.array([ox * mesh.h, oz * mesh.h])
+        to_lab(x_ball, v, pose6, pv[0], pv[1], buf_p, buf_v, 0.5 * geo.length)
+        dither[:] += state.mass[cells] / unit  # in place: the checkpoint's array
+        take = dither >= 0.5
+        dither[take] -= 1.0
+        buf_p[~take] = far
+        samples.pos[j], samples.vel[j], samples.poses[j] = buf_p, buf_v, pose6
+        # contacts as the Lagrangian run counts them: cells holding at least half a
+        # cell of material (a material point's size), pressing on the U
+        touching = np.nonzero((hist["state"][wall_cells] > 0)
+                              & (state.mass[wall_cells] >= 0.5 * full))[0]
+        tc = wall_cells[touching]
+        where = np.searchsorted(cells, tc)
+        c = samples.contacts
+        c["snapshot"].append(np.full(tc.size, j, np.int32))
+        c["particle"].append(where.astype(np.int32))
+        c["fn"].append(hist["fn"][tc] * geo.length)
+        c["ft"].append(np.abs(hist["ft"][tc]) * geo.length)
+        c["sliding"].append(hist["state"][tc] == 2)
+        c["arc"].append(mesh.arc[tc].copy())
+        c["position_tub"].append(np.stack(
+            [system.x[tc, 0], np.full(tc.size, 0.5 * geo.length), system.x[tc, 1]],
+            axis=1))
+        rate_all = shear_rate(state.L)
+        if vtk and j >= S - run.phases_per_cycle:
+            name = f"grid_{j:05d}.vtr"
+            fields = grid_fields(mesh.grid, system.x, state.v, state.mass,
+                                 state.pressure(), rate_all, material.solid_density)
+            write_grid_vtr(out / VTK_DIR / name, mesh.grid, fields, 0.5 * geo.length)
+            samples.vtk["grid"].append((state.t, name))
+        rate = rate_all[cells]
+        held = state.mass[cells] >= 0.5 * full
+        if held.any():
+            samples.rate_all[j] = rate[held].mean()
+            samples.add_cell_rates(system.x[cells][held], rate[held])
+        if (held & near_wall).any():
+            samples.rate_wall[j] = rate[held & near_wall].mean()
+        for q, inside in enumerate(in_probe):
+            if (inside & held).any():
+                samples.rate_probe[j, q] = rate[inside & held].mean()
+
+    return vibration_timeline(state, n_steps, sample_step, samples, record,
+                              lambda m: advance(system, state, m), checkpoint, prog, n,
+                              run.checkpoint_every, stop_after_steps)
