@@ -109,7 +109,7 @@ def dem_bed(dem_dir: Path, per: int) -> dict:
     count = np.zeros(per)
     with DEMResult.open(dem_dir) as res:
         phase = res.file["snapshots/phase"][()]
-        for s, snap in res.iter_snapshots():
+        for s, snap in res.iter_snapshots(wall_contacts=False):  # the ball contacts alone
             k = int(np.rint(phase[s] * per)) % per
             m = snap["mass"]
             x, v = snap["positions_tub"], snap["velocities_rel_tub"]

@@ -149,12 +149,13 @@ class DEMResult:
         return self.has("wall_contacts/force_lab")
 
     # ------------------------------------------------------------------------------------------
-    def iter_snapshots(self, indices=None, contacts: bool = True):
+    def iter_snapshots(self, indices=None, contacts: bool = True, wall_contacts: bool = True):
         """Yield (index, snapshot dict) for the snapshots `indices` (default: all), the dict
         holding add_snapshot's keyword arguments: positions_tub, velocities_rel_tub, radius, mass,
         and when `contacts` (and stored) contacts_i, contacts_j, contact_force, contact_branch
-        (tub axes), wall_particle, wall_force (tub axes), wall_point (tub frame); plus `time`
-        (s) and `pose` (X, Z, theta, Xdot, Zdot, thetadot)."""
+        (tub axes), and, unless wall_contacts is False, wall_particle, wall_force (tub axes),
+        wall_point (tub frame); plus `time` (s) and `pose` (X, Z, theta, Xdot, Zdot,
+        thetadot)."""
         f = self.file
         n_snap = f["snapshots/time"].shape[0]
         idx = np.arange(n_snap) if indices is None else np.asarray(indices, dtype=np.int64)
@@ -168,7 +169,7 @@ class DEMResult:
         bc_rows = wc_rows = None
         if contacts and self.has_ball_contacts:
             bc_rows = _rows_by_snapshot(f["ball_contacts/snapshot"][()], n_snap)
-        if contacts and self.has_wall_forces:
+        if contacts and wall_contacts and self.has_wall_forces:
             wc_rows = _rows_by_snapshot(f["wall_contacts/snapshot"][()], n_snap)
         for s in idx:
             s = int(s)
