@@ -383,7 +383,8 @@ def test_continuum_command_writes_dem_comparable_results(run_cli, tmp_path):
     cont = summary["continuum"]
     assert (cont["material"]["mu_s"], cont["material"]["bulk_modulus"]) == (0.35, 4.0e6)
     assert (cont["wall_friction"], cont["partition_friction"]) == (0.3, 0.1)
-    # impact speed through the calibrated relation v = c0 + c1 d gamma_dot (mean over points)
+    # impact speed through the calibrated relation v = c0 + c1 d gamma_dot (the phase-resolved
+    # field's shear rate, solid-fraction weighted over the cells)
     v = cont["impacts_from_shear_rate"]["ball_ball_mean_normal_speed_m_s"]
     assert v == pytest.approx(0.05 + 0.8 * 0.00635 * cont["shear_rate"]["mean_1_s"], rel=1e-9)
     assert summary["impacts"]["ball_ball_mean_normal_speed"] == pytest.approx(v, rel=1e-12)
@@ -631,15 +632,19 @@ def test_continuum_blowup_names_the_points_and_the_time_step():
     assert "time step is too large for the stiffness" in message
 
 
-def test_shear_rate_map_is_the_cell_mean_and_infers_impacts(tmp_path):
-    """The continuum's shear-rate map (continuum.run.Samples.add_cell_rates and
-    write_shear_rate_csv): each analysis cell holds the mean over samples of the mean shear rate
-    of the points inside it; a linear field gamma_dot = a + b x over points symmetric in each
-    cell gives a + b x_cell exactly, and the impact columns are the calibrated c0 + c1 d g."""
-    from vibroflow.continuum.run import Samples, write_shear_rate_csv
+def test_shear_rate_map_holds_both_measures_and_infers_impacts(tmp_path):
+    """The continuum's shear-rate map (continuum.run.write_shear_rate_csv): each analysis cell
+    holds the phase-resolved field's cycle-mean shear rate at its centre (analysis.phase_shear:
+    here a steady simple shear v_x = G z sampled on a lattice, so G at the interior cells) and
+    the mean over samples of its points' instantaneous rates (Samples.add_cell_rates: a linear
+    field a + b x over points symmetric in each cell gives a + b x_cell exactly); the impact
+    columns are the calibrated c0 + c1 d gamma_dot of the phase-field rate, with the relation
+    fitted on the continuum's measure (c0_cells_m_s, c1_cells) preferred to the fine one."""
+    from vibroflow.analysis.phase_shear import PhaseShearAccumulator
+    from vibroflow.continuum.run import Samples, impact_relation, write_shear_rate_csv
 
-    h, a, b = 0.015, 2.0, 40.0
-    s = Samples(2, 1, 1, cell_grid=(h, 3, 4))
+    h, a, b, G, length = 0.015, 2.0, 40.0, 1.5, 0.0635
+    s = Samples(2, 1, 1, cell_grid=(h, 6, 8))
     offsets = np.array([-0.25, 0.25]) * h
     cx, cz = np.meshgrid(np.arange(-2, 3) * h, np.arange(0, 3) * h, indexing="ij")
     px = (cx.ravel()[:, None] + offsets[None, :]).ravel()
@@ -647,15 +652,36 @@ def test_shear_rate_map_is_the_cell_mean_and_infers_impacts(tmp_path):
     x = np.stack([px, pz], axis=1)
     for _ in range(2):
         s.add_cell_rates(x, a + b * x[:, 0])
-    cal = {"impacts": {"ball_ball": {"c0_m_s": 0.01, "c1": 3.0},
+    acc = PhaseShearAccumulator(h, 6, 8, length, 1, 1)
+    xs = np.arange(-0.09, 0.0901, h / 3)
+    zs = np.arange(0.0, 0.1201, h / 3)
+    X, Z = np.meshgrid(xs, zs)
+    pos = np.stack([X.ravel(), np.full(X.size, length / 2), Z.ravel()], axis=1)
+    vel = np.zeros_like(pos)
+    vel[:, 0] = G * pos[:, 2]
+    acc.add(pos, vel, np.zeros(6), np.full(X.size, 0.6 * (h / 3) ** 2 * length), 0, 0)
+    phase = acc.result()
+    cal = {"impacts": {"ball_ball": {"c0_m_s": 0.01, "c1": 3.0, "c0_cells_m_s": 0.005,
+                                     "c1_cells": 4.0},
                        "ball_wall": {"c0_m_s": 0.02, "c1": 5.0}}}
+    assert impact_relation(cal["impacts"]["ball_ball"]) == (0.005, 4.0, "c0_cells, c1_cells")
+    assert impact_relation(cal["impacts"]["ball_wall"]) == (0.02, 5.0, "c0, c1")
+    assert impact_relation({"c0_m_s": float("nan"), "c1": 1.0}) == (None, None, "")
     d = 0.00635
-    write_shear_rate_csv(tmp_path / "shear_rate.csv", s, cal, d)
+    write_shear_rate_csv(tmp_path / "shear_rate.csv", s, phase, cal, d)
     rows = np.genfromtxt(tmp_path / "shear_rate.csv", delimiter=",", names=True)
-    assert rows.size == 15 and np.all(rows["samples"] == 2)
-    assert np.allclose(rows["shear_rate"], a + b * rows["x"], rtol=0, atol=1e-12)
-    assert np.allclose(rows["impact_ball_ball"], 0.01 + 3.0 * d * rows["shear_rate"])
-    assert np.allclose(rows["impact_ball_wall"], 0.02 + 5.0 * d * rows["shear_rate"])
+    inst = rows["samples"] > 0
+    assert inst.sum() == 15 and np.all(rows["samples"][inst] == 2)
+    assert np.allclose(rows["instantaneous_shear_rate"][inst], a + b * rows["x"][inst], rtol=0,
+                       atol=1e-12)
+    # two spacings in from the lattice's edges (the tent average of a linear field is exact)
+    inner = (np.abs(rows["x"]) <= 0.06 + 1e-9) & (rows["z"] >= 2 * h - 1e-9) & (
+        rows["z"] <= 0.09 + 1e-9)
+    assert inner.sum() >= 20
+    assert np.allclose(rows["shear_rate"][inner], G, rtol=1e-9)
+    got = np.isfinite(rows["shear_rate"])
+    assert np.allclose(rows["impact_ball_ball"][got], 0.005 + 4.0 * d * rows["shear_rate"][got])
+    assert np.allclose(rows["impact_ball_wall"][got], 0.02 + 5.0 * d * rows["shear_rate"][got])
 
 
 def test_a_lone_expanding_point_stays_a_granular_gas_not_a_giant():

@@ -126,3 +126,10 @@ def stderr_of_batches(batch_values, axis: int = 0):
         se = np.sqrt(var / n)
     se = np.where(n >= 2, se, np.nan)
     return float(se) if np.ndim(se) == 0 else se
+
+
+def phase_bins(times, frequency: float, n_phases: int) -> np.ndarray:
+    """Phase bin k = 0 .. n_phases-1 of each time (s): the nearest of the phases k / n_phases of
+    the cycle (phase 0 = t a multiple of 1/f, as dem.h5's /snapshots/phase)."""
+    frac = np.mod(np.asarray(times, float) * frequency + CYCLE_TOLERANCE, 1.0)
+    return np.mod(np.floor(frac * n_phases + 0.5).astype(np.int64), n_phases)

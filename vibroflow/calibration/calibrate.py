@@ -41,7 +41,7 @@ from vibroflow.scenario.model import find_contact
 from vibroflow.errors import InputError
 
 from .dem_result import DEMResult
-from .impacts import impact_relations
+from .impacts import impact_relations, impact_relations_on_cells
 from .run_fields import coarse_grain_run, write_fields
 from .tub_rheology import DENSE_SOLID_FRACTION, bed_pressure, tub_mu_i_scatter
 from .wall_friction import wall_friction
@@ -147,6 +147,7 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
                  f" -> {fields_path}")
         wf = wall_friction(res)
         rel = impact_relations(res, phases, avg)
+        rel["cells"] = impact_relations_on_cells(res)
         scatter = tub_mu_i_scatter(avg, phases)
         p_bed = bed_pressure(avg)
         z = coordination(res)
@@ -465,6 +466,32 @@ def _calibration_record(res, cg_info, wf, rel, rheo, elastic, dp, p_bed, phi_bed
             "a_temperature": _f(t["c1"]), "a_temperature_stderr": _f(t["c1_stderr"]),
             "r2_temperature": _f(t["r2"]), "a_maxwellian": _f(t["maxwell"]),
         }
+    rel_cells = rel.get("cells")
+    for name in ("ball_ball", "ball_wall"):
+        g = (rel_cells or {}).get(name)
+        if g is None or name not in cal["impacts"]:
+            continue
+        # the same relation fitted on the continuum's measure of the shear rate
+        # (impacts.impact_relations_on_cells): what a continuum run uses
+        cal["impacts"][name].update({
+            "c0_cells_m_s": _f(g["c0"]), "c0_cells_stderr_m_s": _f(g["c0_stderr"]),
+            "c1_cells": _f(g["c1"]), "c1_cells_stderr": _f(g["c1_stderr"]),
+            "r2_cells": _f(g["r2"]), "relative_rms_error_cells": _f(g["relative_rms_error"]),
+            "points_cells": int(g["points"])})
+    if rel_cells:
+        cal["impacts"].update({
+            "cells_shear_rate_model": (
+                "v = c0_cells + c1_cells d gamma_dot, gamma_dot the cycle mean of the "
+                "phase-resolved velocity field on the analysis cells' centres "
+                "(vibroflow.analysis.phase_shear: the continuum's measure, so a continuum "
+                "run uses these)"),
+            "cell_size_m": _f(rel_cells["cell_size_m"]),
+            "dem_bed_shear_rate_cells_1_s": _f(rel_cells["bed_mean_shear_rate_1_s"]),
+            "dem_bed_shear_rate_cells_stderr_1_s": _f(
+                rel_cells["bed_mean_shear_rate_1_s_stderr"]),
+            "dem_near_wall_shear_rate_cells_1_s": _f(rel_cells["near_wall_shear_rate_1_s"]),
+            "dem_near_wall_shear_rate_cells_stderr_1_s": _f(
+                rel_cells["near_wall_shear_rate_1_s_stderr"])})
     b = rel.get("bagnold")
     if b is not None:
         cal["impacts"]["bagnold_sqrtT_over_d_gamma_dot"] = _f(b["c1"])

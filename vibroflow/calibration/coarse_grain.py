@@ -87,7 +87,7 @@ import numba as nb
 import numpy as np
 
 from vibroflow.analysis.bulk import grid_extent
-from vibroflow.analysis.stats import CYCLE_TOLERANCE, stderr_of_batches
+from vibroflow.analysis.stats import phase_bins, stderr_of_batches  # noqa: F401 (re-exported)
 from vibroflow.errors import InputError
 from vibroflow.tub.geometry import TubGeometry
 from vibroflow.tub.motion import lab_to_tub_np, pose_np, relative_velocity_tub_axes_np
@@ -247,13 +247,6 @@ def kernel_value(kernel: str, width: float, cutoff: float | None, dx, dz):
         s = np.sqrt(r2) / rc
         w = amp * (1.0 + 3.0 * s) * (1.0 - s) ** 3
     return np.where(r2 < rc * rc, w, 0.0)
-
-
-def phase_bins(times, frequency: float, n_phases: int) -> np.ndarray:
-    """Phase bin k = 0 .. n_phases-1 of each time (s): the nearest of the phases k / n_phases of
-    the cycle (phase 0 = t a multiple of 1/f, as dem.h5's /snapshots/phase)."""
-    frac = np.mod(np.asarray(times, float) * frequency + CYCLE_TOLERANCE, 1.0)
-    return np.mod(np.floor(frac * n_phases + 0.5).astype(np.int64), n_phases)
 
 
 # ----------------------------------------------------------------------------------------------

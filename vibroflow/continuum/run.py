@@ -51,7 +51,9 @@ from pathlib import Path
 import numba as nb
 import numpy as np
 
-from vibroflow.analysis.stats import batch_means, batches_of_whole_cycles
+from vibroflow.analysis.phase_shear import (PhaseShear, PhaseShearAccumulator, near_wall_nodes,
+                                            node_grid)
+from vibroflow.analysis.stats import batch_means, batches_of_whole_cycles, phase_bins
 from vibroflow.analysis.summary import geometry_of, json_safe, tub_summary
 from vibroflow.errors import InputError
 from vibroflow.progress import RunProgress
@@ -499,36 +501,47 @@ class Samples:
 
 
 def cell_grid_of(geo, cell_size: float) -> tuple[float, int, int]:
-    """The analysis cells covering a tub (see Samples): (h m, cells either side, cells up)."""
-    h = float(cell_size)
-    return h, int(math.ceil(geo.radius / h)) + 1, int(math.ceil(geo.rim_height / h)) + 2
+    """The analysis cells covering a tub (see Samples): (h m, cells either side, cells up);
+    the nodes of analysis.phase_shear.node_grid, so the two maps are the same cells."""
+    return node_grid(geo, cell_size)
 
 
 SHEAR_RATE_CSV_NAME = "shear_rate.csv"
 
 
-def write_shear_rate_csv(path: Path, samples: Samples, calibration: dict | None,
-                         diameter: float) -> None:
+def write_shear_rate_csv(path: Path, samples: Samples, phase: PhaseShear | None,
+                         calibration: dict | None, diameter: float) -> None:
     """The continuum's cycle-mean shear-rate map on the analysis cells (the DEM's cells), with
     the impact speeds it implies by the calibrated v = c0 + c1 d gamma_dot ([impacts.ball_ball],
-    [impacts.ball_wall]; empty without a calibration), atomically: columns x, z (m, cell
-    centres), shear_rate (1/s, mean over the samples that held material in the cell), samples,
-    impact_ball_ball, impact_ball_wall (m/s)."""
+    [impacts.ball_wall] by impact_relation; empty without a calibration), atomically: columns x, z (m, cell
+    centres), shear_rate (1/s, the phase-resolved field's cycle mean at the cell's centre, as
+    the DEM's; shear_rate_outputs), solid_fraction (of that field), instantaneous_shear_rate
+    (1/s, mean over the samples that held material in the cell of the points' mean there),
+    samples (those samples), impact_ball_ball, impact_ball_wall (m/s, from shear_rate).  A
+    cell is written when either rate is known there."""
     if samples.cell_grid is None:
         return
     h, nxh, nz = samples.cell_grid
     im = (calibration or {}).get("impacts", {})
-    fits = [im.get(k) if isinstance(im.get(k), dict) else None for k in ("ball_ball", "ball_wall")]
-    lines = ["x,z,shear_rate,samples,impact_ball_ball,impact_ball_wall"]
+    fits = [impact_relation(im.get(k))[:2] for k in ("ball_ball", "ball_wall")]
+    lines = ["x,z,shear_rate,solid_fraction,instantaneous_shear_rate,samples,"
+             "impact_ball_ball,impact_ball_wall"]
+
+    def num(v):
+        return repr(float(v)) if np.isfinite(v) else ""
+
     for k in range(nz):
         for i in range(2 * nxh + 1):
             n = samples.rate_cell_n[k, i]
-            if n <= 0:
+            inst = float(samples.rate_cell_sum[k, i] / n) if n > 0 else float("nan")
+            g = float(phase.shear_rate[k, i]) if phase is not None else float("nan")
+            f = float(phase.solid_fraction[k, i]) if phase is not None else float("nan")
+            if not (np.isfinite(g) or n > 0):
                 continue
-            g = float(samples.rate_cell_sum[k, i] / n)
-            v = ["" if f is None or "c0_m_s" not in f
-                 else repr(float(f["c0_m_s"] + f["c1"] * diameter * g)) for f in fits]
-            lines.append(f"{(i - nxh) * h!r},{k * h!r},{g!r},{int(n)},{v[0]},{v[1]}")
+            v = ["" if c0 is None or not np.isfinite(g) else repr(float(c0 + c1 * diameter * g))
+                 for c0, c1 in fits]
+            lines.append(f"{(i - nxh) * h!r},{k * h!r},{num(g)},{num(f)},{num(inst)},{int(n)},"
+                         f"{v[0]},{v[1]}")
     tmp = path.with_name(f".tmp-{os.getpid()}-{path.name}")
     tmp.write_text("\n".join(lines) + "\n")
     os.replace(tmp, path)
@@ -649,10 +662,12 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
                                     scenario.run.batches) if S else np.zeros(0, np.int64)
     summary["continuum"] = _continuum_block(material, system, state, spacing, h, n_steps,
                                             wall_time, options)
+    phase = phase_shear_of_samples(scenario, samples, times, radius)
     summary["continuum"].update(shear_rate_outputs(
-        material, calibration, list(probes), batch, scenario.run.batches, samples.rate_all,
-        samples.rate_wall, samples.rate_probe, summary["impacts"]))
-    write_shear_rate_csv(out / SHEAR_RATE_CSV_NAME, samples, calibration, material.diameter)
+        material, calibration, probes, batch, scenario.run.batches, samples, phase, geo.radius,
+        summary["impacts"]))
+    write_shear_rate_csv(out / SHEAR_RATE_CSV_NAME, samples, phase, calibration,
+                         material.diameter)
     summary = json_safe(summary)
     write_json_atomic(out / SUMMARY_NAME, summary)
     ckpt.unlink(missing_ok=True)
@@ -844,14 +859,62 @@ def _continuum_block(material, system, state, spacing, h, n_steps, wall_time,
     }
 
 
-def shear_rate_outputs(material, calibration, probe_names, batch, n_batches, rate_all,
-                        rate_wall, rate_probe, impacts: dict) -> dict:
-    """Shear rate (1/s) over the bed, near the wall (points within half a cell of the U) and in
-    the probe cells, with batch-means standard errors; with a calibration, the granular
-    temperature sqrt(T) = a d gamma_dot (models.md, Bagnold scaling; a from [impacts]
-    bagnold_sqrtT_over_d_gamma_dot) and the mean impact speeds v = c0 + c1 d gamma_dot
-    ([impacts.ball_ball] over the bed, [impacts.ball_wall] near the wall), written into the
-    DEM's impact keys (`impacts` is updated in place; its counts stay 0: no impact is seen)."""
+def phase_shear_of_samples(scenario, samples: Samples, times: np.ndarray,
+                           radius: np.ndarray) -> PhaseShear:
+    """The cycle-mean shear rate of the run's phase-resolved velocity field on the analysis
+    cells' centres (vibroflow.analysis.phase_shear): the samples of the averaging window, each
+    point standing for the solid volume of a ball of its `radius` (m), binned by phase and by
+    batch of whole cycles -- the DEM calibration's definition of the shear rate that its impact
+    relation was fitted on."""
+    geo = geometry_of(scenario)
+    h, nxh, nz = cell_grid_of(geo, scenario.analysis.cell_size)
+    run = scenario.run
+    motion = scenario.motion
+    acc = PhaseShearAccumulator(h, nxh, nz, geo.length, run.phases_per_cycle, run.batches,
+                                tuple(motion.pivot))
+    if times.size == 0:
+        return acc.result()
+    batch = batches_of_whole_cycles(times, run.duration - run.average_last, run.duration,
+                                    motion.frequency, run.batches)
+    phase = phase_bins(times, motion.frequency, run.phases_per_cycle)
+    volume = 4.0 / 3.0 * math.pi * np.asarray(radius, float) ** 3
+    for j in range(min(samples.j, times.size)):
+        acc.add(samples.pos[j], samples.vel[j], samples.poses[j], volume, int(phase[j]),
+                int(batch[j]))
+    return acc.result()
+
+
+def impact_relation(rel) -> tuple[float | None, float | None, str]:
+    """(c0 m/s, c1, which) of a calibration's [impacts.KIND] table: the relation fitted on the
+    continuum's own measure of the shear rate (c0_cells_m_s, c1_cells;
+    calibration.impacts.impact_relations_on_cells) when the calibration has it, else the one
+    fitted on the DEM's 5 mm coarse-grained field (c0_m_s, c1; older calibrations); (None,
+    None, "") without either."""
+    if not isinstance(rel, dict):
+        return None, None, ""
+    for c0k, c1k, which in (("c0_cells_m_s", "c1_cells", "c0_cells, c1_cells"),
+                            ("c0_m_s", "c1", "c0, c1")):
+        c0, c1 = rel.get(c0k), rel.get(c1k)
+        if c0 is not None and c1 is not None and math.isfinite(c0) and math.isfinite(c1):
+            return float(c0), float(c1), which
+    return None, None, ""
+
+
+def shear_rate_outputs(material, calibration, probes: dict, batch, n_batches, samples: Samples,
+                       phase: PhaseShear, radius_tub: float, impacts: dict) -> dict:
+    """Shear rate (1/s) over the bed, near the wall and in the probe cells, with batch-means
+    standard errors; with a calibration, the granular temperature sqrt(T) = a d gamma_dot
+    (models.md, Bagnold scaling; a from [impacts] bagnold_sqrtT_over_d_gamma_dot) and the mean
+    impact speeds v = c0 + c1 d gamma_dot ([impacts.ball_ball] over the bed,
+    [impacts.ball_wall] near the wall), written into the DEM's impact keys (`impacts` is
+    updated in place; its counts stay 0: no impact is seen), by impact_relation.
+
+    The shear rate is that of the phase-resolved velocity field (`phase`, the DEM
+    calibration's definition, on which its impact relation was fitted; analysis.phase_shear
+    says why), solid-fraction weighted over the analysis cells' centres: the bed (every node
+    with material), near the wall (nodes less than a cell from the U) and each probe's cell.
+    The mean of the points' instantaneous shear rates (their velocity gradients at the sampled
+    instants, fluctuations included) is kept beside it as instantaneous_*."""
     d = material.diameter
 
     def mean_se(values):
@@ -860,31 +923,51 @@ def shear_rate_outputs(material, calibration, probe_names, batch, n_batches, rat
             return float("nan"), float("nan")
         return batch_means(values[ok], batch[ok], n_batches)
 
-    out: dict = {}
-    m, se = mean_se(rate_all)
-    out["shear_rate"] = {"mean_1_s": m, "mean_1_s_stderr": se}
-    mw, sew = mean_se(rate_wall)
-    out["shear_rate"].update(near_wall_1_s=mw, near_wall_1_s_stderr=sew)
+    near = near_wall_nodes(phase, radius_tub)
+    m, se = phase.weighted_mean()
+    mw, sew = phase.weighted_mean(near)
+    im_, ise = mean_se(samples.rate_all)
+    iw, iwse = mean_se(samples.rate_wall)
+    out: dict = {"shear_rate": {
+        "mean_1_s": m, "mean_1_s_stderr": se, "near_wall_1_s": mw, "near_wall_1_s_stderr": sew,
+        "definition": ("cycle mean of the shear rate of the phase-resolved velocity field "
+                       "(averaged at each sampling phase over the window's cycles, on the "
+                       "analysis cells' centres), as the DEM calibration measures it; "
+                       "solid-fraction weighted"),
+        "instantaneous_mean_1_s": im_, "instantaneous_mean_1_s_stderr": ise,
+        "instantaneous_near_wall_1_s": iw, "instantaneous_near_wall_1_s_stderr": iwse}}
     im = (calibration or {}).get("impacts", {})
     a = im.get("bagnold_sqrtT_over_d_gamma_dot")
-    probes = {}
-    for q, name in enumerate(probe_names):
-        pm, pse = mean_se(rate_probe[:, q])
-        probes[name] = {"shear_rate_1_s": pm, "shear_rate_1_s_stderr": pse,
-                        "granular_temperature_m2_s2": (a * d * pm) ** 2 if a else None}
-    out["probes"] = probes
+    out_probes = {}
+    for q, (name, pr) in enumerate(probes.items()):
+        k, i = phase.node_of(pr.x, pr.z)
+        inside = np.zeros(phase.shear_rate.shape, bool)
+        if 0 <= k < inside.shape[0] and 0 <= i < inside.shape[1]:
+            inside[k, i] = True
+        pm, pse = phase.weighted_mean(inside)
+        qm, qse = mean_se(samples.rate_probe[:, q])
+        out_probes[name] = {"shear_rate_1_s": pm, "shear_rate_1_s_stderr": pse,
+                            "instantaneous_shear_rate_1_s": qm,
+                            "instantaneous_shear_rate_1_s_stderr": qse,
+                            "granular_temperature_m2_s2": (a * d * pm) ** 2 if a else None}
+    out["probes"] = out_probes
     inferred = {}
+    which = set()
     for name, rate, rate_se in (("ball_ball", m, se), ("ball_wall", mw, sew)):
-        rel = im.get(name)
-        if isinstance(rel, dict) and "c0_m_s" in rel and "c1" in rel:
-            v = rel["c0_m_s"] + rel["c1"] * d * rate
-            v_se = abs(rel["c1"]) * d * rate_se
-            impacts[name + "_mean_normal_speed"] = v
-            impacts[name + "_mean_normal_speed_stderr"] = v_se
-            inferred[name + "_mean_normal_speed_m_s"] = v
+        c0, c1, key = impact_relation(im.get(name))
+        if c0 is None:
+            continue
+        v = c0 + c1 * d * rate
+        impacts[name + "_mean_normal_speed"] = v
+        impacts[name + "_mean_normal_speed_stderr"] = abs(c1) * d * rate_se
+        inferred[name + "_mean_normal_speed_m_s"] = v
+        which.add(key)
     if inferred:
-        impacts["inferred_from_shear_rate"] = ("v = c0 + c1 d gamma_dot (calibration.toml "
-                                               "[impacts]); count = 0: no impact is seen")
+        impacts["inferred_from_shear_rate"] = (
+            "v = c0 + c1 d gamma_dot (calibration.toml [impacts] " + ", ".join(sorted(which))
+            + "), gamma_dot of the phase-resolved field on the analysis cells; count = 0: no "
+            "impact is seen")
+        inferred["relation"] = ", ".join(sorted(which))
     if a:
         inferred["granular_temperature_m2_s2"] = (a * d * m) ** 2
     out["impacts_from_shear_rate"] = inferred or None

@@ -219,15 +219,17 @@ class StudyData:
 
     # ------------------------------------------------------------------------------------------
     def impact_fit(self, kind: str = "ball_ball") -> dict | None:
-        """The calibrated v = c0 + c1 d gamma_dot of `kind` (calibration.toml [impacts.KIND]),
-        or None when the calibration has none with finite coefficients."""
+        """The calibrated v = c0 + c1 d gamma_dot of `kind` (calibration.toml [impacts.KIND])
+        that the continuum runs use (continuum.run.impact_relation: the one fitted on the
+        continuum's measure of the shear rate when the calibration has it), or None when the
+        calibration has none with finite coefficients."""
+        from vibroflow.continuum.run import impact_relation
+
         rel = ((self.calibration or {}).get("impacts") or {}).get(kind)
-        if not isinstance(rel, dict):
+        c0, c1, which = impact_relation(rel)
+        if c0 is None:
             return None
-        c0, c1 = rel.get("c0_m_s"), rel.get("c1")
-        if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in (c0, c1)):
-            return None
-        return {"c0": float(c0), "c1": float(c1)}
+        return {"c0": c0, "c1": c1, "which": which}
 
     def continuum_block(self, name: str) -> dict:
         """The `continuum` block of a continuum method's own summary.json ({} if none)."""

@@ -167,8 +167,9 @@ def _shear(data: StudyData) -> str:
         rows.append("<tr>" + "".join(cells) + "</tr>")
     out.append(_table(head, rows, "shear"))
     out.append("<p>Cycle-mean shear rate in each probe's cell: for the DEM the mass-weighted "
-               "mean of the coarse-grained field's grid points in the cell, for a continuum "
-               "method the mean over its material in the cell at the sampled instants.</p>")
+               "mean of the coarse-grained field's grid points in the cell (5 mm grid), for a "
+               "continuum method the cycle mean of its phase-resolved velocity field's shear "
+               "rate at the cell's centre (vibroflow.analysis.phase_shear).</p>")
     if data.dem_fields is None:
         out.append(_note(data.notes.get("dem_fields", "no DEM fields")))
     return "\n".join(out)
@@ -204,7 +205,9 @@ def _impacts(data: StudyData) -> str:
         out.append(f"<p>Mean normal approach speed of ball-ball impacts. A continuum sees no "
                    f"impact: it infers the speed from its shear rate by the relation fitted to "
                    f"the DEM, v = c0 + c1 d gamma_dot with c0 = {fit['c0']:.3g} m/s, c1 = "
-                   f"{fit['c1']:.3g} (calibration.toml [impacts.ball_ball]).</p>")
+                   f"{fit['c1']:.3g} (calibration.toml [impacts.ball_ball] "
+                   f"{_e(fit['which'])}), gamma_dot the cycle mean of the phase-resolved "
+                   f"velocity field on the analysis cells, measured alike on both.</p>")
     else:
         why = [data.notes.get("impacts")] if data.impacts is None else []
         if fit is None:

@@ -59,7 +59,8 @@ from ..mpm import ContinuumBlowUp
 from ..run import default_dx as lagrangian_default_dx
 from ..run import (BULK_CSV_NAME, CHECKPOINT_NAME, REPORT_EVERY, SHEAR_RATE_CSV_NAME,
                    SUMMARY_NAME, VTK_DIR, LagrangianOptions, Samples, bed_area, cell_grid_of,
-                   material_for, run_fingerprint, sample_times, samples_source,
+                   material_for, phase_shear_of_samples, run_fingerprint, sample_times,
+                   samples_source,
                    shear_rate, shear_rate_outputs, to_lab, vibration_timeline,
                    write_json_atomic, write_shear_rate_csv)
 from ..timestep import stable_dt
@@ -336,10 +337,12 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
         "mass_error": state.mass_error(), "mass_error_max_abs": state.mass_error_max,
         "max_solid_fraction": float(state.mass.max() / (h * h * material.solid_density)),
     }
+    phase = phase_shear_of_samples(scenario, samples, times, radius)
     summary["continuum"].update(shear_rate_outputs(
-        material, calibration, list(probes), batch, scenario.run.batches, samples.rate_all,
-        samples.rate_wall, samples.rate_probe, summary["impacts"]))
-    write_shear_rate_csv(out / SHEAR_RATE_CSV_NAME, samples, calibration, material.diameter)
+        material, calibration, probes, batch, scenario.run.batches, samples, phase, geo.radius,
+        summary["impacts"]))
+    write_shear_rate_csv(out / SHEAR_RATE_CSV_NAME, samples, phase, calibration,
+                         material.diameter)
     summary = json_safe(summary)
     write_json_atomic(out / SUMMARY_NAME, summary)
     ckpt.unlink(missing_ok=True)

@@ -1,0 +1,124 @@
+"""Impact speeds inferred from the continuum's shear rate against the DEM's measured impacts
+(the mission's comparison 4: "impact velocity inferred from the continuum shear rate against DEM
+impacts"; benchmarks/README.md "Session 12").
+
+    python benchmarks/impacts_vs_dem.py --dem-dir runs/study-tub47/dem
+        [--calibration FILE] [--methods lagrangian,eulerian] [--settle-time 0.05]
+        [--set key=value ...]
+
+For the DEM run in DIR (its dem.h5 and, by default, its calibration.toml) this prints:
+
+* the DEM's shear rate measured as a continuum measures it (the phase-resolved velocity field
+  of its snapshots on the analysis cells, vibroflow.analysis.phase_shear): the bed's
+  solid-weighted mean and the near-wall one, with batch-means standard errors;
+* the impact relation v = c0 + c1 d gamma_dot fitted on that measure
+  (calibration.impacts.impact_relations_on_cells) beside the calibration's relation fitted on
+  the 5 mm coarse-grained field;
+* for each continuum method, run on the same scenario with its default options: its shear
+  rate on both definitions (the phase-resolved field's, which the runs now report, and the mean
+  of its points' instantaneous rates, which they reported before), and the mean ball-ball and
+  ball-wall impact speeds inferred from each, against the DEM's measured means;
+* the DEM's own inference (the cell relation applied to its own cell shear rate): the part of
+  any difference that is the relation's and the weighting's (a bed mean weighted by solid
+  fraction, where the DEM's impacts are weighted by their rate), not the flow's.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--dem-dir", required=True, type=Path)
+    ap.add_argument("--calibration", type=Path, default=None)
+    ap.add_argument("--methods", default="lagrangian,eulerian")
+    ap.add_argument("--settle-time", type=float, default=None)
+    ap.add_argument("--set", action="append", default=[], dest="sets")
+    args = ap.parse_args(argv)
+
+    from vibroflow.calibration.calibrate import read_calibration
+    from vibroflow.calibration.dem_result import DEMResult
+    from vibroflow.calibration.impacts import impact_relations_on_cells
+    from vibroflow.scenario.io import apply_overrides
+
+    cal = read_calibration(args.calibration or args.dem_dir / "calibration.toml")
+    with DEMResult.open(args.dem_dir) as res:
+        scenario = res.scenario
+        d = res.diameter
+        cells = impact_relations_on_cells(res)
+    if args.sets:
+        scenario = apply_overrides(scenario, args.sets)
+    dem = json.loads((args.dem_dir / "summary.json").read_text())["impacts"]
+    measured = {"ball_ball": dem["ball_ball_mean_normal_speed"],
+                "ball_wall": dem["ball_wall_mean_normal_speed"]}
+    # the relation the continuum now uses: fitted on the continuum's measure
+    for name in ("ball_ball", "ball_wall"):
+        cal["impacts"][name].update(c0_cells_m_s=cells[name]["c0"], c1_cells=cells[name]["c1"])
+
+    print(f"DEM {args.dem_dir} ({scenario.case}): shear rate on the analysis cells "
+          f"(phase-resolved field, h = {cells['cell_size_m'] * 1e3:.0f} mm): bed "
+          f"{cells['bed_mean_shear_rate_1_s']:.3f} +- "
+          f"{cells['bed_mean_shear_rate_1_s_stderr']:.3f} 1/s, near the wall "
+          f"{cells['near_wall_shear_rate_1_s']:.3f} +- "
+          f"{cells['near_wall_shear_rate_1_s_stderr']:.3f} 1/s")
+    own = {}
+    for name, rate in (("ball_ball", cells["bed_mean_shear_rate_1_s"]),
+                       ("ball_wall", cells["near_wall_shear_rate_1_s"])):
+        fine = cal["impacts"][name]
+        c = cells[name]
+        own[name] = c["c0"] + c["c1"] * d * rate
+        print(f"  {name}: measured mean {measured[name]:.4f} m/s; relation on cells c0 "
+              f"{c['c0']:.4f} m/s, c1 {c['c1']:.3f} (R^2 {c['r2']:.2f}, {c['points']} points); "
+              f"on the 5 mm field c0 {fine['c0_m_s']:.4f}, c1 {fine['c1']:.3f}; the DEM's own "
+              f"inference {own[name]:.4f} ({own[name] / measured[name]:.2f} of measured)")
+
+    rows = []
+    for method in [m.strip() for m in args.methods.split(",") if m.strip()]:
+        out = Path(tempfile.mkdtemp(prefix=f"impacts-{method}-"))
+        if method == "lagrangian":
+            from vibroflow.continuum.run import LagrangianOptions, run_lagrangian
+            opt = (LagrangianOptions(settle_time=args.settle_time) if args.settle_time
+                   else LagrangianOptions())
+            s = run_lagrangian(scenario, out, cal, opt)
+        elif method == "eulerian":
+            from vibroflow.continuum.eulerian.run import EulerianOptions, run_eulerian
+            opt = (EulerianOptions(settle_time=args.settle_time) if args.settle_time
+                   else EulerianOptions())
+            s = run_eulerian(scenario, out, cal, opt)
+        else:
+            print(f"--methods: {method!r} is not lagrangian or eulerian", file=sys.stderr)
+            return 2
+        sr = s["continuum"]["shear_rate"]
+        row = {"method": method, "bed": sr["mean_1_s"], "bed_se": sr["mean_1_s_stderr"],
+               "wall": sr["near_wall_1_s"], "wall_se": sr["near_wall_1_s_stderr"],
+               "bed_inst": sr["instantaneous_mean_1_s"],
+               "wall_inst": sr["instantaneous_near_wall_1_s"]}
+        fine = cal["impacts"]
+        row["bb_old"] = fine["ball_ball"]["c0_m_s"] + fine["ball_ball"]["c1"] * d * row["bed_inst"]
+        row["bw_old"] = fine["ball_wall"]["c0_m_s"] + fine["ball_wall"]["c1"] * d * row["wall_inst"]
+        row["bb"] = s["impacts"]["ball_ball_mean_normal_speed"]
+        row["bw"] = s["impacts"]["ball_wall_mean_normal_speed"]
+        rows.append(row)
+
+    print()
+    print("| method | bed shear rate, phase field (DEM) | instantaneous | near-wall, phase field "
+          "(DEM) | instantaneous | ball-ball inferred / DEM measured: now, before | ball-wall "
+          "now, before |")
+    print("|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['method']} | {r['bed']:.2f} +- {r['bed_se']:.2f} "
+              f"({cells['bed_mean_shear_rate_1_s']:.2f}) | {r['bed_inst']:.2f} | "
+              f"{r['wall']:.2f} +- {r['wall_se']:.2f} ({cells['near_wall_shear_rate_1_s']:.2f}) "
+              f"| {r['wall_inst']:.2f} | {r['bb']:.4f} / {measured['ball_ball']:.4f} = "
+              f"{r['bb'] / measured['ball_ball']:.2f}, {r['bb_old'] / measured['ball_ball']:.2f} "
+              f"| {r['bw'] / measured['ball_wall']:.2f}, "
+              f"{r['bw_old'] / measured['ball_wall']:.2f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
