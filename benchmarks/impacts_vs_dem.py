@@ -18,6 +18,8 @@ For the DEM run in DIR (its dem.h5 and, by default, its calibration.toml) this p
   rate on both definitions (the phase-resolved field's, which the runs now report, and the mean
   of its points' instantaneous rates, which they reported before), and the mean ball-ball and
   ball-wall impact speeds inferred from each, against the DEM's measured means;
+* the shear rate of the time-averaged field (the slow roll alone), DEM and continua: the rest
+  of the phase field's is the bed's deformation within each cycle;
 * the DEM's own inference (the cell relation applied to its own cell shear rate): the part of
   any difference that is the relation's and the weighting's (a bed mean weighted by solid
   fraction, where the DEM's impacts are weighted by their rate), not the flow's.
@@ -64,7 +66,8 @@ def main(argv=None) -> int:
           f"{cells['bed_mean_shear_rate_1_s']:.3f} +- "
           f"{cells['bed_mean_shear_rate_1_s_stderr']:.3f} 1/s, near the wall "
           f"{cells['near_wall_shear_rate_1_s']:.3f} +- "
-          f"{cells['near_wall_shear_rate_1_s_stderr']:.3f} 1/s")
+          f"{cells['near_wall_shear_rate_1_s_stderr']:.3f} 1/s; the roll's alone (the "
+          f"time-averaged field's) {cells['bed_roll_shear_rate_1_s']:.3f} 1/s")
     own = {}
     for name, rate in (("ball_ball", cells["bed_mean_shear_rate_1_s"]),
                        ("ball_wall", cells["near_wall_shear_rate_1_s"])):
@@ -95,7 +98,7 @@ def main(argv=None) -> int:
         sr = s["continuum"]["shear_rate"]
         row = {"method": method, "bed": sr["mean_1_s"], "bed_se": sr["mean_1_s_stderr"],
                "wall": sr["near_wall_1_s"], "wall_se": sr["near_wall_1_s_stderr"],
-               "bed_inst": sr["instantaneous_mean_1_s"],
+               "bed_inst": sr["instantaneous_mean_1_s"], "roll": sr["roll_mean_1_s"],
                "wall_inst": sr["instantaneous_near_wall_1_s"]}
         fine = cal["impacts"]
         row["bb_old"] = fine["ball_ball"]["c0_m_s"] + fine["ball_ball"]["c1"] * d * row["bed_inst"]
@@ -105,13 +108,15 @@ def main(argv=None) -> int:
         rows.append(row)
 
     print()
-    print("| method | bed shear rate, phase field (DEM) | instantaneous | near-wall, phase field "
+    print("| method | bed shear rate, phase field (DEM) | the roll's (DEM) | instantaneous | "
+          "near-wall, phase field "
           "(DEM) | instantaneous | ball-ball inferred / DEM measured: now, before | ball-wall "
           "now, before |")
-    print("|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['method']} | {r['bed']:.2f} +- {r['bed_se']:.2f} "
-              f"({cells['bed_mean_shear_rate_1_s']:.2f}) | {r['bed_inst']:.2f} | "
+              f"({cells['bed_mean_shear_rate_1_s']:.2f}) | {r['roll']:.2f} "
+              f"({cells['bed_roll_shear_rate_1_s']:.2f}) | {r['bed_inst']:.2f} | "
               f"{r['wall']:.2f} +- {r['wall_se']:.2f} ({cells['near_wall_shear_rate_1_s']:.2f}) "
               f"| {r['wall_inst']:.2f} | {r['bb']:.4f} / {measured['ball_ball']:.4f} = "
               f"{r['bb'] / measured['ball_ball']:.2f}, {r['bb_old'] / measured['ball_ball']:.2f} "

@@ -74,6 +74,8 @@ def test_steady_simple_shear_is_recovered_and_its_noise_averages_out():
     assert res.solid_fraction[m] == pytest.approx(np.full(m.sum(), 0.6), rel=1e-9)
     mean, se = res.weighted_mean(m)
     assert mean == pytest.approx(G, rel=0.02) and 0 < se < 0.05 * G
+    # steady: the time-averaged field (the roll) shears at G too
+    assert res.roll_mean(m) == pytest.approx(G, rel=0.02)
     single = one.result()
     assert single.weighted_mean(m)[0] > 1.5 * G
 
@@ -81,7 +83,7 @@ def test_steady_simple_shear_is_recovered_and_its_noise_averages_out():
 def test_oscillating_shear_gives_the_cycle_mean_of_its_magnitude():
     """v_x = G z sin(2 pi k / 8) at phase k: each phase's field has shear rate G |sin|, and the
     cycle mean over the 8 phases (equal solid fractions) is G times the mean of |sin(k pi/4)|,
-    (2 + 4 / sqrt(2)) / 8 = 0.6036."""
+    (2 + 4 / sqrt(2)) / 8 = 0.6036; the time-averaged field is at rest (no roll)."""
     G = 3.0
     p, vol = lattice()
     acc = PhaseShearAccumulator(H, NXH, NZ, LENGTH, n_phases=8, n_batches=2, pivot=PIVOT)
@@ -96,6 +98,9 @@ def test_oscillating_shear_gives_the_cycle_mean_of_its_magnitude():
         assert np.allclose(res.phase_shear_rate[k][m], G * abs(math.sin(2 * math.pi * k / 8)),
                            rtol=1e-9, atol=1e-9)
     assert np.allclose(res.shear_rate[m], G * (2 + 4 / math.sqrt(2)) / 8, rtol=1e-9)
+    # no slow roll: the time-averaged field is at rest, so all of it is deformation within
+    # the cycle
+    assert np.allclose(res.roll_shear_rate[m], 0.0, atol=1e-9)
 
 
 def test_a_bed_carried_rigidly_by_the_moving_tub_has_no_shear():

@@ -49,7 +49,10 @@ class PhaseShear:
     x (nx,), z (nz,) node coordinates (m); solid_fraction (nz, nx) window mean; shear_rate
     (nz, nx) cycle mean of the phase-resolved shear rate (1/s, NaN where no material);
     phase_shear_rate, phase_solid_fraction (n_phases, nz, nx); batch_shear_rate (n_batches, nz, nx), each batch's own
-    phase-resolved field's cycle mean (for standard errors of the means built on it)."""
+    phase-resolved field's cycle mean (for standard errors of the means built on it);
+    roll_shear_rate (nz, nx) the shear rate of the time-averaged field (the slow roll alone:
+    the velocity averaged over every phase, then differentiated).  The difference between
+    shear_rate and roll_shear_rate is the bed's deformation within each cycle."""
     x: np.ndarray
     z: np.ndarray
     h: float
@@ -59,12 +62,23 @@ class PhaseShear:
     phase_solid_fraction: np.ndarray
     batch_shear_rate: np.ndarray
     batch_solid_fraction: np.ndarray
+    roll_shear_rate: np.ndarray
 
     def node_of(self, x: float, z: float) -> tuple[int, int]:
         """(k, i) of the node nearest to tub-frame point (x, z) (m)."""
         i = int(np.floor((x - self.x[0]) / self.h + 0.5))
         k = int(np.floor((z - self.z[0]) / self.h + 0.5))
         return k, i
+
+    def roll_mean(self, mask: np.ndarray | None = None) -> float:
+        """Solid-fraction weighted mean of roll_shear_rate over the nodes in `mask` (1/s)."""
+        m = np.isfinite(self.roll_shear_rate) & (self.solid_fraction > 0)
+        if mask is not None:
+            m &= mask
+        if not m.any():
+            return float("nan")
+        w = self.solid_fraction[m]
+        return float(np.sum(w * self.roll_shear_rate[m]) / np.sum(w))
 
     def weighted_mean(self, mask: np.ndarray | None = None) -> tuple[float, float]:
         """Solid-fraction weighted mean of the cycle-mean shear rate over the nodes in `mask`
@@ -240,9 +254,13 @@ class PhaseShearAccumulator:
             _, _, b_rate[b], b_phi[b] = phase_field_shear_rate(
                 self.vol[b], self.mom_x[b], self.mom_z[b],
                 node * np.maximum(self.samples[b], 1), self.h, min_solid_fraction)
+        total = self.vol.sum(axis=(0, 1))[None]
+        _, _, roll, _ = phase_field_shear_rate(
+            total, self.mom_x.sum(axis=(0, 1))[None], self.mom_z.sum(axis=(0, 1))[None],
+            np.array([node * max(int(n_all.sum()), 1)]), self.h, min_solid_fraction)
         x = (np.arange(self.nx) - self.nxh) * self.h
         z = np.arange(self.nz) * self.h
         return PhaseShear(x=x, z=z, h=self.h, solid_fraction=phi, shear_rate=cycle,
                           phase_shear_rate=rate, phase_solid_fraction=phase_phi,
                           batch_shear_rate=b_rate,
-                          batch_solid_fraction=b_phi)
+                          batch_solid_fraction=b_phi, roll_shear_rate=roll)

@@ -489,6 +489,7 @@ def _calibration_record(res, cg_info, wf, rel, rheo, elastic, dp, p_bed, phi_bed
             "dem_bed_shear_rate_cells_1_s": _f(rel_cells["bed_mean_shear_rate_1_s"]),
             "dem_bed_shear_rate_cells_stderr_1_s": _f(
                 rel_cells["bed_mean_shear_rate_1_s_stderr"]),
+            "dem_bed_roll_shear_rate_cells_1_s": _f(rel_cells["bed_roll_shear_rate_1_s"]),
             "dem_near_wall_shear_rate_cells_1_s": _f(rel_cells["near_wall_shear_rate_1_s"]),
             "dem_near_wall_shear_rate_cells_stderr_1_s": _f(
                 rel_cells["near_wall_shear_rate_1_s_stderr"])})

@@ -241,6 +241,7 @@ def impact_relations_on_cells(run, cell_size: float | None = None,
         m, se = shear.weighted_mean()
         mw, sew = shear.weighted_mean(near_wall_nodes(shear, geo.radius))
         out.update(bed_mean_shear_rate_1_s=m, bed_mean_shear_rate_1_s_stderr=se,
+                   bed_roll_shear_rate_1_s=shear.roll_mean(),
                    near_wall_shear_rate_1_s=mw, near_wall_shear_rate_1_s_stderr=sew)
         nx = 2 * nxh + 1
         ncell = n_ph * nz * nx

@@ -930,6 +930,9 @@ def shear_rate_outputs(material, calibration, probes: dict, batch, n_batches, sa
     iw, iwse = mean_se(samples.rate_wall)
     out: dict = {"shear_rate": {
         "mean_1_s": m, "mean_1_s_stderr": se, "near_wall_1_s": mw, "near_wall_1_s_stderr": sew,
+        # the slow roll's share: the shear rate of the time-averaged field (the rest of mean_1_s
+        # is the bed's deformation within each cycle)
+        "roll_mean_1_s": phase.roll_mean(),
         "definition": ("cycle mean of the shear rate of the phase-resolved velocity field "
                        "(averaged at each sampling phase over the window's cycles, on the "
                        "analysis cells' centres), as the DEM calibration measures it; "

@@ -234,7 +234,8 @@ def settle(scenario, material, calibration, options, prog: RunProgress | None = 
 def run_eulerian(scenario, out_dir, calibration: dict | None = None,
                  options: EulerianOptions | None = None, progress: bool = False,
                  vtk: bool = False, resume: bool = False,
-                 stop_after_steps: int | None = None) -> dict | None:
+                 stop_after_steps: int | None = None,
+                 keep_samples: list | None = None) -> dict | None:
     """Run the Eulerian continuum of a tub scenario into out_dir (module docstring); returns
     the summary (also out_dir/summary.json, with out_dir/bulk_velocity.csv), or None when
     stopped by stop_after_steps (a checkpoint is written; go on with resume=True).
@@ -242,7 +243,8 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
     vtk: also the grid fields (continuum.fields: velocity relative to the tub, solid fraction,
     density, pressure, shear rate on the node grid) at the samples of the last cycle, as
     out_dir/vtk/grid_NNNNN.vtr + grid.pvd, and the tub's surface (tub.vtu).  Checkpoints,
-    resume and the removal of stale results: as continuum.run.run_lagrangian."""
+    resume and the removal of stale results: as continuum.run.run_lagrangian, and so is
+    keep_samples (its points are the cells' pseudo-balls)."""
     if scenario.tub is None or scenario.fill is None:
         raise InputError("scenario: the continuum needs a tub-mode scenario (with [tub] and "
                          "[fill]), not explicit particles")
@@ -297,6 +299,8 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
         except ContinuumBlowUp:
             ckpt.unlink(missing_ok=True)
             raise
+    if keep_samples is not None:
+        keep_samples.append(samples)
     if not done:
         return None
     wall_time = wall_before + time.perf_counter() - wall0
