@@ -32,7 +32,7 @@ import numba as nb
 import numpy as np
 
 from .laws import (MODEL_LINEAR, P_DAMP, P_KN, P_KT, P_MODEL, P_MU, P_MUR, P_ROLL, ROLL_CDT,
-                   ROLL_EPSD)
+                   ROLL_CDT_LIGGGHTS, ROLL_EPSD)
 
 
 @nb.njit(cache=True, inline="always", fastmath=False)
@@ -48,14 +48,16 @@ def contact_force(delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, r_i, r_j, r_eff, m_
     if par[P_MODEL] == MODEL_LINEAR:
         kn = par[P_KN]
         gamma = 2.0 * par[P_DAMP] * np.sqrt(m_eff * kn)
-        fn = kn * delta - gamma * vn
+        f_elastic = kn * delta
+        fn = f_elastic - gamma * vn
         kt = par[P_KT] * kn
         kn_tangent = kn
     else:
         k = par[P_KN] * np.sqrt(r_eff)
         sd = np.sqrt(delta)
         c = par[P_DAMP] * np.sqrt(m_eff * k)
-        fn = k * delta * sd - c * np.sqrt(sd) * vn
+        f_elastic = k * delta * sd
+        fn = f_elastic - c * np.sqrt(sd) * vn
         kt = par[P_KT] * np.sqrt(r_eff * delta)
         kn_tangent = 1.5 * k * sd
 
@@ -136,6 +138,17 @@ def contact_force(delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, r_i, r_j, r_eff, m_
                 mx = -mlimit * wrx / wr
                 my = -mlimit * wry / wr
                 mz = -mlimit * wrz / wr
+        elif roll == ROLL_CDT_LIGGGHTS:
+            # LIGGGHTS 3.8's CDT (src/rolling_model_cdt.h), for comparisons with it: the
+            # elastic normal force, along the whole relative spin omega_i - omega_j, then its
+            # normal (twisting) part removed, so the magnitude is mu_r R_eff k_n delta times
+            # |omega_rolling| / |omega| (docs/liggghts.md "Differences that remain")
+            w = np.sqrt(wx * wx + wy * wy + wz * wz)
+            if w > 1e-12:
+                m = par[P_MUR] * r_eff * f_elastic / w
+                mx = -m * wrx
+                my = -m * wry
+                mz = -m * wrz
         elif roll == ROLL_EPSD:
             kr = 2.25 * kn_tangent * par[P_MUR] * par[P_MUR] * r_eff * r_eff
             mx = hist[3]

@@ -27,8 +27,9 @@ from scipy.optimize import brentq
 P_MODEL, P_KN, P_KT, P_DAMP, P_MU, P_MUR, P_ROLL = range(7)
 N_PARAMS = 8
 MODEL_LINEAR, MODEL_HERTZ = 0, 1
-ROLL_NONE, ROLL_CDT, ROLL_EPSD = 0, 1, 2
-_ROLL = {"none": ROLL_NONE, "cdt": ROLL_CDT, "epsd": ROLL_EPSD}
+ROLL_NONE, ROLL_CDT, ROLL_EPSD, ROLL_CDT_LIGGGHTS = 0, 1, 2, 3
+_ROLL = {"none": ROLL_NONE, "cdt": ROLL_CDT, "epsd": ROLL_EPSD,
+         "cdt_liggghts": ROLL_CDT_LIGGGHTS}
 
 
 def damping_ratio(restitution: float) -> float:

@@ -271,7 +271,8 @@ def pair_tables(scenario) -> PairTables:
                 for arr in (kn, kt, gn, e, mu, mur):
                     arr[i, j] = arr[0, 0]
     model = "hooke/stiffness" if models == {"linear"} else "hertz"
-    rolling = {"cdt": "cdt", "epsd": "epsd2", "none": "none"}[rolls.pop()]
+    rolling = {"cdt": "cdt", "cdt_liggghts": "cdt", "epsd": "epsd2",
+               "none": "none"}[rolls.pop()]
     return PairTables(model, rolling, kn, kt, gn, gt, e, mu, mur)
 
 

@@ -46,9 +46,11 @@ class ContactPair(_Strict):
     restitution: float = Field(0.85, gt=0, le=1.0, description="normal restitution, (0, 1]")
     friction: float = Field(0.20, ge=0, description="Coulomb sliding friction coefficient")
     rolling_friction: float = Field(0.002, ge=0, description="rolling resistance mu_r (-)")
-    rolling_model: Literal["cdt", "epsd", "none"] = Field(
-        "cdt", description="constant directional torque, or elastic-plastic spring-dashpot "
-        "(Ai et al. 2011)")
+    rolling_model: Literal["cdt", "epsd", "none", "cdt_liggghts"] = Field(
+        "cdt", description="constant directional torque (tub47.md: mu_r R_eff |F_n| against "
+        "the relative rolling velocity), or elastic-plastic spring-dashpot (Ai et al. 2011), "
+        "or LIGGGHTS 3.8's CDT for comparisons with it (mu_r R_eff k_n delta along the "
+        "relative spin, its twisting part removed)")
 
     @model_validator(mode="before")
     @classmethod

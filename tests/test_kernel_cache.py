@@ -1,0 +1,54 @@
+"""The numba cache guard (vibroflow/_kernel_cache.py): numba keys a cached kernel on its own
+file's stamp only, so a kernel that inlines code from another file keeps stale machine code
+after that file changes; the guard drops the package's cache whenever any source changes."""
+from __future__ import annotations
+
+from vibroflow import _kernel_cache as kc
+
+
+def fake_package(tmp_path: Path) -> Path:
+    pkg = tmp_path / "pkg"
+    (pkg / "dem" / "__pycache__").mkdir(parents=True)
+    (pkg / "dem" / "contact.py").write_text("K = 1\n")
+    (pkg / "dem" / "step.py").write_text("from .contact import K\n")
+    for name in ("step.advance-1.py311.nbi", "step.advance-1.py311.1.nbc"):
+        (pkg / "dem" / "__pycache__" / name).write_text("machine code")
+    return pkg
+
+
+def test_an_edit_to_any_source_drops_the_cache_once(tmp_path):
+    pkg = fake_package(tmp_path)
+    cache = pkg / "dem" / "__pycache__"
+    folders, stamp = kc.cache_folders(pkg, environ={"XDG_CACHE_HOME": str(tmp_path / "xdg")})
+    assert cache in folders and stamp == pkg / "__pycache__" / kc.STAMP_NAME
+    d0 = kc.sources_digest(pkg)
+    assert kc.refresh(folders, stamp, d0) == 2   # no stamp yet: the cache's origin is unknown
+    assert not list(cache.glob("*.nb?"))
+    (cache / "step.advance-1.py311.nbi").write_text("recompiled")
+    assert kc.refresh(folders, stamp, kc.sources_digest(pkg)) == 0  # unchanged: kept
+    assert (cache / "step.advance-1.py311.nbi").exists()
+    # the inlined callee changes, the caller's file does not: the caller's cache must go
+    (pkg / "dem" / "contact.py").write_text("K = 2\n")
+    d1 = kc.sources_digest(pkg)
+    assert d1 != d0
+    assert kc.refresh(folders, stamp, d1) == 1
+    assert not (cache / "step.advance-1.py311.nbi").exists()
+    assert stamp.read_text().strip() == d1
+
+
+def test_the_cache_folders_follow_numba_cache_dir(tmp_path):
+    """With NUMBA_CACHE_DIR numba keeps a source folder's cache in
+    NUMBA_CACHE_DIR/<folder name>_<SHA-1 of its absolute path>: checked against numba's own
+    locator."""
+    from numba.core.caching import _CacheLocator
+
+    pkg = fake_package(tmp_path)
+    user = tmp_path / "nbcache"
+    folders, stamp = kc.cache_folders(pkg, environ={"NUMBA_CACHE_DIR": str(user)})
+    expected = user / _CacheLocator.get_suitable_cache_subpath(str(pkg / "dem" / "step.py"))
+    assert expected in folders
+    assert stamp.parent == user
+    expected.mkdir(parents=True)
+    (expected / "step.advance-1.py311.nbi").write_text("machine code")
+    assert kc.refresh(folders, stamp, kc.sources_digest(pkg)) == 1
+    assert not list(expected.glob("*.nbi"))
