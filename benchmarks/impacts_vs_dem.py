@@ -21,8 +21,9 @@ For the DEM run in DIR (its dem.h5 and, by default, its calibration.toml) this p
 * the shear rate of the time-averaged field (the slow roll alone), DEM and continua: the rest
   of the phase field's is the bed's deformation within each cycle;
 * the DEM's own inference (the cell relation applied to its own cell shear rate): the part of
-  any difference that is the relation's and the weighting's (a bed mean weighted by solid
-  fraction, where the DEM's impacts are weighted by their rate), not the flow's.
+  any difference that is the relation's (its scatter and weighting), not the flow's; beside
+  the measured means (every impact alike), the DEM's node means weighted by solid fraction as
+  a continuum's bed mean is.
 """
 from __future__ import annotations
 
@@ -74,10 +75,13 @@ def main(argv=None) -> int:
         fine = cal["impacts"][name]
         c = cells[name]
         own[name] = c["c0"] + c["c1"] * d * rate
-        print(f"  {name}: measured mean {measured[name]:.4f} m/s; relation on cells c0 "
+        sw = c["mean_normal_speed_solid_weighted"]
+        print(f"  {name}: measured mean {measured[name]:.4f} m/s (the nodes' means weighted by "
+              f"solid fraction, as a continuum's mean is: {sw:.4f}); relation on cells c0 "
               f"{c['c0']:.4f} m/s, c1 {c['c1']:.3f} (R^2 {c['r2']:.2f}, {c['points']} points); "
               f"on the 5 mm field c0 {fine['c0_m_s']:.4f}, c1 {fine['c1']:.3f}; the DEM's own "
-              f"inference {own[name]:.4f} ({own[name] / measured[name]:.2f} of measured)")
+              f"inference {own[name]:.4f} ({own[name] / measured[name]:.2f} of measured, "
+              f"{own[name] / sw:.2f} of the solid-weighted)")
 
     rows = []
     for method in [m.strip() for m in args.methods.split(",") if m.strip()]:
@@ -107,7 +111,10 @@ def main(argv=None) -> int:
         row["bw"] = s["impacts"]["ball_wall_mean_normal_speed"]
         rows.append(row)
 
+    sw_bb = cells["ball_ball"]["mean_normal_speed_solid_weighted"]
+    sw_bw = cells["ball_wall"]["mean_normal_speed_solid_weighted"]
     print()
+    print("(ratios to the DEM's measured means; in brackets, to its solid-weighted node means)")
     print("| method | bed shear rate, phase field (DEM) | the roll's (DEM) | instantaneous | "
           "near-wall, phase field "
           "(DEM) | instantaneous | ball-ball inferred / DEM measured: now, before | ball-wall "
@@ -119,8 +126,9 @@ def main(argv=None) -> int:
               f"({cells['bed_roll_shear_rate_1_s']:.2f}) | {r['bed_inst']:.2f} | "
               f"{r['wall']:.2f} +- {r['wall_se']:.2f} ({cells['near_wall_shear_rate_1_s']:.2f}) "
               f"| {r['wall_inst']:.2f} | {r['bb']:.4f} / {measured['ball_ball']:.4f} = "
-              f"{r['bb'] / measured['ball_ball']:.2f}, {r['bb_old'] / measured['ball_ball']:.2f} "
-              f"| {r['bw'] / measured['ball_wall']:.2f}, "
+              f"{r['bb'] / measured['ball_ball']:.2f} ({r['bb'] / sw_bb:.2f}), "
+              f"{r['bb_old'] / measured['ball_ball']:.2f} "
+              f"| {r['bw'] / measured['ball_wall']:.2f} ({r['bw'] / sw_bw:.2f}), "
               f"{r['bw_old'] / measured['ball_wall']:.2f} |")
     return 0
 

@@ -209,7 +209,9 @@ def impact_relations_on_cells(run, cell_size: float | None = None,
     Impacts of the averaging window are binned by phase bin and by the node nearest their
     contact point; a (phase, node) point enters the fit with at least `min_impacts` impacts and
     solid fraction at least `min_solid_fraction`, weighted by its count.  Returns {kind: fit
-    (weighted_linear_fit's keys, c0 in m/s), "cell_size_m", "bed_mean_shear_rate_1_s",
+    (weighted_linear_fit's keys, c0 in m/s, with the measured mean_normal_speed and the
+    mean_normal_speed_solid_weighted that a continuum's bed or near-wall mean stands for),
+    "cell_size_m", "bed_mean_shear_rate_1_s",
     "near_wall_shear_rate_1_s" (the DEM's own values of the continuum's two measures, with
     their standard errors)}."""
     from vibroflow.analysis.phase_shear import (PhaseShearAccumulator, near_wall_nodes,
@@ -239,7 +241,8 @@ def impact_relations_on_cells(run, cell_size: float | None = None,
         d = res.diameter
         out: dict = {"cell_size_m": h}
         m, se = shear.weighted_mean()
-        mw, sew = shear.weighted_mean(near_wall_nodes(shear, geo.radius))
+        near = near_wall_nodes(shear, geo.radius)
+        mw, sew = shear.weighted_mean(near)
         out.update(bed_mean_shear_rate_1_s=m, bed_mean_shear_rate_1_s_stderr=se,
                    bed_roll_shear_rate_1_s=shear.roll_mean(),
                    near_wall_shear_rate_1_s=mw, near_wall_shear_rate_1_s_stderr=sew)
@@ -280,6 +283,17 @@ def impact_relations_on_cells(run, cell_size: float | None = None,
             fit = weighted_linear_fit(d * shear.phase_shear_rate[ok], mean[ok], c[ok])
             fit["count"] = int(c.sum())
             fit["mean_normal_speed"] = float(sm[name].sum() / c.sum())
+            # the mean a continuum's inference stands for: each node's mean impact speed,
+            # weighted by its solid fraction over the bed (ball-ball) or the near-wall nodes
+            # (ball-wall), where the measured mean weights every impact alike
+            c_node = c.sum(axis=0)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                v_node = sm[name].reshape(c.shape).sum(axis=0) / c_node
+            region = (near if name == "ball_wall" else np.ones_like(near)) & (
+                c_node >= min_impacts) & (shear.solid_fraction > 0)
+            w = shear.solid_fraction[region]
+            fit["mean_normal_speed_solid_weighted"] = (
+                float(np.sum(w * v_node[region]) / np.sum(w)) if w.size else float("nan"))
             out[name] = fit
         return out
     finally:
