@@ -49,11 +49,12 @@ def test_equivalent_shear_rate_of_simple_shear_and_of_pure_compression():
 
 
 def test_steady_simple_shear_is_recovered_and_its_noise_averages_out():
-    """v_x = G z with a zero-mean random velocity on every point at every sample (ten times the
-    shear's velocity difference across a node spacing): the phase-resolved field's shear rate
-    is G over the interior nodes within 2 % (each node within 12 %: 40 cycles of noise left),
-    where one sample's field alone reads more than 1.5 G -- the bias of a fluctuating field's |gamma_dot| that the phase average removes
-    (why the continuum's shear rate is measured this way)."""
+    """v_x = G z with a zero-mean random velocity on every point at every sample (five times the
+    shear's velocity difference across a node spacing): the phase-resolved field's shear rate is G
+    over the interior nodes within 2 % (each node within 12 %: 40 cycles of noise left), where
+    one sample's field alone reads more than 1.5 G -- the bias of a fluctuating field's
+    |gamma_dot| that the phase average removes (why the continuum's shear rate is measured this
+    way)."""
     G = 2.0
     rng = np.random.default_rng(7)
     p, vol = lattice()

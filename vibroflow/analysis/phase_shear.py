@@ -46,12 +46,12 @@ MIN_NODE_SOLID_FRACTION = 0.1
 class PhaseShear:
     """Cycle-mean shear rate on the nodes, with what it was made from.
 
-    x (nx,), z (nz,) node coordinates (m); solid_fraction (nz, nx) window mean; shear_rate
-    (nz, nx) cycle mean of the phase-resolved shear rate (1/s, NaN where no material);
-    phase_shear_rate, phase_solid_fraction (n_phases, nz, nx); batch_shear_rate (n_batches, nz, nx), each batch's own
-    phase-resolved field's cycle mean (for standard errors of the means built on it);
-    roll_shear_rate (nz, nx) the shear rate of the time-averaged field (the slow roll alone:
-    the velocity averaged over every phase, then differentiated).  The difference between
+    x (nx,), z (nz,) node coordinates (m); solid_fraction (nz, nx) window mean; shear_rate (nz, nx)
+    cycle mean of the phase-resolved shear rate (1/s, NaN where no material); phase_shear_rate,
+    phase_solid_fraction (n_phases, nz, nx); batch_shear_rate (n_batches, nz, nx), each batch's
+    own phase-resolved field's cycle mean (for standard errors of the means built on it);
+    roll_shear_rate (nz, nx) the shear rate of the time-averaged field (the slow roll alone: the
+    velocity averaged over every phase, then differentiated). The difference between
     shear_rate and roll_shear_rate is the bed's deformation within each cycle."""
     x: np.ndarray
     z: np.ndarray

@@ -513,12 +513,12 @@ def write_shear_rate_csv(path: Path, samples: Samples, phase: PhaseShear | None,
                          calibration: dict | None, diameter: float) -> None:
     """The continuum's cycle-mean shear-rate map on the analysis cells (the DEM's cells), with
     the impact speeds it implies by the calibrated v = c0 + c1 d gamma_dot ([impacts.ball_ball],
-    [impacts.ball_wall] by impact_relation; empty without a calibration), atomically: columns x, z (m, cell
-    centres), shear_rate (1/s, the phase-resolved field's cycle mean at the cell's centre, as
-    the DEM's; shear_rate_outputs), solid_fraction (of that field), instantaneous_shear_rate
-    (1/s, mean over the samples that held material in the cell of the points' mean there),
-    samples (those samples), impact_ball_ball, impact_ball_wall (m/s, from shear_rate).  A
-    cell is written when either rate is known there."""
+    [impacts.ball_wall] by impact_relation; empty without a calibration), atomically: columns x, z
+    (m, cell centres), shear_rate (1/s, the phase-resolved field's cycle mean at the cell's
+    centre, as the DEM's; shear_rate_outputs), solid_fraction (of that field),
+    instantaneous_shear_rate (1/s, mean over the samples that held material in the cell of the
+    points' mean there), samples (those samples), impact_ball_ball, impact_ball_wall (m/s, from
+    shear_rate).  A cell is written when either rate is known there."""
     if samples.cell_grid is None:
         return
     h, nxh, nz = samples.cell_grid
@@ -895,7 +895,8 @@ def impact_relation(rel) -> tuple[float | None, float | None, str]:
     for c0k, c1k, which in (("c0_cells_m_s", "c1_cells", "c0_cells, c1_cells"),
                             ("c0_m_s", "c1", "c0, c1")):
         c0, c1 = rel.get(c0k), rel.get(c1k)
-        if c0 is not None and c1 is not None and math.isfinite(c0) and math.isfinite(c1):
+        if all(isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c)
+               for c in (c0, c1)):
             return float(c0), float(c1), which
     return None, None, ""
 
