@@ -70,32 +70,25 @@ class PhaseShear:
         k = int(np.floor((z - self.z[0]) / self.h + 0.5))
         return k, i
 
-    def roll_mean(self, mask: np.ndarray | None = None) -> float:
-        """Solid-fraction weighted mean of roll_shear_rate over the nodes in `mask` (1/s)."""
-        m = np.isfinite(self.roll_shear_rate) & (self.solid_fraction > 0)
+    def _solid_mean(self, field: np.ndarray, solid: np.ndarray, mask) -> float:
+        """Solid-fraction weighted mean of field (nz, nx) over its finite nodes with material
+        in `mask` (all by default)."""
+        m = np.isfinite(field) & (solid > 0)
         if mask is not None:
             m &= mask
-        if not m.any():
-            return float("nan")
-        w = self.solid_fraction[m]
-        return float(np.sum(w * self.roll_shear_rate[m]) / np.sum(w))
+        return float(np.sum(solid[m] * field[m]) / np.sum(solid[m])) if m.any() else float("nan")
+
+    def roll_mean(self, mask: np.ndarray | None = None) -> float:
+        """Solid-fraction weighted mean of roll_shear_rate over the nodes in `mask` (1/s)."""
+        return self._solid_mean(self.roll_shear_rate, self.solid_fraction, mask)
 
     def weighted_mean(self, mask: np.ndarray | None = None) -> tuple[float, float]:
         """Solid-fraction weighted mean of the cycle-mean shear rate over the nodes in `mask`
         (all nodes with material by default), and its batch-means standard error (1/s)."""
-        m = np.isfinite(self.shear_rate) & (self.solid_fraction > 0)
-        if mask is not None:
-            m &= mask
-        if not m.any():
-            return float("nan"), float("nan")
-        w = self.solid_fraction[m]
-        mean = float(np.sum(w * self.shear_rate[m]) / np.sum(w))
-        per = []
-        for b in range(self.batch_shear_rate.shape[0]):
-            g, f = self.batch_shear_rate[b][m], self.batch_solid_fraction[b][m]
-            ok = np.isfinite(g) & (f > 0)
-            if ok.any():
-                per.append(np.sum(f[ok] * g[ok]) / np.sum(f[ok]))
+        mean = self._solid_mean(self.shear_rate, self.solid_fraction, mask)
+        per = [self._solid_mean(g, f, mask)
+               for g, f in zip(self.batch_shear_rate, self.batch_solid_fraction)]
+        per = [v for v in per if np.isfinite(v)]
         se = (float(np.std(per, ddof=1) / np.sqrt(len(per))) if len(per) >= 2
               else float("nan"))
         return mean, se
@@ -245,7 +238,6 @@ class PhaseShearAccumulator:
         rate, phase_phi, cycle, phi = phase_field_shear_rate(
             self.vol.sum(axis=0), self.mom_x.sum(axis=0), self.mom_z.sum(axis=0),
             node * np.maximum(n_all, 1), self.h, min_solid_fraction)
-        phi = np.where(n_all.sum() > 0, phi, 0.0)
         b_rate = np.full((self.n_batches, self.nz, self.nx), np.nan)
         b_phi = np.zeros((self.n_batches, self.nz, self.nx))
         for b in range(self.n_batches):
@@ -264,3 +256,29 @@ class PhaseShearAccumulator:
                           phase_shear_rate=rate, phase_solid_fraction=phase_phi,
                           batch_shear_rate=b_rate,
                           batch_solid_fraction=b_phi, roll_shear_rate=roll)
+
+
+def phase_shear_of_snapshots(scenario, positions, velocities, poses, volume, times,
+                             cell_size: float | None = None,
+                             min_solid_fraction: float = MIN_NODE_SOLID_FRACTION) -> PhaseShear:
+    """The PhaseShear of a run's snapshots in its averaging window, on the nodes of node_grid
+    (the analysis cells' centres by default): positions, velocities (S, N, 3) lab frame (arrays
+    or h5py datasets, read a snapshot at a time), poses (S, 6), volume (N,) the solid volume
+    (m^3) each body stands for, times (S,) s.  Binned by the scenario's sampling phases and by
+    its batches of whole cycles.  The DEM calibration and both continuum drivers call this."""
+    from .stats import batches_of_whole_cycles, phase_bins
+    from .summary import geometry_of
+
+    geo = geometry_of(scenario)
+    h, nxh, nz = node_grid(geo, cell_size or float(scenario.analysis.cell_size))
+    run, motion = scenario.run, scenario.motion
+    acc = PhaseShearAccumulator(h, nxh, nz, geo.length, run.phases_per_cycle, run.batches,
+                                tuple(motion.pivot))
+    times = np.asarray(times, float)
+    batch = batches_of_whole_cycles(times, run.duration - run.average_last, run.duration,
+                                    motion.frequency, run.batches)
+    phase = phase_bins(times, motion.frequency, run.phases_per_cycle)
+    poses = np.asarray(poses, float)
+    for j in np.nonzero(batch >= 0)[0]:
+        acc.add(positions[j], velocities[j], poses[j], volume, int(phase[j]), int(batch[j]))
+    return acc.result(min_solid_fraction)

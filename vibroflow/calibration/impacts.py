@@ -105,14 +105,33 @@ def impact_relations(run, phase_fields, time_fields=None,
             res.close()
 
 
+def window_impacts(res: DEMResult, n_phases: int, chunk: int = 2_000_000):
+    """Yield (kind, normal speed m/s, contact point (tub frame, m), phase bin) arrays of the
+    impacts of the averaging window's whole cycles, `chunk` impacts read at a time (a tub47
+    run holds ~25 million)."""
+    from vibroflow.analysis.stats import batches_of_whole_cycles, phase_bins
+
+    if not res.has("impacts/kind"):
+        return
+    f = res.file
+    sc = res.scenario
+    t0, t1 = res.window()
+    freq = float(sc.motion.frequency)
+    m = f["impacts/kind"].shape[0]
+    for a0 in range(0, m, chunk):
+        a1 = min(m, a0 + chunk)
+        it = f["impacts/time"][a0:a1]
+        use = batches_of_whole_cycles(it, t0, t1, freq, int(sc.run.batches)) >= 0
+        if not use.any():
+            continue
+        yield (f["impacts/kind"][a0:a1][use],
+               f["impacts/normal_speed"][a0:a1].astype(float)[use],
+               f["impacts/position_tub"][a0:a1][use], phase_bins(it[use], freq, n_phases))
+
+
 def _relations(res: DEMResult, pf, min_impacts, min_sf, histogram_bins, chunk) -> dict:
-    from vibroflow.analysis.stats import batches_of_whole_cycles
-
-    from .coarse_grain import phase_bins
-
     sc = res.scenario
     d = res.diameter
-    f = res.file
     x = np.asarray(pf["x"].values, float)
     z = np.asarray(pf["z"].values, float)
     n_ph = int(pf.sizes["phase"])
@@ -126,25 +145,12 @@ def _relations(res: DEMResult, pf, min_impacts, min_sf, histogram_bins, chunk) -
             out[name] = None
         out["bagnold"] = None
         return out
-    t0, t1 = res.window()
-    freq = float(sc.motion.frequency)
     ncell = n_ph * x.size * z.size
     cnt = {name: np.zeros(ncell) for name in KINDS}
     sm = {name: np.zeros(ncell) for name in KINDS}
     hist = {name: None for name in KINDS}
     edges = None
-    m = f["impacts/kind"].shape[0]
-    # streamed: a tub47 run holds ~25 million impacts
-    for a0 in range(0, m, chunk):
-        a1 = min(m, a0 + chunk)
-        it = f["impacts/time"][a0:a1]
-        use = batches_of_whole_cycles(it, t0, t1, freq, int(sc.run.batches)) >= 0
-        if not use.any():
-            continue
-        kind = f["impacts/kind"][a0:a1][use]
-        speed = f["impacts/normal_speed"][a0:a1].astype(float)[use]
-        pos = f["impacts/position_tub"][a0:a1][use]
-        ph = phase_bins(it[use], freq, n_ph)
+    for kind, speed, pos, ph in window_impacts(res, n_ph, chunk):
         if edges is None:
             top = 2.0 * float(np.percentile(speed, 99.9)) if speed.size else 1.0
             edges = np.linspace(0.0, max(top, 1e-6), histogram_bins + 1)
@@ -214,9 +220,7 @@ def impact_relations_on_cells(run, cell_size: float | None = None,
     "cell_size_m", "bed_mean_shear_rate_1_s",
     "near_wall_shear_rate_1_s" (the DEM's own values of the continuum's two measures, with
     their standard errors)}."""
-    from vibroflow.analysis.phase_shear import (PhaseShearAccumulator, near_wall_nodes,
-                                                node_grid)
-    from vibroflow.analysis.stats import batches_of_whole_cycles, phase_bins
+    from vibroflow.analysis.phase_shear import near_wall_nodes, phase_shear_of_snapshots
     from vibroflow.analysis.summary import geometry_of
 
     own = not isinstance(run, DEMResult)
@@ -224,20 +228,13 @@ def impact_relations_on_cells(run, cell_size: float | None = None,
     try:
         sc = res.scenario
         geo = geometry_of(sc)
-        h, nxh, nz = node_grid(geo, cell_size or float(sc.analysis.cell_size))
-        n_ph = int(sc.run.phases_per_cycle)
-        freq = float(sc.motion.frequency)
-        acc = PhaseShearAccumulator(h, nxh, nz, geo.length, n_ph, int(sc.run.batches),
-                                    res.pivot)
         f = res.file
-        batch = res.batches()
-        phase = phase_bins(res.times, freq, n_ph)
-        poses = f["snapshots/tub_pose"][()]
-        volume = 4.0 / 3.0 * math.pi * res.radius**3
-        for s in np.nonzero(batch >= 0)[0]:
-            acc.add(f["snapshots/position"][s], f["snapshots/velocity"][s], poses[s], volume,
-                    int(phase[s]), int(batch[s]))
-        shear = acc.result(min_solid_fraction)
+        shear = phase_shear_of_snapshots(
+            sc, f["snapshots/position"], f["snapshots/velocity"], f["snapshots/tub_pose"][()],
+            4.0 / 3.0 * math.pi * res.radius**3, res.times, cell_size, min_solid_fraction)
+        h, n_ph = shear.h, shear.phase_shear_rate.shape[0]
+        nz, nx = shear.shear_rate.shape
+        nxh = (nx - 1) // 2
         d = res.diameter
         out: dict = {"cell_size_m": h}
         m, se = shear.weighted_mean()
@@ -246,30 +243,18 @@ def impact_relations_on_cells(run, cell_size: float | None = None,
         out.update(bed_mean_shear_rate_1_s=m, bed_mean_shear_rate_1_s_stderr=se,
                    bed_roll_shear_rate_1_s=shear.roll_mean(),
                    near_wall_shear_rate_1_s=mw, near_wall_shear_rate_1_s_stderr=sew)
-        nx = 2 * nxh + 1
         ncell = n_ph * nz * nx
         cnt = {name: np.zeros(ncell) for name in KINDS}
         sm = {name: np.zeros(ncell) for name in KINDS}
-        if res.has("impacts/kind"):
-            t0, t1 = res.window()
-            for a0 in range(0, f["impacts/kind"].shape[0], chunk):
-                a1 = min(f["impacts/kind"].shape[0], a0 + chunk)
-                it = f["impacts/time"][a0:a1]
-                use = batches_of_whole_cycles(it, t0, t1, freq, int(sc.run.batches)) >= 0
-                if not use.any():
-                    continue
-                kind = f["impacts/kind"][a0:a1][use]
-                speed = f["impacts/normal_speed"][a0:a1].astype(float)[use]
-                pos = f["impacts/position_tub"][a0:a1][use]
-                ph = phase_bins(it[use], freq, n_ph)
-                i = np.floor(pos[:, 0] / h + 0.5).astype(np.int64) + nxh
-                k = np.floor(pos[:, 2] / h + 0.5).astype(np.int64)
-                inside = (i >= 0) & (i < nx) & (k >= 0) & (k < nz)
-                flat = (ph * nz + k) * nx + i
-                for name, code in KINDS.items():
-                    sel = (kind == code) & inside
-                    cnt[name] += np.bincount(flat[sel], minlength=ncell)
-                    sm[name] += np.bincount(flat[sel], weights=speed[sel], minlength=ncell)
+        for kind, speed, pos, ph in window_impacts(res, n_ph, chunk):
+            i = np.floor(pos[:, 0] / h + 0.5).astype(np.int64) + nxh
+            k = np.floor(pos[:, 2] / h + 0.5).astype(np.int64)
+            inside = (i >= 0) & (i < nx) & (k >= 0) & (k < nz)
+            flat = (ph * nz + k) * nx + i
+            for name, code in KINDS.items():
+                sel = (kind == code) & inside
+                cnt[name] += np.bincount(flat[sel], minlength=ncell)
+                sm[name] += np.bincount(flat[sel], weights=speed[sel], minlength=ncell)
         for name in KINDS:
             c = cnt[name].reshape(n_ph, nz, nx)
             if c.sum() == 0:

@@ -24,15 +24,10 @@ The frame (grid_update.frame_body) is a packed array too: FRAME_FIELDS.
 
 numba's cache watches only the file of the function it compiled, and a compiled loop holds its
 own copy of every kernel it calls: edited boundary or constitutive kernels would go on running
-in a cached loop compiled before.  So the loops are built by a factory whose closure constant is
-a hash of the called kernels' source files (`sources_key`): numba's cache index includes the
-closure's contents, and an edit anywhere in them compiles the loop afresh.
+in a cached loop compiled before.  The package drops its whole kernel cache when any of its
+sources changes (vibroflow/_kernel_cache.py), which covers this loop with every other.
 """
 from __future__ import annotations
-
-import hashlib
-import sys
-from pathlib import Path
 
 import numba as nb
 import numpy as np
@@ -53,22 +48,6 @@ OK, THROUGH_WALL, ESCAPED = 0, 1, 2
 def chunk_bounds(n: int, nchunk: int) -> np.ndarray:
     """Bounds (nchunk + 1,) of nchunk contiguous chunks of n points, sizes differing by <= 1."""
     return (np.arange(nchunk + 1, dtype=np.int64) * n) // nchunk
-
-
-def sources_key(*module_names: str) -> int:
-    """A 56-bit hash of the source files of the named (imported) modules (module docstring)."""
-    h = hashlib.sha256()
-    for name in module_names:
-        h.update(Path(sys.modules[name].__file__).read_bytes())
-    return int.from_bytes(h.digest()[:7], "little")
-
-
-#: the modules whose kernels the compiled loop calls, with theirs (module docstring)
-KERNEL_MODULES = ("vibroflow.continuum.boundary", "vibroflow.continuum.constitutive",
-                  "vibroflow.continuum.g2p", "vibroflow.continuum.grid",
-                  "vibroflow.continuum.grid_update", "vibroflow.continuum.p2g",
-                  "vibroflow.continuum.plasticity", "vibroflow.continuum.transfer_operator",
-                  "vibroflow.tub.geometry", "vibroflow.tub.motion")
 
 
 @nb.njit(cache=True)
@@ -109,123 +88,115 @@ def sum_chunk_rows(i0, i1, cm, cmv, cf, gm, gmv, gf):
             gf[i, k, 1] = f1
 
 
-def _make_advance_kernel(sources: int):
-    """The compiled loop, its cache keyed on `sources` (module docstring)."""
+@nb.njit(cache=True, parallel=True)
+def advance_kernel(nsteps, t, dt, x, v, C, L, mass, volume, density, stress, gamma_dot, phase,
+                   fext, bseq, wpar, wxi, wf, wfn, wft, wst, ppar, frame, x0, z0, dx,
+                   periodic, params, box, bounds, cm, cmv, cf, gm, gmv, gf, gv,
+                   no_slip_rows, flip, axis_cols, transfers, cb, B, gtmp):
+    """Up to nsteps MPM steps of dt (s) from time t (s), in place (module docstring; the
+    state's arrays as mpm.MPMState, the grid's as mpm.MPMSystem.work).  box (4,) the region
+    (m) a point may occupy (mpm.step); bounds (nchunk + 1,) chunk_bounds; cm (nchunk, nx, nz),
+    cmv, cf (nchunk, nx, nz, 2) per-chunk scatter buffers; no_slip_rows: the grid's lowest
+    node rows held still after every grid update (mpm.MPMSystem.no_slip_below, a rough
+    floor), 0 for none; axis_cols: an axisymmetric section's node columns on or left of
+    the axis r = 0, whose radial velocity is held at 0 after every grid update (mpm.
+    MPMSystem.axisymmetric), 0 for a plane-strain section; transfers: the APIC transfers
+    a step makes (mpm.MPMSystem.transfers; transfer_operator.py), with cb (nchunk, nx, nz,
+    5, 5) the per-chunk operators, B (nx, nz, 5, 5) their sum and gtmp (nx, nz, 2) a work
+    grid (unused for one transfer).
 
-    @nb.njit(cache=True, parallel=True)
-    def advance_kernel(nsteps, t, dt, x, v, C, L, mass, volume, density, stress, gamma_dot, phase,
-                       fext, bseq, wpar, wxi, wf, wfn, wft, wst, ppar, frame, x0, z0, dx,
-                       periodic, params, box, bounds, cm, cmv, cf, gm, gmv, gf, gv,
-                       no_slip_rows, flip, axis_cols, transfers, cb, B, gtmp):
-        """Up to nsteps MPM steps of dt (s) from time t (s), in place (module docstring; the
-        state's arrays as mpm.MPMState, the grid's as mpm.MPMSystem.work).  box (4,) the region
-        (m) a point may occupy (mpm.step); bounds (nchunk + 1,) chunk_bounds; cm (nchunk, nx, nz),
-        cmv, cf (nchunk, nx, nz, 2) per-chunk scatter buffers; no_slip_rows: the grid's lowest
-        node rows held still after every grid update (mpm.MPMSystem.no_slip_below, a rough
-        floor), 0 for none; axis_cols: an axisymmetric section's node columns on or left of
-        the axis r = 0, whose radial velocity is held at 0 after every grid update (mpm.
-        MPMSystem.axisymmetric), 0 for a plane-strain section; transfers: the APIC transfers
-        a step makes (mpm.MPMSystem.transfers; transfer_operator.py), with cb (nchunk, nx, nz,
-        5, 5) the per-chunk operators, B (nx, nz, 5, 5) their sum and gtmp (nx, nz, 2) a work
-        grid (unused for one transfer).
-
-        Returns (steps done, t after them, status, boundary): status OK; THROUGH_WALL when points
-        went through the boundary `boundary` (the step was not made: t is its start; the
-        boundaries' forces and histories were computed); ESCAPED when after the last step made a
-        point is off the box or non-finite."""
-        _ = sources
-        nchunk = bounds.shape[0] - 1
-        nb_ = bseq.shape[0]
-        nx = gm.shape[0]
-        deep = np.zeros((nchunk, max(nb_, 1)), np.int64)
-        bad = np.zeros(nchunk, np.int64)
-        for s in range(nsteps):
-            # 1-2: the boundaries' forces in their order (fext zeroed first; deep: the points
-            # through each wall, boundary.py `lost`) and the scatter, per chunk
-            for c in nb.prange(nchunk):
-                a = bounds[c]
-                b = bounds[c + 1]
-                fext[a:b] = 0.0
-                for j in range(nb_):
-                    q = bseq[j, 1]
-                    if bseq[j, 0] == B_PARTITION:
-                        partition_forces(v[a:b], mass[a:b], volume[a:b], stress[a:b],
-                                         fext[a:b], ppar[q, 0], ppar[q, 1], dt)
-                        continue
-                    w = wpar[q]
-                    if w[W_KIND] == WALL_U:
-                        deep[c, j] = u_wall_forces(
-                            x[a:b], v[a:b], mass[a:b], volume[a:b], wxi[q, a:b], fext[a:b],
-                            wf[q, a:b], wfn[q, a:b], wft[q, a:b], wst[q, a:b], w[W_RADIUS],
-                            w[W_KN], w[W_KT], w[W_ZETA], w[W_MU], dt)
-                    else:
-                        px, pz, wvx, wvz = plane_motion(w[W_PX], w[W_PZ], w[W_VX], w[W_VZ],
-                                                        w[W_AX], w[W_AZ], t)
-                        deep[c, j] = plane_forces(
-                            x[a:b], v[a:b], mass[a:b], volume[a:b], wxi[q, a:b], fext[a:b],
-                            wf[q, a:b], wfn[q, a:b], wft[q, a:b], wst[q, a:b], px, pz, w[W_NX],
-                            w[W_NZ], wvx, wvz, w[W_KN], w[W_KT], w[W_ZETA], w[W_MU], dt)
-                cm[c] = 0.0
-                cmv[c] = 0.0
-                cf[c] = 0.0
-                p2g(x[a:b], v[a:b], C[a:b], mass[a:b], volume[a:b], stress[a:b], fext[a:b], x0,
-                    z0, dx, periodic, cm[c], cmv[c], cf[c], axis_cols > 0)
-                if transfers > 1:
-                    cb[c] = 0.0
-                    operator_of_points(x[a:b], mass[a:b], x0, z0, dx, periodic, cb[c])
+    Returns (steps done, t after them, status, boundary): status OK; THROUGH_WALL when points
+    went through the boundary `boundary` (the step was not made: t is its start; the
+    boundaries' forces and histories were computed); ESCAPED when after the last step made a
+    point is off the box or non-finite."""
+    nchunk = bounds.shape[0] - 1
+    nb_ = bseq.shape[0]
+    nx = gm.shape[0]
+    deep = np.zeros((nchunk, max(nb_, 1)), np.int64)
+    bad = np.zeros(nchunk, np.int64)
+    for s in range(nsteps):
+        # 1-2: the boundaries' forces in their order (fext zeroed first; deep: the points
+        # through each wall, boundary.py `lost`) and the scatter, per chunk
+        for c in nb.prange(nchunk):
+            a = bounds[c]
+            b = bounds[c + 1]
+            fext[a:b] = 0.0
             for j in range(nb_):
-                if bseq[j, 0] == B_WALL:
-                    n_deep = 0
-                    for c in range(nchunk):
-                        n_deep += deep[c, j]
-                    if n_deep > 0:
-                        return s, t, THROUGH_WALL, j
-            for i in nb.prange(nx):
-                sum_chunk_rows(i, i + 1, cm, cmv, cf, gm, gmv, gf)
-                if transfers > 1:
-                    sum_operator_rows(i, i + 1, cb, B)
-            # 3: the frame's acceleration at mid-step
-            a0x, a0z, om, al, pvx, pvz = frame_body(frame, t + 0.5 * dt)
-            grid_update(gm, gmv, gf, gv, x0, z0, dx, dt, a0x, a0z, om, al, pvx, pvz, periodic)
-            if no_slip_rows > 0:
-                gv[:, :no_slip_rows, :] = 0.0
-            if axis_cols > 0:
-                gv[:axis_cols, :, 0] = 0.0
-            # 3b: the step's further transfers (transfer_operator.py), each followed by the
-            # grid's conditions as the update was
-            # (from gv to gtmp and back, one parallel loop a transfer, the last copied back;
-            # the conditions inside transfer_rows: numba's parallel build dropped slice
-            # assignments to the alternating buffer)
-            for j in range(transfers - 1):
-                if j % 2 == 0:
-                    for i in nb.prange(nx):
-                        transfer_rows(i, i + 1, B, gm, gv, gtmp, periodic, no_slip_rows,
-                                      axis_cols)
+                q = bseq[j, 1]
+                if bseq[j, 0] == B_PARTITION:
+                    partition_forces(v[a:b], mass[a:b], volume[a:b], stress[a:b],
+                                     fext[a:b], ppar[q, 0], ppar[q, 1], dt)
+                    continue
+                w = wpar[q]
+                if w[W_KIND] == WALL_U:
+                    deep[c, j] = u_wall_forces(
+                        x[a:b], v[a:b], mass[a:b], volume[a:b], wxi[q, a:b], fext[a:b],
+                        wf[q, a:b], wfn[q, a:b], wft[q, a:b], wst[q, a:b], w[W_RADIUS],
+                        w[W_KN], w[W_KT], w[W_ZETA], w[W_MU], dt)
                 else:
-                    for i in nb.prange(nx):
-                        transfer_rows(i, i + 1, B, gm, gtmp, gv, periodic, no_slip_rows,
-                                      axis_cols)
-            if transfers % 2 == 0:
+                    px, pz, wvx, wvz = plane_motion(w[W_PX], w[W_PZ], w[W_VX], w[W_VZ],
+                                                    w[W_AX], w[W_AZ], t)
+                    deep[c, j] = plane_forces(
+                        x[a:b], v[a:b], mass[a:b], volume[a:b], wxi[q, a:b], fext[a:b],
+                        wf[q, a:b], wfn[q, a:b], wft[q, a:b], wst[q, a:b], px, pz, w[W_NX],
+                        w[W_NZ], wvx, wvz, w[W_KN], w[W_KT], w[W_ZETA], w[W_MU], dt)
+            cm[c] = 0.0
+            cmv[c] = 0.0
+            cf[c] = 0.0
+            p2g(x[a:b], v[a:b], C[a:b], mass[a:b], volume[a:b], stress[a:b], fext[a:b], x0,
+                z0, dx, periodic, cm[c], cmv[c], cf[c], axis_cols > 0)
+            if transfers > 1:
+                cb[c] = 0.0
+                operator_of_points(x[a:b], mass[a:b], x0, z0, dx, periodic, cb[c])
+        for j in range(nb_):
+            if bseq[j, 0] == B_WALL:
+                n_deep = 0
+                for c in range(nchunk):
+                    n_deep += deep[c, j]
+                if n_deep > 0:
+                    return s, t, THROUGH_WALL, j
+        for i in nb.prange(nx):
+            sum_chunk_rows(i, i + 1, cm, cmv, cf, gm, gmv, gf)
+            if transfers > 1:
+                sum_operator_rows(i, i + 1, cb, B)
+        # 3: the frame's acceleration at mid-step
+        a0x, a0z, om, al, pvx, pvz = frame_body(frame, t + 0.5 * dt)
+        grid_update(gm, gmv, gf, gv, x0, z0, dx, dt, a0x, a0z, om, al, pvx, pvz, periodic)
+        if no_slip_rows > 0:
+            gv[:, :no_slip_rows, :] = 0.0
+        if axis_cols > 0:
+            gv[:axis_cols, :, 0] = 0.0
+        # 3b: the step's further transfers (transfer_operator.py), each followed by the
+        # grid's conditions as the update was
+        # (from gv to gtmp and back, one parallel loop a transfer, the last copied back;
+        # the conditions inside transfer_rows: numba's parallel build dropped slice
+        # assignments to the alternating buffer)
+        for j in range(transfers - 1):
+            if j % 2 == 0:
                 for i in nb.prange(nx):
-                    gv[i] = gtmp[i]
-            # 4-5: gather, move, volume and stress, per chunk
-            for c in nb.prange(nchunk):
-                a = bounds[c]
-                b = bounds[c + 1]
-                g2p(x[a:b], v[a:b], C[a:b], L[a:b], gv, x0, z0, dx, dt, periodic, gm, gmv,
-                    flip)
-                plasticity_step(L[a:b], mass[a:b], volume[a:b], density[a:b], stress[a:b], dt,
-                                params, gamma_dot[a:b], phase[a:b])
-                bad[c] = _escaped_range(a, b, x, v, box[0], box[1], box[2], box[3])
-            t += dt
-            n_bad = 0
-            for c in range(nchunk):
-                n_bad += bad[c]
-            if n_bad > 0:
-                return s + 1, t, ESCAPED, -1
-        return nsteps, t, OK, -1
+                    transfer_rows(i, i + 1, B, gm, gv, gtmp, periodic, no_slip_rows,
+                                  axis_cols)
+            else:
+                for i in nb.prange(nx):
+                    transfer_rows(i, i + 1, B, gm, gtmp, gv, periodic, no_slip_rows,
+                                  axis_cols)
+        if transfers % 2 == 0:
+            for i in nb.prange(nx):
+                gv[i] = gtmp[i]
+        # 4-5: gather, move, volume and stress, per chunk
+        for c in nb.prange(nchunk):
+            a = bounds[c]
+            b = bounds[c + 1]
+            g2p(x[a:b], v[a:b], C[a:b], L[a:b], gv, x0, z0, dx, dt, periodic, gm, gmv,
+                flip)
+            plasticity_step(L[a:b], mass[a:b], volume[a:b], density[a:b], stress[a:b], dt,
+                            params, gamma_dot[a:b], phase[a:b])
+            bad[c] = _escaped_range(a, b, x, v, box[0], box[1], box[2], box[3])
+        t += dt
+        n_bad = 0
+        for c in range(nchunk):
+            n_bad += bad[c]
+        if n_bad > 0:
+            return s + 1, t, ESCAPED, -1
+    return nsteps, t, OK, -1
 
-    return advance_kernel
-
-
-advance_kernel = _make_advance_kernel(sources_key(*KERNEL_MODULES))

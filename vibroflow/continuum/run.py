@@ -51,9 +51,9 @@ from pathlib import Path
 import numba as nb
 import numpy as np
 
-from vibroflow.analysis.phase_shear import (PhaseShear, PhaseShearAccumulator, near_wall_nodes,
-                                            node_grid)
-from vibroflow.analysis.stats import batch_means, batches_of_whole_cycles, phase_bins
+from vibroflow.analysis.phase_shear import (PhaseShear, near_wall_nodes, node_grid,
+                                            phase_shear_of_snapshots)
+from vibroflow.analysis.stats import batch_means, batches_of_whole_cycles
 from vibroflow.analysis.summary import geometry_of, json_safe, tub_summary
 from vibroflow.errors import InputError
 from vibroflow.progress import RunProgress
@@ -482,6 +482,22 @@ class Samples:
         return s
 
 
+    def add_contacts(self, j: int, particle: np.ndarray, fn: np.ndarray, ft: np.ndarray,
+                     state: np.ndarray, arc: np.ndarray, x: np.ndarray, length: float) -> None:
+        """Add sample j's wall contacts: the touching points' (or cells') indices, their normal
+        and tangential forces per metre of thickness (N/m; times `length`, the slice L_y in m,
+        they are over the slice, the DEM's unit), state (1 stick, 2 slide), arc-length
+        coordinate (m) and tub-frame positions x (n, 2) (m, set at the slice's middle in y)."""
+        c = self.contacts
+        c["snapshot"].append(np.full(particle.size, j, np.int32))
+        c["particle"].append(particle.astype(np.int32))
+        c["fn"].append(fn * length)
+        c["ft"].append(np.abs(ft) * length)
+        c["sliding"].append(state == 2)
+        c["arc"].append(np.array(arc, dtype=np.float64))
+        c["position_tub"].append(np.stack(
+            [x[:, 0], np.full(particle.size, 0.5 * length), x[:, 1]], axis=1))
+
     def add_cell_rates(self, x: np.ndarray, rate: np.ndarray) -> None:
         """Add one sample's shear rates (1/s) at tub-frame positions x (N, 2) m to the map: the
         mean over the points (or cells) in each analysis cell."""
@@ -713,17 +729,9 @@ def _vibrate(scenario, system, state, samples: Samples, geo, material, times, ou
         samples.pos[j], samples.vel[j], samples.poses[j] = buf_p, buf_v, pose6
         touching = np.nonzero(wall_hist["state"] > 0)[0]
         _wall_gap_arc(state.x, geo.radius, gap, arc)
-        c = samples.contacts
-        c["snapshot"].append(np.full(touching.size, j, np.int32))
-        c["particle"].append(touching.astype(np.int32))
-        # per metre of thickness -> over the slice (N), the DEM's unit
-        c["fn"].append(wall_hist["fn"][touching] * geo.length)
-        c["ft"].append(np.abs(wall_hist["ft"][touching]) * geo.length)
-        c["sliding"].append(wall_hist["state"][touching] == 2)
-        c["arc"].append(arc[touching].copy())
-        c["position_tub"].append(np.stack(
-            [state.x[touching, 0], np.full(touching.size, 0.5 * geo.length),
-             state.x[touching, 1]], axis=1))
+        samples.add_contacts(j, touching, wall_hist["fn"][touching], wall_hist["ft"][touching],
+                             wall_hist["state"][touching], arc[touching], state.x[touching],
+                             geo.length)
         rate = shear_rate(state.L)
         if vtk and j >= S - run.phases_per_cycle:
             name = f"points_{j:05d}.vtu"
@@ -862,26 +870,14 @@ def _continuum_block(material, system, state, spacing, h, n_steps, wall_time,
 def phase_shear_of_samples(scenario, samples: Samples, times: np.ndarray,
                            radius: np.ndarray) -> PhaseShear:
     """The cycle-mean shear rate of the run's phase-resolved velocity field on the analysis
-    cells' centres (vibroflow.analysis.phase_shear): the samples of the averaging window, each
-    point standing for the solid volume of a ball of its `radius` (m), binned by phase and by
-    batch of whole cycles -- the DEM calibration's definition of the shear rate that its impact
-    relation was fitted on."""
-    geo = geometry_of(scenario)
-    h, nxh, nz = cell_grid_of(geo, scenario.analysis.cell_size)
-    run = scenario.run
-    motion = scenario.motion
-    acc = PhaseShearAccumulator(h, nxh, nz, geo.length, run.phases_per_cycle, run.batches,
-                                tuple(motion.pivot))
-    if times.size == 0:
-        return acc.result()
-    batch = batches_of_whole_cycles(times, run.duration - run.average_last, run.duration,
-                                    motion.frequency, run.batches)
-    phase = phase_bins(times, motion.frequency, run.phases_per_cycle)
-    volume = 4.0 / 3.0 * math.pi * np.asarray(radius, float) ** 3
-    for j in range(min(samples.j, times.size)):
-        acc.add(samples.pos[j], samples.vel[j], samples.poses[j], volume, int(phase[j]),
-                int(batch[j]))
-    return acc.result()
+    cells' centres (analysis.phase_shear.phase_shear_of_snapshots, as the DEM calibration
+    measures it): each sampled point standing for the solid volume of a ball of its `radius`
+    (m)."""
+    j = min(samples.j, times.size)
+    return phase_shear_of_snapshots(scenario, samples.pos[:j], samples.vel[:j],
+                                    samples.poses[:j],
+                                    4.0 / 3.0 * math.pi * np.asarray(radius, float) ** 3,
+                                    times[:j])
 
 
 def impact_relation(rel) -> tuple[float | None, float | None, str]:

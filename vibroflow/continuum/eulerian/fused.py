@@ -18,8 +18,8 @@ The cells' B-spline weights on the grid are the mesh's constant tables (transfer
 cells holding material are scattered and gathered in place through their indices (no compact
 copies of their fields).
 
-The loop's numba cache is keyed on the source of every kernel it calls, as the Lagrangian's
-(vibroflow.continuum.fused, `sources_key`).
+An edit to any kernel the loop calls drops the package's numba cache (vibroflow/_kernel_cache.py),
+so the cached loop never keeps an old copy of them.
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ import numba as nb
 import numpy as np
 
 from ..boundary import partition_forces
-from ..fused import KERNEL_MODULES, sources_key, sum_chunk_rows
+from ..fused import sum_chunk_rows
 from ..grid_update import frame_body, grid_update
 from .advection import face_velocity_rows, match_divergence, remap, remap_serial
 from .lagrangian_step import (end_density, fill_limit, material_fraction,
@@ -40,10 +40,10 @@ from .wall import wall_forces
 OK, NEGATIVE_MASS, NON_FINITE = 0, 1, 2
 
 
-def _make_advance_kernel(sources: int, parallel: bool):
-    """The compiled loop, its cache keyed on `sources` (module docstring); numba's parallel
-    loops, or the same loops run serially (`parallel` False: the one-thread loop, module
-    docstring)."""
+def _make_advance_kernel(parallel: bool):
+    """The compiled loop: numba's parallel loops, or the same loops run serially (`parallel`
+    False: the one-thread loop, module docstring); `parallel` is a closure constant, so the two
+    are cached apart."""
 
     @nb.njit(cache=True, parallel=parallel)
     def advance_kernel(nsteps, t, dt, mass0, mass_error_max, mass, v, C, L, stress, gamma_dot,
@@ -66,7 +66,7 @@ def _make_advance_kernel(sources: int, parallel: bool):
         Returns (steps done, t, status, lowest cell mass kg/m, largest |M - M0| / M0 so far):
         status OK, NEGATIVE_MASS (a cell lost more mass than it held) or NON_FINITE (a velocity),
         found at the end of the last step made."""
-        _ = (sources, parallel)
+        _ = parallel
         n = mass.shape[0]
         tcx, tcz = tables[0], tables[1]
         ncx = open_z.shape[0]
@@ -174,9 +174,5 @@ def _make_advance_kernel(sources: int, parallel: bool):
     return advance_kernel
 
 
-_SOURCES = sources_key(
-    *KERNEL_MODULES, "vibroflow.continuum.fused", "vibroflow.continuum.eulerian.advection",
-    "vibroflow.continuum.eulerian.lagrangian_step", "vibroflow.continuum.eulerian.transfer",
-    "vibroflow.continuum.eulerian.wall")
-advance_kernel = _make_advance_kernel(_SOURCES, True)
-advance_kernel_serial = _make_advance_kernel(_SOURCES, False)
+advance_kernel = _make_advance_kernel(True)
+advance_kernel_serial = _make_advance_kernel(False)

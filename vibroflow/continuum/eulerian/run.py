@@ -414,17 +414,8 @@ def _vibrate(scenario, system: EulerianSystem, state: EulerianState, samples: Sa
         touching = np.nonzero((hist["state"][wall_cells] > 0)
                               & (state.mass[wall_cells] >= 0.5 * full))[0]
         tc = wall_cells[touching]
-        where = np.searchsorted(cells, tc)
-        c = samples.contacts
-        c["snapshot"].append(np.full(tc.size, j, np.int32))
-        c["particle"].append(where.astype(np.int32))
-        c["fn"].append(hist["fn"][tc] * geo.length)
-        c["ft"].append(np.abs(hist["ft"][tc]) * geo.length)
-        c["sliding"].append(hist["state"][tc] == 2)
-        c["arc"].append(mesh.arc[tc].copy())
-        c["position_tub"].append(np.stack(
-            [system.x[tc, 0], np.full(tc.size, 0.5 * geo.length), system.x[tc, 1]],
-            axis=1))
+        samples.add_contacts(j, np.searchsorted(cells, tc), hist["fn"][tc], hist["ft"][tc],
+                             hist["state"][tc], mesh.arc[tc], system.x[tc], geo.length)
         rate_all = shear_rate(state.L)
         if vtk and j >= S - run.phases_per_cycle:
             name = f"grid_{j:05d}.vtr"
