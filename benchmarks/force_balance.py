@@ -22,9 +22,10 @@ DEM: every ball-wall contact sampled in DIR/dem.h5 (wall_contacts: force in the 
 rotated into the tub's axes with the tub's angle at its snapshot).  Continuum: a run of the same
 scenario and calibration, from the bed that vibroflow.continuum.run.run_lagrangian (or
 eulerian.run.run_eulerian) starts vibrating (their vibration_start), advanced one sampling
-interval at a time from the start of the vibration; after --skip-cycles cycles, at every sample, the U wall's force on each point (the
-penalty law's last force, boundary.UWall's history) or wall-layer cell (eulerian.wall: fn along
-the cell's inward normal n, ft along (n_z, -n_x)) and the partitions' friction
+interval at a time from the start of the vibration; after --skip-cycles cycles, at every
+sample, the U wall's force on each point (the penalty law's last force, boundary.UWall's
+history) or wall-layer cell (eulerian.wall: fn along the cell's inward normal n, ft along
+(n_z, -n_x)) and the partitions' friction
 (boundary.partition_forces on the state) over the next --cycles cycles.
 
 And the bed's state by phase, the same measures for both codes: its mass-weighted mean

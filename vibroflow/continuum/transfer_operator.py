@@ -102,10 +102,10 @@ def transfer_rows(i0, i1, B, gm, gv, out, periodic, no_slip_rows, axis_cols):
     out: v_i' = sum_j B_ij v_j / m_i at nodes holding mass (gm > MASS_EPS, kg/m) and off the
     grid's edge, 0 elsewhere (as grid_update leaves them); then the grid's conditions as after
     the update: the lowest no_slip_rows node rows held still (a rough floor), the radial
-    velocity of the first axis_cols columns 0 (an axisymmetric section's axis).  The sums may be reassociated
-    (fastmath reassoc, contract, nsz and arcp, no other licence: NaN and infinities pass
-    through), which lets them vectorise: a third less time; the numbers still do not depend on
-    the threads, but may on the processor's vector instructions (a checkpoint resumed on
+    velocity of the first axis_cols columns 0 (an axisymmetric section's axis). The sums may be
+    reassociated (fastmath reassoc, contract, nsz and arcp, no other licence: NaN and infinities
+    pass through), which lets them vectorise: a third less time; the numbers still do not depend
+    on the threads, but may on the processor's vector instructions (a checkpoint resumed on
     another kind of processor may then not continue bit for bit)."""
     nx, nz = gm.shape
     for i in range(i0, i1):
