@@ -116,19 +116,50 @@ def face_velocities(gv, tables, periodic, open_x, open_z, m, ux, uz):
 
 
 @nb.njit(cache=True)
-def match_divergence(L, ux, uz, h, periodic):
+def match_divergence(L, ux, uz, h, periodic, v, normal, mass, open_x, open_z):
     """Replace the trace of each cell's velocity gradient L (N, 4) [xx, xz, zx, zz] (1/s,
     p = i * ncz + k) by the finite-volume divergence of its face velocities (1/s), split
     equally between L_xx and L_zz, so that the volume change the stress update sees is the one
     the mass transport makes.  In the domain's interior the two are equal (the quadratic
     B-spline velocity differenced over a cell that lies within one knot span); they differ next
-    to the wall, whose closed faces pass no material while the nodal field beyond them moves."""
+    to the wall, whose closed faces pass no material while the nodal field beyond them moves.
+
+    A closed face is the wall; what moves there is the material's separation from it.  A wall
+    cell (normal (N, 2) its inward unit normal, mesh.py) whose material moves away from the
+    wall, s = v . n > 0 (v (N, 2) the cells' velocities, m/s), gives its closed faces the
+    velocity s n: the material leaves the wall as a body and the gap it opens is the cell's
+    empty part (its volume fraction falls as the remap takes its mass out through the open
+    faces), as a material point of the Lagrangian method lifts off the wall leaving empty
+    space behind.  With the closed faces held at 0 instead, the wall cell's material was
+    stretched between the still wall and the lifting bed at every take-off, dilated below the
+    critical density (stress-free), and the next landing closed the gap without compacting it
+    (lagrangian_step.void_first: that ratchet; benchmarks/README.md, session 13).  A cell pressing on the wall or
+    sliding along it (s <= 0) keeps them at 0: the wall compresses it, its empty part first
+    (lagrangian_step.void_first).  mass (N,) kg/m: only cells holding material; open_x
+    (ncx + 1, ncz), open_z (ncx, ncz + 1): the open faces."""
     ncx, ncz = uz.shape[0], ux.shape[1]
     for i in range(ncx):
         ir = i + 1
         for k in range(ncz):
-            div = (ux[ir, k] - ux[i, k] + uz[i, k + 1] - uz[i, k]) / h
             p = i * ncz + k
+            uxl = ux[i, k]
+            uxr = ux[ir, k]
+            uzb = uz[i, k]
+            uzt = uz[i, k + 1]
+            if mass[p] > 0.0:
+                nx = normal[p, 0]
+                nz = normal[p, 1]
+                s = v[p, 0] * nx + v[p, 1] * nz
+                if s > 0.0:
+                    if not open_x[i, k]:
+                        uxl = s * nx
+                    if not open_x[ir, k]:
+                        uxr = s * nx
+                    if not open_z[i, k]:
+                        uzb = s * nz
+                    if not open_z[i, k + 1]:
+                        uzt = s * nz
+            div = (uxr - uxl + uzt - uzb) / h
             d = 0.5 * (div - L[p, 0] - L[p, 3])
             L[p, 0] += d
             L[p, 3] += d

@@ -131,8 +131,8 @@ def _make_advance_kernel(parallel: bool):
                 # the same parallel loop, one launch fewer
                 face_velocity_rows((c * (ncx + 1)) // nchunk, ((c + 1) * (ncx + 1)) // nchunk,
                                    gv, tables, periodic, open_x, open_z, m2, ux, uz)
-            match_divergence(L, ux, uz, h, periodic)
-            void_first(L, frac, dt)
+            match_divergence(L, ux, uz, h, periodic, v, normal, mass, open_x, open_z)
+            void_first(L, frac, density, rho_c, dt)
             end_density(density, L, dt, end_rho)
             for c in nb.prange(nchunk):
                 update_stress_cells((c * n) // nchunk, ((c + 1) * n) // nchunk, stress, L,

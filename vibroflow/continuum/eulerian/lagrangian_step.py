@@ -15,11 +15,12 @@ proper to the fixed mesh):
 4. nodes to cells: velocity, APIC affine matrix, velocity gradient L (g2p.py; the cells stay
    where they are: the motion is the remap's business, advection.py); the face velocities of
    the remap, and the trace of L made the finite-volume divergence of those
-   (advection.match_divergence: the wall's closed faces); in a partly filled cell the volume
-   change goes to its empty part first (void_first);
+   (advection.match_divergence: the wall's closed faces, which move with the material where it
+   leaves the wall); in a partly filled cell the volume change goes to its empty part first,
+   both ways (void_first);
 5. the material's density rho <- rho / det(I + dt L) (the material's own strain: a mixed
-   cell's material takes its cell's shear and expansion, and its compression once the void is
-   closed) and its stress through the shared constitutive law
+   cell's material takes its cell's shear, its expansion down to the critical density and its
+   compression once the void is closed) and its stress through the shared constitutive law
    (constitutive.update_stress_points: Jaumann elastic predictor and the mu(I) or
    Drucker-Prager return map): material expanded below the critical density is disconnected
    (stress-free, Dunatunga & Kamrin 2015), which is how the bed's flight works.
@@ -48,26 +49,47 @@ def material_fraction(mass, density, h, frac, volume):
 
 
 @nb.njit(cache=True)
-def void_first(L, frac, dt):
-    """A partly filled cell that shrinks closes its empty part first (the void gives way, the
-    material does not): with the cell's volumetric strain e = dt tr(L) < 0 and its empty share
-    1 - f, the material's volumetric strain over the step is min(0, e + 1 - f) / f; the trace
-    of L is replaced by that rate (split equally between L_xx and L_zz), so the stress update
-    and the density see only the material's own compression.  A cell that expands expands its
-    material too (which unloads its stress and, below the critical density, disconnects it:
-    a void that opened without unloading the material would keep pushing its neighbours
-    apart).  A full cell (f = 1) is unchanged."""
+def void_first(L, frac, density, rho_c, dt):
+    """The volume change of a partly filled cell goes to its empty part first, both ways.
+
+    A cell's volumetric strain over the step is e = dt tr(L) (the finite-volume divergence,
+    advection.match_divergence); f its volume fraction, 1 - f its empty share, rho its
+    material's density (kg/m^3), rho_c the critical density.  In a partly filled cell
+    (0 < f < 1) the material's own volumetric strain e_m is
+
+    * shrinking (e < 0): the void closes first, e_m = min(0, e + 1 - f) / f (the void gives
+      way, the material does not);
+    * growing (e > 0): the material unloads elastically down to the critical density, no
+      further, e_m = min(e, rho / rho_c - 1) (>= 0); the rest opens the void.
+
+    The trace of L is replaced by e_m / dt (split equally between L_xx and L_zz), so the stress
+    update and the density see only the material's own strain.  A full cell (f = 1) is
+    unchanged: its material dilates with it (below rho_c: disconnected, stress-free, Dunatunga
+    & Kamrin 2015) and compacts with it.
+
+    Why both ways.  With the void closed first on shrinking but the material dilated first on
+    growing, every cycle of the vibration ratcheted the partly filled cells' material looser:
+    it was dilated as the bed lifted off the floor or swelled at its surface, and the next
+    landing closed the cells' empty part without compacting it back.  In tub47 (the vertical
+    stroke alone) the floor's cells ended at 0.6 and the surface's at 0.45 of the critical
+    density, a stress-free cushion and skin that the bed's load bypassed through the nodes
+    (benchmarks/README.md, session 13; tests/test_eulerian.py, the vibrated bed's volume).
+    A dilated state and a void are the same stress-free state of a cell's content (its mass
+    over the volume m / rho_c it would fill at the critical density); the rule now turns
+    either into the other symmetrically."""
     for p in range(frac.shape[0]):
         f = frac[p]
         if f >= 1.0 or f <= 0.0:
             continue
         tr = L[p, 0] + L[p, 3]
-        if tr >= 0.0:
-            continue
         e = dt * tr
-        em = e + 1.0 - f
-        tr_m = em / (f * dt) if em < 0.0 else 0.0
-        d = 0.5 * (tr_m - tr)
+        if e < 0.0:
+            em = e + 1.0 - f
+            em = em / f if em < 0.0 else 0.0
+        else:
+            room = density[p] / rho_c - 1.0
+            em = e if e < room else (room if room > 0.0 else 0.0)
+        d = 0.5 * (em / dt - tr)
         L[p, 0] += d
         L[p, 3] += d
 
