@@ -48,24 +48,29 @@ def material_fraction(mass, density, h, frac, volume):
         volume[p] = f * area
 
 
+#: the relative dilation below the critical density (-) of material whose cell opens a void
+#: (void_first): far above round-off (1e-16), far below anything physical
+OPEN_MARGIN = 1.0e-12
+
+
 @nb.njit(cache=True)
 def void_first(L, frac, density, rho_c, dt):
-    """The volume change of a partly filled cell goes to its empty part first, both ways.
+    """A cell's volume change goes to its empty part first, both ways.
 
     A cell's volumetric strain over the step is e = dt tr(L) (the finite-volume divergence,
     advection.match_divergence); f its volume fraction, 1 - f its empty share, rho its
-    material's density (kg/m^3), rho_c the critical density.  In a partly filled cell
-    (0 < f < 1) the material's own volumetric strain e_m is
+    material's density (kg/m^3), rho_c the critical density.  In a cell holding material
+    (f > 0) the material's own volumetric strain e_m is
 
     * shrinking (e < 0): the void closes first, e_m = min(0, e + 1 - f) / f (the void gives
-      way, the material does not);
+      way, the material does not; a full cell's material takes all of it, e_m = e);
     * growing (e > 0): the material unloads elastically down to the critical density, no
-      further, e_m = min(e, rho / rho_c - 1) (>= 0); the rest opens the void.
+      further, e_m = min(e, rho / rho_c - 1 + OPEN_MARGIN) (>= 0); the rest opens the void.
 
     The trace of L is replaced by e_m / dt (split equally between L_xx and L_zz), so the stress
-    update and the density see only the material's own strain.  A full cell (f = 1) is
-    unchanged: its material dilates with it (below rho_c: disconnected, stress-free, Dunatunga
-    & Kamrin 2015) and compacts with it.
+    update and the density see only the material's own strain.  Material that has opened a
+    void sits a hair below rho_c (OPEN_MARGIN): disconnected, stress-free (Dunatunga & Kamrin
+    2015), as dilated material was, until the void has closed and it is compressed again.
 
     Why both ways.  With the void closed first on shrinking but the material dilated first on
     growing, every cycle of the vibration ratcheted the partly filled cells' material looser:
@@ -75,11 +80,12 @@ def void_first(L, frac, density, rho_c, dt):
     density, a stress-free cushion and skin that the bed's load bypassed through the nodes
     (benchmarks/README.md, session 13; tests/test_eulerian.py, the vibrated bed's volume).
     A dilated state and a void are the same stress-free state of a cell's content (its mass
-    over the volume m / rho_c it would fill at the critical density); the rule now turns
-    either into the other symmetrically."""
+    over the volume m / rho_c it would fill at the critical density); one rule for every cell,
+    full or not, keeps the step continuous as a cell fills (a rule that switched at f = 1 made
+    the run's round-off grow a thousand times faster: tests/test_continuum_threads.py)."""
     for p in range(frac.shape[0]):
         f = frac[p]
-        if f >= 1.0 or f <= 0.0:
+        if f <= 0.0:
             continue
         tr = L[p, 0] + L[p, 3]
         e = dt * tr
@@ -87,7 +93,10 @@ def void_first(L, frac, density, rho_c, dt):
             em = e + 1.0 - f
             em = em / f if em < 0.0 else 0.0
         else:
-            room = density[p] / rho_c - 1.0
+            # down to a hair below rho_c (OPEN_MARGIN): material that has opened a void is
+            # disconnected, not left on the knife-edge rho = rho_c where a round-off would
+            # decide whether it is stressed (update_stress_cells)
+            room = density[p] / rho_c - 1.0 + OPEN_MARGIN
             em = e if e < room else (room if room > 0.0 else 0.0)
         d = 0.5 * (em / dt - tr)
         L[p, 0] += d
