@@ -133,10 +133,10 @@ def match_divergence(L, ux, uz, h, periodic, v, normal, mass, open_x, open_z):
     space behind.  With the closed faces held at 0 instead, the wall cell's material was
     stretched between the still wall and the lifting bed at every take-off, dilated below the
     critical density (stress-free), and the next landing closed the gap without compacting it
-    (lagrangian_step.void_first: that ratchet; benchmarks/README.md, session 13).  A cell pressing on the wall or
-    sliding along it (s <= 0) keeps them at 0: the wall compresses it, its empty part first
-    (lagrangian_step.void_first).  mass (N,) kg/m: only cells holding material; open_x
-    (ncx + 1, ncz), open_z (ncx, ncz + 1): the open faces."""
+    (lagrangian_step.void_first: that ratchet; benchmarks/README.md, session 13).  A cell
+    pressing on the wall or sliding along it (s <= 0) keeps them at 0: the wall compresses it,
+    its empty part first (lagrangian_step.void_first).  mass (N,) kg/m: only cells holding
+    material; open_x (ncx + 1, ncz), open_z (ncx, ncz + 1): the open faces."""
     ncx, ncz = uz.shape[0], ux.shape[1]
     for i in range(ncx):
         ir = i + 1

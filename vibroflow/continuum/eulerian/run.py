@@ -79,11 +79,11 @@ UNIT = 1.1
 #: 1.40; at cfl 0.3 with 6, 8, 10 transfers: 0.490, 1.17; 0.462, 1.06; 0.466, 0.99; checked at
 #: factors 0.5 (0.448, 0.77, against 0.453, 1.01 before) and 1.5 (0.517, 1.09, against 0.647,
 #: 1.44) and on tub47-quick, which is worse (0.612, 0.51, against 0.540, 0.68)
-#: (benchmarks/README.md "Session 11").  Kept in session 13, when a partly filled cell's growth
-#: went to its empty part and a wall cell's material left the wall as a body (lagrangian_step.
-#: void_first, advection.match_divergence): factors 0.5, 1.0, 1.5 then 0.368, 0.434, 0.559
-#: (strength 0.98 at 1.0), tub47-quick 0.664; 6 transfers (cfl 0.05) 0.419, 0.418, 0.582,
-#: 0.632; 4 transfers (0.075) at 1.0 and on tub47-quick 0.474, 0.610.
+#: (benchmarks/README.md "Session 11").  Kept in session 13, when a cell's growth went to its
+#: empty part and a wall cell's material left the wall as a body (lagrangian_step.void_first,
+#: advection.match_divergence): factors 0.5, 1.0, 1.5 then 0.363, 0.433, 0.562 (strength 0.99
+#: at 1.0), tub47-quick 0.666; 6 transfers (cfl 0.05) about 0.419, 0.418, 0.582, 0.632;
+#: 4 transfers (0.075) at 1.0 and on tub47-quick about 0.474, 0.610.
 DEFAULT_TRANSFER_CFL = 0.0375
 
 
