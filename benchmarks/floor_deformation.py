@@ -2,8 +2,8 @@
 (issue 6: where the Eulerian formulation differs, and why; benchmarks/README.md "Session 13").
 
     python benchmarks/floor_deformation.py [--calibration FILE] [--case tub47]
-        [--width 0.3] [--periodic] [--cycles 20] [--methods eulerian,lagrangian]
-        [--transfer-cfl X]
+        [--width 0.3] [--periodic] [--floor-angle DEG] [--cycles 20]
+        [--methods eulerian,lagrangian] [--transfer-cfl X]
 
 A bed of the case's media (the calibration's moduli and rheology, the case's fill), 0.2 m deep,
 in a rectangular box of the given width (walls on the floor and both sides; --periodic: a strip
@@ -12,7 +12,10 @@ stroke (its frequency and amplitude_z; no horizontal stroke, no rotation), in th
 frame, as the tub runs are.  Both formulations run with their tub defaults (grid spacing,
 Courant numbers, transfers; the wall's stiffness (K + 4 G / 3) / (dx / 2), friction 0.2,
 damping ratio 0.16).  The walls are axis-aligned, so the Eulerian mesh has no staircase: what
-differs is the formulation.
+differs is the formulation.  --floor-angle DEG: a V floor instead, two planes through the box's
+bottom centre inclined at DEG on either side (the bed filled above it to the same 0.2 m at the
+centre plus 5 cm): the Eulerian mesh approximates it by a staircase of cells, as it does the
+tub's U, where the Lagrangian's walls are exact planes.
 
 Printed for each method, over `cycles` cycles after 10 cycles of start-up, sampled at 8 phases a
 cycle, the phase-averaged velocity gradient binned on 15 mm cells (mass-weighted):
@@ -46,16 +49,40 @@ def _lattice(x0, x1, z0, z1, s):
     return np.stack([X.ravel(), Z.ravel()], axis=1)
 
 
-def _lithostatic(z, material):
-    """Pressure (Pa) and density (kg/m^3) of the bed at rest at heights z (m)."""
+def _top(floor_angle):
+    """The bed's initial surface (m): BED_DEPTH, 5 cm more over a V floor."""
+    return BED_DEPTH if floor_angle is None else BED_DEPTH + 0.05
+
+
+def _lithostatic(z, material, top):
+    """Pressure (Pa) and density (kg/m^3) of a bed at rest with its surface at `top` (m), at
+    heights z (m)."""
     rho_c = material.critical_density
-    p = rho_c * G * np.clip(BED_DEPTH - z, 0.0, None)
+    p = rho_c * G * np.clip(top - z, 0.0, None)
     return p, rho_c * np.exp(p / material.bulk_modulus)
 
 
-def build(method, material, motion, width, periodic, transfer_cfl):
+def _v_floor(x, z, width, angle):
+    """Signed distance (m, positive inside) to the box with a V floor of `angle` (rad) and
+    its inward normal: (gap, nx, nz, arc) on arrays, the level set of EulerianMesh."""
+    xm = 0.5 * width
+    sn, cs = math.sin(angle), math.cos(angle)
+    left = x < xm
+    floor = np.where(left, (z - (xm - x) * math.tan(angle)) * cs,
+                     (z - (x - xm) * math.tan(angle)) * cs)
+    cand = [(floor, np.where(left, sn, -sn), np.full_like(x, cs)),
+            (x, np.ones_like(x), np.zeros_like(x)),
+            (width - x, -np.ones_like(x), np.zeros_like(x))]
+    d = np.stack([c[0] for c in cand])
+    j = np.argmin(d, axis=0)
+    idx = np.arange(x.size)
+    return (d[j, idx], np.stack([c[1] for c in cand])[j, idx],
+            np.stack([c[2] for c in cand])[j, idx], np.zeros_like(x))
+
+
+def build(method, material, motion, width, periodic, transfer_cfl, floor_angle=None):
     """(system, state, advance) of one formulation: the bed at rest, lithostatic, in the
-    shaken box's frame."""
+    shaken box's frame; floor_angle (rad) a V floor (module docstring)."""
     from vibroflow.continuum.eulerian.run import EulerianOptions
     from vibroflow.continuum.grid_update import TubFrame
     from vibroflow.continuum.run import LagrangianOptions
@@ -77,15 +104,20 @@ def build(method, material, motion, width, periodic, transfer_cfl):
         from vibroflow.continuum.eulerian.solver import EulerianSystem, advance, init_state
         from vibroflow.continuum.eulerian.wall import MeshWall
 
-        mesh = EulerianMesh.box(0.0, width, 0.0, 2 * BED_DEPTH, dx, periodic=periodic)
+        if floor_angle is None:
+            mesh = EulerianMesh.box(0.0, width, 0.0, 2 * BED_DEPTH, dx, periodic=periodic)
+        else:
+            mesh = EulerianMesh.from_level_set(
+                0.0, width, 0.0, 2 * BED_DEPTH, dx,
+                lambda x, z: _v_floor(x, z, width, floor_angle))
         wall = MeshWall(kn, friction=0.2, damping_ratio=0.16)
         dt = stable_dt(material, dx, h, [wall], v_max=2.0, cfl=opts.cfl)
         dt = period / (8 * math.ceil(period / 8 / dt))
         system = EulerianSystem(mesh, material, dt, frame=frame, wall=wall,
                                 transfers=opts.transfers())
         c = system.x
-        filled = c[:, 1] < BED_DEPTH
-        p, rho = _lithostatic(c[:, 1], material)
+        filled = (c[:, 1] < _top(floor_angle)) & mesh.inside
+        p, rho = _lithostatic(c[:, 1], material, _top(floor_angle))
         stress = np.zeros((mesh.n, 4))
         stress[:, [0, 1, 3]] = -(p * filled)[:, None]
         state = init_state(system, np.where(filled, rho * h * h, 0.0), rho, stress=stress)
@@ -94,7 +126,12 @@ def build(method, material, motion, width, periodic, transfer_cfl):
     from vibroflow.continuum.grid import Grid
     from vibroflow.continuum.mpm import MPMSystem, advance, init_state
 
-    walls = [Plane((0.0, 0.0), (0.0, 1.0), kn, friction=0.2, damping_ratio=0.16)]
+    if floor_angle is None:
+        walls = [Plane((0.0, 0.0), (0.0, 1.0), kn, friction=0.2, damping_ratio=0.16)]
+    else:
+        sn, cs = math.sin(floor_angle), math.cos(floor_angle)
+        walls = [Plane((0.5 * width, 0.0), (sn, cs), kn, friction=0.2, damping_ratio=0.16),
+                 Plane((0.5 * width, 0.0), (-sn, cs), kn, friction=0.2, damping_ratio=0.16)]
     if periodic:
         grid = Grid.periodic_strip(width, -dx, 2 * BED_DEPTH, dx)
     else:
@@ -105,18 +142,21 @@ def build(method, material, motion, width, periodic, transfer_cfl):
     dt = period / (8 * math.ceil(period / 8 / dt))
     system = MPMSystem(grid, material, dt, frame=frame, boundaries=walls,
                        transfers=opts.transfers())
-    x = _lattice(0.0, width, 0.0, BED_DEPTH, h)
-    p, rho = _lithostatic(x[:, 1], material)
+    x = _lattice(0.0, width, 0.0, _top(floor_angle), h)
+    if floor_angle is not None:
+        x = x[x[:, 1] > np.abs(x[:, 0] - 0.5 * width) * math.tan(floor_angle) + 0.5 * h]
+    p, rho = _lithostatic(x[:, 1], material, _top(floor_angle))
     stress = np.zeros((len(x), 4))
     stress[:, [0, 1, 3]] = -p[:, None]
     state = init_state(system, x, h * h * rho_c / rho, rho, stress=stress)
     return system, state, advance
 
 
-def measure(method, material, motion, width, periodic, cycles, transfer_cfl):
+def measure(method, material, motion, width, periodic, cycles, transfer_cfl, floor_angle=None):
     from vibroflow.continuum.grid_update import LabFrame
 
-    system, state, advance = build(method, material, motion, width, periodic, transfer_cfl)
+    system, state, advance = build(method, material, motion, width, periodic, transfer_cfl,
+                                   floor_angle)
     period = 1.0 / motion.frequency
     dt = system.dt
     wall0 = time.perf_counter()
@@ -149,7 +189,7 @@ def measure(method, material, motion, width, periodic, cycles, transfer_cfl):
            "profiles": {}}
     for ph in (2, 6):
         bands = []
-        for j in range(int(round(BED_DEPTH / 0.03)) + 1):
+        for j in range(int(round(_top(floor_angle) / 0.03)) + 1):
             mm = SMz[ph, 2 * j:2 * j + 2].sum()
             if mm > 0:
                 bands.append(1e3 * SV[ph, 2 * j:2 * j + 2].sum() / mm)
@@ -158,7 +198,10 @@ def measure(method, material, motion, width, periodic, cycles, transfer_cfl):
     if method == "eulerian":
         mesh = system.mesh
         frac = state.frac.reshape(mesh.ncx, mesh.ncz)
-        out["floor_fraction"] = float(frac[:, 0].mean())
+        inside = mesh.inside.reshape(mesh.ncx, mesh.ncz)
+        # the lowest cell of each column clear of the side walls
+        lowest = [frac[i, int(np.argmax(inside[i]))] for i in range(1, mesh.ncx - 1)]
+        out["floor_fraction"] = float(np.mean(lowest))
         system.frame = LabFrame((0.0, -G))
         advance(system, state, int(round(0.3 / dt)))
         held = (state.mass > 0) & (state.density > 0)
@@ -173,6 +216,8 @@ def main(argv=None) -> int:
     ap.add_argument("--case", default="tub47")
     ap.add_argument("--width", type=float, default=0.3)
     ap.add_argument("--periodic", action="store_true")
+    ap.add_argument("--floor-angle", type=float, default=None,
+                    help="a V floor inclined at this angle (degrees) on either side")
     ap.add_argument("--cycles", type=int, default=20)
     ap.add_argument("--methods", default="eulerian,lagrangian")
     ap.add_argument("--transfer-cfl", type=float, default=None)
@@ -188,7 +233,13 @@ def main(argv=None) -> int:
     motion = TubMotion(frequency=full.frequency, amplitude_x=0.0, amplitude_z=full.amplitude_z,
                        phase_z=full.phase_z, amplitude_theta=0.0)
     gamma = full.amplitude_z * (2 * math.pi * full.frequency) ** 2 / G
+    if a.periodic and a.floor_angle is not None:
+        print("--periodic and --floor-angle: choose one", file=sys.stderr)
+        return 2
+    angle = None if a.floor_angle is None else math.radians(a.floor_angle)
     where = "periodic strip" if a.periodic else f"box {a.width:g} m wide"
+    if angle is not None:
+        where += f", V floor at {a.floor_angle:g} deg"
     print(f"{a.case}'s media (K {material.bulk_modulus:.3g} Pa, G {material.shear_modulus:.3g} "
           f"Pa), bed {BED_DEPTH} m deep, {where}, vertical stroke {full.frequency:g} Hz, "
           f"{1e3 * full.amplitude_z:.3g} mm (Gamma {gamma:.2f}); {a.cycles} cycles sampled")
@@ -197,7 +248,8 @@ def main(argv=None) -> int:
           "volume at rest / at rho_c | wall (s) |")
     print("|---|---|---|---|---|---|---|---|---|")
     for method in a.methods.split(","):
-        r = measure(method, material, motion, a.width, a.periodic, a.cycles, a.transfer_cfl)
+        r = measure(method, material, motion, a.width, a.periodic, a.cycles, a.transfer_cfl,
+                    angle)
         prof = {ph: " ".join(f"{v:.0f}" for v in r["profiles"][ph]) for ph in (2, 6)}
         fill = f"{r['floor_fraction']:.2f}" if "floor_fraction" in r else "-"
         vol = f"{r['volume']:.4f}" if "volume" in r else "-"
