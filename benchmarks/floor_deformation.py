@@ -33,20 +33,14 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import time
 
 import numpy as np
 
 G = 9.81
 BED_DEPTH = 0.2
 BIN = 0.015
-
-
-def _lattice(x0, x1, z0, z1, s):
-    xs = np.arange(x0 + s / 2, x1, s)
-    zs = np.arange(z0 + s / 2, z1, s)
-    X, Z = np.meshgrid(xs, zs, indexing="ij")
-    return np.stack([X.ravel(), Z.ravel()], axis=1)
+#: node spacing (m): tub47's default grid, three ball diameters (continuum.run.default_dx)
+DX = 0.01875
 
 
 def _top(floor_angle):
@@ -55,8 +49,8 @@ def _top(floor_angle):
 
 
 def _lithostatic(z, material, top):
-    """Pressure (Pa) and density (kg/m^3) of a bed at rest with its surface at `top` (m), at
-    heights z (m)."""
+    """Pressure (Pa) and density (kg/m^3) of the Eulerian cells of a bed at rest with its
+    surface at `top` (m), at heights z (m) (the Lagrangian's points: column.lithostatic_state)."""
     rho_c = material.critical_density
     p = rho_c * G * np.clip(top - z, 0.0, None)
     return p, rho_c * np.exp(p / material.bulk_modulus)
@@ -92,13 +86,12 @@ def build(method, material, motion, width, periodic, transfer_cfl, floor_angle=N
     period = 1.0 / motion.frequency
     opts = (EulerianOptions if method == "eulerian" else LagrangianOptions)(
         **({} if transfer_cfl is None else {"transfer_cfl": transfer_cfl}))
-    dx = 0.01875
+    dx = DX
     h = dx / 2
     if periodic:
         width = 4 * dx
     M = material.bulk_modulus + 4.0 * material.shear_modulus / 3.0
     kn = M / h
-    rho_c = material.critical_density
     if method == "eulerian":
         from vibroflow.continuum.eulerian.mesh import EulerianMesh
         from vibroflow.continuum.eulerian.solver import EulerianSystem, advance, init_state
@@ -124,7 +117,8 @@ def build(method, material, motion, width, periodic, transfer_cfl, floor_angle=N
         return system, state, advance
     from vibroflow.continuum.boundary import Plane
     from vibroflow.continuum.grid import Grid
-    from vibroflow.continuum.mpm import MPMSystem, advance, init_state
+    from vibroflow.continuum.column import column_points, lithostatic_state
+    from vibroflow.continuum.mpm import MPMSystem, advance
 
     if floor_angle is None:
         walls = [Plane((0.0, 0.0), (0.0, 1.0), kn, friction=0.2, damping_ratio=0.16)]
@@ -142,14 +136,10 @@ def build(method, material, motion, width, periodic, transfer_cfl, floor_angle=N
     dt = period / (8 * math.ceil(period / 8 / dt))
     system = MPMSystem(grid, material, dt, frame=frame, boundaries=walls,
                        transfers=opts.transfers())
-    x = _lattice(0.0, width, 0.0, _top(floor_angle), h)
+    x = column_points(0.0, width, _top(floor_angle), h)
     if floor_angle is not None:
         x = x[x[:, 1] > np.abs(x[:, 0] - 0.5 * width) * math.tan(floor_angle) + 0.5 * h]
-    p, rho = _lithostatic(x[:, 1], material, _top(floor_angle))
-    stress = np.zeros((len(x), 4))
-    stress[:, [0, 1, 3]] = -p[:, None]
-    state = init_state(system, x, h * h * rho_c / rho, rho, stress=stress)
-    return system, state, advance
+    return system, lithostatic_state(system, x, np.full(len(x), _top(floor_angle))), advance
 
 
 def measure(method, material, motion, width, periodic, cycles, transfer_cfl, floor_angle=None):
@@ -159,9 +149,8 @@ def measure(method, material, motion, width, periodic, cycles, transfer_cfl, flo
                                    floor_angle)
     period = 1.0 / motion.frequency
     dt = system.dt
-    wall0 = time.perf_counter()
     advance(system, state, int(round(10 * period / dt)))
-    w = 4 * 0.01875 if periodic else width
+    w = 4 * DX if periodic else width
     nxb, nzb = int(math.ceil(w / BIN)), int(math.ceil(2 * BED_DEPTH / BIN))
     SL = np.zeros((8, nxb, nzb, 4))
     SM = np.zeros((8, nxb, nzb))
@@ -194,7 +183,6 @@ def measure(method, material, motion, width, periodic, cycles, transfer_cfl, flo
             if mm > 0:
                 bands.append(1e3 * SV[ph, 2 * j:2 * j + 2].sum() / mm)
         out["profiles"][ph] = bands
-    out["wall_s"] = time.perf_counter() - wall0
     if method == "eulerian":
         mesh = system.mesh
         frac = state.frac.reshape(mesh.ncx, mesh.ncz)
@@ -245,8 +233,8 @@ def main(argv=None) -> int:
           f"{1e3 * full.amplitude_z:.3g} mm (Gamma {gamma:.2f}); {a.cycles} cycles sampled")
     print("| method | phase-field shear rate (1/s) | mean abs dvz/dz | mean abs D_xz | "
           "vz at 2/8 (flight), floor to surface, mm/s | at 6/8 (landing) | floor row's fill | "
-          "volume at rest / at rho_c | wall (s) |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "volume at rest / at rho_c |")
+    print("|---|---|---|---|---|---|---|---|")
     for method in a.methods.split(","):
         r = measure(method, material, motion, a.width, a.periodic, a.cycles, a.transfer_cfl,
                     angle)
@@ -254,7 +242,7 @@ def main(argv=None) -> int:
         fill = f"{r['floor_fraction']:.2f}" if "floor_fraction" in r else "-"
         vol = f"{r['volume']:.4f}" if "volume" in r else "-"
         print(f"| {method} | {r['rate']:.2f} | {r['dvz_dz']:.2f} | {r['dxz']:.2f} | {prof[2]} | "
-              f"{prof[6]} | {fill} | {vol} | {r['wall_s']:.1f} |", flush=True)
+              f"{prof[6]} | {fill} | {vol} |", flush=True)
     return 0
 
 

@@ -584,8 +584,9 @@ def test_vibrated_bed_comes_back_to_its_volume_at_rest():
     """A cohesionless bed that has flown and landed every cycle is, once at rest under gravity,
     no looser than its critical state: the volume its material fills is within 1 % of its mass
     over the critical density (its weight compacts it a little below).  Vibration must not
-    leave material dilated and stress-free under the bed's load: a partly filled cell turns
-    its growth into empty space and its shrinking closes that space first, both ways
+    leave material dilated and stress-free under the bed's load: a cell turns its growth
+    (past unloading to the critical density) into empty space and its shrinking closes that
+    space first, both ways
     (lagrangian_step.void_first), and a wall cell's material leaves the wall as a body
     (advection.match_divergence).  With the growth put into the material but the shrinking
     into the void, each cycle ratcheted the floor's and the surface's cells looser: this bed

@@ -16,13 +16,13 @@ proper to the fixed mesh):
    where they are: the motion is the remap's business, advection.py); the face velocities of
    the remap, and the trace of L made the finite-volume divergence of those
    (advection.match_divergence: the wall's closed faces, which move with the material where it
-   leaves the wall); in a partly filled cell the volume change goes to its empty part first,
-   both ways (void_first);
-5. the material's density rho <- rho / det(I + dt L) (the material's own strain: a mixed
-   cell's material takes its cell's shear, its expansion down to the critical density and its
+   leaves the wall); a cell's volume change goes to its empty part first, both ways
+   (void_first);
+5. the material's density rho <- rho / det(I + dt L) (the material's own strain: a cell's
+   material takes its cell's shear, its expansion down to the critical density and its
    compression once the void is closed) and its stress through the shared constitutive law
    (constitutive.update_stress_points: Jaumann elastic predictor and the mu(I) or
-   Drucker-Prager return map): material expanded below the critical density is disconnected
+   Drucker-Prager return map): material below the critical density is disconnected
    (stress-free, Dunatunga & Kamrin 2015), which is how the bed's flight works.
 """
 from __future__ import annotations

@@ -22,12 +22,12 @@ the cell the material fills, the volume of fluid of coupled Eulerian-Lagrangian 
 material and the empty space above it are told apart by it, and it is computed from the
 transported mass, so it moves without losing mass.  A partly filled cell at the free surface
 carries the stress of its material on the volume f h^2 = m / rho it fills (the material
-point's m_p / rho_p); its material expands with the cell down to the critical density rho_c
-(unloading), the rest of the growth opening the cell's empty part, and is compressed by it
-once that empty part has closed (lagrangian_step.void_first).  A full cell's material dilated
-below rho_c is disconnected (stress-free, Dunatunga & Kamrin 2015) until it is compacted
-again, while a half-filled surface cell at rho_c is not: the two states that a density alone
-would confuse.
+point's m_p / rho_p).  In every cell the material expands with the cell down to the critical
+density rho_c (unloading), the rest of the growth opening the cell's empty part, and is
+compressed by it once that empty part has closed (lagrangian_step.void_first).  Material that
+has opened a void sits a hair below rho_c: disconnected (stress-free, Dunatunga & Kamrin 2015)
+until it is compacted again, while a half-filled surface cell at or above rho_c, still
+pressed, is not: the two states that a density alone would confuse.
 
 Rheology: the elastic part is kept (the shared elasto-visco-plastic law, not a regularised
 visco-plastic mu(I)): the same constitutive module as the Lagrangian formulation, so that the
