@@ -11,7 +11,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vibroflow.analysis.column import LAJEUNESSE_2004, LUBE_2004, LUBE_2005
+from vibroflow.analysis.column import (LAJEUNESSE_2004, LUBE_2004, LUBE_2005,
+                                       quasistatic_runout_axisymmetric)
 from vibroflow.continuum.boundary import Plane
 from vibroflow.continuum.column import run_column
 from vibroflow.continuum.constitutive import ContinuumMaterial, update_stress_points
@@ -137,11 +138,11 @@ def test_axisymmetric_column_spreads_less_than_the_planar_one():
     """a = 3, R0 = L0 = 1 m, dx = L0/20, rough floor, APIC: the cylinder's run-out is shorter
     than the plane-strain column's, as the experiments' are (Lube et al. 2004's 1.6 a^(1/2) =
     2.77 against Lube et al. 2005's 1.9 a^(2/3) = 3.95: 0.70), because its spreading layer
-    thins as 1/r.  Measured: 3.46 against 5.65 (0.61).  Not met, and said here: Lube et al.
-    2004 within 10 %.  The continuum runs out 25 % (APIC) to 37 % (flip 0.99, R0/40) past
-    2.77 and stands at 0.52 - 0.60 R0 against Lajeunesse et al. 2004's 0.74: the same excess
-    mobility as the planar column's (vibroflow.continuum.column), so not a matter of the
-    geometry."""
+    thins as 1/r.  Measured: 3.46 against 5.65 (0.61).  With this default material (tub47's
+    glass-bead mu_s = tan 20.9 deg) the cylinder runs out 25 % (APIC) to 37 % (flip 0.99,
+    R0/40) past Lube et al. 2004's 2.77 and stands at 0.52 - 0.60 R0 against Lajeunesse et
+    al. 2004's 0.74; with the friction of the experiments' sand it meets both within 10 %
+    (test_tall_sand_cylinder_meets_lube_and_lajeunesse_2004)."""
     a = 3.0
     axi = run_column(1.0, a, 1.0 / 20, rough_floor=True, axisymmetric=True)
     plane = run_column(1.0, a, 1.0 / 20, rough_floor=True)
@@ -153,6 +154,91 @@ def test_axisymmetric_column_spreads_less_than_the_planar_one():
           f"{rp:.3f} (Lube 2005 {LUBE_2005.runout(a):.3f}), height {hp:.3f}")
     assert ra < 0.75 * rp
     assert ha < hp
+
+
+# ----------------------------------------------------------------------------------------------
+# the experiments' columns: Lube et al. 2004 and Lajeunesse et al. 2004 are axisymmetric
+
+#: the friction angle (deg) of dry quartz sand, Lube et al. 2004's main material, as the
+#: material's mu_s (the glass-bead rate dependence mu_2 - mu_s and I_0 kept).  A typical value
+#: for dry sand (30 - 34 deg is the usual range of its angle of repose); the paper's own table
+#: of its materials could not be read here, so this is not the measured angle of their sand.
+#: The paper found the deposits "the same" for sand, salt, rice, couscous and sugar.
+SAND_FRICTION_DEG = 29.5
+
+
+def sand():
+    base = ContinuumMaterial()
+    mu_s = float(np.tan(np.radians(SAND_FRICTION_DEG)))
+    return ContinuumMaterial(mu_s=mu_s, mu_2=mu_s + base.mu_2 - base.mu_s)
+
+
+def sand_column(a, n):
+    """The deposit ((r_inf - R0)/R0, H_inf/R0) of a sand cylinder of R0 = 1 m (157 of tub47's
+    grains across), aspect ratio a, on dx = R0/n, rough floor, APIC."""
+    run = run_column(1.0, a, 1.0 / n, material=sand(), rough_floor=True, axisymmetric=True)
+    assert run.settled
+    runout, height = run.deposit().normalised(1.0)
+    print(f"\nsand, a = {a}, R0/{n}: run-out {runout:.3f} (Lube 2004 "
+          f"{LUBE_2004.runout(a):.3f}, {runout / LUBE_2004.runout(a) - 1:+.1%}), height "
+          f"{height:.3f} (Lajeunesse 2004 {LAJEUNESSE_2004.height(a):.3f}, "
+          f"{height / LAJEUNESSE_2004.height(a) - 1:+.1%})")
+    return runout, height
+
+
+@pytest.mark.parametrize("a", [3.0, 4.0])
+def test_tall_sand_cylinder_meets_lube_and_lajeunesse_2004(a):
+    """The issue's check: a cylinder of the experiments' sand (SAND_FRICTION_DEG) on the
+    power-law branch (a > 1.7), R0 = 1 m, dx = R0/20 (about 25 s for both): the run-out
+    within 10 % of Lube et al. 2004's 1.6 a^(1/2) and the height within 10 % of Lajeunesse et
+    al. 2004's 0.74 R0.  Measured: a = 3, 2.70 (-2.7 %) and 0.80 (+8.4 %); a = 4, 3.36
+    (+5.0 %) and 0.69 (-7.2 %).  On R0/40 (test_sand_cylinders_on_the_finer_grid) the run-outs
+    hold, the a = 3 height does not.  With tub47's glass-bead friction (mu_s = tan 20.9 deg)
+    the same cylinder runs 25 % too far and stands 20 - 30 % too low
+    (test_axisymmetric_column_spreads_less_than_the_planar_one): the continuum's deposit
+    depends on the grains' friction, where the experiments' hardly did."""
+    runout, height = sand_column(a, 20)
+    assert runout == pytest.approx(LUBE_2004.runout(a), rel=0.10)
+    assert height == pytest.approx(LAJEUNESSE_2004.height(a), rel=0.10)
+
+
+@pytest.mark.slow
+def test_sand_cylinders_on_the_finer_grid():
+    """R0/40 (about 2 minutes), a = 2 to 5: every run-out within 10 % of Lube et al. 2004
+    (measured -7.3, -2.3, +2.7, +4.1 %), and the heights within 15 % of Lajeunesse et al.
+    2004 (+7.6, +14.5, +2.4, -6.3 %): the a = 3 height misses the issue's 10 %.  The height
+    is the deposit's least converged figure (a = 3: 0.80 on R0/20, 0.85 on R0/40) and the
+    noisiest (the thickness next to the axis, one bin of a point's side, swings by 5 % from
+    bin to bin); the highest point of the deposit, the summit, stands at 0.83 - 0.89 R0 for
+    a = 2 to 5 on R0/40, 12 - 20 % above 0.74.  The continuum's run-out grows faster with a
+    than a^(1/2): from a = 2 to 5 by 1.77 against 1.58.  A friction angle of 27.5 deg puts
+    a = 1 to 3 within 10 % on both (run-outs -5.8, -1.0, +3.1 %; heights -8.8, +1.5, +6.7 %)
+    and a = 4, 5 just outside (+10.1, +10.2 %); it is not the default of this test because it
+    was chosen to fit."""
+    for a in (2.0, 3.0, 4.0, 5.0):
+        runout, height = sand_column(a, 40)
+        assert runout == pytest.approx(LUBE_2004.runout(a), rel=0.10)
+        assert height == pytest.approx(LAJEUNESSE_2004.height(a), rel=0.15)
+
+
+def test_low_sand_cylinder_stops_between_the_static_cone_and_the_experiments():
+    """The linear branch (a < 1.7), a = 0.5, R0 = 1 m, dx = R0/20: missed, and why.  The
+    continuum's low cylinder comes to rest near the quasi-static cone of its own friction
+    (analysis.column.quasistatic_runout_axisymmetric: the truncated cone of slope mu_s holding
+    the cylinder's volume, run-out 0.409): measured 0.405 (R0/20), 0.478 (R0/40), 0.537 (R0/80,
+    the run-out is not grid-converged: the failure is a shear band a cell wide, and a thinner
+    band lets the sliding wedge gather more speed).  Lube et al. 2004's 1.24 a = 0.62 is a
+    deposit sloping at 19.5 deg, 10 degrees below the sand's friction angle: the experiments'
+    low columns flow well past the static cone (so also a = 1: 1.24 is a 15 deg slope; the
+    continuum's 0.95 on R0/20, 1.07 on R0/40, -24 and -14 %).  The top never moves: the height
+    is a within 2 %."""
+    a = 0.5
+    mu_s = float(np.tan(np.radians(SAND_FRICTION_DEG)))
+    static, _ = quasistatic_runout_axisymmetric(a, mu_s)
+    runout, height = sand_column(a, 20)
+    assert height == pytest.approx(a, rel=0.02)
+    assert static * 0.97 < runout < LUBE_2004.runout(a)
+    assert runout < 0.9 * LUBE_2004.runout(a)    # the miss, stated
 
 
 def test_bad_axisymmetric_set_ups_are_one_line_errors():

@@ -37,7 +37,8 @@ import pytest
 from dem_helpers import one_thread
 from vibroflow.analysis.column import (LAJEUNESSE_2004, LAJEUNESSE_2005, LUBE_2004, LUBE_2005,
                                        measure_continuum_deposit, measure_deposit,
-                                       quasistatic_runout, slab_areas)
+                                       quasistatic_runout, quasistatic_runout_axisymmetric,
+                                       slab_areas)
 from vibroflow.continuum.column import run_column
 from vibroflow.dem import simulate as S
 from vibroflow.dem.neighbours import transfer_history
@@ -119,6 +120,26 @@ def test_slab_areas_add_up_to_the_column():
     W, phi0, L0, H0 = 3 * D, 0.58, 0.1, 0.05
     n = phi0 * L0 * H0 * W / (math.pi * D**3 / 6)
     assert slab_areas(np.full(1, R), W, phi0).sum() * n == pytest.approx(L0 * H0, rel=1e-12)
+
+
+@pytest.mark.parametrize("a", [0.3, 0.5, 1.0, 3.0, 7.0])
+def test_quasistatic_cone_holds_the_cylinder_volume(a):
+    """quasistatic_runout_axisymmetric(a, s): the solid of revolution of slope s (a truncated
+    cone of height H0 for low columns, a full cone for tall ones) holds the cylinder's volume
+    pi R0^2 H0, integrated by the midpoint rule over its profile; its top is H0 while it is
+    truncated and below H0 once it is a full cone."""
+    s = math.tan(math.radians(29.5))
+    runout, height = quasistatic_runout_axisymmetric(a, s)
+    r_base = 1.0 + runout
+    r = (np.arange(200_000) + 0.5) * r_base / 200_000
+    h = np.minimum(height, s * (r_base - r))
+    volume = 2.0 * math.pi * float(np.sum(h * r)) * r_base / 200_000
+    assert volume == pytest.approx(math.pi * a, rel=1e-6)
+    assert h[0] == pytest.approx(height, rel=1e-4)
+    if a / s <= math.sqrt(3.0):
+        assert height == pytest.approx(a)
+    else:
+        assert height < a and height == pytest.approx(s * r_base, rel=1e-12)
 
 
 def test_published_laws():

@@ -157,6 +157,29 @@ def quasistatic_runout(a: float, deposit_slope: float) -> float:
     return a / (2.0 * deposit_slope)
 
 
+def quasistatic_runout_axisymmetric(a: float, deposit_slope: float) -> tuple[float, float]:
+    """((r_inf - R0)/R0, H_inf/R0) of a cylinder of radius R0 and height H0 = a R0 whose
+    collapse leaves a plane slope of gradient s = `deposit_slope` (tan of the deposit angle):
+    the solid of revolution of that slope holding the cylinder's volume pi R0^2 H0.
+
+    While c = a / s <= sqrt(3) it is a truncated cone of height H0 (the top untouched), top
+    radius r_t and base r_t + c (in units of R0), whose volume (pi H0 / 3)(r_t^2 + r_t r_b +
+    r_b^2) = pi R0^2 H0 gives 3 r_t^2 + 3 c r_t + c^2 = 3, so r_t = (sqrt(36 - 3 c^2) - 3c)/6.
+    Taller columns leave a full cone, (pi/3) r_b^2 (s r_b) = pi a: r_b = (3a/s)^(1/3), its
+    height s r_b < H0.  Lube et al. 2004's linear branch 1.24 a is this with a shallower slope
+    than the grains' friction: a deposit at the friction angle is what a column that slid no
+    faster than quasi-statically would leave (tan theta = mu_s)."""
+    a = _aspect(a)
+    if not deposit_slope > 0:
+        raise InputError(f"deposit_slope = {deposit_slope!r}: must be > 0")
+    c = a / deposit_slope
+    if c * c <= 3.0:
+        r_top = (math.sqrt(36.0 - 3.0 * c * c) - 3.0 * c) / 6.0
+        return r_top + c - 1.0, a
+    r_base = (3.0 * c) ** (1.0 / 3.0)
+    return r_base - 1.0, deposit_slope * r_base
+
+
 # ----------------------------------------------------------------------------------------------
 # the measurement
 
