@@ -216,10 +216,11 @@ def kernels(a) -> dict:
             w, pf, hist = system.wall, system.partitions, state.wall
             frac, vol, fext = state.frac.copy(), state.volume.copy(), state.fext.copy()
             t["material fraction"] = _per_call(lambda: material_fraction(
-                state.mass, state.density, mesh.h, frac, vol), 200)
+                state.mass, state.density, mesh.h, system.cell_weight, frac, vol), 200)
             t["wall"] = _per_call(lambda: wall_forces(
                 system.wall_cells, mesh.normal, state.v, state.mass,
-                system.material.critical_density, mesh.h, hist["delta"].copy(),
+                system.material.critical_density, mesh.h, system.cell_weight,
+                hist["delta"].copy(),
                 hist["xi"].copy(), fext, hist["fn"].copy(), hist["ft"].copy(),
                 hist["state"].copy(), w.stiffness, w.tangential_stiffness, w.damping_ratio,
                 w.friction, system.dt), 200)
@@ -228,7 +229,7 @@ def kernels(a) -> dict:
                 system.dt), 200)
             t["p2g (cells holding material)"] = _per_call(lambda: p2g_cells(
                 act, mesh.ncz, tcx, tcz, state.v, state.C, state.mass, state.volume,
-                state.stress, state.fext, g.dx, g.periodic, gm, gmv, gf), 200)
+                state.stress, state.fext, g.dx, g.periodic, system.inv_r, gm, gmv, gf), 200)
             t["chunk sums and grid update"] = _per_call(lambda: (
                 sum_chunk_rows(0, g.nx, cm, cmv, cf, gm, gmv, gf),
                 grid_update(gm, gmv, gf, gv, g.x0, g.z0, g.dx, system.dt, 0.0, -9.81, 0.0, 0.0,

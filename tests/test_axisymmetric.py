@@ -303,3 +303,143 @@ def test_pile_stands_below_the_friction_angle_and_slumps_to_it_above(axisymmetri
           f"{slope:.1f} degrees (top {top:.3f} m, front {front:.3f} m)")
     assert moved > 0.1 * H
     assert 20.9 - 4.0 < slope < 22.5 + 4.0
+
+
+# ----------------------------------------------------------------------------------------------
+# the Eulerian formulation's axisymmetric section (vibroflow.continuum.eulerian: the same
+# continuum on a fixed mesh of cells of side h = dx/2, masses per radian h^2 r rho f)
+
+def _axi_system(r1=0.8, z1=0.5, dx=DX):
+    from vibroflow.continuum.eulerian.mesh import EulerianMesh
+    from vibroflow.continuum.eulerian.solver import EulerianSystem
+
+    mesh = EulerianMesh.box(0.0, r1, 0.0, z1, dx, axis=True)
+    return EulerianSystem(mesh, ContinuumMaterial(), 1e-4, axisymmetric=True)
+
+
+def test_eulerian_uniform_stress_is_in_equilibrium_in_cylindrical_coordinates():
+    """The Lagrangian check above on the Eulerian cells' scatter (transfer.p2g_cells with
+    inv_r = 1/r): an isotropic stress -p0 I over the filled cells [0.2, 0.6] x [0, 0.3] m puts
+    no force on the nodes whose support lies inside them (2 x 2 cells an element, as the
+    points there), to round-off; the plane scatter (inv_r = 0) leaves p0 dx^2 at each."""
+    from vibroflow.continuum.eulerian.transfer import WeightTables, p2g_cells
+
+    system = _axi_system()
+    mesh, g = system.mesh, system.mesh.grid
+    c = system.x
+    filled = (c[:, 0] > 0.2) & (c[:, 0] < 0.6) & (c[:, 1] < 0.3)
+    n = mesh.n
+    vol = np.where(filled, mesh.h**2 * c[:, 0], 0.0)
+    stress = np.zeros((n, 4))
+    p0 = 1.0e4
+    stress[np.ix_(filled, [0, 1, 3])] = -p0
+    t = WeightTables.of_mesh(mesh, c)
+    ri = g.x0 + np.arange(g.nx) * DX
+    zk = g.z0 + np.arange(g.nz) * DX
+    R, Z = np.meshgrid(ri, zk, indexing="ij")
+    inner = (R >= 0.2 + 1.5 * DX) & (R <= 0.6 - 1.5 * DX) & (Z >= 1.5 * DX) & \
+        (Z <= 0.3 - 1.5 * DX)
+    assert inner.sum() >= 8
+    out = {}
+    for name, inv_r in (("axi", system.inv_r), ("plane", np.zeros(n))):
+        gm, gmv, gf, _ = g.zeros()
+        p2g_cells(np.flatnonzero(filled), mesh.ncz, t.cx, t.cz, np.zeros((n, 2)),
+                  np.zeros((n, 4)), 4680.0 * vol, vol, stress, np.zeros((n, 2)), g.dx,
+                  g.periodic, inv_r, gm, gmv, gf)
+        out[name] = gf[inner]
+    scale = p0 * DX * R[inner]
+    assert (np.abs(out["axi"][:, 0]) / scale).max() < 1e-12
+    assert (np.abs(out["axi"][:, 1]) / scale).max() < 1e-12
+    np.testing.assert_allclose(np.abs(out["plane"][:, 0]), p0 * DX * DX, rtol=1e-9)
+
+
+def test_eulerian_radial_expansion_hoop_rate_and_mass_per_radian():
+    """A uniform radial expansion u = eps r (eps > 0) of a full annulus of uniform density:
+    advection.match_divergence gives every cell L_rr = eps (the finite-volume divergence of the
+    section's own plane part) and the hoop rate (u_L + u_R) / (2 r) = eps exactly, and one remap with the
+    section's face weights takes from every cell whose inner neighbour is full the mass
+    2 eps dt of its own, the volume change (1 + eps dt)^2 of the material to first order in
+    dt, exactly (the fluxes are rho u dt h r at each face: (r_L^2 - r_R^2) = -2 r h); the
+    total mass per radian is conserved to round-off once the flux reaches empty cells."""
+    from vibroflow.continuum.eulerian.advection import match_divergence, remap
+
+    system = _axi_system()
+    mesh = system.mesh
+    ncx, ncz, h = mesh.ncx, mesh.ncz, mesh.h
+    c = system.x
+    full = c[:, 0] < 0.5
+    rho = 1500.0
+    mass = np.where(full, rho * h * h * c[:, 0], 0.0)
+    eps, dt = 0.3, 1.0e-3
+    r_faces = np.arange(ncx + 1) * h
+    ux = np.where(mesh.open_x, eps * r_faces[:, None], 0.0)
+    ux[0] = 0.0
+    uz = np.zeros((ncx, ncz + 1))
+    L = np.zeros((mesh.n, 5))
+    L[:, 0] = eps              # what g2p gives from the nodes
+    match_divergence(L, ux, uz, h, False, np.zeros((mesh.n, 2)), mesh.normal, mass,
+                     mesh.open_x, mesh.open_z, system.inv_r)
+    np.testing.assert_allclose(L[full, 0], eps, rtol=1e-12)
+    np.testing.assert_allclose(L[full, 3], 0.0, atol=1e-12)
+    np.testing.assert_allclose(L[full, 4], eps, rtol=1e-12)
+    m2 = mass.reshape(ncx, ncz).copy()
+    q = np.zeros((11, ncx, ncz))
+    remap(m2, q, ux, uz, h, dt, False, system.remap_work)
+    new = m2.ravel()
+    inner = full & (c[:, 0] > h)    # the inner neighbour full (the axis cell has none)
+    np.testing.assert_allclose(new[inner] / mass[inner], 1.0 - 2.0 * eps * dt, rtol=1e-12)
+    assert new.sum() == pytest.approx(mass.sum(), rel=1e-14)
+
+
+def _eulerian_sand_column(a, n):
+    from vibroflow.continuum.eulerian.column import run_column as run_eulerian
+
+    run = run_eulerian(1.0, a, 1.0 / n, material=sand(), rough_floor=True, axisymmetric=True)
+    assert run.settled
+    assert abs(run.mass_error) < 1e-12
+    from vibroflow.analysis.column import measure_continuum_deposit
+
+    dep = measure_continuum_deposit(*run.deposit_points(), 0.5 / n, 0.00635)
+    runout, height = dep.normalised(1.0)
+    print(f"\nEulerian sand, a = {a}, R0/{n}: run-out {runout:.3f} (Lube 2004 "
+          f"{LUBE_2004.runout(a):.3f}, {runout / LUBE_2004.runout(a) - 1:+.1%}), height "
+          f"{height:.3f} (Lajeunesse 2004 {LAJEUNESSE_2004.height(a):.3f}, "
+          f"{height / LAJEUNESSE_2004.height(a) - 1:+.1%})")
+    return runout, height
+
+
+def test_eulerian_sand_cylinder_agrees_with_the_lagrangian():
+    """a = 3, R0 = 1 m, dx = R0/10, the sand of the Lagrangian checks above, in the Eulerian
+    formulation's axisymmetric section (about 30 s): the mass per radian is conserved to
+    round-off and the deposit agrees with the material point method's on the same grid
+    (another code: the Lagrangian formulation of the same continuum) within 10 % (measured
+    run-out 2.39 against 2.35, height 0.815 against 0.770)."""
+    r_e, h_e = _eulerian_sand_column(3.0, 10)
+    r_l, h_l = sand_column(3.0, 10)
+    assert r_e == pytest.approx(r_l, rel=0.10)
+    assert h_e == pytest.approx(h_l, rel=0.10)
+
+
+@pytest.mark.slow
+def test_eulerian_sand_cylinder_against_lube_and_lajeunesse_2004():
+    """a = 3, R0/20 (about 80 s): the Eulerian run-out within 10 % of Lube et al. 2004
+    (measured 2.88, +4.0 %); its height is not within 10 % of Lajeunesse et al. 2004 (0.84,
+    +13.8 %; the Lagrangian's 0.80, +8.4 %, on this grid): the fixed mesh's deposit stands
+    taller.  a = 4 on R0/20 (about 3.5 minutes, not run here): run-out 3.55 (+10.8 %), height
+    0.87 (+17.8 %)."""
+    runout, height = _eulerian_sand_column(3.0, 20)
+    assert runout == pytest.approx(LUBE_2004.runout(3.0), rel=0.10)
+    assert height == pytest.approx(LAJEUNESSE_2004.height(3.0), rel=0.20)
+
+
+def test_bad_eulerian_axisymmetric_set_ups_are_one_line_errors():
+    from vibroflow.continuum.eulerian.mesh import EulerianMesh
+    from vibroflow.continuum.eulerian.solver import EulerianSystem
+
+    mat = ContinuumMaterial()
+    for mesh, what in ((EulerianMesh.box(0.0, 1.0, 0.0, 1.0, DX), "wall along the axis"),
+                       (EulerianMesh.box(0.1, 1.0, 0.0, 1.0, DX, axis=True), "xmin"),
+                       (EulerianMesh.box(0.0, 1.0, 0.0, 1.0, DX, periodic=True), "periodic")):
+        with pytest.raises(InputError, match=what) as err:
+            EulerianSystem(mesh, mat, 1e-4, axisymmetric=True)
+        assert "\n" not in str(err.value)

@@ -65,7 +65,8 @@ def test_cells_to_nodes_and_back_as_the_generic_transfers(periodic):
     cells = np.flatnonzero(mass > 0)
     tx, tz = _tables(mesh)[:2]
     got, want = g.zeros()[:3], g.zeros()[:3]
-    p2g_cells(cells, mesh.ncz, tx, tz, v, C, mass, volume, stress, fext, g.dx, g.periodic, *got)
+    p2g_cells(cells, mesh.ncz, tx, tz, v, C, mass, volume, stress, fext, g.dx, g.periodic,
+              np.zeros(mesh.n), *got)
     p2g(x[cells], v[cells], C[cells], mass[cells], volume[cells], stress[cells], fext[cells],
         g.x0, g.z0, g.dx, g.periodic, *want)
     for a, b in zip(got, want):

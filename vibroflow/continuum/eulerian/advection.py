@@ -116,7 +116,7 @@ def face_velocities(gv, tables, periodic, open_x, open_z, m, ux, uz):
 
 
 @nb.njit(cache=True)
-def match_divergence(L, ux, uz, h, periodic, v, normal, mass, open_x, open_z):
+def match_divergence(L, ux, uz, h, periodic, v, normal, mass, open_x, open_z, inv_r):
     """Replace the trace of each cell's velocity gradient L (N, 4) [xx, xz, zx, zz] (1/s,
     p = i * ncz + k) by the finite-volume divergence of its face velocities (1/s), split
     equally between L_xx and L_zz, so that the volume change the stress update sees is the one
@@ -136,8 +136,15 @@ def match_divergence(L, ux, uz, h, periodic, v, normal, mass, open_x, open_z):
     (lagrangian_step.void_first: that ratchet; benchmarks/README.md, session 13).  A cell
     pressing on the wall or sliding along it (s <= 0) keeps them at 0: the wall compresses it,
     its empty part first (lagrangian_step.void_first).  mass (N,) kg/m: only cells holding
-    material; open_x (ncx + 1, ncz), open_z (ncx, ncz + 1): the open faces."""
+    material; open_x (ncx + 1, ncz), open_z (ncx, ncz + 1): the open faces.
+
+    Axisymmetric section (L (N, 5), its fifth column the hoop rate; inv_r (N,) 1 / r of the
+    cells' centres): the finite-volume divergence of a cell of revolution, (u_R r_R - u_L r_L)
+    / (h r) + (w_T - w_B) / h, is the plane one plus (u_L + u_R) / (2 r) exactly (r_R, r_L =
+    r +- h/2), which is the hoop rate given to L[:, 4]: the volume change the stress update
+    sees is again the one the mass transport (remap_work's radii) makes."""
     ncx, ncz = uz.shape[0], ux.shape[1]
+    hoop = L.shape[1] > 4
     for i in range(ncx):
         ir = i + 1
         for k in range(ncz):
@@ -163,6 +170,8 @@ def match_divergence(L, ux, uz, h, periodic, v, normal, mass, open_x, open_z):
             d = 0.5 * (div - L[p, 0] - L[p, 3])
             L[p, 0] += d
             L[p, 3] += d
+            if hoop:
+                L[p, 4] = 0.5 * (uxl + uxr) * inv_r[p]
 
 
 @nb.njit(cache=True, inline="always")
@@ -247,12 +256,14 @@ def _combine(ncx, ncz, periodic, ax, gx, az, gz, d):
 
 
 @nb.njit(cache=True)
-def _faces(u, r_lo, s_lo, r_hi, s_hi, h, dt, on, pos, fac, flux):
-    """Faces j (m,) between cells lo and hi (mass per area r (kg/m^3), limited slope s) with
+def _faces(u, r_lo, s_lo, r_hi, s_hi, h, dt, wf, on, pos, fac, flux):
+    """Faces j (m,) between cells lo and hi (mass per volume r (kg/m^3), limited slope s) with
     normal velocity u (m/s, from lo to hi): on, whether it carries a flux (u != 0 and its
     upwind cell is not empty: nothing to carry from an empty cell, whose limited slope is 0
     too); pos, whether its upwind cell is lo; fac = sgn (1 - c) / 2, its upwind
-    reconstruction's factor (c = |u| dt / h); flux F = u dt h (r + fac s)_upwind (kg/m)."""
+    reconstruction's factor (c = |u| dt / h); flux F = u dt h w (r + fac s)_upwind (kg/m, or
+    kg per radian), w (m,) the face's weight (1 in plane strain; its radius in an
+    axisymmetric section, whose face of side h sweeps h r per radian)."""
     for j in range(u.shape[0]):
         uj = u[j]
         p = uj > 0.0
@@ -264,11 +275,11 @@ def _faces(u, r_lo, s_lo, r_hi, s_hi, h, dt, on, pos, fac, flux):
         pos[j] = p
         on[j] = uj != 0.0 and ru > 0.0
         fac[j] = f
-        flux[j] = uj * dt * h * (ru + f * su)
+        flux[j] = uj * dt * h * wf[j] * (ru + f * su)
 
 
 @nb.njit(cache=True)
-def _prepare(m, ux, uz, h, dt, ncx, ncz, periodic, cells, masks, xf, xb, zf, zb):
+def _prepare(m, ux, uz, h, dt, ncx, ncz, periodic, cells, masks, xf, xb, zf, zb, weights):
     """Everything of a transport step that does not depend on the carried fields, on the flat
     layout (above): cells = (rho, srx, srz, _, _, uzc) the mass per area (kg/m^3), its limited
     slopes and a work array; masks = (ol, orr, od, ou, okl, okr, okd, oku): the cells' open
@@ -276,19 +287,21 @@ def _prepare(m, ux, uz, h, dt, ncx, ncz, periodic, cells, masks, xf, xb, zf, zb)
     (an open face to a cell that is not empty); per face, xf, zf = (c, F): the upwind
     reconstruction's factor sgn (1 - c) / 2 and the mass flux F (kg/m, from the lower to the
     higher index), xb, zb = (on, pos): whether it carries a flux and whether its upwind cell is
-    the lower-index one.  Returns m_empty, the mass (kg/m) at or below which a cell is
-    empty."""
+    the lower-index one; weights = (wc, wx, wz) (`remap_work`): the cells' and the faces'
+    weights, 1 in plane strain, the radius in an axisymmetric section.  Returns m_empty, the
+    mass (kg/m) at or below which a cell is empty."""
     rho, srx, srz, uzc = cells[0], cells[1], cells[2], cells[5]
     ol, orr, od, ou, okl, okr, okd, oku = masks
     cx, fx = xf
     ax, px = xb
     cz, fz = zf
     az, pz = zb
+    wc, wx, wz = weights
     n = ncx * ncz
     area = h * h
     full = 0.0
     for p in range(n):
-        rho[p] = m[p] / area
+        rho[p] = m[p] / (area * wc[p])
         if rho[p] > full:
             full = rho[p]
     rho_empty = EMPTY * full
@@ -325,15 +338,15 @@ def _prepare(m, ux, uz, h, dt, ncx, ncz, periodic, cells, masks, xf, xb, zf, zb)
         ax[f] = False
         fx[f] = 0.0
     if periodic:
-        _faces(ux[:ncz], rho[n - ncz:], srx[n - ncz:], rho[:ncz], srx[:ncz], h, dt, ax[:ncz],
-               px[:ncz], cx[:ncz], fx[:ncz])
+        _faces(ux[:ncz], rho[n - ncz:], srx[n - ncz:], rho[:ncz], srx[:ncz], h, dt, wx[:ncz],
+               ax[:ncz], px[:ncz], cx[:ncz], fx[:ncz])
     else:
         for f in range(ncz):
             ax[f] = False
             fx[f] = 0.0
     w = n - ncz
-    _faces(ux[ncz:n], rho[:w], srx[:w], rho[ncz:], srx[ncz:], h, dt, ax[ncz:n], px[ncz:n],
-           cx[ncz:n], fx[ncz:n])
+    _faces(ux[ncz:n], rho[:w], srx[:w], rho[ncz:], srx[ncz:], h, dt, wx[ncz:n], ax[ncz:n],
+           px[ncz:n], cx[ncz:n], fx[ncz:n])
     # z-faces: below cell p, between cells p - 1 and p, their velocities copied to that
     # layout first (one flat pass, not one per column); the floor of a column is shut (u = 0)
     for i in range(ncx):
@@ -344,8 +357,8 @@ def _prepare(m, ux, uz, h, dt, ncx, ncz, periodic, cells, masks, xf, xb, zf, zb)
     az[n] = False
     fz[n] = 0.0
     w = n - 1
-    _faces(uzc[1:], rho[:w], srz[:w], rho[1:], srz[1:], h, dt, az[1:n], pz[1:n], cz[1:n],
-           fz[1:n])
+    _faces(uzc[1:], rho[:w], srz[:w], rho[1:], srz[1:], h, dt, wz[1:n], az[1:n], pz[1:n],
+           cz[1:n], fz[1:n])
     return rho_empty * area
 
 
@@ -409,13 +422,23 @@ def _renew(qj, dqj, m, mode, inv):
         qj[p] = _pick(mk == 1, a, _pick(mk == 2, b, 0.0))
 
 
-def remap_work(open_x, open_z, nq: int):
+def remap_work(open_x, open_z, nq: int, radius=None):
     """The work arrays of `remap` on a mesh with open faces open_x (ncx + 1, ncz), open_z
     (ncx, ncz + 1) carrying nq fields, with each cell's open faces (left, right, down, up: the
-    mesh's constants)."""
+    mesh's constants) and the weights of the cells and faces: 1 in plane strain; with
+    `radius` = (r_cells (ncx,), r_faces (ncx + 1,)) (m), an axisymmetric section's, where a
+    cell of side h holds h^2 r per radian and its faces sweep h r (x-faces at their own
+    radius, z-faces at their cell's)."""
     ncx, ncz = open_z.shape[0], open_x.shape[1]
     n = ncx * ncz
     nf = (ncx + 1) * ncz
+    if radius is None:
+        weights = (np.ones(n), np.ones(nf), np.ones(n + 1))
+    else:
+        r_cells, r_faces = (np.asarray(r, dtype=float) for r in radius)
+        wz = np.ones(n + 1)
+        wz[:n] = np.repeat(r_cells, ncz)
+        weights = (np.repeat(r_cells, ncz), np.repeat(r_faces, ncz), wz)
     faces = (open_x[:-1].ravel(), open_x[1:].ravel(), open_z[:, :-1].ravel(),
              open_z[:, 1:].ravel())
     masks = tuple(np.array(f, bool) for f in faces) + tuple(np.zeros(n, bool) for _ in range(4))
@@ -423,7 +446,7 @@ def remap_work(open_x, open_z, nq: int):
             (np.zeros(nf), np.zeros(nf)), (np.zeros(nf, bool), np.zeros(nf, bool)),
             (np.zeros(n + 1), np.zeros(n + 1)), (np.zeros(n + 1, bool), np.zeros(n + 1, bool)),
             np.zeros(n, np.int8), (np.zeros((nq, n)), np.zeros((nq, n))),
-            (np.zeros((nq, nf)), np.zeros((nq, n + 1))), np.zeros((nq, n)))
+            (np.zeros((nq, nf)), np.zeros((nq, n + 1))), np.zeros((nq, n)), weights)
 
 
 def _make_remap(parallel: bool):
@@ -441,7 +464,7 @@ def _make_remap(parallel: bool):
         Parallel over the fields: each field's fluxes and new values are one thread's, so the
         numbers are the serial loop's, bit for bit, whatever the threads."""
         _ = parallel
-        cells, masks, xf, xb, zf, zb, mode, (sx, sz), (gx, gz), dq = work
+        cells, masks, xf, xb, zf, zb, mode, (sx, sz), (gx, gz), dq, weights = work
         ncx, ncz = m.shape
         nq = q.shape[0]
         n = ncx * ncz
@@ -449,7 +472,7 @@ def _make_remap(parallel: bool):
         qf = q.reshape((nq, n))
         dm, inv = cells[3], cells[4]
         m_empty = _prepare(mf, ux.reshape((ncx + 1) * ncz), uz, h, dt, ncx, ncz, periodic,
-                           cells, masks, xf, xb, zf, zb)
+                           cells, masks, xf, xb, zf, zb, weights)
         for j in nb.prange(nq + 1):
             if j == nq:
                 _combine(ncx, ncz, periodic, xb[0], xf[1], zb[0], zf[1], dm)
@@ -484,7 +507,7 @@ def advect(m, q, ux, uz, h, dt, open_x, open_z, periodic, work_rho, srx, srz, sq
     cells = (work_rho.reshape(n), srx.reshape(n), srz.reshape(n), dm.reshape(n), w[0][4],
              w[0][5])
     work = (cells,) + w[1:7] + ((sqx.reshape(nq, n), sqz.reshape(nq, n)), w[8],
-                                dq.reshape(nq, n))
+                                dq.reshape(nq, n), w[10])
     qf = np.ascontiguousarray(np.moveaxis(q, 2, 0))
     lowest = remap_serial(m, qf, ux, uz, h, dt, periodic, work)
     q[...] = np.moveaxis(qf, 0, 2)

@@ -15,7 +15,11 @@ energy), on a fixed box mesh (mesh.EulerianMesh.box):
 * rough floor (`rough_floor=True`): the experiments' rough bed as the Lagrangian check's
   no-slip grid condition (EulerianSystem.no_slip_below = 0: the solver grid's nodes on and
   below the floor held still), on top of the floor wall that carries the normal load, so that
-  both formulations are run on the same floor (vibroflow.continuum.column, "rough floor").
+  both formulations are run on the same floor (vibroflow.continuum.column, "rough floor");
+* axisymmetric (`axisymmetric=True`): a cylinder of radius L0 about the axis x = r = 0
+  (EulerianSystem.axisymmetric), the axisymmetric experiments of Lube et al. 2004 and
+  Lajeunesse et al. 2004, as the Lagrangian check's; the mesh [0, reach] has no wall on the
+  axis (mesh.EulerianMesh.box with axis=True).
 
 The deposit is measured by vibroflow.analysis.column from `deposit_points()`: each cell stands
 for its mass over the critical density (m^2 per metre of thickness), as the Lagrangian's points.
@@ -49,6 +53,7 @@ class EulerianColumnRun:
     H0: float
     dx: float
     symmetric: bool
+    axisymmetric: bool
     system: EulerianSystem
     state: EulerianState
     t_end: float
@@ -64,11 +69,14 @@ class EulerianColumnRun:
         """(distance from the wall or symmetry plane (m), area (m^2 per metre)) of every cell
         holding material, for vibroflow.analysis.column: its mass over the critical density
         (so the areas of a half-column add up to L0 H0); a symmetric run's cells are folded
-        about x = 0 with half their area each."""
+        about x = 0 with half their area each; an axisymmetric run's cell stands for its
+        meridian area, its mass per radian over rho_c r (the Lagrangian check's)."""
         st = self.state
         has = st.mass > 0
         x = st.x[has, 0]
         area = st.mass[has] / self.system.material.critical_density
+        if self.axisymmetric:
+            return x.copy(), area / x
         if self.symmetric:
             return np.abs(x), 0.5 * area
         return x.copy(), area
@@ -77,9 +85,10 @@ class EulerianColumnRun:
 def column_system(L0: float, H0: float, dx: float, material: ContinuumMaterial | None = None,
                   floor_friction: float = 0.40, symmetric: bool = True,
                   reach: float | None = None, cfl: float = 0.3,
-                  rough_floor: bool = False) -> EulerianSystem:
+                  rough_floor: bool = False, axisymmetric: bool = False) -> EulerianSystem:
     """The Eulerian system of the column (module docstring); reach (m, from x = 0) default
-    L0 (2 + 3 H0/L0), the Lagrangian check's; `rough_floor`: the no-slip grid floor."""
+    L0 (2 + 3 H0/L0), the Lagrangian check's; `rough_floor`: the no-slip grid floor;
+    `axisymmetric`: a cylinder about x = 0 (`symmetric` is then ignored)."""
     for name, v in (("L0", L0), ("H0", H0), ("dx", dx)):
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
             raise InputError(f"column {name} = {v!r}: must be a finite length > 0 m")
@@ -88,12 +97,16 @@ def column_system(L0: float, H0: float, dx: float, material: ContinuumMaterial |
     reach = L0 * (2.0 + 3.0 * H0 / L0) if reach is None else float(reach)
     reach = h * math.ceil(reach / h - 1e-9)
     top = h * math.ceil(2.0 * H0 / h - 1e-9)
-    mesh = EulerianMesh.box(-reach if symmetric else 0.0, reach, 0.0, top, dx)
+    if axisymmetric:
+        mesh = EulerianMesh.box(0.0, reach, 0.0, top, dx, axis=True)
+    else:
+        mesh = EulerianMesh.box(-reach if symmetric else 0.0, reach, 0.0, top, dx)
     kn = (mat.bulk_modulus + 4.0 * mat.shear_modulus / 3.0) / h
     wall = MeshWall(stiffness=kn, friction=floor_friction, damping_ratio=0.5)
     dt = stable_dt(mat, dx, h, [wall], v_max=math.sqrt(2.0 * G_ACC * H0), cfl=cfl)
     return EulerianSystem(mesh, mat, dt, frame=LabFrame((0.0, -G_ACC)), wall=wall,
-                          no_slip_below=0.0 if rough_floor else None)
+                          no_slip_below=0.0 if rough_floor else None,
+                          axisymmetric=bool(axisymmetric))
 
 
 def column_state(system: EulerianSystem, L0: float, H0: float,
@@ -105,7 +118,7 @@ def column_state(system: EulerianSystem, L0: float, H0: float,
     mat = system.material
     h = mesh.h
     c = system.x
-    xc = np.abs(c[:, 0]) if symmetric else c[:, 0]
+    xc = np.abs(c[:, 0]) if symmetric and not system.axisymmetric else c[:, 0]
     fx = np.clip((L0 - (xc - 0.5 * h)) / h, 0.0, 1.0)
     fz = np.clip((H0 - (c[:, 1] - 0.5 * h)) / h, 0.0, 1.0)
     frac = fx * fz
@@ -117,19 +130,20 @@ def column_state(system: EulerianSystem, L0: float, H0: float,
     stress[:, 0] = stress[:, 3] = k0 * szz
     p = -(stress[:, 0] + stress[:, 1] + stress[:, 3]) / 3.0
     rho = rho_c * np.exp(p / mat.bulk_modulus) * 1.001
-    return init_state(system, frac * rho * h * h, rho, stress=stress)
+    return init_state(system, frac * rho * h * h * system.cell_weight, rho, stress=stress)
 
 
 def run_column(L0: float, H0: float, dx: float, material: ContinuumMaterial | None = None,
                floor_friction: float = 0.40, symmetric: bool = True,
                t_min: float | None = None, t_max: float | None = None,
                ke_fraction: float = 1.0e-4, reach: float | None = None,
-               cfl: float = 0.3, rough_floor: bool = False) -> EulerianColumnRun:
+               cfl: float = 0.3, rough_floor: bool = False,
+               axisymmetric: bool = False) -> EulerianColumnRun:
     """Release the column and run until it is at rest (the Lagrangian run_column's rule:
     after t_min = 3 sqrt(H0/g), the first check, every 0.1 sqrt(H0/g), with kinetic energy
     below ke_fraction M g H0 / 2; at most t_max = 30 sqrt(H0/g))."""
     system = column_system(L0, H0, dx, material, floor_friction, symmetric, reach, cfl,
-                           rough_floor)
+                           rough_floor, axisymmetric)
     state = column_state(system, L0, H0, symmetric)
     tau = math.sqrt(H0 / G_ACC)
     t_min = 3.0 * tau if t_min is None else float(t_min)
@@ -146,6 +160,7 @@ def run_column(L0: float, H0: float, dx: float, material: ContinuumMaterial | No
         if state.t >= t_min - 0.5 * system.dt and ke < ke_fraction * pe0:
             settled = True
             break
-    return EulerianColumnRun(L0=L0, H0=H0, dx=dx, symmetric=symmetric, system=system,
+    return EulerianColumnRun(L0=L0, H0=H0, dx=dx, symmetric=symmetric and not axisymmetric,
+                             axisymmetric=bool(axisymmetric), system=system,
                              state=state, t_end=state.t,
                              settled=settled, ke_ratio=ke / pe0, mass_error=state.mass_error())

@@ -51,7 +51,8 @@ def _make_advance_kernel(parallel: bool):
                        delta, xi, wfn, wft, wst, kn, kt, zeta, mu_w, part_on, mu_p, length,
                        frame, x0, z0, dx, periodic, h, open_x, open_z, params,
                        tables, ux, uz, work, q, end_rho, act,
-                       cm, cmv, cf, gm, gmv, gf, gv, no_slip_rows, transfers, cb, B, gtmp):
+                       cm, cmv, cf, gm, gmv, gf, gv, no_slip_rows, transfers, cb, B, gtmp,
+                       weight, inv_r, axis_cols):
         """Up to nsteps steps of dt (s) from time t (s) of the state's arrays
         (solver.EulerianState, flat per cell; q (NQ, N), end_rho (N,) work arrays), in place;
         the mesh's faces, its weight tables (transfer.WeightTables as a tuple (cx, cz, fx, fz))
@@ -61,7 +62,10 @@ def _make_advance_kernel(parallel: bool):
         held still after every grid update (solver.EulerianSystem.no_slip_below, a rough floor;
         the Lagrangian loop's), 0 for none; transfers, cb, B, gtmp: the APIC transfers a step
         makes and their operator's buffers (solver.EulerianSystem.transfers, the Lagrangian
-        loop's: vibroflow.continuum.fused).
+        loop's: vibroflow.continuum.fused); weight, inv_r (N,) and axis_cols: an axisymmetric
+        section's cell radii, their reciprocals and the node columns on the axis whose radial
+        velocity is held at 0 (solver.EulerianSystem.axisymmetric); 1, 0 and 0 in plane
+        strain.
 
         Returns (steps done, t, status, lowest cell mass kg/m, largest |M - M0| / M0 so far):
         status OK, NEGATIVE_MASS (a cell lost more mass than it held) or NON_FINITE (a velocity),
@@ -79,11 +83,11 @@ def _make_advance_kernel(parallel: bool):
         q3 = q.reshape((nq, ncx, ncz))
         for s in range(nsteps):
             # lagrangian_step.lagrangian_step: forces, the cells holding material to the nodes
-            material_fraction(mass, density, h, frac, volume)
+            material_fraction(mass, density, h, weight, frac, volume)
             fext[:] = 0.0
             if wall_on:
-                wall_forces(wall_cells, normal, v, mass, rho_c, h, delta, xi, fext, wfn, wft, wst,
-                            kn, kt, zeta, mu_w, dt)
+                wall_forces(wall_cells, normal, v, mass, rho_c, h, weight, delta, xi, fext, wfn,
+                            wft, wst, kn, kt, zeta, mu_w, dt)
             if part_on:
                 partition_forces(v, mass, volume, stress, fext, mu_p, length, dt)
             na = 0
@@ -98,7 +102,7 @@ def _make_advance_kernel(parallel: bool):
                 cmv[c] = 0.0
                 cf[c] = 0.0
                 p2g_cells(act[a:b], ncz, tcx, tcz, v, C, mass, volume, stress, fext, dx,
-                          periodic, cm[c], cmv[c], cf[c])
+                          periodic, inv_r, cm[c], cmv[c], cf[c])
                 if transfers > 1:
                     cb[c] = 0.0
                     operator_of_cells(act[a:b], ncz, tcx, tcz, mass, dx, periodic, cb[c])
@@ -110,16 +114,20 @@ def _make_advance_kernel(parallel: bool):
             grid_update(gm, gmv, gf, gv, x0, z0, dx, dt, a0x, a0z, om, al, pvx, pvz, periodic)
             if no_slip_rows > 0:
                 gv[:, :no_slip_rows, :] = 0.0
+            if axis_cols > 0:
+                gv[:axis_cols, :, 0] = 0.0
             # the step's further transfers (vibroflow.continuum.transfer_operator)
             # (from gv to gtmp and back, one parallel loop a transfer, the last copied back;
             # the floor's rows held inside transfer_rows, as the Lagrangian loop's)
             for j in range(transfers - 1):
                 if j % 2 == 0:
                     for i in nb.prange(nx):
-                        transfer_rows(i, i + 1, B, gm, gv, gtmp, periodic, no_slip_rows, 0)
+                        transfer_rows(i, i + 1, B, gm, gv, gtmp, periodic, no_slip_rows,
+                                      axis_cols)
                 else:
                     for i in nb.prange(nx):
-                        transfer_rows(i, i + 1, B, gm, gtmp, gv, periodic, no_slip_rows, 0)
+                        transfer_rows(i, i + 1, B, gm, gtmp, gv, periodic, no_slip_rows,
+                                      axis_cols)
             if transfers % 2 == 0:
                 for i in nb.prange(nx):
                     gv[i] = gtmp[i]
@@ -131,7 +139,7 @@ def _make_advance_kernel(parallel: bool):
                 # the same parallel loop, one launch fewer
                 face_velocity_rows((c * (ncx + 1)) // nchunk, ((c + 1) * (ncx + 1)) // nchunk,
                                    gv, tables, periodic, open_x, open_z, m2, ux, uz)
-            match_divergence(L, ux, uz, h, periodic, v, normal, mass, open_x, open_z)
+            match_divergence(L, ux, uz, h, periodic, v, normal, mass, open_x, open_z, inv_r)
             void_first(L, frac, density, rho_c, dt)
             end_density(density, L, dt, end_rho)
             for c in nb.prange(nchunk):
@@ -159,7 +167,7 @@ def _make_advance_kernel(parallel: bool):
                 density[p] = q[10, p]
                 if not (np.isfinite(v[p, 0]) and np.isfinite(v[p, 1])):
                     finite = False
-            fill_limit(mass, density, h)
+            fill_limit(mass, density, h, weight)
             t += dt
             if lowest < mtol or not np.isfinite(lowest):
                 return s + 1, t, NEGATIVE_MASS, lowest, mass_error_max

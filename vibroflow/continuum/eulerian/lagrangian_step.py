@@ -33,19 +33,22 @@ from ..constitutive import P_RHO_C, update_stress_points
 
 
 @nb.njit(cache=True)
-def material_fraction(mass, density, h, frac, volume):
-    """Volume fraction f = min(1, m / (rho h^2)) of each cell, rho its material's density
-    (kg/m^3), and its material volume f h^2 (m^2)."""
+def material_fraction(mass, density, h, weight, frac, volume):
+    """Volume fraction f = min(1, m / (rho h^2 w)) of each cell, rho its material's density
+    (kg/m^3), and its material volume f h^2 w (m^2 per metre; m^3 per radian); w (N,) the
+    cells' weights: 1 in plane strain, the radius of the cell's centre (m) in an axisymmetric
+    section (solver.EulerianSystem.cell_weight)."""
     area = h * h
     for p in range(mass.shape[0]):
+        cell = area * weight[p]
         if mass[p] > 0.0 and density[p] > 0.0:
-            f = mass[p] / (density[p] * area)
+            f = mass[p] / (density[p] * cell)
             if f > 1.0:
                 f = 1.0
         else:
             f = 0.0
         frac[p] = f
-        volume[p] = f * area
+        volume[p] = f * cell
 
 
 #: the relative dilation below the critical density (-) of material whose cell opens a void
@@ -68,7 +71,8 @@ def void_first(L, frac, density, rho_c, dt):
       further, e_m = min(e, rho / rho_c - 1 + OPEN_MARGIN) (>= 0); the rest opens the void.
 
     The trace of L is replaced by e_m / dt (split equally between L_xx and L_zz), so the stress
-    update and the density see only the material's own strain.  Material that has opened a
+    update and the density see only the material's own strain (an axisymmetric section's
+    hoop rate L[:, 4] counts in e and is left as it is).  Material that has opened a
     void sits a hair below rho_c (OPEN_MARGIN): disconnected, stress-free (Dunatunga & Kamrin
     2015), as dilated material was, until the void has closed and it is compressed again.
 
@@ -83,11 +87,16 @@ def void_first(L, frac, density, rho_c, dt):
     over the volume m / rho_c it would fill at the critical density); one rule for every cell,
     full or not, keeps the step continuous as a cell fills (a rule that switched at f = 1 made
     the run's round-off grow a thousand times faster: tests/test_continuum_threads.py)."""
+    hoop = L.shape[1] > 4
     for p in range(frac.shape[0]):
         f = frac[p]
         if f <= 0.0:
             continue
         tr = L[p, 0] + L[p, 3]
+        if hoop:
+            # an axisymmetric section's hoop rate (advection.match_divergence) is part of the
+            # cell's volume change; the correction goes to the section's own two rates
+            tr += L[p, 4]
         e = dt * tr
         if e < 0.0:
             em = e + 1.0 - f
@@ -106,20 +115,25 @@ def void_first(L, frac, density, rho_c, dt):
 @nb.njit(cache=True)
 def end_density(density, L, dt, out):
     """Density (kg/m^3) of each cell's material after the step, rho / det(I + dt L): the
-    material's own strain, void_first)."""
+    material's own strain, void_first; an axisymmetric section's with its hoop stretch
+    1 + dt L[:, 4])."""
+    hoop = L.shape[1] > 4
     for p in range(density.shape[0]):
         J = (1.0 + dt * L[p, 0]) * (1.0 + dt * L[p, 3]) - dt * dt * L[p, 1] * L[p, 2]
+        if hoop:
+            J *= 1.0 + dt * L[p, 4]
         out[p] = density[p] / J
 
 
 @nb.njit(cache=True)
-def fill_limit(mass, density, h):
-    """After the remap: a cell holds no more material than fills it, rho >= m / h^2 (the
-    excess mass compresses the cell's material; f <= 1).  A cell the remap found empty has
-    density 0 (advection.py) and stays empty (f = 0) whatever round-off mass it keeps."""
+def fill_limit(mass, density, h, weight):
+    """After the remap: a cell holds no more material than fills it, rho >= m / (h^2 w) (the
+    excess mass compresses the cell's material; f <= 1; w the cells' weights, as
+    material_fraction's).  A cell the remap found empty has density 0 (advection.py) and
+    stays empty (f = 0) whatever round-off mass it keeps."""
     area = h * h
     for p in range(mass.shape[0]):
-        full = mass[p] / area
+        full = mass[p] / (area * weight[p])
         if mass[p] > 0.0 and 0.0 < density[p] < full:
             density[p] = full
 

@@ -123,13 +123,17 @@ class EulerianMesh:
         return cls.from_level_set(-R, R, 0.0, zmax, dx, level_set)
 
     @classmethod
-    def box(cls, xmin, xmax, zmin, zmax, dx, periodic=False) -> "EulerianMesh":
+    def box(cls, xmin, xmax, zmin, zmax, dx, periodic=False, axis=False) -> "EulerianMesh":
         """A rectangular container (walls on its four sides; periodic along x: the floor and
-        the lid only), cells of side dx/2 (m)."""
+        the lid only; axis: no wall at x = xmin, the axis of an axisymmetric section, whose
+        face there is closed but is not a wall (solver.EulerianSystem.axisymmetric)), cells of
+        side dx/2 (m)."""
         def level_set(x, z):
             cand = [(z - zmin, 0.0, 1.0), (zmax - z, 0.0, -1.0)]
             if not periodic:
-                cand += [(x - xmin, 1.0, 0.0), (xmax - x, -1.0, 0.0)]
+                if not axis:
+                    cand.append((x - xmin, 1.0, 0.0))
+                cand.append((xmax - x, -1.0, 0.0))
             d = np.stack([np.broadcast_to(c[0], x.shape) for c in cand])
             j = np.argmin(d, axis=0)
             nx = np.array([c[1] for c in cand])[j]

@@ -41,6 +41,7 @@ m^2, stresses Pa [xx, zz, xz, yy] (tension positive), forces N/m.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numba as nb
@@ -87,7 +88,18 @@ class EulerianSystem:
     cells' scatter chunks (fused.py), which alone fix the numbers.
 
     transfers (integer >= 1): the APIC transfers a step makes, as the Lagrangian formulation's
-    (mpm.MPMSystem.transfers, vibroflow.continuum.transfer_operator).  Default 1."""
+    (mpm.MPMSystem.transfers, vibroflow.continuum.transfer_operator).  Default 1.
+
+    axisymmetric: the section is the half-plane x = r >= 0 of a body of revolution about the
+    z axis, as the Lagrangian formulation's (mpm.MPMSystem.axisymmetric: the cylindrical
+    column collapses of Lube et al. 2004 and Lajeunesse et al. 2004).  The mesh must start at
+    the axis (xmin = 0) and not be periodic; its wall must not include the axis, which is a
+    grid condition (the nodes at r <= 0 have no radial velocity) and a closed face of zero
+    area.  Masses, volumes and forces are per radian: a cell of side h holds h^2 r
+    (cell_weight, r its centre's radius), a face sweeps h r (the remap's weights,
+    advection.remap_work), the wall's contact scales with r (wall.wall_forces), the stress
+    divergence gains the hoop term -V sigma_theta w / r (transfer.p2g_cells) and the
+    velocity gradient the hoop rate (advection.match_divergence; L (N, 5))."""
 
     mesh: EulerianMesh
     material: ContinuumMaterial
@@ -99,6 +111,7 @@ class EulerianSystem:
     no_slip_below: float | None = None
     serial_below: int = SERIAL_BELOW
     transfers: int = 1
+    axisymmetric: bool = False
 
     def __post_init__(self):
         if not self.dt > 0:
@@ -115,13 +128,32 @@ class EulerianSystem:
         m = self.mesh
         self.params = self.material.as_array()
         self.x = m.centres()
+        self.cell_weight = np.ones(m.n)
+        self.inv_r = np.zeros(m.n)
+        self.axis_cols = 0
+        radius = None
+        if self.axisymmetric:
+            if m.periodic:
+                raise InputError("axisymmetric = True with a periodic mesh: the section must "
+                                 "start at the axis r = 0, not wrap around")
+            if abs(m.xmin) > 1e-12 * m.h:
+                raise InputError(f"axisymmetric = True with the mesh's left edge at xmin = "
+                                 f"{m.xmin!r} m: the mesh must start at the axis (xmin = 0)")
+            if np.any(m.wall & (self.x[:, 0] < m.h) & (m.normal[:, 0] > 0.5)):
+                raise InputError("axisymmetric = True with a wall along the axis: the axis is "
+                                 "a grid condition, not a wall (mesh.EulerianMesh.box with axis=True)")
+            self.cell_weight = self.x[:, 0].copy()
+            self.inv_r = 1.0 / self.x[:, 0]
+            g = m.grid
+            self.axis_cols = int(math.floor(-g.x0 / g.dx + 1e-9)) + 1
+            radius = (m.xmin + (np.arange(m.ncx) + 0.5) * m.h, m.xmin + np.arange(m.ncx + 1) * m.h)
         self.density = np.zeros(m.n)
         self.work = m.grid.zeros()
         self.wall_cells = np.nonzero(m.wall)[0].astype(np.int64)
         self.ux = np.zeros((m.ncx + 1, m.ncz))
         self.uz = np.zeros((m.ncx, m.ncz + 1))
         # the remap's work arrays and its fields, one after the other (advection.remap)
-        self.remap_work = remap_work(m.open_x, m.open_z, NQ)
+        self.remap_work = remap_work(m.open_x, m.open_z, NQ, radius)
         self.q = np.zeros((NQ, m.n))
         # the B-spline weights of the fixed cell centres and face midpoints (transfer.py), as
         # the tuple the compiled loop takes
@@ -216,14 +248,15 @@ def init_state(system: EulerianSystem, mass, density=None, v=None, stress=None,
         np.broadcast_to(np.asarray(density, dtype=float), (n,)).copy()
     if np.any(rho <= 0):
         raise InputError("cell densities: must be > 0 kg/m^3")
-    fill_limit(mass, rho, system.mesh.h)
+    fill_limit(mass, rho, system.mesh.h, system.cell_weight)
+    # an axisymmetric section's velocity gradient carries the hoop rate as a fifth column
     st = EulerianState(x=system.x.copy(), mass=mass, v=vel, C=np.zeros((n, 4)),
-                       L=np.zeros((n, 4)), stress=sig, gamma_dot=np.zeros(n),
+                       L=np.zeros((n, 5 if system.axisymmetric else 4)), stress=sig, gamma_dot=np.zeros(n),
                        phase=np.ones(n, np.int8), frac=np.zeros(n), volume=np.zeros(n),
                        density=rho, fext=np.zeros((n, 2)),
                        history=[empty_history(n)], t=float(t))
     st.mass0 = st.total_mass()
-    material_fraction(st.mass, st.density, mesh.h, st.frac, st.volume)
+    material_fraction(st.mass, st.density, mesh.h, system.cell_weight, st.frac, st.volume)
     return st
 
 
@@ -235,7 +268,8 @@ def state_from_checkpoint(system: EulerianSystem, saved, meta: dict) -> Eulerian
                        density=saved.density, fext=saved.fext, history=saved.history,
                        mass0=float(meta["mass0"]), mass_error_max=float(meta["mass_error_max"]),
                        t=saved.t, step=saved.step)
-    material_fraction(st.mass, st.density, system.mesh.h, st.frac, st.volume)
+    material_fraction(st.mass, st.density, system.mesh.h, system.cell_weight, st.frac,
+                      st.volume)
     return st
 
 
@@ -284,7 +318,8 @@ def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
         mesh.open_z, system.params, system.tables, system.ux, system.uz, system.remap_work,
         system.q,
         system.end_rho, system.active, *system.chunk_work, *system.work, system.no_slip_rows,
-        system.transfers, *system.transfer_work)
+        system.transfers, *system.transfer_work, system.cell_weight, system.inv_r,
+        system.axis_cols)
     state.t = t
     state.step += done
     state.mass_error_max = err_max

@@ -89,11 +89,14 @@ def table_row(table, j):
 
 
 @nb.njit(cache=True)
-def p2g_cells(cells, ncz, tx, tz, v, C, mass, volume, stress, fext, dx, periodic, gm, gmv, gf):
-    """p2g.p2g (plane strain) of the cells `cells` (indices p = i * ncz + k, in the order
-    given) with the weights of rows tx[i] and tz[k] (WeightTables.cx, cz): accumulates into
-    gm, gmv, gf (zero them first).  v (N, 2), C (N, 4), mass, volume (N,), stress (N, 4),
-    fext (N, 2) the per-cell arrays (units as p2g.p2g)."""
+def p2g_cells(cells, ncz, tx, tz, v, C, mass, volume, stress, fext, dx, periodic, inv_r, gm,
+              gmv, gf):
+    """p2g.p2g of the cells `cells` (indices p = i * ncz + k, in the order given) with the
+    weights of rows tx[i] and tz[k] (WeightTables.cx, cz): accumulates into gm, gmv, gf (zero
+    them first).  v (N, 2), C (N, 4), mass, volume (N,), stress (N, 4), fext (N, 2) the
+    per-cell arrays (units as p2g.p2g); inv_r (N,): 0 in plane strain, 1 / r of the cells'
+    centres in an axisymmetric section (masses and volumes per radian), whose radial force
+    gains p2g.p2g's hoop term -V sigma_theta w / r (sigma_theta the stress's yy slot)."""
     nxg = gm.shape[0]
     for j in range(cells.shape[0]):
         p = cells[j]
@@ -115,6 +118,8 @@ def p2g_cells(cells, ncz, tx, tz, v, C, mass, volume, stress, fext, dx, periodic
         czz = C[p, 3]
         fex = fext[p, 0]
         fez = fext[p, 1]
+        # (+ 0.0: a plane section's -0.0 made +0.0, so that fex + hoop is fex bit for bit)
+        hoop = -vol * stress[p, 3] * inv_r[p] + 0.0
         for a in range(3):
             rx = (a - fx) * dx
             wa = wx0 if a == 0 else (wx1 if a == 1 else wx2)
@@ -133,8 +138,8 @@ def p2g_cells(cells, ncz, tx, tz, v, C, mass, volume, stress, fext, dx, periodic
                 gm[i, k] += w * m
                 gmv[i, k, 0] += w * m * (vx + cxx * rx + cxz * rz)
                 gmv[i, k, 1] += w * m * (vz + czx * rx + czz * rz)
-                # p2g.p2g's w * (fex + hoop) with no hoop stress (plane strain): fex + 0.0
-                gf[i, k, 0] += -vol * (sxx * gwx + sxz * gwz) + w * (fex + 0.0)
+                # p2g.p2g's w * (fex + hoop)
+                gf[i, k, 0] += -vol * (sxx * gwx + sxz * gwz) + w * (fex + hoop)
                 gf[i, k, 1] += -vol * (sxz * gwx + szz * gwz) + w * fez
 
 

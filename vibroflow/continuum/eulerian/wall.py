@@ -36,18 +36,22 @@ FILL_MIN = 1.0e-6
 
 
 @nb.njit(cache=True)
-def wall_forces(cells, normal, v, mass, rho_c, h, delta, xi, fext, fn_out, ft_out, state_out,
-                kn, kt, zeta, mu, dt):
+def wall_forces(cells, normal, v, mass, rho_c, h, weight, delta, xi, fext, fn_out, ft_out,
+                state_out, kn, kt, zeta, mu, dt):
     """Add the wall's force (N/m) on the wall-layer cells `cells` (indices) to fext (N, 2).
     normal (N, 2) inward unit normals; v (N, 2) m/s; mass (N,) kg/m; rho_c critical density
     (kg/m^3); h cell side (m); delta, xi (N,) normal overclosure and tangential slip (m),
     updated in place; fn_out, ft_out (N,) N/m and state_out (N,) int8 (0 none, 1 stick,
-    2 slide) out."""
+    2 slide) out.  weight (N,): the cells' weights (lagrangian_step.material_fraction), 1 in
+    plane strain; in an axisymmetric section the radius r, where a cell's mass is per radian
+    and its contact length sweeps l r: the plane law on the mass per metre m / r, its forces
+    times r (N per radian)."""
     for j in range(cells.shape[0]):
         p = cells[j]
         nx = normal[p, 0]
         nz = normal[p, 1]
-        fill = mass[p] / (rho_c * h * h)
+        w = weight[p]
+        fill = mass[p] / (rho_c * h * h * w)
         if fill > 1.0:
             fill = 1.0
         if mass[p] <= 0.0 or fill < FILL_MIN:
@@ -65,15 +69,15 @@ def wall_forces(cells, normal, v, mass, rho_c, h, delta, xi, fext, fn_out, ft_ou
         l = fill * h
         if d <= 0.0:
             xi[p] = 0.0
-        fx, fz, fn, ft, xn, st = _penalty(0.5 * l - d, nx, nz, v[p, 0], v[p, 1], mass[p], l * l,
-                                          xi[p], kn, kt, zeta, mu, dt)
+        fx, fz, fn, ft, xn, st = _penalty(0.5 * l - d, nx, nz, v[p, 0], v[p, 1], mass[p] / w,
+                                          l * l, xi[p], kn, kt, zeta, mu, dt)
         if st == 0:
             xn = 0.0
-        fext[p, 0] += fx
-        fext[p, 1] += fz
+        fext[p, 0] += fx * w
+        fext[p, 1] += fz * w
         xi[p] = xn
-        fn_out[p] = fn
-        ft_out[p] = ft
+        fn_out[p] = fn * w
+        ft_out[p] = ft * w
         state_out[p] = st
 
 
