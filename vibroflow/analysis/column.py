@@ -38,7 +38,7 @@ planar (a channel, the flow along one direction, i.e. a 2D collapse):
     surface", Phys. Fluids 17, 103302 (glass beads in a channel): lambda = 1.8 for a < 3,
     lambda' = 2.3, alpha = 2/3 above, as consolidated in Lagree, Staron & Popinet 2011
     (J. Fluid Mech. 686, 378, their eq. 3.1) with a_0 = 3 for both branches;
-axisymmetric (a cylinder spreading on a plane), for reference only:
+axisymmetric (a cylinder spreading on a plane), the experiments the issues name:
   * `LUBE_2004`: Lube, Huppert, Sparks & Hallworth 2004, "Axisymmetric collapses of granular
     columns", J. Fluid Mech. 508, 175: (r_inf - r_i)/r_i = 1.24 a for a < 1.7 and
     1.6 a^(1/2) above;
@@ -48,7 +48,9 @@ axisymmetric (a cylinder spreading on a plane), for reference only:
 
 Which law to compare with: a plane-strain continuum and a quasi-2D slab of balls collapse in a
 plane, so the planar laws; the axisymmetric ones spread less (the area grows as r^2) and are
-kept only so that an axisymmetric solver can use the same module.  Of the planar two, Lube
+the reference of the continua's axisymmetric sections (MPMSystem.axisymmetric,
+EulerianSystem.axisymmetric; tests/test_axisymmetric.py), a cylinder being what Lube et al.
+2004 and Lajeunesse et al. 2004 collapsed.  Of the planar two, Lube
 et al. (2005) is the one stated "whatever the grain type and the floor's roughness" over a range
 of materials, so it is the reference of the tests; Lajeunesse et al. (2005), for glass beads
 (closest to smooth steel balls and to the glass-bead mu(I) of the default continuum), is
