@@ -287,6 +287,11 @@ def continuum(
         "--flip", help="Lagrangian only: the FLIP fraction in [0, 1] of the points' velocity "
                        "update (0: APIC, whose transfers damp the flow at every step; "
                        "LagrangianOptions).")] = 0.0,
+    bed_viscosity: Annotated[float, typer.Option(
+        "--bed-viscosity", help="The bed's Kelvin-Voigt damping on connected material (Pa s, "
+                                ">= 0; 0 = off, the default): the continuum's counterpart of "
+                                "the DEM's contact dashpots, fitted on a DEM of a vibrated "
+                                "strip by benchmarks/strip_damping.py.")] = 0.0,
     set_: SetOption = None,
     vtk: Annotated[bool, typer.Option("--vtk", help="Also write ParaView files of the material "
                                                     "points and the grid fields over the last "
@@ -327,7 +332,7 @@ def continuum(
         step["transfer_cfl"] = transfer_cfl
     options = options_class(dx=dx, model=rheology, dilatancy=dilatancy,
                             stiffness_factor=stiffness_factor, compaction=compaction, flip=flip,
-                            **step)
+                            bed_viscosity=bed_viscosity, **step)
     material_for(s, cal, options)  # validates the parameters before --out is made
     try:
         summary = run_method(s, out, calibration=cal, options=options, progress=True,

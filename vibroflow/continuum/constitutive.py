@@ -103,8 +103,8 @@ MODELS = {"mu_i": MU_I, "drucker_prager": DRUCKER_PRAGER}
 
 # packed parameter layout of `ContinuumMaterial.as_array()`
 (P_MODEL, P_K, P_G, P_MU_S, P_MU_2, P_I0, P_D, P_RHO_S, P_RHO_C, P_MU_DP, P_ETA, P_KDIL,
- P_PHI_SLOPE, P_GAMMA_C, P_DPHI_CYC) = range(15)
-N_PARAMS = 15
+ P_PHI_SLOPE, P_GAMMA_C, P_DPHI_CYC, P_ETA_BED) = range(16)
+N_PARAMS = 16
 
 # tub47 defaults (documented in ContinuumMaterial)
 _MU_S = math.tan(math.radians(20.9))
@@ -144,6 +144,8 @@ class ContinuumMaterial:
     * initial_solid_fraction: the unloaded packing phi_0 of the settled bed the continuum runs
       start from (None: the critical one, phi_c); a bed denser than phi_c matters only with
       the dilatancy option (its peak friction K_dil (phi_0 - phi_c)).
+    * bed_viscosity = eta_b (Pa s): the bed's Kelvin-Voigt damping (`damped_stress`), 0 = off
+      (default); measured on DEM by benchmarks/strip_damping.py.
     """
 
     model: str = "mu_i"
@@ -162,6 +164,7 @@ class ContinuumMaterial:
     compaction_strain: float = 0.0
     compaction_excess: float = 0.0
     initial_solid_fraction: float | None = None
+    bed_viscosity: float = 0.0
 
     def __post_init__(self):
         if self.model not in MODELS:
@@ -199,6 +202,11 @@ class ContinuumMaterial:
         if not self.phi_max > self.phi_min:
             raise InputError(f"phi_min = {self.phi_min!r}: must be below phi_max = "
                              f"{self.phi_max!r}")
+        if isinstance(self.bed_viscosity, bool) or not (
+                isinstance(self.bed_viscosity, (int, float)) and math.isfinite(self.bed_viscosity)
+                and self.bed_viscosity >= 0):
+            raise InputError(f"bed_viscosity = {self.bed_viscosity!r}: must be a finite number "
+                             ">= 0 Pa s (0 = off)")
 
     @property
     def critical_density(self) -> float:
@@ -248,6 +256,7 @@ class ContinuumMaterial:
         a[P_PHI_SLOPE] = self.phi_max - self.phi_min
         a[P_GAMMA_C] = self.compaction_strain
         a[P_DPHI_CYC] = self.compaction_excess
+        a[P_ETA_BED] = self.bed_viscosity
         return a
 
     def to_dict(self) -> dict:
@@ -495,3 +504,45 @@ def update_stress_points(stress, L, density, dt, params, gamma_dot, state):
         stress[p, 3] = syy
         gamma_dot[p] = gp
         state[p] = st
+
+
+@nb.njit(cache=True)
+def damped_stress(stress, L, phase, params, out):
+    """out = the stress the grid sees: the stored (elastic-plastic) stress plus the bed's
+    Kelvin-Voigt viscous stress on connected material,
+
+        sigma_v = eta_b tr(D) I + 2 eta_b (D - tr(D) I / 3),
+
+    eta_b = params[P_ETA_BED] (Pa s; the same coefficient for the volumetric and the deviatoric
+    rate), D the symmetric part of the velocity gradient L (N, 4) [xx, xz, zx, zz] (1/s) of the
+    last step, with the out-of-plane rate L[:, 4] of an axisymmetric section (N, 5; 0 in plane
+    strain).  stress, out (N, 4) [xx, zz, xz, yy] Pa; phase (N,) int8: disconnected material
+    (phase 0, below the critical density) carries none, as it carries no elastic stress.
+
+    Why.  The DEM's bed loses the energy of its compression waves in its contacts' dashpots
+    (restitution 0.85 between balls) within a cycle, and flies nearly as a body; the
+    elasto-plastic continuum has nothing to damp those waves below yield but its transfers,
+    and rings through its depth (benchmarks/README.md, session 14: a vibrated strip stretched
+    three times the DEM's).  A Kelvin-Voigt viscosity is the continuum's dashpot: it is not
+    stored in the stress (the elastic predictor and the return map see the elastic-plastic
+    stress only), it adds eta_b (7/3) of damping to the P-wave and eta_b to the shear wave,
+    which decay as exp(-eta k^2 t / (2 rho)) (tests/test_mpm.py), and it does nothing to
+    a body moving rigidly (D = 0).  Its value is fitted on a DEM of the same strip
+    (benchmarks/strip_damping.py)."""
+    eta = params[P_ETA_BED]
+    hoop = L.shape[1] > 4
+    for p in range(stress.shape[0]):
+        if phase[p] == 0:
+            for c in range(4):
+                out[p, c] = stress[p, c]
+            continue
+        dxx = L[p, 0]
+        dzz = L[p, 3]
+        dxz = 0.5 * (L[p, 1] + L[p, 2])
+        dyy = L[p, 4] if hoop else 0.0
+        tr = dxx + dzz + dyy
+        iso = eta * tr - 2.0 * eta * tr / 3.0
+        out[p, 0] = stress[p, 0] + iso + 2.0 * eta * dxx
+        out[p, 1] = stress[p, 1] + iso + 2.0 * eta * dzz
+        out[p, 2] = stress[p, 2] + 2.0 * eta * dxz
+        out[p, 3] = stress[p, 3] + iso + 2.0 * eta * dyy

@@ -35,6 +35,7 @@ import numpy as np
 from .boundary import (B_PARTITION, B_WALL, W_AX, W_AZ, W_KIND, W_KN, W_KT, W_MU, W_NX, W_NZ,
                        W_PX, W_PZ, W_RADIUS, W_VX, W_VZ, W_ZETA, WALL_U, partition_forces,
                        plane_forces, plane_motion, u_wall_forces)
+from .constitutive import P_ETA_BED, damped_stress
 from .g2p import g2p
 from .grid_update import frame_body, grid_update
 from .p2g import p2g
@@ -92,7 +93,7 @@ def sum_chunk_rows(i0, i1, cm, cmv, cf, gm, gmv, gf):
 def advance_kernel(nsteps, t, dt, x, v, C, L, mass, volume, density, stress, gamma_dot, phase,
                    fext, bseq, wpar, wxi, wf, wfn, wft, wst, ppar, frame, x0, z0, dx,
                    periodic, params, box, bounds, cm, cmv, cf, gm, gmv, gf, gv,
-                   no_slip_rows, flip, axis_cols, transfers, cb, B, gtmp):
+                   no_slip_rows, flip, axis_cols, transfers, cb, B, gtmp, stress_work):
     """Up to nsteps MPM steps of dt (s) from time t (s), in place (module docstring; the
     state's arrays as mpm.MPMState, the grid's as mpm.MPMSystem.work).  box (4,) the region
     (m) a point may occupy (mpm.step); bounds (nchunk + 1,) chunk_bounds; cm (nchunk, nx, nz),
@@ -103,7 +104,8 @@ def advance_kernel(nsteps, t, dt, x, v, C, L, mass, volume, density, stress, gam
     MPMSystem.axisymmetric), 0 for a plane-strain section; transfers: the APIC transfers
     a step makes (mpm.MPMSystem.transfers; transfer_operator.py), with cb (nchunk, nx, nz,
     5, 5) the per-chunk operators, B (nx, nz, 5, 5) their sum and gtmp (nx, nz, 2) a work
-    grid (unused for one transfer).
+    grid (unused for one transfer); stress_work (N, 4): the stress scattered when the
+    material has a bed viscosity (constitutive.damped_stress; unused without).
 
     Returns (steps done, t after them, status, boundary): status OK; THROUGH_WALL when points
     went through the boundary `boundary` (the step was not made: t is its start; the
@@ -143,8 +145,15 @@ def advance_kernel(nsteps, t, dt, x, v, C, L, mass, volume, density, stress, gam
             cm[c] = 0.0
             cmv[c] = 0.0
             cf[c] = 0.0
-            p2g(x[a:b], v[a:b], C[a:b], mass[a:b], volume[a:b], stress[a:b], fext[a:b], x0,
-                z0, dx, periodic, cm[c], cmv[c], cf[c], axis_cols > 0)
+            if params[P_ETA_BED] > 0.0:
+                # the bed's Kelvin-Voigt damping on the rate of the last step, scattered with
+                # the stress but not stored in it
+                damped_stress(stress[a:b], L[a:b], phase[a:b], params, stress_work[a:b])
+                p2g(x[a:b], v[a:b], C[a:b], mass[a:b], volume[a:b], stress_work[a:b],
+                    fext[a:b], x0, z0, dx, periodic, cm[c], cmv[c], cf[c], axis_cols > 0)
+            else:
+                p2g(x[a:b], v[a:b], C[a:b], mass[a:b], volume[a:b], stress[a:b], fext[a:b],
+                    x0, z0, dx, periodic, cm[c], cmv[c], cf[c], axis_cols > 0)
             if transfers > 1:
                 cb[c] = 0.0
                 operator_of_points(x[a:b], mass[a:b], x0, z0, dx, periodic, cb[c])

@@ -333,7 +333,8 @@ def advance(system: MPMSystem, state: MPMState, n: int) -> None:
         state.density, state.stress, state.gamma_dot, state.phase, state.fext, bseq, wpar,
         *hist, ppar, system.frame.as_array(), g.x0, g.z0, g.dx, g.periodic, system.params, box,
         bounds, cm, cmv, cf, gm, gmv, gf, gv, system.no_slip_rows, system.flip,
-        system.axis_cols, system.transfers, *system.transfer_work)
+        system.axis_cols, system.transfers, *system.transfer_work,
+        np.empty((state.n, 4)) if system.material.bed_viscosity > 0 else np.empty((0, 4)))
     _unstack_history(state, walls, hist)
     state.t = t
     state.step += done

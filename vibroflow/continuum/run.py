@@ -129,7 +129,10 @@ class LagrangianOptions:
     (Pa/m; default (K + 4G/3) / point spacing), stiffness factor (-); dilatancy: the mu_i
     model's peak-friction option with the calibration's [dilatancy] K_dil
     (constitutive.py); compaction: the cyclic compaction option with the calibration's
-    [compaction] gamma_c and dphi_cyc (constitutive.py, vibroflow.calibration.compaction).
+    [compaction] gamma_c and dphi_cyc (constitutive.py, vibroflow.calibration.compaction);
+    bed_viscosity (Pa s): the bed's Kelvin-Voigt damping on connected material
+    (constitutive.damped_stress), 0 = off (default); benchmarks/strip_damping.py fits it on
+    a DEM of a vibrated strip of the same balls.
 
     stiffness_factor s < 1 is the continuum's counterpart of the DEM's reduced Young's modulus:
     the elastic moduli K and G (and with them the default wall stiffness) are multiplied by s,
@@ -146,7 +149,7 @@ class LagrangianOptions:
     #: options added after the first studies: left out of a study stage's inputs (its hash)
     #: while at their defaults, so that those studies stay up to date (vibroflow.study.stages)
     LATER_OPTIONS: ClassVar[tuple[str, ...]] = ("dilatancy", "stiffness_factor", "compaction",
-                                                "flip")
+                                                "flip", "bed_viscosity")
 
     dx: float | None = None
     cfl: float = DEFAULT_CFL
@@ -158,6 +161,7 @@ class LagrangianOptions:
     compaction: bool = False
     flip: float = 0.0
     transfer_cfl: float | None = DEFAULT_TRANSFER_CFL
+    bed_viscosity: float = 0.0
 
     def __post_init__(self):
         if not (isinstance(self.flip, (int, float)) and 0.0 <= self.flip <= 1.0):
@@ -177,6 +181,11 @@ class LagrangianOptions:
             raise InputError(f"compaction = {self.compaction!r}: must be true or false")
         if not (math.isfinite(self.stiffness_factor) and 0 < self.stiffness_factor <= 1):
             raise InputError(f"stiffness_factor = {self.stiffness_factor!r}: must be in (0, 1]")
+        if isinstance(self.bed_viscosity, bool) or not (
+                isinstance(self.bed_viscosity, (int, float))
+                and math.isfinite(self.bed_viscosity) and self.bed_viscosity >= 0):
+            raise InputError(f"bed_viscosity = {self.bed_viscosity!r}: must be a finite number "
+                             ">= 0 Pa s (0 = off)")
 
     def transfers(self) -> int:
         """The APIC transfers a step makes (timestep.transfers_per_step of cfl and
@@ -240,9 +249,12 @@ def material_for(scenario, calibration: dict | None, options: LagrangianOptions
                  ) -> ContinuumMaterial:
     """The material a run with these options uses (`material_of` with the options' model,
     dilatancy, compaction and stiffness factor); input errors name the setting."""
-    return material_of(scenario, calibration, options.model, dilatancy=options.dilatancy,
-                       stiffness_factor=options.stiffness_factor,
-                       compaction=options.compaction)
+    mat = material_of(scenario, calibration, options.model, dilatancy=options.dilatancy,
+                      stiffness_factor=options.stiffness_factor,
+                      compaction=options.compaction)
+    if options.bed_viscosity > 0:
+        mat = dataclasses.replace(mat, bed_viscosity=float(options.bed_viscosity))
+    return mat
 
 
 def bed_height(radius: float, area: float, rim: float) -> float:

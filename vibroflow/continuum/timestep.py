@@ -53,6 +53,15 @@ def stable_dt(material, dx: float, point_size: float, boundaries=(), v_max: floa
             omega = math.sqrt(kk / (rho * point_size))
             z = b.damping_ratio
             dt = min(dt, cfl * 2.0 * (math.sqrt(1.0 + z * z) - z) / omega)
+    eta = getattr(material, "bed_viscosity", 0.0)
+    if eta > 0:
+        # the bed viscosity's explicit diffusion of momentum (constitutive.damped_stress): its
+        # longitudinal coefficient 7/3 eta; dt <= C rho dx^2 / eta_L.  C = (20/3) cfl (2 at
+        # the default cfl 0.3) is measured, not derived: the quadratic B-spline grid's highest
+        # mode is slower than a finite-difference stencil's, and tub47's strip
+        # (benchmarks/strip_damping.py, dx 18.75 mm, dt 0.27 ms) ran stable up to 10 kPa s
+        # (C = 3.7 at the step it ran) and blew up at 30 kPa s (C = 11)
+        dt = min(dt, cfl * (20.0 / 3.0) * rho * dx * dx / (7.0 / 3.0 * eta))
     return dt
 
 

@@ -27,6 +27,7 @@ import numba as nb
 import numpy as np
 
 from ..boundary import partition_forces
+from ..constitutive import P_ETA_BED, damped_stress
 from ..fused import sum_chunk_rows
 from ..grid_update import frame_body, grid_update
 from .advection import face_velocity_rows, match_divergence, remap, remap_serial
@@ -52,7 +53,7 @@ def _make_advance_kernel(parallel: bool):
                        frame, x0, z0, dx, periodic, h, open_x, open_z, params,
                        tables, ux, uz, work, q, end_rho, act,
                        cm, cmv, cf, gm, gmv, gf, gv, no_slip_rows, transfers, cb, B, gtmp,
-                       weight, inv_r, axis_cols):
+                       weight, inv_r, axis_cols, stress_work):
         """Up to nsteps steps of dt (s) from time t (s) of the state's arrays
         (solver.EulerianState, flat per cell; q (NQ, N), end_rho (N,) work arrays), in place;
         the mesh's faces, its weight tables (transfer.WeightTables as a tuple (cx, cz, fx, fz))
@@ -65,7 +66,8 @@ def _make_advance_kernel(parallel: bool):
         loop's: vibroflow.continuum.fused); weight, inv_r (N,) and axis_cols: an axisymmetric
         section's cell radii, their reciprocals and the node columns on the axis whose radial
         velocity is held at 0 (solver.EulerianSystem.axisymmetric); 1, 0 and 0 in plane
-        strain.
+        strain; stress_work (N, 4): the stress scattered when the material has a bed
+        viscosity (constitutive.damped_stress, on every cell; unused without).
 
         Returns (steps done, t, status, lowest cell mass kg/m, largest |M - M0| / M0 so far):
         status OK, NEGATIVE_MASS (a cell lost more mass than it held) or NON_FINITE (a velocity),
@@ -95,14 +97,26 @@ def _make_advance_kernel(parallel: bool):
                 if mass[p] > 0.0:
                     act[na] = p
                     na += 1
+            damped = params[P_ETA_BED] > 0.0
+            if damped:
+                # the bed's Kelvin-Voigt damping on the rate of the last step, scattered with
+                # the stress but not stored in it (the Lagrangian loop's)
+                for c in nb.prange(nchunk):
+                    a = (c * n) // nchunk
+                    b = ((c + 1) * n) // nchunk
+                    damped_stress(stress[a:b], L[a:b], phase[a:b], params, stress_work[a:b])
             for c in nb.prange(nchunk):
                 a = (c * na) // nchunk
                 b = ((c + 1) * na) // nchunk
                 cm[c] = 0.0
                 cmv[c] = 0.0
                 cf[c] = 0.0
-                p2g_cells(act[a:b], ncz, tcx, tcz, v, C, mass, volume, stress, fext, dx,
-                          periodic, inv_r, cm[c], cmv[c], cf[c])
+                if damped:
+                    p2g_cells(act[a:b], ncz, tcx, tcz, v, C, mass, volume, stress_work, fext,
+                              dx, periodic, inv_r, cm[c], cmv[c], cf[c])
+                else:
+                    p2g_cells(act[a:b], ncz, tcx, tcz, v, C, mass, volume, stress, fext, dx,
+                              periodic, inv_r, cm[c], cmv[c], cf[c])
                 if transfers > 1:
                     cb[c] = 0.0
                     operator_of_cells(act[a:b], ncz, tcx, tcz, mass, dx, periodic, cb[c])

@@ -319,7 +319,8 @@ def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
         system.q,
         system.end_rho, system.active, *system.chunk_work, *system.work, system.no_slip_rows,
         system.transfers, *system.transfer_work, system.cell_weight, system.inv_r,
-        system.axis_cols)
+        system.axis_cols,
+        np.empty((state.n, 4)) if mat.bed_viscosity > 0 else np.empty((0, 4)))
     state.t = t
     state.step += done
     state.mass_error_max = err_max
