@@ -31,8 +31,8 @@ trajectory), and, as a like-with-like check, the largest overlap at the snapshot
 same way from both codes' ball centres.
 
 Results go to --out (default runs/dem_vs_liggghts/, git-ignored) as speed.json, physics.json
-or overlap_seed<N>.json, with the runs' folders beside them.  Use a quiet machine: other processes on
-the cores distort both timings.
+or overlap_seed<N>.json, with the runs' folders beside them.  Use a quiet machine: other
+processes on the cores distort both timings.
 """
 from __future__ import annotations
 

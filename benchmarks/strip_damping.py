@@ -18,12 +18,12 @@ nodes wide, periodic along x, the calibration's material, each formulation's tub
 with the material's bed viscosity (constitutive.damped_stress) set to each value asked.
 
 The measure, the same for all: at each phase, the bed's vertical velocity vz (mass-weighted)
-relative to the floor in 15 mm bands of height above it; its gradient between neighbouring bands; the mean
-|dvz/dz| over the bands holding more than 0.3 of the fullest band's mass and over the phases
-(1/s).  A bed that flies and lands as a body has none; one that rings through its depth (its
-compression waves undamped) has much.  Printed beside it: the profile vz at phase 2/8 (flight)
-from the floor up (mm/s), and the fitted viscosity: where |dvz/dz| against the viscosity
-crosses the DEM's, interpolated linearly between the values run.
+relative to the floor in 15 mm bands of height above it; its gradient between neighbouring
+bands; the mean |dvz/dz| over the bands holding more than 0.3 of the fullest band's mass and
+over the phases (1/s).  A bed that flies and lands as a body has none; one that rings through
+its depth (its compression waves undamped) has much.  Printed beside it: the profile vz at
+phase 2/8 (flight) from the floor up (mm/s), and the fitted viscosity: where |dvz/dz| against
+the viscosity crosses the DEM's, interpolated linearly between the values run.
 """
 from __future__ import annotations
 

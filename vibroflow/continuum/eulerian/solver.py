@@ -141,7 +141,8 @@ class EulerianSystem:
                                  f"{m.xmin!r} m: the mesh must start at the axis (xmin = 0)")
             if np.any(m.wall & (self.x[:, 0] < m.h) & (m.normal[:, 0] > 0.5)):
                 raise InputError("axisymmetric = True with a wall along the axis: the axis is "
-                                 "a grid condition, not a wall (mesh.EulerianMesh.box with axis=True)")
+                                 "a grid condition, not a wall (mesh.EulerianMesh.box with "
+                                 "axis=True)")
             self.cell_weight = self.x[:, 0].copy()
             self.inv_r = 1.0 / self.x[:, 0]
             g = m.grid
@@ -251,7 +252,8 @@ def init_state(system: EulerianSystem, mass, density=None, v=None, stress=None,
     fill_limit(mass, rho, system.mesh.h, system.cell_weight)
     # an axisymmetric section's velocity gradient carries the hoop rate as a fifth column
     st = EulerianState(x=system.x.copy(), mass=mass, v=vel, C=np.zeros((n, 4)),
-                       L=np.zeros((n, 5 if system.axisymmetric else 4)), stress=sig, gamma_dot=np.zeros(n),
+                       L=np.zeros((n, 5 if system.axisymmetric else 4)), stress=sig,
+                       gamma_dot=np.zeros(n),
                        phase=np.ones(n, np.int8), frac=np.zeros(n), volume=np.zeros(n),
                        density=rho, fext=np.zeros((n, 2)),
                        history=[empty_history(n)], t=float(t))
