@@ -130,13 +130,14 @@ class ColumnRun:
             return np.abs(x), 0.5 * area
         return x.copy(), area
 
-    def deposit(self):
+    def deposit(self, wall_window: float | None = None):
         """The deposit measured as every continuum's is (vibroflow.analysis.column.
-        measure_continuum_deposit of `deposit_points`, grains of the material's diameter)."""
+        measure_continuum_deposit of `deposit_points`, grains of the material's diameter; the
+        height within `wall_window` (m) of the wall or axis when given)."""
         from vibroflow.analysis.column import measure_continuum_deposit
 
         return measure_continuum_deposit(*self.deposit_points(), self.point_side,
-                                         self.material.diameter)
+                                         self.material.diameter, wall_window=wall_window)
 
 
 def column_points(x0: float, x1: float, H0: float, spacing: float) -> np.ndarray:
