@@ -198,6 +198,23 @@ def measure(method, material, motion, width, periodic, cycles, transfer_cfl, flo
     return out
 
 
+def case_media(case: str, calibration: str):
+    """(scenario, material, full motion, vertical stroke alone) of a case and a calibration
+    file: the continuum material of `material_for` with the default options, the case's tub
+    motion, and the same motion with no horizontal stroke and no rotation."""
+    from vibroflow.calibration.calibrate import read_calibration
+    from vibroflow.continuum.run import LagrangianOptions, material_for
+    from vibroflow.scenario.io import load_scenario
+    from vibroflow.tub.motion import TubMotion
+
+    scenario = load_scenario(case, [])
+    material = material_for(scenario, read_calibration(calibration), LagrangianOptions())
+    full = TubMotion.of_scenario(scenario)
+    motion = TubMotion(frequency=full.frequency, amplitude_x=0.0, amplitude_z=full.amplitude_z,
+                       phase_z=full.phase_z, amplitude_theta=0.0)
+    return scenario, material, full, motion
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--calibration", default="tests/data/tub47-dem/calibration.toml")
@@ -210,16 +227,7 @@ def main(argv=None) -> int:
     ap.add_argument("--methods", default="eulerian,lagrangian")
     ap.add_argument("--transfer-cfl", type=float, default=None)
     a = ap.parse_args(argv)
-    from vibroflow.calibration.calibrate import read_calibration
-    from vibroflow.continuum.run import LagrangianOptions, material_for
-    from vibroflow.scenario.io import load_scenario
-    from vibroflow.tub.motion import TubMotion
-
-    scenario = load_scenario(a.case, [])
-    material = material_for(scenario, read_calibration(a.calibration), LagrangianOptions())
-    full = TubMotion.of_scenario(scenario)
-    motion = TubMotion(frequency=full.frequency, amplitude_x=0.0, amplitude_z=full.amplitude_z,
-                       phase_z=full.phase_z, amplitude_theta=0.0)
+    _, material, full, motion = case_media(a.case, a.calibration)
     gamma = full.amplitude_z * (2 * math.pi * full.frequency) ** 2 / G
     if a.periodic and a.floor_angle is not None:
         print("--periodic and --floor-angle: choose one", file=sys.stderr)

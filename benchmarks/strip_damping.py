@@ -75,9 +75,8 @@ def summarise(MV, M):
 def dem_strip(scenario, motion, warm, cycles, seed=1):
     """The DEM strip (module docstring): (mean |dvz/dz|, flight profile, balls, wall s)."""
     from vibroflow.dem import simulate as S
-    from vibroflow.scenario.model import ContactPair, Material, ParticleSpec, Run, Scenario, \
-        WallSpec
-    from vibroflow.scenario.model import find_contact
+    from vibroflow.scenario.model import (Material, ParticleSpec, Run, Scenario, WallSpec,
+                                          find_contact)
 
     d = scenario.fill.diameter
     r = 0.5 * d
@@ -95,11 +94,11 @@ def dem_strip(scenario, motion, warm, cycles, seed=1):
     pos = np.array([(x, y, z) for z in zs for x in xs for y in ys])[:n]
     rng = np.random.default_rng(seed)
     pos += rng.uniform(-0.45 * (s - d), 0.45 * (s - d), pos.shape)
-    smooth = dict(k_n=bb.k_n, k_t_over_k_n=bb.k_t_over_k_n, restitution=bb.restitution,
-                  friction=0.0, rolling_friction=0.0, rolling_model="none")
-    contacts = [ContactPair(pair=("ball", "ball"), **_law(bb)),
-                ContactPair(pair=("ball", "floor"), **_law(bw)),
-                ContactPair(pair=("ball", "side"), **smooth)]
+    # the case's laws under the strip's material names; the sides are the balls' law frictionless
+    contacts = [bb.model_copy(update={"pair": ("ball", "ball")}),
+                bw.model_copy(update={"pair": ("ball", "floor")}),
+                bb.model_copy(update={"pair": ("ball", "side"), "friction": 0.0,
+                                      "rolling_friction": 0.0, "rolling_model": "none"})]
     materials = {"ball": Material(density=ball.density), "floor": Material(density=1200.0),
                  "side": Material(density=2500.0)}
     amp = (0.0, 0.0, motion.amplitude_z)
@@ -141,12 +140,6 @@ def dem_strip(scenario, motion, warm, cycles, seed=1):
     return rate, profile, n, time.time() - t0
 
 
-def _law(c):
-    return dict(k_n=c.k_n, k_t_over_k_n=c.k_t_over_k_n, restitution=c.restitution,
-                friction=c.friction, rolling_friction=c.rolling_friction,
-                rolling_model=c.rolling_model)
-
-
 def continuum_strip(method, material, motion, warm, cycles):
     """The periodic continuum strip (module docstring): (mean |dvz/dz|, flight profile, s)."""
     system, state, advance = fd.build(method, material, motion, 0.0, True, None)
@@ -186,16 +179,7 @@ def main(argv=None) -> int:
     ap.add_argument("--viscosities", default="0,1000,3000", help="bed viscosities (Pa s)")
     ap.add_argument("--skip-dem", action="store_true")
     a = ap.parse_args(argv)
-    from vibroflow.calibration.calibrate import read_calibration
-    from vibroflow.continuum.run import LagrangianOptions, material_for
-    from vibroflow.scenario.io import load_scenario
-    from vibroflow.tub.motion import TubMotion
-
-    scenario = load_scenario(a.case, [])
-    material = material_for(scenario, read_calibration(a.calibration), LagrangianOptions())
-    full = TubMotion.of_scenario(scenario)
-    motion = TubMotion(frequency=full.frequency, amplitude_x=0.0, amplitude_z=full.amplitude_z,
-                       phase_z=full.phase_z, amplitude_theta=0.0)
+    scenario, material, full, motion = fd.case_media(a.case, a.calibration)
     etas = [float(v) for v in a.viscosities.split(",")]
     print(f"{a.case}'s media, bed {fd.BED_DEPTH} m deep, vertical stroke {full.frequency:g} Hz "
           f"{1e3 * full.amplitude_z:.3g} mm; {a.warm} cycles, then {a.cycles} sampled at 8 "

@@ -111,6 +111,15 @@ _MU_S = math.tan(math.radians(20.9))
 _MU_2 = math.tan(math.radians(32.8))
 
 
+def check_bed_viscosity(value) -> None:
+    """The bed viscosity (Pa s; ContinuumMaterial.bed_viscosity, LagrangianOptions'): a finite
+    number >= 0, else a one-line InputError naming it."""
+    if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value)
+                                       and value >= 0):
+        raise InputError(f"bed_viscosity = {value!r}: must be a finite number >= 0 Pa s "
+                         "(0 = off)")
+
+
 def drucker_prager_mu(mu_s: float) -> float:
     """Plane-strain matched Drucker-Prager slope mu_dp = tan(beta)/sqrt(3) (-) of a material of
     friction angle atan(mu_s) (models.md: tan beta = 3 sqrt(3) tan phi / sqrt(9 + 12 tan^2 phi))."""
@@ -202,11 +211,7 @@ class ContinuumMaterial:
         if not self.phi_max > self.phi_min:
             raise InputError(f"phi_min = {self.phi_min!r}: must be below phi_max = "
                              f"{self.phi_max!r}")
-        if isinstance(self.bed_viscosity, bool) or not (
-                isinstance(self.bed_viscosity, (int, float)) and math.isfinite(self.bed_viscosity)
-                and self.bed_viscosity >= 0):
-            raise InputError(f"bed_viscosity = {self.bed_viscosity!r}: must be a finite number "
-                             ">= 0 Pa s (0 = off)")
+        check_bed_viscosity(self.bed_viscosity)
 
     @property
     def critical_density(self) -> float:

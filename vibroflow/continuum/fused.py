@@ -116,6 +116,8 @@ def advance_kernel(nsteps, t, dt, x, v, C, L, mass, volume, density, stress, gam
     nx = gm.shape[0]
     deep = np.zeros((nchunk, max(nb_, 1)), np.int64)
     bad = np.zeros(nchunk, np.int64)
+    damped = params[P_ETA_BED] > 0.0
+    scattered = stress_work if damped else stress
     for s in range(nsteps):
         # 1-2: the boundaries' forces in their order (fext zeroed first; deep: the points
         # through each wall, boundary.py `lost`) and the scatter, per chunk
@@ -145,15 +147,12 @@ def advance_kernel(nsteps, t, dt, x, v, C, L, mass, volume, density, stress, gam
             cm[c] = 0.0
             cmv[c] = 0.0
             cf[c] = 0.0
-            if params[P_ETA_BED] > 0.0:
+            if damped:
                 # the bed's Kelvin-Voigt damping on the rate of the last step, scattered with
                 # the stress but not stored in it
                 damped_stress(stress[a:b], L[a:b], phase[a:b], params, stress_work[a:b])
-                p2g(x[a:b], v[a:b], C[a:b], mass[a:b], volume[a:b], stress_work[a:b],
-                    fext[a:b], x0, z0, dx, periodic, cm[c], cmv[c], cf[c], axis_cols > 0)
-            else:
-                p2g(x[a:b], v[a:b], C[a:b], mass[a:b], volume[a:b], stress[a:b], fext[a:b],
-                    x0, z0, dx, periodic, cm[c], cmv[c], cf[c], axis_cols > 0)
+            p2g(x[a:b], v[a:b], C[a:b], mass[a:b], volume[a:b], scattered[a:b], fext[a:b], x0,
+                z0, dx, periodic, cm[c], cmv[c], cf[c], axis_cols > 0)
             if transfers > 1:
                 cb[c] = 0.0
                 operator_of_points(x[a:b], mass[a:b], x0, z0, dx, periodic, cb[c])

@@ -62,7 +62,7 @@ from vibroflow.tub.motion import TubMotion, rigid_velocity, tub_to_lab
 
 from .boundary import PartitionFriction, UWall, damping_ratio_of_restitution
 from .checkpoint import load_checkpoint, save_checkpoint
-from .constitutive import ContinuumMaterial, equivalent_shear_rate
+from .constitutive import ContinuumMaterial, check_bed_viscosity, equivalent_shear_rate
 from .fields import grid_fields, write_grid_vtr
 from .grid import Grid
 from .grid_update import LabFrame, TubFrame
@@ -181,11 +181,7 @@ class LagrangianOptions:
             raise InputError(f"compaction = {self.compaction!r}: must be true or false")
         if not (math.isfinite(self.stiffness_factor) and 0 < self.stiffness_factor <= 1):
             raise InputError(f"stiffness_factor = {self.stiffness_factor!r}: must be in (0, 1]")
-        if isinstance(self.bed_viscosity, bool) or not (
-                isinstance(self.bed_viscosity, (int, float))
-                and math.isfinite(self.bed_viscosity) and self.bed_viscosity >= 0):
-            raise InputError(f"bed_viscosity = {self.bed_viscosity!r}: must be a finite number "
-                             ">= 0 Pa s (0 = off)")
+        check_bed_viscosity(self.bed_viscosity)
 
     def transfers(self) -> int:
         """The APIC transfers a step makes (timestep.transfers_per_step of cfl and

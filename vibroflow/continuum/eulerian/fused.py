@@ -83,6 +83,8 @@ def _make_advance_kernel(parallel: bool):
         mtol = -1e-9 * rho_c * h * h
         m2 = mass.reshape((ncx, ncz))
         q3 = q.reshape((nq, ncx, ncz))
+        damped = params[P_ETA_BED] > 0.0
+        scattered = stress_work if damped else stress
         for s in range(nsteps):
             # lagrangian_step.lagrangian_step: forces, the cells holding material to the nodes
             material_fraction(mass, density, h, weight, frac, volume)
@@ -97,7 +99,6 @@ def _make_advance_kernel(parallel: bool):
                 if mass[p] > 0.0:
                     act[na] = p
                     na += 1
-            damped = params[P_ETA_BED] > 0.0
             if damped:
                 # the bed's Kelvin-Voigt damping on the rate of the last step, scattered with
                 # the stress but not stored in it (the Lagrangian loop's)
@@ -111,12 +112,8 @@ def _make_advance_kernel(parallel: bool):
                 cm[c] = 0.0
                 cmv[c] = 0.0
                 cf[c] = 0.0
-                if damped:
-                    p2g_cells(act[a:b], ncz, tcx, tcz, v, C, mass, volume, stress_work, fext,
-                              dx, periodic, inv_r, cm[c], cmv[c], cf[c])
-                else:
-                    p2g_cells(act[a:b], ncz, tcx, tcz, v, C, mass, volume, stress, fext, dx,
-                              periodic, inv_r, cm[c], cmv[c], cf[c])
+                p2g_cells(act[a:b], ncz, tcx, tcz, v, C, mass, volume, scattered, fext, dx,
+                          periodic, inv_r, cm[c], cmv[c], cf[c])
                 if transfers > 1:
                     cb[c] = 0.0
                     operator_of_cells(act[a:b], ncz, tcx, tcz, mass, dx, periodic, cb[c])
