@@ -1,7 +1,20 @@
-"""Which continuum parameter moves the Lagrangian continuum towards the DEM on the tub case?
+"""Which continuum parameter moves the continuum towards the DEM on the tub case?
 
     python benchmarks/continuum_sensitivity.py --dem-dir DIR [--calibration FILE]
-        [--cases base wall_friction=0.4 ...] [--out DIR]
+        [--cases base wall_friction=0.4 ...] [--settle-times 0.04,0.05,0.06,0.07]
+        [--method lagrangian|eulerian] [--jobs 2] [--out DIR]
+    python benchmarks/continuum_sensitivity.py --dem-dir tests/data/tub47-dem --case tub47 \
+        --dem-strength 2.4418e-3 ...
+
+The second form compares with a reference folder that holds only the DEM's bulk_velocity.csv
+and calibration.toml (tests/data/tub47-dem): the scenario is then --case (a preset or a TOML
+file) and the DEM's circulation strength --dem-strength (m^2/s; its README gives it).
+
+Ensembles.  A single run's E is not a measure: the settling time alone moved session 7's base
+run from 0.62 to 1.01 (benchmarks/README.md).  Each case is therefore run once per settling
+time of --settle-times (default four, 0.04 - 0.07 s, the ensemble every session since 7 used)
+and printed as mean +- standard error over them, with the members; --jobs runs them in
+parallel, one numba thread each.
 
 Issue 4's continuum (vibroflow.continuum.run.run_lagrangian) circulates 1.3-1.7 times too fast
 and its field differs from the DEM's by E ~ 1 (tub47.md), against the DEM's own seed-to-seed
@@ -17,7 +30,8 @@ A case is `base` or `NAME=VALUE` with NAME one of
   moduli_scale                                  (K, G, or K and G, multiplied)
   critical_solid_fraction                       ([rheology])
   wall_stiffness (Pa/m), cfl, dx (m), model,
-  transfer_cfl (0: one APIC transfer a step)    (LagrangianOptions)
+  transfer_cfl (0: one APIC transfer a step),
+  bed_viscosity (Pa s), flip                    (LagrangianOptions, EulerianOptions)
 The default list is the one whose figures benchmarks/README.md records.  Wall times are printed
 but say little unless the machine is quiet.  Results also go to --out/sensitivity.json.
 """
@@ -36,7 +50,8 @@ DEFAULT_CASES = ["base", "wall_friction=0.10", "wall_friction=0.40", "partition_
                  "critical_solid_fraction=0.54", "critical_solid_fraction=0.60",
                  "wall_stiffness=5.9e7", "model=drucker_prager", "cfl=0.6", "dx=0.010",
                  "dx=0.015"]
-OPTION_NAMES = ("wall_stiffness", "cfl", "dx", "model", "transfer_cfl")
+OPTION_NAMES = ("wall_stiffness", "cfl", "dx", "model", "transfer_cfl", "bed_viscosity", "flip")
+DEFAULT_SETTLE_TIMES = "0.04,0.05,0.06,0.07"
 
 
 def apply_case(case: str, calibration: dict) -> tuple[dict, dict]:
@@ -73,50 +88,123 @@ def apply_case(case: str, calibration: dict) -> tuple[dict, dict]:
     return cal, {}
 
 
+def _worker_init() -> None:
+    # one numba thread per run: the runs themselves are the parallel work
+    os.environ["NUMBA_NUM_THREADS"] = "1"
+
+
+def run_member(job: tuple) -> dict:
+    """One run of the ensemble: job = (method, scenario, calibration, options keywords,
+    settling time s, output folder, reference csv, cell size m, min solid fraction).
+    Returns {strength, E, wall_time_s}."""
+    (method, scenario, cal, opts, settle, out, ref_csv, h, phi_min) = job
+    from vibroflow.analysis.bulk import read_csv
+    from vibroflow.analysis.compare import field_difference
+
+    t0 = time.perf_counter()
+    if method == "eulerian":
+        from vibroflow.continuum.eulerian.run import EulerianOptions, run_eulerian
+
+        s = run_eulerian(scenario, out, calibration=cal,
+                         options=EulerianOptions(settle_time=settle, **opts))
+    else:
+        from vibroflow.continuum.run import LagrangianOptions, run_lagrangian
+
+        s = run_lagrangian(scenario, out, calibration=cal,
+                           options=LagrangianOptions(settle_time=settle, **opts))
+    wall = time.perf_counter() - t0
+    E = field_difference(read_csv(Path(out) / "bulk_velocity.csv", cell_size=h),
+                         read_csv(ref_csv, cell_size=h), phi_min)
+    return {"strength": s["circulation"]["strength"], "E": E, "wall_time_s": wall}
+
+
+def _mean_se(values) -> tuple[float, float]:
+    import numpy as np
+
+    v = np.asarray(values, float)
+    se = float(v.std(ddof=1) / np.sqrt(v.size)) if v.size > 1 else float("nan")
+    return float(v.mean()), se
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--dem-dir", required=True, type=Path,
-                    help="a finished `vibroflow dem` (or study dem/) folder")
+                    help="a finished `vibroflow dem` (or study dem/) folder, or a reference "
+                         "folder with bulk_velocity.csv and calibration.toml (with --case)")
+    ap.add_argument("--case", help="the scenario (preset or TOML) when --dem-dir holds no DEM "
+                                   "run (tests/data/tub47-dem: tub47)")
+    ap.add_argument("--dem-strength", type=float,
+                    help="the DEM's circulation strength (m^2/s) when --dem-dir has no "
+                         "summary.json")
     ap.add_argument("--calibration", type=Path, help="default DEM_DIR/calibration.toml")
     ap.add_argument("--cases", nargs="+", default=DEFAULT_CASES)
+    ap.add_argument("--method", choices=("lagrangian", "eulerian"), default="lagrangian")
+    ap.add_argument("--settle-times", default=DEFAULT_SETTLE_TIMES,
+                    help="comma-separated settling times (s), one run each")
+    ap.add_argument("--jobs", type=int, default=1, help="runs at a time (one thread each)")
     ap.add_argument("--out", type=Path, default=Path("runs/continuum_sensitivity"))
     args = ap.parse_args(argv)
+    try:
+        settle_times = [float(t) for t in args.settle_times.split(",")]
+    except ValueError:
+        raise SystemExit(f"--settle-times {args.settle_times!r}: must be comma-separated "
+                         "numbers of seconds")
+    if not settle_times or min(settle_times) < 0 or args.jobs < 1:
+        raise SystemExit("--settle-times must be >= 0 s and --jobs >= 1")
 
-    from vibroflow.analysis.bulk import read_csv
-    from vibroflow.analysis.compare import field_difference
+    from concurrent.futures import ProcessPoolExecutor
+    from multiprocessing import get_context
+
     from vibroflow.calibration.calibrate import read_calibration
-    from vibroflow.calibration.dem_result import DEMResult
-    from vibroflow.continuum.run import LagrangianOptions, run_lagrangian
+    from vibroflow.scenario.io import load_scenario
 
-    with DEMResult.open(args.dem_dir) as res:
-        scenario = res.scenario
-    dem = json.loads((args.dem_dir / "summary.json").read_text())
+    summary = args.dem_dir / "summary.json"
+    if args.case is not None:
+        scenario = load_scenario(args.case)
+    else:
+        from vibroflow.calibration.dem_result import DEMResult
+
+        with DEMResult.open(args.dem_dir) as res:
+            scenario = res.scenario
+    if summary.exists():
+        dc = json.loads(summary.read_text())["circulation"]
+    elif args.dem_strength is not None:
+        dc = {"strength": args.dem_strength, "strength_stderr": float("nan"), "sense": "?"}
+    else:
+        raise SystemExit(f"{summary} is missing: give --dem-strength")
     h = scenario.analysis.cell_size
-    dem_table = read_csv(args.dem_dir / "bulk_velocity.csv", cell_size=h)
+    ref_csv = args.dem_dir / "bulk_velocity.csv"
     base = read_calibration(args.calibration or args.dem_dir / "calibration.toml")
-    dc = dem["circulation"]
-    print(f"{scenario.case}: DEM strength {dc['strength']:.3e} +- {dc['strength_stderr']:.1e} "
-          f"m^2/s ({dc['sense']})")
-    print(f"{'case':<30} {'strength (m^2/s)':>22} {'/ DEM':>6} {'E(cont, DEM)':>13} {'wall':>7}")
-    rows = []
+    print(f"{scenario.case}, {args.method}: DEM strength {dc['strength']:.3e} m^2/s; "
+          f"{len(settle_times)} settling times {args.settle_times} s each")
+    print(f"{'case':<30} {'E(cont, DEM)':>16} {'strength / DEM':>16}  members (E / ratio)")
+    jobs, keys = [], []
     for case in args.cases:
         cal, opts = apply_case(case, base)
-        out = args.out / case.replace("=", "_")
-        t0 = time.perf_counter()
-        s = run_lagrangian(scenario, out, calibration=cal, options=LagrangianOptions(**opts))
-        wall = time.perf_counter() - t0
-        c = s["circulation"]
-        E = field_difference(read_csv(out / "bulk_velocity.csv", cell_size=h), dem_table,
-                             scenario.analysis.min_solid_fraction)
-        ratio = c["strength"] / dc["strength"]
-        print(f"{case:<30} {c['strength']:>10.3e} +- {c['strength_stderr']:.1e} "
-              f"{ratio:>6.2f} {E:>13.3f} {wall:>6.0f}s", flush=True)
-        rows.append({"case": case, "strength": c["strength"],
-                     "strength_stderr": c["strength_stderr"], "sense": c["sense"],
-                     "ratio_to_dem": ratio, "E": E, "wall_time_s": wall})
+        for st in settle_times:
+            out = args.out / f"{args.method}-{case.replace('=', '_')}-{st:g}"
+            jobs.append((args.method, scenario, cal, opts, st, str(out), str(ref_csv), h,
+                         scenario.analysis.min_solid_fraction))
+            keys.append(case)
+    with ProcessPoolExecutor(args.jobs, mp_context=get_context("spawn"),
+                             initializer=_worker_init) as ex:
+        results = list(ex.map(run_member, jobs))
+    rows = []
+    for case in args.cases:
+        members = [r for k, r in zip(keys, results) if k == case]
+        E, E_se = _mean_se([m["E"] for m in members])
+        ratios = [m["strength"] / dc["strength"] for m in members]
+        R, R_se = _mean_se(ratios)
+        detail = " ".join(f"{m['E']:.3f}/{r:.2f}" for m, r in zip(members, ratios))
+        print(f"{case:<30} {E:>8.3f} +- {E_se:.3f} {R:>8.2f} +- {R_se:.2f}  {detail}",
+              flush=True)
+        rows.append({"case": case, "E": E, "E_stderr": E_se, "ratio_to_dem": R,
+                     "ratio_stderr": R_se, "settle_times_s": settle_times,
+                     "members": members})
     args.out.mkdir(parents=True, exist_ok=True)
     tmp = args.out / ".tmp-sensitivity.json"
-    tmp.write_text(json.dumps({"case": scenario.case, "dem": dc, "rows": rows}, indent=2))
+    tmp.write_text(json.dumps({"case": scenario.case, "method": args.method, "dem": dc,
+                               "rows": rows}, indent=2))
     os.replace(tmp, args.out / "sensitivity.json")
     return 0
 
