@@ -23,7 +23,8 @@ the calibration (default DIR/calibration.toml) or the numerical options with one
 and prints the circulation strength (m^2/s +- batch-means standard error) and E(continuum, DEM)
 of each, so one sees which parameter, if any, the mismatch is sensitive to.
 
-A case is `base` or `NAME=VALUE` with NAME one of
+A case is `base`, `NAME=VALUE`, or several NAME=VALUE joined by `;` (changed together), with
+NAME one of
   wall_friction, partition_friction             (calibration [wall], [partitions] friction)
   mu_scale                                      (mu_s and mu_2 both multiplied)
   bulk_modulus_scale, shear_modulus_scale,
@@ -57,6 +58,13 @@ DEFAULT_SETTLE_TIMES = "0.04,0.05,0.06,0.07"
 def apply_case(case: str, calibration: dict) -> tuple[dict, dict]:
     """(calibration, LagrangianOptions keywords) of one case (module docstring)."""
     cal = copy.deepcopy(calibration)
+    if ";" in case:
+        # several changes at once, e.g. "dx=0.0095;transfer_cfl=0.0075"
+        opts = {}
+        for part in case.split(";"):
+            cal, more = apply_case(part, cal)
+            opts.update(more)
+        return cal, opts
     if case == "base":
         return cal, {}
     name, sep, text = case.partition("=")
