@@ -138,19 +138,19 @@ def test_momentum_and_angular_momentum_conserved_with_transfers():
     assert state.angular_momentum(dx) == pytest.approx(L0, rel=1e-12)
 
 
-def _shear_wave_energy(cfl: float, transfers: int, T: float = 0.004) -> float:
+def _shear_wave_energy(cfl: float, transfers: int, T: float = 0.004, dx: float = 0.005,
+                       wavelength: float = 0.04) -> float:
     """Kinetic energy left (mean over [T/2, T], over the initial) of a free, stress-free elastic
-    disc (radius 6 cm, dx = 5 mm, 2 x 2 points a cell) started with a shear wave of 8 cells'
-    wavelength, vx = 0.01 sin(2 pi z / (8 dx)) m/s, at Courant number cfl with `transfers`
-    transfers a step."""
+    disc (radius 6 cm, spacing dx, 5 mm by default, 2 x 2 points a cell) started with a shear
+    wave vx = 0.01 sin(2 pi z / wavelength) m/s (8 cells of 5 mm), at Courant number cfl with
+    `transfers` transfers a step."""
     mat = ContinuumMaterial(mu_s=2.0, mu_2=2.5)  # stays elastic: the transfers alone dissipate
-    dx = 0.005
     sp = dx / 2
     grid = Grid.covering(-0.12, 0.12, -0.12, 0.12, dx)
     x = lattice(-0.06, 0.06, -0.06, 0.06, sp)
     x = x[np.hypot(x[:, 0], x[:, 1]) < 0.06]
     v = np.zeros_like(x)
-    v[:, 0] = 0.01 * np.sin(2.0 * math.pi * x[:, 1] / (8 * dx))
+    v[:, 0] = 0.01 * np.sin(2.0 * math.pi * x[:, 1] / wavelength)
     dt = stable_dt(mat, dx, sp, cfl=cfl)
     system = MPMSystem(grid, mat, dt, frame=LabFrame((0.0, 0.0)), transfers=transfers)
     state = init_state(system, x, sp * sp, mat.critical_density * 1.0001, v=v)
@@ -231,3 +231,84 @@ def test_eulerian_parallel_loop_gives_the_serial_numbers_with_transfers_and_a_ro
     parallel = run(0, min(2, nb.config.NUMBA_NUM_THREADS))
     for f in ("mass", "v", "C", "stress"):
         np.testing.assert_array_equal(getattr(parallel, f), getattr(serial, f), err_msg=f)
+
+
+def _mode_loss(nx: int) -> float:
+    """1 - the amplitude one transfer leaves of a velocity mode of one wavelength across a
+    periodic grid of nx cells of side 1/nx m (2 x 2 points a cell on a lattice), so k dx =
+    2 pi / nx."""
+    dx = 1.0 / nx
+    grid = Grid(x0=0.0, z0=0.0, dx=dx, nx=nx, nz=12, periodic=True)
+    X, Z = np.meshgrid((np.arange(2 * nx) + 0.5) * dx / 2, 3 * dx + (np.arange(12) + 0.5) * dx / 2,
+                       indexing="ij")
+    x = np.stack([X.ravel(), Z.ravel()], axis=1)
+    mass = np.ones(len(x))
+    gm, _ = explicit_pair(grid, x, mass, np.zeros((grid.nx, grid.nz, 2)))
+    mode = np.sin(2.0 * math.pi * np.arange(nx) * dx)
+    gv = np.zeros((nx, grid.nz, 2))
+    gv[:, :, 1] = mode[:, None]
+    out = np.zeros_like(gv)
+    transfer_rows(0, nx, operator(grid, x, mass), gm, gv, out, True, 0, 0)
+    return 1.0 - float(np.sum(out[:, 6, 1] * mode) / np.sum(mode * mode))
+
+
+def test_a_transfer_damps_a_mode_at_fourth_order_in_k_dx():
+    """APIC keeps affine velocity fields exactly, so a transfer's loss of a smooth mode starts
+    at fourth order: 1 - amplitude = alpha (k dx)^4, alpha -> 0.024 (measured 0.0236, 0.0240,
+    0.0241 at k dx = 0.39, 0.20, 0.098), while over (k dx)^2 the loss falls sixteenfold from the
+    first to the last.  This is why the tub runs hold transfer_cfl / dx^3 fixed across grids
+    (continuum/run.py, damping_transfer_cfl): the transfers are a hyperviscosity alpha c dx^3 /
+    transfer_cfl."""
+    kdx = np.array([2.0 * math.pi / n for n in (16, 32, 64)])
+    loss = np.array([_mode_loss(n) for n in (16, 32, 64)])
+    alpha = loss / kdx**4
+    assert alpha == pytest.approx(0.024, rel=0.03)
+    assert loss[0] / kdx[0] ** 2 > 12.0 * loss[2] / kdx[2] ** 2
+
+
+def test_the_damping_is_the_same_on_every_grid_at_a_fixed_damping_length():
+    """A shear wave of 8 cm (k dx = 0.39 and 0.20, where a transfer's loss is alpha (k dx)^4:
+    test above) on grids of 5 and 2.5 mm, the transfers of LagrangianOptions with transfer_cfl
+    0.025 at a damping length of 5 mm (cfl 0.4: 16 and 128 transfers a step): the kinetic
+    energy left after 4 ms is the same within 8 % (measured 0.202 and 0.211), where the rule
+    of sessions 11 - 15 (damping_length = dx: 16 transfers a step on both grids) leaves the
+    fine grid's wave far less damped (0.369): with it the damping was a property of the
+    grid."""
+    from vibroflow.continuum.run import LagrangianOptions
+
+    rule = LagrangianOptions(cfl=0.4, transfer_cfl=0.025, damping_length=0.005)
+    coarse_n, fine_n = rule.transfers(0.005), rule.transfers(0.0025)
+    assert (coarse_n, fine_n) == (16, 128)
+    coarse = _shear_wave_energy(0.4, coarse_n, dx=0.005, wavelength=0.08)
+    fine = _shear_wave_energy(0.4, fine_n, dx=0.0025, wavelength=0.08)
+    old_n = LagrangianOptions(cfl=0.4, transfer_cfl=0.025, damping_length=0.0025).transfers(
+        0.0025)
+    assert old_n == 16
+    old = _shear_wave_energy(0.4, old_n, dx=0.0025, wavelength=0.08)
+    print(f"\nenergy left: 5 mm {coarse:.3f}, 2.5 mm {fine:.3f} (former rule {old:.3f})")
+    assert fine == pytest.approx(coarse, rel=0.08)
+    assert coarse < 0.5
+    assert old > 1.5 * coarse
+
+
+def test_the_transfers_follow_the_grid_from_the_default_one():
+    """The tub runs' rule (continuum/run.py): on the default grid the default 20 (Lagrangian)
+    and 8 (Eulerian) transfers a step; on half of it eight times as many; a damping length
+    equal to the grid gives the former rule; a bad damping length is a one-line error."""
+    from vibroflow.continuum.eulerian.run import EulerianOptions
+    from vibroflow.continuum.run import LagrangianOptions, options_record
+    from vibroflow.scenario.io import load_scenario
+
+    d3 = 3 * load_scenario("tub47").fill.diameter
+    assert LagrangianOptions().transfers(d3, d3) == 20
+    assert LagrangianOptions().transfers(d3 / 2, d3) == 160
+    assert LagrangianOptions(damping_length=d3 / 2).transfers(d3 / 2, d3) == 20
+    assert EulerianOptions().transfers(0.01875, 0.01875) == 8
+    assert EulerianOptions().transfers(0.009375, 0.01875) == 64
+    assert LagrangianOptions(transfer_cfl=0).transfers(d3 / 2, d3) == 1
+    for bad in (0.0, -1.0, float("nan"), True):
+        with pytest.raises(InputError, match="damping_length"):
+            LagrangianOptions(damping_length=bad)
+    # a run on a grid of its own is not taken for one made under the former rule
+    assert options_record(LagrangianOptions())["damping_length"] is None
+    assert options_record(LagrangianOptions(dx=0.01))["damping_length"] is not None

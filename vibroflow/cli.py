@@ -276,8 +276,15 @@ def continuum(
                                "round(cfl / transfer_cfl) of them, so their damping of the "
                                "grid-scale motion does not depend on the step; default 0.015 "
                                "(Lagrangian) and 0.0375 (Eulerian), chosen with the grid to "
-                               "match the DEM (continuum/run.py DEFAULT_TRANSFER_CFL); 0: one "
-                               "transfer a step (always so with --flip > 0).")] = None,
+                               "match the DEM (continuum/run.py DEFAULT_TRANSFER_CFL), on a "
+                               "grid of --damping-length; 0: one transfer a step (always so "
+                               "with --flip > 0).")] = None,
+    damping_length: Annotated[Optional[float], typer.Option(
+        "--damping-length", help="The grid spacing (m) on which --transfer-cfl holds; on "
+                                 "another grid the transfers are made at transfer_cfl (dx / "
+                                 "damping_length)^3, so that their damping of the flow (a "
+                                 "hyperviscosity) is the same on every grid; default the "
+                                 "default grid's spacing (continuum/run.py).")] = None,
     stiffness_factor: Annotated[float, typer.Option(
         "--stiffness-factor", help="Multiply the elastic moduli (and the default wall "
                                    "stiffness) by this factor in (0, 1]: sqrt(factor) times "
@@ -332,7 +339,7 @@ def continuum(
         step["transfer_cfl"] = transfer_cfl
     options = options_class(dx=dx, model=rheology, dilatancy=dilatancy,
                             stiffness_factor=stiffness_factor, compaction=compaction, flip=flip,
-                            bed_viscosity=bed_viscosity, **step)
+                            bed_viscosity=bed_viscosity, damping_length=damping_length, **step)
     material_for(s, cal, options)  # validates the parameters before --out is made
     try:
         summary = run_method(s, out, calibration=cal, options=options, progress=True,

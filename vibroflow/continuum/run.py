@@ -81,10 +81,12 @@ CHECKPOINT_NAME = "checkpoint.npz"
 #: DEFAULT_TRANSFER_CFL) = 20 APIC transfers a step (transfer_operator.py).  The grid and the
 #: transfers' rate are model choices, not only numerical ones, and are stated as such:
 #:
-#: * the local mu(I) law has no length of its own; on a fine grid it forms a tight roll on the
-#:   tub's right half with the left half still, unlike the DEM's bed-wide roll.  A grid of a
-#:   few grains is the length it lacks (a nonlocal law's cooperativity length, Kamrin & Koval
-#:   2012, would be its physical form; not built);
+#: * the grid: on a fine grid at a fixed transfer_cfl the continuum forms a tight roll on the
+#:   tub's right half with the left half still, unlike the DEM's bed-wide roll (session 8).
+#:   Session 16 found that this was the transfers' damping falling with the grid (below), not
+#:   the mu(I) law's want of a length: with the damping held, the field is the same on 19, 12.7
+#:   and 9.5 mm grids, and a nonlocal fluidity (Kamrin & Koval 2012, a throw-away) changed
+#:   nothing on either grid;
 #: * each APIC transfer filters the velocities through the grid, a damping of the grid-scale
 #:   motion, and more of it brings the field closer to the DEM's, where neither a Newtonian
 #:   shear viscosity (20 - 2000 Pa s) nor a bulk viscosity (200 - 4000 Pa s) in the stress did:
@@ -106,10 +108,40 @@ CHECKPOINT_NAME = "checkpoint.npz"
 #: tub47-quick, which is worse (0.477 and a roll 0.59 of the DEM's, against 0.431 and 0.83).
 #: Named in a run's fingerprint and a study stage's inputs (options_record), so that a run made
 #: under the former rule is never taken for one made under this one.
+#:
+#: The transfers' damping is a fourth-order one, held the same on every grid (session 16).  One
+#: APIC transfer leaves a velocity mode of wavenumber k the fraction 1 - alpha (k dx)^4 of its
+#: amplitude (APIC keeps affine fields exactly, so the loss starts at fourth order; alpha =
+#: 0.024 on a lattice of 2 x 2 points a cell, tests/test_transfer_operator.py), and a run
+#: makes n / dt = c / (transfer_cfl dx) of them a second (c the wave speed the step is set
+#: by), so the transfers damp the flow as a hyperviscosity nu_4 = alpha c dx^3 /
+#: transfer_cfl (m^4/s): dv/dt = -nu_4 lap^2 v.  Held at a fixed transfer_cfl, it falls
+#: eightfold each time the grid is halved, and the tub's field moved away from the DEM's as
+#: the grid was refined (E 0.347, 0.418, 0.500 on 19, 12.7 and 9.5 mm): the grid was part of
+#: the model.  transfer_cfl is therefore the Courant number of the transfers on a grid of
+#: spacing `damping_length` (default: the formulation's default grid, 3 ball diameters, on
+#: which the default was chosen), and a run on spacing dx makes them at transfer_cfl (dx /
+#: damping_length)^3: the same nu_4 on every grid.  tub47 then reads E 0.347, 0.335, 0.339
+#: (strength 0.98, 0.98, 0.95 of the DEM's) on 19, 12.7 and 9.5 mm, four settling times each
+#: (benchmarks/continuum_sensitivity.py, benchmarks/README.md "Session 16"): converged in the
+#: grid, at eight times the transfers a step for each halving of it (transfers are cheap: an
+#: application costs a few microseconds on tub47's grid, transfer_operator.py).
 DEFAULT_DX_DIAMETERS = 3.0
 DEFAULT_CFL = 0.3
 DEFAULT_TRANSFER_CFL = 0.015
 DEFAULT_GRID = f"{DEFAULT_DX_DIAMETERS:g} ball diameters"
+DEFAULT_DAMPING = "the default grid's spacing"
+
+
+def damping_transfer_cfl(transfer_cfl: float | None, dx: float, damping_length: float
+                         ) -> float | None:
+    """The Courant number of the transfers on a grid of spacing dx (m) that damps the flow as
+    `transfer_cfl` does on one of spacing damping_length (m): transfer_cfl (dx /
+    damping_length)^3 (the hyperviscosity alpha c dx^3 / transfer_cfl held fixed; the comment
+    above DEFAULT_DX_DIAMETERS).  None or 0 (one transfer a step) pass through."""
+    if not transfer_cfl:
+        return transfer_cfl
+    return transfer_cfl * (dx / damping_length) ** 3
 
 
 def default_dx(scenario) -> float:
@@ -132,7 +164,11 @@ class LagrangianOptions:
     [compaction] gamma_c and dphi_cyc (constitutive.py, vibroflow.calibration.compaction);
     bed_viscosity (Pa s): the bed's Kelvin-Voigt damping on connected material
     (constitutive.damped_stress), 0 = off (default); benchmarks/strip_damping.py fits it on
-    a DEM of a vibrated strip of the same balls.
+    a DEM of a vibrated strip of the same balls; damping_length (m): the grid spacing on which
+    transfer_cfl is the transfers' Courant number (default None: the default grid's spacing,
+    `default_dx`); on another grid they are made at damping_transfer_cfl, so that their
+    damping of the flow does not depend on the grid (the comment above DEFAULT_DX_DIAMETERS);
+    damping_length = dx gives the rule of sessions 11 - 15, transfer_cfl on every grid.
 
     stiffness_factor s < 1 is the continuum's counterpart of the DEM's reduced Young's modulus:
     the elastic moduli K and G (and with them the default wall stiffness) are multiplied by s,
@@ -149,7 +185,7 @@ class LagrangianOptions:
     #: options added after the first studies: left out of a study stage's inputs (its hash)
     #: while at their defaults, so that those studies stay up to date (vibroflow.study.stages)
     LATER_OPTIONS: ClassVar[tuple[str, ...]] = ("dilatancy", "stiffness_factor", "compaction",
-                                                "flip", "bed_viscosity")
+                                                "flip", "bed_viscosity", "damping_length")
 
     dx: float | None = None
     cfl: float = DEFAULT_CFL
@@ -162,6 +198,7 @@ class LagrangianOptions:
     flip: float = 0.0
     transfer_cfl: float | None = DEFAULT_TRANSFER_CFL
     bed_viscosity: float = 0.0
+    damping_length: float | None = None
 
     def __post_init__(self):
         if not (isinstance(self.flip, (int, float)) and 0.0 <= self.flip <= 1.0):
@@ -182,15 +219,37 @@ class LagrangianOptions:
         if not (math.isfinite(self.stiffness_factor) and 0 < self.stiffness_factor <= 1):
             raise InputError(f"stiffness_factor = {self.stiffness_factor!r}: must be in (0, 1]")
         check_bed_viscosity(self.bed_viscosity)
+        if self.damping_length is not None and not (
+                isinstance(self.damping_length, (int, float))
+                and not isinstance(self.damping_length, bool)
+                and math.isfinite(self.damping_length) and self.damping_length > 0):
+            raise InputError(f"damping_length = {self.damping_length!r}: must be a length > 0 m "
+                             "(or unset: the default grid's spacing)")
 
-    def transfers(self) -> int:
-        """The APIC transfers a step makes (timestep.transfers_per_step of cfl and
-        transfer_cfl); one with a FLIP blend (flip > 0), which keeps the sub-grid motion the
+    def transfers(self, dx: float | None = None, default_length: float | None = None) -> int:
+        """The APIC transfers a step makes on a grid of spacing dx (m): timestep.
+        transfers_per_step of cfl and `grid_transfer_cfl`; without dx, of transfer_cfl as
+        given.  One with a FLIP blend (flip > 0), which keeps the sub-grid motion the
         transfers exist to damp: a FLIP run is the step-converged, undamped reference
         (mpm.MPMSystem.flip)."""
         if self.flip > 0.0:
             return 1
-        return transfers_per_step(self.cfl, self.transfer_cfl)
+        return transfers_per_step(self.cfl, self.grid_transfer_cfl(dx, default_length))
+
+    def grid_transfer_cfl(self, dx: float | None, default_length: float | None = None
+                          ) -> float | None:
+        """The transfers' Courant number on a grid of spacing dx (m): damping_transfer_cfl of
+        transfer_cfl from a grid of damping_length, or of `default_length` (m) when that is
+        unset (the formulation's default grid: `default_dx` for the material point method,
+        eulerian.run.default_dx's for the fixed mesh).  Without dx,
+        transfer_cfl as given."""
+        if dx is None:
+            return self.transfer_cfl
+        length = self.damping_length if self.damping_length is not None else default_length
+        if length is None:
+            raise ValueError("grid_transfer_cfl: the damping length is unset and no default "
+                             "length was given")
+        return damping_transfer_cfl(self.transfer_cfl, dx, length)
 
 
 def _contact(scenario, a: str, b: str):
@@ -331,7 +390,7 @@ def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
     dt = interval / math.ceil(interval / dt)
     return MPMSystem(grid, material, dt, frame=frame, boundaries=boundaries,
                      chunks=scenario.run.force_chunks, flip=float(options.flip),
-                     transfers=options.transfers()), spacing
+                     transfers=options.transfers(dx, default_dx(scenario))), spacing
 
 
 def sample_times(scenario) -> tuple[np.ndarray, float, float]:
@@ -411,6 +470,10 @@ def options_record(options: LagrangianOptions) -> dict:
     record = dataclasses.asdict(options)
     if record.get("dx") is None:
         record["dx"] = DEFAULT_GRID
+    elif record.get("damping_length") is None:
+        # a grid of its own: its transfers follow the damping rule of session 16, which a
+        # run made before it did not (the default grid's are the same under both)
+        record["damping_length"] = DEFAULT_DAMPING
     return record
 
 

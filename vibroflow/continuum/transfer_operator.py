@@ -96,17 +96,20 @@ def sum_operator_rows(i0, i1, cb, B):
                     B[i, k, a, b] = s
 
 
-@nb.njit(cache=True, fastmath={"reassoc", "contract", "nsz", "arcp"})
+@nb.njit(cache=True)
 def transfer_rows(i0, i1, B, gm, gv, out, periodic, no_slip_rows, axis_cols):
     """One transfer of the grid velocities gv (nx, nz, 2) (m/s) for the node rows i0:i1, into
     out: v_i' = sum_j B_ij v_j / m_i at nodes holding mass (gm > MASS_EPS, kg/m) and off the
     grid's edge, 0 elsewhere (as grid_update leaves them); then the grid's conditions as after
     the update: the lowest no_slip_rows node rows held still (a rough floor), the radial
-    velocity of the first axis_cols columns 0 (an axisymmetric section's axis). The sums may be
-    reassociated (fastmath reassoc, contract, nsz and arcp, no other licence: NaN and infinities
-    pass through), which lets them vectorise: a third less time; the numbers still do not depend
-    on the threads, but may on the processor's vector instructions (a checkpoint resumed on
-    another kind of processor may then not continue bit for bit)."""
+    velocity of the first axis_cols columns 0 (an axisymmetric section's axis).
+
+    The sums are in the written order (no fastmath).  Sessions 11 - 15 let them be reassociated
+    (fastmath reassoc, a third less time here), and the compiled order then depended on how
+    this kernel was compiled into its callers: a process that loaded it from numba's cache
+    before compiling the Eulerian loops gave the serial and the parallel loop numbers 1e-12
+    apart (tests/test_transfer_operator.py, the second run of the file, session 16), where the
+    loops must agree bit for bit whatever the threads."""
     nx, nz = gm.shape
     for i in range(i0, i1):
         for k in range(nz):

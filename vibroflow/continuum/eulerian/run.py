@@ -132,8 +132,8 @@ def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
     from vibroflow.scenario.model import find_contact
 
     geo = geometry_of(scenario)
-    dx = options.dx if options.dx is not None else default_dx(geo.radius,
-                                                               lagrangian_default_dx(scenario))
+    grid_default = default_dx(geo.radius, lagrangian_default_dx(scenario))
+    dx = options.dx if options.dx is not None else grid_default
     mesh = EulerianMesh.tub(geo, dx)
     cal = calibration or {}
     wall_pair = find_contact(scenario, scenario.fill.material, scenario.tub.wall_material)
@@ -154,7 +154,7 @@ def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
     dt = interval / math.ceil(interval / dt)
     return EulerianSystem(mesh, material, dt, frame=frame, wall=wall, partitions=partitions,
                           chunks=scenario.run.force_chunks,
-                          transfers=options.transfers())
+                          transfers=options.transfers(dx, grid_default))
 
 
 def bed_masses(system: EulerianSystem, area: float, gravity: float):
