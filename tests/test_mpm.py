@@ -419,6 +419,12 @@ def test_continuum_command_bad_input(run_cli, tmp_path):
                 tmp_path / "missing.toml")
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "o").exists()
+    r = run_cli("continuum", "tub47-quick", "--out", tmp_path / "o", "--damping-length", "-1")
+    assert r.returncode == 2
+    assert r.stderr.strip().splitlines() == [
+        "error: damping_length = -1.0: must be a length > 0 m (or unset: the default grid's "
+        "spacing)"]
+    assert not (tmp_path / "o").exists()
 
 
 # ----------------------------------------------------------------------------------------------
