@@ -121,11 +121,13 @@ CHECKPOINT_NAME = "checkpoint.npz"
 #: the model.  transfer_cfl is therefore the Courant number of the transfers on a grid of
 #: spacing `damping_length` (default: the formulation's default grid, 3 ball diameters, on
 #: which the default was chosen), and a run on spacing dx makes them at transfer_cfl (dx /
-#: damping_length)^3: the same nu_4 on every grid.  tub47 then reads E 0.347, 0.335, 0.339
-#: (strength 0.98, 0.98, 0.95 of the DEM's) on 19, 12.7 and 9.5 mm, four settling times each
-#: (benchmarks/continuum_sensitivity.py, benchmarks/README.md "Session 16"): converged in the
-#: grid, at eight times the transfers a step for each halving of it (transfers are cheap: an
-#: application costs a few microseconds on tub47's grid, transfer_operator.py).
+#: damping_length)^3: the same nu_4 on every grid.  tub47 then reads E 0.347, 0.331, 0.346
+#: (strength 0.98, 0.97, 0.92 of the DEM's) on 19, 12.7 and 9.5 mm (20, 67, 161 transfers a
+#: step), four settling times each (benchmarks/continuum_sensitivity.py, benchmarks/README.md
+#: "Session 16"): converged in the grid, at eight times the transfers a step for each halving
+#: of it (a 9.5 mm run took 55 s against 34 s at the fixed transfer_cfl).  The Eulerian
+#: formulation's remap damps too, and is not held: its field settles on finer grids (E 0.493,
+#: 0.506 on 12.5 and 9.4 mm) but not at its default grid's 0.432.
 DEFAULT_DX_DIAMETERS = 3.0
 DEFAULT_CFL = 0.3
 DEFAULT_TRANSFER_CFL = 0.015
