@@ -126,8 +126,9 @@ CHECKPOINT_NAME = "checkpoint.npz"
 #: step), four settling times each (benchmarks/continuum_sensitivity.py, benchmarks/README.md
 #: "Session 16"): converged in the grid, at eight times the transfers a step for each halving
 #: of it (a 9.5 mm run took 55 s against 34 s at the fixed transfer_cfl).  The Eulerian
-#: formulation's remap damps too, and is not held: its field settles on finer grids (E 0.493,
-#: 0.506 on 12.5 and 9.4 mm) but not at its default grid's 0.432.
+#: formulation's field settles on finer grids with the rule (E 0.493, 0.506 on 12.5 and 9.4
+#: mm) but not at its default grid's 0.432, and more damping does not bring it there (0.507,
+#: 0.518 at 1.5 and 2 times it on 12.5 mm): something else in its step depends on the grid.
 DEFAULT_DX_DIAMETERS = 3.0
 DEFAULT_CFL = 0.3
 DEFAULT_TRANSFER_CFL = 0.015
