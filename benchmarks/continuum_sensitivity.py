@@ -127,11 +127,10 @@ def run_member(job: tuple) -> dict:
 
 
 def _mean_se(values) -> tuple[float, float]:
-    import numpy as np
+    """Mean and standard error of an ensemble's members (analysis.stats.stderr_of_batches)."""
+    from vibroflow.analysis.stats import stderr_of_batches
 
-    v = np.asarray(values, float)
-    se = float(v.std(ddof=1) / np.sqrt(v.size)) if v.size > 1 else float("nan")
-    return float(v.mean()), se
+    return float(sum(values) / len(values)), stderr_of_batches(values)
 
 
 def main(argv=None) -> int:

@@ -57,20 +57,6 @@ def _options(method: str, a):
     return cls(dx=a.dx, stiffness_factor=a.stiffness_factor, **extra)
 
 
-def _transfers(method: str, a) -> int:
-    """The transfers a step of the method's run on this case's grid (its make_system's)."""
-    from vibroflow.analysis.summary import geometry_of
-    from vibroflow.continuum.eulerian.run import default_dx as eulerian_dx
-    from vibroflow.continuum.run import default_dx
-
-    scenario = _inputs(a)[0]
-    grid_default = default_dx(scenario)
-    if method == "eulerian":
-        grid_default = eulerian_dx(geometry_of(scenario).radius, grid_default)
-    dx = a.dx if a.dx is not None else grid_default
-    return _options(method, a).transfers(dx, grid_default)
-
-
 def _inputs(a):
     from vibroflow.calibration.calibrate import read_calibration
     from vibroflow.scenario.io import load_scenario
@@ -314,7 +300,7 @@ def main(argv=None) -> int:
     report = {"case": a.case, "options": {"cfl": _options("lagrangian", a).cfl, "dx": a.dx,
                                           "stiffness_factor": a.stiffness_factor,
                                           "transfers_per_step": {
-                                              m: _transfers(m, a)
+                                              m: _options(m, a).transfers_on(_inputs(a)[0])
                                               for m in ("lagrangian", "eulerian")}},
               "dem_wall_time_s": dem_wall, "cases": []}
     if a.kernels:

@@ -299,13 +299,17 @@ def test_the_transfers_follow_the_grid_from_the_default_one():
     from vibroflow.continuum.run import LagrangianOptions, options_record
     from vibroflow.scenario.io import load_scenario
 
-    d3 = 3 * load_scenario("tub47").fill.diameter
-    assert LagrangianOptions().transfers(d3, d3) == 20
-    assert LagrangianOptions().transfers(d3 / 2, d3) == 160
-    assert LagrangianOptions(damping_length=d3 / 2).transfers(d3 / 2, d3) == 20
-    assert EulerianOptions().transfers(0.01875, 0.01875) == 8
-    assert EulerianOptions().transfers(0.009375, 0.01875) == 64
-    assert LagrangianOptions(transfer_cfl=0).transfers(d3 / 2, d3) == 1
+    tub = load_scenario("tub47")
+    d3 = 3 * tub.fill.diameter
+    # each formulation's default grid: 3 diameters, the Eulerian's rounded to fill the tub
+    assert LagrangianOptions().grid(tub) == pytest.approx(d3)
+    assert EulerianOptions().grid(tub) == pytest.approx(0.01875)
+    assert LagrangianOptions().transfers_on(tub) == 20
+    assert LagrangianOptions(dx=d3 / 2).transfers_on(tub) == 160
+    assert LagrangianOptions(dx=d3 / 2, damping_length=d3 / 2).transfers_on(tub) == 20
+    assert EulerianOptions().transfers_on(tub) == 8
+    assert EulerianOptions(dx=0.009375).transfers_on(tub) == 64
+    assert LagrangianOptions(dx=d3 / 2, transfer_cfl=0).transfers_on(tub) == 1
     for bad in (0.0, -1.0, float("nan"), True):
         with pytest.raises(InputError, match="damping_length"):
             LagrangianOptions(damping_length=bad)

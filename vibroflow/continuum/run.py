@@ -254,6 +254,20 @@ class LagrangianOptions:
                              "length was given")
         return damping_transfer_cfl(self.transfer_cfl, dx, length)
 
+    def default_grid(self, scenario) -> float:
+        """The formulation's default grid spacing (m) for this scenario: `default_dx`, 3 ball
+        diameters (EulerianOptions: its mesh's)."""
+        return default_dx(scenario)
+
+    def grid(self, scenario) -> float:
+        """The grid spacing (m) a run of this scenario uses: dx, or the default grid's."""
+        return self.dx if self.dx is not None else self.default_grid(scenario)
+
+    def transfers_on(self, scenario) -> int:
+        """The transfers a step of a run of this scenario makes (`transfers` on its grid, the
+        damping length defaulting to the default grid's spacing)."""
+        return self.transfers(self.grid(scenario), self.default_grid(scenario))
+
 
 def _contact(scenario, a: str, b: str):
     from vibroflow.scenario.model import find_contact
@@ -372,7 +386,7 @@ def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
                 options: LagrangianOptions, frame) -> tuple[MPMSystem, float]:
     """The MPM system of a tub scenario in `frame`; returns (system, point spacing m)."""
     geo = geometry_of(scenario)
-    dx = options.dx if options.dx is not None else default_dx(scenario)
+    dx = options.grid(scenario)
     spacing = 0.5 * dx
     grid = Grid.covering(-geo.radius, geo.radius, 0.0, geo.rim_height, dx)
     cal = calibration or {}
@@ -393,7 +407,7 @@ def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
     dt = interval / math.ceil(interval / dt)
     return MPMSystem(grid, material, dt, frame=frame, boundaries=boundaries,
                      chunks=scenario.run.force_chunks, flip=float(options.flip),
-                     transfers=options.transfers(dx, default_dx(scenario))), spacing
+                     transfers=options.transfers_on(scenario)), spacing
 
 
 def sample_times(scenario) -> tuple[np.ndarray, float, float]:

@@ -99,6 +99,11 @@ class EulerianOptions(LagrangianOptions):
 
     transfer_cfl: float | None = DEFAULT_TRANSFER_CFL
 
+    def default_grid(self, scenario) -> float:
+        """The default node spacing (m): `default_dx` of the Lagrangian default (the mesh's
+        cells must fill the tub's width)."""
+        return default_dx(geometry_of(scenario).radius, lagrangian_default_dx(scenario))
+
     def __post_init__(self):
         super().__post_init__()
         if self.flip != 0.0:
@@ -132,8 +137,7 @@ def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
     from vibroflow.scenario.model import find_contact
 
     geo = geometry_of(scenario)
-    grid_default = default_dx(geo.radius, lagrangian_default_dx(scenario))
-    dx = options.dx if options.dx is not None else grid_default
+    dx = options.grid(scenario)
     mesh = EulerianMesh.tub(geo, dx)
     cal = calibration or {}
     wall_pair = find_contact(scenario, scenario.fill.material, scenario.tub.wall_material)
@@ -154,7 +158,7 @@ def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
     dt = interval / math.ceil(interval / dt)
     return EulerianSystem(mesh, material, dt, frame=frame, wall=wall, partitions=partitions,
                           chunks=scenario.run.force_chunks,
-                          transfers=options.transfers(dx, grid_default))
+                          transfers=options.transfers_on(scenario))
 
 
 def bed_masses(system: EulerianSystem, area: float, gravity: float):
