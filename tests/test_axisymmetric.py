@@ -14,7 +14,7 @@ import pytest
 from vibroflow.analysis.column import (LAJEUNESSE_2004, LUBE_2004, LUBE_2005,
                                        quasistatic_runout_axisymmetric)
 from vibroflow.continuum.boundary import Plane
-from vibroflow.continuum.column import run_column
+from vibroflow.continuum.column import SAND_FRICTION_DEG, run_column, sand_material
 from vibroflow.continuum.constitutive import ContinuumMaterial, update_stress_points
 from vibroflow.continuum.g2p import g2p
 from vibroflow.continuum.grid import Grid
@@ -159,20 +159,6 @@ def test_axisymmetric_column_spreads_less_than_the_planar_one():
 # ----------------------------------------------------------------------------------------------
 # the experiments' columns: Lube et al. 2004 and Lajeunesse et al. 2004 are axisymmetric
 
-#: the friction angle (deg) of dry quartz sand, Lube et al. 2004's main material, as the
-#: material's mu_s (the glass-bead rate dependence mu_2 - mu_s and I_0 kept).  A typical value
-#: for dry sand (30 - 34 deg is the usual range of its angle of repose); the paper's own table
-#: of its materials could not be read here, so this is not the measured angle of their sand.
-#: The paper found the deposits "the same" for sand, salt, rice, couscous and sugar.
-SAND_FRICTION_DEG = 29.5
-
-
-def sand():
-    base = ContinuumMaterial()
-    mu_s = float(np.tan(np.radians(SAND_FRICTION_DEG)))
-    return ContinuumMaterial(mu_s=mu_s, mu_2=mu_s + base.mu_2 - base.mu_s)
-
-
 #: the central height is the deposit's mean thickness within this fraction of R0 of the axis:
 #: next to the axis a bin holds few points, and one bin's thickness swings by 5 - 15 % (a = 4
 #: on R0/20 read 0.687 in the first bin, 0.774 within 0.1 R0, with 0.80 - 0.90 around it);
@@ -184,7 +170,7 @@ def sand_column(a, n):
     """The deposit ((r_inf - R0)/R0, H_inf/R0) of a sand cylinder of R0 = 1 m (157 of tub47's
     grains across), aspect ratio a, on dx = R0/n, rough floor, APIC; the height within CENTRE
     R0 of the axis."""
-    run = run_column(1.0, a, 1.0 / n, material=sand(), rough_floor=True, axisymmetric=True)
+    run = run_column(1.0, a, 1.0 / n, material=sand_material(), rough_floor=True, axisymmetric=True)
     assert run.settled
     runout, height = run.deposit(wall_window=CENTRE).normalised(1.0)
     print(f"\nsand, a = {a}, R0/{n}: run-out {runout:.3f} (Lube 2004 "
@@ -202,8 +188,10 @@ def test_tall_sand_cylinder_meets_lube_and_lajeunesse_2004(a):
     within 10 % of Lube et al. 2004's 1.6 a^(1/2) and the height within 10 % of Lajeunesse et
     al. 2004's 0.74 R0.  Measured: a = 3, 2.70 (-2.7 %) and 0.78 (+5.8 %); a = 4, 3.36
     (+5.0 %) and 0.77 (+4.6 %).  On R0/40 (test_sand_cylinders_on_the_finer_grid) the
-    run-outs hold and the heights do not: the height grows with the refinement.  With tub47's glass-bead friction (mu_s = tan 20.9 deg)
-    the same cylinder runs 25 % too far and stands 20 - 30 % too low
+    run-outs hold and the heights do not: the height grows with the refinement, and on R0/80
+    (benchmarks/column_convergence.py) a = 3 reads 2.86 (+3.1 %) and 0.89 (+20 %): this grid's
+    pass on the height is a coarse grid's.  With tub47's glass-bead friction (mu_s = tan 20.9
+    deg) the same cylinder runs 25 % too far and stands 20 - 30 % too low
     (test_axisymmetric_column_spreads_less_than_the_planar_one): the continuum's deposit
     depends on the grains' friction, where the experiments' hardly did.  Lajeunesse et al.'s
     own grains were glass beads, whose height law they found insensitive to the bead size and
@@ -419,7 +407,7 @@ def test_eulerian_radial_expansion_hoop_rate_and_mass_per_radian():
 def _eulerian_sand_column(a, n, reach=None):
     from vibroflow.continuum.eulerian.column import run_column as run_eulerian
 
-    run = run_eulerian(1.0, a, 1.0 / n, material=sand(), rough_floor=True, axisymmetric=True,
+    run = run_eulerian(1.0, a, 1.0 / n, material=sand_material(), rough_floor=True, axisymmetric=True,
                        reach=reach)
     assert run.settled
     assert abs(run.mass_error) < 1e-12
@@ -453,9 +441,11 @@ def test_eulerian_sand_cylinder_against_lube_and_lajeunesse_2004():
     (measured 2.88, +4.0 %); its height is not within 10 % of Lajeunesse et al. 2004 (0.84,
     +13.7 %; the Lagrangian's 0.78, +5.8 %, on this grid, 0.85 on R0/40): it stands as the
     Lagrangian's does one refinement later.  a = 4 on R0/20 (about 3.5 minutes, not run
-    here): run-out 3.55 (+10.8 %), height 0.87 (+17.8 %).  Nor is the Eulerian run-out
-    grid-converged where the Lagrangian's is: a = 3 reads 2.39, 2.88, 3.12 on R0/10, /20, /40
-    (R0/40: +12.6 %, height 0.878, 14 minutes; the Lagrangian's 2.35, 2.70, 2.71)."""
+    here): run-out 3.55 (+10.8 %), height 0.87 (+17.8 %).  Neither formulation's tall
+    run-out is grid-converged: a = 3 reads 2.39, 2.88, 3.12 on R0/10, /20, /40 here (R0/40:
+    +12.6 %, height 0.878, 14 minutes), and the Lagrangian's 2.35, 2.70, 2.71, 2.86 on R0/10
+    to /80 (height 0.77, 0.78, 0.85, 0.89), the plateau from R0/20 to R0/40 a coincidence
+    (benchmarks/column_convergence.py; benchmarks/README.md, session 17)."""
     runout, height = _eulerian_sand_column(3.0, 20)
     assert runout == pytest.approx(LUBE_2004.runout(3.0), rel=0.10)
     assert height == pytest.approx(LAJEUNESSE_2004.height(3.0), rel=0.20)

@@ -140,6 +140,25 @@ class ColumnRun:
                                          self.material.diameter, wall_window=wall_window)
 
 
+#: the friction angle (deg) of dry quartz sand, the main material of Lube et al. 2004, as a
+#: continuum's mu_s (sand_material).  A typical value for dry sand (30 - 34 deg is the usual
+#: range of its angle of repose); the paper's own table of its materials could not be read
+#: here, so this is not the measured angle of their sand.  The paper found the deposits "the
+#: same" for sand, salt, rice, couscous and sugar.
+SAND_FRICTION_DEG = 29.5
+
+
+def sand_material(friction_deg: float = SAND_FRICTION_DEG) -> ContinuumMaterial:
+    """The default continuum with mu_s = tan(friction_deg) and the glass-bead rate dependence
+    (mu_2 - mu_s and I_0) kept: the material of the cylinder checks against Lube et al. 2004
+    and Lajeunesse et al. 2004 (tests/test_axisymmetric.py, benchmarks/column_convergence.py)."""
+    if not (isinstance(friction_deg, (int, float)) and 0 < friction_deg < 90):
+        raise InputError(f"friction_deg = {friction_deg!r}: must be an angle in (0, 90) deg")
+    base = ContinuumMaterial()
+    mu_s = math.tan(math.radians(friction_deg))
+    return ContinuumMaterial(mu_s=mu_s, mu_2=mu_s + base.mu_2 - base.mu_s)
+
+
 def column_points(x0: float, x1: float, H0: float, spacing: float) -> np.ndarray:
     """Points on a square lattice of `spacing` (m) filling [x0, x1] x [0, H0] (m), each at the
     centre of its own square."""
@@ -164,14 +183,17 @@ def column_system(L0: float, H0: float, dx: float, material: ContinuumMaterial |
                   floor_friction: float = 0.40, wall_friction: float = 0.0,
                   symmetric: bool = True, reach: float | None = None,
                   cfl: float = 0.3, rough_floor: bool = False,
-                  flip: float = 0.0, axisymmetric: bool = False) -> MPMSystem:
+                  flip: float = 0.0, axisymmetric: bool = False,
+                  transfers: int = 1) -> MPMSystem:
     """The MPM system of a column of half-width L0 and height H0 (m) on grid spacing dx (m):
     floor z = 0 with Coulomb friction `floor_friction`, and no slip if `rough_floor`;
     symmetric (module docstring), or a wall x = 0 with `wall_friction`; a grid reaching
     `reach` (m, default L0 (2 + 3 H0/L0)) from x = 0 (both ways when symmetric); `flip` the
     FLIP fraction of the points' velocity update (MPMSystem.flip; module docstring);
     `axisymmetric`: the cylindrical column of radius L0 (module docstring; needs the rough
-    floor, `symmetric` does not apply)."""
+    floor, `symmetric` does not apply); `transfers`: APIC transfers a step (MPMSystem.transfers;
+    1, the checks' setting, unless a study holds the transfers' damping across grids:
+    benchmarks/column_convergence.py)."""
     _check_size(L0, H0, dx)
     mat = material or ContinuumMaterial()
     for name, mu in (("floor_friction", floor_friction), ("wall_friction", wall_friction)):
@@ -201,7 +223,7 @@ def column_system(L0: float, H0: float, dx: float, material: ContinuumMaterial |
         raise InputError(f"flip = {flip!r}: must be in [0, 1] (0: APIC, 1: FLIP)")
     return MPMSystem(grid, mat, dt, frame=LabFrame((0.0, -G_ACC)), boundaries=walls,
                      no_slip_below=0.0 if rough_floor else None, flip=float(flip),
-                     axisymmetric=bool(axisymmetric))
+                     axisymmetric=bool(axisymmetric), transfers=transfers)
 
 
 def column_state(system: MPMSystem, L0: float, H0: float, symmetric: bool = True) -> MPMState:
@@ -244,11 +266,11 @@ def run_column(L0: float, H0: float, dx: float, material: ContinuumMaterial | No
                ke_fraction: float = 1.0e-4, check_every: float | None = None,
                reach: float | None = None, cfl: float = 0.3,
                rough_floor: bool = False, flip: float = 0.0,
-               axisymmetric: bool = False) -> ColumnRun:
+               axisymmetric: bool = False, transfers: int = 1) -> ColumnRun:
     """Release the column and run until it is at rest (module docstring).  Times in s; default
     t_min = 3 sqrt(H0/g), t_max = 30 sqrt(H0/g), checks every 0.1 sqrt(H0/g)."""
     system = column_system(L0, H0, dx, material, floor_friction, wall_friction, symmetric,
-                           reach, cfl, rough_floor, flip, axisymmetric)
+                           reach, cfl, rough_floor, flip, axisymmetric, transfers)
     state = column_state(system, L0, H0, symmetric)
     tau = math.sqrt(H0 / G_ACC)
     t_min = 3.0 * tau if t_min is None else float(t_min)
