@@ -102,7 +102,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args(argv)
     from vibroflow.analysis.column import LAJEUNESSE_2004, LUBE_2004
-    from vibroflow.continuum.column import SAND_FRICTION_DEG
+    from vibroflow.continuum.column import SAND_FRICTION_DEG, sand_material
+    from vibroflow.errors import InputError
 
     try:
         grids = [int(g) for g in args.grids.split(",")]
@@ -110,8 +111,10 @@ def main(argv=None) -> int:
         print(f"--grids {args.grids!r}: must be comma-separated whole numbers (R0/n)",
               file=sys.stderr)
         return 2
-    if not grids or any(g < 2 for g in grids):
-        print(f"--grids {args.grids!r}: every n must be >= 2", file=sys.stderr)
+    if not grids or any(g < 2 for g in grids) or \
+            any(b != 2 * a for a, b in zip(grids, grids[1:])):
+        print(f"--grids {args.grids!r}: every n must be >= 2 and twice the one before (the "
+              "convergence ratios assume halved grids)", file=sys.stderr)
         return 2
     if args.transfers < 1 or args.jobs < 1:
         print(f"--transfers {args.transfers}, --jobs {args.jobs}: must be >= 1",
@@ -122,6 +125,11 @@ def main(argv=None) -> int:
               file=sys.stderr)
         return 2
     friction = SAND_FRICTION_DEG if args.friction_deg is None else args.friction_deg
+    try:
+        sand_material(friction)
+    except InputError as exc:
+        print(f"--friction-deg: {exc}", file=sys.stderr)
+        return 2
     jobs = []
     for method in args.method:
         for a in args.aspect:
@@ -152,8 +160,12 @@ def main(argv=None) -> int:
                 d, q, limit = convergence([r[key] for r in rows])
                 text = " ".join(f"{x:+.3f}" for x in d)
                 qs = "n/a" if q is None else f"{q:.2f}"
-                lim = "none (the changes do not shrink)" if limit is None else \
-                    f"{limit:.3f} ({limit / law - 1:+.1%} of the law)"
+                if q is None:
+                    lim = "needs three grids"
+                elif limit is None:
+                    lim = "none (the changes do not shrink)"
+                else:
+                    lim = f"{limit:.3f} ({limit / law - 1:+.1%} of the law)"
                 print(f"  {method} a = {a:g} {key}: changes {text}; q {qs}; limit {lim}")
                 summary.append({"method": method, "a": a, "measure": key, "changes": d,
                                 "q": q, "limit": limit, "law": law})
