@@ -21,7 +21,7 @@ with --hold-damping, on the first grid only, the count scaled as the tub runs sc
 (vibroflow.continuum.run.damping_transfer_cfl: k (n / n_0)^3 on R0/n, n_0 the first grid),
 which holds the transfers' hyperviscosity alpha c dx^3 / transfer_cfl fixed
 (benchmarks/README.md, session 16; the cost grows as the transfers do: R0/80 at 8 a step is
-about 20 minutes).  The Lagrangian formulation only (the Eulerian's column makes one a step).
+about 20 minutes; the Eulerian's R0/40 at 8, about an hour).
 
 Runs go --jobs at a time, one numba thread each (a 2-core machine: --jobs 2).  Costs, on this
 machine with one thread: Lagrangian R0/10 to R0/80 about 2, 10, 40 and 200 s at a = 3;
@@ -63,7 +63,8 @@ def _one(job: tuple) -> dict:
     else:
         from vibroflow.continuum.eulerian.column import run_column
 
-        run = run_column(1.0, a, 1.0 / n, material=mat, rough_floor=True, axisymmetric=True)
+        run = run_column(1.0, a, 1.0 / n, material=mat, rough_floor=True, axisymmetric=True,
+                         transfers=transfers)
         dep = measure_continuum_deposit(*run.deposit_points(), 0.5 / n, mat.diameter,
                                         wall_window=CENTRE)
         mass_error = float(run.mass_error)
@@ -134,8 +135,7 @@ def main(argv=None) -> int:
     for method in args.method:
         for a in args.aspect:
             for n in grids:
-                k = 1 if method != "lagrangian" else args.transfers * (
-                    round((n / grids[0]) ** 3) if args.hold_damping else 1)
+                k = args.transfers * (round((n / grids[0]) ** 3) if args.hold_damping else 1)
                 jobs.append((method, a, n, friction, max(1, k)))
     print(f"sand cylinder (friction {friction} deg), R0 = 1 m, rough floor, APIC; "
           f"height within {CENTRE} R0 of the axis", flush=True)

@@ -85,10 +85,12 @@ class EulerianColumnRun:
 def column_system(L0: float, H0: float, dx: float, material: ContinuumMaterial | None = None,
                   floor_friction: float = 0.40, symmetric: bool = True,
                   reach: float | None = None, cfl: float = 0.3,
-                  rough_floor: bool = False, axisymmetric: bool = False) -> EulerianSystem:
+                  rough_floor: bool = False, axisymmetric: bool = False,
+                  transfers: int = 1) -> EulerianSystem:
     """The Eulerian system of the column (module docstring); reach (m, from x = 0) default
     L0 (2 + 3 H0/L0), the Lagrangian check's; `rough_floor`: the no-slip grid floor;
-    `axisymmetric`: a cylinder about x = 0 (`symmetric` is then ignored)."""
+    `axisymmetric`: a cylinder about x = 0 (`symmetric` is then ignored); `transfers`: APIC
+    transfers a step (EulerianSystem.transfers; 1, the checks' setting)."""
     for name, v in (("L0", L0), ("H0", H0), ("dx", dx)):
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
             raise InputError(f"column {name} = {v!r}: must be a finite length > 0 m")
@@ -106,7 +108,7 @@ def column_system(L0: float, H0: float, dx: float, material: ContinuumMaterial |
     dt = stable_dt(mat, dx, h, [wall], v_max=math.sqrt(2.0 * G_ACC * H0), cfl=cfl)
     return EulerianSystem(mesh, mat, dt, frame=LabFrame((0.0, -G_ACC)), wall=wall,
                           no_slip_below=0.0 if rough_floor else None,
-                          axisymmetric=bool(axisymmetric))
+                          axisymmetric=bool(axisymmetric), transfers=transfers)
 
 
 def column_state(system: EulerianSystem, L0: float, H0: float,
@@ -138,12 +140,12 @@ def run_column(L0: float, H0: float, dx: float, material: ContinuumMaterial | No
                t_min: float | None = None, t_max: float | None = None,
                ke_fraction: float = 1.0e-4, reach: float | None = None,
                cfl: float = 0.3, rough_floor: bool = False,
-               axisymmetric: bool = False) -> EulerianColumnRun:
+               axisymmetric: bool = False, transfers: int = 1) -> EulerianColumnRun:
     """Release the column and run until it is at rest (the Lagrangian run_column's rule:
     after t_min = 3 sqrt(H0/g), the first check, every 0.1 sqrt(H0/g), with kinetic energy
     below ke_fraction M g H0 / 2; at most t_max = 30 sqrt(H0/g))."""
     system = column_system(L0, H0, dx, material, floor_friction, symmetric, reach, cfl,
-                           rough_floor, axisymmetric)
+                           rough_floor, axisymmetric, transfers)
     state = column_state(system, L0, H0, symmetric)
     tau = math.sqrt(H0 / G_ACC)
     t_min = 3.0 * tau if t_min is None else float(t_min)
