@@ -48,7 +48,6 @@ def _one(job: tuple) -> dict:
     """Run one (method, a, n, friction_deg, transfers) cylinder; its deposit and wall time."""
     method, a, n, friction_deg, transfers = job
     os.environ["NUMBA_NUM_THREADS"] = "1"   # before numba is imported: a spawned process
-    from vibroflow.analysis.column import measure_continuum_deposit
     from vibroflow.continuum.column import sand_material
 
     mat = sand_material(friction_deg)
@@ -65,8 +64,7 @@ def _one(job: tuple) -> dict:
 
         run = run_column(1.0, a, 1.0 / n, material=mat, rough_floor=True, axisymmetric=True,
                          transfers=transfers)
-        dep = measure_continuum_deposit(*run.deposit_points(), 0.5 / n, mat.diameter,
-                                        wall_window=CENTRE)
+        dep = run.deposit(wall_window=CENTRE)
         mass_error = float(run.mass_error)
     runout, height = dep.normalised(1.0)
     return {"method": method, "a": a, "n": n, "transfers": transfers,

@@ -419,11 +419,7 @@ def _eulerian_sand_column(a, n, reach=None):
                        axisymmetric=True, reach=reach)
     assert run.settled
     assert abs(run.mass_error) < 1e-12
-    from vibroflow.analysis.column import measure_continuum_deposit
-
-    dep = measure_continuum_deposit(*run.deposit_points(), 0.5 / n, 0.00635,
-                                    wall_window=CENTRE)
-    runout, height = dep.normalised(1.0)
+    runout, height = run.deposit(wall_window=CENTRE).normalised(1.0)
     print(f"\nEulerian sand, a = {a}, R0/{n}: run-out {runout:.3f} (Lube 2004 "
           f"{LUBE_2004.runout(a):.3f}, {runout / LUBE_2004.runout(a) - 1:+.1%}), height "
           f"{height:.3f} (Lajeunesse 2004 {LAJEUNESSE_2004.height(a):.3f}, "

@@ -261,8 +261,6 @@ def _deposit(L0, H0, dx, method):
     measured by the shared vibroflow.analysis.column.measure_continuum_deposit; and the
     relative mass error of the Eulerian run (0 for the Lagrangian's, whose points keep their
     masses)."""
-    from vibroflow.analysis.column import measure_continuum_deposit
-
     if method == "eulerian":
         from vibroflow.continuum.eulerian.column import run_column
 
@@ -274,8 +272,7 @@ def _deposit(L0, H0, dx, method):
         run = run_column(L0, H0, dx)
         err = 0.0
     assert run.settled
-    x, area = run.deposit_points()
-    dep = measure_continuum_deposit(x, area, 0.5 * dx, 0.00635)
+    dep = run.deposit()
     return (dep.runout - L0) / L0, dep.height / L0, err
 
 
@@ -457,8 +454,6 @@ def test_rough_floor_bad_height_is_one_line():
 def _rough_deposit(a: float, n: int, method: str):
     """(run-out (L_inf - L0)/L0, height H_inf/L0) of the column of L0 = 1 m, aspect ratio a,
     node spacing L0/n, on the rough floor (both formulations' no-slip grid floor, APIC)."""
-    from vibroflow.analysis.column import measure_continuum_deposit
-
     if method == "eulerian":
         from vibroflow.continuum.eulerian.column import run_column
 
@@ -469,7 +464,7 @@ def _rough_deposit(a: float, n: int, method: str):
 
         run = run_column(L_BIG, a * L_BIG, L_BIG / n, rough_floor=True)
     assert run.settled
-    dep = measure_continuum_deposit(*run.deposit_points(), 0.5 * L_BIG / n, 0.00635)
+    dep = run.deposit()
     return (dep.runout - L_BIG) / L_BIG, dep.height / L_BIG
 
 

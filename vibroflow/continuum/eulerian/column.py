@@ -81,6 +81,17 @@ class EulerianColumnRun:
             return np.abs(x), 0.5 * area
         return x.copy(), area
 
+    def deposit(self, wall_window: float | None = None):
+        """The deposit measured as every continuum's is (vibroflow.analysis.column.
+        measure_continuum_deposit of `deposit_points` on the mesh's cell side, grains of the
+        material's diameter; the height within `wall_window` (m) of the wall or axis when
+        given), as the Lagrangian ColumnRun.deposit."""
+        from vibroflow.analysis.column import measure_continuum_deposit
+
+        return measure_continuum_deposit(*self.deposit_points(), self.system.mesh.h,
+                                         self.system.material.diameter,
+                                         wall_window=wall_window)
+
 
 def column_system(L0: float, H0: float, dx: float, material: ContinuumMaterial | None = None,
                   floor_friction: float = 0.40, symmetric: bool = True,
