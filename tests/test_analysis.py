@@ -19,7 +19,8 @@ from vibroflow.analysis import (CellTable, batch_means, batches_of_whole_cycles,
                                 probe_values, read_csv, strengths_agree, stream_function,
                                 tub_summary, wall_contact_stats, write_csv)
 from vibroflow.analysis import vtk
-from vibroflow.analysis.compare import bed_thirds, difference_by_region
+from vibroflow.analysis.compare import (bed_thirds, difference_by_region, difference_to_seeds,
+                                        seed_scatter)
 from vibroflow.analysis.contacts import mean_by_region
 from vibroflow.scenario.model import Scenario
 from vibroflow.tub.geometry import TubGeometry, cross_section_area, distance_to_wall_np
@@ -302,6 +303,57 @@ def test_field_difference_known_answers():
     assert field_difference(a2, b) == pytest.approx(0.0, abs=1e-15)
     with pytest.raises(ValueError):
         field_difference(b, table_from_cells(x, z, phi, b.vx, b.vz, 0.01))
+
+
+def _noisy_seeds(rng, n_seeds, n_cells, U, sigma, h=0.015):
+    """n_seeds tables of one mean field (speed U m/s in a random direction per cell) plus
+    independent Gaussian noise of sigma m/s on each component, and the mean field's own table:
+    runs that differ only in their random part, as fill seeds do."""
+    ii = np.arange(n_cells)
+    x, z = (ii % 40 - 20) * h, (ii // 40) * h
+    phi = rng.uniform(0.35, 0.6, n_cells)
+    ang = rng.uniform(0, 2 * np.pi, n_cells)
+    vx, vz = U * np.cos(ang), U * np.sin(ang)
+    seeds = [table_from_cells(x, z, phi, vx + rng.normal(0, sigma, n_cells),
+                              vz + rng.normal(0, sigma, n_cells), h) for _ in range(n_seeds)]
+    return seeds, table_from_cells(x, z, phi, vx, vz, h)
+
+
+def test_seed_scatter_and_difference_to_seeds_known_answers():
+    """Fields that differ only by independent noise of sigma per component: two seeds differ by
+    sqrt(2 sigma^2) per component, so E(i, j) = 2 sigma / V with V the reference's mean speed
+    (U (1 + sigma^2 / 2U^2) to second order, for a 2D Rician speed); the noise-free mean field
+    against the seeds, E = sqrt(2) sigma / V.  Both checked on 4000 cells within 2 %; the pairs
+    are all 12 ordered pairs of 4 seeds, and 2 seeds give no jackknife error."""
+    rng = np.random.default_rng(21)
+    U, sigma = 0.05, 0.005
+    seeds, mean_field = _noisy_seeds(rng, 4, 4000, U, sigma)
+    V = U * (1 + sigma**2 / (2 * U**2))
+    sc = seed_scatter(seeds)
+    assert len(sc.pairs) == 12 and sc.runs == 4
+    assert sc.mean == pytest.approx(2 * sigma / V, rel=0.02)
+    assert sc.stderr is not None and sc.stderr < 0.02 * sc.mean
+    d = difference_to_seeds(mean_field, seeds)
+    assert len(d.values) == 4
+    assert d.mean == pytest.approx(np.sqrt(2) * sigma / V, rel=0.02)
+    two = seed_scatter(seeds[:2])
+    assert two.stderr is None and len(two.pairs) == 2
+    with pytest.raises(ValueError):
+        seed_scatter(seeds[:1])
+
+
+def test_seed_scatter_jackknife_error_matches_the_scatter_of_repeats():
+    """The jackknife standard error of the pairs' mean, averaged over 300 repeats of 4 seeds on
+    few cells (so one pair's E is noisy), against the standard deviation of the mean over the
+    repeats: the error bar means what it says (within 25 %)."""
+    rng = np.random.default_rng(3)
+    means, errors = [], []
+    for _ in range(300):
+        seeds, _ = _noisy_seeds(rng, 4, 12, 0.05, 0.02)
+        sc = seed_scatter(seeds)
+        means.append(sc.mean)
+        errors.append(sc.stderr)
+    assert np.mean(errors) == pytest.approx(np.std(means, ddof=1), rel=0.25)
 
 
 def test_difference_by_region_locates_a_known_difference():

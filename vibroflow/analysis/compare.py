@@ -14,6 +14,11 @@ Where the difference lies: difference_by_region splits the sum under E's square 
 rectangles of the tub's cross-section (bed_thirds: the width and the reference bed's depth in
 thirds), each region's share of E^2 beside its mean speeds and mean velocity difference.
 
+The floor over several seeds: seed_scatter takes E over every ordered pair of n runs that differ
+only in their fill seed (its mean, with the jackknife error over the runs), and
+difference_to_seeds a result's E against each of them, so that a comparison and its floor are
+measured on the same ensemble rather than on one pair, itself a random number.
+
 Judging (tub47.md): two circulation strengths agree when they differ by no more than 10 % or by no
 more than twice their combined standard error, whichever is larger; two fields agree when
 E(a, b) <= 1.5 E_seed of the reference method.
@@ -152,3 +157,71 @@ def strengths_agree(s_a: float, se_a: float, s_b: float, se_b: float,
 def fields_agree(E_ab: float, E_seed: float) -> bool:
     """Do two fields agree: E(a, b) <= 1.5 x the seed-to-seed E of the reference method?"""
     return bool(E_ab <= FIELD_FACTOR * E_seed)
+
+
+@dataclass(frozen=True)
+class SeedScatter:
+    """The reference method's seed-to-seed E over n >= 2 runs that differ only in the fill's
+    seed (seed_scatter): E(i, j) for every ordered pair i != j (j the reference, E being
+    asymmetric), as (i, j, E) with i, j indices into the runs; their mean (-) and its standard
+    error (-, the jackknife over the runs, since every run enters 2 (n - 1) of the pairs and the
+    pairs are not independent; None for n < 3)."""
+
+    pairs: tuple[tuple[int, int, float], ...]
+    mean: float
+    stderr: float | None
+
+    @property
+    def runs(self) -> int:
+        return 1 + max(max(i, j) for i, j, _ in self.pairs)
+
+
+def seed_scatter(tables, min_solid_fraction: float = 0.3) -> SeedScatter:
+    """The seed-to-seed E of tub47.md measured over every pair of n >= 2 seeds instead of one
+    pair.  One pair's E is itself a random number: the bed is chaotic and the roll's strength
+    swings by a third from one quarter second to the next, so the floor a comparison is judged
+    against is better taken as the mean over all the pairs of several seeds, with its error.
+
+    The standard error is the delete-one jackknife (Efron & Stein 1981; Efron 1982 ch. 3) of
+    the pairs' mean over the runs: theta_(k) the mean of the pairs without run k,
+    se^2 = (n - 1)/n sum_k (theta_(k) - mean_k theta_(k))^2."""
+    tables = list(tables)
+    n = len(tables)
+    if n < 2:
+        raise ValueError(f"seed_scatter needs at least 2 runs, got {n}")
+    E = np.full((n, n), np.nan)
+    for i in range(n):
+        for j in range(n):
+            if i != j:
+                E[i, j] = field_difference(tables[i], tables[j], min_solid_fraction)
+    pairs = tuple((i, j, float(E[i, j])) for i in range(n) for j in range(n) if i != j)
+    mean = float(np.nanmean(E))
+    stderr = None
+    if n >= 3:
+        theta = np.array([np.nanmean(np.delete(np.delete(E, k, 0), k, 1)) for k in range(n)])
+        stderr = float(np.sqrt((n - 1) / n * np.sum((theta - theta.mean()) ** 2)))
+    return SeedScatter(pairs=pairs, mean=mean, stderr=stderr)
+
+
+@dataclass(frozen=True)
+class SeedsDifference:
+    """E(a, seed k) of a result a against each of n runs of the reference method that differ
+    only in their fill seed (difference_to_seeds): the values (-), their mean and its standard
+    error (-, the values' standard deviation over sqrt(n); None for n = 1)."""
+
+    values: tuple[float, ...]
+    mean: float
+    stderr: float | None
+
+
+def difference_to_seeds(a: CellTable, tables,
+                        min_solid_fraction: float = 0.3) -> SeedsDifference:
+    """E(a, b_k) against every seed's field b_k (each the reference in turn), so that a is
+    judged against the same ensemble that seed_scatter measures the floor on: fields agree when
+    the mean is no more than 1.5 times the seed-to-seed mean (fields_agree)."""
+    values = tuple(field_difference(a, b, min_solid_fraction) for b in tables)
+    if not values:
+        raise ValueError("difference_to_seeds needs at least 1 reference run")
+    n = len(values)
+    stderr = float(np.std(values, ddof=1) / np.sqrt(n)) if n > 1 else None
+    return SeedsDifference(values=values, mean=float(np.mean(values)), stderr=stderr)
