@@ -28,7 +28,9 @@ difference_to_seeds: each E, their mean and its standard error), so the comparis
 are measured on the same ensemble; with one seed the floor is the value of --e-seed, marked
 "given".  The tub47.md verdicts: strengths agree within max(10 %, 2 combined standard errors)
 and the same sense (against the first seed); fields agree when E(continuum, DEM) <= 1.5 E_seed
-(the mean over the seeds when there are several); where E comes from (each continuum's share of E^2 in the tub's width and the
+(the mean over the seeds when there are several).  With several seeds, also E against the
+seeds' mean field (compare.ensemble_mean: their noise averaged down, so nearer the systematic
+part of the difference) beside each seed's E against the mean of the others; where E comes from (each continuum's share of E^2 in the tub's width and the
 DEM bed's depth in thirds, vibroflow.analysis.compare.difference_by_region); and the wall times
 of both and their ratio (the issue's target: the continuum at
 least 100 times cheaper at equal accuracy).  Wall times are those the runs recorded in their
@@ -140,7 +142,8 @@ def compare_factor(factor: float, cont: dict, dems: list[dict],
     from dataclasses import asdict
 
     from vibroflow.analysis.compare import (FIELD_FACTOR, bed_thirds, difference_by_region,
-                                            difference_to_seeds, field_difference,
+                                            difference_to_seeds, ensemble_mean,
+                                            field_difference,
                                             fields_agree, seed_scatter, strengths_agree)
 
     out: dict = {"factor": factor, "continuum": _brief(cont),
@@ -167,6 +170,11 @@ def compare_factor(factor: float, cont: dict, dems: list[dict],
         out["E_seed_pairs"] = [{"a": i, "b": j, "E": e} for i, j, e in sc.pairs]
         out["E_seed_source"] = (f"mean over the {len(sc.pairs)} ordered pairs of "
                                 f"{len(dems)} DEM seeds")
+        # against the seeds' mean field (their noise averaged down): the systematic part, beside
+        # each seed against the mean of the others (what is left of the noise there)
+        out["E_continuum_ensemble"] = field_difference(cont["_table"], ensemble_mean(tables))
+        out["E_seed_ensemble"] = [field_difference(t, ensemble_mean(tables[:k] + tables[k + 1:]))
+                                  for k, t in enumerate(tables)]
         out["E_continuum_seeds"] = list(to.values)
         out["E_continuum_seeds_mean"] = to.mean
         out["E_continuum_seeds_stderr"] = to.stderr
@@ -233,6 +241,10 @@ def print_factor(factor: float, results: dict[str, dict], conts: dict[str, dict]
                   f"; DEM seed-to-seed E = {_pm(es, res['E_seed_stderr'], '{:.3f}')} "
                   f"({res['E_seed_source']}, jackknife error); limit 1.5 E_seed = "
                   f"{1.5 * es:.3f}; fields agree: {verdict}")
+            others = ", ".join(f"{e:.3f}" for e in res["E_seed_ensemble"])
+            print(f"{name}: against the mean field of the {len(res['E_seed_ensemble'])} seeds: "
+                  f"E = {res['E_continuum_ensemble']:.3f} (each seed against the mean of the "
+                  f"others: {others})")
         else:
             print(f"{name}: E(continuum, DEM) = {res['E_continuum_dem']:.3f}; DEM seed-to-seed "
                   f"E = {_f(es, '{:.3f}')} ({res['E_seed_source']}); limit 1.5 E_seed = "

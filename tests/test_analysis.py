@@ -20,7 +20,7 @@ from vibroflow.analysis import (CellTable, batch_means, batches_of_whole_cycles,
                                 tub_summary, wall_contact_stats, write_csv)
 from vibroflow.analysis import vtk
 from vibroflow.analysis.compare import (bed_thirds, difference_by_region, difference_to_seeds,
-                                        seed_scatter)
+                                        ensemble_mean, seed_scatter)
 from vibroflow.analysis.contacts import mean_by_region
 from vibroflow.scenario.model import Scenario
 from vibroflow.tub.geometry import TubGeometry, cross_section_area, distance_to_wall_np
@@ -354,6 +354,33 @@ def test_seed_scatter_jackknife_error_matches_the_scatter_of_repeats():
         means.append(sc.mean)
         errors.append(sc.stderr)
     assert np.mean(errors) == pytest.approx(np.std(means, ddof=1), rel=0.25)
+
+
+def test_ensemble_mean_pools_the_samples_and_averages_the_noise_down():
+    """The mean of n seeds' fields: in a cell, the pooled mean of all the runs' samples (a
+    cell with 1 sample of vx = 1 and one with 3 of vx = 3 average to 2.5), the mean solid
+    fraction, only the cells every run holds; and on fields with independent noise sigma, the
+    mean of 4 seeds differs from the noise-free field by sqrt(2) sigma / 2 / V (the noise over
+    sqrt(4)), within 2 %."""
+    h = 0.015
+    a = CellTable(x=np.array([0.0, h, 2 * h]), z=np.zeros(3), solid_fraction=np.array([.4, .5, .6]),
+                  vx=np.array([1.0, 0.0, 7.0]), vz=np.zeros(3), samples=np.array([1, 2, 5]),
+                  cell_size=h)
+    b = CellTable(x=np.array([h, 0.0]), z=np.zeros(2), solid_fraction=np.array([.3, .6]),
+                  vx=np.array([2.0, 3.0]), vz=np.array([1.0, 0.0]), samples=np.array([2, 3]),
+                  cell_size=h)
+    m = ensemble_mean([a, b])
+    assert len(m) == 2 and list(m.ix) == [0, 1]
+    np.testing.assert_allclose(m.vx, [2.5, 1.0])
+    np.testing.assert_allclose(m.vz, [0.0, 0.5])
+    np.testing.assert_allclose(m.solid_fraction, [0.5, 0.4])
+    assert list(m.samples) == [4, 4]
+    rng = np.random.default_rng(8)
+    U, sigma = 0.05, 0.005
+    seeds, mean_field = _noisy_seeds(rng, 4, 4000, U, sigma)
+    V = U * (1 + sigma**2 / (2 * U**2) / 4)
+    assert field_difference(mean_field, ensemble_mean(seeds)) == pytest.approx(
+        np.sqrt(2) * sigma / 2 / V, rel=0.02)
 
 
 def test_difference_by_region_locates_a_known_difference():
