@@ -6,6 +6,7 @@
     vibroflow export liggghts tub47-quick deck/
     vibroflow import liggghts deck/post --out runs/liggghts --scenario tub47-quick
     vibroflow calibrate runs/tub47-quick [--shear-cell]   # continuum parameters from a DEM run
+    vibroflow compare runs/mpm -r runs/dem-seed1 -r runs/dem-seed2   # judged as tub47.md does
 
 Bad input (a missing file, malformed TOML, a value out of range, an unknown key) prints one line
 "error: FIELD = VALUE: what is allowed" on stderr and exits with code 2, without a traceback and
@@ -483,6 +484,35 @@ def report(
     from vibroflow.report import write_report
 
     typer.echo(f"report in {write_report(directory)}")
+
+
+@app.command("compare")
+@input_errors
+def compare(
+    results: Annotated[Optional[list[Path]], typer.Argument(
+        metavar="RESULT...", help="Run folders to judge (vibroflow dem, vibroflow continuum, "
+                                  "a study's DIR/<method>).")] = None,
+    reference: Annotated[Optional[list[Path]], typer.Option(
+        "--reference", "-r", help="A run of the reference method (repeatable: runs that "
+                                  "differ only in their fill seed); required.")] = None,
+    e_seed: Annotated[Optional[float], typer.Option(
+        "--e-seed", help="The reference's seed-to-seed E, when only one reference is "
+                         "given.")] = None,
+    json_out: Annotated[Optional[Path], typer.Option(
+        "--json", help="Also write the judgement as JSON to this file.")] = None,
+) -> None:
+    """Judge runs against a reference method's runs as tub47.md does (circulation strengths,
+    the field difference E against the seed-to-seed floor): with several references, the floor
+    is measured on them and every run is compared with each (vibroflow.analysis.judge)."""
+    from vibroflow.analysis.judge import format_judgement, judge, read_result, write_judgement
+
+    refs = [read_result(f) for f in reference or []]
+    runs = [read_result(f) for f in results or []]
+    j = judge(runs, refs, e_seed)
+    typer.echo(format_judgement(j))
+    if json_out is not None:
+        write_judgement(j, json_out)
+        typer.echo(f"judgement in {json_out}")
 
 
 # ----------------------------------------------------------------------------------------------

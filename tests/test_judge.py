@@ -1,0 +1,119 @@
+"""`vibroflow compare`: runs judged against a reference method's runs over an ensemble of fill
+seeds (vibroflow.analysis.judge), checked on folders whose fields differ by a known noise.
+
+The references are one mean field plus independent Gaussian noise of sigma on each velocity
+component in each cell, as runs that differ only in their fill seed: two of them differ by
+E = 2 sigma / V (V the reference's mean speed), the noise-free field differs from one by
+sqrt(2) sigma / V and from the mean of four by sqrt(2) sigma / 2V, and a field with a
+systematic error of 4 sigma on vx everywhere differs from one by sqrt(16 + 2) sigma / V.  So
+the noise-free field agrees with the references (0.71 times the floor, where 1.5 is allowed)
+and the biased one does not (2.12 times).
+"""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from vibroflow.analysis.bulk import CellTable, write_csv
+
+U, SIGMA, H = 0.05, 0.005, 0.015
+N_CELLS = 4000
+V = U * (1 + SIGMA**2 / (2 * U**2))   # the mean speed of a noisy field (2D Rician, 2nd order)
+
+
+def _write_run(folder, vx, vz, x, z, phi, strength, stderr, case="tub47", window=(1.0, 3.0),
+               method=None, sense="counterclockwise"):
+    folder.mkdir(parents=True)
+    write_csv(CellTable(x=x, z=z, solid_fraction=phi, vx=vx, vz=vz,
+                        samples=np.full(x.size, 100, np.int64), cell_size=H),
+              folder / "bulk_velocity.csv")
+    summary = {"case": case, "source": "test",
+               "circulation": {"sense": sense, "strength": strength, "strength_stderr": stderr},
+               "window": {"t_start": window[0], "t_end": window[1]}}
+    if method:
+        summary["method"] = method
+    (folder / "summary.json").write_text(json.dumps(summary))
+    return folder
+
+
+@pytest.fixture
+def ensemble(tmp_path):
+    """Four noisy reference runs, the noise-free field as a 'continuum' run, and one with a
+    systematic error of 4 sigma on vx; their folders."""
+    rng = np.random.default_rng(12)
+    ii = np.arange(N_CELLS)
+    x, z = (ii % 40 - 20) * H, (ii // 40) * H
+    phi = rng.uniform(0.35, 0.6, N_CELLS)
+    ang = rng.uniform(0, 2 * np.pi, N_CELLS)
+    vx, vz = U * np.cos(ang), U * np.sin(ang)
+    refs = [_write_run(tmp_path / f"dem{k}", vx + rng.normal(0, SIGMA, N_CELLS),
+                       vz + rng.normal(0, SIGMA, N_CELLS), x, z, phi, s, 0.05e-3)
+            for k, s in enumerate((2.40e-3, 2.55e-3, 2.50e-3, 2.35e-3))]
+    exact = _write_run(tmp_path / "exact", vx, vz, x, z, phi, 2.50e-3, 0.04e-3,
+                       method="lagrangian")
+    biased = _write_run(tmp_path / "biased", vx + 4 * SIGMA, vz, x, z, phi, 3.20e-3, 0.04e-3,
+                        method="eulerian")
+    return refs, exact, biased, (x, z, phi, vx, vz)
+
+
+def test_compare_measures_the_floor_and_judges_against_every_seed(run_cli, ensemble, tmp_path):
+    refs, exact, biased, _ = ensemble
+    out = tmp_path / "judgement.json"
+    args = [exact, biased]
+    for r in refs:
+        args += ["-r", r]
+    res = run_cli("compare", *args, "--json", out)
+    assert res.returncode == 0, res.stderr
+    j = json.loads(out.read_text())
+    floor = j["floor"]
+    assert len(floor["pairs"]) == 12
+    assert floor["E_seed"] == pytest.approx(2 * SIGMA / V, rel=0.03)
+    assert j["limit"] == pytest.approx(1.5 * floor["E_seed"], rel=1e-12)
+    ex, bi = j["results"]
+    assert ex["method"] == "lagrangian" and len(ex["E_each"]) == 4
+    assert ex["E_mean"] == pytest.approx(math.sqrt(2) * SIGMA / V, rel=0.03)
+    assert ex["E_mean_field"] == pytest.approx(math.sqrt(2) * SIGMA / (2 * V), rel=0.03)
+    assert ex["fields_agree"] is True
+    # the biased field: |dv|^2 = (4 sigma - noise)^2 + noise^2 -> 18 sigma^2 against each seed
+    assert bi["E_mean"] == pytest.approx(math.sqrt(18) * SIGMA / V, rel=0.03)
+    assert bi["fields_agree"] is False
+    # strengths: the references' mean 2.45e-3 with the scatter's error 0.0456e-3 (n = 4)
+    assert j["reference_strength"] == pytest.approx(2.45e-3, rel=1e-12)
+    assert j["reference_strength_stderr"] == pytest.approx(
+        np.std([2.40e-3, 2.55e-3, 2.50e-3, 2.35e-3], ddof=1) / 2, rel=1e-9)
+    assert ex["strengths_agree"] is True            # 2.50 against 2.45: 2 %
+    assert bi["strengths_agree"] is False           # 3.20 against 2.45: 31 %
+    assert "fields agree: yes" in res.stdout and "fields agree: no" in res.stdout
+
+
+def test_compare_with_one_reference_needs_the_floor(run_cli, ensemble):
+    refs, exact, _, _ = ensemble
+    res = run_cli("compare", exact, "-r", refs[0])
+    assert res.returncode == 0
+    assert "cannot be judged" in res.stdout and "fields agree: cannot say" in res.stdout
+    res = run_cli("compare", exact, "-r", refs[0], "--e-seed", "0.2")
+    assert res.returncode == 0 and "fields agree: yes" in res.stdout
+
+
+def test_compare_bad_input_is_one_line(run_cli, ensemble, tmp_path):
+    refs, exact, _, (x, z, phi, vx, vz) = ensemble
+    other = _write_run(tmp_path / "quick", vx, vz, x, z, phi, 1e-3, 0.0, case="tub47-quick")
+    late = _write_run(tmp_path / "late", vx, vz, x, z, phi, 1e-3, 0.0, window=(0.5, 1.5))
+    out = tmp_path / "never.json"
+    for args, needle in [
+        ((tmp_path / "nowhere", "-r", refs[0]), "no such run folder"),
+        ((exact, "-r", tmp_path), "not a finished run"),
+        ((exact,), "--reference"),
+        (("-r", refs[0]), "RESULT"),
+        ((other, "-r", refs[0]), "case"),
+        ((late, "-r", refs[0]), "window"),
+        ((exact, "-r", refs[0], "--e-seed", "0"), "--e-seed"),
+    ]:
+        res = run_cli("compare", *args, "--json", out)
+        assert res.returncode == 2, (args, res.stdout, res.stderr)
+        assert needle in res.stderr and res.stderr.count("\n") == 1, res.stderr
+        assert "Traceback" not in res.stderr
+        assert not out.exists()

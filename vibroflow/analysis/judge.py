@@ -1,0 +1,221 @@
+"""Judging finished runs against a reference method's runs, from their folders: `vibroflow
+compare` (tub47.md "Judging a comparison", over an ensemble of fill seeds).
+
+A run folder is any method's (`vibroflow dem`, `vibroflow continuum`, an imported LIGGGHTS run,
+a study's DIR/<method>): its summary.json (case, window, circulation) and bulk_velocity.csv.
+The references are runs of the reference method that differ only in their fill seed.  With one
+reference the floor of the field comparison, the seed-to-seed E, must be given; with two or more
+it is measured on them (compare.seed_scatter: E over every ordered pair, with its jackknife
+error from three runs on), and every result is compared with every reference in turn
+(compare.difference_to_seeds), so that the comparison and its floor come from the same
+ensemble.  One pair's E is a random number: on tub47, four seeds' pairs range from 0.076 to
+0.252 (benchmarks/README.md, "Session 18").
+
+For each result: its circulation strength against the references' (the mean of their
+strengths, with the standard error of that mean from their scatter when there are several,
+else the reference's batch-means error), agreeing when within max(10 %, 2 combined standard
+errors) and of the same sense; E against each reference, their mean +- standard error, and E
+against the references' pooled mean field (compare.ensemble_mean, their noise averaged down:
+nearer the systematic part); fields agree when the mean E is no more than 1.5 times the floor.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from vibroflow.analysis.bulk import CellTable, _atomic_write_text, read_csv
+from vibroflow.analysis.compare import (FIELD_FACTOR, STRENGTH_REL_TOL, STRENGTH_SIGMAS,
+                                        difference_to_seeds, ensemble_mean, field_difference,
+                                        seed_scatter)
+from vibroflow.analysis.summary import json_safe
+from vibroflow.errors import InputError
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """One finished run: its folder, case, method (the DEM's 'dem'), averaging window (t_start,
+    t_end s), circulation (summary.json's: strength m^2/s, strength_stderr, sense) and cell
+    table (bulk_velocity.csv)."""
+
+    folder: Path
+    case: str
+    method: str
+    window: tuple[float, float]
+    circulation: dict
+    table: CellTable
+
+
+def read_result(folder) -> RunResult:
+    """The run in `folder`; an InputError (one line) when it is not a finished run."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError(f"{folder}: no such run folder")
+    summary_path, csv_path = folder / "summary.json", folder / "bulk_velocity.csv"
+    for p in (summary_path, csv_path):
+        if not p.is_file():
+            raise InputError(f"{folder}: not a finished run (no {p.name}); give a folder of "
+                             "vibroflow dem, vibroflow continuum or a study's DIR/<method>")
+    try:
+        s = json.loads(summary_path.read_text())
+        c = s["circulation"]
+        w = s["window"]
+        window = (float(w["t_start"]), float(w["t_end"]))
+        strength = float(c["strength"])
+    except (ValueError, KeyError, TypeError) as e:
+        raise InputError(f"{summary_path}: not a run summary (no circulation or window: "
+                         f"{type(e).__name__} {e})") from None
+    if s.get("kind") == "vibroflow study summary":
+        raise InputError(f"{folder}: a study folder; give its run folders, e.g. {folder}/dem "
+                         f"or {folder}/lagrangian")
+    try:
+        table = read_csv(csv_path)
+    except ValueError as e:
+        raise InputError(f"{csv_path}: {e}") from None
+    if not math.isfinite(strength):
+        raise InputError(f"{summary_path}: circulation strength {strength!r}: not a number")
+    return RunResult(folder=folder, case=str(s.get("case")), method=str(s.get("method", "dem")),
+                     window=window, circulation=c, table=table)
+
+
+def _se(x) -> float:
+    return 0.0 if x is None or not math.isfinite(float(x)) else float(x)
+
+
+def _check_alike(runs: list[RunResult]) -> None:
+    """Every run of one case, window and cell size, or an InputError naming the first that is
+    not (tub47.md compares results on the same cells over the same window)."""
+    first = runs[0]
+    for r in runs[1:]:
+        for what, a, b in (("case", r.case, first.case), ("window (s)", r.window, first.window),
+                           ("cell size (m)", round(r.table.cell_size, 9),
+                            round(first.table.cell_size, 9))):
+            if a != b:
+                raise InputError(f"{r.folder}: {what} {a!r} differs from {first.folder}'s "
+                                 f"{b!r}; runs are compared on the same case, window and cells")
+
+
+def judge(results: list[RunResult], references: list[RunResult],
+          e_seed: float | None = None) -> dict:
+    """Every result against the references (module docstring).  e_seed: the seed-to-seed E to
+    judge with when there is one reference (ignored, and said so, with several)."""
+    if not results:
+        raise InputError("RESULT: give at least one run folder to judge")
+    if not references:
+        raise InputError("--reference: give at least one run folder of the reference method")
+    if e_seed is not None and not (math.isfinite(e_seed) and e_seed > 0):
+        raise InputError(f"--e-seed = {e_seed!r}: must be a seed-to-seed E > 0")
+    _check_alike(references + results)
+    tables = [r.table for r in references]
+    n = len(references)
+    strengths = np.array([float(r.circulation["strength"]) for r in references])
+    ref_sense = references[0].circulation.get("sense")
+    if n > 1:
+        ref_strength = float(strengths.mean())
+        ref_strength_se = float(strengths.std(ddof=1) / math.sqrt(n))
+    else:
+        ref_strength = float(strengths[0])
+        ref_strength_se = _se(references[0].circulation.get("strength_stderr"))
+    out: dict = {
+        "references": [{"folder": str(r.folder), "method": r.method,
+                        "strength": float(r.circulation["strength"]),
+                        "strength_stderr": r.circulation.get("strength_stderr"),
+                        "sense": r.circulation.get("sense")} for r in references],
+        "reference_strength": ref_strength, "reference_strength_stderr": ref_strength_se,
+        "case": references[0].case, "window_s": list(references[0].window),
+    }
+    if n > 1:
+        sc = seed_scatter(tables)
+        out["floor"] = {"E_seed": sc.mean, "stderr": sc.stderr,
+                        "source": f"measured: mean E over the {len(sc.pairs)} ordered pairs of "
+                                  f"the {n} references",
+                        "pairs": [{"a": i, "b": j, "E": e} for i, j, e in sc.pairs],
+                        "each_against_mean_of_others": [
+                            field_difference(t, ensemble_mean(tables[:k] + tables[k + 1:]))
+                            for k, t in enumerate(tables)]}
+        if e_seed is not None:
+            out["floor"]["note"] = f"--e-seed {e_seed!r} ignored: measured on the references"
+    elif e_seed is not None:
+        out["floor"] = {"E_seed": float(e_seed), "stderr": None, "source": "given (--e-seed)"}
+    else:
+        out["floor"] = None
+    floor = out["floor"]["E_seed"] if out["floor"] else None
+    out["limit"] = FIELD_FACTOR * floor if floor is not None else None
+    mean_field = ensemble_mean(tables) if n > 1 else None
+    out["results"] = []
+    for r in results:
+        c = r.circulation
+        s, se = float(c["strength"]), _se(c.get("strength_stderr"))
+        tol = max(STRENGTH_REL_TOL * abs(ref_strength),
+                  STRENGTH_SIGMAS * math.hypot(se, ref_strength_se))
+        same_sense = (c.get("sense") == ref_sense) if c.get("sense") and ref_sense else True
+        d = difference_to_seeds(r.table, tables)
+        entry = {"folder": str(r.folder), "method": r.method, "strength": s,
+                 "strength_stderr": c.get("strength_stderr"), "sense": c.get("sense"),
+                 "strength_ratio": s / ref_strength if ref_strength else None,
+                 "strengths_agree": bool(same_sense and abs(s - ref_strength) <= tol),
+                 "E_each": list(d.values), "E_mean": d.mean, "E_stderr": d.stderr,
+                 "E_mean_field": (field_difference(r.table, mean_field)
+                                  if mean_field is not None else None)}
+        entry["fields_agree"] = (bool(d.mean <= out["limit"]) if out["limit"] is not None
+                                 else None)
+        entry["E_over_limit"] = d.mean / out["limit"] if out["limit"] else None
+        out["results"].append(entry)
+    return out
+
+
+def _pm(v, se, fmt="{:.3f}") -> str:
+    return fmt.format(v) + ("" if se is None else " +- " + fmt.format(se))
+
+
+def format_judgement(j: dict) -> str:
+    """The judgement as the lines `vibroflow compare` prints."""
+    refs = j["references"]
+    lines = [f"{j['case']}, window {j['window_s'][0]:g} - {j['window_s'][1]:g} s; "
+             f"{len(refs)} reference run(s):"]
+    for k, r in enumerate(refs):
+        lines.append(f"  [{k}] {r['folder']} ({r['method']}): circulation {r['sense']} "
+                     f"{_pm(r['strength'], r['strength_stderr'], '{:.4e}')} m^2/s")
+    f = j["floor"]
+    if f is None:
+        lines.append("seed-to-seed E: unknown (one reference and no --e-seed): the fields "
+                     "cannot be judged")
+    else:
+        lines.append(f"seed-to-seed E {_pm(f['E_seed'], f['stderr'])} ({f['source']}); "
+                     f"fields agree when E <= {j['limit']:.3f}")
+        if "pairs" in f:
+            n = len(refs)
+            E = {(p["a"], p["b"]): p["E"] for p in f["pairs"]}
+            lines.append("  E(row, column), the column the reference:")
+            lines.append("        " + "".join(f"{f'[{b}]':>8}" for b in range(n)))
+            for a in range(n):
+                lines.append(f"  {f'[{a}]':>6}" + "".join(
+                    f"{E[(a, b)]:8.3f}" if a != b else f"{'':>8}" for b in range(n)))
+            lines.append("  each against the mean field of the others: "
+                         + ", ".join(f"{e:.3f}" for e in f["each_against_mean_of_others"]))
+        if "note" in f:
+            lines.append(f"  ({f['note']})")
+    for r in j["results"]:
+        lines.append(f"{r['folder']} ({r['method']}):")
+        lines.append(f"  circulation {r['sense']} "
+                     f"{_pm(r['strength'], r['strength_stderr'], '{:.4e}')} m^2/s, "
+                     f"{r['strength_ratio']:.3f} of the references' "
+                     f"{_pm(j['reference_strength'], j['reference_strength_stderr'], '{:.4e}')}"
+                     f": strengths agree: {'yes' if r['strengths_agree'] else 'no'}")
+        each = ", ".join(f"{e:.3f}" for e in r["E_each"])
+        line = f"  E against each reference {each}: mean {_pm(r['E_mean'], r['E_stderr'])}"
+        if r["E_mean_field"] is not None:
+            line += f"; against their mean field {r['E_mean_field']:.3f}"
+        lines.append(line)
+        verdict = {True: "yes", False: "no", None: "cannot say"}[r["fields_agree"]]
+        ratio = f" ({r['E_over_limit']:.2f} of the limit)" if r["E_over_limit"] else ""
+        lines.append(f"  fields agree: {verdict}{ratio}")
+    return "\n".join(lines)
+
+
+def write_judgement(j: dict, path) -> None:
+    """The judgement as JSON, written atomically."""
+    _atomic_write_text(Path(path), json.dumps(json_safe(j), indent=2) + "\n")
