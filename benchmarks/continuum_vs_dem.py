@@ -127,6 +127,16 @@ def load_result(folder: Path, cell_size: float) -> dict:
     return summary
 
 
+def _run_result(r: dict):
+    """A loaded run (load_result) as vibroflow.analysis.judge reads one."""
+    from vibroflow.analysis.judge import RunResult
+
+    w = r["window"]
+    return RunResult(folder=Path(r["_folder"]), case=str(r.get("case")),
+                     method=str(r.get("method", "dem")), window=(w["t_start"], w["t_end"]),
+                     circulation=r["circulation"], table=r["_table"])
+
+
 def _f(x, fmt="{:+.4f}") -> str:
     return "n/a" if x is None or (isinstance(x, float) and not math.isfinite(x)) else fmt.format(x)
 
@@ -142,9 +152,8 @@ def compare_factor(factor: float, cont: dict, dems: list[dict],
     from dataclasses import asdict
 
     from vibroflow.analysis.compare import (FIELD_FACTOR, bed_thirds, difference_by_region,
-                                            difference_to_seeds, ensemble_mean,
-                                            field_difference,
-                                            fields_agree, seed_scatter, strengths_agree)
+                                            field_difference, fields_agree, strengths_agree)
+    from vibroflow.analysis.judge import judge
 
     out: dict = {"factor": factor, "continuum": _brief(cont),
                  "dem": [_brief(d) for d in dems]}
@@ -160,24 +169,21 @@ def compare_factor(factor: float, cont: dict, dems: list[dict],
     out["E_by_region"] = [asdict(r) for r in difference_by_region(
         cont["_table"], ref["_table"], *bed_thirds(ref["_table"], half_width))]
     if len(dems) > 1:
-        # every ordered pair of the seeds, and the continuum against every seed: the floor and
-        # the comparison both measured on the same ensemble, with their errors
-        tables = [d["_table"] for d in dems]
-        sc = seed_scatter(tables)
-        to = difference_to_seeds(cont["_table"], tables)
-        out["E_seed"] = sc.mean
-        out["E_seed_stderr"] = sc.stderr
-        out["E_seed_pairs"] = [{"a": i, "b": j, "E": e} for i, j, e in sc.pairs]
-        out["E_seed_source"] = (f"mean over the {len(sc.pairs)} ordered pairs of "
+        # every ordered pair of the seeds, and the continuum against every seed and their mean
+        # field: the floor and the comparison measured on the same ensemble, with their errors
+        # (vibroflow.analysis.judge, what `vibroflow compare` prints)
+        j = judge([_run_result(cont)], [_run_result(d) for d in dems])
+        floor, res = j["floor"], j["results"][0]
+        out["E_seed"] = floor["E_seed"]
+        out["E_seed_stderr"] = floor["stderr"]
+        out["E_seed_pairs"] = floor["pairs"]
+        out["E_seed_source"] = (f"mean over the {len(floor['pairs'])} ordered pairs of "
                                 f"{len(dems)} DEM seeds")
-        # against the seeds' mean field (their noise averaged down): the systematic part, beside
-        # each seed against the mean of the others (what is left of the noise there)
-        out["E_continuum_ensemble"] = field_difference(cont["_table"], ensemble_mean(tables))
-        out["E_seed_ensemble"] = [field_difference(t, ensemble_mean(tables[:k] + tables[k + 1:]))
-                                  for k, t in enumerate(tables)]
-        out["E_continuum_seeds"] = list(to.values)
-        out["E_continuum_seeds_mean"] = to.mean
-        out["E_continuum_seeds_stderr"] = to.stderr
+        out["E_seed_ensemble"] = floor["each_against_mean_of_others"]
+        out["E_continuum_ensemble"] = res["E_mean_field"]
+        out["E_continuum_seeds"] = res["E_each"]
+        out["E_continuum_seeds_mean"] = res["E_mean"]
+        out["E_continuum_seeds_stderr"] = res["E_stderr"]
     elif e_seed_given is not None:
         out["E_seed"] = e_seed_given
         out["E_seed_source"] = "given (--e-seed)"
