@@ -3,7 +3,7 @@ the package exists for (issues 4 and 6), with the DEM as the ground truth.
 
 The references are DEM runs (tests/data/tub47-dem, the reference case: circulation 2.44e-3
 m^2/s counterclockwise, seed-to-seed E 0.135 against seed 2, so tub47.md's fields-agree limit
-is 0.20; over four seeds the seed-to-seed E is 0.162 +- 0.056 and the limit 0.24,
+is 0.20; over ten seeds the seed-to-seed E is 0.206 +- 0.026 and the limit 0.31,
 benchmarks/README.md "Session 18"; and
 tests/data/tub47-quick-dem: 3.57e-3 m^2/s, seed-to-seed E 0.156): their cell tables and the
 calibrations measured on them.  Each continuum runs the same scenario with that calibration, at
