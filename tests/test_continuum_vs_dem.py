@@ -4,7 +4,7 @@ the package exists for (issues 4 and 6), with the DEM as the ground truth.
 The references are DEM runs (tests/data/tub47-dem, the reference case: circulation 2.44e-3
 m^2/s counterclockwise, seed-to-seed E 0.135 against seed 2, so tub47.md's fields-agree limit
 is 0.20; over ten seeds the seed-to-seed E is 0.206 +- 0.026 and the limit 0.31,
-benchmarks/README.md "Session 18"; and
+benchmarks/README.md "Session 18", whose ten runs' tables are tests/data/tub47-dem-seeds; and
 tests/data/tub47-quick-dem: 3.57e-3 m^2/s, seed-to-seed E 0.156): their cell tables and the
 calibrations measured on them.  Each continuum runs the same scenario with that calibration, at
 the package's defaults, and is judged with tub47.md's measures (vibroflow.analysis.compare).
@@ -67,8 +67,34 @@ def _run(method: str, case: str, out: Path, **options):
     return summary, _against_dem(case, summary, out)
 
 
+SEEDS = DATA / "tub47-dem-seeds"
+
+
+def _against_seeds(out: Path) -> dict:
+    """A continuum run judged against the DEM's ten fill seeds (vibroflow.analysis.judge, as
+    `vibroflow compare` prints it): the floor measured on them (0.206 +- 0.026, limit 0.309)."""
+    from vibroflow.analysis.judge import judge, read_result
+
+    refs = [read_result(SEEDS / f"seed{k}") for k in range(1, 11)]
+    j = judge([read_result(out)], refs)
+    r = j["results"][0]
+    print(f"\nagainst the ten seeds: strength x{r['strength_ratio']:.2f} "
+          f"({'agrees' if r['strengths_agree'] else 'differs'}), E {r['E_mean']:.3f} +- "
+          f"{r['E_stderr']:.3f} against the limit {j['limit']:.3f} "
+          f"({r['E_over_limit']:.2f} of it), {r['E_mean_field']:.3f} against their mean field")
+    return r
+
+
 def test_lagrangian_on_tub47_agrees_in_strength_and_beats_session_8(tmp_path):
+    """Against seed 1 (E < 0.40) and against the ensemble of ten seeds: the circulations agree,
+    the field misses the limit by a quarter (measured 1.25 of it: E 0.386 +- 0.015 against
+    0.309), a systematic difference (0.356 against the seeds' mean field); the bound guards
+    that state, it is not tub47.md's target."""
     _, (E, s, agree) = _run("lagrangian", "tub47", tmp_path / "new")
+    r = _against_seeds(tmp_path / "new")
+    assert r["strengths_agree"]
+    assert r["E_over_limit"] < 1.35
+    assert r["E_mean_field"] < r["E_mean"]
     _, (E_old, s_old, _) = _run("lagrangian", "tub47", tmp_path / "old", cfl=0.075,
                                 transfer_cfl=None)
     print(f"\nLagrangian tub47: E {E:.3f}, strength x{s:.2f}; one transfer at cfl 0.075: "
@@ -79,7 +105,12 @@ def test_lagrangian_on_tub47_agrees_in_strength_and_beats_session_8(tmp_path):
 
 
 def test_eulerian_on_tub47_agrees_in_strength(tmp_path):
+    """Against seed 1 (E < 0.50) and against the ten seeds: the circulations agree, the field
+    misses the limit by two fifths (measured 1.42 of it: E 0.437 +- 0.015)."""
     summary, (E, s, agree) = _run("eulerian", "tub47", tmp_path / "eul")
+    r = _against_seeds(tmp_path / "eul")
+    assert r["strengths_agree"]
+    assert r["E_over_limit"] < 1.55
     print(f"\nEulerian tub47: E {E:.3f}, strength x{s:.2f}")
     assert agree
     assert E < 0.50
