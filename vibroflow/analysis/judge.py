@@ -37,7 +37,8 @@ from vibroflow.errors import InputError
 
 @dataclass(frozen=True)
 class RunResult:
-    """One finished run: its folder, case, method (the DEM's 'dem'), averaging window (t_start,
+    """One finished run: its folder, case, method (a vibroflow DEM's 'dem', an imported one's
+    'dem (liggghts)'), averaging window (t_start,
     t_end s), circulation (summary.json's: strength m^2/s, strength_stderr, sense) and cell
     table (bulk_velocity.csv)."""
 
@@ -77,7 +78,10 @@ def read_result(folder) -> RunResult:
         raise InputError(f"{csv_path}: {e}") from None
     if not math.isfinite(strength):
         raise InputError(f"{summary_path}: circulation strength {strength!r}: not a number")
-    return RunResult(folder=folder, case=str(s.get("case")), method=str(s.get("method", "dem")),
+    # a continuum names its method; a DEM run its code ("vibroflow", or "liggghts" imported)
+    source = str(s.get("source", "vibroflow"))
+    method = s.get("method") or ("dem" if source == "vibroflow" else f"dem ({source})")
+    return RunResult(folder=folder, case=str(s.get("case")), method=str(method),
                      window=window, circulation=c, table=table)
 
 
