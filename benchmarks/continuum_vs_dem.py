@@ -129,12 +129,9 @@ def load_result(folder: Path, cell_size: float) -> dict:
 
 def _run_result(r: dict):
     """A loaded run (load_result) as vibroflow.analysis.judge reads one."""
-    from vibroflow.analysis.judge import RunResult
+    from vibroflow.analysis.judge import result_from_summary
 
-    w = r["window"]
-    return RunResult(folder=Path(r["_folder"]), case=str(r.get("case")),
-                     method=str(r.get("method", "dem")), window=(w["t_start"], w["t_end"]),
-                     circulation=r["circulation"], table=r["_table"])
+    return result_from_summary(r, r["_folder"], r["_table"])
 
 
 def _f(x, fmt="{:+.4f}") -> str:

@@ -28,9 +28,9 @@ from pathlib import Path
 import numpy as np
 
 from vibroflow.analysis.bulk import CellTable, _atomic_write_text, read_csv
-from vibroflow.analysis.compare import (FIELD_FACTOR, STRENGTH_REL_TOL, STRENGTH_SIGMAS,
-                                        difference_to_seeds, ensemble_mean, field_difference,
-                                        seed_scatter)
+from vibroflow.analysis.compare import (FIELD_FACTOR, difference_to_seeds, ensemble_mean,
+                                        field_difference, fields_agree, seed_scatter,
+                                        strengths_agree)
 from vibroflow.analysis.summary import json_safe
 from vibroflow.errors import InputError
 
@@ -64,7 +64,7 @@ def read_result(folder) -> RunResult:
         s = json.loads(summary_path.read_text())
         c = s["circulation"]
         w = s["window"]
-        window = (float(w["t_start"]), float(w["t_end"]))
+        float(w["t_start"]), float(w["t_end"])   # checked here: a one-line error if not
         strength = float(c["strength"])
     except (ValueError, KeyError, TypeError) as e:
         raise InputError(f"{summary_path}: not a run summary (no circulation or window: "
@@ -78,11 +78,19 @@ def read_result(folder) -> RunResult:
         raise InputError(f"{csv_path}: {e}") from None
     if not math.isfinite(strength):
         raise InputError(f"{summary_path}: circulation strength {strength!r}: not a number")
+    return result_from_summary(s, folder, table)
+
+
+def result_from_summary(summary: dict, folder, table: CellTable) -> RunResult:
+    """A RunResult of a run's summary.json contents and its cell table (read_result's last
+    step; benchmarks that load runs themselves call it too)."""
     # a continuum names its method; a DEM run its code ("vibroflow", or "liggghts" imported)
-    source = str(s.get("source", "vibroflow"))
-    method = s.get("method") or ("dem" if source == "vibroflow" else f"dem ({source})")
-    return RunResult(folder=folder, case=str(s.get("case")), method=str(method),
-                     window=window, circulation=c, table=table)
+    source = str(summary.get("source", "vibroflow"))
+    method = summary.get("method") or ("dem" if source == "vibroflow" else f"dem ({source})")
+    w = summary["window"]
+    return RunResult(folder=Path(folder), case=str(summary.get("case")), method=str(method),
+                     window=(float(w["t_start"]), float(w["t_end"])),
+                     circulation=summary["circulation"], table=table)
 
 
 def _se(x) -> float:
@@ -153,19 +161,16 @@ def judge(results: list[RunResult], references: list[RunResult],
     for r in results:
         c = r.circulation
         s, se = float(c["strength"]), _se(c.get("strength_stderr"))
-        tol = max(STRENGTH_REL_TOL * abs(ref_strength),
-                  STRENGTH_SIGMAS * math.hypot(se, ref_strength_se))
-        same_sense = (c.get("sense") == ref_sense) if c.get("sense") and ref_sense else True
         d = difference_to_seeds(r.table, tables)
         entry = {"folder": str(r.folder), "method": r.method, "strength": s,
                  "strength_stderr": c.get("strength_stderr"), "sense": c.get("sense"),
                  "strength_ratio": s / ref_strength if ref_strength else None,
-                 "strengths_agree": bool(same_sense and abs(s - ref_strength) <= tol),
+                 "strengths_agree": strengths_agree(s, se, ref_strength, ref_strength_se,
+                                                    c.get("sense"), ref_sense),
                  "E_each": list(d.values), "E_mean": d.mean, "E_stderr": d.stderr,
                  "E_mean_field": (field_difference(r.table, mean_field)
                                   if mean_field is not None else None)}
-        entry["fields_agree"] = (bool(d.mean <= out["limit"]) if out["limit"] is not None
-                                 else None)
+        entry["fields_agree"] = fields_agree(d.mean, floor) if floor is not None else None
         entry["E_over_limit"] = d.mean / out["limit"] if out["limit"] else None
         out["results"].append(entry)
     return out
