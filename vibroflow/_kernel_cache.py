@@ -79,10 +79,9 @@ def refresh(folders: list[Path], stamp: Path, digest: str) -> int:
                 removed += 1
             except FileNotFoundError:
                 pass
-    stamp.parent.mkdir(parents=True, exist_ok=True)
-    tmp = stamp.with_name(f".tmp-{os.getpid()}-{stamp.name}")
-    tmp.write_text(digest + "\n")
-    os.replace(tmp, stamp)
+    from vibroflow.io.atomic import write_text_atomic  # only when stale: the import stays light
+
+    write_text_atomic(stamp, digest + "\n")
     return removed
 
 

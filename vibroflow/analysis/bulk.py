@@ -32,13 +32,12 @@ whole; the per-chunk temporaries stay well under 1 GB.
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from vibroflow.analysis.stats import stderr_of_batches
+from vibroflow.io.atomic import write_text_atomic
 from vibroflow.tub.geometry import TubGeometry
 from vibroflow.tub.motion import lab_to_tub_np, relative_velocity_tub_axes_np
 
@@ -277,22 +276,8 @@ def cell_table(positions, velocities, tub_pose, radius, geometry: TubGeometry,
     return acc.table()
 
 
-def _atomic_write_text(path, text: str) -> None:
-    path = os.fspath(path)
-    d = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=os.path.basename(path), dir=d)
-    try:
-        with os.fdopen(fd, "w", newline="\n") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def write_csv(table: CellTable, path) -> None:
-    """Write bulk_velocity.csv atomically (temporary file, then os.replace).
+    """Write bulk_velocity.csv atomically (vibroflow.io.atomic).
 
     Columns: x, z (m, cell centre, tub frame), solid_fraction (-), vx, vz (m/s, relative to the
     tub, tub axes), samples (ball-samples); one header line, then one row per cell, sorted by z
@@ -303,7 +288,7 @@ def write_csv(table: CellTable, path) -> None:
     for j in order:
         lines.append(f"{table.x[j]:.10g},{table.z[j]:.10g},{table.solid_fraction[j]:.10g},"
                      f"{table.vx[j]:.10g},{table.vz[j]:.10g},{int(table.samples[j])}")
-    _atomic_write_text(path, "\n".join(lines) + "\n")
+    write_text_atomic(path, "\n".join(lines) + "\n")
 
 
 def _infer_cell_size(x, z) -> float:

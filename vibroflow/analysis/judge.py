@@ -27,12 +27,13 @@ from pathlib import Path
 
 import numpy as np
 
-from vibroflow.analysis.bulk import CellTable, _atomic_write_text, read_csv
+from vibroflow.analysis.bulk import CellTable, read_csv
 from vibroflow.analysis.compare import (FIELD_FACTOR, difference_to_seeds, ensemble_mean,
                                         field_difference, fields_agree, seed_scatter,
                                         strengths_agree)
 from vibroflow.analysis.summary import json_safe
 from vibroflow.errors import InputError
+from vibroflow.io.atomic import write_json_atomic
 
 
 @dataclass(frozen=True)
@@ -227,4 +228,4 @@ def format_judgement(j: dict) -> str:
 
 def write_judgement(j: dict, path) -> None:
     """The judgement as JSON, written atomically."""
-    _atomic_write_text(Path(path), json.dumps(json_safe(j), indent=2) + "\n")
+    write_json_atomic(path, json_safe(j))

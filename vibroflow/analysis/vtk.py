@@ -1,23 +1,23 @@
 """ParaView output: ball snapshots (.vtu point clouds), their time collection (.pvd) and the tub's
 surface (.vtu quad mesh).
 
-Files are written to a temporary name in the target folder and moved into place with os.replace,
-so a reader never sees half a file.  Coordinates are in m, velocities in m/s, angular velocities
-in rad/s; the frame is whatever the caller passes (the tub surface is in the tub frame, tub47.md
-"Frames": x across, y along the tub, z up, origin at the lowest point of the inner surface).
-In ParaView, show the balls with the "Point Gaussian" representation (radius array "radius") or a
-Glyph filter with sphere glyphs scaled by "radius".
+Files are written atomically (vibroflow.io.atomic: a temporary name in the target folder, moved
+into place with os.replace), so a reader never sees half a file.  Coordinates are in m,
+velocities in m/s, angular velocities in rad/s; the frame is whatever the caller passes (the
+tub surface is in the tub frame, tub47.md "Frames": x across, y along the tub, z up, origin at
+the lowest point of the inner surface).  In ParaView, show the balls with the "Point Gaussian"
+representation (radius array "radius") or a Glyph filter with sphere glyphs scaled by "radius".
 """
 from __future__ import annotations
 
 import os
-import tempfile
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
 from pyevtk.hl import pointsToVTK, unstructuredGridToVTK
 from pyevtk.vtk import VtkQuad
 
+from vibroflow.io.atomic import atomic_path, write_text_atomic
 from vibroflow.tub.geometry import TubGeometry
 
 
@@ -27,16 +27,11 @@ def atomic_vtk(path, writer, suffix: str = ".vtu") -> str:
     half-written file."""
     path = os.fspath(path)
     final = path if path.endswith(suffix) else path + suffix
-    d = os.path.dirname(os.path.abspath(final))
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=suffix, dir=d)
-    os.close(fd)
-    try:
+    with atomic_path(final, suffix=suffix) as tmp:
+        tmp = os.fspath(tmp)
         written = writer(tmp[:-len(suffix)])
-        os.replace(written, final)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+        if os.path.abspath(written) != os.path.abspath(tmp):
+            raise RuntimeError(f"the VTK writer wrote {written}, not {tmp}")
     return final
 
 
@@ -88,15 +83,7 @@ def write_pvd(path, entries) -> str:
         lines.append(f'    <DataSet timestep="{float(t):.12g}" group="" part="0" '
                      f"file={quoteattr(fname)}/>")
     lines += ["  </Collection>", "</VTKFile>", ""]
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".pvd", dir=folder)
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write("\n".join(lines))
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    write_text_atomic(path, "\n".join(lines))
     return path
 
 

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import datetime as _dt
 import math
-import os
 import tomllib
 from pathlib import Path
 
@@ -39,6 +38,7 @@ from vibroflow import __version__
 from vibroflow.analysis.summary import geometry_of
 from vibroflow.scenario.model import find_contact
 from vibroflow.errors import InputError
+from vibroflow.io.atomic import write_text_atomic
 
 from .dem_result import DEMResult
 from .impacts import impact_relations, impact_relations_on_cells
@@ -508,10 +508,7 @@ def write_calibration(path, cal: dict) -> Path:
             "# Read with vibroflow.calibration.read_calibration; every value has its standard\n"
             "# error (*_stderr, NaN where none could be estimated) and [source] says where it\n"
             "# came from.\n\n")
-    tmp = path.with_name(path.name + f".tmp{os.getpid()}")
-    tmp.write_text(head + tomli_w.dumps(_plain(cal)))
-    os.replace(tmp, path)
-    return path
+    return write_text_atomic(path, head + tomli_w.dumps(_plain(cal)))
 
 
 def _plain(obj):

@@ -5,10 +5,11 @@ and returns its path.
 """
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
+
+from vibroflow.io.atomic import atomic_path
 
 
 def _plt():
@@ -20,10 +21,11 @@ def _plt():
 
 def _save(fig, path) -> Path:
     path = Path(path)
-    tmp = path.with_name(path.stem + f".tmp{os.getpid()}" + path.suffix)
-    fig.savefig(tmp, dpi=110, bbox_inches="tight")
-    os.replace(tmp, path)
-    _plt().close(fig)
+    try:
+        with atomic_path(path) as tmp:  # its name ends with path's: savefig picks the format
+            fig.savefig(tmp, dpi=110, bbox_inches="tight")
+    finally:
+        _plt().close(fig)
     return path
 
 

@@ -8,7 +8,6 @@ them in one NetCDF-4 file (the time averages at the root, the phase-resolved fie
 """
 from __future__ import annotations
 
-import os
 import time
 from pathlib import Path
 
@@ -17,6 +16,7 @@ import xarray as xr
 
 from vibroflow.analysis.summary import geometry_of
 from vibroflow.errors import InputError
+from vibroflow.io.atomic import atomic_path
 
 from .coarse_grain import CoarseGrainer, phase_bins
 from .dem_result import DEMResult
@@ -114,17 +114,12 @@ def add_cycle_means(time_averaged: xr.Dataset, phase_resolved: xr.Dataset) -> No
 
 
 def write_fields(path, time_averaged: xr.Dataset, phase_resolved: xr.Dataset | None) -> Path:
-    """Write the fields to one NetCDF-4 file atomically (temporary file, then rename)."""
+    """Write the fields to one NetCDF-4 file atomically (vibroflow.io.atomic)."""
     path = Path(path)
-    tmp = path.with_name(path.name + f".tmp{os.getpid()}")
-    try:
+    with atomic_path(path) as tmp:
         time_averaged.to_netcdf(tmp, mode="w", engine="h5netcdf", invalid_netcdf=False)
         if phase_resolved is not None:
             phase_resolved.to_netcdf(tmp, mode="a", group="phase_resolved", engine="h5netcdf")
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
     return path
 
 

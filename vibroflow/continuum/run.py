@@ -42,7 +42,6 @@ import dataclasses
 import hashlib
 import json
 import math
-import os
 import time
 from dataclasses import dataclass
 from typing import ClassVar
@@ -56,6 +55,8 @@ from vibroflow.analysis.phase_shear import (PhaseShear, near_wall_nodes, node_gr
 from vibroflow.analysis.stats import batch_means, batches_of_whole_cycles
 from vibroflow.analysis.summary import geometry_of, json_safe, tub_summary
 from vibroflow.errors import InputError
+# write_json_atomic: also imported from here by the Eulerian run
+from vibroflow.io.atomic import write_json_atomic, write_text_atomic
 from vibroflow.progress import RunProgress
 from vibroflow.tub.geometry import cross_section_area, distance_to_wall_np, u_wall_nearest
 from vibroflow.tub.motion import TubMotion, rigid_velocity, tub_to_lab
@@ -475,12 +476,6 @@ def _write_points_vtu(path: Path, state: MPMState, rate: np.ndarray, length: flo
                                      "state": state.phase.astype(np.float64)})
 
 
-def write_json_atomic(path: Path, data: dict) -> None:
-    tmp = path.with_name(".tmp-" + path.name)
-    tmp.write_text(json.dumps(data, indent=2) + "\n")
-    os.replace(tmp, path)
-
-
 def options_record(options: LagrangianOptions) -> dict:
     """The options as a plain dict for a fingerprint or a study's inputs, an unset dx spelled
     out as the rule that sets it (DEFAULT_GRID)."""
@@ -646,9 +641,7 @@ def write_shear_rate_csv(path: Path, samples: Samples, phase: PhaseShear | None,
                  for c0, c1 in fits]
             lines.append(f"{(i - nxh) * h!r},{k * h!r},{num(g)},{num(f)},{num(inst)},{int(n)},"
                          f"{v[0]},{v[1]}")
-    tmp = path.with_name(f".tmp-{os.getpid()}-{path.name}")
-    tmp.write_text("\n".join(lines) + "\n")
-    os.replace(tmp, path)
+    write_text_atomic(path, "\n".join(lines) + "\n")
 
 
 def samples_source(scenario, samples: Samples, times: np.ndarray, radius: np.ndarray) -> dict:

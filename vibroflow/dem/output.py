@@ -31,6 +31,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from ..io.atomic import atomic_path
 from .neighbours import NeighbourList
 from .simulate import DEMState
 
@@ -221,14 +222,11 @@ def read_state(group: h5py.Group) -> DEMState:
 
 
 def save_state_file(path: Path, state: DEMState, attrs: dict | None = None) -> None:
-    """Write a state to an HDF5 file atomically (temp file, then rename)."""
-    path = Path(path)
-    tmp = path.with_name(path.name + f".tmp{os.getpid()}")
-    with h5py.File(tmp, "w") as f:
+    """Write a state to an HDF5 file atomically (vibroflow.io.atomic)."""
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
         write_state(f.create_group("state"), state)
         for k, v in (attrs or {}).items():
             f.attrs[k] = v
-    os.replace(tmp, path)
 
 
 def load_state_file(path: Path) -> tuple[DEMState, dict]:

@@ -21,6 +21,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
+from ..io.atomic import write_json_atomic
 from ..progress import RunProgress
 from ..tub.motion import pose_np
 from . import fill as F
@@ -30,12 +31,6 @@ from .simulate import (BlowUp, DEMState, DEMSystem, init_state, make_system, run
                        shortest_contact_time, take_max_overlaps, wall_contacts_now)
 
 SMALL_RUN = 1500  # below this many balls one thread is faster than two (thread wake-ups)
-
-
-def _write_json_atomic(path: Path, data: dict) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2, sort_keys=False) + "\n")
-    os.replace(tmp, path)
 
 
 def _scenario_toml(scenario) -> str:
@@ -256,7 +251,7 @@ def _vibrate(scenario, out_dir, system, state, writer, prog, settle_info, wall_s
     summary = _summary(scenario, system, state, path, out_dir, wall, settle_info, explicit)
     if vtk:
         _write_vtk(path, out_dir, scenario)
-    _write_json_atomic(out_dir / "summary.json", summary)
+    write_json_atomic(out_dir / "summary.json", summary)
     if ckpt.exists():
         ckpt.unlink()
     return summary

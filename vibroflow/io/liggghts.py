@@ -46,7 +46,6 @@ and push on the whole (PairCheck).
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 import re
@@ -62,6 +61,7 @@ from vibroflow.analysis.summary import geometry_of
 from vibroflow.dem.laws import damping_ratio
 from vibroflow.dem.walls import WALL_PARTITION_HI, WALL_PARTITION_LO, WALL_U
 from vibroflow.errors import InputError
+from vibroflow.io.atomic import write_json_atomic, write_text_atomic
 from vibroflow.scenario.model import find_contact
 from vibroflow.io.stl import DEFAULT_MAX_SAGITTA, arc_segments, sagitta, write_tub_meshes
 from vibroflow.tub.motion import TubMotion, lab_to_tub_np, pose_np
@@ -354,14 +354,6 @@ def _scenario_toml(scenario) -> str:
     return tomli_w.dumps(scenario.model_dump(mode="json", exclude_none=True))
 
 
-def _write_text_atomic(path: Path, text: str) -> None:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
 @dataclass(frozen=True)
 class DeckInfo:
     """What export_deck wrote and the numbers it chose."""
@@ -472,7 +464,7 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     step_lines = "\n".join(str(int(s)) for s in rest) + ("\n" if rest.size else "")
     # two sentinels: LIGGGHTS reads one line ahead of what next() returns
     step_lines += f"{vib_steps + 10**9}\n{vib_steps + 10**9 + 1}\n"
-    _write_text_atomic(tp / "dump_steps.txt", step_lines)
+    write_text_atomic(tp / "dump_steps.txt", step_lines)
 
     ke_every = run.series_every
     model_args, model_kw = model_arguments(tables)
@@ -634,10 +626,10 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     add(f'print "vibroflow: vibration of {vib_steps} steps done"')
     deck = "\n".join(L_) + "\n"
     deck_path = out_dir / DECK_NAME
-    _write_text_atomic(deck_path, deck)
-    _write_text_atomic(out_dir / "scenario.toml", _scenario_toml(scenario))
-    _write_text_atomic(out_dir / "README.txt", _readme(scenario, vib_steps, dsteps.size,
-                                                       wall_contacts, pair_contacts))
+    write_text_atomic(deck_path, deck)
+    write_text_atomic(out_dir / "scenario.toml", _scenario_toml(scenario))
+    write_text_atomic(out_dir / "README.txt", _readme(scenario, vib_steps, dsteps.size,
+                                                      wall_contacts, pair_contacts))
     return DeckInfo(out_dir, deck_path, fill.count, dt, vib_steps, dsteps, n_arc,
                     sagitta(R, n_arc), seeds, per_event, event_steps, settle_steps, tables)
 
@@ -1106,7 +1098,7 @@ def import_run(dump_dir, scenario=None, out_dir=None) -> dict:
     summary["impacts_available"] = False
     from vibroflow.analysis.summary import tub_summary
     summary.update(tub_summary(final, scenario, bulk_csv=out_dir / "bulk_velocity.csv"))
-    _write_text_atomic(out_dir / "summary.json", json.dumps(_json_safe(summary), indent=2) + "\n")
+    write_json_atomic(out_dir / "summary.json", _json_safe(summary))
     return summary
 
 

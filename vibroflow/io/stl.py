@@ -20,13 +20,12 @@ binary STL for other tools.
 from __future__ import annotations
 
 import math
-import os
 import struct
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from vibroflow.io.atomic import write_bytes_atomic
 from vibroflow.tub.geometry import TubGeometry
 
 #: largest chord-to-circle deviation of the U's facets (m)
@@ -121,23 +120,6 @@ def facet_normals(tris: np.ndarray) -> np.ndarray:
     return n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
-def _atomic_write_bytes(path: Path, data: bytes) -> None:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def stl_text(tris: np.ndarray, name: str = "surface") -> str:
     """ASCII STL of triangles (T, 3, 3); normals from the vertex order."""
     normals = facet_normals(tris)
@@ -168,8 +150,7 @@ def write_stl(path, tris: np.ndarray, name: str = "surface", binary: bool = Fals
     """Write triangles (T, 3, 3) to an STL file atomically; returns the path."""
     path = Path(path)
     data = stl_binary(tris, name) if binary else stl_text(tris, name).encode("ascii")
-    _atomic_write_bytes(path, data)
-    return path
+    return write_bytes_atomic(path, data)
 
 
 def read_stl(path) -> tuple[np.ndarray, np.ndarray]:

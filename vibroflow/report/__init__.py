@@ -11,8 +11,9 @@ mu(I) fit, any sweep, the cost and the scenario, with an animation of the DEM sl
 """
 from __future__ import annotations
 
-import os
 from pathlib import Path
+
+from vibroflow.io.atomic import write_text_atomic
 
 REPORT_NAME = "report.html"
 REPORT_DIR = "report"
@@ -39,15 +40,7 @@ def write_report(study_dir) -> Path:
     else:
         why = "no dem/dem.h5 in the study"
     text = render(data, gif, why)
-    path = out / REPORT_NAME
-    tmp = path.with_name(f".tmp{os.getpid()}-{path.name}")
-    try:
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    return path
+    return write_text_atomic(out / REPORT_NAME, text)
 
 
 __all__ = ["write_report", "REPORT_NAME", "GIF_NAME"]

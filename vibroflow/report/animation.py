@@ -11,10 +11,11 @@ folder and moved into place, so a reader never sees a partial file.
 """
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
+
+from vibroflow.io.atomic import atomic_path
 
 #: frames at most (the last snapshots of the run), and the frame duration (ms)
 MAX_FRAMES = 48
@@ -109,13 +110,7 @@ def write_slice_gif(run_dir, path, max_frames: int = MAX_FRAMES,
             colors=COLORS, dither=Image.Dither.NONE))
     plt.close(fig)
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".tmp{os.getpid()}-{path.name}")
-    try:
+    with atomic_path(path) as tmp:
         images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:],
                        duration=FRAME_MS, loop=0, disposal=1)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
     return path

@@ -11,12 +11,13 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+# write_json_atomic is imported from here by the study's other modules
+from vibroflow.io.atomic import write_json_atomic
 from vibroflow.study.methods import ContinuumMethod
 
 DEM = "dem"
@@ -25,14 +26,6 @@ COMPARISON = "comparison"
 SUMMARY_NAME = "summary.json"
 #: DEM particle-steps per wall second assumed for the first estimate of the time left
 ASSUMED_RATE = 2.0e6
-
-
-def write_json_atomic(path: Path, data: Any) -> None:
-    """Write JSON so that a reader sees the old file or the whole new one, never a part."""
-    path = Path(path)
-    tmp = path.with_name(f".tmp-{os.getpid()}-{path.name}")
-    tmp.write_text(json.dumps(data, indent=2, allow_nan=True) + "\n")
-    os.replace(tmp, path)
 
 
 def scenario_inputs(scenario) -> dict:

@@ -10,11 +10,11 @@ One line per method (colour) and, when other keys vary too, per combination of t
 """
 from __future__ import annotations
 
-import os
 from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
+from vibroflow.io.atomic import atomic_path
 from vibroflow.study.sweep_points import FACTOR_KEY
 
 NAMES = ("sweep_probes.png", "sweep_circulation.png", "sweep_impacts.png",
@@ -43,9 +43,8 @@ def _label(key: tuple, varied: list[str]) -> str:
 
 
 def _save(fig, path: Path) -> None:
-    tmp = path.with_name(f".tmp-{os.getpid()}-{path.name}")  # same suffix: same format
-    fig.savefig(tmp, dpi=110)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:  # its name ends with path's: savefig picks the format
+        fig.savefig(tmp, dpi=110)
 
 
 def _draw(ax, series, varied, column: str, scale: float = 1.0, errors: bool = True) -> None:

@@ -13,10 +13,10 @@ import csv
 import io
 import json
 import math
-import os
 from pathlib import Path
 from typing import Any
 
+from vibroflow.io.atomic import write_text_atomic
 from vibroflow.study.sweep_folder import point_dir, point_state
 from vibroflow.study.sweep_points import FACTOR_KEY
 
@@ -108,9 +108,7 @@ def write_csv_atomic(path: Path, rows: list[dict[str, Any]], varied: list[str]) 
     w.writerow(cols)
     for r in rows:
         w.writerow([_cell(r.get(c)) for c in cols])
-    tmp = path.with_name(f".tmp-{os.getpid()}-{path.name}")
-    tmp.write_text(buf.getvalue())
-    os.replace(tmp, path)
+    write_text_atomic(path, buf.getvalue())
 
 
 def _pm(v, e, scale: float = 1.0, fmt: str = ".3g") -> str:
