@@ -3,6 +3,8 @@ file's stamp only, so a kernel that inlines code from another file keeps stale m
 after that file changes; the guard drops the package's cache whenever any source changes."""
 from __future__ import annotations
 
+from pathlib import Path
+
 from vibroflow import _kernel_cache as kc
 
 

@@ -144,7 +144,6 @@ def run_dem(scenario, out_dir: Path, vtk: bool = False, resume: bool = False,
 def _run(scenario, out_dir: Path, system: DEMSystem, vtk: bool, resume: bool,
          prog: RunProgress) -> dict:
     dt = system.dt
-    run = scenario.run
     ckpt = out_dir / "checkpoint.h5"
     wall_start = time.perf_counter()
     wall_before = 0.0

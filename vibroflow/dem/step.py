@@ -131,7 +131,6 @@ def _finish_chunk(c, nchunk, t, dt, pose, pos, vel, omg, radius, mass, mat, grav
     reference-count update per array, which per ball and wall slot cost more than the
     contact itself.  Without `kick` (the set-up force evaluation) contact histories are not
     advanced, as in LAMMPS' setup."""
-    n = pos.shape[0]
     lo, hi = bounds[c], bounds[c + 1]
     cth = np.cos(pose[2])
     sth = np.sin(pose[2])
