@@ -208,7 +208,7 @@ def test_tub47_quick_full(tub47_quick_summary):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="tub47-quick's largest ball-ball overlap is 2.01 - 2.02 % "
+@pytest.mark.xfail(strict=False, reason="tub47-quick's largest ball-ball overlap is 2.01 - 2.02 % "
                    "of d, just past the issue's 2 %")
 def test_tub47_quick_ball_overlap_below_two_percent(tub47_quick_summary):
     """The issue's bound on the ball-ball overlap, 2 % of d, over the whole run.  Not met, by a
@@ -227,5 +227,9 @@ def test_tub47_quick_ball_overlap_below_two_percent(tub47_quick_summary):
     maxima agree (1.69 - 1.80 % in both codes).  The bound lies within the seed-to-seed
     scatter of the extreme in either code; it could be met reliably only by changing
     tub47.md's contact law.
-    Strict: if it ever passes, this marker must go."""
+    Not strict: the figure is the extreme of a chaotic run, and a machine whose compiled kernels
+    round differently (another CPU's vector width) follows another trajectory, whose extreme
+    lies anywhere in that scatter (LIGGGHTS' seed 1: 1.967 %); since session 20 the slow checks
+    run in CI (.ci/run), where an unexpected pass must not fail the build.  An XPASS in the
+    report says this run met the bound, not that the law meets it reliably."""
     assert tub47_quick_summary["max_overlap_over_d"] < 0.02
