@@ -89,6 +89,32 @@ def test_compare_measures_the_floor_and_judges_against_every_seed(run_cli, ensem
     assert "fields agree: yes" in res.stdout and "fields agree: no" in res.stdout
 
 
+def test_a_folder_of_seeds_stands_for_its_runs_in_natural_order(run_cli, ensemble, tmp_path):
+    """`-r FOLDER` (a folder holding run folders and no summary.json of its own) is the same
+    judgement as one `-r` per run: the floor over the same twelve ordered pairs, each result
+    against the same four references; the runs taken in natural order (seed2 before seed10)."""
+    import shutil
+
+    from vibroflow.analysis.judge import run_folders
+
+    refs, exact, _, _ = ensemble
+    seeds = tmp_path / "seeds"
+    for name, r in zip(("seed10", "seed2", "seed1", "seed3"), refs):
+        shutil.copytree(r, seeds / name)
+    (seeds / "notes").mkdir()            # a folder without a run is not one
+    assert [p.name for p in run_folders([seeds])] == ["seed1", "seed2", "seed3", "seed10"]
+    one, each = tmp_path / "one.json", tmp_path / "each.json"
+    assert run_cli("compare", exact, "-r", seeds, "--json", one).returncode == 0
+    args = [exact]
+    for name in ("seed1", "seed2", "seed3", "seed10"):
+        args += ["-r", seeds / name]
+    assert run_cli("compare", *args, "--json", each).returncode == 0
+    a, b = json.loads(one.read_text()), json.loads(each.read_text())
+    assert a["floor"]["E_seed"] == b["floor"]["E_seed"]
+    assert a["results"][0]["E_each"] == b["results"][0]["E_each"]
+    assert a["floor"]["E_seed"] == pytest.approx(2 * SIGMA / V, rel=0.03)
+
+
 def test_compare_with_one_reference_needs_the_floor(run_cli, ensemble):
     refs, exact, _, _ = ensemble
     res = run_cli("compare", exact, "-r", refs[0])
@@ -103,9 +129,11 @@ def test_compare_bad_input_is_one_line(run_cli, ensemble, tmp_path):
     other = _write_run(tmp_path / "quick", vx, vz, x, z, phi, 1e-3, 0.0, case="tub47-quick")
     late = _write_run(tmp_path / "late", vx, vz, x, z, phi, 1e-3, 0.0, window=(0.5, 1.5))
     out = tmp_path / "never.json"
+    empty = tmp_path / "empty"       # a folder with neither a run nor run folders in it
+    empty.mkdir()
     for args, needle in [
         ((tmp_path / "nowhere", "-r", refs[0]), "no such run folder"),
-        ((exact, "-r", tmp_path), "not a finished run"),
+        ((exact, "-r", empty), "not a finished run"),
         ((exact,), "--reference"),
         (("-r", refs[0]), "RESULT"),
         ((other, "-r", refs[0]), "case"),

@@ -491,10 +491,11 @@ def report(
 def compare(
     results: Annotated[Optional[list[Path]], typer.Argument(
         metavar="RESULT...", help="Run folders to judge (vibroflow dem, vibroflow continuum, "
-                                  "a study's DIR/<method>).")] = None,
+                                  "a study's DIR/<method>), or folders of them.")] = None,
     reference: Annotated[Optional[list[Path]], typer.Option(
         "--reference", "-r", help="A run of the reference method (repeatable: runs that "
-                                  "differ only in their fill seed); required.")] = None,
+                                  "differ only in their fill seed), or a folder of such runs "
+                                  "(each of its run folders); required.")] = None,
     e_seed: Annotated[Optional[float], typer.Option(
         "--e-seed", help="The reference's seed-to-seed E, when only one reference is "
                          "given.")] = None,
@@ -504,10 +505,11 @@ def compare(
     """Judge runs against a reference method's runs as tub47.md does (circulation strengths,
     the field difference E against the seed-to-seed floor): with several references, the floor
     is measured on them and every run is compared with each (vibroflow.analysis.judge)."""
-    from vibroflow.analysis.judge import format_judgement, judge, read_result, write_judgement
+    from vibroflow.analysis.judge import (format_judgement, judge, read_result, run_folders,
+                                          write_judgement)
 
-    refs = [read_result(f) for f in reference or []]
-    runs = [read_result(f) for f in results or []]
+    refs = [read_result(f) for f in run_folders(reference or [])]
+    runs = [read_result(f) for f in run_folders(results or [])]
     j = judge(runs, refs, e_seed)
     typer.echo(format_judgement(j))
     if json_out is not None:

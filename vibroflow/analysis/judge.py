@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -49,6 +50,32 @@ class RunResult:
     window: tuple[float, float]
     circulation: dict
     table: CellTable
+
+
+def _natural_key(path: Path) -> list:
+    """Sort key that orders seed2 before seed10 (the digits compared as numbers)."""
+    return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", path.name)]
+
+
+def run_folders(paths) -> list[Path]:
+    """The run folders that `paths` name: each path as it is, except a folder that holds no
+    summary.json of its own but run folders inside (each with a summary.json), which stands
+    for those, in natural order (seed1, seed2, ..., seed10): `-r tests/data/tub47-dem-seeds`
+    for the ten seeds.  Why: a shell glob after a single `-r` (`-r seeds/seed*`) gives the
+    option its first match only and makes the others results, a plausible but wrong
+    judgement; a folder of seeds says what is meant.  Anything else is left to read_result
+    (its one-line errors)."""
+    out: list[Path] = []
+    for p in paths:
+        p = Path(p)
+        if p.is_dir() and not (p / "summary.json").exists():
+            inner = sorted((c for c in p.iterdir() if c.is_dir() and (c / "summary.json")
+                            .is_file()), key=_natural_key)
+            if inner:
+                out.extend(inner)
+                continue
+        out.append(p)
+    return out
 
 
 def read_result(folder) -> RunResult:
