@@ -3,7 +3,8 @@ vibroflow's DEM on the tub case.
 
     python benchmarks/continuum_vs_dem.py [--case tub47-quick|tub47] [--factors 0.5 1.0 1.5]
         [--methods lagrangian eulerian] [--calibration FILE] [--dem-dir DIR ...] [--run-dem]
-        [--seeds 1 2 ...] [--e-seed E] [--dx M] [--rheology mu_i|drucker_prager] [--out DIR]
+        [--seeds 1 2 ...] [--e-seed E] [--dx M] [--rheology mu_i|drucker_prager]
+        [--no-warm-up] [--out DIR]
 
 For each amplitude factor s (tub47.md "Amplitude sweep": the three amplitudes times s) the
 script needs the DEM of the case at s for each seed of --seeds, and runs every continuum method
@@ -36,7 +37,9 @@ of both and their ratio (the issue's target: the continuum at
 least 100 times cheaper at equal accuracy).  Wall times are those the runs recorded in their
 summary.json ("wall_time_s": the DEM's from its start, fill from the cache or not, the
 continuum's with its settling); the DEM's were taken whenever and with whatever load its run
-had, so the ratio is indicative unless both ran on a quiet machine.
+had, so the ratio is indicative unless both ran on a quiet machine.  Before the timed runs
+each method runs once unrecorded (warm_up), so that their wall times hold no compilation of
+numba's kernels (`--no-warm-up` times the first run as it comes).
 
 Everything also goes to --out/report.json (default runs/continuum_vs_dem/<case>/, git-ignored),
 with the continuum runs' folders (<method>_s<factor>) beside it.
@@ -276,6 +279,28 @@ def print_regions(name: str, regions: list[dict]) -> None:
         print(f"  {z_name:>6} z {z0:.3f}-{z1:.3f} m: {cells}")
 
 
+def warm_up(methods, options, cal, scenario, out: Path) -> dict:
+    """Run each method once, unrecorded (into out/warm_up_<method>, removed), so that the timed
+    runs find numba's cache filled: a run's summary.json wall time includes the compilation of
+    every kernel it calls when the cache is cold (after any edit of the package's sources,
+    vibroflow/_kernel_cache.py clears it), 40 - 55 s on tub47 against 3 - 6 s warm, which
+    would put the cost ratio at 12 - 16 instead of 100 - 250 (benchmarks/README.md, "Session
+    20").  Returns {method: this run's wall time (s)}."""
+    import shutil
+    import time
+
+    took = {}
+    for name, m in methods.items():
+        folder = out / f"warm_up_{name}"
+        t0 = time.perf_counter()
+        m.run(scenario, folder, cal, options[name], True, False)
+        took[name] = time.perf_counter() - t0
+        shutil.rmtree(folder, ignore_errors=True)
+        print(f"  {name}: warm-up run {took[name]:.1f} s (numba's cache; not in the wall times)",
+              flush=True)
+    return took
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--case", default="tub47-quick", choices=["tub47-quick", "tub47"])
@@ -298,6 +323,9 @@ def main(argv=None) -> int:
                     help="reuse finished continuum runs in --out instead of running them")
     ap.add_argument("--set", dest="overrides", action="append", default=[],
                     metavar="KEY=VALUE", help="scenario override for both methods")
+    ap.add_argument("--no-warm-up", dest="warm_up", action="store_false",
+                    help="time the first continuum run of each method as it comes, numba's "
+                         "compilation included when its cache is cold")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args(argv)
     out = args.out or Path("runs") / "continuum_vs_dem" / args.case
@@ -332,6 +360,10 @@ def main(argv=None) -> int:
           f"{args.calibration or 'none (tub47 defaults)'}; load {os.getloadavg()[0]:.2f}")
     base = scenario_at(args.case, 1.0, args.seeds[0], args.overrides)
     cell, radius = base.analysis.cell_size, base.tub.radius
+    if args.warm_up and not args.reuse_continuum:
+        report["warm_up_s"] = warm_up(methods, options, cal,
+                                      scenario_at(args.case, args.factors[0], args.seeds[0],
+                                                  args.overrides), out)
     for factor in args.factors:
         key_f = round(factor, 6)
         dems = []
