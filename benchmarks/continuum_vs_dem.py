@@ -51,7 +51,9 @@ import json
 import math
 import os
 import platform
+import shutil
 import sys
+import time
 import tomllib
 from pathlib import Path
 
@@ -286,9 +288,6 @@ def warm_up(methods, options, cal, scenario, out: Path) -> dict:
     vibroflow/_kernel_cache.py clears it), 40 - 55 s on tub47 against 3 - 6 s warm, which
     would put the cost ratio at 12 - 16 instead of 100 - 250 (benchmarks/README.md, "Session
     20").  Returns {method: this run's wall time (s)}."""
-    import shutil
-    import time
-
     took = {}
     for name, m in methods.items():
         folder = out / f"warm_up_{name}"

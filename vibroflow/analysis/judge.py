@@ -68,7 +68,7 @@ def run_folders(paths) -> list[Path]:
     out: list[Path] = []
     for p in paths:
         p = Path(p)
-        if p.is_dir() and not (p / "summary.json").exists():
+        if p.is_dir() and not (p / "summary.json").is_file():
             inner = sorted((c for c in p.iterdir() if c.is_dir() and (c / "summary.json")
                             .is_file()), key=_natural_key)
             if inner:
