@@ -4,7 +4,7 @@ vibroflow's DEM on the tub case.
     python benchmarks/continuum_vs_dem.py [--case tub47-quick|tub47] [--factors 0.5 1.0 1.5]
         [--methods lagrangian eulerian] [--calibration FILE] [--dem-dir DIR ...] [--run-dem]
         [--seeds 1 2 ...] [--e-seed E] [--dx M] [--rheology mu_i|drucker_prager]
-        [--no-warm-up] [--out DIR]
+        [--warm-up] [--out DIR]
 
 For each amplitude factor s (tub47.md "Amplitude sweep": the three amplitudes times s) the
 script needs the DEM of the case at s for each seed of --seeds, and runs every continuum method
@@ -37,9 +37,11 @@ of both and their ratio (the issue's target: the continuum at
 least 100 times cheaper at equal accuracy).  Wall times are those the runs recorded in their
 summary.json ("wall_time_s": the DEM's from its start, fill from the cache or not, the
 continuum's with its settling); the DEM's were taken whenever and with whatever load its run
-had, so the ratio is indicative unless both ran on a quiet machine.  Before the timed runs
-each method runs once unrecorded (warm_up), so that their wall times hold no compilation of
-numba's kernels (`--no-warm-up` times the first run as it comes).
+had, so the ratio is indicative unless both ran on a quiet machine.  Every method's
+wall_time_s leaves numba's compilation out (vibroflow.run_clock: it is compile_time_s, printed
+beside it), so a cold kernel cache after an edit no longer puts the ratio at 12 - 16 instead of
+100 - 250 (benchmarks/README.md, sessions 20 and 21); `--warm-up` still runs each method once
+unrecorded first (warm_up), for timings that also hold no first load of the cached kernels.
 
 Everything also goes to --out/report.json (default runs/continuum_vs_dem/<case>/, git-ignored),
 with the continuum runs' folders (<method>_s<factor>) beside it.
@@ -206,7 +208,8 @@ def compare_factor(factor: float, cont: dict, dems: list[dict],
 def _brief(r: dict) -> dict:
     return {"folder": r["_folder"], "source": r.get("source"),
             "n_particles": r.get("n_particles"), "simulated_time_s": r.get("simulated_time_s"),
-            "wall_time_s": r.get("wall_time_s"), "circulation": r.get("circulation"),
+            "wall_time_s": r.get("wall_time_s"), "compile_time_s": r.get("compile_time_s"),
+            "circulation": r.get("circulation"),
             "probes": r.get("probes")}
 
 
@@ -230,6 +233,7 @@ def print_factor(factor: float, results: dict[str, dict], conts: dict[str, dict]
         print(f"{name:<12} circulation {c['sense']:<16} strength "
               f"{_pm(c['strength'], c['strength_stderr'], '{:.4e}')} m^2/s"
               f"   wall {r.get('wall_time_s', float('nan')):8.1f} s"
+              f" (+{r.get('compile_time_s') or 0.0:.1f} s compiling)"
               f"   simulated {r.get('simulated_time_s', float('nan')):.3f} s"
               f"   {r.get('n_particles')} {'balls' if name.startswith('DEM') else 'points'}")
     if not dems:
@@ -283,11 +287,11 @@ def print_regions(name: str, regions: list[dict]) -> None:
 
 def warm_up(methods, options, cal, scenario, out: Path) -> dict:
     """Run each method once, unrecorded (into out/warm_up_<method>, removed), so that the timed
-    runs find numba's cache filled: a run's summary.json wall time includes the compilation of
-    every kernel it calls when the cache is cold (after any edit of the package's sources,
-    vibroflow/_kernel_cache.py clears it), 40 - 55 s on tub47 against 3 - 6 s warm, which
-    would put the cost ratio at 12 - 16 instead of 100 - 250 (benchmarks/README.md, "Session
-    20").  Returns {method: this run's wall time (s)}."""
+    runs find numba's cache filled and loaded once.  Since session 21 a run's wall_time_s
+    leaves its compilation out (vibroflow.run_clock), which was 40 - 55 s on tub47 against
+    3 - 6 s of solving on a cold cache (after any edit of the package's sources,
+    vibroflow/_kernel_cache.py clears it), so this is optional (`--warm-up`).  Returns
+    {method: this run's wall time (s)}."""
     took = {}
     for name, m in methods.items():
         folder = out / f"warm_up_{name}"
@@ -322,9 +326,9 @@ def main(argv=None) -> int:
                     help="reuse finished continuum runs in --out instead of running them")
     ap.add_argument("--set", dest="overrides", action="append", default=[],
                     metavar="KEY=VALUE", help="scenario override for both methods")
-    ap.add_argument("--no-warm-up", dest="warm_up", action="store_false",
-                    help="time the first continuum run of each method as it comes, numba's "
-                         "compilation included when its cache is cold")
+    ap.add_argument("--warm-up", dest="warm_up", action="store_true",
+                    help="run each continuum method once unrecorded before the timed runs "
+                         "(their wall_time_s leave numba's compilation out anyway)")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args(argv)
     out = args.out or Path("runs") / "continuum_vs_dem" / args.case

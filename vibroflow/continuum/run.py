@@ -58,6 +58,7 @@ from vibroflow.errors import InputError
 # write_json_atomic: also imported from here by the Eulerian run
 from vibroflow.io.atomic import write_json_atomic, write_text_atomic
 from vibroflow.progress import RunProgress
+from vibroflow.run_clock import RunClock
 from vibroflow.tub.geometry import cross_section_area, distance_to_wall_np, u_wall_nearest
 from vibroflow.tub.motion import TubMotion, rigid_velocity, tub_to_lab
 
@@ -703,8 +704,8 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
     ckpt = out / CHECKPOINT_NAME
     fingerprint = run_fingerprint(scenario, calibration, options, vtk)
 
-    wall0 = time.perf_counter()
-    with RunProgress(progress) as prog:
+    clock = RunClock()   # the solver's time, numba's compilation apart
+    with clock, RunProgress(progress) as prog:
         if resume and ckpt.exists():
             state, arrays, meta = load_checkpoint(ckpt)
             if meta.get("fingerprint") != fingerprint:
@@ -713,7 +714,7 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
                                  "afresh")
             samples = Samples.from_arrays(arrays, S, state.n, len(probes),
                                           cell_grid_of(geo, scenario.analysis.cell_size))
-            wall_before = float(meta["wall_time_s"])
+            clock.resume_from(float(meta["wall_time_s"]))
             prog.log(f"resuming from {ckpt} at t = {state.t:.4f} s")
         else:
             if resume:
@@ -726,10 +727,9 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
             state.step = 0
             samples = Samples(S, state.n, len(probes),
                               cell_grid_of(geo, scenario.analysis.cell_size))
-            wall_before = 0.0
         try:
             done = _vibrate(scenario, system, state, samples, geo, material, times, out, vtk,
-                            prog, ckpt, fingerprint, wall_before, wall0, stop_after_steps)
+                            prog, ckpt, fingerprint, clock, stop_after_steps)
         except ContinuumBlowUp:
             ckpt.unlink(missing_ok=True)  # a blown-up run has nothing to resume
             raise
@@ -737,7 +737,7 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
         keep_samples.append(samples)
     if not done:
         return None
-    wall_time = wall_before + time.perf_counter() - wall0
+    wall_time = clock.solver_s()
     n = state.n
     n_steps = state.step
     if vtk:
@@ -752,6 +752,7 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
     summary = {"case": scenario.case, "source": "vibroflow continuum", "method": "lagrangian",
                "n_particles": n, "steps": n_steps, "dt": system.dt,
                "simulated_time_s": n_steps * system.dt, "wall_time_s": wall_time,
+               "compile_time_s": clock.compile_s(),
                "particle_steps_per_s": n * n_steps / wall_time if wall_time > 0 else None}
     summary.update(tub_summary(source, scenario, bulk_csv=out / BULK_CSV_NAME))
     batch = batches_of_whole_cycles(times, scenario.run.duration - scenario.run.average_last,
@@ -772,8 +773,8 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
 
 
 def _vibrate(scenario, system, state, samples: Samples, geo, material, times, out: Path,
-             vtk: bool, prog: RunProgress, ckpt: Path, fingerprint: str, wall_before: float,
-             wall0: float, stop_after_steps: int | None) -> bool:
+             vtk: bool, prog: RunProgress, ckpt: Path, fingerprint: str, clock: RunClock,
+             stop_after_steps: int | None) -> bool:
     """Vibrate from state.step to the end of run.duration, sampling at `times` and writing a
     checkpoint every run.checkpoint_every wall seconds; False when stopped by
     stop_after_steps (after its checkpoint)."""
@@ -799,7 +800,7 @@ def _vibrate(scenario, system, state, samples: Samples, geo, material, times, ou
     def checkpoint():
         save_checkpoint(ckpt, state, samples.arrays(), {
             "fingerprint": fingerprint,
-            "wall_time_s": wall_before + time.perf_counter() - wall0})
+            "wall_time_s": clock.solver_s()})
 
     prog.stage("continuum (lagrangian)", run.duration)
 

@@ -23,6 +23,7 @@ import numpy as np
 
 from ..io.atomic import write_json_atomic
 from ..progress import RunProgress
+from ..run_clock import RunClock
 from ..tub.motion import pose_np
 from . import fill as F
 from .output import ResultWriter, load_state_file, save_state_file
@@ -135,25 +136,24 @@ def run_dem(scenario, out_dir: Path, vtk: bool = False, resume: bool = False,
     if n_balls < SMALL_RUN:
         numba.set_num_threads(1)  # same results: the chunking, not the threads, fixes order
     try:
-        with RunProgress(progress) as prog:
-            return _run(scenario, out_dir, system, vtk, resume, prog)
+        # the solver's time, numba's compilation apart (vibroflow.run_clock)
+        with RunProgress(progress) as prog, RunClock() as clock:
+            return _run(scenario, out_dir, system, vtk, resume, prog, clock)
     finally:
         numba.set_num_threads(threads_before)
 
 
 def _run(scenario, out_dir: Path, system: DEMSystem, vtk: bool, resume: bool,
-         prog: RunProgress) -> dict:
+         prog: RunProgress, clock: RunClock) -> dict:
     dt = system.dt
     ckpt = out_dir / "checkpoint.h5"
-    wall_start = time.perf_counter()
-    wall_before = 0.0
     explicit = scenario.explicit
     if resume and ckpt.exists():
         state, attrs = load_state_file(ckpt)
         if int(attrs["nchunk"]) != system.nchunk:
             system = make_system(scenario, int(attrs["nchunk"]))
             system.notes["shortest_contact_time"] = shortest_contact_time(scenario)
-        wall_before = float(attrs["wall_time_s"])
+        clock.resume_from(float(attrs["wall_time_s"]))
         settle_info = json.loads(attrs["settle_info"])
         writer = ResultWriter(out_dir, state.n, {}, state.radius,
                               parts_done=int(attrs["parts_done"]))
@@ -183,7 +183,7 @@ def _run(scenario, out_dir: Path, system: DEMSystem, vtk: bool, resume: bool,
         writer = ResultWriter(out_dir, state.n, attrs, state.radius)
     try:
         summary = _vibrate(scenario, out_dir, system, state, writer, prog, settle_info,
-                           wall_start, wall_before, explicit, vtk)
+                           clock, explicit, vtk)
     except BlowUp:
         # nothing half-written stays behind: a blown-up run has no result to resume
         writer.discard()
@@ -195,8 +195,8 @@ def _run(scenario, out_dir: Path, system: DEMSystem, vtk: bool, resume: bool,
     return summary
 
 
-def _vibrate(scenario, out_dir, system, state, writer, prog, settle_info, wall_start,
-             wall_before, explicit, vtk):
+def _vibrate(scenario, out_dir, system, state, writer, prog, settle_info, clock: RunClock,
+             explicit, vtk):
     dt = system.dt
     run = scenario.run
     f = scenario.motion.frequency
@@ -242,12 +242,13 @@ def _vibrate(scenario, out_dir, system, state, writer, prog, settle_info, wall_s
         prog.update(state.time(dt), (state.step - state.time_origin_step - stage_steps0) * n)
         if time.perf_counter() - last_ckpt > run.checkpoint_every:
             _checkpoint(ckpt, state, writer, system, settle_info,
-                        wall_before + time.perf_counter() - wall_start)
+                        clock.solver_s())
             last_ckpt = time.perf_counter()
 
-    wall = wall_before + time.perf_counter() - wall_start
+    wall = clock.solver_s()
     path = writer.finish()
     summary = _summary(scenario, system, state, path, out_dir, wall, settle_info, explicit)
+    summary["compile_time_s"] = clock.compile_s()
     if vtk:
         _write_vtk(path, out_dir, scenario)
     write_json_atomic(out_dir / "summary.json", summary)

@@ -48,6 +48,7 @@ from vibroflow.analysis.stats import batches_of_whole_cycles
 from vibroflow.analysis.summary import geometry_of, json_safe, tub_summary
 from vibroflow.errors import InputError
 from vibroflow.progress import RunProgress
+from vibroflow.run_clock import RunClock
 from vibroflow.tub.motion import TubMotion
 
 from ..boundary import PartitionFriction, damping_ratio_of_restitution
@@ -273,8 +274,8 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
     ckpt = out / CHECKPOINT_NAME
     fingerprint = run_fingerprint(scenario, calibration, options, vtk)
 
-    wall0 = time.perf_counter()
-    with RunProgress(progress) as prog:
+    clock = RunClock()   # the solver's time, numba's compilation apart
+    with clock, RunProgress(progress) as prog:
         if resume and ckpt.exists():
             saved, arrays, meta = load_checkpoint(ckpt)
             if meta.get("fingerprint") != fingerprint or meta.get("method") != "eulerian":
@@ -286,7 +287,7 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
                                           cell_grid_of(geo, scenario.analysis.cell_size))
             dither = arrays["dither"].copy()
             top = float(meta["bed_height_m"])
-            wall_before = float(meta["wall_time_s"])
+            clock.resume_from(float(meta["wall_time_s"]))
             prog.log(f"resuming from {ckpt} at t = {state.t:.4f} s")
         else:
             if resume:
@@ -299,10 +300,9 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
             samples = Samples(S, n_cells, len(probes),
                               cell_grid_of(geo, scenario.analysis.cell_size))
             dither = np.zeros(n_cells)
-            wall_before = 0.0
         try:
             done = _vibrate(scenario, system, state, samples, dither, geo, material, times,
-                            out, vtk, prog, ckpt, fingerprint, wall_before, wall0, top,
+                            out, vtk, prog, ckpt, fingerprint, clock, top,
                             stop_after_steps)
         except ContinuumBlowUp:
             ckpt.unlink(missing_ok=True)
@@ -311,7 +311,7 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
         keep_samples.append(samples)
     if not done:
         return None
-    wall_time = wall_before + time.perf_counter() - wall0
+    wall_time = clock.solver_s()
     n_steps = state.step
     if vtk:
         from vibroflow.analysis.vtk import write_pvd
@@ -324,6 +324,7 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
     summary = {"case": scenario.case, "source": "vibroflow continuum", "method": "eulerian",
                "n_particles": n_cells, "steps": n_steps, "dt": system.dt,
                "simulated_time_s": n_steps * system.dt, "wall_time_s": wall_time,
+               "compile_time_s": clock.compile_s(),
                "particle_steps_per_s": n_cells * n_steps / wall_time if wall_time > 0 else None}
     summary.update(tub_summary(source, scenario, bulk_csv=out / BULK_CSV_NAME))
     batch = batches_of_whole_cycles(times, scenario.run.duration - scenario.run.average_last,
@@ -363,7 +364,7 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
 
 def _vibrate(scenario, system: EulerianSystem, state: EulerianState, samples: Samples,
              dither: np.ndarray, geo, material, times, out: Path, vtk: bool,
-             prog: RunProgress, ckpt: Path, fingerprint: str, wall_before: float, wall0: float,
+             prog: RunProgress, ckpt: Path, fingerprint: str, clock: RunClock,
              top: float, stop_after_steps: int | None) -> bool:
     """Vibrate from state.step to the end of run.duration, sampling at `times` and writing a
     checkpoint every run.checkpoint_every wall seconds; False when stopped by
@@ -401,7 +402,7 @@ def _vibrate(scenario, system: EulerianSystem, state: EulerianState, samples: Sa
         save_checkpoint(ckpt, state, {**samples.arrays(), "dither": dither}, {
             "fingerprint": fingerprint, "method": "eulerian", "mass0": state.mass0,
             "mass_error_max": state.mass_error_max, "bed_height_m": top,
-            "wall_time_s": wall_before + time.perf_counter() - wall0})
+            "wall_time_s": clock.solver_s()})
 
     prog.stage("continuum (eulerian)", run.duration)
 
