@@ -56,6 +56,7 @@ def test_small_tub_run_outputs_and_bounds(tmp_path):
     assert r.returncode == 0, r.stderr
     summary = json.loads((out / "summary.json").read_text())
     for key in ("case", "n_particles", "steps", "dt", "simulated_time_s", "wall_time_s",
+                "compile_time_s",
                 "particle_steps_per_s", "max_overlap_over_d", "balls_lost", "probes",
                 "circulation", "wall_contacts", "impacts"):
         assert key in summary, key

@@ -398,7 +398,7 @@ def test_continuum_command_writes_dem_comparable_results(run_cli, tmp_path):
     assert (out / "vtk" / "grid.pvd").read_text().count("grid_0") == 8
     assert not (out / "checkpoint.npz").exists()
     for key in ("probes", "circulation", "wall_contacts", "impacts", "window", "cells",
-                "n_particles", "wall_time_s"):
+                "n_particles", "wall_time_s", "compile_time_s"):
         assert key in summary
     assert set(summary["probes"]) == {"P1", "P2", "P3", "P4", "P5"}
     assert summary["window"]["snapshots"] == 4 * 8
