@@ -38,7 +38,6 @@ removes the checkpoint: all as the Lagrangian run.
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
