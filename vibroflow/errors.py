@@ -20,3 +20,16 @@ class InputError(Exception):
     @property
     def message(self) -> str:
         return str(self.args[0])
+
+
+class Interrupted(Exception):
+    """A run stopped by the user (Ctrl-C, SIGINT): `message` is the one line the CLI prints,
+    saying where the run stopped and how to go on ("interrupted at t = 0.1234 s; resume with
+    --resume"); the CLI exits with code 130 (128 + SIGINT), as a shell does."""
+
+    def __init__(self, message: str):
+        super().__init__(" ".join(str(message).split()))
+
+    @property
+    def message(self) -> str:
+        return str(self.args[0])
