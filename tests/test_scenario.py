@@ -211,7 +211,7 @@ def test_hash():
     ("gravity", "[0, 0, -9.81]", (0.0, 0.0, -9.81)),
     ("gravity", "[0,0,-1.62]", (0.0, 0.0, -1.62)),
     ("case", "my-run", "my-run"),
-    ("case", '"quoted run"', "quoted run"),
+    ("case", '"quoted_run"', "quoted_run"),
     ("materials.steel.density", "8000", 8000.0),
 ])
 def test_set_changes_exactly_one_field(key, text, expected):
@@ -292,7 +292,8 @@ def test_mixed_sizes_use_the_smallest_balls():
     from vibroflow.scenario.model import contact_times
 
     big = ParticleSpec(position=(0, 0, 0.01))
-    s = Scenario(particles=[big, big], run=Run(duration=0.1, average_last=0.0))
+    big2 = ParticleSpec(position=(0, 0, 0.02))
+    s = Scenario(particles=[big, big2], run=Run(duration=0.1, average_last=0.0))
     t_big = contact_times(s)[0][1]
     small = ParticleSpec(position=(0.02, 0, 0.01), diameter=0.002)
     s2 = Scenario(particles=[big, small], run=Run(dt=1e-6, duration=0.1, average_last=0.0))

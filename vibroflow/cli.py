@@ -15,6 +15,7 @@ that `--help` and the scenario commands stay quick.
 """
 from __future__ import annotations
 
+import errno
 import math
 import sys
 import tomllib
@@ -27,10 +28,18 @@ import typer
 from pydantic import ValidationError
 
 from vibroflow import __version__
-from vibroflow.errors import InputError
+from vibroflow.errors import InputError, Interrupted
 
 EXIT_INPUT = 2
 EXIT_BLOWUP = 3
+EXIT_FAILED = 1
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a command stopped by Ctrl-C
+
+# operating-system errors that a user's path or machine causes, said in one line: the path, the
+# reason; a full disk is not bad input (exit 1), a path that cannot be written is (exit 2)
+_PATH_ERRNOS = (errno.EACCES, errno.EPERM, errno.EROFS, errno.ENOTDIR, errno.EISDIR,
+                errno.EEXIST, errno.ENAMETOOLONG, errno.ELOOP)
+_MACHINE_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EMFILE, errno.ENFILE, errno.EIO)
 
 app = typer.Typer(
     name="vibroflow",
@@ -74,15 +83,23 @@ def input_error_message(exc: BaseException) -> str | None:
     return None
 
 
-def _fail(message: str) -> None:
+def _fail(message: str, code: int = EXIT_INPUT, prefix: str = "error: ") -> None:
     # plain write, not rich: rich would wrap a long line and eat [brackets] as markup
-    sys.stderr.write("error: " + " ".join(message.split()) + "\n")
+    sys.stderr.write(prefix + " ".join(message.split()) + "\n")
     sys.stderr.flush()
-    raise typer.Exit(EXIT_INPUT)
+    raise typer.Exit(code)
+
+
+def _os_error_line(exc: OSError) -> str:
+    what = (exc.strerror or type(exc).__name__).lower()
+    where = exc.filename if exc.filename is not None else ""
+    return f"{where}: {what}" if where else what
 
 
 def input_errors(fn: Callable[..., Any]) -> Callable[..., Any]:
-    """Run a command, turning input errors into one line on stderr and exit code 2."""
+    """Run a command, turning input errors into one line on stderr and exit code 2, a Ctrl-C
+    into one line saying where the run stopped and exit code 130, and an operating-system error
+    (a path that cannot be written, a full disk) into one line naming the path."""
 
     @wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
@@ -92,6 +109,16 @@ def input_errors(fn: Callable[..., Any]) -> Callable[..., Any]:
             message = input_error_message(e)
             assert message is not None
             _fail(message)
+        except Interrupted as e:
+            _fail(e.message, EXIT_INTERRUPTED, prefix="")
+        except KeyboardInterrupt:
+            _fail("interrupted", EXIT_INTERRUPTED, prefix="")
+        except OSError as e:
+            if e.errno in _PATH_ERRNOS:
+                _fail(_os_error_line(e))
+            if e.errno in _MACHINE_ERRNOS:
+                _fail(_os_error_line(e), EXIT_FAILED)
+            raise
 
     return wrapper
 

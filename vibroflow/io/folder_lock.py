@@ -91,25 +91,7 @@ def folder_lock(path: Path, command: str, field: str = "--out") -> Iterator[Path
             with _guard:
                 _held[key][1] -= 1
         return
-    lock_file = path / LOCK_NAME
-    try:
-        fd = os.open(lock_file, os.O_RDWR | os.O_CREAT, 0o644)
-    except OSError as exc:
-        raise InputError(f"{field} = {str(path)!r}: cannot write its lock file "
-                         f"({(exc.strerror or str(exc)).lower()})") from None
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        who = _holder(fd)
-        os.close(fd)
-        raise InputError(f"{field} = {str(path)!r}: in use by {who}; wait for it to end or "
-                         "give another folder") from None
-    except OSError as exc:
-        if exc.errno not in (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS):
-            os.close(fd)
-            raise
-        sys.stderr.write(f"warning: {path}: this file system has no working locks; nothing "
-                         "stops another command from writing this folder at the same time\n")
+    fd = _take(path / LOCK_NAME, path, field)
     record = json.dumps({"pid": os.getpid(), "command": command, "since": time.time()})
     os.ftruncate(fd, 0)
     os.pwrite(fd, record.encode("utf-8"), 0)
@@ -120,4 +102,40 @@ def folder_lock(path: Path, command: str, field: str = "--out") -> Iterator[Path
     finally:
         with _guard:
             del _held[key]
-        os.close(fd)  # closing releases the flock; the file stays (unlinking it would race)
+        # unlinked while still locked, so that a command that ends leaves no file behind; a
+        # waiting process that opened the old file notices it was unlinked and opens anew
+        with contextlib.suppress(OSError):
+            os.unlink(path / LOCK_NAME)
+        os.close(fd)
+
+
+def _take(lock_file: Path, path: Path, field: str) -> int:
+    """The open, flocked descriptor of `lock_file` (the file now at that name)."""
+    while True:
+        try:
+            fd = os.open(lock_file, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise InputError(f"{field} = {str(path)!r}: cannot write its lock file "
+                             f"({(exc.strerror or str(exc)).lower()})") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            who = _holder(fd)
+            os.close(fd)
+            raise InputError(f"{field} = {str(path)!r}: in use by {who}; wait for it to end or "
+                             "give another folder") from None
+        except OSError as exc:
+            if exc.errno not in (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS):
+                os.close(fd)
+                raise
+            sys.stderr.write(f"warning: {path}: this file system has no working locks; nothing "
+                             "stops another command from writing this folder at the same "
+                             "time\n")
+            return fd
+        try:
+            same = os.path.samestat(os.fstat(fd), os.stat(lock_file))
+        except FileNotFoundError:
+            same = False
+        if same:
+            return fd
+        os.close(fd)  # its holder unlinked it as we opened it: take the new one

@@ -13,7 +13,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from vibroflow.errors import InputError
 from vibroflow.io.atomic import write_text_atomic
+from vibroflow.io.folder_lock import folder_lock
 
 REPORT_NAME = "report.html"
 REPORT_DIR = "report"
@@ -24,12 +26,22 @@ def write_report(study_dir) -> Path:
     """Write DIR/report.html (and DIR/report/dem_slice.gif) for the finished study in
     study_dir; returns the page's path.  A missing, foreign, corrupt or unfinished folder is an
     InputError (one line) and nothing is written.  Both files are written atomically."""
-    from vibroflow.report.animation import write_slice_gif
     from vibroflow.report.data import StudyData
-    from vibroflow.report.html import render
 
     out = Path(study_dir)
-    data = StudyData.read(out)  # validates the folder before anything is written
+    if not out.is_dir():
+        StudyData.read(out)  # the one-line error of a missing folder or a file
+        raise InputError(f"DIR = {str(out)!r}: not a folder")
+    # held while the page is made: a study rerun writing the folder meanwhile would change
+    # what the page shows under it
+    with folder_lock(out, "vibroflow report", field="DIR"):
+        return _write(out, StudyData.read(out))  # validated before anything is written
+
+
+def _write(out: Path, data) -> Path:
+    from vibroflow.report.animation import write_slice_gif
+    from vibroflow.report.html import render
+
     gif, why = None, None
     dem_dir = out / "dem"
     if (dem_dir / "dem.h5").is_file():

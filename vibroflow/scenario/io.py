@@ -61,13 +61,19 @@ def _read_source(source: str | Path) -> tuple[dict[str, Any], str]:
         except (OSError, UnicodeDecodeError) as e:
             raise InputError(f"{path}: cannot read: {e}") from e
         raw = _parse_toml(text, str(path))
-        # a user file that does not name its case is not tub47 (which the defaults would say)
-        raw.setdefault("case", path.stem)
+        # a user file that does not name its case is not tub47 (which the defaults would say):
+        # it is named after the file, made a safe name (model.NAME_PATTERN)
+        raw.setdefault("case", _name_of_file(path))
         return raw, str(path)
     if str(source) in PRESETS:
         return _parse_toml(read_preset_text(str(source)), f"preset {source}"), str(source)
     raise InputError(f"{source}: no such scenario file or preset (presets: "
                      f"{', '.join(PRESETS)})")
+
+
+def _name_of_file(path: Path) -> str:
+    name = re.sub(r"[^A-Za-z0-9_.+-]+", "-", path.stem).lstrip("_.+-")[:64]
+    return name or "scenario"
 
 
 def load_scenario(source: str | Path, overrides: Iterable[str] = ()) -> Scenario:

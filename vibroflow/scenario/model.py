@@ -13,6 +13,7 @@ The record is frozen after validation; use `scenario.model_copy(update=...)` or
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -23,8 +24,32 @@ Vector3 = tuple[float, float, float]
 
 
 class _Strict(BaseModel):
-    # forbid: an unknown key is an error naming the key, not silently ignored
-    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+    # forbid: an unknown key is an error naming the key, not silently ignored; inf and nan (TOML
+    # literals) are not a size, a speed or a duration: every number must be finite
+    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True,
+                              allow_inf_nan=False)
+
+
+#: names that reach file names, a LIGGGHTS deck, HTML and shells: a letter or digit, then
+#: letters, digits and _ . + -, at most 64 characters (no space, quote, newline or separator)
+NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]{0,63}")
+NAME_RULE = ("a letter or digit, then letters, digits and _ . + - (at most 64 characters, no "
+             "spaces)")
+
+
+def check_name(field: str, name: str, key: bool = False) -> str:
+    """`name` if it is a safe name (NAME_PATTERN), else the one-line scenario error; `key`: the
+    name is a table's key (a material's, a probe's), shown after the table's field."""
+    if not isinstance(name, str) or NAME_PATTERN.fullmatch(name) is None:
+        where = f"{field} key {_show(name)}" if key else f"{field} = {_show(name)}"
+        _fail(f"{where}: must be a name: {NAME_RULE}")
+    return name
+
+
+def _show(value: Any) -> str:
+    # a hostile name shown safely: escapes for newlines and control characters, cut short
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 class Material(_Strict):
@@ -148,6 +173,13 @@ class Analysis(_Strict):
     min_solid_fraction: float = Field(0.3, ge=0, le=1, description="cells counted in E")
     probes: dict[str, Probe] = Field(default_factory=_default_probes)
 
+    @field_validator("probes")
+    @classmethod
+    def _probe_names(cls, v: dict) -> dict:
+        for name in v:
+            check_name("analysis.probes", name, key=True)
+        return v
+
 
 class ParticleSpec(_Strict):
     position: Vector3
@@ -213,6 +245,18 @@ class Scenario(_Strict):
     particles: list[ParticleSpec] | None = None
     walls: list[WallSpec] | None = None
 
+    @field_validator("case")
+    @classmethod
+    def _case_is_a_name(cls, v: str) -> str:
+        return check_name("case", v)
+
+    @field_validator("materials")
+    @classmethod
+    def _material_names(cls, v: dict) -> dict:
+        for name in v:
+            check_name("materials", name, key=True)
+        return v
+
     @property
     def explicit(self) -> bool:
         """True in explicit mode (given particles, no tub, no fill)."""
@@ -250,6 +294,12 @@ class Scenario(_Strict):
                       f"= {self.run.batches} (i.e. >= "
                       f"{self.run.batches / self.motion.frequency:.4g} s)")
         _check_time_step(self)
+        _check_vibration_step(self)
+        _check_size(self)
+        if self.explicit:
+            _check_particles(self)
+        else:
+            _check_tub_fill(self)
         return self
 
 
@@ -421,3 +471,150 @@ def _check_time_step(s: Scenario) -> None:
     if s.run.dt > t_c / STEPS_PER_CONTACT:
         _fail(f"run.dt = {s.run.dt!r}: must be at most {t_c / STEPS_PER_CONTACT:.2e} s "
               f"(1/{STEPS_PER_CONTACT} of the {tp.label} contact time {t_c:.2e} s)")
+
+
+# ----------------------------------------------------------------------------------------------
+# What a run will need, known before it starts: steps, rows, bytes, room in the tub, a start
+# without overlaps.  Each bound is far beyond any run that finishes (tub47: 3.5e5 steps, 0.4 GB
+# of snapshots), so it only stops a typo before it allocates exabytes or runs for years.
+
+#: time steps of one run (vibration plus settling); at 1e7 ball-steps/s a one-ball run of 1e11
+#: steps takes three hours
+MAX_STEPS = 1e11
+#: rows of the time series (run.duration / (run.dt * run.series_every))
+MAX_SERIES_ROWS = 1e8
+#: bytes of the snapshots (position, velocity, angular velocity: 36 bytes a ball a snapshot)
+MAX_SNAPSHOT_BYTES = 256 * 2**30
+#: cells of the analysis grid over the tub's cross-section
+MAX_ANALYSIS_CELLS = 1e7
+#: the vibration period must hold this many steps at least
+STEPS_PER_CYCLE = 20
+#: solid fraction of a loose random packing of spheres (Onoda & Liniger 1990: 0.555): the
+#: least dense bed a fill settles to, so the largest volume it can take
+LOOSE_PACKING = 0.555
+
+
+def _check_vibration_step(s: Scenario) -> None:
+    if s.explicit:
+        return
+    f = s.motion.frequency
+    need = max(STEPS_PER_CYCLE, s.run.phases_per_cycle)
+    if s.run.dt * f * need > 1.0:
+        _fail(f"motion.frequency = {f!r}: its period {1 / f:.3g} s holds "
+              f"{1 / (f * s.run.dt):.3g} steps of run.dt = {s.run.dt!r} s; must hold at least "
+              f"{need} (at least {STEPS_PER_CYCLE} and run.phases_per_cycle = "
+              f"{s.run.phases_per_cycle}): lower motion.frequency or run.dt")
+
+
+def _check_size(s: Scenario) -> None:
+    run = s.run
+    steps = run.duration / run.dt
+    settle = 0.0 if s.fill is None else max(s.fill.settle_time, s.fill.max_settle_time) / run.dt
+    if steps + settle > MAX_STEPS:
+        what = "run.duration" if steps >= settle else "fill.max_settle_time"
+        value = run.duration if steps >= settle else s.fill.max_settle_time
+        _fail(f"{what} = {value:g}: {steps + settle:.3g} steps of run.dt = {run.dt!r} s; a run "
+              f"may have at most {MAX_STEPS:.0e} steps ({MAX_STEPS * run.dt:.3g} s at this dt)")
+    rows = steps / run.series_every
+    if rows > MAX_SERIES_ROWS:
+        _fail(f"run.series_every = {run.series_every}: the series would have {rows:.3g} rows "
+              f"over run.duration = {run.duration!r} s; must give at most "
+              f"{MAX_SERIES_ROWS:.0e} (raise run.series_every to at least "
+              f"{math.ceil(steps / MAX_SERIES_ROWS)})")
+    if not s.explicit:
+        cycles = math.floor(run.average_last * s.motion.frequency + 1e-9)
+        snapshots = cycles * run.phases_per_cycle
+        size = 36.0 * snapshots * s.fill.count
+        if size > MAX_SNAPSHOT_BYTES:
+            _fail(f"run.average_last = {run.average_last:g}: {snapshots} snapshots of "
+                  f"{s.fill.count} balls would take {size / 2**30:.3g} GiB; must take at most "
+                  f"{MAX_SNAPSHOT_BYTES / 2**30:.0f} GiB (shorten run.average_last or lower "
+                  "run.phases_per_cycle)")
+        tub = s.tub
+        area = 2.0 * tub.radius * tub.rim_height
+        cells = area / s.analysis.cell_size**2
+        if cells > MAX_ANALYSIS_CELLS:
+            _fail(f"analysis.cell_size = {s.analysis.cell_size!r}: {cells:.3g} cells over the "
+                  f"tub's cross-section; must give at most {MAX_ANALYSIS_CELLS:.0e} (at least "
+                  f"{math.sqrt(area / MAX_ANALYSIS_CELLS):.2g} m)")
+
+
+def tub_volume(tub: Tub) -> float:
+    """Volume (m^3) of the tub below its rim: a half disc of the radius and the straight walls
+    above it, times the length."""
+    area = 0.5 * math.pi * tub.radius**2 + 2.0 * tub.radius * (tub.rim_height - tub.radius)
+    return area * tub.length
+
+
+def _check_tub_fill(s: Scenario) -> None:
+    fill, tub = s.fill, s.tub
+    d = fill.diameter
+    if 2.0 * tub.radius < 2.0 * d:
+        _fail(f"tub.radius = {tub.radius!r}: the tub is narrower than two balls of "
+              f"fill.diameter = {d!r} m; must be at least {d:g} m")
+    # the insertion lattice (dem/fill.py) keeps a ball and its jitter off the partitions
+    s_lat = fill.lattice_spacing * d
+    need = s_lat if tub.periodic else d + 0.9 * (s_lat - d)
+    if tub.length < need:
+        _fail(f"tub.length = {tub.length!r}: shorter than one insertion lattice layer of "
+              f"balls (fill.diameter x fill.lattice_spacing); must be at least {need:.4g} m")
+    bed = fill.count * math.pi * d**3 / 6.0 / LOOSE_PACKING
+    room = tub_volume(tub)
+    if bed > room:
+        fits = int(room * LOOSE_PACKING / (math.pi * d**3 / 6.0))
+        _fail(f"fill.count = {fill.count}: {fill.count} balls of d = {d:g} m take "
+              f"{bed:.3g} m^3 at a loose packing ({LOOSE_PACKING}), more than the tub holds "
+              f"below its rim ({room:.3g} m^3); must be at most {fits}, or make the tub larger")
+
+
+def _check_particles(s: Scenario) -> None:
+    """Explicit mode: no ball starts inside another or behind a plane wall (the contact law
+    would throw them apart at the first step, a blow-up whose cause is the input)."""
+    import numpy as np  # lazy: keeps `import vibroflow` light
+
+    ps = s.particles
+    x = np.array([p.position for p in ps], dtype=float)
+    r = 0.5 * np.array([p.diameter for p in ps], dtype=float)
+    bound = s.run.max_overlap
+    for k, w in enumerate(s.walls or []):
+        dist = (x - np.array(w.point)) @ np.array(w.normal)
+        behind = np.flatnonzero(dist < 0.0)
+        if behind.size:
+            i = int(behind[0])
+            _fail(f"particles.{i}.position = {_fmt_vec(ps[i].position)}: the ball's centre is "
+                  f"{-dist[i]:.3g} m behind walls.{k} (the side its normal points away from); "
+                  "every ball must start on the walls' side")
+        over = (r - dist) / (2.0 * r)
+        bad = np.flatnonzero(over >= bound)
+        if bad.size:
+            i = int(bad[0])
+            _fail(f"particles.{i}.position = {_fmt_vec(ps[i].position)}: the ball overlaps "
+                  f"walls.{k} by {over[i]:.3g} of its diameter; must be below run.max_overlap "
+                  f"= {bound:g}")
+    if len(ps) < 2:
+        return
+    reach = 2.0 * float(r.max())
+    if len(ps) <= 256:
+        i_idx, j_idx = np.triu_indices(len(ps), 1)
+    else:
+        from scipy.spatial import cKDTree
+
+        pairs = cKDTree(x).query_pairs(reach, output_type="ndarray")
+        i_idx, j_idx = pairs[:, 0], pairs[:, 1]
+    gap = np.linalg.norm(x[i_idx] - x[j_idx], axis=1)
+    d_min = 2.0 * np.minimum(r[i_idx], r[j_idx])
+    over = (r[i_idx] + r[j_idx] - gap) / d_min
+    bad = np.flatnonzero(over >= bound)
+    if bad.size:
+        k = bad[np.lexsort((j_idx[bad], i_idx[bad]))[0]]
+        i, j = sorted((int(i_idx[k]), int(j_idx[k])))
+        if gap[k] == 0.0:
+            _fail(f"particles.{j}.position = {_fmt_vec(ps[j].position)}: the same position as "
+                  f"particles.{i}; balls must not overlap")
+        _fail(f"particles.{j}.position = {_fmt_vec(ps[j].position)}: overlaps particles.{i} "
+              f"by {over[k]:.3g} of the smaller diameter; must be below run.max_overlap = "
+              f"{bound:g}")
+
+
+def _fmt_vec(v) -> str:
+    return "[" + ", ".join(f"{c:g}" for c in v) + "]"

@@ -17,7 +17,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from vibroflow.errors import InputError
+from vibroflow.errors import InputError, Interrupted
+from vibroflow.io.atomic import TMP_PREFIX
+from vibroflow.io.folder_lock import LOCK_NAME, folder_lock
 from vibroflow.study.methods import METHODS, method
 from vibroflow.study.stages import Stage, Study, stages_of, write_json_atomic
 
@@ -50,7 +52,11 @@ def check_study_dir(out: Path, must_exist: bool = False) -> None:
         raise InputError(f"DIR = {str(out)!r}: not a folder")
     marker = out / STUDY_FILE
     if not marker.exists():
-        if any(out.iterdir()) or must_exist:
+        # a lock file or an atomic writer's temporary left by a command that stopped early
+        # does not make a folder a result
+        own = (LOCK_NAME, ".lock")
+        if any(p.name not in own and not p.name.startswith(TMP_PREFIX)
+               for p in out.iterdir()) or must_exist:
             raise InputError(f"DIR = {str(out)!r}: not a vibroflow study folder (no "
                              f"{STUDY_FILE}); give a new or empty folder")
         return
@@ -127,7 +133,20 @@ def _run_stage(study: Study, stage: Stage, h: str) -> dict:
             target.unlink()  # a result that would look complete before the stage ends
     write_json_atomic(pending, {"stage": stage.name, "hash": h})
     t0 = time.perf_counter()
-    result = stage.run(study, resume)
+    try:
+        result = stage.run(study, resume)
+    except (Interrupted, KeyboardInterrupt) as exc:
+        # pending.json stays: the same command again resumes the stage from its checkpoint
+        where = f" ({exc.message})" if isinstance(exc, Interrupted) else ""
+        raise Interrupted(f"interrupted in the study's {stage.name} stage{where}; run the same "
+                          f"command again to go on from there (out: {study.out})") from None
+    except InputError as exc:
+        if resume and "checkpoint" in exc.message:
+            # a damaged or foreign checkpoint of a stage the study resumes by itself
+            raise InputError(exc.message.replace(
+                "run without --resume to start afresh",
+                f"remove {folder} to run the {stage.name} stage afresh")) from None
+        raise
     wall = time.perf_counter() - t0
     record = {"stage": stage.name, "hash": h, "vibroflow_version": __version__,
               "upstream": {u: study.records[u]["hash"] for u in stage.upstream},
@@ -158,6 +177,13 @@ def run_study(scenario, out: Path, settings: dict[str, dict[str, Any]] | None = 
     """
     out = Path(out)
     check_study_dir(out)
+    with folder_lock(out, "vibroflow run", field="DIR"):
+        check_study_dir(out)  # again under the lock: another command may have written it
+        return _run_study(scenario, out, settings, shear_cell, progress, echo)
+
+
+def _run_study(scenario, out: Path, settings, shear_cell: bool, progress: bool,
+               echo: Callable[[str], None] | None) -> dict:
     settings = settings or {}
     methods = []
     for name in METHODS:

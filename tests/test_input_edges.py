@@ -1,0 +1,313 @@
+"""Hostile and clumsy input, caught before a run: each case is a probe of `vibroflow scenario
+check` (and of the command that would run it) that must end in one line naming the field, the
+value and what is allowed, exit code 2, no traceback and nothing written.
+
+Also the command line's own edges: an output folder held by another command, an output path
+that is a file, a Ctrl-C and an operating-system error, each one line with its exit code."""
+from __future__ import annotations
+
+import errno
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import typer
+
+from vibroflow.cli import EXIT_INTERRUPTED, input_errors
+from vibroflow.errors import InputError, Interrupted
+from vibroflow.io.folder_lock import LOCK_NAME, folder_lock
+from vibroflow.scenario.io import load_scenario
+
+DROP = """case = "drop"
+[run]
+dt = 1.0e-6
+duration = 0.01
+average_last = 0.0
+[[particles]]
+position = [0.0, 0.0, 0.01]
+velocity = [0.0, 0.0, -1.0]
+[[particles]]
+position = [0.02, 0.0, 0.01]
+[[walls]]
+point = [0.0, 0.0, 0.0]
+normal = [0.0, 0.0, 1.0]
+"""
+
+
+def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "vibroflow.cli", *args], capture_output=True,
+                          text=True, cwd=cwd, timeout=120)
+
+
+def _one_line_error(r: subprocess.CompletedProcess, code: int = 2) -> str:
+    assert r.returncode == code, r.stderr
+    assert "Traceback" not in r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1, r.stderr
+    return lines[0]
+
+
+@pytest.fixture
+def drop(tmp_path) -> Path:
+    path = tmp_path / "drop.toml"
+    path.write_text(DROP)
+    return path
+
+
+# ---------------------------------------------------------------------------------------------
+# Names that reach a deck, a file name, HTML or a shell: a safe character set, at load
+
+@pytest.mark.parametrize("key, value", [
+    ("case", '"run\\nshell rm -rf /"'),       # a newline would start a new LIGGGHTS line
+    ("case", '"a;b"'),
+    ("case", '"../../etc"'),
+    ("case", '"<script>"'),
+    ("case", '"with space"'),
+    ("case", '""'),
+    ("case", '"' + "x" * 65 + '"'),
+])
+def test_unsafe_case_names_are_refused(key, value):
+    with pytest.raises(InputError, match=r"^case = .*: must be a name: a letter or digit"):
+        load_scenario("tub47-quick", [f"{key}={value}"])
+
+
+def test_unsafe_material_and_probe_names_are_refused(tmp_path):
+    path = tmp_path / "s.toml"
+    path.write_text('[materials."steel\\nshell id"]\ndensity = 7800.0\n')
+    with pytest.raises(InputError, match=r"^materials key 'steel\\nshell id': must be a name"):
+        load_scenario(path)
+    with pytest.raises(InputError, match=r"^analysis\.probes key 'P 1': must be a name"):
+        load_scenario("tub47-quick", ['analysis.probes={"P 1"={x=0.0,z=0.1}}'])
+
+
+def test_a_file_name_that_is_not_a_safe_name_gives_a_safe_case(tmp_path):
+    path = tmp_path / "my run; rm.toml"
+    path.write_text("[run]\nduration = 0.4\naverage_last = 0.2\n")
+    assert load_scenario(path).case == "my-run-rm"
+
+
+# ---------------------------------------------------------------------------------------------
+# Numbers: finite, and runs of a size that can be allocated and finished
+
+@pytest.mark.parametrize("setting, field", [
+    ("fill.diameter=inf", "fill.diameter = inf: must be a finite number"),
+    ("materials.steel.density=inf", "materials.steel.density = inf: must be a finite number"),
+    ("contacts.0.k_n=inf", "contacts.0.k_n = inf: must be a finite number"),
+    ("run.duration=inf", "run.duration = inf: must be a finite number"),
+    ("run.dt=nan", "run.dt = nan: must be a finite number"),
+    ("gravity=[0, nan, -9.81]", "gravity.1 = nan: must be a finite number"),
+    ("motion.pivot=[0.0, -inf]", "motion.pivot.1 = -inf: must be a finite number"),
+    ("analysis.probes.P1.x=nan", "analysis.probes.P1.x = nan: must be a finite number"),
+])
+def test_non_finite_numbers_are_refused(setting, field):
+    with pytest.raises(InputError) as e:
+        load_scenario("tub47-quick", [setting])
+    assert e.value.message == field
+
+
+@pytest.mark.parametrize("setting, field", [
+    ("particles.0.position=[0.0, nan, 0.01]", "particles.0.position.1 = nan"),
+    ("particles.0.velocity=[inf, 0.0, 0.0]", "particles.0.velocity.0 = inf"),
+    ("particles.1.angular_velocity=[0.0, 0.0, -inf]", "particles.1.angular_velocity.2 = -inf"),
+    ("walls.0.point=[0.0, 0.0, nan]", "walls.0.point.2 = nan"),
+])
+def test_non_finite_vectors_are_refused(drop, setting, field):
+    with pytest.raises(InputError, match=f"^{field.replace('.', '[.]')}: must be a finite"):
+        load_scenario(drop, [setting])
+
+
+def test_a_duration_that_no_machine_could_run_is_refused_before_it_allocates(drop):
+    # 1e14 s at dt = 1e-6 s: 1e20 steps, whose series alone once asked numpy for 6.94 EiB
+    with pytest.raises(InputError, match=r"^run\.duration = 1e\+14: 1e\+20 steps of run\.dt = "
+                                         r"1e-06 s; a run may have at most 1e\+11 steps"):
+        load_scenario(drop, ["run.duration=1e14"])
+    with pytest.raises(InputError, match=r"^run\.series_every = 1: the series would have"):
+        load_scenario(drop, ["run.duration=1000", "run.series_every=1"])
+    with pytest.raises(InputError, match=r"^run\.average_last = 90000: .* snapshots of 14000 "
+                                         r"balls would take .* GiB"):
+        load_scenario("tub47", ["run.duration=1e5", "run.average_last=9e4"])
+
+
+def test_the_vibration_period_must_hold_enough_steps():
+    with pytest.raises(InputError, match=r"^motion\.frequency = 20000\.0: its period .* holds "
+                                         r"5 steps of run\.dt = 1e-05 s; must hold at least 20"):
+        load_scenario("tub47-quick", ["motion.frequency=2e4"])
+
+
+def test_an_overfilled_tub_is_refused_with_the_room_it_has():
+    # tub47's tub below its rim: (pi R^2 / 2 + 2 R (H - R)) L = 7.01e-3 m^3; 100 000 balls of
+    # 6.35 mm at the loose random packing 0.555 need 2.42e-2 m^3
+    with pytest.raises(InputError) as e:
+        load_scenario("tub47", ["fill.count=100000"])
+    assert e.value.message.startswith("fill.count = 100000: 100000 balls of d = 0.00635 m take "
+                                      "0.0242 m^3 at a loose packing (0.555), more than the tub "
+                                      "holds below its rim (0.00701 m^3); must be at most 29006")
+    load_scenario("tub47", ["fill.count=29006"])  # the most that fits passes
+
+
+def test_a_tub_too_small_for_one_ball_is_refused():
+    with pytest.raises(InputError, match=r"^tub\.length = 0\.001: shorter than one insertion"):
+        load_scenario("tub47-quick", ["tub.length=0.001"])
+    with pytest.raises(InputError, match=r"^tub\.radius = 0\.005: the tub is narrower than two"):
+        load_scenario("tub47-quick", ["tub.radius=0.005", "tub.rim_height=0.4"])
+
+
+def test_the_analysis_grid_must_be_of_a_size_that_fits():
+    with pytest.raises(InputError, match=r"^analysis\.cell_size = 1e-05: .* cells"):
+        load_scenario("tub47-quick", ["analysis.cell_size=1e-5"])
+
+
+# ---------------------------------------------------------------------------------------------
+# Explicit mode: a start that would blow up at the first step is bad input, said as such
+
+def test_coincident_balls_are_refused(drop):
+    with pytest.raises(InputError) as e:
+        load_scenario(drop, ["particles.1.position=[0.0, 0.0, 0.01]"])
+    assert e.value.message == ("particles.1.position = [0, 0, 0.01]: the same position as "
+                               "particles.0; balls must not overlap")
+
+
+def test_overlapping_balls_are_refused_beyond_the_blow_up_bound(drop):
+    # centres 4 mm apart, d = 6.35 mm: an overlap of 2.35 mm = 0.370 d > run.max_overlap 0.25
+    with pytest.raises(InputError) as e:
+        load_scenario(drop, ["particles.1.position=[0.004, 0.0, 0.01]"])
+    assert e.value.message == ("particles.1.position = [0.004, 0, 0.01]: overlaps particles.0 "
+                               "by 0.37 of the smaller diameter; must be below run.max_overlap "
+                               "= 0.25")
+    load_scenario(drop, ["particles.1.position=[0.0055, 0.0, 0.01]"])  # 0.134 d: allowed
+
+
+def test_overlaps_are_found_among_many_balls(tmp_path):
+    # 300 balls (the k-d tree's branch): one pair overlapping, found and named by its indices
+    lines = ['case = "many"', "[run]", "dt = 1.0e-6", "duration = 0.01", "average_last = 0.0"]
+    for i in range(300):
+        x = 0.01 * (i % 20)
+        z = 0.01 + 0.01 * (i // 20)
+        if i == 217:
+            x += 0.001 - 0.01  # 1 mm from ball 216
+        lines += ["[[particles]]", f"position = [{x!r}, 0.0, {z!r}]"]
+    path = tmp_path / "many.toml"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError, match=r"^particles\.217\.position = .*: overlaps "
+                                         r"particles\.216 by 0\.843 of the smaller diameter"):
+        load_scenario(path)
+
+
+def test_balls_behind_a_wall_or_deep_in_it_are_refused(drop):
+    with pytest.raises(InputError, match=r"^particles\.0\.position = \[0, 0, -0\.001\]: the "
+                                         r"ball's centre is 0\.001 m behind walls\.0"):
+        load_scenario(drop, ["particles.0.position=[0.0, 0.0, -0.001]"])
+    with pytest.raises(InputError, match=r"^particles\.0\.position = \[0, 0, 0\.0005\]: the "
+                                         r"ball overlaps walls\.0 by 0\.421 of its diameter"):
+        load_scenario(drop, ["particles.0.position=[0.0, 0.0, 0.0005]"])
+
+
+def test_scenario_check_says_it_in_one_line_and_dem_writes_nothing(drop, tmp_path):
+    r = _cli("scenario", "check", str(drop), "--set", "particles.1.position=[0.0, 0.0, 0.01]")
+    assert _one_line_error(r).startswith("error: particles.1.position = [0, 0, 0.01]: the same")
+    out = tmp_path / "out"
+    r = _cli("dem", str(drop), "--out", str(out), "--set", "run.duration=inf")
+    assert _one_line_error(r) == "error: run.duration = inf: must be a finite number"
+    assert not out.exists()
+
+
+# ---------------------------------------------------------------------------------------------
+# Output folders: one writer at a time; a file or a read-only folder is bad input
+
+def test_a_folder_in_use_is_refused_naming_its_holder(drop, tmp_path):
+    out = tmp_path / "out"
+    with folder_lock(out, "vibroflow dem"):
+        for args in (["dem", str(drop), "--out", str(out)],
+                     ["run", "tub47-quick", "--out", str(out)],
+                     ["report", str(out)]):
+            line = _one_line_error(_cli(*args))
+            assert line.startswith(f"error: {'DIR' if args[0] != 'dem' else '--out'} = "
+                                   f"'{out}': in use by process {os.getpid()} (vibroflow dem, "
+                                   "since "), line
+        assert sorted(p.name for p in out.iterdir()) == [LOCK_NAME]
+    assert not (out / LOCK_NAME).exists()  # released: the folder is as it was
+
+
+def test_a_process_may_nest_the_lock_of_its_own_folder(tmp_path):
+    with folder_lock(tmp_path / "a", "outer"):
+        with folder_lock(tmp_path / "a", "inner"):
+            pass
+        assert (tmp_path / "a" / LOCK_NAME).exists()  # still held by the outer one
+    assert not (tmp_path / "a" / LOCK_NAME).exists()
+
+
+def test_a_killed_holder_leaves_no_lock(tmp_path):
+    # flock belongs to the open file: the kernel releases it when its process dies, SIGKILL too
+    out = tmp_path / "out"
+    code = ("import os, signal\nfrom vibroflow.io.folder_lock import folder_lock\n"
+            f"with folder_lock({str(out)!r}, 'x'):\n    os.kill(os.getpid(), signal.SIGKILL)\n")
+    assert subprocess.run([sys.executable, "-c", code]).returncode == -9
+    assert (out / LOCK_NAME).exists()  # the file stays, the lock does not
+    with folder_lock(out, "next"):
+        pass
+
+
+@pytest.mark.parametrize("command", ["dem", "run"])
+def test_an_output_path_that_is_a_file_is_refused(drop, tmp_path, command):
+    a_file = tmp_path / "a_file"
+    a_file.write_text("precious\n")
+    args = [str(drop)] if command == "dem" else ["tub47-quick"]
+    for target in (a_file, a_file / "sub"):
+        line = _one_line_error(_cli(command, *args, "--out", str(target)))
+        assert "is a file" in line or "not a folder" in line, line
+    assert a_file.read_text() == "precious\n"
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")
+def test_a_read_only_output_folder_is_refused(drop, tmp_path):
+    out = tmp_path / "ro"
+    out.mkdir()
+    out.chmod(0o500)
+    try:
+        line = _one_line_error(_cli("dem", str(drop), "--out", str(out)))
+        assert line == f"error: --out = '{out}': not writable (permission denied); give a " \
+                       "folder you may write"
+    finally:
+        out.chmod(0o700)
+
+
+# ---------------------------------------------------------------------------------------------
+# The command line's wrapper: Ctrl-C and operating-system errors in one line
+
+def _wrapped(exc: BaseException):
+    @input_errors
+    def command():
+        raise exc
+    return command
+
+
+@pytest.mark.parametrize("exc, line", [
+    (Interrupted("interrupted at t = 0.1234 s; resume with --resume"),
+     "interrupted at t = 0.1234 s; resume with --resume"),
+    (KeyboardInterrupt(), "interrupted"),
+])
+def test_ctrl_c_is_one_line_and_exit_130(capsys, exc, line):
+    with pytest.raises(typer.Exit) as e:
+        _wrapped(exc)()
+    assert e.value.exit_code == EXIT_INTERRUPTED == 130
+    assert capsys.readouterr().err == line + "\n"
+
+
+@pytest.mark.parametrize("exc, code, line", [
+    (PermissionError(errno.EACCES, "Permission denied", "/x/summary.json"), 2,
+     "error: /x/summary.json: permission denied"),
+    (OSError(errno.ENOSPC, "No space left on device", "/x/dem.h5"), 1,
+     "error: /x/dem.h5: no space left on device"),
+])
+def test_operating_system_errors_are_one_line(capsys, exc, code, line):
+    with pytest.raises(typer.Exit) as e:
+        _wrapped(exc)()
+    assert e.value.exit_code == code
+    assert capsys.readouterr().err == line + "\n"
+
+
+def test_a_bug_is_not_disguised_as_input(capsys):
+    with pytest.raises(ZeroDivisionError):
+        _wrapped(ZeroDivisionError("a bug"))()
