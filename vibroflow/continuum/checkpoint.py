@@ -1,31 +1,59 @@
 """Checkpoints of a continuum run: the whole material-point state, what has been sampled so far
-and a few numbers of the run, in one .npz file written atomically.
+and a few numbers of the run, in one .npz file written atomically and checksummed.
 
-A checkpoint is written to a temporary name in the run's folder, flushed to disk and moved over
-the previous one with os.replace, so a run killed at any instant leaves either the previous
-complete checkpoint or the new complete one.  Arrays are stored as they are (float64 state,
-float32 samples), so a resumed run continues with exactly the numbers it had.
+A checkpoint is written with vibroflow.io.atomic (a temporary name in the run's folder, flushed
+to disk, moved over the previous one with os.replace), so a run killed at any instant leaves
+either the previous complete checkpoint or the new complete one.  Arrays are stored as they are
+(float64 state, float32 samples), so a resumed run continues with exactly the numbers it had.
+
+A checkpoint can still be damaged after it is written (a copy cut short, a disk error, a file
+put in its place by hand): "checksum" holds the sha256 of every other entry (its name, dtype,
+shape and bytes, in sorted order; `arrays_checksum`), and load_checkpoint refuses a file whose
+arrays do not match it, as it refuses an empty, truncated or foreign file, with one line
+(InputError) instead of a traceback or a resume from wrong numbers.
 
 Layout: "state/<field>" for the MPMState arrays, "state/history/<slot>/<name>" for the boundaries'
-per-point history, "samples/<name>" for the caller's sampling arrays, and "meta" a JSON text with
-the clock (t, step) and the caller's own record (fingerprint, wall time, ...).
+per-point history, "samples/<name>" for the caller's sampling arrays, "meta" a JSON text with
+the clock (t, step) and the caller's own record (fingerprint, wall time, ...), and "checksum".
 """
 from __future__ import annotations
 
+import hashlib
+import io
 import json
-import os
+import zipfile
 from pathlib import Path
 
 import numpy as np
+
+from vibroflow.errors import InputError
+from vibroflow.io.atomic import atomic_path
 
 from .mpm import MPMState
 
 _STATE_ARRAYS = ("x", "v", "C", "L", "mass", "volume", "density", "stress", "gamma_dot",
                  "phase", "fext")
+CHECKSUM_KEY = "checksum"
+_ZIP_MAGIC = b"PK\x03\x04"
+_ZIP_END = b"PK\x05\x06"  # the end-of-central-directory record: a whole zip file ends with it
+
+
+def arrays_checksum(arrays: dict[str, np.ndarray]) -> str:
+    """sha256 (hex) of the named arrays: each one's name, dtype, shape and bytes, in sorted
+    name order (the checksum entry itself left out)."""
+    h = hashlib.sha256()
+    for name in sorted(arrays):
+        if name == CHECKSUM_KEY:
+            continue
+        a = np.ascontiguousarray(arrays[name])
+        h.update(f"{name}\0{a.dtype.str}\0{a.shape}\0".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
 
 
 def save_checkpoint(path, state: MPMState, samples: dict[str, np.ndarray], meta: dict) -> None:
-    """Write state, samples (name -> array) and meta (JSON-able) to path atomically."""
+    """Write state, samples (name -> array) and meta (JSON-able) to path atomically, with the
+    arrays' checksum."""
     path = Path(path)
     arrays = {f"state/{name}": getattr(state, name) for name in _STATE_ARRAYS}
     for slot, hist in enumerate(state.history):
@@ -36,30 +64,69 @@ def save_checkpoint(path, state: MPMState, samples: dict[str, np.ndarray], meta:
     record = {"t": state.t, "step": state.step, "history_slots": len(state.history),
               **meta}
     arrays["meta"] = np.array(json.dumps(record))
-    tmp = path.with_name(f".tmp{os.getpid()}-" + path.name)
+    arrays[CHECKSUM_KEY] = np.array(arrays_checksum(arrays))
+    with atomic_path(path) as tmp:  # its name ends with ".npz": savez adds no suffix
+        np.savez(tmp, **arrays)
+
+
+class DamagedCheckpoint(InputError):
+    """A checkpoint file that cannot be resumed from: `why` is "empty", "truncated", "not a
+    checkpoint", "checksum mismatch" or "unreadable: ..."."""
+
+    def __init__(self, path: Path, why: str):
+        self.path, self.why = Path(path), why
+        super().__init__(f"--resume: {path} is damaged ({why}); run without --resume to "
+                         "start afresh")
+
+
+def _read_arrays(path: Path) -> dict[str, np.ndarray]:
+    """Every entry of the checkpoint at path, checked against its checksum; DamagedCheckpoint
+    when the file is empty, cut short, not a checkpoint or does not match its checksum."""
+    data = path.read_bytes()
+    if not data:
+        raise DamagedCheckpoint(path, "empty")
+    if not data.startswith(_ZIP_MAGIC):
+        raise DamagedCheckpoint(path, "not a checkpoint")
+    end = data.rfind(_ZIP_END, max(0, len(data) - (65536 + 22)))
+    if end < 0 or len(data) - end < 22:  # no whole end record (22 bytes): cut short
+        raise DamagedCheckpoint(path, "truncated")
     try:
-        with open(tmp, "wb") as f:
-            np.savez(f, **arrays)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+        with np.load(io.BytesIO(data), allow_pickle=False) as f:
+            arrays = {key: f[key].copy() for key in f.files}
+    except zipfile.BadZipFile as e:
+        # zipfile checks each entry's CRC-32: a flipped byte in the data is caught here
+        raise DamagedCheckpoint(path, "checksum mismatch" if "CRC" in str(e) else
+                                f"unreadable: {' '.join(str(e).split())[:80]}") from None
+    except (ValueError, OSError, EOFError, KeyError) as e:
+        raise DamagedCheckpoint(path, f"unreadable: {' '.join(str(e).split())[:80]}") from None
+    if CHECKSUM_KEY not in arrays or "meta" not in arrays:
+        raise DamagedCheckpoint(path, "not a checkpoint")
+    if str(arrays[CHECKSUM_KEY]) != arrays_checksum(arrays):
+        raise DamagedCheckpoint(path, "checksum mismatch")
+    return arrays
 
 
 def load_checkpoint(path) -> tuple[MPMState, dict[str, np.ndarray], dict]:
-    """(state, samples, meta) of a checkpoint written by save_checkpoint."""
-    with np.load(Path(path), allow_pickle=False) as f:
-        meta = json.loads(str(f["meta"]))
-        fields = {name: f[f"state/{name}"].copy() for name in _STATE_ARRAYS}
+    """(state, samples, meta) of a checkpoint written by save_checkpoint; DamagedCheckpoint (an
+    InputError, one line) when the file is empty, truncated, not a checkpoint or fails its
+    checksum."""
+    path = Path(path)
+    arrays = _read_arrays(path)
+    try:
+        meta = json.loads(str(arrays["meta"]))
+        fields = {name: arrays[f"state/{name}"] for name in _STATE_ARRAYS}
         history: list[dict] = [{} for _ in range(int(meta["history_slots"]))]
         samples = {}
-        for key in f.files:
+        for key, a in arrays.items():
             parts = key.split("/")
             if parts[:2] == ["state", "history"]:
-                history[int(parts[2])][parts[3]] = f[key].copy()
+                history[int(parts[2])][parts[3]] = a
             elif parts[0] == "samples":
-                samples[parts[1]] = f[key].copy()
-    state = MPMState(history=history, t=float(meta["t"]), step=int(meta["step"]), **fields)
+                samples[parts[1]] = a
+        state = MPMState(history=history, t=float(meta["t"]), step=int(meta["step"]),
+                         **fields)
+    except (KeyError, IndexError, ValueError, TypeError) as e:
+        # a checksummed file of another layout: not one of these checkpoints
+        raise DamagedCheckpoint(path, f"not a checkpoint: {type(e).__name__} "
+                                f"{' '.join(str(e).split())[:60]}") from None
     return state, samples, meta

@@ -38,10 +38,14 @@ the checkpoint.
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
 import math
+import os
+import signal
+import threading
 import time
 from dataclasses import dataclass
 from typing import ClassVar
@@ -54,9 +58,10 @@ from vibroflow.analysis.phase_shear import (PhaseShear, near_wall_nodes, node_gr
                                             phase_shear_of_snapshots)
 from vibroflow.analysis.stats import batch_means, batches_of_whole_cycles
 from vibroflow.analysis.summary import geometry_of, json_safe, tub_summary
-from vibroflow.errors import InputError
+from vibroflow.errors import InputError, Interrupted
 # write_json_atomic: also imported from here by the Eulerian run
 from vibroflow.io.atomic import write_json_atomic, write_text_atomic
+from vibroflow.io.folder_lock import folder_lock
 from vibroflow.progress import RunProgress
 from vibroflow.run_clock import RunClock
 from vibroflow.tub.geometry import cross_section_area, distance_to_wall_np, u_wall_nearest
@@ -700,43 +705,61 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
     S = times.size
     probes = scenario.analysis.probes
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     ckpt = out / CHECKPOINT_NAME
     fingerprint = run_fingerprint(scenario, calibration, options, vtk)
+    # the folder's lock first: nothing is written into a folder another run is writing, and a
+    # --out that is a file or read-only is a one-line error before anything is made
+    with folder_lock(out, "vibroflow continuum"):
+        clock = RunClock()   # the solver's time, numba's compilation apart
+        with clock, RunProgress(progress) as prog:
+            if resume and ckpt.exists():
+                state, arrays, meta = load_checkpoint(ckpt)
+                if meta.get("fingerprint") != fingerprint:
+                    raise InputError(f"--resume: {ckpt} is the checkpoint of another scenario, "
+                                     "calibration or options; run without --resume to start "
+                                     "afresh")
+                samples = Samples.from_arrays(arrays, S, state.n, len(probes),
+                                              cell_grid_of(geo, scenario.analysis.cell_size))
+                clock.resume_from(float(meta["wall_time_s"]))
+                prog.log(f"resuming from {ckpt} at t = {state.t:.4f} s")
+            else:
+                if resume:
+                    prog.log(f"no checkpoint in {out}: starting afresh")
+                for name in (SUMMARY_NAME, BULK_CSV_NAME, CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME):
+                    (out / name).unlink(missing_ok=True)
+                with interrupted_while_settling():
+                    state = settle(scenario, material, calibration, options, x, volume,
+                                   density, stress, prog)
+                state.t = 0.0
+                state.step = 0
+                samples = Samples(S, state.n, len(probes),
+                                  cell_grid_of(geo, scenario.analysis.cell_size))
+            try:
+                done = _vibrate(scenario, system, state, samples, geo, material, times, out,
+                                vtk, prog, ckpt, fingerprint, clock, stop_after_steps)
+            except ContinuumBlowUp:
+                ckpt.unlink(missing_ok=True)  # a blown-up run has nothing to resume
+                raise
+            except VibrationInterrupted as e:
+                raise interrupted(out, e) from None
+        if keep_samples is not None:
+            keep_samples.append(samples)
+        if not done:
+            return None
+        with interrupted_while_writing(out):
+            summary = _lagrangian_results(scenario, out, calibration, options, vtk, system,
+                                          material, spacing, geo, h, times, state, samples,
+                                          clock)
+        ckpt.unlink(missing_ok=True)
+        return summary
 
-    clock = RunClock()   # the solver's time, numba's compilation apart
-    with clock, RunProgress(progress) as prog:
-        if resume and ckpt.exists():
-            state, arrays, meta = load_checkpoint(ckpt)
-            if meta.get("fingerprint") != fingerprint:
-                raise InputError(f"--resume: {ckpt} is the checkpoint of another scenario, "
-                                 "calibration or options; run without --resume to start "
-                                 "afresh")
-            samples = Samples.from_arrays(arrays, S, state.n, len(probes),
-                                          cell_grid_of(geo, scenario.analysis.cell_size))
-            clock.resume_from(float(meta["wall_time_s"]))
-            prog.log(f"resuming from {ckpt} at t = {state.t:.4f} s")
-        else:
-            if resume:
-                prog.log(f"no checkpoint in {out}: starting afresh")
-            for name in (SUMMARY_NAME, BULK_CSV_NAME, CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME):
-                (out / name).unlink(missing_ok=True)
-            state = settle(scenario, material, calibration, options, x, volume, density,
-                           stress, prog)
-            state.t = 0.0
-            state.step = 0
-            samples = Samples(S, state.n, len(probes),
-                              cell_grid_of(geo, scenario.analysis.cell_size))
-        try:
-            done = _vibrate(scenario, system, state, samples, geo, material, times, out, vtk,
-                            prog, ckpt, fingerprint, clock, stop_after_steps)
-        except ContinuumBlowUp:
-            ckpt.unlink(missing_ok=True)  # a blown-up run has nothing to resume
-            raise
-    if keep_samples is not None:
-        keep_samples.append(samples)
-    if not done:
-        return None
+
+def _lagrangian_results(scenario, out: Path, calibration, options, vtk, system, material,
+                        spacing, geo, h, times, state, samples: Samples, clock: RunClock
+                        ) -> dict:
+    """Write a finished Lagrangian run's results into out (summary.json last); the summary."""
+    S = times.size
+    probes = scenario.analysis.probes
     wall_time = clock.solver_s()
     n = state.n
     n_steps = state.step
@@ -768,7 +791,6 @@ def run_lagrangian(scenario, out_dir, calibration: dict | None = None,
                          material.diameter)
     summary = json_safe(summary)
     write_json_atomic(out / SUMMARY_NAME, summary)
-    ckpt.unlink(missing_ok=True)
     return summary
 
 
@@ -850,30 +872,149 @@ def vibration_timeline(state, n_steps: int, sample_step: np.ndarray, samples: Sa
     on where it stopped), checkpoint() every checkpoint_every wall seconds, the steps between
     two events (next_event) in one advance_steps(m) call, progress reported as simulated time
     and per_step particle-steps a step.  False when stopped by stop_after_steps (after its
-    checkpoint), True at the end."""
+    checkpoint), True at the end.
+
+    A Ctrl-C (SIGINT) stops the timeline at its next look, between two steps and two samples,
+    where state and samples agree: checkpoint() and VibrationInterrupted(t, checkpointed=True),
+    which the runners turn into Interrupted (`interrupted`).  A second Ctrl-C before that, or
+    one outside the main thread's handler, stops it where it is: VibrationInterrupted(t,
+    checkpointed=False), no checkpoint of a state that may be half-way through a sample (the
+    last periodic one, if any, stays)."""
     S = sample_step.size
     k0 = k = state.step
     last_ckpt = time.perf_counter()
-    while True:
-        while samples.j < S and sample_step[samples.j] == k:
-            record(samples.j)
-            samples.j += 1
-        if k == n_steps:
-            break
-        if stop_after_steps is not None and k - k0 >= stop_after_steps:
-            checkpoint()
-            prog.log(f"stopped at t = {state.t:.4f} s (step {k}); go on with --resume")
-            return False
-        if time.perf_counter() - last_ckpt > checkpoint_every:
-            checkpoint()
-            last_ckpt = time.perf_counter()
-        # the steps up to the next sample, stop or progress report, in one compiled call
-        nxt = next_event(k, n_steps, sample_step, samples.j, k0, stop_after_steps)
-        advance_steps(nxt - k)
-        k = nxt
-        prog.update(state.t, (k - k0) * per_step)
+    fault = FaultSigint(k0)
+    with sigint_flag() as stop:
+        try:
+            while True:
+                while samples.j < S and sample_step[samples.j] == k:
+                    record(samples.j)
+                    samples.j += 1
+                if stop.requested:
+                    break
+                if k == n_steps:
+                    break
+                if stop_after_steps is not None and k - k0 >= stop_after_steps:
+                    checkpoint()
+                    prog.log(f"stopped at t = {state.t:.4f} s (step {k}); go on with --resume")
+                    return False
+                if time.perf_counter() - last_ckpt > checkpoint_every:
+                    checkpoint()
+                    last_ckpt = time.perf_counter()
+                # the steps up to the next sample, stop or progress report, in one compiled
+                # call
+                nxt = next_event(k, n_steps, sample_step, samples.j, k0, stop_after_steps)
+                advance_steps(nxt - k)
+                k = nxt
+                prog.update(state.t, (k - k0) * per_step)
+                fault.check(k)
+            if stop.requested:
+                checkpoint()
+                raise VibrationInterrupted(state.t, True)
+        except KeyboardInterrupt:
+            raise VibrationInterrupted(state.t, False) from None
     prog.update(state.t, (n_steps - k0) * per_step)
     return True
+
+
+class VibrationInterrupted(Exception):
+    """A Ctrl-C stopped the vibration at simulated time t (s); checkpointed: whether the state
+    at t was written to the checkpoint (vibration_timeline)."""
+
+    def __init__(self, t: float, checkpointed: bool):
+        super().__init__(f"interrupted at t = {t:.4f} s")
+        self.t, self.checkpointed = float(t), bool(checkpointed)
+
+
+def resume_hint(out: Path) -> str:
+    return f"resume with --resume (vibroflow continuum ... --out {out} --resume)"
+
+
+def interrupted(out: Path, e: VibrationInterrupted) -> Interrupted:
+    """The one-line Interrupted of a vibration stopped by Ctrl-C: the time and how to go on."""
+    if e.checkpointed:
+        return Interrupted(f"interrupted at t = {e.t:.4f} s; {resume_hint(out)}")
+    if (Path(out) / CHECKPOINT_NAME).exists():
+        return Interrupted(f"interrupted at t = {e.t:.4f} s, before its checkpoint was "
+                           f"written; {resume_hint(out)} goes on from the last checkpoint")
+    return Interrupted(f"interrupted at t = {e.t:.4f} s, before a first checkpoint; nothing "
+                       "to resume, run again")
+
+
+@contextlib.contextmanager
+def interrupted_while_settling():
+    """A Ctrl-C while the bed settles: Interrupted (one line); nothing is checkpointed before
+    the vibration, so there is nothing to resume."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        raise Interrupted("interrupted while settling; nothing to resume, run again") from None
+
+
+@contextlib.contextmanager
+def interrupted_while_writing(out: Path):
+    """A Ctrl-C while a finished run writes its results: Interrupted (one line).  Every file is
+    written atomically and summary.json last, so the folder holds no half file and no summary
+    that looks complete; the checkpoint, when there is one, stays to resume from."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        if (Path(out) / CHECKPOINT_NAME).exists():
+            raise Interrupted(f"interrupted while writing the results; {resume_hint(out)} "
+                              "goes on from the last checkpoint") from None
+        raise Interrupted("interrupted while writing the results, before a checkpoint; "
+                          "nothing to resume, run again") from None
+
+
+class _StopFlag:
+    requested = False
+
+
+@contextlib.contextmanager
+def sigint_flag():
+    """While the block runs, a SIGINT (Ctrl-C) sets flag.requested instead of raising
+    KeyboardInterrupt at an arbitrary bytecode (which could leave a sample half recorded); a
+    second one raises KeyboardInterrupt as usual.  Only in the main thread (Python's signal
+    handlers run there) and when SIGINT is not ignored; otherwise the flag stays unset."""
+    flag = _StopFlag()
+    previous = signal.getsignal(signal.SIGINT)
+    if (threading.current_thread() is not threading.main_thread()
+            or previous in (signal.SIG_IGN, None)):
+        yield flag
+        return
+
+    def handler(signum, frame):
+        if flag.requested:
+            raise KeyboardInterrupt
+        flag.requested = True
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield flag
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+#: the fault-injection hook of the Ctrl-C tests (FaultSigint)
+FAULT_SIGINT_ENV = "VIBROFLOW_FAULT_SIGINT_AFTER_STEPS"
+
+
+class FaultSigint:
+    """Fault injection for the Ctrl-C tests: with VIBROFLOW_FAULT_SIGINT_AFTER_STEPS=N in the
+    environment the process sends itself SIGINT, once, at the vibration loop's first look after
+    N steps of this call (from step k0): the deterministic version of a user's Ctrl-C (a test
+    that signals from outside races the run).  The DEM has the same hook
+    (vibroflow.dem.run)."""
+
+    def __init__(self, k0: int):
+        value = os.environ.get(FAULT_SIGINT_ENV)
+        self.k0 = k0
+        self.after = int(value) if value and value.strip().isdigit() else None
+
+    def check(self, k: int) -> None:
+        if self.after is not None and k - self.k0 >= self.after:
+            self.after = None
+            os.kill(os.getpid(), signal.SIGINT)
 
 
 #: steps between progress reports (and the checks for a checkpoint's wall time)

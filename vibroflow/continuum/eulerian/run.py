@@ -46,6 +46,7 @@ import numpy as np
 from vibroflow.analysis.stats import batches_of_whole_cycles
 from vibroflow.analysis.summary import geometry_of, json_safe, tub_summary
 from vibroflow.errors import InputError
+from vibroflow.io.folder_lock import folder_lock
 from vibroflow.progress import RunProgress
 from vibroflow.run_clock import RunClock
 from vibroflow.tub.motion import TubMotion
@@ -58,11 +59,12 @@ from ..grid_update import LabFrame, TubFrame
 from ..mpm import ContinuumBlowUp
 from ..run import default_dx as lagrangian_default_dx
 from ..run import (BULK_CSV_NAME, CHECKPOINT_NAME, REPORT_EVERY, SHEAR_RATE_CSV_NAME,
-                   SUMMARY_NAME, VTK_DIR, LagrangianOptions, Samples, bed_area, cell_grid_of,
-                   material_for, phase_shear_of_samples, run_fingerprint, sample_times,
-                   samples_source,
-                   shear_rate, shear_rate_outputs, to_lab, vibration_timeline,
-                   write_json_atomic, write_shear_rate_csv)
+                   SUMMARY_NAME, VTK_DIR, LagrangianOptions, Samples, VibrationInterrupted,
+                   bed_area, cell_grid_of, interrupted, interrupted_while_settling,
+                   interrupted_while_writing, material_for, phase_shear_of_samples,
+                   run_fingerprint, sample_times, samples_source, shear_rate,
+                   shear_rate_outputs, to_lab, vibration_timeline, write_json_atomic,
+                   write_shear_rate_csv)
 from ..timestep import stable_dt
 from .mesh import EulerianMesh
 from .solver import EulerianState, EulerianSystem, advance, init_state, state_from_checkpoint
@@ -269,47 +271,64 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
     probes = scenario.analysis.probes
     n_cells = int(system.mesh.inside.sum())
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     ckpt = out / CHECKPOINT_NAME
     fingerprint = run_fingerprint(scenario, calibration, options, vtk)
+    # the folder's lock first (as run_lagrangian): a --out that is a file or read-only is a
+    # one-line error before anything is made
+    with folder_lock(out, "vibroflow continuum"):
+        clock = RunClock()   # the solver's time, numba's compilation apart
+        with clock, RunProgress(progress) as prog:
+            if resume and ckpt.exists():
+                saved, arrays, meta = load_checkpoint(ckpt)
+                if meta.get("fingerprint") != fingerprint or meta.get("method") != "eulerian":
+                    raise InputError(f"--resume: {ckpt} is the checkpoint of another scenario, "
+                                     "calibration, method or options; run without --resume to "
+                                     "start afresh")
+                state = state_from_checkpoint(system, saved, meta)
+                samples = Samples.from_arrays(arrays, S, n_cells, len(probes),
+                                              cell_grid_of(geo, scenario.analysis.cell_size))
+                dither = arrays["dither"].copy()
+                top = float(meta["bed_height_m"])
+                clock.resume_from(float(meta["wall_time_s"]))
+                prog.log(f"resuming from {ckpt} at t = {state.t:.4f} s")
+            else:
+                if resume:
+                    prog.log(f"no checkpoint in {out}: starting afresh")
+                for name in (SUMMARY_NAME, BULK_CSV_NAME, CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME):
+                    (out / name).unlink(missing_ok=True)
+                with interrupted_while_settling():
+                    state, top = settle(scenario, material, calibration, options, prog)
+                state.t = 0.0
+                state.step = 0
+                samples = Samples(S, n_cells, len(probes),
+                                  cell_grid_of(geo, scenario.analysis.cell_size))
+                dither = np.zeros(n_cells)
+            try:
+                done = _vibrate(scenario, system, state, samples, dither, geo, material, times,
+                                out, vtk, prog, ckpt, fingerprint, clock, top,
+                                stop_after_steps)
+            except ContinuumBlowUp:
+                ckpt.unlink(missing_ok=True)
+                raise
+            except VibrationInterrupted as e:
+                raise interrupted(out, e) from None
+        if keep_samples is not None:
+            keep_samples.append(samples)
+        if not done:
+            return None
+        with interrupted_while_writing(out):
+            summary = _eulerian_results(scenario, out, calibration, options, vtk, system,
+                                        material, geo, top, times, state, samples, clock)
+        ckpt.unlink(missing_ok=True)
+        return summary
 
-    clock = RunClock()   # the solver's time, numba's compilation apart
-    with clock, RunProgress(progress) as prog:
-        if resume and ckpt.exists():
-            saved, arrays, meta = load_checkpoint(ckpt)
-            if meta.get("fingerprint") != fingerprint or meta.get("method") != "eulerian":
-                raise InputError(f"--resume: {ckpt} is the checkpoint of another scenario, "
-                                 "calibration, method or options; run without --resume to "
-                                 "start afresh")
-            state = state_from_checkpoint(system, saved, meta)
-            samples = Samples.from_arrays(arrays, S, n_cells, len(probes),
-                                          cell_grid_of(geo, scenario.analysis.cell_size))
-            dither = arrays["dither"].copy()
-            top = float(meta["bed_height_m"])
-            clock.resume_from(float(meta["wall_time_s"]))
-            prog.log(f"resuming from {ckpt} at t = {state.t:.4f} s")
-        else:
-            if resume:
-                prog.log(f"no checkpoint in {out}: starting afresh")
-            for name in (SUMMARY_NAME, BULK_CSV_NAME, CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME):
-                (out / name).unlink(missing_ok=True)
-            state, top = settle(scenario, material, calibration, options, prog)
-            state.t = 0.0
-            state.step = 0
-            samples = Samples(S, n_cells, len(probes),
-                              cell_grid_of(geo, scenario.analysis.cell_size))
-            dither = np.zeros(n_cells)
-        try:
-            done = _vibrate(scenario, system, state, samples, dither, geo, material, times,
-                            out, vtk, prog, ckpt, fingerprint, clock, top,
-                            stop_after_steps)
-        except ContinuumBlowUp:
-            ckpt.unlink(missing_ok=True)
-            raise
-    if keep_samples is not None:
-        keep_samples.append(samples)
-    if not done:
-        return None
+
+def _eulerian_results(scenario, out: Path, calibration, options, vtk, system, material, geo,
+                      top, times, state, samples: Samples, clock: RunClock) -> dict:
+    """Write a finished Eulerian run's results into out (summary.json last); the summary."""
+    S = times.size
+    probes = scenario.analysis.probes
+    n_cells = int(system.mesh.inside.sum())
     wall_time = clock.solver_s()
     n_steps = state.step
     if vtk:
@@ -357,7 +376,6 @@ def run_eulerian(scenario, out_dir, calibration: dict | None = None,
                          material.diameter)
     summary = json_safe(summary)
     write_json_atomic(out / SUMMARY_NAME, summary)
-    ckpt.unlink(missing_ok=True)
     return summary
 
 
