@@ -61,7 +61,8 @@ from vibroflow.analysis.summary import geometry_of
 from vibroflow.dem.laws import damping_ratio
 from vibroflow.dem.walls import WALL_PARTITION_HI, WALL_PARTITION_LO, WALL_U
 from vibroflow.errors import InputError
-from vibroflow.io.atomic import write_json_atomic, write_text_atomic
+from vibroflow.io.atomic import TMP_PREFIX, write_json_atomic, write_text_atomic
+from vibroflow.io.folder_lock import check_writable_dir, folder_lock
 from vibroflow.scenario.model import find_contact
 from vibroflow.io.stl import DEFAULT_MAX_SAGITTA, arc_segments, sagitta, write_tub_meshes
 from vibroflow.tub.motion import TubMotion, lab_to_tub_np, pose_np
@@ -285,33 +286,38 @@ def model_arguments(tables: PairTables) -> tuple[str, str]:
     return (f"model hertz tangential history{rolling}", "tangential_damping off limitForce off")
 
 
+def _contact_law_deck(scenario, tables: PairTables | None = None) -> _Deck:
+    """The deck lines of `contact_law_lines`, as a _Deck."""
+    tables = tables or pair_tables(scenario)
+    mats = type_materials(scenario)
+    deck = _Deck()
+    for fix, field in (("youngsModulus", "youngs_modulus"), ("poissonsRatio", "poisson_ratio")):
+        deck.add(f"fix {fix} all property/global {fix} peratomtype {_SLOT} {_SLOT} {_SLOT}",
+                 *(_fmt(getattr(scenario.materials[mt], field)) for mt in mats))
+    _table(deck, "coefficientRestitution", tables.restitution)
+    _table(deck, "coefficientFriction", tables.friction)
+    _table(deck, "coefficientRollingFriction", tables.rolling_friction)
+    if tables.model == "hooke/stiffness":
+        deck.add("# k_n (N/m); k_t = k_t_over_k_n k_n (N/m); gamma_n = 2 zeta sqrt(m_eff k_n) "
+                 "(N s/m),")
+        deck.add("# m_eff = m/2 ball-ball, m ball-wall, m = {} kg; no tangential damping",
+                 ball_mass(scenario))
+        _table(deck, "kn", tables.kn)
+        _table(deck, "kt", tables.kt)
+        _table(deck, "gamman_abs", tables.gamman_abs)
+        _table(deck, "gammat_abs", tables.gammat_abs)
+    model_args, model_kw = model_arguments(tables)
+    deck.add()
+    deck.add(f"pair_style      gran {model_args} {model_kw}")
+    deck.add("pair_coeff      * *")
+    return deck
+
+
 def contact_law_lines(scenario, tables: PairTables | None = None) -> list[str]:
     """Deck lines that define the materials and the contact law: the `fix property/global`
     tables (types 1 = balls, 2 = tub wall, 3 = partitions), `pair_style gran` and
     `pair_coeff`.  The wall fix uses the same model (`model_arguments`)."""
-    tables = tables or pair_tables(scenario)
-    mats = type_materials(scenario)
-
-    def props(name: str) -> str:
-        return " ".join(_fmt(getattr(scenario.materials[mt], name)) for mt in mats)
-
-    out = [f"fix youngsModulus all property/global youngsModulus peratomtype "
-           f"{props('youngs_modulus')}",
-           f"fix poissonsRatio all property/global poissonsRatio peratomtype "
-           f"{props('poisson_ratio')}",
-           _table("coefficientRestitution", tables.restitution),
-           _table("coefficientFriction", tables.friction),
-           _table("coefficientRollingFriction", tables.rolling_friction)]
-    if tables.model == "hooke/stiffness":
-        out += ["# k_n (N/m); k_t = k_t_over_k_n k_n (N/m); gamma_n = 2 zeta sqrt(m_eff k_n) "
-                "(N s/m),",
-                f"# m_eff = m/2 ball-ball, m ball-wall, m = {_fmt(ball_mass(scenario))} kg; "
-                "no tangential damping",
-                _table("kn", tables.kn), _table("kt", tables.kt),
-                _table("gamman_abs", tables.gamman_abs), _table("gammat_abs", tables.gammat_abs)]
-    model_args, model_kw = model_arguments(tables)
-    out += ["", f"pair_style      gran {model_args} {model_kw}", "pair_coeff      * *"]
-    return out
+    return _contact_law_deck(scenario, tables).lines()
 
 
 def dump_vibration_steps(scenario) -> np.ndarray:
@@ -332,16 +338,161 @@ def dump_vibration_steps(scenario) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------------------------
+# What user input may put into a deck
+#
+# A LIGGGHTS deck is a program: a newline in a value starts a new command (and `shell` runs
+# anything), `&` at a line's end joins the next line, `#` starts a comment, `$` substitutes a
+# variable, quotes group words.  So the deck is built from lines whose text is a literal of
+# this module (a template) with slots ("{}") for values, and every value is rendered as one
+# token of a small safe set: a number (_fmt), a whole number, or a name of SAFE_NAME's
+# characters.  A scenario can then fill a slot but never add a word, a line, a comment, a
+# variable or a quoted string the template did not have; the written text is checked line by
+# line against the templates (`_Deck.render`) before anything goes to disk.
+
+#: the names a deck or its README may carry (case, materials, file names): the scenario's own
+#: rule for names
+SAFE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]{0,63}")
+SAFE_NAME_RULE = ("1 to 64 characters of A-Z a-z 0-9 _ . + -, the first a letter or a digit "
+                  "(it is written into the LIGGGHTS deck)")
+#: one value of a deck line: a number, a whole number, a safe name, or a lone * (LIGGGHTS'
+#: "any", in `processors`)
+_TOKEN = r"(?:[A-Za-z0-9_.+-]+|\*)"
+_TOKEN_RE = re.compile(_TOKEN)
+#: a slot of a template
+_SLOT = "{}"
+#: the `processors` grid: three counts, each a whole number or *
+_PROCESSORS = re.compile(r"(?:\*|[1-9][0-9]{0,5})(?: (?:\*|[1-9][0-9]{0,5})){2}")
+
+
+def _short(value, limit: int = 80) -> str:
+    """repr(value), cut to `limit` characters (one line: repr escapes newlines)."""
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def safe_name(field: str, value) -> str:
+    """`value` if it is a name a deck may carry (SAFE_NAME), else a one-line InputError naming
+    `field`.  The guard of every user-derived string of the deck and its README."""
+    if not isinstance(value, str) or SAFE_NAME.fullmatch(value) is None:
+        raise InputError(f"{field} = {_short(value)}: must be {SAFE_NAME_RULE}")
+    return value
+
+
+def _whole(field: str, value, minimum: int = 0) -> int:
+    """A user-derived whole number for the deck, at least `minimum`; InputError otherwise."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) \
+            or value < minimum:
+        raise InputError(f"{field} = {_short(value)}: must be a whole number >= {minimum}")
+    return int(value)
+
+
+def _fmt(x) -> str:
+    """A real number as a deck token (10 significant digits); InputError unless finite."""
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        raise InputError(f"LIGGGHTS deck number = {_short(x)}: must be a real number") from None
+    if not math.isfinite(v):
+        raise InputError(f"LIGGGHTS deck number = {v!r}: must be finite (a scenario value is "
+                         "nan or inf, or a quantity made from them overflows)")
+    return f"{v:.10g}"
+
+
+def _token(value, template: str) -> str:
+    """One slot's value as deck text: int -> decimal, float -> _fmt, str -> as is; each must
+    be a single _TOKEN."""
+    if isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)):
+        text = str(int(value))
+    elif isinstance(value, (float, np.floating)):
+        text = _fmt(value)
+    elif isinstance(value, str):
+        text = value
+    else:
+        text = None
+    if text is None or _TOKEN_RE.fullmatch(text) is None:
+        raise InputError(f"LIGGGHTS deck value = {_short(value)} (in {template!r}): must be a "
+                         "number or a name of A-Z a-z 0-9 _ . + -, nothing LIGGGHTS or a shell "
+                         "reads specially")
+    return text
+
+
+class _Deck:
+    """Lines of a deck (or of its README), each a template and the values of its slots.
+
+    A template is text of this module: a literal, or literals joined by code; it holds no
+    newline and no user input, which goes into the slots only (rendered by `_token`)."""
+
+    def __init__(self) -> None:
+        self._lines: list[tuple[str, tuple]] = []
+
+    def add(self, template: str = "", *values) -> None:
+        if "\n" in template or "\r" in template or template.count(_SLOT) != len(values):
+            raise ValueError(f"deck template {template!r}: one line with {len(values)} slots "
+                             "expected (a bug in vibroflow.io.liggghts)")
+        self._lines.append((template, values))
+
+    def add_block(self, template: str, *values) -> None:
+        """The lines of a multi-line template, the values shared out to their slots in order."""
+        values = list(values)
+        for line in template.split("\n"):
+            k = line.count(_SLOT)
+            self.add(line, *values[:k])
+            values = values[k:]
+        if values:
+            raise ValueError(f"deck template: {len(values)} values left over")
+
+    def extend(self, other: _Deck) -> None:
+        self._lines.extend(other._lines)
+
+    def lines(self) -> list[str]:
+        return [_fill(template, values) for template, values in self._lines]
+
+    def render(self, name: str) -> str:
+        """The text, "\\n" after every line, checked: it has exactly one line per template,
+        each line printable ASCII and matched by its template with one _TOKEN per slot."""
+        text = "".join(line + "\n" for line in self.lines())
+        written = text.split("\n")[:-1]
+        if len(written) != len(self._lines):
+            raise InputError(f"{name}: {len(written)} lines written for {len(self._lines)} "
+                             "template lines (a value held a newline)")
+        for k, ((template, _), line) in enumerate(zip(self._lines, written), 1):
+            pattern = _TOKEN.join(re.escape(part) for part in template.split(_SLOT))
+            if not line.isascii() or not line.isprintable() or \
+                    re.fullmatch(pattern, line) is None:
+                raise InputError(f"{name} line {k} = {_short(line)}: not the line its template "
+                                 f"{template!r} allows")
+        return text
+
+
+def _fill(template: str, values) -> str:
+    parts = template.split(_SLOT)
+    out = [parts[0]]
+    for value, part in zip(values, parts[1:]):
+        out += [_token(value, template), part]
+    return "".join(out)
+
+
+def _table(deck: _Deck, name: str, arr: np.ndarray) -> None:
+    deck.add(f"fix {name} all property/global {name} peratomtypepair 3 "
+             + " ".join([_SLOT] * 9), *(_fmt(v) for v in np.asarray(arr).ravel()))
+
+
+def _check_names(scenario) -> None:
+    """Every name of the scenario that reaches the deck or its README passes `safe_name`, and
+    the materials named are defined."""
+    safe_name("case", scenario.case)
+    materials = scenario.materials if isinstance(scenario.materials, dict) else {}
+    for field, name in (("fill.material", scenario.fill.material),
+                        ("tub.wall_material", scenario.tub.wall_material),
+                        ("tub.partition_material", scenario.tub.partition_material)):
+        safe_name(field, name)
+        if name not in materials:
+            raise InputError(f"{field} = {name!r}: not one of the scenario's materials "
+                             f"{sorted(map(str, materials))}")
+
+
+# ----------------------------------------------------------------------------------------------
 # The deck
-
-def _fmt(x: float) -> str:
-    return f"{float(x):.10g}"
-
-
-def _table(name: str, arr: np.ndarray) -> str:
-    vals = " ".join(_fmt(v) for v in np.asarray(arr).ravel())
-    return f"fix {name} all property/global {name} peratomtypepair 3 {vals}"
-
 
 def _scenario_toml(scenario) -> str:
     try:
@@ -373,6 +524,11 @@ class DeckInfo:
     tables: PairTables
 
 
+#: the meshes' files, as vibroflow.io.stl.write_tub_meshes names them
+U_MESH_FILE = "tub_u.stl"
+PARTITION_MESH_FILE = "partitions.stl"
+
+
 def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts: bool = True,
                 max_sagitta: float = DEFAULT_MAX_SAGITTA, thermo_every: int | None = None,
                 processors: str = "* 1 1", mesh_curvature_deg: float | None = None) -> DeckInfo:
@@ -389,12 +545,20 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     arc facets (5.9 degrees for tub47), so the faceted circle acts as one surface like the
     analytic one; 0 keeps LIGGGHTS' default (0.26 degrees: every crease is an edge).
     Returns a DeckInfo.
+
+    Every file is made and checked in memory first (names through `safe_name`, the deck and
+    README line by line against their templates, `_Deck`), so bad input writes nothing; then
+    they are written atomically under out_dir's folder lock.
     """
     _check_exportable(scenario)
+    _check_names(scenario)
+    if not isinstance(processors, str) or _PROCESSORS.fullmatch(processors) is None:
+        raise InputError(f"processors = {_short(processors)}: must be three counts, each a "
+                         "whole number >= 1 or *, such as '* 1 1'")
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / POST_DIR).mkdir(exist_ok=True)
     run, fill, tub = scenario.run, scenario.fill, scenario.tub
+    count = _whole("fill.count", fill.count, 1)
+    ke_every = _whole("run.series_every", run.series_every, 1)
     geom = geometry_of(scenario)
     motion = TubMotion.of_scenario(scenario)
     tables = pair_tables(scenario)
@@ -407,7 +571,6 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     mats = type_materials(scenario)
     seeds = seed_primes(run.seed, 3)
 
-    meshes = write_tub_meshes(geom, out_dir, max_sagitta)
     n_arc = arc_segments(R, max_sagitta)
     if mesh_curvature_deg is None:
         mesh_curvature_deg = min(10.0, 2.0 * 180.0 / n_arc)
@@ -441,10 +604,10 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     area = _shrunk_u_area(R, margin, ins_z_lo, ins_z_hi)
     v_region = area * (iy_hi - iy_lo)
     v_ball = 4.0 / 3.0 * math.pi * r**3
-    per_event = int(max(1, min(fill.count, math.floor(FILL_EVENT_FRACTION * v_region / v_ball))))
+    per_event = int(max(1, min(count, math.floor(FILL_EVENT_FRACTION * v_region / v_ball))))
     event_steps = max(1, int(round(FILL_EVENT_INTERVAL / dt)))
     rate = per_event / (event_steps * dt)
-    max_passes = 4 * math.ceil(fill.count / per_event) + 20
+    max_passes = 4 * math.ceil(count / per_event) + 20
 
     settle_steps = int(round(fill.settle_time / dt))
     chunk_steps = max(1, int(round(SETTLE_CHUNK / dt)))
@@ -454,30 +617,27 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     vib_steps = int(round(run.duration / dt))
     dsteps = dump_vibration_steps(scenario)
     dsteps = dsteps[(dsteps >= 0) & (dsteps <= vib_steps)]
-    thermo_every = thermo_every or max(1, int(round(0.01 / dt)))
+    thermo_every = _whole("thermo_every", thermo_every, 1) if thermo_every else \
+        max(1, int(round(0.01 / dt)))
 
     w = motion.omega
-    tp = out_dir / POST_DIR
     # dump steps relative to the vibration start; a sentinel far beyond the run ends the list
     first_now = dsteps.size and dsteps[0] == 0
     rest = dsteps[1:] if first_now else dsteps
-    step_lines = "\n".join(str(int(s)) for s in rest) + ("\n" if rest.size else "")
+    step_lines = "".join(f"{int(s)}\n" for s in rest)
     # two sentinels: LIGGGHTS reads one line ahead of what next() returns
     step_lines += f"{vib_steps + 10**9}\n{vib_steps + 10**9 + 1}\n"
-    write_text_atomic(tp / "dump_steps.txt", step_lines)
 
-    ke_every = run.series_every
     model_args, model_kw = model_arguments(tables)
-    mesh_ids = "tub" if periodic else "tub parts"
-    n_meshes = 1 if periodic else 2
+    first = " first yes" if first_now else ""
+    S = _SLOT
 
-    L_ = []
-    add = L_.append
-    add(f"# LIGGGHTS 3.8 deck written by vibroflow.io.liggghts for case '{scenario.case}'")
+    deck = _Deck()
+    add = deck.add
+    add("# LIGGGHTS 3.8 deck written by vibroflow.io.liggghts for case '{}'", scenario.case)
     add("# Run in this folder:  mpirun -np 2 liggghts -in in.tub   (see README.txt)")
-    add("# SI units.  Atom types: 1 = balls (" + mats[0] + "), 2 = tub wall (" + mats[1]
-        + "), 3 = partitions (" + mats[2] + ").")
-    add("")
+    add("# SI units.  Atom types: 1 = balls ({}), 2 = tub wall ({}), 3 = partitions ({}).", *mats)
+    add()
     add("atom_style      granular")
     add("atom_modify     map array sort 0 0")
     add(f"boundary        f {'p' if periodic else 'f'} f")
@@ -485,34 +645,38 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     add("communicate     single vel yes")
     add("units           si")
     add("hard_particles  yes")
-    add(f"processors      {processors}")
-    add("")
-    add(f"region          domain block {_fmt(x_lo)} {_fmt(x_hi)} {_fmt(y_lo)} {_fmt(y_hi)} "
-        f"{_fmt(z_lo)} {_fmt(z_hi)} units box")
+    add("processors      {} {} {}", *processors.split())
+    add()
+    add("region          domain block {} {} {} {} {} {} units box",
+        *(_fmt(v) for v in (x_lo, x_hi, y_lo, y_hi, z_lo, z_hi)))
     add("create_box      3 domain")
-    add(f"neighbor        {_fmt(skin)} bin")
+    add("neighbor        {} bin", _fmt(skin))
     add("neigh_modify    delay 0")
-    add("")
+    add()
     add("# ---- materials and contact law (per type pair; see docs/liggghts.md)")
-    for line in contact_law_lines(scenario, tables):
-        add(line)
-    add(f"timestep        {_fmt(dt)}")
+    deck.extend(_contact_law_deck(scenario, tables))
+    add("timestep        {}", _fmt(dt))
     g = np.asarray(scenario.gravity, dtype=float)
     gn = float(np.linalg.norm(g))
     if gn > 0:
         gv = g / gn
-        add(f"fix gravi all gravity {_fmt(gn)} vector {_fmt(gv[0])} {_fmt(gv[1])} {_fmt(gv[2])}")
+        add("fix gravi all gravity {} vector {} {} {}", *(_fmt(v) for v in (gn, *gv)))
     add("fix integr all nve/sphere")
-    add("")
-    add(f"# ---- walls: the U ({n_arc} arcs on the half circle, sagitta "
-        f"{sagitta(R, n_arc) * 1e3:.4f} mm) and the partitions, moving with the tub")
-    curv = f" curvature {_fmt(mesh_curvature_deg)}" if mesh_curvature_deg > 0 else ""
-    add(f"fix tub all mesh/surface file {meshes['u'].name} type 2{curv}")
+    add()
+    add("# ---- walls: the U ({} arcs on the half circle, sagitta {} mm) and the partitions, "
+        "moving with the tub", n_arc, f"{sagitta(R, n_arc) * 1e3:.4f}")
+    u_file = safe_name("U mesh file", U_MESH_FILE)
+    if mesh_curvature_deg > 0:
+        add("fix tub all mesh/surface file {} type 2 curvature {}", u_file,
+            _fmt(mesh_curvature_deg))
+    else:
+        add("fix tub all mesh/surface file {} type 2", u_file)
     if not periodic:
-        add(f"fix parts all mesh/surface file {meshes['partitions'].name} type 3")
-    add(f"fix walls all wall/gran {model_args} mesh n_meshes {n_meshes} meshes {mesh_ids} "
-        f"{model_kw}")
-    add("")
+        add("fix parts all mesh/surface file {} type 3",
+            safe_name("partition mesh file", PARTITION_MESH_FILE))
+    add(f"fix walls all wall/gran {model_args} mesh n_meshes "
+        + ("1 meshes tub " if periodic else "2 meshes tub parts ") + model_kw)
+    add()
     add("# ---- output between runs")
     add("compute ke all ke")
     add("compute rke all erotate/sphere")
@@ -527,29 +691,29 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
         # first of them (checked at import, _pair_rows)
         add("compute pairc all pair/gran/local id force")
     add("thermo_style    custom step atoms c_ke c_rke cpu")
-    add(f"thermo          {thermo_every}")
+    add("thermo          {}", thermo_every)
     add("thermo_modify   lost error norm no")
-    add("")
-    add(f"# ---- fill: {fill.count} balls, d = {_fmt(d)} m, in events of {per_event} every "
-        f"{event_steps} steps, until all are in")
-    add(f"fix pts1 all particletemplate/sphere {seeds[0]} atom_type 1 density constant "
-        f"{_fmt(scenario.materials[fill.material].density)} radius constant {_fmt(r)}")
-    add(f"fix pdd1 all particledistribution/discrete {seeds[1]} 1 pts1 1.0")
-    add(f"region ucyl cylinder y 0 {_fmt(R)} {_fmt(R - margin)} {_fmt(iy_lo)} {_fmt(iy_hi)} "
-        "units box")
-    add(f"region ublk block {_fmt(-R + margin)} {_fmt(R - margin)} {_fmt(iy_lo)} {_fmt(iy_hi)} "
-        f"{_fmt(R)} {_fmt(ins_z_hi)} units box")
+    add()
+    add("# ---- fill: {} balls, d = {} m, in events of {} every {} steps, until all are in",
+        count, _fmt(d), per_event, event_steps)
+    add("fix pts1 all particletemplate/sphere {} atom_type 1 density constant {} radius "
+        "constant {}", seeds[0], _fmt(scenario.materials[fill.material].density), _fmt(r))
+    add("fix pdd1 all particledistribution/discrete {} 1 pts1 1.0", seeds[1])
+    add("region ucyl cylinder y 0 {} {} {} {} units box",
+        *(_fmt(v) for v in (R, R - margin, iy_lo, iy_hi)))
+    add("region ublk block {} {} {} {} {} {} units box",
+        *(_fmt(v) for v in (-R + margin, R - margin, iy_lo, iy_hi, R, ins_z_hi)))
     add("region uin union 2 ucyl ublk")
-    add(f"region zcut block INF INF INF INF {_fmt(ins_z_lo)} {_fmt(ins_z_hi)} units box")
+    add("region zcut block INF INF INF INF {} {} units box", _fmt(ins_z_lo), _fmt(ins_z_hi))
     add("region ins intersect 2 uin zcut")
-    add(f"fix ins all insert/rate/region seed {seeds[2]} distributiontemplate pdd1 "
-        f"nparticles {fill.count} particlerate {_fmt(rate)} insert_every {event_steps} "
-        "overlapcheck yes all_in no maxattempt 200 vel constant 0. 0. 0. "
-        "region ins ntry_mc 200000")
-    add(f"variable fillpass loop {max_passes}")
+    add("fix ins all insert/rate/region seed {} distributiontemplate pdd1 nparticles {} "
+        "particlerate {} insert_every {} overlapcheck yes all_in no maxattempt 200 vel "
+        "constant 0. 0. 0. region ins ntry_mc 200000", seeds[2], count, _fmt(rate),
+        event_steps)
+    add("variable fillpass loop {}", max_passes)
     add("label fill_loop")
-    add(f"run {event_steps}")
-    add(f'if "${{natoms}} >= {fill.count}" then "jump SELF fill_done"')
+    add("run {}", event_steps)
+    add('if "${natoms} >= {}" then "jump SELF fill_done"', count)
     add("next fillpass")
     add("jump SELF fill_loop")
     add("label fill_done")
@@ -557,80 +721,93 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     add("unfix ins")
     add("variable stepnow equal step")
     add(f'print "${{stepnow}} ${{natoms}}" file {POST_DIR}/{FILL_FILE}')
-    add(f'if "${{natoms}} < {fill.count}" then "print \'vibroflow: the fill inserted only '
-        f'${{natoms}} of {fill.count} balls\'"')
-    add("")
-    add(f"# ---- settle with the tub at rest: {_fmt(fill.settle_time)} s, then on in "
-        f"{_fmt(chunk_steps * dt)} s chunks until the kinetic energy per ball < "
-        f"{_fmt(fill.settle_kinetic_energy)} J (at most {_fmt(fill.max_settle_time)} s)")
+    add('if "${natoms} < {}" then "print \'vibroflow: the fill inserted only ${natoms} of {} '
+        'balls\'"', count, count)
+    add()
+    add("# ---- settle with the tub at rest: {} s, then on in {} s chunks until the kinetic "
+        "energy per ball < {} J (at most {} s)", _fmt(fill.settle_time),
+        _fmt(chunk_steps * dt), _fmt(fill.settle_kinetic_energy), _fmt(fill.max_settle_time))
     if settle_steps > 0:
-        add(f"run {settle_steps}")
+        add("run {}", settle_steps)
     if max_chunks > 0:
-        add(f"variable settlepass loop {max_chunks}")
+        add("variable settlepass loop {}", max_chunks)
         add("label settle_loop")
-        add(f'if "${{keball}} < {_fmt(fill.settle_kinetic_energy)}" then "jump SELF settle_done"')
-        add(f"run {chunk_steps}")
+        add('if "${keball} < {}" then "jump SELF settle_done"',
+            _fmt(fill.settle_kinetic_energy))
+        add("run {}", chunk_steps)
         add("next settlepass")
         add("jump SELF settle_loop")
         add("label settle_done")
         add("variable settlepass delete")
     add(f'print "${{stepnow}} ${{keball}}" file {POST_DIR}/{SETTLE_FILE}')
-    add("")
+    add()
     add("# ---- vibration: t = (step - n0) dt")
     add("variable n0 equal ${stepnow}")
     add(f'print "${{n0}}" file {POST_DIR}/{START_FILE}')
     add("# tub velocity = d/dt of s(a, phi, t) = a [sin(w t + phi) - sin(phi)], evaluated at the")
     add("# middle of each step (LIGGGHTS advances the step counter before moving the mesh), so")
     add("# the integrated pose is exact to O(dt^2) with every phase")
-    add(f"variable tmid equal (step-${{n0}}-0.5)*{_fmt(dt)}")
-    add(f"variable vX equal {_fmt(motion.amplitude_x * w)}*cos({_fmt(w)}*v_tmid+"
-        f"{_fmt(motion.phase_x)})")
+    add("variable tmid equal (step-${n0}-0.5)*{}", _fmt(dt))
+    add("variable vX equal {}*cos({}*v_tmid+{})", _fmt(motion.amplitude_x * w), _fmt(w),
+        _fmt(motion.phase_x))
     add("variable vY equal 0.0")
-    add(f"variable vZ equal {_fmt(motion.amplitude_z * w)}*cos({_fmt(w)}*v_tmid+"
-        f"{_fmt(motion.phase_z)})")
+    add("variable vZ equal {}*cos({}*v_tmid+{})", _fmt(motion.amplitude_z * w), _fmt(w),
+        _fmt(motion.phase_z))
     add("# theta > 0 turns x towards z: a turn about -y")
-    add(f"variable wT equal {_fmt(motion.amplitude_theta * w)}*cos({_fmt(w)}*v_tmid+"
-        f"{_fmt(motion.phase_theta)})")
+    add("variable wT equal {}*cos({}*v_tmid+{})", _fmt(motion.amplitude_theta * w), _fmt(w),
+        _fmt(motion.phase_theta))
     for mesh in (["tub"] if periodic else ["tub", "parts"]):
         add(f"fix move_{mesh}_t all move/mesh mesh {mesh} linear/variable v_vX v_vY v_vZ")
-        add(f"fix move_{mesh}_r all move/mesh mesh {mesh} rotate/variable origin "
-            f"{_fmt(motion.pivot_x)} 0. {_fmt(motion.pivot_z)} axis 0. -1. 0. omega v_wT")
-    add("")
-    add(f"# snapshots at {dsteps.size} vibration steps (post/dump_steps.txt, relative to n0)")
+        add(f"fix move_{mesh}_r all move/mesh mesh {mesh} rotate/variable origin {S} 0. {S} "
+            "axis 0. -1. 0. omega v_wT", _fmt(motion.pivot_x), _fmt(motion.pivot_z))
+    add()
+    add(f"# snapshots at {S} vibration steps ({POST_DIR}/dump_steps.txt, relative to n0)",
+        dsteps.size)
     add(f"variable dfile file {POST_DIR}/dump_steps.txt")
     add("variable dnext equal ${n0}+next(dfile)")
     add(f"dump dballs all custom 1 {POST_DIR}/{BALL_DUMP} id type x y z vx vy vz "
         "omegax omegay omegaz radius")
-    fmt = "%d %d " + " ".join(["%.10g"] * 10)
-    add(f'dump_modify dballs every v_dnext sort id format "{fmt}"'
-        + (" first yes" if first_now else ""))
+    add('dump_modify dballs every v_dnext sort id format "%d %d ' + " ".join(["%.10g"] * 10)
+        + '"' + first)
     if wall_contacts:
         add(f"variable wfile file {POST_DIR}/dump_steps.txt")
         add("variable wnext equal ${n0}+next(wfile)")
-        add(f"dump dwall all local 1 {POST_DIR}/{WALL_DUMP} " + " ".join(
-            f"c_wallc[{k}]" for k in range(1, 10)))
-        add("dump_modify dwall every v_wnext" + (" first yes" if first_now else ""))
+        add(f"dump dwall all local 1 {POST_DIR}/{WALL_DUMP} "
+            + " ".join(f"c_wallc[{k}]" for k in range(1, 10)))
+        add("dump_modify dwall every v_wnext" + first)
     if pair_contacts:
         # its own file variable: each next() advances the variable it is called on
         add(f"variable pfile file {POST_DIR}/dump_steps.txt")
         add("variable pnext equal ${n0}+next(pfile)")
-        add(f"dump dpairs all local 1 {POST_DIR}/{PAIR_DUMP} " + " ".join(
-            f"c_pairc[{k}]" for k in range(1, 7)))
+        add(f"dump dpairs all local 1 {POST_DIR}/{PAIR_DUMP} "
+            + " ".join(f"c_pairc[{k}]" for k in range(1, 7)))
         # 10 digits: the default %g would round the ids above 999999 and the forces to 6 digits
-        add('dump_modify dpairs every v_pnext format "' + " ".join(["%.10g"] * 6) + '"'
-            + (" first yes" if first_now else ""))
-    add(f"variable tvib equal (step-${{n0}})*{_fmt(dt)}")
-    add(f'fix series all print {ke_every} "${{tvib}} ${{ekin}}" file {POST_DIR}/{SERIES_FILE} '
-        'screen no title "# t_vibration_s kinetic_energy_J"')
-    add(f"run {vib_steps}")
-    add(f'print "vibroflow: vibration of {vib_steps} steps done"')
-    deck = "\n".join(L_) + "\n"
-    deck_path = out_dir / DECK_NAME
-    write_text_atomic(deck_path, deck)
-    write_text_atomic(out_dir / "scenario.toml", _scenario_toml(scenario))
-    write_text_atomic(out_dir / "README.txt", _readme(scenario, vib_steps, dsteps.size,
-                                                      wall_contacts, pair_contacts))
-    return DeckInfo(out_dir, deck_path, fill.count, dt, vib_steps, dsteps, n_arc,
+        add('dump_modify dpairs every v_pnext format "' + " ".join(["%.10g"] * 6) + '"' + first)
+    add("variable tvib equal (step-${n0})*{}", _fmt(dt))
+    add(f'fix series all print {S} "${{tvib}} ${{ekin}}" file {POST_DIR}/{SERIES_FILE} '
+        'screen no title "# t_vibration_s kinetic_energy_J"', ke_every)
+    add("run {}", vib_steps)
+    add('print "vibroflow: vibration of {} steps done"', vib_steps)
+
+    # everything is made and checked before anything is written
+    deck_text = deck.render(DECK_NAME)
+    readme_text = _readme(scenario, vib_steps, dsteps.size, wall_contacts,
+                          pair_contacts).render("README.txt")
+    toml_text = _scenario_toml(scenario)
+
+    with folder_lock(out_dir, "vibroflow export liggghts", field="DIR"):
+        check_writable_dir(out_dir / POST_DIR, field="DIR")
+        meshes = write_tub_meshes(geom, out_dir, max_sagitta)
+        names = {k: p.name for k, p in meshes.items()}
+        if names != {"u": U_MESH_FILE, **({} if periodic else
+                                          {"partitions": PARTITION_MESH_FILE})}:
+            raise RuntimeError(f"vibroflow.io.stl wrote {names}, the deck names "
+                               f"{U_MESH_FILE}, {PARTITION_MESH_FILE}")
+        write_text_atomic(out_dir / POST_DIR / "dump_steps.txt", step_lines)
+        deck_path = write_text_atomic(out_dir / DECK_NAME, deck_text)
+        write_text_atomic(out_dir / "scenario.toml", toml_text)
+        write_text_atomic(out_dir / "README.txt", readme_text)
+    return DeckInfo(out_dir, deck_path, count, dt, vib_steps, dsteps, n_arc,
                     sagitta(R, n_arc), seeds, per_event, event_steps, settle_steps, tables)
 
 
@@ -644,15 +821,7 @@ def _shrunk_u_area(R: float, margin: float, z_lo: float, z_hi: float) -> float:
                  else np.trapz(2.0 * half, zs))
 
 
-def _readme(scenario, vib_steps: int, n_snap: int, wall_contacts: bool,
-            pair_contacts: bool = True) -> str:
-    outputs = [f"{n_snap} snapshots of the balls to post/{BALL_DUMP}"]
-    if wall_contacts:
-        outputs.append(f"the ball-wall contacts to post/{WALL_DUMP}")
-    if pair_contacts:
-        outputs.append(f"the ball-ball contacts (ids, force) to post/{PAIR_DUMP}")
-    written = ", ".join(outputs[:-1]) + (" and " if len(outputs) > 1 else "") + outputs[-1]
-    return f"""LIGGGHTS deck for the vibroflow scenario '{scenario.case}' (SI units)
+_README = """LIGGGHTS deck for the vibroflow scenario '{}' (SI units)
 =====================================================================
 
 Files: in.tub (the deck), tub_u.stl (the U-shaped tub wall), partitions.stl (the glass
@@ -666,10 +835,10 @@ Run it in this folder with LIGGGHTS 3.8 on 2 MPI ranks:
 (as root Open MPI also wants --allow-run-as-root, and --oversubscribe on a machine with fewer
 cores than ranks; the Debian package's executable is `liggghts`, a source build's `lmp_auto`).
 
-What it does: inserts {scenario.fill.count} balls at random in the tub, lets them settle with the
-tub at rest, then vibrates the tub for {scenario.run.duration} s ({vib_steps} steps of
-{scenario.run.dt} s) and writes {written} (all at the same
-steps), and the kinetic energy every {scenario.run.series_every} steps to post/{SERIES_FILE}.
+What it does: inserts {} balls at random in the tub, lets them settle with the
+tub at rest, then vibrates the tub for {} s ({} steps of
+{} s) and writes WRITTEN (all at the same
+steps), and the kinetic energy every {} steps to post/SERIES.
 
 Then convert the results into vibroflow's format (dem.h5, summary.json, bulk_velocity.csv):
 
@@ -680,42 +849,214 @@ LIGGGHTS: it is a known function of time, recomputed from the scenario by the im
 """
 
 
+def _readme(scenario, vib_steps: int, n_snap: int, wall_contacts: bool,
+            pair_contacts: bool = True) -> _Deck:
+    """README.txt of a deck folder, as checked template lines (`_Deck`)."""
+    outputs = [f"{_SLOT} snapshots of the balls to post/{BALL_DUMP}"]
+    if wall_contacts:
+        outputs.append(f"the ball-wall contacts to post/{WALL_DUMP}")
+    if pair_contacts:
+        outputs.append(f"the ball-ball contacts (ids, force) to post/{PAIR_DUMP}")
+    written = ", ".join(outputs[:-1]) + (" and " if len(outputs) > 1 else "") + outputs[-1]
+    template = _README.replace("WRITTEN", written).replace("SERIES", SERIES_FILE)
+    if template.endswith("\n"):
+        template = template[:-1]
+    run = scenario.run
+    text = _Deck()
+    text.add_block(template, safe_name("case", scenario.case),
+                   _whole("fill.count", scenario.fill.count, 1), _fmt(run.duration), vib_steps,
+                   _fmt(run.dt), n_snap, _whole("run.series_every", run.series_every, 1))
+    return text
+
+
 # ----------------------------------------------------------------------------------------------
 # Reading LIGGGHTS dumps
 
+#: the longest line a dump may have (bytes): a ball row is about 150, a header a few hundred;
+#: a longer "line" is no dump's (a binary file without newlines)
+MAX_DUMP_LINE = 1 << 16
+
+
+@dataclass(frozen=True)
+class DumpSnapshot:
+    """One snapshot of a dump: its step, column names, data (rows, columns) and where it is
+    in the file (line numbers from 1: its ITEM: TIMESTEP and its first row)."""
+
+    step: int
+    columns: list[str]
+    data: np.ndarray
+    line: int
+    first_row: int
+
+
+def _decode(raw: bytes, path, line: int) -> str:
+    try:
+        return raw.decode("ascii")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{path}: line {line}: byte {raw[exc.start]:#04x} at column "
+                         f"{exc.start + 1} is not text; a LIGGGHTS text dump is ASCII (a binary "
+                         "or compressed file?)") from None
+
+
+class _Lines:
+    """The lines of an open binary dump, counted, each at most MAX_DUMP_LINE bytes."""
+
+    def __init__(self, f, path):
+        self.f, self.path, self.n = f, path, 0
+        self.cut = False  # the last line read ends the file without a newline
+
+    def raw(self) -> bytes:
+        """The next line as bytes (with its newline), b"" at the end of the file."""
+        raw = self.f.readline(MAX_DUMP_LINE + 1)
+        if raw:
+            self.n += 1
+        self.cut = bool(raw) and not raw.endswith(b"\n")
+        if len(raw) > MAX_DUMP_LINE:
+            raise InputError(f"{self.path}: line {self.n}: longer than {MAX_DUMP_LINE} bytes; "
+                             "not a LIGGGHTS text dump (a binary file?)")
+        return raw
+
+    def text(self) -> str | None:
+        raw = self.raw()
+        return _decode(raw, self.path, self.n).rstrip("\r\n") if raw else None
+
+    def required(self, what: str) -> str:
+        text = self.text()
+        if text is None:
+            raise InputError(f"{self.path}: the file ends after line {self.n}, where {what} "
+                             "belongs (a truncated dump)")
+        return text
+
+    def misplaced(self, text: str, expected: str, why: str) -> InputError:
+        """The error of the line just read, `text`, where `expected` belongs."""
+        if self.cut:
+            why = "the file ends within this line: a truncated dump"
+        return InputError(f"{self.path}: line {self.n}: {_short(text)} where {expected} belongs "
+                          f"({why})")
+
+    def whole(self, what: str) -> int:
+        text = self.required(what)
+        words = text.split()
+        if len(words) != 1 or not words[0].isdigit():
+            raise InputError(f"{self.path}: line {self.n}: {what} = {_short(text.strip())}: "
+                             "must be a whole number >= 0")
+        return int(words[0])
+
+
+def read_dump(path):
+    """Snapshots of a LIGGGHTS/LAMMPS text dump (custom or local), as DumpSnapshot.
+
+    Anything but whole snapshots is refused with a one-line InputError naming the file, the
+    line, what is there and what belongs there: text that is not ASCII, a header out of place,
+    a count that is not a whole number, more rows claimed than the rest of the file can hold
+    (checked before anything is read or allocated), a snapshot cut short, a row with too few
+    or too many values, a value that is not a number, and nan or inf (not data: a run that
+    blew up).  Blank lines between snapshots are allowed."""
+    path = Path(path)
+    try:
+        f = open(path, "rb")
+    except OSError as exc:
+        raise InputError(f"{path}: cannot be read ({(exc.strerror or str(exc)).lower()})") \
+            from None
+    with f:
+        size = os.fstat(f.fileno()).st_size
+        src = _Lines(f, path)
+        while True:
+            text = src.text()
+            if text is None:
+                return
+            if not text.strip():
+                continue
+            if text.strip() != "ITEM: TIMESTEP":
+                raise src.misplaced(text, "'ITEM: TIMESTEP' of the next snapshot",
+                                    "more rows than the last ITEM: NUMBER OF says, or not a "
+                                    "LIGGGHTS dump")
+            at = src.n
+            step = src.whole("the timestep")
+            text = src.required("'ITEM: NUMBER OF ATOMS' (or ENTRIES)")
+            if not text.startswith("ITEM: NUMBER OF "):
+                raise src.misplaced(text, "'ITEM: NUMBER OF ATOMS' (or ENTRIES)", f"step {step}")
+            what = text[len("ITEM: "):].strip()
+            n = src.whole(what)
+            count_line = src.n
+            text = src.required("'ITEM: ATOMS' (or ENTRIES) and the column names")
+            if text.startswith("ITEM: BOX BOUNDS"):
+                for _ in range(3):
+                    src.required("a line of the box bounds")
+                text = src.required("'ITEM: ATOMS' (or ENTRIES) and the column names")
+            cols = text.split()[2:]
+            if not (text.startswith("ITEM: ATOMS ") or text.startswith("ITEM: ENTRIES ")) \
+                    or not cols:
+                raise src.misplaced(text, "'ITEM: ATOMS' (or ENTRIES) and the column names",
+                                    f"step {step}")
+            if len(set(cols)) != len(cols):
+                raise InputError(f"{path}: line {src.n}: column names {cols}: each must appear "
+                                 "once")
+            k = len(cols)
+            # every row is at least k one-character values and k - 1 blanks and a newline
+            left = size - f.tell()
+            if n and n * 2 * k - 1 > left:
+                raise InputError(f"{path}: line {count_line}: {what} = {n} (step {step}), but the "
+                                 f"{left} bytes left in the file hold at most "
+                                 f"{(left + 1) // (2 * k)} rows of {k} values (a truncated or "
+                                 "corrupt dump)")
+            first = src.n + 1
+            rows = []
+            for i in range(n):
+                raw = src.raw()
+                if not raw:
+                    raise InputError(f"{path}: the file ends after {i} of the {n} rows of step "
+                                     f"{step} ({what} at line {count_line}; a truncated "
+                                     "dump)")
+                rows.append(raw)
+            data = _parse_rows(path, rows, first, cols, what)
+            yield DumpSnapshot(step, cols, data, at, first)
+
+
+def _parse_rows(path, rows: list[bytes], first: int, cols: list[str], what: str) -> np.ndarray:
+    """The rows of a snapshot as a float64 array (rows, columns); a one-line InputError at the
+    first bad row (`first`: the line number of rows[0])."""
+    n, k = len(rows), len(cols)
+    if n == 0:
+        return np.zeros((0, k))
+    try:  # fast: all at once
+        words = [row.split() for row in rows]
+        if all(len(w) == k for w in words):
+            data = np.array([x for w in words for x in w], dtype=float).reshape(n, k)
+            if np.isfinite(data).all():
+                return data
+    except (UnicodeDecodeError, ValueError):
+        pass
+    # slow: row by row, to say where and what
+    data = np.empty((n, k))
+    for i, raw in enumerate(rows):
+        line = first + i
+        text = _decode(raw, path, line).strip()
+        if text.startswith("ITEM:"):
+            raise InputError(f"{path}: line {line}: {_short(text)} after {i} of the {n} rows "
+                             f"that {what} promises (a truncated snapshot)")
+        values = text.split()
+        if len(values) != k:
+            raise InputError(f"{path}: line {line}: {len(values)} values, expected {k} "
+                             f"({' '.join(cols)}) (a cut-off line?)")
+        for j, (word, col) in enumerate(zip(values, cols)):
+            try:
+                v = float(word)
+            except ValueError:
+                raise InputError(f"{path}: line {line}: {col} = {_short(word)}: not a "
+                                 "number") from None
+            if not math.isfinite(v):
+                raise InputError(f"{path}: line {line}: {col} = {word}: must be a finite "
+                                 "number (nan or inf is no data: did the run blow up?)")
+            data[i, j] = v
+    return data
+
+
 def iter_dump(path):
     """Snapshots of a LIGGGHTS/LAMMPS text dump (custom or local): yields (step, columns, data)
-    with data a float64 array (rows, columns)."""
-    with open(path, "r") as f:
-        while True:
-            line = f.readline()
-            if not line:
-                return
-            if not line.startswith("ITEM: TIMESTEP"):
-                continue
-            step = int(f.readline().split()[0])
-            line = f.readline()
-            if not line.startswith("ITEM: NUMBER OF"):
-                raise ValueError(f"{path}: malformed dump after step {step}")
-            n = int(f.readline().split()[0])
-            line = f.readline()
-            if line.startswith("ITEM: BOX BOUNDS"):
-                for _ in range(3):
-                    f.readline()
-                line = f.readline()
-            if not (line.startswith("ITEM: ATOMS") or line.startswith("ITEM: ENTRIES")):
-                raise ValueError(f"{path}: malformed dump at step {step}: {line.strip()!r}")
-            cols = line.split()[2:]
-            rows = [f.readline() for _ in range(n)]
-            if n:
-                data = np.array(" ".join(rows).split(), dtype=float)
-                if data.size != n * len(cols):
-                    raise ValueError(f"{path}: step {step}: expected {n} rows of {len(cols)} "
-                                     "values (truncated dump?)")
-                data = data.reshape(n, len(cols))
-            else:
-                data = np.zeros((0, len(cols)))
-            yield step, cols, data
+    with data a float64 array (rows, columns).  Bad files: see read_dump."""
+    for snap in read_dump(path):
+        yield snap.step, snap.columns, snap.data
 
 
 def _resolve_dump_dir(dump_dir: Path) -> Path:
@@ -723,7 +1064,9 @@ def _resolve_dump_dir(dump_dir: Path) -> Path:
     for cand in (dump_dir, dump_dir / POST_DIR):
         if (cand / BALL_DUMP).is_file():
             return cand
-    raise InputError(f"{dump_dir}: no LIGGGHTS dump {BALL_DUMP} here or in {dump_dir / POST_DIR}")
+    raise InputError(f"{dump_dir}: no LIGGGHTS dump {BALL_DUMP} here or in {dump_dir / POST_DIR}; "
+                     "give the post/ folder (or the deck folder) of a LIGGGHTS run of an "
+                     "exported deck")
 
 
 def _scenario_for(dump_dir: Path, scenario):
@@ -748,7 +1091,7 @@ def _arc_of(tx, tz, R):
     return np.where(on_circle, s_circle, s_side)
 
 
-def _wall_rows(data, snap_index, ids, pos_lab, pose, motion, scenario, geom):
+def _wall_rows(snap, snap_index, ids, pos_lab, pose, motion, scenario, geom, path):
     """vibroflow wall_contacts rows from one snapshot of the wall/gran/local dump.
 
     Columns (compute wall/gran/local id force_normal force_tangential): mesh id (0 = the U,
@@ -758,12 +1101,16 @@ def _wall_rows(data, snap_index, ids, pos_lab, pose, motion, scenario, geom):
     frame); it differs from the facet's by at most the facets' sagitta.  F_n is |F_n| signed by
     the analytic wall normal (positive pushing the ball into the tub), F_t is |F_t|, and a
     contact slides when |F_t| >= mu |F_n| (LIGGGHTS truncates the tangential spring there).
+    Raises InputError for another number of columns or indices that are not whole numbers.
     """
+    data = snap.data
+    if data.shape[1] != WALL_COLUMNS:
+        raise InputError(f"{path}: line {snap.first_row - 1} (step {snap.step}): "
+                         f"{data.shape[1]} columns, expected {WALL_COLUMNS} (compute "
+                         "wall/gran/local id force_normal force_tangential)")
     if data.shape[0] == 0:
         return None
-    mesh = data[:, 0].astype(np.int64)
-    tri = data[:, 1].astype(np.int64)
-    pid = data[:, 2].astype(np.int64)
+    mesh, tri, pid = (_whole_column(path, snap, j) for j in range(3))
     fnv = data[:, 3:6]
     ftv = data[:, 6:9]
     k = np.clip(np.searchsorted(ids, pid), 0, ids.size - 1)
@@ -822,6 +1169,8 @@ def _wall_rows(data, snap_index, ids, pos_lab, pose, motion, scenario, geom):
             "force_lab": (fnv + ftv).astype(np.float32)}
 
 
+#: columns of the wall/gran/local dump: mesh, triangle and atom id, F_n (3), F_t (3)
+WALL_COLUMNS = 9
 #: columns of the pair/gran/local dump: id (id1, id2, periodic-image flag), force (3)
 PAIR_COLUMNS = 6
 #: the `force` of compute pair/gran/local is the force on the first particle of its `id` pair
@@ -874,7 +1223,7 @@ class PairCheck:
                 "layout?)")
 
 
-def _pair_rows(data, snap_index, ids, pos_lab, radius, period, path, check: PairCheck):
+def _pair_rows(snap, snap_index, ids, pos_lab, radius, period, path, check: PairCheck):
     """vibroflow ball_contacts rows from one snapshot of the pair/gran/local dump.
 
     Columns (compute pair/gran/local id force): id1, id2, periodic-image flag, F (3, lab axes)
@@ -887,15 +1236,18 @@ def _pair_rows(data, snap_index, ids, pos_lab, radius, period, path, check: Pair
     stress and are dropped (a LIGGGHTS build whose compute also lists near pairs within a
     contact distance factor may write untouching pairs so; 3.8.0 wrote none in our runs):
     vibroflow stores touching pairs only.
-    Raises InputError for an id not in the snapshot, a pair twice, or partners apart.
+    Raises InputError for another number of columns, ids that are not whole numbers, an id
+    not in the snapshot, a pair twice, or partners apart.
     """
+    data = snap.data
     if data.shape[1] != PAIR_COLUMNS:
-        raise InputError(f"{path}: {data.shape[1]} columns, expected {PAIR_COLUMNS} "
-                         "(compute pair/gran/local id force)")
+        raise InputError(f"{path}: line {snap.first_row - 1} (step {snap.step}): "
+                         f"{data.shape[1]} columns, expected {PAIR_COLUMNS} (compute "
+                         "pair/gran/local id force)")
     force = PAIR_FORCE_SIGN * data[:, 3:6]
     keep = np.any(force != 0.0, axis=1)
-    id1 = data[keep, 0].astype(np.int64)
-    id2 = data[keep, 1].astype(np.int64)
+    id1 = _whole_column(path, snap, 0)[keep]
+    id2 = _whole_column(path, snap, 1)[keep]
     force = force[keep]
     a = np.clip(np.searchsorted(ids, id1), 0, ids.size - 1)
     b = np.clip(np.searchsorted(ids, id2), 0, ids.size - 1)
@@ -936,26 +1288,88 @@ class _StepReader:
 
     def __init__(self, path: Path):
         self.path = path
-        self._it = iter_dump(path)
+        self._it = read_dump(path)
         self._pending = None
 
     def at(self, step: int):
         while True:
             if self._pending is None:
                 self._pending = next(self._it, None)
-            if self._pending is None or self._pending[0] > step:
+            if self._pending is None or self._pending.step > step:
                 return None
             found = self._pending
             self._pending = None
-            if found[0] == step:
-                return found[2]
+            if found.step == step:
+                return found
+
+
+def _whole_column(path, snap: DumpSnapshot, j: int) -> np.ndarray:
+    """Column j of a snapshot as int64; InputError unless every value is a whole number
+    (an atom id, a mesh or triangle index)."""
+    col = snap.data[:, j]
+    bad = (col != np.round(col)) | (np.abs(col) >= 2.0**53)
+    if np.any(bad):
+        k = int(np.argmax(bad))
+        raise InputError(f"{path}: line {snap.first_row + k}: {snap.columns[j]} = "
+                         f"{float(col[k])!r}: must be a whole number")
+    return col.astype(np.int64)
+
+
+def _read_text(path: Path) -> str:
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot be read ({(exc.strerror or str(exc)).lower()})") \
+            from None
+    text = raw.decode("ascii", errors="replace")
+    if "\ufffd" in text:
+        line = text[:text.index("\ufffd")].count("\n") + 1
+        raise InputError(f"{path}: line {line}: not text; LIGGGHTS writes this file as ASCII "
+                         "(a binary file?)")
+    return text
 
 
 def _read_start_step(post: Path) -> int:
     p = post / START_FILE
     if not p.is_file():
         raise InputError(f"{post}: no {START_FILE} (did the LIGGGHTS run reach the vibration?)")
-    return int(float(p.read_text().split()[0]))
+    words = _read_text(p).split()
+    try:
+        n0 = float(words[0]) if words else math.nan
+    except ValueError:
+        n0 = math.nan
+    if not (math.isfinite(n0) and n0 >= 0 and n0 == round(n0) and n0 < 2.0**53):
+        raise InputError(f"{p}: line 1 = {_short(words[0] if words else '')}: must be the step "
+                         "at which the vibration starts, a whole number >= 0")
+    return int(n0)
+
+
+def _read_series(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Time (s) and kinetic energy (J) of LIGGGHTS' series file: '#' comment lines, then rows
+    of at least two finite numbers."""
+    t, e = [], []
+    for k, line in enumerate(_read_text(path).split("\n"), 1):
+        words = line.split()
+        if not words or words[0].startswith("#"):
+            continue
+        try:
+            a, b = float(words[0]), float(words[1])
+        except (ValueError, IndexError):
+            raise InputError(f"{path}: line {k}: {_short(line.strip())}: must be two numbers, "
+                             "t_vibration_s kinetic_energy_J") from None
+        if not (math.isfinite(a) and math.isfinite(b)):
+            raise InputError(f"{path}: line {k}: {_short(line.strip())}: must be finite numbers "
+                             "(nan or inf is no data: did the run blow up?)")
+        t.append(a)
+        e.append(b)
+    if not t:
+        raise InputError(f"{path}: no rows of t_vibration_s kinetic_energy_J (did the LIGGGHTS "
+                         "run reach the vibration?)")
+    return np.asarray(t), np.asarray(e)
+
+
+#: the ball dump's columns the import reads (the deck's `dump custom`)
+BALL_COLUMNS = ("id", "x", "y", "z", "vx", "vy", "vz", "omegax", "omegay", "omegaz", "radius")
 
 
 def import_run(dump_dir, scenario=None, out_dir=None) -> dict:
@@ -964,22 +1378,46 @@ def import_run(dump_dir, scenario=None, out_dir=None) -> dict:
     dump_dir: the deck's post/ folder (or the deck folder).  scenario: the Scenario run (default:
     scenario.toml next to the dumps).  out_dir: where dem.h5, summary.json and bulk_velocity.csv
     go (default: dump_dir).  Returns the summary dict.
-    """
-    from vibroflow.dem.output import ResultWriter
 
+    Bad dumps (see read_dump; also missing columns, ids that are not whole, unique and the same
+    in every snapshot, steps that do not increase) raise a one-line InputError.  out_dir is
+    written under its folder lock, and only at the end: the three files are made in a temporary
+    folder inside it and moved into place once all of them are whole, so a failed import leaves
+    out_dir as it was.
+    """
     post = _resolve_dump_dir(Path(dump_dir))
     scenario = _scenario_for(post, scenario)
     _check_exportable(scenario)
     out_dir = Path(out_dir) if out_dir is not None else post
-    out_dir.mkdir(parents=True, exist_ok=True)
+    n0 = _read_start_step(post)
+    with folder_lock(out_dir, "vibroflow import liggghts"):
+        tmp_dir = Path(tempfile.mkdtemp(prefix=f"{TMP_PREFIX}liggghts-import-", dir=out_dir))
+        try:
+            summary = _import(post, scenario, n0, tmp_dir)
+            summary["bulk_velocity_csv"] = os.fspath(out_dir / BULK_CSV)
+            write_json_atomic(tmp_dir / "summary.json", _json_safe(summary))
+            for name in ("dem.h5", BULK_CSV, "summary.json"):  # summary.json last: "done"
+                os.replace(tmp_dir / name, out_dir / name)
+        finally:
+            shutil.rmtree(tmp_dir, ignore_errors=True)
+    return summary
+
+
+BULK_CSV = "bulk_velocity.csv"
+
+
+def _import(post: Path, scenario, n0: int, tmp_dir: Path) -> dict:
+    """The import proper: dem.h5 and bulk_velocity.csv into tmp_dir; returns the summary."""
+    from vibroflow.dem.output import ResultWriter
+
     run = scenario.run
     dt = run.dt
     f = scenario.motion.frequency
     motion = TubMotion.of_scenario(scenario)
     geom = geometry_of(scenario)
-    n0 = _read_start_step(post)
     rho = scenario.materials[scenario.fill.material].density
 
+    ball_path = post / BALL_DUMP
     wall_path = post / WALL_DUMP
     walls = _StepReader(wall_path) if wall_path.is_file() else None
     # ball-ball contacts: absent from decks written before they were dumped; then dem.h5 has
@@ -989,34 +1427,62 @@ def import_run(dump_dir, scenario=None, out_dir=None) -> dict:
     pair_check = PairCheck()
     period = float(scenario.tub.length) if scenario.tub.periodic else 0.0
 
-    # a writer into a private temporary folder, renamed into place at the end (atomic)
-    tmp_dir = Path(tempfile.mkdtemp(prefix=".liggghts-import-", dir=out_dir))
     writer = None
-    ids = None
+    ids = radius = None
     ke_t, ke_v = [], []
     n_snap = 0
+    last = None
     try:
-        for step, cols, data in iter_dump(post / BALL_DUMP):
+        for snap in read_dump(ball_path):
+            step, cols, data = snap.step, snap.columns, snap.data
             c = {name: i for i, name in enumerate(cols)}
-            need = ("id", "x", "y", "z", "vx", "vy", "vz", "omegax", "omegay", "omegaz",
-                    "radius")
-            missing = [n for n in need if n not in c]
+            missing = [name for name in BALL_COLUMNS if name not in c]
             if missing:
-                raise InputError(f"{post / BALL_DUMP}: columns {missing} missing (found {cols})")
-            order = np.argsort(data[:, c["id"]], kind="stable")
+                raise InputError(f"{ball_path}: line {snap.first_row - 1} (step {step}): no "
+                                 f"column {' '.join(missing)} (found: {' '.join(cols)}); the "
+                                 f"import needs {' '.join(BALL_COLUMNS)}")
+            if last is not None and step <= last:
+                raise InputError(f"{ball_path}: line {snap.line + 1}: step {step} after step "
+                                 f"{last}: the steps of the snapshots must increase")
+            if step < n0:
+                raise InputError(f"{ball_path}: line {snap.line + 1}: step {step} is before the "
+                                 f"vibration's start, step {n0} ({START_FILE}): the dump and "
+                                 "that file are not of one run")
+            last = step
+            if data.shape[0] == 0:
+                raise InputError(f"{ball_path}: line {snap.line + 3}: step {step} holds no "
+                                 "balls; every snapshot must hold the bed")
+            these_raw = _whole_column(ball_path, snap, c["id"])
+            order = np.argsort(these_raw, kind="stable")
             data = data[order]
-            these = data[:, c["id"]].astype(np.int64)
+            these = these_raw[order]
+            dup = these[1:] == these[:-1]
+            if np.any(dup) or these[0] < 1:
+                what = (f"id {these[int(np.argmax(dup))]} appears twice" if np.any(dup)
+                        else f"id {these[0]}")
+                raise InputError(f"{ball_path}: step {step} (line {snap.line}): {what}; the ids "
+                                 "must be whole numbers >= 1, each once")
             if ids is None:
                 ids = these
                 radius = data[:, c["radius"]].astype(np.float64)
+                if np.any(radius <= 0):
+                    k = int(np.argmax(radius <= 0))
+                    raise InputError(f"{ball_path}: step {step}: radius of id {ids[k]} = "
+                                     f"{radius[k]!r} m: must be > 0")
                 n = ids.size
                 attrs = {"case": scenario.case, "n_particles": int(n), "dt": float(dt),
                          "frequency": float(f), "scenario_toml": _scenario_toml(scenario),
                          "source": "liggghts"}
                 writer = ResultWriter(tmp_dir, n, attrs, radius)
             elif these.size != ids.size or np.any(these != ids):
-                raise InputError(f"{post / BALL_DUMP}: step {step} holds {these.size} balls, "
-                                 f"not the {ids.size} of the first snapshot (balls lost?)")
+                gone = np.setdiff1d(ids, these)
+                new = np.setdiff1d(these, ids)
+                which = ", ".join(([f"id {gone[0]} missing"] if gone.size else [])
+                                  + ([f"id {new[0]} new"] if new.size else []))
+                what = (f"holds {these.size} balls, not the {ids.size} of the first snapshot"
+                        if these.size != ids.size else "holds other ids than the first snapshot")
+                raise InputError(f"{ball_path}: step {step} (line {snap.line}) {what} ({which}; "
+                                 "balls lost?); every snapshot must hold the same balls")
             t = (step - n0) * dt
             p = pose_np(motion, t)
             pose = np.array([p["X"], p["Z"], p["theta"], p["Xdot"], p["Zdot"], p["thetadot"]],
@@ -1036,43 +1502,40 @@ def import_run(dump_dir, scenario=None, out_dir=None) -> dict:
             ke_t.append(t)
             ke_v.append(ke)
             # wall contacts of this step
-            wdata = walls.at(step) if walls is not None else None
-            if wdata is not None:
-                rows = _wall_rows(wdata, n_snap, ids, pos, pose, motion, scenario, geom)
+            wsnap = walls.at(step) if walls is not None else None
+            if wsnap is not None:
+                rows = _wall_rows(wsnap, n_snap, ids, pos, pose, motion, scenario, geom,
+                                  wall_path)
                 if rows is not None:
                     writer.append("wall_contacts", **rows)
             # ball-ball contacts of this step: every snapshot must have its entry (a missing
             # one would read as a snapshot without contacts and bias the contact stress)
             if pairs is not None:
-                pdata = pairs.at(step)
-                if pdata is None:
+                psnap = pairs.at(step)
+                if psnap is None:
                     raise InputError(f"{pair_path}: no entry for step {step} of {BALL_DUMP} "
                                      "(truncated dump?)")
-                writer.append("ball_contacts", **_pair_rows(pdata, n_snap, ids, pos, radius,
+                writer.append("ball_contacts", **_pair_rows(psnap, n_snap, ids, pos, radius,
                                                             period, pair_path, pair_check))
             n_snap += 1
         if writer is None:
-            raise InputError(f"{post / BALL_DUMP}: no snapshot in the dump")
+            raise InputError(f"{ball_path}: no snapshot (no 'ITEM: TIMESTEP'); a LIGGGHTS run "
+                             "writes one at every dump step")
         pair_check.verdict(pair_path)
         # time series: LIGGGHTS' own every series_every steps, else from the snapshots
         series = post / SERIES_FILE
         if series.is_file():
-            arr = np.loadtxt(series, comments="#", ndmin=2)
-            st, sv = arr[:, 0], arr[:, 1]
+            st, sv = _read_series(series)
         else:
             st, sv = np.asarray(ke_t), np.asarray(ke_v)
         nan = np.full(st.shape, np.nan)
         writer.append("series", time=st, kinetic_energy=sv, max_overlap_ball=nan,
                       max_overlap_wall=nan)
-        h5_tmp = writer.finish()
-        final = out_dir / "dem.h5"
-        os.replace(h5_tmp, final)
-    except BaseException:
+        h5 = writer.finish()
+        writer = None
+    finally:
         if writer is not None:
             writer.close()
-        shutil.rmtree(tmp_dir, ignore_errors=True)
-        raise
-    shutil.rmtree(tmp_dir, ignore_errors=True)
 
     summary = {"case": scenario.case, "source": "liggghts", "n_particles": int(ids.size),
                "dt": float(dt), "snapshots": n_snap}
@@ -1097,8 +1560,7 @@ def import_run(dump_dir, scenario=None, out_dir=None) -> dict:
             pair_check.repulsive / pair_check.contacts if pair_check.contacts else float("nan"))
     summary["impacts_available"] = False
     from vibroflow.analysis.summary import tub_summary
-    summary.update(tub_summary(final, scenario, bulk_csv=out_dir / "bulk_velocity.csv"))
-    write_json_atomic(out_dir / "summary.json", _json_safe(summary))
+    summary.update(tub_summary(h5, scenario, bulk_csv=tmp_dir / BULK_CSV))
     return summary
 
 
