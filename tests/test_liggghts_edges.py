@@ -84,8 +84,8 @@ def run(template_run, tmp_path):
 
 
 def untouched(out: Path) -> bool:
-    """--out holds nothing of a failed import: absent, or without results and temporaries."""
-    return not out.exists() or sorted(p.name for p in out.iterdir()) == []
+    """--out, made for an import that failed, is gone again: no results, no temporaries."""
+    return not out.exists()
 
 
 def cli(*args: str) -> subprocess.CompletedProcess:
@@ -319,6 +319,8 @@ def test_a_snapshot_with_more_rows_than_it_claims(run):
     ("nan", "vx = nan: must be a finite number"),
     ("-inf", "vx = -inf: must be a finite number"),
     ("1e999", "vx = 1e999: must be a finite number"),
+    ("-1e300", "vx = -1e\\+300: must be at most 3.40282e\\+38 in magnitude \\(dem.h5 stores "
+               "float32; did the run blow up\\?\\)$"),
 ])
 def test_text_nan_or_inf_in_a_number(run, value, match):
     post, steps, out = run
@@ -494,6 +496,15 @@ def test_import_holds_the_folder_lock(run, tmp_path):
         LG.import_run(post, None, tmp_path / "file")
 
 
+def test_import_refuses_an_out_folder_whose_result_names_are_folders(run):
+    post, steps, out = run
+    (out / "dem.h5").mkdir(parents=True)
+    with pytest.raises(InputError, match=r"^--out = '.*out': dem\.h5 there is a folder; the "
+                                         r"import writes a file of that name$"):
+        LG.import_run(post, None, out)
+    assert sorted(p.name for p in out.iterdir()) == ["dem.h5"]
+
+
 # ----------------------------------------------------------------------------------------------
 # Through the CLI: exit code 2, one line, no traceback, --out as it was
 
@@ -532,3 +543,4 @@ def test_cli_export_of_a_case_with_a_newline(tmp_path):
     line = one_line_error(cli("export", "liggghts", toml, tmp_path / "deck"))
     assert "case" in line
     assert not (tmp_path / "deck").exists()
+

@@ -38,6 +38,13 @@ docs/liggghts.md):
   each rounded to the nearest step) through `dump_modify every v_...` with a file-style
   variable; the kinetic energy every run.series_every steps (post/series.txt).
 
+Bad input writes nothing.  The deck is a program (a newline starts a command, and `shell` runs
+anything), so it is built from this module's template lines with slots, every user-derived value
+one token of a safe set (names through `safe_name`, numbers finite), and each written line is
+checked against its template (`_Deck`).  The importer refuses any dump that is not whole, in
+one line naming the file and the line (`read_dump`).  Both write under the folder's lock
+(vibroflow.io.folder_lock) and put their files in place only once everything is checked.
+
 The importer recomputes the tub pose of every snapshot from the scenario (the pose is a known
 function of time), so no pose file is needed.  It maps the pair dump's atom ids to the sorted
 snapshot, orders each pair i < j (negating the force when it swaps them: the dumped force is
@@ -46,6 +53,7 @@ and push on the whole (PairCheck).
 """
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import re
@@ -1370,6 +1378,11 @@ def _read_series(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 #: the ball dump's columns the import reads (the deck's `dump custom`)
 BALL_COLUMNS = ("id", "x", "y", "z", "vx", "vy", "vz", "omegax", "omegay", "omegaz", "radius")
+BULK_CSV = "bulk_velocity.csv"
+#: what an import writes into its out folder, in the order they are moved into place
+IMPORT_FILES = ("dem.h5", BULK_CSV, "summary.json")
+#: dem.h5 stores positions and velocities as float32: larger magnitudes would be inf there
+FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
 def import_run(dump_dir, scenario=None, out_dir=None) -> dict:
@@ -1390,20 +1403,29 @@ def import_run(dump_dir, scenario=None, out_dir=None) -> dict:
     _check_exportable(scenario)
     out_dir = Path(out_dir) if out_dir is not None else post
     n0 = _read_start_step(post)
-    with folder_lock(out_dir, "vibroflow import liggghts"):
-        tmp_dir = Path(tempfile.mkdtemp(prefix=f"{TMP_PREFIX}liggghts-import-", dir=out_dir))
-        try:
-            summary = _import(post, scenario, n0, tmp_dir)
-            summary["bulk_velocity_csv"] = os.fspath(out_dir / BULK_CSV)
-            write_json_atomic(tmp_dir / "summary.json", _json_safe(summary))
-            for name in ("dem.h5", BULK_CSV, "summary.json"):  # summary.json last: "done"
-                os.replace(tmp_dir / name, out_dir / name)
-        finally:
-            shutil.rmtree(tmp_dir, ignore_errors=True)
+    for name in IMPORT_FILES:
+        if (out_dir / name).is_dir():
+            raise InputError(f"--out = {str(out_dir)!r}: {name} there is a folder; the import "
+                             "writes a file of that name")
+    made = not out_dir.exists()
+    try:
+        with folder_lock(out_dir, "vibroflow import liggghts"):
+            tmp_dir = Path(tempfile.mkdtemp(prefix=f"{TMP_PREFIX}liggghts-import-",
+                                            dir=out_dir))
+            try:
+                summary = _import(post, scenario, n0, tmp_dir)
+                summary["bulk_velocity_csv"] = os.fspath(out_dir / BULK_CSV)
+                write_json_atomic(tmp_dir / "summary.json", _json_safe(summary))
+                for name in IMPORT_FILES:  # summary.json last: it says the import is done
+                    os.replace(tmp_dir / name, out_dir / name)
+            finally:
+                shutil.rmtree(tmp_dir, ignore_errors=True)
+    except BaseException:
+        if made:  # a folder made for a failed import goes again (if still empty)
+            with contextlib.suppress(OSError):
+                out_dir.rmdir()
+        raise
     return summary
-
-
-BULK_CSV = "bulk_velocity.csv"
 
 
 def _import(post: Path, scenario, n0: int, tmp_dir: Path) -> dict:
@@ -1452,6 +1474,14 @@ def _import(post: Path, scenario, n0: int, tmp_dir: Path) -> dict:
             if data.shape[0] == 0:
                 raise InputError(f"{ball_path}: line {snap.line + 3}: step {step} holds no "
                                  "balls; every snapshot must hold the bed")
+            stored = [c[name] for name in BALL_COLUMNS[1:10]]
+            big = np.abs(data[:, stored]) > FLOAT32_MAX
+            if np.any(big):
+                i, j = np.unravel_index(int(np.argmax(big)), big.shape)
+                raise InputError(f"{ball_path}: line {snap.first_row + i}: "
+                                 f"{cols[stored[j]]} = {data[i, stored[j]]:.6g}: must be at most "
+                                 f"{FLOAT32_MAX:.6g} in magnitude (dem.h5 stores float32; did "
+                                 "the run blow up?)")
             these_raw = _whole_column(ball_path, snap, c["id"])
             order = np.argsort(these_raw, kind="stable")
             data = data[order]
