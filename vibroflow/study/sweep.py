@@ -94,12 +94,99 @@ def finish_outputs(out: Path, results: dict[str, dict] | None = None) -> dict:
     return {**record, "rows": rows}
 
 
+#: seconds a scheduler has to accept the connection and answer Dask's handshake
+CONNECT_TIMEOUT_S = 10.0
+
+#: the schemes of Dask's comms (distributed.comm.registry); tcp:// is checked in full
+_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
+
+
+def check_scheduler(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
+    """Check that a Dask scheduler answers at `address` (tcp://HOST:PORT): one-line InputError
+    naming the address and what is there instead (a malformed address, nothing listening, a
+    service that is not Dask, a worker, silence), before any Client is made.
+
+    Why a check of its own: distributed's Client, pointed at a service that speaks another
+    protocol, reads the service's reply as a Dask frame header and fails with MemoryError
+    ("Unable to allocate 3.07 EiB" for an HTTP reply), ValueError or a comm error, and it waits
+    for ever on a peer that accepts the connection and stays silent."""
+    import asyncio
+    import socket
+
+    def refuse(what: str) -> InputError:
+        return InputError(f"--scheduler = {address!r}: no Dask scheduler answers there "
+                          f"({what}); start one with `dask scheduler` or leave --scheduler out")
+
+    def malformed(what: str) -> InputError:
+        return InputError(f"--scheduler = {address!r}: not a Dask scheduler address ({what}); "
+                          "give tcp://HOST:PORT as `dask scheduler` prints it, or leave "
+                          "--scheduler out")
+
+    from distributed.comm import parse_address
+    from distributed.comm.addressing import parse_host_port
+
+    try:
+        scheme, loc = parse_address(address)
+    except ValueError as e:
+        raise malformed(" ".join(str(e).split())) from None
+    if scheme not in _SCHEMES:
+        raise malformed(f"scheme {scheme}://; Dask's are " + ", ".join(_SCHEMES))
+    if scheme != "tcp":
+        return  # tls, ws, ucx: Client's own connection is the check
+    try:
+        host, port = parse_host_port(loc)
+    except ValueError as e:
+        raise malformed(" ".join(str(e).split())) from None
+    if not host or not 0 < int(port) < 65536:
+        raise malformed("a host and a port 1 - 65535 are needed")
+    try:
+        with socket.create_connection((host, int(port)), timeout=timeout):
+            pass
+    except ConnectionRefusedError:
+        raise refuse("nothing listens on that port: connection refused") from None
+    except socket.gaierror:
+        raise refuse(f"no such host {host!r}") from None
+    except TimeoutError:
+        raise refuse(f"no answer to a connection in {timeout:g} s") from None
+    except OSError as e:
+        raise refuse((e.strerror or str(e)).lower()) from None
+
+    async def identity():
+        from distributed.comm import connect
+
+        comm = await connect(address, timeout=timeout)
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            await comm.close()
+
+    try:
+        reply = asyncio.run(asyncio.wait_for(identity(), timeout))
+    except (TimeoutError, asyncio.TimeoutError):
+        raise refuse(f"a service that accepts connections but gives no Dask handshake in "
+                     f"{timeout:g} s") from None
+    except Exception as e:  # noqa: BLE001 -- any failure of the handshake means "not Dask"
+        # (MemoryError, ValueError, CommClosedError, ... as the docstring says); Ctrl-C is
+        # a BaseException and passes
+        kind = ("closed the connection without a Dask handshake"
+                if "closed" in str(e).lower() else
+                "answers in another protocol than Dask's")
+        raise refuse(f"a service that {kind}") from None
+    what = reply.get("type") if isinstance(reply, dict) else None
+    if what != "Scheduler":
+        raise refuse(f"a Dask {what.lower()}, not the scheduler" if isinstance(what, str)
+                     else "a service whose answer is not a Dask scheduler's")
+
+
 def make_client(scheduler: str | None, workers: int):
-    """(client, cluster): the cluster at `scheduler`, or a local one of `workers` processes
-    with one thread each and NUMBA_NUM_THREADS=1 in their environment."""
+    """(client, cluster): the cluster at `scheduler` (checked first, check_scheduler), or a
+    local one of `workers` processes with one thread each and NUMBA_NUM_THREADS=1 in their
+    environment."""
     from distributed import Client, LocalCluster
 
     if scheduler:
+        check_scheduler(scheduler)
         try:
             return Client(scheduler, timeout="15s"), None
         except (OSError, TimeoutError, ValueError) as exc:
