@@ -26,6 +26,7 @@ All files are written atomically; a stage that fails leaves the files of the sta
 """
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import math
 import tomllib
@@ -37,8 +38,9 @@ import tomli_w
 from vibroflow import __version__
 from vibroflow.analysis.summary import geometry_of
 from vibroflow.scenario.model import find_contact
-from vibroflow.errors import InputError
+from vibroflow.errors import InputError, Interrupted
 from vibroflow.io.atomic import write_text_atomic
+from vibroflow.io.folder_lock import folder_lock
 
 from .dem_result import DEMResult
 from .impacts import impact_relations, impact_relations_on_cells
@@ -122,6 +124,18 @@ def young_poisson(K: float, G: float) -> tuple[float, float]:
     return E, nu
 
 
+@contextlib.contextmanager
+def interrupted_calibration(run_dir: Path):
+    """A Ctrl-C in a calibration: Interrupted, one line.  Every file is written atomically, so
+    none is half written; the calibration has no checkpoint, so it is run again."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        raise Interrupted(f"interrupted while calibrating {run_dir}; nothing to resume (every "
+                          f"file written is whole): run `vibroflow calibrate {run_dir}` "
+                          "again") from None
+
+
 # ----------------------------------------------------------------------------------------------
 
 def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
@@ -134,13 +148,22 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
     from vibroflow.progress import RunProgress
 
     run_dir = Path(run)
-    with DEMResult.open(run_dir) as res, RunProgress(progress) as prog:
+    # the run's folder is read first (a missing or foreign dem.h5 is one line and makes no
+    # folder), then locked: the calibration writes into it, and a DEM still writing it or a
+    # folder that is read-only is one line before anything is written
+    with (DEMResult.open(run_dir) as res,
+          folder_lock(res.path.parent, "vibroflow calibrate", field="RUN_DIR"),
+          interrupted_calibration(res.path.parent),
+          RunProgress(progress) as prog):
         out_dir = res.path.parent
         sc = res.scenario
         n_used = int((res.batches() >= 0).sum())
         prog.stage("coarse-grain", n_used, unit="snapshots")
         avg, phases, cg_info = coarse_grain_run(res, kernel=kernel, width=width,
                                                 progress=lambda k, n: prog.update(k))
+        scatter = tub_mu_i_scatter(avg, phases)
+        if not shear_cell:  # before anything is written: a bed too small is the input's fault
+            check_tub_cells(scatter, sc, avg, out_dir)
         fields_path = write_fields(out_dir / FIELDS_FILE, avg, phases)
         prog.log(f"coarse-grained {cg_info['snapshots']} snapshots in "
                  f"{cg_info['wall_time_s']:.1f} s (contact stress: {cg_info['contact_stress']})"
@@ -148,12 +171,9 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
         wf = wall_friction(res)
         rel = impact_relations(res, phases, avg)
         rel["cells"] = impact_relations_on_cells(res)
-        scatter = tub_mu_i_scatter(avg, phases)
         p_bed = bed_pressure(avg)
         z = coordination(res)
-        phi_bed = float(np.nanmedian(np.where(
-            avg["solid_fraction"].values >= DENSE_SOLID_FRACTION,
-            avg["solid_fraction"].values, np.nan)))
+        phi_bed = _median_dense(avg, "solid_fraction")  # NaN without a dense cell
         d = res.diameter
         rho_s = res.solid_density
         k_n, k_t = contact_stiffness_at(sc, p_bed, phi_bed, z["z_non_rattler"], d)
@@ -161,7 +181,7 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
         if shear_cell:
             rheo, elastic, cell_points = _dem_tests(sc, p_bed, prog, shear_cell_options or {})
         else:
-            rheo = _fit_tub_cells(scatter)
+            rheo = _fit_tub_cells(scatter, sc, avg, out_dir)
             cell_points = None
             from .elastic import affine_moduli_linear
             K_aff, G_aff = affine_moduli_linear(phi_bed, z["z_all"], k_n, k_t, d)
@@ -289,24 +309,59 @@ def _median_dense(ds, name: str) -> float:
     return float(np.median(v[sel])) if sel.any() else float("nan")
 
 
-def _fit_tub_cells(scatter: dict) -> dict:
-    """mu(I), phi(I) fitted to the tub's dense phase-resolved cells (no shear cell)."""
-    from .rheology_fit import fit_mu_i, fit_phi_i
+#: the points the tub-cell fits need: mu(I) has three parameters (rheology_fit.fit_mu_i), phi(I)
+#: two (fit_phi_i)
+MU_I_POINTS = 3
 
+
+def _dense_points(scatter: dict) -> dict:
+    """The phase-resolved (else time-averaged) scatter's dense points, which the fits use."""
     ph = scatter.get("phase") or scatter["time"]
     d = ph["dense"]
+    return {k: ph[k][d] for k in ("I", "mu", "phi")}
+
+
+def too_small(run_dir: Path, scenario, avg, what: str) -> InputError:
+    """The one-line InputError of a DEM run too small for the tub-cell calibration: `what`
+    failed, and what to change."""
+    return InputError(
+        f"RUN_DIR = {str(run_dir)!r}: the bed is too small to calibrate on: {what}; give the "
+        f"DEM more balls (fill.count = {scenario.fill.count}) or a longer averaging window "
+        f"(run.average_last = {scenario.run.average_last:g} s), coarse-grain with a wider "
+        f"kernel (--width, now {float(avg.attrs['width_m']) * 1e3:.3g} mm), or measure mu(I) "
+        "in shear cells (--shear-cell)")
+
+
+def check_tub_cells(scatter: dict, scenario, avg, run_dir: Path) -> None:
+    """InputError (too_small) when the tub's coarse-grained cells hold fewer dense points
+    (solid fraction >= DENSE_SOLID_FRACTION, finite mu, I > 0, over the cells and phases) than
+    the mu(I) fit needs: a bed too thin or too agitated has none, and the calibration cannot
+    be completed without --shear-cell."""
+    n = int(_dense_points(scatter)["I"].size)
+    if n < MU_I_POINTS:
+        raise too_small(run_dir, scenario, avg, (
+            f"the mu(I) fit to the tub's cells has {n} dense cell value(s) (coarse-grained "
+            f"cells x phases with solid fraction >= {DENSE_SOLID_FRACTION:g} and I > 0) and "
+            f"needs at least {MU_I_POINTS}"))
+
+
+def _fit_tub_cells(scatter: dict, scenario=None, avg=None, run_dir: Path | None = None
+                   ) -> dict:
+    """mu(I), phi(I) fitted to the tub's dense phase-resolved cells (no shear cell); a fit
+    that fails (too few points, no convergence) is an InputError (too_small): the run is too
+    small to calibrate on, and no number is invented for it."""
+    from .rheology_fit import fit_mu_i, fit_phi_i
+
+    pts = _dense_points(scatter)
     out = {"source": "tub cells (dense phase-resolved coarse-grained cells; run --shear-cell "
-                     "for the Lees-Edwards simple-shear fit)", "points": int(d.sum())}
+                     "for the Lees-Edwards simple-shear fit)", "points": int(pts["I"].size)}
     try:
-        mu = fit_mu_i(ph["I"][d], ph["mu"][d])
-        phi = fit_phi_i(ph["I"][d], ph["phi"][d])
+        mu = fit_mu_i(pts["I"], pts["mu"])
+        phi = fit_phi_i(pts["I"], pts["phi"])
     except InputError as e:
-        # a bed too thin or too agitated to have dense cells: say so, do not invent numbers
-        nan = float("nan")
-        out.update({k: nan for k in ("mu_s", "mu_2", "I_0", "phi_max", "phi_min")})
-        out.update({k + "_stderr": nan for k in ("mu_s", "mu_2", "I_0", "phi_max", "phi_min")})
-        out["status"] = f"not measured: {e} (no dense cell in the tub; run --shear-cell)"
-        return out
+        if scenario is None:
+            raise
+        raise too_small(run_dir, scenario, avg, e.message.rstrip(".")) from None
     out.update(_mu_phi_keys(mu, phi))
     out["status"] = "measured"
     return out
