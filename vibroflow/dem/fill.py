@@ -24,6 +24,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..errors import InputError
 from ..tub.geometry import distance_to_wall_np
 from .simulate import DEMState, DEMSystem, init_state, run_steps
 
@@ -40,11 +41,13 @@ def lattice_fill(scenario, rng: np.random.Generator) -> np.ndarray:
         ny = max(int(tub.length // s), 1)
         ys = (np.arange(ny) + 0.5) * tub.length / ny
         if ny > 1 and tub.length / ny < s:
-            raise ValueError("periodic length too short for the insertion lattice")
+            raise InputError(f"tub.length = {tub.length!r}: too short for the insertion lattice "
+                             f"(spacing {s:.4g} m); give a length of at least {s:.4g} m")
     else:
         ny = int((tub.length - 2 * margin) // s) + 1
         if tub.length - 2 * margin < 0:
-            raise ValueError(f"tub.length = {tub.length}: shorter than one ball diameter")
+            raise InputError(f"tub.length = {tub.length!r}: shorter than one ball diameter with "
+                             f"its insertion jitter ({2 * margin:.4g} m); give a longer tub")
         span = (ny - 1) * s
         ys = tub.length / 2 - span / 2 + np.arange(ny) * s
     width = 2.0 * (tub.radius - margin)
@@ -81,7 +84,8 @@ def fill_cache_key(scenario, nchunk: int) -> str:
         "contacts": [c.model_dump(mode="json") for c in scenario.contacts],
         "gravity": list(scenario.gravity), "dt": scenario.run.dt, "seed": scenario.run.seed,
         "skin": scenario.run.skin, "pivot": list(scenario.motion.pivot), "nchunk": nchunk,
-        "version": __version__, "format": 1,
+        # format 2: entries carry a checksum (output.save_state_file)
+        "version": __version__, "format": 2,
     }
     text = json.dumps(payload, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:24]

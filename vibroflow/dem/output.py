@@ -21,11 +21,19 @@ importer and read by vibroflow.analysis):
 
 Checkpoints hold the whole DEMState plus the number of complete result parts; on resume the
 parts after those are dropped, so a resumed run writes exactly what an uninterrupted one would.
+
+Everything a resume or a cached fill reads back is checked: a saved state carries the sha256 of
+its arrays and attributes (`state_checksum`, verified by `load_state_file`), and a checkpoint
+the sha256 of every part file it counts on (`file_sha256`, verified by `ResultWriter`).  A
+flipped bit, a truncated or an empty file is `DamagedFile`, never other numbers or a traceback.
 """
 from __future__ import annotations
 
+import hashlib
+import json
 import os
 import shutil
+import signal
 from pathlib import Path
 
 import h5py
@@ -57,6 +65,54 @@ _COPY_ROWS = 1_000_000
 _PARTICLE_FIELDS = ("position", "velocity", "angular_velocity")
 
 
+class DamagedFile(Exception):
+    """A file a run reads back (checkpoint, result part, cached fill) is unreadable or fails its
+    checksum; `reason` says how in a few words ("checksum mismatch", "truncated", ...)."""
+
+    def __init__(self, path: Path, reason: str):
+        super().__init__(f"{path}: {reason}")
+        self.path = Path(path)
+        self.reason = reason
+
+
+def fault_kill_at(phase: str) -> None:
+    """Fault injection for the tests of the end of a run: with VIBROFLOW_FAULT_KILL_AT=<phase>
+    in the environment the process SIGKILLs itself when it reaches that phase (a power cut at a
+    known instant).  Phases, in the order a run passes them: "final-checkpoint" (the state at
+    the end is on disk, the last rows not yet written), "assembling" (DIR/dem.h5.partial holds
+    the first part only), "assembled" (dem.h5 in place, parts and checkpoint kept), "summary"
+    (summary.json written, checkpoint and parts kept), "checkpoint-removed" (parts kept)."""
+    if os.environ.get("VIBROFLOW_FAULT_KILL_AT") == phase:
+        os.kill(os.getpid(), signal.SIGKILL)
+
+
+def file_sha256(path: Path) -> str:
+    """sha256 of a file's bytes (read in 1 MiB blocks: parts of a tub47 run are large)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _damage(path: Path, exc: BaseException) -> str:
+    """A few words on why h5py could not read `path`."""
+    try:
+        size = Path(path).stat().st_size
+    except OSError:
+        return "missing"
+    if size == 0:
+        return "empty"
+    text = str(exc).lower()
+    if "signature" in text:
+        return "not an HDF5 file"
+    if "truncat" in text or "eof" in text or "end of file" in text:
+        return "truncated"
+    if isinstance(exc, KeyError):
+        return f"incomplete ({exc})"
+    return f"unreadable ({' '.join(str(exc).split())[:80]})"
+
+
 class ResultWriter:
     """Appends result rows as a run goes; `finish` assembles DIR/dem.h5.
 
@@ -69,7 +125,12 @@ class ResultWriter:
     """
 
     def __init__(self, out_dir: Path, n_particles: int, attrs: dict, radius: np.ndarray,
-                 parts_done: int | None = None):
+                 parts_done: int | None = None, part_hashes: list[str] | None = None,
+                 meta_hash: str | None = None):
+        """A fresh writer (parts_done None: DIR/dem.parts made anew with meta.h5), or one that
+        goes on after `parts_done` complete parts (resume).  On resume, `part_hashes` (the
+        sha256 of each complete part) and `meta_hash` (of meta.h5), as the checkpoint recorded
+        them, are verified: DamagedFile when a part is missing, changed or unreadable."""
         self.out_dir = Path(out_dir)
         self.final = self.out_dir / "dem.h5"
         self.partial = self.out_dir / "dem.h5.partial"
@@ -85,17 +146,41 @@ class ResultWriter:
                 for k, v in self.attrs.items():
                     f.attrs[k] = v
                 f.create_dataset("particles/radius", data=self.radius)
+            self.meta_hash = file_sha256(self.parts_dir / "meta.h5")
+            self.part_hashes: list[str] = []
         else:
             self.index = parts_done
+            self._verify(parts_done, part_hashes, meta_hash)
+            self.meta_hash = meta_hash
+            self.part_hashes = list(part_hashes or [])[:parts_done]
             for p in self.parts_dir.glob("part_*.h5"):
                 if int(p.stem.split("_")[1]) >= parts_done:
                     p.unlink()
         self.rows_done = {key: 0 for key in self._keys()}
         for k in range(self.index):
-            with h5py.File(self._part(k), "r") as f:
-                for key in self.rows_done:
-                    self.rows_done[key] += f[key].shape[0]
+            try:
+                with h5py.File(self._part(k), "r") as f:
+                    for key in self.rows_done:
+                        self.rows_done[key] += f[key].shape[0]
+            except (OSError, KeyError, ValueError) as exc:
+                raise DamagedFile(self._part(k), _damage(self._part(k), exc)) from None
         self.f = self._open_part()
+
+    def _verify(self, parts_done: int, part_hashes: list[str] | None,
+                meta_hash: str | None) -> None:
+        """Check meta.h5 and the complete parts against the checkpoint's checksums (without
+        them, as in a checkpoint of an older vibroflow, nothing can vouch for the parts)."""
+        files = [(self.parts_dir / "meta.h5", meta_hash)]
+        hashes = list(part_hashes or [])
+        files += [(self._part(k), hashes[k] if k < len(hashes) else None)
+                  for k in range(parts_done)]
+        for path, expected in files:
+            if not path.is_file():
+                raise DamagedFile(path, "missing")
+            if expected is None:
+                raise DamagedFile(path, "no checksum in the checkpoint")
+            if file_sha256(path) != expected:
+                raise DamagedFile(path, "checksum mismatch")
 
     @staticmethod
     def _keys():
@@ -135,12 +220,15 @@ class ResultWriter:
         for key in self.rows_done:
             self.rows_done[key] += self.f[key].shape[0]
         self.f.close()
+        self.part_hashes.append(file_sha256(self._part(self.index)))
         self.index += 1
         self.f = self._open_part()
         return self.index
 
-    def finish(self) -> Path:
-        """Assemble the parts into DIR/dem.h5 (atomically) and remove them."""
+    def finish(self, keep_parts: bool = False) -> Path:
+        """Assemble the parts into DIR/dem.h5 (atomically) and remove them, unless keep_parts:
+        a run keeps them until its summary is written and its checkpoint removed, so that a
+        kill at any instant of its end leaves a folder --resume completes (`remove_parts`)."""
         self.f.close()
         parts = [self._part(k) for k in range(self.index + 1)]
         with h5py.File(self.partial, "w") as out:
@@ -172,9 +260,17 @@ class ResultWriter:
                             b = min(m, a + step)
                             out[key][offsets[key] + a:offsets[key] + b] = f[key][a:b]
                         offsets[key] += m
+                if p == parts[0]:
+                    out.flush()
+                    fault_kill_at("assembling")
         os.replace(self.partial, self.final)
-        shutil.rmtree(self.parts_dir, ignore_errors=True)
+        if not keep_parts:
+            self.remove_parts()
         return self.final
+
+    def remove_parts(self) -> None:
+        """Remove DIR/dem.parts (the last step of a run's end)."""
+        shutil.rmtree(self.parts_dir, ignore_errors=True)
 
     def close(self) -> None:
         try:
@@ -221,14 +317,69 @@ def read_state(group: h5py.Group) -> DEMState:
                     vibrating=bool(group.attrs["vibrating"]), **arrays)
 
 
+def _attr_bytes(value) -> bytes:
+    """An attribute value as bytes for the checksum, the same written or read back (h5py
+    returns str for str, numpy scalars for numbers)."""
+    if isinstance(value, bytes):
+        return value
+    if isinstance(value, str):
+        return value.encode("utf-8")
+    a = np.asarray(value)
+    return a.dtype.str.encode() + repr(a.shape).encode() + a.tobytes()
+
+
+def state_checksum(f: h5py.File) -> str:
+    """sha256 of every dataset (name, dtype, shape, bytes) and every attribute (name, value)
+    of an open state file, but the root's "checksum" attribute itself; the same function
+    writes it (save_state_file) and checks it (load_state_file)."""
+    h = hashlib.sha256()
+    names: list[str] = []
+    f.visit(names.append)
+    for name in ["", *sorted(names)]:
+        obj = f[name] if name else f
+        h.update(b"\0node\0" + name.encode())
+        if isinstance(obj, h5py.Dataset):
+            data = np.ascontiguousarray(obj[()])
+            h.update(data.dtype.str.encode() + repr(data.shape).encode())
+            h.update(data.tobytes())
+        for key in sorted(obj.attrs):
+            if name == "" and key == "checksum":
+                continue
+            h.update(b"\0attr\0" + key.encode() + b"\0" + _attr_bytes(obj.attrs[key]))
+    return h.hexdigest()
+
+
 def save_state_file(path: Path, state: DEMState, attrs: dict | None = None) -> None:
-    """Write a state to an HDF5 file atomically (vibroflow.io.atomic)."""
+    """Write a state to an HDF5 file atomically (vibroflow.io.atomic), with the sha256 of its
+    contents in the root attribute "checksum"."""
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
         write_state(f.create_group("state"), state)
         for k, v in (attrs or {}).items():
             f.attrs[k] = v
+        f.attrs["checksum"] = state_checksum(f)
 
 
 def load_state_file(path: Path) -> tuple[DEMState, dict]:
-    with h5py.File(path, "r") as f:
-        return read_state(f["state"]), dict(f.attrs)
+    """(state, root attributes) of a file of save_state_file; DamagedFile when it is not
+    readable (empty, truncated, not HDF5, a dataset missing) or fails its checksum."""
+    path = Path(path)
+    try:
+        with h5py.File(path, "r") as f:
+            stored = f.attrs.get("checksum")
+            if stored is None:
+                raise DamagedFile(path, "no checksum")
+            if state_checksum(f) != stored:
+                raise DamagedFile(path, "checksum mismatch")
+            state = read_state(f["state"])
+            attrs = {k: v for k, v in f.attrs.items() if k != "checksum"}
+    except DamagedFile:
+        raise
+    except (OSError, KeyError, ValueError, TypeError, RuntimeError) as exc:
+        raise DamagedFile(path, _damage(path, exc)) from None
+    return state, attrs
+
+
+def read_json_attr(attrs: dict, key: str, default=None):
+    """A JSON-valued attribute of a state file (None when absent)."""
+    value = attrs.get(key)
+    return default if value is None else json.loads(value)
