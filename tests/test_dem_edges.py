@@ -296,8 +296,8 @@ def test_damaged_part_is_refused_in_one_line(tmp_path, bounce_toml, bounce_ref):
     part.write_bytes(bytes(data))
     with pytest.raises(InputError) as err:
         run_dem(load_scenario(bounce_toml), out, resume=True, progress=False)
-    assert str(err.value) == (f"--resume: {part} is damaged (checksum mismatch); run without "
-                              "--resume to start afresh")
+    assert str(err.value) == (f"--resume: {part} is damaged (checksum mismatch), a part "
+                              "checkpoint.h5 counts on; run without --resume to start afresh")
     part.unlink()
     with pytest.raises(InputError, match=r"part_00000\.h5 is damaged \(missing\)"):
         run_dem(load_scenario(bounce_toml), out, resume=True, progress=False)
