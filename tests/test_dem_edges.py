@@ -352,6 +352,17 @@ def test_ctrl_c_writes_a_checkpoint_and_resume_is_bit_for_bit(tmp_path, monkeypa
     _same_as_ref(out, bounce_ref)
 
 
+def test_ctrl_c_at_the_last_step_is_resumable(tmp_path, monkeypatch, bounce_toml, bounce_ref):
+    """A SIGINT with the last step done: the final state's checkpoint is there to go on from."""
+    out = tmp_path / "out"
+    monkeypatch.setenv("VIBROFLOW_FAULT_SIGINT_AFTER_STEPS", "3000")
+    with pytest.raises(Interrupted, match=r"^interrupted at t = 0\.0300 s; checkpoint written"):
+        run_dem(load_scenario(bounce_toml), out, progress=False)
+    monkeypatch.delenv("VIBROFLOW_FAULT_SIGINT_AFTER_STEPS")
+    run_dem(load_scenario(bounce_toml), out, resume=True, progress=False)
+    _same_as_ref(out, bounce_ref)
+
+
 def test_ctrl_c_in_the_cli_exits_130_in_one_line(tmp_path, bounce_toml):
     out = tmp_path / "out"
     r = _cli("dem", str(bounce_toml), "--out", str(out),

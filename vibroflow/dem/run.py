@@ -316,6 +316,10 @@ def _run(scenario, out_dir: Path, system: DEMSystem, vtk: bool, resume: bool,
         # a second Ctrl-C, or one outside the main thread's deferral: the state in memory may
         # be between two updates, so the last checkpoint on disk is where to go on from
         writer.close()
+        if (out_dir / SUMMARY_NAME).exists():
+            raise Interrupted(f"interrupted while tidying up after the run; its results are "
+                              f"complete in {out_dir} (--resume removes what is left over)") \
+                from None
         if ckpt.exists():
             raise Interrupted(f"interrupted at t = {state.time(dt):.4f} s; resume from the last "
                               f"checkpoint with: vibroflow dem <the same scenario and --set> "
@@ -440,6 +444,11 @@ def _vibrate(scenario, out_dir, system, state, writer, prog, settle_info, clock:
         _vibration_loop(state, system, writer, prog, run, samples, done_snapshots, total,
                         window_start, explicit, f, stage_steps0, n, last_ckpt, on_impacts,
                         checkpoint, sigint, sigint_after, out_dir)
+    if sigint["raised"] and ckpt.exists():
+        # a SIGINT while the last rows were written: the final state's checkpoint is on disk
+        raise Interrupted(f"interrupted at t = {state.time(dt):.4f} s; checkpoint written; "
+                          f"resume with: vibroflow dem <the same scenario and --set> --resume "
+                          f"--out {out_dir}")
 
     # the end, in an order that a kill at any instant leaves a folder --resume completes
     # (module docstring): dem.h5 from the parts (kept), summary.json, checkpoint, parts
