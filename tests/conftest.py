@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -9,6 +10,13 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
+
+
+def pytest_configure(config):
+    # Ctrl-C tests send SIGINT to themselves or to a command they start; a runner started in
+    # the background by a non-interactive shell ignores SIGINT, and its children inherit the
+    # ignoring, so the tests would see no Ctrl-C: Python's own handler, as in a terminal
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @pytest.fixture

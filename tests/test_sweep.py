@@ -18,15 +18,18 @@ import pytest
 
 from tests.test_calibrate import SMALL
 
-# SMALL, shorter (0.13 s window = 6 cycles at 47 Hz >= 4 batches) and with 250 balls; fill.count
-# is varied by the fixture, so it is not fixed here
+# SMALL, shorter (0.13 s window = 6 cycles at 47 Hz >= 4 batches) and with 250 balls
+GOOD = 250
 FIXED = [s for s in SMALL if not s.startswith(("fill.count=", "run.duration=",
                                                "run.average_last="))]
-FIXED += ["run.duration=0.15", "run.average_last=0.13"]
+FIXED += ["run.duration=0.15", "run.average_last=0.13", f"fill.count={GOOD}"]
 # a fixed continuum option every point takes, as `vibroflow run --set` does
 FIXED += ["lagrangian.cfl=0.3"]
-GOOD = 250
-BAD = 1_000_000  # valid, but no tub holds it: the fill fails at run time ("too large to insert")
+# the ball-ball stiffness the fixture varies: tub47-quick's own (N/m), and one that passes every
+# check made before a run but fails in it: at 1 N/m a ball's weight alone (0.01 N) presses its
+# contacts by 10 mm, beyond the blow-up bound of a quarter diameter, while the fill settles
+GOOD_KN = 100000.0
+BAD_KN = 1.0
 STAGES = ("dem", "calibration", "lagrangian", "comparison")
 
 
@@ -48,8 +51,8 @@ def _cli(*args, env, timeout=600):
                           timeout=timeout)
 
 
-def _sweep_args(out, factors="0.5,1", counts=f"{GOOD},{BAD}", *extra):
-    return ["sweep", "tub47-quick", "--factors", factors, "--vary", f"fill.count={counts}",
+def _sweep_args(out, factors="0.5,1", kns=f"{GOOD_KN},{BAD_KN}", *extra):
+    return ["sweep", "tub47-quick", "--factors", factors, "--vary", f"contacts.0.k_n={kns}",
             "--out", out, *_sets(FIXED), *extra]
 
 
@@ -65,11 +68,11 @@ def _num(cell):
 
 
 def _good(factor):
-    return f"amplitude_factor={factor!r},fill.count={GOOD}"
+    return f"amplitude_factor={factor!r},contacts.0.k_n={GOOD_KN!r}"
 
 
 def _bad(factor):
-    return f"amplitude_factor={factor!r},fill.count={BAD}"
+    return f"amplitude_factor={factor!r},contacts.0.k_n={BAD_KN!r}"
 
 
 def _mtimes(out, names):
@@ -80,11 +83,11 @@ def _mtimes(out, names):
 @pytest.fixture(scope="module")
 def swept(tmp_path_factory):
     """Four points on a local cluster of two workers: factors 0.5 and 1 with 250 balls (run)
-    and with a million balls (fail at run time)."""
+    and with the soft contacts of BAD_KN (fail at run time)."""
     tmp = tmp_path_factory.mktemp("sweep")
     env = _env(tmp)
     out = tmp / "sweep"
-    r = _cli(*_sweep_args(out, "0.5,1", f"{GOOD},{BAD}", "--workers", "2"), env=env)
+    r = _cli(*_sweep_args(out, "0.5,1", f"{GOOD_KN},{BAD_KN}", "--workers", "2"), env=env)
     return tmp, out, env, r
 
 
@@ -105,7 +108,7 @@ def test_sweep_table_matches_points_and_tub_speed_scales_with_factor(swept):
         assert sorted(row["method"] for row in mine) == sorted(summary["methods"])
         assert {"dem", "lagrangian"} <= set(summary["methods"])
         assert all(row["status"] == "done" for row in mine)
-        assert all(float(row["motion.amplitude_factor"]) == f and int(row["fill.count"]) == GOOD
+        assert all(float(row["motion.amplitude_factor"]) == f and float(row["contacts.0.k_n"]) == GOOD_KN
                    for row in mine)
         for row in mine:
             m = summary["methods"][row["method"]]
@@ -150,7 +153,7 @@ def test_sweep_table_matches_points_and_tub_speed_scales_with_factor(swept):
     # environment before numba loads (numba's own config reads it at import)
     record = json.loads((out / "sweep.json").read_text())
     assert record["kind"] == "vibroflow sweep"
-    assert record["varied"] == ["motion.amplitude_factor", "fill.count"]
+    assert record["varied"] == ["motion.amplitude_factor", "contacts.0.k_n"]
     for name in (_good(0.5), _good(1.0), _bad(0.5), _bad(1.0)):
         w = record["points"][name]["last_run"]["worker"]
         assert w["numba_threads"] == 1 and w["numba_num_threads_config"] == 1
@@ -164,12 +167,12 @@ def test_failed_point_is_reported_and_the_others_finish(swept):
     for f in (0.5, 1.0):
         bad = [row for row in rows if row["point"] == _bad(f)]
         assert len(bad) == 1 and bad[0]["status"] == "failed"
-        assert "fill.count too large to insert" in bad[0]["error"]
+        assert "contact stiffness k_n too low" in bad[0]["error"]
         failed = json.loads((out / "points" / _bad(f) / "failed.json").read_text())
-        assert "\n" not in failed["error"] and "ValueError" in failed["error"]
+        assert "\n" not in failed["error"] and "BlowUp" in failed["error"]
         assert not (out / "points" / _bad(f) / "summary.json").exists()
         assert (out / "points" / _good(f) / "summary.json").exists()
-        assert f"{_bad(f)}: FAILED: ValueError" in r.stdout
+        assert f"{_bad(f)}: FAILED: BlowUp" in r.stdout
     assert "2 of 4 point(s) failed" in r.stderr and "Traceback" not in r.stderr
 
 
@@ -237,7 +240,7 @@ def test_sweep_on_a_scheduler_started_by_hand(swept, tmp_path):
     out = tmp_path / "copy"
     shutil.copytree(src, out)
     before = _mtimes(out, [_good(0.5), _good(1.0)])
-    r, worker_pids = _on_cluster(tmp_path, out, env, "0.5,1", f"{GOOD},{BAD}")
+    r, worker_pids = _on_cluster(tmp_path, out, env, "0.5,1", f"{GOOD_KN},{BAD_KN}")
     assert r.returncode == 1, r.stderr
     assert "tcp://127.0.0.1" in r.stdout
     assert _mtimes(out, [_good(0.5), _good(1.0)]) == before
@@ -255,7 +258,7 @@ def test_new_point_computed_on_a_scheduler_started_by_hand(swept, tmp_path):
     _, src, env, _ = swept
     out = tmp_path / "copy"
     shutil.copytree(src, out)
-    r, worker_pids = _on_cluster(tmp_path, out, env, "0.5,1,1.5", f"{GOOD}")
+    r, worker_pids = _on_cluster(tmp_path, out, env, "0.5,1,1.5", f"{GOOD_KN}")
     assert r.returncode == 0, r.stderr
     record = json.loads((out / "sweep.json").read_text())
     run = record["points"][_good(1.5)]["last_run"]
@@ -295,9 +298,10 @@ def test_foreign_corrupt_or_other_base_dir_is_a_one_line_error(swept, tmp_path):
     other.mkdir()
     (other / "sweep.json").write_text('{"kind": "vibroflow study"}')
     for folder, sets, vary, words in (
-            (other, FIXED, [f"fill.count={GOOD}"], "not a vibroflow sweep record"),
-            (src, [*FIXED, "run.seed=7"], [f"fill.count={GOOD}"], "run.seed = 1 there, 7 now"),
-            (src, [*FIXED, f"fill.count={GOOD}"], [], "not of motion.amplitude_factor")):
+            (other, FIXED, [f"contacts.0.k_n={GOOD_KN}"], "not a vibroflow sweep record"),
+            (src, [*FIXED, "run.seed=7"], [f"contacts.0.k_n={GOOD_KN}"],
+             "run.seed = 1 there, 7 now"),
+            (src, [*FIXED, f"contacts.0.k_n={GOOD_KN}"], [], "not of motion.amplitude_factor")):
         plan = plan_sweep("tub47-quick", [0.5], parse_vary(vary), sets)
         with pytest.raises(InputError) as e:
             check_sweep_dir(folder, plan)
@@ -347,7 +351,7 @@ def test_two_reruns_together_compute_nothing_and_leave_the_folder_whole(swept):
     before = _mtimes(out, good)
     csv_before = {(row["point"], row["method"]): row["circulation_strength"]
                   for row in _rows(out)}
-    args = _sweep_args(out, "0.5,1", f"{GOOD},{BAD}", "--workers", "1")
+    args = _sweep_args(out, "0.5,1", f"{GOOD_KN},{BAD_KN}", "--workers", "1")
     procs = [subprocess.Popen([sys.executable, "-m", "vibroflow.cli", *map(str, args)],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                               env=env, stdin=subprocess.DEVNULL) for _ in range(2)]
@@ -370,7 +374,7 @@ def test_two_reruns_together_compute_nothing_and_leave_the_folder_whole(swept):
 def test_two_sweeps_compute_each_new_point_once(tmp_path):
     env = _env(tmp_path)
     out = tmp_path / "sweep"
-    args = _sweep_args(out, "0.5,1", f"{GOOD}", "--workers", "1")
+    args = _sweep_args(out, "0.5,1", f"{GOOD_KN}", "--workers", "1")
     procs = [subprocess.Popen([sys.executable, "-m", "vibroflow.cli", *map(str, args)],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                               env=env, stdin=subprocess.DEVNULL) for _ in range(2)]

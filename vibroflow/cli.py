@@ -486,6 +486,10 @@ def sweep(
                                        summary_of)
 
     check_sweep_dir(out, plan)  # before anything is written or started
+    if scheduler:
+        from vibroflow.study.sweep import check_scheduler
+
+        check_scheduler(scheduler)  # before the first line: a wrong address is one line
     where = scheduler or f"a local cluster of {workers or os.cpu_count()} worker(s)"
     typer.echo(f"{len(plan.points)} point(s) of {', '.join(plan.varied)} on {where}")
     record = run_sweep(plan, out, scheduler=scheduler, workers=workers, echo=typer.echo)

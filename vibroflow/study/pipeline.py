@@ -177,21 +177,21 @@ def run_study(scenario, out: Path, settings: dict[str, dict[str, Any]] | None = 
     """
     out = Path(out)
     check_study_dir(out)
-    with folder_lock(out, "vibroflow run", field="DIR"):
-        check_study_dir(out)  # again under the lock: another command may have written it
-        return _run_study(scenario, out, settings, shear_cell, progress, echo)
-
-
-def _run_study(scenario, out: Path, settings, shear_cell: bool, progress: bool,
-               echo: Callable[[str], None] | None) -> dict:
     settings = settings or {}
-    methods = []
+    methods = []  # every input checked before the folder is made
     for name in METHODS:
         m = method(name)
         methods.append((m, m.make_options(settings.get(name, {}))))
     if scenario.tub is None or scenario.fill is None:
         raise InputError("scenario: a study needs a tub-mode scenario (with [tub] and [fill]), "
                          "not explicit particles")
+    with folder_lock(out, "vibroflow run", field="DIR"):
+        check_study_dir(out)  # again under the lock: another command may have written it
+        return _run_study(scenario, out, methods, shear_cell, progress, echo)
+
+
+def _run_study(scenario, out: Path, methods: list, shear_cell: bool, progress: bool,
+               echo: Callable[[str], None] | None) -> dict:
     from vibroflow import __version__
 
     out.mkdir(parents=True, exist_ok=True)

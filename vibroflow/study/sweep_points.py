@@ -190,11 +190,10 @@ def plan_sweep(source: str, factors: list[float], vary: dict[str, list[tuple[str
         if key in fixed_keys:
             raise InputError(f"--set {fixed_keys[key]}: {key} is varied by the sweep; give it "
                              f"in {'--factors' if key == FACTOR_KEY else '--vary'} only")
-    base_scenario_sets, base_settings = split_settings(sets)
-    base = load_scenario(source, base_scenario_sets)
-    if base.tub is None or base.fill is None:
-        raise InputError(f"{source}: a sweep needs a tub-mode scenario (with [tub] and [fill]), "
-                         "not explicit particles")
+    _, base_settings = split_settings(sets)
+    # the base alone is not validated: only the points are run, and a base may be valid only
+    # with the varied values (4 200 balls in a tub that --vary fill.count=250,300 fills);
+    # every point's scenario is, below
     options_cache: dict[str, Any] = {}
     for name in METHODS:  # the fixed options first: their errors name --set
         options_cache[name] = method(name).make_options(base_settings.get(name, {}))
@@ -203,10 +202,16 @@ def plan_sweep(source: str, factors: list[float], vary: dict[str, list[tuple[str
     choices = [[(repr(f), f) for f in factors], *vary.values()]
     points: list[Point] = []
     seen: set[str] = set()
+    base = None
     for combo in itertools.product(*choices):
         overrides = [f"{k}={text}" for k, (text, _) in zip(keys, combo)]
         scenario_sets, settings = split_settings([*sets, *overrides])
         s = load_scenario(source, scenario_sets)
+        if s.tub is None or s.fill is None:
+            raise InputError(f"{source}: a sweep needs a tub-mode scenario (with [tub] and "
+                             "[fill]), not explicit particles")
+        if base is None:
+            base = s  # the first point stands for the base; its varied keys go below
         data = s.model_dump(mode="json")
         values: dict[str, Any] = {}
         for k, (_, v) in zip(keys, combo):
