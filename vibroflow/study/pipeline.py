@@ -136,10 +136,15 @@ def _run_stage(study: Study, stage: Stage, h: str) -> dict:
     try:
         result = stage.run(study, resume)
     except (Interrupted, KeyboardInterrupt) as exc:
-        # pending.json stays: the same command again resumes the stage from its checkpoint
-        where = f" ({exc.message})" if isinstance(exc, Interrupted) else ""
-        raise Interrupted(f"interrupted in the study's {stage.name} stage{where}; run the same "
-                          f"command again to go on from there (out: {study.out})") from None
+        # pending.json stays: the same command again resumes the stage from its checkpoint;
+        # of the stage's own line only where it stopped ("at t = ...", "while settling"): its
+        # advice is for its own command
+        where = ""
+        if isinstance(exc, Interrupted):
+            where = " " + exc.message.split(";")[0].removeprefix("interrupted").strip()
+        raise Interrupted(f"interrupted in the study's {stage.name} stage{where.rstrip()}; run "
+                          f"the same command again to go on from there (out: {study.out})"
+                          ) from None
     except InputError as exc:
         if resume and "checkpoint" in exc.message:
             # a damaged or foreign checkpoint of a stage the study resumes by itself
