@@ -311,3 +311,28 @@ def test_operating_system_errors_are_one_line(capsys, exc, code, line):
 def test_a_bug_is_not_disguised_as_input(capsys):
     with pytest.raises(ZeroDivisionError):
         _wrapped(ZeroDivisionError("a bug"))()
+
+
+# ---------------------------------------------------------------------------------------------
+# Results read back (`vibroflow compare`): a table that is not one is one line
+
+SEEDS = Path(__file__).resolve().parent / "data" / "tub47-dem-seeds"
+
+
+@pytest.mark.parametrize("cell, words", [
+    ("nan", "row 2, column samples = nan: must be a finite number"),
+    ("inf", "row 2, column samples = inf: must be a finite number"),
+    ("abc", "could not convert string 'abc'"),
+    ("-5", "row 2: solid_fraction = 0.1912256727, samples = -5.0: must be >= 0"),
+])
+def test_compare_refuses_a_bulk_table_with_no_measurement_in_it(tmp_path, cell, words):
+    import shutil
+
+    run = tmp_path / "run"
+    shutil.copytree(SEEDS / "seed1", run)
+    lines = (run / "bulk_velocity.csv").read_text().splitlines()
+    lines[2] = lines[2].rsplit(",", 1)[0] + "," + cell
+    (run / "bulk_velocity.csv").write_text("\n".join(lines) + "\n")
+    r = _cli("compare", str(run), "-r", str(SEEDS / "seed2"), "--e-seed", "0.2")
+    line = _one_line_error(r)
+    assert line.startswith(f"error: {run / 'bulk_velocity.csv'}: ") and words in line, line

@@ -492,7 +492,11 @@ def sweep(
         check_scheduler(scheduler)  # before the first line: a wrong address is one line
     where = scheduler or f"a local cluster of {workers or os.cpu_count()} worker(s)"
     typer.echo(f"{len(plan.points)} point(s) of {', '.join(plan.varied)} on {where}")
-    record = run_sweep(plan, out, scheduler=scheduler, workers=workers, echo=typer.echo)
+    try:
+        record = run_sweep(plan, out, scheduler=scheduler, workers=workers, echo=typer.echo)
+    except KeyboardInterrupt:
+        raise Interrupted(f"interrupted; the finished points are kept and a point cut short "
+                          f"resumes: run the same command again to go on (out: {out})") from None
     print_table(record)
     counts = summary_of(record)
     typer.echo(", ".join(f"{v} {k}" for k, v in sorted(counts.items()))

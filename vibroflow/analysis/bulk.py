@@ -312,6 +312,8 @@ def _infer_cell_size(x, z) -> float:
 
 def read_csv(path, cell_size: float | None = None) -> CellTable:
     """Read a bulk_velocity.csv (any method's) back into a CellTable (no per-batch data).
+    ValueError (one line, without the path: the caller names the file) on a table that is not
+    one: another header, text, NaN or inf in a number, a negative count.
 
     cell_size (m) defaults to the largest length of which every centre coordinate is a multiple
     (right for any table with two neighbouring cells along some row or column; pass it when
@@ -320,9 +322,18 @@ def read_csv(path, cell_size: float | None = None) -> CellTable:
     with open(path) as f:
         header = f.readline().strip().split(",")
     if tuple(h.strip() for h in header[:len(CSV_COLUMNS)]) != CSV_COLUMNS:
-        raise ValueError(f"{path}: header {header}: must start with {','.join(CSV_COLUMNS)}")
+        raise ValueError(f"header {','.join(header)}: must start with {','.join(CSV_COLUMNS)}")
     data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2, usecols=range(len(CSV_COLUMNS)))
+    bad = np.argwhere(~np.isfinite(data))
+    if bad.size:  # every row is a cell that held samples: a NaN or inf is no measurement
+        i, j = bad[0]
+        raise ValueError(f"row {i + 1}, column {CSV_COLUMNS[j]} = {data[i, j]}: must "
+                         "be a finite number")
     x, z, phi, vx, vz, n = (data[:, j] for j in range(len(CSV_COLUMNS)))
+    if (n < 0).any() or (phi < 0).any():
+        i = int(np.flatnonzero((n < 0) | (phi < 0))[0])
+        raise ValueError(f"row {i + 1}: solid_fraction = {phi[i]}, samples = {n[i]}: "
+                         "must be >= 0")
     h = _infer_cell_size(x, z) if cell_size is None else float(cell_size)
     return CellTable(x=x, z=z, solid_fraction=phi, vx=vx, vz=vz,
                      samples=np.rint(n).astype(np.int64), cell_size=h)

@@ -34,7 +34,10 @@ def field_dataset(csv_path, cell_size: float | None = None, method: str = ""):
 
     from vibroflow.analysis.bulk import read_csv
 
-    t = read_csv(csv_path, cell_size=cell_size)
+    try:
+        t = read_csv(csv_path, cell_size=cell_size)
+    except ValueError as e:
+        raise InputError(f"{csv_path}: {e}") from None
     h = t.cell_size
     ix, iz = t.ix, t.iz
     xs = np.arange(ix.min(), ix.max() + 1) if len(t) else np.zeros(0, np.int64)
