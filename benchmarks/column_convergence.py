@@ -8,7 +8,7 @@ The check of issues 4 and 6 (tests/test_axisymmetric.py): a cylinder of radius R
 height a R0 of the experiments' sand (vibroflow.continuum.column.sand_material) collapses on the
 rough (no-slip grid) floor, and its deposit is compared with Lube et al. 2004's run-out
 (r_inf - R0)/R0 = 1.6 a^(1/2) and Lajeunesse et al. 2004's height H_inf/R0 = 0.74 (a > 1.7;
-vibroflow.analysis.column).  The suite runs it on one grid; this script runs it on a sequence
+vibroflow.measure.column).  The suite runs it on one grid; this script runs it on a sequence
 of grids R0/n (n from --grids), in each formulation of --method, and prints for each its
 run-out and height (the mean thickness within 0.1 R0 of the axis, the tests' measure) beside
 the laws, then the convergence of each sequence: the successive changes, their ratio q (a
@@ -100,7 +100,7 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args(argv)
-    from vibroflow.analysis.column import LAJEUNESSE_2004, LUBE_2004
+    from vibroflow.measure.column import LAJEUNESSE_2004, LUBE_2004
     from vibroflow.continuum.column import SAND_FRICTION_DEG, sand_material
     from vibroflow.errors import InputError
 

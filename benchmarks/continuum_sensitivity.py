@@ -106,7 +106,7 @@ def run_member(job: tuple) -> dict:
     settling time s, output folder, reference csv, cell size m, min solid fraction).
     Returns {strength, E, wall_time_s}."""
     (method, scenario, cal, opts, settle, out, ref_csv, h, phi_min) = job
-    from vibroflow.analysis.bulk import read_csv
+    from vibroflow.measure.bulk import read_csv
     from vibroflow.analysis.compare import field_difference
 
     t0 = time.perf_counter()
@@ -127,8 +127,8 @@ def run_member(job: tuple) -> dict:
 
 
 def _mean_se(values) -> tuple[float, float]:
-    """Mean and standard error of an ensemble's members (analysis.stats.stderr_of_batches)."""
-    from vibroflow.analysis.stats import stderr_of_batches
+    """Mean and standard error of an ensemble's members (measure.stats.stderr_of_batches)."""
+    from vibroflow.measure.stats import stderr_of_batches
 
     return float(sum(values) / len(values)), stderr_of_batches(values)
 

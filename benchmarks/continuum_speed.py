@@ -87,7 +87,7 @@ def worker(a) -> dict:
     """One case in this process (NUMBA_NUM_THREADS set by the parent)."""
     import numba
 
-    from vibroflow.analysis.bulk import read_csv
+    from vibroflow.measure.bulk import read_csv
     from vibroflow.analysis.compare import field_difference
 
     scenario, cal = _inputs(a)

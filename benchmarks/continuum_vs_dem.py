@@ -64,7 +64,7 @@ PROBES = ("P1", "P2", "P3", "P4", "P5")
 
 
 def _write_json(path: Path, data) -> None:
-    from vibroflow.analysis.summary import json_safe
+    from vibroflow.measure.summary import json_safe
 
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(".tmp-" + path.name)
@@ -126,7 +126,7 @@ def run_dem_here(scenario, folder: Path) -> None:
 
 def load_result(folder: Path, cell_size: float) -> dict:
     """A run's summary.json with its bulk_velocity.csv (cells of cell_size m) as "_table"."""
-    from vibroflow.analysis.bulk import read_csv
+    from vibroflow.measure.bulk import read_csv
 
     summary = json.loads((folder / "summary.json").read_text())
     summary["_table"] = read_csv(folder / "bulk_velocity.csv", cell_size=cell_size)

@@ -169,7 +169,7 @@ def _summary(folder: Path) -> dict:
 
 
 def _table(folder: Path, s):
-    from vibroflow.analysis.bulk import read_csv
+    from vibroflow.measure.bulk import read_csv
     return read_csv(folder / "bulk_velocity.csv", cell_size=s.analysis.cell_size)
 
 

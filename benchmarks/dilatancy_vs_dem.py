@@ -43,7 +43,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True, type=Path)
     args = ap.parse_args(argv)
 
-    from vibroflow.analysis.bulk import read_csv
+    from vibroflow.measure.bulk import read_csv
     from vibroflow.analysis.compare import field_difference
     from vibroflow.calibration.calibrate import read_calibration
     from vibroflow.calibration.dem_result import DEMResult

@@ -21,7 +21,7 @@ Printed for each method, over `cycles` cycles after 10 cycles of start-up, sampl
 cycle, the phase-averaged velocity gradient binned on 15 mm cells (mass-weighted):
 
 * the phase-field shear rate, sqrt(2 D':D') of the phase-averaged field (plane strain), the
-  measure of vibroflow.analysis.phase_shear, mean over the bed and the phases;
+  measure of vibroflow.measure.phase_shear, mean over the bed and the phases;
 * its parts, the mean |dvz/dz| (the bed stretched and squeezed vertically) and |D_xz|;
 * the bed's vertical velocity (mm/s) at phases 2/8 (flight) and 6/8 (landing) by 30 mm bands
   of height, floor to surface: a bed in flight moves nearly as a body;

@@ -9,7 +9,7 @@ impacts"; benchmarks/README.md "Session 12").
 For the DEM run in DIR (its dem.h5 and, by default, its calibration.toml) this prints:
 
 * the DEM's shear rate measured as a continuum measures it (the phase-resolved velocity field
-  of its snapshots on the analysis cells, vibroflow.analysis.phase_shear): the bed's
+  of its snapshots on the analysis cells, vibroflow.measure.phase_shear): the bed's
   solid-weighted mean and the near-wall one, with batch-means standard errors;
 * the impact relation v = c0 + c1 d gamma_dot fitted on that measure
   (calibration.impacts.impact_relations_on_cells) beside the calibration's relation fitted on

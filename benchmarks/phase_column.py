@@ -66,7 +66,7 @@ def column_by_phase(positions, velocities, poses, phases, per_cycle, x0, band, h
 
 
 def packing(table) -> dict:
-    """Packing figures of a bulk_velocity.csv table (vibroflow.analysis.bulk.CellTable):
+    """Packing figures of a bulk_velocity.csv table (vibroflow.measure.bulk.CellTable):
     dense-cell mean solid fraction (cells >= 0.55), solid-fraction-weighted mean solid fraction
     and the centre of mass's height (m, cell centres)."""
     phi = np.asarray(table.solid_fraction, float)
@@ -128,7 +128,7 @@ def main(argv=None) -> int:
     import h5py
 
     import vibroflow.continuum.run as R
-    from vibroflow.analysis.bulk import read_csv
+    from vibroflow.measure.bulk import read_csv
     from vibroflow.calibration.calibrate import read_calibration
     from vibroflow.calibration.dem_result import DEMResult
 

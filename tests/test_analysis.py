@@ -14,14 +14,14 @@ import h5py
 import numpy as np
 import pytest
 
-from vibroflow.analysis import (CellTable, batch_means, batches_of_whole_cycles, cell_table,
-                                circulation, field_difference, fields_agree, impact_stats,
-                                probe_values, read_csv, strengths_agree, stream_function,
-                                tub_summary, wall_contact_stats, write_csv)
-from vibroflow.analysis import vtk
+from vibroflow.analysis import field_difference, fields_agree, strengths_agree
+from vibroflow.io import vtk
+from vibroflow.measure import (CellTable, batch_means, batches_of_whole_cycles, cell_table,
+                               circulation, impact_stats, probe_values, read_csv,
+                               stream_function, tub_summary, wall_contact_stats, write_csv)
 from vibroflow.analysis.compare import (bed_thirds, difference_by_region, difference_to_seeds,
                                         ensemble_mean, seed_scatter)
-from vibroflow.analysis.contacts import mean_by_region
+from vibroflow.measure.contacts import mean_by_region
 from vibroflow.scenario.model import Scenario
 from vibroflow.tub.geometry import TubGeometry, cross_section_area, distance_to_wall_np
 from vibroflow.tub.motion import TubMotion, pose_np

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vibroflow.analysis.column import (LAJEUNESSE_2004, LUBE_2004, LUBE_2005,
+from vibroflow.measure.column import (LAJEUNESSE_2004, LUBE_2004, LUBE_2005,
                                        quasistatic_runout_axisymmetric)
 from vibroflow.continuum.boundary import Plane
 from vibroflow.continuum.column import SAND_FRICTION_DEG, run_column, sand_material

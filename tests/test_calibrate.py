@@ -204,7 +204,7 @@ def test_coarse_grained_fields_of_the_run_conserve_mass_and_momentum(calibrated_
     times L_y is the balls' mass, and the integral of the momentum density the balls' momentum
     relative to the tub (the time average over the window's snapshots), computed here from
     dem.h5 independently of the calibration code."""
-    from vibroflow.analysis.stats import batches_of_whole_cycles
+    from vibroflow.measure.stats import batches_of_whole_cycles
     from vibroflow.calibration.run_fields import read_fields
     from vibroflow.tub.motion import relative_velocity_tub_axes_np
 

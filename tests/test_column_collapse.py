@@ -2,7 +2,7 @@
 published scaling with aspect ratio and against vibroflow's own DEM of the same column.
 
 A column of width L0 and height H0 (a = H0/L0) against a wall, on a rough floor, released at
-t = 0, spreads to a deposit of run-out L_inf and height H_inf (vibroflow.analysis.column, which
+t = 0, spreads to a deposit of run-out L_inf and height H_inf (vibroflow.measure.column, which
 measures every method alike and holds the published laws).
 
 What is checked, and against what:
@@ -35,7 +35,7 @@ import numpy as np
 import pytest
 
 from dem_helpers import one_thread
-from vibroflow.analysis.column import (LAJEUNESSE_2004, LAJEUNESSE_2005, LUBE_2004, LUBE_2005,
+from vibroflow.measure.column import (LAJEUNESSE_2004, LAJEUNESSE_2005, LUBE_2004, LUBE_2005,
                                        measure_continuum_deposit, measure_deposit,
                                        quasistatic_runout, quasistatic_runout_axisymmetric,
                                        slab_areas)
@@ -143,7 +143,7 @@ def test_quasistatic_cone_holds_the_cylinder_volume(a):
 
 
 def test_published_laws():
-    """The fits as published (module docstring of vibroflow.analysis.column)."""
+    """The fits as published (module docstring of vibroflow.measure.column)."""
     assert LUBE_2005.runout(0.5) == pytest.approx(0.6)
     assert LUBE_2005.runout(3.0) == pytest.approx(1.9 * 3.0 ** (2 / 3))
     assert LUBE_2005.height(0.5) == 0.5

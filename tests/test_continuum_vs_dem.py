@@ -28,7 +28,7 @@ from pathlib import Path
 
 import pytest
 
-from vibroflow.analysis.bulk import read_csv
+from vibroflow.measure.bulk import read_csv
 from vibroflow.analysis.compare import field_difference, strengths_agree
 from vibroflow.calibration.calibrate import read_calibration
 from vibroflow.scenario.io import load_scenario

@@ -258,7 +258,7 @@ def test_bagnold_inclined_layer_profile_and_convergence():
 def _deposit(L0, H0, dx, method):
     """Run-out (L_inf - L0)/L0 and height H_inf/L0 of a column collapse by `method`
     ("eulerian" or "lagrangian"; both symmetric, folded about x = 0, floor friction 0.40),
-    measured by the shared vibroflow.analysis.column.measure_continuum_deposit; and the
+    measured by the shared vibroflow.measure.column.measure_continuum_deposit; and the
     relative mass error of the Eulerian run (0 for the Lagrangian's, whose points keep their
     masses)."""
     if method == "eulerian":
@@ -301,7 +301,7 @@ def test_continuum_command_eulerian_writes_the_lagrangian_outputs(run_cli, tmp_p
     the Lagrangian run's keys (the DEM's, and its continuum block's), bulk_velocity.csv on the
     15 mm cells with the bed's solid fraction where it is dense, the grid fields at the 8
     samples of the last cycle, the mass conserved to round-off, no checkpoint left."""
-    from vibroflow.analysis.bulk import read_csv
+    from vibroflow.measure.bulk import read_csv
     from vibroflow.continuum.run import LagrangianOptions, run_lagrangian
     from vibroflow.scenario.io import load_scenario
 
@@ -370,7 +370,7 @@ def test_eulerian_low_column_keeps_its_top_at_the_experiments_scale():
     the run-out is past Lube et al.'s 1.2 a (0.75 against 0.60; the Lagrangian formulation on
     the same grid gives 0.65 and its run-out grows with the refinement,
     tests/test_column_collapse.py: the plane-strain continuum has no channel side walls)."""
-    from vibroflow.analysis.column import LUBE_2005
+    from vibroflow.measure.column import LUBE_2005
 
     a = 0.5
     runout, height = _big_deposit(a, 20, "eulerian")
@@ -386,7 +386,7 @@ def test_eulerian_tall_column_runs_out_as_the_lagrangian():
     more than half (tests/test_column_collapse.py: the tub47 glass-bead friction and no
     channel side walls); the height at the symmetry plane is not compared (1.13 against 0.90,
     Lube's a^(2/5) = 1.55: neither formulation meets it)."""
-    from vibroflow.analysis.column import LUBE_2005
+    from vibroflow.measure.column import LUBE_2005
 
     a = 3.0  # (about 2 minutes)
     r_e, _ = _big_deposit(a, 10, "eulerian")
@@ -490,7 +490,7 @@ def test_rough_floor_tall_column_runs_out_as_the_lagrangian():
     run-outs agree within 10 % (measured 5.41 Eulerian, 5.72 Lagrangian) and both run past
     Lube et al. 2005's 1.9 a^(2/3) = 3.95 by more than a third: the continuum's excess mobility
     (benchmarks/README.md, sessions 5 and 6) is the model's, the same on the fixed mesh."""
-    from vibroflow.analysis.column import LUBE_2005
+    from vibroflow.measure.column import LUBE_2005
 
     r_e, h_e = _rough_deposit(3.0, 10, "eulerian")
     r_l, h_l = _rough_deposit(3.0, 10, "lagrangian")
@@ -508,7 +508,7 @@ def test_sampled_solid_fraction_is_even_on_cells_that_do_not_divide_the_analysis
     at the fixed centres the bed's interior is striped (on tub47: 0.62 +- 0.27, the DEM's
     +- 0.006); spread, over this short run's 16 samples, it is even to the samples' resolution."""
     import vibroflow.continuum.eulerian.run as ER
-    from vibroflow.analysis.bulk import read_csv
+    from vibroflow.measure.bulk import read_csv
     from vibroflow.scenario.io import load_scenario
 
     offsets = np.array([ER.cell_offset(j) for j in range(512)])

@@ -17,7 +17,7 @@ import math
 import numpy as np
 import pytest
 
-from vibroflow.analysis.bulk import CellTable, write_csv
+from vibroflow.measure.bulk import CellTable, write_csv
 
 U, SIGMA, H = 0.05, 0.005, 0.015
 N_CELLS = 4000

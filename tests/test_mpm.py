@@ -365,7 +365,7 @@ def test_continuum_command_writes_dem_comparable_results(run_cli, tmp_path):
     summary.json with the DEM's keys, readable by the analysis code."""
     import json
 
-    from vibroflow.analysis.bulk import read_csv
+    from vibroflow.measure.bulk import read_csv
 
     out = tmp_path / "cont"
     cal = tmp_path / "calibration.toml"
@@ -648,7 +648,7 @@ def test_shear_rate_map_holds_both_measures_and_infers_impacts(tmp_path):
     field a + b x over points symmetric in each cell gives a + b x_cell exactly); the impact
     columns are the calibrated c0 + c1 d gamma_dot of the phase-field rate, with the relation
     fitted on the continuum's measure (c0_cells_m_s, c1_cells) preferred to the fine one."""
-    from vibroflow.analysis.phase_shear import PhaseShearAccumulator
+    from vibroflow.measure.phase_shear import PhaseShearAccumulator
     from vibroflow.continuum.run import Samples, impact_relation, write_shear_rate_csv
 
     h, a, b, G, length = 0.015, 2.0, 40.0, 1.5, 0.0635

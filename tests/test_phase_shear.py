@@ -1,5 +1,5 @@
 """The shear rate of a sampled flow's phase-resolved velocity field
-(vibroflow.analysis.phase_shear), the measure both the DEM's impact calibration and the continuum
+(vibroflow.measure.phase_shear), the measure both the DEM's impact calibration and the continuum
 runs use, against flows whose shear rate is known exactly."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from vibroflow.analysis.phase_shear import (PhaseShearAccumulator, equivalent_shear_rate_2d,
+from vibroflow.measure.phase_shear import (PhaseShearAccumulator, equivalent_shear_rate_2d,
                                             near_wall_nodes)
 from vibroflow.tub.motion import rigid_velocity, tub_to_lab
 

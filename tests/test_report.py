@@ -73,7 +73,7 @@ def test_impacts_binned_by_analysis_cell():
 
 def test_report_impacts_are_the_summarys_impacts(study):  # noqa: F811
     """The impact map counts exactly the ball-ball impacts the DEM summary averages (another
-    code path: vibroflow.analysis.contacts.impact_stats_chunked), with the same mean speed."""
+    code path: vibroflow.measure.contacts.impact_stats_chunked), with the same mean speed."""
     from vibroflow.report.data import StudyData
 
     _, out, summary, _ = study

@@ -47,7 +47,7 @@ def test_pipeline_runs_end_to_end(study):
     import xarray as xr
 
     import vibroflow
-    from vibroflow.analysis.bulk import read_csv
+    from vibroflow.measure.bulk import read_csv
     from vibroflow.analysis.compare import field_difference
 
     scenario, out, summary, lines = study

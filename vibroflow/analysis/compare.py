@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vibroflow.analysis.bulk import CellTable
+from vibroflow.measure.bulk import CellTable
 
 #: tub47.md "Judging a comparison"
 STRENGTH_REL_TOL = 0.10

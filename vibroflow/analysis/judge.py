@@ -28,11 +28,11 @@ from pathlib import Path
 
 import numpy as np
 
-from vibroflow.analysis.bulk import CellTable, read_csv
+from vibroflow.measure.bulk import CellTable, read_csv
 from vibroflow.analysis.compare import (FIELD_FACTOR, difference_to_seeds, ensemble_mean,
                                         field_difference, fields_agree, seed_scatter,
                                         strengths_agree)
-from vibroflow.analysis.summary import json_safe
+from vibroflow.measure.summary import json_safe
 from vibroflow.errors import InputError
 from vibroflow.io.atomic import write_json_atomic
 

@@ -36,7 +36,7 @@ import numpy as np
 import tomli_w
 
 from vibroflow import __version__
-from vibroflow.analysis.summary import geometry_of
+from vibroflow.measure.summary import geometry_of
 from vibroflow.scenario.model import find_contact
 from vibroflow.errors import InputError, Interrupted
 from vibroflow.io.atomic import write_text_atomic
@@ -538,7 +538,7 @@ def _calibration_record(res, cg_info, wf, rel, rheo, elastic, dp, p_bed, phi_bed
             "cells_shear_rate_model": (
                 "v = c0_cells + c1_cells d gamma_dot, gamma_dot the cycle mean of the "
                 "phase-resolved velocity field on the analysis cells' centres "
-                "(vibroflow.analysis.phase_shear: the continuum's measure, so a continuum "
+                "(vibroflow.measure.phase_shear: the continuum's measure, so a continuum "
                 "run uses these)"),
             "cell_size_m": _f(rel_cells["cell_size_m"]),
             "dem_bed_shear_rate_cells_1_s": _f(rel_cells["bed_mean_shear_rate_1_s"]),

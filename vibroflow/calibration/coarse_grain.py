@@ -16,7 +16,7 @@ y: the kernel W is two-dimensional in (x, z), normalised so that its integral ov
 is 1, and a per-unit-volume field is the kernel sum divided by the slab depth L_y
 (default: the tub's length), e.g. rho(x, z) = sum_i m_i W(x - x_i, z - z_i) / L_y.
 The grid is cell-centred with spacing h (default: tub47's 15 mm cells, centres on multiples of
-h, as vibroflow.analysis.bulk), covering the tub's cross-section (bulk.grid_extent) plus a margin
+h, as vibroflow.measure.bulk), covering the tub's cross-section (bulk.grid_extent) plus a margin
 of cells wide enough to hold the kernel's support, so that no deposited mass, momentum or stress
 leaves the grid (the integral identities then hold exactly).  A field value is the smoothed
 field at the cell centre (a point value, not a cell average).
@@ -71,7 +71,7 @@ mass-weighted (Favre) mean velocity and the kinetic stress <K> - <P><P>/<rho> co
 fluctuation of each ball about that time-mean velocity, so it includes the local velocity's own
 oscillation over the cycle.  Phase-resolved fields (`n_phases`, `phase_bin`) do the same within
 each phase bin, and there the kinetic stress is the fluctuation at that phase.  With
-`n_batches` >= 2 (batches of whole cycles: vibroflow.analysis.stats.batches_of_whole_cycles)
+`n_batches` >= 2 (batches of whole cycles: vibroflow.measure.stats.batches_of_whole_cycles)
 every field also gets `<name>_stderr`, the batch-means standard error of the same derivation
 done per batch.
 
@@ -86,8 +86,8 @@ import math
 import numba as nb
 import numpy as np
 
-from vibroflow.analysis.bulk import grid_extent
-from vibroflow.analysis.stats import phase_bins, stderr_of_batches  # noqa: F401 (re-exported)
+from vibroflow.measure.bulk import grid_extent
+from vibroflow.measure.stats import phase_bins, stderr_of_batches  # noqa: F401 (re-exported)
 from vibroflow.errors import InputError
 from vibroflow.tub.geometry import TubGeometry
 from vibroflow.tub.motion import lab_to_tub_np, pose_np, relative_velocity_tub_axes_np

@@ -18,7 +18,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from vibroflow.analysis.stats import batches_of_whole_cycles
+from vibroflow.measure.stats import batches_of_whole_cycles
 from vibroflow.errors import InputError
 from vibroflow.tub.motion import lab_to_tub_np, relative_velocity_tub_axes_np
 
@@ -128,7 +128,7 @@ class DEMResult:
 
     def batches(self) -> np.ndarray:
         """Batch of whole cycles (0 .. run.batches-1, or -1 outside the window) of each
-        snapshot (vibroflow.analysis.stats.batches_of_whole_cycles)."""
+        snapshot (vibroflow.measure.stats.batches_of_whole_cycles)."""
         t0, t1 = self.window()
         return batches_of_whole_cycles(self.times, t0, t1, float(self.scenario.motion.frequency),
                                        int(self.scenario.run.batches))

@@ -109,7 +109,7 @@ def window_impacts(res: DEMResult, n_phases: int, chunk: int = 2_000_000):
     """Yield (kind, normal speed m/s, contact point (tub frame, m), phase bin) arrays of the
     impacts of the averaging window's whole cycles, `chunk` impacts read at a time (a tub47
     run holds ~25 million)."""
-    from vibroflow.analysis.stats import batches_of_whole_cycles, phase_bins
+    from vibroflow.measure.stats import batches_of_whole_cycles, phase_bins
 
     if not res.has("impacts/kind"):
         return
@@ -202,7 +202,7 @@ def impact_relations_on_cells(run, cell_size: float | None = None,
                               min_solid_fraction: float = 0.1, chunk: int = 2_000_000) -> dict:
     """The impact relation v = c0 + c1 d gamma_dot fitted against the shear rate *as a
     continuum run measures it*: the phase-resolved velocity field of the DEM's snapshots on the
-    analysis cells' centres (vibroflow.analysis.phase_shear, the same code the continuum
+    analysis cells' centres (vibroflow.measure.phase_shear, the same code the continuum
     drivers use on their samples), not the 5 mm coarse-grained field of `impact_relations`.
 
     Why: the fine field resolves the one-to-two-diameter slip layer at the wall, where its shear
@@ -220,8 +220,8 @@ def impact_relations_on_cells(run, cell_size: float | None = None,
     "cell_size_m", "bed_mean_shear_rate_1_s",
     "near_wall_shear_rate_1_s" (the DEM's own values of the continuum's two measures, with
     their standard errors)}."""
-    from vibroflow.analysis.phase_shear import near_wall_nodes, phase_shear_of_snapshots
-    from vibroflow.analysis.summary import geometry_of
+    from vibroflow.measure.phase_shear import near_wall_nodes, phase_shear_of_snapshots
+    from vibroflow.measure.summary import geometry_of
 
     own = not isinstance(run, DEMResult)
     res = DEMResult.open(run) if own else run

@@ -4,7 +4,7 @@ the DEM's ball-wall contacts (issue 3 section 3; tub47.md "Wall contacts").
 What is measured (contacts sampled at the snapshots of the averaging window, F_n > 0):
 * the distribution of |F_t| / F_n, its mean, the ratio of sums sum|F_t| / sum F_n and the
   fraction of contacts at the Coulomb limit (sliding) against those below it (rolling or
-  sticking), with batch-means standard errors (vibroflow.analysis.contacts);
+  sticking), with batch-means standard errors (vibroflow.measure.contacts);
 * the same along the U wall (arc position s from the bottom, + towards +x), and, where the
   contact forces are stored, the *mobilised* friction along the wall: the signed tangential
   force along the profile, sum F_s / sum F_n, whose sign says which way the bed drags the wall;
@@ -34,9 +34,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from vibroflow.analysis.contacts import wall_contact_stats
-from vibroflow.analysis.stats import batch_means
-from vibroflow.analysis.summary import geometry_of
+from vibroflow.measure.contacts import wall_contact_stats
+from vibroflow.measure.stats import batch_means
+from vibroflow.measure.summary import geometry_of
 from vibroflow.scenario.model import find_contact
 from vibroflow.dem.walls import WALL_PARTITION_HI, WALL_PARTITION_LO, WALL_U
 

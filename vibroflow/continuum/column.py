@@ -7,7 +7,7 @@ the planar column of the channel experiments (Lube, Huppert, Sparks & Freundt 20
 against a wall) and of the mu(I) continuum simulations of Lagree, Staron & Popinet (2011,
 J. Fluid Mech. 686, 378) and Dunatunga & Kamrin (2015, J. Fluid Mech. 779, 483, section 5.2, the
 same elasto-viscoplastic MPM as this package's); its deposit is measured by
-`vibroflow.analysis.column` from `ColumnRun.deposit_points()`.
+`vibroflow.measure.column` from `ColumnRun.deposit_points()`.
 
 Set-up choices, and why:
 
@@ -52,7 +52,7 @@ Set-up choices, and why:
   0.90 - 0.93 L0 at the symmetry plane against a^(2/5) = 1.55), tests/test_column_collapse.py;
 * axisymmetric (`axisymmetric=True`): the cylindrical column of radius L0 = R0 of Lube,
   Huppert, Sparks & Hallworth (2004, J. Fluid Mech. 508, 175) and Lajeunesse, Mangeney-Castelnau
-  & Vilotte (2004, Phys. Fluids 16, 2371), the experiments the laws of vibroflow.analysis.column
+  & Vilotte (2004, Phys. Fluids 16, 2371), the experiments the laws of vibroflow.measure.column
   LUBE_2004 and LAJEUNESSE_2004 were fitted on, as the axisymmetric MPM of
   MPMSystem.axisymmetric: the half-plane r >= 0 of the section, points of mass rho_c sp^2 r
   per radian, the hoop stress K_0 sigma_zz at the start like sigma_xx; the floor is the rough
@@ -116,7 +116,7 @@ class ColumnRun:
 
     def deposit_points(self) -> tuple[np.ndarray, np.ndarray]:
         """(distance from the wall, symmetry plane or axis (m), area (m^2 per metre)) of every
-        point, for vibroflow.analysis.column: the area is the point's mass over the critical
+        point, for vibroflow.measure.column: the area is the point's mass over the critical
         density (the column's, to 1e-3), so the areas of a half-column add up to L0 H0; a
         symmetric run's points are folded about x = 0 with half their area each; an
         axisymmetric run's area is the meridian area V / r of its volume per radian V, so that
@@ -131,10 +131,10 @@ class ColumnRun:
         return x.copy(), area
 
     def deposit(self, wall_window: float | None = None):
-        """The deposit measured as every continuum's is (vibroflow.analysis.column.
+        """The deposit measured as every continuum's is (vibroflow.measure.column.
         measure_continuum_deposit of `deposit_points`, grains of the material's diameter; the
         height within `wall_window` (m) of the wall or axis when given)."""
-        from vibroflow.analysis.column import measure_continuum_deposit
+        from vibroflow.measure.column import measure_continuum_deposit
 
         return measure_continuum_deposit(*self.deposit_points(), self.point_side,
                                          self.material.diameter, wall_window=wall_window)

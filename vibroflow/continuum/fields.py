@@ -71,7 +71,7 @@ def write_grid_vtr(path, grid: Grid, fields: dict, y: float = 0.0) -> str:
     shear_rate."""
     from pyevtk.hl import gridToVTK
 
-    from vibroflow.analysis.vtk import atomic_vtk
+    from vibroflow.io.vtk import atomic_vtk
 
     def c(a):  # (nx, nz) -> contiguous (nx, 1, nz)
         return np.ascontiguousarray(np.asarray(a, dtype=np.float64)[:, None, :])

@@ -54,10 +54,10 @@ from pathlib import Path
 import numba as nb
 import numpy as np
 
-from vibroflow.analysis.phase_shear import (PhaseShear, near_wall_nodes, node_grid,
+from vibroflow.measure.phase_shear import (PhaseShear, near_wall_nodes, node_grid,
                                             phase_shear_of_snapshots)
-from vibroflow.analysis.stats import batch_means, batches_of_whole_cycles
-from vibroflow.analysis.summary import geometry_of, json_safe, tub_summary
+from vibroflow.measure.stats import batch_means, batches_of_whole_cycles
+from vibroflow.measure.summary import geometry_of, json_safe, tub_summary
 from vibroflow.errors import InputError, Interrupted
 # write_json_atomic: also imported from here by the Eulerian run
 from vibroflow.io.atomic import write_json_atomic, write_text_atomic
@@ -470,7 +470,7 @@ def shear_rate(L: np.ndarray) -> np.ndarray:
 def _write_points_vtu(path: Path, state: MPMState, rate: np.ndarray, length: float,
                       solid_density: float) -> str:
     """The material points as a ParaView point cloud (tub frame, y = the slice's middle)."""
-    from vibroflow.analysis.vtk import write_snapshot_vtu
+    from vibroflow.io.vtk import write_snapshot_vtu
 
     n = state.n
     pos = np.stack([state.x[:, 0], np.full(n, 0.5 * length), state.x[:, 1]], axis=1)
@@ -764,7 +764,7 @@ def _lagrangian_results(scenario, out: Path, calibration, options, vtk, system, 
     n = state.n
     n_steps = state.step
     if vtk:
-        from vibroflow.analysis.vtk import write_pvd
+        from vibroflow.io.vtk import write_pvd
 
         write_pvd(out / VTK_DIR / "points.pvd", samples.vtk["points"])
         write_pvd(out / VTK_DIR / "grid.pvd", samples.vtk["grid"])
@@ -813,7 +813,7 @@ def _vibrate(scenario, system, state, samples: Samples, geo, material, times, ou
     buf_p, buf_v = np.zeros((n, 3)), np.zeros((n, 3))
     arc, gap = np.zeros(n), np.zeros(n)
     if vtk:
-        from vibroflow.analysis.vtk import write_tub_surface
+        from vibroflow.io.vtk import write_tub_surface
 
         (out / VTK_DIR).mkdir(exist_ok=True)
         write_tub_surface(out / VTK_DIR / "tub.vtu", geo)

@@ -590,7 +590,7 @@ def _summary(scenario, system, state, h5path, out_dir, wall, settle_info, explic
             {"id": i, "position": state.pos[i].tolist(), "velocity": state.vel[i].tolist(),
              "angular_velocity": state.omg[i].tolist()} for i in range(state.n)]
         return summary
-    from ..analysis.summary import tub_summary
+    from ..measure.summary import tub_summary
     summary.update(tub_summary(h5path, scenario, bulk_csv=out_dir / "bulk_velocity.csv"))
     return summary
 
@@ -598,8 +598,8 @@ def _summary(scenario, system, state, h5path, out_dir, wall, settle_info, explic
 def _write_vtk(h5path: Path, out_dir: Path, scenario) -> None:
     import h5py
 
-    from ..analysis import vtk as V
-    from ..analysis.summary import geometry_of
+    from ..io import vtk as V
+    from ..measure.summary import geometry_of
     vdir = out_dir / "vtk"
     vdir.mkdir(exist_ok=True)
     entries = []

@@ -65,7 +65,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vibroflow.analysis.summary import geometry_of
+from vibroflow.measure.summary import geometry_of
 from vibroflow.dem.laws import damping_ratio
 from vibroflow.dem.walls import WALL_PARTITION_HI, WALL_PARTITION_LO, WALL_U
 from vibroflow.errors import InputError
@@ -1589,7 +1589,7 @@ def _import(post: Path, scenario, n0: int, tmp_dir: Path) -> dict:
         summary["ball_contacts_repulsive_fraction"] = (
             pair_check.repulsive / pair_check.contacts if pair_check.contacts else float("nan"))
     summary["impacts_available"] = False
-    from vibroflow.analysis.summary import tub_summary
+    from vibroflow.measure.summary import tub_summary
     summary.update(tub_summary(h5, scenario, bulk_csv=tmp_dir / BULK_CSV))
     return summary
 
@@ -1604,7 +1604,7 @@ def _find_log(post: Path) -> Path | None:
 
 def _json_safe(obj):
     try:
-        from vibroflow.analysis.summary import json_safe
+        from vibroflow.measure.summary import json_safe
         return json_safe(obj)
     except ImportError:  # pragma: no cover
         return obj

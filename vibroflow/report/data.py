@@ -55,8 +55,8 @@ def bin_impacts(chunks, cell_size: float) -> ImpactCells:
     """Mean speed and count per square cell of side cell_size (m) centred on its multiples
     (the analysis cells of tub47.md "Bulk velocity"), from an iterable of (position_tub (M, 3)
     m, normal_speed (M,) m/s) chunks of impacts (a tub47 run holds tens of millions: they are
-    never all in memory).  The per-chunk means are vibroflow.analysis.contacts.mean_by_region."""
-    from vibroflow.analysis.contacts import mean_by_region
+    never all in memory).  The per-chunk means are vibroflow.measure.contacts.mean_by_region."""
+    from vibroflow.measure.contacts import mean_by_region
 
     h = float(cell_size)
     acc: dict[tuple[int, int], list[float]] = {}
@@ -144,7 +144,7 @@ class StudyData:
 
     @property
     def geometry(self):
-        from vibroflow.analysis.summary import geometry_of
+        from vibroflow.measure.summary import geometry_of
 
         return geometry_of(self.scenario)
 
@@ -331,12 +331,12 @@ def _scenario(out: Path):
 
 def _dem_impacts(h5: Path, scenario, chunk: int = 2_000_000):
     """The DEM's ball-ball impacts of the averaging window's whole cycles (the impacts its
-    summary averages: vibroflow.analysis.stats.batches_of_whole_cycles) by analysis cell."""
+    summary averages: vibroflow.measure.stats.batches_of_whole_cycles) by analysis cell."""
     if not h5.is_file():
         return None, f"no {DEM}/dem.h5: no measured impacts"
     import h5py
 
-    from vibroflow.analysis.stats import batches_of_whole_cycles
+    from vibroflow.measure.stats import batches_of_whole_cycles
     from vibroflow.dem.walls import KIND_BALL_BALL
 
     run = scenario.run

@@ -169,7 +169,7 @@ def _shear(data: StudyData) -> str:
     out.append("<p>Cycle-mean shear rate in each probe's cell: for the DEM the mass-weighted "
                "mean of the coarse-grained field's grid points in the cell (5 mm grid), for a "
                "continuum method the cycle mean of its phase-resolved velocity field's shear "
-               "rate at the cell's centre (vibroflow.analysis.phase_shear).</p>")
+               "rate at the cell's centre (vibroflow.measure.phase_shear).</p>")
     if data.dem_fields is None:
         out.append(_note(data.notes.get("dem_fields", "no DEM fields")))
     return "\n".join(out)

@@ -32,7 +32,7 @@ def field_dataset(csv_path, cell_size: float | None = None, method: str = ""):
     import numpy as np
     import xarray as xr
 
-    from vibroflow.analysis.bulk import read_csv
+    from vibroflow.measure.bulk import read_csv
 
     try:
         t = read_csv(csv_path, cell_size=cell_size)

@@ -173,7 +173,7 @@ def compare(study: Study) -> dict:
     continuum method's field difference E against the DEM, circulation verdict (tub47.md
     "Judging a comparison"), probe differences and cost ratio."""
     from vibroflow import __version__
-    from vibroflow.analysis.bulk import read_csv
+    from vibroflow.measure.bulk import read_csv
     from vibroflow.analysis.compare import field_difference, strengths_agree
 
     out = study.out

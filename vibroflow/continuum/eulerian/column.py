@@ -21,7 +21,7 @@ energy), on a fixed box mesh (mesh.EulerianMesh.box):
   Lajeunesse et al. 2004, as the Lagrangian check's; the mesh [0, reach] has no wall on the
   axis (mesh.EulerianMesh.box with axis=True).
 
-The deposit is measured by vibroflow.analysis.column from `deposit_points()`: each cell stands
+The deposit is measured by vibroflow.measure.column from `deposit_points()`: each cell stands
 for its mass over the critical density (m^2 per metre of thickness), as the Lagrangian's points.
 """
 from __future__ import annotations
@@ -67,7 +67,7 @@ class EulerianColumnRun:
 
     def deposit_points(self) -> tuple[np.ndarray, np.ndarray]:
         """(distance from the wall or symmetry plane (m), area (m^2 per metre)) of every cell
-        holding material, for vibroflow.analysis.column: its mass over the critical density
+        holding material, for vibroflow.measure.column: its mass over the critical density
         (so the areas of a half-column add up to L0 H0); a symmetric run's cells are folded
         about x = 0 with half their area each; an axisymmetric run's cell stands for its
         meridian area, its mass per radian over rho_c r (the Lagrangian check's)."""
@@ -82,11 +82,11 @@ class EulerianColumnRun:
         return x.copy(), area
 
     def deposit(self, wall_window: float | None = None):
-        """The deposit measured as every continuum's is (vibroflow.analysis.column.
+        """The deposit measured as every continuum's is (vibroflow.measure.column.
         measure_continuum_deposit of `deposit_points` on the mesh's cell side, grains of the
         material's diameter; the height within `wall_window` (m) of the wall or axis when
         given), as the Lagrangian ColumnRun.deposit."""
-        from vibroflow.analysis.column import measure_continuum_deposit
+        from vibroflow.measure.column import measure_continuum_deposit
 
         return measure_continuum_deposit(*self.deposit_points(), self.system.mesh.h,
                                          self.system.material.diameter,

@@ -43,8 +43,8 @@ from pathlib import Path
 
 import numpy as np
 
-from vibroflow.analysis.stats import batches_of_whole_cycles
-from vibroflow.analysis.summary import geometry_of, json_safe, tub_summary
+from vibroflow.measure.stats import batches_of_whole_cycles
+from vibroflow.measure.summary import geometry_of, json_safe, tub_summary
 from vibroflow.errors import InputError
 from vibroflow.io.folder_lock import folder_lock
 from vibroflow.progress import RunProgress
@@ -332,7 +332,7 @@ def _eulerian_results(scenario, out: Path, calibration, options, vtk, system, ma
     wall_time = clock.solver_s()
     n_steps = state.step
     if vtk:
-        from vibroflow.analysis.vtk import write_pvd
+        from vibroflow.io.vtk import write_pvd
 
         write_pvd(out / VTK_DIR / "grid.pvd", samples.vtk["grid"])
     h = system.mesh.h
@@ -409,7 +409,7 @@ def _vibrate(scenario, system: EulerianSystem, state: EulerianState, samples: Sa
     buf_p, buf_v = np.zeros((n, 3)), np.zeros((n, 3))
     far = np.array([0.0, 0.5 * geo.length, 1.0e3])  # outside every analysis cell
     if vtk:
-        from vibroflow.analysis.vtk import write_tub_surface
+        from vibroflow.io.vtk import write_tub_surface
 
         (out / VTK_DIR).mkdir(exist_ok=True)
         write_tub_surface(out / VTK_DIR / "tub.vtu", geo)

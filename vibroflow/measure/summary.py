@@ -28,10 +28,10 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from vibroflow.analysis.bulk import cell_table, probe_values, write_csv
-from vibroflow.analysis.circulation import circulation
-from vibroflow.analysis.contacts import impact_stats, impact_stats_chunked, wall_contact_stats
-from vibroflow.analysis.stats import batches_of_whole_cycles, cycles_in_window
+from vibroflow.measure.bulk import cell_table, probe_values, write_csv
+from vibroflow.measure.circulation import circulation
+from vibroflow.measure.contacts import impact_stats, impact_stats_chunked, wall_contact_stats
+from vibroflow.measure.stats import batches_of_whole_cycles, cycles_in_window
 from vibroflow.tub.geometry import TubGeometry
 
 BULK_CSV_NAME = "bulk_velocity.csv"

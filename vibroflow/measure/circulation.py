@@ -32,8 +32,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from vibroflow.analysis.bulk import CellTable
-from vibroflow.analysis.stats import stderr_of_batches
+from vibroflow.measure.bulk import CellTable
+from vibroflow.measure.stats import stderr_of_batches
 
 #: solid fraction below which a cell is outside the bed (psi = 0 there)
 BED_THRESHOLD = 0.05

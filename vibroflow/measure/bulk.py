@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from vibroflow.analysis.stats import stderr_of_batches
+from vibroflow.measure.stats import stderr_of_batches
 from vibroflow.io.atomic import write_text_atomic
 from vibroflow.tub.geometry import TubGeometry
 from vibroflow.tub.motion import lab_to_tub_np, relative_velocity_tub_axes_np
