@@ -69,7 +69,7 @@ def main(argv=None) -> int:
     ap.add_argument("--json", type=Path, default=None)
     a = ap.parse_args(argv)
 
-    from vibroflow.measure.summary import geometry_of
+    from vibroflow.tub.geometry import geometry_of
     from vibroflow.calibration.coarse_grain import CoarseGrainer
     from vibroflow.calibration.dem_result import DEMResult
     from vibroflow.calibration.run_fields import coarse_grain_run

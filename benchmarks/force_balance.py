@@ -143,7 +143,7 @@ def phase_means(scenario, system, state, advance, wall_of, mu_p, per: int, skip:
     frame positions (N, 2) m of its points or cells, their wall normal force and the wall
     force's z component (N,) in N/m of thickness; mu_p the partitions' friction (None: no
     partitions)."""
-    from vibroflow.measure.summary import geometry_of
+    from vibroflow.tub.geometry import geometry_of
     from vibroflow.continuum.boundary import partition_forces
 
     geo = geometry_of(scenario)

@@ -36,7 +36,7 @@ import numpy as np
 import tomli_w
 
 from vibroflow import __version__
-from vibroflow.measure.summary import geometry_of
+from vibroflow.tub.geometry import geometry_of
 from vibroflow.scenario.model import find_contact
 from vibroflow.errors import InputError, Interrupted
 from vibroflow.io.atomic import write_text_atomic

@@ -221,7 +221,7 @@ def impact_relations_on_cells(run, cell_size: float | None = None,
     "near_wall_shear_rate_1_s" (the DEM's own values of the continuum's two measures, with
     their standard errors)}."""
     from vibroflow.measure.phase_shear import near_wall_nodes, phase_shear_of_snapshots
-    from vibroflow.measure.summary import geometry_of
+    from vibroflow.tub.geometry import geometry_of
 
     own = not isinstance(run, DEMResult)
     res = DEMResult.open(run) if own else run

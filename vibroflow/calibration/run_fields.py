@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from vibroflow.measure.summary import geometry_of
+from vibroflow.tub.geometry import geometry_of
 from vibroflow.errors import InputError
 from vibroflow.io.atomic import atomic_path
 

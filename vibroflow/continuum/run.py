@@ -57,7 +57,8 @@ import numpy as np
 from vibroflow.measure.phase_shear import (PhaseShear, near_wall_nodes, node_grid,
                                             phase_shear_of_snapshots)
 from vibroflow.measure.stats import batch_means, batches_of_whole_cycles
-from vibroflow.measure.summary import geometry_of, json_safe, tub_summary
+from vibroflow.measure.summary import json_safe, tub_summary
+from vibroflow.tub.geometry import geometry_of
 from vibroflow.errors import InputError, Interrupted
 # write_json_atomic: also imported from here by the Eulerian run
 from vibroflow.io.atomic import write_json_atomic, write_text_atomic

@@ -599,7 +599,7 @@ def _write_vtk(h5path: Path, out_dir: Path, scenario) -> None:
     import h5py
 
     from ..io import vtk as V
-    from ..measure.summary import geometry_of
+    from ..tub.geometry import geometry_of
     vdir = out_dir / "vtk"
     vdir.mkdir(exist_ok=True)
     entries = []

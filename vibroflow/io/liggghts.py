@@ -65,7 +65,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vibroflow.measure.summary import geometry_of
+from vibroflow.tub.geometry import geometry_of
 from vibroflow.dem.laws import damping_ratio
 from vibroflow.dem.walls import WALL_PARTITION_HI, WALL_PARTITION_LO, WALL_U
 from vibroflow.errors import InputError

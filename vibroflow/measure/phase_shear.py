@@ -267,7 +267,7 @@ def phase_shear_of_snapshots(scenario, positions, velocities, poses, volume, tim
     (m^3) each body stands for, times (S,) s.  Binned by the scenario's sampling phases and by
     its batches of whole cycles.  The DEM calibration and both continuum drivers call this."""
     from .stats import batches_of_whole_cycles, phase_bins
-    from .summary import geometry_of
+    from vibroflow.tub.geometry import geometry_of
 
     geo = geometry_of(scenario)
     h, nxh, nz = node_grid(geo, cell_size or float(scenario.analysis.cell_size))

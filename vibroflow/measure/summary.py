@@ -32,7 +32,7 @@ from vibroflow.measure.bulk import cell_table, probe_values, write_csv
 from vibroflow.measure.circulation import circulation
 from vibroflow.measure.contacts import impact_stats, impact_stats_chunked, wall_contact_stats
 from vibroflow.measure.stats import batches_of_whole_cycles, cycles_in_window
-from vibroflow.tub.geometry import TubGeometry
+from vibroflow.tub.geometry import geometry_of
 
 BULK_CSV_NAME = "bulk_velocity.csv"
 
@@ -76,15 +76,6 @@ def json_safe(obj):
         f = float(obj)
         return f if math.isfinite(f) else None
     return obj
-
-
-def geometry_of(scenario) -> TubGeometry:
-    """The scenario's tub as a TubGeometry (ValueError in explicit mode: no tub)."""
-    tub = scenario.tub
-    if tub is None:
-        raise ValueError("scenario.tub = None: the tub summary needs a tub-mode scenario")
-    return TubGeometry(radius=tub.radius, rim_height=tub.rim_height, length=tub.length,
-                       periodic=tub.periodic)
 
 
 def tub_summary(source, scenario, bulk_csv=None, t_end: float | None = None) -> dict:

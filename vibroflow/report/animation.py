@@ -37,7 +37,7 @@ def slice_frames(run_dir, max_frames: int = MAX_FRAMES, half_thickness: float | 
     a list of dicts {time (s), x, z (m, tub frame), radius (m), speed (m/s, relative to the
     tub)} of the slab's balls, for the last `max_frames` snapshots.  half_thickness (m) defaults
     to 1.5 ball diameters (a slab three balls thick), at most half the tub's length."""
-    from vibroflow.measure.summary import geometry_of
+    from vibroflow.tub.geometry import geometry_of
     from vibroflow.calibration.dem_result import DEMResult
 
     with DEMResult.open(run_dir) as res:

@@ -144,7 +144,7 @@ class StudyData:
 
     @property
     def geometry(self):
-        from vibroflow.measure.summary import geometry_of
+        from vibroflow.tub.geometry import geometry_of
 
         return geometry_of(self.scenario)
 

@@ -112,3 +112,12 @@ def u_wall_nearest(px, pz, radius):
     if px >= 0.0:
         return R - px, -1.0, 0.0, R, pz, quarter + (pz - R)
     return R + px, 1.0, 0.0, -R, pz, -(quarter + (pz - R))
+
+
+def geometry_of(scenario) -> TubGeometry:
+    """The scenario's tub as a TubGeometry (ValueError in explicit mode: no tub)."""
+    tub = scenario.tub
+    if tub is None:
+        raise ValueError("scenario.tub = None: a tub is needed by a tub-mode scenario")
+    return TubGeometry(radius=tub.radius, rim_height=tub.rim_height, length=tub.length,
+                       periodic=tub.periodic)

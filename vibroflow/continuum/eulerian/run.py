@@ -44,7 +44,8 @@ from pathlib import Path
 import numpy as np
 
 from vibroflow.measure.stats import batches_of_whole_cycles
-from vibroflow.measure.summary import geometry_of, json_safe, tub_summary
+from vibroflow.measure.summary import json_safe, tub_summary
+from vibroflow.tub.geometry import geometry_of
 from vibroflow.errors import InputError
 from vibroflow.io.folder_lock import folder_lock
 from vibroflow.progress import RunProgress
