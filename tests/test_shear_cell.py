@@ -100,7 +100,7 @@ def test_head_on_collision_across_the_boundary_has_the_laws_restitution():
     the unwrapped momentum is conserved.  A wrong image shift or velocity jump would make
     the contact oblique by gamma_dot L_z = 1 m/s beside w = 0.1 m/s."""
     from vibroflow.calibration.periodic import MODE_FIXED
-    from vibroflow.dem.laws import damping_ratio
+    from vibroflow.scenario.laws import damping_ratio
     L = (0.05, 0.05, 0.05)
     gd = 20.0
     w = 0.1

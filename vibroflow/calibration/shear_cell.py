@@ -60,9 +60,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vibroflow.dem.laws import P_KN, P_MODEL, MODEL_LINEAR, contact_time, material_index, \
-    pair_table
+from vibroflow.dem.laws import MODEL_LINEAR, P_KN, P_MODEL, material_index, pair_table
 from vibroflow.errors import InputError
+from vibroflow.scenario.laws import contact_time
 
 from .periodic import (MODE_FIXED, MODE_ISO, MODE_Z, PeriodicBox, Q_KE, Q_LX, Q_LY, Q_LZ,
                        Q_SXX, Q_SXY, Q_SXZ, Q_SYY, Q_SYZ, Q_SZX, Q_SZZ, Q_Z, Q_ZNR,

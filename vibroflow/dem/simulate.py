@@ -18,7 +18,8 @@ import numpy as np
 
 from ..tub.motion import TubMotion, lab_to_tub_np
 from . import step as K
-from .laws import contact_time, material_index, pair_table
+from ..scenario.laws import contact_time
+from .laws import material_index, pair_table
 from .neighbours import NeighbourList
 from .walls import (N_PLANE, WALL_PARTITION_HI, WALL_PARTITION_LO, WALL_PLANE0, WALL_U,
                     wall_kind)

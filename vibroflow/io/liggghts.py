@@ -66,7 +66,7 @@ from pathlib import Path
 import numpy as np
 
 from vibroflow.tub.geometry import geometry_of
-from vibroflow.dem.laws import damping_ratio
+from vibroflow.scenario.laws import damping_ratio
 from vibroflow.dem.walls import WALL_PARTITION_HI, WALL_PARTITION_LO, WALL_U
 from vibroflow.errors import InputError
 from vibroflow.io.atomic import TMP_PREFIX, write_json_atomic, write_text_atomic

@@ -451,8 +451,8 @@ def _check_contacts(s: Scenario) -> None:
 
 def contact_times(s: Scenario) -> list[tuple[TouchingPair, float]]:
     """Contact time (s) of every pair in use, shortest first, from
-    `vibroflow.dem.laws.contact_time` (linear: the damped half period; Hertz: at 1 m/s)."""
-    from vibroflow.dem.laws import contact_time  # lazy: keeps `import vibroflow` light
+    `vibroflow.scenario.laws.contact_time` (linear: the damped half period; Hertz: at 1 m/s)."""
+    from vibroflow.scenario.laws import contact_time  # lazy: scipy stays out of `import vibroflow`
 
     out = [(tp, float(contact_time(find_contact(s, tp.a, tp.b), s.materials, tp.m_eff, tp.r_eff)))
            for tp in touching_pairs(s)]
