@@ -354,7 +354,7 @@ def continuum(
 
     cal = None
     if calibration is not None:
-        from vibroflow.calibration.calibrate import read_calibration
+        from vibroflow.io.calibration_file import read_calibration
 
         cal = read_calibration(calibration)
     # an unset --cfl or --transfer-cfl takes the options' own default (continuum/run.py and

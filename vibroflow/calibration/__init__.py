@@ -13,7 +13,8 @@
 * calibrate     -- `vibroflow calibrate`: all of the above into calibration.toml
 * plots         -- the pictures
 """
-from vibroflow.calibration.calibrate import calibrate, read_calibration
+from vibroflow.calibration.calibrate import calibrate
+from vibroflow.io.calibration_file import read_calibration
 from vibroflow.calibration.coarse_grain import (CoarseGrainer, kernel_value, phase_bins,
                                                 rheology, snapshot_from_state,
                                                 velocity_gradient_on_grid)

@@ -29,18 +29,16 @@ from __future__ import annotations
 import contextlib
 import datetime as _dt
 import math
-import tomllib
 from pathlib import Path
 
 import numpy as np
-import tomli_w
 
 from vibroflow import __version__
-from vibroflow.tub.geometry import geometry_of
-from vibroflow.scenario.model import find_contact
 from vibroflow.errors import InputError, Interrupted
-from vibroflow.io.atomic import write_text_atomic
+from vibroflow.io.calibration_file import CALIBRATION_FILE, write_calibration
 from vibroflow.io.folder_lock import folder_lock
+from vibroflow.scenario.model import find_contact
+from vibroflow.tub.geometry import geometry_of
 
 from .dem_result import DEMResult
 from .impacts import impact_relations, impact_relations_on_cells
@@ -48,7 +46,6 @@ from .run_fields import coarse_grain_run, write_fields
 from .tub_rheology import DENSE_SOLID_FRACTION, bed_pressure, tub_mu_i_scatter
 from .wall_friction import wall_friction
 
-CALIBRATION_FILE = "calibration.toml"
 FIELDS_FILE = "fields.nc"
 PICTURES_DIR = "calibration"
 
@@ -556,52 +553,3 @@ def _calibration_record(res, cg_info, wf, rel, rheo, elastic, dp, p_bed, phi_bed
     return cal
 
 
-def write_calibration(path, cal: dict) -> Path:
-    """calibration.toml, atomically, with a header saying what it is."""
-    path = Path(path)
-    head = ("# vibroflow calibration: continuum parameters measured on a DEM run (SI units).\n"
-            "# Read with vibroflow.calibration.read_calibration; every value has its standard\n"
-            "# error (*_stderr, NaN where none could be estimated) and [source] says where it\n"
-            "# came from.\n\n")
-    return write_text_atomic(path, head + tomli_w.dumps(_plain(cal)))
-
-
-def _plain(obj):
-    if isinstance(obj, dict):
-        return {str(k): _plain(v) for k, v in obj.items() if v is not None}
-    if isinstance(obj, (list, tuple)):
-        return [_plain(v) for v in obj]
-    if isinstance(obj, (np.floating, float)):
-        return float(obj)
-    if isinstance(obj, (np.integer,)):
-        return int(obj)
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    return obj
-
-
-REQUIRED = {"rheology": ("mu_s", "mu_2", "I_0", "phi_max", "phi_min"),
-            "elastic": ("bulk_modulus_Pa", "shear_modulus_Pa"),
-            "wall": ("friction",), "media": ("diameter_m", "solid_density_kg_m3")}
-
-
-def read_calibration(path) -> dict:
-    """Read calibration.toml (a file, or a run directory holding one); InputError when it is
-    missing, malformed or lacks a parameter the continuum needs."""
-    p = Path(path)
-    if p.is_dir():
-        p = p / CALIBRATION_FILE
-    if not p.is_file():
-        raise InputError(f"calibration = {str(path)!r}: no such file (run `vibroflow calibrate`)")
-    try:
-        cal = tomllib.loads(p.read_text())
-    except tomllib.TOMLDecodeError as e:
-        raise InputError(f"{p}: malformed TOML ({e})") from None
-    for table, keys in REQUIRED.items():
-        for k in keys:
-            v = cal.get(table, {}).get(k)
-            if not isinstance(v, (int, float)) or not math.isfinite(v):
-                why = cal.get(table, {}).get("status", "")
-                raise InputError(f"{p}: {table}.{k} = {v!r}: must be a finite number"
-                                 + (f" ({why})" if why and why != "measured" else ""))
-    return cal

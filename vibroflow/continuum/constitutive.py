@@ -95,6 +95,7 @@ import numba as nb
 import numpy as np
 
 from vibroflow.errors import InputError
+from vibroflow.io.calibration_file import read_calibration
 
 #: rheology models (params[0])
 MU_I = 0
@@ -309,8 +310,6 @@ class ContinuumMaterial:
     @classmethod
     def from_file(cls, path, model: str = "mu_i") -> "ContinuumMaterial":
         """From calibration.toml (a file, or a run folder holding one)."""
-        from vibroflow.calibration.calibrate import read_calibration
-
         return cls.from_calibration(read_calibration(path), model=model)
 
 

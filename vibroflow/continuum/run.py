@@ -21,7 +21,7 @@ Timeline (tub47.md "Procedure", the DEM's clock: t = 0 when the vibration starts
    and the shear rate with the impact speed and granular temperature it implies through the
    calibrated relations (calibration.toml [impacts]), when a calibration is given.
 
-Parameters come from calibration.toml (vibroflow.calibration.calibrate.read_calibration) or the
+Parameters come from calibration.toml (vibroflow.io.calibration_file.read_calibration) or the
 tub47 defaults (ContinuumMaterial): the wall friction [wall] friction (default: the scenario's
 ball-wall contact friction), the partitions' [partitions] friction (default: the scenario's
 ball-partition friction), the diameter and solid density (default: the scenario's fill).

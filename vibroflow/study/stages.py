@@ -141,7 +141,7 @@ def continuum_stage(method: ContinuumMethod, options) -> Stage:
         return {"scenario": scenario_inputs(study.scenario), "options": opts}
 
     def run(study: Study, resume: bool) -> dict:
-        from vibroflow.calibration.calibrate import read_calibration
+        from vibroflow.io.calibration_file import read_calibration
 
         cal = read_calibration(study.folder(DEM) / "calibration.toml")
         summary = method.run(study.scenario, study.folder(method.name), cal, options,
