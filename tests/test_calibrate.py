@@ -125,7 +125,7 @@ def calibrated_run(tmp_path_factory):
 
 
 def test_calibrate_writes_its_files_and_reads_back(calibrated_run):
-    from vibroflow.calibration.calibrate import read_calibration
+    from vibroflow.io.calibration_file import read_calibration
     from vibroflow.calibration.run_fields import read_fields
 
     out, r = calibrated_run
@@ -154,7 +154,7 @@ def test_continuum_gets_the_cyclic_secant_modulus_at_the_tubs_strain(calibrated_
     amplitudes' moduli."""
     import math
 
-    from vibroflow.calibration.calibrate import read_calibration
+    from vibroflow.io.calibration_file import read_calibration
 
     out, r = calibrated_run
     cal = read_calibration(out)
@@ -176,7 +176,7 @@ def test_calibrated_wall_friction_obeys_coulomb(calibrated_run):
     """Every contact has |F_t| <= mu F_n, so the ratio of sums and the coherent friction of
     slipping patches cannot exceed the contact's mu; sliding contacts sit exactly at mu (to the
     float32 of dem.h5)."""
-    from vibroflow.calibration.calibrate import read_calibration
+    from vibroflow.io.calibration_file import read_calibration
 
     out, _ = calibrated_run
     cal = read_calibration(out)

@@ -30,7 +30,7 @@ import pytest
 
 from vibroflow.measure.bulk import read_csv
 from vibroflow.analysis.compare import field_difference, strengths_agree
-from vibroflow.calibration.calibrate import read_calibration
+from vibroflow.io.calibration_file import read_calibration
 from vibroflow.scenario.io import load_scenario
 
 DATA = Path(__file__).parent / "data"

@@ -12,6 +12,7 @@ import pytest
 
 from tests.test_calibrate import SMALL
 
+from vibroflow.report.stage import report_stage
 from vibroflow.study.methods import METHODS
 
 #: every registered continuum method is a stage of its own (a method is one more entry)
@@ -34,7 +35,7 @@ def study(tmp_path_factory):
         scenario = load_scenario("tub47-quick", SMALL)
         lines: list[str] = []
         out = tmp / "run"
-        summary = run_study(scenario, out, echo=lines.append)
+        summary = run_study(scenario, out, echo=lines.append, extra_stages=[report_stage()])
         yield scenario, out, summary, lines
     finally:
         if old is None:
@@ -91,7 +92,7 @@ def test_rerun_recomputes_nothing(study):
     scenario, out, _, _ = study
     before = _mtimes(out)
     lines: list[str] = []
-    summary = run_study(scenario, out, echo=lines.append)
+    summary = run_study(scenario, out, echo=lines.append, extra_stages=[report_stage()])
     assert _mtimes(out) == before
     assert all("kept" in line for line in lines)
     assert set(summary["methods"]) == {"dem", *METHODS}
@@ -103,7 +104,8 @@ def test_continuum_setting_reruns_only_continuum_and_comparison(study):
     scenario, out, _, _ = study
     before = _mtimes(out)
     lines: list[str] = []
-    run_study(scenario, out, settings={"lagrangian": {"cfl": 0.25}}, echo=lines.append)
+    run_study(scenario, out, settings={"lagrangian": {"cfl": 0.25}}, echo=lines.append,
+              extra_stages=[report_stage()])
     after = _mtimes(out)
     assert after["dem"] == before["dem"] and after["calibration"] == before["calibration"]
     assert after["lagrangian"] != before["lagrangian"]
@@ -168,7 +170,7 @@ def test_a_killed_run_resumes_where_it_stopped(study, tmp_path):
 
     lines: list[str] = []
     resumed = run_study(load_scenario("tub47-quick", [*SMALL, "run.checkpoint_every=0.05"]),
-                        out, echo=lines.append)
+                        out, echo=lines.append, extra_stages=[report_stage()])
     assert "(resumed)" in lines[0]
     assert json.loads((out / "dem" / "stage.json").read_text())["resumed"] is True
     a, b = resumed["methods"]["dem"], reference["methods"]["dem"]

@@ -407,18 +407,20 @@ def run(
 ) -> None:
     """DEM, calibration, every continuum formulation and their comparison into --out; a rerun
     redoes only the stages whose inputs changed (DIR/summary.json, vibroflow.load(DIR))."""
-    from vibroflow.study.pipeline import check_study_dir, split_settings
+    from vibroflow.study.folder import check_study_dir
+    from vibroflow.study.pipeline import split_settings
 
     scenario_sets, method_sets = split_settings(set_)
     s = _load(scenario, scenario_sets)  # before anything is written
     check_study_dir(out)
     from vibroflow.continuum.mpm import ContinuumBlowUp
     from vibroflow.dem.simulate import BlowUp
+    from vibroflow.report.stage import report_stage
     from vibroflow.study.pipeline import run_study
 
     try:
         summary = run_study(s, out, method_sets, shear_cell=shear_cell, progress=True,
-                            echo=typer.echo)
+                            echo=typer.echo, extra_stages=[report_stage()])
     except (BlowUp, ContinuumBlowUp) as exc:
         sys.stderr.write("error: " + str(exc) + "\n")
         raise typer.Exit(EXIT_BLOWUP)
@@ -493,7 +495,10 @@ def sweep(
     where = scheduler or f"a local cluster of {workers or os.cpu_count()} worker(s)"
     typer.echo(f"{len(plan.points)} point(s) of {', '.join(plan.varied)} on {where}")
     try:
-        record = run_sweep(plan, out, scheduler=scheduler, workers=workers, echo=typer.echo)
+        from vibroflow.report.stage import report_stage
+
+        record = run_sweep(plan, out, scheduler=scheduler, workers=workers, echo=typer.echo,
+                           finishing=[report_stage])
     except KeyboardInterrupt:
         raise Interrupted(f"interrupted; the finished points are kept and a point cut short "
                           f"resumes: run the same command again to go on (out: {out})") from None

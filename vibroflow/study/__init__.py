@@ -5,6 +5,8 @@
     <method>     -> DIR/<method>      every continuum formulation of `methods.METHODS`
     comparison   -> DIR/comparison    probes, circulation, E against the DEM, cost;
                                       writes DIR/summary.json
+    report       -> DIR/report        DIR/report.html (vibroflow.report.stage: the layer above
+                                      the study, so the commands hand it over as an extra stage)
 
 Each stage keeps DIR/<stage>/stage.json (written atomically, last) with the hash of its inputs
 (the scenario fields it depends on, its options, the upstream stages' hashes and the vibroflow

@@ -13,57 +13,18 @@ import json
 import shutil
 import time
 import tomllib
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from vibroflow.errors import InputError, Interrupted
-from vibroflow.io.atomic import TMP_PREFIX
-from vibroflow.io.folder_lock import LOCK_NAME, folder_lock
+from vibroflow.io.folder_lock import folder_lock
+from vibroflow.study.folder import KIND, STUDY_FILE, check_study_dir, read_json
 from vibroflow.study.methods import METHODS, method
 from vibroflow.study.stages import Stage, Study, stages_of, write_json_atomic
 
-STUDY_FILE = "study.json"
 STAGE_FILE = "stage.json"
 PENDING_FILE = "pending.json"
-KIND = "vibroflow study"
-
-
-def _read_json(path: Path, what: str) -> dict:
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"{path}: corrupt {what} ({type(exc).__name__}); remove the folder "
-                         "or give another --out") from None
-    if not isinstance(data, dict):
-        raise InputError(f"{path}: corrupt {what} (not a JSON table); remove the folder or "
-                         "give another --out")
-    return data
-
-
-def check_study_dir(out: Path, must_exist: bool = False) -> None:
-    """Raise an InputError (one line) unless `out` is new, empty, or a study folder."""
-    out = Path(out)
-    if not out.exists():
-        if must_exist:
-            raise InputError(f"DIR = {str(out)!r}: no such folder")
-        return
-    if not out.is_dir():
-        raise InputError(f"DIR = {str(out)!r}: not a folder")
-    marker = out / STUDY_FILE
-    if not marker.exists():
-        # a lock file or an atomic writer's temporary left by a command that stopped early
-        # does not make a folder a result
-        own = (LOCK_NAME, ".lock")
-        if any(p.name not in own and not p.name.startswith(TMP_PREFIX)
-               for p in out.iterdir()) or must_exist:
-            raise InputError(f"DIR = {str(out)!r}: not a vibroflow study folder (no "
-                             f"{STUDY_FILE}); give a new or empty folder")
-        return
-    data = _read_json(marker, "study record")
-    if data.get("kind") != KIND:
-        raise InputError(f"{marker}: not a vibroflow study record (kind = "
-                         f"{data.get('kind')!r}); give a new or empty folder")
 
 
 def split_settings(settings: list[str] | None) -> tuple[list[str], dict[str, dict[str, Any]]]:
@@ -101,7 +62,7 @@ def _kept(study: Study, stage: Stage, h: str) -> dict | None:
     path = study.folder(stage.name) / STAGE_FILE
     if not path.exists():
         return None
-    record = _read_json(path, "stage record")
+    record = read_json(path, "stage record")
     if record.get("hash") != h:
         return None
     if not all((study.out / p).exists() for p in stage.outputs):
@@ -122,7 +83,7 @@ def _run_stage(study: Study, stage: Stage, h: str) -> dict:
 
     folder = study.folder(stage.name)
     pending = folder / PENDING_FILE
-    resume = pending.exists() and _read_json(pending, "stage record").get("hash") == h
+    resume = pending.exists() and read_json(pending, "stage record").get("hash") == h
     if not resume and folder.exists():
         shutil.rmtree(folder)  # another run's leftovers: start afresh
     folder.mkdir(parents=True, exist_ok=True)
@@ -174,11 +135,14 @@ def format_duration(seconds: float) -> str:
 
 def run_study(scenario, out: Path, settings: dict[str, dict[str, Any]] | None = None,
               shear_cell: bool = False, progress: bool = False,
-              echo: Callable[[str], None] | None = print) -> dict:
+              echo: Callable[[str], None] | None = print,
+              extra_stages: Sequence[Stage] = ()) -> dict:
     """Run (or bring up to date) the study of `scenario` in `out`; returns the summary.
 
     settings: method name -> its options (`--set lagrangian.dx=0.004` gives
-    {"lagrangian": {"dx": 0.004}}); echo: where the one line per stage goes (None: nowhere).
+    {"lagrangian": {"dx": 0.004}}); echo: where the one line per stage goes (None: nowhere);
+    extra_stages: stages after the comparison from the layers above the study (the report:
+    `vibroflow.report.stage.report_stage()`).
     """
     out = Path(out)
     check_study_dir(out)
@@ -192,11 +156,11 @@ def run_study(scenario, out: Path, settings: dict[str, dict[str, Any]] | None = 
                          "not explicit particles")
     with folder_lock(out, "vibroflow run", field="DIR"):
         check_study_dir(out)  # again under the lock: another command may have written it
-        return _run_study(scenario, out, methods, shear_cell, progress, echo)
+        return _run_study(scenario, out, methods, shear_cell, progress, echo, extra_stages)
 
 
 def _run_study(scenario, out: Path, methods: list, shear_cell: bool, progress: bool,
-               echo: Callable[[str], None] | None) -> dict:
+               echo: Callable[[str], None] | None, extra_stages: Sequence[Stage]) -> dict:
     from vibroflow import __version__
 
     out.mkdir(parents=True, exist_ok=True)
@@ -205,7 +169,7 @@ def _run_study(scenario, out: Path, methods: list, shear_cell: bool, progress: b
                                              "case": scenario.case})
     study = Study(out=out, scenario=scenario, methods=methods, shear_cell=shear_cell,
                   progress=progress)
-    stages = stages_of(study)
+    stages = stages_of(study, extra_stages)
     hashes: dict[str, str] = {}
     for s in stages:  # a hash depends on the upstream hashes only, not on their results
         hashes[s.name] = stage_hash(s, study, hashes)

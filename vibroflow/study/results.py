@@ -5,12 +5,11 @@ import json
 from pathlib import Path
 
 from vibroflow.errors import InputError
+from vibroflow.study.folder import check_study_dir
 
 
 def read_summary(out) -> dict:
     """DIR/summary.json of a finished study (an InputError, one line, for anything else)."""
-    from vibroflow.study.pipeline import check_study_dir
-
     out = Path(out)
     check_study_dir(out, must_exist=True)
     path = out / "summary.json"

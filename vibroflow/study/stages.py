@@ -11,7 +11,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -238,29 +238,10 @@ def comparison_stage(study: Study) -> Stage:
                  run=_run_comparison, upstream=(DEM, *names), outputs=(SUMMARY_NAME,))
 
 
-# ----------------------------------------------------------------------------------------------
-# report: DIR/report.html (vibroflow.report), the DEM animation in DIR/report/
-
-REPORT = "report"
-
-
-def _run_report(study: Study, resume: bool) -> dict:
-    from vibroflow.report import GIF_NAME, write_report
-
-    path = write_report(study.out)
-    gif = study.folder(REPORT) / GIF_NAME
-    return {"report": path.name,
-            "animation": f"{REPORT}/{GIF_NAME}" if gif.is_file() else None}
-
-
-def report_stage() -> Stage:
-    return Stage(REPORT, inputs=lambda st: {}, run=_run_report, upstream=(COMPARISON,),
-                 outputs=("report.html",), estimate=lambda st: 20.0)
-
-
-def stages_of(study: Study) -> list[Stage]:
-    """The study's stages in order: DEM, calibration, each continuum method, comparison,
-    report."""
+def stages_of(study: Study, extra: Sequence[Stage] = ()) -> list[Stage]:
+    """The study's stages in order: DEM, calibration, each continuum method, comparison, then
+    `extra`, the stages of the layers above that finish a study (its report:
+    vibroflow.report.stage), given by the caller since the study cannot import them."""
     return [dem_stage(), calibration_stage(),
             *(continuum_stage(m, o) for m, o in study.methods), comparison_stage(study),
-            report_stage()]
+            *extra]

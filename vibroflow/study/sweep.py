@@ -19,7 +19,7 @@ import logging
 import os
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -204,20 +204,24 @@ def make_client(scheduler: str | None, workers: int):
 
 def run_sweep(plan: SweepPlan, out: Path, scheduler: str | None = None,
               workers: int | None = None, client=None,
-              echo: Callable[[str], None] | None = print) -> dict:
+              echo: Callable[[str], None] | None = print,
+              finishing: Sequence[Callable[[], Any]] = ()) -> dict:
     """Run (or bring up to date) every point of `plan` in `out`; write the table and plots.
 
     workers: local worker processes (default one per core, at most one per point); client: a
     dask.distributed Client to use as it is (tests); echo: where the one line per finished
-    point goes.  Returns the sweep record (sweep.json) with "rows" (the table) and "results"
-    (this run's result per point)."""
+    point goes; finishing: factories of the stages each point's study ends with, from the
+    layers above the study (the report: vibroflow.report.stage.report_stage).  Returns the
+    sweep record (sweep.json) with "rows" (the table) and "results" (this run's result per
+    point)."""
     from distributed import wait
 
     out = Path(out)
     check_sweep_dir(out, plan)  # before anything is written or started
     jobs = {p.name: {"name": p.name, "values": p.values, "scenario": p.scenario,
                      "settings": p.settings, "overrides": list(p.overrides),
-                     "shear_cell": plan.shear_cell} for p in plan.points}
+                     "shear_cell": plan.shear_cell, "finishing": list(finishing)}
+            for p in plan.points}
     n = len(jobs)
     own_client = client is None
     cluster = None

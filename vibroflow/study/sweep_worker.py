@@ -57,8 +57,8 @@ def run_point(out: str, job: dict) -> dict:
     shear_cell) in DIR/points/<name>; returns its result record (status "done", "kept",
     "failed" or "busy": another sweep holds the point's lock)."""
     from vibroflow import __version__
-    from vibroflow.study.pipeline import KIND as STUDY_KIND
-    from vibroflow.study.pipeline import STUDY_FILE
+    from vibroflow.study.folder import KIND as STUDY_KIND
+    from vibroflow.study.folder import STUDY_FILE
     from vibroflow.study.stages import write_json_atomic
     from vibroflow.study.sweep_folder import (FAILED_FILE, POINT_FILE, POINT_LOCK, point_dir,
                                               try_lock)
@@ -90,6 +90,7 @@ def run_point(out: str, job: dict) -> dict:
             scenario = Scenario.model_validate(job["scenario"])
             with open(folder / "sweep.log", "a") as log:
                 run_study(scenario, folder, job["settings"], shear_cell=job["shear_cell"],
+                          extra_stages=[make() for make in job.get("finishing", ())],
                           progress=False, echo=lambda line: print(line, file=log, flush=True))
         except Exception as exc:  # any failure of this point: recorded, the others go on
             error = _one_line(exc)

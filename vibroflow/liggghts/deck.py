@@ -1,0 +1,469 @@
+"""A LIGGGHTS 3.8 deck for a tub scenario: DIR/in.tub, tub_u.stl, partitions.stl, scenario.toml,
+README.txt and post/ (where LIGGGHTS writes).
+
+What the deck does, and why (details and the deviations from vibroflow's own DEM in
+docs/liggghts.md):
+
+* Contact law.  vibroflow's linear spring-dashpot is LIGGGHTS' `hooke/stiffness` with
+  `absolute_damping on` (so the damping coefficients are in N s/m, not per unit mass) and
+  `tangential_damping off`, per type pair: kn = k_n, kt = k_t_over_k_n k_n,
+  gamman_abs = 2 zeta sqrt(m_eff k_n) with zeta = -ln e / sqrt(pi^2 + ln^2 e) and m_eff = m/2
+  for ball-ball, m for ball-wall (models.md), gammat_abs = 0; Coulomb friction and the CDT rolling
+  resistance from the pair's mu and mu_r.  A scenario whose contacts are all Hertz gets LIGGGHTS'
+  `hertz` (moduli from the materials, restitution through LIGGGHTS' own damping formula).
+* Atom types: 1 = the balls' material, 2 = the tub wall's, 3 = the partitions'.
+* Walls: the U and the partitions as STL meshes (vibroflow.liggghts.stl; the U's facets joined into
+  one smooth surface by `curvature`, so contact histories cross their creases), moved rigidly
+  with the tub by two superposed `fix move/mesh` per mesh: `linear/variable` (the translation) then
+  `rotate/variable` about the pivot (whose origin rides with the translation).  Their velocity
+  variables are the exact derivatives of s(a, phi, t) = a [sin(omega t + phi) - sin(phi)], and
+  LIGGGHTS integrates them once a step with the step counter already advanced, so the variables
+  are evaluated at the middle of the step, t = (step - n0 - 1/2) dt: the midpoint rule, which
+  reproduces X(t), Z(t), theta(t) with every phase to O(dt^2) (measured: 1e-8 m).
+* Fill: `fix insert/rate/region` (random, no overlaps) in the U above insert_above, in events
+  0.05 s apart, repeated until all N balls are in; then settling with the tub at rest for
+  fill.settle_time and, like vibroflow, on in 0.01 s chunks until the kinetic energy per ball
+  is below fill.settle_kinetic_energy or fill.max_settle_time has passed.  Seeds are primes
+  derived from run.seed (`seed_primes`).
+* Vibration for run.duration from step n0 (written to post/vibration_start_step.txt), snapshots
+  (`dump custom`, post/balls.dump), ball-wall contacts (`compute wall/gran/local`,
+  post/wall.dump) and ball-ball contacts (`compute pair/gran/local id force`, post/pairs.dump)
+  at exactly the vibration steps vibroflow samples (vibroflow.dem.run.sample_steps:
+  phases_per_cycle instants a cycle over the whole cycles of the last average_last seconds,
+  each rounded to the nearest step) through `dump_modify every v_...` with a file-style
+  variable; the kinetic energy every run.series_every steps (post/series.txt).
+
+Bad input writes nothing.  The deck is a program (a newline starts a command, and `shell` runs
+anything), so it is built from template lines with slots, every user-derived value
+one token of a safe set (names through `safe_name`, numbers finite), and each written line is
+checked against its template (vibroflow.liggghts.template).  The export writes under the
+folder's lock (vibroflow.io.folder_lock) and puts its files in place only once everything is
+checked.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from vibroflow.errors import InputError
+from vibroflow.io.atomic import write_text_atomic
+from vibroflow.io.folder_lock import check_writable_dir, folder_lock
+from vibroflow.liggghts.parameters import (PairTables, _check_exportable, _contact_law_deck,
+                                           dump_vibration_steps, model_arguments, pair_tables,
+                                           seed_primes, type_materials)
+from vibroflow.liggghts.stl import DEFAULT_MAX_SAGITTA, arc_segments, sagitta, write_tub_meshes
+from vibroflow.liggghts.template import _PROCESSORS, _SLOT, _Deck, _fmt, _short, _whole, safe_name
+from vibroflow.tub.geometry import geometry_of
+from vibroflow.tub.motion import TubMotion
+
+DECK_NAME = "in.tub"
+POST_DIR = "post"
+BALL_DUMP = "balls.dump"
+WALL_DUMP = "wall.dump"
+PAIR_DUMP = "pairs.dump"
+SERIES_FILE = "series.txt"
+START_FILE = "vibration_start_step.txt"
+FILL_FILE = "fill_done.txt"
+SETTLE_FILE = "settle_done.txt"
+
+#: seconds between insertion events of the fill
+FILL_EVENT_INTERVAL = 0.05
+#: fraction of the insertion region's volume one event tries to fill
+FILL_EVENT_FRACTION = 0.15
+#: settling chunk after settle_time (s), as vibroflow.dem.fill.settle
+SETTLE_CHUNK = 0.01
+
+
+def _check_names(scenario) -> None:
+    """Every name of the scenario that reaches the deck or its README passes `safe_name`, and
+    the materials named are defined."""
+    safe_name("case", scenario.case)
+    materials = scenario.materials if isinstance(scenario.materials, dict) else {}
+    for field, name in (("fill.material", scenario.fill.material),
+                        ("tub.wall_material", scenario.tub.wall_material),
+                        ("tub.partition_material", scenario.tub.partition_material)):
+        safe_name(field, name)
+        if name not in materials:
+            raise InputError(f"{field} = {name!r}: not one of the scenario's materials "
+                             f"{sorted(map(str, materials))}")
+
+
+
+
+def _scenario_toml(scenario) -> str:
+    try:
+        from vibroflow.scenario.io import dump_scenario
+    except ImportError:  # pragma: no cover
+        dump_scenario = None
+    if dump_scenario is not None:
+        return dump_scenario(scenario)
+    import tomli_w
+    return tomli_w.dumps(scenario.model_dump(mode="json", exclude_none=True))
+
+
+@dataclass(frozen=True)
+class DeckInfo:
+    """What export_deck wrote and the numbers it chose."""
+
+    directory: Path
+    deck: Path
+    n_particles: int
+    dt: float
+    vibration_steps: int
+    dump_steps: np.ndarray       # vibration steps of the snapshots
+    arc_segments: int
+    max_sagitta: float
+    seeds: list[int]
+    fill_per_event: int
+    fill_event_steps: int
+    settle_steps: int
+    tables: PairTables
+
+
+#: the meshes' files, as vibroflow.liggghts.stl.write_tub_meshes names them
+U_MESH_FILE = "tub_u.stl"
+PARTITION_MESH_FILE = "partitions.stl"
+
+
+def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts: bool = True,
+                max_sagitta: float = DEFAULT_MAX_SAGITTA, thermo_every: int | None = None,
+                processors: str = "* 1 1", mesh_curvature_deg: float | None = None) -> DeckInfo:
+    """Write a LIGGGHTS 3.8 deck for a tub scenario into out_dir (see the module docstring).
+
+    wall_contacts: dump the ball-wall contacts at the snapshots (compute wall/gran/local).
+    pair_contacts: dump the ball-ball contacts (the two ids and the contact force) at the
+    snapshots (compute pair/gran/local), for the contact stress of the calibration.
+    processors: LIGGGHTS processor grid; the default splits the tub across x only, which
+    balances a symmetric bed.
+    mesh_curvature_deg: `curvature` of the U's fix mesh/surface, the largest angle between two
+    facets that LIGGGHTS treats as one smooth surface (carrying a contact's tangential history
+    across their common edge, no edge contact).  Default: twice the angle between neighbouring
+    arc facets (5.9 degrees for tub47), so the faceted circle acts as one surface like the
+    analytic one; 0 keeps LIGGGHTS' default (0.26 degrees: every crease is an edge).
+    Returns a DeckInfo.
+
+    Every file is made and checked in memory first (names through `safe_name`, the deck and
+    README line by line against their templates, `_Deck`), so bad input writes nothing; then
+    they are written atomically under out_dir's folder lock.
+    """
+    _check_exportable(scenario)
+    _check_names(scenario)
+    if not isinstance(processors, str) or _PROCESSORS.fullmatch(processors) is None:
+        raise InputError(f"processors = {_short(processors)}: must be three counts, each a "
+                         "whole number >= 1 or *, such as '* 1 1'")
+    out_dir = Path(out_dir)
+    run, fill, tub = scenario.run, scenario.fill, scenario.tub
+    count = _whole("fill.count", fill.count, 1)
+    ke_every = _whole("run.series_every", run.series_every, 1)
+    geom = geometry_of(scenario)
+    motion = TubMotion.of_scenario(scenario)
+    tables = pair_tables(scenario)
+    dt = run.dt
+    d = fill.diameter
+    r = 0.5 * d
+    skin = run.skin * d
+    R, rim, L = tub.radius, tub.rim_height, tub.length
+    periodic = tub.periodic
+    mats = type_materials(scenario)
+    seeds = seed_primes(run.seed, 3)
+
+    n_arc = arc_segments(R, max_sagitta)
+    if mesh_curvature_deg is None:
+        mesh_curvature_deg = min(10.0, 2.0 * 180.0 / n_arc)
+
+    # simulation box: the tub plus room for its motion (translation <= 2 A, rotation about the
+    # pivot) and for balls thrown above the rim
+    reach = 2.0 * max(motion.amplitude_x, motion.amplitude_z)
+    lever = math.hypot(R + abs(motion.pivot_x), rim - motion.pivot_z)
+    swing = 2.0 * motion.amplitude_theta * lever
+    pad = reach + swing + 4.0 * d
+    x_lo, x_hi = -R - pad, R + pad
+    z_lo, z_hi = -pad, rim + max(0.2, 10.0 * d) + pad
+    if periodic:
+        y_lo, y_hi = 0.0, L
+    else:
+        y_lo, y_hi = -4.0 * d, L + 4.0 * d
+
+    # insertion region: ball centres at least r + skin/2 from every wall (LIGGGHTS' rule for
+    # mesh walls), above insert_above (ball bottoms) and below the rim
+    margin = r + 0.5 * skin
+    ins_z_lo = max(fill.insert_above + r, margin)
+    ins_z_hi = rim - margin
+    if periodic:
+        iy_lo, iy_hi = 0.0, L
+    else:
+        iy_lo, iy_hi = margin, L - margin
+    if iy_hi - iy_lo <= 0 or ins_z_hi <= ins_z_lo or R - margin <= 0:
+        raise InputError(f"tub.length = {L}: too short to insert balls of diameter {d} with "
+                         f"a skin of {skin:.3g} m away from the partitions")
+    # volume of the insertion region (centres), cross-section of the shrunk U above ins_z_lo
+    area = _shrunk_u_area(R, margin, ins_z_lo, ins_z_hi)
+    v_region = area * (iy_hi - iy_lo)
+    v_ball = 4.0 / 3.0 * math.pi * r**3
+    per_event = int(max(1, min(count, math.floor(FILL_EVENT_FRACTION * v_region / v_ball))))
+    event_steps = max(1, int(round(FILL_EVENT_INTERVAL / dt)))
+    rate = per_event / (event_steps * dt)
+    max_passes = 4 * math.ceil(count / per_event) + 20
+
+    settle_steps = int(round(fill.settle_time / dt))
+    chunk_steps = max(1, int(round(SETTLE_CHUNK / dt)))
+    extra_settle = max(0.0, fill.max_settle_time - fill.settle_time)
+    max_chunks = int(math.ceil(extra_settle / (chunk_steps * dt) - 1e-9))
+
+    vib_steps = int(round(run.duration / dt))
+    dsteps = dump_vibration_steps(scenario)
+    dsteps = dsteps[(dsteps >= 0) & (dsteps <= vib_steps)]
+    thermo_every = _whole("thermo_every", thermo_every, 1) if thermo_every else \
+        max(1, int(round(0.01 / dt)))
+
+    w = motion.omega
+    # dump steps relative to the vibration start; a sentinel far beyond the run ends the list
+    first_now = dsteps.size and dsteps[0] == 0
+    rest = dsteps[1:] if first_now else dsteps
+    step_lines = "".join(f"{int(s)}\n" for s in rest)
+    # two sentinels: LIGGGHTS reads one line ahead of what next() returns
+    step_lines += f"{vib_steps + 10**9}\n{vib_steps + 10**9 + 1}\n"
+
+    model_args, model_kw = model_arguments(tables)
+    first = " first yes" if first_now else ""
+    S = _SLOT
+
+    deck = _Deck()
+    add = deck.add
+    add("# LIGGGHTS 3.8 deck written by vibroflow.io.liggghts for case '{}'", scenario.case)
+    add("# Run in this folder:  mpirun -np 2 liggghts -in in.tub   (see README.txt)")
+    add("# SI units.  Atom types: 1 = balls ({}), 2 = tub wall ({}), 3 = partitions ({}).", *mats)
+    add()
+    add("atom_style      granular")
+    add("atom_modify     map array sort 0 0")
+    add(f"boundary        f {'p' if periodic else 'f'} f")
+    add("newton          off")
+    add("communicate     single vel yes")
+    add("units           si")
+    add("hard_particles  yes")
+    add("processors      {} {} {}", *processors.split())
+    add()
+    add("region          domain block {} {} {} {} {} {} units box",
+        *(_fmt(v) for v in (x_lo, x_hi, y_lo, y_hi, z_lo, z_hi)))
+    add("create_box      3 domain")
+    add("neighbor        {} bin", _fmt(skin))
+    add("neigh_modify    delay 0")
+    add()
+    add("# ---- materials and contact law (per type pair; see docs/liggghts.md)")
+    deck.extend(_contact_law_deck(scenario, tables))
+    add("timestep        {}", _fmt(dt))
+    g = np.asarray(scenario.gravity, dtype=float)
+    gn = float(np.linalg.norm(g))
+    if gn > 0:
+        gv = g / gn
+        add("fix gravi all gravity {} vector {} {} {}", *(_fmt(v) for v in (gn, *gv)))
+    add("fix integr all nve/sphere")
+    add()
+    add("# ---- walls: the U ({} arcs on the half circle, sagitta {} mm) and the partitions, "
+        "moving with the tub", n_arc, f"{sagitta(R, n_arc) * 1e3:.4f}")
+    u_file = safe_name("U mesh file", U_MESH_FILE)
+    if mesh_curvature_deg > 0:
+        add("fix tub all mesh/surface file {} type 2 curvature {}", u_file,
+            _fmt(mesh_curvature_deg))
+    else:
+        add("fix tub all mesh/surface file {} type 2", u_file)
+    if not periodic:
+        add("fix parts all mesh/surface file {} type 3",
+            safe_name("partition mesh file", PARTITION_MESH_FILE))
+    add(f"fix walls all wall/gran {model_args} mesh n_meshes "
+        + ("1 meshes tub " if periodic else "2 meshes tub parts ") + model_kw)
+    add()
+    add("# ---- output between runs")
+    add("compute ke all ke")
+    add("compute rke all erotate/sphere")
+    add("variable ekin equal c_ke+c_rke")
+    add("variable natoms equal atoms")
+    add("variable keball equal (c_ke+c_rke)/(atoms+1.0e-300)")
+    if wall_contacts:
+        # (LIGGGHTS wants this compute defined before the first run)
+        add("compute wallc all wall/gran/local id force_normal force_tangential")
+    if pair_contacts:
+        # id: the two atom ids and a periodic-image flag; force: the contact force on the
+        # first of them (checked at import, _pair_rows)
+        add("compute pairc all pair/gran/local id force")
+    add("thermo_style    custom step atoms c_ke c_rke cpu")
+    add("thermo          {}", thermo_every)
+    add("thermo_modify   lost error norm no")
+    add()
+    add("# ---- fill: {} balls, d = {} m, in events of {} every {} steps, until all are in",
+        count, _fmt(d), per_event, event_steps)
+    add("fix pts1 all particletemplate/sphere {} atom_type 1 density constant {} radius "
+        "constant {}", seeds[0], _fmt(scenario.materials[fill.material].density), _fmt(r))
+    add("fix pdd1 all particledistribution/discrete {} 1 pts1 1.0", seeds[1])
+    add("region ucyl cylinder y 0 {} {} {} {} units box",
+        *(_fmt(v) for v in (R, R - margin, iy_lo, iy_hi)))
+    add("region ublk block {} {} {} {} {} {} units box",
+        *(_fmt(v) for v in (-R + margin, R - margin, iy_lo, iy_hi, R, ins_z_hi)))
+    add("region uin union 2 ucyl ublk")
+    add("region zcut block INF INF INF INF {} {} units box", _fmt(ins_z_lo), _fmt(ins_z_hi))
+    add("region ins intersect 2 uin zcut")
+    add("fix ins all insert/rate/region seed {} distributiontemplate pdd1 nparticles {} "
+        "particlerate {} insert_every {} overlapcheck yes all_in no maxattempt 200 vel "
+        "constant 0. 0. 0. region ins ntry_mc 200000", seeds[2], count, _fmt(rate),
+        event_steps)
+    add("variable fillpass loop {}", max_passes)
+    add("label fill_loop")
+    add("run {}", event_steps)
+    add('if "${natoms} >= {}" then "jump SELF fill_done"', count)
+    add("next fillpass")
+    add("jump SELF fill_loop")
+    add("label fill_done")
+    add("variable fillpass delete")
+    add("unfix ins")
+    add("variable stepnow equal step")
+    add(f'print "${{stepnow}} ${{natoms}}" file {POST_DIR}/{FILL_FILE}')
+    add('if "${natoms} < {}" then "print \'vibroflow: the fill inserted only ${natoms} of {} '
+        'balls\'"', count, count)
+    add()
+    add("# ---- settle with the tub at rest: {} s, then on in {} s chunks until the kinetic "
+        "energy per ball < {} J (at most {} s)", _fmt(fill.settle_time),
+        _fmt(chunk_steps * dt), _fmt(fill.settle_kinetic_energy), _fmt(fill.max_settle_time))
+    if settle_steps > 0:
+        add("run {}", settle_steps)
+    if max_chunks > 0:
+        add("variable settlepass loop {}", max_chunks)
+        add("label settle_loop")
+        add('if "${keball} < {}" then "jump SELF settle_done"',
+            _fmt(fill.settle_kinetic_energy))
+        add("run {}", chunk_steps)
+        add("next settlepass")
+        add("jump SELF settle_loop")
+        add("label settle_done")
+        add("variable settlepass delete")
+    add(f'print "${{stepnow}} ${{keball}}" file {POST_DIR}/{SETTLE_FILE}')
+    add()
+    add("# ---- vibration: t = (step - n0) dt")
+    add("variable n0 equal ${stepnow}")
+    add(f'print "${{n0}}" file {POST_DIR}/{START_FILE}')
+    add("# tub velocity = d/dt of s(a, phi, t) = a [sin(w t + phi) - sin(phi)], evaluated at the")
+    add("# middle of each step (LIGGGHTS advances the step counter before moving the mesh), so")
+    add("# the integrated pose is exact to O(dt^2) with every phase")
+    add("variable tmid equal (step-${n0}-0.5)*{}", _fmt(dt))
+    add("variable vX equal {}*cos({}*v_tmid+{})", _fmt(motion.amplitude_x * w), _fmt(w),
+        _fmt(motion.phase_x))
+    add("variable vY equal 0.0")
+    add("variable vZ equal {}*cos({}*v_tmid+{})", _fmt(motion.amplitude_z * w), _fmt(w),
+        _fmt(motion.phase_z))
+    add("# theta > 0 turns x towards z: a turn about -y")
+    add("variable wT equal {}*cos({}*v_tmid+{})", _fmt(motion.amplitude_theta * w), _fmt(w),
+        _fmt(motion.phase_theta))
+    for mesh in (["tub"] if periodic else ["tub", "parts"]):
+        add(f"fix move_{mesh}_t all move/mesh mesh {mesh} linear/variable v_vX v_vY v_vZ")
+        add(f"fix move_{mesh}_r all move/mesh mesh {mesh} rotate/variable origin {S} 0. {S} "
+            "axis 0. -1. 0. omega v_wT", _fmt(motion.pivot_x), _fmt(motion.pivot_z))
+    add()
+    add(f"# snapshots at {S} vibration steps ({POST_DIR}/dump_steps.txt, relative to n0)",
+        dsteps.size)
+    add(f"variable dfile file {POST_DIR}/dump_steps.txt")
+    add("variable dnext equal ${n0}+next(dfile)")
+    add(f"dump dballs all custom 1 {POST_DIR}/{BALL_DUMP} id type x y z vx vy vz "
+        "omegax omegay omegaz radius")
+    add('dump_modify dballs every v_dnext sort id format "%d %d ' + " ".join(["%.10g"] * 10)
+        + '"' + first)
+    if wall_contacts:
+        add(f"variable wfile file {POST_DIR}/dump_steps.txt")
+        add("variable wnext equal ${n0}+next(wfile)")
+        add(f"dump dwall all local 1 {POST_DIR}/{WALL_DUMP} "
+            + " ".join(f"c_wallc[{k}]" for k in range(1, 10)))
+        add("dump_modify dwall every v_wnext" + first)
+    if pair_contacts:
+        # its own file variable: each next() advances the variable it is called on
+        add(f"variable pfile file {POST_DIR}/dump_steps.txt")
+        add("variable pnext equal ${n0}+next(pfile)")
+        add(f"dump dpairs all local 1 {POST_DIR}/{PAIR_DUMP} "
+            + " ".join(f"c_pairc[{k}]" for k in range(1, 7)))
+        # 10 digits: the default %g would round the ids above 999999 and the forces to 6 digits
+        add('dump_modify dpairs every v_pnext format "' + " ".join(["%.10g"] * 6) + '"' + first)
+    add("variable tvib equal (step-${n0})*{}", _fmt(dt))
+    add(f'fix series all print {S} "${{tvib}} ${{ekin}}" file {POST_DIR}/{SERIES_FILE} '
+        'screen no title "# t_vibration_s kinetic_energy_J"', ke_every)
+    add("run {}", vib_steps)
+    add('print "vibroflow: vibration of {} steps done"', vib_steps)
+
+    # everything is made and checked before anything is written
+    deck_text = deck.render(DECK_NAME)
+    readme_text = _readme(scenario, vib_steps, dsteps.size, wall_contacts,
+                          pair_contacts).render("README.txt")
+    toml_text = _scenario_toml(scenario)
+
+    with folder_lock(out_dir, "vibroflow export liggghts", field="DIR"):
+        check_writable_dir(out_dir / POST_DIR, field="DIR")
+        meshes = write_tub_meshes(geom, out_dir, max_sagitta)
+        names = {k: p.name for k, p in meshes.items()}
+        if names != {"u": U_MESH_FILE, **({} if periodic else
+                                          {"partitions": PARTITION_MESH_FILE})}:
+            raise RuntimeError(f"vibroflow.liggghts.stl wrote {names}, the deck names "
+                               f"{U_MESH_FILE}, {PARTITION_MESH_FILE}")
+        write_text_atomic(out_dir / POST_DIR / "dump_steps.txt", step_lines)
+        deck_path = write_text_atomic(out_dir / DECK_NAME, deck_text)
+        write_text_atomic(out_dir / "scenario.toml", toml_text)
+        write_text_atomic(out_dir / "README.txt", readme_text)
+    return DeckInfo(out_dir, deck_path, count, dt, vib_steps, dsteps, n_arc,
+                    sagitta(R, n_arc), seeds, per_event, event_steps, settle_steps, tables)
+
+
+def _shrunk_u_area(R: float, margin: float, z_lo: float, z_hi: float) -> float:
+    """Area (m^2) of the U shrunk by `margin` (circle of radius R - margin centred at (0, R),
+    walls at x = +-(R - margin)) between heights z_lo and z_hi."""
+    rr = R - margin
+    zs = np.linspace(z_lo, z_hi, 4001)
+    half = np.where(zs >= R, rr, np.sqrt(np.clip(rr**2 - (zs - R) ** 2, 0.0, None)))
+    return float(np.trapezoid(2.0 * half, zs) if hasattr(np, "trapezoid")
+                 else np.trapz(2.0 * half, zs))
+
+
+_README = """LIGGGHTS deck for the vibroflow scenario '{}' (SI units)
+=====================================================================
+
+Files: in.tub (the deck), tub_u.stl (the U-shaped tub wall), partitions.stl (the glass
+partitions at y = 0 and y = L_y), scenario.toml (the scenario it was written from), post/ (where
+LIGGGHTS writes its output; post/dump_steps.txt lists the snapshot steps).
+
+Run it in this folder with LIGGGHTS 3.8 on 2 MPI ranks:
+
+    mpirun -np 2 liggghts -in in.tub
+
+(as root Open MPI also wants --allow-run-as-root, and --oversubscribe on a machine with fewer
+cores than ranks; the Debian package's executable is `liggghts`, a source build's `lmp_auto`).
+
+What it does: inserts {} balls at random in the tub, lets them settle with the
+tub at rest, then vibrates the tub for {} s ({} steps of
+{} s) and writes WRITTEN (all at the same
+steps), and the kinetic energy every {} steps to post/SERIES.
+
+Then convert the results into vibroflow's format (dem.h5, summary.json, bulk_velocity.csv):
+
+    vibroflow import liggghts post --out results
+
+(the scenario is read from scenario.toml next to post/).  The tub's pose is not written by
+LIGGGHTS: it is a known function of time, recomputed from the scenario by the importer.
+"""
+
+
+def _readme(scenario, vib_steps: int, n_snap: int, wall_contacts: bool,
+            pair_contacts: bool = True) -> _Deck:
+    """README.txt of a deck folder, as checked template lines (`_Deck`)."""
+    outputs = [f"{_SLOT} snapshots of the balls to post/{BALL_DUMP}"]
+    if wall_contacts:
+        outputs.append(f"the ball-wall contacts to post/{WALL_DUMP}")
+    if pair_contacts:
+        outputs.append(f"the ball-ball contacts (ids, force) to post/{PAIR_DUMP}")
+    written = ", ".join(outputs[:-1]) + (" and " if len(outputs) > 1 else "") + outputs[-1]
+    template = _README.replace("WRITTEN", written).replace("SERIES", SERIES_FILE)
+    if template.endswith("\n"):
+        template = template[:-1]
+    run = scenario.run
+    text = _Deck()
+    text.add_block(template, safe_name("case", scenario.case),
+                   _whole("fill.count", scenario.fill.count, 1), _fmt(run.duration), vib_steps,
+                   _fmt(run.dt), n_snap, _whole("run.series_every", run.series_every, 1))
+    return text
+
