@@ -162,7 +162,7 @@ def main(argv=None) -> int:
     from concurrent.futures import ProcessPoolExecutor
     from multiprocessing import get_context
 
-    from vibroflow.calibration.calibrate import read_calibration
+    from vibroflow.io.calibration_file import read_calibration
     from vibroflow.scenario.io import load_scenario
 
     summary = args.dem_dir / "summary.json"

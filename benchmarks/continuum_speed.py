@@ -58,7 +58,7 @@ def _options(method: str, a):
 
 
 def _inputs(a):
-    from vibroflow.calibration.calibrate import read_calibration
+    from vibroflow.io.calibration_file import read_calibration
     from vibroflow.scenario.io import load_scenario
 
     scenario = load_scenario(a.case, a.set)

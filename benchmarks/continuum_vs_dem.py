@@ -340,7 +340,7 @@ def main(argv=None) -> int:
     try:
         cal = None
         if args.calibration is not None:
-            from vibroflow.calibration.calibrate import read_calibration
+            from vibroflow.io.calibration_file import read_calibration
 
             cal = read_calibration(args.calibration)
         dem_dirs = collect_dem_dirs(args.dem_dir, args.case, args.overrides)

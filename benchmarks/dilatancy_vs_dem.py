@@ -45,7 +45,7 @@ def main(argv=None) -> int:
 
     from vibroflow.measure.bulk import read_csv
     from vibroflow.analysis.compare import field_difference
-    from vibroflow.calibration.calibrate import read_calibration
+    from vibroflow.io.calibration_file import read_calibration
     from vibroflow.calibration.dem_result import DEMResult
     from vibroflow.continuum.eulerian.run import EulerianOptions, run_eulerian
     from vibroflow.continuum.run import LagrangianOptions, run_lagrangian

@@ -202,7 +202,7 @@ def case_media(case: str, calibration: str):
     """(scenario, material, full motion, vertical stroke alone) of a case and a calibration
     file: the continuum material of `material_for` with the default options, the case's tub
     motion, and the same motion with no horizontal stroke and no rotation."""
-    from vibroflow.calibration.calibrate import read_calibration
+    from vibroflow.io.calibration_file import read_calibration
     from vibroflow.continuum.run import LagrangianOptions, material_for
     from vibroflow.scenario.io import load_scenario
     from vibroflow.tub.motion import TubMotion

@@ -225,7 +225,7 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
 
     import vibroflow.continuum.run as R
-    from vibroflow.calibration.calibrate import read_calibration
+    from vibroflow.io.calibration_file import read_calibration
     from vibroflow.continuum.eulerian.run import EulerianOptions
     from vibroflow.calibration.dem_result import DEMResult
 

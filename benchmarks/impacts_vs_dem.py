@@ -43,7 +43,7 @@ def main(argv=None) -> int:
     ap.add_argument("--set", action="append", default=[], dest="sets")
     args = ap.parse_args(argv)
 
-    from vibroflow.calibration.calibrate import read_calibration
+    from vibroflow.io.calibration_file import read_calibration
     from vibroflow.calibration.dem_result import DEMResult
     from vibroflow.calibration.impacts import impact_relations_on_cells
     from vibroflow.scenario.io import apply_overrides

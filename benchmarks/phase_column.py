@@ -129,7 +129,7 @@ def main(argv=None) -> int:
 
     import vibroflow.continuum.run as R
     from vibroflow.measure.bulk import read_csv
-    from vibroflow.calibration.calibrate import read_calibration
+    from vibroflow.io.calibration_file import read_calibration
     from vibroflow.calibration.dem_result import DEMResult
 
     with DEMResult.open(a.dem_dir) as res:

@@ -70,7 +70,7 @@ def main(argv=None) -> int:
     import h5py
 
     import vibroflow.continuum.run as R
-    from vibroflow.calibration.calibrate import read_calibration
+    from vibroflow.io.calibration_file import read_calibration
     from vibroflow.calibration.dem_result import DEMResult
 
     with DEMResult.open(a.dem_dir) as res:
