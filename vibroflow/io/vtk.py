@@ -11,13 +11,12 @@ representation (radius array "radius") or a Glyph filter with sphere glyphs scal
 from __future__ import annotations
 
 import os
-from xml.sax.saxutils import quoteattr
 
 import numpy as np
 from pyevtk.hl import pointsToVTK, unstructuredGridToVTK
-from pyevtk.vtk import VtkQuad
+from pyevtk.vtk import VtkGroup, VtkQuad
 
-from vibroflow.io.atomic import atomic_path, write_text_atomic
+from vibroflow.io.atomic import atomic_path
 from vibroflow.tub.geometry import TubGeometry
 
 
@@ -66,24 +65,16 @@ def write_snapshot_vtu(path, positions, velocities, angular_velocities, radius, 
 
 
 def write_pvd(path, entries) -> str:
-    """Write a ParaView collection (.pvd) of (time s, filename) entries; returns its path.
-
-    Filenames are written relative to the .pvd's folder when they lie under it.
-    """
+    """Write a ParaView collection (.pvd) of (time s, filename) entries with pyevtk's VtkGroup,
+    atomically; returns its path.  Filenames are written relative to the .pvd's folder (a
+    relative name is taken as lying in that folder)."""
     path = os.fspath(path)
     folder = os.path.dirname(os.path.abspath(path))
-    lines = ['<?xml version="1.0"?>',
-             '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">',
-             "  <Collection>"]
-    for t, fname in entries:
-        fname = os.fspath(fname)
-        if os.path.isabs(fname):
-            rel = os.path.relpath(fname, folder)
-            fname = fname if rel.startswith("..") else rel
-        lines.append(f'    <DataSet timestep="{float(t):.12g}" group="" part="0" '
-                     f"file={quoteattr(fname)}/>")
-    lines += ["  </Collection>", "</VTKFile>", ""]
-    write_text_atomic(path, "\n".join(lines))
+    with atomic_path(path, suffix=".pvd") as tmp:
+        group = VtkGroup(os.fspath(tmp)[: -len(".pvd")])
+        for t, fname in entries:
+            group.addFile(os.path.join(folder, os.fspath(fname)), sim_time=float(t))
+        group.save()
     return path
 
 
