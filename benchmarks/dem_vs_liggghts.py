@@ -47,7 +47,8 @@ from pathlib import Path
 
 import numpy as np
 
-from vibroflow.io import liggghts as LG
+from vibroflow import liggghts as LG
+from vibroflow.liggghts.importer import _json_safe
 
 
 def load(case: str, overrides: list[str]):
@@ -64,7 +65,7 @@ def _copy(s, **sections):
 def _write_json(path: Path, data: dict) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(LG._json_safe(data), indent=2) + "\n")
+    tmp.write_text(json.dumps(_json_safe(data), indent=2) + "\n")
     os.replace(tmp, path)
 
 
@@ -284,7 +285,7 @@ def overlap_deck(s, deck: Path) -> "LG.DeckInfo":
     for old in (_PAIR_COMPUTE, _WALL_COMPUTE):
         if text.count(old + "\n") != 1:
             raise RuntimeError(f"{info.deck}: expected the line {old!r} once (has "
-                               "vibroflow.io.liggghts.export_deck changed?)")
+                               "vibroflow.liggghts.export_deck changed?)")
     text = text.replace(_PAIR_COMPUTE + "\n", _PAIR_COMPUTE + " delta\n")
     text = text.replace(_WALL_COMPUTE + "\n", _WALL_COMPUTE + " delta\n")
     run_line = f"\nrun {info.vibration_steps}\n"

@@ -74,7 +74,7 @@ def test_no_hand_rolled_atomic_writes_left():
     """New code uses vibroflow.io.atomic; os.replace is left only where the rename is part of a
     bigger protocol (the DEM's partial -> final dem.h5, the LIGGGHTS import's dem.h5, the
     continuum checkpoint's own fsync'ed write)."""
-    allowed = {"io/atomic.py", "dem/output.py", "io/liggghts.py", "continuum/checkpoint.py"}
+    allowed = {"io/atomic.py", "dem/output.py", "liggghts/importer.py", "continuum/checkpoint.py"}
     users = {p.relative_to(PACKAGE).as_posix() for p in PACKAGE.rglob("*.py")
              if "os.replace(" in p.read_text(encoding="utf-8")}
     assert users <= allowed, sorted(users - allowed)

@@ -1,4 +1,4 @@
-"""Bad input at the LIGGGHTS round trip (vibroflow.io.liggghts): what the deck writer refuses to
+"""Bad input at the LIGGGHTS round trip (vibroflow.liggghts): what the deck writer refuses to
 write and what the importer refuses to read.
 
 The deck is a program (LIGGGHTS' `shell` runs anything), so no user-derived string may add a
@@ -21,9 +21,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from vibroflow import liggghts as LG
 from vibroflow.errors import InputError
-from vibroflow.io import liggghts as LG
 from vibroflow.io.folder_lock import LOCK_NAME
+from vibroflow.liggghts import deck as LG_deck
+from vibroflow.liggghts import template as LG_template
 from vibroflow.scenario.model import Scenario
 
 COLS = "id type x y z vx vy vz omegax omegay omegaz radius"
@@ -153,14 +155,14 @@ def test_export_refuses_a_bad_count_or_processor_grid_and_writes_nothing(tmp_pat
 def test_a_name_past_a_missing_guard_is_still_refused(tmp_path, monkeypatch):
     """Defence in depth: with the name guard switched off, the deck's own line check (every
     slot one token of the safe set, every line its template's) still refuses the deck."""
-    monkeypatch.setattr(LG, "safe_name", lambda field, value: value)
+    monkeypatch.setattr(LG_deck, "safe_name", lambda field, value: value)
     s = small()
     for value in ["x\nshell rm -rf /", "x'\nshell ls #", "a b"]:
         with pytest.raises(InputError, match=r"^LIGGGHTS deck value = .*nothing LIGGGHTS or a "
                                              r"shell reads specially$"):
             LG.export_deck(s.model_copy(update={"case": value}), tmp_path / "deck")
     assert not (tmp_path / "deck").exists()
-    deck = LG._Deck()
+    deck = LG_template._Deck()
     deck.add("label {}", "fill_loop")
     deck._lines.append(("label {}", ("x\nshell ls",)))  # a value no slot accepts
     with pytest.raises(InputError):

@@ -1,4 +1,4 @@
-"""The LIGGGHTS round trip (vibroflow.io.stl, vibroflow.io.liggghts).
+"""The LIGGGHTS round trip (vibroflow.liggghts).
 
 Known answers used here: the analytic U surface of tub47.md (every STL vertex on it, every facet
 within the 0.05 mm chord tolerance of it, the facets' normals pointing into the tub); the contact
@@ -22,12 +22,12 @@ import h5py
 import numpy as np
 import pytest
 
+from vibroflow import liggghts as LG
 from vibroflow.errors import InputError
-from vibroflow.io import liggghts as LG
-from vibroflow.io.stl import (arc_segments, facet_normals, partition_triangles, read_stl,
-                              u_profile, u_triangles, write_stl, write_tub_meshes)
+from vibroflow.liggghts.stl import (arc_segments, facet_normals, partition_triangles, read_stl,
+                                    u_profile, u_triangles, write_stl, write_tub_meshes)
 from vibroflow.scenario.model import Scenario
-from vibroflow.tub.geometry import TubGeometry
+from vibroflow.tub.geometry import TubGeometry, geometry_of
 
 R_TUB, RIM = 0.15, 0.40
 TOL = 5.0e-5  # m, the facets' allowed deviation from the circle
@@ -610,7 +610,7 @@ def test_mpirun_command_runs_two_ranks():
 def _collision_deck(s: Scenario, dt: float, steps: int) -> str:
     """Four balls without gravity: one falls on the U's flat bottom facet, two collide head-on,
     one hits the partition at y = 0; each at 0.5 m/s."""
-    g = LG.geometry_of(s)
+    g = geometry_of(s)
     args, kw = LG.model_arguments(LG.pair_tables(s))
     r = 0.5 * s.fill.diameter
     L = g.length
@@ -645,7 +645,7 @@ def test_liggghts_collisions_have_the_tub47_restitution_and_contact_time(tmp_pat
     time discretisation is negligible, so this checks the parameters themselves (that LIGGGHTS
     reads gamman_abs in N s/m with the m_eff we assumed)."""
     s = Scenario().model_copy(update={"gravity": (0.0, 0.0, 0.0)})
-    write_tub_meshes(LG.geometry_of(s), tmp_path)
+    write_tub_meshes(geometry_of(s), tmp_path)
     dt = 1.0e-6
     (tmp_path / "in.tub").write_text(_collision_deck(s, dt, 30000))
     LG.run_deck(tmp_path, nprocs=1, timeout=300)

@@ -569,7 +569,7 @@ def export_liggghts(
 ) -> None:
     """Write a LIGGGHTS input deck (with STL walls) for a scenario into DIR."""
     s = _load(scenario, set_)
-    from vibroflow.io.liggghts import export_deck
+    from vibroflow.liggghts import export_deck
 
     export_deck(s, Path(directory))
 
@@ -599,7 +599,7 @@ def import_liggghts(
     if not dumpdir.is_dir():
         raise InputError(f"{dumpdir}: no such dump folder")
     s = _load(_import_scenario_source(dumpdir, scenario), set_)
-    from vibroflow.io.liggghts import import_run
+    from vibroflow.liggghts import import_run
 
     import_run(Path(dumpdir), s, Path(out))
 

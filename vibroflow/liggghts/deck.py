@@ -12,8 +12,8 @@ docs/liggghts.md):
   resistance from the pair's mu and mu_r.  A scenario whose contacts are all Hertz gets LIGGGHTS'
   `hertz` (moduli from the materials, restitution through LIGGGHTS' own damping formula).
 * Atom types: 1 = the balls' material, 2 = the tub wall's, 3 = the partitions'.
-* Walls: the U and the partitions as STL meshes (vibroflow.liggghts.stl; the U's facets joined into
-  one smooth surface by `curvature`, so contact histories cross their creases), moved rigidly
+* Walls: the U and the partitions as STL meshes (vibroflow.liggghts.stl; the U's facets joined
+  into one smooth surface by `curvature`, so contact histories cross their creases), moved rigidly
   with the tub by two superposed `fix move/mesh` per mesh: `linear/variable` (the translation) then
   `rotate/variable` about the pivot (whose origin rides with the translation).  Their velocity
   variables are the exact derivatives of s(a, phi, t) = a [sin(omega t + phi) - sin(phi)], and
@@ -34,11 +34,10 @@ docs/liggghts.md):
   variable; the kinetic energy every run.series_every steps (post/series.txt).
 
 Bad input writes nothing.  The deck is a program (a newline starts a command, and `shell` runs
-anything), so it is built from template lines with slots, every user-derived value
-one token of a safe set (names through `safe_name`, numbers finite), and each written line is
-checked against its template (vibroflow.liggghts.template).  The export writes under the
-folder's lock (vibroflow.io.folder_lock) and puts its files in place only once everything is
-checked.
+anything), so it is built from template lines with slots, every user-derived value one token of
+a safe set (names through `safe_name`, numbers finite), and each written line is checked against
+its template (vibroflow.liggghts.template).  The export writes under the folder's lock
+(vibroflow.io.folder_lock) and puts its files in place only once everything is checked.
 """
 from __future__ import annotations
 
@@ -59,6 +58,7 @@ from vibroflow.liggghts.template import _PROCESSORS, _SLOT, _Deck, _fmt, _short,
 from vibroflow.tub.geometry import geometry_of
 from vibroflow.tub.motion import TubMotion
 
+#: the files of a deck folder: the deck, and what LIGGGHTS writes into post/ for the importer
 DECK_NAME = "in.tub"
 POST_DIR = "post"
 BALL_DUMP = "balls.dump"
@@ -89,8 +89,6 @@ def _check_names(scenario) -> None:
         if name not in materials:
             raise InputError(f"{field} = {name!r}: not one of the scenario's materials "
                              f"{sorted(map(str, materials))}")
-
-
 
 
 def _scenario_toml(scenario) -> str:

@@ -321,7 +321,6 @@ def _read_series(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(t), np.asarray(e)
 
 
-
 def _find_log(post: Path) -> Path | None:
     for folder in (post, post.parent):
         for name in ("log.liggghts", "log.lammps", "screen.txt"):

@@ -4,6 +4,7 @@ random seeds and the vibration steps of the snapshots."""
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 

@@ -1,0 +1,28 @@
+"""The LIGGGHTS round trip: a tub scenario exported as a LIGGGHTS 3.8 deck, run elsewhere, and its
+dumps imported back as vibroflow results, so the two codes are compared with the same analysis.
+
+    export_deck(scenario, DIR)      DIR/in.tub, tub_u.stl, partitions.stl, scenario.toml,
+                                    README.txt, post/ (where LIGGGHTS writes)
+    mpirun -np 2 liggghts -in in.tub    (in DIR; see README.txt and docs/liggghts.md)
+    import_run(DIR/post, scenario, OUT) OUT/dem.h5 (vibroflow's DEM layout, source "liggghts"),
+                                    OUT/summary.json, OUT/bulk_velocity.csv
+
+Modules: stl (the tub's triangle meshes), parameters (the contact law, seeds and snapshot steps a
+scenario gives the deck), template (what user input may put into a deck), deck (the export),
+launch (running LIGGGHTS; its log's loop times), dumps (reading LIGGGHTS text dumps), contacts
+(the dumped contacts as dem.h5 rows), importer (a run's dumps as dem.h5, summary.json and
+bulk_velocity.csv).
+"""
+from vibroflow.liggghts.deck import (BALL_DUMP, DECK_NAME, PAIR_DUMP, POST_DIR, SERIES_FILE,
+                                     START_FILE, WALL_DUMP, DeckInfo, export_deck)
+from vibroflow.liggghts.dumps import DumpSnapshot, iter_dump, read_dump
+from vibroflow.liggghts.importer import import_run
+from vibroflow.liggghts.launch import find_liggghts, loop_times, mpirun_command, run_deck
+from vibroflow.liggghts.parameters import (contact_law_lines, model_arguments, pair_tables,
+                                           seed_primes)
+from vibroflow.liggghts.template import safe_name
+
+__all__ = ["BALL_DUMP", "DECK_NAME", "PAIR_DUMP", "POST_DIR", "SERIES_FILE", "START_FILE",
+           "WALL_DUMP", "DeckInfo", "DumpSnapshot", "contact_law_lines", "export_deck",
+           "find_liggghts", "import_run", "iter_dump", "loop_times", "model_arguments",
+           "mpirun_command", "pair_tables", "read_dump", "run_deck", "safe_name", "seed_primes"]
