@@ -231,7 +231,7 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
 
     deck = _Deck()
     add = deck.add
-    add("# LIGGGHTS 3.8 deck written by vibroflow.io.liggghts for case '{}'", scenario.case)
+    add("# LIGGGHTS 3.8 deck written by vibroflow.liggghts for case '{}'", scenario.case)
     add("# Run in this folder:  mpirun -np 2 liggghts -in in.tub   (see README.txt)")
     add("# SI units.  Atom types: 1 = balls ({}), 2 = tub wall ({}), 3 = partitions ({}).", *mats)
     add()
