@@ -94,7 +94,7 @@ def test_peak_vertical_acceleration_is_about_13_g():
 
 def test_time_step_is_about_1_22_of_ball_ball_contact_time():
     # models.md: t_c = pi / sqrt(k/m_eff - (gamma/(2 m_eff))^2), gamma = 2 zeta sqrt(m_eff k)
-    from vibroflow.scenario.model import contact_times
+    from vibroflow.scenario.checks import contact_times
 
     s = Scenario()
     m_eff = 7800.0 * math.pi * 0.00635**3 / 6 / 2
@@ -289,7 +289,7 @@ def test_model_checks_cross_fields():
 def test_mixed_sizes_use_the_smallest_balls():
     # m_eff and r_eff of the smallest pair: a 2 mm steel ball has t_c (linear) = (2/6.35)^1.5
     # of the 6.35 mm one's, so dt = 1e-5 fails only once it is present
-    from vibroflow.scenario.model import contact_times
+    from vibroflow.scenario.checks import contact_times
 
     big = ParticleSpec(position=(0, 0, 0.01))
     big2 = ParticleSpec(position=(0, 0, 0.02))

@@ -157,7 +157,7 @@ def scenario_show(scenario: ScenarioArg, set_: SetOption = None) -> None:
 
 def summary_line(s) -> str:
     """One line describing a valid scenario."""
-    from vibroflow.scenario.model import contact_times
+    from vibroflow.scenario.checks import contact_times
 
     if s.explicit:
         what = (f"explicit mode, particles: {len(s.particles)}, plane walls: "

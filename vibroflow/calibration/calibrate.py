@@ -37,7 +37,7 @@ from vibroflow import __version__
 from vibroflow.errors import InputError, Interrupted
 from vibroflow.io.calibration_file import CALIBRATION_FILE, write_calibration
 from vibroflow.io.folder_lock import folder_lock
-from vibroflow.scenario.model import find_contact
+from vibroflow.scenario.checks import find_contact
 from vibroflow.tub.geometry import geometry_of
 
 from .dem_result import DEMResult

@@ -37,7 +37,7 @@ import numpy as np
 from vibroflow.measure.contacts import wall_contact_stats
 from vibroflow.measure.stats import batch_means
 from vibroflow.tub.geometry import geometry_of
-from vibroflow.scenario.model import find_contact
+from vibroflow.scenario.checks import find_contact
 from vibroflow.dem.walls import WALL_PARTITION_HI, WALL_PARTITION_LO, WALL_U
 
 from .dem_result import DEMResult

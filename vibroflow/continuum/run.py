@@ -278,7 +278,7 @@ class LagrangianOptions:
 
 
 def _contact(scenario, a: str, b: str):
-    from vibroflow.scenario.model import find_contact
+    from vibroflow.scenario.checks import find_contact
 
     return find_contact(scenario, a, b)
 

@@ -16,7 +16,7 @@ from vibroflow.dem.walls import WALL_PARTITION_HI, WALL_PARTITION_LO, WALL_U
 from vibroflow.errors import InputError
 from vibroflow.liggghts.dumps import _whole_column
 from vibroflow.liggghts.parameters import type_materials
-from vibroflow.scenario.model import find_contact
+from vibroflow.scenario.checks import find_contact
 from vibroflow.tub.motion import lab_to_tub_np
 
 #: relative tolerance of |F_t| = mu |F_n| that marks a wall contact as sliding

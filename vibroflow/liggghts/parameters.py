@@ -11,7 +11,7 @@ import numpy as np
 from vibroflow.errors import InputError
 from vibroflow.liggghts.template import _SLOT, _Deck, _fmt, _table
 from vibroflow.scenario.laws import damping_ratio
-from vibroflow.scenario.model import find_contact
+from vibroflow.scenario.checks import find_contact
 
 
 def next_prime(n: int) -> int:

@@ -137,7 +137,7 @@ def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
                 options: EulerianOptions, frame) -> EulerianSystem:
     """The Eulerian system of a tub scenario in `frame`: the U's mesh, the wall and partitions
     with the Lagrangian run's parameters (continuum.run.make_system), the time step."""
-    from vibroflow.scenario.model import find_contact
+    from vibroflow.scenario.checks import find_contact
 
     geo = geometry_of(scenario)
     dx = options.grid(scenario)
