@@ -1,26 +1,21 @@
 """The continuum formulations against vibroflow's DEM on tub47 and tub47-quick: the comparison
-the package exists for (issues 4 and 6), with the DEM as the ground truth.
+the package exists for, with the DEM as the ground truth, judged as tub47.md judges it.
 
-The references are DEM runs (tests/data/tub47-dem, the reference case: circulation 2.44e-3
-m^2/s counterclockwise, seed-to-seed E 0.135 against seed 2, so tub47.md's fields-agree limit
-is 0.20; over ten seeds the seed-to-seed E is 0.206 +- 0.026 and the limit 0.31,
-benchmarks/README.md "Session 18", whose ten runs' tables are tests/data/tub47-dem-seeds; and
-tests/data/tub47-quick-dem: 3.57e-3 m^2/s, seed-to-seed E 0.156): their cell tables and the
-calibrations measured on them.  Each continuum runs the same scenario with that calibration, at
-the package's defaults, and is judged with tub47.md's measures (vibroflow.analysis.compare).
+References (tests/data): the ten tub47 fill seeds' tables (tub47-dem-seeds; seed-to-seed E
+0.206 +- 0.026, so the fields-agree limit is 0.309), tub47's seed 1 with its calibration
+(tub47-dem: circulation 2.44e-3 m^2/s counterclockwise) and tub47-quick's DEM with its
+calibration (tub47-quick-dem: 3.57e-3 m^2/s; limit 1.5 x 0.166 = 0.249, tub47.md).  Each
+continuum runs the same scenario with that calibration at the package's defaults, once per
+module (`runs`).
 
-On tub47 the circulations agree as tub47.md judges them (within 10 % or twice the combined
-standard error) and the fields do not (E 0.34 and 0.43 for this settling time, against the
-limit 0.20): the E bounds are what the formulations reach (benchmarks/README.md "Session 11";
-over four settling times the Lagrangian's E is 0.347 +- 0.006), guards against regressions,
-not tub47.md's target.  The Lagrangian check also runs session 8's default (one APIC transfer
-a step at cfl 0.075: E 0.46 here), which the transfers' rate decoupled from the step
-(continuum/run.py, DEFAULT_TRANSFER_CFL) improves on.
-
-tub47-quick (3 balls between the partitions instead of 10) is where the defaults were not
-chosen, and where they do worse: both rolls are too weak (0.58 and 0.51 of the DEM's; with
-session 8's defaults 0.83 and 0.68) and the fields as far or farther from the DEM's (E 0.48 and
-0.61, against 0.43 and 0.54).  Its bounds guard that state and say so.
+What is true today, said by the tests:
+- tub47: the circulations agree with the DEM's in both formulations (a target met);
+- tub47: the fields miss the limit (Lagrangian E 1.25 of it, Eulerian 1.42): tub47.md's target,
+  asserted under a strict xfail that states the miss;
+- tub47-quick: both rolls are too weak (0.58 and 0.45 of the DEM's) and the fields miss the
+  limit (E 0.48 and 0.67 against 0.249): the targets under strict xfails;
+- regression guards (named so) hold the state reached, so that a change that makes it worse
+  fails.
 """
 from __future__ import annotations
 
@@ -28,9 +23,9 @@ from pathlib import Path
 
 import pytest
 
-from vibroflow.measure.bulk import read_csv
 from vibroflow.analysis.compare import field_difference, strengths_agree
 from vibroflow.io.calibration_file import read_calibration
+from vibroflow.measure.bulk import read_csv
 from vibroflow.scenario.io import load_scenario
 
 DATA = Path(__file__).parent / "data"
@@ -38,41 +33,26 @@ DATA = Path(__file__).parent / "data"
 #: README.md)
 DEM = {"tub47": (2.4418e-3, 0.2183e-3), "tub47-quick": (3.5725e-3, 0.0932e-3)}
 DIRS = {"tub47": DATA / "tub47-dem", "tub47-quick": DATA / "tub47-quick-dem"}
+SEEDS = DATA / "tub47-dem-seeds"
+#: tub47.md's fields-agree limit on tub47-quick: 1.5 x the DEM's seed-to-seed E there
+QUICK_LIMIT = 0.249
+METHODS = ("lagrangian", "eulerian")
 
 
-def _against_dem(case: str, summary: dict, out: Path) -> tuple[float, float, bool]:
-    """(E against the DEM, strength over the DEM's, whether the strengths agree) of a continuum
-    run of `case` in `out`."""
+def _against_dem(case: str, summary: dict, out: Path) -> dict:
+    """E against the case's DEM reference, the strength over the DEM's and whether the strengths
+    agree (tub47.md), of a continuum run of `case` in `out`."""
     c = summary["circulation"]
-    assert c["sense"] == "counterclockwise"
     E = field_difference(read_csv(out / "bulk_velocity.csv"),
                          read_csv(DIRS[case] / "bulk_velocity.csv"))
     s, se = DEM[case]
-    return E, c["strength"] / s, strengths_agree(c["strength"], c["strength_stderr"], s, se)
-
-
-def _run(method: str, case: str, out: Path, **options):
-    scenario = load_scenario(case)
-    cal = read_calibration(DIRS[case] / "calibration.toml")
-    if method == "lagrangian":
-        from vibroflow.continuum.run import LagrangianOptions, run_lagrangian
-
-        summary = run_lagrangian(scenario, out, calibration=cal,
-                                 options=LagrangianOptions(**options))
-    else:
-        from vibroflow.continuum.eulerian.run import EulerianOptions, run_eulerian
-
-        summary = run_eulerian(scenario, out, calibration=cal,
-                               options=EulerianOptions(**options))
-    return summary, _against_dem(case, summary, out)
-
-
-SEEDS = DATA / "tub47-dem-seeds"
+    return {"sense": c["sense"], "E": E, "strength_ratio": c["strength"] / s,
+            "agree": strengths_agree(c["strength"], c["strength_stderr"], s, se)}
 
 
 def _against_seeds(out: Path) -> dict:
     """A continuum run judged against the DEM's ten fill seeds (vibroflow.analysis.judge, as
-    `vibroflow compare` prints it): the floor measured on them (0.206 +- 0.026, limit 0.309)."""
+    `vibroflow compare` prints it)."""
     from vibroflow.analysis.judge import judge, read_result
 
     refs = [read_result(SEEDS / f"seed{k}") for k in range(1, 11)]
@@ -85,45 +65,106 @@ def _against_seeds(out: Path) -> dict:
     return r
 
 
-def test_lagrangian_on_tub47_agrees_in_strength_and_beats_session_8(tmp_path):
-    """Against seed 1 (E < 0.40) and against the ensemble of ten seeds: the circulations agree,
-    the field misses the limit by a quarter (measured 1.25 of it: E 0.386 +- 0.015 against
-    0.309), a systematic difference (0.356 against the seeds' mean field); the bound guards
-    that state, it is not tub47.md's target."""
-    _, (E, s, agree) = _run("lagrangian", "tub47", tmp_path / "new")
-    r = _against_seeds(tmp_path / "new")
-    assert r["strengths_agree"]
-    assert r["E_over_limit"] < 1.35
-    assert r["E_mean_field"] < r["E_mean"]
-    _, (E_old, s_old, _) = _run("lagrangian", "tub47", tmp_path / "old", cfl=0.075,
-                                transfer_cfl=None)
-    print(f"\nLagrangian tub47: E {E:.3f}, strength x{s:.2f}; one transfer at cfl 0.075: "
-          f"E {E_old:.3f}, strength x{s_old:.2f}")
-    assert agree
-    assert E < 0.40
-    assert E < E_old - 0.05
+def _run(method: str, case: str, out: Path, **options) -> dict:
+    scenario = load_scenario(case)
+    cal = read_calibration(DIRS[case] / "calibration.toml")
+    if method == "lagrangian":
+        from vibroflow.continuum.run import LagrangianOptions, run_lagrangian
+
+        summary = run_lagrangian(scenario, out, calibration=cal,
+                                 options=LagrangianOptions(**options))
+    else:
+        from vibroflow.continuum.eulerian.run import EulerianOptions, run_eulerian
+
+        summary = run_eulerian(scenario, out, calibration=cal,
+                               options=EulerianOptions(**options))
+    result = {"summary": summary, **_against_dem(case, summary, out)}
+    if case == "tub47":
+        result["seeds"] = _against_seeds(out)
+    print(f"\n{method} {case}: E {result['E']:.3f}, strength x{result['strength_ratio']:.2f}")
+    return result
 
 
-def test_eulerian_on_tub47_agrees_in_strength(tmp_path):
-    """Against seed 1 (E < 0.50) and against the ten seeds: the circulations agree, the field
-    misses the limit by two fifths (measured 1.42 of it: E 0.437 +- 0.015)."""
-    summary, (E, s, agree) = _run("eulerian", "tub47", tmp_path / "eul")
-    r = _against_seeds(tmp_path / "eul")
-    assert r["strengths_agree"]
-    assert r["E_over_limit"] < 1.55
-    print(f"\nEulerian tub47: E {E:.3f}, strength x{s:.2f}")
-    assert agree
-    assert E < 0.50
-    assert abs(summary["continuum"]["mass_error"]) < 1e-12
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """Each (method, case) run once for the module, when a test first asks for it."""
+    done: dict[tuple[str, str], dict] = {}
+
+    def get(method: str, case: str) -> dict:
+        if (method, case) not in done:
+            done[method, case] = _run(method, case, tmp_path_factory.mktemp(f"{method}-{case}"))
+        return done[method, case]
+
+    return get
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_circulation_on_tub47_agrees_with_the_dem_seeds(runs, method):
+    """tub47.md: the continuum's strength within 10 % or twice the combined standard error of
+    the DEM's, against the ten seeds' mean and against seed 1; the same sense."""
+    r = runs(method, "tub47")
+    assert r["sense"] == "counterclockwise"
+    assert r["seeds"]["strengths_agree"]
+    assert r["agree"]
+
+
+MISS = "a systematic difference: the DEM's agitated bed, which the continuum lacks (issue 29)"
+
+
+@pytest.mark.parametrize("method", [
+    pytest.param("lagrangian", marks=pytest.mark.xfail(
+        strict=True, reason=f"E is 1.25 x the limit (0.386 +- 0.015 against 0.309): {MISS}")),
+    pytest.param("eulerian", marks=pytest.mark.xfail(
+        strict=True, reason=f"E is 1.42 x the limit (0.437 +- 0.015 against 0.309): {MISS}")),
+])
+def test_field_on_tub47_meets_the_fields_agree_limit(runs, method):
+    """tub47.md's target: E against the ten seeds at most 1.5 x their seed-to-seed E."""
+    assert runs(method, "tub47")["seeds"]["E_over_limit"] <= 1.0
+
+
+@pytest.mark.parametrize("method, guard", [("lagrangian", 1.35), ("eulerian", 1.55)])
+def test_regression_guard_field_on_tub47(runs, method, guard):
+    """Regression guard, not a target: E against the ten seeds stays below `guard` x the limit
+    (measured 1.25 and 1.42) and the difference is systematic (against the seeds' mean field it
+    is smaller than against each seed)."""
+    r = runs(method, "tub47")
+    assert r["seeds"]["E_over_limit"] < guard
+    if method == "lagrangian":
+        assert r["seeds"]["E_mean_field"] < r["seeds"]["E_mean"]
+
+
+def test_regression_guard_lagrangian_transfers_beat_one_transfer_a_step(runs, tmp_path):
+    """Regression guard of a model choice (continuum/run.py DEFAULT_TRANSFER_CFL): the
+    transfers' rate set apart from the step gives a field closer to the DEM's than one APIC
+    transfer a step at cfl 0.075 (E 0.46 against seed 1)."""
+    new = runs("lagrangian", "tub47")
+    old = _run("lagrangian", "tub47", tmp_path / "old", cfl=0.075, transfer_cfl=None)
+    assert new["E"] < 0.40
+    assert new["E"] < old["E"] - 0.05
+
+
+def test_eulerian_conserves_mass_on_tub47(runs):
+    assert abs(runs("eulerian", "tub47")["summary"]["continuum"]["mass_error"]) < 1e-12
+
+
+@pytest.mark.parametrize("method", [
+    pytest.param("lagrangian", marks=pytest.mark.xfail(
+        strict=True, reason=f"strength 0.58 of the DEM's, E 0.48 against 0.249: {MISS}")),
+    pytest.param("eulerian", marks=pytest.mark.xfail(
+        strict=True, reason=f"strength 0.45 of the DEM's, E 0.67 against 0.249: {MISS}")),
+])
+def test_on_tub47_quick_the_dem_flow_is_met(runs, method):
+    """tub47.md's targets on tub47-quick: strength within 10 % of the DEM's, E at most the limit
+    0.249."""
+    r = runs(method, "tub47-quick")
+    assert abs(r["strength_ratio"] - 1.0) <= 0.10 and r["E"] <= QUICK_LIMIT
 
 
 @pytest.mark.parametrize("method, E_max, s_range", [("lagrangian", 0.55, (0.45, 1.3)),
                                                      ("eulerian", 0.70, (0.40, 1.3))])
-def test_on_tub47_quick_against_the_dem(tmp_path, method, E_max, s_range):
-    """tub47-quick, where the defaults were not chosen: bounds that guard the state reached
-    (module docstring: both rolls too weak), not tub47.md's targets."""
-    _, (E, s, _) = _run(method, "tub47-quick", tmp_path / method)
-    print(f"\n{method} tub47-quick: E {E:.3f}, strength x{s:.2f}")
-    assert E < E_max
-    assert s_range[0] < s < s_range[1]
-
+def test_regression_guard_on_tub47_quick(runs, method, E_max, s_range):
+    """Regression guard, not a target: the state reached on tub47-quick."""
+    r = runs(method, "tub47-quick")
+    assert r["sense"] == "counterclockwise"
+    assert r["E"] < E_max
+    assert s_range[0] < r["strength_ratio"] < s_range[1]
