@@ -526,13 +526,13 @@ def damped_stress(stress, L, phase, params, out):
     Why.  The DEM's bed loses the energy of its compression waves in its contacts' dashpots
     (restitution 0.85 between balls) within a cycle, and flies nearly as a body; the
     elasto-plastic continuum has nothing to damp those waves below yield but its transfers,
-    and rings through its depth (benchmarks/README.md, session 14: a vibrated strip stretched
-    three times the DEM's).  A Kelvin-Voigt viscosity is the continuum's dashpot: it is not
-    stored in the stress (the elastic predictor and the return map see the elastic-plastic
-    stress only), it adds eta_b (7/3) of damping to the P-wave and eta_b to the shear wave,
-    which decay as exp(-eta k^2 t / (2 rho)) (tests/test_mpm.py), and it does nothing to
-    a body moving rigidly (D = 0).  Its value is fitted on a DEM of the same strip
-    (benchmarks/strip_damping.py)."""
+    and rings through its depth (without it a vibrated strip stretches three times as far as
+    the DEM's: benchmarks/strip_damping.py, docs/validation.md).  A Kelvin-Voigt viscosity is
+    the continuum's dashpot: it is not stored in the stress (the elastic predictor and the
+    return map see the elastic-plastic stress only), it adds eta_b (7/3) of damping to the
+    P-wave and eta_b to the shear wave, which decay as exp(-eta k^2 t / (2 rho))
+    (tests/test_mpm.py), and it does nothing to a body moving rigidly (D = 0).  Its value is
+    fitted on a DEM of the same strip (benchmarks/strip_damping.py)."""
     eta = params[P_ETA_BED]
     hoop = L.shape[1] > 4
     for p in range(stress.shape[0]):

@@ -83,60 +83,46 @@ VTK_DIR = "vtk"
 CHECKPOINT_NAME = "checkpoint.npz"
 
 
-#: The default grid, time step and APIC transfers of a tub run (sessions 8 and 11;
-#: benchmarks/README.md "Session 8", "Session 11"): dx = DEFAULT_DX_DIAMETERS ball diameters
-#: (19 mm in tub47), steps of Courant number DEFAULT_CFL, and round(DEFAULT_CFL /
+#: The default grid, time step and APIC transfers of a tub run: dx = DEFAULT_DX_DIAMETERS ball
+#: diameters (19 mm in tub47), steps of Courant number DEFAULT_CFL, and round(DEFAULT_CFL /
 #: DEFAULT_TRANSFER_CFL) = 20 APIC transfers a step (transfer_operator.py).  The grid and the
 #: transfers' rate are model choices, not only numerical ones, and are stated as such:
 #:
-#: * the grid: on a fine grid at a fixed transfer_cfl the continuum forms a tight roll on the
-#:   tub's right half with the left half still, unlike the DEM's bed-wide roll (session 8).
-#:   Session 16 found that this was the transfers' damping falling with the grid (below), not
-#:   the mu(I) law's want of a length: with the damping held, the field is the same on 19, 12.7
-#:   and 9.5 mm grids, and a nonlocal fluidity (Kamrin & Koval 2012, a throw-away) changed
-#:   nothing on either grid;
 #: * each APIC transfer filters the velocities through the grid, a damping of the grid-scale
-#:   motion, and more of it brings the field closer to the DEM's, where neither a Newtonian
-#:   shear viscosity (20 - 2000 Pa s) nor a bulk viscosity (200 - 4000 Pa s) in the stress did:
-#:   the dissipation the continuum lacks is at the grid's scale, not the roll's (its physical
-#:   form would be the collisional decay of the bed's agitation; not built).  Until session 10
-#:   the step set it (one transfer a step, cfl 0.075: the run depended on the step); now the
-#:   transfers' rate does, given as the Courant number of the equivalent one-transfer step,
-#:   DEFAULT_TRANSFER_CFL, and the step is set by stability alone (0.3, timestep.py), so a run
-#:   hardly depends on its step any more (to within the rounding of the transfers' count;
-#:   tests/test_transfer_operator.py; tub47 at the rate of 16 transfers at cfl 0.3: E 0.388,
-#:   0.379, 0.369 at cfl 0.15, 0.3, 0.5).
+#:   motion, and it is this damping that brings the tub's field to the DEM's; a Newtonian shear
+#:   or bulk viscosity in the stress does not: the dissipation the continuum lacks is at the
+#:   grid's scale, not the roll's (its physical form would be the collisional decay of the
+#:   bed's agitation, which is not modelled).  The transfers' rate is given as the Courant
+#:   number of the equivalent one-transfer step, DEFAULT_TRANSFER_CFL, and the step is set by
+#:   stability alone (timestep.py), so a run hardly depends on its step (to within the
+#:   rounding of the transfers' count; tests/test_transfer_operator.py).  The rate is the one
+#:   whose field is closest to the DEM's on tub47 (E 0.347 +- 0.006 against the DEM's
+#:   seed-to-seed 0.135, strength 0.98 of the DEM's): docs/decisions/transfer-rate.md;
+#: * the grid: the mu(I) law needs no length of its own here, the field is the same on 19, 12.7
+#:   and 9.5 mm grids once the transfers' damping is held the same on each (below), and a
+#:   nonlocal fluidity (Kamrin & Koval 2012) changes nothing: docs/decisions/grid-spacing.md.
 #:
-#: Chosen on tub47 at amplitude factor 1.0, four settling times each, E against the DEM (the
-#: DEM's seed-to-seed E 0.135) and strength over the DEM's: one transfer a step at cfl 0.075
-#: (the session-8 default) 0.470 +- 0.015, 1.08; at cfl 0.3 with 4, 8, 12, 16, 20, 24 and 32
-#: transfers (transfer Courant number 0.075 to 0.0094): 0.497, 0.435, 0.425, 0.379, 0.347 +-
-#: 0.006, 0.350, 0.410 (strengths 1.10, 0.98, 1.10, 1.04, 0.98, 0.87, 0.76); then checked where
-#: not chosen: factors 0.5 and 1.5 (0.434 and 0.326, against 0.839 and 0.487 before) and
-#: tub47-quick, which is worse (0.477 and a roll 0.59 of the DEM's, against 0.431 and 0.83).
-#: Named in a run's fingerprint and a study stage's inputs (options_record), so that a run made
-#: under the former rule is never taken for one made under this one.
+#: Named in a run's fingerprint and a study stage's inputs (options_record), so that runs made
+#: under different damping rules are never taken for one another.
 #:
-#: The transfers' damping is a fourth-order one, held the same on every grid (session 16).  One
-#: APIC transfer leaves a velocity mode of wavenumber k the fraction 1 - alpha (k dx)^4 of its
+#: The transfers' damping is a fourth-order one, held the same on every grid.  One APIC
+#: transfer leaves a velocity mode of wavenumber k the fraction 1 - alpha (k dx)^4 of its
 #: amplitude (APIC keeps affine fields exactly, so the loss starts at fourth order; alpha =
 #: 0.024 on a lattice of 2 x 2 points a cell, tests/test_transfer_operator.py), and a run
 #: makes n / dt = c / (transfer_cfl dx) of them a second (c the wave speed the step is set
 #: by), so the transfers damp the flow as a hyperviscosity nu_4 = alpha c dx^3 /
-#: transfer_cfl (m^4/s): dv/dt = -nu_4 lap^2 v.  Held at a fixed transfer_cfl, it falls
-#: eightfold each time the grid is halved, and the tub's field moved away from the DEM's as
-#: the grid was refined (E 0.347, 0.418, 0.500 on 19, 12.7 and 9.5 mm): the grid was part of
-#: the model.  transfer_cfl is therefore the Courant number of the transfers on a grid of
-#: spacing `damping_length` (default: the formulation's default grid, 3 ball diameters, on
-#: which the default was chosen), and a run on spacing dx makes them at transfer_cfl (dx /
-#: damping_length)^3: the same nu_4 on every grid.  tub47 then reads E 0.347, 0.331, 0.346
-#: (strength 0.98, 0.97, 0.92 of the DEM's) on 19, 12.7 and 9.5 mm (20, 67, 161 transfers a
-#: step), four settling times each (benchmarks/continuum_sensitivity.py, benchmarks/README.md
-#: "Session 16"): converged in the grid, at eight times the transfers a step for each halving
-#: of it (a 9.5 mm run took 55 s against 34 s at the fixed transfer_cfl).  The Eulerian
-#: formulation's field settles on finer grids with the rule (E 0.493, 0.506 on 12.5 and 9.4
-#: mm) but not at its default grid's 0.432, and more damping does not bring it there (0.507,
-#: 0.518 at 1.5 and 2 times it on 12.5 mm): something else in its step depends on the grid.
+#: transfer_cfl (m^4/s): dv/dt = -nu_4 lap^2 v.  Held at a fixed transfer_cfl it would fall
+#: eightfold with each halving of the grid, and the field would move away from the DEM's: the
+#: grid would be part of the model.  transfer_cfl is therefore the Courant number of the
+#: transfers on a grid of spacing `damping_length` (default: the formulation's default grid,
+#: 3 ball diameters, on which the rate was chosen), and a run on spacing dx makes them at
+#: transfer_cfl (dx / damping_length)^3: the same nu_4 on every grid.  tub47 reads E 0.347,
+#: 0.331, 0.346 (strength 0.98, 0.97, 0.92 of the DEM's) on 19, 12.7 and 9.5 mm (20, 67, 161
+#: transfers a step), four settling times each (benchmarks/continuum_sensitivity.py): converged
+#: in the grid, at eight times the transfers a step for each halving of it
+#: (docs/decisions/grid-spacing.md).  The Eulerian formulation's field settles on finer grids
+#: under this rule (E 0.493, 0.506 on 12.5 and 9.4 mm) but not at its default grid's 0.432, and
+#: more damping does not bring it there: something else in its step depends on the grid.
 DEFAULT_DX_DIAMETERS = 3.0
 DEFAULT_CFL = 0.3
 DEFAULT_TRANSFER_CFL = 0.015
@@ -179,7 +165,8 @@ class LagrangianOptions:
     transfer_cfl is the transfers' Courant number (default None: the default grid's spacing,
     `default_dx`); on another grid they are made at damping_transfer_cfl, so that their
     damping of the flow does not depend on the grid (the comment above DEFAULT_DX_DIAMETERS);
-    damping_length = dx gives the rule of sessions 11 - 15, transfer_cfl on every grid.
+    damping_length = dx makes them at transfer_cfl on every grid (their damping then falls
+    with the grid).
 
     stiffness_factor s < 1 is the continuum's counterpart of the DEM's reduced Young's modulus:
     the elastic moduli K and G (and with them the default wall stiffness) are multiplied by s,
@@ -187,14 +174,14 @@ class LagrangianOptions:
     run takes sqrt(s) times the steps.  It is a physics change, not a numerical one: the elastic
     strains grow as 1/s and the bed's elastic waves slow down; its effect on the flow must be
     checked against the DEM (benchmarks/continuum_speed.py prints E for it).  On tub47-quick
-    at the grid and step of sessions 3 - 7 (7.5 mm, cfl 0.3; four settling times each;
-    benchmarks/README.md "Continuum speed") E against the DEM was
+    on a 7.5 mm grid at cfl 0.3 with one transfer a step (four settling times each;
+    docs/validation.md) E against the DEM is
     0.89 +- 0.09 at s = 1, 1.07 +- 0.01 at s = 0.5 and 0.68 +- 0.01 at s = 0.25, whose
     circulation, though, is 0.62 of the DEM's (s = 1: 1.14): not monotonic, so no default
     other than 1.  Default 1: the calibrated moduli."""
 
-    #: options added after the first studies: left out of a study stage's inputs (its hash)
-    #: while at their defaults, so that those studies stay up to date (vibroflow.study.stages)
+    #: options left out of a study stage's inputs (its hash) while at their defaults, so that
+    #: stages hashed without them stay up to date (vibroflow.study.stages)
     LATER_OPTIONS: ClassVar[tuple[str, ...]] = ("dilatancy", "stiffness_factor", "compaction",
                                                 "flip", "bed_viscosity", "damping_length")
 
@@ -490,8 +477,8 @@ def options_record(options: LagrangianOptions) -> dict:
     if record.get("dx") is None:
         record["dx"] = DEFAULT_GRID
     elif record.get("damping_length") is None:
-        # a grid of its own: its transfers follow the damping rule of session 16, which a
-        # run made before it did not (the default grid's are the same under both)
+        # a grid of its own: its transfers follow the damping_length rule, which sets their
+        # rate on any grid but the default one (docs/decisions/grid-spacing.md)
         record["damping_length"] = DEFAULT_DAMPING
     return record
 

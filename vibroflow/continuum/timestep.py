@@ -20,12 +20,13 @@ damped explicit update is stable to about 0.85 x 2 / (2.3 c / dx) = 0.74 dx / c,
 step at cfl 0.3 (0.25 dx / c); the mu(I) viscous stress adds no bound, the return map being
 implicit in the plastic rate (constitutive.py), so its tangent never exceeds G.  A tub run's
 default cfl is this function's 0.3 (continuum.run.DEFAULT_CFL), inside these bounds.  At 0.6
-(the stability margin alone) tub47 at amplitude factor 1.5 once put a point through the U wall.
+(the stability margin alone) a point of tub47 at amplitude factor 1.5 can pass through the U
+wall.
 
-The APIC transfers' damping is not the step's business any more: a step makes
-`transfers_per_step` transfers (mpm.MPMSystem.transfers, transfer_operator.py), so that the
-damping per second is that of a one-transfer step of Courant number transfer_cfl, whatever the
-step (until session 10 a tub run stepped at cfl 0.075 for that damping alone).
+The APIC transfers' damping is not the step's business: a step makes `transfers_per_step`
+transfers (mpm.MPMSystem.transfers, transfer_operator.py), so that the damping per second is
+that of a one-transfer step of Courant number transfer_cfl, whatever the step, and the step is
+set by stability alone (docs/decisions/transfer-rate.md).
 """
 from __future__ import annotations
 

@@ -4,14 +4,14 @@ can make with it.
 Why.  An APIC step (p2g.py, g2p.py; Jiang et al. 2015) replaces every point's velocity by the
 grid's smooth field: whatever the points' velocities held below the grid's resolution (beyond
 each point's affine part) is lost at every transfer.  That loss is a damping of the grid-scale
-motion whose rate is the number of transfers per second, 1/dt: the tub's continuum fields
-depend on the time step through it (benchmarks/README.md, sessions 5 and 8: E(continuum, DEM)
+motion whose rate is the number of transfers per second.  With one transfer a step that rate
+is 1/dt, and the tub's continuum fields depend on the time step through it (E(continuum, DEM)
 0.82, 0.71, 0.55, 0.42 as the step halves from cfl 0.3; a FLIP blend, which keeps the
-sub-grid motion, is step-converged and does not improve).  The step was the model's
-dissipation parameter.  Here the two are parted: a step of any size can make n transfers, so
-the damping is set by the transfers' rate n/dt, a model parameter of its own (the tub drivers'
-`transfer_cfl`: the Courant number of the equivalent one-transfer APIC step), and the step
-only by stability.
+sub-grid motion, is step-converged and does not improve: docs/decisions/transfer-rate.md):
+the step would be the model's dissipation parameter.  Here the two are parted: a step of any
+size can make n transfers, so the damping is set by the transfers' rate n/dt, a model
+parameter of its own (the tub drivers' `transfer_cfl`: the Courant number of the equivalent
+one-transfer APIC step), and the step only by stability.
 
 What a transfer is.  With the point velocities v_p = sum_j w_jp v_j and affine matrices
 C_p = (4/dx^2) sum_j w_jp v_j (x_j - x_p)^T that g2p gives from grid velocities v_j, the next
@@ -104,12 +104,12 @@ def transfer_rows(i0, i1, B, gm, gv, out, periodic, no_slip_rows, axis_cols):
     the update: the lowest no_slip_rows node rows held still (a rough floor), the radial
     velocity of the first axis_cols columns 0 (an axisymmetric section's axis).
 
-    The sums are in the written order (no fastmath).  Sessions 11 - 15 let them be reassociated
-    (fastmath reassoc, a third less time here), and the compiled order then depended on how
-    this kernel was compiled into its callers: a process that loaded it from numba's cache
-    before compiling the Eulerian loops gave the serial and the parallel loop numbers 1e-12
-    apart (tests/test_transfer_operator.py, the second run of the file, session 16), where the
-    loops must agree bit for bit whatever the threads."""
+    The sums are in the written order (no fastmath).  Reassociated (fastmath reassoc, a third
+    less time here), their compiled order depends on how this kernel is compiled into its
+    callers: a process that loads it from numba's cache before compiling the Eulerian loops
+    gives the serial and the parallel loop numbers 1e-12 apart (tests/test_transfer_operator.py
+    run a second time, from the cache), where the loops must agree bit for bit whatever the
+    threads (docs/decisions/reproducibility.md)."""
     nx, nz = gm.shape
     for i in range(i0, i1):
         for k in range(nz):

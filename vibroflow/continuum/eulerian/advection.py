@@ -26,7 +26,7 @@ round-off; nothing is clipped (the Courant numbers keep every cell's mass >= 0; 
 is reported by the solver).  The volume fraction f = min(1, m / (rho h^2)) (solver.py) is
 computed from the transported mass and density, so it is transported without losing mass too.
 
-Speed (issue 6: the remap was the Eulerian step's largest part).  The arithmetic is that of a
+Speed (the remap is a large part of the Eulerian step).  The arithmetic is that of a
 face-by-face loop (every cell's fluxes summed in the order x-faces by ascending i, then z-faces
 by ascending k), but it runs field by field over flat arrays, each pass a long branch-free loop
 (`_pick`) that the compiler vectorises; a loop over one row of cells was too short for it.
@@ -130,10 +130,10 @@ def match_divergence(L, ux, uz, h, periodic, v, normal, mass, open_x, open_z, in
     velocity s n: the material leaves the wall as a body and the gap it opens is the cell's
     empty part (its volume fraction falls as the remap takes its mass out through the open
     faces), as a material point of the Lagrangian method lifts off the wall leaving empty
-    space behind.  With the closed faces held at 0 instead, the wall cell's material was
+    space behind.  With the closed faces held at 0 instead, the wall cell's material would be
     stretched between the still wall and the lifting bed at every take-off, dilated below the
-    critical density (stress-free), and the next landing closed the gap without compacting it
-    (lagrangian_step.void_first: that ratchet; benchmarks/README.md, session 13).  A cell
+    critical density (stress-free), and the next landing would close the gap without
+    compacting it (lagrangian_step.void_first: that ratchet).  A cell
     pressing on the wall or sliding along it (s <= 0) keeps them at 0: the wall compresses it,
     its empty part first (lagrangian_step.void_first).  mass (N,) kg/m: only cells holding
     material; open_x (ncx + 1, ncz), open_z (ncx, ncz + 1): the open faces.

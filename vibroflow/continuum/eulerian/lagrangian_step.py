@@ -74,18 +74,18 @@ def void_first(L, frac, density, rho_c, dt):
     update and the density see only the material's own strain (an axisymmetric section's
     hoop rate L[:, 4] counts in e and is left as it is).  Material that has opened a
     void sits a hair below rho_c (OPEN_MARGIN): disconnected, stress-free (Dunatunga & Kamrin
-    2015), as dilated material was, until the void has closed and it is compressed again.
+    2015), as dilated material is, until the void has closed and it is compressed again.
 
     Why both ways.  With the void closed first on shrinking but the material dilated first on
-    growing, every cycle of the vibration ratcheted the partly filled cells' material looser:
-    it was dilated as the bed lifted off the floor or swelled at its surface, and the next
-    landing closed the cells' empty part without compacting it back.  In tub47 (the vertical
-    stroke alone) the floor's cells ended at 0.6 and the surface's at 0.45 of the critical
-    density, a stress-free cushion and skin that the bed's load bypassed through the nodes
-    (benchmarks/README.md, session 13; tests/test_eulerian.py, the vibrated bed's volume).
+    growing, every cycle of the vibration would ratchet the partly filled cells' material
+    looser: it would be dilated as the bed lifts off the floor or swells at its surface, and
+    the next landing would close the cells' empty part without compacting it back.  In tub47
+    (the vertical stroke alone) such a rule leaves the floor's cells at 0.6 and the surface's
+    at 0.45 of the critical density, a stress-free cushion and skin that the bed's load
+    bypasses through the nodes (tests/test_eulerian.py, the vibrated bed's volume).
     A dilated state and a void are the same stress-free state of a cell's content (its mass
     over the volume m / rho_c it would fill at the critical density); one rule for every cell,
-    full or not, keeps the step continuous as a cell fills (a rule that switched at f = 1 made
+    full or not, keeps the step continuous as a cell fills (a rule that switches at f = 1 makes
     the run's round-off grow a thousand times faster: tests/test_continuum_threads.py)."""
     hoop = L.shape[1] > 4
     for p in range(frac.shape[0]):

@@ -76,17 +76,12 @@ UNIT = 1.1
 
 #: the Courant number of the APIC transfers (LagrangianOptions.transfer_cfl, continuum.run
 #: DEFAULT_TRANSFER_CFL): round(0.3 / 0.0375) = 8 transfers a step at the default cfl 0.3.
-#: The Eulerian formulation's own, since its remap damps too: at the Lagrangian's 20 transfers
-#: its roll is 0.43 of the DEM's.  Chosen on tub47 at amplitude factor 1.0 (E against the DEM,
-#: strength over the DEM's): one transfer a step at cfl 0.075 (the session-8 default) 0.613,
-#: 1.40; at cfl 0.3 with 6, 8, 10 transfers: 0.490, 1.17; 0.462, 1.06; 0.466, 0.99; checked at
-#: factors 0.5 (0.448, 0.77, against 0.453, 1.01 before) and 1.5 (0.517, 1.09, against 0.647,
-#: 1.44) and on tub47-quick, which is worse (0.612, 0.51, against 0.540, 0.68)
-#: (benchmarks/README.md "Session 11").  Kept in session 13, when a cell's growth went to its
-#: empty part and a wall cell's material left the wall as a body (lagrangian_step.void_first,
-#: advection.match_divergence): factors 0.5, 1.0, 1.5 then 0.363, 0.433, 0.562 (strength 0.99
-#: at 1.0), tub47-quick 0.666; 6 transfers (cfl 0.05) about 0.419, 0.418, 0.582, 0.632;
-#: 4 transfers (0.075) at 1.0 and on tub47-quick about 0.474, 0.610.
+#: The Eulerian formulation's own, fewer than the Lagrangian's because its remap damps the
+#: grid-scale motion too.  Chosen on tub47 at amplitude factor 1.0 (E against the DEM,
+#: strength over the DEM's): E 0.433, strength 0.99; at factors 0.5 and 1.5 E 0.363 and 0.562,
+#: on tub47-quick 0.666; with 6 transfers a step (cfl 0.05) about 0.419, 0.418, 0.582 and
+#: 0.632, no clear gain, with 4 (0.075) about 0.474 at factor 1.0 and 0.610 on tub47-quick
+#: (docs/decisions/transfer-rate.md).
 DEFAULT_TRANSFER_CFL = 0.0375
 
 
