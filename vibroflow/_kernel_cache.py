@@ -5,8 +5,8 @@ defines it, and on nothing else.  vibroflow's kernels inline small functions fro
 (the contact law of dem/contact.py into the step loops of dem/step.py, the constitutive update
 into the continuum's fused loops, the tub's kinematics into both), so after an edit of such a
 file -- a `git pull` in an editable install -- the callers' cached machine code would silently
-keep the old law.  (Found in session 12: a new rolling model gave no torque until the caches
-were removed.)
+keep the old law (a changed rolling model, say, would give the step loops no torque until the
+caches were removed).
 
 What it does: a digest of every .py file of the package is kept beside the cache; when the
 sources' digest differs from it, every numba index and data file (*.nbi, *.nbc) of the package's

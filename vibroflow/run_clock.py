@@ -5,8 +5,8 @@ Why.  Every solver of the package (the DEM, both continua) runs numba kernels wi
 new machine, or any edit of the package's sources, which clears the whole cache:
 vibroflow._kernel_cache) the first call compiles it, and the fused continuum loops take
 30 - 50 s to compile where the tub47 run itself takes 2 - 6 s.  A run's wall time that holds
-that one-off cost says nothing of the method: the main job's cost line read "x0.161" for a
-Lagrangian continuum about 200 times cheaper than its DEM (benchmarks/README.md, session 20).
+that one-off cost says nothing of the method: on a cold cache a cost line would read about
+x0.16 for a Lagrangian continuum about 200 times cheaper than its DEM (docs/validation.md).
 
 How.  numba announces each compilation as a "numba:compile" event (numba.core.event; nested
 compilations of the callees inside one outer event, and a cache load none at all).  A

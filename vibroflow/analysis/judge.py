@@ -9,7 +9,7 @@ it is measured on them (compare.seed_scatter: E over every ordered pair, with it
 error from three runs on), and every result is compared with every reference in turn
 (compare.difference_to_seeds), so that the comparison and its floor come from the same
 ensemble.  One pair's E is a random number: on tub47, ten seeds' pairs range from 0.076 to
-0.480 (benchmarks/README.md, "Session 18").
+0.480 (docs/validation.md).
 
 For each result: its circulation strength against the references' (the mean of their
 strengths, with the standard error of that mean from their scatter when there are several,

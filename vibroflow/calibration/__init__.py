@@ -1,4 +1,4 @@
-"""Calibration of continuum models on DEM results (issue 3), one concept per module:
+"""Calibration of continuum models on DEM results, one concept per module:
 
 * coarse_grain  -- coarse-grained continuum fields (density, velocity, stresses, strain rate,
                    inertial number, stress ratio) on a grid of the tub's x-z plane

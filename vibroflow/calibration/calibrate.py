@@ -1,5 +1,4 @@
-"""`vibroflow calibrate RUN_DIR [--shear-cell]`: from a DEM run to the continuum's parameters
-(issue 3 section 4).
+"""`vibroflow calibrate RUN_DIR [--shear-cell]`: from a DEM run to the continuum's parameters.
 
 Stages:
 1. coarse-grain the run's averaging window (run_fields) -> RUN_DIR/fields.nc;

@@ -1,4 +1,4 @@
-"""Coarse-grained (CG) continuum fields from DEM snapshots: issue 3 section 1, models.md
+"""Coarse-grained (CG) continuum fields from DEM snapshots: models.md
 "Coarse-graining" (Goldhirsch 2010; Weinhart, Thornton, Luding & Bokhove 2012, Granular Matter
 14:289, "From discrete particles to continuum fields near a boundary"; MercuryCG).
 

@@ -1,5 +1,5 @@
 """Cyclic simple shear of the packed media at the tub's frequency: the strain-dependent secant
-shear modulus and damping the continuum's elastic part should have (issue 4; soil dynamics'
+shear modulus and damping the continuum's elastic part should have (soil dynamics'
 modulus reduction, Hardin & Drnevich 1972, J. Soil Mech. Found. Div. 98(7), 667-692).
 
 Why.  The continuum's elastic shear modulus sets how its bed deforms under the tub's 47 Hz
@@ -10,8 +10,8 @@ curve G_sec / G_max = 1 / (1 + gamma_0 / gamma_r) (Hardin & Drnevich 1972), and 
 dissipates energy (hysteretic damping ratio D).  Soil dynamics gives a continuum the secant
 modulus at the strain amplitude it will see; so does vibroflow: the tub's strain amplitude is
 measured on the DEM (`tub_strain_amplitude`: from the bed's cycle-mean shear rate) and the
-continuum gets G_sec at that amplitude (calibrate.py).  benchmarks/README.md ("Why the continuum
-misses") shows what this does to the continuum against the DEM.
+continuum gets G_sec at that amplitude (calibrate.py).  docs/decisions/cyclic-shear-modulus.md
+shows what this does to the continuum against the DEM.
 
 The test.  A Lees-Edwards periodic box of the scenario's balls (periodic.py; the same packing as
 the steady shear cell, shear_cell.packed_box) at the pressure p with sigma_zz held at p by the

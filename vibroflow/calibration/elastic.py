@@ -1,7 +1,7 @@
-"""Elastic moduli of the packed media from DEM strain steps in a periodic box (issue 3
-section 2): the bulk modulus K = dp / d eps_v and the shear modulus G = d tau / d gamma of a
-packing at rest under the pressure p, for the elastic predictor of an elasto-viscoplastic
-continuum (Dunatunga & Kamrin 2015).
+"""Elastic moduli of the packed media from DEM strain steps in a periodic box: the bulk
+modulus K = dp / d eps_v and the shear modulus G = d tau / d gamma of a packing at rest under
+the pressure p, for the elastic predictor of an elasto-viscoplastic continuum (Dunatunga &
+Kamrin 2015).
 
 Protocol (reusing the Lees-Edwards box of vibroflow.calibration.periodic):
 

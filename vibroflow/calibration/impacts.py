@@ -1,6 +1,6 @@
 """Impact velocities from the DEM, and their relation to the local shear rate and granular
-temperature, so that the continuum can infer the impact velocity from its own fields (issue 3
-section 3; models.md "Impact velocity from the continuum").
+temperature, so that the continuum can infer the impact velocity from its own fields (models.md
+"Impact velocity from the continuum"; docs/decisions/impact-speed.md).
 
 Data: every new contact of the averaging window with its normal approach speed, its time and
 its contact point (dem.h5 /impacts), ball-ball and ball-tub-wall apart.  They are binned on the

@@ -1,5 +1,5 @@
 """A fully periodic box of spheres with Lees-Edwards boundaries: the DEM of the shear cell and of
-the elastic tests (issue 3 section 2).  Numba kernels over flat arrays; `PeriodicBox` below is
+the elastic tests.  Numba kernels over flat arrays; `PeriodicBox` below is
 the plain-Python orchestration (neighbour-list rebuilds, history transfer, samples).
 
 Kinematics

@@ -1,4 +1,4 @@
-"""Coarse-grained fields of a whole DEM run (issue 3 section 1): every snapshot of the averaging
+"""Coarse-grained fields of a whole DEM run: every snapshot of the averaging
 window deposited on the tub-frame grid, time-averaged over its whole cycles and phase-resolved
 at the scenario's sampling phases, with batch-means standard errors (tub47.md "Procedure" 3).
 

@@ -1,5 +1,5 @@
 """Steady simple shear of the media at imposed pressure and shear rate: the mu(I), phi(I)
-rheology from DEM (issue 3 section 2; GDR MiDi 2004, da Cruz et al. 2005 PRE 72:021309).
+rheology from DEM (GDR MiDi 2004, da Cruz et al. 2005 PRE 72:021309).
 
 A Lees-Edwards periodic box of the scenario's balls (vibroflow.calibration.periodic) is
 

@@ -1,6 +1,6 @@
 """The mu(I) relation read directly from the tub's coarse-grained fields: a scatter of the stress
 ratio mu = tau_eq / p against the inertial number I = gamma_dot d / sqrt(p / rho_s) over the
-cells of the cross-section (issue 3 section 2), beside the shear-cell fit.
+cells of the cross-section, beside the shear-cell fit.
 
 Points are the phase-resolved cell values (each cell at each sampled phase of the cycle), since
 the bed's state changes over the cycle (it flies, lands and is sheared); the time-averaged cells

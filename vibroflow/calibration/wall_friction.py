@@ -1,5 +1,5 @@
 """The effective Coulomb friction of the tub wall and of the partitions, for the continuum, from
-the DEM's ball-wall contacts (issue 3 section 3; tub47.md "Wall contacts").
+the DEM's ball-wall contacts (tub47.md "Wall contacts"; docs/decisions/wall-friction.md).
 
 What is measured (contacts sampled at the snapshots of the averaging window, F_n > 0):
 * the distribution of |F_t| / F_n, its mean, the ratio of sums sum|F_t| / sum F_n and the
