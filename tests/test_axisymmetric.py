@@ -194,7 +194,7 @@ def test_tall_sand_cylinder_meets_lube_and_lajeunesse_2004(a):
     halved grid.  With this grid's damping held (8 transfers a step on R0/40,
     benchmarks/column_convergence.py --hold-damping) a = 3 reads 2.62 and 0.81 (+9.6 %), a = 4
     3.29 and 0.83 (+11.6 %): the pass on the height holds at a = 3, not at a = 4
-    (benchmarks/README.md, session 17).  With tub47's glass-bead friction (mu_s = tan 20.9
+    (docs/validation.md).  With tub47's glass-bead friction (mu_s = tan 20.9
     deg) the same cylinder runs 25 % too far and stands 20 - 30 % too low
     (test_axisymmetric_column_spreads_less_than_the_planar_one): the continuum's deposit
     depends on the grains' friction, where the experiments' hardly did.  Lajeunesse et al.'s
@@ -217,7 +217,7 @@ def test_sand_cylinders_on_the_finer_grid():
     moves the height by 2 % where one transfer a step moves it by 5 % (a = 3; a = 4 still by
     7 %).  The continuum's tall cylinders (a = 3 to 5) stand 9.6 - 12.9 % above the
     experiments' at the damping of R0/20's one transfer a step and about 20 % with next to
-    none (benchmarks/README.md, session 17).
+    none (docs/validation.md).
     Its run-out grows faster with a than a^(1/2): from a = 2 to 5 by 1.77 against 1.58.  A
     friction angle of 27.5 deg puts a = 1 to 3 within 10 % on both (run-outs -5.8, -1.0,
     +3.1 %; heights -8.8, +1.5, +6.7 %) and a = 4, 5 just outside (+10.1, +10.2 %); it is not
@@ -449,7 +449,7 @@ def test_eulerian_sand_cylinder_against_lube_and_lajeunesse_2004():
     run-out is grid-converged: a = 3 reads 2.39, 2.88, 3.12 on R0/10, /20, /40 here (R0/40:
     +12.6 %, height 0.878, 14 minutes), and the Lagrangian's 2.35, 2.70, 2.71, 2.86 on R0/10
     to /80 (height 0.77, 0.78, 0.85, 0.89), the plateau from R0/20 to R0/40 a coincidence
-    (benchmarks/column_convergence.py; benchmarks/README.md, session 17).  Both rises are mostly
+    (benchmarks/column_convergence.py; docs/validation.md).  Both rises are mostly
     the transfers' damping, which one transfer a step divides by eight on each halved grid:
     with R0/20's damping held (8 transfers a step on R0/40, 23 minutes) this formulation's
     R0/40 reads 2.684 (-3.1 %) and 0.831, the Lagrangian's 2.619 and 0.811."""

@@ -1,4 +1,4 @@
-"""Checks of the calibration from a DEM run (issue 3 sections 3 and 4): the impact statistics
+"""Checks of the calibration from a DEM run: the impact statistics
 against kinetic theory, the wall-friction reduction against Coulomb's law and geometry, and the
 `vibroflow calibrate` command end to end on a small tub run (its files, their units and
 conservation of what the coarse-graining deposits).

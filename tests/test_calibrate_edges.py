@@ -1,5 +1,5 @@
-"""Edges of `vibroflow calibrate` (issue 27): a DEM run too small to calibrate on (it printed
-"mu_s = nan: must be a finite number >= 0" as if the user had typed the NaN), a run folder
+"""Edges of `vibroflow calibrate`: a DEM run too small to calibrate on (one line saying so,
+not a NaN parameter reported as though the user had typed it), a run folder
 another command holds or that cannot be written, a Ctrl-C.  One line each, no traceback,
 nothing written."""
 from __future__ import annotations

@@ -558,8 +558,8 @@ def test_mpm_against_dem_tall_column():
 @pytest.mark.slow
 def test_eulerian_against_dem_low_column():
     """The low DEM column of test_mpm_against_dem_low_column (the same run, dem_column_once)
-    against the Eulerian formulation on the same L0/32 (issue 6: the column collapse as in the
-    Lagrangian issue, against vibroflow's own DEM of the same column; about 2 minutes, the
+    against the Eulerian formulation on the same L0/32 (the column collapse as for the
+    Lagrangian formulation, against vibroflow's own DEM of the same column; about 2 minutes, the
     fixed mesh covering the whole reach at the 1 mm cell): run-out and height within
     `mpm_dem_tolerance`, the mass conserved to round-off (measured: DEM run-out 0.483 and
     height 0.446, the fixed mesh 0.408 and 0.528 at a = 0.525; the material point method's

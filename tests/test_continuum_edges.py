@@ -1,4 +1,4 @@
-"""Edges of a continuum run (issue 27): an output folder that cannot be written, a damaged
+"""Edges of a continuum run: an output folder that cannot be written, a damaged
 checkpoint, a Ctrl-C.  Each is one line (InputError: exit 2; Interrupted: exit 130) with no
 traceback, and an interrupted run resumes to the uninterrupted numbers bit for bit."""
 from __future__ import annotations

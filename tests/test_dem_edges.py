@@ -1,4 +1,4 @@
-"""The edges of a DEM run (issue 27): the output folder's lock, resume of another scenario, a
+"""The edges of a DEM run: the output folder's lock, resume of another scenario, a
 kill at every phase of a run's end, damaged checkpoints, parts and fill-cache entries, Ctrl-C,
 and the blow-up's cause read from the state.
 

@@ -412,7 +412,7 @@ def test_continuum_command_eulerian_bad_input(run_cli, tmp_path):
 
 @pytest.mark.slow
 def test_tub47_quick_run_conserves_mass(tmp_path):
-    """Issue 6: mass conserved within 0.5 % over a whole tub47-quick run (1.5 s of a bed thrown
+    """Mass conserved within 0.5 % over a whole tub47-quick run (1.5 s of a bed thrown
     at 13 g); the conservative remap makes it round-off."""
     from vibroflow.continuum.eulerian.run import run_eulerian
     from vibroflow.scenario.io import load_scenario
@@ -475,7 +475,7 @@ def test_rough_floor_low_column_agrees_with_the_lagrangian():
     2005's 1.2 a = 0.60).  The agreement with Lube et al. on this grid is not a claim: neither
     run-out is grid-converged (L0/10: 0.304 and 0.381; L0/40: 0.769 and 0.782), since the front
     is read where the deposit is one cell thick and a mu(I) continuum has no h_stop to stop a
-    thinner tail (benchmarks/README.md, session 6); the two formulations move together."""
+    thinner tail (docs/validation.md); the two formulations move together."""
     r_e, h_e = _rough_deposit(0.5, 20, "eulerian")
     r_l, h_l = _rough_deposit(0.5, 20, "lagrangian")
     print(f"\nrough floor a = 0.5: Eulerian {r_e:.3f} / {h_e:.3f}, Lagrangian {r_l:.3f} / "
@@ -489,7 +489,7 @@ def test_rough_floor_tall_column_runs_out_as_the_lagrangian():
     """a = 3, L0 = 1 m, dx = L0/10, both formulations on the rough floor (about 1 minute): the
     run-outs agree within 10 % (measured 5.41 Eulerian, 5.72 Lagrangian) and both run past
     Lube et al. 2005's 1.9 a^(2/3) = 3.95 by more than a third: the continuum's excess mobility
-    (benchmarks/README.md, sessions 5 and 6) is the model's, the same on the fixed mesh."""
+    (docs/validation.md) is the model's, the same on the fixed mesh."""
     from vibroflow.measure.column import LUBE_2005
 
     r_e, h_e = _rough_deposit(3.0, 10, "eulerian")
@@ -583,8 +583,8 @@ def test_vibrated_bed_comes_back_to_its_volume_at_rest():
     (past unloading to the critical density) into empty space and its shrinking closes that
     space first, both ways
     (lagrangian_step.void_first), and a wall cell's material leaves the wall as a body
-    (advection.match_divergence).  With the growth put into the material but the shrinking
-    into the void, each cycle ratcheted the floor's and the surface's cells looser: this bed
-    ended 2.2 % over its volume (now 0.05 % under); with tub47's calibrated media, 7.9 % over,
-    its floor cell at 0.46 of the critical density (benchmarks/README.md, session 13)."""
+    (advection.match_divergence): this bed ends 0.05 % under its volume.  With the growth put
+    into the material but the shrinking into the void, each cycle would ratchet the floor's and
+    the surface's cells looser: this bed would end 2.2 % over its volume; with tub47's
+    calibrated media, 7.9 % over, its floor cell at 0.46 of the critical density."""
     assert _vibrated_then_settled_volume() == pytest.approx(1.0, abs=0.01)

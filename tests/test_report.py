@@ -1,6 +1,6 @@
 """The study report (DIR/report.html, `vibroflow report DIR`): the helpers against known
 answers (the shear rate of analytic flows, impacts binned by cell against the DEM summary's own
-count and mean), and the page of a tiny study (tests.test_study's fixture, which now ends with
+count and mean), and the page of a tiny study (tests.test_study's fixture, which ends with
 the report stage): self-contained, every image a valid PNG/GIF, the probe table equal to
 summary.json, rendered by headless Chromium with every figure loaded; bad folders are a one-line
 error that writes nothing."""

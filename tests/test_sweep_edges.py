@@ -1,4 +1,4 @@
-"""`vibroflow sweep --scheduler` at an address where no Dask scheduler answers (issue 27): a
+"""`vibroflow sweep --scheduler` at an address where no Dask scheduler answers: a
 malformed address, a port where nothing listens, a service that speaks HTTP or garbage, a
 silent one, a worker: one line naming the address and what is there, exit code 2, no
 traceback, nothing written to --out."""

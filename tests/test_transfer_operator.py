@@ -270,10 +270,9 @@ def test_the_damping_is_the_same_on_every_grid_at_a_fixed_damping_length():
     """A shear wave of 8 cm (k dx = 0.39 and 0.20, where a transfer's loss is alpha (k dx)^4:
     test above) on grids of 5 and 2.5 mm, the transfers of LagrangianOptions with transfer_cfl
     0.025 at a damping length of 5 mm (cfl 0.4: 16 and 128 transfers a step): the kinetic
-    energy left after 4 ms is the same within 8 % (measured 0.202 and 0.211), where the rule
-    of sessions 11 - 15 (damping_length = dx: 16 transfers a step on both grids) leaves the
-    fine grid's wave far less damped (0.369): with it the damping was a property of the
-    grid."""
+    energy left after 4 ms is the same within 8 % (measured 0.202 and 0.211), where
+    damping_length = dx (16 transfers a step on both grids) leaves the fine grid's wave far
+    less damped (0.369): with it the damping would be a property of the grid."""
     from vibroflow.continuum.run import LagrangianOptions
 
     rule = LagrangianOptions(cfl=0.4, transfer_cfl=0.025, damping_length=0.005)
@@ -294,7 +293,7 @@ def test_the_damping_is_the_same_on_every_grid_at_a_fixed_damping_length():
 def test_the_transfers_follow_the_grid_from_the_default_one():
     """The tub runs' rule (continuum/run.py): on the default grid the default 20 (Lagrangian)
     and 8 (Eulerian) transfers a step; on half of it eight times as many; a damping length
-    equal to the grid gives the former rule; a bad damping length is a one-line error."""
+    equal to the grid gives transfer_cfl on every grid; a bad damping length is a one-line error."""
     from vibroflow.continuum.eulerian.run import EulerianOptions
     from vibroflow.continuum.run import LagrangianOptions, options_record
     from vibroflow.scenario.io import load_scenario
@@ -313,6 +312,7 @@ def test_the_transfers_follow_the_grid_from_the_default_one():
     for bad in (0.0, -1.0, float("nan"), True):
         with pytest.raises(InputError, match="damping_length"):
             LagrangianOptions(damping_length=bad)
-    # a run on a grid of its own is not taken for one made under the former rule
+    # a run on a grid of its own names its damping length, so it is not taken for one made
+    # with damping_length = dx
     assert options_record(LagrangianOptions())["damping_length"] is None
     assert options_record(LagrangianOptions(dx=0.01))["damping_length"] is not None
