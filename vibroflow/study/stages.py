@@ -132,8 +132,8 @@ def continuum_stage(method: ContinuumMethod, options) -> Stage:
         from vibroflow.continuum.run import options_record
 
         opts = options_record(options)
-        # the options that came after the first studies are left out at their defaults, so
-        # that those studies keep their hashes (the options class's LATER_OPTIONS)
+        # the options class's LATER_OPTIONS are left out at their defaults, so that a stage
+        # hashed without them keeps its hash
         defaults = {f.name: f.default for f in dataclasses.fields(options)}
         for name in getattr(options, "LATER_OPTIONS", ()):
             if opts.get(name) == defaults.get(name):
