@@ -234,7 +234,7 @@ def calibrate(
     dilatancy: Annotated[bool, typer.Option(
         "--dilatancy", help="Also measure the dilatancy constant K_dil of the continuum's "
                             "peak-friction option on dense sheared DEM packings (about a "
-                            "minute) -> [dilatancy].")] = False,
+                            "minute) -> \\[dilatancy].")] = False,
 ) -> None:
     """Calibrate the continuum on a DEM run: RUN_DIR/calibration.toml, fields.nc, pictures."""
     if not run_dir.is_dir():
@@ -287,12 +287,12 @@ def continuum(
         "--rheology", help="mu_i (Dunatunga & Kamrin) or drucker_prager.")] = "mu_i",
     dilatancy: Annotated[bool, typer.Option(
         "--dilatancy", help="mu_i with peak friction and dilation (Pailha & Pouliquen 2009), "
-                            "K_dil from the calibration's [dilatancy] (vibroflow calibrate "
+                            "K_dil from the calibration's \\[dilatancy] (vibroflow calibrate "
                             "--dilatancy).")] = False,
     compaction: Annotated[bool, typer.Option(
         "--compaction", help="Cyclic compaction of the connected bed towards the cyclic shear "
                              "cell's packing (Sawicki & Swidzinski 1989), from the calibration's "
-                             "[compaction] (vibroflow calibrate --dilatancy).")] = False,
+                             "\\[compaction] (vibroflow calibrate --dilatancy).")] = False,
     dx: Annotated[Optional[float], typer.Option(
         "--dx", help="Grid spacing (m); default 3 ball diameters (why: continuum/run.py, "
                     "DEFAULT_DX_DIAMETERS).")] = None,
