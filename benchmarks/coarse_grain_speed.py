@@ -1,5 +1,5 @@
-"""Speed of the coarse-graining of a DEM run (issue 3 section 5: a tub47 run, 14 000 balls and
-752 snapshots, in under a minute on the 2-core machine).
+"""Speed of the coarse-graining of a DEM run (the target: a tub47 run, 14 000 balls and 752
+snapshots, in under a minute on the 2-core machine).
 
     python benchmarks/coarse_grain_speed.py RUN_DIR [--peer-snapshots 8]
 

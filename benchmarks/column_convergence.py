@@ -20,7 +20,7 @@ change).  A sequence whose changes do not shrink has no limit here, which is sai
 with --hold-damping, on the first grid only, the count scaled as the tub runs scale it
 (vibroflow.continuum.run.damping_transfer_cfl: k (n / n_0)^3 on R0/n, n_0 the first grid),
 which holds the transfers' hyperviscosity alpha c dx^3 / transfer_cfl fixed
-(benchmarks/README.md, session 16; the cost grows as the transfers do: R0/80 at 8 a step is
+(docs/decisions/grid-spacing.md; the cost grows as the transfers do: R0/80 at 8 a step is
 about 20 minutes; the Eulerian's R0/40 at 8, about an hour).
 
 Runs go --jobs at a time, one numba thread each (a 2-core machine: --jobs 2).  Costs, on this

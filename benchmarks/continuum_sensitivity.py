@@ -10,15 +10,14 @@ The second form compares with a reference folder that holds only the DEM's bulk_
 and calibration.toml (tests/data/tub47-dem): the scenario is then --case (a preset or a TOML
 file) and the DEM's circulation strength --dem-strength (m^2/s; its README gives it).
 
-Ensembles.  A single run's E is not a measure: the settling time alone moved session 7's base
-run from 0.62 to 1.01 (benchmarks/README.md).  Each case is therefore run once per settling
-time of --settle-times (default four, 0.04 - 0.07 s, the ensemble every session since 7 used)
+Ensembles.  A single run's E is not a measure: the settling time alone moves a run's E by up to
+half its value (docs/validation.md).  Each case is therefore run once per settling
+time of --settle-times (default four, 0.04 - 0.07 s)
 and printed as mean +- standard error over them, with the members; --jobs runs them in
 parallel, one numba thread each.
 
-Issue 4's continuum (vibroflow.continuum.run.run_lagrangian) circulates 1.3-1.7 times too fast
-and its field differs from the DEM's by E ~ 1 (tub47.md), against the DEM's own seed-to-seed
-E ~ 0.16.  This script runs the continuum of the DEM run's scenario once per case, each case
+The continuum's field differs from the DEM's by more than the DEM's own seed-to-seed scatter
+(docs/validation.md).  This script runs the continuum of the DEM run's scenario once per case, each case
 the calibration (default DIR/calibration.toml) or the numerical options with one thing changed,
 and prints the circulation strength (m^2/s +- batch-means standard error) and E(continuum, DEM)
 of each, so one sees which parameter, if any, the mismatch is sensitive to.

@@ -39,8 +39,8 @@ summary.json ("wall_time_s": the DEM's from its start, fill from the cache or no
 continuum's with its settling); the DEM's were taken whenever and with whatever load its run
 had, so the ratio is indicative unless both ran on a quiet machine.  Every method's
 wall_time_s leaves numba's compilation out (vibroflow.run_clock: it is compile_time_s, printed
-beside it), so a cold kernel cache after an edit no longer puts the ratio at 12 - 16 instead of
-100 - 250 (benchmarks/README.md, sessions 20 and 21); `--warm-up` still runs each method once
+beside it), so a cold kernel cache does not put the ratio at 12 - 16 instead of 100 - 250
+(docs/validation.md, cost); `--warm-up` still runs each method once
 unrecorded first (warm_up), for timings that also hold no first load of the cached kernels.
 
 Everything also goes to --out/report.json (default runs/continuum_vs_dem/<case>/, git-ignored),
@@ -287,8 +287,8 @@ def print_regions(name: str, regions: list[dict]) -> None:
 
 def warm_up(methods, options, cal, scenario, out: Path) -> dict:
     """Run each method once, unrecorded (into out/warm_up_<method>, removed), so that the timed
-    runs find numba's cache filled and loaded once.  Since session 21 a run's wall_time_s
-    leaves its compilation out (vibroflow.run_clock), which was 40 - 55 s on tub47 against
+    runs find numba's cache filled and loaded once.  A run's wall_time_s leaves its
+    compilation out (vibroflow.run_clock), which is 40 - 55 s on tub47 against
     3 - 6 s of solving on a cold cache (after any edit of the package's sources,
     vibroflow/_kernel_cache.py clears it), so this is optional (`--warm-up`).  Returns
     {method: this run's wall time (s)}."""

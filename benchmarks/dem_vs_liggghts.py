@@ -20,7 +20,7 @@ E(codes) <= 1.5 E_seed(vibroflow)).
 
 Overlap (--overlap):
     python benchmarks/dem_vs_liggghts.py --overlap [--case tub47-quick] [--seeds 1]
-Issue 2 asks for the largest ball-ball overlap below 2 % of d; with the reference case's
+tub47.md asks for the largest ball-ball overlap below 2 % of d; with the reference case's
 k_n = 1e5 N/m, does another code get below it?  A full run of the case in both codes with the
 first fill seed; prints each code's largest ball-ball and ball-wall overlap / d over every step
 of the vibration and over the averaging window (vibroflow: its force kernel's running maximum,
@@ -252,7 +252,7 @@ def run_physics(args) -> dict:
 
 
 # ----------------------------------------------------------------------------------------------
-# Overlap (issue 2: is "the largest ball-ball overlap below 2 % of d" reachable at k_n = 1e5?)
+# Overlap (tub47.md: is "the largest ball-ball overlap below 2 % of d" reachable at k_n = 1e5?)
 
 #: per-step record of the largest overlaps that the --overlap deck adds (in post/)
 OVERLAP_FILE = "overlap.txt"
@@ -462,7 +462,7 @@ def main(argv=None) -> int:
                     help="scenario override (repeatable)")
     ap.add_argument("--physics", action="store_true", help="full runs and field comparison")
     ap.add_argument("--overlap", action="store_true", help="full runs; the largest ball-ball "
-                    "and ball-wall overlap / d of each code (issue 2)")
+                    "and ball-wall overlap / d of each code (tub47.md)")
     ap.add_argument("--steps", type=int, default=2000, help="vibration steps timed (speed)")
     ap.add_argument("--settle", type=float, default=0.1, help="settling time before the timed "
                     "vibration (s, speed mode)")

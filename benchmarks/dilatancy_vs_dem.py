@@ -32,7 +32,7 @@ def main(argv=None) -> int:
     ap.add_argument("--cfl", type=float, default=0.3)
     ap.add_argument("--transfer-cfl", type=float, default=0.0,
                     help="the APIC transfers' Courant number (LagrangianOptions.transfer_cfl); "
-                         "default 0: one transfer a step, as the figures of sessions 4 and 5")
+                         "default 0: one transfer a step")
     ap.add_argument("--compaction", action="store_true", help="the cyclic compaction option")
     ap.add_argument("--gamma-c", type=float, default=None, help="override [compaction] "
                     "compaction_strain")

@@ -1,5 +1,5 @@
 """The bed's deformation within the cycle on a vibrating floor: Eulerian against Lagrangian
-(issue 6: where the Eulerian formulation differs, and why; benchmarks/README.md "Session 13").
+(where the Eulerian formulation differs, and why: docs/decisions/eulerian-cells.md).
 
     python benchmarks/floor_deformation.py [--calibration FILE] [--case tub47]
         [--width 0.3] [--periodic] [--floor-angle DEG] [--cycles 20]

@@ -1,5 +1,5 @@
 """The bed's force balance by phase of the cycle: what the tub wall and the partitions exert on
-the bed, DEM against the continuum formulations (benchmarks/README.md, "Session 9").
+the bed, DEM against the continuum formulations (docs/validation.md).
 
     python benchmarks/force_balance.py --dem-dir runs/study-quick/dem [--calibration FILE]
         [--methods lagrangian,eulerian] [--skip-cycles 20] [--cycles 40] [--set NAME=VALUE ...]

@@ -1,6 +1,6 @@
 """Impact speeds inferred from the continuum's shear rate against the DEM's measured impacts
 (the mission's comparison 4: "impact velocity inferred from the continuum shear rate against DEM
-impacts"; benchmarks/README.md "Session 12").
+impacts"; docs/decisions/impact-speed.md).
 
     python benchmarks/impacts_vs_dem.py --dem-dir runs/study-tub47/dem
         [--calibration FILE] [--methods lagrangian,eulerian] [--settle-time 0.05]

@@ -1,5 +1,4 @@
-"""The bed's column by phase of the cycle, DEM against a continuum (benchmarks/README.md,
-"Session 19").
+"""The bed's column by phase of the cycle, DEM against a continuum (docs/validation.md).
 
     python benchmarks/phase_column.py --dem-dir runs/s18/dem-tub47-seed1
         [--calibration tests/data/tub47-dem/calibration.toml] [--method lagrangian|eulerian]

@@ -1,6 +1,6 @@
 """The bed's damping within the cycle: a DEM of a vibrated strip of balls against the continua,
-and the bed viscosity that makes the continuum fly as the DEM does (benchmarks/README.md,
-sessions 14 and 15).
+and the bed viscosity that makes the continuum fly as the DEM does
+(docs/decisions/bed-viscosity-off.md).
 
     python benchmarks/strip_damping.py [--calibration FILE] [--case tub47] [--cycles 20]
         [--methods lagrangian,eulerian] [--viscosities 0,1000,3000] [--skip-dem]

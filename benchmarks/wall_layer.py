@@ -1,5 +1,5 @@
 """The tub's wall layer by phase of the cycle: how the side walls convey the bed, DEM against
-the Lagrangian continuum (benchmarks/README.md, "Session 7").
+the Lagrangian continuum (docs/validation.md).
 
     python benchmarks/wall_layer.py --dem-dir runs/study-quick/dem [--calibration FILE]
         [--settle-time 0.05] [--layer-diameters 2] [--above 0.15]
@@ -62,7 +62,7 @@ def main(argv=None) -> int:
                     help="the continuum's Courant number (default: LagrangianOptions')")
     ap.add_argument("--transfer-cfl", type=float, default=None,
                     help="its transfers' Courant number (default: LagrangianOptions'; 0: one "
-                         "transfer a step, as session 8's defaults with --cfl 0.075)")
+                         "transfer a step)")
     ap.add_argument("--layer-diameters", type=float, default=2.0)
     ap.add_argument("--above", type=float, default=0.15)
     a = ap.parse_args(argv)
