@@ -404,11 +404,12 @@ def test_package_import_is_light():
 
 
 # ---------------------------------------------------------------------------------------------
-# The README's examples are valid and its test command is what CI runs
+# The documents' examples are valid and the README's test command is what CI runs
 
-def test_readme_examples_are_valid(tmp_path):
-    readme = (REPO / "README.md").read_text()
-    blocks = re.findall(r"```toml\n(.*?)```", readme, re.S)
+def test_documented_scenario_examples_are_valid(tmp_path):
+    """Every TOML example of the README and the user guide loads as a valid scenario."""
+    text = "".join((REPO / name).read_text() for name in ("README.md", "docs/user-guide.md"))
+    blocks = re.findall(r"```toml\n(.*?)```", text, re.S)
     assert len(blocks) >= 2
     for i, block in enumerate(blocks):
         path = tmp_path / f"example{i}.toml"
