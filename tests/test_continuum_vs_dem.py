@@ -108,7 +108,8 @@ def test_circulation_on_tub47_agrees_with_the_dem_seeds(runs, method):
     assert r["agree"]
 
 
-MISS = "a systematic difference: the DEM's agitated bed, which the continuum lacks (docs/validation.md)"
+MISS = ("a systematic difference: the DEM's agitated bed, which the continuum lacks "
+        "(docs/validation.md)")
 
 
 @pytest.mark.parametrize("method", [

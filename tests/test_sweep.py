@@ -108,8 +108,8 @@ def test_sweep_table_matches_points_and_tub_speed_scales_with_factor(swept):
         assert sorted(row["method"] for row in mine) == sorted(summary["methods"])
         assert {"dem", "lagrangian"} <= set(summary["methods"])
         assert all(row["status"] == "done" for row in mine)
-        assert all(float(row["motion.amplitude_factor"]) == f and float(row["contacts.0.k_n"]) == GOOD_KN
-                   for row in mine)
+        assert all(float(row["motion.amplitude_factor"]) == f
+                   and float(row["contacts.0.k_n"]) == GOOD_KN for row in mine)
         for row in mine:
             m = summary["methods"][row["method"]]
             c = m["circulation"]
