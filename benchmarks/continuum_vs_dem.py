@@ -31,7 +31,8 @@ are measured on the same ensemble; with one seed the floor is the value of --e-s
 and the same sense (against the first seed); fields agree when E(continuum, DEM) <= 1.5 E_seed
 (the mean over the seeds when there are several).  With several seeds, also E against the
 seeds' mean field (compare.ensemble_mean: their noise averaged down, so nearer the systematic
-part of the difference) beside each seed's E against the mean of the others; where E comes from (each continuum's share of E^2 in the tub's width and the
+part of the difference) beside each seed's E against the mean of the others; where E comes
+from (each continuum's share of E^2 in the tub's width and the
 DEM bed's depth in thirds, vibroflow.analysis.compare.difference_by_region); and the wall times
 of both and their ratio (the issue's target: the continuum at
 least 100 times cheaper at equal accuracy).  Wall times are those the runs recorded in their
