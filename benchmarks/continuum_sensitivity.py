@@ -19,8 +19,8 @@ parallel, one numba thread each.
 The continuum's field differs from the DEM's by more than the DEM's own seed-to-seed scatter
 (docs/validation.md).  This script runs the continuum of the DEM run's scenario once per case,
 each case the calibration (default DIR/calibration.toml) or the numerical options with one
-thing changed, and prints the circulation strength (m^2/s +- batch-means standard error) and E(continuum, DEM)
-of each, so one sees which parameter, if any, the mismatch is sensitive to.
+thing changed, and prints the circulation strength (m^2/s +- batch-means standard error) and
+E(continuum, DEM) of each, so one sees which parameter, if any, the mismatch is sensitive to.
 
 A case is `base`, `NAME=VALUE`, or several NAME=VALUE joined by `;` (changed together), with
 NAME one of
