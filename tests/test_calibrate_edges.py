@@ -11,6 +11,8 @@ import sys
 
 import pytest
 
+from tests.cli_helpers import one_line_error as _one_line
+
 from vibroflow.errors import InputError, Interrupted
 
 # 150 balls in tub47-quick's tub: a fluidised film with no dense cell (tests/test_calibrate.py)
@@ -25,12 +27,6 @@ def _cli(*args):
                           timeout=300)
 
 
-def _one_line(r, code: int = 2) -> str:
-    assert r.returncode == code, r.stderr
-    assert "Traceback" not in r.stderr
-    lines = r.stderr.strip().splitlines()
-    assert len(lines) == 1, r.stderr
-    return lines[0]
 
 
 @pytest.fixture(scope="module")

@@ -10,6 +10,8 @@ import zipfile
 import numpy as np
 import pytest
 
+from tests.cli_helpers import one_line_error as _one_line
+
 from vibroflow.continuum import run as R
 from vibroflow.continuum.checkpoint import CHECKSUM_KEY
 from vibroflow.continuum.eulerian.run import EulerianOptions, run_eulerian
@@ -25,12 +27,6 @@ CLI_SETS = ["--set", "run.duration=0.05", "--set", "run.average_last=0.043", "--
             "run.batches=2"]
 
 
-def _one_line(r, code: int = 2) -> str:
-    assert r.returncode == code, r.stderr
-    assert "Traceback" not in r.stderr
-    lines = r.stderr.strip().splitlines()
-    assert len(lines) == 1, r.stderr
-    return lines[0]
 
 
 # ----------------------------------------------------------------------------------------------

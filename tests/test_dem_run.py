@@ -202,7 +202,7 @@ STORED_QUICK = Path(__file__).parent / "data" / "tub47-quick-dem"
 
 
 @pytest.mark.slow
-def test_tub47_quick_reproduces_the_stored_dem_table(tub47_quick_run, tub47_quick_summary):
+def test_tub47_quick_agrees_with_the_stored_dem_table(tub47_quick_run, tub47_quick_summary):
     """The stored tub47-quick DEM table (tests/data/tub47-quick-dem, the continuum checks'
     reference) is what the DEM gives today: on the machine that made it, byte for byte (same
     scenario, same seed, numbers independent of the thread count); on a machine whose compiled

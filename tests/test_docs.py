@@ -29,11 +29,10 @@ def test_the_user_guide_holds_the_scenario_reference_the_model_generates():
         "print(f())'` between the markers")
 
 
-def test_the_scenario_reference_is_deterministic_and_covers_every_field():
+def test_the_scenario_reference_covers_every_field():
     from vibroflow.scenario.reference import TABLES
 
     text = scenario_reference_markdown()
-    assert text == scenario_reference_markdown()
     for _, record, _ in TABLES:
         for name in record.model_fields:
             assert f"| `{name}` |" in text, f"{record.__name__}.{name} missing"

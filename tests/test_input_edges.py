@@ -15,6 +15,8 @@ from pathlib import Path
 import pytest
 import typer
 
+from tests.cli_helpers import one_line_error as _one_line_error
+
 from vibroflow.cli import EXIT_INTERRUPTED, input_errors
 from vibroflow.errors import InputError, Interrupted
 from vibroflow.io.folder_lock import LOCK_NAME, folder_lock
@@ -41,12 +43,6 @@ def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
                           text=True, cwd=cwd, timeout=120)
 
 
-def _one_line_error(r: subprocess.CompletedProcess, code: int = 2) -> str:
-    assert r.returncode == code, r.stderr
-    assert "Traceback" not in r.stderr
-    lines = r.stderr.strip().splitlines()
-    assert len(lines) == 1, r.stderr
-    return lines[0]
 
 
 @pytest.fixture

@@ -52,7 +52,7 @@ from .output import (DamagedFile, ResultWriter, fault_kill_at, load_state_file,
                      save_state_file)
 from .query import ball_contacts_now
 from .simulate import (BlowUp, DEMState, DEMSystem, init_state, make_system, run_steps,
-                       shortest_contact_time, take_max_overlaps, wall_contacts_now)
+                       take_max_overlaps, wall_contacts_now)
 
 SMALL_RUN = 1500  # below this many balls one thread is faster than two (thread wake-ups)
 
@@ -224,7 +224,6 @@ def run_dem(scenario, out_dir: Path, vtk: bool = False, resume: bool = False,
     out_dir = Path(out_dir)
     with folder_lock(out_dir, "vibroflow dem"):
         system = make_system(scenario, nchunk)
-        system.notes["shortest_contact_time"] = shortest_contact_time(scenario)
         n_balls = len(scenario.particles) if scenario.explicit else scenario.fill.count
         threads_before = numba.get_num_threads()
         if n_balls < SMALL_RUN:
@@ -348,7 +347,6 @@ def _resumed(scenario, out_dir: Path, system: DEMSystem, clock: RunClock, finger
         raise _refuse(ckpt, f"is the checkpoint of another scenario ({diff})")
     if int(attrs["nchunk"]) != system.nchunk:
         system = make_system(scenario, int(attrs["nchunk"]))
-        system.notes["shortest_contact_time"] = shortest_contact_time(scenario)
     settle_info = json.loads(attrs["settle_info"])
     try:
         writer = ResultWriter(out_dir, state.n, {}, state.radius,

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..tub.motion import TubMotion, lab_to_tub_np
 from . import step as K
-from ..scenario.laws import contact_time
+from ..scenario.checks import STEPS_PER_CONTACT, contact_times
 from .laws import material_index, pair_table
 from .neighbours import NeighbourList
 from .walls import (N_PLANE, WALL_PARTITION_HI, WALL_PARTITION_LO, WALL_PLANE0, WALL_U,
@@ -27,9 +27,6 @@ from .walls import (N_PLANE, WALL_PARTITION_HI, WALL_PARTITION_LO, WALL_PLANE0, 
 IMPACT_CAPACITY = 1 << 15  # per chunk, between flushes
 
 
-# fewer steps than this per contact time resolve a contact too coarsely: the scenario check's
-# bound, dt <= t_c / 10 (vibroflow.scenario.model); only then is the time step named as a cause
-STEPS_PER_CONTACT = 10.0
 
 
 class BlowUp(RuntimeError):
@@ -485,26 +482,7 @@ def wall_contacts_now(system: DEMSystem, state: DEMState) -> dict[str, np.ndarra
 
 
 def shortest_contact_time(scenario) -> float:
-    """Shortest head-on contact time (s) of the pairs that can touch in this scenario."""
-    times = []
-    mats = scenario.materials
-    if scenario.explicit:
-        balls = [(p.diameter, p.material) for p in scenario.particles]
-    else:
-        balls = [(scenario.fill.diameter, scenario.fill.material)]
-    walls = []
-    if scenario.tub is not None:
-        walls += [scenario.tub.wall_material, scenario.tub.partition_material]
-    walls += [w.material for w in (scenario.walls or [])]
-    for pair in scenario.contacts:
-        a, b = pair.pair
-        for d, m in balls:
-            r = 0.5 * d
-            mass = 4.0 / 3.0 * math.pi * r**3 * mats[m].density
-            if m in (a, b):
-                other = b if m == a else a
-                if any(other == m2 for _, m2 in balls):
-                    times.append(contact_time(pair, mats, 0.5 * mass, 0.5 * r))
-                if other in walls:
-                    times.append(contact_time(pair, mats, mass, r))
-    return min(times) if times else math.inf
+    """Shortest head-on contact time (s) of the pairs that can touch in this scenario: the one
+    the scenario's time-step check uses (vibroflow.scenario.checks.contact_times)."""
+    times = contact_times(scenario)
+    return times[0][1] if times else math.inf

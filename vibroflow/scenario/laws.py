@@ -61,6 +61,13 @@ def hertz_eta(restitution: float) -> float:
     return brentq(lambda eta: _hertz_collision(eta)[0] - restitution, 0.0, 20.0, xtol=1e-12)
 
 
+@lru_cache(maxsize=64)
+def _hertz_tau(restitution: float) -> float:
+    """Dimensionless duration of the Hertz collision of restitution e (_hertz_collision): one
+    integration per restitution, as every scenario's validation asks for it."""
+    return _hertz_collision(hertz_eta(restitution))[1]
+
+
 def effective_moduli(mat_a, mat_b) -> tuple[float, float]:
     """E* and G* of two materials (Johnson, Contact Mechanics; Mindlin)."""
     e_star = 1.0 / ((1 - mat_a.poisson_ratio**2) / mat_a.youngs_modulus
@@ -84,5 +91,4 @@ def contact_time(pair, materials: dict, m_eff: float, r_eff: float,
         return math.pi / (w0 * math.sqrt(1.0 - zeta**2))
     e_star, _ = effective_moduli(materials[pair.pair[0]], materials[pair.pair[1]])
     k = 4.0 / 3.0 * e_star * math.sqrt(r_eff)
-    _, tau = _hertz_collision(hertz_eta(pair.restitution))
-    return tau * (m_eff / (k * math.sqrt(impact_speed))) ** 0.4
+    return _hertz_tau(pair.restitution) * (m_eff / (k * math.sqrt(impact_speed))) ** 0.4

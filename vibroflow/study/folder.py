@@ -12,6 +12,8 @@ from vibroflow.errors import InputError
 from vibroflow.io.atomic import TMP_PREFIX
 from vibroflow.io.folder_lock import LOCK_NAME
 
+POINT_LOCK = ".lock"  # a sweep point's own lock (vibroflow.study.sweep_folder)
+
 STUDY_FILE = "study.json"
 KIND = "vibroflow study"
 
@@ -42,7 +44,7 @@ def check_study_dir(out: Path, must_exist: bool = False) -> None:
     if not marker.exists():
         # a lock file or an atomic writer's temporary left by a command that stopped early
         # does not make a folder a result
-        own = (LOCK_NAME, ".lock")
+        own = (LOCK_NAME, POINT_LOCK)
         if any(p.name not in own and not p.name.startswith(TMP_PREFIX)
                for p in out.iterdir()) or must_exist:
             raise InputError(f"DIR = {str(out)!r}: not a vibroflow study folder (no "

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from vibroflow.errors import InputError
+from vibroflow.study.folder import POINT_LOCK  # noqa: F401 -- the study folder's check knows it
 from vibroflow.study.stages import write_json_atomic
 
 KIND = "vibroflow sweep"
@@ -33,7 +34,6 @@ TABLE_FILE = "sweep.csv"
 POINTS = "points"
 PLOTS = "plots"
 DIR_LOCK = ".sweep.lock"
-POINT_LOCK = ".lock"
 POINT_FILE = "point.json"
 FAILED_FILE = "failed.json"
 
