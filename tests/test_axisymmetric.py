@@ -115,7 +115,7 @@ def test_hoop_rate_volume_and_stress_of_a_radial_compression():
 def test_axisymmetric_low_column_keeps_its_top():
     """a = 0.5 < 0.74, R0 = 1 m, dx = R0/20, rough floor: the top of a low cylinder never
     moves, so H_inf = H0 (Lajeunesse et al. 2004's small-a branch, H_inf / R0 = a), within the
-    issue's 10 %.  Measured 0.466 (-7 %; 0.488 with flip = 0.99, 0.474 on R0/40): the
+    mission's 10 %.  Measured 0.466 (-7 %; 0.488 with flip = 0.99, 0.474 on R0/40): the
     continuum's centre subsides, its top 0.453 at the axis and 0.41 at r = 0.3 R0, where the
     plane-strain column's sinks by 2.6 % only (0.487 at the symmetry plane, same grid and floor);
     a 15-degree cone stands (largest displacement 3 mm over 6 sqrt(H/g)), so this is the
@@ -186,7 +186,7 @@ def sand_column(a, n):
 
 @pytest.mark.parametrize("a", [3.0, 4.0])
 def test_tall_sand_cylinder_meets_lube_and_lajeunesse_2004(a):
-    """The issue's check, on the power-law branch (the linear one needs finer grids:
+    """The check on the power-law branch (the linear one needs finer grids:
     test_low_sand_cylinders_reach_the_law_on_fine_grids): a cylinder of the experiments' sand
     (SAND_FRICTION_DEG), a > 1.7, R0 = 1 m, dx = R0/20 (about 25 s for both): the run-out
     within 10 % of Lube et al. 2004's 1.6 a^(1/2) and the height within 10 % of Lajeunesse et
