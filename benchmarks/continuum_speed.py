@@ -160,7 +160,8 @@ def kernels(a) -> dict:
             from vibroflow.continuum.plasticity import update_volume
 
             g = system.grid
-            gm, gmv, gf, gv = system.work
+            gw = system.work
+            gm, gmv, gf, gv = gw.gm, gw.gmv, gw.gf, gw.gv
             wall, part = system.boundaries[0], system.boundaries[-1]
             h = state.history[0]
             x, v, C, L = state.x.copy(), state.v.copy(), state.C.copy(), state.L.copy()
@@ -204,14 +205,15 @@ def kernels(a) -> dict:
             from vibroflow.continuum.eulerian.solver import NQ
             from vibroflow.continuum.eulerian.transfer import g2p_cells, p2g_cells
             from vibroflow.continuum.eulerian.wall import wall_forces
-            from vibroflow.continuum.fused import sum_chunk_rows
+            from vibroflow.continuum.grid_step import sum_chunk_rows
             from vibroflow.continuum.grid_update import grid_update
 
             mesh = system.mesh
             g = mesh.grid
             n = mesh.n
-            gm, gmv, gf, gv = system.work
-            cm, cmv, cf = system.chunk_work
+            gw = system.work
+            gm, gmv, gf, gv = gw.gm, gw.gmv, gw.gf, gw.gv
+            cm, cmv, cf = gw.cm, gw.cmv, gw.cf
             act = np.flatnonzero(state.mass > 0)
             tcx, tcz = system.tables[0], system.tables[1]
             w, pf, hist = system.wall, system.partitions, state.wall
