@@ -123,7 +123,7 @@ def advance_kernel(nsteps, t, points, step, boundaries, grid, work):
                 return s, t, THROUGH_WALL, j
         # 3: the grid's part (grid_step.py): the chunks' sums, the update with the frame's
         # acceleration at mid-step, the grid's conditions and the further transfers
-        grid_phase(grid, work, frame, t, dt)
+        gv = grid_phase(grid, work, frame, t, dt)
         # 4-5: gather, move, volume and stress, per chunk
         for c in nb.prange(nchunk):
             a = bounds[c]

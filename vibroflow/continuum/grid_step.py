@@ -95,7 +95,9 @@ def _make_grid_phase(parallel: bool):
     def grid_phase(grid, work, frame, t, dt):
         """The grid's part of a step of dt (s) from time t (s) (module docstring, 1-4): from
         the chunks' scatter in `work` (GridWork) to the grid velocity work.gv (m/s), on the
-        grid `grid` (GridSpec) in the frame `frame` (grid_update.FRAME_FIELDS)."""
+        grid `grid` (GridSpec) in the frame `frame` (grid_update.FRAME_FIELDS).  Returns
+        work.gv: a caller's parallel loop that gathers from the returned array depends on
+        this call, so numba's parfor fusion cannot move the gather before it."""
         _ = parallel
         x0, z0, dx, periodic, no_slip_rows, axis_cols = grid
         cm, cmv, cf, gm, gmv, gf, gv, transfers, cb, B, gtmp = work
@@ -125,6 +127,7 @@ def _make_grid_phase(parallel: bool):
         if transfers % 2 == 0:
             for i in nb.prange(nx):
                 gv[i] = gtmp[i]
+        return gv
 
     return grid_phase
 

@@ -147,10 +147,11 @@ def _make_advance_kernel(parallel: bool):
                     operator_of_cells(act[a:b], ncz, tcx, tcz, mass, dx, periodic, cb[c])
             # the grid's part (grid_step.py): the chunks' sums, the update with the frame's
             # acceleration at mid-step, the grid's conditions and the further transfers
+            # (the gather below reads the returned grid velocity, so it stays after the call)
             if parallel:
-                grid_phase(grid, work, frame, t, dt)
+                gv = grid_phase(grid, work, frame, t, dt)
             else:
-                grid_phase_serial(grid, work, frame, t, dt)
+                gv = grid_phase_serial(grid, work, frame, t, dt)
             for c in nb.prange(nchunk):
                 a = (c * na) // nchunk
                 b = ((c + 1) * na) // nchunk
