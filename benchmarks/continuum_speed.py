@@ -1,4 +1,4 @@
-"""Wall time of the continuum formulations on a tub case, against the DEM's (issues 4 and 6).
+"""Wall time of the continuum formulations on a tub case, against the DEM's.
 
     python benchmarks/continuum_speed.py [--case tub47-quick] [--calibration FILE]
         [--dem-dir DIR] [--methods lagrangian,eulerian] [--threads 1,2] [--cfl C]
@@ -11,7 +11,7 @@ compilation when the cache is cold) on a few steps of the settled bed, then the 
 sampling, the analysis) into a temporary folder.  Printed per case: points (material points, or
 the Eulerian mesh's cells), steps (settling + vibration), the run's wall time (its summary's
 wall_time_s, as the DEM's), steps/s and point-steps/s, the DEM's wall time and the ratio (the
-issue's target: >= 100 at equal accuracy), and, with a DEM folder, the field difference E of
+mission's target: >= 100 at equal accuracy), and, with a DEM folder, the field difference E of
 tub47.md against the DEM and the circulation (equal accuracy is judged on these).  The 1-minute
 load average before and after each case is printed: on a shared machine the ratio is only
 indicative.
@@ -153,7 +153,7 @@ def kernels(a) -> dict:
         t = {}
         if method == "lagrangian":
             from vibroflow.continuum.boundary import partition_forces, u_wall_forces
-            from vibroflow.continuum.constitutive import update_stress_points
+            from vibroflow.continuum.stress_update import update_stress_points
             from vibroflow.continuum.g2p import g2p
             from vibroflow.continuum.grid_update import grid_update
             from vibroflow.continuum.p2g import p2g
@@ -196,8 +196,9 @@ def kernels(a) -> dict:
                 lambda: transfer_rows(0, g.nx, B, mass, gv, gtmp, g.periodic, 0, 0), 200)
         else:
             from vibroflow.continuum.boundary import partition_forces
-            from vibroflow.continuum.constitutive import update_stress_points
-            from vibroflow.continuum.eulerian.advection import face_velocities, remap
+            from vibroflow.continuum.stress_update import update_stress_points
+            from vibroflow.continuum.eulerian.advection import remap
+            from vibroflow.continuum.eulerian.face_velocity import face_velocities
             from vibroflow.continuum.eulerian.lagrangian_step import (end_density,
                                                                       material_fraction)
             from vibroflow.continuum.eulerian.solver import NQ

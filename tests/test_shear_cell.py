@@ -259,14 +259,15 @@ def test_mu_i_fit_recovers_known_parameters_from_noisy_data():
     I_0 = 0.279, GDR MiDi / Jop et al. 2006) with Gaussian noise of known standard error: the
     fit must find each parameter within 3 of its own standard errors, in 20 noise draws at
     least 18 times, and chi2/dof near 1; phi(I) likewise."""
-    from vibroflow.calibration.rheology_fit import fit_mu_i, fit_phi_i, mu_of_i, phi_of_i
+    from vibroflow.calibration.rheology_fit import fit_mu_i, fit_phi_i
+    from vibroflow.continuum.rheology import mu_of_I, phi_of_I
     true = (math.tan(math.radians(20.9)), math.tan(math.radians(32.8)), 0.279)
     I = np.geomspace(0.003, 1.0, 9)
     se = np.full(I.size, 0.008)
     rng = np.random.default_rng(11)
     hits, chi = 0, []
     for _ in range(20):
-        mu = mu_of_i(I, *true) + rng.normal(0, se)
+        mu = mu_of_I(I, *true) + rng.normal(0, se)
         f = fit_mu_i(I, mu, se)
         ok = all(abs(f[k] - v) <= 3 * f[k + "_stderr"] for k, v in zip(("mu_s", "mu_2", "I_0"),
                                                                        true))
@@ -274,7 +275,7 @@ def test_mu_i_fit_recovers_known_parameters_from_noisy_data():
         chi.append(f["chi2_per_dof"])
     assert hits >= 18
     assert 0.6 < np.mean(chi) < 1.5
-    phi = phi_of_i(I, 0.60, 0.52) + rng.normal(0, 0.002, I.size)
+    phi = phi_of_I(I, 0.60, 0.52) + rng.normal(0, 0.002, I.size)
     p = fit_phi_i(I, phi, np.full(I.size, 0.002))
     assert abs(p["phi_max"] - 0.60) < 3 * p["phi_max_stderr"]
     assert abs(p["phi_min"] - 0.52) < 3 * p["phi_min_stderr"]
@@ -310,12 +311,13 @@ def test_plane_strain_drucker_prager_reproduces_mohr_coulomb(phi_deg):
 
 def test_equivalent_viscosity_gives_the_mu_i_stress():
     """mu_s p + eta gamma_dot must be the mu(I) shear stress at that shear rate."""
-    from vibroflow.calibration.rheology_fit import drucker_prager_equivalent, mu_of_i
+    from vibroflow.calibration.rheology_fit import drucker_prager_equivalent
+    from vibroflow.continuum.rheology import mu_of_I
     p, gd = 5000.0, 30.0
     dp = drucker_prager_equivalent(0.38, 0.64, 0.279, 0.6, 0.5, p, D, RHO, gd)
     I = gd * D / math.sqrt(p / RHO)
     assert dp["inertial_number"] == pytest.approx(I)
-    assert 0.38 * p + dp["viscosity_Pa_s"] * gd == pytest.approx(mu_of_i(I, 0.38, 0.64, 0.279)
+    assert 0.38 * p + dp["viscosity_Pa_s"] * gd == pytest.approx(mu_of_I(I, 0.38, 0.64, 0.279)
                                                                  * p)
     assert 0 < dp["dilation_angle_deg"] < 90
 
