@@ -53,7 +53,7 @@ def ball_row(sc):
 
 
 def make_box(pos, vel, lengths, sc=None, dt=1e-5):
-    from vibroflow.calibration.periodic import PeriodicBox
+    from vibroflow.dem.periodic_box import PeriodicBox
     sc = sc or scenario()
     n = len(pos)
     box = PeriodicBox(np.array(pos, float), np.full(n, R), np.full(n, M), ball_row(sc),
@@ -68,7 +68,7 @@ def make_box(pos, vel, lengths, sc=None, dt=1e-5):
 def test_free_ball_crossing_gets_the_exact_shift_and_velocity_jump():
     """Two balls far from anything cross the z boundary, up and down; after n steps each is
     where free flight plus the LE map puts it, to round-off."""
-    from vibroflow.calibration.periodic import MODE_FIXED
+    from vibroflow.dem.periodic_step import MODE_FIXED
     L = (0.05, 0.04, 0.05)
     gd = 20.0
     x0 = np.array([[0.010, 0.020, 0.049], [0.030, 0.010, 0.001], [0.025, 0.030, 0.025]])
@@ -99,7 +99,7 @@ def test_head_on_collision_across_the_boundary_has_the_laws_restitution():
     their values, the relative normal velocity is reversed with e (1%, the time step), and
     the unwrapped momentum is conserved.  A wrong image shift or velocity jump would make
     the contact oblique by gamma_dot L_z = 1 m/s beside w = 0.1 m/s."""
-    from vibroflow.calibration.periodic import MODE_FIXED
+    from vibroflow.dem.periodic_step import MODE_FIXED
     from vibroflow.scenario.laws import damping_ratio
     L = (0.05, 0.05, 0.05)
     gd = 20.0
@@ -129,7 +129,8 @@ def test_sheared_gas_conserves_unwrapped_momentum_and_is_reproducible():
     """A gas of 150 balls at phi = 0.3 sheared at a high rate, with many collisions across the
     LE boundary: the unwrapped momentum is conserved to round-off (pair forces are equal and
     opposite, every crossing accounted), and the same seed gives the same state bit for bit."""
-    from vibroflow.calibration.periodic import MODE_FIXED, Q_Z, random_fill
+    from vibroflow.dem.periodic_box import random_fill
+    from vibroflow.dem.periodic_step import MODE_FIXED, Q_Z
 
     def run():
         rng = np.random.default_rng(7)
