@@ -1,4 +1,4 @@
-"""Wall time of the continuum formulations on a tub case, against the DEM's (issues 4 and 6).
+"""Wall time of the continuum formulations on a tub case, against the DEM's.
 
     python benchmarks/continuum_speed.py [--case tub47-quick] [--calibration FILE]
         [--dem-dir DIR] [--methods lagrangian,eulerian] [--threads 1,2] [--cfl C]
@@ -8,12 +8,12 @@ Every (method, thread count) case runs in its own process (NUMBA_NUM_THREADS set
 is imported): it first times the compiled kernels' first call (numba's cache load, or the
 compilation when the cache is cold) on a few steps of the settled bed, then the whole run
 (vibroflow.continuum.tub_run.run_continuum: settling, vibration, sampling, the analysis) into a
-temporary folder. Printed per case: points (material points, or the Eulerian mesh's cells), steps
-(settling + vibration), the run's wall time (its summary's wall_time_s, as the DEM's), steps/s and
-point-steps/s, the DEM's wall time and the ratio (the issue's target: >= 100 at equal accuracy),
-and, with a DEM folder, the field difference E of tub47.md against the DEM and the circulation
-(equal accuracy is judged on these). The 1-minute load average before and after each case is
-printed: on a shared machine the ratio is only indicative.
+temporary folder.  Printed per case: points (material points, or the Eulerian mesh's cells),
+steps (settling + vibration), the run's wall time (its summary's wall_time_s, as the DEM's),
+steps/s and point-steps/s, the DEM's wall time and the ratio (the mission's target: >= 100 at
+equal accuracy), and, with a DEM folder, the field difference E of tub47.md against the DEM and
+the circulation (equal accuracy is judged on these).  The 1-minute load average before and after
+each case is printed: on a shared machine the ratio is only indicative.
 
 --kernels: one thread, in this process, on the settled bed: microseconds per call of each kernel
 of a step (the Lagrangian's boundaries, p2g, grid update, g2p, volume and stress; the Eulerian's
