@@ -217,7 +217,7 @@ def test_ctrl_c_while_settling_says_there_is_nothing_to_resume(tmp_path, monkeyp
     def ctrl_c(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(R, "advance", ctrl_c)  # the settling's first steps
+    monkeypatch.setattr(mpm_formulation, "advance", ctrl_c)  # the settling's first steps
     with pytest.raises(Interrupted) as e:
         run_continuum(s, tmp_path / "o")
     assert e.value.message == "interrupted while settling; nothing to resume, run again"
