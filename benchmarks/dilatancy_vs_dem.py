@@ -90,8 +90,8 @@ def main(argv=None) -> int:
     c, dc = s["circulation"], dem["circulation"]
     extra = {}
     if diag:
-        from vibroflow.continuum.constitutive import unloaded_packing
         from vibroflow.continuum.material import material_of
+        from vibroflow.continuum.stress_update import unloaded_packing
 
         mat = material_of(sc, cal, dilatancy=args.k_dil > 0, compaction=args.compaction)
         ph = np.concatenate([d[0] for d in diag])

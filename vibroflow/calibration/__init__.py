@@ -19,13 +19,12 @@ from vibroflow.calibration.coarse_grain import (CoarseGrainer, kernel_value, pha
                                                 rheology, snapshot_from_state,
                                                 velocity_gradient_on_grid)
 from vibroflow.calibration.elastic import elastic_moduli
-from vibroflow.calibration.rheology_fit import (drucker_prager_equivalent, fit_mu_i, fit_phi_i,
-                                                mu_of_i, phi_of_i)
+from vibroflow.calibration.rheology_fit import drucker_prager_equivalent, fit_mu_i, fit_phi_i
 from vibroflow.calibration.run_fields import coarse_grain_run, read_fields, write_fields
 from vibroflow.calibration.shear_cell import run_shear_cell, tub_mid_depth_pressure
 
 __all__ = ["CoarseGrainer", "calibrate", "coarse_grain_run", "drucker_prager_equivalent",
-           "elastic_moduli", "fit_mu_i", "fit_phi_i", "kernel_value", "mu_of_i", "phase_bins",
-           "phi_of_i", "read_calibration", "read_fields", "rheology", "run_shear_cell",
+           "elastic_moduli", "fit_mu_i", "fit_phi_i", "kernel_value", "phase_bins",
+           "read_calibration", "read_fields", "rheology", "run_shear_cell",
            "snapshot_from_state", "tub_mid_depth_pressure", "velocity_gradient_on_grid",
            "write_fields"]

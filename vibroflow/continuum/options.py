@@ -98,7 +98,7 @@ class ContinuumOptions:
     option with the calibration's [compaction] gamma_c and dphi_cyc (constitutive.py,
     vibroflow.calibration.compaction); flip: the FLIP fraction of the points' velocity update
     (mpm.MPMSystem.flip; the material point method's only); bed_viscosity (Pa s): the bed's
-    Kelvin-Voigt damping on connected material (constitutive.damped_stress), 0 = off
+    Kelvin-Voigt damping on connected material (stress_update.damped_stress), 0 = off
     (default); benchmarks/strip_damping.py fits it on a DEM of a vibrated strip of the same
     balls; damping_length (m): the grid spacing on which transfer_cfl is the transfers'
     Courant number (default None: the formulation's default grid's spacing); on another grid

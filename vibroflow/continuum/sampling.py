@@ -12,7 +12,7 @@ import numpy as np
 from vibroflow.measure.phase_shear import PhaseShear, node_grid, phase_shear_of_snapshots
 from vibroflow.tub.motion import rigid_velocity, tub_to_lab
 
-from .constitutive import equivalent_shear_rate
+from .stress_update import equivalent_shear_rate
 
 
 def sample_times(scenario) -> tuple[np.ndarray, float, float]:
