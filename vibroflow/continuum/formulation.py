@@ -1,7 +1,7 @@
 """The interface every continuum formulation implements, and the registry of formulations.
 
-A formulation is a way of solving the same continuum (constitutive.py, the wall laws of
-boundary.py, the grid and transfers) on a tub scenario: the material point method
+A formulation is a way of solving the same continuum (constitutive.py, stress_update.py, the
+wall laws of boundary.py, the grid and transfers) on a tub scenario: the material point method
 (vibroflow.continuum.mpm, "lagrangian") and the fixed mesh (vibroflow.continuum.eulerian,
 "eulerian").  The tub driver (tub_run.py) and the column driver (column.py) run any of them
 through this interface; what the formulations share (options.py, material.py, bed.py,
