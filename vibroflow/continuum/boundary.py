@@ -10,7 +10,7 @@ kernel and a branch of `boundary_forces` here, and the step loop stays as it is.
 with a per-point history (`init_history(n)`, `state.history[self.slot]`; the penalty walls)
 says so (`has_history`); the walls also have `lost(state)`: the ids of the points the last
 step found through the wall by more than their own side, which the solver reports as a
-blow-up (mpm.py).
+blow-up (mpm/solver.py).
 
 Wall contact (`UWall`, `Plane`): a penalty contact with a constant normal stiffness, as the
 published finite element study of the tub did (a linear pressure-overclosure law), and Coulomb
@@ -45,7 +45,6 @@ import numba as nb
 import numpy as np
 
 from vibroflow.errors import InputError
-from vibroflow.scenario.laws import damping_ratio
 from vibroflow.tub.geometry import u_wall_nearest
 
 NO_CONTACT, STICK, SLIDE = 0, 1, 2
@@ -55,8 +54,8 @@ NO_CONTACT, STICK, SLIDE = 0, 1, 2
 U_WALL, PLANE_WALL, PARTITIONS = 0, 1, 2
 
 #: a boundary's numbers for the compiled step (`record()`): kind; hist, the row of a wall's
-#: history in the step's stacked histories (mpm.pack_boundaries); a penalty wall's k_n, k_t
-#: (Pa/m), damping ratio zeta and friction mu; the U's radius (m); a plane through (px, pz) +
+#: history in the step's stacked histories (mpm.solver.pack_boundaries); a penalty wall's k_n,
+#: k_t (Pa/m), damping ratio zeta and friction mu; the U's radius (m); a plane through (px, pz) +
 #: (vx, vz) t + (ax, az) t^2 / 2 (m) with unit normal (nx, nz); the partitions' friction mu_p
 #: and spacing L_y (m)
 BOUNDARY_DTYPE = np.dtype([("kind", np.int64), ("hist", np.int64), ("kn", np.float64),
@@ -65,15 +64,6 @@ BOUNDARY_DTYPE = np.dtype([("kind", np.int64), ("hist", np.int64), ("kn", np.flo
                            ("nx", np.float64), ("nz", np.float64), ("vx", np.float64),
                            ("vz", np.float64), ("ax", np.float64), ("az", np.float64),
                            ("friction", np.float64), ("length", np.float64)])
-
-
-def damping_ratio_of_restitution(e: float) -> float:
-    """Damping ratio zeta of a linear spring-dashpot with restitution e (models.md), the DEM's
-    (vibroflow.scenario.laws.damping_ratio), for a restitution checked here: the continuum's
-    may come from a calibration file rather than a validated scenario."""
-    if not 0 < e <= 1:
-        raise InputError(f"restitution = {e!r}: must be in (0, 1]")
-    return damping_ratio(e)
 
 
 @nb.njit(cache=True, inline="always")
@@ -184,9 +174,9 @@ def partition_forces(v, mass, volume, stress, fext, mu_p, length, dt):
 def boundary_forces(b, x, v, mass, volume, stress, fext, hist, a, e, t, dt):
     """Add the force of the boundary b (a BOUNDARY_DTYPE record) on the points a:e to fext
     (N, 2) (N/m) at time t (s) over dt (s), with its kind's kernel; x, v (N, 2), mass, volume
-    (N,), stress (N, 4) the points' (mpm.MPMState); hist = (xi, f, fn, ft, state) the walls'
-    stacked histories (mpm.pack_boundaries), row b.hist this wall's.  Returns the number of
-    points gone through a wall (0 for the partitions)."""
+    (N,), stress (N, 4) the points' (mpm.solver.MPMState); hist = (xi, f, fn, ft, state) the
+    walls' stacked histories (mpm.solver.pack_boundaries), row b.hist this wall's.  Returns the
+    number of points gone through a wall (0 for the partitions)."""
     if b.kind == PARTITIONS:
         partition_forces(v[a:e], mass[a:e], volume[a:e], stress[a:e], fext[a:e], b.friction,
                          b.length, dt)

@@ -1,6 +1,6 @@
 """Many MPM steps in one numba call, parallel over a fixed number of point chunks.
 
-The step is mpm.py's (boundaries, p2g, grid update, g2p, volume and stress), made of the same
+The step is mpm/solver.py's (boundaries, p2g, grid update, g2p, volume and stress), made of the same
 kernels (boundary.py, p2g.py, grid_step.py, g2p.py, plasticity.py, stress_update.py), but run
 as one compiled loop over `nsteps` steps, without a Python step's dispatch per kernel, the
 boundaries' Python methods and the frame's pose (~15 % of a tub47-quick step, whose time is
@@ -15,10 +15,10 @@ too), so the grid sums, and with them the whole run, depend on the number of chu
 on the number of threads (as the DEM's run.force_chunks: vibroflow.dem.step).  With one chunk
 the scatter is the serial p2g's, bit for bit.
 
-Records (numba named tuples): `Points` the state's arrays (mpm.MPMState), `MPMStep` the step's
-constants, `Boundaries` the boundaries as BOUNDARY_DTYPE records in the system's order with the
-walls' stacked histories (boundary.py, mpm.pack_boundaries), and the grid's GridSpec and
-GridWork (grid_step.py).
+Records (numba named tuples): `Points` the state's arrays (mpm.solver.MPMState), `MPMStep` the
+step's constants, `Boundaries` the boundaries as BOUNDARY_DTYPE records in the system's order
+with the walls' stacked histories (boundary.py, mpm.solver.pack_boundaries), and the grid's
+GridSpec and GridWork (grid_step.py).
 
 numba's cache watches only the file of the function it compiled, and a compiled loop holds its
 own copy of every kernel it calls: edited boundary or constitutive kernels would go on running
@@ -44,15 +44,15 @@ from .transfer_operator import operator_of_points
 #: status of `advance_kernel`
 OK, THROUGH_WALL, ESCAPED = 0, 1, 2
 
-#: the material points' arrays (mpm.MPMState's, units there) and stress_work (N, 4) the stress
-#: scattered when the material has a bed viscosity (stress_update.damped_stress; (0, 4)
+#: the material points' arrays (mpm.solver.MPMState's, units there) and stress_work (N, 4) the
+#: stress scattered when the material has a bed viscosity (stress_update.damped_stress; (0, 4)
 #: without)
 Points = namedtuple("Points", ["x", "v", "C", "L", "mass", "volume", "density", "stress",
                                "gamma_dot", "phase", "fext", "stress_work"])
 #: the step's constants: dt (s), the material's params (constitutive.ContinuumMaterial.
 #: as_array), the frame (grid_update.FRAME_FIELDS), box (4,) the region (m) a point may occupy
 #: (xmin, xmax, zmin, zmax), bounds (nchunk + 1,) the point chunks (grid_step.chunk_bounds),
-#: flip the FLIP fraction (mpm.MPMSystem.flip)
+#: flip the FLIP fraction (mpm.solver.MPMSystem.flip)
 MPMStep = namedtuple("MPMStep", ["dt", "params", "frame", "box", "bounds", "flip"])
 #: records (nb,) of boundary.BOUNDARY_DTYPE in the system's order, and the walls' histories
 #: (walls, N, ...) xi, f, fn, ft, state (boundary.py; row `hist` of a wall's record)
