@@ -289,13 +289,18 @@ def main(argv=None) -> int:
     if a.method:
         print("RESULT " + json.dumps(worker(a)))
         return 0
+    # vibroflow (and with it numba) is imported in functions, after a worker's
+    # NUMBA_NUM_THREADS is set (module docstring)
+    from vibroflow.continuum.formulation import formulation
+
     dem_wall = None
     if a.dem_dir:
         dem_wall = json.loads((Path(a.dem_dir) / "summary.json").read_text())["wall_time_s"]
     report = {"case": a.case, "options": {"cfl": _options("lagrangian", a).cfl, "dx": a.dx,
                                           "stiffness_factor": a.stiffness_factor,
                                           "transfers_per_step": {
-                                              m: _options(m, a).transfers_on(_inputs(a)[0])
+                                              m: formulation(m).transfers_on(
+                                                  _options(m, a), _inputs(a)[0])
                                               for m in ("lagrangian", "eulerian")}},
               "dem_wall_time_s": dem_wall, "cases": []}
     if a.kernels:
