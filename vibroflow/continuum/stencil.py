@@ -20,7 +20,9 @@ call these functions, so they give the same numbers bit for bit.
 
 A point's weights travel as the tuple `bspline_weights` returns, (base, fx, w0, w1, w2, g0, g1,
 g2), one per axis; the weights are picked by selects rather than small arrays so that they stay
-in registers, and the kernels are inlined into their callers.
+in registers.  The weights and the scatter are inlined into their callers by numba
+(inline="always"); the gathers are left to LLVM's inliner, which compiles the Eulerian cells'
+gather a third faster than numba's inlining does (benchmarks/continuum_speed.py --kernels).
 """
 from __future__ import annotations
 
@@ -83,7 +85,7 @@ def scatter_point(wx, wz, dx, periodic, m, vol, sxx, szz, sxz, vx, vz, cxx, cxz,
             gf[i, k, 1] += -vol * (sxz * gwx + szz * gwz) + w * fez
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def gather_point(wx, wz, dx, periodic, gv):
     """One point's APIC gather from the grid velocity gv (nx, nz, 2) (m/s; module docstring):
     (vx, vz) m/s, the affine matrix (cxx, cxz, czx, czz) and the velocity gradient
@@ -131,7 +133,7 @@ def gather_point(wx, wz, dx, periodic, gv):
     return (vx, vz, inv * cxx, inv * cxz, inv * czx, inv * czz, lxx, lxz, lzx, lzz)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def gather_old_velocity(wx, wz, periodic, gm, gmv):
     """sum_i w_ip gmv_i / gm_i over the point's nodes holding mass (m/s): the grid's velocity
     before the update at the point, from its mass gm (nx, nz) and momentum gmv (nx, nz, 2)."""
