@@ -34,7 +34,7 @@ import numpy as np
 
 from vibroflow import __version__
 from vibroflow.errors import InputError, Interrupted
-from vibroflow.io.calibration_file import CALIBRATION_FILE, write_calibration
+from vibroflow.io.calibration_file import CALIBRATION_FILE, Calibration, write_calibration
 from vibroflow.io.folder_lock import folder_lock
 from vibroflow.scenario.checks import find_contact
 from vibroflow.tub.geometry import geometry_of
@@ -136,10 +136,11 @@ def interrupted_calibration(run_dir: Path):
 
 def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
               width: float | None = None, progress: bool = True, shear_cell_options=None,
-              pictures: bool = True, cyclic: bool = True, dilatancy: bool = False) -> dict:
+              pictures: bool = True, cyclic: bool = True, dilatancy: bool = False
+              ) -> Calibration:
     """Calibrate the continuum on the DEM run in RUN (a run directory with dem.h5).
 
-    Returns the calibration as a dict (what calibration.toml holds).  See the module notes.
+    Returns the calibration record (what calibration.toml holds).  See the module notes.
     """
     from vibroflow.progress import RunProgress
 
@@ -210,7 +211,8 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
                              f", dphi_cyc = {cal['compaction']['excess_solid_fraction']:.4f}")
                 except InputError as e:
                     prog.log(f"compaction not measured: {e}")
-        write_calibration(out_dir / CALIBRATION_FILE, cal)
+        record = Calibration.from_dict(cal, where=str(out_dir / CALIBRATION_FILE))
+        write_calibration(out_dir / CALIBRATION_FILE, record)
         if pictures:
             from . import plots
             pic = out_dir / PICTURES_DIR
@@ -222,7 +224,7 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
             plots.wall_friction_plot(pic / "wall_friction.png", wf)
             plots.impacts_plot(pic / "impacts.png", rel)
         prog.log(f"calibration in {out_dir / CALIBRATION_FILE}")
-        return cal
+        return record
 
 
 def _cyclic_modulus(sc, pressure: float, shear_rate: float, elastic: dict, prog) -> dict | None:

@@ -62,6 +62,7 @@ from vibroflow.tub.geometry import geometry_of
 from vibroflow.errors import InputError, Interrupted
 # write_json_atomic: also imported from here by the Eulerian run
 from vibroflow.io.atomic import write_json_atomic, write_text_atomic
+from vibroflow.io.calibration_file import Calibration, ImpactRelation
 from vibroflow.io.folder_lock import folder_lock
 from vibroflow.progress import RunProgress
 from vibroflow.run_clock import RunClock
@@ -270,7 +271,7 @@ def _contact(scenario, a: str, b: str):
     return find_contact(scenario, a, b)
 
 
-def material_of(scenario, calibration: dict | None, model: str = "mu_i",
+def material_of(scenario, calibration: Calibration | None, model: str = "mu_i",
                 dilatancy: bool = False, stiffness_factor: float = 1.0,
                 compaction: bool = False) -> ContinuumMaterial:
     """The continuum material: the calibration's, else tub47's defaults with the scenario's
@@ -289,10 +290,10 @@ def material_of(scenario, calibration: dict | None, model: str = "mu_i",
         mat = dataclasses.replace(mat, bulk_modulus=mat.bulk_modulus * stiffness_factor,
                                   shear_modulus=mat.shear_modulus * stiffness_factor)
     if compaction:
-        c = (calibration or {}).get("compaction", {})
-        gc, ex = c.get("compaction_strain"), c.get("excess_solid_fraction")
-        if not (isinstance(gc, (int, float)) and math.isfinite(gc) and gc > 0
-                and isinstance(ex, (int, float)) and math.isfinite(ex) and ex >= 0):
+        c = calibration.compaction if calibration is not None else None
+        gc, ex = (None, None) if c is None else (c.compaction_strain, c.excess_solid_fraction)
+        if not (gc is not None and math.isfinite(gc) and gc > 0
+                and ex is not None and math.isfinite(ex) and ex >= 0):
             raise InputError(f"compaction = true: needs a calibration with a measured "
                              f"[compaction] compaction_strain > 0 and excess_solid_fraction >= 0"
                              f" (vibroflow calibrate --dilatancy); got {gc!r}, {ex!r}")
@@ -300,12 +301,14 @@ def material_of(scenario, calibration: dict | None, model: str = "mu_i",
                                   compaction_excess=float(ex))
     if not dilatancy:
         return mat
-    k = (calibration or {}).get("dilatancy", {}).get("K_dil")
-    if not (isinstance(k, (int, float)) and math.isfinite(k) and k > 0):
+    dil = calibration.dilatancy if calibration is not None else None
+    k = dil.K_dil if dil is not None else None
+    if not (k is not None and math.isfinite(k) and k > 0):
         raise InputError(f"dilatancy = true: needs a calibration with a measured [dilatancy] "
                          f"K_dil > 0 (vibroflow calibrate --dilatancy); got {k!r}")
-    excess = calibration["dilatancy"].get("initial_excess_solid_fraction", 0.0)
-    if not (isinstance(excess, (int, float)) and math.isfinite(excess) and excess >= 0):
+    excess = dil.initial_excess_solid_fraction
+    excess = 0.0 if excess is None else excess
+    if not (math.isfinite(excess) and excess >= 0):
         raise InputError(f"calibration [dilatancy] initial_excess_solid_fraction = {excess!r}: "
                          "must be a number >= 0")
     return dataclasses.replace(mat, dilatancy=float(k), initial_solid_fraction=(
@@ -377,23 +380,24 @@ def settled_bed(scenario, material: ContinuumMaterial, spacing: float):
     return x, volume, density, stress, h
 
 
-def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
+def make_system(scenario, material: ContinuumMaterial, calibration: Calibration | None,
                 options: LagrangianOptions, frame) -> tuple[MPMSystem, float]:
     """The MPM system of a tub scenario in `frame`; returns (system, point spacing m)."""
     geo = geometry_of(scenario)
     dx = options.grid(scenario)
     spacing = 0.5 * dx
     grid = Grid.covering(-geo.radius, geo.radius, 0.0, geo.rim_height, dx)
-    cal = calibration or {}
     wall_pair = _contact(scenario, scenario.fill.material, scenario.tub.wall_material)
-    mu_w = float(cal.get("wall", {}).get("friction", wall_pair.friction))
+    mu_w = float(calibration.wall.friction if calibration is not None else wall_pair.friction)
     M = material.bulk_modulus + 4.0 * material.shear_modulus / 3.0
     k_wall = options.wall_stiffness if options.wall_stiffness is not None else M / spacing
     boundaries: list = [UWall(radius=geo.radius, stiffness=k_wall, friction=mu_w,
                               damping_ratio=damping_ratio_of_restitution(wall_pair.restitution))]
     if not geo.periodic:
         part_pair = _contact(scenario, scenario.fill.material, scenario.tub.partition_material)
-        mu_p = float(cal.get("partitions", {}).get("friction", part_pair.friction))
+        mu_p = float(calibration.partitions.friction
+                     if calibration is not None and calibration.partitions is not None
+                     else part_pair.friction)
         boundaries.append(PartitionFriction(friction=mu_p, length=geo.length))
     dt = stable_dt(material, dx, spacing, boundaries, v_max=2.0, cfl=options.cfl)
     # a whole number of steps between samples, so every sample falls on a step
@@ -483,14 +487,15 @@ def options_record(options: LagrangianOptions) -> dict:
     return record
 
 
-def run_fingerprint(scenario, calibration: dict | None, options: LagrangianOptions,
+def run_fingerprint(scenario, calibration: Calibration | None, options: LagrangianOptions,
                     vtk: bool) -> str:
     """A hash of everything that fixes a run's numbers (the scenario but for
     run.checkpoint_every, the calibration, the options, vtk): a checkpoint resumes only the run
     that wrote it."""
     s = scenario.model_dump(mode="json")
     s.get("run", {}).pop("checkpoint_every", None)
-    text = json.dumps({"scenario": s, "calibration": calibration,
+    cal = calibration.to_toml_dict() if calibration is not None else None
+    text = json.dumps({"scenario": s, "calibration": cal,
                        "options": options_record(options), "vtk": bool(vtk)},
                       sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()
@@ -603,7 +608,7 @@ SHEAR_RATE_CSV_NAME = "shear_rate.csv"
 
 
 def write_shear_rate_csv(path: Path, samples: Samples, phase: PhaseShear | None,
-                         calibration: dict | None, diameter: float) -> None:
+                         calibration: Calibration | None, diameter: float) -> None:
     """The continuum's cycle-mean shear-rate map on the analysis cells (the DEM's cells), with
     the impact speeds it implies by the calibrated v = c0 + c1 d gamma_dot ([impacts.ball_ball],
     [impacts.ball_wall] by impact_relation; empty without a calibration), atomically: columns x, z
@@ -615,8 +620,9 @@ def write_shear_rate_csv(path: Path, samples: Samples, phase: PhaseShear | None,
     if samples.cell_grid is None:
         return
     h, nxh, nz = samples.cell_grid
-    im = (calibration or {}).get("impacts", {})
-    fits = [impact_relation(im.get(k))[:2] for k in ("ball_ball", "ball_wall")]
+    im = calibration.impacts if calibration is not None else None
+    fits = [impact_relation(getattr(im, k) if im is not None else None)[:2]
+            for k in ("ball_ball", "ball_wall")]
     lines = ["x,z,shear_rate,solid_fraction,instantaneous_shear_rate,samples,"
              "impact_ball_ball,impact_ball_wall"]
 
@@ -1091,25 +1097,24 @@ def phase_shear_of_samples(scenario, samples: Samples, times: np.ndarray,
                                     times[:j])
 
 
-def impact_relation(rel) -> tuple[float | None, float | None, str]:
+def impact_relation(rel: ImpactRelation | None) -> tuple[float | None, float | None, str]:
     """(c0 m/s, c1, which) of a calibration's [impacts.KIND] table: the relation fitted on the
     continuum's own measure of the shear rate (c0_cells_m_s, c1_cells;
     calibration.impacts.impact_relations_on_cells) when the calibration has it, else the one
     fitted on the DEM's 5 mm coarse-grained field (c0_m_s, c1; older calibrations); (None,
     None, "") without either."""
-    if not isinstance(rel, dict):
+    if rel is None:
         return None, None, ""
-    for c0k, c1k, which in (("c0_cells_m_s", "c1_cells", "c0_cells, c1_cells"),
-                            ("c0_m_s", "c1", "c0, c1")):
-        c0, c1 = rel.get(c0k), rel.get(c1k)
-        if all(isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c)
-               for c in (c0, c1)):
+    for c0, c1, which in ((rel.c0_cells_m_s, rel.c1_cells, "c0_cells, c1_cells"),
+                          (rel.c0_m_s, rel.c1, "c0, c1")):
+        if all(c is not None and math.isfinite(c) for c in (c0, c1)):
             return float(c0), float(c1), which
     return None, None, ""
 
 
-def shear_rate_outputs(material, calibration, probes: dict, batch, n_batches, samples: Samples,
-                       phase: PhaseShear, radius_tub: float, impacts: dict) -> dict:
+def shear_rate_outputs(material, calibration: Calibration | None, probes: dict, batch,
+                       n_batches, samples: Samples, phase: PhaseShear, radius_tub: float,
+                       impacts: dict) -> dict:
     """Shear rate (1/s) over the bed, near the wall and in the probe cells, with batch-means
     standard errors; with a calibration, the granular temperature sqrt(T) = a d gamma_dot
     (models.md, Bagnold scaling; a from [impacts] bagnold_sqrtT_over_d_gamma_dot) and the mean
@@ -1147,8 +1152,8 @@ def shear_rate_outputs(material, calibration, probes: dict, batch, n_batches, sa
                        "solid-fraction weighted"),
         "instantaneous_mean_1_s": im_, "instantaneous_mean_1_s_stderr": ise,
         "instantaneous_near_wall_1_s": iw, "instantaneous_near_wall_1_s_stderr": iwse}}
-    im = (calibration or {}).get("impacts", {})
-    a = im.get("bagnold_sqrtT_over_d_gamma_dot")
+    im = calibration.impacts if calibration is not None else None
+    a = im.bagnold_sqrtT_over_d_gamma_dot if im is not None else None
     out_probes = {}
     for q, (name, pr) in enumerate(probes.items()):
         k, i = phase.node_of(pr.x, pr.z)
@@ -1165,7 +1170,7 @@ def shear_rate_outputs(material, calibration, probes: dict, batch, n_batches, sa
     inferred = {}
     which = set()
     for name, rate, rate_se in (("ball_ball", m, se), ("ball_wall", mw, sew)):
-        c0, c1, key = impact_relation(im.get(name))
+        c0, c1, key = impact_relation(getattr(im, name) if im is not None else None)
         if c0 is None:
             continue
         v = c0 + c1 * d * rate

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from vibroflow.errors import InputError
+from vibroflow.io.calibration_file import Calibration, read_calibration
 
 DEM = "dem"
 #: impacts a cell needs before its mean impact speed is drawn (a cell mean of fewer is mostly
@@ -125,7 +126,7 @@ class StudyData:
     scenario_toml: str | None
     fields: dict                      # method -> xarray Dataset of bulk_velocity.csv (z, x)
     stages: dict                      # stage name -> its stage.json record
-    calibration: dict | None
+    calibration: Calibration | None
     dem_fields: Any | None            # the DEM's time-averaged coarse-grained fields (fields.nc)
     impacts: ImpactCells | None       # the DEM's measured ball-ball impacts by cell
     sweep_table: Path | None
@@ -190,9 +191,9 @@ class StudyData:
         cal_path = out / DEM / "calibration.toml"
         if cal_path.is_file():
             try:
-                calibration = tomllib.loads(cal_path.read_text())
-            except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-                notes["calibration"] = f"{cal_path}: unreadable ({type(exc).__name__})"
+                calibration = read_calibration(cal_path)
+            except InputError as exc:
+                notes["calibration"] = exc.message
         else:
             notes["calibration"] = f"no {DEM}/calibration.toml in the study"
         dem_fields = None
@@ -225,8 +226,8 @@ class StudyData:
         calibration has none with finite coefficients."""
         from vibroflow.continuum.run import impact_relation
 
-        rel = ((self.calibration or {}).get("impacts") or {}).get(kind)
-        c0, c1, which = impact_relation(rel)
+        impacts = self.calibration.impacts if self.calibration is not None else None
+        c0, c1, which = impact_relation(getattr(impacts, kind) if impacts is not None else None)
         if c0 is None:
             return None
         return {"c0": c0, "c1": c1, "which": which}

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from vibroflow.errors import InputError
+from vibroflow.io.calibration_file import Calibration
 
 
 @dataclass(frozen=True)
@@ -49,7 +50,7 @@ def _method(name: str, description: str, module: str, options: str, run: str):
 
         mod = importlib.import_module(module)
 
-        def run_method(scenario, out_dir: Path, calibration: dict | None, opts,
+        def run_method(scenario, out_dir: Path, calibration: Calibration | None, opts,
                        progress: bool, resume: bool) -> dict:
             from vibroflow.continuum.run import material_for
 

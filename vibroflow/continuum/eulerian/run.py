@@ -47,6 +47,7 @@ from vibroflow.measure.stats import batches_of_whole_cycles
 from vibroflow.measure.summary import json_safe, tub_summary
 from vibroflow.tub.geometry import geometry_of
 from vibroflow.errors import InputError
+from vibroflow.io.calibration_file import Calibration
 from vibroflow.io.folder_lock import folder_lock
 from vibroflow.progress import RunProgress
 from vibroflow.run_clock import RunClock
@@ -128,7 +129,7 @@ def default_dx(radius: float, target: float) -> float:
     return 2.0 * (2.0 * radius / n)
 
 
-def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
+def make_system(scenario, material: ContinuumMaterial, calibration: Calibration | None,
                 options: EulerianOptions, frame) -> EulerianSystem:
     """The Eulerian system of a tub scenario in `frame`: the U's mesh, the wall and partitions
     with the Lagrangian run's parameters (continuum.run.make_system), the time step."""
@@ -137,9 +138,8 @@ def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
     geo = geometry_of(scenario)
     dx = options.grid(scenario)
     mesh = EulerianMesh.tub(geo, dx)
-    cal = calibration or {}
     wall_pair = find_contact(scenario, scenario.fill.material, scenario.tub.wall_material)
-    mu_w = float(cal.get("wall", {}).get("friction", wall_pair.friction))
+    mu_w = float(calibration.wall.friction if calibration is not None else wall_pair.friction)
     M = material.bulk_modulus + 4.0 * material.shear_modulus / 3.0
     k_wall = options.wall_stiffness if options.wall_stiffness is not None else M / mesh.h
     wall = MeshWall(stiffness=k_wall, friction=mu_w,
@@ -148,7 +148,9 @@ def make_system(scenario, material: ContinuumMaterial, calibration: dict | None,
     if not geo.periodic:
         part_pair = find_contact(scenario, scenario.fill.material,
                                  scenario.tub.partition_material)
-        mu_p = float(cal.get("partitions", {}).get("friction", part_pair.friction))
+        mu_p = float(calibration.partitions.friction
+                     if calibration is not None and calibration.partitions is not None
+                     else part_pair.friction)
         partitions = PartitionFriction(friction=mu_p, length=geo.length)
     dt = stable_dt(material, dx, mesh.h, [wall], v_max=2.0, cfl=options.cfl)
     f, per = scenario.motion.frequency, scenario.run.phases_per_cycle
