@@ -83,7 +83,7 @@ def mean_flow_shear_rate(vx: np.ndarray, vz: np.ndarray, h: float) -> np.ndarray
     D is the symmetric part of the in-plane velocity gradient (central differences, one-sided
     at the bed's edge; NaN where a cell has no neighbour along an axis), D_yy = 0 (plane flow),
     and D' = D - tr(D)/3 I its deviator in 3D, the definition of the DEM's coarse-grained
-    shear rate (vibroflow.calibration.coarse_grain), so simple shear v_x = g z gives g and a
+    shear rate (vibroflow.calibration.coarse_grain_fields), so simple shear v_x = g z gives g and a
     rigid rotation 0.
     """
     vx = np.asarray(vx, dtype=float)
