@@ -13,9 +13,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from vibroflow.errors import InputError
 from vibroflow.io.atomic import write_text_atomic
 from vibroflow.io.folder_lock import folder_lock
+from vibroflow.study.folder import check_study_dir
 
 REPORT_NAME = "report.html"
 REPORT_DIR = "report"
@@ -29,9 +29,7 @@ def write_report(study_dir) -> Path:
     from vibroflow.report.data import StudyData
 
     out = Path(study_dir)
-    if not out.is_dir():
-        StudyData.read(out)  # the one-line error of a missing folder or a file
-        raise InputError(f"DIR = {str(out)!r}: not a folder")
+    check_study_dir(out, must_exist=True)  # before the lock, which would make the folder
     # held while the page is made: a study rerun writing the folder meanwhile would change
     # what the page shows under it
     with folder_lock(out, "vibroflow report", field="DIR"):

@@ -165,10 +165,8 @@ class StudyData:
         from vibroflow.study.results import load
 
         out = Path(out)
-        if out.is_dir() and not (out / "study.json").exists():
-            raise InputError(f"DIR = {str(out)!r}: not a vibroflow study folder (no study.json); "
-                             "give the --out folder of a finished `vibroflow run`")
-        loaded = load(out)  # validates DIR and every method's bulk velocity table
+        loaded = load(out)  # validates DIR (study.folder.check_study_dir) and every method's
+        # bulk velocity table
         fields = loaded.pop("fields")
         summary = loaded
         for name, entry in summary["methods"].items():
