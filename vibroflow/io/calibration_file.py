@@ -83,7 +83,7 @@ def _plain(obj):
 class Table(BaseModel):
     """One table of calibration.toml: declared keys typed, others kept, the key order kept."""
 
-    model_config = ConfigDict(frozen=True, extra="allow", arbitrary_types_allowed=True)
+    model_config = ConfigDict(frozen=True, extra="allow")
     _order: tuple = PrivateAttr(default=())
 
     @model_validator(mode="wrap")
@@ -290,24 +290,20 @@ class Calibration(Table):
 
 
 def _first_error(e: ValidationError, tables: dict) -> str:
+    """The first error as "table.key = value: what is allowed", with the table's status (why a
+    fit left a value out) when it has one other than "measured"."""
     err = e.errors(include_url=False)[0]
     loc = [str(p) for p in err["loc"]]
     field = ".".join(loc)
+    table = tables.get(loc[0]) if len(loc) == 2 else None
+    status = table.get("status", "") if isinstance(table, dict) else ""
+    why = f" ({status})" if status and status != "measured" else ""
     if err["type"] == "missing":
-        # the table's status says why a fit left a parameter out
-        table = tables.get(loc[0]) if loc else None
-        why = table.get("status", "") if isinstance(table, dict) and len(loc) == 2 else ""
         what = "a table" if len(loc) == 1 else "a finite number"
-        return (f"{field} is missing: must be {what}"
-                + (f" ({why})" if why and why != "measured" else ""))
-    msg = err["msg"].removeprefix("Value error, ")
-    if err["type"] == "model_type":
-        msg = "must be a table"
-    value = err.get("input")
-    why = ""
-    if len(loc) == 2 and isinstance(tables.get(loc[0]), dict):
-        why = tables[loc[0]].get("status", "")
-    return f"{field} = {value!r}: {msg}" + (f" ({why})" if why and why != "measured" else "")
+        return f"{field} is missing: must be {what}{why}"
+    msg = "must be a table" if err["type"] == "model_type" else \
+        err["msg"].removeprefix("Value error, ")
+    return f"{field} = {err.get('input')!r}: {msg}{why}"
 
 
 def write_calibration(path, cal: Calibration) -> Path:
