@@ -4,7 +4,7 @@
         [--grids 10,20,40,80] [--friction-deg 29.5] [--transfers 1 [--hold-damping]]
         [--jobs 2] [--out DIR]
 
-The check of issues 4 and 6 (tests/test_axisymmetric.py): a cylinder of radius R0 = 1 m and
+The grid convergence of the checks of tests/test_axisymmetric.py: a cylinder of radius R0 = 1 m and
 height a R0 of the experiments' sand (vibroflow.continuum.column.sand_material) collapses on the
 rough (no-slip grid) floor, and its deposit is compared with Lube et al. 2004's run-out
 (r_inf - R0)/R0 = 1.6 a^(1/2) and Lajeunesse et al. 2004's height H_inf/R0 = 0.74 (a > 1.7;

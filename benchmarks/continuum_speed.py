@@ -1,4 +1,4 @@
-"""Wall time of the continuum formulations on a tub case, against the DEM's (issues 4 and 6).
+"""Wall time of the continuum formulations on a tub case, against the DEM's.
 
     python benchmarks/continuum_speed.py [--case tub47-quick] [--calibration FILE]
         [--dem-dir DIR] [--methods lagrangian,eulerian] [--threads 1,2] [--cfl C]
@@ -11,7 +11,7 @@ compilation when the cache is cold) on a few steps of the settled bed, then the 
 sampling, the analysis) into a temporary folder.  Printed per case: points (material points, or
 the Eulerian mesh's cells), steps (settling + vibration), the run's wall time (its summary's
 wall_time_s, as the DEM's), steps/s and point-steps/s, the DEM's wall time and the ratio (the
-issue's target: >= 100 at equal accuracy), and, with a DEM folder, the field difference E of
+mission's target: >= 100 at equal accuracy), and, with a DEM folder, the field difference E of
 tub47.md against the DEM and the circulation (equal accuracy is judged on these).  The 1-minute
 load average before and after each case is printed: on a shared machine the ratio is only
 indicative.

@@ -34,7 +34,7 @@ seeds' mean field (compare.ensemble_mean: their noise averaged down, so nearer t
 part of the difference) beside each seed's E against the mean of the others; where E comes
 from (each continuum's share of E^2 in the tub's width and the
 DEM bed's depth in thirds, vibroflow.analysis.compare.difference_by_region); and the wall times
-of both and their ratio (the issue's target: the continuum at
+of both and their ratio (the mission's target: the continuum at
 least 100 times cheaper at equal accuracy).  Wall times are those the runs recorded in their
 summary.json ("wall_time_s": the DEM's from its start, fill from the cache or not, the
 continuum's with its settling); the DEM's were taken whenever and with whatever load its run

@@ -1,4 +1,4 @@
-"""vibroflow's DEM against LIGGGHTS 3.8 on the same tub scenario (first version).
+"""vibroflow's DEM against LIGGGHTS 3.8 on the same tub scenario.
 
 Speed (default):
     python benchmarks/dem_vs_liggghts.py [--case tub47-quick] [--steps 2000] [--nprocs 2]

@@ -8,6 +8,8 @@ hoop rate v_r / r and the internal force the term -V sigma_theta w / r (Nairn & 
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -113,7 +115,7 @@ def test_hoop_rate_volume_and_stress_of_a_radial_compression():
 def test_axisymmetric_low_column_keeps_its_top():
     """a = 0.5 < 0.74, R0 = 1 m, dx = R0/20, rough floor: the top of a low cylinder never
     moves, so H_inf = H0 (Lajeunesse et al. 2004's small-a branch, H_inf / R0 = a), within the
-    issue's 10 %.  Measured 0.466 (-7 %; 0.488 with flip = 0.99, 0.474 on R0/40): the
+    mission's 10 %.  Measured 0.466 (-7 %; 0.488 with flip = 0.99, 0.474 on R0/40): the
     continuum's centre subsides, its top 0.453 at the axis and 0.41 at r = 0.3 R0, where the
     plane-strain column's sinks by 2.6 % only (0.487 at the symmetry plane, same grid and floor);
     a 15-degree cone stands (largest displacement 3 mm over 6 sqrt(H/g)), so this is the
@@ -166,6 +168,7 @@ def test_axisymmetric_column_spreads_less_than_the_planar_one():
 CENTRE = 0.1
 
 
+@functools.cache
 def sand_column(a, n):
     """The deposit ((r_inf - R0)/R0, H_inf/R0) of a sand cylinder of R0 = 1 m (157 of tub47's
     grains across), aspect ratio a, on dx = R0/n, rough floor, APIC; the height within CENTRE
@@ -183,7 +186,7 @@ def sand_column(a, n):
 
 @pytest.mark.parametrize("a", [3.0, 4.0])
 def test_tall_sand_cylinder_meets_lube_and_lajeunesse_2004(a):
-    """The issue's check, on the power-law branch (the linear one needs finer grids:
+    """The check on the power-law branch (the linear one needs finer grids:
     test_low_sand_cylinders_reach_the_law_on_fine_grids): a cylinder of the experiments' sand
     (SAND_FRICTION_DEG), a > 1.7, R0 = 1 m, dx = R0/20 (about 25 s for both): the run-out
     within 10 % of Lube et al. 2004's 1.6 a^(1/2) and the height within 10 % of Lajeunesse et
@@ -206,25 +209,48 @@ def test_tall_sand_cylinder_meets_lube_and_lajeunesse_2004(a):
     assert height == pytest.approx(LAJEUNESSE_2004.height(a), rel=0.10)
 
 
+#: the tall cylinders of the finer grid, R0/40 (about 2 minutes together)
+FINE_ASPECTS = (2.0, 3.0, 4.0, 5.0)
+
+
 @pytest.mark.slow
-def test_sand_cylinders_on_the_finer_grid():
-    """R0/40 (about 2 minutes), a = 2 to 5: every run-out within 10 % of Lube et al. 2004
-    (measured -7.3, -2.3, +2.7, +4.1 %); the heights miss the issue's 10 % from a = 3 on:
-    0.807, 0.847, 0.842, 0.864 (+9.1, +14.5, +13.8, +16.8 % of Lajeunesse et al. 2004's
-    0.74; asserted within 20 %).  The height is the deposit's least converged figure (a = 3:
-    0.77, 0.78, 0.85, 0.89 on R0/10 to /80), and much of its rise is the transfers' damping,
-    which one transfer a step divides by eight on each halved grid: held fixed, R0/40 to R0/80
-    moves the height by 2 % where one transfer a step moves it by 5 % (a = 3; a = 4 still by
-    7 %).  The continuum's tall cylinders (a = 3 to 5) stand 9.6 - 12.9 % above the
-    experiments' at the damping of R0/20's one transfer a step and about 20 % with next to
-    none (docs/validation.md).
-    Its run-out grows faster with a than a^(1/2): from a = 2 to 5 by 1.77 against 1.58.  A
-    friction angle of 27.5 deg puts a = 1 to 3 within 10 % on both (run-outs -5.8, -1.0,
-    +3.1 %; heights -8.8, +1.5, +6.7 %) and a = 4, 5 just outside (+10.1, +10.2 %); it is not
-    the default of this test because it was chosen to fit."""
-    for a in (2.0, 3.0, 4.0, 5.0):
-        runout, height = sand_column(a, 40)
+def test_sand_cylinder_runouts_on_the_finer_grid_meet_lube_2004():
+    """R0/40, a = 2 to 5: every run-out within 10 % of Lube et al. 2004 (measured -7.3, -2.3,
+    +2.7, +4.1 %).  Its run-out grows faster with a than a^(1/2): from a = 2 to 5 by 1.77
+    against 1.58.  A friction angle of 27.5 deg puts a = 1 to 3 within 10 % on both run-out and
+    height (run-outs -5.8, -1.0, +3.1 %; heights -8.8, +1.5, +6.7 %) and a = 4, 5 just outside
+    (+10.1, +10.2 %); it is not the default of this test because it was chosen to fit."""
+    for a in FINE_ASPECTS:
+        runout, _ = sand_column(a, 40)
         assert runout == pytest.approx(LUBE_2004.runout(a), rel=0.10)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "the continuum's tall cylinders stand too high on R0/40: 0.807, 0.847, 0.842, 0.864 for "
+    "a = 2 to 5 (+9.1, +14.5, +13.8, +16.8 % of Lajeunesse et al. 2004's 0.74; "
+    "docs/validation.md)"))
+def test_sand_cylinder_heights_on_the_finer_grid_meet_lajeunesse_2004():
+    """The target: R0/40, a = 2 to 5, the central height within 10 % of Lajeunesse et al.
+    2004's 0.74 R0.  The height is the deposit's least converged figure (a = 3: 0.77, 0.78,
+    0.85, 0.89 on R0/10 to /80), and much of its rise is the transfers' damping, which one
+    transfer a step divides by eight on each halved grid: held fixed, R0/40 to R0/80 moves the
+    height by 2 % where one transfer a step moves it by 5 % (a = 3; a = 4 still by 7 %).  The
+    continuum's tall cylinders (a = 3 to 5) stand 9.6 - 12.9 % above the experiments' at the
+    damping of R0/20's one transfer a step and about 20 % with next to none
+    (docs/validation.md)."""
+    for a in FINE_ASPECTS:
+        _, height = sand_column(a, 40)
+        assert height == pytest.approx(LAJEUNESSE_2004.height(a), rel=0.10)
+
+
+@pytest.mark.slow
+def test_sand_cylinder_heights_on_the_finer_grid_regression_guard():
+    """Regression guard of the state reached (not a physics target: that is the strict xfail
+    above): R0/40's central heights, a = 2 to 5, stay within 20 % of Lajeunesse et al. 2004
+    (measured +9.1 to +16.8 %)."""
+    for a in FINE_ASPECTS:
+        _, height = sand_column(a, 40)
         assert height == pytest.approx(LAJEUNESSE_2004.height(a), rel=0.20)
 
 
@@ -246,7 +272,16 @@ def test_low_sand_cylinder_stops_between_the_static_cone_and_the_experiments():
     runout, height = sand_column(a, 20)
     assert height == pytest.approx(a, rel=0.02)
     assert static * 0.97 < runout < LUBE_2004.runout(a)
-    assert runout < 0.9 * LUBE_2004.runout(a)    # the miss, stated
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "on R0/20 the low cylinder stops at its static cone: run-out 0.405 against Lube et al. "
+    "2004's 0.62 (-35 %); the law is reached on R0/160 "
+    "(test_low_sand_cylinders_reach_the_law_on_fine_grids)"))
+def test_low_sand_cylinder_on_the_coarse_grid_meets_lube_2004():
+    """The target on R0/20: a = 0.5, the run-out within 10 % of Lube et al. 2004's 1.24 a."""
+    runout, _ = sand_column(0.5, 20)
+    assert runout == pytest.approx(LUBE_2004.runout(0.5), rel=0.10)
 
 
 @pytest.mark.slow
@@ -412,6 +447,7 @@ def test_eulerian_radial_expansion_hoop_rate_and_mass_per_radian():
     assert new.sum() == pytest.approx(mass.sum(), rel=1e-14)
 
 
+@functools.cache
 def _eulerian_sand_column(a, n, reach=None):
     from vibroflow.continuum.eulerian.column import run_column as run_eulerian
 
@@ -440,7 +476,7 @@ def test_eulerian_sand_cylinder_agrees_with_the_lagrangian():
 
 
 @pytest.mark.slow
-def test_eulerian_sand_cylinder_against_lube_and_lajeunesse_2004():
+def test_eulerian_sand_cylinder_runout_meets_lube_2004():
     """a = 3, R0/20 (about 80 s): the Eulerian run-out within 10 % of Lube et al. 2004
     (measured 2.88, +4.0 %); its height is not within 10 % of Lajeunesse et al. 2004 (0.84,
     +13.7 %; the Lagrangian's 0.78, +5.8 %, on this grid, 0.85 on R0/40): it stands as the
@@ -453,8 +489,25 @@ def test_eulerian_sand_cylinder_against_lube_and_lajeunesse_2004():
     the transfers' damping, which one transfer a step divides by eight on each halved grid:
     with R0/20's damping held (8 transfers a step on R0/40, 23 minutes) this formulation's
     R0/40 reads 2.684 (-3.1 %) and 0.831, the Lagrangian's 2.619 and 0.811."""
-    runout, height = _eulerian_sand_column(3.0, 20)
+    runout, _ = _eulerian_sand_column(3.0, 20)
     assert runout == pytest.approx(LUBE_2004.runout(3.0), rel=0.10)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "the Eulerian tall cylinder stands too high on R0/20: 0.84 against Lajeunesse et al. "
+    "2004's 0.74 (+13.7 %); docs/validation.md"))
+def test_eulerian_sand_cylinder_height_meets_lajeunesse_2004():
+    """The target: a = 3, R0/20, the central height within 10 % of Lajeunesse et al. 2004."""
+    _, height = _eulerian_sand_column(3.0, 20)
+    assert height == pytest.approx(LAJEUNESSE_2004.height(3.0), rel=0.10)
+
+
+@pytest.mark.slow
+def test_eulerian_sand_cylinder_height_regression_guard():
+    """Regression guard of the state reached (the target is the strict xfail above): a = 3 on
+    R0/20 stands within 20 % of Lajeunesse et al. 2004 (measured +13.7 %)."""
+    _, height = _eulerian_sand_column(3.0, 20)
     assert height == pytest.approx(LAJEUNESSE_2004.height(3.0), rel=0.20)
 
 

@@ -29,6 +29,7 @@ What is checked, and against what:
 """
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -40,6 +41,7 @@ from vibroflow.measure.column import (LAJEUNESSE_2004, LAJEUNESSE_2005, LUBE_200
                                        quasistatic_runout, quasistatic_runout_axisymmetric,
                                        slab_areas)
 from vibroflow.continuum.column import run_column
+from vibroflow.continuum.constitutive import ContinuumMaterial
 from vibroflow.dem import simulate as S
 from vibroflow.dem.neighbours import transfer_history
 from vibroflow.errors import InputError
@@ -351,6 +353,21 @@ def test_mpm_low_column_keeps_its_top_and_runs_past_the_experiments():
     assert runout > LUBE_2005.runout(a)
 
 
+@functools.cache
+def friction_runouts() -> dict[str, float]:
+    """The run-outs (r_inf - L0)/L0 of a = 3 on L0/10 for the three materials of the test
+    below: tub47's glass beads, Lube's sand, the glass beads on a floor that never slides."""
+    from vibroflow.continuum.constitutive import ContinuumMaterial
+
+    a = 3.0
+    mu_s = math.tan(math.radians(29.5))
+    base = ContinuumMaterial()
+    sand = ContinuumMaterial(mu_s=mu_s, mu_2=mu_s + base.mu_2 - base.mu_s)
+    runs = {"glass": {}, "sand": {"material": sand}, "rough": {"floor_friction": 1.0}}
+    return {k: mpm_deposit(run_column(L_BIG, a * L_BIG, L_BIG / 10, **kw)).normalised(L_BIG)[0]
+            for k, kw in runs.items()}
+
+
 def test_mpm_runout_prefactor_falls_with_the_grain_friction():
     """a = 3 (the power-law branch, a > 2.8), L0 = 1 m, dx = L0/10.  The run-out's prefactor
     depends on the grains' friction: the tub47 material (glass-bead mu(I), mu_s = tan 20.9 deg)
@@ -362,22 +379,28 @@ def test_mpm_runout_prefactor_falls_with_the_grain_friction():
     ball-lining friction, as the brief asks) is below the flowing material's mu(I), so the base
     slides; a floor that never slides (mu_w = 1) shortens the run-out to 4.52 (but 5.78 on
     L0/20: not converged)."""
-    from vibroflow.continuum.constitutive import ContinuumMaterial
+    r = friction_runouts()
+    assert r["sand"] < r["glass"]
+    assert r["rough"] < r["glass"]
 
-    a = 3.0
-    law = LUBE_2005.runout(a)
-    glass = mpm_deposit(run_column(L_BIG, a * L_BIG, L_BIG / 10)).normalised(L_BIG)[0]
-    mu_s = math.tan(math.radians(29.5))
-    base = ContinuumMaterial()
-    sand = ContinuumMaterial(mu_s=mu_s, mu_2=mu_s + base.mu_2 - base.mu_s)
-    sandy = mpm_deposit(run_column(L_BIG, a * L_BIG, L_BIG / 10, material=sand))
-    sandy = sandy.normalised(L_BIG)[0]
-    rough = mpm_deposit(run_column(L_BIG, a * L_BIG, L_BIG / 10, floor_friction=1.0))
-    rough = rough.normalised(L_BIG)[0]
-    assert glass > 1.5 * law
-    assert sandy < glass
-    assert sandy == pytest.approx(law, rel=0.25)
-    assert rough < glass
+
+@pytest.mark.xfail(strict=True, reason=(
+    "the plane-strain continuum of Lube's sand runs out 4.65 on L0/10 against Lube et al. "
+    "2005's 3.95 at a = 3 (+18 %; 5.01 on L0/20); their channel's side walls, which it lacks, "
+    "may brake the rest"))
+def test_mpm_sand_column_runout_meets_lube_2005():
+    """The target: a = 3, the sand's run-out within 10 % of Lube et al. 2005's 1.9 a^(2/3)."""
+    assert friction_runouts()["sand"] == pytest.approx(LUBE_2005.runout(3.0), rel=0.10)
+
+
+def test_mpm_column_runouts_regression_guard():
+    """Regression guard of the state reached (the target is the strict xfail above): a = 3 on
+    L0/10, the sand within 25 % of Lube et al. 2005 (measured +18 %) and tub47's glass beads
+    beyond 1.5 times it (measured 1.8 times)."""
+    r = friction_runouts()
+    law = LUBE_2005.runout(3.0)
+    assert r["sand"] == pytest.approx(law, rel=0.25)
+    assert r["glass"] > 1.5 * law
 
 
 @pytest.mark.slow

@@ -226,7 +226,7 @@ def test_tub47_quick_agrees_with_the_stored_dem_table(tub47_quick_run, tub47_qui
 
 @pytest.mark.slow
 def test_tub47_quick_full(tub47_quick_summary):
-    """tub47-quick as specified: no ball lost, the ball-wall overlap within the issue's 5 % of
+    """tub47-quick as specified: no ball lost, the ball-wall overlap within tub47.md's 5 % of
     d, one coherent roll."""
     s = tub47_quick_summary
     assert s["balls_lost"] == 0

@@ -1,7 +1,7 @@
 """Continuum fields on the background grid, and their ParaView files.
 
 At an instant the points are scattered to the grid nodes with the solver's quadratic B-spline
-weights w_ip (grid.py):
+weights w_ip (stencil.py):
 
 * node mass per area rho_i = sum_p w_ip m_p / dx^2 (kg/m^3, per metre of thickness, so a bulk
   density), and the solid fraction phi_i = rho_i / rho_s;
@@ -19,7 +19,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .grid import Grid, bspline_weights
+from .grid import Grid
+from .stencil import bspline_weights
 
 
 @nb.njit(cache=True)

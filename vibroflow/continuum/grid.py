@@ -2,9 +2,9 @@
 
 A uniform Cartesian grid of nodes x_i = x0 + i dx, z_k = z0 + k dx (m), i < nx, k < nz, in the
 frame the solver works in (the tub frame for tub runs).  Shape functions are quadratic B-splines
-(Steffen, Kirby & Berzins 2008), C1 and positive, so a point's 3 x 3 nodes carry its mass and the
-grid velocity gradient is continuous; for them the APIC inertia tensor is D = dx^2/4 I (Jiang et
-al. 2015, section 5.1).
+(Steffen, Kirby & Berzins 2008; stencil.py), C1 and positive, so a point's 3 x 3 nodes carry its
+mass and the grid velocity gradient is continuous; for them the APIC inertia tensor is
+D = dx^2/4 I (Jiang et al. 2015, section 5.1).
 
 Grid arrays are (nx, nz) node masses (kg per metre of thickness), (nx, nz, 2) momenta and forces;
 the solver reuses them every step.
@@ -14,7 +14,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numba as nb
 import numpy as np
 
 from vibroflow.errors import InputError
@@ -95,22 +94,3 @@ class Grid:
                     self.z0 + (self.nz - 1 - GUARD) * self.dx)
         return (self.x0 + GUARD * self.dx, self.x0 + (self.nx - 1 - GUARD) * self.dx,
                 self.z0 + GUARD * self.dx, self.z0 + (self.nz - 1 - GUARD) * self.dx)
-
-
-@nb.njit(cache=True, inline="always")
-def bspline_weights(xp, x0, dx):
-    """Base node index and the 3 quadratic B-spline weights and derivatives (1/m) of a point at
-    coordinate xp (m) along one axis of a grid with origin x0 (m) and spacing dx (m).
-
-    Returns (base, fx, w0, w1, w2, g0, g1, g2): nodes base, base+1, base+2; fx = xp/dx - base
-    in [0.5, 1.5), so node base + a lies at (a - fx) dx from the point."""
-    X = (xp - x0) / dx
-    base = int(np.floor(X - 0.5))
-    fx = X - base
-    w0 = 0.5 * (1.5 - fx) ** 2
-    w1 = 0.75 - (fx - 1.0) ** 2
-    w2 = 0.5 * (fx - 0.5) ** 2
-    g0 = (fx - 1.5) / dx
-    g1 = -2.0 * (fx - 1.0) / dx
-    g2 = (fx - 0.5) / dx
-    return base, fx, w0, w1, w2, g0, g1, g2

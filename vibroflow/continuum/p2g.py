@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numba as nb
 
-from .grid import bspline_weights
+from .stencil import bspline_weights, scatter_point
 
 
 @nb.njit(cache=True)
@@ -33,44 +33,9 @@ def p2g(x, v, C, mass, volume, stress, fext, x0, z0, dx, periodic, gm, gmv, gf,
     sigma_theta adds the radial force -V_p sigma_theta w_ip / r_p (the 1/r term of the
     divergence in cylindrical coordinates; Nairn & Guilkey 2015, eq. 16).
     """
-    nxg = gm.shape[0]
     for p in range(x.shape[0]):
-        bx, fx, wx0, wx1, wx2, gx0, gx1, gx2 = bspline_weights(x[p, 0], x0, dx)
-        bz, fz, wz0, wz1, wz2, gz0, gz1, gz2 = bspline_weights(x[p, 1], z0, dx)
-        # the point's values in locals: the compiler cannot tell that the grid arrays written
-        # below do not alias them, and would load them again for every node (~25 % of the
-        # scatter's time)
-        m = mass[p]
-        vol = volume[p]
-        sxx = stress[p, 0]
-        szz = stress[p, 1]
-        sxz = stress[p, 2]
-        vx = v[p, 0]
-        vz = v[p, 1]
-        cxx = C[p, 0]
-        cxz = C[p, 1]
-        czx = C[p, 2]
-        czz = C[p, 3]
-        fex = fext[p, 0]
-        fez = fext[p, 1]
-        hoop = -vol * stress[p, 3] / x[p, 0] if axisymmetric else 0.0
-        for a in range(3):
-            rx = (a - fx) * dx
-            wa = wx0 if a == 0 else (wx1 if a == 1 else wx2)
-            ga = gx0 if a == 0 else (gx1 if a == 1 else gx2)
-            i = bx + a
-            if periodic:
-                i = i % nxg
-            for b in range(3):
-                rz = (b - fz) * dx
-                wb = wz0 if b == 0 else (wz1 if b == 1 else wz2)
-                gb = gz0 if b == 0 else (gz1 if b == 1 else gz2)
-                w = wa * wb
-                gwx = ga * wb
-                gwz = wa * gb
-                k = bz + b
-                gm[i, k] += w * m
-                gmv[i, k, 0] += w * m * (vx + cxx * rx + cxz * rz)
-                gmv[i, k, 1] += w * m * (vz + czx * rx + czz * rz)
-                gf[i, k, 0] += -vol * (sxx * gwx + sxz * gwz) + w * (fex + hoop)
-                gf[i, k, 1] += -vol * (sxz * gwx + szz * gwz) + w * fez
+        hoop = -volume[p] * stress[p, 3] / x[p, 0] if axisymmetric else 0.0
+        scatter_point(bspline_weights(x[p, 0], x0, dx), bspline_weights(x[p, 1], z0, dx), dx,
+                      periodic, mass[p], volume[p], stress[p, 0], stress[p, 1], stress[p, 2],
+                      v[p, 0], v[p, 1], C[p, 0], C[p, 1], C[p, 2], C[p, 3], fext[p, 0] + hoop,
+                      fext[p, 1], gm, gmv, gf)

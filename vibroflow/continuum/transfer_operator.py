@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import numba as nb
 
-from .grid import bspline_weights
+from .stencil import bspline_weights
 from .grid_update import MASS_EPS
 
 
@@ -46,7 +46,7 @@ from .grid_update import MASS_EPS
 def add_point(B, m, bx, fx, wx0, wx1, wx2, bz, fz, wz0, wz1, wz2, dx, periodic):
     """Add one point's part m w_ip w_jp (1 + 4/dx^2 r_ip . r_jp) to the operator B
     (nx, nz, 5, 5) (module docstring): mass m (kg/m), its base nodes bx, bz, offsets fx, fz and
-    three weights per axis as grid.bspline_weights returns them, spacing dx (m)."""
+    three weights per axis as stencil.bspline_weights returns them, spacing dx (m)."""
     nxg = B.shape[0]
     inv = 4.0 / (dx * dx)
     for a in range(3):

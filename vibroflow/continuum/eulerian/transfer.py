@@ -8,7 +8,7 @@ of a weight of row i and one of column k: four one-dimensional tables (`WeightTa
 centres and face midpoints along x and along z, a few hundred numbers) hold them all.
 
 The kernels here are p2g.p2g and g2p.g2p on the cells holding material, the weights read from
-the tables instead of computed, every other operation written as there and in the same order,
+the tables instead of computed and the stencil the same (stencil.scatter_point, gather_point),
 so they give the generic kernels' numbers bit for bit (tests/test_eulerian_kernels.py); they
 read and write the per-cell arrays through the cells' indices, so the cells' fields need not be
 copied into compact arrays first.  The cells stay put: no point advection, no FLIP blend (the
@@ -21,18 +21,18 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from ..grid import bspline_weights
+from ..stencil import bspline_weights, gather_point, scatter_point
 from ..transfer_operator import add_point
 
 #: columns of a weight table's row: the base node (an integer stored as a float), fx, the
-#: three weights and their three derivatives (1/m), as grid.bspline_weights returns them
+#: three weights and their three derivatives (1/m), as stencil.bspline_weights returns them
 T_BASE, T_FX, T_W0, T_W1, T_W2, T_G0, T_G1, T_G2 = range(8)
 
 
 @nb.njit(cache=True)
 def weight_table(coords, x0, dx):
-    """(n, 8) rows of grid.bspline_weights (T_* columns) of the coordinates (n,) (m) on a grid
-    axis of origin x0 and spacing dx (m)."""
+    """(n, 8) rows of stencil.bspline_weights (T_* columns) of the coordinates (n,) (m) on a
+    grid axis of origin x0 and spacing dx (m)."""
     out = np.empty((coords.shape[0], 8))
     for j in range(coords.shape[0]):
         b, f, w0, w1, w2, g0, g1, g2 = bspline_weights(coords[j], x0, dx)
@@ -82,7 +82,7 @@ class WeightTables:
 
 @nb.njit(cache=True, inline="always")
 def table_row(table, j):
-    """Row j of a weight_table as grid.bspline_weights returns it: (base node, fx, the three
+    """Row j of a weight_table as stencil.bspline_weights returns it: (base node, fx, the three
     weights, their three derivatives)."""
     return (int(table[j, T_BASE]), table[j, T_FX], table[j, T_W0], table[j, T_W1],
             table[j, T_W2], table[j, T_G0], table[j, T_G1], table[j, T_G2])
@@ -97,50 +97,15 @@ def p2g_cells(cells, ncz, tx, tz, v, C, mass, volume, stress, fext, dx, periodic
     per-cell arrays (units as p2g.p2g); inv_r (N,): 0 in plane strain, 1 / r of the cells'
     centres in an axisymmetric section (masses and volumes per radian), whose radial force
     gains p2g.p2g's hoop term -V sigma_theta w / r (sigma_theta the stress's yy slot)."""
-    nxg = gm.shape[0]
     for j in range(cells.shape[0]):
         p = cells[j]
         ic = p // ncz
         kc = p - ic * ncz
-        bx, fx, wx0, wx1, wx2, gx0, gx1, gx2 = table_row(tx, ic)
-        bz, fz, wz0, wz1, wz2, gz0, gz1, gz2 = table_row(tz, kc)
-        # the cell's values in locals (p2g.p2g: the grid arrays written below might alias them)
-        m = mass[p]
-        vol = volume[p]
-        sxx = stress[p, 0]
-        szz = stress[p, 1]
-        sxz = stress[p, 2]
-        vx = v[p, 0]
-        vz = v[p, 1]
-        cxx = C[p, 0]
-        cxz = C[p, 1]
-        czx = C[p, 2]
-        czz = C[p, 3]
-        fex = fext[p, 0]
-        fez = fext[p, 1]
         # (+ 0.0: a plane section's -0.0 made +0.0, so that fex + hoop is fex bit for bit)
-        hoop = -vol * stress[p, 3] * inv_r[p] + 0.0
-        for a in range(3):
-            rx = (a - fx) * dx
-            wa = wx0 if a == 0 else (wx1 if a == 1 else wx2)
-            ga = gx0 if a == 0 else (gx1 if a == 1 else gx2)
-            i = bx + a
-            if periodic:
-                i = i % nxg
-            for b in range(3):
-                rz = (b - fz) * dx
-                wb = wz0 if b == 0 else (wz1 if b == 1 else wz2)
-                gb = gz0 if b == 0 else (gz1 if b == 1 else gz2)
-                w = wa * wb
-                gwx = ga * wb
-                gwz = wa * gb
-                k = bz + b
-                gm[i, k] += w * m
-                gmv[i, k, 0] += w * m * (vx + cxx * rx + cxz * rz)
-                gmv[i, k, 1] += w * m * (vz + czx * rx + czz * rz)
-                # p2g.p2g's w * (fex + hoop)
-                gf[i, k, 0] += -vol * (sxx * gwx + sxz * gwz) + w * (fex + hoop)
-                gf[i, k, 1] += -vol * (sxz * gwx + szz * gwz) + w * fez
+        hoop = -volume[p] * stress[p, 3] * inv_r[p] + 0.0
+        scatter_point(table_row(tx, ic), table_row(tz, kc), dx, periodic, mass[p], volume[p],
+                      stress[p, 0], stress[p, 1], stress[p, 2], v[p, 0], v[p, 1], C[p, 0],
+                      C[p, 1], C[p, 2], C[p, 3], fext[p, 0] + hoop, fext[p, 1], gm, gmv, gf)
 
 
 @nb.njit(cache=True)
@@ -148,56 +113,18 @@ def g2p_cells(cells, ncz, tx, tz, v, C, L, gv, dx, periodic):
     """g2p.g2p (APIC, no FLIP blend, the points not moved) of the cells `cells` (indices) with
     the weights of rows tx[i] and tz[k]: their v (N, 2) m/s, C and L (N, 4) 1/s written in
     place from the grid velocity gv (nx, nz, 2) (m/s)."""
-    inv = 4.0 / (dx * dx)
-    nxg = gv.shape[0]
     for j in range(cells.shape[0]):
         p = cells[j]
         ic = p // ncz
         kc = p - ic * ncz
-        bx, fx, wx0, wx1, wx2, gx0, gx1, gx2 = table_row(tx, ic)
-        bz, fz, wz0, wz1, wz2, gz0, gz1, gz2 = table_row(tz, kc)
-        vx = 0.0
-        vz = 0.0
-        cxx = 0.0
-        cxz = 0.0
-        czx = 0.0
-        czz = 0.0
-        lxx = 0.0
-        lxz = 0.0
-        lzx = 0.0
-        lzz = 0.0
-        for a in range(3):
-            rx = (a - fx) * dx
-            wa = wx0 if a == 0 else (wx1 if a == 1 else wx2)
-            ga = gx0 if a == 0 else (gx1 if a == 1 else gx2)
-            i = bx + a
-            if periodic:
-                i = i % nxg
-            for b in range(3):
-                rz = (b - fz) * dx
-                wb = wz0 if b == 0 else (wz1 if b == 1 else wz2)
-                gb = gz0 if b == 0 else (gz1 if b == 1 else gz2)
-                w = wa * wb
-                gwx = ga * wb
-                gwz = wa * gb
-                ux = gv[i, bz + b, 0]
-                uz = gv[i, bz + b, 1]
-                vx += w * ux
-                vz += w * uz
-                cxx += w * ux * rx
-                cxz += w * ux * rz
-                czx += w * uz * rx
-                czz += w * uz * rz
-                lxx += ux * gwx
-                lxz += ux * gwz
-                lzx += uz * gwx
-                lzz += uz * gwz
+        vx, vz, cxx, cxz, czx, czz, lxx, lxz, lzx, lzz = gather_point(
+            table_row(tx, ic), table_row(tz, kc), dx, periodic, gv)
         v[p, 0] = vx
         v[p, 1] = vz
-        C[p, 0] = inv * cxx
-        C[p, 1] = inv * cxz
-        C[p, 2] = inv * czx
-        C[p, 3] = inv * czz
+        C[p, 0] = cxx
+        C[p, 1] = cxz
+        C[p, 2] = czx
+        C[p, 3] = czz
         L[p, 0] = lxx
         L[p, 1] = lxz
         L[p, 2] = lzx
