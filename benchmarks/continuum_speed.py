@@ -153,7 +153,7 @@ def kernels(a) -> dict:
         t = {}
         if method == "lagrangian":
             from vibroflow.continuum.boundary import partition_forces, u_wall_forces
-            from vibroflow.continuum.constitutive import update_stress_points
+            from vibroflow.continuum.stress_update import update_stress_points
             from vibroflow.continuum.g2p import g2p
             from vibroflow.continuum.grid_update import grid_update
             from vibroflow.continuum.p2g import p2g
@@ -196,8 +196,9 @@ def kernels(a) -> dict:
                 lambda: transfer_rows(0, g.nx, B, mass, gv, gtmp, g.periodic, 0, 0), 200)
         else:
             from vibroflow.continuum.boundary import partition_forces
-            from vibroflow.continuum.constitutive import update_stress_points
-            from vibroflow.continuum.eulerian.advection import face_velocities, remap
+            from vibroflow.continuum.stress_update import update_stress_points
+            from vibroflow.continuum.eulerian.advection import remap
+            from vibroflow.continuum.eulerian.face_velocity import face_velocities
             from vibroflow.continuum.eulerian.lagrangian_step import (end_density,
                                                                       material_fraction)
             from vibroflow.continuum.eulerian.solver import NQ

@@ -92,7 +92,7 @@ def main(argv=None) -> int:
     c, dc = s["circulation"], dem["circulation"]
     extra = {}
     if diag:
-        from vibroflow.continuum.constitutive import unloaded_packing
+        from vibroflow.continuum.stress_update import unloaded_packing
         from vibroflow.continuum.run import material_of
 
         mat = material_of(sc, cal, dilatancy=args.k_dil > 0, compaction=args.compaction)

@@ -15,7 +15,7 @@ phases a cycle.
 
 The continua: benchmarks/floor_deformation.py's periodic strip (the same bed, 0.2 m deep, four
 nodes wide, periodic along x, the calibration's material, each formulation's tub defaults),
-with the material's bed viscosity (constitutive.damped_stress) set to each value asked.
+with the material's bed viscosity (stress_update.damped_stress) set to each value asked.
 
 The measure, the same for all: at each phase, the bed's vertical velocity vz (mass-weighted)
 relative to the floor in 15 mm bands of height above it; its gradient between neighbouring

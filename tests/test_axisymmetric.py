@@ -17,7 +17,8 @@ from vibroflow.measure.column import (LAJEUNESSE_2004, LUBE_2004, LUBE_2005,
                                        quasistatic_runout_axisymmetric)
 from vibroflow.continuum.boundary import Plane
 from vibroflow.continuum.column import SAND_FRICTION_DEG, run_column, sand_material
-from vibroflow.continuum.constitutive import ContinuumMaterial, update_stress_points
+from vibroflow.continuum.constitutive import ContinuumMaterial
+from vibroflow.continuum.stress_update import update_stress_points
 from vibroflow.continuum.g2p import g2p
 from vibroflow.continuum.grid import Grid
 from vibroflow.continuum.mpm import MPMSystem, init_state
@@ -411,13 +412,14 @@ def test_eulerian_uniform_stress_is_in_equilibrium_in_cylindrical_coordinates():
 
 def test_eulerian_radial_expansion_hoop_rate_and_mass_per_radian():
     """A uniform radial expansion u = eps r (eps > 0) of a full annulus of uniform density:
-    advection.match_divergence gives every cell L_rr = eps (the finite-volume divergence of the
+    face_velocity.match_divergence gives every cell L_rr = eps (the finite-volume divergence of the
     section's own plane part) and the hoop rate (u_L + u_R) / (2 r) = eps exactly, and one
     remap with the section's face weights takes from every cell whose inner neighbour is full
     the mass 2 eps dt of its own, the volume change (1 + eps dt)^2 of the material to first
     order in dt, exactly (the fluxes are rho u dt h r at each face: (r_L^2 - r_R^2) = -2 r h);
     the total mass per radian is conserved to round-off once the flux reaches empty cells."""
-    from vibroflow.continuum.eulerian.advection import match_divergence, remap
+    from vibroflow.continuum.eulerian.advection import remap
+    from vibroflow.continuum.eulerian.face_velocity import match_divergence
 
     system = _axi_system()
     mesh = system.mesh

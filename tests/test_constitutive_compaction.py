@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from vibroflow.calibration.compaction import compaction_table, fit_compaction
-from vibroflow.continuum.constitutive import ContinuumMaterial, update_stress_points
+from vibroflow.continuum.constitutive import ContinuumMaterial
+from vibroflow.continuum.stress_update import update_stress_points
 from vibroflow.errors import InputError
 from tests.test_constitutive_dilatancy import barostat_point, barostat_step
 

@@ -15,7 +15,9 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from vibroflow.calibration.dilatancy import fit_dilatancy
-from vibroflow.continuum.constitutive import ContinuumMaterial, mu_of_I, update_stress_points
+from vibroflow.continuum.constitutive import ContinuumMaterial
+from vibroflow.continuum.rheology import mu_of_I
+from vibroflow.continuum.stress_update import update_stress_points
 from vibroflow.errors import InputError
 
 # a material whose steady phi_eq(I) stays connected (phi_eq > phi_c exp(-p/K)) at the test's I

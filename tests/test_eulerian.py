@@ -583,7 +583,7 @@ def test_vibrated_bed_comes_back_to_its_volume_at_rest():
     (past unloading to the critical density) into empty space and its shrinking closes that
     space first, both ways
     (lagrangian_step.void_first), and a wall cell's material leaves the wall as a body
-    (advection.match_divergence): this bed ends 0.05 % under its volume.  With the growth put
+    (face_velocity.match_divergence): this bed ends 0.05 % under its volume.  With the growth put
     into the material but the shrinking into the void, each cycle would ratchet the floor's and
     the surface's cells looser: this bed would end 2.2 % over its volume; with tub47's
     calibrated media, 7.9 % over, its floor cell at 0.46 of the critical density."""

@@ -21,7 +21,8 @@ import pytest
 from vibroflow.continuum import run as lag_run
 from vibroflow.continuum.eulerian import run as eul_run
 from vibroflow.continuum.eulerian import solver as eul
-from vibroflow.continuum.eulerian.advection import face_velocities, remap, remap_work
+from vibroflow.continuum.eulerian.advection import remap, remap_work
+from vibroflow.continuum.eulerian.face_velocity import face_velocities
 from vibroflow.continuum.eulerian.mesh import EulerianMesh
 from vibroflow.continuum.eulerian.transfer import WeightTables, g2p_cells, p2g_cells
 from vibroflow.continuum.g2p import g2p

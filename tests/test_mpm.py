@@ -13,7 +13,9 @@ import numpy as np
 import pytest
 
 from vibroflow.continuum.boundary import Plane
-from vibroflow.continuum.constitutive import ContinuumMaterial, mu_of_I, update_stress_points
+from vibroflow.continuum.constitutive import ContinuumMaterial
+from vibroflow.continuum.rheology import mu_of_I
+from vibroflow.continuum.stress_update import update_stress_points
 from vibroflow.continuum.grid import Grid
 from vibroflow.continuum.grid_update import LabFrame
 from vibroflow.continuum.mpm import MPMSystem, init_state, run_steps
@@ -792,7 +794,7 @@ def test_flip_blend_conserves_momentum_of_a_spinning_compressed_disc():
 
 
 # ----------------------------------------------------------------------------------------------
-# the bed viscosity (constitutive.damped_stress): a Kelvin-Voigt standing shear wave
+# the bed viscosity (stress_update.damped_stress): a Kelvin-Voigt standing shear wave
 
 def _standing_shear_wave(method: str, eta: float, H=0.1, dx=0.005, V=0.01, periods=10):
     """The first shear mode of a free layer of height H (m), periodic along x, no gravity:
@@ -860,7 +862,7 @@ def test_bed_viscosity_damps_a_shear_wave_as_kelvin_voigt(method):
     mode's amplitude, sampled every step over 10 periods, decays at that rate within 2 %
     once the formulation's own damping (the run without viscosity: the APIC transfers,
     0.19 1/s) is taken off (measured 0.994 of it in both formulations: the same kernel,
-    constitutive.damped_stress, scattered with the stress)."""
+    stress_update.damped_stress, scattered with the stress)."""
     base, _ = _standing_shear_wave(method, 0.0)
     rate, want = _standing_shear_wave(method, 100.0)
     print(f"\n{method}: decay {rate:.3f} 1/s, without viscosity {base:.3f}, Kelvin-Voigt "
@@ -873,7 +875,7 @@ def test_bed_viscosity_leaves_a_rigid_motion_alone_and_bad_values_are_errors():
     """The viscous stress is 2 eta D (plus eta tr D I - 2/3 eta tr D I): zero for a rigid
     rotation, none on disconnected material; a negative or non-finite viscosity is a one-line
     error naming the field."""
-    from vibroflow.continuum.constitutive import damped_stress
+    from vibroflow.continuum.stress_update import damped_stress
     from vibroflow.continuum.run import LagrangianOptions
 
     mat = ContinuumMaterial(bed_viscosity=1000.0)

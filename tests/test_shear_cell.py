@@ -53,7 +53,7 @@ def ball_row(sc):
 
 
 def make_box(pos, vel, lengths, sc=None, dt=1e-5):
-    from vibroflow.calibration.periodic import PeriodicBox
+    from vibroflow.dem.periodic_box import PeriodicBox
     sc = sc or scenario()
     n = len(pos)
     box = PeriodicBox(np.array(pos, float), np.full(n, R), np.full(n, M), ball_row(sc),
@@ -68,7 +68,7 @@ def make_box(pos, vel, lengths, sc=None, dt=1e-5):
 def test_free_ball_crossing_gets_the_exact_shift_and_velocity_jump():
     """Two balls far from anything cross the z boundary, up and down; after n steps each is
     where free flight plus the LE map puts it, to round-off."""
-    from vibroflow.calibration.periodic import MODE_FIXED
+    from vibroflow.dem.periodic_step import MODE_FIXED
     L = (0.05, 0.04, 0.05)
     gd = 20.0
     x0 = np.array([[0.010, 0.020, 0.049], [0.030, 0.010, 0.001], [0.025, 0.030, 0.025]])
@@ -99,7 +99,7 @@ def test_head_on_collision_across_the_boundary_has_the_laws_restitution():
     their values, the relative normal velocity is reversed with e (1%, the time step), and
     the unwrapped momentum is conserved.  A wrong image shift or velocity jump would make
     the contact oblique by gamma_dot L_z = 1 m/s beside w = 0.1 m/s."""
-    from vibroflow.calibration.periodic import MODE_FIXED
+    from vibroflow.dem.periodic_step import MODE_FIXED
     from vibroflow.scenario.laws import damping_ratio
     L = (0.05, 0.05, 0.05)
     gd = 20.0
@@ -129,7 +129,8 @@ def test_sheared_gas_conserves_unwrapped_momentum_and_is_reproducible():
     """A gas of 150 balls at phi = 0.3 sheared at a high rate, with many collisions across the
     LE boundary: the unwrapped momentum is conserved to round-off (pair forces are equal and
     opposite, every crossing accounted), and the same seed gives the same state bit for bit."""
-    from vibroflow.calibration.periodic import MODE_FIXED, Q_Z, random_fill
+    from vibroflow.dem.periodic_box import random_fill
+    from vibroflow.dem.periodic_step import MODE_FIXED, Q_Z
 
     def run():
         rng = np.random.default_rng(7)
@@ -258,14 +259,15 @@ def test_mu_i_fit_recovers_known_parameters_from_noisy_data():
     I_0 = 0.279, GDR MiDi / Jop et al. 2006) with Gaussian noise of known standard error: the
     fit must find each parameter within 3 of its own standard errors, in 20 noise draws at
     least 18 times, and chi2/dof near 1; phi(I) likewise."""
-    from vibroflow.calibration.rheology_fit import fit_mu_i, fit_phi_i, mu_of_i, phi_of_i
+    from vibroflow.calibration.rheology_fit import fit_mu_i, fit_phi_i
+    from vibroflow.continuum.rheology import mu_of_I, phi_of_I
     true = (math.tan(math.radians(20.9)), math.tan(math.radians(32.8)), 0.279)
     I = np.geomspace(0.003, 1.0, 9)
     se = np.full(I.size, 0.008)
     rng = np.random.default_rng(11)
     hits, chi = 0, []
     for _ in range(20):
-        mu = mu_of_i(I, *true) + rng.normal(0, se)
+        mu = mu_of_I(I, *true) + rng.normal(0, se)
         f = fit_mu_i(I, mu, se)
         ok = all(abs(f[k] - v) <= 3 * f[k + "_stderr"] for k, v in zip(("mu_s", "mu_2", "I_0"),
                                                                        true))
@@ -273,7 +275,7 @@ def test_mu_i_fit_recovers_known_parameters_from_noisy_data():
         chi.append(f["chi2_per_dof"])
     assert hits >= 18
     assert 0.6 < np.mean(chi) < 1.5
-    phi = phi_of_i(I, 0.60, 0.52) + rng.normal(0, 0.002, I.size)
+    phi = phi_of_I(I, 0.60, 0.52) + rng.normal(0, 0.002, I.size)
     p = fit_phi_i(I, phi, np.full(I.size, 0.002))
     assert abs(p["phi_max"] - 0.60) < 3 * p["phi_max_stderr"]
     assert abs(p["phi_min"] - 0.52) < 3 * p["phi_min_stderr"]
@@ -309,12 +311,13 @@ def test_plane_strain_drucker_prager_reproduces_mohr_coulomb(phi_deg):
 
 def test_equivalent_viscosity_gives_the_mu_i_stress():
     """mu_s p + eta gamma_dot must be the mu(I) shear stress at that shear rate."""
-    from vibroflow.calibration.rheology_fit import drucker_prager_equivalent, mu_of_i
+    from vibroflow.calibration.rheology_fit import drucker_prager_equivalent
+    from vibroflow.continuum.rheology import mu_of_I
     p, gd = 5000.0, 30.0
     dp = drucker_prager_equivalent(0.38, 0.64, 0.279, 0.6, 0.5, p, D, RHO, gd)
     I = gd * D / math.sqrt(p / RHO)
     assert dp["inertial_number"] == pytest.approx(I)
-    assert 0.38 * p + dp["viscosity_Pa_s"] * gd == pytest.approx(mu_of_i(I, 0.38, 0.64, 0.279)
+    assert 0.38 * p + dp["viscosity_Pa_s"] * gd == pytest.approx(mu_of_I(I, 0.38, 0.64, 0.279)
                                                                  * p)
     assert 0 < dp["dilation_angle_deg"] < 90
 

@@ -11,7 +11,8 @@
 * impacts       -- impact speeds against the local shear rate and temperature
 * tub_rheology  -- mu(I) read from the tub's own cells, and fitted to their dense points
 * bed_contacts  -- the bed's coordination number and contact stiffness at its pressure
-* periodic, shear_cell, elastic -- Lees-Edwards simple-shear cells and elastic tests of the media
+* shear_cell, elastic -- Lees-Edwards simple-shear cells (vibroflow.dem.lees_edwards) and elastic
+                   tests of the media
 * media_tests   -- those tests (and the cyclic shear and dilatancy cells) run at the bed's
                    pressure for the calibration
 * rheology_fit  -- mu(I), phi(I) fits and the equivalent Drucker-Prager model
@@ -25,13 +26,12 @@ from vibroflow.calibration.coarse_grain import CoarseGrainer, snapshot_from_stat
 from vibroflow.calibration.coarse_grain_fields import rheology, velocity_gradient_on_grid
 from vibroflow.calibration.coarse_grain_kernel import kernel_value
 from vibroflow.calibration.elastic import elastic_moduli
-from vibroflow.calibration.rheology_fit import (drucker_prager_equivalent, fit_mu_i, fit_phi_i,
-                                                mu_of_i, phi_of_i)
+from vibroflow.calibration.rheology_fit import drucker_prager_equivalent, fit_mu_i, fit_phi_i
 from vibroflow.calibration.run_fields import coarse_grain_run, read_fields, write_fields
 from vibroflow.calibration.shear_cell import run_shear_cell, tub_mid_depth_pressure
 
 __all__ = ["CoarseGrainer", "calibrate", "coarse_grain_run", "drucker_prager_equivalent",
-           "elastic_moduli", "fit_mu_i", "fit_phi_i", "kernel_value", "mu_of_i",
-           "phi_of_i", "read_calibration", "read_fields", "rheology", "run_shear_cell",
+           "elastic_moduli", "fit_mu_i", "fit_phi_i", "kernel_value", "read_calibration",
+           "read_fields", "rheology", "run_shear_cell",
            "snapshot_from_state", "tub_mid_depth_pressure", "velocity_gradient_on_grid",
            "write_fields"]

@@ -13,12 +13,13 @@ measured on the DEM (`tub_strain_amplitude`: from the bed's cycle-mean shear rat
 continuum gets G_sec at that amplitude (calibrate.py).  docs/decisions/cyclic-shear-modulus.md
 shows what this does to the continuum against the DEM.
 
-The test.  A Lees-Edwards periodic box of the scenario's balls (periodic.py; the same packing as
-the steady shear cell, shear_cell.packed_box) at the pressure p with sigma_zz held at p by the
-barostat, sheared with gamma(t) = gamma_0 sin(omega t), omega = 2 pi f: the shear rate
-gamma_0 omega cos(omega t) is imposed piecewise constant over `segments` parts of a cycle (the
-stress is the mean over each part, taken at its mid-strain).  The first `discard_cycles` cycles
-(the packing shakes down to its cyclic state) are dropped; over each later cycle:
+The test. A Lees-Edwards periodic box of the scenario's balls (vibroflow.dem.periodic_box; the
+same packing as the steady shear cell, shear_cell.packed_box) at the pressure p with sigma_zz
+held at p by the barostat, sheared with gamma(t) = gamma_0 sin(omega t), omega = 2 pi f: the
+shear rate gamma_0 omega cos(omega t) is imposed piecewise constant over `segments` parts of a
+cycle (the stress is the mean over each part, taken at its mid-strain). The first
+`discard_cycles` cycles (the packing shakes down to its cyclic state) are dropped; over each
+later cycle:
 
 * secant modulus G_sec = (tau_max - tau_min) / (gamma_max - gamma_min) (Pa), tau = shear stress
   -(sigma_xz + sigma_zx) / 2 with compression positive (as the steady shear cell);
@@ -36,9 +37,9 @@ import time
 
 import numpy as np
 
+from vibroflow.dem.periodic_step import MODE_Z, Q_SXZ, Q_SZX, Q_SZZ
 from vibroflow.errors import InputError
 
-from .periodic import MODE_Z, Q_SXZ, Q_SZX, Q_SZZ
 from .shear_cell import (DEFAULT_POLYDISPERSITY, _check, check_values, packed_box,
                          tub_mid_depth_pressure)
 

@@ -13,12 +13,12 @@ with psi the dilatancy angle.  K_dil is a property of the media; Pailha & Pouliq
 for glass beads in a viscous fluid.  Here it is measured on the scenario's own balls, never on
 the tub's flow.
 
-The test (Lees-Edwards box of periodic.py, the shear cell's polydisperse balls): a dense
-packing, made as dense random packings are made in simulation (compressed isotropically to the
-pressure p with the friction switched off, then switched on: Silbert, Ertas, Grest, Halsey &
-Levine 2002; frictional compression alone leaves a packing looser than its steady shear state,
-which then compacts instead of dilating), is sheared at constant inertial number I with sigma_zz
-held at p by the barostat, over `strain` units.
+The test (the Lees-Edwards box of vibroflow.dem.periodic_box, the shear cell's polydisperse
+balls): a dense packing, made as dense random packings are made in simulation (compressed
+isotropically to the pressure p with the friction switched off, then switched on: Silbert,
+Ertas, Grest, Halsey & Levine 2002; frictional compression alone leaves a packing looser than
+its steady shear state, which then compacts instead of dilating), is sheared at constant
+inertial number I with sigma_zz held at p by the barostat, over `strain` units.
 Every `segment_strain` the mean stress ratio mu = tau / sigma_zz and solid fraction phi are
 recorded.  The stress ratio climbs to a peak while the packing dilates, then softens to its
 steady value; the last `steady_fraction` of the strain gives the steady mu_ss = mu(I) and
@@ -36,11 +36,11 @@ import time
 
 import numpy as np
 
+from vibroflow.dem.laws import P_MU
+from vibroflow.dem.periodic_box import PeriodicBox, random_fill
+from vibroflow.dem.periodic_step import MODE_Z, Q_LX, Q_LY, Q_LZ, Q_SXZ, Q_SZX, Q_SZZ
 from vibroflow.errors import InputError
 
-from vibroflow.dem.laws import P_MU
-
-from .periodic import MODE_Z, PeriodicBox, Q_LX, Q_LY, Q_LZ, Q_SXZ, Q_SZX, Q_SZZ, random_fill
 from .shear_cell import (DEFAULT_POLYDISPERSITY, FILL_SOLID_FRACTION, _check, ball_setup,
                          compress, tub_mid_depth_pressure)
 

@@ -3,7 +3,7 @@ modulus K = dp / d eps_v and the shear modulus G = d tau / d gamma of a packing 
 the pressure p, for the elastic predictor of an elasto-viscoplastic continuum (Dunatunga &
 Kamrin 2015).
 
-Protocol (reusing the Lees-Edwards box of vibroflow.calibration.periodic):
+Protocol (reusing the Lees-Edwards box of vibroflow.dem.periodic_box):
 
 1. a random fill compressed isotropically to p (shear_cell.packed_box, no damping), brought to
    rest at p under the isotropic box control and a light background viscous damping, then
@@ -37,8 +37,9 @@ import time
 import numpy as np
 
 from vibroflow.dem.laws import P_KT, P_MODEL, MODEL_LINEAR
+from vibroflow.dem.periodic_box import PeriodicBox
+from vibroflow.dem.periodic_step import MODE_FIXED, Q_SXX, Q_SXZ, Q_SYY, Q_SZX, Q_SZZ, S_STRAIN
 
-from .periodic import MODE_FIXED, Q_SXX, Q_SXZ, Q_SYY, Q_SZX, Q_SZZ, S_STRAIN, PeriodicBox
 from .shear_cell import (BallSetup, _check, ball_setup, compress, packed_box,
                          tub_mid_depth_pressure)
 

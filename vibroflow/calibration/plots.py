@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from vibroflow.continuum.rheology import mu_of_I, phi_of_I
 from vibroflow.io.atomic import atomic_path
 
 
@@ -91,10 +92,6 @@ def field_maps(path, fields, geometry, min_solid_fraction: float = 0.05) -> Path
     return _save(fig, path)
 
 
-def _mu_curve(I, mu_s, mu_2, I_0):
-    return mu_s + (mu_2 - mu_s) / (1.0 + I_0 / I)
-
-
 def mu_i_plot(path, scatter: dict, shear_cell_points=None, fit=None, phi_fit=None) -> Path:
     """mu(I) and phi(I): the tub's phase-resolved cells (dense and dilute marked), the shear
     cell's steady points with error bars, and the fitted curves."""
@@ -123,11 +120,11 @@ def mu_i_plot(path, scatter: dict, shear_cell_points=None, fit=None, phi_fit=Non
                     color="tab:red", ms=6, capsize=3, label="shear cell")
     Ic = np.logspace(np.log10(Ilo), np.log10(Ihi), 200)
     if fit is not None and np.isfinite(fit.get("mu_s", np.nan)):
-        a1.plot(Ic, _mu_curve(Ic, fit["mu_s"], fit["mu_2"], fit["I_0"]), "k-",
+        a1.plot(Ic, mu_of_I(Ic, fit["mu_s"], fit["mu_2"], fit["I_0"]), "k-",
                 label=(f"fit: mu_s={fit['mu_s']:.3f}, mu_2={fit['mu_2']:.3f}, "
                        f"I_0={fit['I_0']:.3g} ({fit.get('source', '')})"))
     if phi_fit is not None and np.isfinite(phi_fit.get("phi_max", np.nan)):
-        a2.plot(Ic, phi_fit["phi_max"] - (phi_fit["phi_max"] - phi_fit["phi_min"]) * Ic, "k-",
+        a2.plot(Ic, phi_of_I(Ic, phi_fit["phi_max"], phi_fit["phi_min"]), "k-",
                 label=f"fit: phi_max={phi_fit['phi_max']:.3f}, phi_min={phi_fit['phi_min']:.3f}")
     for ax, lab in ((a1, "mu = tau_eq / p"), (a2, "solid fraction phi")):
         ax.set_xscale("log")

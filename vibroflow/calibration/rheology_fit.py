@@ -1,5 +1,6 @@
 """Fits of the mu(I) rheology to measured points, and the equivalent Drucker-Prager model with
-viscosity (models.md, "Rheology of the continuum").
+viscosity (models.md, "Rheology of the continuum"); the laws are the continuum's
+(vibroflow.continuum.rheology):
 
 * mu(I) = mu_s + (mu_2 - mu_s) / (1 + I_0 / I)        (GDR MiDi 2004; Jop, Forterre &
   Pouliquen 2006, Nature 441:727)
@@ -19,22 +20,12 @@ import warnings
 import numpy as np
 from scipy.optimize import OptimizeWarning, curve_fit
 
+from vibroflow.continuum.rheology import mu_of_I, phi_of_I
 from vibroflow.errors import InputError
 
 # Pailha & Pouliquen 2009 (JFM 633:115), the dilatancy law tan psi = K_1 (phi - phi_eq(I)) of an
 # immersed granular layer of glass beads starting to flow
 DILATANCY_K1 = 4.09
-
-
-def mu_of_i(I, mu_s, mu_2, I_0):
-    """mu(I) = mu_s + (mu_2 - mu_s) / (1 + I_0 / I) (-)."""
-    I = np.asarray(I, float)
-    return mu_s + (mu_2 - mu_s) / (1.0 + I_0 / I)
-
-
-def phi_of_i(I, phi_max, phi_min):
-    """phi(I) = phi_max - (phi_max - phi_min) I (-)."""
-    return phi_max - (phi_max - phi_min) * np.asarray(I, float)
 
 
 def _points(name: str, I, y, se, n_params: int):
@@ -90,7 +81,7 @@ def fit_mu_i(I, mu, mu_stderr=None) -> dict:
 
     # fitted as (mu_s, mu_2 - mu_s, I_0) with mu_2 - mu_s >= 0: mu(I) never falls with I
     def model(x, mu_s, dmu, i0):
-        return mu_of_i(x, mu_s, mu_s + dmu, i0)
+        return mu_of_I(x, mu_s, mu_s + dmu, i0)
 
     lo = [0.0, 0.0, 1e-8]
     hi = [10.0, 10.0, 1e3]
@@ -118,7 +109,7 @@ def fit_mu_i(I, mu, mu_stderr=None) -> dict:
         cov = np.full((3, 3), np.nan)  # no residual left to scale an unweighted covariance
     # back to (mu_s, mu_2, I_0): mu_2 = mu_s + dmu, covariance J C J^T
     J = np.array([[1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
-    return _summary(mu_of_i, J @ p, J @ cov @ J.T, I, y, se, ("mu_s", "mu_2", "I_0"))
+    return _summary(mu_of_I, J @ p, J @ cov @ J.T, I, y, se, ("mu_s", "mu_2", "I_0"))
 
 
 def fit_phi_i(I, phi, phi_stderr=None) -> dict:
@@ -128,10 +119,10 @@ def fit_phi_i(I, phi, phi_stderr=None) -> dict:
     points, weighted}.  Raises InputError with fewer than 2 usable points."""
     I, y, se = _points("phi(I) fit", I, phi, phi_stderr, 2)
     p0 = [float(y.max()), float(y.min())]
-    p, cov = curve_fit(phi_of_i, I, y, p0=p0, sigma=se, absolute_sigma=se is not None)
+    p, cov = curve_fit(phi_of_I, I, y, p0=p0, sigma=se, absolute_sigma=se is not None)
     if I.size == 2 and se is None:
         cov = np.full((2, 2), np.nan)
-    return _summary(phi_of_i, p, cov, I, y, se, ("phi_max", "phi_min"))
+    return _summary(phi_of_I, p, cov, I, y, se, ("phi_max", "phi_min"))
 
 
 def drucker_prager_equivalent(mu_s, mu_2, I_0, phi_max, phi_min, pressure, diameter, rho_s,
@@ -170,9 +161,9 @@ def drucker_prager_equivalent(mu_s, mu_2, I_0, phi_max, phi_min, pressure, diame
     tan_beta = 3.0 * math.sqrt(3.0) * t / math.sqrt(9.0 + 12.0 * t * t)
     I = float(shear_rate) * diameter / math.sqrt(pressure / rho_s)
     if math.isfinite(I) and I > 0:
-        mu_i = float(mu_of_i(I, mu_s, mu_2, I_0))
+        mu_i = float(mu_of_I(I, mu_s, mu_2, I_0))
         eta = (mu_i - mu_s) * pressure / shear_rate
-        phi_i = float(phi_of_i(I, phi_max, phi_min))
+        phi_i = float(phi_of_I(I, phi_max, phi_min))
         psi = math.degrees(math.atan(DILATANCY_K1 * (phi_max - phi_min) * I))
     elif I == 0.0:
         mu_i, phi_i, psi = float(mu_s), float(phi_max), 0.0

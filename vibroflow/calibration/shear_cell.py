@@ -1,7 +1,7 @@
 """Steady simple shear of the media at imposed pressure and shear rate: the mu(I), phi(I)
 rheology from DEM (GDR MiDi 2004, da Cruz et al. 2005 PRE 72:021309).
 
-A Lees-Edwards periodic box of the scenario's balls (vibroflow.calibration.periodic) is
+A Lees-Edwards periodic box of the scenario's balls (vibroflow.dem.periodic_box) is
 
 1. filled at random without overlap at solid fraction 0.3 (reproducible from the seed),
 2. compressed affinely at a fixed strain rate to solid fraction 0.5 (a gas: nothing jams below
@@ -20,9 +20,9 @@ which shows as a dense (phi ~ 0.62), weak (mu ~ 0.35) flow at I = 0.3; the usual
 here, is a slight polydispersity: diameters uniform in d (1 +- 0.1) by default, mean d (I uses
 the mean d).  polydispersity = 0 gives the scenario's monodisperse balls.
 
-Barostat (periodic.py): eps_dot_zz = (sigma_zz - p) / (K_ref t_b) with K_ref = k_eff / d, k_eff
-the contact's normal stiffness at the force p d^2 (linear law: k_n).  The time t_b sets how
-fast the box follows:
+Barostat (vibroflow.dem.periodic_step): eps_dot_zz = (sigma_zz - p) / (K_ref t_b) with K_ref =
+k_eff / d, k_eff the contact's normal stiffness at the force p d^2 (linear law: k_n). The time
+t_b sets how fast the box follows:
 * a jammed packing (uniaxial stiffness M ~ 0.5 K_ref) relaxes sigma_zz - p with the time
   t_b K_ref / M ~ 2 t_b, so t_b >= t_c / 4 keeps the control stable and well resolved;
 * a flowing packing has the much lower stiffness of its steady state, M_flow = phi dp/dphi at
@@ -61,12 +61,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from vibroflow.dem.laws import MODEL_LINEAR, P_KN, P_MODEL, material_index, pair_table
+from vibroflow.dem.periodic_box import PeriodicBox, random_fill
+from vibroflow.dem.periodic_step import (MODE_FIXED, MODE_ISO, MODE_Z, Q_KE, Q_LX, Q_LY, Q_LZ,
+                                         Q_SXX, Q_SXY, Q_SXZ, Q_SYY, Q_SYZ, Q_SZX, Q_SZZ, Q_Z,
+                                         Q_ZNR)
 from vibroflow.errors import InputError
 from vibroflow.scenario.laws import contact_time
-
-from .periodic import (MODE_FIXED, MODE_ISO, MODE_Z, PeriodicBox, Q_KE, Q_LX, Q_LY, Q_LZ,
-                       Q_SXX, Q_SXY, Q_SXZ, Q_SYY, Q_SYZ, Q_SZX, Q_SZZ, Q_Z, Q_ZNR,
-                       random_fill)
 
 DEFAULT_INERTIAL_NUMBERS = (0.005, 0.01, 0.03, 0.1, 0.3)
 DEFAULT_N_BALLS = 400

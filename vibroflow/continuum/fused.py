@@ -35,11 +35,12 @@ import numpy as np
 from .boundary import (B_PARTITION, B_WALL, W_AX, W_AZ, W_KIND, W_KN, W_KT, W_MU, W_NX, W_NZ,
                        W_PX, W_PZ, W_RADIUS, W_VX, W_VZ, W_ZETA, WALL_U, partition_forces,
                        plane_forces, plane_motion, u_wall_forces)
-from .constitutive import P_ETA_BED, damped_stress
+from .constitutive import P_ETA_BED
 from .g2p import g2p
 from .grid_update import frame_body, grid_update
 from .p2g import p2g
 from .plasticity import plasticity_step
+from .stress_update import damped_stress
 from .transfer_operator import operator_of_points, sum_operator_rows, transfer_rows
 
 #: status of `advance_kernel`
@@ -105,7 +106,7 @@ def advance_kernel(nsteps, t, dt, x, v, C, L, mass, volume, density, stress, gam
     a step makes (mpm.MPMSystem.transfers; transfer_operator.py), with cb (nchunk, nx, nz,
     5, 5) the per-chunk operators, B (nx, nz, 5, 5) their sum and gtmp (nx, nz, 2) a work
     grid (unused for one transfer); stress_work (N, 4): the stress scattered when the
-    material has a bed viscosity (constitutive.damped_stress; unused without).
+    material has a bed viscosity (stress_update.damped_stress; unused without).
 
     Returns (steps done, t after them, status, boundary): status OK; THROUGH_WALL when points
     went through the boundary `boundary` (the step was not made: t is its start; the

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numba as nb
 
-from .constitutive import P_RHO_C, update_stress_points
+from .constitutive import P_RHO_C
+from .stress_update import update_stress_points
 
 
 #: the lowest density of a point, as a fraction of the critical density rho_c (see update_volume)

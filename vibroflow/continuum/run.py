@@ -71,11 +71,12 @@ from vibroflow.tub.motion import TubMotion, rigid_velocity, tub_to_lab
 
 from .boundary import PartitionFriction, UWall, damping_ratio_of_restitution
 from .checkpoint import load_checkpoint, save_checkpoint
-from .constitutive import ContinuumMaterial, check_bed_viscosity, equivalent_shear_rate
+from .constitutive import ContinuumMaterial, check_bed_viscosity
 from .fields import grid_fields, write_grid_vtr
 from .grid import Grid
 from .grid_update import LabFrame, TubFrame
 from .mpm import ContinuumBlowUp, MPMState, MPMSystem, advance, init_state
+from .stress_update import equivalent_shear_rate
 from .timestep import stable_dt, transfers_per_step
 
 SUMMARY_NAME = "summary.json"
@@ -161,7 +162,7 @@ class LagrangianOptions:
     (constitutive.py); compaction: the cyclic compaction option with the calibration's
     [compaction] gamma_c and dphi_cyc (constitutive.py, vibroflow.calibration.compaction);
     bed_viscosity (Pa s): the bed's Kelvin-Voigt damping on connected material
-    (constitutive.damped_stress), 0 = off (default); benchmarks/strip_damping.py fits it on
+    (stress_update.damped_stress), 0 = off (default); benchmarks/strip_damping.py fits it on
     a DEM of a vibrated strip of the same balls; damping_length (m): the grid spacing on which
     transfer_cfl is the transfers' Courant number (default None: the default grid's spacing,
     `default_dx`); on another grid they are made at damping_transfer_cfl, so that their

@@ -56,7 +56,7 @@ def stable_dt(material, dx: float, point_size: float, boundaries=(), v_max: floa
             dt = min(dt, cfl * 2.0 * (math.sqrt(1.0 + z * z) - z) / omega)
     eta = getattr(material, "bed_viscosity", 0.0)
     if eta > 0:
-        # the bed viscosity's explicit diffusion of momentum (constitutive.damped_stress): its
+        # the bed viscosity's explicit diffusion of momentum (stress_update.damped_stress): its
         # longitudinal coefficient 7/3 eta; dt <= C rho dx^2 / eta_L.  C = (20/3) cfl (2 at
         # the default cfl 0.3) is measured, not derived: the quadratic B-spline grid's highest
         # mode is slower than a finite-difference stencil's, and tub47's strip

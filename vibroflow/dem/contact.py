@@ -207,3 +207,65 @@ def pair_contact_velocity(vel, omg, i, j, ri, rj, nx, ny, nz):
     return (vel[i, 0] - vel[j, 0] - (wsy * nz - wsz * ny),
             vel[i, 1] - vel[j, 1] - (wsz * nx - wsx * nz),
             vel[i, 2] - vel[j, 2] - (wsx * ny - wsy * nx))
+
+
+@nb.njit(cache=True, inline="always")
+def ball_pair(i, j, q, dx, dy, dz, dvx, dvy, dvz, vel, omg, radius, mass, table, mat_i, mat_j,
+              hist, flag, dt_hist, fbuf, tbuf, c):
+    """One listed pair of balls (i, j), entry q of a neighbour list: the pair kernel of every
+    DEM variant (the tub's step, the Lees-Edwards box).
+
+    (dx, dy, dz) = r_i - r_j (m) is the branch vector to the image of j the caller chose;
+    (dvx, dvy, dvz) (m/s) is added to the material relative velocity: the velocity of i's frame
+    relative to that image's (Lees-Edwards images and the box's affine dilation; -0.0 where the
+    image moves with j, which leaves the velocity bit for bit and costs no addition).  Apart,
+    the contact's history is forgotten.  In contact, the force and torques of `contact_force`
+    with the parameters table[mat_i, mat_j] are added to fbuf[c, i], -fbuf[c, j], tbuf[c, i],
+    tbuf[c, j] and the history advances by dt_hist.
+
+    Returns (touching, first, delta, nx, ny, nz, vn, fx, fy, fz): whether they touch, whether
+    the contact is new (its flag was clear), the overlap (m), the unit normal from j to i, the
+    normal relative velocity (m/s, > 0 separating) and the force on i (N).
+    """
+    ri = radius[i]
+    rj = radius[j]
+    rsum = ri + rj
+    d2 = dx * dx + dy * dy + dz * dz
+    if d2 >= rsum * rsum:
+        if flag[q]:
+            flag[q] = 0
+            for a in range(6):
+                hist[q, a] = 0.0
+        return False, False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    d = np.sqrt(d2)
+    delta = rsum - d
+    inv = 1.0 / d
+    nx = dx * inv
+    ny = dy * inv
+    nz = dz * inv
+    vx, vy, vz = pair_contact_velocity(vel, omg, i, j, ri, rj, nx, ny, nz)
+    vx += dvx
+    vy += dvy
+    vz += dvz
+    vn = vx * nx + vy * ny + vz * nz
+    first = flag[q] == 0
+    flag[q] = 1
+    mi = mass[i]
+    mj = mass[j]
+    fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz, fn, ft, sl = contact_force(
+        delta, nx, ny, nz, vx, vy, vz,
+        omg[i, 0] - omg[j, 0], omg[i, 1] - omg[j, 1], omg[i, 2] - omg[j, 2],
+        ri, rj, ri * rj / rsum, mi * mj / (mi + mj), table[mat_i, mat_j], hist[q], dt_hist)
+    fbuf[c, i, 0] += fx
+    fbuf[c, i, 1] += fy
+    fbuf[c, i, 2] += fz
+    fbuf[c, j, 0] -= fx
+    fbuf[c, j, 1] -= fy
+    fbuf[c, j, 2] -= fz
+    tbuf[c, i, 0] += tix
+    tbuf[c, i, 1] += tiy
+    tbuf[c, i, 2] += tiz
+    tbuf[c, j, 0] += tjx
+    tbuf[c, j, 1] += tjy
+    tbuf[c, j, 2] += tjz
+    return True, first, delta, nx, ny, nz, vn, fx, fy, fz

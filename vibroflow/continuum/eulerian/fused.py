@@ -27,12 +27,14 @@ import numba as nb
 import numpy as np
 
 from ..boundary import partition_forces
-from ..constitutive import P_ETA_BED, damped_stress
+from ..constitutive import P_ETA_BED
 from ..fused import sum_chunk_rows
 from ..grid_update import frame_body, grid_update
-from .advection import face_velocity_rows, match_divergence, remap, remap_serial
+from .advection import remap, remap_serial
+from .face_velocity import face_velocity_rows, match_divergence
 from .lagrangian_step import (end_density, fill_limit, material_fraction,
                               update_stress_cells, void_first)
+from ..stress_update import damped_stress
 from ..transfer_operator import sum_operator_rows, transfer_rows
 from .transfer import g2p_cells, operator_of_cells, p2g_cells
 from .wall import wall_forces
@@ -67,7 +69,7 @@ def _make_advance_kernel(parallel: bool):
         section's cell radii, their reciprocals and the node columns on the axis whose radial
         velocity is held at 0 (solver.EulerianSystem.axisymmetric); 1, 0 and 0 in plane
         strain; stress_work (N, 4): the stress scattered when the material has a bed
-        viscosity (constitutive.damped_stress, on every cell; unused without).
+        viscosity (stress_update.damped_stress, on every cell; unused without).
 
         Returns (steps done, t, status, lowest cell mass kg/m, largest |M - M0| / M0 so far):
         status OK, NEGATIVE_MASS (a cell lost more mass than it held) or NON_FINITE (a velocity),

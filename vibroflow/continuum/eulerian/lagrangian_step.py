@@ -15,13 +15,13 @@ proper to the fixed mesh):
 4. nodes to cells: velocity, APIC affine matrix, velocity gradient L (g2p.py; the cells stay
    where they are: the motion is the remap's business, advection.py); the face velocities of
    the remap, and the trace of L made the finite-volume divergence of those
-   (advection.match_divergence: the wall's closed faces, which move with the material where it
+   (face_velocity.match_divergence: the wall's closed faces, which move with the material where it
    leaves the wall); a cell's volume change goes to its empty part first, both ways
    (void_first);
 5. the material's density rho <- rho / det(I + dt L) (the material's own strain: a cell's
    material takes its cell's shear, its expansion down to the critical density and its
    compression once the void is closed) and its stress through the shared constitutive law
-   (constitutive.update_stress_points: Jaumann elastic predictor and the mu(I) or
+   (stress_update.update_stress_points: Jaumann elastic predictor and the mu(I) or
    Drucker-Prager return map): material below the critical density is disconnected
    (stress-free, Dunatunga & Kamrin 2015), which is how the bed's flight works.
 """
@@ -29,7 +29,8 @@ from __future__ import annotations
 
 import numba as nb
 
-from ..constitutive import P_RHO_C, update_stress_points
+from ..constitutive import P_RHO_C
+from ..stress_update import update_stress_points
 
 
 @nb.njit(cache=True)
@@ -61,7 +62,7 @@ def void_first(L, frac, density, rho_c, dt):
     """A cell's volume change goes to its empty part first, both ways.
 
     A cell's volumetric strain over the step is e = dt tr(L) (the finite-volume divergence,
-    advection.match_divergence); f its volume fraction, 1 - f its empty share, rho its
+    face_velocity.match_divergence); f its volume fraction, 1 - f its empty share, rho its
     material's density (kg/m^3), rho_c the critical density.  In a cell holding material
     (f > 0) the material's own volumetric strain e_m is
 
@@ -94,7 +95,7 @@ def void_first(L, frac, density, rho_c, dt):
             continue
         tr = L[p, 0] + L[p, 3]
         if hoop:
-            # an axisymmetric section's hoop rate (advection.match_divergence) is part of the
+            # an axisymmetric section's hoop rate (face_velocity.match_divergence) is part of the
             # cell's volume change; the correction goes to the section's own two rates
             tr += L[p, 4]
         e = dt * tr
@@ -140,10 +141,10 @@ def fill_limit(mass, density, h, weight):
 
 @nb.njit(cache=True)
 def update_stress_cells(a, b, stress, L, density, dt, params, gamma_dot, state):
-    """constitutive.update_stress_points (the arguments as there) on the cells a:b, with the
+    """stress_update.update_stress_points (the arguments as there) on the cells a:b, with the
     cells whose end-of-step density is below the critical one (the empty cells, density 0, and
     the disconnected ones) given that kernel's result for them directly: stress 0, plastic
-    rate 0, state 0 (constitutive.return_map's first branch, which discards the elastic
+    rate 0, state 0 (stress_update.return_map's first branch, which discards the elastic
     predictor's trial stress).  A quarter of tub47's cells are empty at any time; the others
     go to the shared kernel in runs of consecutive cells."""
     rho_c = params[P_RHO_C]

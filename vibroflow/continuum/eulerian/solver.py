@@ -99,7 +99,7 @@ class EulerianSystem:
     (cell_weight, r its centre's radius), a face sweeps h r (the remap's weights,
     advection.remap_work), the wall's contact scales with r (wall.wall_forces), the stress
     divergence gains the hoop term -V sigma_theta w / r (transfer.p2g_cells) and the
-    velocity gradient the hoop rate (advection.match_divergence; L (N, 5))."""
+    velocity gradient the hoop rate (face_velocity.match_divergence; L (N, 5))."""
 
     mesh: EulerianMesh
     material: ContinuumMaterial

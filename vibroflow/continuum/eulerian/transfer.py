@@ -49,7 +49,7 @@ def weight_table(coords, x0, dx):
 
 @nb.njit(cache=True)
 def _face_coords(lo, h, n):
-    """lo + i h for i < n (m): the face positions as advection.face_velocities computed them,
+    """lo + i h for i < n (m): the face positions as face_velocity.face_velocities computed them,
     the same floating-point operations, so the tables hold the same weights."""
     out = np.empty(n)
     for i in range(n):
