@@ -29,10 +29,12 @@ def write_report(study_dir) -> Path:
     from vibroflow.report.data import StudyData
 
     out = Path(study_dir)
-    check_study_dir(out, must_exist=True)  # before the lock, which would make the folder
+    if not out.is_dir():  # a missing folder or a file, before the lock would make a folder
+        check_study_dir(out, must_exist=True)
     # held while the page is made: a study rerun writing the folder meanwhile would change
-    # what the page shows under it
+    # what the page shows under it (a folder another command holds is refused first)
     with folder_lock(out, "vibroflow report", field="DIR"):
+        check_study_dir(out, must_exist=True)
         return _write(out, StudyData.read(out))  # validated before anything is written
 
 
