@@ -18,7 +18,7 @@ change).  A sequence whose changes do not shrink has no limit here, which is sai
 
 --transfers k makes k APIC transfers a step (default 1, the checks' setting) on every grid, or,
 with --hold-damping, on the first grid only, the count scaled as the tub runs scale it
-(vibroflow.continuum.run.damping_transfer_cfl: k (n / n_0)^3 on R0/n, n_0 the first grid),
+(vibroflow.continuum.options.damping_transfer_cfl: k (n / n_0)^3 on R0/n, n_0 the first grid),
 which holds the transfers' hyperviscosity alpha c dx^3 / transfer_cfl fixed
 (docs/decisions/grid-spacing.md; the cost grows as the transfers do: R0/80 at 8 a step is
 about 20 minutes; the Eulerian's R0/40 at 8, about an hour).
@@ -48,24 +48,14 @@ def _one(job: tuple) -> dict:
     """Run one (method, a, n, friction_deg, transfers) cylinder; its deposit and wall time."""
     method, a, n, friction_deg, transfers = job
     os.environ["NUMBA_NUM_THREADS"] = "1"   # before numba is imported: a spawned process
-    from vibroflow.continuum.column import sand_material
+    from vibroflow.continuum.column import run_column, sand_material
 
     mat = sand_material(friction_deg)
     t0 = time.perf_counter()
-    if method == "lagrangian":
-        from vibroflow.continuum import column as lag
-
-        run = lag.run_column(1.0, a, 1.0 / n, material=mat, rough_floor=True,
-                             axisymmetric=True, transfers=transfers)
-        dep = run.deposit(wall_window=CENTRE)
-        mass_error = 0.0
-    else:
-        from vibroflow.continuum.eulerian.column import run_column
-
-        run = run_column(1.0, a, 1.0 / n, material=mat, rough_floor=True, axisymmetric=True,
-                         transfers=transfers)
-        dep = run.deposit(wall_window=CENTRE)
-        mass_error = float(run.mass_error)
+    run = run_column(1.0, a, 1.0 / n, material=mat, rough_floor=True, axisymmetric=True,
+                     transfers=transfers, method=method)
+    dep = run.deposit(wall_window=CENTRE)
+    mass_error = float(run.mass_error)
     runout, height = dep.normalised(1.0)
     return {"method": method, "a": a, "n": n, "transfers": transfers,
             "runout": float(runout), "height": float(height), "settled": bool(run.settled),

@@ -31,7 +31,7 @@ NAME one of
   critical_solid_fraction                       ([rheology])
   wall_stiffness (Pa/m), cfl, dx (m), model,
   transfer_cfl (0: one APIC transfer a step),
-  bed_viscosity (Pa s), flip                    (LagrangianOptions, EulerianOptions)
+  bed_viscosity (Pa s), flip                    (ContinuumOptions)
 The default list is the one whose figures benchmarks/README.md records.  Wall times are printed
 but say little unless the machine is quiet.  Results also go to --out/sensitivity.json.
 """
@@ -55,7 +55,7 @@ DEFAULT_SETTLE_TIMES = "0.04,0.05,0.06,0.07"
 
 
 def apply_case(case: str, calibration: dict) -> tuple[dict, dict]:
-    """(calibration tables, LagrangianOptions keywords) of one case (module docstring), from
+    """(calibration tables, ContinuumOptions keywords) of one case (module docstring), from
     the tables of a calibration (`Calibration.to_toml_dict`)."""
     cal = copy.deepcopy(calibration)
     if ";" in case:
@@ -110,16 +110,11 @@ def run_member(job: tuple) -> dict:
     from vibroflow.analysis.compare import field_difference
 
     t0 = time.perf_counter()
-    if method == "eulerian":
-        from vibroflow.continuum.eulerian.run import EulerianOptions, run_eulerian
+    from vibroflow.continuum.formulation import formulation
+    from vibroflow.continuum.tub_run import run_continuum
 
-        s = run_eulerian(scenario, out, calibration=cal,
-                         options=EulerianOptions(settle_time=settle, **opts))
-    else:
-        from vibroflow.continuum.run import LagrangianOptions, run_lagrangian
-
-        s = run_lagrangian(scenario, out, calibration=cal,
-                           options=LagrangianOptions(settle_time=settle, **opts))
+    s = run_continuum(scenario, out, method, calibration=cal,
+                      options=formulation(method).options(settle_time=settle, **opts))
     wall = time.perf_counter() - t0
     E = field_difference(read_csv(Path(out) / "bulk_velocity.csv", cell_size=h),
                          read_csv(ref_csv, cell_size=h), phi_min)

@@ -7,14 +7,13 @@
 Every (method, thread count) case runs in its own process (NUMBA_NUM_THREADS set before numba
 is imported): it first times the compiled kernels' first call (numba's cache load, or the
 compilation when the cache is cold) on a few steps of the settled bed, then the whole run
-(vibroflow.continuum.run.run_lagrangian / eulerian.run.run_eulerian: settling, vibration,
-sampling, the analysis) into a temporary folder.  Printed per case: points (material points, or
-the Eulerian mesh's cells), steps (settling + vibration), the run's wall time (its summary's
-wall_time_s, as the DEM's), steps/s and point-steps/s, the DEM's wall time and the ratio (the
-mission's target: >= 100 at equal accuracy), and, with a DEM folder, the field difference E of
-tub47.md against the DEM and the circulation (equal accuracy is judged on these).  The 1-minute
-load average before and after each case is printed: on a shared machine the ratio is only
-indicative.
+(vibroflow.continuum.tub_run.run_continuum: settling, vibration, sampling, the analysis) into a
+temporary folder.  Printed per case: points (material points, or the Eulerian mesh's cells),
+steps (settling + vibration), the run's wall time (its summary's wall_time_s, as the DEM's),
+steps/s and point-steps/s, the DEM's wall time and the ratio (the mission's target: >= 100 at
+equal accuracy), and, with a DEM folder, the field difference E of tub47.md against the DEM and
+the circulation (equal accuracy is judged on these).  The 1-minute load average before and after
+each case is printed: on a shared machine the ratio is only indicative.
 
 --kernels: one thread, in this process, on the settled bed: microseconds per call of each kernel
 of a step (the Lagrangian's boundaries, p2g, grid update, g2p, volume and stress; the Eulerian's
@@ -47,14 +46,12 @@ def _load() -> float:
 
 
 def _options(method: str, a):
-    from vibroflow.continuum.eulerian.run import EulerianOptions
-    from vibroflow.continuum.run import LagrangianOptions
+    from vibroflow.continuum.formulation import formulation
 
-    cls = LagrangianOptions if method == "lagrangian" else EulerianOptions
     extra = {} if a.cfl is None else {"cfl": a.cfl}  # None: the options' default
     if a.transfer_cfl is not None:  # 0: one transfer a step
         extra["transfer_cfl"] = a.transfer_cfl
-    return cls(dx=a.dx, stiffness_factor=a.stiffness_factor, **extra)
+    return formulation(method).options(dx=a.dx, stiffness_factor=a.stiffness_factor, **extra)
 
 
 def _inputs(a):
@@ -72,15 +69,12 @@ def _inputs(a):
 
 def _settled(method: str, scenario, cal, opts):
     """(system, state, advance) of the settled bed in the vibrating tub's frame: the bed the
-    run starts vibrating (vibration_start of the method's run module)."""
-    if method == "lagrangian":
-        from vibroflow.continuum.mpm import advance
-        from vibroflow.continuum.run import vibration_start
-    else:
-        from vibroflow.continuum.eulerian.run import vibration_start
-        from vibroflow.continuum.eulerian.solver import advance
-    system, state = vibration_start(scenario, cal, opts)
-    return system, state, advance
+    run starts vibrating (tub_run.vibration_start)."""
+    from vibroflow.continuum.formulation import formulation
+    from vibroflow.continuum.tub_run import vibration_start
+
+    system, state = vibration_start(scenario, cal, opts, method)
+    return system, state, formulation(method).advance
 
 
 def worker(a) -> dict:
@@ -96,14 +90,12 @@ def worker(a) -> dict:
     t1 = time.perf_counter()
     advance(system, state, 2)
     first = time.perf_counter() - t1
-    if a.method == "lagrangian":
-        from vibroflow.continuum.run import run_lagrangian as run
-    else:
-        from vibroflow.continuum.eulerian.run import run_eulerian as run
+    from vibroflow.continuum.tub_run import run_continuum
+
     load0 = _load()
     res = {}
     with tempfile.TemporaryDirectory() as out:
-        summary = run(scenario, out, calibration=cal, options=opts)
+        summary = run_continuum(scenario, out, a.method, calibration=cal, options=opts)
         dem_csv = Path(a.dem_dir) / "bulk_velocity.csv" if a.dem_dir else None
         if dem_csv is not None and dem_csv.exists():
             h = scenario.analysis.cell_size

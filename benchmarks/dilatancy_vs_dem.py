@@ -30,7 +30,7 @@ def main(argv=None) -> int:
                     help="initial_excess_solid_fraction of the bed over phi_c")
     ap.add_argument("--cfl", type=float, default=0.3)
     ap.add_argument("--transfer-cfl", type=float, default=0.0,
-                    help="the APIC transfers' Courant number (LagrangianOptions.transfer_cfl); "
+                    help="the APIC transfers' Courant number (ContinuumOptions.transfer_cfl); "
                          "default 0: one transfer a step")
     ap.add_argument("--compaction", action="store_true", help="the cyclic compaction option")
     ap.add_argument("--gamma-c", type=float, default=None, help="override [compaction] "
@@ -46,8 +46,8 @@ def main(argv=None) -> int:
     from vibroflow.analysis.compare import field_difference
     from vibroflow.io.calibration_file import Calibration, read_calibration
     from vibroflow.calibration.dem_result import DEMResult
-    from vibroflow.continuum.eulerian.run import EulerianOptions, run_eulerian
-    from vibroflow.continuum.run import LagrangianOptions, run_lagrangian
+    from vibroflow.continuum.formulation import formulation
+    from vibroflow.continuum.tub_run import run_continuum
 
     with DEMResult.open(args.dem_dir) as res:
         sc = res.scenario
@@ -70,21 +70,19 @@ def main(argv=None) -> int:
     if args.diagnose:
         import numpy as np
 
-        import vibroflow.continuum.run as lrun
+        import vibroflow.continuum.mpm.formulation as mpm_formulation
 
-        write_points = lrun._write_points_vtu
+        write_points = mpm_formulation._write_points_vtu
 
         def spy(path, state, rate, length, solid_density):
             diag.append((state.phase.copy(), state.density.copy(), state.pressure().copy()))
             return write_points(path, state, rate, length, solid_density)
 
-        lrun._write_points_vtu = spy
+        mpm_formulation._write_points_vtu = spy
     t0 = time.perf_counter()
-    if args.method == "lagrangian":
-        s = run_lagrangian(sc, args.out, calibration=cal, options=LagrangianOptions(**opts),
-                           vtk=args.diagnose)
-    else:
-        s = run_eulerian(sc, args.out, calibration=cal, options=EulerianOptions(**opts))
+    s = run_continuum(sc, args.out, args.method, calibration=cal,
+                      options=formulation(args.method).options(**opts),
+                      vtk=args.diagnose and args.method == "lagrangian")
     h = sc.analysis.cell_size
     E = field_difference(read_csv(args.out / "bulk_velocity.csv", cell_size=h),
                          read_csv(args.dem_dir / "bulk_velocity.csv", cell_size=h),
@@ -92,8 +90,8 @@ def main(argv=None) -> int:
     c, dc = s["circulation"], dem["circulation"]
     extra = {}
     if diag:
+        from vibroflow.continuum.material import material_of
         from vibroflow.continuum.stress_update import unloaded_packing
-        from vibroflow.continuum.run import material_of
 
         mat = material_of(sc, cal, dilatancy=args.k_dil > 0, compaction=args.compaction)
         ph = np.concatenate([d[0] for d in diag])

@@ -39,7 +39,7 @@ import numpy as np
 G = 9.81
 BED_DEPTH = 0.2
 BIN = 0.015
-#: node spacing (m): tub47's default grid, three ball diameters (continuum.run.default_dx)
+#: node spacing (m): tub47's default grid, three ball diameters (continuum.options.default_dx)
 DX = 0.01875
 
 
@@ -77,14 +77,13 @@ def _v_floor(x, z, width, angle):
 def build(method, material, motion, width, periodic, transfer_cfl, floor_angle=None):
     """(system, state, advance) of one formulation: the bed at rest, lithostatic, in the
     shaken box's frame; floor_angle (rad) a V floor (module docstring)."""
-    from vibroflow.continuum.eulerian.run import EulerianOptions
+    from vibroflow.continuum.formulation import formulation
     from vibroflow.continuum.grid_update import TubFrame
-    from vibroflow.continuum.run import LagrangianOptions
     from vibroflow.continuum.timestep import stable_dt
 
     frame = TubFrame(motion, (0.0, -G))
     period = 1.0 / motion.frequency
-    opts = (EulerianOptions if method == "eulerian" else LagrangianOptions)(
+    opts = formulation(method).options(
         **({} if transfer_cfl is None else {"transfer_cfl": transfer_cfl}))
     dx = DX
     h = dx / 2
@@ -117,8 +116,8 @@ def build(method, material, motion, width, periodic, transfer_cfl, floor_angle=N
         return system, state, advance
     from vibroflow.continuum.boundary import Plane
     from vibroflow.continuum.grid import Grid
-    from vibroflow.continuum.column import column_points, lithostatic_state
-    from vibroflow.continuum.mpm import MPMSystem, advance
+    from vibroflow.continuum.mpm.column import column_points, lithostatic_state
+    from vibroflow.continuum.mpm.solver import MPMSystem, advance
 
     if floor_angle is None:
         walls = [Plane((0.0, 0.0), (0.0, 1.0), kn, friction=0.2, damping_ratio=0.16)]
@@ -203,12 +202,14 @@ def case_media(case: str, calibration: str):
     file: the continuum material of `material_for` with the default options, the case's tub
     motion, and the same motion with no horizontal stroke and no rotation."""
     from vibroflow.io.calibration_file import read_calibration
-    from vibroflow.continuum.run import LagrangianOptions, material_for
+    from vibroflow.continuum.formulation import formulation
+    from vibroflow.continuum.material import material_for
     from vibroflow.scenario.io import load_scenario
     from vibroflow.tub.motion import TubMotion
 
     scenario = load_scenario(case, [])
-    material = material_for(scenario, read_calibration(calibration), LagrangianOptions())
+    material = material_for(scenario, read_calibration(calibration),
+                            formulation("lagrangian").options())
     full = TubMotion.of_scenario(scenario)
     motion = TubMotion(frequency=full.frequency, amplitude_x=0.0, amplitude_z=full.amplitude_z,
                        phase_z=full.phase_z, amplitude_theta=0.0)

@@ -20,8 +20,8 @@ slice between the partitions, the DEM's unit):
 
 DEM: every ball-wall contact sampled in DIR/dem.h5 (wall_contacts: force in the lab frame,
 rotated into the tub's axes with the tub's angle at its snapshot).  Continuum: a run of the same
-scenario and calibration, from the bed that vibroflow.continuum.run.run_lagrangian (or
-eulerian.run.run_eulerian) starts vibrating (their vibration_start), advanced one sampling
+scenario and calibration, from the bed that vibroflow.continuum.tub_run.run_continuum starts
+vibrating with each formulation (tub_run.vibration_start), advanced one sampling
 interval at a time from the start of the vibration; after --skip-cycles cycles, at every
 sample, the U wall's force on each point (the penalty law's last force, boundary.UWall's
 history) or wall-layer cell (eulerian.wall: fn along the cell's inward normal n, ft along
@@ -182,11 +182,11 @@ def phase_means(scenario, system, state, advance, wall_of, mu_p, per: int, skip:
 
 
 def eulerian_balance(scenario, calibration, options, per: int, skip: int, cycles: int) -> dict:
-    """phase_means of an Eulerian run, from the bed run_eulerian starts vibrating."""
-    from vibroflow.continuum.eulerian.run import vibration_start
+    """phase_means of an Eulerian run, from the bed run_continuum starts vibrating."""
     from vibroflow.continuum.eulerian.solver import advance
+    from vibroflow.continuum.tub_run import vibration_start
 
-    system, state = vibration_start(scenario, calibration, options)
+    system, state = vibration_start(scenario, calibration, options, "eulerian")
     n = system.mesh.normal
 
     def wall_of(st):
@@ -199,11 +199,11 @@ def eulerian_balance(scenario, calibration, options, per: int, skip: int, cycles
 
 
 def continuum_balance(scenario, calibration, options, per: int, skip: int, cycles: int) -> dict:
-    """phase_means of a Lagrangian run, from the bed run_lagrangian starts vibrating."""
-    from vibroflow.continuum.mpm import advance
-    from vibroflow.continuum.run import vibration_start
+    """phase_means of a Lagrangian run, from the bed run_continuum starts vibrating."""
+    from vibroflow.continuum.mpm.solver import advance
+    from vibroflow.continuum.tub_run import vibration_start
 
-    system, state = vibration_start(scenario, calibration, options)
+    system, state = vibration_start(scenario, calibration, options, "lagrangian")
 
     def wall_of(st):
         hist = st.history[0]  # boundary.UWall's: the penalty law's last force on each point
@@ -224,9 +224,8 @@ def main(argv=None) -> int:
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
     a = ap.parse_args(argv)
 
-    import vibroflow.continuum.run as R
     from vibroflow.io.calibration_file import Calibration, read_calibration
-    from vibroflow.continuum.eulerian.run import EulerianOptions
+    from vibroflow.continuum.formulation import formulation
     from vibroflow.calibration.dem_result import DEMResult
 
     with DEMResult.open(a.dem_dir) as res:
@@ -248,10 +247,12 @@ def main(argv=None) -> int:
     for method in a.methods.split(","):
         if method == "lagrangian":
             results["Lagrangian"] = continuum_balance(
-                scenario, calibration, R.LagrangianOptions(**opts), per, a.skip_cycles, a.cycles)
+                scenario, calibration, formulation(method).options(**opts), per,
+                a.skip_cycles, a.cycles)
         elif method == "eulerian":
             results["Eulerian"] = eulerian_balance(
-                scenario, calibration, EulerianOptions(**opts), per, a.skip_cycles, a.cycles)
+                scenario, calibration, formulation(method).options(**opts), per,
+                a.skip_cycles, a.cycles)
         else:
             ap.error(f"--methods: {method!r} is not lagrangian or eulerian")
     fill = scenario.fill

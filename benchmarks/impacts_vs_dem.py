@@ -89,16 +89,13 @@ def main(argv=None) -> int:
     rows = []
     for method in [m.strip() for m in args.methods.split(",") if m.strip()]:
         out = Path(tempfile.mkdtemp(prefix=f"impacts-{method}-"))
-        if method == "lagrangian":
-            from vibroflow.continuum.run import LagrangianOptions, run_lagrangian
-            opt = (LagrangianOptions(settle_time=args.settle_time) if args.settle_time
-                   else LagrangianOptions())
-            s = run_lagrangian(scenario, out, cal, opt)
-        elif method == "eulerian":
-            from vibroflow.continuum.eulerian.run import EulerianOptions, run_eulerian
-            opt = (EulerianOptions(settle_time=args.settle_time) if args.settle_time
-                   else EulerianOptions())
-            s = run_eulerian(scenario, out, cal, opt)
+        if method in ("lagrangian", "eulerian"):
+            from vibroflow.continuum.formulation import formulation
+            from vibroflow.continuum.tub_run import run_continuum
+            form = formulation(method)
+            opt = (form.options(settle_time=args.settle_time) if args.settle_time
+                   else form.options())
+            s = run_continuum(scenario, out, method, calibration=cal, options=opt)
         else:
             print(f"--methods: {method!r} is not lagrangian or eulerian", file=sys.stderr)
             return 2

@@ -126,7 +126,8 @@ def main(argv=None) -> int:
 
     import h5py
 
-    import vibroflow.continuum.run as R
+    from vibroflow.continuum.sampling import sample_times
+    from vibroflow.continuum.tub_run import run_continuum
     from vibroflow.measure.bulk import read_csv
     from vibroflow.io.calibration_file import read_calibration
     from vibroflow.calibration.dem_result import DEMResult
@@ -147,15 +148,10 @@ def main(argv=None) -> int:
     samplers = []
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / a.method
-        if a.method == "lagrangian":
-            summ = R.run_lagrangian(sc, out, calibration=cal, keep_samples=samplers)
-        else:
-            from vibroflow.continuum.eulerian.run import run_eulerian
-
-            summ = run_eulerian(sc, out, calibration=cal, keep_samples=samplers)
+        summ = run_continuum(sc, out, a.method, calibration=cal, keep_samples=samplers)
         cont_table = read_csv(out / "bulk_velocity.csv")
     smp = samplers[-1]
-    times, _, _ = R.sample_times(sc)
+    times, _, _ = sample_times(sc)
     n = smp.j
     cont = column_by_phase(smp.pos[:n], smp.vel[:n], smp.poses[:n], (np.asarray(times[:n]) * f)
                            % 1.0, per, a.x, a.band, heights, pivot)

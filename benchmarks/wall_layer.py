@@ -13,9 +13,9 @@ transport up (+) or down (-) each wall.  The DEM's bed heaps towards the right w
 right wall carries the layer up more than down over a cycle (a vibratory conveyor's ratchet);
 this script shows by how much, and how much of it the continuum has.
 
-The continuum's sampled points are taken from the run's sampler (vibroflow.continuum.run
-.Samples, which keeps every point at every sample instant; run_lagrangian's keep_samples); the
-run itself is the ordinary run_lagrangian into a temporary folder.
+The continuum's sampled points are taken from the run's samples (vibroflow.continuum.sampling
+.Samples, which keep every point at every sample instant; run_continuum's keep_samples); the
+run itself is the ordinary material point method's run_continuum into a temporary folder.
 """
 from __future__ import annotations
 
@@ -59,17 +59,19 @@ def main(argv=None) -> int:
     ap.add_argument("--calibration", type=Path)
     ap.add_argument("--settle-time", type=float, default=0.05)
     ap.add_argument("--cfl", type=float, default=None,
-                    help="the continuum's Courant number (default: LagrangianOptions')")
+                    help="the continuum's Courant number (default: the material point method's)")
     ap.add_argument("--transfer-cfl", type=float, default=None,
-                    help="its transfers' Courant number (default: LagrangianOptions'; 0: one "
-                         "transfer a step)")
+                    help="its transfers' Courant number (default: the material point method's; "
+                         "0: one transfer a step)")
     ap.add_argument("--layer-diameters", type=float, default=2.0)
     ap.add_argument("--above", type=float, default=0.15)
     a = ap.parse_args(argv)
 
     import h5py
 
-    import vibroflow.continuum.run as R
+    from vibroflow.continuum.formulation import formulation
+    from vibroflow.continuum.sampling import sample_times
+    from vibroflow.continuum.tub_run import run_continuum
     from vibroflow.io.calibration_file import read_calibration
     from vibroflow.calibration.dem_result import DEMResult
 
@@ -89,13 +91,13 @@ def main(argv=None) -> int:
     samplers = []
     cal = read_calibration(a.calibration or a.dem_dir / "calibration.toml")
     with tempfile.TemporaryDirectory() as tmp:
-        R.run_lagrangian(sc, Path(tmp) / "lagrangian", calibration=cal,
-                         options=R.LagrangianOptions(settle_time=a.settle_time, **{
-                             k: v for k, v in (("cfl", a.cfl), ("transfer_cfl", a.transfer_cfl))
-                             if v is not None}),
-                         keep_samples=samplers)
+        run_continuum(sc, Path(tmp) / "lagrangian", "lagrangian", calibration=cal,
+                      options=formulation("lagrangian").options(settle_time=a.settle_time, **{
+                          k: v for k, v in (("cfl", a.cfl), ("transfer_cfl", a.transfer_cfl))
+                          if v is not None}),
+                      keep_samples=samplers)
     smp = samplers[-1]
-    times, _, _ = R.sample_times(sc)
+    times, _, _ = sample_times(sc)
     n = smp.j
     phases = (np.asarray(times[:n]) * f) % 1.0
     cont = layer_by_phase(smp.pos[:n], smp.vel[:n], smp.poses[:n], phases, per, half, depth,

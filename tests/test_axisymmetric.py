@@ -1,6 +1,7 @@
-"""The axisymmetric material point method (vibroflow.continuum.mpm.MPMSystem.axisymmetric) against
-known answers: the divergence of a stress in cylindrical coordinates, the kinematics of a radial
-stretch, and the cylindrical column collapse of Lube et al. (2004) and Lajeunesse et al. (2004).
+"""The axisymmetric material point method (vibroflow.continuum.mpm.solver.MPMSystem.axisymmetric)
+against known answers: the divergence of a stress in cylindrical coordinates, the kinematics of a
+radial stretch, and the cylindrical column collapse of Lube et al. (2004) and Lajeunesse et al.
+(2004).
 
 In a section x = r >= 0 of a body of revolution the points' masses and volumes are per radian
 (V = A r), the hoop stress sigma_theta is the stress's yy slot, the velocity gradient gains the
@@ -21,7 +22,7 @@ from vibroflow.continuum.constitutive import ContinuumMaterial
 from vibroflow.continuum.stress_update import update_stress_points
 from vibroflow.continuum.g2p import g2p
 from vibroflow.continuum.grid import Grid
-from vibroflow.continuum.mpm import MPMSystem, init_state
+from vibroflow.continuum.mpm.solver import MPMSystem, init_state
 from vibroflow.continuum.p2g import p2g
 from vibroflow.continuum.plasticity import update_volume
 from vibroflow.errors import InputError
@@ -320,9 +321,9 @@ def _pile(theta_deg, axisymmetric, n=10, duration_tau=6.0):
     """A pile of half-width (or radius) W = 2 m and slope theta (deg) of the default material on
     the rough floor, lithostatic with Jaky's K_0, run for `duration_tau` sqrt(H/g).  Returns
     (top at the centre, initial height H, front, largest displacement), m."""
-    from vibroflow.continuum.column import (G_ACC, column_points, column_system,
-                                            lithostatic_state)
-    from vibroflow.continuum.mpm import run_steps
+    from vibroflow.continuum.column_setup import G_ACC
+    from vibroflow.continuum.mpm.column import column_points, column_system, lithostatic_state
+    from vibroflow.continuum.mpm.solver import run_steps
 
     mat = ContinuumMaterial()
     W = 2.0
@@ -451,10 +452,8 @@ def test_eulerian_radial_expansion_hoop_rate_and_mass_per_radian():
 
 @functools.cache
 def _eulerian_sand_column(a, n, reach=None):
-    from vibroflow.continuum.eulerian.column import run_column as run_eulerian
-
-    run = run_eulerian(1.0, a, 1.0 / n, material=sand_material(), rough_floor=True,
-                       axisymmetric=True, reach=reach)
+    run = run_column(1.0, a, 1.0 / n, material=sand_material(), rough_floor=True,
+                     axisymmetric=True, reach=reach, method="eulerian")
     assert run.settled
     assert abs(run.mass_error) < 1e-12
     runout, height = run.deposit(wall_window=CENTRE).normalised(1.0)

@@ -61,7 +61,7 @@ def test_unknown_tables_and_keys_are_kept(tmp_path):
 
 
 def test_the_fingerprint_content_is_the_files_tables():
-    """What the continuum's run fingerprint hashes (continuum.run.run_fingerprint) is the
+    """What the continuum's run fingerprint hashes (continuum.checkpoint.run_fingerprint) is the
     file's own tables."""
     import tomllib
 

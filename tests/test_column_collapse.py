@@ -458,7 +458,7 @@ def test_mpm_rough_floor_does_not_slip():
     dx = L_BIG / n
 
     def base_slip(**kw):
-        from vibroflow.continuum.column import column_state, column_system
+        from vibroflow.continuum.mpm.column import column_state, column_system
 
         system = column_system(L_BIG, a * L_BIG, dx, **kw)
         x0 = column_state(system, L_BIG, a * L_BIG).x
@@ -510,28 +510,24 @@ def dem_column_once(a):
 
 
 def dem_and_mpm(a, dx_cells=32, method="lagrangian"):
-    """The DEM column of aspect ratio about a (width L_DEM), and the continuum column of the
-    same width and the DEM's measured height (rounded to a point spacing, the Eulerian mesh's
-    cell side being the same dx/2), on dx = L_DEM/dx_cells, with the same floor (the glued
-    balls' roughness: mu_w = 0.40, above the continuum's mu_s), released on both sides (the
-    DEM's frictionless wall stands for that symmetry plane); `method` "lagrangian" (the
-    material point method) or "eulerian" (vibroflow.continuum.eulerian.column, the same set-up
-    on the fixed mesh).  Returns ((L-L0)/L0, H/L0) of each and the DEM record."""
+    """The DEM column of aspect ratio about a (width L_DEM), and the continuum column of the same
+    width and the DEM's measured height (rounded to a point spacing, the Eulerian mesh's cell side
+    being the same dx/2), on dx = L_DEM/dx_cells, with the same floor (the glued balls' roughness:
+    mu_w = 0.40, above the continuum's mu_s), released on both sides (the DEM's frictionless wall
+    stands for that symmetry plane); `method` "lagrangian" (the material point method) or "eulerian"
+    (vibroflow.continuum.eulerian.column, the same set-up on the fixed mesh; both run by
+    vibroflow.continuum.column.run_column). Returns ((L-L0)/L0, H/L0) of each and the DEM record."""
     dem = dem_column_once(a)
     assert dem["settled"]
     dem_dep = measure_deposit(dem["x"], dem["areas"], D)
     dx = L_DEM / dx_cells
     sp = 0.5 * dx
     H0 = sp * round(dem["H0"] / sp)
+    run = run_column(L_DEM, H0, dx, method=method)
+    assert run.settled
     if method == "eulerian":
-        from vibroflow.continuum.eulerian.column import run_column as run_eulerian
-
-        run = run_eulerian(L_DEM, H0, dx)
-        assert run.settled
         assert abs(run.mass_error) < 1e-12
         return dem_dep.normalised(L_DEM), run.deposit().normalised(L_DEM), dem
-    run = run_column(L_DEM, H0, dx)
-    assert run.settled
     return dem_dep.normalised(L_DEM), mpm_deposit(run).normalised(L_DEM), dem
 
 
@@ -614,7 +610,7 @@ def test_mpm_runout_is_time_step_converged_with_flip_not_with_apic():
     """a = 3, L0 = 1 m, dx = L0/10, rough floor: the run-out against the Courant number.  APIC
     (flip = 0) damps the flow at every step (tests/test_mpm.py, the free grains), so its
     run-out falls as the steps multiply (measured: 5.72 at cfl 0.3, 3.84 at cfl 0.03, -33 %);
-    the FLIP-APIC blend (flip = 0.99, vibroflow.continuum.mpm.MPMSystem.flip) moves by less
+    the FLIP-APIC blend (flip = 0.99, vibroflow.continuum.mpm.solver.MPMSystem.flip) moves by less
     than a third of that (measured 5.35 and 5.88, +10 %).  With it, the continuum's own
     run-out (5.4 - 5.9) is 35 - 50 % above Lube et al. 2005's 3.95, and its height (0.90 -
     0.93 L0) 40 % below their a^(2/5) = 1.55: the planar laws are missed by the model, not by

@@ -181,7 +181,9 @@ def test_run_option_takes_k_dil_from_the_calibration():
     """`dilatancy = true` (run options) switches the option on with the calibration's measured
     [dilatancy] K_dil, and is refused without one; an initial excess packing is carried to the
     bed without changing its solid volume (the DEM's balls)."""
-    from vibroflow.continuum.run import LagrangianOptions, bed_area, material_of
+    from vibroflow.continuum.bed import bed_area
+    from vibroflow.continuum.formulation import formulation
+    from vibroflow.continuum.material import material_of
     from vibroflow.io.calibration_file import Calibration
     from vibroflow.scenario.io import load_scenario
 
@@ -205,7 +207,7 @@ def test_run_option_takes_k_dil_from_the_calibration():
     for m in (mat, dense):
         assert bed_area(sc, m) * m.initial_density == pytest.approx(solid * 7800.0, rel=1e-12)
     with pytest.raises(InputError, match="dilatancy"):
-        LagrangianOptions(dilatancy="yes")
+        formulation("lagrangian").options(dilatancy="yes")
 
 
 @pytest.mark.slow

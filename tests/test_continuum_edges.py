@@ -12,10 +12,12 @@ import pytest
 
 from tests.cli_helpers import one_line_error as _one_line
 
-from vibroflow.continuum import run as R
 from vibroflow.continuum.checkpoint import CHECKSUM_KEY
-from vibroflow.continuum.eulerian.run import EulerianOptions, run_eulerian
-from vibroflow.continuum.run import CHECKPOINT_NAME, FAULT_SIGINT_ENV, run_lagrangian
+from vibroflow.continuum.files import CHECKPOINT_NAME
+from vibroflow.continuum.formulation import formulation
+from vibroflow.continuum.mpm import formulation as mpm_formulation
+from vibroflow.continuum.timeline import FAULT_SIGINT_ENV
+from vibroflow.continuum.tub_run import run_continuum
 from vibroflow.errors import InputError, Interrupted
 from vibroflow.scenario.io import load_scenario
 
@@ -73,10 +75,11 @@ def stopped(tmp_path_factory):
     """A Lagrangian and an Eulerian run of the short scenarios stopped with a checkpoint."""
     tmp = tmp_path_factory.mktemp("stopped")
     s = load_scenario("tub47-quick", SHORT)
-    assert run_lagrangian(s, tmp / "lagrangian", stop_after_steps=40) is None
+    assert run_continuum(s, tmp / "lagrangian", stop_after_steps=40) is None
     se = load_scenario("tub47-quick", SHORT_EULERIAN)
-    opt = EulerianOptions(dx=0.015)
-    assert run_eulerian(se, tmp / "eulerian", options=opt, stop_after_steps=40) is None
+    opt = formulation("eulerian").options(dx=0.015)
+    assert run_continuum(se, tmp / "eulerian", "eulerian", options=opt,
+                         stop_after_steps=40) is None
     return {"lagrangian": (tmp / "lagrangian", s, {}),
             "eulerian": (tmp / "eulerian", se, {"options": opt})}
 
@@ -131,7 +134,7 @@ def test_damaged_lagrangian_checkpoint_is_refused_in_one_line(stopped, tmp_path,
     out, s, _ = _damaged_copy(stopped, "lagrangian", tmp_path, damage)
     before = (out / CHECKPOINT_NAME).read_bytes()
     with pytest.raises(InputError) as e:
-        run_lagrangian(s, out, resume=True)
+        run_continuum(s, out, resume=True)
     assert e.value.message == (f"--resume: {out / CHECKPOINT_NAME} is damaged "
                                f"({DAMAGE[damage][1]}); run without --resume to start afresh")
     assert (out / CHECKPOINT_NAME).read_bytes() == before  # left as found
@@ -142,7 +145,7 @@ def test_damaged_lagrangian_checkpoint_is_refused_in_one_line(stopped, tmp_path,
 def test_damaged_eulerian_checkpoint_is_refused_in_one_line(stopped, tmp_path, damage):
     out, s, kw = _damaged_copy(stopped, "eulerian", tmp_path, damage)
     with pytest.raises(InputError) as e:
-        run_eulerian(s, out, resume=True, **kw)
+        run_continuum(s, out, "eulerian", resume=True, **kw)
     assert e.value.message == (f"--resume: {out / CHECKPOINT_NAME} is damaged "
                                f"({DAMAGE[damage][1]}); run without --resume to start afresh")
 
@@ -163,7 +166,7 @@ def test_checkpoint_carries_its_checksum_and_another_scenario_is_still_refused(s
         assert CHECKSUM_KEY in f.files and len(str(f[CHECKSUM_KEY])) == 64
     other = load_scenario("tub47-quick", SHORT + ["fill.count=380"])
     with pytest.raises(InputError, match="is the checkpoint of another scenario"):
-        run_lagrangian(other, out, resume=True)
+        run_continuum(other, out, resume=True)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -183,15 +186,16 @@ def test_ctrl_c_checkpoints_and_the_resume_gives_the_uninterrupted_numbers(
     time and the folder, a checkpoint of that instant; --resume then ends with the same
     bulk_velocity.csv and summary, bit for bit, as a run never interrupted."""
     if method == "lagrangian":
-        s, kw, runner = load_scenario("tub47-quick", SHORT), {}, run_lagrangian
+        s, kw = load_scenario("tub47-quick", SHORT), {}
     else:
         s = load_scenario("tub47-quick", SHORT_EULERIAN)
-        kw, runner = {"options": EulerianOptions(dx=0.015)}, run_eulerian
-    whole = runner(s, tmp_path / "whole", **kw)
+        kw = {"options": formulation("eulerian").options(dx=0.015)}
+
+    whole = run_continuum(s, tmp_path / "whole", method, **kw)
     out = tmp_path / "split"
     monkeypatch.setenv(FAULT_SIGINT_ENV, str(whole["steps"] // 2))
     with pytest.raises(Interrupted) as e:
-        runner(s, out, **kw)
+        run_continuum(s, out, method, **kw)
     monkeypatch.delenv(FAULT_SIGINT_ENV)
     msg = e.value.message
     assert msg.startswith("interrupted at t = 0.0") and "\n" not in msg
@@ -200,7 +204,7 @@ def test_ctrl_c_checkpoints_and_the_resume_gives_the_uninterrupted_numbers(
     t = float(msg.split("t = ")[1].split(" s")[0])
     assert 0.3 * s.run.duration < t < 0.9 * s.run.duration
     assert (out / CHECKPOINT_NAME).is_file() and not (out / "summary.json").exists()
-    resumed = runner(s, out, resume=True, **kw)
+    resumed = run_continuum(s, out, method, resume=True, **kw)
     assert not (out / CHECKPOINT_NAME).exists()
     assert (out / "bulk_velocity.csv").read_bytes() == \
         (tmp_path / "whole" / "bulk_velocity.csv").read_bytes()
@@ -213,9 +217,9 @@ def test_ctrl_c_while_settling_says_there_is_nothing_to_resume(tmp_path, monkeyp
     def ctrl_c(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(R, "advance", ctrl_c)  # the settling's first steps
+    monkeypatch.setattr(mpm_formulation, "advance", ctrl_c)  # the settling's first steps
     with pytest.raises(Interrupted) as e:
-        run_lagrangian(s, tmp_path / "o")
+        run_continuum(s, tmp_path / "o")
     assert e.value.message == "interrupted while settling; nothing to resume, run again"
     assert not (tmp_path / "o" / CHECKPOINT_NAME).exists()
 
@@ -227,7 +231,7 @@ def test_second_ctrl_c_stops_at_once_without_a_checkpoint(tmp_path, monkeypatch)
 
     s = load_scenario("tub47-quick", SHORT)
     calls = {"n": 0}
-    advance = R.advance
+    advance = mpm_formulation.advance
 
     def twice(system, state, m):
         advance(system, state, m)
@@ -237,9 +241,9 @@ def test_second_ctrl_c_stops_at_once_without_a_checkpoint(tmp_path, monkeypatch)
                 os.kill(os.getpid(), signal.SIGINT)
                 os.kill(os.getpid(), signal.SIGINT)
 
-    monkeypatch.setattr(R, "advance", twice)
+    monkeypatch.setattr(mpm_formulation, "advance", twice)
     with pytest.raises(Interrupted) as e:
-        run_lagrangian(s, tmp_path / "o")
+        run_continuum(s, tmp_path / "o")
     assert e.value.message.startswith("interrupted at t = ")
     assert e.value.message.endswith(", before a first checkpoint; nothing to resume, run again")
     assert not (tmp_path / "o" / CHECKPOINT_NAME).exists()

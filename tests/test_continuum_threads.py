@@ -16,12 +16,15 @@ import numba
 import numpy as np
 import pytest
 
-from vibroflow.continuum import run as lag_run
+from vibroflow.continuum.bed import bed_area
 from vibroflow.continuum.boundary import Plane
-from vibroflow.continuum.eulerian import run as eul_run
 from vibroflow.continuum.eulerian import solver as eul
+from vibroflow.continuum.eulerian.formulation import bed_masses
+from vibroflow.continuum.formulation import formulation
 from vibroflow.continuum.grid_update import TubFrame
-from vibroflow.continuum.mpm import MPMSystem, init_state, run_steps
+from vibroflow.continuum.material import material_of
+from vibroflow.continuum.mpm.formulation import settled_bed
+from vibroflow.continuum.mpm.solver import MPMSystem, init_state, run_steps
 from vibroflow.scenario.io import load_scenario
 from vibroflow.tub.motion import TubMotion
 
@@ -42,11 +45,11 @@ def _threads(n):
 def _lagrangian(scenario, chunks, threads, steps=300):
     _threads(threads)
     try:
-        mat = lag_run.material_of(scenario, None)
+        mat = material_of(scenario, None)
         frame = TubFrame(TubMotion.of_scenario(scenario))
-        base, spacing = lag_run.make_system(scenario, mat, None, lag_run.LagrangianOptions(),
-                                            frame)
-        x, volume, density, stress, h = lag_run.settled_bed(scenario, mat, spacing)
+        mpm = formulation("lagrangian")
+        base = mpm.make_system(scenario, mat, None, mpm.options(), frame)
+        x, volume, density, stress, h = settled_bed(scenario, mat, 0.5 * base.grid.dx)
         lid = Plane((0.0, h), (0.0, -1.0), base.boundaries[0].stiffness, friction=0.3,
                     velocity=(0.0, -0.3))
         system = MPMSystem(base.grid, mat, base.dt, frame, base.boundaries + [lid],
@@ -64,12 +67,12 @@ def _lagrangian(scenario, chunks, threads, steps=300):
 def _eulerian(scenario, chunks, threads, steps=150):
     _threads(threads)
     try:
-        mat = lag_run.material_of(scenario, None)
+        mat = material_of(scenario, None)
         frame = TubFrame(TubMotion.of_scenario(scenario))
-        system = eul_run.make_system(scenario, mat, None, eul_run.EulerianOptions(), frame)
+        mesh = formulation("eulerian")
+        system = mesh.make_system(scenario, mat, None, mesh.options(), frame)
         system = dataclasses.replace(system, chunks=chunks)
-        mass, density, stress, _ = eul_run.bed_masses(
-            system, lag_run.bed_area(scenario, mat), 9.81)
+        mass, density, stress, _ = bed_masses(system, bed_area(scenario, mat), 9.81)
         state = eul.init_state(system, mass, density, stress=stress)
         eul.run_steps(system, state, steps)
     finally:

@@ -24,6 +24,8 @@ from pathlib import Path
 import pytest
 
 from vibroflow.analysis.compare import field_difference, strengths_agree
+from vibroflow.continuum.formulation import formulation
+from vibroflow.continuum.tub_run import run_continuum
 from vibroflow.io.calibration_file import read_calibration
 from vibroflow.measure.bulk import read_csv
 from vibroflow.scenario.io import load_scenario
@@ -68,16 +70,8 @@ def _against_seeds(out: Path) -> dict:
 def _run(method: str, case: str, out: Path, **options) -> dict:
     scenario = load_scenario(case)
     cal = read_calibration(DIRS[case] / "calibration.toml")
-    if method == "lagrangian":
-        from vibroflow.continuum.run import LagrangianOptions, run_lagrangian
-
-        summary = run_lagrangian(scenario, out, calibration=cal,
-                                 options=LagrangianOptions(**options))
-    else:
-        from vibroflow.continuum.eulerian.run import EulerianOptions, run_eulerian
-
-        summary = run_eulerian(scenario, out, calibration=cal,
-                               options=EulerianOptions(**options))
+    summary = run_continuum(scenario, out, method, calibration=cal,
+                            options=formulation(method).options(**options))
     result = {"summary": summary, **_against_dem(case, summary, out)}
     if case == "tub47":
         result["seeds"] = _against_seeds(out)
@@ -135,7 +129,7 @@ def test_regression_guard_field_on_tub47(runs, method, guard):
 
 
 def test_regression_guard_lagrangian_transfers_beat_one_transfer_a_step(runs, tmp_path):
-    """Regression guard of a model choice (continuum/run.py DEFAULT_TRANSFER_CFL): the
+    """Regression guard of a model choice (continuum/mpm/formulation.py DEFAULT_TRANSFER_CFL): the
     transfers' rate set apart from the step gives a field closer to the DEM's than one APIC
     transfer a step at cfl 0.075 (E 0.46 against seed 1)."""
     new = runs("lagrangian", "tub47")

@@ -261,16 +261,10 @@ def _deposit(L0, H0, dx, method):
     measured by the shared vibroflow.measure.column.measure_continuum_deposit; and the
     relative mass error of the Eulerian run (0 for the Lagrangian's, whose points keep their
     masses)."""
-    if method == "eulerian":
-        from vibroflow.continuum.eulerian.column import run_column
+    from vibroflow.continuum.column import run_column
 
-        run = run_column(L0, H0, dx)
-        err = run.mass_error
-    else:
-        from vibroflow.continuum.column import run_column
-
-        run = run_column(L0, H0, dx)
-        err = 0.0
+    run = run_column(L0, H0, dx, method=method)
+    err = run.mass_error
     assert run.settled
     dep = run.deposit()
     return (dep.runout - L0) / L0, dep.height / L0, err
@@ -302,7 +296,8 @@ def test_continuum_command_eulerian_writes_the_lagrangian_outputs(run_cli, tmp_p
     15 mm cells with the bed's solid fraction where it is dense, the grid fields at the 8
     samples of the last cycle, the mass conserved to round-off, no checkpoint left."""
     from vibroflow.measure.bulk import read_csv
-    from vibroflow.continuum.run import LagrangianOptions, run_lagrangian
+    from vibroflow.continuum.formulation import formulation
+    from vibroflow.continuum.tub_run import run_continuum
     from vibroflow.scenario.io import load_scenario
 
     out = tmp_path / "eul"
@@ -312,8 +307,8 @@ def test_continuum_command_eulerian_writes_the_lagrangian_outputs(run_cli, tmp_p
     assert r.returncode == 0, r.stderr
     assert "circulation" in r.stdout
     summary = json.loads((out / "summary.json").read_text())
-    lag = run_lagrangian(load_scenario("tub47-quick", SHORT), tmp_path / "lag",
-                         options=LagrangianOptions(dx=0.015))
+    lag = run_continuum(load_scenario("tub47-quick", SHORT), tmp_path / "lag",
+                         options=formulation("lagrangian").options(dx=0.015))
     assert set(summary) == set(lag)
     assert set(lag["continuum"]) <= set(summary["continuum"])
     assert set(summary["probes"]) == set(lag["probes"]) == {"P1", "P2", "P3", "P4", "P5"}
@@ -333,15 +328,17 @@ def test_continuum_command_eulerian_writes_the_lagrangian_outputs(run_cli, tmp_p
 def test_eulerian_resume_gives_the_uninterrupted_numbers_bit_for_bit(tmp_path):
     """A run stopped after 150 vibration steps and resumed from its checkpoint ends with the
     summary and cell table of a run never interrupted (wall times aside)."""
-    from vibroflow.continuum.eulerian.run import EulerianOptions, run_eulerian
+    from vibroflow.continuum.formulation import formulation
+    from vibroflow.continuum.tub_run import run_continuum
     from vibroflow.scenario.io import load_scenario
 
     s = load_scenario("tub47-quick", SHORT)
-    opt = EulerianOptions(dx=0.015)
-    whole = run_eulerian(s, tmp_path / "a", options=opt)
-    assert run_eulerian(s, tmp_path / "b", options=opt, stop_after_steps=150) is None
+    opt = formulation("eulerian").options(dx=0.015)
+    whole = run_continuum(s, tmp_path / "a", "eulerian", options=opt)
+    assert run_continuum(s, tmp_path / "b", "eulerian", options=opt,
+                         stop_after_steps=150) is None
     assert (tmp_path / "b" / "checkpoint.npz").is_file()
-    resumed = run_eulerian(s, tmp_path / "b", options=opt, resume=True)
+    resumed = run_continuum(s, tmp_path / "b", "eulerian", options=opt, resume=True)
     for d in (whole, resumed):
         for k in ("wall_time_s", "compile_time_s", "particle_steps_per_s", "bulk_velocity_csv"):
             d.pop(k)
@@ -414,10 +411,10 @@ def test_continuum_command_eulerian_bad_input(run_cli, tmp_path):
 def test_tub47_quick_run_conserves_mass(tmp_path):
     """Mass conserved within 0.5 % over a whole tub47-quick run (1.5 s of a bed thrown
     at 13 g); the conservative remap makes it round-off."""
-    from vibroflow.continuum.eulerian.run import run_eulerian
+    from vibroflow.continuum.tub_run import run_continuum
     from vibroflow.scenario.io import load_scenario
 
-    s = run_eulerian(load_scenario("tub47-quick", []), tmp_path / "eul")
+    s = run_continuum(load_scenario("tub47-quick", []), tmp_path / "eul", "eulerian")
     c = s["continuum"]
     assert abs(c["mass_error"]) < 5e-3 and c["mass_error_max_abs"] < 5e-3
     assert s["circulation"]["sense"] == "counterclockwise"  # the DEM's sense
@@ -454,15 +451,10 @@ def test_rough_floor_bad_height_is_one_line():
 def _rough_deposit(a: float, n: int, method: str):
     """(run-out (L_inf - L0)/L0, height H_inf/L0) of the column of L0 = 1 m, aspect ratio a,
     node spacing L0/n, on the rough floor (both formulations' no-slip grid floor, APIC)."""
-    if method == "eulerian":
-        from vibroflow.continuum.eulerian.column import run_column
+    from vibroflow.continuum.column import run_column
 
-        run = run_column(L_BIG, a * L_BIG, L_BIG / n, rough_floor=True)
-        assert abs(run.mass_error) < 1e-12
-    else:
-        from vibroflow.continuum.column import run_column
-
-        run = run_column(L_BIG, a * L_BIG, L_BIG / n, rough_floor=True)
+    run = run_column(L_BIG, a * L_BIG, L_BIG / n, rough_floor=True, method=method)
+    assert abs(run.mass_error) < 1e-12
     assert run.settled
     dep = run.deposit()
     return (dep.runout - L_BIG) / L_BIG, dep.height / L_BIG
@@ -502,12 +494,13 @@ def test_rough_floor_tall_column_runs_out_as_the_lagrangian():
 def test_sampled_solid_fraction_is_even_on_cells_that_do_not_divide_the_analysis_cell(
         tmp_path, monkeypatch):
     """The pseudo-balls of the mesh's cells are spread over each cell by the samples' R2 offsets
-    (eulerian.run.cell_offset), so a uniform bed reads as uniform on the 15 mm analysis cells
-    even when the mesh's cells (9.375 mm at the default dx of tub47-quick, 18.75 mm) do not
-    divide them: some analysis cells cover two rows of cell centres, some one.  With the balls
-    at the fixed centres the bed's interior is striped (on tub47: 0.62 +- 0.27, the DEM's
-    +- 0.006); spread, over this short run's 16 samples, it is even to the samples' resolution."""
-    import vibroflow.continuum.eulerian.run as ER
+    (eulerian.formulation.cell_offset), so a uniform bed reads as uniform on the 15 mm analysis
+    cells even when the mesh's cells (9.375 mm at the default dx of tub47-quick, 18.75 mm) do not
+    divide them: some analysis cells cover two rows of cell centres, some one. With the balls at the
+    fixed centres the bed's interior is striped (on tub47: 0.62 +- 0.27, the DEM's +- 0.006);
+    spread, over this short run's 16 samples, it is even to the samples' resolution."""
+    import vibroflow.continuum.eulerian.formulation as ER
+    from vibroflow.continuum.tub_run import run_continuum
     from vibroflow.measure.bulk import read_csv
     from vibroflow.scenario.io import load_scenario
 
@@ -523,10 +516,10 @@ def test_sampled_solid_fraction_is_even_on_cells_that_do_not_divide_the_analysis
         return table.solid_fraction[inner]
 
     scenario = load_scenario("tub47-quick", SHORT)
-    ER.run_eulerian(scenario, tmp_path / "spread")
+    run_continuum(scenario, tmp_path / "spread", "eulerian")
     spread = interior(tmp_path / "spread")
     monkeypatch.setattr(ER, "cell_offset", lambda j: (0.0, 0.0))
-    ER.run_eulerian(scenario, tmp_path / "centres")
+    run_continuum(scenario, tmp_path / "centres", "eulerian")
     centres = interior(tmp_path / "centres")
     print(f"\ninterior solid fraction: spread {spread.mean():.3f} +- {spread.std():.3f}, "
           f"at the centres {centres.mean():.3f} +- {centres.std():.3f}")

@@ -18,15 +18,17 @@ import numba
 import numpy as np
 import pytest
 
-from vibroflow.continuum import run as lag_run
-from vibroflow.continuum.eulerian import run as eul_run
+from vibroflow.continuum.bed import bed_area
 from vibroflow.continuum.eulerian import solver as eul
 from vibroflow.continuum.eulerian.advection import remap, remap_work
 from vibroflow.continuum.eulerian.face_velocity import face_velocities
+from vibroflow.continuum.eulerian.formulation import bed_masses
 from vibroflow.continuum.eulerian.mesh import EulerianMesh
 from vibroflow.continuum.eulerian.transfer import WeightTables, g2p_cells, p2g_cells
+from vibroflow.continuum.formulation import formulation
 from vibroflow.continuum.g2p import g2p
 from vibroflow.continuum.grid_update import TubFrame
+from vibroflow.continuum.material import material_of
 from vibroflow.continuum.p2g import p2g
 from vibroflow.scenario.io import load_scenario
 from vibroflow.tub.motion import TubMotion
@@ -214,16 +216,16 @@ def test_parallel_loop_gives_the_serial_loops_numbers_on_one_thread_and_on_two()
     """The compiled loop with numba's parallel loops (forced on tub47-quick's small mesh,
     serial_below = 0) against the serial loop that small meshes use (solver.SERIAL_BELOW)."""
     scenario = load_scenario("tub47-quick", [])
-    mat = lag_run.material_of(scenario, None)
+    mat = material_of(scenario, None)
     frame = TubFrame(TubMotion.of_scenario(scenario))
-    base = eul_run.make_system(scenario, mat, None, eul_run.EulerianOptions(), frame)
+    mesh_formulation = formulation("eulerian")
+    base = mesh_formulation.make_system(scenario, mat, None, mesh_formulation.options(), frame)
 
     def run(threads, serial_below):
         if numba.config.NUMBA_NUM_THREADS < threads:
             pytest.skip(f"numba has fewer than {threads} threads here")
         system = dataclasses.replace(base, serial_below=serial_below)
-        mass, density, stress, _ = eul_run.bed_masses(system, lag_run.bed_area(scenario, mat),
-                                                      9.81)
+        mass, density, stress, _ = bed_masses(system, bed_area(scenario, mat), 9.81)
         state = eul.init_state(system, mass, density, stress=stress)
         numba.set_num_threads(threads)
         try:

@@ -18,7 +18,7 @@ from vibroflow.continuum.rheology import mu_of_I
 from vibroflow.continuum.stress_update import update_stress_points
 from vibroflow.continuum.grid import Grid
 from vibroflow.continuum.grid_update import LabFrame
-from vibroflow.continuum.mpm import MPMSystem, init_state, run_steps
+from vibroflow.continuum.mpm.solver import MPMSystem, init_state, run_steps
 from vibroflow.continuum.timestep import stable_dt
 from vibroflow.errors import InputError
 
@@ -331,7 +331,7 @@ def test_tub_bed_holds_the_dem_solid_volume_and_its_weight():
     """The initial bed holds the DEM's solid volume (fill.count balls over L_y) at the critical
     solid fraction, and its lithostatic stress carries its weight: sigma_zz at the bottom is
     rho_c g h."""
-    from vibroflow.continuum.run import settled_bed
+    from vibroflow.continuum.mpm.formulation import settled_bed
     from vibroflow.scenario.io import load_scenario
 
     s = load_scenario("tub47-quick")
@@ -349,13 +349,16 @@ def test_settled_bed_weight_is_carried_by_the_u_wall():
     """A bed in the still U (tub47-quick without partitions, so nothing else can hold it) comes
     to rest with the U wall's penalty contacts carrying its weight: the vertical wall force,
     averaged over the last 0.1 s of 0.3 s, equals sum m g within 2%."""
-    from vibroflow.continuum.run import make_system, material_of, settled_bed, LagrangianOptions
+    from vibroflow.continuum.formulation import formulation
+    from vibroflow.continuum.material import material_of
+    from vibroflow.continuum.mpm.formulation import settled_bed
     from vibroflow.scenario.io import load_scenario
 
     s = load_scenario("tub47-quick", ["tub.periodic=true"])
     mat = material_of(s, None)
-    system, spacing = make_system(s, mat, None, LagrangianOptions(), LabFrame((0.0, -G_ACC)))
-    x, volume, density, stress, h = settled_bed(s, mat, spacing)
+    mpm = formulation("lagrangian")
+    system = mpm.make_system(s, mat, None, mpm.options(), LabFrame((0.0, -G_ACC)))
+    x, volume, density, stress, h = settled_bed(s, mat, 0.5 * system.grid.dx)
     state = init_state(system, x, volume, density, stress=stress)
     weight = state.mass.sum() * G_ACC
     fz = []
@@ -441,7 +444,7 @@ def test_free_flight_in_the_vibrating_tub_frame_is_ballistic_in_the_lab():
     grid_update.py from vibroflow.tub.motion), seen from the lab, flies on the parabola
     r0 + v0 t + g t^2 / 2; the error falls with dt."""
     from vibroflow.continuum.grid_update import TubFrame
-    from vibroflow.continuum.run import _to_lab
+    from vibroflow.continuum.sampling import to_lab
     from vibroflow.tub.motion import TubMotion, pose, rigid_velocity
 
     motion = TubMotion(amplitude_theta=0.05)  # a large turn, so the rotation terms matter
@@ -459,7 +462,7 @@ def test_free_flight_in_the_vibrating_tub_frame_is_ballistic_in_the_lab():
                            v=(v_lab0 - v_tub0)[None])
         run_steps(system, state, int(round(T / dt)))
         pos, vel = np.zeros((1, 3)), np.zeros((1, 3))
-        _to_lab(state.x, state.v, np.array(frame.pose(state.t)), motion.pivot_x,
+        to_lab(state.x, state.v, np.array(frame.pose(state.t)), motion.pivot_x,
                 motion.pivot_z, pos, vel, 0.0)
         r_exact = p0 + v_lab0 * T + 0.5 * np.array([0.0, -G_ACC]) * T * T
         v_exact = v_lab0 + np.array([0.0, -G_ACC]) * T
@@ -544,13 +547,13 @@ def test_bed_on_vibrating_plate_leaves_and_lands_as_the_bouncing_ball(gamma, cyc
 def test_continuum_run_is_reproducible(tmp_path):
     """The same scenario gives the same numbers (DEVELOPERS.md): two runs write identical cell
     tables and summaries (wall times aside)."""
-    from vibroflow.continuum.run import run_lagrangian
+    from vibroflow.continuum.tub_run import run_continuum
     from vibroflow.scenario.io import load_scenario
 
     s = load_scenario("tub47-quick", ["run.duration=0.1", "run.average_last=0.1"])
     runs = []
     for k in range(2):
-        summary = run_lagrangian(s, tmp_path / f"r{k}")
+        summary = run_continuum(s, tmp_path / f"r{k}")
         for key in ("wall_time_s", "compile_time_s", "particle_steps_per_s",
                     "bulk_velocity_csv"):
             summary.pop(key)
@@ -570,21 +573,23 @@ def test_continuum_resume_gives_the_uninterrupted_numbers_bit_for_bit(tmp_path):
     summary.json; a checkpoint of other options is refused."""
     import json
 
-    from vibroflow.continuum.run import CHECKPOINT_NAME, LagrangianOptions, run_lagrangian
+    from vibroflow.continuum.files import CHECKPOINT_NAME
+    from vibroflow.continuum.formulation import formulation
+    from vibroflow.continuum.tub_run import run_continuum
     from vibroflow.scenario.io import load_scenario
 
     over = ["run.duration=0.05", "run.average_last=0.043", "run.batches=2"]
     s = load_scenario("tub47-quick", over)
-    full = run_lagrangian(s, tmp_path / "full", vtk=True)
+    full = run_continuum(s, tmp_path / "full", vtk=True)
     n_steps = full["steps"]
     split = tmp_path / "split"
     busy = load_scenario("tub47-quick", over + ["run.checkpoint_every=1e-9"])
-    assert run_lagrangian(s, split, vtk=True, stop_after_steps=n_steps // 2 + 7) is None
+    assert run_continuum(s, split, vtk=True, stop_after_steps=n_steps // 2 + 7) is None
     assert (split / CHECKPOINT_NAME).is_file() and not (split / "summary.json").exists()
-    with pytest.raises(InputError, match="another scenario, calibration or options"):
-        run_lagrangian(s, split, options=LagrangianOptions(cfl=0.25), resume=True)
-    assert run_lagrangian(busy, split, vtk=True, resume=True, stop_after_steps=60) is None
-    resumed = run_lagrangian(s, split, vtk=True, resume=True)
+    with pytest.raises(InputError, match="another scenario, calibration, method or options"):
+        run_continuum(s, split, options=formulation("lagrangian").options(cfl=0.25), resume=True)
+    assert run_continuum(busy, split, vtk=True, resume=True, stop_after_steps=60) is None
+    resumed = run_continuum(s, split, vtk=True, resume=True)
     assert not (split / CHECKPOINT_NAME).exists()
     for summary in (full, resumed):
         for key in ("wall_time_s", "compile_time_s", "particle_steps_per_s",
@@ -627,7 +632,7 @@ def test_continuum_grid_fields_carry_mass_momentum_and_uniform_values():
 def test_continuum_blowup_names_the_points_and_the_time_step():
     """A block dropped on a stiff plate with 30 times the stable time step blows up; the error
     names the points and says the time step is too large for the stiffness."""
-    from vibroflow.continuum.mpm import ContinuumBlowUp
+    from vibroflow.continuum.mpm.solver import ContinuumBlowUp
 
     mat = ContinuumMaterial()
     dx = 0.01
@@ -647,15 +652,16 @@ def test_continuum_blowup_names_the_points_and_the_time_step():
 
 
 def test_shear_rate_map_holds_both_measures_and_infers_impacts(tmp_path):
-    """The continuum's shear-rate map (continuum.run.write_shear_rate_csv): each analysis cell
-    holds the phase-resolved field's cycle-mean shear rate at its centre (analysis.phase_shear:
-    here a steady simple shear v_x = G z sampled on a lattice, so G at the interior cells) and
-    the mean over samples of its points' instantaneous rates (Samples.add_cell_rates: a linear
-    field a + b x over points symmetric in each cell gives a + b x_cell exactly); the impact
-    columns are the calibrated c0 + c1 d gamma_dot of the phase-field rate, with the relation
-    fitted on the continuum's measure (c0_cells_m_s, c1_cells) preferred to the fine one."""
+    """The continuum's shear-rate map (continuum.shear_outputs.write_shear_rate_csv): each analysis
+    cell holds the phase-resolved field's cycle-mean shear rate at its centre (analysis.phase_shear:
+    here a steady simple shear v_x = G z sampled on a lattice, so G at the interior cells) and the
+    mean over samples of its points' instantaneous rates (Samples.add_cell_rates: a linear field a +
+    b x over points symmetric in each cell gives a + b x_cell exactly); the impact columns are the
+    calibrated c0 + c1 d gamma_dot of the phase-field rate, with the relation fitted on the
+    continuum's measure (c0_cells_m_s, c1_cells) preferred to the fine one."""
     from vibroflow.measure.phase_shear import PhaseShearAccumulator
-    from vibroflow.continuum.run import Samples, impact_relation, write_shear_rate_csv
+    from vibroflow.continuum.sampling import Samples
+    from vibroflow.continuum.shear_outputs import impact_relation, write_shear_rate_csv
     from vibroflow.io.calibration_file import Calibration, ImpactRelation
 
     h, a, b, G, length = 0.015, 2.0, 40.0, 1.5, 0.0635
@@ -738,7 +744,7 @@ def test_a_lone_expanding_point_stays_a_granular_gas_not_a_giant():
 
 
 # ----------------------------------------------------------------------------------------------
-# the FLIP fraction of the points' velocity update (MPMSystem.flip, LagrangianOptions.flip)
+# the FLIP fraction of the points' velocity update (MPMSystem.flip, ContinuumOptions.flip)
 
 def _free_cloud(flip: float):
     """A cloud of stress-free points (density below rho_c: disconnected grains) in free space
@@ -875,8 +881,8 @@ def test_bed_viscosity_leaves_a_rigid_motion_alone_and_bad_values_are_errors():
     """The viscous stress is 2 eta D (plus eta tr D I - 2/3 eta tr D I): zero for a rigid
     rotation, none on disconnected material; a negative or non-finite viscosity is a one-line
     error naming the field."""
+    from vibroflow.continuum.formulation import formulation
     from vibroflow.continuum.stress_update import damped_stress
-    from vibroflow.continuum.run import LagrangianOptions
 
     mat = ContinuumMaterial(bed_viscosity=1000.0)
     L = np.array([[0.0, 2.0, -2.0, 0.0], [1.0, 0.5, 0.5, -3.0], [1.0, 0.5, 0.5, -3.0]])
@@ -893,4 +899,4 @@ def test_bed_viscosity_leaves_a_rigid_motion_alone_and_bad_values_are_errors():
             ContinuumMaterial(bed_viscosity=bad)
         assert "\n" not in str(err.value)
         with pytest.raises(InputError, match="bed_viscosity"):
-            LagrangianOptions(bed_viscosity=bad)
+            formulation("lagrangian").options(bed_viscosity=bad)

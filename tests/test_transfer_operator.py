@@ -6,7 +6,7 @@ motion, Jiang et al. 2015), so it must give the explicit pair's grid velocities;
 affine velocity field and the grid's momentum exactly (APIC's properties); and a step of
 Courant number cfl making n transfers must damp the grid-scale motion as a one-transfer APIC
 step of Courant number cfl / n does, whatever the step: the property the tub runs' default
-rests on (continuum/run.py, DEFAULT_TRANSFER_CFL).
+rests on (continuum/options.py; each formulation's DEFAULT_TRANSFER_CFL).
 """
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ from vibroflow.continuum.constitutive import ContinuumMaterial
 from vibroflow.continuum.g2p import g2p
 from vibroflow.continuum.grid import Grid
 from vibroflow.continuum.grid_update import MASS_EPS, LabFrame
-from vibroflow.continuum.mpm import MPMSystem, init_state, run_steps
+from vibroflow.continuum.mpm.solver import MPMSystem, init_state, run_steps
 from vibroflow.continuum.p2g import p2g
 from vibroflow.continuum.timestep import stable_dt, transfers_per_step
 from vibroflow.continuum.transfer_operator import operator_of_points, transfer_rows
@@ -115,13 +115,13 @@ def test_transfers_per_step():
     for bad in (-0.1, float("nan"), float("inf"), True):
         with pytest.raises(InputError, match="transfer_cfl"):
             transfers_per_step(0.3, bad)
-    from vibroflow.continuum.eulerian.run import EulerianOptions
-    from vibroflow.continuum.run import LagrangianOptions
+    from vibroflow.continuum.formulation import formulation
 
-    assert LagrangianOptions().transfers() == 20
-    assert EulerianOptions().transfers() == 8
-    assert LagrangianOptions(flip=0.99).transfers() == 1
-    assert LagrangianOptions(transfer_cfl=0).transfers() == 1
+    mpm_options = formulation("lagrangian").options
+    assert mpm_options().transfers() == 20
+    assert formulation("eulerian").options().transfers() == 8
+    assert mpm_options(flip=0.99).transfers() == 1
+    assert mpm_options(transfer_cfl=0).transfers() == 1
     with pytest.raises(InputError, match="transfers"):
         MPMSystem(Grid.covering(0.0, 0.1, 0.0, 0.1, DX), ContinuumMaterial(), 1e-4,
                   transfers=0)
@@ -185,8 +185,8 @@ def test_grid_conditions_hold_after_the_transfers(transfers, axisymmetric):
     update itself, while the column above them moves."""
     import dataclasses
 
-    from vibroflow.continuum.column import column_state, column_system
-    from vibroflow.continuum.mpm import advance
+    from vibroflow.continuum.mpm.column import column_state, column_system
+    from vibroflow.continuum.mpm.solver import advance
 
     base = column_system(0.2, 0.2, 0.02, axisymmetric=axisymmetric, rough_floor=True)
     system = dataclasses.replace(base, transfers=transfers)
@@ -257,7 +257,7 @@ def test_a_transfer_damps_a_mode_at_fourth_order_in_k_dx():
     at fourth order: 1 - amplitude = alpha (k dx)^4, alpha -> 0.024 (measured 0.0236, 0.0240,
     0.0241 at k dx = 0.39, 0.20, 0.098), while over (k dx)^2 the loss falls sixteenfold from the
     first to the last.  This is why the tub runs hold transfer_cfl / dx^3 fixed across grids
-    (continuum/run.py, damping_transfer_cfl): the transfers are a hyperviscosity alpha c dx^3 /
+    (continuum/options.py, damping_transfer_cfl): the transfers are a hyperviscosity alpha c dx^3 /
     transfer_cfl."""
     kdx = np.array([2.0 * math.pi / n for n in (16, 32, 64)])
     loss = np.array([_mode_loss(n) for n in (16, 32, 64)])
@@ -268,19 +268,20 @@ def test_a_transfer_damps_a_mode_at_fourth_order_in_k_dx():
 
 def test_the_damping_is_the_same_on_every_grid_at_a_fixed_damping_length():
     """A shear wave of 8 cm (k dx = 0.39 and 0.20, where a transfer's loss is alpha (k dx)^4:
-    test above) on grids of 5 and 2.5 mm, the transfers of LagrangianOptions with transfer_cfl
+    test above) on grids of 5 and 2.5 mm, the transfers of ContinuumOptions with transfer_cfl
     0.025 at a damping length of 5 mm (cfl 0.4: 16 and 128 transfers a step): the kinetic
     energy left after 4 ms is the same within 8 % (measured 0.202 and 0.211), where
     damping_length = dx (16 transfers a step on both grids) leaves the fine grid's wave far
     less damped (0.369): with it the damping would be a property of the grid."""
-    from vibroflow.continuum.run import LagrangianOptions
+    from vibroflow.continuum.formulation import formulation
 
-    rule = LagrangianOptions(cfl=0.4, transfer_cfl=0.025, damping_length=0.005)
+    mpm_options = formulation("lagrangian").options
+    rule = mpm_options(cfl=0.4, transfer_cfl=0.025, damping_length=0.005)
     coarse_n, fine_n = rule.transfers(0.005), rule.transfers(0.0025)
     assert (coarse_n, fine_n) == (16, 128)
     coarse = _shear_wave_energy(0.4, coarse_n, dx=0.005, wavelength=0.08)
     fine = _shear_wave_energy(0.4, fine_n, dx=0.0025, wavelength=0.08)
-    old_n = LagrangianOptions(cfl=0.4, transfer_cfl=0.025, damping_length=0.0025).transfers(
+    old_n = mpm_options(cfl=0.4, transfer_cfl=0.025, damping_length=0.0025).transfers(
         0.0025)
     assert old_n == 16
     old = _shear_wave_energy(0.4, old_n, dx=0.0025, wavelength=0.08)
@@ -291,28 +292,29 @@ def test_the_damping_is_the_same_on_every_grid_at_a_fixed_damping_length():
 
 
 def test_the_transfers_follow_the_grid_from_the_default_one():
-    """The tub runs' rule (continuum/run.py): on the default grid the default 20 (Lagrangian)
+    """The tub runs' rule (continuum/options.py): on the default grid the default 20 (Lagrangian)
     and 8 (Eulerian) transfers a step; on half of it eight times as many; a damping length
     equal to the grid gives transfer_cfl on every grid; a bad damping length is a one-line error."""
-    from vibroflow.continuum.eulerian.run import EulerianOptions
-    from vibroflow.continuum.run import LagrangianOptions, options_record
+    from vibroflow.continuum.formulation import formulation
+    from vibroflow.continuum.options import options_record
     from vibroflow.scenario.io import load_scenario
 
     tub = load_scenario("tub47")
     d3 = 3 * tub.fill.diameter
+    lag, eul = formulation("lagrangian"), formulation("eulerian")
     # each formulation's default grid: 3 diameters, the Eulerian's rounded to fill the tub
-    assert LagrangianOptions().grid(tub) == pytest.approx(d3)
-    assert EulerianOptions().grid(tub) == pytest.approx(0.01875)
-    assert LagrangianOptions().transfers_on(tub) == 20
-    assert LagrangianOptions(dx=d3 / 2).transfers_on(tub) == 160
-    assert LagrangianOptions(dx=d3 / 2, damping_length=d3 / 2).transfers_on(tub) == 20
-    assert EulerianOptions().transfers_on(tub) == 8
-    assert EulerianOptions(dx=0.009375).transfers_on(tub) == 64
-    assert LagrangianOptions(dx=d3 / 2, transfer_cfl=0).transfers_on(tub) == 1
+    assert lag.grid(lag.options(), tub) == pytest.approx(d3)
+    assert eul.grid(eul.options(), tub) == pytest.approx(0.01875)
+    assert lag.transfers_on(lag.options(), tub) == 20
+    assert lag.transfers_on(lag.options(dx=d3 / 2), tub) == 160
+    assert lag.transfers_on(lag.options(dx=d3 / 2, damping_length=d3 / 2), tub) == 20
+    assert eul.transfers_on(eul.options(), tub) == 8
+    assert eul.transfers_on(eul.options(dx=0.009375), tub) == 64
+    assert lag.transfers_on(lag.options(dx=d3 / 2, transfer_cfl=0), tub) == 1
     for bad in (0.0, -1.0, float("nan"), True):
         with pytest.raises(InputError, match="damping_length"):
-            LagrangianOptions(damping_length=bad)
+            lag.options(damping_length=bad)
     # a run on a grid of its own names its damping length, so it is not taken for one made
     # with damping_length = dx
-    assert options_record(LagrangianOptions())["damping_length"] is None
-    assert options_record(LagrangianOptions(dx=0.01))["damping_length"] is not None
+    assert options_record(lag.options())["damping_length"] is None
+    assert options_record(lag.options(dx=0.01))["damping_length"] is not None

@@ -28,6 +28,7 @@ import typer
 from pydantic import ValidationError
 
 from vibroflow import __version__
+from vibroflow.continuum.formulation import FORMULATIONS
 from vibroflow.errors import InputError, Interrupted
 
 EXIT_INPUT = 2
@@ -278,7 +279,7 @@ def continuum(
     out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")],
     method: Annotated[str, typer.Option(
         "--method", help="Formulation: lagrangian (material point method) or eulerian (fixed "
-                         "mesh of the tub).")] = "lagrangian",
+                         "mesh of the tub); continuum/formulation.py.")] = "lagrangian",
     calibration: Annotated[Optional[Path], typer.Option(
         "--calibration", help="calibration.toml, or a run folder holding one; default: "
                               "tub47's parameters.")] = None,
@@ -293,17 +294,17 @@ def continuum(
                              "cell's packing (Sawicki & Swidzinski 1989), from the calibration's "
                              "\\[compaction] (vibroflow calibrate --dilatancy).")] = False,
     dx: Annotated[Optional[float], typer.Option(
-        "--dx", help="Grid spacing (m); default 3 ball diameters (why: continuum/run.py, "
+        "--dx", help="Grid spacing (m); default 3 ball diameters (why: continuum/options.py, "
                     "DEFAULT_DX_DIAMETERS).")] = None,
     cfl: Annotated[Optional[float], typer.Option(
-        "--cfl", help="Courant number of the time step in (0, 1]; default 0.3 (continuum/run.py "
-                      "DEFAULT_CFL).")] = None,
+        "--cfl", help="Courant number of the time step in (0, 1]; default 0.3 "
+                      "(continuum/options.py DEFAULT_CFL).")] = None,
     transfer_cfl: Annotated[Optional[float], typer.Option(
         "--transfer-cfl", help="Courant number of the APIC transfers (> 0): each step makes "
                                "round(cfl / transfer_cfl) of them, so their damping of the "
                                "grid-scale motion does not depend on the step; default 0.015 "
                                "(Lagrangian) and 0.0375 (Eulerian), chosen with the grid to "
-                               "match the DEM (continuum/run.py DEFAULT_TRANSFER_CFL), on a "
+                               "match the DEM (continuum/options.py), on a "
                                "grid of --damping-length; 0: one transfer a step (always so "
                                "with --flip > 0).")] = None,
     damping_length: Annotated[Optional[float], typer.Option(
@@ -311,16 +312,16 @@ def continuum(
                                  "another grid the transfers are made at transfer_cfl (dx / "
                                  "damping_length)^3, so that their damping of the flow (a "
                                  "hyperviscosity) is the same on every grid; default the "
-                                 "default grid's spacing (continuum/run.py).")] = None,
+                                 "default grid's spacing (continuum/options.py).")] = None,
     stiffness_factor: Annotated[float, typer.Option(
         "--stiffness-factor", help="Multiply the elastic moduli (and the default wall "
                                    "stiffness) by this factor in (0, 1]: sqrt(factor) times "
                                    "the steps, a physics change like the DEM's reduced "
-                                   "Young's modulus (LagrangianOptions).")] = 1.0,
+                                   "Young's modulus (ContinuumOptions).")] = 1.0,
     flip: Annotated[float, typer.Option(
         "--flip", help="Lagrangian only: the FLIP fraction in [0, 1] of the points' velocity "
                        "update (0: APIC, whose transfers damp the flow at every step; "
-                       "LagrangianOptions).")] = 0.0,
+                       "ContinuumOptions).")] = 0.0,
     bed_viscosity: Annotated[float, typer.Option(
         "--bed-viscosity", help="The bed's Kelvin-Voigt damping on connected material (Pa s, "
                                 ">= 0; 0 = off, the default): the continuum's counterpart of "
@@ -337,40 +338,39 @@ def continuum(
                                    "steps (to split a run; go on with --resume).")] = None,
 ) -> None:
     """Run a continuum model of a tub scenario: --out/summary.json, bulk_velocity.csv."""
-    if method not in ("lagrangian", "eulerian"):
-        raise InputError(f"--method = {method!r}: must be lagrangian or eulerian")
+    if method not in FORMULATIONS:
+        *rest, last = FORMULATIONS
+        raise InputError(f"--method = {method!r}: must be {', '.join(rest)} or {last}")
     if stop_after_steps is not None and stop_after_steps < 0:
         raise InputError(f"--stop-after-steps = {stop_after_steps}: must be >= 0")
     s = _load(scenario, set_)  # before anything is written: bad input leaves --out untouched
-    from vibroflow.continuum.mpm import ContinuumBlowUp
-    from vibroflow.continuum.run import LagrangianOptions, material_for, run_lagrangian
+    from vibroflow.continuum.formulation import formulation
+    from vibroflow.continuum.material import material_for
+    from vibroflow.continuum.mpm.solver import ContinuumBlowUp
+    from vibroflow.continuum.tub_run import run_continuum
 
-    options_class, run_method = LagrangianOptions, run_lagrangian
-    if method == "eulerian":
-        from vibroflow.continuum.eulerian.run import EulerianOptions, run_eulerian
-
-        options_class, run_method = EulerianOptions, run_eulerian
-
+    form = formulation(method)
     cal = None
     if calibration is not None:
         from vibroflow.io.calibration_file import read_calibration
 
         cal = read_calibration(calibration)
-    # an unset --cfl or --transfer-cfl takes the options' own default (continuum/run.py and
-    # eulerian/run.py), kept in one place; --transfer-cfl 0: one transfer a step
+    # an unset --cfl or --transfer-cfl takes the formulation's own default
+    # (Formulation.options), kept in one place; --transfer-cfl 0: one transfer a step
     step = {} if cfl is None else {"cfl": cfl}
     if transfer_cfl is not None:
         if not (math.isfinite(transfer_cfl) and transfer_cfl >= 0):
             raise InputError(f"--transfer-cfl = {transfer_cfl!r}: must be a Courant number > 0, "
                              "or 0 for one transfer a step")
         step["transfer_cfl"] = transfer_cfl
-    options = options_class(dx=dx, model=rheology, dilatancy=dilatancy,
-                            stiffness_factor=stiffness_factor, compaction=compaction, flip=flip,
-                            bed_viscosity=bed_viscosity, damping_length=damping_length, **step)
+    options = form.options(dx=dx, model=rheology, dilatancy=dilatancy,
+                           stiffness_factor=stiffness_factor, compaction=compaction, flip=flip,
+                           bed_viscosity=bed_viscosity, damping_length=damping_length, **step)
     material_for(s, cal, options)  # validates the parameters before --out is made
     try:
-        summary = run_method(s, out, calibration=cal, options=options, progress=True,
-                             vtk=vtk, resume=resume, stop_after_steps=stop_after_steps)
+        summary = run_continuum(s, out, method, calibration=cal, options=options,
+                                progress=True, vtk=vtk, resume=resume,
+                                stop_after_steps=stop_after_steps)
     except ContinuumBlowUp as exc:
         # a numerical blow-up is not bad input: its own exit code, the points and the cause
         sys.stderr.write("error: " + str(exc) + "\n")
@@ -412,7 +412,7 @@ def run(
     scenario_sets, method_sets = split_settings(set_)
     s = _load(scenario, scenario_sets)  # before anything is written
     check_study_dir(out)
-    from vibroflow.continuum.mpm import ContinuumBlowUp
+    from vibroflow.continuum.mpm.solver import ContinuumBlowUp
     from vibroflow.dem.simulate import BlowUp
     from vibroflow.report.stage import report_stage
     from vibroflow.study.pipeline import run_study

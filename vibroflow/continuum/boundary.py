@@ -43,7 +43,6 @@ import numba as nb
 import numpy as np
 
 from vibroflow.errors import InputError
-from vibroflow.scenario.laws import damping_ratio
 from vibroflow.tub.geometry import u_wall_nearest
 
 NO_CONTACT, STICK, SLIDE = 0, 1, 2
@@ -57,15 +56,6 @@ WALL_FIELDS = 14
 WALL_U, WALL_PLANE = 0, 1
 #: kinds of boundary (`packed()`)
 B_WALL, B_PARTITION = 0, 1
-
-
-def damping_ratio_of_restitution(e: float) -> float:
-    """Damping ratio zeta of a linear spring-dashpot with restitution e (models.md), the DEM's
-    (vibroflow.scenario.laws.damping_ratio), for a restitution checked here: the continuum's
-    may come from a calibration file rather than a validated scenario."""
-    if not 0 < e <= 1:
-        raise InputError(f"restitution = {e!r}: must be in (0, 1]")
-    return damping_ratio(e)
 
 
 @nb.njit(cache=True, inline="always")

@@ -12,6 +12,9 @@ shape and bytes, in sorted order; `arrays_checksum`), and load_checkpoint refuse
 arrays do not match it, as it refuses an empty, truncated or foreign file, with one line
 (InputError) instead of a traceback or a resume from wrong numbers.
 
+A checkpoint resumes only the run that wrote it: its meta holds the run's fingerprint
+(`run_fingerprint`) and formulation, both checked by `check_resumable`.
+
 Layout: "state/<field>" for the MPMState arrays, "state/history/<slot>/<name>" for the boundaries'
 per-point history, "samples/<name>" for the caller's sampling arrays, "meta" a JSON text with
 the clock (t, step) and the caller's own record (fingerprint, wall time, ...), and "checksum".
@@ -28,8 +31,10 @@ import numpy as np
 
 from vibroflow.errors import InputError
 from vibroflow.io.atomic import atomic_path
+from vibroflow.io.calibration_file import Calibration
 
-from .mpm import MPMState
+from .mpm.solver import MPMState
+from .options import ContinuumOptions, options_record
 
 _STATE_ARRAYS = ("x", "v", "C", "L", "mass", "volume", "density", "stress", "gamma_dot",
                  "phase", "fext")
@@ -130,3 +135,25 @@ def load_checkpoint(path) -> tuple[MPMState, dict[str, np.ndarray], dict]:
         raise DamagedCheckpoint(path, f"not a checkpoint: {type(e).__name__} "
                                 f"{' '.join(str(e).split())[:60]}") from None
     return state, samples, meta
+
+
+def run_fingerprint(scenario, calibration: Calibration | None, options: ContinuumOptions,
+                    vtk: bool) -> str:
+    """A hash of everything that fixes a run's numbers (the scenario but for
+    run.checkpoint_every, the calibration, the options, vtk): a checkpoint resumes only the run
+    that wrote it (with its formulation, `check_resumable`)."""
+    s = scenario.model_dump(mode="json")
+    s.get("run", {}).pop("checkpoint_every", None)
+    cal = calibration.to_toml_dict() if calibration is not None else None
+    text = json.dumps({"scenario": s, "calibration": cal,
+                       "options": options_record(options), "vtk": bool(vtk)},
+                      sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def check_resumable(path, meta: dict, fingerprint: str, method: str) -> None:
+    """InputError (one line) unless the checkpoint at path, of record `meta`, was written by a
+    run of this fingerprint (run_fingerprint) and formulation `method`."""
+    if meta.get("fingerprint") != fingerprint or meta.get("method") != method:
+        raise InputError(f"--resume: {path} is the checkpoint of another scenario, calibration, "
+                         "method or options; run without --resume to start afresh")

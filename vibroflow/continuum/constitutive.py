@@ -32,7 +32,7 @@ _MU_2 = math.tan(math.radians(32.8))
 
 
 def check_bed_viscosity(value) -> None:
-    """The bed viscosity (Pa s; ContinuumMaterial.bed_viscosity, LagrangianOptions'): a finite
+    """The bed viscosity (Pa s; ContinuumMaterial.bed_viscosity, ContinuumOptions'): a finite
     number >= 0, else a one-line InputError naming it."""
     if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value)
                                        and value >= 0):

@@ -19,7 +19,7 @@ its highest elastic frequency sqrt(4/3) c / dx (the grid-scale mode's Fourier sy
 damped explicit update is stable to about 0.85 x 2 / (2.3 c / dx) = 0.74 dx / c, 3 times the
 step at cfl 0.3 (0.25 dx / c); the mu(I) viscous stress adds no bound, the return map being
 implicit in the plastic rate (constitutive.py), so its tangent never exceeds G.  A tub run's
-default cfl is this function's 0.3 (continuum.run.DEFAULT_CFL), inside these bounds.  At 0.6
+default cfl is this function's 0.3 (continuum.options.DEFAULT_CFL), inside these bounds.  At 0.6
 (the stability margin alone) a point of tub47 at amplitude factor 1.5 can pass through the U
 wall.
 

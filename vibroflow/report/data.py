@@ -219,10 +219,10 @@ class StudyData:
     # ------------------------------------------------------------------------------------------
     def impact_fit(self, kind: str = "ball_ball") -> dict | None:
         """The calibrated v = c0 + c1 d gamma_dot of `kind` (calibration.toml [impacts.KIND])
-        that the continuum runs use (continuum.run.impact_relation: the one fitted on the
+        that the continuum runs use (continuum.shear_outputs.impact_relation: the one fitted on the
         continuum's measure of the shear rate when the calibration has it), or None when the
         calibration has none with finite coefficients."""
-        from vibroflow.continuum.run import impact_relation
+        from vibroflow.continuum.shear_outputs import impact_relation
 
         impacts = self.calibration.impacts if self.calibration is not None else None
         c0, c1, which = impact_relation(getattr(impacts, kind) if impacts is not None else None)

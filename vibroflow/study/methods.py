@@ -1,9 +1,11 @@
-"""The registry of continuum formulations a study runs and compares with the DEM.
+"""The continuum formulations a study runs and compares with the DEM: one `ContinuumMethod`
+for each formulation of vibroflow.continuum.formulation.FORMULATIONS.
 
-A formulation is one `ContinuumMethod` entry: its name (also its stage and folder name, and
-the prefix of its `--set NAME.option=value` settings), the dataclass of its numerical options,
-and a function that runs it into a folder and returns its summary (the DEM's summary keys:
-probes, circulation, impacts, wall_time_s; bulk_velocity.csv next to it).
+A method's name is also its stage and folder name, and the prefix of its `--set
+NAME.option=value` settings; its options are the formulation's (continuum.options.
+ContinuumOptions with the formulation's defaults); its run writes the formulation's tub run
+(continuum.tub_run.run_continuum) into a folder and returns its summary (the DEM's summary
+keys: probes, circulation, impacts, wall_time_s; bulk_velocity.csv next to it).
 """
 from __future__ import annotations
 
@@ -13,18 +15,21 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from vibroflow.continuum.formulation import FORMULATIONS
 from vibroflow.errors import InputError
 from vibroflow.io.calibration_file import Calibration
 
 
 @dataclass(frozen=True)
 class ContinuumMethod:
-    """name: stage and folder name; options: a dataclass of its options (validated in its
-    __post_init__); run(scenario, out_dir, calibration, options, progress, resume) -> summary."""
+    """name: stage and folder name; options: the dataclass of its options; make: the options
+    from settings (the formulation's defaults and checks); run(scenario, out_dir,
+    calibration, options, progress, resume) -> summary."""
 
     name: str
     description: str
     options: type
+    make: Callable[..., Any]
     run: Callable[..., dict]
 
     def make_options(self, settings: dict[str, Any]):
@@ -36,41 +41,37 @@ class ContinuumMethod:
                 raise InputError(f"--set {self.name}.{key}: unknown option of the {self.name} "
                                  f"method; allowed: {', '.join(allowed)}")
         try:
-            return self.options(**settings)
+            return self.make(**settings)
         except TypeError as exc:
             raise InputError(f"--set {self.name}: {exc}") from None
 
 
-def _method(name: str, description: str, module: str, options: str, run: str):
-    """The factory of a registered method whose options class and run function live in
-    `module` (imported only when the method is used, so `import vibroflow.study` stays free of
-    numba); its run first builds the material, so bad parameters are an input error first."""
+def _method(name: str):
+    """The factory of the method of formulation `name` (imported only when the method is used,
+    so `import vibroflow.study` stays free of numba); its run first builds the material, so bad
+    parameters are an input error first."""
     def factory() -> ContinuumMethod:
-        import importlib
+        # imported here: the continuum's modules load numba (the factory's reason to exist)
+        from vibroflow.continuum.formulation import formulation
+        from vibroflow.continuum.material import material_for
+        from vibroflow.continuum.options import ContinuumOptions
+        from vibroflow.continuum.tub_run import run_continuum
 
-        mod = importlib.import_module(module)
+        form = formulation(name)
 
         def run_method(scenario, out_dir: Path, calibration: Calibration | None, opts,
                        progress: bool, resume: bool) -> dict:
-            from vibroflow.continuum.run import material_for
-
             material_for(scenario, calibration, opts)
-            return getattr(mod, run)(scenario, out_dir, calibration=calibration, options=opts,
-                                     progress=progress, resume=resume)
+            return run_continuum(scenario, out_dir, name, calibration=calibration,
+                                 options=opts, progress=progress, resume=resume)
 
-        return ContinuumMethod(name=name, description=description,
-                               options=getattr(mod, options), run=run_method)
+        return ContinuumMethod(name=name, description=form.description,
+                               options=ContinuumOptions, make=form.options, run=run_method)
     return factory
 
 
 #: name -> factory of the method (factories keep `import vibroflow.study` free of numba)
-METHODS: dict[str, Callable[[], ContinuumMethod]] = {
-    "lagrangian": _method("lagrangian", "material point method (vibroflow.continuum)",
-                          "vibroflow.continuum.run", "LagrangianOptions", "run_lagrangian"),
-    "eulerian": _method("eulerian", "fixed mesh of the tub, volume fraction transport "
-                        "(vibroflow.continuum.eulerian)", "vibroflow.continuum.eulerian.run",
-                        "EulerianOptions", "run_eulerian"),
-}
+METHODS: dict[str, Callable[[], ContinuumMethod]] = {name: _method(name) for name in FORMULATIONS}
 
 
 def method(name: str) -> ContinuumMethod:

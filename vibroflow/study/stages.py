@@ -129,7 +129,7 @@ def calibration_stage() -> Stage:
 
 def continuum_stage(method: ContinuumMethod, options) -> Stage:
     def inputs(study: Study) -> dict:
-        from vibroflow.continuum.run import options_record
+        from vibroflow.continuum.options import options_record
 
         opts = options_record(options)
         # the options class's LATER_OPTIONS are left out at their defaults, so that a stage

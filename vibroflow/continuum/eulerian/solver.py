@@ -51,7 +51,7 @@ from vibroflow.errors import InputError
 
 from ..constitutive import ContinuumMaterial
 from ..grid_update import LabFrame
-from ..mpm import ContinuumBlowUp
+from ..mpm.solver import ContinuumBlowUp
 from . import fused
 from .advection import remap_work
 from .lagrangian_step import fill_limit, material_fraction

@@ -27,11 +27,11 @@ import numpy as np
 
 from vibroflow.errors import InputError
 
-from . import fused
-from .boundary import B_PARTITION, B_WALL, WALL_FIELDS
-from .constitutive import ContinuumMaterial
-from .grid import Grid
-from .grid_update import LabFrame
+from .. import fused
+from ..boundary import B_PARTITION, B_WALL, WALL_FIELDS
+from ..constitutive import ContinuumMaterial
+from ..grid import Grid
+from ..grid_update import LabFrame
 
 
 class ContinuumBlowUp(RuntimeError):
@@ -227,7 +227,7 @@ def blowup_message(system: MPMSystem, state: MPMState, ids, what: str) -> str:
     """One paragraph for a ContinuumBlowUp: when, which points (ids, at most 10 named), what
     happened to them, and the likely cause, judged against the stability limits of timestep.py
     (elastic waves over dx, penalty walls) at the points' fastest finite speed."""
-    from .timestep import stable_dt
+    from ..timestep import stable_dt
 
     ids = np.asarray(ids, dtype=np.int64)
     named = ", ".join(str(int(i)) for i in ids[:10]) + (", ..." if ids.size > 10 else "")

@@ -1,0 +1,235 @@
+"""The material point method as a continuum formulation (continuum.formulation.Formulation) of a
+tub run and of the column collapse.
+
+The tub (continuum.tub_run's timeline): the settled bed's material points on a square lattice
+of side dx/2 (4 a grid cell) inside the U below the bed's height h (bed.py), at rest under the
+lithostatic stress, their densities those the elastic law gives that pressure; the points
+share the bed's area (their lattice misses a sliver along the curved wall).  Each point is
+sampled as a "ball" of the point's solid volume m_p L_y / rho_s at its centre, with its lab
+position and velocity; its wall contacts are the points touching the U.  The wall's normal
+stiffness is constant: (K + 4G/3) / l0 with l0 the point spacing (the bed's elastic stiffness
+over one point), its damping ratio that of the scenario's ball-wall restitution.  With vtk,
+ParaView files of the points and of the grid fields (fields.py) over the last cycle.
+
+The column collapse: mpm/column.py's set-up.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numba as nb
+import numpy as np
+
+from vibroflow.errors import InputError
+from vibroflow.scenario.laws import damping_ratio
+from vibroflow.tub.geometry import distance_to_wall_np, geometry_of, u_wall_nearest
+
+from ..bed import bed_area, bed_height, lithostatic
+from ..boundary import PartitionFriction, UWall
+from ..fields import grid_fields, write_grid_vtr
+from ..files import VTK_DIR
+from ..formulation import Formulation, Sampler
+from ..grid import Grid
+from ..material import boundary_friction
+from ..options import ContinuumOptions, default_dx
+from ..sampling import shear_rate, to_lab
+from ..timestep import stable_dt
+from . import column
+from .solver import MPMState, MPMSystem, advance, init_state
+
+#: the Courant number of the APIC transfers (options.ContinuumOptions.transfer_cfl):
+#: round(0.3 / 0.015) = 20 transfers a step at the default cfl 0.3.  The rate whose field is
+#: closest to the DEM's on tub47 (E 0.347 +- 0.006 against the DEM's seed-to-seed 0.135,
+#: strength 0.98 of the DEM's): docs/decisions/transfer-rate.md.
+DEFAULT_TRANSFER_CFL = 0.015
+
+
+@nb.njit(cache=True)
+def _wall_gap_arc(x, radius, gap_out, arc_out):
+    """Distance (m) of each point from the U wall and the arc-length coordinate (m) of its
+    nearest wall point (tub.geometry)."""
+    for p in range(x.shape[0]):
+        r = u_wall_nearest(x[p, 0], x[p, 1], radius)
+        gap_out[p] = r[0]
+        arc_out[p] = r[5]
+
+
+def settled_bed(scenario, material, spacing: float):
+    """Points of the settled bed (tub frame): positions (N, 2) m, volumes (N,) m^2, densities
+    (N,) kg/m^3, stresses (N, 4) Pa, and the bed height h (m) (module docstring)."""
+    geo = geometry_of(scenario)
+    area = bed_area(scenario, material)
+    h = bed_height(geo.radius, area, geo.rim_height)
+    xs = np.arange(-geo.radius + spacing / 2, geo.radius, spacing)
+    zs = np.arange(spacing / 2, h, spacing)
+    X, Z = np.meshgrid(xs, zs, indexing="ij")
+    X, Z = X.ravel(), Z.ravel()
+    keep = distance_to_wall_np(X, Z, geo.radius) >= 0.5 * spacing  # the square inside the U
+    x = np.stack([X[keep], Z[keep]], axis=1)
+    n = x.shape[0]
+    if n == 0:
+        raise InputError(f"fill.count = {scenario.fill.count}: the bed is thinner than one point "
+                         f"({spacing:.3g} m); refine dx")
+    g = math.hypot(scenario.gravity[0], scenario.gravity[2])
+    rho_c = material.initial_density  # rho_c unless the bed starts denser (dilatancy)
+    stress, density = lithostatic(rho_c, g, np.clip(h - x[:, 1], 0.0, None), material.mu_s,
+                                  material.bulk_modulus)
+    # the points share the bed's area (their lattice misses a sliver along the curved wall)
+    volume = np.full(n, area / n) * rho_c / density
+    return x, volume, density, stress, h
+
+
+def _write_points_vtu(path: Path, state: MPMState, rate: np.ndarray, length: float,
+                      solid_density: float) -> str:
+    """The material points as a ParaView point cloud (tub frame, y = the slice's middle)."""
+    from vibroflow.io.vtk import write_snapshot_vtu  # noqa: PLC0415  (only with vtk: meshio)
+
+    n = state.n
+    pos = np.stack([state.x[:, 0], np.full(n, 0.5 * length), state.x[:, 1]], axis=1)
+    vel = np.stack([state.v[:, 0], np.zeros(n), state.v[:, 1]], axis=1)
+    side = np.sqrt(state.volume)
+    return write_snapshot_vtu(path, pos, vel, np.zeros((n, 3)), 0.5 * side,
+                              extra={"pressure": state.pressure(), "shear_rate": rate,
+                                     "solid_fraction": state.density / solid_density,
+                                     "state": state.phase.astype(np.float64)})
+
+
+class PointSampler(Sampler):
+    """The material points as the DEM's balls (module docstring)."""
+
+    vtk_kinds = ("points", "grid")
+
+    def __init__(self, scenario, system: MPMSystem, state: MPMState, out: Path, vtk: bool):
+        self.scenario, self.system, self.state = scenario, system, state
+        self.out, self.vtk = out, vtk
+        self.geo = geometry_of(scenario)
+        self.n_points = n = state.n
+        motion = system.frame.motion
+        self.pv = (motion.pivot_x, motion.pivot_z)
+        self.cell = cell = scenario.analysis.cell_size
+        self.probe_cells = [(math.floor(pr.x / cell + 0.5), math.floor(pr.z / cell + 0.5))
+                            for pr in scenario.analysis.probes.values()]
+        self.buf_p, self.buf_v = np.zeros((n, 3)), np.zeros((n, 3))
+        self.arc, self.gap = np.zeros(n), np.zeros(n)
+        if vtk:
+            from vibroflow.io.vtk import write_tub_surface  # noqa: PLC0415  (only with vtk)
+
+            (out / VTK_DIR).mkdir(exist_ok=True)
+            write_tub_surface(out / VTK_DIR / "tub.vtu", self.geo)
+
+    def record(self, j: int, samples) -> None:
+        system, state, geo, out = self.system, self.state, self.geo, self.out
+        run = self.scenario.run
+        S = samples.pos.shape[0]
+        wall_hist = state.history[0]
+        pose6 = np.array(system.frame.pose(state.t))
+        to_lab(state.x, state.v, pose6, self.pv[0], self.pv[1], self.buf_p, self.buf_v,
+               0.5 * geo.length)
+        samples.pos[j], samples.vel[j], samples.poses[j] = self.buf_p, self.buf_v, pose6
+        touching = np.nonzero(wall_hist["state"] > 0)[0]
+        _wall_gap_arc(state.x, geo.radius, self.gap, self.arc)
+        samples.add_contacts(j, touching, wall_hist["fn"][touching], wall_hist["ft"][touching],
+                             wall_hist["state"][touching], self.arc[touching],
+                             state.x[touching], geo.length)
+        rate = shear_rate(state.L)
+        if self.vtk and j >= S - run.phases_per_cycle:
+            material = system.material
+            name = f"points_{j:05d}.vtu"
+            _write_points_vtu(out / VTK_DIR / name, state, rate, geo.length,
+                              material.solid_density)
+            samples.vtk["points"].append((state.t, name))
+            name = f"grid_{j:05d}.vtr"
+            fields = grid_fields(system.grid, state.x, state.v, state.mass,
+                                 state.pressure(), rate, material.solid_density)
+            write_grid_vtr(out / VTK_DIR / name, system.grid, fields, 0.5 * geo.length)
+            samples.vtk["grid"].append((state.t, name))
+        samples.rate_all[j] = rate.mean()
+        samples.add_cell_rates(state.x, rate)
+        near = self.gap < 0.5 * self.cell
+        if near.any():
+            samples.rate_wall[j] = rate[near].mean()
+        ci = np.floor(state.x[:, 0] / self.cell + 0.5)
+        ck = np.floor(state.x[:, 1] / self.cell + 0.5)
+        for q, (pi, pk) in enumerate(self.probe_cells):
+            inside = (ci == pi) & (ck == pk)
+            if inside.any():
+                samples.rate_probe[j, q] = rate[inside].mean()
+
+    def radius(self):
+        return np.cbrt(3.0 * self.state.mass * self.geo.length
+                       / (4.0 * math.pi * self.system.material.solid_density))
+
+
+class MaterialPointMethod(Formulation):
+    """The material point method (module docstring)."""
+
+    name = "lagrangian"
+    description = "material point method (vibroflow.continuum.mpm)"
+
+    def options(self, **settings) -> ContinuumOptions:
+        return ContinuumOptions(**{"transfer_cfl": DEFAULT_TRANSFER_CFL, **settings})
+
+    def default_grid(self, scenario) -> float:
+        """options.default_dx: 3 ball diameters."""
+        return default_dx(scenario)
+
+    def make_system(self, scenario, material, calibration, options, frame) -> MPMSystem:
+        geo = geometry_of(scenario)
+        dx = self.grid(options, scenario)
+        spacing = 0.5 * dx
+        grid = Grid.covering(-geo.radius, geo.radius, 0.0, geo.rim_height, dx)
+        wall_pair, mu_w, mu_p = boundary_friction(scenario, calibration)
+        M = material.bulk_modulus + 4.0 * material.shear_modulus / 3.0
+        k_wall = options.wall_stiffness if options.wall_stiffness is not None else M / spacing
+        boundaries: list = [UWall(radius=geo.radius, stiffness=k_wall, friction=mu_w,
+                                  damping_ratio=damping_ratio(wall_pair.restitution))]
+        if mu_p is not None:
+            boundaries.append(PartitionFriction(friction=mu_p, length=geo.length))
+        dt = stable_dt(material, dx, spacing, boundaries, v_max=2.0, cfl=options.cfl)
+        # a whole number of steps between samples, so every sample falls on a step
+        f, per = scenario.motion.frequency, scenario.run.phases_per_cycle
+        interval = 1.0 / (f * per)
+        dt = interval / math.ceil(interval / dt)
+        return MPMSystem(grid, material, dt, frame=frame, boundaries=boundaries,
+                         chunks=scenario.run.force_chunks, flip=float(options.flip),
+                         transfers=self.transfers_on(options, scenario))
+
+    def initial_state(self, scenario, system: MPMSystem) -> tuple[MPMState, float]:
+        x, volume, density, stress, h = settled_bed(scenario, system.material,
+                                                    0.5 * system.grid.dx)
+        return init_state(system, x, volume, density, stress=stress), h
+
+    def advance(self, system, state, steps: int) -> None:
+        advance(system, state, steps)
+
+    def restore(self, system, saved, meta: dict) -> MPMState:
+        return saved
+
+    def sampler(self, scenario, system, state, out: Path, vtk: bool) -> PointSampler:
+        return PointSampler(scenario, system, state, out, vtk)
+
+    def continuum_block(self, system, state, bed_height: float) -> dict:
+        walls = system.boundaries
+        return {
+            "method": "lagrangian (material point method, APIC, 2D plane strain, tub frame)",
+            "grid_spacing_m": system.grid.dx, "point_spacing_m": 0.5 * system.grid.dx,
+            "points": state.n,
+            "wall_friction": walls[0].friction, "wall_stiffness_Pa_m": walls[0].stiffness,
+            "partition_friction": walls[1].friction if len(walls) > 1 else None,
+        }
+
+    def column_system(self, L0, H0, dx, material, floor_friction, wall_friction, symmetric,
+                      reach, cfl, rough_floor, flip, axisymmetric, transfers) -> MPMSystem:
+        return column.column_system(L0, H0, dx, material, floor_friction, wall_friction,
+                                    symmetric, reach, cfl, rough_floor, flip, axisymmetric,
+                                    transfers)
+
+    def column_state(self, system, L0, H0, symmetric) -> MPMState:
+        return column.column_state(system, L0, H0, symmetric)
+
+    def column_deposit(self, system, state):
+        return state.x[:, 0], state.mass, 0.5 * system.grid.dx
+
+
+FORMULATION = MaterialPointMethod()

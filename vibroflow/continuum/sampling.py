@@ -1,0 +1,188 @@
+"""What a continuum tub run samples, as the DEM samples its balls: the sample instants (the
+DEM's phases), the sampled points or cells as the DEM's snapshots in the lab frame, their wall
+contacts and shear rates (`Samples`, carried through a checkpoint unchanged), and the samples
+as the dem.h5 layout that vibroflow.measure.summary.tub_summary reads (`samples_source`)."""
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from vibroflow.measure.phase_shear import PhaseShear, node_grid, phase_shear_of_snapshots
+from vibroflow.tub.motion import rigid_velocity, tub_to_lab
+
+from .stress_update import equivalent_shear_rate
+
+
+def sample_times(scenario) -> tuple[np.ndarray, float, float]:
+    """The DEM's sample instants (s): phases m / (P f) over the whole cycles of the window
+    [duration - average_last, ...) (as vibroflow.dem.run.sample_steps, before its rounding to
+    the DEM's step), and the window (t0, t1)."""
+    run, f = scenario.run, scenario.motion.frequency
+    t0 = run.duration - run.average_last
+    n_cycles = int(math.floor(run.average_last * f + 1e-9))
+    per = run.phases_per_cycle
+    m0 = math.ceil(t0 * f * per - 1e-9)
+    return (m0 + np.arange(n_cycles * per)) / (f * per), t0, t0 + n_cycles / f
+
+
+@nb.njit(cache=True)
+def to_lab(x, v, pose6, pivx, pivz, pos_out, vel_out, y):
+    """Lab positions and velocities (3D, y = the slice's middle) of tub-frame points (x, v) at
+    the tub pose (X, Z, theta, Xdot, Zdot, thetadot), through vibroflow.tub.motion."""
+    X, Z, th, Xd, Zd, thd = pose6[0], pose6[1], pose6[2], pose6[3], pose6[4], pose6[5]
+    c = np.cos(th)
+    s = np.sin(th)
+    for p in range(x.shape[0]):
+        lx, lz = tub_to_lab(x[p, 0], x[p, 1], X, Z, th, pivx, pivz)
+        rvx, rvz = rigid_velocity(lx, lz, X, Z, Xd, Zd, thd, pivx, pivz)
+        pos_out[p, 0] = lx
+        pos_out[p, 1] = y
+        pos_out[p, 2] = lz
+        vel_out[p, 0] = rvx + c * v[p, 0] - s * v[p, 1]
+        vel_out[p, 1] = 0.0
+        vel_out[p, 2] = rvz + s * v[p, 0] + c * v[p, 1]
+
+
+
+
+def shear_rate(L: np.ndarray) -> np.ndarray:
+    """gamma_dot = sqrt(2 D':D') (1/s) of velocity gradients L (N, 4) [xx, xz, zx, zz], plane
+    strain (D_yy = 0) (models.md)."""
+    L = np.ascontiguousarray(L, dtype=np.float64)
+    return equivalent_shear_rate(L[:, 0], L[:, 1], L[:, 2], L[:, 3])
+
+
+
+class Samples:
+    """What the samples of the vibration have recorded so far: the points as the DEM's
+    snapshots (lab position and velocity, tub pose), the wall contacts, the shear rates and the
+    ParaView files written; `arrays` / `from_arrays` carry it through a checkpoint unchanged."""
+
+    CONTACTS = {"snapshot": ((), np.int32), "particle": ((), np.int32), "fn": ((), np.float64),
+                "ft": ((), np.float64), "sliding": ((), np.bool_), "arc": ((), np.float64),
+                "position_tub": ((3,), np.float64)}
+
+    def __init__(self, n_samples: int, n_points: int, n_probes: int, cell_grid=None):
+        self.j = 0
+        # the shear-rate map on the analysis cells: cell_grid = (cell size h m, cells either
+        # side of x = 0, cells up from z = 0); per cell the sum over samples of the sample's
+        # mean shear rate there, and the number of samples that held material there
+        self.cell_grid = cell_grid
+        if cell_grid is not None:
+            h, nxh, nz = cell_grid
+            self.rate_cell_sum = np.zeros((nz, 2 * nxh + 1))
+            self.rate_cell_n = np.zeros((nz, 2 * nxh + 1))
+        self.pos = np.zeros((n_samples, n_points, 3), np.float32)
+        self.vel = np.zeros((n_samples, n_points, 3), np.float32)
+        self.poses = np.zeros((n_samples, 6))
+        self.contacts: dict[str, list] = {k: [] for k in self.CONTACTS}
+        self.rate_all = np.full(n_samples, np.nan)
+        self.rate_wall = np.full(n_samples, np.nan)
+        self.rate_probe = np.full((n_samples, n_probes), np.nan)
+        self.vtk: dict[str, list] = {"points": [], "grid": []}  # (t s, file name)
+
+    def contact_arrays(self) -> dict[str, np.ndarray]:
+        return {k: (np.concatenate(v) if v else np.zeros((0, *shape), dtype))
+                for (k, (shape, dtype)), v in zip(self.CONTACTS.items(),
+                                                  self.contacts.values())}
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        j = self.j
+        out = {"pos": self.pos[:j], "vel": self.vel[:j], "poses": self.poses[:j],
+               "rate_all": self.rate_all, "rate_wall": self.rate_wall,
+               "rate_probe": self.rate_probe}
+        out.update({"contact_" + k: v for k, v in self.contact_arrays().items()})
+        if self.cell_grid is not None:
+            out["rate_cell_sum"], out["rate_cell_n"] = self.rate_cell_sum, self.rate_cell_n
+        for kind, entries in self.vtk.items():
+            out[f"vtk_{kind}_t"] = np.array([t for t, _ in entries], dtype=np.float64)
+            out[f"vtk_{kind}_name"] = np.array([name for _, name in entries], dtype=np.str_)
+        return out
+
+    @classmethod
+    def from_arrays(cls, a: dict, n_samples: int, n_points: int, n_probes: int,
+                    cell_grid=None) -> "Samples":
+        s = cls(n_samples, n_points, n_probes, cell_grid)
+        if cell_grid is not None and "rate_cell_sum" in a:
+            s.rate_cell_sum[:], s.rate_cell_n[:] = a["rate_cell_sum"], a["rate_cell_n"]
+        j = s.j = int(a["pos"].shape[0])
+        s.pos[:j], s.vel[:j], s.poses[:j] = a["pos"], a["vel"], a["poses"]
+        s.rate_all[:], s.rate_wall[:], s.rate_probe[:] = (a["rate_all"], a["rate_wall"],
+                                                          a["rate_probe"])
+        s.contacts = {k: [a["contact_" + k]] for k in cls.CONTACTS}
+        for kind in s.vtk:
+            s.vtk[kind] = [(float(t), str(name)) for t, name in
+                           zip(a[f"vtk_{kind}_t"], a[f"vtk_{kind}_name"])]
+        return s
+
+
+    def add_contacts(self, j: int, particle: np.ndarray, fn: np.ndarray, ft: np.ndarray,
+                     state: np.ndarray, arc: np.ndarray, x: np.ndarray, length: float) -> None:
+        """Add sample j's wall contacts: the touching points' (or cells') indices, their normal
+        and tangential forces per metre of thickness (N/m; times `length`, the slice L_y in m,
+        they are over the slice, the DEM's unit), state (1 stick, 2 slide), arc-length
+        coordinate (m) and tub-frame positions x (n, 2) (m, set at the slice's middle in y)."""
+        c = self.contacts
+        c["snapshot"].append(np.full(particle.size, j, np.int32))
+        c["particle"].append(particle.astype(np.int32))
+        c["fn"].append(fn * length)
+        c["ft"].append(np.abs(ft) * length)
+        c["sliding"].append(state == 2)
+        c["arc"].append(np.array(arc, dtype=np.float64))
+        c["position_tub"].append(np.stack(
+            [x[:, 0], np.full(particle.size, 0.5 * length), x[:, 1]], axis=1))
+
+    def add_cell_rates(self, x: np.ndarray, rate: np.ndarray) -> None:
+        """Add one sample's shear rates (1/s) at tub-frame positions x (N, 2) m to the map: the
+        mean over the points (or cells) in each analysis cell."""
+        if self.cell_grid is None:
+            return
+        h, nxh, nz = self.cell_grid
+        ix = np.floor(x[:, 0] / h + 0.5).astype(np.int64) + nxh
+        iz = np.floor(x[:, 1] / h + 0.5).astype(np.int64)
+        ok = (ix >= 0) & (ix <= 2 * nxh) & (iz >= 0) & (iz < nz) & np.isfinite(rate)
+        flat = iz[ok] * (2 * nxh + 1) + ix[ok]
+        size = nz * (2 * nxh + 1)
+        total = np.bincount(flat, weights=rate[ok], minlength=size).reshape(nz, -1)
+        count = np.bincount(flat, minlength=size).reshape(nz, -1)
+        held = count > 0
+        self.rate_cell_sum[held] += total[held] / count[held]
+        self.rate_cell_n[held] += 1
+
+
+def cell_grid_of(geo, cell_size: float) -> tuple[float, int, int]:
+    """The analysis cells covering a tub (see Samples): (h m, cells either side, cells up);
+    the nodes of analysis.phase_shear.node_grid, so the two maps are the same cells."""
+    return node_grid(geo, cell_size)
+
+
+
+def samples_source(scenario, samples: Samples, times: np.ndarray, radius: np.ndarray) -> dict:
+    """The samples as the dem.h5 layout that analysis.summary.tub_summary reads: snapshots of
+    "balls" of the given radii (m), the wall contacts on the tub's U."""
+    source = {"attrs": {"frequency": scenario.motion.frequency},
+              "snapshots/time": times, "snapshots/position": samples.pos,
+              "snapshots/velocity": samples.vel, "snapshots/tub_pose": samples.poses,
+              "particles/radius": radius}
+    if times.size:
+        source.update({"wall_contacts/" + k: v for k, v in samples.contact_arrays().items()})
+        source["wall_contacts/wall"] = np.zeros(source["wall_contacts/fn"].size, np.int8)
+    return source
+
+
+
+def phase_shear_of_samples(scenario, samples: Samples, times: np.ndarray,
+                           radius: np.ndarray) -> PhaseShear:
+    """The cycle-mean shear rate of the run's phase-resolved velocity field on the analysis
+    cells' centres (analysis.phase_shear.phase_shear_of_snapshots, as the DEM calibration
+    measures it): each sampled point standing for the solid volume of a ball of its `radius`
+    (m)."""
+    j = min(samples.j, times.size)
+    return phase_shear_of_snapshots(scenario, samples.pos[:j], samples.vel[:j],
+                                    samples.poses[:j],
+                                    4.0 / 3.0 * math.pi * np.asarray(radius, float) ** 3,
+                                    times[:j])
+
+

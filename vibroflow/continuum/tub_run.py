@@ -1,0 +1,253 @@
+"""A continuum run of a tub scenario, by any formulation (continuum.formulation).
+
+Timeline (tub47.md "Procedure", the DEM's clock: t = 0 when the vibration starts):
+
+1. The settled bed: the DEM's solid volume (fill.count balls of fill.diameter, over the slice
+   L_y) at the critical solid fraction fills the U to the height h that holds it, at rest under
+   the lithostatic stress, so its weight is carried from the start (bed.py; each formulation
+   places it on its points or cells, Formulation.initial_state).  It then settles for
+   `settle_time` in the still tub, where the walls take up the load.
+2. Vibrate for run.duration in the tub frame (grid_update.TubFrame: the tub's motion from
+   vibroflow.tub.motion enters as the frame's inertial force), sampling `run.phases_per_cycle`
+   instants a cycle over the whole cycles of the last run.average_last seconds, at exactly the
+   DEM's sample phases (m / (P f), sampling.sample_times); the time step divides the sampling
+   interval (timeline.py).
+3. Results, through vibroflow.measure (the DEM's own code): each sampled point or cell is a
+   "ball" (Formulation.sampler) with its lab position and velocity at the sample;
+   bulk_velocity.csv (CellTable / write_csv on the scenario's cells) and summary.json with the
+   DEM's keys (probes, circulation, wall_contacts from the points or cells touching the U,
+   impacts: none, window, cells), plus a "continuum" block: the method, numerics, material,
+   and the shear rate with the impact speed and granular temperature it implies through the
+   calibrated relations (calibration.toml [impacts]), when a calibration is given
+   (shear_outputs.py).
+
+Parameters come from calibration.toml (vibroflow.io.calibration_file.read_calibration) or the
+tub47 defaults (ContinuumMaterial, material.py): the wall friction [wall] friction (default:
+the scenario's ball-wall contact friction), the partitions' [partitions] friction (default: the
+scenario's ball-partition friction), the diameter and solid density (default: the scenario's
+fill).
+
+Checkpoints (checkpoint.py) every run.checkpoint_every wall seconds of the vibration; a resumed
+run gives the numbers of an uninterrupted one bit for bit; results are written atomically and
+summary.json last.  A blow-up (ContinuumBlowUp: a point or cell non-finite, off the grid or
+through the wall) ends the run with the ids and the likely cause, and removes the checkpoint.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from vibroflow.errors import InputError
+from vibroflow.io.atomic import write_json_atomic
+from vibroflow.io.calibration_file import Calibration
+from vibroflow.io.folder_lock import folder_lock
+from vibroflow.measure.stats import batches_of_whole_cycles
+from vibroflow.measure.summary import json_safe, tub_summary
+from vibroflow.progress import RunProgress
+from vibroflow.run_clock import RunClock
+from vibroflow.tub.geometry import geometry_of
+from vibroflow.tub.motion import TubMotion
+
+from .checkpoint import check_resumable, load_checkpoint, run_fingerprint, save_checkpoint
+from .files import BULK_CSV_NAME, CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME, SUMMARY_NAME, VTK_DIR
+from .formulation import Formulation, formulation
+from .grid_update import LabFrame, TubFrame
+from .material import material_for
+from .mpm.solver import ContinuumBlowUp
+from .sampling import Samples, cell_grid_of, phase_shear_of_samples, sample_times, samples_source
+from .shear_outputs import shear_rate_outputs, write_shear_rate_csv
+from .timeline import (REPORT_EVERY, VibrationInterrupted, interrupted,
+                       interrupted_while_settling, interrupted_while_writing, vibration_timeline)
+
+
+def _gravity(scenario) -> tuple[float, float]:
+    return float(scenario.gravity[0]), float(scenario.gravity[2])
+
+
+def tub_system(form: Formulation, scenario, calibration: Calibration | None, options):
+    """What a run vibrates: the formulation's system of the scenario in the vibrating tub's
+    frame, and its material (material.material_for)."""
+    material = material_for(scenario, calibration, options)
+    system = form.make_system(scenario, material, calibration, options,
+                              TubFrame(TubMotion.of_scenario(scenario), _gravity(scenario)))
+    return system, material
+
+
+def settle(form: Formulation, scenario, material, calibration: Calibration | None, options,
+           prog: RunProgress | None = None):
+    """(state, bed height m): the settled bed after options.settle_time in the still tub
+    (module docstring, step 1)."""
+    system = form.make_system(scenario, material, calibration, options,
+                              LabFrame(_gravity(scenario)))
+    state, h = form.initial_state(scenario, system)
+    steps = int(math.ceil(options.settle_time / system.dt))
+    if prog is not None:
+        prog.stage(f"continuum ({form.name}): settle (still tub)", options.settle_time)
+    for k in range(0, steps, REPORT_EVERY):
+        form.advance(system, state, min(REPORT_EVERY, steps - k))
+        if prog is not None:
+            prog.update(state.t, state.step * state.n)
+    return state, h
+
+
+def vibration_start(scenario, calibration: Calibration | None, options,
+                    method: str = "lagrangian", prog: RunProgress | None = None):
+    """(system, state): the system in the vibrating tub's frame and the bed it starts
+    vibrating from, settled for options.settle_time in the still tub, its clock set to t = 0,
+    step 0 (run_continuum's first two steps, for a diagnostic that drives the run itself:
+    benchmarks/)."""
+    form = formulation(method)
+    system, material = tub_system(form, scenario, calibration, options)
+    state, _ = settle(form, scenario, material, calibration, options, prog)
+    state.t, state.step = 0.0, 0
+    return system, state
+
+
+def run_continuum(scenario, out_dir, method: str = "lagrangian",
+                  calibration: Calibration | None = None, options=None, progress: bool = False,
+                  vtk: bool = False, resume: bool = False, stop_after_steps: int | None = None,
+                  keep_samples: list | None = None) -> dict | None:
+    """Run the continuum formulation `method` ("lagrangian", "eulerian":
+    continuum.formulation.FORMULATIONS) of a tub scenario into out_dir (module docstring);
+    returns the summary (also written to out_dir/summary.json with out_dir/bulk_velocity.csv
+    and shear_rate.csv), or None when stopped by stop_after_steps.  options: the
+    formulation's (Formulation.options; default its defaults).
+
+    vtk: also write ParaView files in out_dir/vtk at the samples of the last vibration cycle:
+    the grid fields of fields.py (velocity relative to the tub, solid fraction, density,
+    pressure, shear rate on the background grid; grid_NNNNN.vtr, grid.pvd), the material
+    points of the material point method (tub frame, velocity relative to the tub, pressure,
+    shear rate, solid fraction, state; points_NNNNN.vtu, points.pvd) and the tub's surface
+    (tub.vtu).
+
+    Checkpoints: every run.checkpoint_every wall seconds of the vibration the whole state and
+    what has been sampled go to out_dir/checkpoint.npz (checkpoint.py, atomic); resume=True
+    continues from it (a run killed while settling starts afresh) and gives the same numbers,
+    bit for bit, as a run never interrupted; the checkpoint of another scenario, calibration,
+    method or options is an input error.  stop_after_steps: write a checkpoint and return None
+    after that many vibration steps of this call (to split a run; go on with resume=True).  A
+    fresh run first removes the folder's summary.json and bulk_velocity.csv, so a run killed
+    before its end never leaves results that look complete; summary.json is written last.
+
+    keep_samples: a list that receives the run's `Samples` (every point or cell at every
+    sample instant, the wall contacts) for an analysis beyond the summary's
+    (benchmarks/wall_layer.py).
+    """
+    form = formulation(method)
+    if scenario.tub is None or scenario.fill is None:
+        raise InputError("scenario: the continuum needs a tub-mode scenario (with [tub] and "
+                         "[fill]), not explicit particles")
+    if sample_times(scenario)[0].size == 0:
+        raise InputError(f"run.average_last = {scenario.run.average_last!r}: must hold at least "
+                         "one whole vibration cycle to average over")
+    if stop_after_steps is not None and not int(stop_after_steps) >= 0:
+        raise InputError(f"stop_after_steps = {stop_after_steps!r}: must be >= 0")
+    options = options or form.options()
+    system, material = tub_system(form, scenario, calibration, options)
+    geo = geometry_of(scenario)
+    times = sample_times(scenario)[0]
+    S = times.size
+    n_probes = len(scenario.analysis.probes)
+    cell_grid = cell_grid_of(geo, scenario.analysis.cell_size)
+    out = Path(out_dir)
+    ckpt = out / CHECKPOINT_NAME
+    fingerprint = run_fingerprint(scenario, calibration, options, vtk)
+    # the folder's lock first: nothing is written into a folder another run is writing, and a
+    # --out that is a file or read-only is a one-line error before anything is made
+    with folder_lock(out, "vibroflow continuum"):
+        clock = RunClock()   # the solver's time, numba's compilation apart
+        with clock, RunProgress(progress) as prog:
+            if resume and ckpt.exists():
+                saved, arrays, meta = load_checkpoint(ckpt)
+                check_resumable(ckpt, meta, fingerprint, form.name)
+                state = form.restore(system, saved, meta)
+                h = float(meta["bed_height_m"])
+                sampler = form.sampler(scenario, system, state, out, vtk)
+                samples = Samples.from_arrays(arrays, S, sampler.n_points, n_probes, cell_grid)
+                sampler.restore(arrays)
+                clock.resume_from(float(meta["wall_time_s"]))
+                prog.log(f"resuming from {ckpt} at t = {state.t:.4f} s")
+            else:
+                if resume:
+                    prog.log(f"no checkpoint in {out}: starting afresh")
+                for name in (SUMMARY_NAME, BULK_CSV_NAME, CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME):
+                    (out / name).unlink(missing_ok=True)
+                with interrupted_while_settling():
+                    state, h = settle(form, scenario, material, calibration, options, prog)
+                state.t = 0.0
+                state.step = 0
+                sampler = form.sampler(scenario, system, state, out, vtk)
+                samples = Samples(S, sampler.n_points, n_probes, cell_grid)
+
+            def checkpoint():
+                save_checkpoint(ckpt, state, {**samples.arrays(), **sampler.arrays()}, {
+                    "fingerprint": fingerprint, "method": form.name, "bed_height_m": h,
+                    **form.checkpoint_meta(state), "wall_time_s": clock.solver_s()})
+
+            run = scenario.run
+            sample_step = np.rint(times / system.dt).astype(np.int64)
+            n_steps = int(round(run.duration / system.dt))
+            prog.stage(f"continuum ({form.name})", run.duration)
+            try:
+                done = vibration_timeline(
+                    state, n_steps, sample_step, samples, lambda j: sampler.record(j, samples),
+                    lambda m: form.advance(system, state, m), checkpoint, prog,
+                    sampler.n_points, run.checkpoint_every, stop_after_steps)
+            except ContinuumBlowUp:
+                ckpt.unlink(missing_ok=True)  # a blown-up run has nothing to resume
+                raise
+            except VibrationInterrupted as e:
+                raise interrupted(out, e) from None
+        if keep_samples is not None:
+            keep_samples.append(samples)
+        if not done:
+            return None
+        with interrupted_while_writing(out):
+            summary = _results(form, scenario, out, calibration, options, vtk, system,
+                               material, h, times, state, samples, sampler, clock)
+        ckpt.unlink(missing_ok=True)
+        return summary
+
+
+def _results(form: Formulation, scenario, out: Path, calibration, options, vtk, system,
+             material, h, times, state, samples: Samples, sampler, clock: RunClock) -> dict:
+    """Write a finished run's results into out (summary.json last); the summary."""
+    geo = geometry_of(scenario)
+    wall_time = clock.solver_s()
+    n = sampler.n_points
+    n_steps = state.step
+    if vtk:
+        from vibroflow.io.vtk import write_pvd  # noqa: PLC0415  (only with vtk: meshio)
+
+        for kind in sampler.vtk_kinds:
+            write_pvd(out / VTK_DIR / f"{kind}.pvd", samples.vtk[kind])
+    radius = sampler.radius()
+    source = samples_source(scenario, samples, times, radius)
+    # the DEM's top-level keys (vibroflow.dem.run), with the points or cells as its particles
+    summary = {"case": scenario.case, "source": "vibroflow continuum", "method": form.name,
+               "n_particles": n, "steps": n_steps, "dt": system.dt,
+               "simulated_time_s": n_steps * system.dt, "wall_time_s": wall_time,
+               "compile_time_s": clock.compile_s(),
+               "particle_steps_per_s": n * n_steps / wall_time if wall_time > 0 else None}
+    summary.update(tub_summary(source, scenario, bulk_csv=out / BULK_CSV_NAME))
+    run = scenario.run
+    batch = batches_of_whole_cycles(times, run.duration - run.average_last, run.duration,
+                                    scenario.motion.frequency, run.batches) \
+        if times.size else np.zeros(0, np.int64)
+    summary["continuum"] = {
+        "rheology": material.model, "material": material.to_dict(), "bed_height_m": h,
+        "dt_s": system.dt, "steps": n_steps, "transfers_per_step": system.transfers,
+        "transfer_cfl": options.transfer_cfl, "wall_time_s": wall_time,
+        "stiffness_factor": options.stiffness_factor,
+        **form.continuum_block(system, state, h)}
+    phase = phase_shear_of_samples(scenario, samples, times, radius)
+    summary["continuum"].update(shear_rate_outputs(
+        material, calibration, scenario.analysis.probes, batch, run.batches, samples, phase,
+        geo.radius, summary["impacts"]))
+    write_shear_rate_csv(out / SHEAR_RATE_CSV_NAME, samples, phase, calibration,
+                         material.diameter)
+    summary = json_safe(summary)
+    write_json_atomic(out / SUMMARY_NAME, summary)
+    return summary
