@@ -152,7 +152,8 @@ def kernels(a) -> dict:
             from vibroflow.continuum.plasticity import update_volume
 
             g = system.grid
-            gm, gmv, gf, gv = system.work
+            gw = system.work
+            gm, gmv, gf, gv = gw.gm, gw.gmv, gw.gf, gw.gv
             wall, part = system.boundaries[0], system.boundaries[-1]
             h = state.history[0]
             x, v, C, L = state.x.copy(), state.v.copy(), state.C.copy(), state.L.copy()
@@ -196,14 +197,15 @@ def kernels(a) -> dict:
             from vibroflow.continuum.eulerian.solver import NQ
             from vibroflow.continuum.eulerian.transfer import g2p_cells, p2g_cells
             from vibroflow.continuum.eulerian.wall import wall_forces
-            from vibroflow.continuum.fused import sum_chunk_rows
+            from vibroflow.continuum.grid_step import sum_chunk_rows
             from vibroflow.continuum.grid_update import grid_update
 
             mesh = system.mesh
             g = mesh.grid
             n = mesh.n
-            gm, gmv, gf, gv = system.work
-            cm, cmv, cf = system.chunk_work
+            gw = system.work
+            gm, gmv, gf, gv = gw.gm, gw.gmv, gw.gf, gw.gv
+            cm, cmv, cf = gw.cm, gw.cmv, gw.cf
             act = np.flatnonzero(state.mass > 0)
             tcx, tcz = system.tables[0], system.tables[1]
             w, pf, hist = system.wall, system.partitions, state.wall
@@ -287,13 +289,18 @@ def main(argv=None) -> int:
     if a.method:
         print("RESULT " + json.dumps(worker(a)))
         return 0
+    # vibroflow (and with it numba) is imported in functions, after a worker's
+    # NUMBA_NUM_THREADS is set (module docstring)
+    from vibroflow.continuum.formulation import formulation
+
     dem_wall = None
     if a.dem_dir:
         dem_wall = json.loads((Path(a.dem_dir) / "summary.json").read_text())["wall_time_s"]
     report = {"case": a.case, "options": {"cfl": _options("lagrangian", a).cfl, "dx": a.dx,
                                           "stiffness_factor": a.stiffness_factor,
                                           "transfers_per_step": {
-                                              m: _options(m, a).transfers_on(_inputs(a)[0])
+                                              m: formulation(m).transfers_on(
+                                                  _options(m, a), _inputs(a)[0])
                                               for m in ("lagrangian", "eulerian")}},
               "dem_wall_time_s": dem_wall, "cases": []}
     if a.kernels:

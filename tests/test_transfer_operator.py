@@ -191,7 +191,7 @@ def test_grid_conditions_hold_after_the_transfers(transfers, axisymmetric):
     base = column_system(0.2, 0.2, 0.02, axisymmetric=axisymmetric, rough_floor=True)
     system = dataclasses.replace(base, transfers=transfers)
     state = column_state(system, 0.2, 0.2)
-    gv = system.work[3]
+    gv = system.work.gv
     for _ in range(20):
         advance(system, state, 5)
         assert system.no_slip_rows > 0
@@ -221,7 +221,7 @@ def test_eulerian_parallel_loop_gives_the_serial_numbers_with_transfers_and_a_ro
         try:
             for _ in range(10):
                 solver.advance(system, state, 10)
-                assert np.all(system.work[3][:, :system.no_slip_rows, :] == 0.0)
+                assert np.all(system.work.gv[:, :system.no_slip_rows, :] == 0.0)
         finally:
             nb.set_num_threads(old)
         return state

@@ -2,13 +2,15 @@
 
 Every boundary adds its force on each point (N per metre of thickness, in the solver's frame)
 to the points' external force before the particle-to-grid transfer, using the point's position
-and velocity at the start of the step, through this module's kernels (`u_wall_forces`,
-`plane_forces`, `partition_forces`), which the MPM's compiled step loop calls (fused.py).  A
-boundary object says how: `packed()` gives its kind (B_WALL or B_PARTITION) and its row of
-numbers (the WALL_FIELDS layout below for a penalty wall; friction and spacing for the
-partitions); `init_history(n)` allocates its per-point history (`state.history[self.slot]`).
-The penalty walls also have `lost(state)`: the ids of the points the last step found through
-the wall by more than their own side, which the solver reports as a blow-up (mpm.py).
+and velocity at the start of the step.  A boundary object gives the compiled step loop
+(fused.py) its numbers as one record of BOUNDARY_DTYPE (`record()`: its kind, and the fields
+of that kind by name), and `boundary_forces` runs the kernel of the record's kind
+(`u_wall_forces`, `plane_forces`, `partition_forces`): a new kind of boundary is a class, a
+kernel and a branch of `boundary_forces` here, and the step loop stays as it is.  A boundary
+with a per-point history (`init_history(n)`, `state.history[self.slot]`; the penalty walls)
+says so (`has_history`); the walls also have `lost(state)`: the ids of the points the last
+step found through the wall by more than their own side, which the solver reports as a
+blow-up (mpm/solver.py).
 
 Wall contact (`UWall`, `Plane`): a penalty contact with a constant normal stiffness, as the
 published finite element study of the tub did (a linear pressure-overclosure law), and Coulomb
@@ -47,15 +49,21 @@ from vibroflow.tub.geometry import u_wall_nearest
 
 NO_CONTACT, STICK, SLIDE = 0, 1, 2
 
-#: a penalty wall's packed row (`packed()`): kind (WALL_U the tub's U of radius W_RADIUS,
-#: WALL_PLANE a plane through (px, pz) + (vx, vz) t + (ax, az) t^2 / 2 with unit normal
-#: (nx, nz)), k_n, k_t (Pa/m), damping ratio, friction
-W_KIND, W_KN, W_KT, W_ZETA, W_MU, W_RADIUS, W_PX, W_PZ, W_NX, W_NZ, W_VX, W_VZ, W_AX, W_AZ = \
-    range(14)
-WALL_FIELDS = 14
-WALL_U, WALL_PLANE = 0, 1
-#: kinds of boundary (`packed()`)
-B_WALL, B_PARTITION = 0, 1
+#: kinds of boundary (BOUNDARY_DTYPE's `kind`): the tub's U wall, a moving plane wall, the
+#: partitions' friction
+U_WALL, PLANE_WALL, PARTITIONS = 0, 1, 2
+
+#: a boundary's numbers for the compiled step (`record()`): kind; hist, the row of a wall's
+#: history in the step's stacked histories (mpm.solver.pack_boundaries); a penalty wall's k_n,
+#: k_t (Pa/m), damping ratio zeta and friction mu; the U's radius (m); a plane through (px, pz) +
+#: (vx, vz) t + (ax, az) t^2 / 2 (m) with unit normal (nx, nz); the partitions' friction mu_p
+#: and spacing L_y (m)
+BOUNDARY_DTYPE = np.dtype([("kind", np.int64), ("hist", np.int64), ("kn", np.float64),
+                           ("kt", np.float64), ("zeta", np.float64), ("mu", np.float64),
+                           ("radius", np.float64), ("px", np.float64), ("pz", np.float64),
+                           ("nx", np.float64), ("nz", np.float64), ("vx", np.float64),
+                           ("vz", np.float64), ("ax", np.float64), ("az", np.float64),
+                           ("friction", np.float64), ("length", np.float64)])
 
 
 @nb.njit(cache=True, inline="always")
@@ -114,7 +122,8 @@ def u_wall_forces(x, v, mass, volume, xi, fext, f_out, fn_out, ft_out, state_out
 @nb.njit(cache=True)
 def plane_motion(px0, pz0, vx, vz, ax, az, t):
     """(px, pz, vx, vz) at time t (s) of a plane through (px0, pz0) (m) at t = 0 moving with
-    the velocity (vx, vz) + (ax, az) t (m/s): Plane.at, and the compiled step's (fused.py)."""
+    the velocity (vx, vz) + (ax, az) t (m/s): Plane.at, and the compiled step's
+    (`boundary_forces`)."""
     return (px0 + vx * t + 0.5 * ax * t * t, pz0 + vz * t + 0.5 * az * t * t, vx + ax * t,
             vz + az * t)
 
@@ -161,6 +170,29 @@ def partition_forces(v, mass, volume, stress, fext, mu_p, length, dt):
         fext[p, 1] -= f * v[p, 1] / sp
 
 
+@nb.njit(cache=True)
+def boundary_forces(b, x, v, mass, volume, stress, fext, hist, a, e, t, dt):
+    """Add the force of the boundary b (a BOUNDARY_DTYPE record) on the points a:e to fext
+    (N, 2) (N/m) at time t (s) over dt (s), with its kind's kernel; x, v (N, 2), mass, volume
+    (N,), stress (N, 4) the points' (mpm.solver.MPMState); hist = (xi, f, fn, ft, state) the
+    walls' stacked histories (mpm.solver.pack_boundaries), row b.hist this wall's.  Returns the
+    number of points gone through a wall (0 for the partitions)."""
+    if b.kind == PARTITIONS:
+        partition_forces(v[a:e], mass[a:e], volume[a:e], stress[a:e], fext[a:e], b.friction,
+                         b.length, dt)
+        return 0
+    xi, f, fn, ft, st = hist
+    q = b.hist
+    if b.kind == U_WALL:
+        return u_wall_forces(x[a:e], v[a:e], mass[a:e], volume[a:e], xi[q, a:e], fext[a:e],
+                             f[q, a:e], fn[q, a:e], ft[q, a:e], st[q, a:e], b.radius, b.kn,
+                             b.kt, b.zeta, b.mu, dt)
+    px, pz, wvx, wvz = plane_motion(b.px, b.pz, b.vx, b.vz, b.ax, b.az, t)
+    return plane_forces(x[a:e], v[a:e], mass[a:e], volume[a:e], xi[q, a:e], fext[a:e],
+                        f[q, a:e], fn[q, a:e], ft[q, a:e], st[q, a:e], px, pz, b.nx, b.nz, wvx,
+                        wvz, b.kn, b.kt, b.zeta, b.mu, dt)
+
+
 class _Contact:
     """Shared parts of the penalty walls: per-point slip history and last contact forces."""
 
@@ -186,12 +218,14 @@ class _Contact:
     def tangential_stiffness(self) -> float:
         return self.stiffness * self.tangential_ratio
 
-    def _row(self, kind: int) -> np.ndarray:
-        w = np.zeros(WALL_FIELDS)
-        w[W_KIND] = kind
-        w[[W_KN, W_KT, W_ZETA, W_MU]] = (self.stiffness, self.tangential_stiffness,
-                                         self.damping_ratio, self.friction)
-        return w
+    has_history = True
+
+    def _record(self, kind: int) -> np.ndarray:
+        r = np.zeros((), BOUNDARY_DTYPE)
+        r["kind"] = kind
+        r["kn"], r["kt"] = self.stiffness, self.tangential_stiffness
+        r["zeta"], r["mu"] = self.damping_ratio, self.friction
+        return r
 
     def init_history(self, n: int) -> dict:
         """Per-point arrays: slip xi (m), last force f (N, 2) with its normal and tangential
@@ -214,11 +248,11 @@ class UWall(_Contact):
     def __post_init__(self):
         self._check()
 
-    def packed(self) -> tuple[int, np.ndarray]:
-        """(B_WALL, its WALL_FIELDS row) (module docstring)."""
-        w = self._row(WALL_U)
-        w[W_RADIUS] = self.radius
-        return B_WALL, w
+    def record(self) -> np.ndarray:
+        """Its BOUNDARY_DTYPE record (module docstring)."""
+        r = self._record(U_WALL)
+        r["radius"] = self.radius
+        return r
 
     def _gap(self, state) -> np.ndarray:
         from vibroflow.tub.geometry import distance_to_wall_np
@@ -254,14 +288,14 @@ class Plane(_Contact):
                                         self.acceleration[1], t)
         return (px, pz), (wvx, wvz)
 
-    def packed(self) -> tuple[int, np.ndarray]:
-        """(B_WALL, its WALL_FIELDS row) (module docstring)."""
-        w = self._row(WALL_PLANE)
-        w[[W_PX, W_PZ]] = self.point
-        w[[W_NX, W_NZ]] = self.normal
-        w[[W_VX, W_VZ]] = self.velocity
-        w[[W_AX, W_AZ]] = self.acceleration
-        return B_WALL, w
+    def record(self) -> np.ndarray:
+        """Its BOUNDARY_DTYPE record (module docstring)."""
+        r = self._record(PLANE_WALL)
+        r["px"], r["pz"] = self.point
+        r["nx"], r["nz"] = self.normal
+        r["vx"], r["vz"] = self.velocity
+        r["ax"], r["az"] = self.acceleration
+        return r
 
     def _gap(self, state) -> np.ndarray:
         (px, pz), _ = self.at(self._t_last)
@@ -283,9 +317,14 @@ class PartitionFriction:
         if not self.length > 0:
             raise InputError(f"partition spacing L_y = {self.length!r}: must be > 0 m")
 
+    has_history = False
+
     def init_history(self, n: int) -> dict:
         return {}
 
-    def packed(self) -> tuple[int, np.ndarray]:
-        """(B_PARTITION, (friction, spacing L_y m))."""
-        return B_PARTITION, np.array([self.friction, self.length])
+    def record(self) -> np.ndarray:
+        """Its BOUNDARY_DTYPE record: friction mu_p (-), spacing L_y (m)."""
+        r = np.zeros((), BOUNDARY_DTYPE)
+        r["kind"] = PARTITIONS
+        r["friction"], r["length"] = self.friction, self.length
+        return r

@@ -117,7 +117,8 @@ class Formulation(ABC):
 
     @abstractmethod
     def restore(self, system, saved, meta: dict):
-        """The state of a checkpoint (checkpoint.load_checkpoint's state and meta)."""
+        """The state of a checkpoint (checkpoint.load_checkpoint's saved arrays, history, t,
+        step, and meta)."""
 
     def checkpoint_meta(self, state) -> dict:
         """The formulation's own numbers to keep in a checkpoint's meta (for `restore`)."""

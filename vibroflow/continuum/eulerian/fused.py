@@ -8,8 +8,9 @@ indexing, packing the remap's fields, dispatching a dozen kernels, the frame's p
 Threads, as the Lagrangian step's (vibroflow.continuum.fused): the per-cell kernels write only
 their own cells and the remap works field by field (advection.remap), so they give the serial
 numbers whatever the threads; the cells holding material are scattered to the nodes in `nchunk`
-fixed chunks of per-chunk buffers summed in a fixed order, so the run depends on the number of
-chunks, never on the number of threads (one chunk: the serial p2g's numbers).  On one thread,
+fixed chunks of per-chunk buffers summed in a fixed order (the grid's part of the step is the
+Lagrangian loop's: grid_step.grid_phase), so the run depends on the number of chunks, never on
+the number of threads (one chunk: the serial p2g's numbers).  On one thread,
 and on a small mesh (solver.SERIAL_BELOW), the loop is compiled without numba's parallel loops
 (`advance_kernel_serial`, the same code): on tub47's ~1000 cells a parallel loop's launch,
 even with one thread, cost ~1.5 us, and a step has seven of them.
@@ -18,29 +19,61 @@ The cells' B-spline weights on the grid are the mesh's constant tables (transfer
 cells holding material are scattered and gathered in place through their indices (no compact
 copies of their fields).
 
+Records (numba named tuples): `Cells` the state's arrays (solver.EulerianState), `CellStep` the
+step's constants, `MeshRecord` the mesh's, `MeshBoundaries` the wall and the partitions,
+`CellWork` the remap's work arrays, and the grid's GridSpec and GridWork (grid_step.py).
+
 An edit to any kernel the loop calls drops the package's numba cache (vibroflow/_kernel_cache.py),
 so the cached loop never keeps an old copy of them.
 """
 from __future__ import annotations
+
+from collections import namedtuple
 
 import numba as nb
 import numpy as np
 
 from ..boundary import partition_forces
 from ..constitutive import P_ETA_BED
-from ..fused import sum_chunk_rows
-from ..grid_update import frame_body, grid_update
+from ..grid_step import grid_phase, grid_phase_serial
+from ..stress_update import damped_stress
 from .advection import remap, remap_serial
 from .face_velocity import face_velocity_rows, match_divergence
 from .lagrangian_step import (end_density, fill_limit, material_fraction,
                               update_stress_cells, void_first)
-from ..stress_update import damped_stress
-from ..transfer_operator import sum_operator_rows, transfer_rows
 from .transfer import g2p_cells, operator_of_cells, p2g_cells
 from .wall import wall_forces
 
 #: status of `advance_kernel`
 OK, NEGATIVE_MASS, NON_FINITE = 0, 1, 2
+
+#: the cells' arrays (solver.EulerianState's, units there) and stress_work (N, 4) the stress
+#: scattered when the material has a bed viscosity (stress_update.damped_stress, on every
+#: cell; (0, 4) without)
+Cells = namedtuple("Cells", ["mass", "v", "C", "L", "stress", "gamma_dot", "phase", "frac",
+                             "volume", "density", "fext", "stress_work"])
+#: the step's constants: dt (s), the material's params (constitutive.ContinuumMaterial.
+#: as_array), the frame (grid_update.FRAME_FIELDS), the critical density rho_c (kg/m^3) and
+#: the initial total mass mass0 (kg/m; 0: not tracked)
+CellStep = namedtuple("CellStep", ["dt", "params", "frame", "rho_c", "mass0"])
+#: the mesh (mesh.EulerianMesh): cell side h (m), open faces open_x (ncx + 1, ncz) and open_z
+#: (ncx, ncz + 1), the wall cells' inward normals normal (N, 2), the weight tables
+#: (transfer.WeightTables as a tuple (cx, cz, fx, fz)), and weight, inv_r (N,) an
+#: axisymmetric section's cell radii and their reciprocals (1 and 0 in plane strain;
+#: solver.EulerianSystem.axisymmetric)
+MeshRecord = namedtuple("MeshRecord", ["h", "open_x", "open_z", "normal", "tables", "weight",
+                                       "inv_r"])
+#: the mesh's wall (wall.MeshWall; wall_on False without): its cells (int64 indices), its
+#: history (wall.empty_history: delta, xi, fn, ft, state), stiffnesses kn, kt (Pa/m), damping
+#: ratio zeta and friction mu; the partitions' friction (boundary.PartitionFriction;
+#: partitions_on False without): mu_p (-), spacing length (m)
+MeshBoundaries = namedtuple("MeshBoundaries", [
+    "wall_on", "wall_cells", "delta", "xi", "fn", "ft", "state", "kn", "kt", "zeta", "mu",
+    "partitions_on", "mu_p", "length"])
+#: the remap's work arrays: face velocities ux (ncx + 1, ncz), uz (ncx, ncz + 1) (m/s),
+#: advection.remap_work's arrays, the carried fields q (NQ, N), the end-of-step density
+#: end_rho (N,), active (N,) int64 the cells holding material
+CellWork = namedtuple("CellWork", ["ux", "uz", "remap", "q", "end_rho", "active"])
 
 
 def _make_advance_kernel(parallel: bool):
@@ -49,39 +82,32 @@ def _make_advance_kernel(parallel: bool):
     are cached apart."""
 
     @nb.njit(cache=True, parallel=parallel)
-    def advance_kernel(nsteps, t, dt, mass0, mass_error_max, mass, v, C, L, stress, gamma_dot,
-                       phase, frac, volume, density, fext, wall_on, wall_cells, normal, rho_c,
-                       delta, xi, wfn, wft, wst, kn, kt, zeta, mu_w, part_on, mu_p, length,
-                       frame, x0, z0, dx, periodic, h, open_x, open_z, params,
-                       tables, ux, uz, work, q, end_rho, act,
-                       cm, cmv, cf, gm, gmv, gf, gv, no_slip_rows, transfers, cb, B, gtmp,
-                       weight, inv_r, axis_cols, stress_work):
-        """Up to nsteps steps of dt (s) from time t (s) of the state's arrays
-        (solver.EulerianState, flat per cell; q (NQ, N), end_rho (N,) work arrays), in place;
-        the mesh's faces, its weight tables (transfer.WeightTables as a tuple (cx, cz, fx, fz))
-        and the remap's work arrays (advection.remap_work) as solver.EulerianSystem's; act (N,)
-        int64 a work array for the cells holding material; cm (nchunk, nx, nz), cmv, cf
-        (nchunk, nx, nz, 2) per-chunk scatter buffers; no_slip_rows: the grid's lowest node rows
-        held still after every grid update (solver.EulerianSystem.no_slip_below, a rough floor;
-        the Lagrangian loop's), 0 for none; transfers, cb, B, gtmp: the APIC transfers a step
-        makes and their operator's buffers (solver.EulerianSystem.transfers, the Lagrangian
-        loop's: vibroflow.continuum.fused); weight, inv_r (N,) and axis_cols: an axisymmetric
-        section's cell radii, their reciprocals and the node columns on the axis whose radial
-        velocity is held at 0 (solver.EulerianSystem.axisymmetric); 1, 0 and 0 in plane
-        strain; stress_work (N, 4): the stress scattered when the material has a bed
-        viscosity (stress_update.damped_stress, on every cell; unused without).
+    def advance_kernel(nsteps, t, mass_error_max, cells, step, mesh, boundaries, grid, work,
+                       cell_work):
+        """Up to nsteps steps of step.dt (s) from time t (s) of the cells' arrays, in place
+        (module docstring): cells (Cells), step (CellStep), mesh (MeshRecord), boundaries
+        (MeshBoundaries), grid (grid_step.GridSpec), work (grid_step.GridWork), cell_work
+        (CellWork); mass_error_max the largest |M - M0| / M0 so far.
 
         Returns (steps done, t, status, lowest cell mass kg/m, largest |M - M0| / M0 so far):
         status OK, NEGATIVE_MASS (a cell lost more mass than it held) or NON_FINITE (a velocity),
         found at the end of the last step made."""
         _ = parallel
+        mass, v, C, L, stress, gamma_dot, phase, frac, volume, density, fext, stress_work = \
+            cells
+        dt, params, frame, rho_c, mass0 = step
+        h, open_x, open_z, normal, tables, weight, inv_r = mesh
+        (wall_on, wall_cells, delta, xi, wfn, wft, wst, kn, kt, zeta, mu_w, part_on, mu_p,
+         length) = boundaries
+        x0, z0, dx, periodic, no_slip_rows, axis_cols = grid
+        cm, cmv, cf, gm, gmv, gf, gv, transfers, cb, B, gtmp = work
+        ux, uz, rwork, q, end_rho, act = cell_work
         n = mass.shape[0]
         tcx, tcz = tables[0], tables[1]
         ncx = open_z.shape[0]
         ncz = open_x.shape[1]
         nq = q.shape[0]
         nchunk = cm.shape[0]
-        nx = gm.shape[0]
         mtol = -1e-9 * rho_c * h * h
         m2 = mass.reshape((ncx, ncz))
         q3 = q.reshape((nq, ncx, ncz))
@@ -119,31 +145,13 @@ def _make_advance_kernel(parallel: bool):
                 if transfers > 1:
                     cb[c] = 0.0
                     operator_of_cells(act[a:b], ncz, tcx, tcz, mass, dx, periodic, cb[c])
-            for i in nb.prange(nx):
-                sum_chunk_rows(i, i + 1, cm, cmv, cf, gm, gmv, gf)
-                if transfers > 1:
-                    sum_operator_rows(i, i + 1, cb, B)
-            a0x, a0z, om, al, pvx, pvz = frame_body(frame, t + 0.5 * dt)
-            grid_update(gm, gmv, gf, gv, x0, z0, dx, dt, a0x, a0z, om, al, pvx, pvz, periodic)
-            if no_slip_rows > 0:
-                gv[:, :no_slip_rows, :] = 0.0
-            if axis_cols > 0:
-                gv[:axis_cols, :, 0] = 0.0
-            # the step's further transfers (vibroflow.continuum.transfer_operator)
-            # (from gv to gtmp and back, one parallel loop a transfer, the last copied back;
-            # the floor's rows held inside transfer_rows, as the Lagrangian loop's)
-            for j in range(transfers - 1):
-                if j % 2 == 0:
-                    for i in nb.prange(nx):
-                        transfer_rows(i, i + 1, B, gm, gv, gtmp, periodic, no_slip_rows,
-                                      axis_cols)
-                else:
-                    for i in nb.prange(nx):
-                        transfer_rows(i, i + 1, B, gm, gtmp, gv, periodic, no_slip_rows,
-                                      axis_cols)
-            if transfers % 2 == 0:
-                for i in nb.prange(nx):
-                    gv[i] = gtmp[i]
+            # the grid's part (grid_step.py): the chunks' sums, the update with the frame's
+            # acceleration at mid-step, the grid's conditions and the further transfers
+            # (the gather below reads the returned grid velocity, so it stays after the call)
+            if parallel:
+                gv = grid_phase(grid, work, frame, t, dt)
+            else:
+                gv = grid_phase_serial(grid, work, frame, t, dt)
             for c in nb.prange(nchunk):
                 a = (c * na) // nchunk
                 b = ((c + 1) * na) // nchunk
@@ -167,9 +175,9 @@ def _make_advance_kernel(parallel: bool):
                     q[6 + c, p] = stress[p, c]
                 q[10, p] = end_rho[p]
             if parallel:
-                lowest = remap(m2, q3, ux, uz, h, dt, periodic, work)
+                lowest = remap(m2, q3, ux, uz, h, dt, periodic, rwork)
             else:
-                lowest = remap_serial(m2, q3, ux, uz, h, dt, periodic, work)
+                lowest = remap_serial(m2, q3, ux, uz, h, dt, periodic, rwork)
             finite = True
             for p in range(n):
                 v[p, 0] = q[0, p]

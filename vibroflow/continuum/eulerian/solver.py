@@ -50,6 +50,7 @@ import numpy as np
 from vibroflow.errors import InputError
 
 from ..constitutive import ContinuumMaterial
+from ..grid_step import grid_spec, grid_work
 from ..grid_update import LabFrame
 from ..mpm.solver import ContinuumBlowUp
 from . import fused
@@ -149,7 +150,6 @@ class EulerianSystem:
             self.axis_cols = int(math.floor(-g.x0 / g.dx + 1e-9)) + 1
             radius = (m.xmin + (np.arange(m.ncx) + 0.5) * m.h, m.xmin + np.arange(m.ncx + 1) * m.h)
         self.density = np.zeros(m.n)
-        self.work = m.grid.zeros()
         self.wall_cells = np.nonzero(m.wall)[0].astype(np.int64)
         self.ux = np.zeros((m.ncx + 1, m.ncz))
         self.uz = np.zeros((m.ncx, m.ncz + 1))
@@ -160,20 +160,15 @@ class EulerianSystem:
         # the tuple the compiled loop takes
         t = WeightTables.of_mesh(m, self.x)
         self.tables = (t.cx, t.cz, t.fx, t.fz)
-        # fused.py's work arrays: the end-of-step density, the cells holding material, the
-        # per-chunk scatter buffers
-        n = m.n
-        self.end_rho = np.zeros(n)
-        self.active = np.zeros(n, np.int64)
-        g = m.grid
-        self.chunk_work = (np.zeros((self.chunks, g.nx, g.nz)),
-                           np.zeros((self.chunks, g.nx, g.nz, 2)),
-                           np.zeros((self.chunks, g.nx, g.nz, 2)))
-        # the transfer operator's buffers (vibroflow.continuum.transfer_operator), empty for
-        # one transfer a step
-        t = (g.nx, g.nz) if self.transfers > 1 else (0, 0)
-        self.transfer_work = (np.zeros((self.chunks, *t, 5, 5)), np.zeros((*t, 5, 5)),
-                              np.zeros((*t, 2)))
+        # fused.py's records of the mesh and of its work arrays (the end-of-step density, the
+        # cells holding material), and the grid's (grid_step.py: its conditions, the
+        # per-chunk scatter buffers, the node fields, the transfer operator's buffers)
+        self.mesh_record = fused.MeshRecord(float(m.h), m.open_x, m.open_z, m.normal,
+                                            self.tables, self.cell_weight, self.inv_r)
+        self.cell_work = fused.CellWork(self.ux, self.uz, self.remap_work, self.q,
+                                        np.zeros(m.n), np.zeros(m.n, np.int64))
+        self.grid_spec = grid_spec(m.grid, self.no_slip_rows, self.axis_cols)
+        self.work = grid_work(m.grid, self.chunks, self.transfers)
 
 
 @dataclass
@@ -299,7 +294,6 @@ def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
     if n <= 0:
         return
     mesh = system.mesh
-    g = mesh.grid
     mat = system.material
     w = system.wall
     hist = state.wall
@@ -308,21 +302,21 @@ def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
     # then) and on a small mesh (SERIAL_BELOW)
     parallel = nb.get_num_threads() > 1 and mesh.n >= system.serial_below
     kernel = fused.advance_kernel if parallel else fused.advance_kernel_serial
-    done, t, status, lowest, err_max = kernel(
-        n, state.t, system.dt, state.mass0, state.mass_error_max, state.mass,
-        state.v, state.C, state.L, state.stress, state.gamma_dot, state.phase, state.frac,
-        state.volume, state.density, state.fext, w is not None, system.wall_cells, mesh.normal,
-        mat.critical_density, hist["delta"], hist["xi"], hist["fn"], hist["ft"],
-        hist["state"], *((w.stiffness, w.tangential_stiffness, w.damping_ratio, w.friction)
+    cells = fused.Cells(state.mass, state.v, state.C, state.L, state.stress, state.gamma_dot,
+                        state.phase, state.frac, state.volume, state.density, state.fext,
+                        np.empty((state.n, 4)) if mat.bed_viscosity > 0 else np.empty((0, 4)))
+    step = fused.CellStep(float(system.dt), system.params, system.frame.as_array(),
+                          float(mat.critical_density), float(state.mass0))
+    boundaries = fused.MeshBoundaries(
+        w is not None, system.wall_cells, hist["delta"], hist["xi"], hist["fn"], hist["ft"],
+        hist["state"], *((float(w.stiffness), float(w.tangential_stiffness),
+                          float(w.damping_ratio), float(w.friction))
                          if w is not None else (0.0, 0.0, 0.0, 0.0)),
-        pf is not None, *((pf.friction, pf.length) if pf is not None else (0.0, 1.0)),
-        system.frame.as_array(), g.x0, g.z0, g.dx, g.periodic, mesh.h, mesh.open_x,
-        mesh.open_z, system.params, system.tables, system.ux, system.uz, system.remap_work,
-        system.q,
-        system.end_rho, system.active, *system.chunk_work, *system.work, system.no_slip_rows,
-        system.transfers, *system.transfer_work, system.cell_weight, system.inv_r,
-        system.axis_cols,
-        np.empty((state.n, 4)) if mat.bed_viscosity > 0 else np.empty((0, 4)))
+        pf is not None, *((float(pf.friction), float(pf.length)) if pf is not None
+                          else (0.0, 1.0)))
+    done, t, status, lowest, err_max = kernel(
+        n, float(state.t), float(state.mass_error_max), cells, step, system.mesh_record,
+        boundaries, system.grid_spec, system.work, system.cell_work)
     state.t = t
     state.step += done
     state.mass_error_max = err_max

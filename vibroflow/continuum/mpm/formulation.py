@@ -15,6 +15,7 @@ The column collapse: mpm/column.py's set-up.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -204,7 +205,7 @@ class MaterialPointMethod(Formulation):
         advance(system, state, steps)
 
     def restore(self, system, saved, meta: dict) -> MPMState:
-        return saved
+        return MPMState(**{f.name: getattr(saved, f.name) for f in dataclasses.fields(MPMState)})
 
     def sampler(self, scenario, system, state, out: Path, vtk: bool) -> PointSampler:
         return PointSampler(scenario, system, state, out, vtk)

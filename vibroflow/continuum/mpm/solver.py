@@ -28,9 +28,10 @@ import numpy as np
 from vibroflow.errors import InputError
 
 from .. import fused
-from ..boundary import B_PARTITION, B_WALL, WALL_FIELDS
+from ..boundary import BOUNDARY_DTYPE
 from ..constitutive import ContinuumMaterial
 from ..grid import Grid
+from ..grid_step import chunk_bounds, grid_spec, grid_work
 from ..grid_update import LabFrame
 
 
@@ -120,18 +121,10 @@ class MPMSystem:
         self.params = self.material.as_array()
         for j, b in enumerate(self.boundaries):
             b.slot = j
-        # grid work arrays (mass, momentum, force, velocity), reused every step
-        self.work = self.grid.zeros()
-        # per-chunk scatter buffers of the parallel p2g (fused.py)
-        g = self.grid
-        self.chunk_work = (np.zeros((self.chunks, g.nx, g.nz)),
-                           np.zeros((self.chunks, g.nx, g.nz, 2)),
-                           np.zeros((self.chunks, g.nx, g.nz, 2)))
-        # the transfer operator's per-chunk buffers, sum and work grid (transfer_operator.py),
-        # empty for one transfer a step
-        t = (g.nx, g.nz) if self.transfers > 1 else (0, 0)
-        self.transfer_work = (np.zeros((self.chunks, *t, 5, 5)), np.zeros((*t, 5, 5)),
-                              np.zeros((*t, 2)))
+        # the grid and its conditions, and its work arrays reused every step: the per-chunk
+        # scatter buffers, the node fields, the transfer operator's (grid_step.py)
+        self.grid_spec = grid_spec(self.grid, self.no_slip_rows, self.axis_cols)
+        self.work = grid_work(self.grid, self.chunks, self.transfers)
 
 
 @dataclass
@@ -260,27 +253,21 @@ def blowup_message(system: MPMSystem, state: MPMState, ids, what: str) -> str:
     return f"{where}; {numbers}; {cause}"
 
 
-def pack_boundaries(boundaries, n: int):
-    """The boundaries as fused.py's numbers: (bseq, wpar, history arrays (xi, f, fn, ft,
-    state) with one row per penalty wall, ppar, walls) for n points; the history rows are
-    views of the walls' own arrays when there is one wall, else stacked copies (write them
-    back with `unpack_history`)."""
-    bseq = np.zeros((len(boundaries), 2), np.int64)
-    wpar, ppar, walls = [], [], []
+def pack_boundaries(boundaries) -> tuple[np.ndarray, list]:
+    """The boundaries as fused.py's records (nb,) of BOUNDARY_DTYPE in their order, and the
+    walls (the boundaries with a per-point history), a wall's record pointing at its row of
+    the stacked histories (`_stack_history`)."""
+    records = np.zeros(len(boundaries), BOUNDARY_DTYPE)
+    walls = []
     for j, b in enumerate(boundaries):
-        if not hasattr(b, "packed"):
-            raise InputError(f"boundary {type(b).__name__}: has no packed() row for the MPM "
-                             "step (boundary.py: UWall, Plane, PartitionFriction)")
-        kind, row = b.packed()
-        if kind == B_PARTITION:
-            bseq[j] = (B_PARTITION, len(ppar))
-            ppar.append(row)
-        else:
-            bseq[j] = (B_WALL, len(wpar))
-            wpar.append(row)
+        if not hasattr(b, "record"):
+            raise InputError(f"boundary {type(b).__name__}: has no record() for the MPM step "
+                             "(boundary.py: UWall, Plane, PartitionFriction)")
+        records[j] = b.record()
+        if b.has_history:
+            records[j]["hist"] = len(walls)
             walls.append(b)
-    return (bseq, np.array(wpar).reshape(len(wpar), WALL_FIELDS),
-            np.array(ppar, dtype=float).reshape(len(ppar), 2), walls)
+    return records, walls
 
 
 _HISTORY = (("xi", np.float64, ()), ("f", np.float64, (2,)), ("fn", np.float64, ()),
@@ -317,7 +304,7 @@ def advance(system: MPMSystem, state: MPMState, n: int) -> None:
     if n <= 0:
         return
     g = system.grid
-    bseq, wpar, ppar, walls = pack_boundaries(system.boundaries, state.n)
+    records, walls = pack_boundaries(system.boundaries)
     hist = _stack_history(state, walls)
     xmin, xmax, zmin, zmax = g.inner_bounds()
     pad = 0.0 if g.periodic else g.dx
@@ -325,16 +312,15 @@ def advance(system: MPMSystem, state: MPMState, n: int) -> None:
     if system.axisymmetric:
         # a point on or across the axis r = 0 has no hoop rate v_r / r: stop there
         box[0] = 1.0e-9 * g.dx
-    bounds = fused.chunk_bounds(state.n, system.chunks)
-    cm, cmv, cf = system.chunk_work
-    gm, gmv, gf, gv = system.work
-    done, t, status, which = fused.advance_kernel(
-        n, state.t, system.dt, state.x, state.v, state.C, state.L, state.mass, state.volume,
-        state.density, state.stress, state.gamma_dot, state.phase, state.fext, bseq, wpar,
-        *hist, ppar, system.frame.as_array(), g.x0, g.z0, g.dx, g.periodic, system.params, box,
-        bounds, cm, cmv, cf, gm, gmv, gf, gv, system.no_slip_rows, system.flip,
-        system.axis_cols, system.transfers, *system.transfer_work,
+    points = fused.Points(
+        state.x, state.v, state.C, state.L, state.mass, state.volume, state.density,
+        state.stress, state.gamma_dot, state.phase, state.fext,
         np.empty((state.n, 4)) if system.material.bed_viscosity > 0 else np.empty((0, 4)))
+    step = fused.MPMStep(float(system.dt), system.params, system.frame.as_array(), box,
+                         chunk_bounds(state.n, system.chunks), float(system.flip))
+    done, t, status, which = fused.advance_kernel(
+        n, float(state.t), points, step, fused.Boundaries(records, *hist), system.grid_spec,
+        system.work)
     _unstack_history(state, walls, hist)
     state.t = t
     state.step += done
