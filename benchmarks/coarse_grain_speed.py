@@ -27,7 +27,7 @@ import numpy as np
 
 def numpy_peer(cg, snaps) -> tuple[np.ndarray, np.ndarray]:
     """rho (nx, nz) and contact-stress sums (9, nx, nz) of the snapshots, in plain NumPy."""
-    from vibroflow.calibration.coarse_grain import kernel_value
+    from vibroflow.calibration.coarse_grain_kernel import kernel_value
 
     x0, z0, h = cg.i_min * cg.h, cg.k_min * cg.h, cg.h
     rc = cg.cutoff_radius

@@ -55,7 +55,8 @@ DEFAULT_SETTLE_TIMES = "0.04,0.05,0.06,0.07"
 
 
 def apply_case(case: str, calibration: dict) -> tuple[dict, dict]:
-    """(calibration, ContinuumOptions keywords) of one case (module docstring)."""
+    """(calibration tables, ContinuumOptions keywords) of one case (module docstring), from
+    the tables of a calibration (`Calibration.to_toml_dict`)."""
     cal = copy.deepcopy(calibration)
     if ";" in case:
         # several changes at once, e.g. "dx=0.0095;transfer_cfl=0.0075"
@@ -156,7 +157,7 @@ def main(argv=None) -> int:
     from concurrent.futures import ProcessPoolExecutor
     from multiprocessing import get_context
 
-    from vibroflow.io.calibration_file import read_calibration
+    from vibroflow.io.calibration_file import Calibration, read_calibration
     from vibroflow.scenario.io import load_scenario
 
     summary = args.dem_dir / "summary.json"
@@ -175,13 +176,14 @@ def main(argv=None) -> int:
         raise SystemExit(f"{summary} is missing: give --dem-strength")
     h = scenario.analysis.cell_size
     ref_csv = args.dem_dir / "bulk_velocity.csv"
-    base = read_calibration(args.calibration or args.dem_dir / "calibration.toml")
+    base = read_calibration(args.calibration or args.dem_dir / "calibration.toml").to_toml_dict()
     print(f"{scenario.case}, {args.method}: DEM strength {dc['strength']:.3e} m^2/s; "
           f"{len(settle_times)} settling times {args.settle_times} s each")
     print(f"{'case':<30} {'E(cont, DEM)':>16} {'strength / DEM':>16}  members (E / ratio)")
     jobs, keys = [], []
     for case in args.cases:
-        cal, opts = apply_case(case, base)
+        tables, opts = apply_case(case, base)
+        cal = Calibration.from_dict(tables, where=f"--cases {case}")
         for st in settle_times:
             out = args.out / f"{args.method}-{case.replace('=', '_')}-{st:g}"
             jobs.append((args.method, scenario, cal, opts, st, str(out), str(ref_csv), h,

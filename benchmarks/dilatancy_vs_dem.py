@@ -14,7 +14,6 @@ points' unloaded packing phi = rho exp(-p / K) / rho_s minus phi_c.
 from __future__ import annotations
 
 import argparse
-import copy
 import json
 import sys
 import time
@@ -45,7 +44,7 @@ def main(argv=None) -> int:
 
     from vibroflow.measure.bulk import read_csv
     from vibroflow.analysis.compare import field_difference
-    from vibroflow.io.calibration_file import read_calibration
+    from vibroflow.io.calibration_file import Calibration, read_calibration
     from vibroflow.calibration.dem_result import DEMResult
     from vibroflow.continuum.formulation import formulation
     from vibroflow.continuum.tub_run import run_continuum
@@ -53,17 +52,18 @@ def main(argv=None) -> int:
     with DEMResult.open(args.dem_dir) as res:
         sc = res.scenario
     dem = json.loads((args.dem_dir / "summary.json").read_text())
-    cal = copy.deepcopy(read_calibration(args.calibration))
+    tables = read_calibration(args.calibration).to_toml_dict()
     if args.k_dil > 0:
-        cal["dilatancy"] = {**cal.get("dilatancy", {}), "K_dil": args.k_dil,
-                            "initial_excess_solid_fraction": args.excess}
+        tables["dilatancy"] = {**tables.get("dilatancy", {}), "K_dil": args.k_dil,
+                               "initial_excess_solid_fraction": args.excess}
     if args.compaction:
-        comp = dict(cal.get("compaction", {}))
+        comp = dict(tables.get("compaction", {}))
         if args.gamma_c is not None:
             comp["compaction_strain"] = args.gamma_c
         if args.dphi_cyc is not None:
             comp["excess_solid_fraction"] = args.dphi_cyc
-        cal["compaction"] = comp
+        tables["compaction"] = comp
+    cal = Calibration.from_dict(tables, where=str(args.calibration))
     opts = dict(dilatancy=args.k_dil > 0, cfl=args.cfl, compaction=args.compaction,
                 transfer_cfl=args.transfer_cfl)
     diag = []
@@ -109,8 +109,9 @@ def main(argv=None) -> int:
     print(json.dumps({"amplitude_factor": sc.motion.amplitude_factor, "method": args.method,
                       "K_dil": args.k_dil, "excess": args.excess, "cfl": args.cfl,
                       "transfer_cfl": args.transfer_cfl,
-                      "compaction": ({k: cal["compaction"].get(k) for k in (
-                          "compaction_strain", "excess_solid_fraction")}
+                      "compaction": ({"compaction_strain": cal.compaction.compaction_strain,
+                                      "excess_solid_fraction":
+                                          cal.compaction.excess_solid_fraction}
                                      if args.compaction else None),
                       "strength": c["strength"], "strength_stderr": c["strength_stderr"],
                       "dem_strength": dc["strength"], "dem_strength_stderr": dc["strength_stderr"],

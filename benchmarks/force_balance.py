@@ -224,13 +224,14 @@ def main(argv=None) -> int:
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
     a = ap.parse_args(argv)
 
-    from vibroflow.io.calibration_file import read_calibration
+    from vibroflow.io.calibration_file import Calibration, read_calibration
     from vibroflow.continuum.formulation import formulation
     from vibroflow.calibration.dem_result import DEMResult
 
     with DEMResult.open(a.dem_dir) as res:
         scenario = res.scenario
-    calibration = read_calibration(a.calibration or a.dem_dir / "calibration.toml")
+    cal_path = a.calibration or a.dem_dir / "calibration.toml"
+    tables = read_calibration(cal_path).to_toml_dict()
     opts = {}
     for item in a.set:
         name, _, value = item.partition("=")
@@ -238,7 +239,8 @@ def main(argv=None) -> int:
             opts[name[4:]] = float(value)
         else:
             section, _, key = name.partition(".")
-            calibration[section][key] = float(value)
+            tables[section][key] = float(value)
+    calibration = Calibration.from_dict(tables, where=str(cal_path))
     per = scenario.run.phases_per_cycle
     radius = scenario.tub.radius
     results = {"DEM": dem_balance(a.dem_dir, per, radius)}

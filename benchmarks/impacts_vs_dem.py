@@ -43,12 +43,13 @@ def main(argv=None) -> int:
     ap.add_argument("--set", action="append", default=[], dest="sets")
     args = ap.parse_args(argv)
 
-    from vibroflow.io.calibration_file import read_calibration
+    from vibroflow.io.calibration_file import Calibration, read_calibration
     from vibroflow.calibration.dem_result import DEMResult
     from vibroflow.calibration.impacts import impact_relations_on_cells
     from vibroflow.scenario.io import apply_overrides
 
-    cal = read_calibration(args.calibration or args.dem_dir / "calibration.toml")
+    cal_path = args.calibration or args.dem_dir / "calibration.toml"
+    tables = read_calibration(cal_path).to_toml_dict()
     with DEMResult.open(args.dem_dir) as res:
         scenario = res.scenario
         d = res.diameter
@@ -60,7 +61,9 @@ def main(argv=None) -> int:
                 "ball_wall": dem["ball_wall_mean_normal_speed"]}
     # the relation the continuum now uses: fitted on the continuum's measure
     for name in ("ball_ball", "ball_wall"):
-        cal["impacts"][name].update(c0_cells_m_s=cells[name]["c0"], c1_cells=cells[name]["c1"])
+        tables["impacts"][name].update(c0_cells_m_s=cells[name]["c0"],
+                                       c1_cells=cells[name]["c1"])
+    cal = Calibration.from_dict(tables, where=str(cal_path))
 
     print(f"DEM {args.dem_dir} ({scenario.case}): shear rate on the analysis cells "
           f"(phase-resolved field, h = {cells['cell_size_m'] * 1e3:.0f} mm): bed "
@@ -72,14 +75,14 @@ def main(argv=None) -> int:
     own = {}
     for name, rate in (("ball_ball", cells["bed_mean_shear_rate_1_s"]),
                        ("ball_wall", cells["near_wall_shear_rate_1_s"])):
-        fine = cal["impacts"][name]
+        fine = getattr(cal.impacts, name)
         c = cells[name]
         own[name] = c["c0"] + c["c1"] * d * rate
         sw = c["mean_normal_speed_solid_weighted"]
         print(f"  {name}: measured mean {measured[name]:.4f} m/s (the nodes' means weighted by "
               f"solid fraction, as a continuum's mean is: {sw:.4f}); relation on cells c0 "
               f"{c['c0']:.4f} m/s, c1 {c['c1']:.3f} (R^2 {c['r2']:.2f}, {c['points']} points); "
-              f"on the 5 mm field c0 {fine['c0_m_s']:.4f}, c1 {fine['c1']:.3f}; the DEM's own "
+              f"on the 5 mm field c0 {fine.c0_m_s:.4f}, c1 {fine.c1:.3f}; the DEM's own "
               f"inference {own[name]:.4f} ({own[name] / measured[name]:.2f} of measured, "
               f"{own[name] / sw:.2f} of the solid-weighted)")
 
@@ -101,9 +104,9 @@ def main(argv=None) -> int:
                "wall": sr["near_wall_1_s"], "wall_se": sr["near_wall_1_s_stderr"],
                "bed_inst": sr["instantaneous_mean_1_s"], "roll": sr["roll_mean_1_s"],
                "wall_inst": sr["instantaneous_near_wall_1_s"]}
-        fine = cal["impacts"]
-        row["bb_old"] = fine["ball_ball"]["c0_m_s"] + fine["ball_ball"]["c1"] * d * row["bed_inst"]
-        row["bw_old"] = fine["ball_wall"]["c0_m_s"] + fine["ball_wall"]["c1"] * d * row["wall_inst"]
+        bb, bw = cal.impacts.ball_ball, cal.impacts.ball_wall
+        row["bb_old"] = bb.c0_m_s + bb.c1 * d * row["bed_inst"]
+        row["bw_old"] = bw.c0_m_s + bw.c1 * d * row["wall_inst"]
         row["bb"] = s["impacts"]["ball_ball_mean_normal_speed"]
         row["bw"] = s["impacts"]["ball_wall_mean_normal_speed"]
         rows.append(row)

@@ -125,17 +125,21 @@ def calibrated_run(tmp_path_factory):
 
 
 def test_calibrate_writes_its_files_and_reads_back(calibrated_run):
-    from vibroflow.io.calibration_file import read_calibration
     from vibroflow.calibration.run_fields import read_fields
+    from vibroflow.io.calibration_file import read_calibration, write_calibration
 
     out, r = calibrated_run
     assert "wall friction (effective)" in r.stdout
     cal = read_calibration(out)
     for table in ("source", "media", "rheology", "elastic", "drucker_prager", "wall",
                   "partitions", "impacts"):
-        assert table in cal, table
-    assert cal["source"]["case"] == "tub47-quick"
-    assert cal["media"]["diameter_m"] == pytest.approx(D_STEEL)
+        assert getattr(cal, table) is not None, table
+    assert cal.source.case == "tub47-quick"
+    assert cal.media.diameter_m == pytest.approx(D_STEEL)
+    # the record written and read back is the same file
+    write_calibration(out / "again.toml", cal)
+    assert (out / "again.toml").read_bytes() == (out / "calibration.toml").read_bytes()
+    (out / "again.toml").unlink()
     for name in ("fields.png", "mu_I.png", "wall_friction.png", "impacts.png"):
         p = out / "calibration" / name
         assert p.is_file() and p.stat().st_size > 10_000, name
@@ -158,13 +162,13 @@ def test_continuum_gets_the_cyclic_secant_modulus_at_the_tubs_strain(calibrated_
 
     out, r = calibrated_run
     cal = read_calibration(out)
-    cs, el = cal["cyclic_shear"], cal["elastic"]
-    f = cs["frequency_Hz"]
-    assert cs["tub_strain_amplitude"] == pytest.approx(
-        math.pi * cs["tub_shear_rate_cycle_mean_1_s"] / (4 * math.pi * f))
-    assert el["shear_modulus_Pa"] == pytest.approx(cs["secant_shear_modulus_at_tub_amplitude_Pa"])
-    assert el["shear_modulus_Pa"] < el["shear_modulus_small_strain_Pa"]
-    amps, G = cs["strain_amplitude"], cs["secant_shear_modulus"]
+    cs, el = cal.cyclic_shear, cal.elastic
+    f = cs.frequency_Hz
+    assert cs.tub_strain_amplitude == pytest.approx(
+        math.pi * cs.tub_shear_rate_cycle_mean_1_s / (4 * math.pi * f))
+    assert el.shear_modulus_Pa == pytest.approx(cs.secant_shear_modulus_at_tub_amplitude_Pa)
+    assert el.shear_modulus_Pa < el.shear_modulus_small_strain_Pa
+    amps, G = cs.strain_amplitude, cs.secant_shear_modulus
     assert amps == sorted(amps)
     # the reduction curve, over amplitudes far enough apart to beat the cycle-to-cycle scatter
     assert all(G[j] < G[i] for i in range(len(amps)) for j in range(len(amps))
@@ -180,13 +184,13 @@ def test_calibrated_wall_friction_obeys_coulomb(calibrated_run):
 
     out, _ = calibrated_run
     cal = read_calibration(out)
-    w = cal["wall"]
-    mu = w["contact_friction"]
+    w = cal.wall
+    mu = w.contact_friction
     assert mu == pytest.approx(0.40)
-    assert 0.0 < w["ratio_of_sums"] <= mu * (1 + 1e-5)
-    assert w["friction"] == w["ratio_of_sums"]
-    if math.isfinite(w["coherent_slip_friction"]):
-        assert w["coherent_slip_friction"] <= mu * (1 + 1e-5)
+    assert 0.0 < w.ratio_of_sums <= mu * (1 + 1e-5)
+    assert w.friction == w.ratio_of_sums
+    if math.isfinite(w.coherent_slip_friction):
+        assert w.coherent_slip_friction <= mu * (1 + 1e-5)
     with h5py.File(out / "dem.h5") as f:
         fn = f["wall_contacts/fn"][()]
         ft = f["wall_contacts/ft"][()]

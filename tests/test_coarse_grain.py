@@ -26,7 +26,8 @@ import pytest
 
 from dem_helpers import D_STEEL, G, M_STEEL, R_STEEL, Sim, ball, contact, one_thread, plane, \
     scenario
-from vibroflow.calibration.coarse_grain import CoarseGrainer, kernel_value, snapshot_from_state
+from vibroflow.calibration.coarse_grain import CoarseGrainer, snapshot_from_state
+from vibroflow.calibration.coarse_grain_kernel import kernel_value
 from vibroflow.errors import InputError
 from vibroflow.scenario.model import Material
 from vibroflow.tub.geometry import TubGeometry

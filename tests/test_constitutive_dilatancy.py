@@ -184,20 +184,24 @@ def test_run_option_takes_k_dil_from_the_calibration():
     from vibroflow.continuum.bed import bed_area
     from vibroflow.continuum.formulation import formulation
     from vibroflow.continuum.material import material_of
+    from vibroflow.io.calibration_file import Calibration
     from vibroflow.scenario.io import load_scenario
 
     sc = load_scenario("tub47-quick", [])
-    cal = {"rheology": {"mu_s": 0.3, "mu_2": 0.55, "I_0": 0.04, "phi_max": 0.57,
-                        "phi_min": 0.36},
-           "media": {"diameter_m": 0.00635, "solid_density_kg_m3": 7800.0}}
+    tables = {"rheology": {"mu_s": 0.3, "mu_2": 0.55, "I_0": 0.04, "phi_max": 0.57,
+                           "phi_min": 0.36},
+              "elastic": {"bulk_modulus_Pa": 1.0e6, "shear_modulus_Pa": 1.0e5},
+              "wall": {"friction": 0.19},
+              "media": {"diameter_m": 0.00635, "solid_density_kg_m3": 7800.0}}
+    cal = Calibration.from_dict(tables)
     assert material_of(sc, cal, "mu_i", False).dilatancy == 0.0
     with pytest.raises(InputError, match="dilatancy"):
         material_of(sc, cal, "mu_i", True)
-    cal["dilatancy"] = {"K_dil": 6.0}
-    mat = material_of(sc, cal, "mu_i", True)
+    tables["dilatancy"] = {"K_dil": 6.0}
+    mat = material_of(sc, Calibration.from_dict(tables), "mu_i", True)
     assert mat.dilatancy == 6.0 and mat.initial_solid_fraction is None
-    cal["dilatancy"]["initial_excess_solid_fraction"] = 0.03
-    dense = material_of(sc, cal, "mu_i", True)
+    tables["dilatancy"]["initial_excess_solid_fraction"] = 0.03
+    dense = material_of(sc, Calibration.from_dict(tables), "mu_i", True)
     assert dense.initial_solid_fraction == pytest.approx(0.60)
     solid = sc.fill.count * math.pi * sc.fill.diameter**3 / 6.0 / sc.tub.length
     for m in (mat, dense):

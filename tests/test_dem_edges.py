@@ -4,8 +4,8 @@ and the blow-up's cause read from the state.
 
 Runs are small explicit scenarios (a few steel balls bouncing on a plate, milliseconds of
 simulated time) and, where the fill matters, a 200-ball tub47-quick; kills are deterministic
-(the fault-injection hooks of vibroflow.dem.run and vibroflow.dem.output, DEVELOPERS.md "Tests
-that kill a run"), never a race against the run.
+(the fault-injection hooks of vibroflow.dem.interrupts and vibroflow.dem.output, DEVELOPERS.md
+"Tests that kill a run"), never a race against the run.
 """
 from __future__ import annotations
 

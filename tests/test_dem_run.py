@@ -94,7 +94,7 @@ def test_killed_and_resumed_run_equals_uninterrupted(tmp_path):
     r = _cli("dem", "tub47-quick", "--out", str(ref), *_sets(SMALL), env=env)
     assert r.returncode == 0, r.stderr
     out = tmp_path / "killed"
-    # the run SIGKILLs itself right after its first checkpoint (vibroflow.dem.run's fault
+    # the run SIGKILLs itself right after its first checkpoint (vibroflow.dem.interrupts' fault
     # injection): a kill from outside raced the CI machine, which finished the run first
     r = _cli("dem", "tub47-quick", "--out", str(out), *sets,
              env=dict(env, VIBROFLOW_FAULT_KILL_AFTER_CHECKPOINT="1"))

@@ -105,11 +105,15 @@ def test_material_defaults_and_bad_input():
 
 
 def test_material_from_calibration_record():
-    cal = {"rheology": {"mu_s": 0.30, "mu_2": 0.55, "I_0": 0.3, "phi_max": 0.61,
-                        "phi_min": 0.5, "critical_solid_fraction": 0.605},
-           "elastic": {"bulk_modulus_Pa": 2e6, "shear_modulus_Pa": 1e6},
-           "media": {"diameter_m": 0.006, "solid_density_kg_m3": 7700.0},
-           "drucker_prager": {"viscosity_Pa_s": 3.5}}
+    from vibroflow.io.calibration_file import Calibration
+
+    cal = Calibration.from_dict({
+        "rheology": {"mu_s": 0.30, "mu_2": 0.55, "I_0": 0.3, "phi_max": 0.61, "phi_min": 0.5,
+                     "critical_solid_fraction": 0.605},
+        "elastic": {"bulk_modulus_Pa": 2e6, "shear_modulus_Pa": 1e6},
+        "wall": {"friction": 0.2},
+        "media": {"diameter_m": 0.006, "solid_density_kg_m3": 7700.0},
+        "drucker_prager": {"viscosity_Pa_s": 3.5}})
     mat = ContinuumMaterial.from_calibration(cal)
     assert (mat.mu_s, mat.mu_2, mat.I_0, mat.bulk_modulus) == (0.30, 0.55, 0.3, 2e6)
     assert mat.critical_density == pytest.approx(0.605 * 7700.0)
@@ -658,6 +662,7 @@ def test_shear_rate_map_holds_both_measures_and_infers_impacts(tmp_path):
     from vibroflow.measure.phase_shear import PhaseShearAccumulator
     from vibroflow.continuum.sampling import Samples
     from vibroflow.continuum.shear_outputs import impact_relation, write_shear_rate_csv
+    from vibroflow.io.calibration_file import Calibration, ImpactRelation
 
     h, a, b, G, length = 0.015, 2.0, 40.0, 1.5, 0.0635
     s = Samples(2, 1, 1, cell_grid=(h, 6, 8))
@@ -677,12 +682,18 @@ def test_shear_rate_map_holds_both_measures_and_infers_impacts(tmp_path):
     vel[:, 0] = G * pos[:, 2]
     acc.add(pos, vel, np.zeros(6), np.full(X.size, 0.6 * (h / 3) ** 2 * length), 0, 0)
     phase = acc.result()
-    cal = {"impacts": {"ball_ball": {"c0_m_s": 0.01, "c1": 3.0, "c0_cells_m_s": 0.005,
-                                     "c1_cells": 4.0},
-                       "ball_wall": {"c0_m_s": 0.02, "c1": 5.0}}}
-    assert impact_relation(cal["impacts"]["ball_ball"]) == (0.005, 4.0, "c0_cells, c1_cells")
-    assert impact_relation(cal["impacts"]["ball_wall"]) == (0.02, 5.0, "c0, c1")
-    assert impact_relation({"c0_m_s": float("nan"), "c1": 1.0}) == (None, None, "")
+    cal = Calibration.from_dict({
+        "rheology": {"mu_s": 0.30, "mu_2": 0.55, "I_0": 0.3, "phi_max": 0.61, "phi_min": 0.5},
+        "elastic": {"bulk_modulus_Pa": 2e6, "shear_modulus_Pa": 1e6},
+        "wall": {"friction": 0.2},
+        "media": {"diameter_m": 0.00635, "solid_density_kg_m3": 7800.0},
+        "impacts": {"ball_ball": {"c0_m_s": 0.01, "c1": 3.0, "c0_cells_m_s": 0.005,
+                                  "c1_cells": 4.0},
+                    "ball_wall": {"c0_m_s": 0.02, "c1": 5.0}}})
+    assert impact_relation(cal.impacts.ball_ball) == (0.005, 4.0, "c0_cells, c1_cells")
+    assert impact_relation(cal.impacts.ball_wall) == (0.02, 5.0, "c0, c1")
+    assert impact_relation(ImpactRelation(c0_m_s=float("nan"), c1=1.0)) == (None, None, "")
+    assert impact_relation(None) == (None, None, "")
     d = 0.00635
     write_shear_rate_csv(tmp_path / "shear_rate.csv", s, phase, cal, d)
     rows = np.genfromtxt(tmp_path / "shear_rate.csv", delimiter=",", names=True)

@@ -188,7 +188,7 @@ def test_a_killed_run_resumes_where_it_stopped(study, tmp_path):
     out = tmp_path / "killed"
     sets = [a for s in [*SMALL, "run.checkpoint_every=0.05"] for a in ("--set", s)]
     # the fixture's VIBROFLOW_CACHE (the cached fill); the DEM SIGKILLs the whole run right
-    # after its first checkpoint (vibroflow.dem.run's fault injection): a kill from outside
+    # after its first checkpoint (vibroflow.dem.interrupts' fault injection): a kill from outside
     # raced the CI machine, which finished the DEM stage first
     env = dict(os.environ, NO_COLOR="1", VIBROFLOW_FAULT_KILL_AFTER_CHECKPOINT="1")
     proc = subprocess.run([sys.executable, "-m", "vibroflow.cli", "run", "tub47-quick",

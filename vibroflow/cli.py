@@ -248,25 +248,24 @@ def calibrate(
 
     cal = run_calibration(run_dir, shear_cell=shear_cell, kernel=kernel, width=width,
                           cyclic=cyclic, dilatancy=dilatancy)
-    r, w = cal["rheology"], cal["wall"]
-    if r.get("status", "measured") != "measured":
-        sys.stderr.write(f"warning: rheology {r['status']}\n")
-    typer.echo(f"mu_s = {r['mu_s']:.3f} +- {r['mu_s_stderr']:.3f}, mu_2 = {r['mu_2']:.3f} +- "
-               f"{r['mu_2_stderr']:.3f}, I_0 = {r['I_0']:.3g} +- {r['I_0_stderr']:.2g} "
-               f"({r['source'].split(' (')[0]})")
-    e = cal["elastic"]
-    typer.echo(f"K = {e['bulk_modulus_Pa'] / 1e6:.3g} MPa, "
-               f"G = {e['shear_modulus_Pa'] / 1e6:.3g} MPa"
-               + (f" (cyclic secant at strain {cal['cyclic_shear']['tub_strain_amplitude']:.3g};"
-                  f" small-strain {e['shear_modulus_small_strain_Pa'] / 1e6:.3g} MPa)"
-                  if "cyclic_shear" in cal else ""))
-    typer.echo(f"wall friction (effective) = {w['friction']:.3f} +- {w['friction_stderr']:.3f}"
-               f", sliding fraction {w['sliding_fraction']:.2f}")
+    r, w, e = cal.rheology, cal.wall, cal.elastic
+    if (r.status or "measured") != "measured":
+        sys.stderr.write(f"warning: rheology {r.status}\n")
+    typer.echo(f"mu_s = {r.mu_s:.3f} +- {r.mu_s_stderr:.3f}, mu_2 = {r.mu_2:.3f} +- "
+               f"{r.mu_2_stderr:.3f}, I_0 = {r.I_0:.3g} +- {r.I_0_stderr:.2g} "
+               f"({r.source.split(' (')[0]})")
+    typer.echo(f"K = {e.bulk_modulus_Pa / 1e6:.3g} MPa, "
+               f"G = {e.shear_modulus_Pa / 1e6:.3g} MPa"
+               + (f" (cyclic secant at strain {cal.cyclic_shear.tub_strain_amplitude:.3g};"
+                  f" small-strain {e.shear_modulus_small_strain_Pa / 1e6:.3g} MPa)"
+                  if cal.cyclic_shear is not None else ""))
+    typer.echo(f"wall friction (effective) = {w.friction:.3f} +- {w.friction_stderr:.3f}"
+               f", sliding fraction {w.sliding_fraction:.2f}")
     for name in ("ball_ball", "ball_wall"):
-        im = cal["impacts"].get(name)
-        if im:
-            typer.echo(f"impacts {name}: v = {im['c0_m_s']:.3f} + {im['c1']:.2f} d gamma_dot "
-                       f"(R2 = {im['r2']:.2f}), mean {im['mean_normal_speed_m_s']:.3f} m/s")
+        im = getattr(cal.impacts, name)
+        if im is not None:
+            typer.echo(f"impacts {name}: v = {im.c0_m_s:.3f} + {im.c1:.2f} d gamma_dot "
+                       f"(R2 = {im.r2:.2f}), mean {im.mean_normal_speed_m_s:.3f} m/s")
     typer.echo(f"results in {run_dir}/calibration.toml, fields.nc, calibration/*.png")
 
 

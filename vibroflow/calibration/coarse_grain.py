@@ -7,6 +7,9 @@ hands over, per snapshot, the balls' positions and velocities in the tub frame a
 forces; `CoarseGrainer` accumulates kernel-weighted sums on a grid and `fields()` turns the
 averaged sums into continuum fields.
 
+The kernel and its deposits are in coarse_grain_kernel, the fields derived from the averaged
+sums (their definitions, compression positive) in coarse_grain_fields.
+
 Frame and grid
 --------------
 Everything is in the tub frame (tub47.md "Frames"): x across, z up, y along the tub; velocities
@@ -20,48 +23,6 @@ h, as vibroflow.measure.bulk), covering the tub's cross-section (bulk.grid_exten
 of cells wide enough to hold the kernel's support, so that no deposited mass, momentum or stress
 leaves the grid (the integral identities then hold exactly).  A field value is the smoothed
 field at the cell centre (a point value, not a cell average).
-
-Kernel (choice and why)
------------------------
-* "gaussian" (default): W = A [exp(-r^2 / 2 w^2) - exp(-c^2 / 2 w^2)] for r < c = cutoff * w
-  (cutoff 3 by default), zero beyond.  The constant is subtracted so that W is continuous at the
-  cut-off: the gradient of the CG fields is then exactly the sum of the kernel gradients (with a
-  plain truncated Gaussian the jump at r = c would leave out a ring term and under-read every
-  gradient by ~5 % at c = 3 w).  A normalises W to unit integral over the plane.
-  (The shift narrows it slightly: its standard deviation per axis is 0.94 w at c = 3 w.)
-* "lucy": W = 5 / (pi c^2) (1 + 3 s)(1 - s)^3, s = r / c < 1 (the 2D Lucy polynomial).  `width`
-  is its standard deviation per axis (the uncut Gaussian's w), so c = sqrt(56 / 5) w ~ 3.35 w;
-  it has compact support by construction and takes no `cutoff`.
-* Default width w = d / 2 with d = 6.35 mm, i.e. 3.2 mm, cut off at 9.5 mm.  Weinhart et al.
-  2012 find the CG fields independent of w over a plateau from about d/4 to d/2 (below it the
-  fields show the single-particle layering, above it real gradients are smeared); we take the
-  upper end because the fields here are averaged over y and a 15 mm grid and the shear-rate
-  field (a gradient) is the noisiest quantity, while d/2 still resolves the ~1-2 d boundary
-  layer at the wall.  Pass width = d/4 for near-wall profiles on a fine grid.
-
-Definitions (compression positive)
-----------------------------------
-Sign convention: **compression positive** (a bed at rest has sigma_zz > 0, p > 0).
-* density rho = sum_i m_i W_i / L_y; solid fraction phi = sum_i V_i W_i / L_y (V_i ball volume);
-  momentum density P = sum_i m_i v_i W_i / L_y; velocity V = P / rho.
-* kinetic stress sigma_k = sum_i m_i v'_i (x) v'_i W_i / L_y, v'_i = v_i - V(r), computed as
-  K - P (x) P / rho with K = sum_i m_i v_i (x) v_i W_i / L_y.
-* contact stress sigma_c = sum_contacts f_ij (x) r_ij  int_0^1 W(r - r_i + s r_ij) ds / L_y,
-  each touching pair once, f_ij the force on i by j, r_ij = r_i - r_j (branch), the line
-  integral by Gauss-Legendre quadrature (`quadrature` points, default 4); plus every wall
-  contact, with f the wall's force on the ball and r = r_i - c (ball centre minus contact point),
-  so the stress carries the wall's load up to the wall and the momentum balance
-  d sigma_ab / d x_b = rho g_a - (rate of change of momentum) holds right up to the boundary.
-  The tensor is kept whole (3 x 3, not symmetrised: f (x) r of a frictional contact is not).
-* stress sigma = sigma_k + sigma_c; pressure p = tr(sigma) / 3; deviator tau = sym(sigma) - p 1;
-  shear stress tau_eq = sqrt(tau : tau / 2); friction coefficient mu = tau_eq / p.
-* velocity gradient L_ab = d V_a / d x_b for b in (x, z) from the kernel gradients,
-  L = (grad P - V (x) grad rho) / rho (exact for the CG field; `gradient="grid"` takes central
-  differences on the grid instead); its y column is zero (fields are uniform in y).
-  Strain rate D = (L + L^T) / 2 (D_yy = D_xy = D_yz = 0 when V_y = 0); shear rate
-  gamma_dot = sqrt(2 D' : D'), D' = D - tr(D) / 3 1 (simple shear v_x = g z gives g).
-* granular temperature T = tr(sigma_k) / (3 rho) = <|v'|^2> / 3 (m^2/s^2).
-* inertial number I = gamma_dot d / sqrt(p / rho_s).
 
 Averaging
 ---------
@@ -83,268 +44,25 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 
-from vibroflow.measure.bulk import grid_extent
-from vibroflow.measure.stats import phase_bins, stderr_of_batches  # noqa: F401 (re-exported)
 from vibroflow.errors import InputError
+from vibroflow.measure.bulk import grid_extent
+from vibroflow.measure.stats import stderr_of_batches
 from vibroflow.tub.geometry import TubGeometry
 from vibroflow.tub.motion import lab_to_tub_np, pose_np, relative_velocity_tub_axes_np
+
+from .coarse_grain_fields import COMPONENTS, FIELD_META, derive_fields
+from .coarse_grain_kernel import (KERNELS, LUCY_CUTOFF_PER_WIDTH, N_BALL_Q, N_CONTACT_Q,
+                                  deposit_balls, deposit_contacts, kernel_parameters)
 
 try:  # optional: fields() returns a plain dict without it
     import xarray as _xr
 except ImportError:  # pragma: no cover - exercised only where xarray is absent
     _xr = None
 
-KERNELS = ("gaussian", "lucy")
 D_TUB47 = 0.00635          # m, tub47's ball diameter (default kernel width d/2)
-LUCY_CUTOFF_PER_WIDTH = math.sqrt(56.0 / 5.0)  # c / w of the 2D Lucy kernel of per-axis std w
 
-# Layout of the per-ball sums (first axis of the ball accumulator).
-B_RHO, B_VOL, B_DRHO = 0, 1, 2               # rho; volume; d rho / dx, dz  (2)
-B_P = 4                                      # momentum x, y, z  (3)
-B_DP = 7                                     # d P_a / d x_b: 7 + 2 a + b, b = 0 (x), 1 (z)  (6)
-B_K = 13                                     # K xx yy zz xy xz yz  (6)
-N_BALL_Q = 19
-N_CONTACT_Q = 9                              # sigma_c ab, 3 a + b
-_SYM = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
-_COMP = ["x", "y", "z"]
-
-
-# ----------------------------------------------------------------------------------------------
-# numba kernels: pure functions over flat arrays.
-
-@nb.njit(cache=True, inline="always")
-def _w_and_grad(dx, dz, kind, amp, inv2w2, shift, rc):
-    """Kernel value and gradient (d/dx, d/dz of W(r - r_p)) at offset (dx, dz) = r - r_p."""
-    r2 = dx * dx + dz * dz
-    if r2 >= rc * rc:
-        return 0.0, 0.0, 0.0
-    if kind == 0:
-        e = math.exp(-r2 * inv2w2)
-        g = -2.0 * inv2w2 * amp * e
-        return amp * (e - shift), g * dx, g * dz
-    s = math.sqrt(r2) / rc
-    om = 1.0 - s
-    g = -12.0 * amp * om * om / (rc * rc)
-    return amp * (1.0 + 3.0 * s) * om * om * om, g * dx, g * dz
-
-
-@nb.njit(cache=True)
-def deposit_balls(px, pz, mass, volume, vel, factor, x0, z0, h, nx, nz, kind, amp, inv2w2,
-                  shift, rc, out):
-    """Add factor x the per-ball kernel sums of one snapshot to out (N_BALL_Q, nx, nz).
-
-    px, pz : (N,) tub-frame x, z (m); mass (kg), volume (m^3) : (N,); vel : (N, 3) (m/s);
-    the grid's cell (a, b) is centred at (x0 + a h, z0 + b h).  Sums are per unit area (the
-    kernel is 2D); the caller divides by the depth.
-    """
-    n = px.shape[0]
-    for p in range(n):
-        x = px[p]
-        z = pz[p]
-        a0 = max(int(math.ceil((x - rc - x0) / h)), 0)
-        a1 = min(int(math.floor((x + rc - x0) / h)), nx - 1)
-        b0 = max(int(math.ceil((z - rc - z0) / h)), 0)
-        b1 = min(int(math.floor((z + rc - z0) / h)), nz - 1)
-        if a0 > a1 or b0 > b1:
-            continue
-        m = mass[p] * factor
-        vo = volume[p] * factor
-        vx = vel[p, 0]
-        vy = vel[p, 1]
-        vz = vel[p, 2]
-        for a in range(a0, a1 + 1):
-            dx = x0 + a * h - x
-            for b in range(b0, b1 + 1):
-                dz = z0 + b * h - z
-                w, gx, gz = _w_and_grad(dx, dz, kind, amp, inv2w2, shift, rc)
-                if w == 0.0 and gx == 0.0 and gz == 0.0:
-                    continue
-                mw = m * w
-                out[0, a, b] += mw
-                out[1, a, b] += vo * w
-                out[2, a, b] += m * gx
-                out[3, a, b] += m * gz
-                out[4, a, b] += mw * vx
-                out[5, a, b] += mw * vy
-                out[6, a, b] += mw * vz
-                out[7, a, b] += m * vx * gx
-                out[8, a, b] += m * vx * gz
-                out[9, a, b] += m * vy * gx
-                out[10, a, b] += m * vy * gz
-                out[11, a, b] += m * vz * gx
-                out[12, a, b] += m * vz * gz
-                out[13, a, b] += mw * vx * vx
-                out[14, a, b] += mw * vy * vy
-                out[15, a, b] += mw * vz * vz
-                out[16, a, b] += mw * vx * vy
-                out[17, a, b] += mw * vx * vz
-                out[18, a, b] += mw * vy * vz
-
-
-@nb.njit(cache=True)
-def deposit_contacts(start, branch, force, s_nodes, s_weights, factor, x0, z0, h, nx, nz, kind,
-                     amp, inv2w2, shift, rc, out):
-    """Add factor x sum_c f_c (x) b_c int_0^1 W(r - start_c + s b_c) ds to out (9, nx, nz).
-
-    start : (C, 3) r_i, the ball's centre (tub frame, m); branch : (C, 3) b = r_i - r_j (or
-    r_i - contact point for a wall), m; force : (C, 3) on ball i (N, tub axes).  The line
-    integral from r_i to r_i - b is done with the quadrature nodes s_nodes in [0, 1] and weights
-    s_weights (summing to 1).
-    """
-    nc = start.shape[0]
-    nq = s_nodes.shape[0]
-    t = np.empty(9)
-    for c in range(nc):
-        for i in range(3):
-            for j in range(3):
-                t[3 * i + j] = force[c, i] * branch[c, j] * factor
-        for q in range(nq):
-            x = start[c, 0] - s_nodes[q] * branch[c, 0]
-            z = start[c, 2] - s_nodes[q] * branch[c, 2]
-            wq = s_weights[q]
-            a0 = max(int(math.ceil((x - rc - x0) / h)), 0)
-            a1 = min(int(math.floor((x + rc - x0) / h)), nx - 1)
-            b0 = max(int(math.ceil((z - rc - z0) / h)), 0)
-            b1 = min(int(math.floor((z + rc - z0) / h)), nz - 1)
-            for a in range(a0, a1 + 1):
-                dx = x0 + a * h - x
-                for b in range(b0, b1 + 1):
-                    dz = z0 + b * h - z
-                    w, _gx, _gz = _w_and_grad(dx, dz, kind, amp, inv2w2, shift, rc)
-                    if w == 0.0:
-                        continue
-                    ww = wq * w
-                    for k in range(9):
-                        out[k, a, b] += ww * t[k]
-
-
-# ----------------------------------------------------------------------------------------------
-# Kernel parameters.
-
-def kernel_parameters(kernel: str, width: float, cutoff: float | None):
-    """(kind, amplitude, 1/(2 w^2), shift, cut-off radius) of the 2D kernel (SI)."""
-    if kernel == "gaussian":
-        c = 3.0 if cutoff is None else float(cutoff)
-        rc = c * width
-        shift = math.exp(-0.5 * c * c)
-        # integral over the disc r < rc of [exp(-r^2/2w^2) - shift]
-        norm = 2.0 * math.pi * width**2 * (1.0 - shift) - math.pi * rc**2 * shift
-        return 0, 1.0 / norm, 1.0 / (2.0 * width**2), shift, rc
-    rc = LUCY_CUTOFF_PER_WIDTH * width
-    return 1, 5.0 / (math.pi * rc**2), 0.0, 0.0, rc
-
-
-def kernel_value(kernel: str, width: float, cutoff: float | None, dx, dz):
-    """W at offsets (dx, dz) (m), vectorised; for checks and plots (1/m^2)."""
-    kind, amp, inv2w2, shift, rc = kernel_parameters(kernel, width, cutoff)
-    r2 = np.asarray(dx, float) ** 2 + np.asarray(dz, float) ** 2
-    if kind == 0:
-        w = amp * (np.exp(-r2 * inv2w2) - shift)
-    else:
-        s = np.sqrt(r2) / rc
-        w = amp * (1.0 + 3.0 * s) * (1.0 - s) ** 3
-    return np.where(r2 < rc * rc, w, 0.0)
-
-
-# ----------------------------------------------------------------------------------------------
-# Derived fields (numpy, vectorised over any leading axes).
-
-def rheology(velocity_gradient, stress, rho_s: float, diameter: float) -> dict:
-    """Strain rate, shear rate, pressure, shear stress, inertial number and friction coefficient
-    from a velocity gradient L_ab = dV_a/dx_b (s^-1) and a stress (Pa, compression positive),
-    both (..., 3, 3); rho_s (kg/m^3) the solid density, diameter d (m).
-
-    D = (L + L^T)/2; gamma_dot = sqrt(2 D':D'), D' = D - tr(D)/3 1; p = tr(sigma)/3;
-    tau = sym(sigma) - p 1; tau_eq = sqrt(tau:tau/2); I = gamma_dot d / sqrt(p / rho_s);
-    mu = tau_eq / p.  I and mu are NaN where p <= 0 (no compressive pressure).
-    """
-    L = np.asarray(velocity_gradient, float)
-    s = np.asarray(stress, float)
-    eye = np.eye(3)
-    D = 0.5 * (L + np.swapaxes(L, -1, -2))
-    Dd = D - np.trace(D, axis1=-2, axis2=-1)[..., None, None] / 3.0 * eye
-    gamma = np.sqrt(2.0 * np.einsum("...ij,...ij->...", Dd, Dd))
-    p = np.trace(s, axis1=-2, axis2=-1) / 3.0
-    tau = 0.5 * (s + np.swapaxes(s, -1, -2)) - p[..., None, None] * eye
-    tau_eq = np.sqrt(0.5 * np.einsum("...ij,...ij->...", tau, tau))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        pos = p > 0
-        I = np.where(pos, gamma * diameter / np.sqrt(np.where(pos, p, 1.0) / rho_s), np.nan)
-        mu = np.where(pos, tau_eq / np.where(pos, p, 1.0), np.nan)
-    return {"strain_rate": D, "shear_rate": gamma, "pressure": p, "shear_stress": tau_eq,
-            "inertial_number": I, "friction_coefficient": mu}
-
-
-def velocity_gradient_on_grid(velocity, cell_size: float):
-    """Velocity gradient (..., nx, nz, 3, 3) by second-order differences (np.gradient) of a
-    grid velocity (..., nx, nz, 3) with spacing cell_size (m); the y column is zero."""
-    v = np.asarray(velocity, float)
-    L = np.zeros(v.shape + (3,))
-    L[..., 0] = np.gradient(v, cell_size, axis=-3)
-    L[..., 2] = np.gradient(v, cell_size, axis=-2)
-    return L
-
-
-def _derive(ball, cont, depth, rho_s, diameter, gradient, cell_size):
-    """Fields from weight-averaged sums: ball (..., 19, nx, nz), cont (..., 9, nx, nz).
-    Returns a dict of arrays (..., nx, nz[, 3[, 3]])."""
-    ball = np.moveaxis(ball, -3, -1) / depth          # (..., nx, nz, 19)
-    cont = np.moveaxis(cont, -3, -1) / depth
-    rho = ball[..., B_RHO]
-    P = ball[..., B_P:B_P + 3]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        inv = np.where(rho > 0, 1.0 / np.where(rho > 0, rho, 1.0), np.nan)
-        V = P * inv[..., None]
-        K = np.zeros(rho.shape + (3, 3))
-        for q, (a, b) in enumerate(_SYM):
-            K[..., a, b] = ball[..., B_K + q]
-            K[..., b, a] = ball[..., B_K + q]
-        # no mass, no kinetic stress (the contact stress reaches a little further than the
-        # density: the kernel rides along each branch to the wall's contact point)
-        sig_k = np.where((rho > 0)[..., None, None],
-                         K - np.einsum("...a,...b->...ab", P, np.nan_to_num(V)), 0.0)
-        if gradient == "kernel":
-            L = np.zeros(rho.shape + (3, 3))
-            grad_rho = ball[..., B_DRHO:B_DRHO + 2]
-            for a in range(3):
-                for bi, b in enumerate((0, 2)):
-                    L[..., a, b] = (ball[..., B_DP + 2 * a + bi]
-                                    - V[..., a] * grad_rho[..., bi]) * inv
-        else:
-            L = velocity_gradient_on_grid(V, cell_size)
-        T = np.trace(sig_k, axis1=-2, axis2=-1) / 3.0 * inv
-    sig_c = cont.reshape(cont.shape[:-1] + (3, 3))
-    sig = sig_k + sig_c
-    out = {"density": rho, "solid_fraction": ball[..., B_VOL], "velocity": V,
-           "velocity_gradient": L, "kinetic_stress": sig_k, "contact_stress": sig_c,
-           "stress": sig, "temperature": T}
-    out.update(rheology(L, sig, rho_s, diameter))
-    return out
-
-
-_META = {
-    "density": ("kg m-3", "CG mass density rho = sum m_i W_i / L_y"),
-    "solid_fraction": ("1", "solid fraction phi = sum V_i W_i / L_y"),
-    "velocity": ("m s-1", "V = <P>/<rho>, relative to the tub, tub axes"),
-    "velocity_gradient": ("s-1", "L_ij = dV_i/dx_j (y column zero)"),
-    "kinetic_stress": ("Pa", "sum m v' (x) v' W / L_y, compression positive"),
-    "contact_stress": ("Pa", "sum f_ij (x) r_ij int W ds / L_y incl. walls, compression "
-                       "positive"),
-    "stress": ("Pa", "kinetic + contact stress, compression positive"),
-    "temperature": ("m2 s-2", "granular temperature T = tr(sigma_k) / (3 rho)"),
-    "strain_rate": ("s-1", "D = (L + L^T)/2"),
-    "shear_rate": ("s-1", "gamma_dot = sqrt(2 D':D')"),
-    "pressure": ("Pa", "p = tr(sigma)/3, compression positive"),
-    "shear_stress": ("Pa", "tau_eq = sqrt(tau:tau/2), tau = sym(sigma) - p 1"),
-    "inertial_number": ("1", "I = gamma_dot d / sqrt(p / rho_s)"),
-    "friction_coefficient": ("1", "mu = tau_eq / p"),
-}
-
-
-# ----------------------------------------------------------------------------------------------
 
 class CoarseGrainer:
     """Streaming coarse-graining on a grid of the tub frame's x-z plane (see the module notes).
@@ -469,7 +187,8 @@ class CoarseGrainer:
         wall_particle : (W,) ball of each wall contact; wall_force : (W, 3) the wall's force on
             the ball, tub axes (N); wall_point : (W, 3) contact point, tub frame (m).
         weight : the snapshot's weight in the averages (>= 0).
-        phase_bin : phase bin 0 .. n_phases-1 (required when n_phases is set; see phase_bins).
+        phase_bin : phase bin 0 .. n_phases-1 (required when n_phases is set; see
+            vibroflow.measure.stats.phase_bins).
         batch : batch of whole cycles 0 .. n_batches-1; negative: the snapshot is skipped
             (as stats.batches_of_whole_cycles marks samples outside the window).
         """
@@ -547,7 +266,7 @@ class CoarseGrainer:
             inv = np.where(weight > 0, 1.0 / np.where(weight > 0, weight, 1.0), np.nan)
         ball = ball * inv[..., None, None, None]
         cont = cont * inv[..., None, None, None]
-        return _derive(ball, cont, self.depth, self.solid_density(), self.diameter, gradient,
+        return derive_fields(ball, cont, self.depth, self.solid_density(), self.diameter, gradient,
                        self.h)
 
     def fields(self, phase_resolved: bool = False, gradient: str = "kernel",
@@ -587,7 +306,7 @@ class CoarseGrainer:
             per_batch = self._fields_of(self._ball.sum(axis=1), self._cont.sum(axis=1),
                                         self._weight.sum(axis=1), gradient) if stderr else None
             lead = ()
-        coords = {"x": self.x, "z": self.z, "i": _COMP, "j": _COMP}
+        coords = {"x": self.x, "z": self.z, "i": COMPONENTS, "j": COMPONENTS}
         if phase_resolved:
             coords["phase"] = 2.0 * np.pi * np.arange(self.n_phases) / self.n_phases
         attrs = {
@@ -604,7 +323,7 @@ class CoarseGrainer:
         for name, arr in main.items():
             extra = ("i", "j")[:arr.ndim - len(lead) - 2]
             dims = lead + ("x", "z") + extra
-            unit, desc = _META[name]
+            unit, desc = FIELD_META[name]
             out[name] = (dims, arr, {"units": unit, "long_name": desc})
             if per_batch is not None:
                 se = stderr_of_batches(per_batch[name], axis=0)

@@ -26,7 +26,7 @@ where contacts open or slide), combined with the residual drift of the relaxed s
 step sizes are set so that the affine stress change is `stress_step` times p (2% by default):
 small enough to stay near linear, large beside the residual stress fluctuation.
 
-Affine reference (Walton 1987; see calibration.calibrate.affine_moduli): for linear springs
+Affine reference (Walton 1987; affine_moduli_linear below): for linear springs
 K_aff = phi Z k_n / (3 pi d), G_aff = phi Z (2 k_n + 3 k_t) / (10 pi d) with Z = 2 C / N.
 """
 from __future__ import annotations

@@ -17,8 +17,9 @@ import xarray as xr
 from vibroflow.tub.geometry import geometry_of
 from vibroflow.errors import InputError
 from vibroflow.io.atomic import atomic_path
+from vibroflow.measure.stats import phase_bins
 
-from .coarse_grain import CoarseGrainer, phase_bins
+from .coarse_grain import CoarseGrainer
 from .dem_result import DEMResult
 
 _CG_KEYS = ("positions_tub", "velocities_rel_tub", "radius", "mass", "contacts_i",

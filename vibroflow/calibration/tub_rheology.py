@@ -7,10 +7,21 @@ the bed's state changes over the cycle (it flies, lands and is sheared); the tim
 are given too.  A point is marked dilute when its solid fraction is below `dense_solid_fraction`
 (default 0.5: below it the balls are no longer in enduring contact and mu(I), a dense-flow law,
 is not expected to hold; GDR MiDi 2004).
+
+Without shear cells the calibration fits mu(I) and phi(I) to the dense points of this scatter
+(fit_tub_cells); a bed with too few of them is an input error saying what to change
+(check_tub_cells, too_small).
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
+
+from vibroflow.errors import InputError
+
+from .calibration_tables import mu_phi_keys
+from .rheology_fit import fit_mu_i, fit_phi_i
 
 DENSE_SOLID_FRACTION = 0.5
 MIN_SOLID_FRACTION = 0.1
@@ -48,3 +59,68 @@ def bed_pressure(time_averaged, dense_solid_fraction: float = DENSE_SOLID_FRACTI
     if not sel.any():
         sel = np.isfinite(p) & (p > 0)
     return float(np.median(p[sel])) if sel.any() else float("nan")
+
+
+def median_dense(ds, name: str) -> float:
+    """The median of field `name` over the dense cells (solid fraction >= DENSE_SOLID_FRACTION)
+    of a coarse-grained Dataset; NaN without one."""
+    v = np.asarray(ds[name].values, float)
+    phi = np.asarray(ds["solid_fraction"].values, float)
+    sel = np.isfinite(v) & (phi >= DENSE_SOLID_FRACTION)
+    return float(np.median(v[sel])) if sel.any() else float("nan")
+
+
+#: the points the tub-cell fits need: mu(I) has three parameters (rheology_fit.fit_mu_i), phi(I)
+#: two (fit_phi_i)
+MU_I_POINTS = 3
+
+
+def dense_points(scatter: dict) -> dict:
+    """The phase-resolved (else time-averaged) scatter's dense points, which the fits use."""
+    ph = scatter.get("phase") or scatter["time"]
+    d = ph["dense"]
+    return {k: ph[k][d] for k in ("I", "mu", "phi")}
+
+
+def too_small(run_dir: Path, scenario, avg, what: str) -> InputError:
+    """The one-line InputError of a DEM run too small for the tub-cell calibration: `what`
+    failed, and what to change."""
+    return InputError(
+        f"RUN_DIR = {str(run_dir)!r}: the bed is too small to calibrate on: {what}; give the "
+        f"DEM more balls (fill.count = {scenario.fill.count}) or a longer averaging window "
+        f"(run.average_last = {scenario.run.average_last:g} s), coarse-grain with a wider "
+        f"kernel (--width, now {float(avg.attrs['width_m']) * 1e3:.3g} mm), or measure mu(I) "
+        "in shear cells (--shear-cell)")
+
+
+def check_tub_cells(scatter: dict, scenario, avg, run_dir: Path) -> None:
+    """InputError (too_small) when the tub's coarse-grained cells hold fewer dense points
+    (solid fraction >= DENSE_SOLID_FRACTION, finite mu, I > 0, over the cells and phases) than
+    the mu(I) fit needs: a bed too thin or too agitated has none, and the calibration cannot
+    be completed without --shear-cell."""
+    n = int(dense_points(scatter)["I"].size)
+    if n < MU_I_POINTS:
+        raise too_small(run_dir, scenario, avg, (
+            f"the mu(I) fit to the tub's cells has {n} dense cell value(s) (coarse-grained "
+            f"cells x phases with solid fraction >= {DENSE_SOLID_FRACTION:g} and I > 0) and "
+            f"needs at least {MU_I_POINTS}"))
+
+
+def fit_tub_cells(scatter: dict, scenario=None, avg=None, run_dir: Path | None = None
+                   ) -> dict:
+    """mu(I), phi(I) fitted to the tub's dense phase-resolved cells (no shear cell); a fit
+    that fails (too few points, no convergence) is an InputError (too_small): the run is too
+    small to calibrate on, and no number is invented for it."""
+    pts = dense_points(scatter)
+    out = {"source": "tub cells (dense phase-resolved coarse-grained cells; run --shear-cell "
+                     "for the Lees-Edwards simple-shear fit)", "points": int(pts["I"].size)}
+    try:
+        mu = fit_mu_i(pts["I"], pts["mu"])
+        phi = fit_phi_i(pts["I"], pts["phi"])
+    except InputError as e:
+        if scenario is None:
+            raise
+        raise too_small(run_dir, scenario, avg, e.message.rstrip(".")) from None
+    out.update(mu_phi_keys(mu, phi))
+    out["status"] = "measured"
+    return out

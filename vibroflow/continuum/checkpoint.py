@@ -1,5 +1,5 @@
-"""Checkpoints of a continuum run: the whole material-point state, what has been sampled so far
-and a few numbers of the run, in one .npz file written atomically and checksummed.
+"""Checkpoints of a continuum run: the whole state of any formulation, what has been sampled so
+far and a few numbers of the run, in one .npz file written atomically and checksummed.
 
 A checkpoint is written with vibroflow.io.atomic (a temporary name in the run's folder, flushed
 to disk, moved over the previous one with os.replace), so a run killed at any instant leaves
@@ -15,28 +15,29 @@ arrays do not match it, as it refuses an empty, truncated or foreign file, with 
 A checkpoint resumes only the run that wrote it: its meta holds the run's fingerprint
 (`run_fingerprint`) and formulation, both checked by `check_resumable`.
 
-Layout: "state/<field>" for the MPMState arrays, "state/history/<slot>/<name>" for the boundaries'
-per-point history, "samples/<name>" for the caller's sampling arrays, "meta" a JSON text with
-the clock (t, step) and the caller's own record (fingerprint, wall time, ...), and "checksum".
+Layout: "state/<field>" for every array field of the formulation's state record,
+"state/history/<slot>/<name>" for the boundaries' per-point (or per-cell) history,
+"samples/<name>" for the caller's sampling arrays, "meta" a JSON text with the clock (t, step)
+and the caller's own record (fingerprint, formulation, wall time, ...), and "checksum".
 """
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import io
 import json
 import zipfile
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
 from vibroflow.errors import InputError
 from vibroflow.io.atomic import atomic_path
+from vibroflow.io.calibration_file import Calibration
 
-from .mpm.solver import MPMState
 from .options import ContinuumOptions, options_record
 
-_STATE_ARRAYS = ("x", "v", "C", "L", "mass", "volume", "density", "stress", "gamma_dot",
-                 "phase", "fext")
 CHECKSUM_KEY = "checksum"
 _ZIP_MAGIC = b"PK\x03\x04"
 _ZIP_END = b"PK\x05\x06"  # the end-of-central-directory record: a whole zip file ends with it
@@ -55,11 +56,13 @@ def arrays_checksum(arrays: dict[str, np.ndarray]) -> str:
     return h.hexdigest()
 
 
-def save_checkpoint(path, state: MPMState, samples: dict[str, np.ndarray], meta: dict) -> None:
-    """Write state, samples (name -> array) and meta (JSON-able) to path atomically, with the
-    arrays' checksum."""
+def save_checkpoint(path, state, samples: dict[str, np.ndarray], meta: dict) -> None:
+    """Write state (a formulation's state record: its array fields, its history, t and step),
+    samples (name -> array) and meta (JSON-able) to path atomically, with the arrays'
+    checksum."""
     path = Path(path)
-    arrays = {f"state/{name}": getattr(state, name) for name in _STATE_ARRAYS}
+    arrays = {f"state/{f.name}": getattr(state, f.name) for f in dataclasses.fields(state)
+              if isinstance(getattr(state, f.name), np.ndarray)}
     for slot, hist in enumerate(state.history):
         for name, a in hist.items():
             arrays[f"state/history/{slot}/{name}"] = a
@@ -110,40 +113,46 @@ def _read_arrays(path: Path) -> dict[str, np.ndarray]:
     return arrays
 
 
-def load_checkpoint(path) -> tuple[MPMState, dict[str, np.ndarray], dict]:
-    """(state, samples, meta) of a checkpoint written by save_checkpoint; DamagedCheckpoint (an
-    InputError, one line) when the file is empty, truncated, not a checkpoint or fails its
-    checksum."""
+def load_checkpoint(path) -> tuple[SimpleNamespace, dict[str, np.ndarray], dict]:
+    """(saved, samples, meta) of a checkpoint written by save_checkpoint: saved holds the
+    state's arrays by field name, its history, t and step, from which the formulation makes its
+    state (Formulation.restore); DamagedCheckpoint (an InputError, one line) when the file is
+    empty, truncated, not a checkpoint or fails its checksum."""
     path = Path(path)
     arrays = _read_arrays(path)
     try:
         meta = json.loads(str(arrays["meta"]))
-        fields = {name: arrays[f"state/{name}"] for name in _STATE_ARRAYS}
+        fields = {}
         history: list[dict] = [{} for _ in range(int(meta["history_slots"]))]
         samples = {}
         for key, a in arrays.items():
             parts = key.split("/")
             if parts[:2] == ["state", "history"]:
                 history[int(parts[2])][parts[3]] = a
+            elif parts[0] == "state":
+                fields[parts[1]] = a
             elif parts[0] == "samples":
                 samples[parts[1]] = a
-        state = MPMState(history=history, t=float(meta["t"]), step=int(meta["step"]),
-                         **fields)
+        if "x" not in fields:
+            raise KeyError("state/x")
+        saved = SimpleNamespace(history=history, t=float(meta["t"]), step=int(meta["step"]),
+                                **fields)
     except (KeyError, IndexError, ValueError, TypeError) as e:
         # a checksummed file of another layout: not one of these checkpoints
         raise DamagedCheckpoint(path, f"not a checkpoint: {type(e).__name__} "
                                 f"{' '.join(str(e).split())[:60]}") from None
-    return state, samples, meta
+    return saved, samples, meta
 
 
-def run_fingerprint(scenario, calibration: dict | None, options: ContinuumOptions,
+def run_fingerprint(scenario, calibration: Calibration | None, options: ContinuumOptions,
                     vtk: bool) -> str:
     """A hash of everything that fixes a run's numbers (the scenario but for
     run.checkpoint_every, the calibration, the options, vtk): a checkpoint resumes only the run
     that wrote it (with its formulation, `check_resumable`)."""
     s = scenario.model_dump(mode="json")
     s.get("run", {}).pop("checkpoint_every", None)
-    text = json.dumps({"scenario": s, "calibration": calibration,
+    cal = calibration.to_toml_dict() if calibration is not None else None
+    text = json.dumps({"scenario": s, "calibration": cal,
                        "options": options_record(options), "vtk": bool(vtk)},
                       sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()

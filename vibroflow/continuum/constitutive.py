@@ -14,7 +14,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from vibroflow.errors import InputError
-from vibroflow.io.calibration_file import read_calibration
+from vibroflow.io.calibration_file import Calibration, read_calibration
 
 #: rheology models (params[0])
 MU_I = 0
@@ -193,38 +193,25 @@ class ContinuumMaterial:
         return d
 
     @classmethod
-    def from_calibration(cls, cal: dict, model: str = "mu_i") -> "ContinuumMaterial":
-        """From a calibration record (the dict of `read_calibration`): [rheology] mu_s, mu_2,
-        I_0, phi_max, phi_min, critical_solid_fraction; [elastic] bulk_modulus_Pa,
+    def from_calibration(cls, cal: Calibration, model: str = "mu_i") -> "ContinuumMaterial":
+        """From a calibration record (`read_calibration`): [rheology] mu_s, mu_2, I_0, phi_max,
+        phi_min, critical_solid_fraction (phi_max when absent); [elastic] bulk_modulus_Pa,
         shear_modulus_Pa; [media] diameter_m, solid_density_kg_m3; [drucker_prager]
-        viscosity_Pa_s (the Drucker-Prager option's viscosity, when finite).  Missing optional
-        keys keep the tub47 defaults.  The dilatancy option stays off (K_dil = 0) here: the
-        caller switches it on with `dataclasses.replace(mat, dilatancy=...)` (run options,
-        calibration.toml [dilatancy] K_dil)."""
-        base = cls()
-        r = cal.get("rheology", {})
-        e = cal.get("elastic", {})
-        m = cal.get("media", {})
-        eta = cal.get("drucker_prager", {}).get("viscosity_Pa_s")
-        if not (isinstance(eta, (int, float)) and math.isfinite(eta) and eta >= 0):
+        viscosity_Pa_s (the Drucker-Prager option's viscosity, when finite).  The dilatancy
+        option stays off (K_dil = 0) here: the caller switches it on with
+        `dataclasses.replace(mat, dilatancy=...)` (run options, calibration.toml [dilatancy]
+        K_dil)."""
+        r, e, m = cal.rheology, cal.elastic, cal.media
+        eta = cal.drucker_prager.viscosity_Pa_s if cal.drucker_prager is not None else None
+        if not (eta is not None and math.isfinite(eta) and eta >= 0):
             eta = None
-
-        def num(table, key, default):
-            v = table.get(key, default)
-            if not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise InputError(f"calibration {key} = {v!r}: must be a finite number")
-            return float(v)
-
-        phi_max = num(r, "phi_max", base.phi_max)
+        phi_c = r.critical_solid_fraction
         return cls(model=model,
-                   bulk_modulus=num(e, "bulk_modulus_Pa", base.bulk_modulus),
-                   shear_modulus=num(e, "shear_modulus_Pa", base.shear_modulus),
-                   mu_s=num(r, "mu_s", base.mu_s), mu_2=num(r, "mu_2", base.mu_2),
-                   I_0=num(r, "I_0", base.I_0), phi_max=phi_max,
-                   phi_min=num(r, "phi_min", base.phi_min),
-                   critical_solid_fraction=num(r, "critical_solid_fraction", phi_max),
-                   diameter=num(m, "diameter_m", base.diameter),
-                   solid_density=num(m, "solid_density_kg_m3", base.solid_density),
+                   bulk_modulus=float(e.bulk_modulus_Pa), shear_modulus=float(e.shear_modulus_Pa),
+                   mu_s=float(r.mu_s), mu_2=float(r.mu_2), I_0=float(r.I_0),
+                   phi_max=float(r.phi_max), phi_min=float(r.phi_min),
+                   critical_solid_fraction=float(r.phi_max if phi_c is None else phi_c),
+                   diameter=float(m.diameter_m), solid_density=float(m.solid_density_kg_m3),
                    viscosity=None if eta is None else float(eta))
 
     @classmethod

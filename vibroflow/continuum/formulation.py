@@ -29,6 +29,7 @@ from abc import ABC, abstractmethod
 from pathlib import Path
 
 from vibroflow.errors import InputError
+from vibroflow.io.calibration_file import Calibration
 
 #: name -> module holding the formulation's FORMULATION; imported when the formulation is used
 #: (`formulation`), so that `import vibroflow.study` and the CLI's import stay free of numba
@@ -101,7 +102,7 @@ class Formulation(ABC):
         return options.transfers(self.grid(options, scenario), self.default_grid(scenario))
 
     @abstractmethod
-    def make_system(self, scenario, material, calibration: dict | None, options, frame):
+    def make_system(self, scenario, material, calibration: Calibration | None, options, frame):
         """The system of a tub scenario in `frame` (grid_update.LabFrame or TubFrame): grid or
         mesh, the U wall and partitions with the calibration's (else the scenario's) friction,
         the time step (a whole number of steps between samples)."""
@@ -116,7 +117,8 @@ class Formulation(ABC):
 
     @abstractmethod
     def restore(self, system, saved, meta: dict):
-        """The state of a checkpoint (checkpoint.load_checkpoint's state and meta)."""
+        """The state of a checkpoint (checkpoint.load_checkpoint's saved arrays, history, t,
+        step, and meta)."""
 
     def checkpoint_meta(self, state) -> dict:
         """The formulation's own numbers to keep in a checkpoint's meta (for `restore`)."""

@@ -1,17 +1,20 @@
 """The continuum material of a tub run: the calibration's (calibration.toml), else tub47's
-defaults with the scenario's ball diameter and density, with the options' model and switches."""
+defaults with the scenario's ball diameter and density, with the options' model and switches;
+and the Coulomb friction of its wall and partitions (`boundary_friction`)."""
 from __future__ import annotations
 
 import dataclasses
 import math
 
 from vibroflow.errors import InputError
+from vibroflow.io.calibration_file import Calibration
+from vibroflow.scenario.checks import find_contact
 
 from .constitutive import ContinuumMaterial
 from .options import ContinuumOptions
 
 
-def material_of(scenario, calibration: dict | None, model: str = "mu_i",
+def material_of(scenario, calibration: Calibration | None, model: str = "mu_i",
                 dilatancy: bool = False, stiffness_factor: float = 1.0,
                 compaction: bool = False) -> ContinuumMaterial:
     """The continuum material: the calibration's, else tub47's defaults with the scenario's
@@ -30,10 +33,10 @@ def material_of(scenario, calibration: dict | None, model: str = "mu_i",
         mat = dataclasses.replace(mat, bulk_modulus=mat.bulk_modulus * stiffness_factor,
                                   shear_modulus=mat.shear_modulus * stiffness_factor)
     if compaction:
-        c = (calibration or {}).get("compaction", {})
-        gc, ex = c.get("compaction_strain"), c.get("excess_solid_fraction")
-        if not (isinstance(gc, (int, float)) and math.isfinite(gc) and gc > 0
-                and isinstance(ex, (int, float)) and math.isfinite(ex) and ex >= 0):
+        c = calibration.compaction if calibration is not None else None
+        gc, ex = (None, None) if c is None else (c.compaction_strain, c.excess_solid_fraction)
+        if not (gc is not None and math.isfinite(gc) and gc > 0
+                and ex is not None and math.isfinite(ex) and ex >= 0):
             raise InputError(f"compaction = true: needs a calibration with a measured "
                              f"[compaction] compaction_strain > 0 and excess_solid_fraction >= 0"
                              f" (vibroflow calibrate --dilatancy); got {gc!r}, {ex!r}")
@@ -41,12 +44,14 @@ def material_of(scenario, calibration: dict | None, model: str = "mu_i",
                                   compaction_excess=float(ex))
     if not dilatancy:
         return mat
-    k = (calibration or {}).get("dilatancy", {}).get("K_dil")
-    if not (isinstance(k, (int, float)) and math.isfinite(k) and k > 0):
+    dil = calibration.dilatancy if calibration is not None else None
+    k = dil.K_dil if dil is not None else None
+    if not (k is not None and math.isfinite(k) and k > 0):
         raise InputError(f"dilatancy = true: needs a calibration with a measured [dilatancy] "
                          f"K_dil > 0 (vibroflow calibrate --dilatancy); got {k!r}")
-    excess = calibration["dilatancy"].get("initial_excess_solid_fraction", 0.0)
-    if not (isinstance(excess, (int, float)) and math.isfinite(excess) and excess >= 0):
+    excess = dil.initial_excess_solid_fraction
+    excess = 0.0 if excess is None else excess
+    if not (math.isfinite(excess) and excess >= 0):
         raise InputError(f"calibration [dilatancy] initial_excess_solid_fraction = {excess!r}: "
                          "must be a number >= 0")
     return dataclasses.replace(mat, dilatancy=float(k), initial_solid_fraction=(
@@ -54,7 +59,7 @@ def material_of(scenario, calibration: dict | None, model: str = "mu_i",
 
 
 
-def material_for(scenario, calibration: dict | None, options: ContinuumOptions
+def material_for(scenario, calibration: Calibration | None, options: ContinuumOptions
                  ) -> ContinuumMaterial:
     """The material a run with these options uses (`material_of` with the options' model,
     dilatancy, compaction and stiffness factor); input errors name the setting."""
@@ -64,3 +69,19 @@ def material_for(scenario, calibration: dict | None, options: ContinuumOptions
     if options.bed_viscosity > 0:
         mat = dataclasses.replace(mat, bed_viscosity=float(options.bed_viscosity))
     return mat
+
+
+def boundary_friction(scenario, calibration: Calibration | None):
+    """(wall contact law, wall friction, partition friction) of a tub run: the calibration's
+    [wall] and [partitions] friction (the media's effective Coulomb friction measured on the
+    DEM), else the scenario's contact laws' friction of the fill on the wall and partition
+    materials; the partition friction is None for a periodic tub (no partitions)."""
+    wall_pair = find_contact(scenario, scenario.fill.material, scenario.tub.wall_material)
+    mu_w = float(calibration.wall.friction if calibration is not None else wall_pair.friction)
+    if scenario.tub.periodic:
+        return wall_pair, mu_w, None
+    part_pair = find_contact(scenario, scenario.fill.material, scenario.tub.partition_material)
+    mu_p = float(calibration.partitions.friction
+                 if calibration is not None and calibration.partitions is not None
+                 else part_pair.friction)
+    return wall_pair, mu_w, mu_p

@@ -17,7 +17,7 @@ from .stress_update import equivalent_shear_rate
 
 def sample_times(scenario) -> tuple[np.ndarray, float, float]:
     """The DEM's sample instants (s): phases m / (P f) over the whole cycles of the window
-    [duration - average_last, ...) (as vibroflow.dem.run.sample_steps, before its rounding to
+    [duration - average_last, ...) (as vibroflow.dem.sampling.sample_steps, before its rounding to
     the DEM's step), and the window (t0, t1)."""
     run, f = scenario.run, scenario.motion.frequency
     t0 = run.duration - run.average_last

@@ -10,13 +10,14 @@ from pathlib import Path
 import numpy as np
 
 from vibroflow.io.atomic import write_text_atomic
+from vibroflow.io.calibration_file import Calibration, ImpactRelation
 from vibroflow.measure.phase_shear import PhaseShear, near_wall_nodes
 from vibroflow.measure.stats import batch_means
 
 from .sampling import Samples
 
 def write_shear_rate_csv(path: Path, samples: Samples, phase: PhaseShear | None,
-                         calibration: dict | None, diameter: float) -> None:
+                         calibration: Calibration | None, diameter: float) -> None:
     """The continuum's cycle-mean shear-rate map on the analysis cells (the DEM's cells), with
     the impact speeds it implies by the calibrated v = c0 + c1 d gamma_dot ([impacts.ball_ball],
     [impacts.ball_wall] by impact_relation; empty without a calibration), atomically: columns x, z
@@ -28,8 +29,9 @@ def write_shear_rate_csv(path: Path, samples: Samples, phase: PhaseShear | None,
     if samples.cell_grid is None:
         return
     h, nxh, nz = samples.cell_grid
-    im = (calibration or {}).get("impacts", {})
-    fits = [impact_relation(im.get(k))[:2] for k in ("ball_ball", "ball_wall")]
+    im = calibration.impacts if calibration is not None else None
+    fits = [impact_relation(getattr(im, k) if im is not None else None)[:2]
+            for k in ("ball_ball", "ball_wall")]
     lines = ["x,z,shear_rate,solid_fraction,instantaneous_shear_rate,samples,"
              "impact_ball_ball,impact_ball_wall"]
 
@@ -52,26 +54,25 @@ def write_shear_rate_csv(path: Path, samples: Samples, phase: PhaseShear | None,
 
 
 
-def impact_relation(rel) -> tuple[float | None, float | None, str]:
+def impact_relation(rel: ImpactRelation | None) -> tuple[float | None, float | None, str]:
     """(c0 m/s, c1, which) of a calibration's [impacts.KIND] table: the relation fitted on the
     continuum's own measure of the shear rate (c0_cells_m_s, c1_cells;
     calibration.impacts.impact_relations_on_cells) when the calibration has it, else the one
-    fitted on the DEM's 5 mm coarse-grained field (c0_m_s, c1; older calibrations); (None,
+    fitted on the DEM's 5 mm coarse-grained field (c0_m_s, c1; a calibration without it); (None,
     None, "") without either."""
-    if not isinstance(rel, dict):
+    if rel is None:
         return None, None, ""
-    for c0k, c1k, which in (("c0_cells_m_s", "c1_cells", "c0_cells, c1_cells"),
-                            ("c0_m_s", "c1", "c0, c1")):
-        c0, c1 = rel.get(c0k), rel.get(c1k)
-        if all(isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c)
-               for c in (c0, c1)):
+    for c0, c1, which in ((rel.c0_cells_m_s, rel.c1_cells, "c0_cells, c1_cells"),
+                          (rel.c0_m_s, rel.c1, "c0, c1")):
+        if all(c is not None and math.isfinite(c) for c in (c0, c1)):
             return float(c0), float(c1), which
     return None, None, ""
 
 
 
-def shear_rate_outputs(material, calibration, probes: dict, batch, n_batches, samples: Samples,
-                       phase: PhaseShear, radius_tub: float, impacts: dict) -> dict:
+def shear_rate_outputs(material, calibration: Calibration | None, probes: dict, batch,
+                       n_batches, samples: Samples, phase: PhaseShear, radius_tub: float,
+                       impacts: dict) -> dict:
     """Shear rate (1/s) over the bed, near the wall and in the probe cells, with batch-means
     standard errors; with a calibration, the granular temperature sqrt(T) = a d gamma_dot
     (models.md, Bagnold scaling; a from [impacts] bagnold_sqrtT_over_d_gamma_dot) and the mean
@@ -109,8 +110,8 @@ def shear_rate_outputs(material, calibration, probes: dict, batch, n_batches, sa
                        "solid-fraction weighted"),
         "instantaneous_mean_1_s": im_, "instantaneous_mean_1_s_stderr": ise,
         "instantaneous_near_wall_1_s": iw, "instantaneous_near_wall_1_s_stderr": iwse}}
-    im = (calibration or {}).get("impacts", {})
-    a = im.get("bagnold_sqrtT_over_d_gamma_dot")
+    im = calibration.impacts if calibration is not None else None
+    a = im.bagnold_sqrtT_over_d_gamma_dot if im is not None else None
     out_probes = {}
     for q, (name, pr) in enumerate(probes.items()):
         k, i = phase.node_of(pr.x, pr.z)
@@ -127,7 +128,7 @@ def shear_rate_outputs(material, calibration, probes: dict, batch, n_batches, sa
     inferred = {}
     which = set()
     for name, rate, rate_se in (("ball_ball", m, se), ("ball_wall", mw, sew)):
-        c0, c1, key = impact_relation(im.get(name))
+        c0, c1, key = impact_relation(getattr(im, name) if im is not None else None)
         if c0 is None:
             continue
         v = c0 + c1 * d * rate

@@ -41,6 +41,7 @@ import numpy as np
 
 from vibroflow.errors import InputError
 from vibroflow.io.atomic import write_json_atomic
+from vibroflow.io.calibration_file import Calibration
 from vibroflow.io.folder_lock import folder_lock
 from vibroflow.measure.stats import batches_of_whole_cycles
 from vibroflow.measure.summary import json_safe, tub_summary
@@ -65,7 +66,7 @@ def _gravity(scenario) -> tuple[float, float]:
     return float(scenario.gravity[0]), float(scenario.gravity[2])
 
 
-def tub_system(form: Formulation, scenario, calibration: dict | None, options):
+def tub_system(form: Formulation, scenario, calibration: Calibration | None, options):
     """What a run vibrates: the formulation's system of the scenario in the vibrating tub's
     frame, and its material (material.material_for)."""
     material = material_for(scenario, calibration, options)
@@ -74,7 +75,7 @@ def tub_system(form: Formulation, scenario, calibration: dict | None, options):
     return system, material
 
 
-def settle(form: Formulation, scenario, material, calibration: dict | None, options,
+def settle(form: Formulation, scenario, material, calibration: Calibration | None, options,
            prog: RunProgress | None = None):
     """(state, bed height m): the settled bed after options.settle_time in the still tub
     (module docstring, step 1)."""
@@ -91,8 +92,8 @@ def settle(form: Formulation, scenario, material, calibration: dict | None, opti
     return state, h
 
 
-def vibration_start(scenario, calibration: dict | None, options, method: str = "lagrangian",
-                    prog: RunProgress | None = None):
+def vibration_start(scenario, calibration: Calibration | None, options,
+                    method: str = "lagrangian", prog: RunProgress | None = None):
     """(system, state): the system in the vibrating tub's frame and the bed it starts
     vibrating from, settled for options.settle_time in the still tub, its clock set to t = 0,
     step 0 (run_continuum's first two steps, for a diagnostic that drives the run itself:
@@ -105,7 +106,7 @@ def vibration_start(scenario, calibration: dict | None, options, method: str = "
 
 
 def run_continuum(scenario, out_dir, method: str = "lagrangian",
-                  calibration: dict | None = None, options=None, progress: bool = False,
+                  calibration: Calibration | None = None, options=None, progress: bool = False,
                   vtk: bool = False, resume: bool = False, stop_after_steps: int | None = None,
                   keep_samples: list | None = None) -> dict | None:
     """Run the continuum formulation `method` ("lagrangian", "eulerian":

@@ -212,8 +212,10 @@ def pair_contact_velocity(vel, omg, i, j, ri, rj, nx, ny, nz):
 @nb.njit(cache=True, inline="always")
 def ball_pair(i, j, q, dx, dy, dz, dvx, dvy, dvz, vel, omg, radius, mass, table, mat_i, mat_j,
               hist, flag, dt_hist, fbuf, tbuf, c):
-    """One listed pair of balls (i, j), entry q of a neighbour list: the pair kernel of every
-    DEM variant (the tub's step, the Lees-Edwards box).
+    """One listed pair of balls (i, j), entry q of a neighbour list: the pair kernel of the
+    Lees-Edwards box (vibroflow.dem.periodic_step).  The tub's step (vibroflow.dem.step) writes
+    the same operations out in its chunk loop: through this function it costs about a quarter
+    more (benchmarks/dem_step_cost.py, one thread, tub47-quick).
 
     (dx, dy, dz) = r_i - r_j (m) is the branch vector to the image of j the caller chose;
     (dvx, dvy, dvz) (m/s) is added to the material relative velocity: the velocity of i's frame

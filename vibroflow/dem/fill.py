@@ -10,8 +10,8 @@ bed settles quickly.  The jitter, the lattice's random offset and the order of b
 scenario's seed.
 
 The settled state (positions, velocities, forces, neighbour list and every contact history) is
-cached on disk, keyed by the hash of the scenario fields that shape it, so later runs, e.g. an
-amplitude sweep, start from the very same bed.
+cached on disk (`settled_bed`), keyed by the hash of the scenario fields that shape it, so later
+runs, e.g. an amplitude sweep, start from the very same bed.
 """
 from __future__ import annotations
 
@@ -25,7 +25,10 @@ from typing import Callable
 import numpy as np
 
 from ..errors import InputError
+from ..progress import RunProgress
 from ..tub.geometry import distance_to_wall_np
+from .interrupts import fault_sigint_settling
+from .output import DamagedFile, load_state_file, save_state_file
 from .simulate import DEMState, DEMSystem, init_state, run_steps
 
 
@@ -132,3 +135,39 @@ def settle(system: DEMSystem, state: DEMState, scenario,
             progress(state.step * dt, ke)
     return {"settle_time_s": state.step * dt, "kinetic_energy_per_ball_J": ke,
             "settled": bool(ke < fill.settle_kinetic_energy)}
+
+
+def settled_bed(system: DEMSystem, scenario, prog: RunProgress) -> tuple[DEMState, dict]:
+    """The settled bed, from the cache or made now (and cached).  A cache entry that is
+    unreadable or fails its checksum (output.load_state_file) is made again; a cache that
+    cannot be written costs only the time of the next run's settling (a warning)."""
+    key = fill_cache_key(scenario, system.nchunk)
+    path = cache_dir() / "fills" / f"{key}.h5"
+    if path.exists():
+        try:
+            state, attrs = load_state_file(path)
+            info = json.loads(attrs.get("settle_info", "{}"))
+            if state.n != scenario.fill.count:
+                raise DamagedFile(path, f"{state.n} balls, not {scenario.fill.count}")
+            info["cached"] = True
+            prog.log(f"settled bed from cache {path}")
+            return state, info
+        except (DamagedFile, ValueError, TypeError, KeyError) as exc:
+            prog.log(f"settled-bed cache entry {path} is damaged ({exc}): settling again")
+    state = fill_state(system, scenario)
+    n = state.n
+
+    def progress(t, ke):
+        prog.update(t, int(round(t / system.dt)) * n)
+        fault_sigint_settling()
+
+    prog.stage("fill + settle", max(scenario.fill.settle_time, 1e-9))
+    info = settle(system, state, scenario, progress=progress)
+    info["cached"] = False
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        save_state_file(path, state, {"settle_info": json.dumps(info)})
+    except OSError as exc:
+        prog.log(f"warning: the settled bed cannot be cached in {path.parent} "
+                 f"({(exc.strerror or str(exc)).lower()}); the next run settles it again")
+    return state, info

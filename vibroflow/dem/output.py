@@ -23,9 +23,11 @@ Checkpoints hold the whole DEMState plus the number of complete result parts; on
 parts after those are dropped, so a resumed run writes exactly what an uninterrupted one would.
 
 Everything a resume or a cached fill reads back is checked: a saved state carries the sha256 of
-its arrays and attributes (`state_checksum`, verified by `load_state_file`), and a checkpoint
-the sha256 of every part file it counts on (`file_sha256`, verified by `ResultWriter`).  A
-flipped bit, a truncated or an empty file is `DamagedFile`, never other numbers or a traceback.
+its arrays and attributes (`state_checksum`, computed from the arrays as they are written and
+verified by `load_state_file`), and a checkpoint the sha256 of every part file it counts on
+(`file_sha256`, verified by `ResultWriter`) with the rows each holds, so a resume reads each
+part once.  A flipped bit, a truncated or an empty file is `DamagedFile`, never other numbers or
+a traceback.
 """
 from __future__ import annotations
 
@@ -126,11 +128,13 @@ class ResultWriter:
 
     def __init__(self, out_dir: Path, n_particles: int, attrs: dict, radius: np.ndarray,
                  parts_done: int | None = None, part_hashes: list[str] | None = None,
-                 meta_hash: str | None = None):
+                 meta_hash: str | None = None, rows_done: dict[str, int] | None = None):
         """A fresh writer (parts_done None: DIR/dem.parts made anew with meta.h5), or one that
         goes on after `parts_done` complete parts (resume).  On resume, `part_hashes` (the
         sha256 of each complete part) and `meta_hash` (of meta.h5), as the checkpoint recorded
-        them, are verified: DamagedFile when a part is missing, changed or unreadable."""
+        them, are verified: DamagedFile when a part is missing or changed; `rows_done` (the
+        rows of each dataset in those parts, `rows_done` of the checkpoint's writer) is taken
+        as recorded, the checksums vouching for the parts."""
         self.out_dir = Path(out_dir)
         self.final = self.out_dir / "dem.h5"
         self.partial = self.out_dir / "dem.h5.partial"
@@ -157,13 +161,10 @@ class ResultWriter:
                 if int(p.stem.split("_")[1]) >= parts_done:
                     p.unlink()
         self.rows_done = {key: 0 for key in self._keys()}
-        for k in range(self.index):
-            try:
-                with h5py.File(self._part(k), "r") as f:
-                    for key in self.rows_done:
-                        self.rows_done[key] += f[key].shape[0]
-            except (OSError, KeyError, ValueError) as exc:
-                raise DamagedFile(self._part(k), _damage(self._part(k), exc)) from None
+        if parts_done is not None:
+            if rows_done is None or set(rows_done) != set(self.rows_done):
+                raise DamagedFile(self.parts_dir, "no row counts in the checkpoint")
+            self.rows_done = {key: int(rows_done[key]) for key in self.rows_done}
         self.f = self._open_part()
 
     def _verify(self, parts_done: int, part_hashes: list[str] | None,
@@ -291,18 +292,20 @@ _STATE_ARRAYS = ("pos", "vel", "omg", "force", "torque", "radius", "mass", "mat"
                  "wall_arc")
 
 
-def write_state(group: h5py.Group, state: DEMState) -> None:
+def _state_nodes(state: DEMState, attrs: dict) -> dict[str, tuple[np.ndarray | None, dict]]:
+    """A state file's tree as it is written: node name ("" the root) -> (the dataset's array,
+    or None for a group; the node's attributes)."""
+    nl = state.nl
+    nodes = {"": (None, dict(attrs)),
+             "state": (None, {"step": state.step, "time_origin_step": state.time_origin_step,
+                              "vibrating": state.vibrating}),
+             "state/neighbours": (None, {"skin": nl.skin, "periodic_length": nl.periodic_length,
+                                         "builds": nl.builds})}
     for name in _STATE_ARRAYS:
-        group.create_dataset(name, data=getattr(state, name))
-    nl = group.create_group("neighbours")
+        nodes[f"state/{name}"] = (getattr(state, name), {})
     for name in ("start", "nbr", "hist", "flag"):
-        nl.create_dataset(name, data=getattr(state.nl, name))
-    nl.attrs["skin"] = state.nl.skin
-    nl.attrs["periodic_length"] = state.nl.periodic_length
-    nl.attrs["builds"] = state.nl.builds
-    group.attrs["step"] = state.step
-    group.attrs["time_origin_step"] = state.time_origin_step
-    group.attrs["vibrating"] = state.vibrating
+        nodes[f"state/neighbours/{name}"] = (getattr(nl, name), {})
+    return nodes
 
 
 def read_state(group: h5py.Group) -> DEMState:
@@ -328,35 +331,49 @@ def _attr_bytes(value) -> bytes:
     return a.dtype.str.encode() + repr(a.shape).encode() + a.tobytes()
 
 
-def state_checksum(f: h5py.File) -> str:
+def _nodes_checksum(nodes: dict[str, tuple[np.ndarray | None, dict]]) -> str:
     """sha256 of every dataset (name, dtype, shape, bytes) and every attribute (name, value)
-    of an open state file, but the root's "checksum" attribute itself; the same function
-    writes it (save_state_file) and checks it (load_state_file)."""
+    of a state file's tree (`_state_nodes`), but the root's "checksum" attribute itself."""
     h = hashlib.sha256()
-    names: list[str] = []
-    f.visit(names.append)
-    for name in ["", *sorted(names)]:
-        obj = f[name] if name else f
+    for name in sorted(nodes):
+        data, attrs = nodes[name]
         h.update(b"\0node\0" + name.encode())
-        if isinstance(obj, h5py.Dataset):
-            data = np.ascontiguousarray(obj[()])
+        if data is not None:
+            data = np.ascontiguousarray(data)
             h.update(data.dtype.str.encode() + repr(data.shape).encode())
             h.update(data.tobytes())
-        for key in sorted(obj.attrs):
+        for key in sorted(attrs):
             if name == "" and key == "checksum":
                 continue
-            h.update(b"\0attr\0" + key.encode() + b"\0" + _attr_bytes(obj.attrs[key]))
+            h.update(b"\0attr\0" + key.encode() + b"\0" + _attr_bytes(attrs[key]))
     return h.hexdigest()
+
+
+def state_checksum(f: h5py.File) -> str:
+    """The checksum of an open state file as read back (load_state_file checks it against the
+    one save_state_file computed from the arrays it wrote)."""
+    names: list[str] = []
+    f.visit(names.append)
+    nodes = {"": (None, dict(f.attrs))}
+    for name in names:
+        obj = f[name]
+        nodes[name] = (obj[()] if isinstance(obj, h5py.Dataset) else None, dict(obj.attrs))
+    return _nodes_checksum(nodes)
 
 
 def save_state_file(path: Path, state: DEMState, attrs: dict | None = None) -> None:
     """Write a state to an HDF5 file atomically (vibroflow.io.atomic), with the sha256 of its
-    contents in the root attribute "checksum"."""
+    contents (computed from the arrays written, not read back) in the root attribute
+    "checksum"."""
+    nodes = _state_nodes(state, attrs or {})
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
-        write_state(f.create_group("state"), state)
-        for k, v in (attrs or {}).items():
-            f.attrs[k] = v
-        f.attrs["checksum"] = state_checksum(f)
+        for name in sorted(nodes):
+            data, node_attrs = nodes[name]
+            obj = f if name == "" else (f.create_group(name) if data is None
+                                        else f.create_dataset(name, data=data))
+            for k, v in node_attrs.items():
+                obj.attrs[k] = v
+        f.attrs["checksum"] = _nodes_checksum(nodes)
 
 
 def load_state_file(path: Path) -> tuple[DEMState, dict]:

@@ -16,9 +16,10 @@ dilation rate stays small beside the velocity fluctuations).  So that contact da
 tangential springs see it, the relative velocity of a pair gets the affine part
 eps_dot_a (r_i - r_j)_a.
 
-Contacts: `vibroflow.dem.contact.ball_pair`, the pair kernel of the tub's step, with the
-scenario's ball-ball row of `vibroflow.dem.laws.pair_table`; time integration: velocity Verlet
-for translation and rotation (LAMMPS nve/sphere ordering), as `vibroflow.dem.step`.
+Contacts: `vibroflow.dem.contact.ball_pair` (the contact law `contact_force` of the tub's step,
+for one listed pair), with the scenario's ball-ball row of `vibroflow.dem.laws.pair_table`;
+time integration: velocity Verlet for translation and rotation (LAMMPS nve/sphere ordering),
+as `vibroflow.dem.step`.
 
 Stress (compression positive, as vibroflow.calibration.coarse_grain): sigma = (1/V) [sum over
 contacts f_ij (x) r_ij + sum_i m_i v'_i (x) v'_i], f_ij the force on i by j, r_ij = r_i - r_j(image)

@@ -6,7 +6,8 @@
 
 `DEMState` holds every array the run needs to continue bit for bit (positions, velocities,
 forces, the neighbour list with its contact histories, the wall contacts' histories, the step
-count); checkpoints and the settled-fill cache are just saved states.
+count); checkpoints and the settled-fill cache are just saved states.  When a run cannot go on,
+`BlowUp` says why in one line (vibroflow.dem.blowup).
 """
 from __future__ import annotations
 
@@ -16,24 +17,18 @@ from typing import Callable
 
 import numpy as np
 
-from ..tub.motion import TubMotion, lab_to_tub_np
+from ..scenario.checks import contact_times
+from ..tub.motion import TubMotion, lab_to_tub_np, pose_np
 from . import step as K
-from ..scenario.checks import STEPS_PER_CONTACT, contact_times
+from .blowup import (BlowUp, blowup_message, check_finite_start, check_overlaps_at_start,
+                     coincident_message, coincident_pair)
 from .laws import material_index, pair_table
 from .neighbours import NeighbourList
-from .walls import (N_PLANE, WALL_PARTITION_HI, WALL_PARTITION_LO, WALL_PLANE0, WALL_U,
-                    wall_kind)
+from .walls import N_PLANE, WALL_PLANE0, wall_kind
 
 IMPACT_CAPACITY = 1 << 15  # per chunk, between flushes
 
 
-
-
-class BlowUp(RuntimeError):
-    """The run became unphysical, or its starting state cannot be run; the message (one line)
-    names the balls and the cause the state shows: non-finite input, balls coincident or
-    overlapping at the start, a ball behind a wall or outside the tub, and the time step only
-    when it resolves the contact time too coarsely."""
 
 
 @dataclass
@@ -163,125 +158,14 @@ def init_state(system: DEMSystem, pos, vel, omg, radius, density, mat) -> DEMSta
         wall_force=np.zeros((n, w, 3)),
         wall_arc=np.zeros(n),
     )
-    _check_finite_start(state)
+    check_finite_start(state)
     rebuild(system, state)
-    pair = _coincident_pair(system, state)
+    pair = coincident_pair(system, state)
     if pair is not None:
-        raise BlowUp(_coincident_message(system, state, pair))
+        raise BlowUp(coincident_message(system, state, pair))
     _forces_now(system, state)
-    _check_overlaps_at_start(system, state)
+    check_overlaps_at_start(system, state, _buf(system, state).diag)
     return state
-
-
-def _vec(v) -> str:
-    return "(" + ", ".join(f"{float(x):.6g}" for x in np.ravel(v)) + ")"
-
-
-def _ids(ids, at_most: int = 10) -> str:
-    ids = [int(i) for i in ids]
-    more = f" and {len(ids) - at_most} more" if len(ids) > at_most else ""
-    return str(ids[:at_most]) + more
-
-
-def _wall_name(w: int) -> str:
-    if w == WALL_U:
-        return "wall 0 (the tub's U wall)"
-    if w == WALL_PARTITION_LO:
-        return "wall 1 (the partition at y = 0)"
-    if w == WALL_PARTITION_HI:
-        return "wall 2 (the partition at y = length)"
-    return f"wall {w} (plane walls[{w - WALL_PLANE0}])"
-
-
-def _check_finite_start(state: DEMState) -> None:
-    """BlowUp naming the balls and fields of a starting state that holds NaN or infinity, or a
-    radius or mass not > 0: the kernels would turn it into NaN everywhere (and the neighbour
-    grid into nonsense) and the blow-up would be blamed on the time step."""
-    bad = []
-    for name, a in (("position", state.pos), ("velocity", state.vel),
-                    ("angular_velocity", state.omg), ("radius", state.radius),
-                    ("mass", state.mass)):
-        rows = a.reshape(state.n, -1)
-        wrong = ~np.isfinite(rows).all(axis=1)
-        if name in ("radius", "mass"):
-            wrong |= ~(rows[:, 0] > 0.0)
-        bad += [(int(i), name, rows[i]) for i in np.nonzero(wrong)[0]]
-    if bad:
-        shown = ", ".join(f"ball {i} {name} = {_vec(v)}" for i, name, v in bad[:5])
-        more = f" and {len(bad) - 5} more" if len(bad) > 5 else ""
-        raise BlowUp(f"blow-up at t = 0 s: non-finite input: {shown}{more}; the starting state "
-                     "must be finite (radius and mass > 0); not a time-step problem")
-
-
-def _list_pairs(system: DEMSystem, state: DEMState) -> tuple[np.ndarray, np.ndarray,
-                                                            np.ndarray]:
-    """(i, j, squared centre distance) of the neighbour list's pairs, minimum image in y when
-    periodic, summed in the kernel's order (dx^2 + dy^2 + dz^2)."""
-    nl = state.nl
-    i = np.repeat(np.arange(state.n), np.diff(nl.start))
-    j = nl.nbr
-    d = state.pos[i] - state.pos[j]
-    L = system.periodic_length
-    if L > 0.0:
-        d[:, 1] -= L * np.rint(d[:, 1] / L)
-    return i, j, d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]
-
-
-def _coincident_pair(system: DEMSystem, state: DEMState) -> tuple[int, int] | None:
-    """The first pair of balls at one spot (zero centre distance: no contact normal, and the
-    kernel's 1/d divides by zero), or None."""
-    if not np.all(np.isfinite(state.pos)):
-        return None
-    i, j, d2 = _list_pairs(system, state)
-    hit = np.nonzero(d2 == 0.0)[0]
-    if hit.size == 0:
-        return None
-    return int(i[hit[0]]), int(j[hit[0]])
-
-
-def _coincident_message(system: DEMSystem, state: DEMState, pair: tuple[int, int]) -> str:
-    i, j = pair
-    where = (f"blow-up at t = {state.time(system.dt):.6g} s: balls {i} and {j} are coincident "
-             f"(both centres at {_vec(state.pos[i])} m): two balls on one spot have no contact "
-             "normal")
-    if state.step == 0:
-        return f"{where}; the starting positions put them there; not a time-step problem"
-    return f"{where}; they met head-on with no repulsion between them"
-
-
-def _check_overlaps_at_start(system: DEMSystem, state: DEMState) -> None:
-    """BlowUp when the starting positions already break the overlap bound (two balls deep in
-    each other, a ball behind a wall) or put a ball outside the tub: the first step would blow
-    up, and not because of the time step.  The set-up force evaluation has measured them."""
-    b = _buf(system, state)
-    diag = b.diag
-    d = 2.0 * float(state.radius.max())
-    bound = system.max_overlap
-    c = int(np.argmax(diag[:, K.D_BALL_OVERLAP]))
-    if diag[c, K.D_BALL_OVERLAP] > bound:
-        i, j = int(diag[c, K.D_BALL_I]), int(diag[c, K.D_BALL_J])
-        raise BlowUp(f"blow-up at t = 0 s: balls {i} and {j} overlap by "
-                     f"{diag[c, K.D_BALL_OVERLAP] / d:.1%} of d at the start (bound "
-                     f"{bound / d:.0%}): the starting positions overlap; not a time-step "
-                     "problem")
-    cw = int(np.argmax(diag[:, K.D_WALL_OVERLAP]))
-    if diag[cw, K.D_WALL_OVERLAP] > bound:
-        i, w = int(diag[cw, K.D_WALL_I]), int(diag[cw, K.D_WALL_W])
-        delta = float(diag[cw, K.D_WALL_OVERLAP])
-        r = float(state.radius[i])
-        if delta >= r:
-            raise BlowUp(f"blow-up at t = 0 s: ball {i} is behind {_wall_name(w)} at the start: "
-                         f"its centre {_vec(state.pos[i])} m lies {(delta - r) * 1e3:.3g} mm "
-                         "beyond the wall; the starting positions put it there; not a "
-                         "time-step problem")
-        raise BlowUp(f"blow-up at t = 0 s: ball {i} overlaps {_wall_name(w)} by "
-                     f"{delta / d:.1%} of d at the start (bound {bound / d:.0%}): the starting "
-                     "positions put it into the wall; not a time-step problem")
-    lost = [int(x) for x in diag[:, K.D_LOST] if x >= 0]
-    if lost:
-        raise BlowUp(f"blow-up at t = 0 s: ball(s) {_ids(lost)} start outside the tub (ball "
-                     f"{lost[0]} at {_vec(state.pos[lost[0]])} m); the starting positions put "
-                     "them there; not a time-step problem")
 
 
 class _Buffers:
@@ -357,65 +241,16 @@ def take_max_overlaps(system: DEMSystem, state: DEMState) -> tuple[float, float]
     return out
 
 
-def _time_step_cause(system: DEMSystem) -> tuple[bool, str]:
-    """(is the time step a likely cause, words on it): only when it resolves the shortest
-    contact time with fewer than STEPS_PER_CONTACT steps."""
-    tc = system.notes.get("shortest_contact_time")
-    if not tc or not math.isfinite(tc):
-        return False, f"time step dt = {system.dt:.3g} s (contact time not known)"
-    per = tc / system.dt
-    words = (f"time step dt = {system.dt:.3g} s, {per:.1f} steps per shortest contact time "
-             f"{tc:.3g} s")
-    return per < STEPS_PER_CONTACT * (1.0 - 1e-9), words
+def overlap_maxima(state: DEMState) -> np.ndarray | None:
+    """The diagnostics of the step (largest overlaps and the balls, step.D_*) since the last
+    take_max_overlaps, or None before the first step; a checkpoint carries them so that the
+    series of a resumed run is exact."""
+    return state.scratch.diag if state.scratch is not None else None
 
 
-def _blowup_message(system: DEMSystem, state: DEMState, diag: np.ndarray) -> str:
-    """One line: when, which balls, and the cause the state shows."""
-    t = state.time(system.dt)
-    d = 2.0 * float(state.radius.max())
-    nan = [int(x) for x in diag[:, K.D_NAN] if x >= 0]
-    lost = [int(x) for x in diag[:, K.D_LOST] if x >= 0]
-    c = int(np.argmax(diag[:, K.D_BALL_OVERLAP]))
-    cw = int(np.argmax(diag[:, K.D_WALL_OVERLAP]))
-    dt_is_cause, dt_words = _time_step_cause(system)
-    too_coarse = (f"likely cause: {dt_words}, too large (at least {STEPS_PER_CONTACT:.0f} "
-                  "needed)")
-    finite = np.isfinite(state.vel).all(axis=1)
-    vmax = float(np.sqrt((state.vel[finite] ** 2).sum(axis=1)).max()) if finite.any() else 0.0
-    if nan:
-        where = f"blow-up at t = {t:.6g} s: ball(s) {_ids(nan)} have non-finite position"
-        if dt_is_cause:
-            return f"{where}; {too_coarse}"
-        return (f"{where}; not the time step ({dt_words}); the largest finite speed is "
-                f"{vmax:.3g} m/s: look at the starting velocities and the materials' density "
-                "and contact stiffness")
-    if diag[c, K.D_BALL_OVERLAP] > system.max_overlap:
-        i, j = int(diag[c, K.D_BALL_I]), int(diag[c, K.D_BALL_J])
-        where = (f"blow-up at t = {t:.6g} s: balls {i} and {j} overlap by "
-                 f"{diag[c, K.D_BALL_OVERLAP] / d:.1%} of d (bound {system.max_overlap / d:.0%})")
-        if dt_is_cause:
-            return f"{where}; {too_coarse}"
-        v = float(np.linalg.norm(state.vel[i] - state.vel[j]))
-        return (f"{where}; likely cause: contact stiffness k_n too low for the load or for "
-                f"their relative speed {v:.3g} m/s ({dt_words}: enough)")
-    if diag[cw, K.D_WALL_OVERLAP] > system.max_overlap:
-        i, w = int(diag[cw, K.D_WALL_I]), int(diag[cw, K.D_WALL_W])
-        where = (f"blow-up at t = {t:.6g} s: ball {i} overlaps {_wall_name(w)} by "
-                 f"{diag[cw, K.D_WALL_OVERLAP] / d:.1%} of d (bound "
-                 f"{system.max_overlap / d:.0%})")
-        if dt_is_cause:
-            return f"{where}; {too_coarse}"
-        v = float(np.linalg.norm(state.vel[i]))
-        return (f"{where}; likely cause: wall contact stiffness k_n too low for the load or "
-                f"for the ball's speed {v:.3g} m/s ({dt_words}: enough)")
-    where = (f"blow-up at t = {t:.6g} s: ball(s) {_ids(lost)} outside the tub (ball {lost[0]} "
-             f"at {_vec(state.pos[lost[0]])} m)" if lost else
-             f"blow-up at t = {t:.6g} s: no ball named by the kernel")
-    if dt_is_cause:
-        return f"{where}; {too_coarse}, so a fast ball passed through the wall"
-    v = float(np.linalg.norm(state.vel[lost[0]])) if lost else vmax
-    return (f"{where}; likely cause: wall contact stiffness too low for the ball's speed "
-            f"{v:.3g} m/s, so it passed through the wall ({dt_words}: enough)")
+def set_overlap_maxima(system: DEMSystem, state: DEMState, diag: np.ndarray) -> None:
+    """Restore the diagnostics of overlap_maxima (a resumed checkpoint's)."""
+    _buf(system, state).diag[:] = diag
 
 
 def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: bool = False,
@@ -440,14 +275,14 @@ def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: b
         except ZeroDivisionError:
             # 1/d of two coincident balls (numba raises it, as Python does); the step count is
             # unknown here, so the time is that of the call's start
-            pair = _coincident_pair(system, state)
+            pair = coincident_pair(system, state)
             if pair is None:
                 raise
-            raise BlowUp(_coincident_message(system, state, pair)) from None
+            raise BlowUp(coincident_message(system, state, pair)) from None
         state.step += done
         left -= done
         if status == K.BLOWUP:
-            raise BlowUp(_blowup_message(system, state, b.diag))
+            raise BlowUp(blowup_message(system, state, b.diag))
         if status == K.REBUILD:
             rebuild(system, state)
         if on_impacts is not None and (status == K.IMPACTS_FULL or left == 0):
@@ -467,7 +302,6 @@ def wall_contacts_now(system: DEMSystem, state: DEMState) -> dict[str, np.ndarra
     plane = w >= WALL_PLANE0
     if np.any(plane):
         # a plane wall's contact point is kept in the lab frame by the kernel
-        from ..tub.motion import TubMotion, lab_to_tub_np, pose_np
         motion = system.motion if state.vibrating else TubMotion.still()
         pz = pose_np(motion, state.time(system.dt))
         point[plane] = lab_to_tub_np(point[plane], float(pz["X"]), float(pz["Z"]),

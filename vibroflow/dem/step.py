@@ -20,7 +20,7 @@ import numba as nb
 import numpy as np
 
 from ..tub.motion import pose as tub_pose
-from .contact import ball_pair, branch_vector, contact_force
+from .contact import branch_vector, contact_force, pair_contact_velocity
 from .walls import (KIND_BALL_BALL, KIND_BALL_PARTITION, KIND_BALL_PLANE, KIND_BALL_TUB,
                     TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT, WALL_PLANE0, WALL_U, plane_wall,
                     u_wall)
@@ -51,19 +51,54 @@ def _pair_chunk(c, nchunk, t, dt_hist, pos, vel, omg, radius, mass, mat, table, 
                 record_impacts, diag):
     lo, hi = bounds[c], bounds[c + 1]
     for i in range(lo, hi):
+        ri = radius[i]
+        mi = mass[i]
         for k in range(nbr_start[i], nbr_start[i + 1]):
             j = nbr[k]
             dx, dy, dz = branch_vector(pos, i, j, periodic_length)
-            # the images move with the balls: -0.0 adds nothing (contact.ball_pair)
-            touching, first, delta, nx, ny, nz, vn, _fx, _fy, _fz = ball_pair(
-                i, j, k, dx, dy, dz, -0.0, -0.0, -0.0, vel, omg, radius, mass, table, mat[i],
-                mat[j], hist, flag, dt_hist, fbuf, tbuf, c)
-            if not touching:
+            rsum = ri + radius[j]
+            d2 = dx * dx + dy * dy + dz * dz
+            if d2 >= rsum * rsum:
+                if flag[k]:
+                    flag[k] = 0
+                    for q in range(6):
+                        hist[k, q] = 0.0
                 continue
-            if first and record_impacts:
-                ri = radius[i]
-                _record_impact(imp_buf, imp_count, c, t, KIND_BALL_BALL, pos[i, 0] - ri * nx,
-                               pos[i, 1] - ri * ny, pos[i, 2] - ri * nz, -vn)
+            d = np.sqrt(d2)
+            delta = rsum - d
+            inv = 1.0 / d
+            nx = dx * inv
+            ny = dy * inv
+            nz = dz * inv
+            rj = radius[j]
+            vx, vy, vz = pair_contact_velocity(vel, omg, i, j, ri, rj, nx, ny, nz)
+            if not flag[k]:
+                flag[k] = 1
+                if record_impacts:
+                    vn = vx * nx + vy * ny + vz * nz
+                    _record_impact(imp_buf, imp_count, c, t, KIND_BALL_BALL,
+                                   pos[i, 0] - ri * nx, pos[i, 1] - ri * ny,
+                                   pos[i, 2] - ri * nz, -vn)
+            mj = mass[j]
+            m_eff = mi * mj / (mi + mj)
+            r_eff = ri * rj / (ri + rj)
+            par = table[mat[i], mat[j]]
+            fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz, fn, ft, sl = contact_force(
+                delta, nx, ny, nz, vx, vy, vz,
+                omg[i, 0] - omg[j, 0], omg[i, 1] - omg[j, 1], omg[i, 2] - omg[j, 2],
+                ri, rj, r_eff, m_eff, par, hist[k], dt_hist)
+            fbuf[c, i, 0] += fx
+            fbuf[c, i, 1] += fy
+            fbuf[c, i, 2] += fz
+            fbuf[c, j, 0] -= fx
+            fbuf[c, j, 1] -= fy
+            fbuf[c, j, 2] -= fz
+            tbuf[c, i, 0] += tix
+            tbuf[c, i, 1] += tiy
+            tbuf[c, i, 2] += tiz
+            tbuf[c, j, 0] += tjx
+            tbuf[c, j, 1] += tjy
+            tbuf[c, j, 2] += tjz
             if delta > diag[c, D_BALL_OVERLAP]:
                 diag[c, D_BALL_OVERLAP] = delta
                 diag[c, D_BALL_I] = i

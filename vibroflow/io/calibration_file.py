@@ -1,18 +1,28 @@
-"""calibration.toml: the continuum's parameters measured on a DEM run, written and read here
-only (`vibroflow calibrate` writes it; the continuum, the study and the report read it).
+"""calibration.toml: the continuum's parameters measured on a DEM run, as a typed record
+(`Calibration`), written and read here only (`vibroflow calibrate` writes it; the continuum, the
+study and the report read it).
 
-Every value carries its standard error (`*_stderr`); the tables the continuum needs are checked
-when the file is read (REQUIRED), so a file that lacks one is a one-line error, not a solver
-that runs on a default.
+Each TOML table is a frozen pydantic model: the parameters the continuum needs are required
+finite numbers (the [rheology] mu(I)/phi(I) constants, the [elastic] moduli, the [wall]
+friction, the [media] diameter and density), so a file that lacks one is a one-line error when
+it is read, not a solver that runs on a default; every other table and key is optional. Every
+value carries its standard error (`*_stderr`, NaN where none could be estimated); keys a table
+does not declare are kept as they are (extra="allow"), and the record keeps the file's key order,
+so `Calibration.to_toml_dict` gives back exactly the tables the file holds and a record written
+and read again is the same file, byte for byte.  Units are SI, named in the keys (`_Pa`, `_m`,
+`_m_s`, `_1_s`, `_kg_m3`).
 """
 from __future__ import annotations
 
 import math
 import tomllib
 from pathlib import Path
+from typing import Annotated, Any
 
 import numpy as np
 import tomli_w
+from pydantic import BaseModel, ConfigDict, PlainValidator, PrivateAttr, ValidationError, \
+    model_validator
 
 from vibroflow.errors import InputError
 from vibroflow.io.atomic import write_text_atomic
@@ -20,17 +30,43 @@ from vibroflow.io.atomic import write_text_atomic
 CALIBRATION_FILE = "calibration.toml"
 
 
-def write_calibration(path, cal: dict) -> Path:
-    """calibration.toml, atomically, with a header saying what it is."""
-    path = Path(path)
-    head = ("# vibroflow calibration: continuum parameters measured on a DEM run (SI units).\n"
-            "# Read with vibroflow.calibration.read_calibration; every value has its standard\n"
-            "# error (*_stderr, NaN where none could be estimated) and [source] says where it\n"
-            "# came from.\n\n")
-    return write_text_atomic(path, head + tomli_w.dumps(_plain(cal)))
+def _finite(v):
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+            or not math.isfinite(v):
+        raise ValueError("must be a finite number")
+    return v
+
+
+def _number(v):
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+        raise ValueError("must be a number (nan where it could not be estimated)")
+    return v
+
+
+def _count(v):
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+        raise ValueError("must be a whole number >= 0")
+    return v
+
+
+def _text(v):
+    if not isinstance(v, str):
+        raise ValueError("must be a string")
+    return v
+
+
+# the values keep the type they are given (an int stays an int, so the file is written back as
+# it was read); NaN and inf are allowed where a value may be unknown
+Finite = Annotated[float, PlainValidator(_finite)]
+Number = Annotated[float, PlainValidator(_number)]
+Count = Annotated[int, PlainValidator(_count)]
+Text = Annotated[str, PlainValidator(_text)]
 
 
 def _plain(obj):
+    """A value as TOML writes it: numpy scalars as Python's, None left out, records as tables."""
+    if isinstance(obj, Table):
+        return obj.to_toml_dict()
     if isinstance(obj, dict):
         return {str(k): _plain(v) for k, v in obj.items() if v is not None}
     if isinstance(obj, (list, tuple)):
@@ -44,12 +80,243 @@ def _plain(obj):
     return obj
 
 
-REQUIRED = {"rheology": ("mu_s", "mu_2", "I_0", "phi_max", "phi_min"),
-            "elastic": ("bulk_modulus_Pa", "shear_modulus_Pa"),
-            "wall": ("friction",), "media": ("diameter_m", "solid_density_kg_m3")}
+class Table(BaseModel):
+    """One table of calibration.toml: declared keys typed, others kept, the key order kept."""
+
+    model_config = ConfigDict(frozen=True, extra="allow")
+    _order: tuple = PrivateAttr(default=())
+
+    @model_validator(mode="wrap")
+    @classmethod
+    def _keep_order(cls, data: Any, handler):
+        rec = handler(data)
+        if isinstance(data, dict):
+            rec._order = tuple(str(k) for k in data)
+        return rec
+
+    def to_toml_dict(self) -> dict:
+        """The table as the file holds it: its keys in the file's order (declared keys given
+        otherwise after them), None left out, sub-tables as dicts."""
+        values = {**{k: getattr(self, k) for k in type(self).model_fields},
+                  **(self.__pydantic_extra__ or {})}
+        keys = [*self._order, *(k for k in values if k not in self._order)]
+        return {k: _plain(values[k]) for k in keys if values.get(k) is not None}
 
 
-def read_calibration(path) -> dict:
+class CoarseGraining(Table):
+    kernel: Text | None = None
+    width_m: Number | None = None
+    cell_size_m: Number | None = None
+    contact_stress: Text | None = None
+
+
+class Source(Table):
+    """[source]: the DEM run the calibration was measured on."""
+    run: Text | None = None
+    case: Text | None = None
+    dem_code: Text | None = None
+    snapshots: Count | None = None
+    window_s: list[Number] | None = None
+    shear_cell: bool | None = None
+    created: Text | None = None
+    vibroflow_version: Text | None = None
+    coarse_graining: CoarseGraining | None = None
+
+
+class Media(Table):
+    """[media]: the balls and the bed they form."""
+    diameter_m: Finite
+    solid_density_kg_m3: Finite
+    bed_solid_fraction: Number | None = None
+    bed_pressure_Pa: Number | None = None
+    coordination_number: Number | None = None
+    coordination_number_all_balls: Number | None = None
+
+
+class Rheology(Table):
+    """[rheology]: mu(I) = mu_s + (mu_2 - mu_s) / (1 + I_0 / I), phi(I) = phi_max - (phi_max -
+    phi_min) I, and the critical solid fraction below which the material is stress-free."""
+    model: Text | None = None
+    source: Text | None = None
+    points: Count | None = None
+    status: Text | None = None
+    mu_s: Finite
+    mu_s_stderr: Number | None = None
+    mu_2: Finite
+    mu_2_stderr: Number | None = None
+    I_0: Finite
+    I_0_stderr: Number | None = None
+    phi_max: Finite
+    phi_max_stderr: Number | None = None
+    phi_min: Finite
+    phi_min_stderr: Number | None = None
+    mu_fit_chi2_per_dof: Number | None = None
+    critical_solid_fraction: Finite | None = None
+
+
+class Elastic(Table):
+    """[elastic]: the packed bed's moduli (Pa) the continuum gets."""
+    bulk_modulus_Pa: Finite
+    bulk_modulus_stderr_Pa: Number | None = None
+    shear_modulus_Pa: Finite
+    shear_modulus_stderr_Pa: Number | None = None
+    shear_modulus_small_strain_Pa: Number | None = None
+    shear_modulus_small_strain_stderr_Pa: Number | None = None
+    youngs_modulus_Pa: Number | None = None
+    poisson_ratio: Number | None = None
+    pressure_Pa: Number | None = None
+    solid_fraction: Number | None = None
+    coordination_number: Number | None = None
+    source: Text | None = None
+
+
+class DruckerPrager(Table):
+    """[drucker_prager]: the equivalent Drucker-Prager cone with viscosity."""
+    model: Text | None = None
+    friction_angle_deg: Number | None = None
+    tan_beta: Number | None = None
+    beta_deg: Number | None = None
+    dilation_angle_deg: Number | None = None
+    viscosity_Pa_s: Number | None = None
+    inertial_number: Number | None = None
+
+
+class Wall(Table):
+    """[wall]: the media's effective Coulomb friction on the tub's lining."""
+    friction: Finite
+    friction_stderr: Number | None = None
+    choice: Text | None = None
+    contact_friction: Number | None = None
+    mean_ft_over_fn: Number | None = None
+    mean_ft_over_fn_stderr: Number | None = None
+    ratio_of_sums: Number | None = None
+    sliding_fraction: Number | None = None
+    sliding_fraction_stderr: Number | None = None
+    coherent_slip_friction: Number | None = None
+    coherent_slip_friction_stderr: Number | None = None
+    contacts: Count | None = None
+
+
+class Partitions(Table):
+    """[partitions]: the effective friction on the partitions, the body force it gives."""
+    friction: Finite
+    friction_stderr: Number | None = None
+    contact_friction: Number | None = None
+    mean_ft_over_fn: Number | None = None
+    sliding_fraction: Number | None = None
+    contacts: Count | None = None
+    body_force: Text | None = None
+    spacing_m: Number | None = None
+
+
+class ImpactRelation(Table):
+    """[impacts.ball_ball], [impacts.ball_wall]: v = c0 + c1 d gamma_dot (m/s) fitted on the
+    DEM's coarse-grained field (c0_m_s, c1) and on the continuum's measure of the shear rate
+    (c0_cells_m_s, c1_cells), v = a sqrt(T)."""
+    count: Count | None = None
+    mean_normal_speed_m_s: Number | None = None
+    c0_m_s: Number | None = None
+    c0_stderr_m_s: Number | None = None
+    c1: Number | None = None
+    c1_stderr: Number | None = None
+    r2: Number | None = None
+    a_temperature: Number | None = None
+    a_temperature_stderr: Number | None = None
+    c0_cells_m_s: Number | None = None
+    c0_cells_stderr_m_s: Number | None = None
+    c1_cells: Number | None = None
+    c1_cells_stderr: Number | None = None
+
+
+class Impacts(Table):
+    """[impacts]: impact speeds against the shear rate and the granular temperature."""
+    shear_rate_model: Text | None = None
+    temperature_model: Text | None = None
+    bagnold_sqrtT_over_d_gamma_dot: Number | None = None
+    bagnold_r2: Number | None = None
+    reference_shear_rate_1_s: Number | None = None
+    ball_ball: ImpactRelation | None = None
+    ball_wall: ImpactRelation | None = None
+
+
+class CyclicShear(Table):
+    """[cyclic_shear]: the cyclic shear cell at the tub's frequency, per strain amplitude."""
+    frequency_Hz: Number | None = None
+    pressure_Pa: Number | None = None
+    tub_shear_rate_cycle_mean_1_s: Number | None = None
+    tub_strain_amplitude: Number | None = None
+    secant_shear_modulus_at_tub_amplitude_Pa: Number | None = None
+    strain_amplitude: list[Number] | None = None
+    secant_shear_modulus: list[Number] | None = None
+    secant_shear_modulus_stderr: list[Number] | None = None
+
+
+class Dilatancy(Table):
+    """[dilatancy]: K_dil of mu = mu(I) + K_dil (phi - phi_eq(I)) (Pailha & Pouliquen 2009)."""
+    K_dil: Number | None = None
+    K_dil_stderr: Number | None = None
+    initial_excess_solid_fraction: Number | None = None
+
+
+class Compaction(Table):
+    """[compaction]: the cyclic compaction of the packing at the tub's amplitude."""
+    compaction_strain: Number | None = None
+    excess_solid_fraction: Number | None = None
+
+
+class Calibration(Table):
+    """The whole of calibration.toml: [rheology], [elastic], [wall] and [media] required, the
+    other tables when measured."""
+    rheology: Rheology
+    elastic: Elastic
+    wall: Wall
+    media: Media
+    source: Source | None = None
+    drucker_prager: DruckerPrager | None = None
+    impacts: Impacts | None = None
+    partitions: Partitions | None = None
+    cyclic_shear: CyclicShear | None = None
+    dilatancy: Dilatancy | None = None
+    compaction: Compaction | None = None
+
+    @classmethod
+    def from_dict(cls, tables: dict, where: str = "calibration") -> "Calibration":
+        """The record of these tables; InputError naming `where`, the field (table.key), its
+        value and what is allowed when one does not fit."""
+        try:
+            return cls.model_validate(tables)
+        except ValidationError as e:
+            raise InputError(f"{where}: {_first_error(e, tables)}") from None
+
+
+def _first_error(e: ValidationError, tables: dict) -> str:
+    """The first error as "table.key = value: what is allowed", with the table's status (why a
+    fit left a value out) when it has one other than "measured"."""
+    err = e.errors(include_url=False)[0]
+    loc = [str(p) for p in err["loc"]]
+    field = ".".join(loc)
+    table = tables.get(loc[0]) if len(loc) == 2 else None
+    status = table.get("status", "") if isinstance(table, dict) else ""
+    why = f" ({status})" if status and status != "measured" else ""
+    if err["type"] == "missing":
+        what = "a table" if len(loc) == 1 else "a finite number"
+        return f"{field} is missing: must be {what}{why}"
+    msg = "must be a table" if err["type"] == "model_type" else \
+        err["msg"].removeprefix("Value error, ")
+    return f"{field} = {err.get('input')!r}: {msg}{why}"
+
+
+def write_calibration(path, cal: Calibration) -> Path:
+    """calibration.toml, atomically, with a header saying what it is."""
+    path = Path(path)
+    head = ("# vibroflow calibration: continuum parameters measured on a DEM run (SI units).\n"
+            "# Read with vibroflow.calibration.read_calibration; every value has its standard\n"
+            "# error (*_stderr, NaN where none could be estimated) and [source] says where it\n"
+            "# came from.\n\n")
+    return write_text_atomic(path, head + tomli_w.dumps(cal.to_toml_dict()))
+
+
+def read_calibration(path) -> Calibration:
     """Read calibration.toml (a file, or a run directory holding one); InputError when it is
     missing, malformed or lacks a parameter the continuum needs."""
     p = Path(path)
@@ -58,16 +325,9 @@ def read_calibration(path) -> dict:
     if not p.is_file():
         raise InputError(f"calibration = {str(path)!r}: no such file (run `vibroflow calibrate`)")
     try:
-        cal = tomllib.loads(p.read_text(encoding="utf-8"))
+        tables = tomllib.loads(p.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as e:
         raise InputError(f"{p}: malformed TOML ({e})") from None
     except (OSError, UnicodeDecodeError) as e:
         raise InputError(f"{p}: cannot be read ({type(e).__name__}: {e})") from None
-    for table, keys in REQUIRED.items():
-        for k in keys:
-            v = cal.get(table, {}).get(k)
-            if not isinstance(v, (int, float)) or not math.isfinite(v):
-                why = cal.get(table, {}).get("status", "")
-                raise InputError(f"{p}: {table}.{k} = {v!r}: must be a finite number"
-                                 + (f" ({why})" if why and why != "measured" else ""))
-    return cal
+    return Calibration.from_dict(tables, where=str(p))

@@ -28,7 +28,7 @@ docs/liggghts.md):
 * Vibration for run.duration from step n0 (written to post/vibration_start_step.txt), snapshots
   (`dump custom`, post/balls.dump), ball-wall contacts (`compute wall/gran/local`,
   post/wall.dump) and ball-ball contacts (`compute pair/gran/local id force`, post/pairs.dump)
-  at exactly the vibration steps vibroflow samples (vibroflow.dem.run.sample_steps:
+  at exactly the vibration steps vibroflow samples (vibroflow.dem.sampling.sample_steps:
   phases_per_cycle instants a cycle over the whole cycles of the last average_last seconds,
   each rounded to the nearest step) through `dump_modify every v_...` with a file-style
   variable; the kinetic energy every run.series_every steps (post/series.txt).

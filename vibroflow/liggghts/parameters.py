@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from vibroflow.dem.sampling import sample_steps
 from vibroflow.errors import InputError
 from vibroflow.liggghts.template import _SLOT, _Deck, _fmt, _table
 from vibroflow.scenario.laws import damping_ratio
@@ -164,16 +165,6 @@ def contact_law_lines(scenario, tables: PairTables | None = None) -> list[str]:
 
 def dump_vibration_steps(scenario) -> np.ndarray:
     """Vibration steps (from the start of vibration) of the snapshots: the same instants as
-    vibroflow's own DEM (vibroflow.dem.run.sample_steps)."""
-    run, f, dt = scenario.run, scenario.motion.frequency, scenario.run.dt
-    try:
-        from vibroflow.dem.run import sample_steps
-    except ImportError:  # pragma: no cover - dem package absent
-        sample_steps = None
-    if sample_steps is not None:
-        steps, _, _ = sample_steps(scenario, dt)
-        return np.asarray(steps, dtype=np.int64)
-    n_cycles = int(math.floor(run.average_last * f + 1e-9))
-    t0 = run.duration - n_cycles / f
-    k = np.arange(n_cycles * run.phases_per_cycle)
-    return np.round((t0 + k / (f * run.phases_per_cycle)) / dt).astype(np.int64)
+    vibroflow's own DEM (vibroflow.dem.sampling.sample_steps)."""
+    steps, _, _ = sample_steps(scenario, scenario.run.dt)
+    return np.asarray(steps, dtype=np.int64)

@@ -21,7 +21,7 @@ tub axes), and deposits volume and volume-weighted velocity on the nodes of a sq
 spacing h with bilinear (tent) weights, per (batch, phase).  `result()` forms the phase-averaged
 velocity v = sum(w V v) / sum(w V) at each node, its gradient by central differences (one-sided
 at the bed's edge), the plane-strain equivalent shear rate sqrt(2 D':D') of models.md (the
-DEM's coarse_grain.rheology with D_yy = 0), and its cycle mean weighted by the solid fraction
+DEM's coarse_grain_fields.rheology with D_yy = 0), and its cycle mean weighted by the solid fraction
 over the phases, as add_cycle_means weights by density.
 
 Units: m, m/s, 1/s.  Nodes sit on multiples of h (the analysis cells' centres when h is the
@@ -112,7 +112,7 @@ def near_wall_nodes(shear: "PhaseShear", radius: float) -> np.ndarray:
 
 def equivalent_shear_rate_2d(lxx, lxz, lzx, lzz):
     """sqrt(2 D':D') (1/s) of a plane-strain velocity gradient (D_yy = 0), models.md; the same
-    number as calibration.coarse_grain.rheology gives for the 3D gradient with no y terms."""
+    number as calibration.coarse_grain_fields.rheology gives for the 3D gradient with no y terms."""
     third = (lxx + lzz) / 3.0
     exx, ezz = lxx - third, lzz - third
     exz = 0.5 * (lxz + lzx)

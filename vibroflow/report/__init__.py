@@ -13,9 +13,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from vibroflow.errors import InputError
 from vibroflow.io.atomic import write_text_atomic
 from vibroflow.io.folder_lock import folder_lock
+from vibroflow.study.folder import check_study_dir
 
 REPORT_NAME = "report.html"
 REPORT_DIR = "report"
@@ -29,12 +29,12 @@ def write_report(study_dir) -> Path:
     from vibroflow.report.data import StudyData
 
     out = Path(study_dir)
-    if not out.is_dir():
-        StudyData.read(out)  # the one-line error of a missing folder or a file
-        raise InputError(f"DIR = {str(out)!r}: not a folder")
+    if not out.is_dir():  # a missing folder or a file, before the lock would make a folder
+        check_study_dir(out, must_exist=True)
     # held while the page is made: a study rerun writing the folder meanwhile would change
-    # what the page shows under it
+    # what the page shows under it (a folder another command holds is refused first)
     with folder_lock(out, "vibroflow report", field="DIR"):
+        check_study_dir(out, must_exist=True)
         return _write(out, StudyData.read(out))  # validated before anything is written
 
 

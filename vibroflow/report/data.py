@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from vibroflow.errors import InputError
+from vibroflow.io.calibration_file import Calibration, read_calibration
 
 DEM = "dem"
 #: impacts a cell needs before its mean impact speed is drawn (a cell mean of fewer is mostly
@@ -82,7 +83,7 @@ def mean_flow_shear_rate(vx: np.ndarray, vz: np.ndarray, h: float) -> np.ndarray
     D is the symmetric part of the in-plane velocity gradient (central differences, one-sided
     at the bed's edge; NaN where a cell has no neighbour along an axis), D_yy = 0 (plane flow),
     and D' = D - tr(D)/3 I its deviator in 3D, the definition of the DEM's coarse-grained
-    shear rate (vibroflow.calibration.coarse_grain), so simple shear v_x = g z gives g and a
+    shear rate (vibroflow.calibration.coarse_grain_fields), so simple shear v_x = g z gives g and a
     rigid rotation 0.
     """
     vx = np.asarray(vx, dtype=float)
@@ -125,7 +126,7 @@ class StudyData:
     scenario_toml: str | None
     fields: dict                      # method -> xarray Dataset of bulk_velocity.csv (z, x)
     stages: dict                      # stage name -> its stage.json record
-    calibration: dict | None
+    calibration: Calibration | None
     dem_fields: Any | None            # the DEM's time-averaged coarse-grained fields (fields.nc)
     impacts: ImpactCells | None       # the DEM's measured ball-ball impacts by cell
     sweep_table: Path | None
@@ -164,10 +165,8 @@ class StudyData:
         from vibroflow.study.results import load
 
         out = Path(out)
-        if out.is_dir() and not (out / "study.json").exists():
-            raise InputError(f"DIR = {str(out)!r}: not a vibroflow study folder (no study.json); "
-                             "give the --out folder of a finished `vibroflow run`")
-        loaded = load(out)  # validates DIR and every method's bulk velocity table
+        loaded = load(out)  # validates DIR (study.folder.check_study_dir) and every method's
+        # bulk velocity table
         fields = loaded.pop("fields")
         summary = loaded
         for name, entry in summary["methods"].items():
@@ -190,9 +189,9 @@ class StudyData:
         cal_path = out / DEM / "calibration.toml"
         if cal_path.is_file():
             try:
-                calibration = tomllib.loads(cal_path.read_text())
-            except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-                notes["calibration"] = f"{cal_path}: unreadable ({type(exc).__name__})"
+                calibration = read_calibration(cal_path)
+            except InputError as exc:
+                notes["calibration"] = exc.message
         else:
             notes["calibration"] = f"no {DEM}/calibration.toml in the study"
         dem_fields = None
@@ -225,8 +224,8 @@ class StudyData:
         calibration has none with finite coefficients."""
         from vibroflow.continuum.shear_outputs import impact_relation
 
-        rel = ((self.calibration or {}).get("impacts") or {}).get(kind)
-        c0, c1, which = impact_relation(rel)
+        impacts = self.calibration.impacts if self.calibration is not None else None
+        c0, c1, which = impact_relation(getattr(impacts, kind) if impacts is not None else None)
         if c0 is None:
             return None
         return {"c0": c0, "c1": c1, "which": which}

@@ -246,29 +246,24 @@ def _wall(data: StudyData) -> dict:
     out = {"picture": _picture(data, "dem/calibration/wall_friction.png",
                                "wall friction histogram"),
            "rows": rows, "friction": None}
-    cal = (data.calibration or {}).get("wall") or {}
-    if cal:
-        out.update(friction=f"{cal.get('friction', 'n/a'):.4g}",
-                   friction_stderr=f"{cal.get('friction_stderr', float('nan')):.2g}",
-                   choice=cal.get("choice", ""))
+    if data.calibration is not None:
+        w = data.calibration.wall
+        se = w.friction_stderr if w.friction_stderr is not None else float("nan")
+        out.update(friction=f"{w.friction:.4g}", friction_stderr=f"{se:.2g}",
+                   choice=w.choice or "")
     return out
 
 
 def _rheology(data: StudyData) -> dict:
-    r = (data.calibration or {}).get("rheology") or {}
-
-    def v(k):
-        x = r.get(k)
-        se = r.get(k + "_stderr")
-        if not isinstance(x, (int, float)):
-            return "n/a"
-        return f"{x:.4g}" + (f" ± {se:.2g}" if isinstance(se, (int, float)) and
-                             math.isfinite(se) else "")
+    def v(r, k):
+        x, se = getattr(r, k), getattr(r, k + "_stderr")
+        return f"{x:.4g}" + (f" ± {se:.2g}" if se is not None and math.isfinite(se) else "")
 
     fit = None
-    if r:
-        fit = {k: v(k) for k in ("mu_s", "mu_2", "I_0", "phi_max", "phi_min")}
-        fit.update(source=r.get("source", ""), status=r.get("status", "n/a"))
+    if data.calibration is not None:
+        r = data.calibration.rheology
+        fit = {k: v(r, k) for k in ("mu_s", "mu_2", "I_0", "phi_max", "phi_min")}
+        fit.update(source=r.source or "", status=r.status or "n/a")
     return {"picture": _picture(data, "dem/calibration/mu_I.png", "mu(I) fit"), "fit": fit}
 
 

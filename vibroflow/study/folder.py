@@ -32,8 +32,11 @@ def read_json(path: Path, what: str) -> dict:
 
 
 def check_study_dir(out: Path, must_exist: bool = False) -> None:
-    """Raise an InputError (one line) unless `out` is new, empty, or a study folder."""
+    """Raise an InputError (one line) unless `out` is new, empty, or a study folder; with
+    must_exist (a reader of a study), unless it is a study folder."""
     out = Path(out)
+    remedy = ("give the --out folder of a `vibroflow run`" if must_exist
+              else "give a new or empty folder")
     if not out.exists():
         if must_exist:
             raise InputError(f"DIR = {str(out)!r}: no such folder")
@@ -48,9 +51,9 @@ def check_study_dir(out: Path, must_exist: bool = False) -> None:
         if any(p.name not in own and not p.name.startswith(TMP_PREFIX)
                for p in out.iterdir()) or must_exist:
             raise InputError(f"DIR = {str(out)!r}: not a vibroflow study folder (no "
-                             f"{STUDY_FILE}); give a new or empty folder")
+                             f"{STUDY_FILE}); {remedy}")
         return
     data = read_json(marker, "study record")
     if data.get("kind") != KIND:
         raise InputError(f"{marker}: not a vibroflow study record (kind = "
-                         f"{data.get('kind')!r}); give a new or empty folder")
+                         f"{data.get('kind')!r}); {remedy}")

@@ -17,6 +17,7 @@ from typing import Any
 
 from vibroflow.continuum.formulation import FORMULATIONS
 from vibroflow.errors import InputError
+from vibroflow.io.calibration_file import Calibration
 
 
 @dataclass(frozen=True)
@@ -58,7 +59,7 @@ def _method(name: str):
 
         form = formulation(name)
 
-        def run_method(scenario, out_dir: Path, calibration: dict | None, opts,
+        def run_method(scenario, out_dir: Path, calibration: Calibration | None, opts,
                        progress: bool, resume: bool) -> dict:
             material_for(scenario, calibration, opts)
             return run_continuum(scenario, out_dir, name, calibration=calibration,

@@ -94,9 +94,9 @@ def _run_calibration(study: Study, resume: bool) -> dict:
 
     cal = calibrate(study.folder(DEM), shear_cell=study.shear_cell, progress=study.progress,
                     cyclic=True, dilatancy=needs_dilatancy(study))
-    r = cal["rheology"]
+    r = cal.rheology
     return {"calibration": f"{DEM}/calibration.toml",
-            "rheology": {k: r.get(k) for k in ("mu_s", "mu_2", "I_0", "source")}}
+            "rheology": {"mu_s": r.mu_s, "mu_2": r.mu_2, "I_0": r.I_0, "source": r.source}}
 
 
 def needs_dilatancy(study: Study) -> bool:

@@ -35,7 +35,6 @@ from pathlib import Path
 import numpy as np
 
 from vibroflow.errors import InputError
-from vibroflow.scenario.checks import find_contact
 from vibroflow.scenario.laws import damping_ratio
 from vibroflow.tub.geometry import geometry_of
 
@@ -44,6 +43,7 @@ from ..boundary import PartitionFriction
 from ..fields import grid_fields, write_grid_vtr
 from ..files import VTK_DIR
 from ..formulation import Formulation, Sampler
+from ..material import boundary_friction
 from ..options import ContinuumOptions, default_dx
 from ..sampling import shear_rate, to_lab
 from ..timestep import stable_dt
@@ -233,18 +233,13 @@ class FixedMesh(Formulation):
         geo = geometry_of(scenario)
         dx = self.grid(options, scenario)
         mesh = EulerianMesh.tub(geo, dx)
-        cal = calibration or {}
-        wall_pair = find_contact(scenario, scenario.fill.material, scenario.tub.wall_material)
-        mu_w = float(cal.get("wall", {}).get("friction", wall_pair.friction))
+        wall_pair, mu_w, mu_p = boundary_friction(scenario, calibration)
         M = material.bulk_modulus + 4.0 * material.shear_modulus / 3.0
         k_wall = options.wall_stiffness if options.wall_stiffness is not None else M / mesh.h
         wall = MeshWall(stiffness=k_wall, friction=mu_w,
                         damping_ratio=damping_ratio(wall_pair.restitution))
         partitions = None
-        if not geo.periodic:
-            part_pair = find_contact(scenario, scenario.fill.material,
-                                     scenario.tub.partition_material)
-            mu_p = float(cal.get("partitions", {}).get("friction", part_pair.friction))
+        if mu_p is not None:
             partitions = PartitionFriction(friction=mu_p, length=geo.length)
         dt = stable_dt(material, dx, mesh.h, [wall], v_max=2.0, cfl=options.cfl)
         f, per = scenario.motion.frequency, scenario.run.phases_per_cycle

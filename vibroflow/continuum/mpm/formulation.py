@@ -15,6 +15,7 @@ The column collapse: mpm/column.py's set-up.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -22,7 +23,6 @@ import numba as nb
 import numpy as np
 
 from vibroflow.errors import InputError
-from vibroflow.scenario.checks import find_contact
 from vibroflow.scenario.laws import damping_ratio
 from vibroflow.tub.geometry import distance_to_wall_np, geometry_of, u_wall_nearest
 
@@ -32,6 +32,7 @@ from ..fields import grid_fields, write_grid_vtr
 from ..files import VTK_DIR
 from ..formulation import Formulation, Sampler
 from ..grid import Grid
+from ..material import boundary_friction
 from ..options import ContinuumOptions, default_dx
 from ..sampling import shear_rate, to_lab
 from ..timestep import stable_dt
@@ -179,17 +180,12 @@ class MaterialPointMethod(Formulation):
         dx = self.grid(options, scenario)
         spacing = 0.5 * dx
         grid = Grid.covering(-geo.radius, geo.radius, 0.0, geo.rim_height, dx)
-        cal = calibration or {}
-        wall_pair = find_contact(scenario, scenario.fill.material, scenario.tub.wall_material)
-        mu_w = float(cal.get("wall", {}).get("friction", wall_pair.friction))
+        wall_pair, mu_w, mu_p = boundary_friction(scenario, calibration)
         M = material.bulk_modulus + 4.0 * material.shear_modulus / 3.0
         k_wall = options.wall_stiffness if options.wall_stiffness is not None else M / spacing
         boundaries: list = [UWall(radius=geo.radius, stiffness=k_wall, friction=mu_w,
                                   damping_ratio=damping_ratio(wall_pair.restitution))]
-        if not geo.periodic:
-            part_pair = find_contact(scenario, scenario.fill.material,
-                                     scenario.tub.partition_material)
-            mu_p = float(cal.get("partitions", {}).get("friction", part_pair.friction))
+        if mu_p is not None:
             boundaries.append(PartitionFriction(friction=mu_p, length=geo.length))
         dt = stable_dt(material, dx, spacing, boundaries, v_max=2.0, cfl=options.cfl)
         # a whole number of steps between samples, so every sample falls on a step
@@ -209,7 +205,7 @@ class MaterialPointMethod(Formulation):
         advance(system, state, steps)
 
     def restore(self, system, saved, meta: dict) -> MPMState:
-        return saved
+        return MPMState(**{f.name: getattr(saved, f.name) for f in dataclasses.fields(MPMState)})
 
     def sampler(self, scenario, system, state, out: Path, vtk: bool) -> PointSampler:
         return PointSampler(scenario, system, state, out, vtk)

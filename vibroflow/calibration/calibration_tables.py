@@ -1,0 +1,165 @@
+"""The tables of calibration.toml (vibroflow.io.calibration_file.Calibration) from the results
+of the calibration's stages (calibrate.py): each value a plain float (NaN where none could be
+estimated) with its standard error, units in the keys."""
+from __future__ import annotations
+
+import datetime as _dt
+
+from vibroflow import __version__
+
+from .bed_contacts import contact_pair, young_poisson
+
+
+def toml_float(x) -> float:
+    """A plain float for TOML (NaN stays NaN: TOML 1.0 has nan)."""
+    try:
+        return float(x)
+    except (TypeError, ValueError):
+        return float("nan")
+
+
+def mu_phi_keys(mu: dict, phi: dict) -> dict:
+    """The [rheology] keys of a mu(I) and a phi(I) fit (rheology_fit.fit_mu_i, fit_phi_i): each
+    constant with its standard error, and the mu(I) fit's chi^2 per degree of freedom."""
+    out = {}
+    for k in ("mu_s", "mu_2", "I_0"):
+        out[k] = toml_float(mu[k])
+        out[k + "_stderr"] = toml_float(mu.get(k + "_stderr"))
+    for k in ("phi_max", "phi_min"):
+        out[k] = toml_float(phi[k])
+        out[k + "_stderr"] = toml_float(phi.get(k + "_stderr"))
+    out["mu_fit_chi2_per_dof"] = toml_float(mu.get("chi2_per_dof"))
+    return out
+
+
+def calibration_tables(res, cg_info, wf, rel, rheo, elastic, dp, p_bed, phi_bed, z, d, rho_s,
+                       gam_ref, shear_cell, kernel, width, avg) -> dict:
+    """The tables of calibration.toml (what `Calibration.from_dict` takes) from the stages'
+    results: [source], [media], [rheology], [elastic], [drucker_prager], [wall], [impacts] and,
+    when measured, [partitions] and [impacts.ball_ball], [impacts.ball_wall]."""
+    sc = res.scenario
+    t0, t1 = res.window()
+    tw = wf["tub_wall"]
+    E, nu = young_poisson(elastic["bulk_modulus"], elastic["shear_modulus"])
+    wall_pair = contact_pair(sc, sc.fill.material, sc.tub.wall_material)
+    cal = {
+        "source": {
+            "run": str(res.path.parent.resolve()), "case": str(sc.case),
+            "dem_code": res.source, "snapshots": int(cg_info["snapshots"]),
+            "window_s": [t0, t1], "shear_cell": bool(shear_cell),
+            "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+            "vibroflow_version": __version__,
+            "coarse_graining": {"kernel": kernel, "width_m": toml_float(avg.attrs["width_m"]),
+                                "cell_size_m": toml_float(avg.attrs["cell_size_m"]),
+                                "contact_stress": cg_info["contact_stress"]},
+        },
+        "media": {"diameter_m": d, "solid_density_kg_m3": rho_s,
+                  "bed_solid_fraction": phi_bed, "bed_pressure_Pa": p_bed,
+                  "coordination_number": toml_float(z["z_non_rattler"]),
+                  "coordination_number_all_balls": toml_float(z["z_all"])},
+        "rheology": {
+            "model": "mu(I): mu = mu_s + (mu_2 - mu_s) / (1 + I_0 / I); "
+                     "phi(I) = phi_max - (phi_max - phi_min) I",
+            **{k: (v if isinstance(v, (str, int)) else toml_float(v)) for k, v in rheo.items()},
+            # Dunatunga & Kamrin 2015: below the critical density the material is disconnected
+            # (stress-free); the steady quasi-static packing phi(I -> 0) = phi_max
+            "critical_solid_fraction": toml_float(rheo["phi_max"]),
+        },
+        "elastic": {
+            "bulk_modulus_Pa": toml_float(elastic["bulk_modulus"]),
+            "bulk_modulus_stderr_Pa": toml_float(elastic.get("bulk_modulus_stderr")),
+            "shear_modulus_Pa": toml_float(elastic["shear_modulus"]),
+            "shear_modulus_stderr_Pa": toml_float(elastic.get("shear_modulus_stderr")),
+            **({"shear_modulus_small_strain_Pa": toml_float(elastic["shear_modulus_small_strain"]),
+                "shear_modulus_small_strain_stderr_Pa":
+                    toml_float(elastic["shear_modulus_small_strain_stderr"])}
+               if "shear_modulus_small_strain" in elastic else {}),
+            "youngs_modulus_Pa": toml_float(E), "poisson_ratio": toml_float(nu),
+            "pressure_Pa": toml_float(elastic.get("pressure", p_bed)),
+            "solid_fraction": toml_float(elastic.get("solid_fraction", phi_bed)),
+            "coordination_number": toml_float(elastic.get("coordination_number")),
+            "source": str(elastic.get("source", "")),
+        },
+        "drucker_prager": {k: (v if isinstance(v, str) else toml_float(v)) for k, v in dp.items()},
+        "wall": {
+            "friction": toml_float(tw["effective_friction"]),
+            "friction_stderr": toml_float(tw["effective_friction_stderr"]),
+            "choice": tw["choice"],
+            "contact_friction": toml_float(tw["contact_friction"]),
+            "mean_ft_over_fn": toml_float(tw["mean_ft_over_fn"]),
+            "mean_ft_over_fn_stderr": toml_float(tw["mean_ft_over_fn_stderr"]),
+            "ratio_of_sums": toml_float(tw["ratio_of_sums"]),
+            "sliding_fraction": toml_float(tw["sliding_fraction"]),
+            "sliding_fraction_stderr": toml_float(tw["sliding_fraction_stderr"]),
+            "rolling_or_sticking_fraction": toml_float(tw["rolling_or_sticking_fraction"]),
+            "coherent_slip_friction": toml_float(tw["coherent_slip_friction"]),
+            "coherent_slip_friction_stderr": toml_float(tw["coherent_slip_friction_stderr"]),
+            "contacts": int(tw["count"]),
+            "dem_normal_stiffness_N_m": toml_float(wall_pair.k_n) if wall_pair.model == "linear"
+            else float("nan"),
+        },
+        "impacts": {"shear_rate_model": "v = c0 + c1 d gamma_dot (m/s), fitted over cells",
+                    "temperature_model": "v = a sqrt(T)"},
+    }
+    pw = wf["partitions"]
+    if pw is not None:
+        cal["partitions"] = {
+            "friction": toml_float(pw["effective_friction"]),
+            "friction_stderr": toml_float(pw["effective_friction_stderr"]),
+            "contact_friction": toml_float(pw["contact_friction"]),
+            "mean_ft_over_fn": toml_float(pw["mean_ft_over_fn"]),
+            "sliding_fraction": toml_float(pw["sliding_fraction"]),
+            "contacts": int(pw["count"]),
+            "body_force": "-2 friction p / L_y along the velocity (Jop, Forterre & Pouliquen "
+                          "2005)",
+            "spacing_m": toml_float(sc.tub.length)}
+    for name in ("ball_ball", "ball_wall"):
+        r = rel.get(name)
+        if r is None:
+            continue
+        g, t = r["fit_shear_rate"], r["fit_temperature"]
+        cal["impacts"][name] = {
+            "count": int(r["count"]), "mean_normal_speed_m_s": toml_float(r["mean_normal_speed"]),
+            "c0_m_s": toml_float(g["c0"]), "c0_stderr_m_s": toml_float(g["c0_stderr"]),
+            "c1": toml_float(g["c1"]), "c1_stderr": toml_float(g["c1_stderr"]),
+            "r2": toml_float(g["r2"]), "relative_rms_error": toml_float(g["relative_rms_error"]),
+            "cells": int(g["points"]),
+            "a_temperature": toml_float(t["c1"]),
+            "a_temperature_stderr": toml_float(t["c1_stderr"]),
+            "r2_temperature": toml_float(t["r2"]), "a_maxwellian": toml_float(t["maxwell"]),
+        }
+    rel_cells = rel.get("cells")
+    for name in ("ball_ball", "ball_wall"):
+        g = (rel_cells or {}).get(name)
+        if g is None or name not in cal["impacts"]:
+            continue
+        # the same relation fitted on the continuum's measure of the shear rate
+        # (impacts.impact_relations_on_cells): what a continuum run uses
+        cal["impacts"][name].update({
+            "c0_cells_m_s": toml_float(g["c0"]),
+            "c0_cells_stderr_m_s": toml_float(g["c0_stderr"]),
+            "c1_cells": toml_float(g["c1"]), "c1_cells_stderr": toml_float(g["c1_stderr"]),
+            "r2_cells": toml_float(g["r2"]),
+            "relative_rms_error_cells": toml_float(g["relative_rms_error"]),
+            "points_cells": int(g["points"])})
+    if rel_cells:
+        cal["impacts"].update({
+            "cells_shear_rate_model": (
+                "v = c0_cells + c1_cells d gamma_dot, gamma_dot the cycle mean of the "
+                "phase-resolved velocity field on the analysis cells' centres "
+                "(vibroflow.measure.phase_shear: the continuum's measure, so a continuum "
+                "run uses these)"),
+            "cell_size_m": toml_float(rel_cells["cell_size_m"]),
+            "dem_bed_shear_rate_cells_1_s": toml_float(rel_cells["bed_mean_shear_rate_1_s"]),
+            "dem_bed_shear_rate_cells_stderr_1_s": toml_float(
+                rel_cells["bed_mean_shear_rate_1_s_stderr"]),
+            "dem_bed_roll_shear_rate_cells_1_s": toml_float(rel_cells["bed_roll_shear_rate_1_s"]),
+            "dem_near_wall_shear_rate_cells_1_s": toml_float(rel_cells["near_wall_shear_rate_1_s"]),
+            "dem_near_wall_shear_rate_cells_stderr_1_s": toml_float(
+                rel_cells["near_wall_shear_rate_1_s_stderr"])})
+    b = rel.get("bagnold")
+    if b is not None:
+        cal["impacts"]["bagnold_sqrtT_over_d_gamma_dot"] = toml_float(b["c1"])
+        cal["impacts"]["bagnold_r2"] = toml_float(b["r2"])
+    cal["impacts"]["reference_shear_rate_1_s"] = toml_float(gam_ref)
+    return cal

@@ -1,0 +1,72 @@
+"""The summary of a DEM run (DIR/summary.json): the run's figures, its overlaps and, in tub mode,
+the measures of vibroflow.measure.summary (with bulk_velocity.csv); and its VTK output.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import h5py
+import numba
+
+from ..measure.summary import tub_summary
+from ..tub.geometry import geometry_of
+from .simulate import DEMState, DEMSystem
+
+
+def run_summary(scenario, system: DEMSystem, state: DEMState, h5path: Path, out_dir: Path,
+                wall: float, settle_info: dict, explicit: bool) -> dict:
+    """The summary of the finished run whose results are h5path (wall: the solver's seconds)."""
+    dt = system.dt
+    steps = state.step - state.time_origin_step
+    with h5py.File(h5path, "r") as f:
+        ob = f["series/max_overlap_ball"][()]
+        ow = f["series/max_overlap_wall"][()]
+        ts = f["series/time"][()]
+    d = 2.0 * float(state.radius.max())
+    # the same maxima over the averaging window only: the start of the vibration (the tub
+    # starting at full speed against a bed at rest) gives the run's hardest impacts
+    in_window = ts >= scenario.run.duration - scenario.run.average_last - 1e-12
+    summary = {
+        "case": scenario.case, "source": "vibroflow", "n_particles": state.n, "steps": steps,
+        "dt": dt, "simulated_time_s": steps * dt, "wall_time_s": wall,
+        "particle_steps_per_s": state.n * steps / wall if wall > 0 else None,
+        "max_overlap_over_d": float(ob.max() / d) if ob.size else 0.0,
+        "max_wall_overlap_over_d": float(ow.max() / d) if ow.size else 0.0,
+        "max_overlap_over_d_window": float(ob[in_window].max() / d) if in_window.any()
+        else 0.0,
+        "max_wall_overlap_over_d_window": float(ow[in_window].max() / d) if in_window.any()
+        else 0.0,
+        "balls_lost": 0, "threads": numba.get_num_threads(), "chunks": system.nchunk,
+        "neighbour_builds": state.nl.builds,
+    }
+    if settle_info:
+        summary["settle"] = settle_info
+    if explicit:
+        summary["final_state"] = [
+            {"id": i, "position": state.pos[i].tolist(), "velocity": state.vel[i].tolist(),
+             "angular_velocity": state.omg[i].tolist()} for i in range(state.n)]
+        return summary
+    summary.update(tub_summary(h5path, scenario, bulk_csv=out_dir / "bulk_velocity.csv"))
+    return summary
+
+
+def write_vtk(h5path: Path, out_dir: Path, scenario) -> None:
+    """DIR/vtk/: a .vtu of the balls at each snapshot, their .pvd collection and the tub's
+    surface."""
+    from ..io import vtk as V  # pyevtk is loaded only when VTK output is asked for
+
+    vdir = out_dir / "vtk"
+    vdir.mkdir(exist_ok=True)
+    entries = []
+    with h5py.File(h5path, "r") as f:
+        radius = f["particles/radius"][()]
+        times = f["snapshots/time"][()]
+        for s in range(times.shape[0]):
+            name = f"snapshot_{s:05d}.vtu"
+            V.write_snapshot_vtu(vdir / name, f["snapshots/position"][s],
+                                 f["snapshots/velocity"][s],
+                                 f["snapshots/angular_velocity"][s], radius)
+            entries.append((float(times[s]), name))
+    V.write_pvd(vdir / "snapshots.pvd", entries)
+    if scenario.tub is not None:
+        V.write_tub_surface(vdir / "tub.vtu", geometry_of(scenario))
