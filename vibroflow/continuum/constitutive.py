@@ -59,7 +59,7 @@ class ContinuumMaterial:
     * phi_max = 0.60, phi_min = 0.30 (phi(I) = phi_max - (phi_max - phi_min) I, the slope 0.3 of
       da Cruz et al. 2005); critical solid fraction phi_c = phi_max;
     * bulk_modulus = 4.5e6 Pa: the affine estimate K = phi Z k_n / (3 pi d)
-      (vibroflow.calibration.calibrate.affine_moduli) at phi = 0.60, Z = 4.5 contacts per ball,
+      (vibroflow.calibration.elastic.affine_moduli_linear) at phi = 0.60, Z = 4.5 contacts per ball,
       k_n = 1e5 N/m, d = 6.35 mm; shear_modulus = 1.3e6 Pa: the affine G (3.9e6 Pa) divided by 3
       for non-affine relaxation (affine G is an upper bound, several times the measured one);
     * diameter 6.35 mm, solid density 7800 kg/m^3 (steel balls);
