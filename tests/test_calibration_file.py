@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -63,8 +64,6 @@ def test_unknown_tables_and_keys_are_kept(tmp_path):
 def test_the_fingerprint_content_is_the_files_tables():
     """What the continuum's run fingerprint hashes (continuum.checkpoint.run_fingerprint) is the
     file's own tables."""
-    import tomllib
-
     for path in FILES:
         tables = tomllib.loads(path.read_text())
         cal = read_calibration(path)
