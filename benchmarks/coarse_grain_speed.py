@@ -15,14 +15,14 @@ same sums on the peer's snapshots.
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import os
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+import bench
 
 
 def numpy_peer(cg, snaps) -> tuple[np.ndarray, np.ndarray]:
@@ -125,7 +125,7 @@ def main(argv=None) -> int:
             "numpy_peer_deposit_s_per_snapshot": t_np / max(len(snaps), 1),
             "ratio_numpy_over_vibroflow_deposit": (t_np / t_vf_sub) if t_vf_sub > 0 else None,
             "peer_relative_difference": {"rho": float(err_rho), "contact_stress": float(err_sig)},
-            "load_average": os.getloadavg(), "cpu_count": os.cpu_count(),
+            "machine": bench.machine(),
         }
     print(f"run {a.run}: {out['balls']} balls, {n_used} snapshots, "
           f"{n_contacts:.0f} ball contacts a snapshot")
@@ -138,7 +138,7 @@ def main(argv=None) -> int:
           f"{1e3 * out['read_s_per_snapshot']:.1f} ms a snapshot")
     print(f"same sums: max relative difference rho {err_rho:.1e}, contact stress {err_sig:.1e}")
     if a.json:
-        a.json.write_text(json.dumps(out, indent=2))
+        bench.write_json(a.json, out)
     return 0
 
 

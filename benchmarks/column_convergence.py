@@ -31,13 +31,14 @@ benchmarks/README.md with the date; --out DIR also writes DIR/column_convergence
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
 from pathlib import Path
+
+import bench
 
 #: the height is the deposit's mean thickness within this fraction of R0 of the axis (the
 #: tests' measure, tests/test_axisymmetric.py CENTRE)
@@ -158,10 +159,8 @@ def main(argv=None) -> int:
                 summary.append({"method": method, "a": a, "measure": key, "changes": d,
                                 "q": q, "limit": limit, "law": law})
     if args.out is not None:
-        args.out.mkdir(parents=True, exist_ok=True)
-        tmp = args.out / "column_convergence.json.tmp"
-        tmp.write_text(json.dumps({"runs": results, "convergence": summary}, indent=1))
-        tmp.replace(args.out / "column_convergence.json")
+        bench.write_json(args.out / "column_convergence.json",
+                         {"runs": results, "convergence": summary, "machine": bench.machine()})
     return 0
 
 

@@ -45,6 +45,8 @@ import sys
 import time
 from pathlib import Path
 
+import bench
+
 DEFAULT_CASES = ["base", "wall_friction=0.10", "wall_friction=0.40", "partition_friction=0",
                  "mu_scale=0.5", "bulk_modulus_scale=4", "moduli_scale=4",
                  "critical_solid_fraction=0.54", "critical_solid_fraction=0.60",
@@ -158,11 +160,10 @@ def main(argv=None) -> int:
     from multiprocessing import get_context
 
     from vibroflow.io.calibration_file import Calibration, read_calibration
-    from vibroflow.scenario.io import load_scenario
 
     summary = args.dem_dir / "summary.json"
     if args.case is not None:
-        scenario = load_scenario(args.case)
+        scenario = bench.scenario(args.case)
     else:
         from vibroflow.calibration.dem_result import DEMResult
 
@@ -204,11 +205,8 @@ def main(argv=None) -> int:
         rows.append({"case": case, "E": E, "E_stderr": E_se, "ratio_to_dem": R,
                      "ratio_stderr": R_se, "settle_times_s": settle_times,
                      "members": members})
-    args.out.mkdir(parents=True, exist_ok=True)
-    tmp = args.out / ".tmp-sensitivity.json"
-    tmp.write_text(json.dumps({"case": scenario.case, "method": args.method, "dem": dc,
-                               "rows": rows}, indent=2))
-    os.replace(tmp, args.out / "sensitivity.json")
+    bench.write_json(args.out / "sensitivity.json", {"case": scenario.case, "method": args.method,
+                                                      "dem": dc, "rows": rows})
     return 0
 
 

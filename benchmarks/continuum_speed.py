@@ -38,11 +38,9 @@ import tempfile
 import time
 from pathlib import Path
 
+import bench
+
 ROOT = Path(__file__).resolve().parent.parent
-
-
-def _load() -> float:
-    return os.getloadavg()[0]
 
 
 def _options(method: str, a):
@@ -92,7 +90,7 @@ def worker(a) -> dict:
     first = time.perf_counter() - t1
     from vibroflow.continuum.tub_run import run_continuum
 
-    load0 = _load()
+    load0 = bench.load_1min()
     res = {}
     with tempfile.TemporaryDirectory() as out:
         summary = run_continuum(scenario, out, a.method, calibration=cal, options=opts)
@@ -102,7 +100,7 @@ def worker(a) -> dict:
             res["E"] = field_difference(read_csv(Path(out) / "bulk_velocity.csv", cell_size=h),
                                         read_csv(dem_csv, cell_size=h),
                                         scenario.analysis.min_solid_fraction)
-    load1 = _load()
+    load1 = bench.load_1min()
     c = summary["continuum"]
     steps = summary["steps"] + int(math.ceil(opts.settle_time / c["dt_s"]))
     wall = summary["wall_time_s"]
@@ -342,9 +340,7 @@ def main(argv=None) -> int:
                   f"{res['load_before']:4.1f}/{res['load_after']:4.1f}")
     if dem_wall:
         print(f"DEM wall time {dem_wall:.1f} s ({a.dem_dir})")
-    path = Path(a.json)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(report, indent=2) + "\n")
+    path = bench.write_json(a.json, report)
     print(f"written {path}")
     return 0
 

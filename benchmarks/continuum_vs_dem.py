@@ -52,32 +52,20 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
-import platform
 import shutil
 import sys
 import time
 import tomllib
 from pathlib import Path
 
+import bench
 
 PROBES = ("P1", "P2", "P3", "P4", "P5")
 
 
-def _write_json(path: Path, data) -> None:
-    from vibroflow.measure.summary import json_safe
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(".tmp-" + path.name)
-    tmp.write_text(json.dumps(json_safe(data), indent=2) + "\n")
-    os.replace(tmp, path)
-
-
 def scenario_at(case: str, factor: float, seed: int, overrides: list[str]):
-    from vibroflow.scenario.io import load_scenario
-
-    return load_scenario(case, [*overrides, f"motion.amplitude_factor={factor!r}",
-                                f"run.seed={seed}"])
+    return bench.scenario(case, [*overrides, f"motion.amplitude_factor={factor!r}",
+                                 f"run.seed={seed}"])
 
 
 def _comparable(s) -> dict:
@@ -357,11 +345,10 @@ def main(argv=None) -> int:
     report = {"case": args.case, "calibration": str(args.calibration) if args.calibration
               else None, "options": {"dx": args.dx, "rheology": args.rheology},
               "seeds": args.seeds, "overrides": args.overrides,
-              "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
-                          "load_1min_start": os.getloadavg()[0]}, "factors": []}
+              "machine": bench.machine(), "factors": []}
     print(f"{args.case}: continuum ({', '.join(methods)}; {args.rheology}) against the DEM; "
           "calibration "
-          f"{args.calibration or 'none (tub47 defaults)'}; load {os.getloadavg()[0]:.2f}")
+          f"{args.calibration or 'none (tub47 defaults)'}; load {bench.load_1min():.2f}")
     base = scenario_at(args.case, 1.0, args.seeds[0], args.overrides)
     cell, radius = base.analysis.cell_size, base.tub.radius
     if args.warm_up and not args.reuse_continuum:
@@ -394,9 +381,9 @@ def main(argv=None) -> int:
             results[name] = compare_factor(factor, conts[name], dems, args.e_seed, radius)
         print_factor(factor, results, conts, dems, seeds_found)
         report["factors"].append({"factor": factor, "methods": results})
-        _write_json(out / "report.json", report)
-    report["machine"]["load_1min_end"] = os.getloadavg()[0]
-    _write_json(out / "report.json", report)
+        bench.write_json(out / "report.json", report)
+    report["machine"]["load_1min_end"] = bench.load_1min()
+    bench.write_json(out / "report.json", report)
     print(f"\nreport in {out / 'report.json'}")
     return 0
 

@@ -39,34 +39,14 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
-import platform
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+import bench
 from vibroflow import liggghts as LG
-from vibroflow.liggghts.importer import _json_safe
-
-
-def load(case: str, overrides: list[str]):
-    from vibroflow.scenario.io import load_scenario
-    return load_scenario(case, overrides)
-
-
-def _copy(s, **sections):
-    """Scenario with fields of its sections replaced: _copy(s, run={"seed": 2})."""
-    update = {name: getattr(s, name).model_copy(update=vals) for name, vals in sections.items()}
-    return s.model_copy(update=update)
-
-
-def _write_json(path: Path, data: dict) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(_json_safe(data), indent=2) + "\n")
-    os.replace(tmp, path)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -75,7 +55,7 @@ def _write_json(path: Path, data: dict) -> None:
 def speed_scenario(s, steps: int, settle: float):
     """The case with a short settle and `steps` vibration steps, no snapshots."""
     dt = s.run.dt
-    return _copy(s, run={"duration": steps * dt, "average_last": 0.0},
+    return bench.with_sections(s, run={"duration": steps * dt, "average_last": 0.0},
                  fill={"settle_time": settle, "max_settle_time": max(settle, dt)})
 
 
@@ -122,11 +102,10 @@ def vibroflow_speed(s, steps: int) -> dict:
 
 
 def run_speed(args) -> dict:
-    s = speed_scenario(load(args.case, args.set), args.steps, args.settle)
+    s = speed_scenario(bench.scenario(args.case, args.set), args.steps, args.settle)
     out = Path(args.out)
     res = {"mode": "speed", "case": s.case, "steps": args.steps, "settle_s": args.settle,
-           "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
-                       "processor": platform.processor()}}
+           "machine": bench.machine()}
     if not args.skip_liggghts:
         print(f"LIGGGHTS: {s.fill.count} balls, {args.steps} vibration steps on {args.nprocs} "
               "MPI ranks ...", flush=True)
@@ -177,11 +156,11 @@ def _table(folder: Path, s):
 def run_physics(args) -> dict:
     from vibroflow.analysis.compare import field_difference, fields_agree, strengths_agree
 
-    base = load(args.case, args.set)
+    base = bench.scenario(args.case, args.set)
     out = Path(args.out) / f"physics-{base.case}"
     runs = {}
     for seed in args.seeds:
-        s = _copy(base, run={"seed": seed})
+        s = bench.with_sections(base, run={"seed": seed})
         for code in ("vibroflow", "liggghts"):
             key = f"{code}-seed{seed}"
             folder = out / key
@@ -423,9 +402,9 @@ def liggghts_overlap(s, work: Path, nprocs: int, timeout: float | None, reuse: b
 
 
 def run_overlap(args) -> dict:
-    base = load(args.case, args.set)
+    base = bench.scenario(args.case, args.set)
     seed = args.seeds[0]
-    s = _copy(base, run={"seed": seed})
+    s = bench.with_sections(base, run={"seed": seed})
     out = Path(args.out) / f"overlap-{s.case}-seed{seed}"
     res = {"mode": "overlap", "case": s.case, "seed": seed, "duration_s": s.run.duration,
            "window_s": s.run.average_last, "dt_s": s.run.dt, "d_m": s.fill.diameter,
@@ -490,7 +469,7 @@ def main(argv=None) -> int:
     # an overlap run is one fill seed's: its file says which, so seeds do not overwrite
     name = f"overlap_seed{args.seeds[0]}" if mode == "overlap" else mode
     path = Path(args.out) / f"{name}.json"
-    _write_json(path, res)
+    bench.write_json(path, res)
     print(f"results: {path}")
     return 0
 

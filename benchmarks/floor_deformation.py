@@ -36,6 +36,8 @@ import sys
 
 import numpy as np
 
+import bench
+
 G = 9.81
 BED_DEPTH = 0.2
 BIN = 0.015
@@ -204,10 +206,9 @@ def case_media(case: str, calibration: str):
     from vibroflow.io.calibration_file import read_calibration
     from vibroflow.continuum.formulation import formulation
     from vibroflow.continuum.material import material_for
-    from vibroflow.scenario.io import load_scenario
     from vibroflow.tub.motion import TubMotion
 
-    scenario = load_scenario(case, [])
+    scenario = bench.scenario(case)
     material = material_for(scenario, read_calibration(calibration),
                             formulation("lagrangian").options())
     full = TubMotion.of_scenario(scenario)

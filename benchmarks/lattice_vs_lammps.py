@@ -48,7 +48,6 @@ import ctypes
 import json
 import math
 import os
-import platform
 import subprocess
 import sys
 import tempfile
@@ -56,6 +55,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+import bench
 
 D = 0.00635          # ball diameter (m)
 RHO = 7800.0         # kg/m^3
@@ -122,10 +123,6 @@ def analyse(pos, vel, omg, radius, mass, lo, hi) -> dict:
         "wall_contacts": int(wall_ov.size),
         "mean_overlap_over_d": float(ov.mean() / D) if ov.size else 0.0,
     }
-
-
-def load1() -> float:
-    return os.getloadavg()[0]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -208,11 +205,11 @@ def run_vibroflow(args) -> dict:
     timings = []
     for _ in range(args.repeat):
         rebuild_log.update(count=0, seconds=0.0)
-        l0 = load1()
+        l0 = bench.load_1min()
         t0 = time.perf_counter()
         S.run_steps(system, state, args.steps)
         wall = time.perf_counter() - t0
-        timings.append({"wall_s": wall, "load_before": l0, "load_after": load1(),
+        timings.append({"wall_s": wall, "load_before": l0, "load_after": bench.load_1min(),
                         "rebuilds": rebuild_log["count"],
                         "rebuild_s": rebuild_log["seconds"]})
     S.rebuild = original_rebuild
@@ -394,14 +391,14 @@ def run_lammps(args) -> dict:
 
     timings = []
     for _ in range(args.repeat):
-        l0 = load1()
+        l0 = bench.load_1min()
         t0 = time.perf_counter()
         L.command(f"run {args.steps}")
         wall = time.perf_counter() - t0
         L.command("print 'timing mark'")
         L.flush_buffers()
         bd = _parse_breakdown(logfile.read_text())
-        timings.append({"wall_s": wall, "load_before": l0, "load_after": load1(),
+        timings.append({"wall_s": wall, "load_before": l0, "load_after": bench.load_1min(),
                         "rebuilds": bd.get("Neighbor list builds"), "breakdown_s": bd})
     final = {"step": total_steps, **sample()}
     info = {"version": L.version(), "granular": L.has_package("GRANULAR"),
@@ -530,7 +527,7 @@ def main(argv=None) -> int:
         for code, pair, t in jobs:
             out = Path(tmp) / f"{code}-{pair}-{t}.json"
             name = code + (f" {pair}" if code == "lammps" else "")
-            print(f"# running {name} with {t} thread(s) (load {load1():.2f}) ...", flush=True)
+            print(f"# running {name} with {t} thread(s) (load {bench.load_1min():.2f}) ...", flush=True)
             r = subprocess.run(_worker_argv(args, code, t, out, pair), text=True,
                                capture_output=True, env=env)
             if r.returncode != 0 or not out.exists():
@@ -617,15 +614,11 @@ def main(argv=None) -> int:
                           "density": RHO, "k_n": KN, "k_t": KT_RATIO * KN,
                           "restitution": E_REST, "friction": MU, "dt_s": DT,
                           "skin_over_d": SKIN_FRAC, "boundaries": "six plane walls (both codes)"},
-               "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
-                           "processor": _cpu_name(), "python": platform.python_version()},
+               "machine": bench.machine(),
                "engine_sha256": _engine_fingerprint(),
                "rows": rows, "physics": physics, "cases": cases,
                "date": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        tmpf = args.json.with_suffix(args.json.suffix + ".tmp")
-        tmpf.write_text(json.dumps(doc, indent=1, default=str))
-        os.replace(tmpf, args.json)
+        bench.write_json(args.json, doc)
         print(f"\nwrote {args.json}")
     return 0
 
@@ -640,16 +633,6 @@ def _engine_fingerprint() -> str:
     for f in sorted(Path(vibroflow.dem.__file__).parent.glob("*.py")):
         h.update(f.name.encode() + b"\0" + f.read_bytes())
     return h.hexdigest()
-
-
-def _cpu_name() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor()
 
 
 if __name__ == "__main__":

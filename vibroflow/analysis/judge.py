@@ -32,9 +32,8 @@ from vibroflow.measure.bulk import CellTable, read_csv
 from vibroflow.analysis.compare import (FIELD_FACTOR, difference_to_seeds, ensemble_mean,
                                         field_difference, fields_agree, seed_scatter,
                                         strengths_agree)
-from vibroflow.measure.summary import json_safe
 from vibroflow.errors import InputError
-from vibroflow.io.atomic import write_json_atomic
+from vibroflow.io.atomic import json_safe, write_json_atomic
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ file do not collide (the last os.replace wins, and each file is whole), and star
     write_bytes_atomic(path, data)            bytes
     write_text_atomic(path, text)             str, UTF-8, "\\n" line ends (no translation)
     write_json_atomic(path, data, indent=2)   json.dumps(...) + "\\n"
+    json_safe(obj)                            numpy values as Python's, NaN/inf as null
     atomic_path(path) / replace_atomic(path, writer)
                                               for writers that want a path of their own
                                               (matplotlib savefig, PIL, h5py, NetCDF, pyevtk)
@@ -26,11 +27,14 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 TMP_PREFIX = ".tmp-"
 
@@ -86,6 +90,24 @@ def write_json_atomic(path, data: Any, *, indent: int | None = 2, sort_keys: boo
     data does not serialise (the exception propagates)."""
     text = json.dumps(data, indent=indent, sort_keys=sort_keys, allow_nan=allow_nan) + "\n"
     return write_text_atomic(path, text)
+
+
+def json_safe(obj):
+    """Recursively turn numpy scalars into Python numbers and NaN/inf into None."""
+    if isinstance(obj, dict):
+        return {str(k): json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return [json_safe(v) for v in obj.tolist()]
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        f = float(obj)
+        return f if math.isfinite(f) else None
+    return obj
 
 
 def _fsync_path(tmp: Path) -> None:

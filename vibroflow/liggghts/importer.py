@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from vibroflow.errors import InputError
-from vibroflow.io.atomic import TMP_PREFIX, write_json_atomic
+from vibroflow.io.atomic import TMP_PREFIX, json_safe, write_json_atomic
 from vibroflow.io.folder_lock import folder_lock
 from vibroflow.liggghts.contacts import PairCheck, _pair_rows, _wall_rows
 from vibroflow.liggghts.deck import (BALL_DUMP, PAIR_DUMP, POST_DIR, SERIES_FILE, START_FILE,
@@ -69,7 +69,7 @@ def import_run(dump_dir, scenario=None, out_dir=None) -> dict:
             try:
                 summary = _import(post, scenario, n0, tmp_dir)
                 summary["bulk_velocity_csv"] = os.fspath(out_dir / BULK_CSV)
-                write_json_atomic(tmp_dir / "summary.json", _json_safe(summary))
+                write_json_atomic(tmp_dir / "summary.json", json_safe(summary))
                 for name in IMPORT_FILES:  # summary.json last: it says the import is done
                     os.replace(tmp_dir / name, out_dir / name)
             finally:
@@ -327,11 +327,3 @@ def _find_log(post: Path) -> Path | None:
             if (folder / name).is_file():
                 return folder / name
     return None
-
-
-def _json_safe(obj):
-    try:
-        from vibroflow.measure.summary import json_safe
-        return json_safe(obj)
-    except ImportError:  # pragma: no cover
-        return obj

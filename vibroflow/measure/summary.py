@@ -22,12 +22,12 @@ batches, a kind with no impact) are reported as None so the dict is valid JSON.
 """
 from __future__ import annotations
 
-import math
 import os
 from collections.abc import Mapping
 
 import numpy as np
 
+from vibroflow.io.atomic import json_safe
 from vibroflow.measure.bulk import cell_table, probe_values, write_csv
 from vibroflow.measure.circulation import circulation
 from vibroflow.measure.contacts import impact_stats, impact_stats_chunked, wall_contact_stats
@@ -58,24 +58,6 @@ def _attrs(src) -> Mapping:
     if a is None and isinstance(src, Mapping):
         a = src.get("attrs", {})
     return a if a is not None else {}
-
-
-def json_safe(obj):
-    """Recursively turn numpy scalars into Python numbers and NaN/inf into None."""
-    if isinstance(obj, dict):
-        return {str(k): json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [json_safe(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return [json_safe(v) for v in obj.tolist()]
-    if isinstance(obj, (bool, np.bool_)):
-        return bool(obj)
-    if isinstance(obj, (int, np.integer)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        f = float(obj)
-        return f if math.isfinite(f) else None
-    return obj
 
 
 def tub_summary(source, scenario, bulk_csv=None, t_end: float | None = None) -> dict:
