@@ -59,7 +59,7 @@ def main(argv=None) -> int:
     dem = json.loads((args.dem_dir / "summary.json").read_text())["impacts"]
     measured = {"ball_ball": dem["ball_ball_mean_normal_speed"],
                 "ball_wall": dem["ball_wall_mean_normal_speed"]}
-    # the relation the continuum now uses: fitted on the continuum's measure
+    # the relation the continuum uses: fitted on the continuum's measure
     for name in ("ball_ball", "ball_wall"):
         tables["impacts"][name].update(c0_cells_m_s=cells[name]["c0"],
                                        c1_cells=cells[name]["c1"])

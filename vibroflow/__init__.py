@@ -9,6 +9,7 @@ nothing here imports numba.
 """
 from __future__ import annotations
 
+import importlib
 import os as _os
 import sys as _sys
 from importlib import metadata as _metadata
@@ -54,9 +55,7 @@ _LAZY = {"load_scenario": "vibroflow.scenario.io", "Scenario": "vibroflow.scenar
 
 
 def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        import importlib
-
+    if name in _LAZY:  # loaded on first use: `import vibroflow` stays light for the CLI
         value = getattr(importlib.import_module(_LAZY[name]), name)
         globals()[name] = value
         return value

@@ -45,21 +45,20 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import xarray as xr
 
+from vibroflow.dem.query import ball_contacts_now
+from vibroflow.dem.simulate import wall_contacts_now
 from vibroflow.errors import InputError
 from vibroflow.measure.bulk import grid_extent
 from vibroflow.measure.stats import stderr_of_batches
 from vibroflow.tub.geometry import TubGeometry
-from vibroflow.tub.motion import lab_to_tub_np, pose_np, relative_velocity_tub_axes_np
+from vibroflow.tub.motion import TubMotion, lab_to_tub_np, pose_np, relative_velocity_tub_axes_np
 
 from .coarse_grain_fields import COMPONENTS, FIELD_META, derive_fields
 from .coarse_grain_kernel import (KERNELS, LUCY_CUTOFF_PER_WIDTH, N_BALL_Q, N_CONTACT_Q,
                                   deposit_balls, deposit_contacts, kernel_parameters)
 
-try:  # optional: fields() returns a plain dict without it
-    import xarray as _xr
-except ImportError:  # pragma: no cover - exercised only where xarray is absent
-    _xr = None
 
 D_TUB47 = 0.00635          # m, tub47's ball diameter (default kernel width d/2)
 
@@ -278,7 +277,7 @@ class CoarseGrainer:
         gradient : "kernel" (exact CG velocity gradient, default) or "grid" (central
             differences of V on the grid).
         stderr : add `<name>_stderr` (batch means) for every field; default when n_batches >= 2.
-        as_xarray : return an xarray.Dataset (default when xarray is installed) or a dict
+        as_xarray : return an xarray.Dataset (default) or, with False, a dict
             {"coords": {...}, "attrs": {...}, name: (dims, array, attrs)}.
 
         Vectors have a last dim `i`, tensors `i`, `j` (coordinates "x", "y", "z").  Where no
@@ -330,11 +329,8 @@ class CoarseGrainer:
                 out[name + "_stderr"] = (dims, np.asarray(se),
                                          {"units": unit,
                                           "long_name": f"batch-means standard error of {name}"})
-        use_xr = (_xr is not None) if as_xarray is None else bool(as_xarray)
-        if use_xr:
-            if _xr is None:
-                raise InputError("as_xarray = True: xarray is not installed")
-            ds = _xr.Dataset({k: v for k, v in out.items()}, coords=coords, attrs=attrs)
+        if as_xarray is None or as_xarray:
+            ds = xr.Dataset({k: v for k, v in out.items()}, coords=coords, attrs=attrs)
             ds["x"].attrs["units"] = "m"
             ds["z"].attrs["units"] = "m"
             if phase_resolved:
@@ -354,10 +350,6 @@ def snapshot_from_state(system, state, contacts: bool = True) -> dict:
     The tub's pose is the system's motion at the state's time (at rest unless the state is
     vibrating); wall contact points are in the tub frame (wall_contacts_now).
     """
-    from vibroflow.dem.query import ball_contacts_now
-    from vibroflow.dem.simulate import wall_contacts_now
-    from vibroflow.tub.motion import TubMotion
-
     motion = system.motion if state.vibrating else TubMotion.still()
     pivot = (motion.pivot_x, motion.pivot_z)
     pz = pose_np(motion, state.time(system.dt))

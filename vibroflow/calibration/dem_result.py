@@ -18,8 +18,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from vibroflow.measure.stats import batches_of_whole_cycles
 from vibroflow.errors import InputError
+from vibroflow.measure.stats import batches_of_whole_cycles
+from vibroflow.scenario.io import parse_scenario
 from vibroflow.tub.motion import lab_to_tub_np, relative_velocity_tub_axes_np
 
 DEM_FILE = "dem.h5"
@@ -67,7 +68,6 @@ class DEMResult:
                 text = f.attrs.get("scenario_toml")
                 if text is None:
                     raise InputError(f"{path}: no scenario_toml attribute: give the scenario")
-                from vibroflow.scenario.io import parse_scenario
                 if isinstance(text, bytes):
                     text = text.decode()
                 scenario = parse_scenario(tomllib.loads(str(text)))

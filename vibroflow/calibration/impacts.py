@@ -26,6 +26,9 @@ import math
 import numpy as np
 
 from vibroflow.dem.walls import KIND_BALL_BALL, KIND_BALL_TUB
+from vibroflow.measure.phase_shear import near_wall_nodes, phase_shear_of_snapshots
+from vibroflow.measure.stats import batches_of_whole_cycles, phase_bins
+from vibroflow.tub.geometry import geometry_of
 
 from .dem_result import DEMResult
 
@@ -109,8 +112,6 @@ def window_impacts(res: DEMResult, n_phases: int, chunk: int = 2_000_000):
     """Yield (kind, normal speed m/s, contact point (tub frame, m), phase bin) arrays of the
     impacts of the averaging window's whole cycles, `chunk` impacts read at a time (a tub47
     run holds ~25 million)."""
-    from vibroflow.measure.stats import batches_of_whole_cycles, phase_bins
-
     if not res.has("impacts/kind"):
         return
     f = res.file
@@ -220,9 +221,6 @@ def impact_relations_on_cells(run, cell_size: float | None = None,
     "cell_size_m", "bed_mean_shear_rate_1_s",
     "near_wall_shear_rate_1_s" (the DEM's own values of the continuum's two measures, with
     their standard errors)}."""
-    from vibroflow.measure.phase_shear import near_wall_nodes, phase_shear_of_snapshots
-    from vibroflow.tub.geometry import geometry_of
-
     own = not isinstance(run, DEMResult)
     res = DEMResult.open(run) if own else run
     try:

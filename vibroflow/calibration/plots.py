@@ -8,15 +8,19 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from matplotlib.colors import LogNorm
 
 from vibroflow.continuum.rheology import mu_of_I, phi_of_I
 from vibroflow.io.atomic import atomic_path
 
 
 def _plt():
-    import matplotlib
+    """pyplot on the Agg backend (files, no display).  Imported here, not at the top: the
+    backend is chosen before pyplot loads, and only when a picture is drawn, so importing
+    vibroflow never changes the backend of the caller's own plots."""
+    import matplotlib  # noqa: PLC0415
     matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # noqa: PLC0415
     return plt
 
 
@@ -42,7 +46,6 @@ def field_maps(path, fields, geometry, min_solid_fraction: float = 0.05) -> Path
     """Solid fraction, velocity relative to the tub (arrows on its magnitude), shear rate and
     granular temperature over the cross-section, from the time-averaged fields."""
     plt = _plt()
-    from matplotlib.colors import LogNorm
 
     x = fields["x"].values
     z = fields["z"].values

@@ -55,6 +55,7 @@ from vibroflow.liggghts.parameters import (PairTables, _check_exportable, _conta
                                            seed_primes, type_materials)
 from vibroflow.liggghts.stl import DEFAULT_MAX_SAGITTA, arc_segments, sagitta, write_tub_meshes
 from vibroflow.liggghts.template import _PROCESSORS, _SLOT, _Deck, _fmt, _short, _whole, safe_name
+from vibroflow.scenario.io import dump_scenario
 from vibroflow.tub.geometry import geometry_of
 from vibroflow.tub.motion import TubMotion
 
@@ -92,14 +93,7 @@ def _check_names(scenario) -> None:
 
 
 def _scenario_toml(scenario) -> str:
-    try:
-        from vibroflow.scenario.io import dump_scenario
-    except ImportError:  # pragma: no cover
-        dump_scenario = None
-    if dump_scenario is not None:
-        return dump_scenario(scenario)
-    import tomli_w
-    return tomli_w.dumps(scenario.model_dump(mode="json", exclude_none=True))
+    return dump_scenario(scenario)
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from vibroflow.dem.output import ResultWriter
 from vibroflow.errors import InputError
 from vibroflow.io.atomic import TMP_PREFIX, json_safe, write_json_atomic
 from vibroflow.io.folder_lock import folder_lock
@@ -27,6 +28,8 @@ from vibroflow.liggghts.dumps import _StepReader, _whole_column, read_dump
 from vibroflow.liggghts.launch import loop_times
 from vibroflow.liggghts.parameters import _check_exportable
 from vibroflow.liggghts.template import _short
+from vibroflow.measure.summary import tub_summary
+from vibroflow.scenario.io import load_scenario
 from vibroflow.tub.geometry import geometry_of
 from vibroflow.tub.motion import TubMotion, pose_np
 
@@ -84,8 +87,6 @@ def import_run(dump_dir, scenario=None, out_dir=None) -> dict:
 
 def _import(post: Path, scenario, n0: int, tmp_dir: Path) -> dict:
     """The import proper: dem.h5 and bulk_velocity.csv into tmp_dir; returns the summary."""
-    from vibroflow.dem.output import ResultWriter
-
     run = scenario.run
     dt = run.dt
     f = scenario.motion.frequency
@@ -243,7 +244,6 @@ def _import(post: Path, scenario, n0: int, tmp_dir: Path) -> dict:
         summary["ball_contacts_repulsive_fraction"] = (
             pair_check.repulsive / pair_check.contacts if pair_check.contacts else float("nan"))
     summary["impacts_available"] = False
-    from vibroflow.measure.summary import tub_summary
     summary.update(tub_summary(h5, scenario, bulk_csv=tmp_dir / BULK_CSV))
     return summary
 
@@ -261,7 +261,6 @@ def _resolve_dump_dir(dump_dir: Path) -> Path:
 def _scenario_for(dump_dir: Path, scenario):
     if scenario is not None:
         return scenario
-    from vibroflow.scenario.io import load_scenario
     for folder in (dump_dir, dump_dir.parent):
         if (folder / "scenario.toml").is_file():
             return load_scenario(folder / "scenario.toml")

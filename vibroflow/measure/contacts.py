@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vibroflow.measure.stats import batch_means, stderr_of_batches
+from vibroflow.measure.stats import batch_means, batches_of_whole_cycles, stderr_of_batches
 
 IMPACT_KINDS = {0: "ball_ball", 1: "ball_wall", 2: "ball_partition", 3: "plane_wall"}
 
@@ -215,8 +215,6 @@ def impact_stats_chunked(kind, normal_speed, time, t_start: float, t_end: float,
     The impacts of the averaging window [t_start, t_end) are batched by whole cycles
     (stats.batches_of_whole_cycles) and reduced exactly as impact_stats does.
     """
-    from vibroflow.measure.stats import batches_of_whole_cycles
-
     nk = max(IMPACT_KINDS) + 1
     sums, counts = np.zeros((nk, n_batches)), np.zeros((nk, n_batches))
     m = int(kind.shape[0])

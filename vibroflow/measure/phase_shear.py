@@ -34,8 +34,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vibroflow.tub.geometry import distance_to_wall_np
+from vibroflow.tub.geometry import distance_to_wall_np, geometry_of
 from vibroflow.tub.motion import lab_to_tub_np, relative_velocity_tub_axes_np
+
+from .stats import batches_of_whole_cycles, phase_bins
 
 #: a node enters the gradient when its phase-averaged solid fraction is at least this (the
 #: impact relation's own floor, calibration.impacts.impact_relations min_solid_fraction)
@@ -266,9 +268,6 @@ def phase_shear_of_snapshots(scenario, positions, velocities, poses, volume, tim
     or h5py datasets, read a snapshot at a time), poses (S, 6), volume (N,) the solid volume
     (m^3) each body stands for, times (S,) s.  Binned by the scenario's sampling phases and by
     its batches of whole cycles.  The DEM calibration and both continuum drivers call this."""
-    from .stats import batches_of_whole_cycles, phase_bins
-    from vibroflow.tub.geometry import geometry_of
-
     geo = geometry_of(scenario)
     h, nxh, nz = node_grid(geo, cell_size or float(scenario.analysis.cell_size))
     run, motion = scenario.run, scenario.motion

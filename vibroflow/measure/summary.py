@@ -25,6 +25,7 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 
+import h5py
 import numpy as np
 
 from vibroflow.io.atomic import json_safe
@@ -81,8 +82,6 @@ def tub_summary(source, scenario, bulk_csv=None, t_end: float | None = None) -> 
     Units: m, m/s, m^2/s, s.
     """
     if isinstance(source, (str, os.PathLike)):
-        import h5py
-
         path = os.fspath(source)
         if bulk_csv is None:
             bulk_csv = os.path.join(os.path.dirname(os.path.abspath(path)), BULK_CSV_NAME)

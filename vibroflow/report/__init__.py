@@ -15,6 +15,9 @@ from pathlib import Path
 
 from vibroflow.io.atomic import write_text_atomic
 from vibroflow.io.folder_lock import folder_lock
+from vibroflow.report.animation import write_slice_gif
+from vibroflow.report.data import StudyData
+from vibroflow.report.html import render
 from vibroflow.study.folder import check_study_dir
 
 REPORT_NAME = "report.html"
@@ -26,8 +29,6 @@ def write_report(study_dir) -> Path:
     """Write DIR/report.html (and DIR/report/dem_slice.gif) for the finished study in
     study_dir; returns the page's path.  A missing, foreign, corrupt or unfinished folder is an
     InputError (one line) and nothing is written.  Both files are written atomically."""
-    from vibroflow.report.data import StudyData
-
     out = Path(study_dir)
     if not out.is_dir():  # a missing folder or a file, before the lock would make a folder
         check_study_dir(out, must_exist=True)
@@ -39,9 +40,6 @@ def write_report(study_dir) -> Path:
 
 
 def _write(out: Path, data) -> Path:
-    from vibroflow.report.animation import write_slice_gif
-    from vibroflow.report.html import render
-
     gif, why = None, None
     dem_dir = out / "dem"
     if (dem_dir / "dem.h5").is_file():

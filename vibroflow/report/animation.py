@@ -14,8 +14,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from matplotlib.collections import EllipseCollection
+from matplotlib.colors import Normalize
+from PIL import Image
 
+from vibroflow.calibration.dem_result import DEMResult
 from vibroflow.io.atomic import atomic_path
+from vibroflow.tub.geometry import geometry_of
 
 #: frames at most (the last snapshots of the run), and the frame duration (ms)
 MAX_FRAMES = 48
@@ -26,9 +31,12 @@ DPI = 90
 
 
 def _plt():
-    import matplotlib
+    """pyplot on the Agg backend (files, no display).  Imported here, not at the top: the
+    backend is chosen before pyplot loads, and only when a picture is drawn, so importing
+    vibroflow never changes the backend of the caller's own plots."""
+    import matplotlib  # noqa: PLC0415
     matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # noqa: PLC0415
     return plt
 
 
@@ -37,9 +45,6 @@ def slice_frames(run_dir, max_frames: int = MAX_FRAMES, half_thickness: float | 
     a list of dicts {time (s), x, z (m, tub frame), radius (m), speed (m/s, relative to the
     tub)} of the slab's balls, for the last `max_frames` snapshots.  half_thickness (m) defaults
     to 1.5 ball diameters (a slab three balls thick), at most half the tub's length."""
-    from vibroflow.tub.geometry import geometry_of
-    from vibroflow.calibration.dem_result import DEMResult
-
     with DEMResult.open(run_dir) as res:
         geo = geometry_of(res.scenario)
         d = res.diameter
@@ -62,10 +67,6 @@ def write_slice_gif(run_dir, path, max_frames: int = MAX_FRAMES,
                     half_thickness: float | None = None) -> Path:
     """Write the animation of the DEM run in run_dir (a folder with dem.h5) to `path`; returns
     the path.  Frame count: min(max_frames, snapshots); ~ 410 px wide."""
-    from matplotlib.collections import EllipseCollection
-    from matplotlib.colors import Normalize
-    from PIL import Image
-
     frames, geo, d, ht = slice_frames(run_dir, max_frames, half_thickness)
     if not frames:
         raise ValueError(f"{run_dir}: the DEM result holds no snapshots")

@@ -24,6 +24,7 @@ from pathlib import Path
 import jinja2
 from markupsafe import Markup
 
+from vibroflow import __version__
 from vibroflow.report import figures
 from vibroflow.report.data import StudyData
 
@@ -330,8 +331,6 @@ def _cost(data: StudyData) -> dict:
 
 def render(data: StudyData, gif: Path | None = None, gif_note: str | None = None) -> str:
     """The whole page (a str of HTML)."""
-    from vibroflow import __version__
-
     s = data.summary
     bodies = {
         "velocity": {"img": _img(figures.velocity_fields(data), "velocity fields")},

@@ -336,7 +336,7 @@ def _check_particles(s: Scenario) -> None:
     if len(ps) <= 256:
         i_idx, j_idx = np.triu_indices(len(ps), 1)
     else:
-        from scipy.spatial import cKDTree
+        from scipy.spatial import cKDTree  # lazy: scipy stays out of `import vibroflow`
 
         pairs = cKDTree(x).query_pairs(reach, output_type="ndarray")
         i_idx, j_idx = pairs[:, 0], pairs[:, 1]

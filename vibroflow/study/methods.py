@@ -15,7 +15,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from vibroflow.continuum.formulation import FORMULATIONS
+from vibroflow.continuum.formulation import FORMULATIONS, formulation
+from vibroflow.continuum.material import material_for
+from vibroflow.continuum.options import ContinuumOptions
+from vibroflow.continuum.tub_run import run_continuum
 from vibroflow.errors import InputError
 from vibroflow.io.calibration_file import Calibration
 
@@ -52,10 +55,6 @@ def _method(name: str):
     parameters are an input error first."""
     def factory() -> ContinuumMethod:
         # imported here: the continuum's modules load numba (the factory's reason to exist)
-        from vibroflow.continuum.formulation import formulation
-        from vibroflow.continuum.material import material_for
-        from vibroflow.continuum.options import ContinuumOptions
-        from vibroflow.continuum.tub_run import run_continuum
 
         form = formulation(name)
 

@@ -4,7 +4,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
+import xarray as xr
+
 from vibroflow.errors import InputError
+from vibroflow.measure.bulk import read_csv
 from vibroflow.study.folder import check_study_dir
 
 
@@ -28,11 +32,6 @@ def read_summary(out) -> dict:
 def field_dataset(csv_path, cell_size: float | None = None, method: str = ""):
     """A bulk_velocity.csv as an xarray Dataset on its (z, x) cell grid (cells without a ball:
     NaN velocities, 0 solid fraction and samples).  Units: m, m/s."""
-    import numpy as np
-    import xarray as xr
-
-    from vibroflow.measure.bulk import read_csv
-
     try:
         t = read_csv(csv_path, cell_size=cell_size)
     except ValueError as e:

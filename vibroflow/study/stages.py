@@ -16,8 +16,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from vibroflow import __version__
+from vibroflow.analysis.compare import field_difference, strengths_agree
+from vibroflow.calibration.calibrate import calibrate
+from vibroflow.continuum.options import options_record
+from vibroflow.dem.run import run_dem
 # write_json_atomic is imported from here by the study's other modules
 from vibroflow.io.atomic import write_json_atomic
+from vibroflow.io.calibration_file import read_calibration
+from vibroflow.measure.bulk import read_csv
 from vibroflow.study.methods import ContinuumMethod
 
 DEM = "dem"
@@ -72,8 +79,6 @@ def _dem_cost(study: Study) -> float:
 
 
 def _run_dem(study: Study, resume: bool) -> dict:
-    from vibroflow.dem.run import run_dem
-
     summary = run_dem(study.scenario, out_dir=study.folder(DEM), resume=resume,
                       progress=study.progress)
     return {"summary": f"{DEM}/summary.json", "wall_time_s": summary["wall_time_s"]}
@@ -90,8 +95,6 @@ def dem_stage() -> Stage:
 # calibration (its files go next to the DEM's, where `vibroflow calibrate` puts them)
 
 def _run_calibration(study: Study, resume: bool) -> dict:
-    from vibroflow.calibration.calibrate import calibrate
-
     cal = calibrate(study.folder(DEM), shear_cell=study.shear_cell, progress=study.progress,
                     cyclic=True, dilatancy=needs_dilatancy(study))
     r = cal.rheology
@@ -129,8 +132,6 @@ def calibration_stage() -> Stage:
 
 def continuum_stage(method: ContinuumMethod, options) -> Stage:
     def inputs(study: Study) -> dict:
-        from vibroflow.continuum.options import options_record
-
         opts = options_record(options)
         # the options class's LATER_OPTIONS are left out at their defaults, so that a stage
         # hashed without them keeps its hash
@@ -141,8 +142,6 @@ def continuum_stage(method: ContinuumMethod, options) -> Stage:
         return {"scenario": scenario_inputs(study.scenario), "options": opts}
 
     def run(study: Study, resume: bool) -> dict:
-        from vibroflow.io.calibration_file import read_calibration
-
         cal = read_calibration(study.folder(DEM) / "calibration.toml")
         summary = method.run(study.scenario, study.folder(method.name), cal, options,
                              study.progress, resume)
@@ -172,10 +171,6 @@ def compare(study: Study) -> dict:
     """The study's summary: every method's probes, circulation, impacts and wall time; each
     continuum method's field difference E against the DEM, circulation verdict (tub47.md
     "Judging a comparison"), probe differences and cost ratio."""
-    from vibroflow import __version__
-    from vibroflow.measure.bulk import read_csv
-    from vibroflow.analysis.compare import field_difference, strengths_agree
-
     out = study.out
     sc = study.scenario
     h = sc.analysis.cell_size

@@ -15,20 +15,29 @@ other sweep died); so both sweeps end with the whole table and every point runs 
 """
 from __future__ import annotations
 
+import asyncio
 import logging
 import os
+import socket
 import sys
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from distributed import Client, LocalCluster, wait
+from distributed.comm import connect, parse_address
+from distributed.comm.addressing import parse_host_port
+from rich.console import Console
+
+from vibroflow import __version__
 from vibroflow.errors import InputError
-from vibroflow.study.sweep_folder import (KIND, PLOTS, POINT_LOCK, TABLE_FILE, check_same_sweep,
-                                          dir_lock, is_locked, point_dir, read_record,
-                                          write_record)
 from vibroflow.study.pipeline import format_duration
+from vibroflow.study.sweep_folder import (KIND, PLOTS, POINT_LOCK, TABLE_FILE, check_same_sweep,
+                                          dir_lock, is_locked, point_dir, read_record, write_record)
+from vibroflow.study.sweep_plots import write_plots
 from vibroflow.study.sweep_points import SweepPlan
+from vibroflow.study.sweep_table import rich_table, sweep_rows, write_csv_atomic
 from vibroflow.study.sweep_worker import THREAD_ENV, record_lost, run_point
 
 #: seconds between two looks at the lock of a point running elsewhere
@@ -47,8 +56,6 @@ def check_sweep_dir(out: Path, plan: SweepPlan) -> dict | None:
 def _merge_record(out: Path, plan: SweepPlan) -> dict:
     """Create or extend DIR/sweep.json with this sweep's points (under the folder lock: two
     sweeps starting together both see one folder, one base, every point)."""
-    from vibroflow import __version__
-
     with dir_lock(out):
         record = check_sweep_dir(out, plan)
         now = time.strftime("%Y-%m-%dT%H:%M:%S%z")
@@ -68,9 +75,6 @@ def _merge_record(out: Path, plan: SweepPlan) -> dict:
 def finish_outputs(out: Path, results: dict[str, dict] | None = None) -> dict:
     """Write sweep.csv, the plots and sweep.json from what the points' folders hold now (under
     the folder lock, so two sweeps never interleave); returns the record with the rows."""
-    from vibroflow.study.sweep_plots import write_plots
-    from vibroflow.study.sweep_table import sweep_rows, write_csv_atomic
-
     with dir_lock(out):
         record = read_record(out)
         assert record is not None  # written by _merge_record before any point ran
@@ -110,9 +114,6 @@ def check_scheduler(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
     protocol, reads the service's reply as a Dask frame header and fails with MemoryError
     ("Unable to allocate 3.07 EiB" for an HTTP reply), ValueError or a comm error, and it waits
     for ever on a peer that accepts the connection and stays silent."""
-    import asyncio
-    import socket
-
     def refuse(what: str) -> InputError:
         return InputError(f"--scheduler = {address!r}: no Dask scheduler answers there "
                           f"({what}); start one with `dask scheduler` or leave --scheduler out")
@@ -121,9 +122,6 @@ def check_scheduler(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
         return InputError(f"--scheduler = {address!r}: not a Dask scheduler address ({what}); "
                           "give tcp://HOST:PORT as `dask scheduler` prints it, or leave "
                           "--scheduler out")
-
-    from distributed.comm import parse_address
-    from distributed.comm.addressing import parse_host_port
 
     try:
         scheme, loc = parse_address(address)
@@ -152,8 +150,6 @@ def check_scheduler(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
         raise refuse((e.strerror or str(e)).lower()) from None
 
     async def identity():
-        from distributed.comm import connect
-
         comm = await connect(address, timeout=timeout)
         try:
             await comm.write({"op": "identity", "reply": True})
@@ -183,8 +179,6 @@ def make_client(scheduler: str | None, workers: int):
     """(client, cluster): the cluster at `scheduler` (checked first, check_scheduler), or a
     local one of `workers` processes with one thread each and NUMBA_NUM_THREADS=1 in their
     environment."""
-    from distributed import Client, LocalCluster
-
     if scheduler:
         check_scheduler(scheduler)
         try:
@@ -214,8 +208,6 @@ def run_sweep(plan: SweepPlan, out: Path, scheduler: str | None = None,
     layers above the study (the report: vibroflow.report.stage.report_stage).  Returns the
     sweep record (sweep.json) with "rows" (the table) and "results" (this run's result per
     point)."""
-    from distributed import wait
-
     out = Path(out)
     check_sweep_dir(out, plan)  # before anything is written or started
     jobs = {p.name: {"name": p.name, "values": p.values, "scenario": p.scenario,
@@ -298,10 +290,6 @@ def run_sweep(plan: SweepPlan, out: Path, scheduler: str | None = None,
 
 def print_table(record: dict, file=None) -> None:
     """The sweep's table on the terminal (rich)."""
-    from rich.console import Console
-
-    from vibroflow.study.sweep_table import rich_table
-
     Console(file=file or sys.stdout).print(rich_table(record["rows"], record["varied"]))
 
 

@@ -17,9 +17,14 @@ import itertools
 import re
 import tomllib
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from vibroflow.errors import InputError
+from vibroflow.scenario.io import load_scenario
+from vibroflow.study.methods import METHODS, method
+from vibroflow.study.pipeline import split_settings
+from vibroflow.study.stages import Study, stages_of
 
 FACTOR_KEY = "motion.amplitude_factor"
 #: the folder-name label of the amplitude factor (the other keys keep their dotted names)
@@ -165,8 +170,6 @@ def _drop(data: Any, dotted: str) -> None:
 
 
 def _method_key(key: str) -> bool:
-    from vibroflow.study.methods import METHODS
-
     head, dot, rest = key.partition(".")
     return head in METHODS and bool(dot and rest)
 
@@ -178,10 +181,6 @@ def plan_sweep(source: str, factors: list[float], vary: dict[str, list[tuple[str
     sets: the fixed `--set` items (scenario fields and continuum options, as `vibroflow run`
     takes them).  Raises InputError (one line naming the key and value) before anything runs.
     """
-    from vibroflow.scenario.io import load_scenario
-    from vibroflow.study.methods import METHODS, method
-    from vibroflow.study.pipeline import split_settings
-
     sets = list(sets or [])
     if not factors:
         raise InputError("--factors: give at least one amplitude factor")
@@ -250,11 +249,6 @@ def plan_sweep(source: str, factors: list[float], vary: dict[str, list[tuple[str
 
 def _point_estimate(scenario, options: dict[str, Any], shear_cell: bool) -> float:
     """The stages' own first estimates of one point's cost (s), as `vibroflow run` makes them."""
-    from pathlib import Path
-
-    from vibroflow.study.methods import method
-    from vibroflow.study.stages import Study, stages_of
-
     study = Study(out=Path("."), scenario=scenario,
                   methods=[(method(n), o) for n, o in options.items()], shear_cell=shear_cell)
     return float(sum(s.estimate(study) for s in stages_of(study)))

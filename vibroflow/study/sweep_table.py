@@ -16,6 +16,8 @@ import math
 from pathlib import Path
 from typing import Any
 
+from rich.table import Table
+
 from vibroflow.io.atomic import write_text_atomic
 from vibroflow.study.sweep_folder import point_dir, point_state
 from vibroflow.study.sweep_points import FACTOR_KEY
@@ -121,8 +123,6 @@ def _pm(v, e, scale: float = 1.0, fmt: str = ".3g") -> str:
 def rich_table(rows: list[dict[str, Any]], varied: list[str]):
     """The table for the terminal: values, method, status, circulation, E, impacts, wall time
     (the probes are in sweep.csv)."""
-    from rich.table import Table
-
     t = Table(title="vibroflow sweep", show_lines=False)
     for k in varied:
         t.add_column("factor" if k == FACTOR_KEY else k, justify="right")

@@ -22,6 +22,14 @@ import traceback
 from pathlib import Path
 from typing import Any
 
+from vibroflow import __version__
+from vibroflow.io.atomic import write_json_atomic
+from vibroflow.scenario.model import Scenario
+from vibroflow.study.folder import KIND as STUDY_KIND
+from vibroflow.study.folder import STUDY_FILE
+from vibroflow.study.pipeline import run_study
+from vibroflow.study.sweep_folder import FAILED_FILE, POINT_FILE, POINT_LOCK, point_dir, try_lock
+
 THREAD_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
               "OPENBLAS_NUM_THREADS": "1"}
 
@@ -32,7 +40,7 @@ def limit_threads() -> dict[str, Any]:
     if not numba_loaded:
         for k, v in THREAD_ENV.items():
             os.environ.setdefault(k, v)
-    import numba
+    import numba  # noqa: PLC0415  (after the environment: numba reads NUMBA_NUM_THREADS once)
 
     if numba.get_num_threads() != 1:
         numba.set_num_threads(1)  # numba loaded earlier with more threads: this thread's share
@@ -56,13 +64,6 @@ def run_point(out: str, job: dict) -> dict:
     """Run the study of one point (job: name, values, scenario, settings, overrides,
     shear_cell) in DIR/points/<name>; returns its result record (status "done", "kept",
     "failed" or "busy": another sweep holds the point's lock)."""
-    from vibroflow import __version__
-    from vibroflow.study.folder import KIND as STUDY_KIND
-    from vibroflow.study.folder import STUDY_FILE
-    from vibroflow.study.stages import write_json_atomic
-    from vibroflow.study.sweep_folder import (FAILED_FILE, POINT_FILE, POINT_LOCK, point_dir,
-                                              try_lock)
-
     worker = limit_threads()
     name = job["name"]
     folder = point_dir(Path(out), name)
@@ -84,9 +85,6 @@ def run_point(out: str, job: dict) -> dict:
         (folder / FAILED_FILE).unlink(missing_ok=True)
         before = _stage_mtimes(folder)
         try:
-            from vibroflow.scenario.model import Scenario
-            from vibroflow.study.pipeline import run_study
-
             scenario = Scenario.model_validate(job["scenario"])
             with open(folder / "sweep.log", "a") as log:
                 run_study(scenario, folder, job["settings"], shear_cell=job["shear_cell"],
@@ -111,9 +109,6 @@ def run_point(out: str, job: dict) -> dict:
 def record_lost(out: str, name: str, error: str) -> None:
     """Write failed.json for a point whose worker died (the task's own handler never ran);
     skipped when another process holds the point now."""
-    from vibroflow.study.stages import write_json_atomic
-    from vibroflow.study.sweep_folder import FAILED_FILE, POINT_LOCK, point_dir, try_lock
-
     folder = point_dir(Path(out), name)
     if not folder.is_dir():
         folder.mkdir(parents=True, exist_ok=True)
