@@ -22,15 +22,7 @@ from vibroflow.continuum.mpm.solver import MPMSystem, init_state, run_steps
 from vibroflow.continuum.timestep import stable_dt
 from vibroflow.errors import InputError
 
-G_ACC = 9.81
-
-
-def lattice(x0, x1, z0, z1, spacing):
-    """Points on a square lattice of the given spacing filling [x0, x1] x [z0, z1] (m)."""
-    xs = np.arange(x0 + spacing / 2, x1, spacing)
-    zs = np.arange(z0 + spacing / 2, z1, spacing)
-    X, Z = np.meshgrid(xs, zs, indexing="ij")
-    return np.stack([X.ravel(), Z.ravel()], axis=1)
+from continuum_helpers import G_ACC, lattice, spinning_compressed_disc
 
 
 # ----------------------------------------------------------------------------------------------
@@ -155,28 +147,6 @@ def test_elastic_p_wave_speed():
     run_steps(system, state, int(0.12 / c / system.dt), record)
     speed = np.polyfit(t, centre, 1)[0]
     assert speed == pytest.approx(c, rel=0.02)
-
-
-def spinning_compressed_disc(flip: float, transfers: int = 1):
-    """A disc of radius 6 cm (dx = 5 mm, 2 x 2 points a cell) in free space, translating at
-    (0.3, 0.1) m/s and spinning at 15 rad/s, pre-compressed to p0 = 20 kPa, elastic (mu_s = 2);
-    returns (system, state, p0) with the system's FLIP fraction `flip` and its transfers a
-    step."""
-    mat = ContinuumMaterial(mu_s=2.0, mu_2=2.5)
-    dx = 0.005
-    sp = dx / 2
-    grid = Grid.covering(-0.12, 0.12, -0.12, 0.12, dx)
-    x = lattice(-0.06, 0.06, -0.06, 0.06, sp)
-    x = x[np.hypot(x[:, 0], x[:, 1]) < 0.06]
-    p0 = 2.0e4
-    rho = mat.critical_density * math.exp(p0 / mat.bulk_modulus)
-    omega = 15.0
-    v = np.stack([0.3 - omega * x[:, 1], 0.1 + omega * x[:, 0]], axis=1)
-    stress = np.zeros((len(x), 4))
-    stress[:, [0, 1, 3]] = -p0
-    system = MPMSystem(grid, mat, stable_dt(mat, dx, sp), frame=LabFrame((0.0, 0.0)), flip=flip,
-                       transfers=transfers)
-    return system, init_state(system, x, sp * sp, rho, v=v, stress=stress), p0
 
 
 def test_momentum_and_angular_momentum_conserved_without_walls():
