@@ -32,48 +32,6 @@ G_ACC = 9.81
 # ----------------------------------------------------------------------------------------------
 # transport
 
-def _advect_blob(u, w, t_end):
-    """A disc of material (radius 25 mm, full cells, a passive field q = 3 on it) in a closed
-    0.2 m box, advected by the uniform velocity (u, w) m/s for t_end s."""
-    dx = 0.01
-    mesh = EulerianMesh.box(0.0, 0.2, 0.0, 0.2, dx)
-    h = mesh.h
-    c = mesh.centres()
-    r = np.hypot(c[:, 0] - 0.06, c[:, 1] - 0.07)
-    m = np.where(r < 0.025, 4680.0 * h * h, 0.0)
-    s2 = (mesh.ncx, mesh.ncz)
-    m2 = m.reshape(s2).copy()
-    q = np.zeros(s2 + (NQ,))
-    q[..., 0] = np.where(m2 > 0, 3.0, 0.0)
-    ux = np.where(mesh.open_x, u, 0.0)
-    uz = np.where(mesh.open_z, w, 0.0)
-    work = (np.zeros(s2), np.zeros(s2), np.zeros(s2), np.zeros(s2 + (NQ,)),
-            np.zeros(s2 + (NQ,)), np.zeros(s2), np.zeros(s2 + (NQ,)))
-    dt = 0.2 * h / max(abs(u), abs(w))
-    n = int(round(t_end / dt))
-    for _ in range(n):
-        lowest = advect(m2, q, ux, uz, h, dt, mesh.open_x, mesh.open_z, False, *work)
-        assert lowest >= 0.0
-    return c, m, m2.ravel(), q.reshape(-1, NQ), n * dt
-
-
-def test_advection_conserves_mass_and_translates_a_blob():
-    """Uniform velocity: the total mass is conserved to round-off, the centre of mass moves by
-    u t (to 1% of the displacement), a uniform carried field stays uniform (no new extrema),
-    and the second-order limited scheme keeps the disc compact (its peak cell stays more than
-    90 % full after crossing 7 cells)."""
-    u, w = 0.4, 0.3
-    c, m0, m, q, t = _advect_blob(u, w, 0.1)
-    M0, M = m0.sum(), m.sum()
-    assert abs(M - M0) / M0 < 1e-13
-    com0 = (m0[:, None] * c).sum(axis=0) / M0
-    com = (m[:, None] * c).sum(axis=0) / M
-    shift = np.array([u, w]) * t
-    assert np.linalg.norm(com - com0 - shift) < 0.01 * np.linalg.norm(shift)
-    held = m > 1e-4 * m0.max()  # below, the cells' masses are round-off of the blob's tail
-    assert np.allclose(q[held, 0], 3.0, rtol=1e-8, atol=0.0)
-    assert m.max() > 0.9 * m0.max()
-
 
 # ----------------------------------------------------------------------------------------------
 # the tub frame: a bed held in a moving box
@@ -407,19 +365,6 @@ def test_continuum_command_eulerian_bad_input(run_cli, tmp_path):
     assert not (tmp_path / "o").exists()
 
 
-@pytest.mark.slow
-def test_tub47_quick_run_conserves_mass(tmp_path):
-    """Mass conserved within 0.5 % over a whole tub47-quick run (1.5 s of a bed thrown
-    at 13 g); the conservative remap makes it round-off."""
-    from vibroflow.continuum.tub_run import run_continuum
-    from vibroflow.scenario.io import load_scenario
-
-    s = run_continuum(load_scenario("tub47-quick", []), tmp_path / "eul", "eulerian")
-    c = s["continuum"]
-    assert abs(c["mass_error"]) < 5e-3 and c["mass_error_max_abs"] < 5e-3
-    assert s["circulation"]["sense"] == "counterclockwise"  # the DEM's sense
-
-
 # ----------------------------------------------------------------------------------------------
 # the rough (no-slip grid) floor, shared with the Lagrangian formulation
 
@@ -531,53 +476,4 @@ def test_sampled_solid_fraction_is_even_on_cells_that_do_not_divide_the_analysis
 # ----------------------------------------------------------------------------------------------
 # a bed on a vibrating floor: no ratchet in the partly filled cells
 
-def _vibrated_then_settled_volume(cycles: int = 20) -> float:
-    """A 0.2 m bed of the default media (periodic strip, 4 nodes wide) on a floor vibrated
-    vertically at tub47's 47 Hz stroke (peak acceleration about 3 g: the bed flies and lands
-    every cycle) for `cycles` cycles, then at rest 0.3 s under gravity; returns the volume its
-    material fills, sum of m / rho, over the volume it fills at the critical density."""
-    mat = ContinuumMaterial()
-    f = 47.0
-    w = 2 * math.pi * f
-    motion = TubMotion(frequency=f, amplitude_x=0.0, amplitude_z=3.0 * G_ACC / w**2,
-                       phase_z=0.0, amplitude_theta=0.0)
-    dx, H = 0.01875, 0.2
-    h = dx / 2
-    mesh = EulerianMesh.box(0.0, 4 * dx, 0.0, 0.4, dx, periodic=True)
-    kn = (mat.bulk_modulus + 4 * mat.shear_modulus / 3) / h
-    wall = MeshWall(kn, friction=0.2, damping_ratio=0.16)
-    period = 1.0 / f
-    dt = stable_dt(mat, dx, h, [wall], v_max=2.0)
-    dt = period / (8 * math.ceil(period / 8 / dt))
-    system = EulerianSystem(mesh, mat, dt, frame=TubFrame(motion, (0.0, -G_ACC)), wall=wall)
-    c = system.x
-    rho_c = mat.critical_density
-    filled = c[:, 1] < H
-    p = rho_c * G_ACC * np.clip(H - c[:, 1], 0.0, None) * filled
-    rho = rho_c * np.exp(p / mat.bulk_modulus)
-    stress = np.zeros((mesh.n, 4))
-    stress[:, [0, 1, 3]] = -p[:, None]
-    state = init_state(system, np.where(filled, rho * h * h, 0.0), rho, stress=stress)
-    run_steps(system, state, int(round(cycles * period / dt)))
-    system.frame = LabFrame((0.0, -G_ACC))
-    run_steps(system, state, int(round(0.3 / dt)))
-    # cells the remap found empty have density 0 whatever round-off mass they keep
-    held = (state.mass > 0) & (state.density > 0)
-    assert abs(state.mass_error()) < 5e-3
-    return float((state.mass[held] / state.density[held]).sum()
-                 / (state.mass[held].sum() / rho_c))
 
-
-def test_vibrated_bed_comes_back_to_its_volume_at_rest():
-    """A cohesionless bed that has flown and landed every cycle is, once at rest under gravity,
-    no looser than its critical state: the volume its material fills is within 1 % of its mass
-    over the critical density (its weight compacts it a little below).  Vibration must not
-    leave material dilated and stress-free under the bed's load: a cell turns its growth
-    (past unloading to the critical density) into empty space and its shrinking closes that
-    space first, both ways
-    (lagrangian_step.void_first), and a wall cell's material leaves the wall as a body
-    (face_velocity.match_divergence): this bed ends 0.05 % under its volume.  With the growth put
-    into the material but the shrinking into the void, each cycle would ratchet the floor's and
-    the surface's cells looser: this bed would end 2.2 % over its volume; with tub47's
-    calibrated media, 7.9 % over, its floor cell at 0.46 of the critical density."""
-    assert _vibrated_then_settled_volume() == pytest.approx(1.0, abs=0.01)
