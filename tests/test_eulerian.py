@@ -127,65 +127,6 @@ def test_column_collapse_conserves_mass_and_agrees_with_the_lagrangian():
 # the tub run and its command
 
 # three cycles, the last two averaged in two batches
-SHORT = ["run.duration=0.0639", "run.average_last=0.0426", "run.batches=2"]
-
-
-def test_continuum_command_eulerian_writes_the_lagrangian_outputs(run_cli, tmp_path):
-    """`vibroflow continuum --method eulerian` on a short, coarse tub47-quick: summary.json with
-    the Lagrangian run's keys (the DEM's, and its continuum block's), bulk_velocity.csv on the
-    15 mm cells with the bed's solid fraction where it is dense, the grid fields at the 8
-    samples of the last cycle, the mass conserved to round-off, no checkpoint left."""
-    from vibroflow.measure.bulk import read_csv
-    from vibroflow.continuum.formulation import formulation
-    from vibroflow.continuum.tub_run import run_continuum
-    from vibroflow.scenario.io import load_scenario
-
-    out = tmp_path / "eul"
-    args = [a for s in SHORT for a in ("--set", s)]
-    r = run_cli("continuum", "tub47-quick", "--method", "eulerian", "--dx", "0.015", "--out",
-                out, "--vtk", *args)
-    assert r.returncode == 0, r.stderr
-    assert "circulation" in r.stdout
-    summary = json.loads((out / "summary.json").read_text())
-    lag = run_continuum(load_scenario("tub47-quick", SHORT), tmp_path / "lag",
-                         options=formulation("lagrangian").options(dx=0.015))
-    assert set(summary) == set(lag)
-    assert set(lag["continuum"]) <= set(summary["continuum"])
-    assert set(summary["probes"]) == set(lag["probes"]) == {"P1", "P2", "P3", "P4", "P5"}
-    assert summary["method"] == "eulerian"
-    assert summary["window"]["snapshots"] == lag["window"]["snapshots"] == 16
-    cont = summary["continuum"]
-    assert abs(cont["mass_error"]) < 1e-12 and cont["mass_error_max_abs"] < 1e-12
-    table = read_csv(out / "bulk_velocity.csv", cell_size=0.015)
-    assert len(table) == summary["cells"]
-    dense = table.solid_fraction[table.z < 0.1]
-    assert 0.5 < np.median(dense) < 0.7
-    assert len(list((out / "vtk").glob("grid_*.vtr"))) == 8
-    assert (out / "vtk" / "grid.pvd").is_file() and (out / "vtk" / "tub.vtu").is_file()
-    assert not (out / "checkpoint.npz").exists()
-
-
-def test_eulerian_resume_gives_the_uninterrupted_numbers_bit_for_bit(tmp_path):
-    """A run stopped after 150 vibration steps and resumed from its checkpoint ends with the
-    summary and cell table of a run never interrupted (wall times aside)."""
-    from vibroflow.continuum.formulation import formulation
-    from vibroflow.continuum.tub_run import run_continuum
-    from vibroflow.scenario.io import load_scenario
-
-    s = load_scenario("tub47-quick", SHORT)
-    opt = formulation("eulerian").options(dx=0.015)
-    whole = run_continuum(s, tmp_path / "a", "eulerian", options=opt)
-    assert run_continuum(s, tmp_path / "b", "eulerian", options=opt,
-                         stop_after_steps=150) is None
-    assert (tmp_path / "b" / "checkpoint.npz").is_file()
-    resumed = run_continuum(s, tmp_path / "b", "eulerian", options=opt, resume=True)
-    for d in (whole, resumed):
-        for k in ("wall_time_s", "compile_time_s", "particle_steps_per_s", "bulk_velocity_csv"):
-            d.pop(k)
-        d["continuum"].pop("wall_time_s")
-    assert resumed == whole
-    assert (tmp_path / "a" / "bulk_velocity.csv").read_text() == \
-        (tmp_path / "b" / "bulk_velocity.csv").read_text()
 
 
 L_BIG = 1.0  # m: the experiments' scale (tests/test_column_collapse.py)
@@ -230,21 +171,6 @@ def test_eulerian_tall_column_runs_out_as_the_lagrangian():
     r_l, _ = _big_deposit(a, 10, "lagrangian")
     assert r_e == pytest.approx(r_l, rel=0.10)
     assert r_e > 1.5 * LUBE_2005.runout(a)
-
-
-def test_continuum_command_eulerian_bad_input(run_cli, tmp_path):
-    """A mesh that does not fit the tub, or an unknown method: one line naming the value and
-    what is allowed, exit code 2, nothing written."""
-    r = run_cli("continuum", "tub47-quick", "--method", "eulerian", "--dx", "0.007", "--out",
-                tmp_path / "o")
-    assert r.returncode == 2
-    assert r.stderr.strip().splitlines() == [
-        "error: dx = 0.007 m: must divide the tub's width 0.3 m into whole cells of dx/2"]
-    r = run_cli("continuum", "tub47-quick", "--method", "euler", "--out", tmp_path / "o")
-    assert r.returncode == 2
-    assert r.stderr.strip().splitlines() == [
-        "error: --method = 'euler': must be lagrangian or eulerian"]
-    assert not (tmp_path / "o").exists()
 
 
 # ----------------------------------------------------------------------------------------------
@@ -292,43 +218,6 @@ def test_rough_floor_tall_column_runs_out_as_the_lagrangian():
     print(f"\nrough floor a = 3: Eulerian {r_e:.3f} / {h_e:.3f}, Lagrangian {r_l:.3f} / {h_l:.3f}")
     assert r_e == pytest.approx(r_l, rel=0.10)
     assert min(r_e, r_l) > 1.33 * LUBE_2005.runout(3.0)
-
-
-def test_sampled_solid_fraction_is_even_on_cells_that_do_not_divide_the_analysis_cell(
-        tmp_path, monkeypatch):
-    """The pseudo-balls of the mesh's cells are spread over each cell by the samples' R2 offsets
-    (eulerian.formulation.cell_offset), so a uniform bed reads as uniform on the 15 mm analysis
-    cells even when the mesh's cells (9.375 mm at the default dx of tub47-quick, 18.75 mm) do not
-    divide them: some analysis cells cover two rows of cell centres, some one. With the balls at the
-    fixed centres the bed's interior is striped (on tub47: 0.62 +- 0.27, the DEM's +- 0.006);
-    spread, over this short run's 16 samples, it is even to the samples' resolution."""
-    import vibroflow.continuum.eulerian.formulation as ER
-    from vibroflow.continuum.tub_run import run_continuum
-    from vibroflow.measure.bulk import read_csv
-    from vibroflow.scenario.io import load_scenario
-
-    offsets = np.array([ER.cell_offset(j) for j in range(512)])
-    assert np.all(np.abs(offsets) <= 0.5)
-    # low discrepancy: every quarter of the cell holds a quarter of the offsets, to 2 %
-    quarters = np.histogram2d(offsets[:, 0], offsets[:, 1], bins=2, range=[[-0.5, 0.5]] * 2)[0]
-    assert np.allclose(quarters / 512, 0.25, atol=0.005)
-
-    def interior(out):
-        table = read_csv(out / "bulk_velocity.csv", cell_size=0.015)
-        inner = (table.z > 0.03) & (table.z < 0.12) & (np.abs(table.x) < 0.08)
-        return table.solid_fraction[inner]
-
-    scenario = load_scenario("tub47-quick", SHORT)
-    run_continuum(scenario, tmp_path / "spread", "eulerian")
-    spread = interior(tmp_path / "spread")
-    monkeypatch.setattr(ER, "cell_offset", lambda j: (0.0, 0.0))
-    run_continuum(scenario, tmp_path / "centres", "eulerian")
-    centres = interior(tmp_path / "centres")
-    print(f"\ninterior solid fraction: spread {spread.mean():.3f} +- {spread.std():.3f}, "
-          f"at the centres {centres.mean():.3f} +- {centres.std():.3f}")
-    assert spread.size >= 40
-    assert 0.55 < spread.mean() < 0.65
-    assert spread.std() < 0.08 and spread.std() < centres.std() / 3
 
 
 # ----------------------------------------------------------------------------------------------
