@@ -21,9 +21,10 @@ from vibroflow.continuum.tub_run import run_continuum
 from vibroflow.errors import InputError, Interrupted
 from vibroflow.scenario.io import load_scenario
 
-# tests/test_mpm.py's resume scenario (4 cycles averaged in 2 batches, ~60 ms of vibration)
+# tests/test_continuum_runs.py's Lagrangian resume scenario (4 cycles averaged in 2 batches,
+# ~60 ms of vibration)
 SHORT = ["run.duration=0.05", "run.average_last=0.043", "run.batches=2"]
-# tests/test_eulerian.py's
+# tests/test_continuum_runs.py's Eulerian runs (continuum_helpers.THREE_CYCLES)
 SHORT_EULERIAN = ["run.duration=0.0639", "run.average_last=0.0426", "run.batches=2"]
 CLI_SETS = ["--set", "run.duration=0.05", "--set", "run.average_last=0.043", "--set",
             "run.batches=2"]

@@ -15,7 +15,7 @@ import math
 import numpy as np
 import pytest
 
-from test_mpm import lattice, spinning_compressed_disc
+from continuum_helpers import lattice, spinning_compressed_disc
 from vibroflow.continuum.constitutive import ContinuumMaterial
 from vibroflow.continuum.g2p import g2p
 from vibroflow.continuum.grid import Grid
@@ -128,7 +128,7 @@ def test_transfers_per_step():
 
 
 def test_momentum_and_angular_momentum_conserved_with_transfers():
-    """The spinning, translating, pre-compressed elastic disc of test_mpm, four transfers a
+    """The spinning, translating, pre-compressed elastic disc of continuum_helpers, four transfers a
     step: linear and angular momentum (with the points' affine spin) kept to round-off."""
     system, state, p0 = spinning_compressed_disc(flip=0.0, transfers=4)
     dx = system.grid.dx
