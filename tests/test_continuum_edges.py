@@ -16,9 +16,9 @@ from vibroflow.continuum.checkpoint import CHECKSUM_KEY
 from vibroflow.continuum.files import CHECKPOINT_NAME
 from vibroflow.continuum.formulation import formulation
 from vibroflow.continuum.mpm import formulation as mpm_formulation
-from vibroflow.continuum.timeline import FAULT_SIGINT_ENV
 from vibroflow.continuum.tub_run import run_continuum
 from vibroflow.errors import InputError, Interrupted
+from vibroflow.interrupts import FAULT_SIGINT_ENV
 from vibroflow.scenario.io import load_scenario
 
 # tests/test_continuum_runs.py's Lagrangian resume scenario (4 cycles averaged in 2 batches,

@@ -17,7 +17,7 @@ import typer
 
 from tests.cli_helpers import one_line_error as _one_line_error
 
-from vibroflow.cli import EXIT_INTERRUPTED, input_errors
+from vibroflow.cli.failures import EXIT_INTERRUPTED, input_errors
 from vibroflow.errors import InputError, Interrupted
 from vibroflow.io.folder_lock import LOCK_NAME, folder_lock
 from vibroflow.scenario.io import load_scenario

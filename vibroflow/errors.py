@@ -22,14 +22,46 @@ class InputError(Exception):
         return str(self.args[0])
 
 
+#: how to go on from a refused --resume, unless the caller knows better (CheckpointRefused)
+START_AFRESH = "run without --resume to start afresh"
+
+
+class CheckpointRefused(InputError):
+    """A --resume refused: the checkpoint, or a file it counts on, is damaged or another run's.
+    `reason` says which ("--resume: DIR/checkpoint.h5 is damaged (truncated)"), `remedy` how to
+    go on; the message is "REASON; REMEDY"."""
+
+    def __init__(self, reason: str, remedy: str = START_AFRESH):
+        self.reason = " ".join(str(reason).split())
+        self.remedy = remedy
+        super().__init__(f"{self.reason}; {remedy}")
+
+    def __reduce__(self):
+        # rebuilt from its reason and remedy: a sweep point's exception crosses processes
+        return CheckpointRefused, (self.reason, self.remedy)
+
+
 class Interrupted(Exception):
     """A run stopped by the user (Ctrl-C, SIGINT): `message` is the one line the CLI prints,
     saying where the run stopped and how to go on ("interrupted at t = 0.1234 s; resume with
-    --resume"); the CLI exits with code 130 (128 + SIGINT), as a shell does."""
+    --resume"); the CLI exits with code 130 (128 + SIGINT), as a shell does.  `where` is where
+    it stopped ("at t = 0.1234 s", "while settling"): given, or the line's first clause less
+    its "interrupted"."""
 
-    def __init__(self, message: str):
+    def __init__(self, message: str, where: str | None = None):
         super().__init__(" ".join(str(message).split()))
+        self._where = where
 
     @property
     def message(self) -> str:
         return str(self.args[0])
+
+    @property
+    def where(self) -> str:
+        if self._where is not None:
+            return self._where
+        return self.message.split(";")[0].removeprefix("interrupted").strip()
+
+    def __reduce__(self):
+        # rebuilt with its where: a sweep point's exception crosses processes
+        return type(self), (self.message, self._where)

@@ -32,7 +32,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from vibroflow.errors import InputError
+from vibroflow.errors import CheckpointRefused
 from vibroflow.io.atomic import atomic_path
 from vibroflow.io.calibration_file import Calibration
 
@@ -76,14 +76,13 @@ def save_checkpoint(path, state, samples: dict[str, np.ndarray], meta: dict) -> 
         np.savez(tmp, **arrays)
 
 
-class DamagedCheckpoint(InputError):
+class DamagedCheckpoint(CheckpointRefused):
     """A checkpoint file that cannot be resumed from: `why` is "empty", "truncated", "not a
     checkpoint", "checksum mismatch" or "unreadable: ..."."""
 
     def __init__(self, path: Path, why: str):
         self.path, self.why = Path(path), why
-        super().__init__(f"--resume: {path} is damaged ({why}); run without --resume to "
-                         "start afresh")
+        super().__init__(f"--resume: {path} is damaged ({why})")
 
 
 def _read_arrays(path: Path) -> dict[str, np.ndarray]:
@@ -159,8 +158,8 @@ def run_fingerprint(scenario, calibration: Calibration | None, options: Continuu
 
 
 def check_resumable(path, meta: dict, fingerprint: str, method: str) -> None:
-    """InputError (one line) unless the checkpoint at path, of record `meta`, was written by a
-    run of this fingerprint (run_fingerprint) and formulation `method`."""
+    """CheckpointRefused (one line) unless the checkpoint at path, of record `meta`, was written
+    by a run of this fingerprint (run_fingerprint) and formulation `method`."""
     if meta.get("fingerprint") != fingerprint or meta.get("method") != method:
-        raise InputError(f"--resume: {path} is the checkpoint of another scenario, calibration, "
-                         "method or options; run without --resume to start afresh")
+        raise CheckpointRefused(f"--resume: {path} is the checkpoint of another scenario, "
+                                "calibration, method or options")

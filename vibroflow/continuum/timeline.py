@@ -7,13 +7,13 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
-import threading
 import time
 from pathlib import Path
 
 import numpy as np
 
 from vibroflow.errors import Interrupted
+from vibroflow.interrupts import FAULT_SIGINT_ENV, deferred_sigint
 from vibroflow.progress import RunProgress
 
 from .files import CHECKPOINT_NAME
@@ -43,13 +43,14 @@ def vibration_timeline(state, n_steps: int, sample_step: np.ndarray, samples: Sa
     k0 = k = state.step
     last_ckpt = time.perf_counter()
     fault = FaultSigint(k0)
-    with sigint_flag() as stop:
+    # over any SIGINT handler but an ignored one (vibroflow.interrupts)
+    with deferred_sigint(over_any_handler=True) as stop:
         try:
             while True:
                 while samples.j < S and sample_step[samples.j] == k:
                     record(samples.j)
                     samples.j += 1
-                if stop.requested:
+                if stop["raised"]:
                     break
                 if k == n_steps:
                     break
@@ -67,7 +68,7 @@ def vibration_timeline(state, n_steps: int, sample_step: np.ndarray, samples: Sa
                 k = nxt
                 prog.update(state.t, (k - k0) * per_step)
                 fault.check(k)
-            if stop.requested:
+            if stop["raised"]:
                 checkpoint()
                 raise VibrationInterrupted(state.t, True)
         except KeyboardInterrupt:
@@ -125,39 +126,6 @@ def interrupted_while_writing(out: Path):
                           "nothing to resume, run again") from None
 
 
-class _StopFlag:
-    requested = False
-
-
-@contextlib.contextmanager
-def sigint_flag():
-    """While the block runs, a SIGINT (Ctrl-C) sets flag.requested instead of raising
-    KeyboardInterrupt at an arbitrary bytecode (which could leave a sample half recorded); a
-    second one raises KeyboardInterrupt as usual.  Only in the main thread (Python's signal
-    handlers run there) and when SIGINT is not ignored; otherwise the flag stays unset."""
-    flag = _StopFlag()
-    previous = signal.getsignal(signal.SIGINT)
-    if (threading.current_thread() is not threading.main_thread()
-            or previous in (signal.SIG_IGN, None)):
-        yield flag
-        return
-
-    def handler(signum, frame):
-        if flag.requested:
-            raise KeyboardInterrupt
-        flag.requested = True
-
-    signal.signal(signal.SIGINT, handler)
-    try:
-        yield flag
-    finally:
-        signal.signal(signal.SIGINT, previous)
-
-
-#: the fault-injection hook of the Ctrl-C tests (FaultSigint)
-FAULT_SIGINT_ENV = "VIBROFLOW_FAULT_SIGINT_AFTER_STEPS"
-
-
 class FaultSigint:
     """Fault injection for the Ctrl-C tests: with VIBROFLOW_FAULT_SIGINT_AFTER_STEPS=N in the
     environment the process sends itself SIGINT, once, at the vibration loop's first look after
@@ -174,7 +142,6 @@ class FaultSigint:
         if self.after is not None and k - self.k0 >= self.after:
             self.after = None
             os.kill(os.getpid(), signal.SIGINT)
-
 
 
 def next_event(k: int, n_steps: int, sample_step, j: int, k0: int,

@@ -11,7 +11,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from ..errors import InputError
+from ..errors import START_AFRESH, CheckpointRefused, InputError
 from ..run_clock import RunClock
 from .fingerprint import first_difference
 from .interrupts import fault_after_checkpoint
@@ -22,8 +22,8 @@ CHECKPOINT_NAME = "checkpoint.h5"
 SUMMARY_NAME = "summary.json"
 
 
-def refuse(path, what: str) -> InputError:
-    return InputError(f"--resume: {path} {what}; run without --resume to start afresh")
+def refuse(path, what: str) -> CheckpointRefused:
+    return CheckpointRefused(f"--resume: {path} {what}")
 
 
 def finished_summary(out_dir: Path, fingerprint: str, record: dict) -> dict | None:
@@ -41,14 +41,15 @@ def finished_summary(out_dir: Path, fingerprint: str, record: dict) -> dict | No
         return None  # not a whole result: the checkpoint, if any, decides
     if there_fp != fingerprint:
         diff = first_difference(json.loads(there) if there else None, record)
-        raise refuse(out_dir, f"holds the finished run of another scenario ({diff})")
+        raise InputError(f"--resume: {out_dir} holds the finished run of another scenario "
+                         f"({diff}); {START_AFRESH}")
     return summary
 
 
 def resume_checkpoint(scenario, out_dir: Path, system: DEMSystem, clock: RunClock,
                       fingerprint: str, record: dict):
     """(system, state, settle_info, writer) of the run in out_dir/checkpoint.h5, its
-    fingerprint, checksum and parts checked (InputError when it cannot be resumed)."""
+    fingerprint, checksum and parts checked (CheckpointRefused when it cannot be resumed)."""
     ckpt = out_dir / CHECKPOINT_NAME
     try:
         state, attrs = load_state_file(ckpt)
@@ -68,7 +69,6 @@ def resume_checkpoint(scenario, out_dir: Path, system: DEMSystem, clock: RunCloc
                               meta_hash=str(attrs["meta_sha256"]),
                               rows_done=json.loads(attrs.get("rows_done", "null")))
     except DamagedFile as exc:
-        # "checkpoint" named: a study rewrites such a line into its own remedy
         raise refuse(exc.path, f"is damaged ({exc.reason}), a part {ckpt.name} counts on") \
             from None
     clock.resume_from(float(attrs["wall_time_s"]))

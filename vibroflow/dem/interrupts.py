@@ -1,40 +1,19 @@
 """Ctrl-C during a DEM run, and the fault injection its tests use (environment variables that make
 the run interrupt or kill itself at a known instant, deterministic where a signal from outside
-would race the run).  The end-of-run kill points are vibroflow.dem.output.fault_kill_at.
+would race the run).  The end-of-run kill points are vibroflow.dem.output.fault_kill_at.  The
+deferred Ctrl-C of the vibration loop is vibroflow.interrupts' deferred_sigint, the continua's
+too: over Python's own SIGINT handler only (a SIGINT ignored or handled by the caller is left
+so).
 """
 from __future__ import annotations
 
-import contextlib
 import os
 import signal
-import threading
-from collections.abc import Iterator
 
+from ..interrupts import FAULT_SIGINT_ENV, deferred_sigint
 
-@contextlib.contextmanager
-def deferred_sigint() -> Iterator[dict]:
-    """While the block runs, a first SIGINT only sets flag["raised"]; the caller stops at its
-    next safe point (state and result rows consistent) with a checkpoint.  A KeyboardInterrupt
-    raised anywhere else could land between the compiled step's return and the step count's
-    update, and a checkpoint of that state would resume with other numbers.  A second SIGINT
-    raises KeyboardInterrupt at once.  Only in the main thread with Python's own handler in
-    place (a SIGINT ignored or handled by the caller is left so)."""
-    flag = {"raised": False}
-    install = (threading.current_thread() is threading.main_thread()
-               and signal.getsignal(signal.SIGINT) is signal.default_int_handler)
-
-    def handler(signum, frame):
-        if flag["raised"]:
-            raise KeyboardInterrupt
-        flag["raised"] = True
-
-    if install:
-        signal.signal(signal.SIGINT, handler)
-    try:
-        yield flag
-    finally:
-        if install:
-            signal.signal(signal.SIGINT, signal.default_int_handler)
+__all__ = ["deferred_sigint", "fault_after_checkpoint", "fault_sigint_after_steps",
+           "fault_sigint_settling"]
 
 
 def fault_after_checkpoint() -> None:
@@ -50,7 +29,7 @@ def fault_sigint_after_steps() -> int | None:
     """Fault injection for the Ctrl-C tests: VIBROFLOW_FAULT_SIGINT_AFTER_STEPS=N makes the
     run send itself a SIGINT as soon as N vibration steps are done (at the return of the
     compiled call that passes N), deterministic where a signal from outside races the run."""
-    value = os.environ.get("VIBROFLOW_FAULT_SIGINT_AFTER_STEPS")
+    value = os.environ.get(FAULT_SIGINT_ENV)
     return int(value) if value else None
 
 

@@ -185,26 +185,10 @@ class StudyData:
                 continue
             if isinstance(rec, dict) and "stage" in rec:
                 stages[str(rec["stage"])] = rec
-        calibration = None
-        cal_path = out / DEM / "calibration.toml"
-        if cal_path.is_file():
-            try:
-                calibration = read_calibration(cal_path)
-            except InputError as exc:
-                notes["calibration"] = exc.message
-        else:
-            notes["calibration"] = f"no {DEM}/calibration.toml in the study"
-        dem_fields = None
-        fpath = out / DEM / "fields.nc"
-        if fpath.is_file():
-            from vibroflow.calibration.run_fields import read_fields
-
-            try:
-                dem_fields = read_fields(fpath)
-            except InputError as exc:
-                notes["dem_fields"] = exc.message
-        else:
-            notes["dem_fields"] = f"no {DEM}/fields.nc (the calibration's coarse-grained fields)"
+        calibration = _optional(out / DEM / "calibration.toml", read_calibration, notes,
+                                "calibration", f"no {DEM}/calibration.toml in the study")
+        dem_fields = _optional(out / DEM / "fields.nc", _read_dem_fields, notes, "dem_fields",
+                               f"no {DEM}/fields.nc (the calibration's coarse-grained fields)")
         impacts = None
         if scenario is not None:
             impacts, why = _dem_impacts(out / DEM / "dem.h5", scenario)
@@ -299,6 +283,26 @@ class StudyData:
         if not ok.any():
             return float("nan")
         return float(np.sum(g[ok] * w[ok]) / np.sum(w[ok]))
+
+
+def _optional(path: Path, read, notes: dict[str, str], key: str, missing: str):
+    """read(path) of an optional piece, or None with notes[key] saying why: `missing` when the
+    file is not there, the InputError's line when it cannot be read."""
+    if not path.is_file():
+        notes[key] = missing
+        return None
+    try:
+        return read(path)
+    except InputError as exc:
+        notes[key] = exc.message
+        return None
+
+
+def _read_dem_fields(path: Path):
+    # imported here: xarray is slow to import, and a study without fields.nc reads none
+    from vibroflow.calibration.run_fields import read_fields
+
+    return read_fields(path)
 
 
 def _scenario(out: Path):

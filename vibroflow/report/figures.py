@@ -149,6 +149,17 @@ def _cell_squares(ax, data: StudyData, values: dict, norm, cmap):
     return pc, len(vals)
 
 
+def _continuum_map(ax, data: StudyData, grid_map, cells: dict, norm, cmap, mappable):
+    """A continuum method's map: its grid (xs, zs, values) where it wrote one, else the probe
+    cells coloured by `cells`.  Returns the colour bar's mappable (the grid, or the first drawn
+    of `mappable` and the cells) and the number of cells drawn (None for a grid)."""
+    if grid_map is not None:
+        xs, zs, grid = grid_map
+        return ax.pcolormesh(xs, zs, grid, shading="nearest", cmap=cmap, norm=norm), None
+    pc, k = _cell_squares(ax, data, cells, norm, cmap)
+    return mappable or pc, k
+
+
 def _log_norm(values):
     from matplotlib.colors import LogNorm
 
@@ -196,21 +207,21 @@ def shear_rate_maps(data: StudyData) -> bytes:
                 mappable = ax.pcolormesh(x, z, dem_map.T, shading="nearest", cmap=cmap,
                                          norm=norm)
             ax.set_title("dem: cycle-mean shear rate (fields.nc)", fontsize=9)
-        elif cmaps.get(name) is not None:
-            xs, zs, grid = cmaps[name]
-            mappable = ax.pcolormesh(xs, zs, grid, shading="nearest", cmap=cmap, norm=norm)
-            ax.set_title(f"{name}: cycle-mean shear rate (shear_rate.csv)", fontsize=9)
         else:
-            pc, k = _cell_squares(ax, data, cont.get(name, {}), norm, cmap)
-            mappable = mappable or pc
-            block = data.continuum_block(name).get("shear_rate") or {}
-            m, se = block.get("mean_1_s"), block.get("mean_1_s_stderr")
-            txt = (f"bed mean {m:.3g} ± {se:.2g} 1/s" if isinstance(m, (int, float))
-                   and math.isfinite(m) else "no shear rate written")
-            if k == 0:
-                txt += "\nno probe shear rates"
-            ax.text(0.03, 0.97, txt, ha="left", va="top", transform=ax.transAxes, fontsize=8)
-            ax.set_title(f"{name}: cycle-mean shear rate in the probe cells", fontsize=9)
+            mappable, k = _continuum_map(ax, data, cmaps.get(name), cont.get(name, {}), norm,
+                                         cmap, mappable)
+            if k is None:
+                ax.set_title(f"{name}: cycle-mean shear rate (shear_rate.csv)", fontsize=9)
+            else:
+                block = data.continuum_block(name).get("shear_rate") or {}
+                m, se = block.get("mean_1_s"), block.get("mean_1_s_stderr")
+                txt = (f"bed mean {m:.3g} ± {se:.2g} 1/s" if isinstance(m, (int, float))
+                       and math.isfinite(m) else "no shear rate written")
+                if k == 0:
+                    txt += "\nno probe shear rates"
+                ax.text(0.03, 0.97, txt, ha="left", va="top", transform=ax.transAxes,
+                        fontsize=8)
+                ax.set_title(f"{name}: cycle-mean shear rate in the probe cells", fontsize=9)
         _outline(ax, data, top)
         _probes(ax, data)
     if mappable is not None:
@@ -295,24 +306,23 @@ def impact_maps(data: StudyData) -> bytes:
                 ax.text(0.03, 0.97, f"{int(imp.count.sum())} impacts measured",
                         ha="left", va="top", transform=ax.transAxes, fontsize=8)
             ax.set_title("dem: measured ball-ball impacts", fontsize=9)
-        elif imaps.get(name) is not None:
-            xs, zs, grid = imaps[name]
-            mappable = ax.pcolormesh(xs, zs, grid, shading="nearest", cmap=cmap, norm=norm)
-            ax.set_title(f"{name}: inferred from its shear-rate map", fontsize=9)
         else:
-            pc, k = _cell_squares(ax, data, inferred[name], norm, cmap)
-            mappable = mappable or pc
-            if k == 0:
-                why = ("no calibrated impact relation" if data.impact_fit("ball_ball") is None
-                       else "no probe shear rates")
-                ax.text(0.5, 0.6, f"no inferred impacts:\n{why}", ha="center", va="center",
-                        transform=ax.transAxes, fontsize=9)
-            v = data.summary["methods"][name].get("impacts", {}).get(
-                "ball_ball_mean_normal_speed")
-            if isinstance(v, (int, float)) and math.isfinite(v):
-                ax.text(0.03, 0.97, f"bed mean (inferred) {v:.3g} m/s", ha="left", va="top",
-                        transform=ax.transAxes, fontsize=8)
-            ax.set_title(f"{name}: inferred from its shear rate", fontsize=9)
+            mappable, k = _continuum_map(ax, data, imaps.get(name), inferred[name], norm, cmap,
+                                         mappable)
+            if k is None:
+                ax.set_title(f"{name}: inferred from its shear-rate map", fontsize=9)
+            else:
+                if k == 0:
+                    why = ("no calibrated impact relation"
+                           if data.impact_fit("ball_ball") is None else "no probe shear rates")
+                    ax.text(0.5, 0.6, f"no inferred impacts:\n{why}", ha="center",
+                            va="center", transform=ax.transAxes, fontsize=9)
+                v = data.summary["methods"][name].get("impacts", {}).get(
+                    "ball_ball_mean_normal_speed")
+                if isinstance(v, (int, float)) and math.isfinite(v):
+                    ax.text(0.03, 0.97, f"bed mean (inferred) {v:.3g} m/s", ha="left",
+                            va="top", transform=ax.transAxes, fontsize=8)
+                ax.set_title(f"{name}: inferred from its shear rate", fontsize=9)
         _outline(ax, data, top)
         _probes(ax, data)
     if mappable is not None:

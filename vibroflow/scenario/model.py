@@ -46,6 +46,14 @@ def check_name(field: str, name: str, key: bool = False) -> str:
     return name
 
 
+def check_keys(field: str, table: dict) -> dict:
+    """`table` if each of its keys is a safe name (check_name), else the one-line scenario
+    error naming the first that is not."""
+    for name in table:
+        check_name(field, name, key=True)
+    return table
+
+
 def _show(value: Any) -> str:
     # a hostile name shown safely: escapes for newlines and control characters, cut short
     text = repr(value)
@@ -176,9 +184,7 @@ class Analysis(_Strict):
     @field_validator("probes")
     @classmethod
     def _probe_names(cls, v: dict) -> dict:
-        for name in v:
-            check_name("analysis.probes", name, key=True)
-        return v
+        return check_keys("analysis.probes", v)
 
 
 class ParticleSpec(_Strict):
@@ -253,9 +259,7 @@ class Scenario(_Strict):
     @field_validator("materials")
     @classmethod
     def _material_names(cls, v: dict) -> dict:
-        for name in v:
-            check_name("materials", name, key=True)
-        return v
+        return check_keys("materials", v)
 
     @property
     def explicit(self) -> bool:

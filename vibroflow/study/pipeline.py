@@ -17,7 +17,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from vibroflow.errors import InputError, Interrupted
+from vibroflow.errors import CheckpointRefused, InputError, Interrupted
 from vibroflow.io.folder_lock import folder_lock
 from vibroflow.study.folder import KIND, STUDY_FILE, check_study_dir, read_json
 from vibroflow.study.methods import METHODS, method
@@ -96,23 +96,16 @@ def _run_stage(study: Study, stage: Stage, h: str) -> dict:
     t0 = time.perf_counter()
     try:
         result = stage.run(study, resume)
-    except (Interrupted, KeyboardInterrupt) as exc:
-        # pending.json stays: the same command again resumes the stage from its checkpoint;
-        # of the stage's own line only where it stopped ("at t = ...", "while settling"): its
-        # advice is for its own command
-        where = ""
-        if isinstance(exc, Interrupted):
-            where = " " + exc.message.split(";")[0].removeprefix("interrupted").strip()
-        raise Interrupted(f"interrupted in the study's {stage.name} stage{where.rstrip()}; run "
-                          f"the same command again to go on from there (out: {study.out})"
-                          ) from None
-    except InputError as exc:
-        if resume and "checkpoint" in exc.message:
-            # a damaged or foreign checkpoint of a stage the study resumes by itself
-            raise InputError(exc.message.replace(
-                "run without --resume to start afresh",
-                f"remove {folder} to run the {stage.name} stage afresh")) from None
-        raise
+    except Interrupted as exc:
+        raise _stage_interrupted(study, stage, exc.where) from None
+    except KeyboardInterrupt:
+        raise _stage_interrupted(study, stage, "") from None
+    except CheckpointRefused as exc:
+        if not resume:
+            raise
+        # a damaged or foreign checkpoint of a stage the study resumes by itself
+        raise CheckpointRefused(exc.reason, f"remove {folder} to run the {stage.name} stage "
+                                            "afresh") from None
     wall = time.perf_counter() - t0
     record = {"stage": stage.name, "hash": h, "vibroflow_version": __version__,
               "upstream": {u: study.records[u]["hash"] for u in stage.upstream},
@@ -121,6 +114,15 @@ def _run_stage(study: Study, stage: Stage, h: str) -> dict:
     write_json_atomic(folder / STAGE_FILE, record)  # last: the stage is finished
     pending.unlink(missing_ok=True)
     return record
+
+
+def _stage_interrupted(study: Study, stage: Stage, where: str) -> Interrupted:
+    """The study's line for a stage stopped by Ctrl-C: pending.json stays, so the same command
+    again resumes the stage from its checkpoint; of the stage's own line only where it stopped
+    ("at t = ...", "while settling"): its advice is for its own command."""
+    at = f" {where}" if where else ""
+    return Interrupted(f"interrupted in the study's {stage.name} stage{at}; run the same "
+                       f"command again to go on from there (out: {study.out})")
 
 
 def format_duration(seconds: float) -> str:

@@ -71,8 +71,14 @@ def _one_panel(plt, path: Path, series, varied, column: str, scale: float, ylabe
     ax.set_xlabel(XLABEL)
     ax.set_ylabel(ylabel)
     ax.set_title(title)
+    _finish(plt, fig, ax, series, path)
+
+
+def _finish(plt, fig, legend_ax, series, path: Path) -> None:
+    """The legend on legend_ax (when a line is drawn), the layout, the picture written to path
+    and the figure closed."""
     if series:
-        ax.legend(fontsize=7)
+        legend_ax.legend(fontsize=7)
     fig.tight_layout()
     _save(fig, path)
     plt.close(fig)
@@ -103,12 +109,8 @@ def write_plots(folder: Path, rows: list[dict[str, Any]], varied: list[str]) -> 
             ax.set_ylabel(f"{p} {c} (mm/s)")
     for ax in axes[-1]:
         ax.set_xlabel(XLABEL)
-    if series:
-        axes[0][0].legend(fontsize=7)
     fig.suptitle("bulk velocity at the probes (tub frame), mean ± standard error")
-    fig.tight_layout()
-    _save(fig, folder / NAMES[0])
-    plt.close(fig)
+    _finish(plt, fig, axes[0][0], series, folder / NAMES[0])
 
     _one_panel(plt, folder / NAMES[1], series, varied, "circulation_strength", 1e4,
                "circulation strength (1e-4 m²/s)", "circulation strength ± standard error")
@@ -118,12 +120,8 @@ def write_plots(folder: Path, rows: list[dict[str, Any]], varied: list[str]) -> 
         _draw(ax, series, varied, f"impact_{kind}")
         ax.set_xlabel(XLABEL)
         ax.set_ylabel(f"mean normal impact speed {kind.replace('_', '-')} (m/s)")
-    if series:
-        axes[0][0].legend(fontsize=7)
     fig.suptitle("impact speeds (continuum: from the calibrated c0 + c1 d gamma_dot)")
-    fig.tight_layout()
-    _save(fig, folder / NAMES[2])
-    plt.close(fig)
+    _finish(plt, fig, axes[0][0], series, folder / NAMES[2])
 
     _one_panel(plt, folder / NAMES[3], series, varied, "wall_time_s", 1.0, "wall time (s)",
                "wall time per method and point", errors=False)

@@ -1,0 +1,126 @@
+"""`vibroflow continuum`: a continuum model of a tub scenario.  The solver is imported inside the
+command, so that `--help` stays quick."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from vibroflow.continuum.formulation import FORMULATIONS
+from vibroflow.errors import InputError
+
+from .apps import app
+from .failures import blown_up, input_errors
+from .options import OutOption, ResumeOption, ScenarioArg, SetOption, load
+
+
+@app.command("continuum")
+@input_errors
+def continuum(
+    scenario: ScenarioArg,
+    out: OutOption,
+    method: Annotated[str, typer.Option(
+        "--method", help="Formulation: lagrangian (material point method) or eulerian (fixed "
+                         "mesh of the tub); continuum/formulation.py.")] = "lagrangian",
+    calibration: Annotated[Optional[Path], typer.Option(
+        "--calibration", help="calibration.toml, or a run folder holding one; default: "
+                              "tub47's parameters.")] = None,
+    rheology: Annotated[str, typer.Option(
+        "--rheology", help="mu_i (Dunatunga & Kamrin) or drucker_prager.")] = "mu_i",
+    dilatancy: Annotated[bool, typer.Option(
+        "--dilatancy", help="mu_i with peak friction and dilation (Pailha & Pouliquen 2009), "
+                            "K_dil from the calibration's \\[dilatancy] (vibroflow calibrate "
+                            "--dilatancy).")] = False,
+    compaction: Annotated[bool, typer.Option(
+        "--compaction", help="Cyclic compaction of the connected bed towards the cyclic shear "
+                             "cell's packing (Sawicki & Swidzinski 1989), from the calibration's "
+                             "\\[compaction] (vibroflow calibrate --dilatancy).")] = False,
+    dx: Annotated[Optional[float], typer.Option(
+        "--dx", help="Grid spacing (m); default 3 ball diameters (why: continuum/options.py, "
+                    "DEFAULT_DX_DIAMETERS).")] = None,
+    cfl: Annotated[Optional[float], typer.Option(
+        "--cfl", help="Courant number of the time step in (0, 1]; default 0.3 "
+                      "(continuum/options.py DEFAULT_CFL).")] = None,
+    transfer_cfl: Annotated[Optional[float], typer.Option(
+        "--transfer-cfl", help="Courant number of the APIC transfers (> 0): each step makes "
+                               "round(cfl / transfer_cfl) of them, so their damping of the "
+                               "grid-scale motion does not depend on the step; default 0.015 "
+                               "(Lagrangian) and 0.0375 (Eulerian), chosen with the grid to "
+                               "match the DEM (continuum/options.py), on a "
+                               "grid of --damping-length; 0: one transfer a step (always so "
+                               "with --flip > 0).")] = None,
+    damping_length: Annotated[Optional[float], typer.Option(
+        "--damping-length", help="The grid spacing (m) on which --transfer-cfl holds; on "
+                                 "another grid the transfers are made at transfer_cfl (dx / "
+                                 "damping_length)^3, so that their damping of the flow (a "
+                                 "hyperviscosity) is the same on every grid; default the "
+                                 "default grid's spacing (continuum/options.py).")] = None,
+    stiffness_factor: Annotated[float, typer.Option(
+        "--stiffness-factor", help="Multiply the elastic moduli (and the default wall "
+                                   "stiffness) by this factor in (0, 1]: sqrt(factor) times "
+                                   "the steps, a physics change like the DEM's reduced "
+                                   "Young's modulus (ContinuumOptions).")] = 1.0,
+    flip: Annotated[float, typer.Option(
+        "--flip", help="Lagrangian only: the FLIP fraction in [0, 1] of the points' velocity "
+                       "update (0: APIC, whose transfers damp the flow at every step; "
+                       "ContinuumOptions).")] = 0.0,
+    bed_viscosity: Annotated[float, typer.Option(
+        "--bed-viscosity", help="The bed's Kelvin-Voigt damping on connected material (Pa s, "
+                                ">= 0; 0 = off, the default): the continuum's counterpart of "
+                                "the DEM's contact dashpots, fitted on a DEM of a vibrated "
+                                "strip by benchmarks/strip_damping.py.")] = 0.0,
+    set_: SetOption = None,
+    vtk: Annotated[bool, typer.Option("--vtk", help="Also write ParaView files of the material "
+                                                    "points and the grid fields over the last "
+                                                    "cycle.")] = False,
+    resume: ResumeOption = False,
+    stop_after_steps: Annotated[Optional[int], typer.Option(
+        "--stop-after-steps", help="Write a checkpoint and stop after this many vibration "
+                                   "steps (to split a run; go on with --resume).")] = None,
+) -> None:
+    """Run a continuum model of a tub scenario: --out/summary.json, bulk_velocity.csv."""
+    if method not in FORMULATIONS:
+        *rest, last = FORMULATIONS
+        raise InputError(f"--method = {method!r}: must be {', '.join(rest)} or {last}")
+    if stop_after_steps is not None and stop_after_steps < 0:
+        raise InputError(f"--stop-after-steps = {stop_after_steps}: must be >= 0")
+    s = load(scenario, set_)  # before anything is written: bad input leaves --out untouched
+    from vibroflow.continuum.formulation import formulation
+    from vibroflow.continuum.material import material_for
+    from vibroflow.continuum.mpm.solver import ContinuumBlowUp
+    from vibroflow.continuum.tub_run import run_continuum
+
+    form = formulation(method)
+    cal = None
+    if calibration is not None:
+        from vibroflow.io.calibration_file import read_calibration
+
+        cal = read_calibration(calibration)
+    # an unset --cfl or --transfer-cfl takes the formulation's own default
+    # (Formulation.options), kept in one place; --transfer-cfl 0: one transfer a step
+    step = {} if cfl is None else {"cfl": cfl}
+    if transfer_cfl is not None:
+        if not (math.isfinite(transfer_cfl) and transfer_cfl >= 0):
+            raise InputError(f"--transfer-cfl = {transfer_cfl!r}: must be a Courant number > 0, "
+                             "or 0 for one transfer a step")
+        step["transfer_cfl"] = transfer_cfl
+    options = form.options(dx=dx, model=rheology, dilatancy=dilatancy,
+                           stiffness_factor=stiffness_factor, compaction=compaction, flip=flip,
+                           bed_viscosity=bed_viscosity, damping_length=damping_length, **step)
+    material_for(s, cal, options)  # validates the parameters before --out is made
+    try:
+        summary = run_continuum(s, out, method, calibration=cal, options=options,
+                                progress=True, vtk=vtk, resume=resume,
+                                stop_after_steps=stop_after_steps)
+    except ContinuumBlowUp as exc:
+        blown_up(exc)
+    if summary is None:
+        typer.echo(f"stopped after {stop_after_steps} steps; checkpoint in {out}, go on with "
+                   "--resume")
+        return
+    c = summary["circulation"]
+    typer.echo(f"circulation {c['sense']}, strength {c['strength']:.4g} m^2/s; "
+               f"{summary['n_particles']} points, {summary['wall_time_s']:.1f} s")
+    typer.echo(f"results in {out}")

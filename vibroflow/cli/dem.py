@@ -1,0 +1,32 @@
+"""`vibroflow dem`: the DEM of a scenario.  The solver is imported inside the command, so that
+`--help` stays quick."""
+from __future__ import annotations
+
+from typing import Annotated
+
+import typer
+
+from .apps import app
+from .failures import blown_up, input_errors
+from .options import OutOption, ResumeOption, ScenarioArg, SetOption, load
+
+
+@app.command("dem")
+@input_errors
+def dem(
+    scenario: ScenarioArg,
+    out: OutOption,
+    set_: SetOption = None,
+    vtk: Annotated[bool, typer.Option("--vtk", help="Also write VTK snapshots.")] = False,
+    resume: ResumeOption = False,
+) -> None:
+    """Run the DEM of a scenario (fill, settle, vibrate, average) into --out."""
+    s = load(scenario, set_)  # before anything is written: bad input leaves --out untouched
+    from vibroflow.dem.run import run_dem
+    from vibroflow.dem.simulate import BlowUp
+
+    try:
+        run_dem(s, out_dir=out, vtk=vtk, resume=resume, progress=True)
+    except BlowUp as exc:
+        blown_up(exc)
+    typer.echo(f"results in {out}")

@@ -1,0 +1,43 @@
+"""The options and arguments several commands share, and the scenario they name."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any, Optional
+
+import typer
+
+SCENARIO_HELP = "A preset (tub47, tub47-quick) or a TOML file."
+
+
+def out_option(help: str) -> Any:
+    """--out/-o, the folder a command writes."""
+    return typer.Option("--out", "-o", help=help)
+
+
+def set_option(help: str) -> Any:
+    """The repeatable --set/-s KEY=VALUE (typer wants a list default of None)."""
+    return typer.Option("--set", "-s", metavar="KEY=VALUE", help=help)
+
+
+def shear_cell_option(help: str) -> Any:
+    """--shear-cell: mu(I) and the moduli from DEM shear cells."""
+    return typer.Option("--shear-cell", help=help)
+
+
+ScenarioArg = Annotated[str, typer.Argument(metavar="SCENARIO", help=SCENARIO_HELP)]
+# a study's scenario, optional (default tub47-quick)
+StudyScenarioArg = Annotated[str, typer.Argument(metavar="[SCENARIO]", help=SCENARIO_HELP)]
+SetOption = Annotated[Optional[list[str]], set_option(
+    "Override a scenario field, e.g. --set run.duration=0.2 --set contacts.0.friction=0.3 "
+    "(repeatable; the value is read as TOML).")]
+OutOption = Annotated[Path, out_option("Output folder.")]
+ResumeOption = Annotated[bool, typer.Option("--resume", help="Go on from the last checkpoint "
+                                                             "in --out.")]
+
+
+def load(source: str | Path, overrides: list[str] | None):
+    """The scenario `source` (a preset or a TOML file) with its --set overrides."""
+    # imported here: the scenario's model is heavy, and --help stays quick without it
+    from vibroflow.scenario.io import load_scenario
+
+    return load_scenario(source, overrides or [])

@@ -1,0 +1,57 @@
+"""`vibroflow run`: the whole study of a scenario.  The study's modules are imported inside the
+command, so that `--help` stays quick."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from .apps import app
+from .failures import blown_up, input_errors
+from .options import StudyScenarioArg, load, out_option, set_option, shear_cell_option
+
+
+@app.command("run")
+@input_errors
+def run(
+    scenario: StudyScenarioArg = "tub47-quick",
+    out: Annotated[Path, out_option("Study folder.")] = ...,
+    set_: Annotated[Optional[list[str]], set_option(
+        "Override a scenario field (run.duration=0.2) or set a continuum method's option "
+        "(lagrangian.dx=0.004, lagrangian.model=\"drucker_prager\"); repeatable, the value is "
+        "read as TOML.")] = None,
+    shear_cell: Annotated[bool, shear_cell_option(
+        "Calibrate mu(I) and the moduli in DEM shear-cell tests (minutes) instead of the "
+        "tub's own cells.")] = False,
+) -> None:
+    """DEM, calibration, every continuum formulation and their comparison into --out; a rerun
+    redoes only the stages whose inputs changed (DIR/summary.json, vibroflow.load(DIR))."""
+    from vibroflow.study.folder import check_study_dir
+    from vibroflow.study.pipeline import split_settings
+
+    scenario_sets, method_sets = split_settings(set_)
+    s = load(scenario, scenario_sets)  # before anything is written
+    check_study_dir(out)
+    from vibroflow.continuum.mpm.solver import ContinuumBlowUp
+    from vibroflow.dem.simulate import BlowUp
+    from vibroflow.report.stage import report_stage
+    from vibroflow.study.pipeline import run_study
+
+    try:
+        summary = run_study(s, out, method_sets, shear_cell=shear_cell, progress=True,
+                            echo=typer.echo, extra_stages=[report_stage()])
+    except (BlowUp, ContinuumBlowUp) as exc:
+        blown_up(exc)
+    for name, m in summary["methods"].items():
+        c = m["circulation"]
+        line = (f"{name}: circulation {c['sense']} {c['strength']:.4g} m^2/s, wall time "
+                f"{m['wall_time_s']:.1f} s")
+        a = m.get("against_dem")
+        if a:
+            E = a["field_difference_E"]
+            line += (f", E vs DEM = {E:.3f}" if E is not None else ", E vs DEM: n/a")
+            line += (", circulation " + ("agrees" if a["circulation_agrees"] else "differs")
+                     + f", cost x{a['cost_ratio']:.3g}")
+        typer.echo(line)
+    typer.echo(f"results in {out}/summary.json")
