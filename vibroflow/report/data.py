@@ -19,10 +19,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import h5py
 import numpy as np
 
+from vibroflow.calibration.run_fields import read_fields
+from vibroflow.continuum.shear_outputs import impact_relation
+from vibroflow.dem.walls import KIND_BALL_BALL
 from vibroflow.errors import InputError
 from vibroflow.io.calibration_file import Calibration, read_calibration
+from vibroflow.measure.contacts import mean_by_region
+from vibroflow.measure.stats import batches_of_whole_cycles
+from vibroflow.scenario.io import dump_scenario, parse_scenario
+from vibroflow.study.results import load
+from vibroflow.tub.geometry import geometry_of
 
 DEM = "dem"
 #: impacts a cell needs before its mean impact speed is drawn (a cell mean of fewer is mostly
@@ -57,8 +66,6 @@ def bin_impacts(chunks, cell_size: float) -> ImpactCells:
     (the analysis cells of tub47.md "Bulk velocity"), from an iterable of (position_tub (M, 3)
     m, normal_speed (M,) m/s) chunks of impacts (a tub47 run holds tens of millions: they are
     never all in memory).  The per-chunk means are vibroflow.measure.contacts.mean_by_region."""
-    from vibroflow.measure.contacts import mean_by_region
-
     h = float(cell_size)
     acc: dict[tuple[int, int], list[float]] = {}
     for pos, speed in chunks:
@@ -145,8 +152,6 @@ class StudyData:
 
     @property
     def geometry(self):
-        from vibroflow.tub.geometry import geometry_of
-
         return geometry_of(self.scenario)
 
     @property
@@ -162,8 +167,6 @@ class StudyData:
     def read(cls, out) -> "StudyData":
         """Read the study in `out` (InputError, one line, for a missing, foreign, corrupt or
         unfinished folder)."""
-        from vibroflow.study.results import load
-
         out = Path(out)
         loaded = load(out)  # validates DIR (study.folder.check_study_dir) and every method's
         # bulk velocity table
@@ -206,8 +209,6 @@ class StudyData:
         that the continuum runs use (continuum.shear_outputs.impact_relation: the one fitted on the
         continuum's measure of the shear rate when the calibration has it), or None when the
         calibration has none with finite coefficients."""
-        from vibroflow.continuum.shear_outputs import impact_relation
-
         impacts = self.calibration.impacts if self.calibration is not None else None
         c0, c1, which = impact_relation(getattr(impacts, kind) if impacts is not None else None)
         if c0 is None:
@@ -300,7 +301,6 @@ def _optional(path: Path, read, notes: dict[str, str], key: str, missing: str):
 
 def _read_dem_fields(path: Path):
     # imported here: xarray is slow to import, and a study without fields.nc reads none
-    from vibroflow.calibration.run_fields import read_fields
 
     return read_fields(path)
 
@@ -308,12 +308,8 @@ def _read_dem_fields(path: Path):
 def _scenario(out: Path):
     """The study's scenario and its TOML text (as `vibroflow scenario show` prints it): dem.h5's
     scenario_toml attribute, else the DEM stage record's inputs."""
-    from vibroflow.scenario.io import dump_scenario, parse_scenario
-
     h5 = out / DEM / "dem.h5"
     if h5.is_file():
-        import h5py
-
         try:
             with h5py.File(h5, "r") as f:
                 text = f.attrs.get("scenario_toml")
@@ -337,10 +333,6 @@ def _dem_impacts(h5: Path, scenario, chunk: int = 2_000_000):
     summary averages: vibroflow.measure.stats.batches_of_whole_cycles) by analysis cell."""
     if not h5.is_file():
         return None, f"no {DEM}/dem.h5: no measured impacts"
-    import h5py
-
-    from vibroflow.measure.stats import batches_of_whole_cycles
-    from vibroflow.dem.walls import KIND_BALL_BALL
 
     run = scenario.run
     t0, t1 = run.duration - run.average_last, run.duration

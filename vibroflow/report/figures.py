@@ -14,6 +14,9 @@ import io
 import math
 
 import numpy as np
+from matplotlib.collections import PatchCollection
+from matplotlib.colors import LogNorm, Normalize, PowerNorm
+from matplotlib.patches import Rectangle
 
 from vibroflow.report.data import MIN_IMPACTS_PER_CELL, StudyData, mean_flow_shear_rate
 
@@ -21,9 +24,12 @@ DPI = 90
 
 
 def _plt():
-    import matplotlib
+    """pyplot on the Agg backend (files, no display).  Imported here, not at the top: the
+    backend is chosen before pyplot loads, and only when a picture is drawn, so importing
+    vibroflow never changes the backend of the caller's own plots."""
+    import matplotlib  # noqa: PLC0415
     matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # noqa: PLC0415
     return plt
 
 
@@ -93,8 +99,6 @@ def velocity_fields(data: StudyData) -> bytes:
     |v| in colour (one square-root scale for all methods: the fast surface layer would
     otherwise leave the slow bulk in one colour), on the cells holding bed (solid fraction >=
     half the analysis' min_solid_fraction)."""
-    from matplotlib.colors import PowerNorm
-
     names = data.methods
     fig, axes = _panels(len(names))
     top = _bed_top(data)
@@ -131,9 +135,6 @@ def velocity_fields(data: StudyData) -> bytes:
 
 def _cell_squares(ax, data: StudyData, values: dict, norm, cmap):
     """Colour the probe cells by values (probe name -> value); returns the mappable."""
-    from matplotlib.collections import PatchCollection
-    from matplotlib.patches import Rectangle
-
     h = float(data.scenario.analysis.cell_size)
     patches, vals = [], []
     for name, p in data.scenario.analysis.probes.items():
@@ -161,8 +162,6 @@ def _continuum_map(ax, data: StudyData, grid_map, cells: dict, norm, cmap, mappa
 
 
 def _log_norm(values):
-    from matplotlib.colors import LogNorm
-
     v = np.concatenate([np.ravel(np.asarray(a, dtype=float)) for a in values] or [np.zeros(0)])
     v = v[np.isfinite(v) & (v > 0)]
     if v.size == 0:
@@ -268,8 +267,6 @@ def impact_maps(data: StudyData) -> bytes:
     """Mean ball-ball normal impact speed: the DEM's measured impacts of the averaging window by
     cell (cells with at least MIN_IMPACTS_PER_CELL impacts), against each continuum method's
     inference in the probe cells, on one colour scale."""
-    from matplotlib.colors import Normalize
-
     names = data.methods
     fig, axes = _panels(len(names))
     top = _bed_top(data)

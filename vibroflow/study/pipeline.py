@@ -17,10 +17,12 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from vibroflow import __version__
 from vibroflow.errors import CheckpointRefused, InputError, Interrupted
 from vibroflow.io.folder_lock import folder_lock
 from vibroflow.study.folder import KIND, STUDY_FILE, check_study_dir, read_json
 from vibroflow.study.methods import METHODS, method
+from vibroflow.study.results import read_summary
 from vibroflow.study.stages import Stage, Study, stages_of, write_json_atomic
 
 STAGE_FILE = "stage.json"
@@ -50,8 +52,6 @@ def split_settings(settings: list[str] | None) -> tuple[list[str], dict[str, dic
 
 def stage_hash(stage: Stage, study: Study, hashes: dict[str, str]) -> str:
     """The hash of a stage's inputs, its upstream stages' hashes and the vibroflow version."""
-    from vibroflow import __version__
-
     text = json.dumps({"stage": stage.name, "inputs": stage.inputs(study),
                        "upstream": {u: hashes[u] for u in stage.upstream},
                        "vibroflow_version": __version__}, sort_keys=True, default=str)
@@ -79,8 +79,6 @@ def _previous_wall(study: Study, stage: Stage) -> float | None:
 
 
 def _run_stage(study: Study, stage: Stage, h: str) -> dict:
-    from vibroflow import __version__
-
     folder = study.folder(stage.name)
     pending = folder / PENDING_FILE
     resume = pending.exists() and read_json(pending, "stage record").get("hash") == h
@@ -163,8 +161,6 @@ def run_study(scenario, out: Path, settings: dict[str, dict[str, Any]] | None = 
 
 def _run_study(scenario, out: Path, methods: list, shear_cell: bool, progress: bool,
                echo: Callable[[str], None] | None, extra_stages: Sequence[Stage]) -> dict:
-    from vibroflow import __version__
-
     out.mkdir(parents=True, exist_ok=True)
     if not (out / STUDY_FILE).exists():
         write_json_atomic(out / STUDY_FILE, {"kind": KIND, "vibroflow_version": __version__,
@@ -198,6 +194,5 @@ def _run_study(scenario, out: Path, methods: list, shear_cell: bool, progress: b
         left = scale * sum(estimates[s.name] for s in stages[i:] if kept[s.name] is None)
         if echo is not None:
             echo(f"[{i}/{n}] {stage.name:<12} {what}; time left ~ {format_duration(left)}")
-    from vibroflow.study.results import read_summary
 
     return read_summary(out)

@@ -86,10 +86,12 @@ def _finish(plt, fig, legend_ax, series, path: Path) -> None:
 
 def write_plots(folder: Path, rows: list[dict[str, Any]], varied: list[str]) -> list[str]:
     """The four pictures in `folder` (made if missing); returns their file names."""
-    import matplotlib
+    # pyplot on Agg (files, no display), chosen when a picture is drawn: importing vibroflow
+    # never changes the backend of the caller's own plots
+    import matplotlib  # noqa: PLC0415
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # noqa: PLC0415
 
     folder.mkdir(parents=True, exist_ok=True)
     series = _series(rows, varied)
