@@ -32,6 +32,25 @@ def mu_phi_keys(mu: dict, phi: dict) -> dict:
     return out
 
 
+def _friction_keys(w: dict, measures, **text) -> dict:
+    """The keys of a wall's friction (a wall_friction table w): its effective friction and
+    standard error, the text keys given, the named measures (floats) and the contact count."""
+    return {"friction": toml_float(w["effective_friction"]),
+            "friction_stderr": toml_float(w["effective_friction_stderr"]), **text,
+            **{k: toml_float(w[k]) for k in measures}, "contacts": int(w["count"])}
+
+
+def _speed_fit_keys(g: dict, tag: str, points_key: str) -> dict:
+    """The keys of an impact speed's fit v = c0 + c1 d gamma_dot (impacts.py's fit g): c0 (m/s)
+    and c1 with their standard errors, r^2, the relative rms error (tag after each name) and
+    the number of points fitted (points_key)."""
+    return {f"c0{tag}_m_s": toml_float(g["c0"]), f"c0{tag}_stderr_m_s": toml_float(g["c0_stderr"]),
+            f"c1{tag}": toml_float(g["c1"]), f"c1{tag}_stderr": toml_float(g["c1_stderr"]),
+            f"r2{tag}": toml_float(g["r2"]),
+            f"relative_rms_error{tag}": toml_float(g["relative_rms_error"]),
+            points_key: int(g["points"])}
+
+
 def calibration_tables(res, cg_info, wf, rel, rheo, elastic, dp, p_bed, phi_bed, z, d, rho_s,
                        gam_ref, shear_cell, kernel, width, avg) -> dict:
     """The tables of calibration.toml (what `Calibration.from_dict` takes) from the stages'
@@ -82,19 +101,10 @@ def calibration_tables(res, cg_info, wf, rel, rheo, elastic, dp, p_bed, phi_bed,
         },
         "drucker_prager": {k: (v if isinstance(v, str) else toml_float(v)) for k, v in dp.items()},
         "wall": {
-            "friction": toml_float(tw["effective_friction"]),
-            "friction_stderr": toml_float(tw["effective_friction_stderr"]),
-            "choice": tw["choice"],
-            "contact_friction": toml_float(tw["contact_friction"]),
-            "mean_ft_over_fn": toml_float(tw["mean_ft_over_fn"]),
-            "mean_ft_over_fn_stderr": toml_float(tw["mean_ft_over_fn_stderr"]),
-            "ratio_of_sums": toml_float(tw["ratio_of_sums"]),
-            "sliding_fraction": toml_float(tw["sliding_fraction"]),
-            "sliding_fraction_stderr": toml_float(tw["sliding_fraction_stderr"]),
-            "rolling_or_sticking_fraction": toml_float(tw["rolling_or_sticking_fraction"]),
-            "coherent_slip_friction": toml_float(tw["coherent_slip_friction"]),
-            "coherent_slip_friction_stderr": toml_float(tw["coherent_slip_friction_stderr"]),
-            "contacts": int(tw["count"]),
+            **_friction_keys(tw, ("contact_friction", "mean_ft_over_fn", "mean_ft_over_fn_stderr",
+                                  "ratio_of_sums", "sliding_fraction", "sliding_fraction_stderr",
+                                  "rolling_or_sticking_fraction", "coherent_slip_friction",
+                                  "coherent_slip_friction_stderr"), choice=tw["choice"]),
             "dem_normal_stiffness_N_m": toml_float(wall_pair.k_n) if wall_pair.model == "linear"
             else float("nan"),
         },
@@ -104,12 +114,7 @@ def calibration_tables(res, cg_info, wf, rel, rheo, elastic, dp, p_bed, phi_bed,
     pw = wf["partitions"]
     if pw is not None:
         cal["partitions"] = {
-            "friction": toml_float(pw["effective_friction"]),
-            "friction_stderr": toml_float(pw["effective_friction_stderr"]),
-            "contact_friction": toml_float(pw["contact_friction"]),
-            "mean_ft_over_fn": toml_float(pw["mean_ft_over_fn"]),
-            "sliding_fraction": toml_float(pw["sliding_fraction"]),
-            "contacts": int(pw["count"]),
+            **_friction_keys(pw, ("contact_friction", "mean_ft_over_fn", "sliding_fraction")),
             "body_force": "-2 friction p / L_y along the velocity (Jop, Forterre & Pouliquen "
                           "2005)",
             "spacing_m": toml_float(sc.tub.length)}
@@ -120,10 +125,7 @@ def calibration_tables(res, cg_info, wf, rel, rheo, elastic, dp, p_bed, phi_bed,
         g, t = r["fit_shear_rate"], r["fit_temperature"]
         cal["impacts"][name] = {
             "count": int(r["count"]), "mean_normal_speed_m_s": toml_float(r["mean_normal_speed"]),
-            "c0_m_s": toml_float(g["c0"]), "c0_stderr_m_s": toml_float(g["c0_stderr"]),
-            "c1": toml_float(g["c1"]), "c1_stderr": toml_float(g["c1_stderr"]),
-            "r2": toml_float(g["r2"]), "relative_rms_error": toml_float(g["relative_rms_error"]),
-            "cells": int(g["points"]),
+            **_speed_fit_keys(g, "", "cells"),
             "a_temperature": toml_float(t["c1"]),
             "a_temperature_stderr": toml_float(t["c1_stderr"]),
             "r2_temperature": toml_float(t["r2"]), "a_maxwellian": toml_float(t["maxwell"]),
@@ -135,13 +137,7 @@ def calibration_tables(res, cg_info, wf, rel, rheo, elastic, dp, p_bed, phi_bed,
             continue
         # the same relation fitted on the continuum's measure of the shear rate
         # (impacts.impact_relations_on_cells): what a continuum run uses
-        cal["impacts"][name].update({
-            "c0_cells_m_s": toml_float(g["c0"]),
-            "c0_cells_stderr_m_s": toml_float(g["c0_stderr"]),
-            "c1_cells": toml_float(g["c1"]), "c1_cells_stderr": toml_float(g["c1_stderr"]),
-            "r2_cells": toml_float(g["r2"]),
-            "relative_rms_error_cells": toml_float(g["relative_rms_error"]),
-            "points_cells": int(g["points"])})
+        cal["impacts"][name].update(_speed_fit_keys(g, "_cells", "points_cells"))
     if rel_cells:
         cal["impacts"].update({
             "cells_shear_rate_model": (

@@ -39,6 +39,7 @@ B_RHO, B_VOL, B_DRHO = 0, 1, 2               # rho; volume; d rho / dx, dz  (2)
 B_P = 4                                      # momentum x, y, z  (3)
 B_DP = 7                                     # d P_a / d x_b: 7 + 2 a + b, b = 0 (x), 1 (z)  (6)
 B_K = 13                                     # K xx yy zz xy xz yz  (6)
+K_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))  # the axes of B_K + q
 N_BALL_Q = 19
 N_CONTACT_Q = 9                              # sigma_c ab, 3 a + b
 
@@ -62,6 +63,17 @@ def _w_and_grad(dx, dz, kind, amp, inv2w2, shift, rc):
     return amp * (1.0 + 3.0 * s) * om * om * om, g * dx, g * dz
 
 
+@nb.njit(cache=True, inline="always")
+def _cells_within(x, z, rc, x0, z0, h, nx, nz):
+    """(a0, a1, b0, b1): the first and last cells along x and z of the grid (cell (a, b) centred
+    at (x0 + a h, z0 + b h), nx by nz) whose centres lie within rc (m) of (x, z) along each axis
+    (a0 > a1 or b0 > b1: none)."""
+    return (max(int(math.ceil((x - rc - x0) / h)), 0),
+            min(int(math.floor((x + rc - x0) / h)), nx - 1),
+            max(int(math.ceil((z - rc - z0) / h)), 0),
+            min(int(math.floor((z + rc - z0) / h)), nz - 1))
+
+
 @nb.njit(cache=True)
 def deposit_balls(px, pz, mass, volume, vel, factor, x0, z0, h, nx, nz, kind, amp, inv2w2,
                   shift, rc, out):
@@ -75,17 +87,12 @@ def deposit_balls(px, pz, mass, volume, vel, factor, x0, z0, h, nx, nz, kind, am
     for p in range(n):
         x = px[p]
         z = pz[p]
-        a0 = max(int(math.ceil((x - rc - x0) / h)), 0)
-        a1 = min(int(math.floor((x + rc - x0) / h)), nx - 1)
-        b0 = max(int(math.ceil((z - rc - z0) / h)), 0)
-        b1 = min(int(math.floor((z + rc - z0) / h)), nz - 1)
+        a0, a1, b0, b1 = _cells_within(x, z, rc, x0, z0, h, nx, nz)
         if a0 > a1 or b0 > b1:
             continue
         m = mass[p] * factor
         vo = volume[p] * factor
-        vx = vel[p, 0]
-        vy = vel[p, 1]
-        vz = vel[p, 2]
+        v = (vel[p, 0], vel[p, 1], vel[p, 2])
         for a in range(a0, a1 + 1):
             dx = x0 + a * h - x
             for b in range(b0, b1 + 1):
@@ -94,25 +101,18 @@ def deposit_balls(px, pz, mass, volume, vel, factor, x0, z0, h, nx, nz, kind, am
                 if w == 0.0 and gx == 0.0 and gz == 0.0:
                     continue
                 mw = m * w
-                out[0, a, b] += mw
-                out[1, a, b] += vo * w
-                out[2, a, b] += m * gx
-                out[3, a, b] += m * gz
-                out[4, a, b] += mw * vx
-                out[5, a, b] += mw * vy
-                out[6, a, b] += mw * vz
-                out[7, a, b] += m * vx * gx
-                out[8, a, b] += m * vx * gz
-                out[9, a, b] += m * vy * gx
-                out[10, a, b] += m * vy * gz
-                out[11, a, b] += m * vz * gx
-                out[12, a, b] += m * vz * gz
-                out[13, a, b] += mw * vx * vx
-                out[14, a, b] += mw * vy * vy
-                out[15, a, b] += mw * vz * vz
-                out[16, a, b] += mw * vx * vy
-                out[17, a, b] += mw * vx * vz
-                out[18, a, b] += mw * vy * vz
+                out[B_RHO, a, b] += mw
+                out[B_VOL, a, b] += vo * w
+                out[B_DRHO, a, b] += m * gx
+                out[B_DRHO + 1, a, b] += m * gz
+                for c in range(3):
+                    mv = m * v[c]
+                    out[B_P + c, a, b] += mw * v[c]
+                    out[B_DP + 2 * c, a, b] += mv * gx
+                    out[B_DP + 2 * c + 1, a, b] += mv * gz
+                for q in range(6):
+                    c, e = K_PAIRS[q]
+                    out[B_K + q, a, b] += mw * v[c] * v[e]
 
 
 @nb.njit(cache=True)
@@ -136,10 +136,7 @@ def deposit_contacts(start, branch, force, s_nodes, s_weights, factor, x0, z0, h
             x = start[c, 0] - s_nodes[q] * branch[c, 0]
             z = start[c, 2] - s_nodes[q] * branch[c, 2]
             wq = s_weights[q]
-            a0 = max(int(math.ceil((x - rc - x0) / h)), 0)
-            a1 = min(int(math.floor((x + rc - x0) / h)), nx - 1)
-            b0 = max(int(math.ceil((z - rc - z0) / h)), 0)
-            b1 = min(int(math.floor((z + rc - z0) / h)), nz - 1)
+            a0, a1, b0, b1 = _cells_within(x, z, rc, x0, z0, h, nx, nz)
             for a in range(a0, a1 + 1):
                 dx = x0 + a * h - x
                 for b in range(b0, b1 + 1):

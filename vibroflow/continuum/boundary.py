@@ -93,6 +93,27 @@ def _penalty(gap, nx, nz, vrx, vrz, mass, volume, xi, kn, kt, zeta, mu, dt):
     return fn * nx + ft * tx, fn * nz + ft * tz, fn, ft, xi, state
 
 
+@nb.njit(cache=True, inline="always")
+def _contact(p, gap, nx, nz, vrx, vrz, mass, volume, xi, fext, f_out, fn_out, ft_out,
+             state_out, kn, kt, zeta, mu, dt):
+    """Point p's penalty contact with a wall at gap (m) along the unit normal (nx, nz), its
+    velocity relative to the wall (vrx, vrz) (m/s): its force added to fext, its history xi
+    and the outputs f_out, fn_out, ft_out, state_out written (`u_wall_forces`).  Returns 1
+    when the point has gone through the wall (centre beyond it by more than its side), else 0."""
+    deep = 1 if gap < -np.sqrt(volume[p]) else 0
+    fx, fz, fn, ft, xn, st = _penalty(gap, nx, nz, vrx, vrz, mass[p], volume[p], xi[p], kn, kt,
+                                      zeta, mu, dt)
+    fext[p, 0] += fx
+    fext[p, 1] += fz
+    f_out[p, 0] = fx
+    f_out[p, 1] = fz
+    xi[p] = xn
+    fn_out[p] = fn
+    ft_out[p] = ft
+    state_out[p] = st
+    return deep
+
+
 @nb.njit(cache=True)
 def u_wall_forces(x, v, mass, volume, xi, fext, f_out, fn_out, ft_out, state_out, radius, kn,
                   kt, zeta, mu, dt):
@@ -104,18 +125,8 @@ def u_wall_forces(x, v, mass, volume, xi, fext, f_out, fn_out, ft_out, state_out
     deep = 0
     for p in range(x.shape[0]):
         gap, nx, nz, cx, cz, s = u_wall_nearest(x[p, 0], x[p, 1], radius)
-        if gap < -np.sqrt(volume[p]):
-            deep += 1
-        fx, fz, fn, ft, xn, st = _penalty(gap, nx, nz, v[p, 0], v[p, 1], mass[p], volume[p],
-                                          xi[p], kn, kt, zeta, mu, dt)
-        fext[p, 0] += fx
-        fext[p, 1] += fz
-        f_out[p, 0] = fx
-        f_out[p, 1] = fz
-        xi[p] = xn
-        fn_out[p] = fn
-        ft_out[p] = ft
-        state_out[p] = st
+        deep += _contact(p, gap, nx, nz, v[p, 0], v[p, 1], mass, volume, xi, fext, f_out,
+                         fn_out, ft_out, state_out, kn, kt, zeta, mu, dt)
     return deep
 
 
@@ -136,18 +147,8 @@ def plane_forces(x, v, mass, volume, xi, fext, f_out, fn_out, ft_out, state_out,
     deep = 0
     for p in range(x.shape[0]):
         gap = (x[p, 0] - px) * nx + (x[p, 1] - pz) * nz
-        if gap < -np.sqrt(volume[p]):
-            deep += 1
-        fx, fz, fn, ft, xn, st = _penalty(gap, nx, nz, v[p, 0] - wvx, v[p, 1] - wvz, mass[p],
-                                          volume[p], xi[p], kn, kt, zeta, mu, dt)
-        fext[p, 0] += fx
-        fext[p, 1] += fz
-        f_out[p, 0] = fx
-        f_out[p, 1] = fz
-        xi[p] = xn
-        fn_out[p] = fn
-        ft_out[p] = ft
-        state_out[p] = st
+        deep += _contact(p, gap, nx, nz, v[p, 0] - wvx, v[p, 1] - wvz, mass, volume, xi, fext,
+                         f_out, fn_out, ft_out, state_out, kn, kt, zeta, mu, dt)
     return deep
 
 

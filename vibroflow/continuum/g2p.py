@@ -12,6 +12,23 @@ import numba as nb
 from .stencil import bspline_weights, gather_old_velocity, gather_point
 
 
+@nb.njit(cache=True, inline="always")
+def store_gather(p, vx, vz, g, v, C, L):
+    """Row p of v (N, 2) (m/s), C and L (N, 4 or 5) (1/s) from one point's gather: its new
+    velocity (vx, vz) (m/s) and the affine matrix and velocity gradient of its
+    stencil.gather_point tuple g."""
+    v[p, 0] = vx
+    v[p, 1] = vz
+    C[p, 0] = g[2]
+    C[p, 1] = g[3]
+    C[p, 2] = g[4]
+    C[p, 3] = g[5]
+    L[p, 0] = g[6]
+    L[p, 1] = g[7]
+    L[p, 2] = g[8]
+    L[p, 3] = g[9]
+
+
 @nb.njit(cache=True)
 def g2p(x, v, C, L, gv, x0, z0, dx, dt, periodic, gm, gmv, flip):
     """Gather the grid velocity gv (nx, nz, 2) (m/s) to the points: v (N, 2) m/s, C (N, 4) and
@@ -25,25 +42,18 @@ def g2p(x, v, C, L, gv, x0, z0, dx, dt, periodic, gm, gmv, flip):
     for p in range(x.shape[0]):
         wx = bspline_weights(x[p, 0], x0, dx)
         wz = bspline_weights(x[p, 1], z0, dx)
-        vx, vz, cxx, cxz, czx, czz, lxx, lxz, lzx, lzz = gather_point(wx, wz, dx, periodic,
-                                                                      gv)
+        g = gather_point(wx, wz, dx, periodic, gv)
+        vx = g[0]
+        vz = g[1]
+        ux = vx
+        uz = vz
         if flip > 0.0:
             # FLIP-APIC blend: the point keeps the part of its own velocity that the grid's
             # old velocity did not hold, a fraction `flip` of it
             ox, oz = gather_old_velocity(wx, wz, periodic, gm, gmv)
-            v[p, 0] = vx + flip * (v[p, 0] - ox)
-            v[p, 1] = vz + flip * (v[p, 1] - oz)
-        else:
-            v[p, 0] = vx
-            v[p, 1] = vz
-        C[p, 0] = cxx
-        C[p, 1] = cxz
-        C[p, 2] = czx
-        C[p, 3] = czz
-        L[p, 0] = lxx
-        L[p, 1] = lxz
-        L[p, 2] = lzx
-        L[p, 3] = lzz
+            ux = vx + flip * (v[p, 0] - ox)
+            uz = vz + flip * (v[p, 1] - oz)
+        store_gather(p, ux, uz, g, v, C, L)
         if L.shape[1] > 4:
             L[p, 4] = vx / x[p, 0]
         x[p, 0] += dt * vx

@@ -106,6 +106,20 @@ class TubFrame:
         return float(X), float(Z), float(th), float(Xd), float(Zd), float(thd)
 
 
+@nb.njit(cache=True, inline="always")
+def idle_node(gm, i, k, periodic, out):
+    """Whether node (i, k) of the grid of masses gm (nx, nz) (kg/m) gets no velocity: it holds
+    no mass (<= MASS_EPS) or lies on the grid's edge (no edge along x when periodic); then its
+    velocity out[i, k] (nx, nz, 2) (m/s) is set to 0."""
+    nx, nz = gm.shape
+    edge = k < 1 or k >= nz - 1 or (not periodic and (i < 1 or i >= nx - 1))
+    if gm[i, k] <= MASS_EPS or edge:
+        out[i, k, 0] = 0.0
+        out[i, k, 1] = 0.0
+        return True
+    return False
+
+
 @nb.njit(cache=True)
 def grid_update(gm, gmv, gf, gv, x0, z0, dx, dt, a0x, a0z, w, alpha, pivx, pivz, periodic):
     """New grid velocities gv (nx, nz, 2) (m/s) from masses gm (kg/m), momenta gmv (kg/s) and
@@ -115,12 +129,9 @@ def grid_update(gm, gmv, gf, gv, x0, z0, dx, dt, a0x, a0z, w, alpha, pivx, pivz,
     nx, nz = gm.shape
     for i in range(nx):
         for k in range(nz):
-            m = gm[i, k]
-            edge = k < 1 or k >= nz - 1 or (not periodic and (i < 1 or i >= nx - 1))
-            if m <= MASS_EPS or edge:
-                gv[i, k, 0] = 0.0
-                gv[i, k, 1] = 0.0
+            if idle_node(gm, i, k, periodic, gv):
                 continue
+            m = gm[i, k]
             vx = gmv[i, k, 0] / m
             vz = gmv[i, k, 1] / m
             qx = x0 + i * dx - pivx

@@ -19,10 +19,12 @@ Eulerian mesh reads them from constant tables of its fixed cells (eulerian/trans
 call these functions, so they give the same numbers bit for bit.
 
 A point's weights travel as the tuple `bspline_weights` returns, (base, fx, w0, w1, w2, g0, g1,
-g2), one per axis; the weights are picked by selects rather than small arrays so that they stay
-in registers.  The weights and the scatter are inlined into their callers by numba
-(inline="always"); the gathers are left to LLVM's inliner, which compiles the Eulerian cells'
-gather a third faster than numba's inlining does (benchmarks/continuum_speed.py --kernels).
+g2), one per axis; `axis_node` gives every loop over the stencil its nodes along each axis
+(index, offset, weight and derivative), the weights picked by selects rather than small arrays
+so that they stay in registers.  The weights, the node and the scatter are inlined into their
+callers by numba (inline="always"); the gathers are left to LLVM's inliner, which compiles
+the Eulerian cells' gather a third faster than numba's inlining does
+(benchmarks/continuum_speed.py --kernels).
 """
 from __future__ import annotations
 
@@ -50,6 +52,20 @@ def bspline_weights(xp, x0, dx):
 
 
 @nb.njit(cache=True, inline="always")
+def axis_node(w, a, dx, periodic, n):
+    """Node a (0, 1, 2) of a point's stencil along one axis, from its `bspline_weights` w on
+    an axis of spacing dx (m) and n nodes (wrapped around when periodic): the node's index, its
+    offset (a - fx) dx (m) from the point, its weight and the weight's derivative (1/m).  A
+    node's weight w_ip is the product of its two axes' weights, its gradient (g_a w_b, w_a g_b)."""
+    base, fx, w0, w1, w2, g0, g1, g2 = w
+    i = base + a
+    if periodic:
+        i = i % n
+    return (i, (a - fx) * dx, w0 if a == 0 else (w1 if a == 1 else w2),
+            g0 if a == 0 else (g1 if a == 1 else g2))
+
+
+@nb.njit(cache=True, inline="always")
 def scatter_point(wx, wz, dx, periodic, m, vol, sxx, szz, sxz, vx, vz, cxx, cxz, czx, czz,
                   fex, fez, gm, gmv, gf):
     """Add one point's APIC mass, momentum and force to the grid (module docstring).
@@ -60,24 +76,12 @@ def scatter_point(wx, wz, dx, periodic, m, vol, sxx, szz, sxz, vx, vz, cxx, cxz,
     point force fex, fez (N/m) are passed as numbers: the compiler cannot tell that the grid
     arrays gm (nx, nz), gmv, gf (nx, nz, 2) written here do not alias the point's arrays, and
     would load them again for every node."""
-    bx, fx, wx0, wx1, wx2, gx0, gx1, gx2 = wx
-    bz, fz, wz0, wz1, wz2, gz0, gz1, gz2 = wz
     nxg = gm.shape[0]
     for a in range(3):
-        rx = (a - fx) * dx
-        wa = wx0 if a == 0 else (wx1 if a == 1 else wx2)
-        ga = gx0 if a == 0 else (gx1 if a == 1 else gx2)
-        i = bx + a
-        if periodic:
-            i = i % nxg
+        i, rx, wa, ga = axis_node(wx, a, dx, periodic, nxg)
         for b in range(3):
-            rz = (b - fz) * dx
-            wb = wz0 if b == 0 else (wz1 if b == 1 else wz2)
-            gb = gz0 if b == 0 else (gz1 if b == 1 else gz2)
-            w = wa * wb
-            gwx = ga * wb
-            gwz = wa * gb
-            k = bz + b
+            k, rz, wb, gb = axis_node(wz, b, dx, False, 0)
+            w, gwx, gwz = wa * wb, ga * wb, wa * gb
             gm[i, k] += w * m
             gmv[i, k, 0] += w * m * (vx + cxx * rx + cxz * rz)
             gmv[i, k, 1] += w * m * (vz + czx * rx + czz * rz)
@@ -90,8 +94,6 @@ def gather_point(wx, wz, dx, periodic, gv):
     """One point's APIC gather from the grid velocity gv (nx, nz, 2) (m/s; module docstring):
     (vx, vz) m/s, the affine matrix (cxx, cxz, czx, czz) and the velocity gradient
     (lxx, lxz, lzx, lzz) 1/s.  wx, wz, dx, periodic as `scatter_point`'s."""
-    bx, fx, wx0, wx1, wx2, gx0, gx1, gx2 = wx
-    bz, fz, wz0, wz1, wz2, gz0, gz1, gz2 = wz
     nxg = gv.shape[0]
     vx = 0.0
     vz = 0.0
@@ -104,21 +106,12 @@ def gather_point(wx, wz, dx, periodic, gv):
     lzx = 0.0
     lzz = 0.0
     for a in range(3):
-        rx = (a - fx) * dx
-        wa = wx0 if a == 0 else (wx1 if a == 1 else wx2)
-        ga = gx0 if a == 0 else (gx1 if a == 1 else gx2)
-        i = bx + a
-        if periodic:
-            i = i % nxg
+        i, rx, wa, ga = axis_node(wx, a, dx, periodic, nxg)
         for b in range(3):
-            rz = (b - fz) * dx
-            wb = wz0 if b == 0 else (wz1 if b == 1 else wz2)
-            gb = gz0 if b == 0 else (gz1 if b == 1 else gz2)
-            w = wa * wb
-            gwx = ga * wb
-            gwz = wa * gb
-            ux = gv[i, bz + b, 0]
-            uz = gv[i, bz + b, 1]
+            k, rz, wb, gb = axis_node(wz, b, dx, False, 0)
+            w, gwx, gwz = wa * wb, ga * wb, wa * gb
+            ux = gv[i, k, 0]
+            uz = gv[i, k, 1]
             vx += w * ux
             vz += w * uz
             cxx += w * ux * rx
@@ -137,21 +130,16 @@ def gather_point(wx, wz, dx, periodic, gv):
 def gather_old_velocity(wx, wz, periodic, gm, gmv):
     """sum_i w_ip gmv_i / gm_i over the point's nodes holding mass (m/s): the grid's velocity
     before the update at the point, from its mass gm (nx, nz) and momentum gmv (nx, nz, 2)."""
-    bx, _, wx0, wx1, wx2, _, _, _ = wx
-    bz, _, wz0, wz1, wz2, _, _, _ = wz
     nxg = gm.shape[0]
     ox = 0.0
     oz = 0.0
     for a in range(3):
-        wa = wx0 if a == 0 else (wx1 if a == 1 else wx2)
-        i = bx + a
-        if periodic:
-            i = i % nxg
+        i, _, wa, _ = axis_node(wx, a, 0.0, periodic, nxg)
         for b in range(3):
-            wb = wz0 if b == 0 else (wz1 if b == 1 else wz2)
+            k, _, wb, _ = axis_node(wz, b, 0.0, False, 0)
             w = wa * wb
-            mi = gm[i, bz + b]
+            mi = gm[i, k]
             if mi > 0.0:
-                ox += w * gmv[i, bz + b, 0] / mi
-                oz += w * gmv[i, bz + b, 1] / mi
+                ox += w * gmv[i, k, 0] / mi
+                oz += w * gmv[i, k, 1] / mi
     return ox, oz

@@ -38,8 +38,8 @@ from __future__ import annotations
 
 import numba as nb
 
+from .grid_update import idle_node
 from .stencil import bspline_weights
-from .grid_update import MASS_EPS
 
 
 @nb.njit(cache=True)
@@ -113,12 +113,9 @@ def transfer_rows(i0, i1, B, gm, gv, out, periodic, no_slip_rows, axis_cols):
     nx, nz = gm.shape
     for i in range(i0, i1):
         for k in range(nz):
-            m = gm[i, k]
-            edge = k < 1 or k >= nz - 1 or (not periodic and (i < 1 or i >= nx - 1))
-            if m <= MASS_EPS or edge:
-                out[i, k, 0] = 0.0
-                out[i, k, 1] = 0.0
+            if idle_node(gm, i, k, periodic, out):
                 continue
+            m = gm[i, k]
             sx = 0.0
             sz = 0.0
             if 2 <= i < nx - 2 and 2 <= k < nz - 2:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numba as nb
 
+from ..stencil import axis_node
 from .transfer import table_row
 
 
@@ -19,17 +20,14 @@ def _interp(gv, tx, ix, tz, kz, periodic, comp):
     """Component comp of the node velocities gv (nx, nz, 2) at the point whose B-spline
     weights are rows tx[ix] and tz[kz] of transfer.weight_table tables."""
     nxg = gv.shape[0]
-    bx, _, wx0, wx1, wx2, _, _, _ = table_row(tx, ix)
-    bz, _, wz0, wz1, wz2, _, _, _ = table_row(tz, kz)
+    wx = table_row(tx, ix)
+    wz = table_row(tz, kz)
     s = 0.0
     for a in range(3):
-        wa = wx0 if a == 0 else (wx1 if a == 1 else wx2)
-        i = bx + a
-        if periodic:
-            i = i % nxg
+        i, _, wa, _ = axis_node(wx, a, 0.0, periodic, nxg)
         for b in range(3):
-            wb = wz0 if b == 0 else (wz1 if b == 1 else wz2)
-            s += wa * wb * gv[i, bz + b, comp]
+            k, _, wb, _ = axis_node(wz, b, 0.0, False, 0)
+            s += wa * wb * gv[i, k, comp]
     return s
 
 

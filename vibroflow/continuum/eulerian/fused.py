@@ -166,7 +166,7 @@ def _make_advance_kernel(parallel: bool):
             for c in nb.prange(nchunk):
                 update_stress_cells((c * n) // nchunk, ((c + 1) * n) // nchunk, stress, L,
                                     end_rho, dt, params, gamma_dot, phase)
-            # solver.step: the remap of mass and of the fields it carries
+            # the remap of mass and of the fields it carries (solver.py, step 2)
             for p in range(n):
                 q[0, p] = v[p, 0]
                 q[1, p] = v[p, 1]

@@ -49,10 +49,12 @@ import numpy as np
 
 from vibroflow.errors import InputError
 
+from .. import steps
 from ..constitutive import ContinuumMaterial
 from ..grid_step import grid_spec, grid_work
 from ..grid_update import LabFrame
 from ..mpm.solver import ContinuumBlowUp
+from ..state import ContinuumState
 from . import fused
 from .advection import remap_work
 from .lagrangian_step import fill_limit, material_fraction
@@ -171,39 +173,17 @@ class EulerianSystem:
         self.work = grid_work(m.grid, self.chunks, self.transfers)
 
 
-@dataclass
-class EulerianState:
-    """The fields on the mesh's cells (arrays over the N cells, p = i * ncz + k) and the clock.
+@dataclass(kw_only=True)
+class EulerianState(ContinuumState):
+    """The fields on the mesh's cells (ContinuumState's fields over the N cells, p = i * ncz +
+    k, x their fixed centres) and the clock, with frac (N,) the material fraction, volume (N,)
+    the material's volume m^2 and density (N,) its density kg/m^3 at the end of the last step;
+    history: [the wall's per-cell arrays (wall.empty_history)]; mass0: the initial total mass
+    (kg/m); mass_error_max: the largest |M - M0| / M0 seen."""
 
-    x (N, 2) the fixed cell centres (m); mass (N,) kg/m; v (N, 2) m/s; C, L (N, 4)
-    [xx, xz, zx, zz] 1/s; stress (N, 4) Pa; gamma_dot (N,) plastic shear rate 1/s; phase (N,)
-    0 disconnected / 1 elastic / 2 flowing; frac (N,) material fraction; volume (N,) material
-    volume m^2; density (N,) material density kg/m^3 at the end of the last step; fext (N, 2)
-    N/m (work array); history: [the wall's per-cell arrays (wall.empty_history)]; mass0: the
-    initial total mass (kg/m); mass_error_max: the largest |M - M0| / M0 seen; t (s), step.
-    The field names are those of mpm.MPMState, so checkpoint.py stores it."""
-
-    x: np.ndarray
-    mass: np.ndarray
-    v: np.ndarray
-    C: np.ndarray
-    L: np.ndarray
-    stress: np.ndarray
-    gamma_dot: np.ndarray
-    phase: np.ndarray
     frac: np.ndarray
-    volume: np.ndarray
-    density: np.ndarray
-    fext: np.ndarray
-    history: list
     mass0: float = 0.0
     mass_error_max: float = 0.0
-    t: float = 0.0
-    step: int = 0
-
-    @property
-    def n(self) -> int:
-        return int(self.mass.shape[0])
 
     @property
     def wall(self) -> dict:
@@ -215,15 +195,6 @@ class EulerianState:
     def mass_error(self) -> float:
         """(M - M0) / M0 (-)."""
         return (self.total_mass() - self.mass0) / self.mass0 if self.mass0 > 0 else 0.0
-
-    def pressure(self) -> np.ndarray:
-        return -(self.stress[:, 0] + self.stress[:, 1] + self.stress[:, 3]) / 3.0
-
-    def momentum(self) -> np.ndarray:
-        return (self.mass[:, None] * self.v).sum(axis=0)
-
-    def kinetic_energy(self) -> float:
-        return float(0.5 * (self.mass * (self.v**2).sum(axis=1)).sum())
 
 
 def init_state(system: EulerianSystem, mass, density=None, v=None, stress=None,
@@ -328,16 +299,6 @@ def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
                       "reached a non-finite velocity")
 
 
-def step(system: EulerianSystem, state: EulerianState) -> None:
-    """Advance the state by one step system.dt (`advance`)."""
-    advance(system, state, 1)
-
-
 def run_steps(system: EulerianSystem, state: EulerianState, n: int, callback=None) -> None:
-    """n steps; callback(state) after each if given (else all in one compiled call)."""
-    if callback is None:
-        advance(system, state, n)
-        return
-    for _ in range(int(n)):
-        step(system, state)
-        callback(state)
+    """n steps (`advance`); callback(state) after each if given (steps.run_steps)."""
+    steps.run_steps(advance, system, state, n, callback)

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+from ..g2p import store_gather
 from ..stencil import bspline_weights, gather_point, scatter_point
 from ..transfer_operator import add_point
 
@@ -117,18 +118,8 @@ def g2p_cells(cells, ncz, tx, tz, v, C, L, gv, dx, periodic):
         p = cells[j]
         ic = p // ncz
         kc = p - ic * ncz
-        vx, vz, cxx, cxz, czx, czz, lxx, lxz, lzx, lzz = gather_point(
-            table_row(tx, ic), table_row(tz, kc), dx, periodic, gv)
-        v[p, 0] = vx
-        v[p, 1] = vz
-        C[p, 0] = cxx
-        C[p, 1] = cxz
-        C[p, 2] = czx
-        C[p, 3] = czz
-        L[p, 0] = lxx
-        L[p, 1] = lxz
-        L[p, 2] = lzx
-        L[p, 3] = lzz
+        g = gather_point(table_row(tx, ic), table_row(tz, kc), dx, periodic, gv)
+        store_gather(p, g[0], g[1], g, v, C, L)
 
 
 @nb.njit(cache=True)

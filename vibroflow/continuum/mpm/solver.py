@@ -27,12 +27,13 @@ import numpy as np
 
 from vibroflow.errors import InputError
 
-from .. import fused
+from .. import fused, steps
 from ..boundary import BOUNDARY_DTYPE
 from ..constitutive import ContinuumMaterial
 from ..grid import Grid
 from ..grid_step import chunk_bounds, grid_spec, grid_work
 from ..grid_update import LabFrame
+from ..state import ContinuumState
 
 
 class ContinuumBlowUp(RuntimeError):
@@ -127,42 +128,9 @@ class MPMSystem:
         self.work = grid_work(self.grid, self.chunks, self.transfers)
 
 
-@dataclass
-class MPMState:
-    """The material points and the clock (arrays over the N points).
-
-    x, v (N, 2) m, m/s; C, L (N, 4) [xx, xz, zx, zz] 1/s; mass (N,) kg/m; volume (N,) m^2;
-    density (N,) kg/m^3; stress (N, 4) Pa; gamma_dot (N,) plastic shear rate 1/s; phase (N,)
-    0 disconnected / 1 elastic / 2 flowing; fext (N, 2) N/m (work array); history: per-boundary
-    dicts of per-point arrays; t (s), step.
-    """
-
-    x: np.ndarray
-    v: np.ndarray
-    C: np.ndarray
-    L: np.ndarray
-    mass: np.ndarray
-    volume: np.ndarray
-    density: np.ndarray
-    stress: np.ndarray
-    gamma_dot: np.ndarray
-    phase: np.ndarray
-    fext: np.ndarray
-    history: list
-    t: float = 0.0
-    step: int = 0
-
-    @property
-    def n(self) -> int:
-        return int(self.x.shape[0])
-
-    def pressure(self) -> np.ndarray:
-        """p = -tr(sigma)/3 (Pa) per point."""
-        return -(self.stress[:, 0] + self.stress[:, 1] + self.stress[:, 3]) / 3.0
-
-    def momentum(self) -> np.ndarray:
-        """Total linear momentum (kg/s per m of thickness), [x, z]."""
-        return (self.mass[:, None] * self.v).sum(axis=0)
+@dataclass(kw_only=True)
+class MPMState(ContinuumState):
+    """The material points (ContinuumState's fields over the N points) and the clock."""
 
     def angular_momentum(self, dx: float, origin=(0.0, 0.0)) -> float:
         """Total angular momentum about `origin` (kg m/s per m; positive turning x into z) with
@@ -172,10 +140,6 @@ class MPMState:
         orbital = self.mass * (rx * self.v[:, 1] - rz * self.v[:, 0])
         spin = self.mass * 0.25 * dx * dx * (self.C[:, 2] - self.C[:, 1])
         return float(orbital.sum() + spin.sum())
-
-    def kinetic_energy(self) -> float:
-        """0.5 sum m v^2 (J per m of thickness)."""
-        return float(0.5 * (self.mass * (self.v**2).sum(axis=1)).sum())
 
 
 def init_state(system: MPMSystem, x, volume, density, v=None, stress=None,
@@ -336,16 +300,6 @@ def advance(system: MPMSystem, state: MPMState, n: int) -> None:
                                              "left the grid or became non-finite"))
 
 
-def step(system: MPMSystem, state: MPMState) -> None:
-    """Advance the state by one step system.dt (module docstring; `advance`)."""
-    advance(system, state, 1)
-
-
 def run_steps(system: MPMSystem, state: MPMState, n: int, callback=None) -> None:
-    """n steps; callback(state) after each if given (else all in one compiled call)."""
-    if callback is None:
-        advance(system, state, n)
-        return
-    for _ in range(int(n)):
-        step(system, state)
-        callback(state)
+    """n steps (`advance`); callback(state) after each if given (steps.run_steps)."""
+    steps.run_steps(advance, system, state, n, callback)
