@@ -12,16 +12,7 @@ from matplotlib.colors import LogNorm
 
 from vibroflow.continuum.rheology import mu_of_I, phi_of_I
 from vibroflow.io.atomic import atomic_path
-
-
-def _plt():
-    """pyplot on the Agg backend (files, no display).  Imported here, not at the top: the
-    backend is chosen before pyplot loads, and only when a picture is drawn, so importing
-    vibroflow never changes the backend of the caller's own plots."""
-    import matplotlib  # noqa: PLC0415
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt  # noqa: PLC0415
-    return plt
+from vibroflow.io.pictures import pyplot
 
 
 def _save(fig, path) -> Path:
@@ -30,7 +21,7 @@ def _save(fig, path) -> Path:
         with atomic_path(path) as tmp:  # its name ends with path's: savefig picks the format
             fig.savefig(tmp, dpi=110, bbox_inches="tight")
     finally:
-        _plt().close(fig)
+        pyplot().close(fig)
     return path
 
 
@@ -45,7 +36,7 @@ def _outline(ax, geometry) -> None:
 def field_maps(path, fields, geometry, min_solid_fraction: float = 0.05) -> Path:
     """Solid fraction, velocity relative to the tub (arrows on its magnitude), shear rate and
     granular temperature over the cross-section, from the time-averaged fields."""
-    plt = _plt()
+    plt = pyplot()
 
     x = fields["x"].values
     z = fields["z"].values
@@ -98,7 +89,7 @@ def field_maps(path, fields, geometry, min_solid_fraction: float = 0.05) -> Path
 def mu_i_plot(path, scatter: dict, shear_cell_points=None, fit=None, phi_fit=None) -> Path:
     """mu(I) and phi(I): the tub's phase-resolved cells (dense and dilute marked), the shear
     cell's steady points with error bars, and the fitted curves."""
-    plt = _plt()
+    plt = pyplot()
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(12, 4.8))
     ph = scatter.get("phase") or scatter.get("time")
     if ph is not None and ph["I"].size:
@@ -144,7 +135,7 @@ def mu_i_plot(path, scatter: dict, shear_cell_points=None, fit=None, phi_fit=Non
 
 def wall_friction_plot(path, wf: dict) -> Path:
     """Histogram of |F_t|/F_n (tub wall, partitions) and its profile along the U wall."""
-    plt = _plt()
+    plt = pyplot()
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(12, 4.6))
     h = wf["histogram"]
     e = np.asarray(h["edges"])
@@ -186,7 +177,7 @@ def wall_friction_plot(path, wf: dict) -> Path:
 def impacts_plot(path, rel: dict) -> Path:
     """Mean impact speed by cell against d gamma_dot and sqrt(T), with the fits; the
     distributions of the normal approach speed."""
-    plt = _plt()
+    plt = pyplot()
     fig, axes = plt.subplots(1, 3, figsize=(16, 4.6))
     d = rel["diameter"]
     colors = {"ball_ball": "tab:blue", "ball_wall": "tab:red"}

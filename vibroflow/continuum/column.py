@@ -29,7 +29,7 @@ Set-up choices, and why:
   but below the flowing material's mu(I), so the base slides; a floor that never slides
   (mu_w >= mu_2) runs out much less (at a = 3 on L0/10, 4.5 L0 instead of 7.2 L0).  Its
   stiffness is the P-wave modulus over the point side (the stiffness of the continuum itself
-  across one point), as in the block test of tests/test_mpm.py;
+  across one point), as in the block test of tests/test_continuum_walls.py;
 * rough floor (`rough_floor=True`): the experiments' rough bed as a no-slip grid condition, the
   nodes on and below z = 0 held still (MPMSystem.no_slip_below; the no-slip base of Lagree,
   Staron & Popinet 2011), on top of the penalty floor that carries the normal load.  A penalty

@@ -310,7 +310,7 @@ def damped_stress(stress, L, phase, params, out):
     the continuum's dashpot: it is not stored in the stress (the elastic predictor and the
     return map see the elastic-plastic stress only), it adds eta_b (7/3) of damping to the
     P-wave and eta_b to the shear wave, which decay as exp(-eta k^2 t / (2 rho))
-    (tests/test_mpm.py), and it does nothing to a body moving rigidly (D = 0).  Its value is
+    (tests/test_rheology.py), and it does nothing to a body moving rigidly (D = 0).  Its value is
     fitted on a DEM of the same strip (benchmarks/strip_damping.py)."""
     eta = params[P_ETA_BED]
     hoop = L.shape[1] > 4

@@ -20,6 +20,7 @@ from PIL import Image
 
 from vibroflow.calibration.dem_result import DEMResult
 from vibroflow.io.atomic import atomic_path
+from vibroflow.io.pictures import pyplot
 from vibroflow.tub.geometry import geometry_of
 
 #: frames at most (the last snapshots of the run), and the frame duration (ms)
@@ -28,16 +29,6 @@ FRAME_MS = 90
 COLORS = 48      # GIF palette size: enough for the colour scale, keeps the file small
 WIDTH_IN = 4.6   # figure width (inches) at DPI: ~ 410 px
 DPI = 90
-
-
-def _plt():
-    """pyplot on the Agg backend (files, no display).  Imported here, not at the top: the
-    backend is chosen before pyplot loads, and only when a picture is drawn, so importing
-    vibroflow never changes the backend of the caller's own plots."""
-    import matplotlib  # noqa: PLC0415
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt  # noqa: PLC0415
-    return plt
 
 
 def slice_frames(run_dir, max_frames: int = MAX_FRAMES, half_thickness: float | None = None):
@@ -78,7 +69,7 @@ def write_slice_gif(run_dir, path, max_frames: int = MAX_FRAMES,
     ztop = min(geo.rim_height, ztop + 2.0 * d)
     R = geo.radius
     aspect = (ztop + 0.05 * R) / (2.1 * R)
-    plt = _plt()
+    plt = pyplot()
     fig = plt.figure(figsize=(WIDTH_IN, WIDTH_IN * aspect * 0.86 + 0.6), dpi=DPI)
     ax = fig.add_axes([0.02, 0.02, 0.80, 0.86])
     cax = fig.add_axes([0.85, 0.1, 0.035, 0.7])

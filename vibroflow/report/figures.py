@@ -18,26 +18,17 @@ from matplotlib.collections import PatchCollection
 from matplotlib.colors import LogNorm, Normalize, PowerNorm
 from matplotlib.patches import Rectangle
 
+from vibroflow.io.pictures import pyplot
 from vibroflow.report.data import MIN_IMPACTS_PER_CELL, StudyData, mean_flow_shear_rate
 
 DPI = 90
-
-
-def _plt():
-    """pyplot on the Agg backend (files, no display).  Imported here, not at the top: the
-    backend is chosen before pyplot loads, and only when a picture is drawn, so importing
-    vibroflow never changes the backend of the caller's own plots."""
-    import matplotlib  # noqa: PLC0415
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt  # noqa: PLC0415
-    return plt
 
 
 def png_bytes(fig) -> bytes:
     """The figure as PNG bytes (closed afterwards)."""
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=DPI, bbox_inches="tight")
-    _plt().close(fig)
+    pyplot().close(fig)
     return buf.getvalue()
 
 
@@ -74,7 +65,7 @@ def _probes(ax, data: StudyData, labels: bool = True) -> None:
 
 
 def _panels(n: int, width: float = 4.6, height: float = 4.2):
-    plt = _plt()
+    plt = pyplot()
     # constrained layout: two-line panel titles, the suptitle and the colour bar never overlap
     fig, axes = plt.subplots(1, n, figsize=(width * n, height), squeeze=False,
                              layout="constrained")
@@ -175,7 +166,7 @@ def shear_rate_maps(data: StudyData) -> bytes:
     continuum: its own cycle-mean shear rate in the probe cells).  Bottom row: the shear rate of
     the mean (circulation) flow, from every method's bulk_velocity.csv by the same finite
     differences (data.mean_flow_shear_rate)."""
-    plt = _plt()
+    plt = pyplot()
     names = data.methods
     n = len(names)
     fig, axes = plt.subplots(2, n, figsize=(4.6 * n, 8.4), squeeze=False, layout="constrained")

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from vibroflow.io.atomic import atomic_path
+from vibroflow.io.pictures import pyplot
 from vibroflow.study.sweep_points import FACTOR_KEY
 
 NAMES = ("sweep_probes.png", "sweep_circulation.png", "sweep_impacts.png",
@@ -86,12 +87,7 @@ def _finish(plt, fig, legend_ax, series, path: Path) -> None:
 
 def write_plots(folder: Path, rows: list[dict[str, Any]], varied: list[str]) -> list[str]:
     """The four pictures in `folder` (made if missing); returns their file names."""
-    # pyplot on Agg (files, no display), chosen when a picture is drawn: importing vibroflow
-    # never changes the backend of the caller's own plots
-    import matplotlib  # noqa: PLC0415
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # noqa: PLC0415
+    plt = pyplot()
 
     folder.mkdir(parents=True, exist_ok=True)
     series = _series(rows, varied)

@@ -83,7 +83,7 @@ def void_first(L, frac, density, rho_c, dt):
     the next landing would close the cells' empty part without compacting it back.  In tub47
     (the vertical stroke alone) such a rule leaves the floor's cells at 0.6 and the surface's
     at 0.45 of the critical density, a stress-free cushion and skin that the bed's load
-    bypasses through the nodes (tests/test_eulerian.py, the vibrated bed's volume).
+    bypasses through the nodes (tests/test_continuum_conservation.py, the vibrated bed's volume).
     A dilated state and a void are the same stress-free state of a cell's content (its mass
     over the volume m / rho_c it would fill at the critical density); one rule for every cell,
     full or not, keeps the step continuous as a cell fills (a rule that switches at f = 1 makes
