@@ -68,16 +68,20 @@ DONE, REBUILD, BLOWUP = 0, 1, 2
 
 
 @nb.njit(cache=True)
-def pair_forces(pos, vel, omg, radius, mass, table, start, nbr, hist, flag, box, rates, dt_hist,
-                force, torque, virial, degree):
+def pair_forces(balls, pairs, cell, dt_hist):
     """Contact forces and torques of every listed pair (N, N m; force/torque overwritten), the
-    contact virial sum f_ij (x) r_ij (N m, virial[a, b] = sum f_a r_b) and the contacts of each
-    ball.  Pairs are seen at their nearest LE image: the image of j moves k gamma_dot L_z faster
-    in x, and the box's affine dilation adds eps_dot_a (r_i - r_j)_a to the relative velocity.
-    `table` (1, 1, N_PARAMS) holds the ball-ball row of the contact law.  `dt_hist` = 0
+    contact virial sum f_ij (x) r_ij (N m, cell.virial[a, b] = sum f_a r_b) and the contacts of
+    each ball (records of vibroflow.dem.records).  Pairs are seen at their nearest LE image:
+    the image of j moves k gamma_dot L_z faster in x, and the box's affine dilation adds
+    eps_dot_a (r_i - r_j)_a to the relative velocity.
+    `cell.table` (1, 1, N_PARAMS) holds the ball-ball row of the contact law.  `dt_hist` = 0
     evaluates without advancing the contact histories.
 
     Returns (number of contacts, largest overlap (m))."""
+    pos, vel, omg, radius, mass = balls.pos, balls.vel, balls.omg, balls.radius, balls.mass
+    force, torque, degree = balls.force, balls.torque, balls.degree
+    start, nbr, hist, flag = pairs.start, pairs.nbr, pairs.hist, pairs.flag
+    table, box, rates, virial = cell.table, cell.box, cell.rates, cell.virial
     n = pos.shape[0]
     for i in range(n):
         degree[i] = 0
@@ -121,9 +125,11 @@ def pair_forces(pos, vel, omg, radius, mass, table, start, nbr, hist, flag, box,
 
 
 @nb.njit(cache=True)
-def _damp(vel, omg, pos, mass, inertia, box, rates, c, force, torque):
+def _damp(balls, box, rates, c):
     """Background viscous damping -c m v' (v' relative to the mean flow) and -c I w, used only to
     bring a packing to rest (preparation, elastic tests); c in 1/s."""
+    pos, vel, omg, mass, inertia = balls.pos, balls.vel, balls.omg, balls.mass, balls.inertia
+    force, torque = balls.force, balls.torque
     n = pos.shape[0]
     half = 0.5 * box[B_LZ]
     for i in range(n):
@@ -135,9 +141,11 @@ def _damp(vel, omg, pos, mass, inertia, box, rates, c, force, torque):
 
 
 @nb.njit(cache=True)
-def stress(pos, vel, mass, box, gamma_dot, virial, out):
+def stress(balls, cell, gamma_dot, out):
     """Stress of the box (Pa, compression positive) into out[9] (row-major xx xy xz yx ...):
     (contact virial + sum m v' (x) v') / V, v' = v - gamma_dot (z - L_z/2) x."""
+    pos, vel, mass = balls.pos, balls.vel, balls.mass
+    box, virial = cell.box, cell.virial
     vol = box[B_LX] * box[B_LY] * box[B_LZ]
     half = 0.5 * box[B_LZ]
     for a in range(3):
@@ -162,10 +170,9 @@ def stress(pos, vel, mass, box, gamma_dot, virial, out):
 
 
 @nb.njit(cache=True)
-def advance(n_steps, dt, pos, vel, omg, force, torque, radius, mass, inertia, table, start,
-            nbr, hist, flag, box, rates, ctrl, state, disp, image, degree, virial, acc, samples,
-            sample_every):
-    """Velocity-Verlet steps of the periodic box (see the module notes).
+def advance(n_steps, dt, sample_every, balls, pairs, cell, samples):
+    """Velocity-Verlet steps of the periodic box (see the module notes; the records of
+    vibroflow.dem.records).
 
     Per step: half kick; drift, with the non-affine displacement `disp` accumulated; affine
     dilation of the box by the rates; LE offset += gamma_dot L_z dt; wrap; forces at the new
@@ -176,6 +183,10 @@ def advance(n_steps, dt, pos, vel, omg, force, torque, radius, mass, inertia, ta
     Stops after n_steps (DONE), when the neighbour list must be rebuilt before the next step
     (REBUILD), or when an overlap exceeds ctrl[C_MAX_OVERLAP] or a value is not finite
     (BLOWUP).  Returns (status, steps done)."""
+    pos, vel, omg, force, torque = balls.pos, balls.vel, balls.omg, balls.force, balls.torque
+    mass, inertia, disp, image, degree = (balls.mass, balls.inertia, balls.disp, balls.image,
+                                          balls.degree)
+    box, rates, ctrl, state, acc = cell.box, cell.rates, cell.ctrl, cell.state, cell.acc
     n = pos.shape[0]
     half_dt = 0.5 * dt
     mode = int(ctrl[C_MODE])
@@ -217,10 +228,9 @@ def advance(n_steps, dt, pos, vel, omg, force, torque, radius, mass, inertia, ta
         state[S_BUILD_STRAIN] += (abs(gd) + max(abs(rates[R_EX]), abs(rates[R_EY]),
                                                 abs(rates[R_EZ]))) * dt
         # forces at the new positions
-        nc, ov = pair_forces(pos, vel, omg, radius, mass, table, start, nbr, hist, flag, box,
-                             rates, dt, force, torque, virial, degree)
+        nc, ov = pair_forces(balls, pairs, cell, dt)
         if damping > 0.0:
-            _damp(vel, omg, pos, mass, inertia, box, rates, damping, force, torque)
+            _damp(balls, box, rates, damping)
         # second half kick, largest displacement and speed
         d2max = 0.0
         v2max = 0.0
@@ -244,7 +254,7 @@ def advance(n_steps, dt, pos, vel, omg, force, torque, radius, mass, inertia, ta
             state[S_MAX_OVERLAP] = ov
         if ov > ctrl[C_MAX_OVERLAP] or not np.isfinite(ke):
             return BLOWUP, s + 1
-        stress(pos, vel, mass, box, gd, virial, sig)
+        stress(balls, cell, gd, sig)
         # box control for the next step
         if mode == MODE_Z:
             e = (sig[8] - p_target) * gain
