@@ -22,7 +22,8 @@ import numba as nb
 import numpy as np
 
 from ..tub.motion import pose as tub_pose
-from .contact import branch_vector, contact_force, pair_contact_velocity
+from .contact import (add_pair, branch_vector, contact_force, forget, pair_contact_velocity,
+                      unit_normal)
 from .walls import (KIND_BALL_BALL, KIND_BALL_PARTITION, KIND_BALL_PLANE, KIND_BALL_TUB,
                     TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT, WALL_PLANE0, WALL_U, plane_wall,
                     u_wall)
@@ -65,17 +66,9 @@ def _pair_chunk(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, ta
             rsum = ri + radius[j]
             d2 = dx * dx + dy * dy + dz * dz
             if d2 >= rsum * rsum:
-                if flag[k]:
-                    flag[k] = 0
-                    for q in range(6):
-                        hist[k, q] = 0.0
+                forget(hist, flag, k)
                 continue
-            d = np.sqrt(d2)
-            delta = rsum - d
-            inv = 1.0 / d
-            nx = dx * inv
-            ny = dy * inv
-            nz = dz * inv
+            delta, nx, ny, nz = unit_normal(dx, dy, dz, d2, rsum)
             rj = radius[j]
             vx, vy, vz = pair_contact_velocity(vel, omg, i, j, ri, rj, nx, ny, nz)
             if not flag[k]:
@@ -93,18 +86,7 @@ def _pair_chunk(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, ta
                 delta, nx, ny, nz, vx, vy, vz,
                 omg[i, 0] - omg[j, 0], omg[i, 1] - omg[j, 1], omg[i, 2] - omg[j, 2],
                 ri, rj, r_eff, m_eff, par, hist[k], dt_hist)
-            fbuf[c, i, 0] += fx
-            fbuf[c, i, 1] += fy
-            fbuf[c, i, 2] += fz
-            fbuf[c, j, 0] -= fx
-            fbuf[c, j, 1] -= fy
-            fbuf[c, j, 2] -= fz
-            tbuf[c, i, 0] += tix
-            tbuf[c, i, 1] += tiy
-            tbuf[c, i, 2] += tiz
-            tbuf[c, j, 0] += tjx
-            tbuf[c, j, 1] += tjy
-            tbuf[c, j, 2] += tjz
+            add_pair(fbuf, tbuf, c, i, j, fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz)
             if delta > diag[c, D_BALL_OVERLAP]:
                 diag[c, D_BALL_OVERLAP] = delta
                 diag[c, D_BALL_I] = i
