@@ -169,6 +169,17 @@ def stress(balls, cell, gamma_dot, out):
         out[a] /= vol
 
 
+@nb.njit(cache=True, inline="always")
+def _kick(balls, i, half_dt):
+    """Half kick of ball i: v += dt/2 F/m, w += dt/2 T/I."""
+    vel, omg, force, torque = balls.vel, balls.omg, balls.force, balls.torque
+    im = half_dt / balls.mass[i]
+    ii = half_dt / balls.inertia[i]
+    for a in range(3):
+        vel[i, a] += im * force[i, a]
+        omg[i, a] += ii * torque[i, a]
+
+
 @nb.njit(cache=True)
 def advance(n_steps, dt, sample_every, balls, pairs, cell, samples):
     """Velocity-Verlet steps of the periodic box (see the module notes; the records of
@@ -183,9 +194,8 @@ def advance(n_steps, dt, sample_every, balls, pairs, cell, samples):
     Stops after n_steps (DONE), when the neighbour list must be rebuilt before the next step
     (REBUILD), or when an overlap exceeds ctrl[C_MAX_OVERLAP] or a value is not finite
     (BLOWUP).  Returns (status, steps done)."""
-    pos, vel, omg, force, torque = balls.pos, balls.vel, balls.omg, balls.force, balls.torque
-    mass, inertia, disp, image, degree = (balls.mass, balls.inertia, balls.disp, balls.image,
-                                          balls.degree)
+    pos, vel, mass, disp = balls.pos, balls.vel, balls.mass, balls.disp
+    image, degree = balls.image, balls.degree
     box, rates, ctrl, state, acc = cell.box, cell.rates, cell.ctrl, cell.state, cell.acc
     n = pos.shape[0]
     half_dt = 0.5 * dt
@@ -202,11 +212,7 @@ def advance(n_steps, dt, sample_every, balls, pairs, cell, samples):
         # kick and drift
         half = 0.5 * box[B_LZ]
         for i in range(n):
-            im = half_dt / mass[i]
-            ii = half_dt / inertia[i]
-            for a in range(3):
-                vel[i, a] += im * force[i, a]
-                omg[i, a] += ii * torque[i, a]
+            _kick(balls, i, half_dt)
             disp[i, 0] += (vel[i, 0] - gd * (pos[i, 2] - half)) * dt
             disp[i, 1] += vel[i, 1] * dt
             disp[i, 2] += vel[i, 2] * dt
@@ -237,11 +243,7 @@ def advance(n_steps, dt, sample_every, balls, pairs, cell, samples):
         ke = 0.0
         half = 0.5 * box[B_LZ]
         for i in range(n):
-            im = half_dt / mass[i]
-            ii = half_dt / inertia[i]
-            for a in range(3):
-                vel[i, a] += im * force[i, a]
-                omg[i, a] += ii * torque[i, a]
+            _kick(balls, i, half_dt)
             d2 = disp[i, 0] ** 2 + disp[i, 1] ** 2 + disp[i, 2] ** 2
             if d2 > d2max:
                 d2max = d2
