@@ -14,17 +14,17 @@ import numpy as np
 
 
 class Balls(NamedTuple):
-    """One row a ball (SI units, lab frame)."""
+    """One row a ball: the DEMState arrays of the same names."""
 
-    pos: np.ndarray        # (N, 3) m
-    vel: np.ndarray        # (N, 3) m/s
-    omg: np.ndarray        # (N, 3) rad/s
-    force: np.ndarray      # (N, 3) N
-    torque: np.ndarray     # (N, 3) N m
-    radius: np.ndarray     # (N,) m
-    mass: np.ndarray       # (N,) kg
-    mat: np.ndarray        # (N,) material index
-    ref_tub: np.ndarray    # (N, 3) tub-frame positions at the last list build (m)
+    pos: np.ndarray
+    vel: np.ndarray
+    omg: np.ndarray
+    force: np.ndarray
+    torque: np.ndarray
+    radius: np.ndarray
+    mass: np.ndarray
+    mat: np.ndarray
+    ref_tub: np.ndarray
 
 
 class Pairs(NamedTuple):
@@ -38,16 +38,17 @@ class Pairs(NamedTuple):
 
 
 class Walls(NamedTuple):
-    """The ball-wall contacts, one slot a wall (vibroflow.dem.walls)."""
+    """The ball-wall contacts, one slot a wall (vibroflow.dem.walls): the DEMState arrays
+    wall_hist, wall_flag, ... wall_arc."""
 
-    hist: np.ndarray       # (N, W, 6)
-    flag: np.ndarray       # (N, W) uint8
-    fn: np.ndarray         # (N, W) N, at the last step
-    ft: np.ndarray         # (N, W) N
-    slide: np.ndarray      # (N, W) uint8
-    point: np.ndarray      # (N, W, 3) contact point (tub frame for tub walls)
-    force: np.ndarray      # (N, W, 3) force on the ball (N, lab axes), last step
-    arc: np.ndarray        # (N,) arc coordinate of the nearest U point (m)
+    hist: np.ndarray
+    flag: np.ndarray
+    fn: np.ndarray
+    ft: np.ndarray
+    slide: np.ndarray
+    point: np.ndarray
+    force: np.ndarray
+    arc: np.ndarray
 
 
 class Work(NamedTuple):
