@@ -87,6 +87,14 @@ def add_pair(fbuf, tbuf, c, i, j, fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz):
     tbuf[c, j, 2] += tjz
 
 
+@nb.njit(cache=True, inline="always")
+def put3(a, i, x, y, z):
+    """Row i of an (N, 3) array set to (x, y, z)."""
+    a[i, 0] = x
+    a[i, 1] = y
+    a[i, 2] = z
+
+
 @nb.njit(cache=True, inline="always", fastmath=False)
 def contact_force(delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, r_i, r_j, r_eff, m_eff, par,
                   hist, dt):

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .contact import branch_vector, contact_force, pair_contact_velocity
+from .contact import branch_vector, contact_force, pair_contact_velocity, put3
 from .records import balls_of, pairs_of
 
 
@@ -56,12 +56,8 @@ def _ball_ball(balls, pairs, table, periodic_length):
                 table[mat[i], mat[j]], h, 0.0)
             ii[m] = i
             jj[m] = j
-            force[m, 0] = fx
-            force[m, 1] = fy
-            force[m, 2] = fz
-            branch[m, 0] = dx
-            branch[m, 1] = dy
-            branch[m, 2] = dz
+            put3(force, m, fx, fy, fz)
+            put3(branch, m, dx, dy, dz)
             m += 1
     return ii, jj, force, branch
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..tub.motion import pose as tub_pose
 from .contact import (add_pair, branch_vector, contact_force, forget, pair_contact_velocity,
-                      unit_normal)
+                      put3, unit_normal)
 from .walls import (KIND_BALL_BALL, KIND_BALL_PARTITION, KIND_BALL_PLANE, KIND_BALL_TUB,
                     TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT, WALL_PLANE0, WALL_U, plane_wall,
                     u_wall)
@@ -255,12 +255,8 @@ def _finish_chunk(c, t, kick, record_impacts, balls, walls, bounds, params, work
                 diag[c, D_WALL_OVERLAP] = delta
                 diag[c, D_WALL_I] = i
                 diag[c, D_WALL_W] = w
-        force[i, 0] = fx
-        force[i, 1] = fy
-        force[i, 2] = fz
-        torque[i, 0] = tx
-        torque[i, 1] = ty
-        torque[i, 2] = tz
+        put3(force, i, fx, fy, fz)
+        put3(torque, i, tx, ty, tz)
         if kick:
             im = 1.0 / mass[i]
             ii = 1.0 / (0.4 * mass[i] * r * r)
