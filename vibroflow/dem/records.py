@@ -19,11 +19,11 @@ class Balls(NamedTuple):
     pos: np.ndarray
     vel: np.ndarray
     omg: np.ndarray
-    force: np.ndarray
-    torque: np.ndarray
     radius: np.ndarray
     mass: np.ndarray
     mat: np.ndarray
+    force: np.ndarray
+    torque: np.ndarray
     ref_tub: np.ndarray
 
 
@@ -79,15 +79,12 @@ class Params(NamedTuple):
 
 def balls_of(state) -> Balls:
     """The Balls record of a vibroflow.dem.simulate.DEMState's arrays."""
-    s = state
-    return Balls(s.pos, s.vel, s.omg, s.force, s.torque, s.radius, s.mass, s.mat, s.ref_tub)
+    return Balls(*(getattr(state, name) for name in Balls._fields))
 
 
 def walls_of(state) -> Walls:
     """The Walls record of a vibroflow.dem.simulate.DEMState's arrays."""
-    s = state
-    return Walls(s.wall_hist, s.wall_flag, s.wall_fn, s.wall_ft, s.wall_slide, s.wall_point,
-                 s.wall_force, s.wall_arc)
+    return Walls(*(getattr(state, "wall_" + name) for name in Walls._fields))
 
 
 def pairs_of(nl, nchunk: int = 1) -> Pairs:
