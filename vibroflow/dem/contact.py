@@ -251,8 +251,7 @@ def pair_contact_velocity(vel, omg, i, j, ri, rj, nx, ny, nz):
 
 
 @nb.njit(cache=True, inline="always")
-def ball_pair(i, j, q, dx, dy, dz, dvx, dvy, dvz, vel, omg, radius, mass, table, mat_i, mat_j,
-              hist, flag, dt_hist, fbuf, tbuf, c):
+def ball_pair(i, j, q, dx, dy, dz, dvx, dvy, dvz, balls, pairs, par, dt_hist, fbuf, tbuf, c):
     """One listed pair of balls (i, j), entry q of a neighbour list: the pair kernel of the
     Lees-Edwards box (vibroflow.dem.periodic_step).  The tub's step (vibroflow.dem.step) writes
     the same operations out in its chunk loop: through this function it costs about a quarter
@@ -261,15 +260,18 @@ def ball_pair(i, j, q, dx, dy, dz, dvx, dvy, dvz, vel, omg, radius, mass, table,
     (dx, dy, dz) = r_i - r_j (m) is the branch vector to the image of j the caller chose;
     (dvx, dvy, dvz) (m/s) is added to the material relative velocity: the velocity of i's frame
     relative to that image's (Lees-Edwards images and the box's affine dilation; -0.0 where the
-    image moves with j, which leaves the velocity bit for bit and costs no addition).  Apart,
-    the contact's history is forgotten.  In contact, the force and torques of `contact_force`
-    with the parameters table[mat_i, mat_j] are added to fbuf[c, i], -fbuf[c, j], tbuf[c, i],
-    tbuf[c, j] and the history advances by dt_hist.
+    image moves with j, which leaves the velocity bit for bit and costs no addition).  `balls`
+    holds vel, omg, radius and mass, `pairs` the list's hist and flag (vibroflow.dem.records).
+    Apart, the contact's history is forgotten.  In contact, the force and torques of
+    `contact_force` with the parameters `par` (a row of vibroflow.dem.laws.pair_table) are added
+    to fbuf[c, i], -fbuf[c, j], tbuf[c, i], tbuf[c, j] and the history advances by dt_hist.
 
     Returns (touching, first, delta, nx, ny, nz, vn, fx, fy, fz): whether they touch, whether
     the contact is new (its flag was clear), the overlap (m), the unit normal from j to i, the
     normal relative velocity (m/s, > 0 separating) and the force on i (N).
     """
+    vel, omg, radius, mass = balls.vel, balls.omg, balls.radius, balls.mass
+    hist, flag = pairs.hist, pairs.flag
     ri = radius[i]
     rj = radius[j]
     rsum = ri + rj
@@ -290,6 +292,6 @@ def ball_pair(i, j, q, dx, dy, dz, dvx, dvy, dvz, vel, omg, radius, mass, table,
     fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz, fn, ft, sl = contact_force(
         delta, nx, ny, nz, vx, vy, vz,
         omg[i, 0] - omg[j, 0], omg[i, 1] - omg[j, 1], omg[i, 2] - omg[j, 2],
-        ri, rj, ri * rj / rsum, mi * mj / (mi + mj), table[mat_i, mat_j], hist[q], dt_hist)
+        ri, rj, ri * rj / rsum, mi * mj / (mi + mj), par, hist[q], dt_hist)
     add_pair(fbuf, tbuf, c, i, j, fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz)
     return True, first, delta, nx, ny, nz, vn, fx, fy, fz

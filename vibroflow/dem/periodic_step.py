@@ -78,10 +78,9 @@ def pair_forces(balls, pairs, cell, dt_hist):
     evaluates without advancing the contact histories.
 
     Returns (number of contacts, largest overlap (m))."""
-    pos, vel, omg, radius, mass = balls.pos, balls.vel, balls.omg, balls.radius, balls.mass
-    force, torque, degree = balls.force, balls.torque, balls.degree
-    start, nbr, hist, flag = pairs.start, pairs.nbr, pairs.hist, pairs.flag
-    table, box, rates, virial = cell.table, cell.box, cell.rates, cell.virial
+    pos, force, torque, degree = balls.pos, balls.force, balls.torque, balls.degree
+    start, nbr = pairs.start, pairs.nbr
+    par, box, rates, virial = cell.table[0, 0], cell.box, cell.rates, cell.virial
     n = pos.shape[0]
     for i in range(n):
         degree[i] = 0
@@ -103,8 +102,7 @@ def pair_forces(balls, pairs, cell, dt_hist):
             dx, dy, dz, k = le_branch(pos, i, j, box)
             touching, _first, delta, _nx, _ny, _nz, _vn, fx, fy, fz = ball_pair(
                 i, j, q, dx, dy, dz, rates[R_EX] * dx - k * jump, rates[R_EY] * dy,
-                rates[R_EZ] * dz, vel, omg, radius, mass, table, 0, 0, hist, flag, dt_hist,
-                fbuf, tbuf, 0)
+                rates[R_EZ] * dz, balls, pairs, par, dt_hist, fbuf, tbuf, 0)
             if not touching:
                 continue
             virial[0, 0] += fx * dx
