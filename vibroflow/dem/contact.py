@@ -35,6 +35,66 @@ from .laws import (MODEL_LINEAR, P_DAMP, P_KN, P_KT, P_MODEL, P_MU, P_MUR, P_ROL
                    ROLL_CDT_LIGGGHTS, ROLL_EPSD)
 
 
+@nb.njit(cache=True, inline="always")
+def into_plane(x, y, z, nx, ny, nz, len2):
+    """(x, y, z) with its part along the unit normal n removed, then scaled back to the squared
+    length len2 (left as it is when nothing of it is tangential)."""
+    xn = x * nx + y * ny + z * nz
+    x -= xn * nx
+    y -= xn * ny
+    z -= xn * nz
+    p2 = x * x + y * y + z * z
+    if p2 > 0.0:
+        scale = np.sqrt(len2 / p2)
+        x *= scale
+        y *= scale
+        z *= scale
+    return x, y, z
+
+
+@nb.njit(cache=True, inline="always")
+def forget(hist, flag, q):
+    """Entry q of a neighbour list is apart: its contact flag and history are cleared."""
+    if flag[q]:
+        flag[q] = 0
+        for a in range(6):
+            hist[q, a] = 0.0
+
+
+@nb.njit(cache=True, inline="always")
+def unit_normal(dx, dy, dz, d2, rsum):
+    """Overlap rsum - d (m) and unit normal (dx, dy, dz) / d of two touching balls, d2 = d^2."""
+    d = np.sqrt(d2)
+    inv = 1.0 / d
+    return rsum - d, dx * inv, dy * inv, dz * inv
+
+
+@nb.njit(cache=True, inline="always")
+def add_pair(fbuf, tbuf, c, i, j, fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz):
+    """A pair's force on i (j receives its opposite) and torques on i and j into chunk c's
+    buffers."""
+    fbuf[c, i, 0] += fx
+    fbuf[c, i, 1] += fy
+    fbuf[c, i, 2] += fz
+    fbuf[c, j, 0] -= fx
+    fbuf[c, j, 1] -= fy
+    fbuf[c, j, 2] -= fz
+    tbuf[c, i, 0] += tix
+    tbuf[c, i, 1] += tiy
+    tbuf[c, i, 2] += tiz
+    tbuf[c, j, 0] += tjx
+    tbuf[c, j, 1] += tjy
+    tbuf[c, j, 2] += tjz
+
+
+@nb.njit(cache=True, inline="always")
+def put3(a, i, x, y, z):
+    """Row i of an (N, 3) array set to (x, y, z)."""
+    a[i, 0] = x
+    a[i, 1] = y
+    a[i, 2] = z
+
+
 @nb.njit(cache=True, inline="always", fastmath=False)
 def contact_force(delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, r_i, r_j, r_eff, m_eff, par,
                   hist, dt):
@@ -72,16 +132,7 @@ def contact_force(delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, r_i, r_j, r_eff, m_
     hz = hist[2]
     h2 = hx * hx + hy * hy + hz * hz
     if h2 > 0.0:
-        hn = hx * nx + hy * ny + hz * nz
-        hx -= hn * nx
-        hy -= hn * ny
-        hz -= hn * nz
-        p2 = hx * hx + hy * hy + hz * hz
-        if p2 > 0.0:
-            scale = np.sqrt(h2 / p2)
-            hx *= scale
-            hy *= scale
-            hz *= scale
+        hx, hy, hz = into_plane(hx, hy, hz, nx, ny, nz, h2)
     hx += vtx * dt
     hy += vty * dt
     hz += vtz * dt
@@ -154,17 +205,7 @@ def contact_force(delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, r_i, r_j, r_eff, m_
             mx = hist[3]
             my = hist[4]
             mz = hist[5]
-            m2 = mx * mx + my * my + mz * mz
-            mn = mx * nx + my * ny + mz * nz
-            mx -= mn * nx
-            my -= mn * ny
-            mz -= mn * nz
-            p2 = mx * mx + my * my + mz * mz
-            if p2 > 0.0:
-                scale = np.sqrt(m2 / p2)
-                mx *= scale
-                my *= scale
-                mz *= scale
+            mx, my, mz = into_plane(mx, my, mz, nx, ny, nz, mx * mx + my * my + mz * mz)
             mx -= kr * wrx * dt
             my -= kr * wry * dt
             mz -= kr * wrz * dt
@@ -210,8 +251,7 @@ def pair_contact_velocity(vel, omg, i, j, ri, rj, nx, ny, nz):
 
 
 @nb.njit(cache=True, inline="always")
-def ball_pair(i, j, q, dx, dy, dz, dvx, dvy, dvz, vel, omg, radius, mass, table, mat_i, mat_j,
-              hist, flag, dt_hist, fbuf, tbuf, c):
+def ball_pair(i, j, q, dx, dy, dz, dvx, dvy, dvz, balls, pairs, par, dt_hist, fbuf, tbuf, c):
     """One listed pair of balls (i, j), entry q of a neighbour list: the pair kernel of the
     Lees-Edwards box (vibroflow.dem.periodic_step).  The tub's step (vibroflow.dem.step) writes
     the same operations out in its chunk loop: through this function it costs about a quarter
@@ -220,31 +260,26 @@ def ball_pair(i, j, q, dx, dy, dz, dvx, dvy, dvz, vel, omg, radius, mass, table,
     (dx, dy, dz) = r_i - r_j (m) is the branch vector to the image of j the caller chose;
     (dvx, dvy, dvz) (m/s) is added to the material relative velocity: the velocity of i's frame
     relative to that image's (Lees-Edwards images and the box's affine dilation; -0.0 where the
-    image moves with j, which leaves the velocity bit for bit and costs no addition).  Apart,
-    the contact's history is forgotten.  In contact, the force and torques of `contact_force`
-    with the parameters table[mat_i, mat_j] are added to fbuf[c, i], -fbuf[c, j], tbuf[c, i],
-    tbuf[c, j] and the history advances by dt_hist.
+    image moves with j, which leaves the velocity bit for bit and costs no addition).  `balls`
+    holds vel, omg, radius and mass, `pairs` the list's hist and flag (vibroflow.dem.records).
+    Apart, the contact's history is forgotten.  In contact, the force and torques of
+    `contact_force` with the parameters `par` (a row of vibroflow.dem.laws.pair_table) are added
+    to fbuf[c, i], -fbuf[c, j], tbuf[c, i], tbuf[c, j] and the history advances by dt_hist.
 
     Returns (touching, first, delta, nx, ny, nz, vn, fx, fy, fz): whether they touch, whether
     the contact is new (its flag was clear), the overlap (m), the unit normal from j to i, the
     normal relative velocity (m/s, > 0 separating) and the force on i (N).
     """
+    vel, omg, radius, mass = balls.vel, balls.omg, balls.radius, balls.mass
+    hist, flag = pairs.hist, pairs.flag
     ri = radius[i]
     rj = radius[j]
     rsum = ri + rj
     d2 = dx * dx + dy * dy + dz * dz
     if d2 >= rsum * rsum:
-        if flag[q]:
-            flag[q] = 0
-            for a in range(6):
-                hist[q, a] = 0.0
+        forget(hist, flag, q)
         return False, False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    d = np.sqrt(d2)
-    delta = rsum - d
-    inv = 1.0 / d
-    nx = dx * inv
-    ny = dy * inv
-    nz = dz * inv
+    delta, nx, ny, nz = unit_normal(dx, dy, dz, d2, rsum)
     vx, vy, vz = pair_contact_velocity(vel, omg, i, j, ri, rj, nx, ny, nz)
     vx += dvx
     vy += dvy
@@ -257,17 +292,6 @@ def ball_pair(i, j, q, dx, dy, dz, dvx, dvy, dvz, vel, omg, radius, mass, table,
     fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz, fn, ft, sl = contact_force(
         delta, nx, ny, nz, vx, vy, vz,
         omg[i, 0] - omg[j, 0], omg[i, 1] - omg[j, 1], omg[i, 2] - omg[j, 2],
-        ri, rj, ri * rj / rsum, mi * mj / (mi + mj), table[mat_i, mat_j], hist[q], dt_hist)
-    fbuf[c, i, 0] += fx
-    fbuf[c, i, 1] += fy
-    fbuf[c, i, 2] += fz
-    fbuf[c, j, 0] -= fx
-    fbuf[c, j, 1] -= fy
-    fbuf[c, j, 2] -= fz
-    tbuf[c, i, 0] += tix
-    tbuf[c, i, 1] += tiy
-    tbuf[c, i, 2] += tiz
-    tbuf[c, j, 0] += tjx
-    tbuf[c, j, 1] += tjy
-    tbuf[c, j, 2] += tjz
+        ri, rj, ri * rj / rsum, mi * mj / (mi + mj), par, hist[q], dt_hist)
+    add_pair(fbuf, tbuf, c, i, j, fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz)
     return True, first, delta, nx, ny, nz, vn, fx, fy, fz

@@ -149,7 +149,7 @@ def build_le_list(pos, radius, box, skin, dims):
 def wrap(pos, vel, image, box, gamma_dot):
     """Put every ball back in the box: across z with the Lees-Edwards shift -k Delta in x and
     velocity jump -k gamma_dot L_z (k = +1 leaving through the top), then x and y periodic."""
-    lx, ly, lz, off = box[B_LX], box[B_LY], box[B_LZ], box[B_OFFSET]
+    lz, off = box[B_LZ], box[B_OFFSET]
     for i in range(pos.shape[0]):
         k = np.floor(pos[i, 2] / lz)
         if k != 0.0:
@@ -159,15 +159,11 @@ def wrap(pos, vel, image, box, gamma_dot):
             image[i, 2] += int(k)
             if pos[i, 2] >= lz:  # round-off of a ball a hair below the top
                 pos[i, 2] -= lz
-        kx = np.floor(pos[i, 0] / lx)
-        if kx != 0.0:
-            pos[i, 0] -= kx * lx
-            image[i, 0] += int(kx)
-            if pos[i, 0] >= lx:
-                pos[i, 0] -= lx
-        ky = np.floor(pos[i, 1] / ly)
-        if ky != 0.0:
-            pos[i, 1] -= ky * ly
-            image[i, 1] += int(ky)
-            if pos[i, 1] >= ly:
-                pos[i, 1] -= ly
+        for a in range(2):  # x and y: box[B_LX], box[B_LY]
+            length = box[a]
+            k = np.floor(pos[i, a] / length)
+            if k != 0.0:
+                pos[i, a] -= k * length
+                image[i, a] += int(k)
+                if pos[i, a] >= length:
+                    pos[i, a] -= length

@@ -15,8 +15,21 @@ minimum image.
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba as nb
 import numpy as np
+
+
+class Cells(NamedTuple):
+    """The balls sorted into a grid of cells (`bin_particles`), and the search's settings."""
+
+    start: np.ndarray          # (ncell + 1,) first entry of each cell in `members`
+    members: np.ndarray        # (N,) balls, cell by cell, each cell's in index order
+    cell_of: np.ndarray        # (N, 3) integer cell coordinates of each ball
+    dims: np.ndarray           # (3,) cells along x, y, z
+    skin: float                # m
+    periodic_length: float     # m along y; 0 when not periodic
 
 
 @nb.njit(cache=True)
@@ -61,9 +74,10 @@ def bin_particles(pos, lo, cell_size, dims, periodic_length):
 
 
 @nb.njit(cache=True, inline="always")
-def _scan(i, pos, radius, skin, cell_start, cell_members, cell_of, dims, periodic_length, out,
-          offset, write):
+def _scan(i, pos, radius, cells, out, offset, write):
     """Visit the neighbour cells of i; count (write=False) or store (write=True) its j > i."""
+    cell_start, cell_members, cell_of, dims = cells.start, cells.members, cells.cell_of, cells.dims
+    skin, periodic_length = cells.skin, cells.periodic_length
     nx, ny, nz = dims[0], dims[1], dims[2]
     cx, cy, cz = cell_of[i, 0], cell_of[i, 1], cell_of[i, 2]
     count = 0
@@ -104,22 +118,19 @@ def _scan(i, pos, radius, skin, cell_start, cell_members, cell_of, dims, periodi
 
 
 @nb.njit(cache=True, parallel=True)
-def build_half_list(pos, radius, skin, cell_start, cell_members, cell_of, dims,
-                    periodic_length):
+def build_half_list(pos, radius, cells):
     """Half neighbour list in CSR form: (start (N+1,), nbr (M,))."""
     n = pos.shape[0]
     counts = np.zeros(n + 1, np.int64)
     dummy = np.empty(0, np.int64)
     for i in nb.prange(n):
-        counts[i + 1] = _scan(i, pos, radius, skin, cell_start, cell_members, cell_of, dims,
-                              periodic_length, dummy, 0, False)
+        counts[i + 1] = _scan(i, pos, radius, cells, dummy, 0, False)
     for i in range(n):
         counts[i + 1] += counts[i]
     nbr = np.empty(counts[n], np.int64)
     for i in nb.prange(n):
         # within a cell, members are in index order, so each i's list is reproducible
-        _scan(i, pos, radius, skin, cell_start, cell_members, cell_of, dims, periodic_length,
-              nbr, counts[i], True)
+        _scan(i, pos, radius, cells, nbr, counts[i], True)
     return counts, nbr
 
 
@@ -168,9 +179,9 @@ class NeighbourList:
             dims[1] = max(int(self.periodic_length / cell), 1)
             if dims[1] < 3:
                 dims[1] = 1
-        cell_start, members, cell_of = bin_particles(pos, lo, cell, dims, self.periodic_length)
-        start, nbr = build_half_list(pos, radius, self.skin, cell_start, members, cell_of, dims,
-                                     self.periodic_length)
+        cells = Cells(*bin_particles(pos, lo, cell, dims, self.periodic_length), dims,
+                      self.skin, self.periodic_length)
+        start, nbr = build_half_list(pos, radius, cells)
         if self.nbr.shape[0] and self.start.shape[0] == start.shape[0]:
             hist, flag = transfer_history(self.start, self.nbr, self.hist, self.flag, start, nbr)
         else:

@@ -15,6 +15,7 @@ from .periodic_step import (BLOWUP, C_CUT, C_DAMPING, C_GAIN, C_MAX_OVERLAP, C_M
                             C_RATE_MAX, C_SKIN, MODE_FIXED, MODE_Z, N_CTRL, N_Q, N_STATE,
                             R_EX, R_EY, R_EZ, R_GAMMA, REBUILD, S_BUILD_STRAIN, S_BLOCK,
                             S_MAX_OVERLAP, S_NSAMPLE, S_TIME, advance, pair_forces, stress)
+from .records import Box, BoxBalls, Pairs
 
 
 def random_fill(n: int, radius: np.ndarray, lengths, rng: np.random.Generator,
@@ -118,14 +119,12 @@ class PeriodicBox:
     def evaluate(self) -> tuple[int, float]:
         """Forces, torques and virial at the current state without advancing contact histories
         (LAMMPS' setup).  Returns (contacts, largest overlap)."""
-        return pair_forces(self.pos, self.vel, self.omg, self.radius, self.mass, self.table,
-                           self.start, self.nbr, self.hist, self.flag, self.box, self.rates,
-                           0.0, self.force, self.torque, self.virial, self.degree)
+        return pair_forces(self._balls(), self._pairs(), self._cell(np.zeros(N_CTRL)), 0.0)
 
     def stress_tensor(self) -> np.ndarray:
         """Instantaneous stress (3x3, Pa, compression positive) from the last evaluation."""
         out = np.zeros(9)
-        stress(self.pos, self.vel, self.mass, self.box, self.rates[R_GAMMA], self.virial, out)
+        stress(self._balls(), self._cell(np.zeros(N_CTRL)), self.rates[R_GAMMA], out)
         return out.reshape(3, 3)
 
     # -- velocities of the mean flow -------------------------------------------------------------
@@ -144,6 +143,19 @@ class PeriodicBox:
         v = self.vel.copy()
         v[:, 0] += self.image[:, 2] * self.rates[R_GAMMA] * self.box[B_LZ]
         return (self.mass[:, None] * v).sum(axis=0)
+
+    # -- the kernels' records (vibroflow.dem.records) of the current arrays ---------------------
+    def _balls(self) -> BoxBalls:
+        return BoxBalls(self.pos, self.vel, self.omg, self.force, self.torque, self.radius,
+                        self.mass, self.inertia, self.disp, self.image, self.degree)
+
+    def _pairs(self) -> Pairs:
+        """The neighbour list, one force-assembly chunk."""
+        return Pairs(self.start, self.nbr, self.hist, self.flag,
+                     np.array([0, self.n], np.int64))
+
+    def _cell(self, ctrl: np.ndarray) -> Box:
+        return Box(self.box, self.rates, ctrl, self.state, self.virial, self.acc, self.table)
 
     # -- stepping --------------------------------------------------------------------------------
     def run(self, n_steps: int, mode: int = MODE_FIXED, pressure: float = 0.0,
@@ -174,14 +186,11 @@ class PeriodicBox:
         self.acc[:] = 0.0
         done = 0
         chunk = 20_000 if stop is None else 10 * sample_every
+        balls, cell = self._balls(), self._cell(ctrl)
         while done < n_steps:
             todo = min(n_steps - done, chunk)
-            status, steps = advance(todo, self.dt, self.pos, self.vel, self.omg, self.force,
-                                    self.torque, self.radius, self.mass, self.inertia,
-                                    self.table, self.start, self.nbr, self.hist, self.flag,
-                                    self.box, self.rates, ctrl, self.state, self.disp,
-                                    self.image, self.degree, self.virial, self.acc, samples,
-                                    sample_every)
+            status, steps = advance(todo, self.dt, sample_every, balls, self._pairs(), cell,
+                                    samples)
             done += steps
             if status == BLOWUP:
                 raise FloatingPointError(

@@ -68,16 +68,19 @@ DONE, REBUILD, BLOWUP = 0, 1, 2
 
 
 @nb.njit(cache=True)
-def pair_forces(pos, vel, omg, radius, mass, table, start, nbr, hist, flag, box, rates, dt_hist,
-                force, torque, virial, degree):
+def pair_forces(balls, pairs, cell, dt_hist):
     """Contact forces and torques of every listed pair (N, N m; force/torque overwritten), the
-    contact virial sum f_ij (x) r_ij (N m, virial[a, b] = sum f_a r_b) and the contacts of each
-    ball.  Pairs are seen at their nearest LE image: the image of j moves k gamma_dot L_z faster
-    in x, and the box's affine dilation adds eps_dot_a (r_i - r_j)_a to the relative velocity.
-    `table` (1, 1, N_PARAMS) holds the ball-ball row of the contact law.  `dt_hist` = 0
+    contact virial sum f_ij (x) r_ij (N m, cell.virial[a, b] = sum f_a r_b) and the contacts of
+    each ball (records of vibroflow.dem.records).  Pairs are seen at their nearest LE image:
+    the image of j moves k gamma_dot L_z faster in x, and the box's affine dilation adds
+    eps_dot_a (r_i - r_j)_a to the relative velocity.
+    `cell.table` (1, 1, N_PARAMS) holds the ball-ball row of the contact law.  `dt_hist` = 0
     evaluates without advancing the contact histories.
 
     Returns (number of contacts, largest overlap (m))."""
+    pos, force, torque, degree = balls.pos, balls.force, balls.torque, balls.degree
+    start, nbr = pairs.start, pairs.nbr
+    par, box, rates, virial = cell.table[0, 0], cell.box, cell.rates, cell.virial
     n = pos.shape[0]
     for i in range(n):
         degree[i] = 0
@@ -99,8 +102,7 @@ def pair_forces(pos, vel, omg, radius, mass, table, start, nbr, hist, flag, box,
             dx, dy, dz, k = le_branch(pos, i, j, box)
             touching, _first, delta, _nx, _ny, _nz, _vn, fx, fy, fz = ball_pair(
                 i, j, q, dx, dy, dz, rates[R_EX] * dx - k * jump, rates[R_EY] * dy,
-                rates[R_EZ] * dz, vel, omg, radius, mass, table, 0, 0, hist, flag, dt_hist,
-                fbuf, tbuf, 0)
+                rates[R_EZ] * dz, balls, pairs, par, dt_hist, fbuf, tbuf, 0)
             if not touching:
                 continue
             virial[0, 0] += fx * dx
@@ -121,9 +123,11 @@ def pair_forces(pos, vel, omg, radius, mass, table, start, nbr, hist, flag, box,
 
 
 @nb.njit(cache=True)
-def _damp(vel, omg, pos, mass, inertia, box, rates, c, force, torque):
+def _damp(balls, box, rates, c):
     """Background viscous damping -c m v' (v' relative to the mean flow) and -c I w, used only to
     bring a packing to rest (preparation, elastic tests); c in 1/s."""
+    pos, vel, omg, mass, inertia = balls.pos, balls.vel, balls.omg, balls.mass, balls.inertia
+    force, torque = balls.force, balls.torque
     n = pos.shape[0]
     half = 0.5 * box[B_LZ]
     for i in range(n):
@@ -135,9 +139,11 @@ def _damp(vel, omg, pos, mass, inertia, box, rates, c, force, torque):
 
 
 @nb.njit(cache=True)
-def stress(pos, vel, mass, box, gamma_dot, virial, out):
+def stress(balls, cell, gamma_dot, out):
     """Stress of the box (Pa, compression positive) into out[9] (row-major xx xy xz yx ...):
     (contact virial + sum m v' (x) v') / V, v' = v - gamma_dot (z - L_z/2) x."""
+    pos, vel, mass = balls.pos, balls.vel, balls.mass
+    box, virial = cell.box, cell.virial
     vol = box[B_LX] * box[B_LY] * box[B_LZ]
     half = 0.5 * box[B_LZ]
     for a in range(3):
@@ -161,11 +167,21 @@ def stress(pos, vel, mass, box, gamma_dot, virial, out):
         out[a] /= vol
 
 
+@nb.njit(cache=True, inline="always")
+def _kick(balls, i, half_dt):
+    """Half kick of ball i: v += dt/2 F/m, w += dt/2 T/I."""
+    vel, omg, force, torque = balls.vel, balls.omg, balls.force, balls.torque
+    im = half_dt / balls.mass[i]
+    ii = half_dt / balls.inertia[i]
+    for a in range(3):
+        vel[i, a] += im * force[i, a]
+        omg[i, a] += ii * torque[i, a]
+
+
 @nb.njit(cache=True)
-def advance(n_steps, dt, pos, vel, omg, force, torque, radius, mass, inertia, table, start,
-            nbr, hist, flag, box, rates, ctrl, state, disp, image, degree, virial, acc, samples,
-            sample_every):
-    """Velocity-Verlet steps of the periodic box (see the module notes).
+def advance(n_steps, dt, sample_every, balls, pairs, cell, samples):
+    """Velocity-Verlet steps of the periodic box (see the module notes; the records of
+    vibroflow.dem.records).
 
     Per step: half kick; drift, with the non-affine displacement `disp` accumulated; affine
     dilation of the box by the rates; LE offset += gamma_dot L_z dt; wrap; forces at the new
@@ -176,6 +192,9 @@ def advance(n_steps, dt, pos, vel, omg, force, torque, radius, mass, inertia, ta
     Stops after n_steps (DONE), when the neighbour list must be rebuilt before the next step
     (REBUILD), or when an overlap exceeds ctrl[C_MAX_OVERLAP] or a value is not finite
     (BLOWUP).  Returns (status, steps done)."""
+    pos, vel, mass, disp = balls.pos, balls.vel, balls.mass, balls.disp
+    image, degree = balls.image, balls.degree
+    box, rates, ctrl, state, acc = cell.box, cell.rates, cell.ctrl, cell.state, cell.acc
     n = pos.shape[0]
     half_dt = 0.5 * dt
     mode = int(ctrl[C_MODE])
@@ -191,11 +210,7 @@ def advance(n_steps, dt, pos, vel, omg, force, torque, radius, mass, inertia, ta
         # kick and drift
         half = 0.5 * box[B_LZ]
         for i in range(n):
-            im = half_dt / mass[i]
-            ii = half_dt / inertia[i]
-            for a in range(3):
-                vel[i, a] += im * force[i, a]
-                omg[i, a] += ii * torque[i, a]
+            _kick(balls, i, half_dt)
             disp[i, 0] += (vel[i, 0] - gd * (pos[i, 2] - half)) * dt
             disp[i, 1] += vel[i, 1] * dt
             disp[i, 2] += vel[i, 2] * dt
@@ -217,21 +232,16 @@ def advance(n_steps, dt, pos, vel, omg, force, torque, radius, mass, inertia, ta
         state[S_BUILD_STRAIN] += (abs(gd) + max(abs(rates[R_EX]), abs(rates[R_EY]),
                                                 abs(rates[R_EZ]))) * dt
         # forces at the new positions
-        nc, ov = pair_forces(pos, vel, omg, radius, mass, table, start, nbr, hist, flag, box,
-                             rates, dt, force, torque, virial, degree)
+        nc, ov = pair_forces(balls, pairs, cell, dt)
         if damping > 0.0:
-            _damp(vel, omg, pos, mass, inertia, box, rates, damping, force, torque)
+            _damp(balls, box, rates, damping)
         # second half kick, largest displacement and speed
         d2max = 0.0
         v2max = 0.0
         ke = 0.0
         half = 0.5 * box[B_LZ]
         for i in range(n):
-            im = half_dt / mass[i]
-            ii = half_dt / inertia[i]
-            for a in range(3):
-                vel[i, a] += im * force[i, a]
-                omg[i, a] += ii * torque[i, a]
+            _kick(balls, i, half_dt)
             d2 = disp[i, 0] ** 2 + disp[i, 1] ** 2 + disp[i, 2] ** 2
             if d2 > d2max:
                 d2max = d2
@@ -244,7 +254,7 @@ def advance(n_steps, dt, pos, vel, omg, force, torque, radius, mass, inertia, ta
             state[S_MAX_OVERLAP] = ov
         if ov > ctrl[C_MAX_OVERLAP] or not np.isfinite(ke):
             return BLOWUP, s + 1
-        stress(pos, vel, mass, box, gd, virial, sig)
+        stress(balls, cell, gd, sig)
         # box control for the next step
         if mode == MODE_Z:
             e = (sig[8] - p_target) * gain

@@ -11,12 +11,15 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .contact import branch_vector, contact_force, pair_contact_velocity
+from .contact import branch_vector, contact_force, pair_contact_velocity, put3
+from .records import balls_of, pairs_of
 
 
 @nb.njit(cache=True)
-def _ball_ball(pos, vel, omg, radius, mass, mat, table, nbr_start, nbr, hist, flag,
-               periodic_length):
+def _ball_ball(balls, pairs, table, periodic_length):
+    pos, vel, omg, radius, mass, mat = (balls.pos, balls.vel, balls.omg, balls.radius,
+                                        balls.mass, balls.mat)
+    nbr_start, nbr, hist, flag = pairs.start, pairs.nbr, pairs.hist, pairs.flag
     n = pos.shape[0]
     count = 0
     for i in range(n):
@@ -53,12 +56,8 @@ def _ball_ball(pos, vel, omg, radius, mass, mat, table, nbr_start, nbr, hist, fl
                 table[mat[i], mat[j]], h, 0.0)
             ii[m] = i
             jj[m] = j
-            force[m, 0] = fx
-            force[m, 1] = fy
-            force[m, 2] = fz
-            branch[m, 0] = dx
-            branch[m, 1] = dy
-            branch[m, 2] = dz
+            put3(force, m, fx, fy, fz)
+            put3(branch, m, dx, dy, dz)
             m += 1
     return ii, jj, force, branch
 
@@ -66,7 +65,6 @@ def _ball_ball(pos, vel, omg, radius, mass, mat, table, nbr_start, nbr, hist, fl
 def ball_contacts_now(system, state) -> dict[str, np.ndarray]:
     """Every touching ball pair now: `i`, `j` (i < j), `force` (N, on i by j, lab axes) and
     `branch` = r_i - r_j (m, minimum image in a periodic length)."""
-    i, j, force, branch = _ball_ball(
-        state.pos, state.vel, state.omg, state.radius, state.mass, state.mat, system.table,
-        state.nl.start, state.nl.nbr, state.nl.hist, state.nl.flag, system.periodic_length)
+    i, j, force, branch = _ball_ball(balls_of(state), pairs_of(state.nl), system.table,
+                                     system.periodic_length)
     return {"i": i, "j": j, "force": force, "branch": branch}

@@ -24,11 +24,10 @@ from .blowup import (BlowUp, blowup_message, check_finite_start, check_overlaps_
                      coincident_message, coincident_pair)
 from .laws import material_index, pair_table
 from .neighbours import NeighbourList
+from .records import Params, Work, balls_of, pairs_of, walls_of
 from .walls import N_PLANE, WALL_PLANE0, wall_kind
 
 IMPACT_CAPACITY = 1 << 15  # per chunk, between flushes
-
-
 
 
 @dataclass
@@ -47,6 +46,11 @@ class DEMSystem:
     nchunk: int                    # force-assembly chunks (fixes the summation order)
     material_names: list[str]
     notes: dict = field(default_factory=dict)
+    params: Params = field(init=False, repr=False, compare=False)  # the kernels' constants
+
+    def __post_init__(self):
+        self.params = Params(float(self.dt), self.gravity, self.table, self.tub, self.wall_mat,
+                             self.planes, 0.5 * self.skin, float(self.max_overlap))
 
     @property
     def n_walls(self) -> int:
@@ -164,32 +168,35 @@ def init_state(system: DEMSystem, pos, vel, omg, radius, density, mat) -> DEMSta
     if pair is not None:
         raise BlowUp(coincident_message(system, state, pair))
     _forces_now(system, state)
-    check_overlaps_at_start(system, state, _buf(system, state).diag)
+    check_overlaps_at_start(system, state, _buf(system, state).work.diag)
     return state
 
 
 class _Buffers:
-    """Scratch arrays of the force assembly, made once per run."""
+    """Scratch arrays of the force assembly and the kernels' records of a state's arrays,
+    made once per run."""
 
-    def __init__(self, system: DEMSystem, n: int):
-        self.fbuf = np.zeros((system.nchunk, n, 3))
-        self.tbuf = np.zeros((system.nchunk, n, 3))
-        self.imp_buf = np.zeros((system.nchunk, IMPACT_CAPACITY, 6))
-        self.imp_count = np.zeros(system.nchunk, np.int64)
-        self.diag = np.empty((system.nchunk, K.N_DIAG))
-        self.pose = np.zeros(8)
+    def __init__(self, system: DEMSystem, state: DEMState):
+        n, nchunk = state.n, system.nchunk
+        self.work = Work(fbuf=np.zeros((nchunk, n, 3)), tbuf=np.zeros((nchunk, n, 3)),
+                         imp_buf=np.zeros((nchunk, IMPACT_CAPACITY, 6)),
+                         imp_count=np.zeros(nchunk, np.int64), diag=np.empty((nchunk, K.N_DIAG)),
+                         pose=np.zeros(8), moved=np.zeros(nchunk))
+        self.balls = balls_of(state)
+        self.walls = walls_of(state)
         self.reset_diag()
 
     def reset_diag(self):
-        self.diag[:] = -1.0
-        self.diag[:, K.D_BALL_OVERLAP] = 0.0
-        self.diag[:, K.D_WALL_OVERLAP] = 0.0
+        diag = self.work.diag
+        diag[:] = -1.0
+        diag[:, K.D_BALL_OVERLAP] = 0.0
+        diag[:, K.D_WALL_OVERLAP] = 0.0
 
 
 def _buf(system: DEMSystem, state: DEMState) -> _Buffers:
     b = state.scratch
-    if b is None or b.fbuf.shape[1] != state.n or b.fbuf.shape[0] != system.nchunk:
-        b = state.scratch = _Buffers(system, state.n)
+    if b is None or b.work.fbuf.shape[1] != state.n or b.work.fbuf.shape[0] != system.nchunk:
+        b = state.scratch = _Buffers(system, state)
     return b
 
 
@@ -211,32 +218,27 @@ def rebuild(system: DEMSystem, state: DEMState) -> None:
 
 def _forces_now(system: DEMSystem, state: DEMState) -> None:
     b = _buf(system, state)
-    pose = _tub_pose(system, state)
-    K.compute_forces(state.time(system.dt), system.dt, pose, state.pos, state.vel, state.omg,
-                     state.radius, state.mass, state.mat, system.gravity, system.table,
-                     state.nl.start, state.nl.nbr, state.nl.hist, state.nl.flag, system.tub,
-                     system.wall_mat, system.planes, state.wall_hist, state.wall_flag,
-                     state.wall_fn, state.wall_ft, state.wall_slide, state.wall_point,
-                     state.wall_force, state.wall_arc, state.force, state.torque, b.fbuf,
-                     b.tbuf, state.nl.chunk_bounds(system.nchunk), b.imp_buf, b.imp_count,
-                     False, b.diag, False, state.ref_tub,
-                     np.zeros(system.nchunk))
-    b.imp_count[:] = 0
+    b.work.pose[:] = _tub_pose(system, state)
+    K.compute_forces(state.time(system.dt), False, False, b.balls,
+                     pairs_of(state.nl, system.nchunk), b.walls, system.params, b.work)
+    b.work.imp_count[:] = 0
 
 
 def take_impacts(system: DEMSystem, state: DEMState) -> np.ndarray:
     """Impacts recorded since the last call: (M, 6) [time, kind, x, y, z, speed] (lab), in a
     fixed order (chunk by chunk)."""
     b = _buf(system, state)
-    parts = [b.imp_buf[c, :min(b.imp_count[c], IMPACT_CAPACITY)] for c in range(system.nchunk)]
-    b.imp_count[:] = 0
+    buf, count = b.work.imp_buf, b.work.imp_count
+    parts = [buf[c, :min(count[c], IMPACT_CAPACITY)] for c in range(system.nchunk)]
+    count[:] = 0
     return np.concatenate(parts) if parts else np.zeros((0, 6))
 
 
 def take_max_overlaps(system: DEMSystem, state: DEMState) -> tuple[float, float]:
     """Largest ball-ball and ball-wall overlaps (m) since the last call."""
     b = _buf(system, state)
-    out = (float(b.diag[:, K.D_BALL_OVERLAP].max()), float(b.diag[:, K.D_WALL_OVERLAP].max()))
+    diag = b.work.diag
+    out = (float(diag[:, K.D_BALL_OVERLAP].max()), float(diag[:, K.D_WALL_OVERLAP].max()))
     b.reset_diag()
     return out
 
@@ -245,12 +247,12 @@ def overlap_maxima(state: DEMState) -> np.ndarray | None:
     """The diagnostics of the step (largest overlaps and the balls, step.D_*) since the last
     take_max_overlaps, or None before the first step; a checkpoint carries them so that the
     series of a resumed run is exact."""
-    return state.scratch.diag if state.scratch is not None else None
+    return state.scratch.work.diag if state.scratch is not None else None
 
 
 def set_overlap_maxima(system: DEMSystem, state: DEMState, diag: np.ndarray) -> None:
     """Restore the diagnostics of overlap_maxima (a resumed checkpoint's)."""
-    _buf(system, state).diag[:] = diag
+    _buf(system, state).work.diag[:] = diag
 
 
 def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: bool = False,
@@ -258,20 +260,13 @@ def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: b
     """Advance the state by `nsteps` steps in place (rebuilding the list as needed)."""
     b = _buf(system, state)
     motion = system.motion_array(state.vibrating)
-    b.pose[6], b.pose[7] = system.motion.pivot_x, system.motion.pivot_z
-    half_skin = 0.5 * system.skin
+    b.work.pose[6], b.work.pose[7] = system.motion.pivot_x, system.motion.pivot_z
     left = nsteps
     while left > 0:
         try:
-            done, status = K.advance(
-                state.step, left, system.dt, state.time_origin_step, motion, state.pos,
-                state.vel, state.omg, state.radius, state.mass, state.mat, system.gravity,
-                system.table, state.nl.start, state.nl.nbr, state.nl.hist, state.nl.flag,
-                system.tub, system.wall_mat, system.planes, state.wall_hist, state.wall_flag,
-                state.wall_fn, state.wall_ft, state.wall_slide, state.wall_point,
-                state.wall_force, state.wall_arc, state.force, state.torque, b.fbuf, b.tbuf,
-                state.nl.chunk_bounds(system.nchunk), state.ref_tub, half_skin, b.imp_buf,
-                b.imp_count, record_impacts, b.diag, system.max_overlap, b.pose)
+            done, status = K.advance(state.step, left, state.time_origin_step, motion,
+                                     record_impacts, b.balls, pairs_of(state.nl, system.nchunk),
+                                     b.walls, system.params, b.work)
         except ZeroDivisionError:
             # 1/d of two coincident balls (numba raises it, as Python does); the step count is
             # unknown here, so the time is that of the call's start
@@ -282,7 +277,7 @@ def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: b
         state.step += done
         left -= done
         if status == K.BLOWUP:
-            raise BlowUp(blowup_message(system, state, b.diag))
+            raise BlowUp(blowup_message(system, state, b.work.diag))
         if status == K.REBUILD:
             rebuild(system, state)
         if on_impacts is not None and (status == K.IMPACTS_FULL or left == 0):

@@ -7,6 +7,8 @@
 `advance` runs steps until it is asked to stop, the neighbour list needs a rebuild (some ball
 moved more than half the skin in the tub frame), the impact buffer fills, or the run blows up;
 the caller (dem/simulate.py) rebuilds and calls again.  All loops over balls are parallel.
+The kernels take the records of vibroflow.dem.records and read their fields into local
+variables first.
 
 Parallel force assembly without races or atomics: balls are split into `nchunk` contiguous
 chunks; the pair forces of chunk c go to its own buffer fbuf[c], then the buffers are summed in
@@ -20,7 +22,8 @@ import numba as nb
 import numpy as np
 
 from ..tub.motion import pose as tub_pose
-from .contact import branch_vector, contact_force, pair_contact_velocity
+from .contact import (add_pair, branch_vector, contact_force, forget, pair_contact_velocity,
+                      put3, unit_normal)
 from .walls import (KIND_BALL_BALL, KIND_BALL_PARTITION, KIND_BALL_PLANE, KIND_BALL_TUB,
                     TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT, WALL_PLANE0, WALL_U, plane_wall,
                     u_wall)
@@ -46,9 +49,13 @@ def _record_impact(imp_buf, imp_count, c, t, kind, x, y, z, speed):
 
 
 @nb.njit(cache=True)
-def _pair_chunk(c, nchunk, t, dt_hist, pos, vel, omg, radius, mass, mat, table, nbr_start, nbr,
-                hist, flag, periodic_length, fbuf, tbuf, bounds, imp_buf, imp_count,
-                record_impacts, diag):
+def _pair_chunk(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, table, work):
+    pos, vel, omg = balls.pos, balls.vel, balls.omg
+    radius, mass, mat = balls.radius, balls.mass, balls.mat
+    nbr_start, nbr, hist, flag = pairs.start, pairs.nbr, pairs.hist, pairs.flag
+    bounds = pairs.bounds
+    fbuf, tbuf, imp_buf, imp_count, diag = (work.fbuf, work.tbuf, work.imp_buf, work.imp_count,
+                                            work.diag)
     lo, hi = bounds[c], bounds[c + 1]
     for i in range(lo, hi):
         ri = radius[i]
@@ -59,17 +66,9 @@ def _pair_chunk(c, nchunk, t, dt_hist, pos, vel, omg, radius, mass, mat, table, 
             rsum = ri + radius[j]
             d2 = dx * dx + dy * dy + dz * dz
             if d2 >= rsum * rsum:
-                if flag[k]:
-                    flag[k] = 0
-                    for q in range(6):
-                        hist[k, q] = 0.0
+                forget(hist, flag, k)
                 continue
-            d = np.sqrt(d2)
-            delta = rsum - d
-            inv = 1.0 / d
-            nx = dx * inv
-            ny = dy * inv
-            nz = dz * inv
+            delta, nx, ny, nz = unit_normal(dx, dy, dz, d2, rsum)
             rj = radius[j]
             vx, vy, vz = pair_contact_velocity(vel, omg, i, j, ri, rj, nx, ny, nz)
             if not flag[k]:
@@ -87,18 +86,7 @@ def _pair_chunk(c, nchunk, t, dt_hist, pos, vel, omg, radius, mass, mat, table, 
                 delta, nx, ny, nz, vx, vy, vz,
                 omg[i, 0] - omg[j, 0], omg[i, 1] - omg[j, 1], omg[i, 2] - omg[j, 2],
                 ri, rj, r_eff, m_eff, par, hist[k], dt_hist)
-            fbuf[c, i, 0] += fx
-            fbuf[c, i, 1] += fy
-            fbuf[c, i, 2] += fz
-            fbuf[c, j, 0] -= fx
-            fbuf[c, j, 1] -= fy
-            fbuf[c, j, 2] -= fz
-            tbuf[c, i, 0] += tix
-            tbuf[c, i, 1] += tiy
-            tbuf[c, i, 2] += tiz
-            tbuf[c, j, 0] += tjx
-            tbuf[c, j, 1] += tjy
-            tbuf[c, j, 2] += tjz
+            add_pair(fbuf, tbuf, c, i, j, fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz)
             if delta > diag[c, D_BALL_OVERLAP]:
                 diag[c, D_BALL_OVERLAP] = delta
                 diag[c, D_BALL_I] = i
@@ -119,10 +107,7 @@ def _pose_array(motion, pivot_x, pivot_z, t, out):
 
 
 @nb.njit(cache=True)
-def _finish_chunk(c, nchunk, t, dt, pose, pos, vel, omg, radius, mass, mat, gravity, table,
-                  tub, wall_mat, planes, wall_hist, wall_flag, wall_fn, wall_ft, wall_slide,
-                  wall_point, wall_force, wall_arc, force, torque, fbuf, tbuf, bounds, imp_buf,
-                  imp_count, record_impacts, diag, kick, ref_tub, moved):
+def _finish_chunk(c, t, kick, record_impacts, balls, walls, bounds, params, work):
     """For the balls of chunk c: gather the pair forces from every chunk's buffer (and clear
     it), add gravity and the walls, and with `kick` finish the step (second half kick) and
     measure the largest move since the last list build (tub frame) into moved[c].
@@ -131,6 +116,16 @@ def _finish_chunk(c, nchunk, t, dt, pose, pos, vel, omg, radius, mass, mat, grav
     reference-count update per array, which per ball and wall slot cost more than the
     contact itself.  Without `kick` (the set-up force evaluation) contact histories are not
     advanced, as in LAMMPS' setup."""
+    pos, vel, omg, force, torque = balls.pos, balls.vel, balls.omg, balls.force, balls.torque
+    radius, mass, mat, ref_tub = balls.radius, balls.mass, balls.mat, balls.ref_tub
+    wall_hist, wall_flag, wall_fn, wall_ft = walls.hist, walls.flag, walls.fn, walls.ft
+    wall_slide, wall_point, wall_force, wall_arc = walls.slide, walls.point, walls.force, walls.arc
+    dt, gravity, table, tub = params.dt, params.gravity, params.table, params.tub
+    wall_mat, planes = params.wall_mat, params.planes
+    fbuf, tbuf, imp_buf, imp_count, diag = (work.fbuf, work.tbuf, work.imp_buf, work.imp_count,
+                                            work.diag)
+    pose, moved = work.pose, work.moved
+    nchunk = fbuf.shape[0]
     lo, hi = bounds[c], bounds[c + 1]
     cth = np.cos(pose[2])
     sth = np.sin(pose[2])
@@ -260,12 +255,8 @@ def _finish_chunk(c, nchunk, t, dt, pose, pos, vel, omg, radius, mass, mat, grav
                 diag[c, D_WALL_OVERLAP] = delta
                 diag[c, D_WALL_I] = i
                 diag[c, D_WALL_W] = w
-        force[i, 0] = fx
-        force[i, 1] = fy
-        force[i, 2] = fz
-        torque[i, 0] = tx
-        torque[i, 1] = ty
-        torque[i, 2] = tz
+        put3(force, i, fx, fy, fz)
+        put3(torque, i, tx, ty, tz)
         if kick:
             im = 1.0 / mass[i]
             ii = 1.0 / (0.4 * mass[i] * r * r)
@@ -287,45 +278,40 @@ def _finish_chunk(c, nchunk, t, dt, pose, pos, vel, omg, radius, mass, mat, grav
 
 
 @nb.njit(cache=True, parallel=True)
-def compute_forces(t, dt, pose, pos, vel, omg, radius, mass, mat, gravity, table, nbr_start,
-                   nbr, hist, flag, tub, wall_mat, planes, wall_hist, wall_flag, wall_fn,
-                   wall_ft, wall_slide, wall_point, wall_force, wall_arc, force, torque, fbuf,
-                   tbuf, bounds, imp_buf, imp_count, record_impacts, diag, kick, ref_tub, moved):
-    """Forces and torques at the current positions (gravity, pairs, walls); with `kick`, also
-    the step's second half kick.  Two parallel loops: pairs into the chunk buffers, then each
-    chunk's balls."""
-    nchunk = fbuf.shape[0]
+def compute_forces(t, kick, record_impacts, balls, pairs, walls, params, work):
+    """Forces and torques at the current positions (gravity, pairs, walls) at time t (s), with
+    the tub's pose in work.pose; with `kick`, also the step's second half kick.  Two parallel
+    loops: pairs into the chunk buffers, then each chunk's balls."""
+    nchunk = work.fbuf.shape[0]
+    tub = params.tub
     periodic_length = tub[TUB_LENGTH] if (tub[TUB_PRESENT] > 0.0 and
                                           tub[TUB_PERIODIC] > 0.0) else 0.0
-    dt_hist = dt if kick else 0.0  # the set-up evaluation does not advance histories
+    dt_hist = params.dt if kick else 0.0  # the set-up evaluation does not advance histories
     for c in nb.prange(nchunk):
-        _pair_chunk(c, nchunk, t, dt_hist, pos, vel, omg, radius, mass, mat, table, nbr_start,
-                    nbr, hist, flag, periodic_length, fbuf, tbuf, bounds, imp_buf, imp_count,
-                    record_impacts, diag)
+        _pair_chunk(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, params.table,
+                    work)
     for c in nb.prange(nchunk):
-        _finish_chunk(c, nchunk, t, dt, pose, pos, vel, omg, radius, mass, mat, gravity, table,
-                      tub, wall_mat, planes, wall_hist, wall_flag, wall_fn, wall_ft, wall_slide,
-                      wall_point, wall_force, wall_arc, force, torque, fbuf, tbuf, bounds,
-                      imp_buf, imp_count, record_impacts, diag, kick, ref_tub, moved)
+        _finish_chunk(c, t, kick, record_impacts, balls, walls, pairs.bounds, params, work)
 
 
 @nb.njit(cache=True, parallel=True)
-def advance(step0, nsteps, dt, time_origin_step, motion, pos, vel, omg, radius, mass, mat,
-            gravity, table, nbr_start, nbr, hist, flag, tub, wall_mat, planes, wall_hist,
-            wall_flag, wall_fn, wall_ft, wall_slide, wall_point, wall_force, wall_arc, force,
-            torque, fbuf, tbuf, bounds, ref_tub, half_skin, imp_buf, imp_count, record_impacts,
-            diag, max_overlap, pose):
+def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pairs, walls, params,
+            work):
     """Run up to `nsteps` velocity-Verlet steps from step `step0`.
 
     Time is t = (step - time_origin_step) dt, so that the vibration's phase comes from an
-    integer step count (exact on resume).  `pose` receives the tub pose of the last step.
+    integer step count (exact on resume).  work.pose receives the tub pose of the last step.
     Returns (steps done, status) with status DONE, REBUILD, IMPACTS_FULL or BLOWUP.
     """
+    pos, vel, omg, force, torque = balls.pos, balls.vel, balls.omg, balls.force, balls.torque
+    radius, mass = balls.radius, balls.mass
+    dt, half_skin, max_overlap = params.dt, params.half_skin, params.max_overlap
+    imp_buf, imp_count, diag, pose, moved = (work.imp_buf, work.imp_count, work.diag, work.pose,
+                                             work.moved)
     n = pos.shape[0]
-    nchunk = fbuf.shape[0]
+    nchunk = work.fbuf.shape[0]
     half_dt = 0.5 * dt
     hs2 = half_skin * half_skin
-    moved = np.zeros(nchunk)
     cap = imp_buf.shape[1]
     for k in range(nsteps):
         # kick and drift
@@ -339,11 +325,7 @@ def advance(step0, nsteps, dt, time_origin_step, motion, pos, vel, omg, radius, 
         step = step0 + k + 1
         t = (step - time_origin_step) * dt
         _pose_array(motion, pose[6], pose[7], t, pose)
-        compute_forces(t, dt, pose, pos, vel, omg, radius, mass, mat, gravity, table,
-                       nbr_start, nbr, hist, flag, tub, wall_mat, planes, wall_hist, wall_flag,
-                       wall_fn, wall_ft, wall_slide, wall_point, wall_force, wall_arc, force,
-                       torque, fbuf, tbuf, bounds, imp_buf, imp_count, record_impacts, diag,
-                       True, ref_tub, moved)
+        compute_forces(t, True, record_impacts, balls, pairs, walls, params, work)
         blown = False
         rebuild = False
         full = False
