@@ -45,7 +45,7 @@ import numba as nb
 import numpy as np
 
 from vibroflow.errors import InputError
-from vibroflow.tub.geometry import u_wall_nearest
+from vibroflow.tub.geometry import distance_to_wall_np, u_wall_nearest
 
 NO_CONTACT, STICK, SLIDE = 0, 1, 2
 
@@ -256,8 +256,6 @@ class UWall(_Contact):
         return r
 
     def _gap(self, state) -> np.ndarray:
-        from vibroflow.tub.geometry import distance_to_wall_np
-
         return distance_to_wall_np(state.x[:, 0], state.x[:, 1], self.radius)
 
 

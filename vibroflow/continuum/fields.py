@@ -15,9 +15,11 @@ and moved into place, so a reader never sees half a file.
 """
 from __future__ import annotations
 
-
 import numba as nb
 import numpy as np
+from pyevtk.hl import gridToVTK
+
+from vibroflow.io.vtk import atomic_vtk
 
 from .grid import Grid
 from .stencil import bspline_weights
@@ -70,10 +72,6 @@ def write_grid_vtr(path, grid: Grid, fields: dict, y: float = 0.0) -> str:
     """Write grid_fields(...) as a ParaView rectilinear grid (.vtr) at y (m); returns the path.
     Point data: velocity (3-vector, y component 0), solid_fraction, density, pressure,
     shear_rate."""
-    from pyevtk.hl import gridToVTK
-
-    from vibroflow.io.vtk import atomic_vtk
-
     def c(a):  # (nx, nz) -> contiguous (nx, 1, nz)
         return np.ascontiguousarray(np.asarray(a, dtype=np.float64)[:, None, :])
 

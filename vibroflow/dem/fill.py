@@ -24,6 +24,7 @@ from typing import Callable
 
 import numpy as np
 
+from .. import __version__
 from ..errors import InputError
 from ..progress import RunProgress
 from ..tub.geometry import distance_to_wall_np
@@ -79,7 +80,6 @@ def lattice_fill(scenario, rng: np.random.Generator) -> np.ndarray:
 
 def fill_cache_key(scenario, nchunk: int) -> str:
     """Hash of everything that shapes the settled bed."""
-    from .. import __version__
     payload = {
         "fill": scenario.fill.model_dump(mode="json"),
         "tub": scenario.tub.model_dump(mode="json"),

@@ -1,19 +1,15 @@
 """Ctrl-C during a DEM run, and the fault injection its tests use (environment variables that make
 the run interrupt or kill itself at a known instant, deterministic where a signal from outside
 would race the run).  The end-of-run kill points are vibroflow.dem.output.fault_kill_at.  The
-deferred Ctrl-C of the vibration loop is vibroflow.interrupts' deferred_sigint, the continua's
-too: over Python's own SIGINT handler only (a SIGINT ignored or handled by the caller is left
-so).
+deferred Ctrl-C of the vibration loop is vibroflow.interrupts' deferred_sigint, shared with the
+continua.
 """
 from __future__ import annotations
 
 import os
 import signal
 
-from ..interrupts import FAULT_SIGINT_ENV, deferred_sigint
-
-__all__ = ["deferred_sigint", "fault_after_checkpoint", "fault_sigint_after_steps",
-           "fault_sigint_settling"]
+from ..interrupts import FAULT_SIGINT_ENV
 
 
 def fault_after_checkpoint() -> None:

@@ -40,6 +40,7 @@ import numba
 import numpy as np
 
 from ..errors import Interrupted
+from ..interrupts import deferred_sigint
 from ..io.atomic import write_json_atomic
 from ..io.folder_lock import folder_lock
 from ..progress import RunProgress
@@ -48,7 +49,7 @@ from .checkpoint import (CHECKPOINT_NAME, SUMMARY_NAME, finished_summary, resume
                          write_checkpoint)
 from .fill import settled_bed
 from .fingerprint import scenario_fingerprint, scenario_record, scenario_toml
-from .interrupts import deferred_sigint, fault_sigint_after_steps
+from .interrupts import fault_sigint_after_steps
 from .output import ResultWriter, fault_kill_at
 from .sampling import impact_rows, sample_steps, write_snapshot
 from .simulate import (BlowUp, DEMState, DEMSystem, init_state, make_system, run_steps,

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from vibroflow.errors import InputError
-from vibroflow.tub.geometry import distance_to_wall_np
+from vibroflow.tub.geometry import distance_to_wall_np, u_wall_nearest
 
 from ..grid import Grid
 
@@ -114,8 +114,6 @@ class EulerianMesh:
         zmax = h * math.ceil(geometry.rim_height / h - 1e-9)
 
         def level_set(x, z):
-            from vibroflow.tub.geometry import u_wall_nearest
-
             out = np.array([u_wall_nearest(a, b, R) for a, b in zip(x, z)])
             gap = distance_to_wall_np(x, z, R)
             return gap, out[:, 1], out[:, 2], out[:, 5]

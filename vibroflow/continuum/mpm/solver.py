@@ -34,6 +34,7 @@ from ..grid import Grid
 from ..grid_step import chunk_bounds, grid_spec, grid_work
 from ..grid_update import LabFrame
 from ..state import ContinuumState
+from ..timestep import stable_dt
 
 
 class ContinuumBlowUp(RuntimeError):
@@ -184,8 +185,6 @@ def blowup_message(system: MPMSystem, state: MPMState, ids, what: str) -> str:
     """One paragraph for a ContinuumBlowUp: when, which points (ids, at most 10 named), what
     happened to them, and the likely cause, judged against the stability limits of timestep.py
     (elastic waves over dx, penalty walls) at the points' fastest finite speed."""
-    from ..timestep import stable_dt
-
     ids = np.asarray(ids, dtype=np.int64)
     named = ", ".join(str(int(i)) for i in ids[:10]) + (", ..." if ids.size > 10 else "")
     mat = system.material
