@@ -19,8 +19,9 @@ split (Strang 1968, SIAM J. Numer. Anal. 5, 506) around its stiff dissipation:
    the mechanical step's.  kappa is taken at the step's temperature (linearised);
 4. dissipation over dt/2 as in 1.
 
-With production frozen over the step, the split is second order in dt, so a balance of
-production and dissipation reaches its algebraic steady value to O(dt^2).
+For the local terms with production frozen over the step the split is second order in dt, so
+a balance of production and dissipation reaches its algebraic steady value to O(dt^2);
+conduction's backward Euler is first order.
 
 Cells are (nx, nz) arrays (x first).  A cell whose solid fraction is below the grid's
 void_solid_fraction is empty: it holds no fluctuation energy, exchanges none, and its T is left
