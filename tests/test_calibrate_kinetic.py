@@ -214,3 +214,11 @@ def test_cells_that_lun_does_not_describe_put_phi_rcp_at_the_bound():
     T = np.full(100, 1e-3)
     fit = fit_phi_rcp(phi, T, RHO_S * phi * T, RHO_S, E)
     assert fit["status"].startswith("at the bound")
+
+
+def test_cells_scattered_far_about_the_closure_say_so_in_the_status():
+    phi, T, p, *_ = _cells(0.60, n=400, rel_p=1.0)
+    fit = fit_phi_rcp(phi, T, p, RHO_S, E)
+    assert fit["rms_log_residual"] == pytest.approx(1.0, rel=0.1)
+    assert "the closure does not describe them" in fit["status"]
+    assert "scatter" not in fit_phi_rcp(*_cells(0.60, n=400, rel_p=0.1)[:3], RHO_S, E)["status"]

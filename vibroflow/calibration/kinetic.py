@@ -35,6 +35,8 @@ from vibroflow.errors import InputError
 
 PHI_RANGE = (0.1, 0.6)
 MAX_LOG_ERROR = 0.5
+#: a scatter of the cells about the closure above this (a factor 1.65) is said in the status
+MAX_RMS_LOG_RESIDUAL = 0.5
 #: the largest phi_rcp the fit may return: the packing fraction of face-centred cubic spheres
 PHI_RCP_MAX = math.pi / (3.0 * math.sqrt(2.0))
 G0_FORMS = {"chialvo_sundaresan": CHIALVO_SUNDARESAN, "lun_savage": LUN_SAVAGE}
@@ -81,7 +83,8 @@ def fit_phi_rcp(phi, T, p, rho_s: float, restitution: float, phi_stderr=None, T_
     Returns {phi_rcp, phi_rcp_stderr, restitution, g0_form, points, solid_fraction_range
     (of the points used), rms_log_residual, chi2_per_dof (NaN unweighted), weighted,
     status ("measured", or "at the bound ..." when the best phi_rcp is within two standard
-    errors of the densest cell's solid fraction or of PHI_RCP_MAX)}.  InputError when fewer
+    errors of the densest cell's solid fraction or of PHI_RCP_MAX; the scatter said when
+    the rms log residual exceeds MAX_RMS_LOG_RESIDUAL)}.  InputError when fewer
     than `min_points` cells qualify.
     """
     lo, hi = _check(restitution, phi_range, g0_form, max_log_error)
@@ -127,14 +130,19 @@ def fit_phi_rcp(phi, T, p, rho_s: float, restitution: float, phi_stderr=None, T_
     r = y - np.log(pressure_ratio(phi, phi_rcp, restitution, g0_form))
     # a bound within two standard errors: the cells do not fix phi_rcp on that side
     at_bound = min(phi_rcp - lo_b, PHI_RCP_MAX - phi_rcp) < max(2.0 * se, 1e-5)
+    rms = float(math.sqrt(np.sum(w * r * r) / np.sum(w)))
+    status = ("at the bound (within two standard errors of the densest cell's solid fraction "
+              "or of close packing): the cells do not fix phi_rcp" if at_bound else "measured")
+    if rms > MAX_RMS_LOG_RESIDUAL:
+        status += (f"; the cells scatter about Lun's pressure by a factor {math.exp(rms):.3g} "
+                   "(rms log residual): the closure does not describe them, and phi_rcp "
+                   "depends on the solid fractions fitted")
     return {"phi_rcp": phi_rcp, "phi_rcp_stderr": se, "restitution": float(restitution),
             "g0_form": g0_form, "points": n,
             "solid_fraction_range": [float(phi.min()), float(phi.max())],
-            "rms_log_residual": float(math.sqrt(np.sum(w * r * r) / np.sum(w))),
+            "rms_log_residual": rms,
             "chi2_per_dof": s2 if weighted else float("nan"), "weighted": weighted,
-            "status": ("at the bound (within two standard errors of the densest cell's solid "
-                       "fraction or of close packing): the cells do not fix phi_rcp"
-                       if at_bound else "measured")}
+            "status": status}
 
 
 def fit_cells(fields, rho_s: float, restitution: float, **options) -> dict:
