@@ -176,6 +176,27 @@ def test_continuum_gets_the_cyclic_secant_modulus_at_the_tubs_strain(calibrated_
     assert "cyclic secant" in r.stdout
 
 
+def test_the_vibrating_walls_drive_the_bed_and_its_restitution_is_the_contact_laws(
+        calibrated_run):
+    """[kinetic]: over steady cycles the walls' lab-frame work on the balls is what the bed
+    dissipates, so it is positive; e is the scenario's ball-ball restitution."""
+    from vibroflow.io.calibration_file import read_calibration
+
+    out, _ = calibrated_run
+    kin = read_calibration(out).kinetic
+    assert kin is not None and kin.restitution == pytest.approx(0.85)
+    assert 0.1 < kin.phi_rcp <= 0.7405 and kin.phi_rcp_stderr > 0
+    w = kin.wall_flux
+    arc_area = (w.arc_edges_m[-1] - w.arc_edges_m[0]) * w.length_m
+    drive = w.u_drive_flux_W_m2 * arc_area + w.partitions_drive_flux_W_m2 * w.partition_area_m2
+    drive_se = math.hypot(w.u_drive_flux_stderr_W_m2 * arc_area,
+                          w.partitions_drive_flux_stderr_W_m2 * w.partition_area_m2)
+    assert drive > 2 * drive_se
+    # the fluxes by arc average to the whole U's (equal arc bins)
+    assert np.mean(w.u_fluctuation_flux_by_arc_W_m2) == pytest.approx(
+        w.u_fluctuation_flux_W_m2, rel=1e-9)
+
+
 def test_calibrated_wall_friction_obeys_coulomb(calibrated_run):
     """Every contact has |F_t| <= mu F_n, so the ratio of sums and the coherent friction of
     slipping patches cannot exceed the contact's mu; sliding contacts sit exactly at mu (to the

@@ -20,7 +20,10 @@ Stages:
    sheared packings of the balls at the bed's pressure and the tub's I (dilatancy.py) ->
    [dilatancy], and with it the cyclic compaction of the continuum's compaction option from
    the cyclic cell's per-cycle packing at the tub's amplitude (compaction.py) -> [compaction];
-7. RUN_DIR/calibration.toml (every parameter with its uncertainty and its provenance; its
+7. kinetic theory's constants (kinetic, wall_energy): phi_rcp of g0 fitted to the
+   phase-resolved cells' p / (rho_s phi T) with the scenario's ball-ball restitution, and the
+   walls' energy flux from the wall contacts -> [kinetic];
+8. RUN_DIR/calibration.toml (every parameter with its uncertainty and its provenance; its
    tables built by calibration_tables, checked and written as the record
    vibroflow.io.calibration_file.Calibration, which the continuum solvers read with
    `read_calibration`), RUN_DIR/calibration/ pictures (plots).
@@ -40,17 +43,19 @@ from vibroflow.io.folder_lock import folder_lock
 from vibroflow.progress import RunProgress
 from vibroflow.tub.geometry import geometry_of
 
-from .bed_contacts import contact_stiffness_at, coordination
+from .bed_contacts import contact_pair, contact_stiffness_at, coordination
 from .calibration_tables import calibration_tables
 from .compaction import compaction_table
 from .dem_result import DEMResult
 from .elastic import affine_moduli_linear
 from .impacts import impact_relations, impact_relations_on_cells
+from .kinetic import fit_cells, kinetic_table
 from .media_tests import cyclic_modulus, dem_tests, dilatancy_table
 from .rheology_fit import drucker_prager_equivalent
 from .run_fields import coarse_grain_run, write_fields
 from .tub_rheology import (bed_pressure, check_tub_cells, fit_tub_cells, median_dense,
                            tub_mu_i_scatter)
+from .wall_energy import wall_flux
 from .wall_friction import wall_friction
 
 FIELDS_FILE = "fields.nc"
@@ -67,6 +72,27 @@ def interrupted_calibration(run_dir: Path):
         raise Interrupted(f"interrupted while calibrating {run_dir}; nothing to resume (every "
                           f"file written is whole): run `vibroflow calibrate {run_dir}` "
                           "again") from None
+
+
+def kinetic_record(res, phases, prog) -> dict | None:
+    """The [kinetic] table: phi_rcp fitted to the phase-resolved cells, the walls' energy flux;
+    None when the run has neither (no contact stress, no wall forces)."""
+    sc = res.scenario
+    e = contact_pair(sc, sc.fill.material, sc.fill.material).restitution
+    fit = None
+    if res.has_ball_contacts:  # the pressure holds the collisional (contact) part
+        try:
+            fit = fit_cells(phases, res.solid_density, e)
+            prog.log(f"kinetic: phi_rcp = {fit['phi_rcp']:.4f} +- {fit['phi_rcp_stderr']:.4f} "
+                     f"({fit['points']} cells, rms log residual "
+                     f"{fit['rms_log_residual']:.3f}; {fit['status']})")
+        except InputError as err:
+            prog.log(f"kinetic: phi_rcp not measured: {err}")
+    flux = wall_flux(res, phases)
+    if fit is None and flux is None:
+        return None
+    return kinetic_table(fit, flux, e, "the scenario's ball-ball contact law (normal "
+                                       "restitution of a head-on collision)")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -143,6 +169,9 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
                              f", dphi_cyc = {cal['compaction']['excess_solid_fraction']:.4f}")
                 except InputError as e:
                     prog.log(f"compaction not measured: {e}")
+        kin = kinetic_record(res, phases, prog)
+        if kin is not None:
+            cal["kinetic"] = kin
         record = Calibration.from_dict(cal, where=str(out_dir / CALIBRATION_FILE))
         write_calibration(out_dir / CALIBRATION_FILE, record)
         if pictures:

@@ -264,6 +264,53 @@ class Compaction(Table):
     excess_solid_fraction: Number | None = None
 
 
+class WallFlux(Table):
+    """[kinetic.wall_flux]: the fluctuation-energy flux of the walls into the balls (W/m^2),
+    per arc bin of the U (arc_edges_m) and phase bin (phase_rad), with batch-means errors."""
+    arc_edges_m: list[Number] | None = None
+    phase_rad: list[Number] | None = None
+    length_m: Number | None = None
+    partition_area_m2: Number | None = None
+    u_fluctuation_flux_W_m2: Number | None = None
+    u_fluctuation_flux_stderr_W_m2: Number | None = None
+    u_power_flux_W_m2: Number | None = None
+    u_power_flux_stderr_W_m2: Number | None = None
+    u_drive_flux_W_m2: Number | None = None
+    u_drive_flux_stderr_W_m2: Number | None = None
+    u_fluctuation_flux_by_arc_W_m2: list[Number] | None = None
+    u_fluctuation_flux_by_arc_stderr_W_m2: list[Number] | None = None
+    u_fluctuation_flux_by_phase_W_m2: list[Number] | None = None
+    u_fluctuation_flux_by_phase_stderr_W_m2: list[Number] | None = None
+    u_fluctuation_flux_by_phase_arc_W_m2: list[list[Number]] | None = None
+    u_fluctuation_flux_by_phase_arc_stderr_W_m2: list[list[Number]] | None = None
+    partitions_fluctuation_flux_W_m2: Number | None = None
+    partitions_fluctuation_flux_stderr_W_m2: Number | None = None
+    partitions_power_flux_W_m2: Number | None = None
+    partitions_power_flux_stderr_W_m2: Number | None = None
+    partitions_drive_flux_W_m2: Number | None = None
+    partitions_drive_flux_stderr_W_m2: Number | None = None
+    partitions_fluctuation_flux_by_phase_W_m2: list[Number] | None = None
+    partitions_fluctuation_flux_by_phase_stderr_W_m2: list[Number] | None = None
+
+
+class Kinetic(Table):
+    """[kinetic]: kinetic theory's constants measured on the DEM: the ball-ball restitution e,
+    the close packing phi_rcp of g0 fitted to p / (rho_s phi T) = 1 + 2 (1 + e) phi g0 in the
+    coarse-grained cells, and the walls' energy flux."""
+    model: Text | None = None
+    g0_form: Text | None = None
+    restitution: Number | None = None
+    restitution_source: Text | None = None
+    phi_rcp: Number | None = None
+    phi_rcp_stderr: Number | None = None
+    status: Text | None = None
+    points: Count | None = None
+    solid_fraction_range: list[Number] | None = None
+    rms_log_residual: Number | None = None
+    chi2_per_dof: Number | None = None
+    wall_flux: WallFlux | None = None
+
+
 class Calibration(Table):
     """The whole of calibration.toml: [rheology], [elastic], [wall] and [media] required, the
     other tables when measured."""
@@ -278,6 +325,7 @@ class Calibration(Table):
     cyclic_shear: CyclicShear | None = None
     dilatancy: Dilatancy | None = None
     compaction: Compaction | None = None
+    kinetic: Kinetic | None = None
 
     @classmethod
     def from_dict(cls, tables: dict, where: str = "calibration") -> "Calibration":

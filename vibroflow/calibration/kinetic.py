@@ -1,0 +1,195 @@
+"""Kinetic theory's equation of state measured in the DEM's coarse-grained cells: the closure's
+close packing phi_rcp fitted so that Lun et al.'s (1984, J. Fluid Mech. 140, 223) pressure
+
+    p / (rho_s phi T) = 1 + 2 (1 + e) phi g0(phi; phi_rcp)
+
+matches the cells' kinetic + contact pressure p, solid fraction phi and granular temperature T,
+with g0 the continuum's own (vibroflow.continuum.kinetic_theory: Chialvo & Sundaresan 2013 by
+default) and e the scenario's ball-ball restitution.
+
+Which cells: the phase-resolved ones (each cell at each sampled phase), whose kinetic stress is
+the fluctuation about that phase's mean velocity, the temperature kinetic theory means; the
+time-averaged cells count the bed's oscillation over the cycle as temperature.  A cell enters
+the fit when its p, phi and T are finite and positive, phi lies in [phi_lo, phi_hi] (default
+0.1 - 0.6: below, a cell holds too few balls; kinetic theory has no enduring contacts, so the
+packed core above is not its domain) and, where the fields carry batch-means errors, the
+error of ln(p / (rho_s phi T)) is at most `max_log_error` (enough samples).
+
+The fit: weighted least squares in ln(p / (rho_s phi T)), one parameter, weights
+1 / sigma^2 with sigma^2 = (sigma_p/p)^2 + (sigma_T/T)^2 + (sigma_phi/phi)^2 from the batch-means
+errors (equal weights without them).  The standard error of phi_rcp is sqrt(s^2 / sum w J^2),
+J = d ln(model) / d phi_rcp and s^2 the weighted residual variance per degree of freedom, as in
+impacts.weighted_linear_fit; the scatter is the weighted rms of the log residuals.
+"""
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from vibroflow.continuum.kinetic_theory import (CHIALVO_SUNDARESAN, LUN_SAVAGE,
+                                                KineticParameters, radial_distribution)
+from vibroflow.errors import InputError
+
+PHI_RANGE = (0.1, 0.6)
+MAX_LOG_ERROR = 0.5
+#: a scatter of the cells about the closure above this (a factor 1.65) is said in the status
+MAX_RMS_LOG_RESIDUAL = 0.5
+#: the largest phi_rcp the fit may return: the packing fraction of face-centred cubic spheres
+PHI_RCP_MAX = math.pi / (3.0 * math.sqrt(2.0))
+G0_FORMS = {"chialvo_sundaresan": CHIALVO_SUNDARESAN, "lun_savage": LUN_SAVAGE}
+
+
+@nb.njit(cache=True)
+def _g0_of(phi, prm):
+    out = np.empty(phi.size)
+    for k in range(phi.size):
+        out[k] = radial_distribution(phi[k], prm)
+    return out
+
+
+def pressure_ratio(phi, phi_rcp: float, restitution: float,
+                   g0_form: str = "chialvo_sundaresan") -> np.ndarray:
+    """Lun et al.'s p / (rho_s phi T) = 1 + 2 (1 + e) phi g0(phi; phi_rcp) (-) at solid
+    fractions phi, with the continuum's g0 (form `g0_form`)."""
+    phi = np.ascontiguousarray(phi, dtype=float).ravel()
+    prm = KineticParameters(restitution=float(restitution), phi_rcp=float(phi_rcp),
+                            g0_form=G0_FORMS[g0_form])
+    return 1.0 + 2.0 * (1.0 + restitution) * phi * _g0_of(phi, prm)
+
+
+def _check(restitution, phi_range, g0_form, max_log_error):
+    if not (0.0 < restitution <= 1.0):
+        raise InputError(f"restitution = {restitution!r}: must be in (0, 1]")
+    lo, hi = (float(v) for v in phi_range)
+    if not (0.0 < lo < hi < PHI_RCP_MAX):
+        raise InputError(f"phi_range = {tuple(phi_range)!r}: must be (lo, hi) with "
+                         f"0 < lo < hi < {PHI_RCP_MAX:.4f}")
+    if g0_form not in G0_FORMS:
+        raise InputError(f"g0_form = {g0_form!r}: must be one of {', '.join(G0_FORMS)}")
+    if not (max_log_error > 0):
+        raise InputError(f"max_log_error = {max_log_error!r}: must be > 0")
+    return lo, hi
+
+
+def fit_phi_rcp(phi, T, p, rho_s: float, restitution: float, phi_stderr=None, T_stderr=None,
+                p_stderr=None, phi_range=PHI_RANGE, g0_form: str = "chialvo_sundaresan",
+                max_log_error: float = MAX_LOG_ERROR, min_points: int = 3) -> dict:
+    """phi_rcp fitted to cells (flat arrays of solid fraction phi, temperature T (m^2/s^2) and
+    pressure p (Pa), optional batch-means errors of each); rho_s (kg/m^3).
+
+    Returns {phi_rcp, phi_rcp_stderr, restitution, g0_form, points, solid_fraction_range
+    (of the points used), rms_log_residual, chi2_per_dof (NaN unweighted), weighted,
+    status ("measured", or "at the bound ..." when the best phi_rcp is within two standard
+    errors of the densest cell's solid fraction or of PHI_RCP_MAX; the scatter said when
+    the rms log residual exceeds MAX_RMS_LOG_RESIDUAL)}.  InputError when fewer
+    than `min_points` cells qualify.
+    """
+    lo, hi = _check(restitution, phi_range, g0_form, max_log_error)
+    if not (rho_s > 0):
+        raise InputError(f"rho_s = {rho_s!r}: must be > 0 kg/m^3")
+    phi = np.asarray(phi, float).ravel()
+    T = np.asarray(T, float).ravel()
+    p = np.asarray(p, float).ravel()
+    if not (phi.size == T.size == p.size):
+        raise InputError(f"phi, T, p have {phi.size}, {T.size}, {p.size} values: must have "
+                         "one per cell each")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        y = np.log(p / (rho_s * phi * T))
+        ok = np.isfinite(y) & (phi >= lo) & (phi <= hi) & (T > 0) & (p > 0)
+        errs = (phi_stderr, T_stderr, p_stderr)
+        weighted = all(e is not None for e in errs)
+        if weighted:
+            var = sum((np.asarray(e, float).ravel() / v) ** 2 for e, v in zip(errs, (phi, T, p)))
+            ok &= np.isfinite(var) & (var > 0) & (var <= max_log_error ** 2)
+            w = np.where(ok, 1.0 / np.where(var > 0, var, 1.0), 0.0)
+        else:
+            w = np.ones_like(y)
+    n = int(ok.sum())
+    if n < min_points:
+        raise InputError(f"cells = {n}: the phi_rcp fit needs at least {min_points} cells with "
+                         f"finite p, T > 0 and solid fraction in [{lo:g}, {hi:g}]"
+                         + (f" and log error <= {max_log_error:g}" if weighted else ""))
+    phi, y, w = phi[ok], y[ok], w[ok]
+
+    def sse(phi_rcp):
+        r = y - np.log(pressure_ratio(phi, phi_rcp, restitution, g0_form))
+        return float(np.sum(w * r * r))
+
+    lo_b = float(phi.max()) + 1e-4
+    best = minimize_scalar(sse, bounds=(lo_b, PHI_RCP_MAX), method="bounded",
+                           options={"xatol": 1e-9})
+    phi_rcp = float(best.x)
+    h = 1e-6
+    J = (np.log(pressure_ratio(phi, phi_rcp + h, restitution, g0_form))
+         - np.log(pressure_ratio(phi, phi_rcp - h, restitution, g0_form))) / (2.0 * h)
+    s2 = sse(phi_rcp) / max(n - 1, 1)
+    se = math.sqrt(s2 / float(np.sum(w * J * J))) if n > 1 else float("nan")
+    r = y - np.log(pressure_ratio(phi, phi_rcp, restitution, g0_form))
+    # a bound within two standard errors: the cells do not fix phi_rcp on that side
+    at_bound = min(phi_rcp - lo_b, PHI_RCP_MAX - phi_rcp) < max(2.0 * se, 1e-5)
+    rms = float(math.sqrt(np.sum(w * r * r) / np.sum(w)))
+    status = ("at the bound (within two standard errors of the densest cell's solid fraction "
+              "or of close packing): the cells do not fix phi_rcp" if at_bound else "measured")
+    if rms > MAX_RMS_LOG_RESIDUAL:
+        status += (f"; the cells scatter about Lun's pressure by a factor {math.exp(rms):.3g} "
+                   "(rms log residual): the closure does not describe them, and phi_rcp "
+                   "depends on the solid fractions fitted")
+    return {"phi_rcp": phi_rcp, "phi_rcp_stderr": se, "restitution": float(restitution),
+            "g0_form": g0_form, "points": n,
+            "solid_fraction_range": [float(phi.min()), float(phi.max())],
+            "rms_log_residual": rms,
+            "chi2_per_dof": s2 if weighted else float("nan"), "weighted": weighted,
+            "status": status}
+
+
+def fit_cells(fields, rho_s: float, restitution: float, **options) -> dict:
+    """fit_phi_rcp on a coarse-grained Dataset (run_fields.coarse_grain_run's phase-resolved
+    one, or any with solid_fraction, temperature, pressure and, optionally, their *_stderr)."""
+    for name in ("solid_fraction", "temperature", "pressure"):
+        if name not in fields:
+            raise InputError(f"fields: no {name!r}: not a coarse-grained field set")
+    get = (lambda k: np.asarray(fields[k].values, float) if k in fields else None)
+    return fit_phi_rcp(get("solid_fraction"), get("temperature"), get("pressure"), rho_s,
+                       restitution, get("solid_fraction_stderr"), get("temperature_stderr"),
+                       get("pressure_stderr"), **options)
+
+
+def _floats(a):
+    """A (nested) list of plain floats for TOML (NaN stays NaN)."""
+    return np.asarray(a, float).tolist()
+
+
+def kinetic_table(fit: dict | None, flux: dict | None, restitution: float,
+                  restitution_source: str) -> dict:
+    """The [kinetic] table of calibration.toml (io.calibration_file.Kinetic) from a phi_rcp fit
+    (fit_phi_rcp; None: not measured) and the walls' fluxes (wall_energy.wall_flux; None: the
+    run stores no wall forces)."""
+    out = {"model": "p / (rho_s phi T) = 1 + 2 (1 + e) phi g0(phi; phi_rcp) (Lun et al. 1984)",
+           "restitution": float(restitution), "restitution_source": restitution_source}
+    if fit is not None:
+        out.update(g0_form=fit["g0_form"], phi_rcp=fit["phi_rcp"],
+                   phi_rcp_stderr=fit["phi_rcp_stderr"], status=fit["status"],
+                   points=int(fit["points"]), solid_fraction_range=fit["solid_fraction_range"],
+                   rms_log_residual=fit["rms_log_residual"], chi2_per_dof=fit["chi2_per_dof"])
+    if flux is not None:
+        u, p = flux["u"], flux["partitions"]
+        wf = {"arc_edges_m": _floats(flux["arc_edges_m"]),
+              "phase_rad": _floats(flux["phase_rad"]), "length_m": float(flux["length_m"]),
+              "partition_area_m2": float(flux["partition_area_m2"])}
+        for name, tag in (("fluctuation_power", "fluctuation"), ("power", "power"),
+                          ("drive_power", "drive")):
+            for part, rec in (("u", u), ("partitions", p)):
+                wf[f"{part}_{tag}_flux_W_m2"] = float(rec[name]["mean"])
+                wf[f"{part}_{tag}_flux_stderr_W_m2"] = float(rec[name]["mean_stderr"])
+        fl = u["fluctuation_power"]
+        for key, k in (("by_arc", "arc"), ("by_phase", "phase"), ("by_phase_arc", "phase_arc")):
+            wf[f"u_fluctuation_flux_{key}_W_m2"] = _floats(fl[k])
+            wf[f"u_fluctuation_flux_{key}_stderr_W_m2"] = _floats(fl[k + "_stderr"])
+        pf = p["fluctuation_power"]
+        wf["partitions_fluctuation_flux_by_phase_W_m2"] = _floats(pf["phase"])
+        wf["partitions_fluctuation_flux_by_phase_stderr_W_m2"] = _floats(pf["phase_stderr"])
+        out["wall_flux"] = wf
+    return out
