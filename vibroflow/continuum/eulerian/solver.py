@@ -55,8 +55,8 @@ from ..grid_step import grid_spec, grid_work
 from ..grid_update import LabFrame
 from ..mpm.solver import ContinuumBlowUp
 from ..state import ContinuumState
-from . import fused
 from ..temperature_field import cell_step, kinetic_pressure, production_W_m3
+from . import fused
 from .advection import remap_serial, remap_work
 from .lagrangian_step import fill_limit, material_fraction
 from .mesh import EulerianMesh
