@@ -39,16 +39,18 @@ from .grid_step import grid_phase
 from .p2g import p2g
 from .plasticity import plasticity_step
 from .stress_update import damped_stress
+from .temperature_field import add_pressure
 from .transfer_operator import operator_of_points
 
 #: status of `advance_kernel`
 OK, THROUGH_WALL, ESCAPED = 0, 1, 2
 
 #: the material points' arrays (mpm.solver.MPMState's, units there) and stress_work (N, 4) the
-#: stress scattered when the material has a bed viscosity (stress_update.damped_stress; (0, 4)
-#: without)
+#: stress scattered when the material has a bed viscosity or a kinetic pressure
+#: (stress_update.damped_stress; (0, 4) without), p_kin (N,) the kinetic pressure (Pa) added to
+#: the scattered mean stress (temperature_field.py; (0,) without the temperature)
 Points = namedtuple("Points", ["x", "v", "C", "L", "mass", "volume", "density", "stress",
-                               "gamma_dot", "phase", "fext", "stress_work"])
+                               "gamma_dot", "phase", "fext", "stress_work", "p_kin"])
 #: the step's constants: dt (s), the material's params (constitutive.ContinuumMaterial.
 #: as_array), the frame (grid_update.FRAME_FIELDS), box (4,) the region (m) a point may occupy
 #: (xmin, xmax, zmin, zmax), bounds (nchunk + 1,) the point chunks (grid_step.chunk_bounds),
@@ -81,7 +83,8 @@ def advance_kernel(nsteps, t, points, step, boundaries, grid, work):
     went through the boundary `boundary` (the step was not made: t is its start; the
     boundaries' forces and histories were computed); ESCAPED when after the last step made a
     point is off the box or non-finite."""
-    x, v, C, L, mass, volume, density, stress, gamma_dot, phase, fext, stress_work = points
+    x, v, C, L, mass, volume, density, stress, gamma_dot, phase, fext, stress_work, p_kin = \
+        points
     dt, params, frame, box, bounds, flip = step
     records = boundaries.records
     hist = (boundaries.xi, boundaries.f, boundaries.fn, boundaries.ft, boundaries.state)
@@ -92,7 +95,8 @@ def advance_kernel(nsteps, t, points, step, boundaries, grid, work):
     deep = np.zeros((nchunk, max(nb_, 1)), np.int64)
     bad = np.zeros(nchunk, np.int64)
     damped = params[P_ETA_BED] > 0.0
-    scattered = stress_work if damped else stress
+    kinetic = p_kin.shape[0] > 0
+    scattered = stress_work if damped or kinetic else stress
     for s in range(nsteps):
         # 1-2: the boundaries' forces in their order (fext zeroed first; deep: the points
         # through each wall, boundary.py `lost`) and the scatter, per chunk
@@ -110,6 +114,10 @@ def advance_kernel(nsteps, t, points, step, boundaries, grid, work):
                 # the bed's Kelvin-Voigt damping on the rate of the last step, scattered with
                 # the stress but not stored in it
                 damped_stress(stress[a:b], L[a:b], phase[a:b], params, stress_work[a:b])
+            elif kinetic:
+                stress_work[a:b] = stress[a:b]
+            if kinetic:
+                add_pressure(stress_work, p_kin, a, b)
             p2g(x[a:b], v[a:b], C[a:b], mass[a:b], volume[a:b], scattered[a:b], fext[a:b], x0,
                 z0, dx, periodic, cm[c], cmv[c], cf[c], axis_cols > 0)
             if transfers > 1:

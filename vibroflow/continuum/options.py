@@ -104,7 +104,10 @@ class ContinuumOptions:
     Courant number (default None: the formulation's default grid's spacing); on another grid
     they are made at damping_transfer_cfl, so that their damping of the flow does not depend on
     the grid (module docstring); damping_length = dx makes them at transfer_cfl on every grid
-    (their damping then falls with the grid).
+    (their damping then falls with the grid); temperature: the granular temperature T
+    (m^2/s^2) carried by the material, with its balance and Lun's kinetic pressure in the stress
+    (temperature_field.py; default False: not carried, the step as without it),
+    initial_temperature (m^2/s^2, >= 0): T of the material at the start (default 0).
 
     stiffness_factor s < 1 is the continuum's counterpart of the DEM's reduced Young's modulus:
     the elastic moduli K and G (and with them the default wall stiffness) are multiplied by s,
@@ -121,7 +124,8 @@ class ContinuumOptions:
     #: options left out of a study stage's inputs (its hash) while at their defaults, so that
     #: stages hashed without them stay up to date (vibroflow.study.stages)
     LATER_OPTIONS: ClassVar[tuple[str, ...]] = ("dilatancy", "stiffness_factor", "compaction",
-                                                "flip", "bed_viscosity", "damping_length")
+                                                "flip", "bed_viscosity", "damping_length",
+                                                "temperature", "initial_temperature")
 
     transfer_cfl: float | None
     dx: float | None = None
@@ -135,6 +139,8 @@ class ContinuumOptions:
     flip: float = 0.0
     bed_viscosity: float = 0.0
     damping_length: float | None = None
+    temperature: bool = False
+    initial_temperature: float = 0.0
 
     def __post_init__(self):
         if not (isinstance(self.flip, (int, float)) and 0.0 <= self.flip <= 1.0):
@@ -161,6 +167,13 @@ class ContinuumOptions:
                 and math.isfinite(self.damping_length) and self.damping_length > 0):
             raise InputError(f"damping_length = {self.damping_length!r}: must be a length > 0 m "
                              "(or unset: the default grid's spacing)")
+        if not isinstance(self.temperature, bool):
+            raise InputError(f"temperature = {self.temperature!r}: must be true or false")
+        if not (isinstance(self.initial_temperature, (int, float))
+                and not isinstance(self.initial_temperature, bool)
+                and math.isfinite(self.initial_temperature) and self.initial_temperature >= 0):
+            raise InputError(f"initial_temperature = {self.initial_temperature!r}: must be a "
+                             "temperature >= 0 m^2/s^2")
 
     def transfers(self, dx: float | None = None, default_length: float | None = None) -> int:
         """The APIC transfers a step makes on a grid of spacing dx (m): timestep.
@@ -189,8 +202,13 @@ class ContinuumOptions:
 
 def options_record(options: ContinuumOptions) -> dict:
     """The options as a plain dict for a fingerprint or a study's inputs, an unset dx spelled
-    out as the rule that sets it (DEFAULT_GRID)."""
+    out as the rule that sets it (DEFAULT_GRID).  The temperature's options are left out while
+    the field is not carried, so that the record (and a run's fingerprint) is the one of a run
+    made without them."""
     record = dataclasses.asdict(options)
+    if not record.get("temperature", False):
+        record.pop("temperature", None)
+        record.pop("initial_temperature", None)
     if record.get("dx") is None:
         record["dx"] = DEFAULT_GRID
     elif record.get("damping_length") is None:

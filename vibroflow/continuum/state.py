@@ -18,7 +18,8 @@ class ContinuumState:
     section: the hoop rate last); mass (N,) kg/m; volume (N,) m^2; density (N,) kg/m^3;
     stress (N, 4) Pa [xx, zz, xz, yy]; gamma_dot (N,) plastic shear rate 1/s; phase (N,)
     0 disconnected / 1 elastic / 2 flowing; fext (N, 2) N/m (work array); history: per-boundary
-    dicts of per-point arrays; t (s), step."""
+    dicts of per-point arrays; t (s), step; temperature (N,) the granular temperature
+    m^2/s^2 where the run carries it (options.ContinuumOptions.temperature), else None."""
 
     x: np.ndarray
     v: np.ndarray
@@ -34,6 +35,7 @@ class ContinuumState:
     history: list
     t: float = 0.0
     step: int = 0
+    temperature: np.ndarray | None = None
 
     @property
     def n(self) -> int:

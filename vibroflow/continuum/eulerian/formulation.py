@@ -46,6 +46,7 @@ from ..formulation import Formulation, Sampler
 from ..material import boundary_friction
 from ..options import ContinuumOptions, default_dx
 from ..sampling import shear_rate, to_lab
+from ..temperature_field import temperature_model
 from ..timestep import stable_dt
 from . import column
 from .mesh import EulerianMesh
@@ -247,7 +248,8 @@ class FixedMesh(Formulation):
         dt = interval / math.ceil(interval / dt)
         return EulerianSystem(mesh, material, dt, frame=frame, wall=wall, partitions=partitions,
                               chunks=scenario.run.force_chunks,
-                              transfers=self.transfers_on(options, scenario))
+                              transfers=self.transfers_on(options, scenario),
+                              temperature=temperature_model(scenario, options, mesh.h))
 
     def initial_state(self, scenario, system) -> tuple[EulerianState, float]:
         g = math.hypot(float(scenario.gravity[0]), float(scenario.gravity[2]))

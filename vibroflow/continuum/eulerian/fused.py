@@ -37,6 +37,7 @@ from ..boundary import partition_forces
 from ..constitutive import P_ETA_BED
 from ..grid_step import grid_phase, grid_phase_serial
 from ..stress_update import damped_stress
+from ..temperature_field import add_pressure
 from .advection import remap, remap_serial
 from .face_velocity import face_velocity_rows, match_divergence
 from .lagrangian_step import (end_density, fill_limit, material_fraction,
@@ -47,11 +48,12 @@ from .wall import wall_forces
 #: status of `advance_kernel`
 OK, NEGATIVE_MASS, NON_FINITE = 0, 1, 2
 
-#: the cells' arrays (solver.EulerianState's, units there) and stress_work (N, 4) the stress
+#: the cells' arrays (solver.EulerianState's, units there), stress_work (N, 4) the stress
 #: scattered when the material has a bed viscosity (stress_update.damped_stress, on every
-#: cell; (0, 4) without)
+#: cell) or a kinetic pressure ((0, 4) without either), p_kin (N,) the kinetic pressure (Pa)
+#: added to the scattered mean stress (temperature_field.py; (0,) without the temperature)
 Cells = namedtuple("Cells", ["mass", "v", "C", "L", "stress", "gamma_dot", "phase", "frac",
-                             "volume", "density", "fext", "stress_work"])
+                             "volume", "density", "fext", "stress_work", "p_kin"])
 #: the step's constants: dt (s), the material's params (constitutive.ContinuumMaterial.
 #: as_array), the frame (grid_update.FRAME_FIELDS), the critical density rho_c (kg/m^3) and
 #: the initial total mass mass0 (kg/m; 0: not tracked)
@@ -93,8 +95,8 @@ def _make_advance_kernel(parallel: bool):
         status OK, NEGATIVE_MASS (a cell lost more mass than it held) or NON_FINITE (a velocity),
         found at the end of the last step made."""
         _ = parallel
-        mass, v, C, L, stress, gamma_dot, phase, frac, volume, density, fext, stress_work = \
-            cells
+        (mass, v, C, L, stress, gamma_dot, phase, frac, volume, density, fext, stress_work,
+         p_kin) = cells
         dt, params, frame, rho_c, mass0 = step
         h, open_x, open_z, normal, tables, weight, inv_r = mesh
         (wall_on, wall_cells, delta, xi, wfn, wft, wst, kn, kt, zeta, mu_w, part_on, mu_p,
@@ -112,7 +114,8 @@ def _make_advance_kernel(parallel: bool):
         m2 = mass.reshape((ncx, ncz))
         q3 = q.reshape((nq, ncx, ncz))
         damped = params[P_ETA_BED] > 0.0
-        scattered = stress_work if damped else stress
+        kinetic = p_kin.shape[0] > 0
+        scattered = stress_work if damped or kinetic else stress
         for s in range(nsteps):
             # lagrangian_step.lagrangian_step: forces, the cells holding material to the nodes
             material_fraction(mass, density, h, weight, frac, volume)
@@ -134,6 +137,14 @@ def _make_advance_kernel(parallel: bool):
                     a = (c * n) // nchunk
                     b = ((c + 1) * n) // nchunk
                     damped_stress(stress[a:b], L[a:b], phase[a:b], params, stress_work[a:b])
+            if kinetic:
+                # the kinetic pressure (temperature_field.py), scattered but not stored
+                for c in nb.prange(nchunk):
+                    a = (c * n) // nchunk
+                    b = ((c + 1) * n) // nchunk
+                    if not damped:
+                        stress_work[a:b] = stress[a:b]
+                    add_pressure(stress_work, p_kin, a, b)
             for c in nb.prange(nchunk):
                 a = (c * na) // nchunk
                 b = ((c + 1) * na) // nchunk

@@ -55,8 +55,9 @@ from ..grid_step import grid_spec, grid_work
 from ..grid_update import LabFrame
 from ..mpm.solver import ContinuumBlowUp
 from ..state import ContinuumState
+from ..temperature_field import cell_step, kinetic_pressure, production_W_m3
 from . import fused
-from .advection import remap_work
+from .advection import remap_serial, remap_work
 from .lagrangian_step import fill_limit, material_fraction
 from .mesh import EulerianMesh
 from .transfer import WeightTables
@@ -102,7 +103,12 @@ class EulerianSystem:
     (cell_weight, r its centre's radius), a face sweeps h r (the remap's weights,
     advection.remap_work), the wall's contact scales with r (wall.wall_forces), the stress
     divergence gains the hoop term -V sigma_theta w / r (transfer.p2g_cells) and the
-    velocity gradient the hoop rate (face_velocity.match_divergence; L (N, 5))."""
+    velocity gradient the hoop rate (face_velocity.match_divergence; L (N, 5)).
+
+    temperature (temperature_field.TemperatureModel, optional): the cells carry the granular
+    temperature (state.temperature), remapped with their mass, its balance made after every
+    step on the cells, its kinetic pressure added to the stress they scatter (`advance`);
+    None (default): not carried.  Plane strain only."""
 
     mesh: EulerianMesh
     material: ContinuumMaterial
@@ -115,6 +121,7 @@ class EulerianSystem:
     serial_below: int = SERIAL_BELOW
     transfers: int = 1
     axisymmetric: bool = False
+    temperature: object = None
 
     def __post_init__(self):
         if not self.dt > 0:
@@ -128,6 +135,9 @@ class EulerianSystem:
         if not (isinstance(self.transfers, int) and self.transfers >= 1):
             raise InputError(f"transfers = {self.transfers!r}: must be an integer >= 1 (APIC "
                              "transfers a step)")
+        if self.temperature is not None and self.axisymmetric:
+            raise InputError("temperature with axisymmetric = True: the temperature's balance "
+                             "is plane strain only")
         m = self.mesh
         self.params = self.material.as_array()
         self.x = m.centres()
@@ -171,6 +181,9 @@ class EulerianSystem:
                                         np.zeros(m.n), np.zeros(m.n, np.int64))
         self.grid_spec = grid_spec(m.grid, self.no_slip_rows, self.axis_cols)
         self.work = grid_work(m.grid, self.chunks, self.transfers)
+        # the temperature's own remap (one field, after the step's: `advance`)
+        self.temperature_work = None if self.temperature is None else \
+            remap_work(m.open_x, m.open_z, 1, radius)
 
 
 @dataclass(kw_only=True)
@@ -224,6 +237,8 @@ def init_state(system: EulerianSystem, mass, density=None, v=None, stress=None,
                        density=rho, fext=np.zeros((n, 2)),
                        history=[empty_history(n)], t=float(t))
     st.mass0 = st.total_mass()
+    if system.temperature is not None:
+        st.temperature = np.where(mass > 0, system.temperature.initial_T, 0.0)
     material_fraction(st.mass, st.density, mesh.h, system.cell_weight, st.frac, st.volume)
     return st
 
@@ -235,7 +250,8 @@ def state_from_checkpoint(system: EulerianSystem, saved, meta: dict) -> Eulerian
                        frac=np.zeros(saved.mass.shape[0]), volume=saved.volume,
                        density=saved.density, fext=saved.fext, history=saved.history,
                        mass0=float(meta["mass0"]), mass_error_max=float(meta["mass_error_max"]),
-                       t=saved.t, step=saved.step)
+                       t=saved.t, step=saved.step,
+                       temperature=getattr(saved, "temperature", None))
     material_fraction(st.mass, st.density, system.mesh.h, system.cell_weight, st.frac,
                       st.volume)
     return st
@@ -260,10 +276,44 @@ def _blowup(system, state, ids, what):
 def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
     """n steps of system.dt (the Lagrangian step, then the remap: module docstring) in one
     compiled call (fused.py); raises mpm.ContinuumBlowUp when a cell's mass goes negative or
-    its velocity non-finite."""
+    its velocity non-finite.  With the temperature (EulerianSystem.temperature), one call a
+    step, each followed by the temperature's remap with the step's mass fluxes and its balance
+    on the cells (temperature_field.py)."""
     n = int(n)
     if n <= 0:
         return
+    model = system.temperature
+    if model is None:
+        _advance(system, state, n, np.empty(0))
+        return
+    mesh = system.mesh
+    shape = (mesh.ncx, mesh.ncz)
+    h = mesh.h
+    periodic = system.grid_spec[3]
+    p_kin = np.empty(state.n)
+    power = np.empty(state.n)
+    T = state.temperature.reshape((1,) + shape)
+    for _ in range(n):
+        kinetic_pressure(state.density, state.temperature, model.params, model.coupled,
+                         p_kin)
+        m_start = state.mass.reshape(shape).copy()
+        _advance(system, state, 1, p_kin)
+        # T carried with the mass: the same transport of the step's start mass by the same
+        # face velocities as the kernel's remap
+        remap_serial(m_start, T, system.ux, system.uz, h, system.dt, periodic,
+                     system.temperature_work)
+        production_W_m3(state.stress, state.L, state.gamma_dot, p_kin, power)
+        full = state.density > 0.0
+        frac = np.minimum(1.0, np.divide(state.mass, state.density * h * h,
+                                         out=np.zeros(state.n), where=full))
+        phi = state.mass / (model.params.density_kg_m3 * h * h)
+        state.temperature[:] = cell_step(T[0], phi.reshape(shape), (power * frac).reshape(shape),
+                                         system.dt, model).ravel()
+
+
+def _advance(system: EulerianSystem, state: EulerianState, n: int, p_kin) -> None:
+    """`advance`'s compiled call: n steps, the kinetic pressure p_kin (N,) Pa added to the
+    scattered stress ((0,): none)."""
     mesh = system.mesh
     mat = system.material
     w = system.wall
@@ -275,7 +325,8 @@ def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
     kernel = fused.advance_kernel if parallel else fused.advance_kernel_serial
     cells = fused.Cells(state.mass, state.v, state.C, state.L, state.stress, state.gamma_dot,
                         state.phase, state.frac, state.volume, state.density, state.fext,
-                        np.empty((state.n, 4)) if mat.bed_viscosity > 0 else np.empty((0, 4)))
+                        np.empty((state.n, 4)) if mat.bed_viscosity > 0 or p_kin.shape[0] > 0
+                        else np.empty((0, 4)), p_kin)
     step = fused.CellStep(float(system.dt), system.params, system.frame.as_array(),
                           float(mat.critical_density), float(state.mass0))
     boundaries = fused.MeshBoundaries(

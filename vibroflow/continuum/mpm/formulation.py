@@ -35,6 +35,7 @@ from ..grid import Grid
 from ..material import boundary_friction
 from ..options import ContinuumOptions, default_dx
 from ..sampling import shear_rate, to_lab
+from ..temperature_field import temperature_model
 from ..timestep import stable_dt
 from . import column
 from .solver import MPMState, MPMSystem, advance, init_state
@@ -194,7 +195,8 @@ class MaterialPointMethod(Formulation):
         dt = interval / math.ceil(interval / dt)
         return MPMSystem(grid, material, dt, frame=frame, boundaries=boundaries,
                          chunks=scenario.run.force_chunks, flip=float(options.flip),
-                         transfers=self.transfers_on(options, scenario))
+                         transfers=self.transfers_on(options, scenario),
+                         temperature=temperature_model(scenario, options, dx))
 
     def initial_state(self, scenario, system: MPMSystem) -> tuple[MPMState, float]:
         x, volume, density, stress, h = settled_bed(scenario, system.material,
@@ -205,7 +207,9 @@ class MaterialPointMethod(Formulation):
         advance(system, state, steps)
 
     def restore(self, system, saved, meta: dict) -> MPMState:
-        return MPMState(**{f.name: getattr(saved, f.name) for f in dataclasses.fields(MPMState)})
+        # a run without the temperature stores none
+        return MPMState(**{f.name: getattr(saved, f.name) for f in dataclasses.fields(MPMState)
+                           if f.name != "temperature" or hasattr(saved, f.name)})
 
     def sampler(self, scenario, system, state, out: Path, vtk: bool) -> PointSampler:
         return PointSampler(scenario, system, state, out, vtk)

@@ -34,6 +34,7 @@ from ..grid import Grid
 from ..grid_step import chunk_bounds, grid_spec, grid_work
 from ..grid_update import LabFrame
 from ..state import ContinuumState
+from ..temperature_field import kinetic_pressure, point_step, production_W_m3
 from ..timestep import stable_dt
 
 
@@ -82,7 +83,12 @@ class MPMSystem:
     101, 127).  The axis is a grid condition: nodes at r <= 0 have no radial velocity.  Plane
     penalty walls and the partitions are plane-strain objects (their force scales with the
     point's side sqrt(V)) and are refused here: a floor is the no-slip grid floor
-    (`no_slip_below`)."""
+    (`no_slip_below`).
+
+    temperature (temperature_field.TemperatureModel, optional): the points carry the granular
+    temperature (state.temperature) and its balance is made after every step on the grid's
+    cells, its kinetic pressure added to the stress the points scatter (`advance`); None
+    (default): not carried.  Plane strain only."""
 
     grid: Grid
     material: ContinuumMaterial
@@ -94,8 +100,12 @@ class MPMSystem:
     flip: float = 0.0
     axisymmetric: bool = False
     transfers: int = 1
+    temperature: object = None
 
     def __post_init__(self):
+        if self.temperature is not None and self.axisymmetric:
+            raise InputError("temperature with axisymmetric = True: the temperature's balance "
+                             "is plane strain only")
         if not self.dt > 0:
             raise InputError(f"dt = {self.dt!r}: must be > 0 s")
         self.no_slip_rows = 0 if self.no_slip_below is None else \
@@ -170,6 +180,8 @@ def init_state(system: MPMSystem, x, volume, density, v=None, stress=None,
                      mass=volume * density, volume=volume, density=density, stress=sig,
                      gamma_dot=np.zeros(n), phase=np.ones(n, np.int8), fext=np.zeros((n, 2)),
                      history=[b.init_history(n) for b in system.boundaries], t=float(t))
+    if system.temperature is not None:
+        state.temperature = np.full(n, system.temperature.initial_T)
     return state
 
 
@@ -262,10 +274,31 @@ def _unstack_history(state: MPMState, walls, stacked) -> None:
 def advance(system: MPMSystem, state: MPMState, n: int) -> None:
     """n steps (module docstring) in one compiled call (fused.py), parallel over the system's
     point chunks; raises ContinuumBlowUp naming the points and the likely cause when a point
-    goes through a wall (boundary.py `lost`), leaves the grid or stops being finite."""
+    goes through a wall (boundary.py `lost`), leaves the grid or stops being finite.  With the
+    temperature (MPMSystem.temperature), one call a step, each followed by the temperature's
+    balance (temperature_field.py)."""
     n = int(n)
     if n <= 0:
         return
+    model = system.temperature
+    if model is None:
+        _advance(system, state, n, np.empty(0))
+        return
+    g = system.grid
+    p_kin = np.empty(state.n)
+    power = np.empty(state.n)
+    for _ in range(n):
+        kinetic_pressure(state.density, state.temperature, model.params, model.coupled,
+                         p_kin)
+        _advance(system, state, 1, p_kin)
+        production_W_m3(state.stress, state.L, state.gamma_dot, p_kin, power)
+        point_step(state.temperature, state.x, state.mass, state.volume, power, (g.x0, g.z0),
+                   (g.nx, g.nz), system.dt, model)
+
+
+def _advance(system: MPMSystem, state: MPMState, n: int, p_kin) -> None:
+    """`advance`'s compiled call: n steps, the kinetic pressure p_kin (N,) Pa added to the
+    scattered stress ((0,): none)."""
     g = system.grid
     records, walls = pack_boundaries(system.boundaries)
     hist = _stack_history(state, walls)
@@ -278,7 +311,8 @@ def advance(system: MPMSystem, state: MPMState, n: int) -> None:
     points = fused.Points(
         state.x, state.v, state.C, state.L, state.mass, state.volume, state.density,
         state.stress, state.gamma_dot, state.phase, state.fext,
-        np.empty((state.n, 4)) if system.material.bed_viscosity > 0 else np.empty((0, 4)))
+        np.empty((state.n, 4)) if system.material.bed_viscosity > 0 or p_kin.shape[0] > 0
+        else np.empty((0, 4)), p_kin)
     step = fused.MPMStep(float(system.dt), system.params, system.frame.as_array(), box,
                          chunk_bounds(state.n, system.chunks), float(system.flip))
     done, t, status, which = fused.advance_kernel(
