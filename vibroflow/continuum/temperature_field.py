@@ -147,6 +147,28 @@ def point_step(T, x, mass, volume, power, origin, shape, dt: float, model: Tempe
     T[~warm] = T_new[idx[~warm]]
 
 
+def advance_with_temperature(state, n, model: TemperatureModel | None, compiled, balance,
+                             start=lambda: None) -> None:
+    """n steps of a formulation: without the temperature (model None), one compiled call of n
+    steps (compiled(n, p_kin) with an empty p_kin); with it, one call a step: the kinetic
+    pressure (Pa) of the state's T scattered by that step, its production (W/m^3), then the
+    formulation's balance of T (balance(power, start()), start() taken before the step)."""
+    n = int(n)
+    if n <= 0:
+        return
+    if model is None:
+        compiled(n, np.empty(0))
+        return
+    p_kin = np.empty(state.n)
+    power = np.empty(state.n)
+    for _ in range(n):
+        kinetic_pressure(state.density, state.temperature, model.params, model.coupled, p_kin)
+        before = start()
+        compiled(1, p_kin)
+        production_W_m3(state.stress, state.L, state.gamma_dot, p_kin, power)
+        balance(power, before)
+
+
 def fluctuation_energy_J_m(mass, T) -> float:
     """(3/2) sum m T (J per metre of thickness) of the points or cells."""
     return float(1.5 * np.sum(np.asarray(mass) * np.asarray(T)))

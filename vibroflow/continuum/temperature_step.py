@@ -84,6 +84,29 @@ def _thomas(lower, diag, upper, rhs, out, n):
 
 
 @nb.njit(cache=True)
+def _sweep_line(T, capacity, kappa, r, lo, di, up, rhs, line):
+    """One line of cells (1-D views T, capacity, kappa along x or z) after a backward-Euler step
+    of conduction along it, written into T; r = dt / h^2 (s/m^2); lo .. line are scratch."""
+    n = T.shape[0]
+    for i in range(n):
+        if capacity[i] <= 0.0:
+            lo[i] = 0.0
+            di[i] = 1.0
+            up[i] = 0.0
+            rhs[i] = T[i]
+            continue
+        kb = _face(kappa[i - 1], kappa[i]) if i > 0 else 0.0
+        kf = _face(kappa[i], kappa[i + 1]) if i < n - 1 else 0.0
+        lo[i] = -r * kb
+        up[i] = -r * kf
+        di[i] = capacity[i] + r * (kb + kf)
+        rhs[i] = capacity[i] * T[i]
+    _thomas(lo, di, up, rhs, line, n)
+    for i in range(n):
+        T[i] = line[i]
+
+
+@nb.njit(cache=True)
 def conduct(T, capacity, kappa, dt, h):
     """T (m^2/s^2, (nx, nz)) after dt (s) of capacity dT/dt = div (kappa grad T) on cells of side
     h (m), zero-flux edges: backward Euler, an x sweep then a z sweep (module docstring).
@@ -99,39 +122,9 @@ def conduct(T, capacity, kappa, dt, h):
     rhs = np.empty(n)
     line = np.empty(n)
     for k in range(nz):
-        for i in range(nx):
-            if capacity[i, k] <= 0.0:
-                lo[i] = 0.0
-                di[i] = 1.0
-                up[i] = 0.0
-                rhs[i] = out[i, k]
-                continue
-            kw = _face(kappa[i - 1, k], kappa[i, k]) if i > 0 else 0.0
-            ke = _face(kappa[i, k], kappa[i + 1, k]) if i < nx - 1 else 0.0
-            lo[i] = -r * kw
-            up[i] = -r * ke
-            di[i] = capacity[i, k] + r * (kw + ke)
-            rhs[i] = capacity[i, k] * out[i, k]
-        _thomas(lo, di, up, rhs, line, nx)
-        for i in range(nx):
-            out[i, k] = line[i]
+        _sweep_line(out[:, k], capacity[:, k], kappa[:, k], r, lo, di, up, rhs, line)
     for i in range(nx):
-        for k in range(nz):
-            if capacity[i, k] <= 0.0:
-                lo[k] = 0.0
-                di[k] = 1.0
-                up[k] = 0.0
-                rhs[k] = out[i, k]
-                continue
-            ks = _face(kappa[i, k - 1], kappa[i, k]) if k > 0 else 0.0
-            kn = _face(kappa[i, k], kappa[i, k + 1]) if k < nz - 1 else 0.0
-            lo[k] = -r * ks
-            up[k] = -r * kn
-            di[k] = capacity[i, k] + r * (ks + kn)
-            rhs[k] = capacity[i, k] * out[i, k]
-        _thomas(lo, di, up, rhs, line, nz)
-        for k in range(nz):
-            out[i, k] = line[k]
+        _sweep_line(out[i, :], capacity[i, :], kappa[i, :], r, lo, di, up, rhs, line)
     return out
 
 

@@ -55,7 +55,7 @@ from ..grid_step import grid_spec, grid_work
 from ..grid_update import LabFrame
 from ..mpm.solver import ContinuumBlowUp
 from ..state import ContinuumState
-from ..temperature_field import cell_step, kinetic_pressure, production_W_m3
+from ..temperature_field import advance_with_temperature, cell_step
 from . import fused
 from .advection import remap_serial, remap_work
 from .lagrangian_step import fill_limit, material_fraction
@@ -279,36 +279,30 @@ def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
     its velocity non-finite.  With the temperature (EulerianSystem.temperature), one call a
     step, each followed by the temperature's remap with the step's mass fluxes and its balance
     on the cells (temperature_field.py)."""
-    n = int(n)
-    if n <= 0:
-        return
     model = system.temperature
-    if model is None:
-        _advance(system, state, n, np.empty(0))
-        return
     mesh = system.mesh
     shape = (mesh.ncx, mesh.ncz)
     h = mesh.h
     periodic = system.grid_spec[3]
-    p_kin = np.empty(state.n)
-    power = np.empty(state.n)
-    T = state.temperature.reshape((1,) + shape)
-    for _ in range(n):
-        kinetic_pressure(state.density, state.temperature, model.params, model.coupled,
-                         p_kin)
-        m_start = state.mass.reshape(shape).copy()
-        _advance(system, state, 1, p_kin)
+
+    def start():
+        return state.mass.reshape(shape).copy()
+
+    def balance(power, m_start):
         # T carried with the mass: the same transport of the step's start mass by the same
         # face velocities as the kernel's remap
+        T = state.temperature.reshape((1,) + shape)
         remap_serial(m_start, T, system.ux, system.uz, h, system.dt, periodic,
                      system.temperature_work)
-        production_W_m3(state.stress, state.L, state.gamma_dot, p_kin, power)
         full = state.density > 0.0
         frac = np.minimum(1.0, np.divide(state.mass, state.density * h * h,
                                          out=np.zeros(state.n), where=full))
         phi = state.mass / (model.params.density_kg_m3 * h * h)
         state.temperature[:] = cell_step(T[0], phi.reshape(shape), (power * frac).reshape(shape),
                                          system.dt, model).ravel()
+
+    advance_with_temperature(state, n, model,
+                             lambda k, p_kin: _advance(system, state, k, p_kin), balance, start)
 
 
 def _advance(system: EulerianSystem, state: EulerianState, n: int, p_kin) -> None:

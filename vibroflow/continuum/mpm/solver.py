@@ -34,7 +34,7 @@ from ..grid import Grid
 from ..grid_step import chunk_bounds, grid_spec, grid_work
 from ..grid_update import LabFrame
 from ..state import ContinuumState
-from ..temperature_field import kinetic_pressure, point_step, production_W_m3
+from ..temperature_field import advance_with_temperature, point_step
 from ..timestep import stable_dt
 
 
@@ -277,23 +277,14 @@ def advance(system: MPMSystem, state: MPMState, n: int) -> None:
     goes through a wall (boundary.py `lost`), leaves the grid or stops being finite.  With the
     temperature (MPMSystem.temperature), one call a step, each followed by the temperature's
     balance (temperature_field.py)."""
-    n = int(n)
-    if n <= 0:
-        return
-    model = system.temperature
-    if model is None:
-        _advance(system, state, n, np.empty(0))
-        return
     g = system.grid
-    p_kin = np.empty(state.n)
-    power = np.empty(state.n)
-    for _ in range(n):
-        kinetic_pressure(state.density, state.temperature, model.params, model.coupled,
-                         p_kin)
-        _advance(system, state, 1, p_kin)
-        production_W_m3(state.stress, state.L, state.gamma_dot, p_kin, power)
+
+    def balance(power, _start):
         point_step(state.temperature, state.x, state.mass, state.volume, power, (g.x0, g.z0),
-                   (g.nx, g.nz), system.dt, model)
+                   (g.nx, g.nz), system.dt, system.temperature)
+
+    advance_with_temperature(state, n, system.temperature,
+                             lambda k, p_kin: _advance(system, state, k, p_kin), balance)
 
 
 def _advance(system: MPMSystem, state: MPMState, n: int, p_kin) -> None:
