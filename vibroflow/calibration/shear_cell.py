@@ -68,6 +68,8 @@ from vibroflow.dem.periodic_step import (MODE_FIXED, MODE_ISO, MODE_Z, Q_KE, Q_L
 from vibroflow.errors import InputError
 from vibroflow.scenario.laws import contact_time
 
+from .shear_temperature import profile_shear_rate, shear_rate_record
+
 DEFAULT_INERTIAL_NUMBERS = (0.005, 0.01, 0.03, 0.1, 0.3)
 DEFAULT_N_BALLS = 400
 DEFAULT_STRAIN = 2.0            # shear strain per point
@@ -318,6 +320,7 @@ def _point_record(s: np.ndarray, I_target: float, gamma_dot: float, pressure: fl
         "coordination_number": B["Z"],
         "coordination_number_non_rattler": B["Znr"],
         "sqrtT_over_d_gamma_dot": np.sqrt(B["T"]) / (d * gamma_dot),
+        "granular_temperature": B["T"],
     }
     rec = {"I_target": float(I_target), "shear_rate": float(gamma_dot),
            "pressure_target": float(pressure)}
@@ -329,6 +332,7 @@ def _point_record(s: np.ndarray, I_target: float, gamma_dot: float, pressure: fl
         "normal_stress_ratio_xx": ob["sxx"].mean() / ob["szz"].mean(),
         "normal_stress_ratio_yy": ob["syy"].mean() / ob["szz"].mean(),
         "sqrtT_over_d_gamma_dot": math.sqrt(ob["T"].mean()) / (d * gamma_dot),
+        "granular_temperature": ob["T"].mean(),
     }
     for name, b in derived.items():
         rec[name] = float(whole.get(name, b.mean()))
@@ -392,8 +396,10 @@ def run_shear_cell(scenario, inertial_numbers=DEFAULT_INERTIAL_NUMBERS,
 
     Returns one dict per I (in the order given): I_target; I, mu, mu_eq, phi, pressure
     (sigma_zz, Pa), mean_pressure (tr sigma / 3, Pa), normal_stress_ratio_xx/_yy,
-    coordination_number(_non_rattler), sqrtT_over_d_gamma_dot, each with *_stderr (batch
-    means over the steady window); shear_rate (1/s), pressure_target (Pa), strain,
+    coordination_number(_non_rattler), sqrtT_over_d_gamma_dot, granular_temperature (T =
+    <m |v - u(z)|^2> / (3 <m>) about the imposed profile u_x = gamma_dot (z - L_z/2), m^2/s^2),
+    shear_rate_measured (the slope of the balls' mean profile, 1/s), each with *_stderr (batch
+    means over the steady window); shear_rate (imposed, 1/s), pressure_target (Pa), strain,
     transient_strain, steps, dt (s), wall_time_s, n_balls, seed, steady, reason,
     box_L_z (m, mean).  Deterministic for a given seed.
     """
@@ -440,8 +446,13 @@ def run_shear_cell(scenario, inertial_numbers=DEFAULT_INERTIAL_NUMBERS,
         t1 = time.perf_counter()
         base = done_strain
 
-        def stop(s, base=base, gd=gd, every=every):
-            prog.update(base + len(s) * every * gd * setup.dt, total, len(s) * every * box.n)
+        slopes: list[tuple[int, float]] = []
+
+        def stop(s, base=base, gd=gd, every=every, slopes=slopes):
+            slopes.append((len(s), profile_shear_rate(box)))
+            if progress is not None:
+                prog.update(base + len(s) * every * gd * setup.dt, total,
+                            len(s) * every * box.n)
             return False
 
         try:
@@ -449,14 +460,16 @@ def run_shear_cell(scenario, inertial_numbers=DEFAULT_INERTIAL_NUMBERS,
                 box.run(int(math.ceil(PRESHEAR_STRAIN / (gd * setup.dt))), MODE_Z,
                         pressure=pressure, gain=gain, sample_every=1000)
             s = box.run(steps, MODE_Z, pressure=pressure, gain=gain, sample_every=every,
-                        stop=stop if progress is not None else None)
+                        stop=stop)
         except FloatingPointError as e:
             raise InputError(f"run.dt = {scenario.run.dt!r}: the shear cell blew up at I = "
                              f"{I:.3g} ({e}); use a smaller time step") from None
         wall = time.perf_counter() - t1
         done_strain += strain
-        kept = s[(skip + every - 1) // every:]
+        first = (skip + every - 1) // every
+        kept = s[first:]
         rec = _point_record(kept, I, gd, pressure, setup, box, int(batches))
+        rec.update(shear_rate_record([g for n, g in slopes if n > first], int(batches)))
         rec.update(strain=float(strain), transient_strain=float(transient_strain),
                    steps=int(steps), dt=float(setup.dt), wall_time_s=float(wall),
                    n_balls=int(box.n), seed=seed, polydispersity=float(polydispersity),
