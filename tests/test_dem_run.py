@@ -255,3 +255,20 @@ def test_tub47_quick_ball_overlap_against_liggghts(tub47_quick_summary):
     in both codes; docs/validation.md)."""
     seed = 1  # tub47-quick's fill seed
     assert tub47_quick_summary["max_overlap_over_d"] <= 1.25 * LIGGGHTS_MAX_OVERLAP[seed]
+
+
+def test_every_dataset_of_dem_h5_says_its_si_units(tmp_path):
+    """dem.h5 is read by other programs: every dataset carries "units" (SI) and "long_name"."""
+    from vibroflow.dem.output import UNITS
+
+    out = tmp_path / "run"
+    r = _cli("dem", "tub47-quick", "--out", str(out), *_sets(SMALL))
+    assert r.returncode == 0, r.stderr
+    with h5py.File(out / "dem.h5", "r") as f:
+        names = []
+        f.visit(lambda n: names.append(n) if isinstance(f[n], h5py.Dataset) else None)
+        assert sorted(names) == sorted(UNITS)
+        for n in names:
+            assert f[n].attrs["units"] and f[n].attrs["long_name"], n
+        assert f["snapshots/position"].attrs["units"] == "m"
+        assert f["wall_contacts/fn"].attrs["units"] == "N"

@@ -395,6 +395,8 @@ def test_package_import_is_light():
     code = ("import sys, vibroflow, vibroflow.cli; "
             "assert 'numba' not in sys.modules, 'numba'; "
             "assert 'vibroflow.scenario.model' not in sys.modules; "
+            "assert {'load', 'load_scenario', 'Scenario'} <= set(dir(vibroflow)); "
+            "assert 'numba' not in sys.modules, 'numba after dir'; "
             "assert vibroflow.Scenario().case == 'tub47'; "
             "assert vibroflow.load_scenario('tub47-quick').fill.count == 4200; "
             "print(vibroflow.__version__)")

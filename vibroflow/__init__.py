@@ -47,8 +47,9 @@ _kernel_cache.ensure_fresh()
 if TYPE_CHECKING:
     from vibroflow.scenario.io import load_scenario
     from vibroflow.scenario.model import Scenario
+    from vibroflow.study.results import load
 
-__all__ = ["__version__", "load_scenario", "Scenario"]
+__all__ = ["__version__", "load", "load_scenario", "Scenario"]
 
 _LAZY = {"load_scenario": "vibroflow.scenario.io", "Scenario": "vibroflow.scenario.model",
          "load": "vibroflow.study.results"}
@@ -60,3 +61,8 @@ def __getattr__(name: str) -> Any:
         globals()[name] = value
         return value
     raise AttributeError(f"module 'vibroflow' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    # the lazy names are listed (tab completion, help()) before their first use loads them
+    return sorted(set(globals()) | set(_LAZY))

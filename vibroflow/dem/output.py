@@ -59,6 +59,40 @@ _SCHEMA = {
                "max_overlap_ball": ((), "f8"), "max_overlap_wall": ((), "f8")},
 }
 
+#: every dataset's "units" (SI; "1" for a count, an index or a flag) and "long_name" attributes
+UNITS = {
+    "particles/radius": ("m", "ball radius"),
+    "snapshots/time": ("s", "time since the vibration started"),
+    "snapshots/step": ("1", "steps since the vibration started"),
+    "snapshots/phase": ("1", "phase of the vibration cycle, as a fraction of the cycle"),
+    "snapshots/tub_pose": ("m, m, rad, m/s, m/s, rad/s",
+                           "tub pose X, Z, theta and their rates (tub47.md, Tub motion)"),
+    "snapshots/position": ("m", "ball centre, lab frame"),
+    "snapshots/velocity": ("m/s", "ball velocity, lab frame"),
+    "snapshots/angular_velocity": ("rad/s", "ball angular velocity, lab frame"),
+    "wall_contacts/snapshot": ("1", "snapshot index"),
+    "wall_contacts/particle": ("1", "ball index"),
+    "wall_contacts/wall": ("1", "wall: 0 the U, 1 and 2 the partitions, 3 and up the planes"),
+    "wall_contacts/position_tub": ("m", "contact point, tub frame"),
+    "wall_contacts/arc": ("m", "arc length of the contact point along the U's profile"),
+    "wall_contacts/fn": ("N", "normal force on the ball"),
+    "wall_contacts/ft": ("N", "magnitude of the tangential force on the ball"),
+    "wall_contacts/sliding": ("1", "true where the tangential force is at the Coulomb limit"),
+    "wall_contacts/force_lab": ("N", "force of the wall on the ball, lab axes"),
+    "ball_contacts/snapshot": ("1", "snapshot index"),
+    "ball_contacts/i": ("1", "first ball index (i < j)"),
+    "ball_contacts/j": ("1", "second ball index"),
+    "ball_contacts/force_lab": ("N", "force on ball i by ball j, lab axes"),
+    "impacts/time": ("s", "time of the contact's first step"),
+    "impacts/kind": ("1", "0 ball-ball, 1 ball-U, 2 ball-partition, 3 ball-plane"),
+    "impacts/position_tub": ("m", "contact point, tub frame"),
+    "impacts/normal_speed": ("m/s", "normal approach speed at the first step of the contact"),
+    "series/time": ("s", "time since the vibration started"),
+    "series/kinetic_energy": ("J", "kinetic energy of the balls, spin included, lab frame"),
+    "series/max_overlap_ball": ("m", "largest ball-ball overlap since the previous row"),
+    "series/max_overlap_wall": ("m", "largest ball-wall overlap since the previous row"),
+}
+
 # groups of millions of rows: lzf keeps the file small at little cost
 _COMPRESSED = ("impacts", "ball_contacts")
 
@@ -250,6 +284,9 @@ class ResultWriter:
                                        chunks=chunks if total else None,
                                        compression="lzf" if key.split("/")[0] in _COMPRESSED
                                        and total else None)
+            for key, (units, long_name) in UNITS.items():
+                out[key].attrs["units"] = units
+                out[key].attrs["long_name"] = long_name
             offsets = {key: 0 for key in totals}
             for p in parts:
                 with h5py.File(p, "r") as f:
