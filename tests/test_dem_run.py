@@ -272,3 +272,17 @@ def test_every_dataset_of_dem_h5_says_its_si_units(tmp_path):
             assert f[n].attrs["units"] and f[n].attrs["long_name"], n
         assert f["snapshots/position"].attrs["units"] == "m"
         assert f["wall_contacts/fn"].attrs["units"] == "N"
+
+
+def test_summary_reports_the_settling_and_the_vibration_apart(tmp_path):
+    """wall_time_s = settle.wall_time_s + vibration_wall_time_s, and particle_steps_per_s is
+    the vibration's: balls x vibration steps / vibration_wall_time_s."""
+    out = tmp_path / "run"
+    r = _cli("dem", "tub47-quick", "--out", str(out), *_sets(SMALL))
+    assert r.returncode == 0, r.stderr
+    s = json.loads((out / "summary.json").read_text())
+    settle, vib = s["settle"]["wall_time_s"], s["vibration_wall_time_s"]
+    assert settle > 0 and vib > 0
+    assert settle + vib == pytest.approx(s["wall_time_s"], rel=1e-12)
+    assert s["particle_steps_per_s"] == pytest.approx(s["n_particles"] * s["steps"] / vib,
+                                                      rel=1e-12)
