@@ -282,6 +282,12 @@ def test_summary_reports_the_settling_and_the_vibration_apart(tmp_path):
     assert r.returncode == 0, r.stderr
     s = json.loads((out / "summary.json").read_text())
     settle, vib = s["settle"]["wall_time_s"], s["vibration_wall_time_s"]
+    # 300 balls fill the U a few centimetres deep: the probes at z = 0.15 m see no ball, and
+    # the command says so, each in a line that names the probe and why its velocity is n/a
+    empty = [name for name, p in s["probes"].items() if p["samples"] == 0]
+    assert empty and all("above the bed's surface" in s["probes"][n]["note"] for n in empty)
+    warnings = [line for line in r.stderr.splitlines() if line.startswith("warning:")]
+    assert sorted(line.split()[4] for line in warnings) == sorted(empty)
     assert settle > 0 and vib > 0
     assert settle + vib == pytest.approx(s["wall_time_s"], rel=1e-12)
     assert s["particle_steps_per_s"] == pytest.approx(s["n_particles"] * s["steps"] / vib,

@@ -6,6 +6,7 @@ from typing import Annotated
 
 import typer
 
+from .after_run import warn_empty_probes
 from .apps import app
 from .failures import blown_up, input_errors
 from .options import OutOption, ResumeOption, ScenarioArg, SetOption, load
@@ -26,7 +27,8 @@ def dem(
     from vibroflow.dem.simulate import BlowUp
 
     try:
-        run_dem(s, out_dir=out, vtk=vtk, resume=resume, progress=True)
+        summary = run_dem(s, out_dir=out, vtk=vtk, resume=resume, progress=True)
     except BlowUp as exc:
         blown_up(exc)
+    warn_empty_probes("the DEM's", summary)
     typer.echo(f"results in {out}")

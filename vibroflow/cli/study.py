@@ -7,6 +7,7 @@ from typing import Annotated, Optional
 
 import typer
 
+from .after_run import warn_empty_probes
 from .apps import app
 from .failures import blown_up, input_errors
 from .options import StudyScenarioArg, load, out_option, set_option, shear_cell_option
@@ -44,6 +45,7 @@ def run(
     except (BlowUp, ContinuumBlowUp) as exc:
         blown_up(exc)
     for name, m in summary["methods"].items():
+        warn_empty_probes(f"{name}:", m)
         c = m["circulation"]
         line = (f"{name}: circulation {c['sense']} {c['strength']:.4g} m^2/s, wall time "
                 f"{m['wall_time_s']:.1f} s")

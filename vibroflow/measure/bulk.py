@@ -345,7 +345,8 @@ def probe_values(table: CellTable, probes) -> dict:
     probes : mapping name -> (x, z) in m, or an object with .x and .z (scenario Probe).
     Returns name -> {x, z (the probe point, m), cell_x, cell_z (its cell's centre, m),
     vx, vz (m/s), vx_stderr, vz_stderr (m/s, batch means; NaN without batches), solid_fraction,
-    samples}.  A probe in a cell that held no ball gets NaN velocities and 0 samples.
+    samples}.  A probe in a cell that held no ball gets NaN velocities, 0 samples and a "note"
+    saying why (the probe lies above the bed's surface, or outside the tub).
     """
     h = table.cell_size
     lookup = {(int(a), int(b)): j for j, (a, b) in enumerate(zip(table.ix, table.iz))}
@@ -364,5 +365,9 @@ def probe_values(table: CellTable, probes) -> dict:
                        vx_stderr=float(se_x[j]), vz_stderr=float(se_z[j]),
                        solid_fraction=float(table.solid_fraction[j]),
                        samples=int(table.samples[j]))
+        if rec["samples"] == 0:
+            rec["note"] = (f"no ball entered its {h * 1e3:.0f} mm cell in the averaging window: "
+                           "the probe lies above the bed's surface (a shallow bed, or a probe "
+                           "placed high), or outside the tub; its velocity is n/a")
         out[name] = rec
     return out

@@ -153,7 +153,8 @@ def _summary(src, scenario, bulk_csv, t_end) -> dict:
     keep = ("x", "z", "cell_x", "cell_z", "vx", "vz", "vx_stderr", "vz_stderr",
             "solid_fraction", "samples")
     out = {
-        "probes": {name: {k: rec[k] for k in keep} for name, rec in probes.items()},
+        "probes": {name: {k: rec[k] for k in (*keep, "note") if k in rec}
+                   for name, rec in probes.items()},
         "circulation": circ.as_dict(),
         "wall_contacts": wc.as_dict(),
         "impacts": im.as_dict(),
