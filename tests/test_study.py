@@ -52,8 +52,13 @@ def test_pipeline_runs_end_to_end(study):
     from vibroflow.analysis.compare import field_difference
 
     scenario, out, summary, lines = study
-    assert len(lines) == len(STAGES)  # one progress line per stage
-    assert all("done in" in line and "time left" in line for line in lines)
+    # two lines per stage that runs: when it starts (with its estimate), when it ends
+    assert len(lines) == 2 * len(STAGES)
+    for k, s in enumerate(STAGES):
+        start, end = lines[2 * k], lines[2 * k + 1]
+        assert start.startswith(f"[{k + 1}/{len(STAGES)}] {s}") and "running, about" in start
+        assert end.startswith(f"[{k + 1}/{len(STAGES)}] {s}")
+        assert "done in" in end and "time left" in end
     for s in STAGES:
         rec = json.loads((out / s / "stage.json").read_text())
         assert rec["stage"] == s and len(rec["hash"]) == 64
@@ -202,7 +207,7 @@ def test_a_killed_run_resumes_where_it_stopped(study, tmp_path):
     lines: list[str] = []
     resumed = run_study(load_scenario("tub47-quick", [*SMALL, "run.checkpoint_every=0.05"]),
                         out, echo=lines.append, extra_stages=[report_stage()])
-    assert "(resumed)" in lines[0]
+    assert "running" in lines[0] and "(resumed)" in lines[1]
     assert json.loads((out / "dem" / "stage.json").read_text())["resumed"] is True
     a, b = resumed["methods"]["dem"], reference["methods"]["dem"]
     assert a["circulation"]["strength"] == b["circulation"]["strength"]

@@ -184,6 +184,9 @@ def _run_study(scenario, out: Path, methods: list, shear_cell: bool, progress: b
             what = "up to date, kept"
             spent = 0.0
         else:
+            if echo is not None:  # said when it starts: a stage may take minutes
+                echo(f"[{i}/{n}] {stage.name:<12} running, about "
+                     f"{format_duration(estimates[stage.name])}")
             record = _run_stage(study, stage, h)
             spent = record["wall_time_s"]
             what = f"done in {format_duration(spent)}" + (" (resumed)" if record["resumed"] else "")
