@@ -189,8 +189,9 @@ class CellSampler(Sampler):
             samples.rate_all[j] = rate[held].mean()
             samples.add_cell_rates(system.x[cells][held], rate[held])
         if getattr(state, "temperature", None) is not None:
-            samples.add_temperatures(j, system.x[cells], state.mass[cells],
-                                     state.temperature[cells])
+            # the cells that hold material as the shear rates count them
+            samples.add_temperatures(j, system.x[cells][held], state.mass[cells][held],
+                                     state.temperature[cells][held])
         if (held & self.near_wall).any():
             samples.rate_wall[j] = rate[held & self.near_wall].mean()
         for q, inside in enumerate(self.in_probe):
