@@ -144,6 +144,9 @@ def test_report_is_self_contained_and_shows_the_summary(study):  # noqa: F811
     page = _Page()
     page.feed((out / "report.html").read_text(encoding="utf-8"))
     assert page.h2[:len(SECTIONS)] == list(SECTIONS.values())
+    text = (out / "report.html").read_text(encoding="utf-8")
+    for name in ("lagrangian", "eulerian"):  # the study's continua carry no temperature
+        assert f"{name} ran without the granular temperature" in text
     assert "script" not in page.tags and "link" not in page.tags
     assert not [u for u in page.links if re.match(r"\s*(https?:)?//", u, re.I)]
     gifs = []

@@ -71,6 +71,13 @@ def continuum(
                                 ">= 0; 0 = off, the default): the continuum's counterpart of "
                                 "the DEM's contact dashpots, fitted on a DEM of a vibrated "
                                 "strip by benchmarks/strip_damping.py.")] = 0.0,
+    temperature: Annotated[bool, typer.Option(
+        "--temperature", help="Carry the granular temperature T (m^2/s^2) with its balance "
+                              "and kinetic pressure (continuum/temperature_field.py), and "
+                              "write its map temperature.csv; default off.")] = False,
+    initial_temperature: Annotated[float, typer.Option(
+        "--initial-temperature", help="With --temperature: T of the bed at the start "
+                                      "(m^2/s^2, >= 0); default 0.")] = 0.0,
     set_: SetOption = None,
     vtk: Annotated[bool, typer.Option("--vtk", help="Also write ParaView files of the material "
                                                     "points and the grid fields over the last "
@@ -108,7 +115,9 @@ def continuum(
         step["transfer_cfl"] = transfer_cfl
     options = form.options(dx=dx, model=rheology, dilatancy=dilatancy,
                            stiffness_factor=stiffness_factor, compaction=compaction, flip=flip,
-                           bed_viscosity=bed_viscosity, damping_length=damping_length, **step)
+                           bed_viscosity=bed_viscosity, damping_length=damping_length,
+                           temperature=temperature, initial_temperature=initial_temperature,
+                           **step)
     material_for(s, cal, options)  # validates the parameters before --out is made
     try:
         summary = run_continuum(s, out, method, calibration=cal, options=options,

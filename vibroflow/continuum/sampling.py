@@ -64,8 +64,20 @@ class Samples:
                 "ft": ((), np.float64), "sliding": ((), np.bool_), "arc": ((), np.float64),
                 "position_tub": ((3,), np.float64)}
 
-    def __init__(self, n_samples: int, n_points: int, n_probes: int, cell_grid=None):
+    def __init__(self, n_samples: int, n_points: int, n_probes: int, cell_grid=None,
+                 temperature: bool = False):
         self.j = 0
+        # with the granular temperature (ContinuumOptions.temperature): per sample the
+        # mass-weighted mean T over the material (m^2/s^2) and, on the analysis cells, the sum
+        # over samples of the mass-weighted mean T in the cell and the samples that held
+        # material there
+        self.temperature = bool(temperature)
+        if self.temperature:
+            self.temperature_all = np.full(n_samples, np.nan)
+            if cell_grid is not None:
+                h, nxh, nz = cell_grid
+                self.temperature_cell_sum = np.zeros((nz, 2 * nxh + 1))
+                self.temperature_cell_n = np.zeros((nz, 2 * nxh + 1))
         # the shear-rate map on the analysis cells: cell_grid = (cell size h m, cells either
         # side of x = 0, cells up from z = 0); per cell the sum over samples of the sample's
         # mean shear rate there, and the number of samples that held material there
@@ -96,6 +108,11 @@ class Samples:
         out.update({"contact_" + k: v for k, v in self.contact_arrays().items()})
         if self.cell_grid is not None:
             out["rate_cell_sum"], out["rate_cell_n"] = self.rate_cell_sum, self.rate_cell_n
+        if self.temperature:
+            out["temperature_all"] = self.temperature_all
+            if self.cell_grid is not None:
+                out["temperature_cell_sum"] = self.temperature_cell_sum
+                out["temperature_cell_n"] = self.temperature_cell_n
         for kind, entries in self.vtk.items():
             out[f"vtk_{kind}_t"] = np.array([t for t, _ in entries], dtype=np.float64)
             out[f"vtk_{kind}_name"] = np.array([name for _, name in entries], dtype=np.str_)
@@ -103,10 +120,15 @@ class Samples:
 
     @classmethod
     def from_arrays(cls, a: dict, n_samples: int, n_points: int, n_probes: int,
-                    cell_grid=None) -> "Samples":
-        s = cls(n_samples, n_points, n_probes, cell_grid)
+                    cell_grid=None, temperature: bool = False) -> "Samples":
+        s = cls(n_samples, n_points, n_probes, cell_grid, temperature)
         if cell_grid is not None and "rate_cell_sum" in a:
             s.rate_cell_sum[:], s.rate_cell_n[:] = a["rate_cell_sum"], a["rate_cell_n"]
+        if s.temperature and "temperature_all" in a:
+            s.temperature_all[:] = a["temperature_all"]
+            if cell_grid is not None:
+                s.temperature_cell_sum[:] = a["temperature_cell_sum"]
+                s.temperature_cell_n[:] = a["temperature_cell_n"]
         j = s.j = int(a["pos"].shape[0])
         s.pos[:j], s.vel[:j], s.poses[:j] = a["pos"], a["vel"], a["poses"]
         s.rate_all[:], s.rate_wall[:], s.rate_probe[:] = (a["rate_all"], a["rate_wall"],
@@ -150,6 +172,34 @@ class Samples:
         held = count > 0
         self.rate_cell_sum[held] += total[held] / count[held]
         self.rate_cell_n[held] += 1
+
+
+    def add_temperatures(self, j: int, x: np.ndarray, mass: np.ndarray, T: np.ndarray) -> None:
+        """Add sample j's granular temperatures T (m^2/s^2) of points (or cells) of masses
+        `mass` (kg/m, > 0 for material) at tub-frame positions x (N, 2) m: the mass-weighted
+        mean over the material and, on the analysis cells, in each cell (nothing without the
+        option)."""
+        if not self.temperature:
+            return
+        m = np.asarray(mass, dtype=np.float64)
+        T = np.asarray(T, dtype=np.float64)
+        held = (m > 0) & np.isfinite(T)
+        if not held.any():
+            return
+        self.temperature_all[j] = float(np.sum(m[held] * T[held]) / np.sum(m[held]))
+        if self.cell_grid is None:
+            return
+        h, nxh, nz = self.cell_grid
+        ix = np.floor(x[:, 0] / h + 0.5).astype(np.int64) + nxh
+        iz = np.floor(x[:, 1] / h + 0.5).astype(np.int64)
+        ok = held & (ix >= 0) & (ix <= 2 * nxh) & (iz >= 0) & (iz < nz)
+        flat = iz[ok] * (2 * nxh + 1) + ix[ok]
+        size = nz * (2 * nxh + 1)
+        M = np.bincount(flat, weights=m[ok], minlength=size).reshape(nz, -1)
+        E = np.bincount(flat, weights=m[ok] * T[ok], minlength=size).reshape(nz, -1)
+        inside = M > 0
+        self.temperature_cell_sum[inside] += E[inside] / M[inside]
+        self.temperature_cell_n[inside] += 1
 
 
 def cell_grid_of(geo, cell_size: float) -> tuple[float, int, int]:

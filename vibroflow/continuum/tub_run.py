@@ -19,7 +19,8 @@ Timeline (tub47.md "Procedure", the DEM's clock: t = 0 when the vibration starts
    impacts: none, window, cells), plus a "continuum" block: the method, numerics, material,
    and the shear rate with the impact speed and granular temperature it implies through the
    calibrated relations (calibration.toml [impacts]), when a calibration is given
-   (shear_outputs.py).
+   (shear_outputs.py); with the granular temperature (ContinuumOptions.temperature), its map
+   temperature.csv and the summary's "granular_temperature" block (temperature_outputs.py).
 
 Parameters come from calibration.toml (vibroflow.io.calibration_file.read_calibration) or the
 tub47 defaults (ContinuumMaterial, material.py): the wall friction [wall] friction (default:
@@ -58,6 +59,7 @@ from .material import material_for
 from .mpm.solver import ContinuumBlowUp
 from .sampling import Samples, cell_grid_of, phase_shear_of_samples, sample_times, samples_source
 from .shear_outputs import shear_rate_outputs, write_shear_rate_csv
+from .temperature_outputs import TEMPERATURE_CSV_NAME, temperature_outputs, write_temperature_csv
 from .timeline import (REPORT_EVERY, VibrationInterrupted, interrupted,
                        interrupted_while_settling, interrupted_while_writing, vibration_timeline)
 
@@ -165,21 +167,23 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
                 state = form.restore(system, saved, meta)
                 h = float(meta["bed_height_m"])
                 sampler = form.sampler(scenario, system, state, out, vtk)
-                samples = Samples.from_arrays(arrays, S, sampler.n_points, n_probes, cell_grid)
+                samples = Samples.from_arrays(arrays, S, sampler.n_points, n_probes, cell_grid,
+                                              options.temperature)
                 sampler.restore(arrays)
                 clock.resume_from(float(meta["wall_time_s"]))
                 prog.log(f"resuming from {ckpt} at t = {state.t:.4f} s")
             else:
                 if resume:
                     prog.log(f"no checkpoint in {out}: starting afresh")
-                for name in (SUMMARY_NAME, BULK_CSV_NAME, CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME):
+                for name in (SUMMARY_NAME, BULK_CSV_NAME, CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME,
+                             TEMPERATURE_CSV_NAME):
                     (out / name).unlink(missing_ok=True)
                 with interrupted_while_settling():
                     state, h = settle(form, scenario, material, calibration, options, prog)
                 state.t = 0.0
                 state.step = 0
                 sampler = form.sampler(scenario, system, state, out, vtk)
-                samples = Samples(S, sampler.n_points, n_probes, cell_grid)
+                samples = Samples(S, sampler.n_points, n_probes, cell_grid, options.temperature)
 
             def checkpoint():
                 save_checkpoint(ckpt, state, {**samples.arrays(), **sampler.arrays()}, {
@@ -248,6 +252,8 @@ def _results(form: Formulation, scenario, out: Path, calibration, options, vtk, 
         geo.radius, summary["impacts"]))
     write_shear_rate_csv(out / SHEAR_RATE_CSV_NAME, samples, phase, calibration,
                          material.diameter)
+    wrote = write_temperature_csv(out / TEMPERATURE_CSV_NAME, samples, phase)
+    summary["continuum"].update(temperature_outputs(samples, batch, run.batches, wrote))
     summary = json_safe(summary)
     write_json_atomic(out / SUMMARY_NAME, summary)
     return summary

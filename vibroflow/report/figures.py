@@ -20,6 +20,7 @@ from matplotlib.patches import Rectangle
 
 from vibroflow.io.pictures import pyplot
 from vibroflow.report.data import MIN_IMPACTS_PER_CELL, StudyData, mean_flow_shear_rate
+from vibroflow.report.temperature_maps import PHI_KEY, T_KEY, TemperatureMaps
 
 DPI = 90
 
@@ -317,4 +318,51 @@ def impact_maps(data: StudyData) -> bytes:
         fig.colorbar(mappable, ax=axes, shrink=0.8, label="mean normal impact speed (m/s)")
     fig.suptitle("ball-ball impact speed: DEM measured vs continuum inferred "
                  "(v = c0 + c1 d gamma_dot)")
+    return png_bytes(fig)
+
+
+def temperature_maps(data: StudyData, maps: TemperatureMaps) -> bytes:
+    """The granular temperature (top row, m^2/s^2) and solid fraction (bottom row) on the
+    analysis cells (report.temperature_maps): the DEM's, then each continuum's that carries the
+    temperature beside its difference to the DEM (continuum minus DEM, a diverging scale
+    centred on 0); cells with no material in a map are left blank."""
+    plt = pyplot()
+    cols = [("dem", maps.dem, None)]
+    for name, m in maps.continua.items():
+        cols.append((name, m, None))
+        cols.append((name, m, "difference"))
+    n = len(cols)
+    fig, axes = plt.subplots(2, n, figsize=(4.6 * n, 8.4), squeeze=False, layout="constrained")
+    top = _bed_top(data)
+    rows = ((T_KEY, "temperature_difference_m2_s2", "granular temperature T (m²/s²)"),
+            (PHI_KEY, "solid_fraction_difference", "solid fraction"))
+    for r, (key, diff_key, label) in enumerate(rows):
+        values = [m[key] for _, m, kind in cols if m is not None and kind is None]
+        hi = max([float(np.max(v)) for v in values] + [1e-12])
+        norm = Normalize(0.0, hi)
+        diffs = [m[diff_key] for _, m, kind in cols if kind and m.get(diff_key) is not None]
+        dhi = max([float(np.max(np.abs(d))) for d in diffs] + [1e-12])
+        dnorm = Normalize(-dhi, dhi)
+        shown = diff_shown = None
+        for ax, (name, m, kind) in zip(axes[r], cols):
+            if m is None or (kind and m.get(diff_key) is None):
+                ax.text(0.5, 0.5, "no coarse-grained fields\n(dem/fields.nc)", ha="center",
+                        va="center", transform=ax.transAxes)
+            elif kind is None:
+                empty = (m[T_KEY] <= 0) & (m[PHI_KEY] <= 0)
+                shown = ax.pcolormesh(maps.x, maps.z, np.where(empty, np.nan, m[key]),
+                                      shading="nearest", cmap="viridis", norm=norm)
+            else:
+                empty = ((m[T_KEY] <= 0) & (m[PHI_KEY] <= 0)
+                         & (maps.dem[T_KEY] <= 0) & (maps.dem[PHI_KEY] <= 0))
+                diff_shown = ax.pcolormesh(maps.x, maps.z, np.where(empty, np.nan, m[diff_key]),
+                                           shading="nearest", cmap="RdBu_r", norm=dnorm)
+            what = "difference (continuum − DEM)" if kind else label.split(" (")[0]
+            ax.set_title(f"{name}: {what}", fontsize=9)
+            _outline(ax, data, top)
+        if shown is not None:
+            fig.colorbar(shown, ax=list(axes[r]), shrink=0.8, label=label)
+        if diff_shown is not None:
+            fig.colorbar(diff_shown, ax=list(axes[r]), shrink=0.8, label="difference")
+    fig.suptitle("granular temperature and solid fraction, time-averaged")
     return png_bytes(fig)

@@ -27,6 +27,7 @@ from markupsafe import Markup
 from vibroflow import __version__
 from vibroflow.report import figures
 from vibroflow.report.data import StudyData
+from vibroflow.report.temperature_maps import temperature_maps
 
 #: section id -> heading, in page order (tests check the headings)
 SECTIONS = {
@@ -34,6 +35,7 @@ SECTIONS = {
     "probes": "Probes",
     "circulation": "Circulation and agreement with the DEM",
     "shear": "Shear rate",
+    "temperature": "Granular temperature and solid fraction",
     "impacts": "Impact speeds",
     "wall": "Wall friction",
     "rheology": "mu(I) fit",
@@ -194,6 +196,14 @@ def _shear(data: StudyData) -> dict:
             "rows": rows, "missing": missing}
 
 
+def _temperature(data: StudyData) -> dict:
+    maps = temperature_maps(data)
+    return {"img": _img(figures.temperature_maps(data, maps), "granular temperature and "
+                        "solid-fraction maps"),
+            "with": list(maps.continua), "without": maps.without,
+            "dem_fields": maps.dem is not None}
+
+
 def _impacts(data: StudyData) -> dict:
     rows = []
     for name in data.methods:
@@ -337,6 +347,7 @@ def render(data: StudyData, gif: Path | None = None, gif_note: str | None = None
         "probes": _probes(data),
         "circulation": _circulation(data),
         "shear": _shear(data),
+        "temperature": _temperature(data),
         "impacts": _impacts(data),
         "wall": _wall(data),
         "rheology": _rheology(data),

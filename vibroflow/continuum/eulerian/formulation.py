@@ -188,6 +188,10 @@ class CellSampler(Sampler):
         if held.any():
             samples.rate_all[j] = rate[held].mean()
             samples.add_cell_rates(system.x[cells][held], rate[held])
+        if getattr(state, "temperature", None) is not None:
+            # the cells that hold material as the shear rates count them
+            samples.add_temperatures(j, system.x[cells][held], state.mass[cells][held],
+                                     state.temperature[cells][held])
         if (held & self.near_wall).any():
             samples.rate_wall[j] = rate[held & self.near_wall].mean()
         for q, inside in enumerate(self.in_probe):

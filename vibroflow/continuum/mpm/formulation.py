@@ -148,6 +148,8 @@ class PointSampler(Sampler):
             samples.vtk["grid"].append((state.t, name))
         samples.rate_all[j] = rate.mean()
         samples.add_cell_rates(state.x, rate)
+        if state.temperature is not None:
+            samples.add_temperatures(j, state.x, state.mass, state.temperature)
         near = self.gap < 0.5 * self.cell
         if near.any():
             samples.rate_wall[j] = rate[near].mean()
