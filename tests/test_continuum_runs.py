@@ -324,3 +324,25 @@ def test_sampled_solid_fraction_is_even_on_cells_that_do_not_divide_the_analysis
     assert spread.std() < 0.08 and spread.std() < centres.std() / 3
 
 
+
+
+def test_resume_of_a_finished_run_says_so_and_reruns_nothing(run_cli, tmp_path):
+    """--resume on a folder whose run finished (summary.json, no checkpoint) keeps the results
+    as they are and says the run is finished; on another formulation's finished run it is a
+    one-line error (exit 2) that leaves the folder alone."""
+    out = tmp_path / "cont"
+    args = ["--dx", "0.015", *(a for s in THREE_CYCLES for a in ("--set", s))]
+    r = run_cli("continuum", "tub47-quick", "--method", "eulerian", "--out", out, *args)
+    assert r.returncode == 0, r.stderr
+    before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
+    r = run_cli("continuum", "tub47-quick", "--method", "eulerian", "--out", out, "--resume",
+                *args)
+    assert r.returncode == 0, r.stderr
+    assert "finished already" in r.stdout + r.stderr
+    assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == before
+    r = run_cli("continuum", "tub47-quick", "--method", "lagrangian", "--out", out, "--resume",
+                *args)
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "holds the finished eulerian run" in lines[0], r.stderr
+    assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == before

@@ -35,6 +35,7 @@ through the wall) ends the run with the ids and the likely cause, and removes th
 """
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -107,6 +108,22 @@ def vibration_start(scenario, calibration: Calibration | None, options,
     return system, state
 
 
+def _finished(out: Path, scenario, method: str) -> dict | None:
+    """The summary of a finished run of this case and formulation in `out` (summary.json),
+    None where there is none; InputError for another case's or formulation's run."""
+    path = out / SUMMARY_NAME
+    try:
+        summary = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    there = (summary.get("case"), summary.get("method"))
+    if there != (scenario.case, method):
+        raise InputError(f"--resume: {out} holds the finished {there[1]} run of "
+                         f"{there[0]!r}, not this {method} run of {scenario.case!r}; give "
+                         "another --out, or leave --resume out to replace it")
+    return summary
+
+
 def run_continuum(scenario, out_dir, method: str = "lagrangian",
                   calibration: Calibration | None = None, options=None, progress: bool = False,
                   vtk: bool = False, resume: bool = False, stop_after_steps: int | None = None,
@@ -174,6 +191,12 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
                 prog.log(f"resuming from {ckpt} at t = {state.t:.4f} s")
             else:
                 if resume:
+                    done = _finished(out, scenario, form.name)
+                    if done is not None:
+                        prog.log(f"{out}: the run is finished already (summary.json, no "
+                                 "checkpoint); nothing to resume: leave --resume out to run it "
+                                 "again")
+                        return done
                     prog.log(f"no checkpoint in {out}: starting afresh")
                 for name in (SUMMARY_NAME, BULK_CSV_NAME, CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME,
                              TEMPERATURE_CSV_NAME):
