@@ -358,7 +358,6 @@ def test_mpm_low_column_keeps_its_top_and_runs_past_the_experiments():
 def friction_runouts() -> dict[str, float]:
     """The run-outs (r_inf - L0)/L0 of a = 3 on L0/10 for the three materials of the test
     below: tub47's glass beads, Lube's sand, the glass beads on a floor that never slides."""
-    from vibroflow.continuum.constitutive import ContinuumMaterial
 
     a = 3.0
     mu_s = math.tan(math.radians(29.5))
