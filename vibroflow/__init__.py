@@ -47,7 +47,6 @@ _kernel_cache.ensure_fresh()
 if TYPE_CHECKING:
     from vibroflow.scenario.io import load_scenario
     from vibroflow.scenario.model import Scenario
-    from vibroflow.study.results import load
 
 __all__ = ["__version__", "load", "load_scenario", "Scenario"]
 
