@@ -14,10 +14,12 @@ import h5py
 import numpy as np
 import pytest
 
+from tests.cli_helpers import one_line_error
 from tests.dem_helpers import D_STEEL, RHO_STEEL, Sim, ball, contact, one_thread, plane, scenario
 from vibroflow.calibration.impacts import weighted_linear_fit
 from vibroflow.calibration.wall_friction import wall_normal_tangent
 from vibroflow.dem import simulate as S
+from vibroflow.io.calibration_file import read_calibration
 
 # a small but dense bed: 400 balls in a U of radius 4 cm, 8 whole cycles averaged, probes
 # inside it (the tub47-quick tub would hold them as a fluidised film with no dense cell)
@@ -257,6 +259,31 @@ def test_coarse_grained_fields_of_the_run_conserve_mass_and_momentum(calibrated_
     ref = np.mean(mom, axis=0)
     scale = float(np.mean(absmom))
     assert np.all(np.abs(P - ref) <= 3e-3 * scale + 1e-12)
+
+
+def test_the_calibration_records_the_runs_scenario_and_continuum_like_takes_both(
+        calibrated_run, tmp_path):
+    """[scenario] holds the run's media and tub (set on the command line of `vibroflow dem`);
+    `vibroflow continuum --like RUN_DIR` runs that scenario with that calibration, and a --set on
+    top that changes the tub is refused by the calibration's check."""
+    out, _ = calibrated_run
+    cal = read_calibration(out)
+    assert list(cal.to_toml_dict())[-1] == "scenario"
+    assert cal.scenario.case == "tub47-quick"
+    assert (cal.scenario.tub.radius_m, cal.scenario.tub.rim_height_m) == (0.04, 0.12)
+    assert cal.scenario.media.diameter_m == pytest.approx(D_STEEL)
+    assert cal.scenario.media.density_kg_m3 == pytest.approx(RHO_STEEL)
+    env = dict(os.environ, VIBROFLOW_CACHE=str(tmp_path / "cache"), NO_COLOR="1")
+    line = one_line_error(_cli("continuum", "--like", out, "--set", "tub.radius=0.05",
+                               "-o", tmp_path / "other", env=env))
+    assert "scenario.tub.radius_m = 0.04" in line and "0.05" in line
+    assert str(out / "calibration.toml") in line
+    r = _cli("continuum", "--like", out, "--stop-after-steps", "0", "-o", tmp_path / "like",
+             env=env)
+    assert r.returncode == 0, r.stderr
+    assert "warning" not in r.stderr
+    x = np.load(tmp_path / "like" / "checkpoint.npz")["state/x"]
+    assert 0.03 < np.abs(x[:, 0]).max() <= 0.04  # the run's tub (radius 0.04 m), not tub47's
 
 
 def test_calibrate_bad_input_is_one_line_exit_2(tmp_path):

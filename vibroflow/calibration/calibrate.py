@@ -23,7 +23,8 @@ Stages:
 7. kinetic theory's constants (kinetic, wall_energy): phi_rcp of g0 fitted to the
    phase-resolved cells' p / (rho_s phi T) with the scenario's ball-ball restitution, and the
    walls' energy flux from the wall contacts -> [kinetic];
-8. RUN_DIR/calibration.toml (every parameter with its uncertainty and its provenance; its
+8. RUN_DIR/calibration.toml (every parameter with its uncertainty and its provenance, and
+   last the [scenario] it was measured on, which the continuum checks its own against; its
    tables built by calibration_tables, checked and written as the record
    vibroflow.io.calibration_file.Calibration, which the continuum solvers read with
    `read_calibration`), RUN_DIR/calibration/ pictures (plots).
@@ -39,6 +40,7 @@ from pathlib import Path
 
 from vibroflow.errors import InputError, Interrupted
 from vibroflow.io.calibration_file import CALIBRATION_FILE, Calibration, write_calibration
+from vibroflow.io.calibration_source import scenario_source
 from vibroflow.io.folder_lock import folder_lock
 from vibroflow.progress import RunProgress
 from vibroflow.tub.geometry import geometry_of
@@ -172,6 +174,7 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
         kin = kinetic_record(res, phases, prog)
         if kin is not None:
             cal["kinetic"] = kin
+        cal["scenario"] = scenario_source(sc)  # last: the tables before keep their place
         record = Calibration.from_dict(cal, where=str(out_dir / CALIBRATION_FILE))
         write_calibration(out_dir / CALIBRATION_FILE, record)
         if pictures:

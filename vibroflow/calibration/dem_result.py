@@ -32,6 +32,35 @@ def _rows_by_snapshot(snapshot_column: np.ndarray, n_snapshots: int) -> np.ndarr
     return np.searchsorted(snapshot_column, np.arange(n_snapshots + 1), side="left")
 
 
+def _stored_scenario(f: h5py.File, path: Path) -> dict:
+    """The raw scenario (TOML tables) stored in dem.h5's attribute scenario_toml."""
+    text = f.attrs.get("scenario_toml")
+    if text is None:
+        raise InputError(f"{path}: no scenario_toml attribute: give the scenario")
+    if isinstance(text, bytes):
+        text = text.decode()
+    try:
+        return tomllib.loads(str(text))
+    except tomllib.TOMLDecodeError as e:
+        raise InputError(f"{path}: its stored scenario is malformed TOML ({e})") from None
+
+
+def run_scenario(run: str | Path, overrides=(), field: str = "RUN_DIR"):
+    """The scenario the DEM run in RUN (a run directory holding dem.h5, or the file) ran, with
+    `key=value` overrides on top; InputError (one line naming `field`) when there is none."""
+    p = Path(run)
+    path = p / DEM_FILE if p.is_dir() else p
+    if not path.is_file():
+        raise InputError(f"{field} = {str(run)!r}: no {DEM_FILE} there (run `vibroflow dem` "
+                         f"or `vibroflow import liggghts` first)")
+    try:
+        with h5py.File(path, "r") as f:
+            raw = _stored_scenario(f, path)
+    except OSError as e:
+        raise InputError(f"{path}: not a readable HDF5 file ({e})") from None
+    return parse_scenario(raw, overrides)
+
+
 @dataclass
 class DEMResult:
     """An open dem.h5 with its scenario.  Use as a context manager (closes the file)."""
@@ -65,12 +94,7 @@ class DEMResult:
                 if key not in f:
                     raise InputError(f"{path}: no /{key}: not a vibroflow DEM result")
             if scenario is None:
-                text = f.attrs.get("scenario_toml")
-                if text is None:
-                    raise InputError(f"{path}: no scenario_toml attribute: give the scenario")
-                if isinstance(text, bytes):
-                    text = text.decode()
-                scenario = parse_scenario(tomllib.loads(str(text)))
+                scenario = parse_scenario(_stored_scenario(f, path))
             if scenario.tub is None:
                 raise InputError(f"{path}: the run's scenario has no tub (explicit mode): "
                                  f"calibration needs a tub run")

@@ -3,6 +3,7 @@ command, so that `--help` stays quick."""
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -13,20 +14,28 @@ from vibroflow.errors import InputError
 
 from .apps import app
 from .failures import blown_up, input_errors
-from .options import OutOption, ResumeOption, ScenarioArg, SetOption, load
+from .options import OptionalScenarioArg, OutOption, ResumeOption, SetOption, load
 
 
 @app.command("continuum")
 @input_errors
 def continuum(
-    scenario: ScenarioArg,
-    out: OutOption,
+    scenario: OptionalScenarioArg = None,
+    out: OutOption = ...,
     method: Annotated[str, typer.Option(
         "--method", help="Formulation: lagrangian (material point method) or eulerian (fixed "
                          "mesh of the tub); continuum/formulation.py.")] = "lagrangian",
     calibration: Annotated[Optional[Path], typer.Option(
         "--calibration", help="calibration.toml, or a run folder holding one; default: "
-                              "tub47's parameters.")] = None,
+                              "--like's calibration.toml, else tub47's parameters.")] = None,
+    like: Annotated[Optional[Path], typer.Option(
+        "--like", metavar="RUN_DIR", help="Run the scenario of the DEM run in RUN_DIR (its "
+                                          "dem.h5's, --set on top) with its calibration.toml "
+                                          "when it has one; instead of SCENARIO.")] = None,
+    allow_other_calibration: Annotated[bool, typer.Option(
+        "--allow-other-calibration", help="Use a calibration measured on other media or "
+                                          "another tub than the scenario's (its \\[scenario] "
+                                          "differs): a warning, not an error.")] = False,
     rheology: Annotated[str, typer.Option(
         "--rheology", help="mu_i (Dunatunga & Kamrin) or drucker_prager.")] = "mu_i",
     dilatancy: Annotated[bool, typer.Option(
@@ -93,7 +102,19 @@ def continuum(
         raise InputError(f"--method = {method!r}: must be {', '.join(rest)} or {last}")
     if stop_after_steps is not None and stop_after_steps < 0:
         raise InputError(f"--stop-after-steps = {stop_after_steps}: must be >= 0")
-    s = load(scenario, set_)  # before anything is written: bad input leaves --out untouched
+    if scenario is not None and like is not None:
+        raise InputError(f"SCENARIO = {scenario!r} and --like = {str(like)!r}: give one of them")
+    if scenario is None and like is None:
+        raise InputError("SCENARIO is missing: give a preset, a TOML file or --like RUN_DIR")
+    # before anything is written: bad input leaves --out untouched
+    if like is not None:
+        from vibroflow.calibration.dem_result import run_scenario
+
+        s = run_scenario(like, set_ or [], field="--like")
+        if calibration is None and (like / "calibration.toml").is_file():
+            calibration = like / "calibration.toml"
+    else:
+        s = load(scenario, set_)
     from vibroflow.continuum.formulation import formulation
     from vibroflow.continuum.material import material_for
     from vibroflow.continuum.mpm.solver import ContinuumBlowUp
@@ -103,8 +124,13 @@ def continuum(
     cal = None
     if calibration is not None:
         from vibroflow.io.calibration_file import read_calibration
+        from vibroflow.io.calibration_source import check_calibration_source
 
         cal = read_calibration(calibration)
+        warning = check_calibration_source(cal, s, where=f"--calibration {calibration}",
+                                           allow=allow_other_calibration)
+        if warning:
+            sys.stderr.write(warning + "\n")
     # an unset --cfl or --transfer-cfl takes the formulation's own default
     # (Formulation.options), kept in one place; --transfer-cfl 0: one transfer a step
     step = {} if cfl is None else {"cfl": cfl}

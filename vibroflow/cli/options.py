@@ -25,6 +25,9 @@ def shear_cell_option(help: str) -> Any:
 
 
 ScenarioArg = Annotated[str, typer.Argument(metavar="SCENARIO", help=SCENARIO_HELP)]
+# a scenario that another option (--like RUN_DIR) may give instead
+OptionalScenarioArg = Annotated[Optional[str], typer.Argument(
+    metavar="SCENARIO", help=SCENARIO_HELP + " Or --like RUN_DIR.", show_default=False)]
 # a study's scenario, optional (default tub47-quick)
 StudyScenarioArg = Annotated[str, typer.Argument(metavar="[SCENARIO]", help=SCENARIO_HELP)]
 SetOption = Annotated[Optional[list[str]], set_option(

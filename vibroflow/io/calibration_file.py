@@ -311,9 +311,39 @@ class Kinetic(Table):
     wall_flux: WallFlux | None = None
 
 
+class ScenarioMedia(Table):
+    """[scenario.media]: the balls of the DEM run and the contact laws that shape the bed's
+    rheology (normal restitution, Coulomb friction) against each other, the lining and the
+    partitions."""
+    diameter_m: Number | None = None
+    density_kg_m3: Number | None = None
+    ball_ball_restitution: Number | None = None
+    ball_ball_friction: Number | None = None
+    ball_wall_restitution: Number | None = None
+    ball_wall_friction: Number | None = None
+    ball_partition_restitution: Number | None = None
+    ball_partition_friction: Number | None = None
+
+
+class ScenarioTub(Table):
+    """[scenario.tub]: the DEM run's tub."""
+    radius_m: Number | None = None
+    rim_height_m: Number | None = None
+    length_m: Number | None = None
+    periodic: bool | None = None
+
+
+class ScenarioSource(Table):
+    """[scenario]: the scenario the calibration was measured on (its case, media and tub), which
+    a solver given the calibration checks its own scenario against."""
+    case: Text | None = None
+    media: ScenarioMedia | None = None
+    tub: ScenarioTub | None = None
+
+
 class Calibration(Table):
     """The whole of calibration.toml: [rheology], [elastic], [wall] and [media] required, the
-    other tables when measured."""
+    other tables when measured, [scenario] (the scenario it came from) last."""
     rheology: Rheology
     elastic: Elastic
     wall: Wall
@@ -326,6 +356,7 @@ class Calibration(Table):
     dilatancy: Dilatancy | None = None
     compaction: Compaction | None = None
     kinetic: Kinetic | None = None
+    scenario: ScenarioSource | None = None
 
     @classmethod
     def from_dict(cls, tables: dict, where: str = "calibration") -> "Calibration":

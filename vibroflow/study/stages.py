@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,6 +25,7 @@ from vibroflow.dem.run import run_dem
 # write_json_atomic is imported from here by the study's other modules
 from vibroflow.io.atomic import write_json_atomic
 from vibroflow.io.calibration_file import read_calibration
+from vibroflow.io.calibration_source import check_calibration_source
 from vibroflow.measure.bulk import read_csv
 from vibroflow.study.methods import ContinuumMethod
 
@@ -142,7 +144,12 @@ def continuum_stage(method: ContinuumMethod, options) -> Stage:
         return {"scenario": scenario_inputs(study.scenario), "options": opts}
 
     def run(study: Study, resume: bool) -> dict:
-        cal = read_calibration(study.folder(DEM) / "calibration.toml")
+        path = study.folder(DEM) / "calibration.toml"
+        cal = read_calibration(path)
+        # the study's own DEM made it, so it matches unless the folder was changed by hand
+        warning = check_calibration_source(cal, study.scenario, where=str(path))
+        if warning:
+            sys.stderr.write(warning + "\n")
         summary = method.run(study.scenario, study.folder(method.name), cal, options,
                              study.progress, resume)
         return {"summary": f"{method.name}/summary.json",
