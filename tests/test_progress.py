@@ -2,6 +2,9 @@
 from __future__ import annotations
 
 import io
+import os
+import subprocess
+import sys
 import time
 
 import numba
@@ -70,3 +73,32 @@ def test_plain_lines_are_whole():
     with prog:
         prog.log(f"resuming from {path} at t = 0.1000 s [x]")
     assert f"resuming from {path} at t = 0.1000 s [x]" in buf.getvalue().splitlines()
+
+
+def test_a_sweep_table_off_a_terminal_cuts_no_column():
+    from vibroflow.study.sweep import print_table
+
+    row = {"factor": 0.5, "method": "lagrangian", "status": "done",
+           "circulation_strength": 1.234e-4, "circulation_strength_stderr": 1e-6,
+           "circulation_sense": "clockwise", "E_against_dem": 0.25, "impact_ball_ball": 0.1,
+           "impact_ball_wall": 0.2, "wall_time_s": 3.0}
+    varied = ["factor", "material.ball.youngs_modulus", "lagrangian.dx", "eulerian.dx"]
+    for k in varied[1:]:
+        row[k] = 1.0
+    buf = io.StringIO()  # not a terminal
+    print_table({"rows": [row], "varied": varied}, file=buf)
+    text = buf.getvalue()
+    for header in ("circulation (1e-4 m²/s)", "impacts b-b / b-w (m/s)", "wall (s)", *varied[1:]):
+        assert header in text, text
+    assert "…" not in text
+
+
+def test_progress_lines_to_a_pipe_keep_a_long_path_whole(tmp_path):
+    out = tmp_path / ("a-long-folder-name-for-the-results-of-this-run/" * 4) / "out"
+    code = ("from vibroflow.progress import RunProgress\n"
+            "with RunProgress(True) as p:\n"
+            f"    p.log('no checkpoint in {out}: starting afresh')\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       env={**os.environ, "NO_COLOR": "1"}, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert f"no checkpoint in {out}: starting afresh" in r.stderr.splitlines(), r.stderr
