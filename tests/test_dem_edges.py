@@ -59,7 +59,8 @@ material = "steel"
 """
 
 # summary entries that are clocks or machine facts, not results
-TIMES = {"wall_time_s", "vibration_wall_time_s", "compile_time_s", "particle_steps_per_s", "threads"}
+TIMES = {"wall_time_s", "vibration_wall_time_s", "compile_time_s", "particle_steps_per_s",
+         "threads"}
 
 
 def _cli(*args, env=None, **kw):
