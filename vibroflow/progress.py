@@ -21,6 +21,8 @@ from rich.text import Text
 COMPILING = "compiling the kernels (once per install) ..."
 #: seconds of steps outside compilation before a time left is shown
 MEASURE_S = 1.0
+#: seconds a compilation runs before it is announced (numba compiles small things in passing)
+ANNOUNCE_S = 0.5
 #: seconds between two plain progress lines
 PLAIN_EVERY_S = 10.0
 
@@ -108,6 +110,7 @@ class RunProgress:
         self._ticker: threading.Thread | None = None
         self._stop = threading.Event()
         self._compile_said = 0.0
+        self._compile_from = 0.0
         self._t0 = None
         self._base: tuple[float, float, int, float] | None = None
         self._plain_last = 0.0
@@ -153,9 +156,12 @@ class RunProgress:
             self._show_compiling()
 
     def _show_compiling(self) -> None:
-        """Say "compiling the kernels" while a compilation is open, with its seconds; once it
-        ends, say so once."""
+        """Say "compiling the kernels" while a compilation of more than ANNOUNCE_S is open, with
+        its seconds; once it ends, say so once, with the seconds since it was first said."""
         open_s = self._watch.open_s()
+        if open_s is not None and open_s < ANNOUNCE_S and not self._compile_said \
+                and self._compile_task is None:
+            return
         if self._progress is not None:
             if open_s is not None:
                 text = f"{COMPILING} {open_s:.0f} s"
@@ -170,11 +176,13 @@ class RunProgress:
             return
         now = time.perf_counter()
         if open_s is not None:
+            if not self._compile_said:
+                self._compile_from = now - open_s
             if not self._compile_said or now - self._compile_said >= PLAIN_EVERY_S:
-                self._line(f"{COMPILING} {open_s:.0f} s")
+                self._line(f"{COMPILING} {now - self._compile_from:.0f} s")
                 self._compile_said = now
         elif self._compile_said:
-            self._line(f"kernels compiled ({self._watch.total_s():.0f} s)")
+            self._line(f"kernels compiled ({now - self._compile_from:.0f} s)")
             self._compile_said = 0.0
 
     # -- stages ---------------------------------------------------------------------------------
