@@ -52,11 +52,14 @@ def test_pipeline_runs_end_to_end(study):
     from vibroflow.analysis.compare import field_difference
 
     scenario, out, summary, lines = study
-    # two lines per stage that runs: when it starts (with its estimate), when it ends
+    # two lines per stage that runs: when it starts (with its estimate, or that a first run of
+    # a continuum has none), when it ends
     assert len(lines) == 2 * len(STAGES)
     for k, s in enumerate(STAGES):
         start, end = lines[2 * k], lines[2 * k + 1]
-        assert start.startswith(f"[{k + 1}/{len(STAGES)}] {s}") and "running, about" in start
+        assert start.startswith(f"[{k + 1}/{len(STAGES)}] {s}")
+        said = "running, no estimate yet" if s in METHODS else "running, about"
+        assert said in start, start
         assert end.startswith(f"[{k + 1}/{len(STAGES)}] {s}")
         assert "done in" in end and "time left" in end
     for s in STAGES:
@@ -215,3 +218,16 @@ def test_a_killed_run_resumes_where_it_stopped(study, tmp_path):
     for name in METHODS:  # the continuum ran from the same calibration: the same numbers
         assert (resumed["methods"][name]["circulation"]["strength"]
                 == reference["methods"][name]["circulation"]["strength"])
+
+
+def test_time_left_names_the_stages_it_cannot_estimate():
+    from vibroflow.study.pipeline import _about, _time_left
+    from vibroflow.study.stages import Stage
+
+    rest = [Stage(n, inputs=dict, run=lambda st, r: {}) for n in ("a", "b", "c", "d")]
+    kept = {"a": None, "b": None, "c": None, "d": {"hash": "x"}}
+    est = {"a": 30.0, "b": None, "c": 60.0, "d": 1000.0}
+    # the kept stage d counts nothing; b has no estimate and says so
+    assert _time_left(rest, kept, est, 0.5) == "time left ~ 45 s + the b stage (not estimated yet)"
+    assert _time_left(rest[:1], kept, est, 1.0) == "time left ~ 30 s"
+    assert _about(None).startswith("no estimate yet") and _about(150.0) == "about 2.5 min"

@@ -133,6 +133,25 @@ def format_duration(seconds: float) -> str:
     return f"{seconds / 3600:.1f} h"
 
 
+def _about(estimate: float | None) -> str:
+    if estimate is None:
+        return "no estimate yet (its first run here)"
+    return f"about {format_duration(estimate)}"
+
+
+def _time_left(rest: Sequence[Stage], kept: dict, estimates: dict, scale: float) -> str:
+    """The time left of the stages still to run: their estimates scaled by how the finished
+    ones compared with theirs; the stages without an estimate are named, not guessed."""
+    to_run = [s.name for s in rest if kept[s.name] is None]
+    left = scale * sum(estimates[s] for s in to_run if estimates[s] is not None)
+    unknown = [s for s in to_run if estimates[s] is None]
+    text = f"time left ~ {format_duration(left)}"
+    if unknown:
+        text += f" + the {', '.join(unknown)} stage{'s' if len(unknown) > 1 else ''} (not " \
+                "estimated yet)"
+    return text
+
+
 def run_study(scenario, out: Path, settings: dict[str, dict[str, Any]] | None = None,
               shear_cell: bool = False, progress: bool = False,
               echo: Callable[[str], None] | None = print,
@@ -185,17 +204,17 @@ def _run_study(scenario, out: Path, methods: list, shear_cell: bool, progress: b
             spent = 0.0
         else:
             if echo is not None:  # said when it starts: a stage may take minutes
-                echo(f"[{i}/{n}] {stage.name:<12} running, about "
-                     f"{format_duration(estimates[stage.name])}")
+                echo(f"[{i}/{n}] {stage.name:<12} running, {_about(estimates[stage.name])}")
             record = _run_stage(study, stage, h)
             spent = record["wall_time_s"]
             what = f"done in {format_duration(spent)}" + (" (resumed)" if record["resumed"] else "")
-            spent_est += estimates[stage.name]
-            spent_real += spent
+            if estimates[stage.name] is not None:
+                spent_est += estimates[stage.name]
+                spent_real += spent
         study.records[stage.name] = record
         scale = min(5.0, max(0.2, spent_real / spent_est)) if spent_est > 0 else 1.0
-        left = scale * sum(estimates[s.name] for s in stages[i:] if kept[s.name] is None)
         if echo is not None:
-            echo(f"[{i}/{n}] {stage.name:<12} {what}; time left ~ {format_duration(left)}")
+            echo(f"[{i}/{n}] {stage.name:<12} {what}; "
+                 f"{_time_left(stages[i:], kept, estimates, scale)}")
 
     return read_summary(out)

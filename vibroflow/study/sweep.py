@@ -38,6 +38,9 @@ from vibroflow.study.sweep_folder import (KIND, PLOTS, POINT_LOCK, TABLE_FILE, c
 from vibroflow.study.sweep_plots import write_plots
 from vibroflow.study.sweep_points import SweepPlan
 from vibroflow.study.sweep_table import rich_table, sweep_rows, write_csv_atomic
+
+#: the width of the table in a log file or a pipe: wide enough for any row whole
+PLAIN_WIDTH = 10_000
 from vibroflow.study.sweep_worker import THREAD_ENV, record_lost, run_point
 
 #: seconds between two looks at the lock of a point running elsewhere
@@ -289,8 +292,12 @@ def run_sweep(plan: SweepPlan, out: Path, scheduler: str | None = None,
 
 
 def print_table(record: dict, file=None) -> None:
-    """The sweep's table on the terminal (rich)."""
-    Console(file=file or sys.stdout).print(rich_table(record["rows"], record["varied"]))
+    """The sweep's table (rich): on a terminal as wide as the terminal; elsewhere (a log file, a
+    pipe) as wide as the table needs, so that no column is cut."""
+    console = Console(file=file or sys.stdout)
+    if not console.is_terminal:
+        console = Console(file=file or sys.stdout, width=PLAIN_WIDTH)
+    console.print(rich_table(record["rows"], record["varied"]))
 
 
 def failed_points(record: dict) -> list[str]:

@@ -248,7 +248,9 @@ def plan_sweep(source: str, factors: list[float], vary: dict[str, list[tuple[str
 
 
 def _point_estimate(scenario, options: dict[str, Any], shear_cell: bool) -> float:
-    """The stages' own first estimates of one point's cost (s), as `vibroflow run` makes them."""
+    """The stages' own first estimates of one point's cost (s), as `vibroflow run` makes them;
+    the stages without one (the continua's first runs) count nothing here."""
     study = Study(out=Path("."), scenario=scenario,
                   methods=[(method(n), o) for n, o in options.items()], shear_cell=shear_cell)
-    return float(sum(s.estimate(study) for s in stages_of(study)))
+    estimates = (s.estimate(study) for s in stages_of(study))
+    return float(sum(e for e in estimates if e is not None))
