@@ -255,7 +255,10 @@ def _impact_distributions(data: StudyData) -> dict:
                       _pm(r["inferred"], r["inferred_stderr"]),
                       _num(100.0 * r["relative"], "+.0f", " %"),
                       flag.tagged(data_flag=str(r["flagged"]).lower())])
-    return {"why": s["why"], "stats": stats, "flags": flags,
+    flagged = sum(r["flagged"] is True for r in s["comparisons"])
+    compared = sum(r["flagged"] is not None for r in s["comparisons"])
+    return {"why": s["why"], "stats": stats, "flags": flags, "flagged": flagged,
+            "compared": compared,
             "histograms": s["histograms"] and _img(s["histograms"], "impact-speed histograms"),
             "wall_map": s["wall_map"] and _img(s["wall_map"], "ball-wall impacts along the U"),
             "seconds": f"{s.get('seconds', float('nan')):.3g}",

@@ -33,8 +33,10 @@ def read_distributions(data: StudyData) -> tuple[ImpactDistributions | None, str
     """The DEM's impacts of the averaging window's whole cycles as distributions, or None and
     why (no dem.h5, no impacts, unreadable)."""
     h5 = data.out / DEM / "dem.h5"
-    if not h5.is_file() or data.scenario is None or data.scenario.tub is None:
+    if not h5.is_file():
         return None, f"no {DEM}/dem.h5: no measured impacts"
+    if data.scenario.tub is None:
+        return None, "the scenario has no tub: no U to map the impacts on"
     run = data.scenario.run
     try:
         with h5py.File(h5, "r") as f:
