@@ -274,6 +274,12 @@ def test_report_renders_in_headless_chromium(study):  # noqa: F811
                 assert "FLAG" in text and colour == "rgb(180, 35, 24)"  # .bad
             elif flag == "false":
                 assert "within a quarter" in text
+        if flags:
+            said = driver.execute_script(
+                "return document.getElementById('impact-flag-count').textContent")
+            n_true = sum(f == "true" for f, _, _ in flags)
+            n_compared = sum(f in ("true", "false") for f, _, _ in flags)
+            assert " ".join(said.split()).startswith(f"{n_true} of {n_compared} inferred")
     finally:
         driver.quit()
 

@@ -68,11 +68,14 @@ def speed_histograms(dist: ImpactDistributions) -> bytes:
         c = np.add.reduceat(total[1:], np.arange(0, total.size - 1, DRAWN_BIN))[:edges.size - 1]
         dens = c / (st.count * np.diff(np.log(edges)))
         keep = np.nonzero(c)[0]
+        if keep.size == 0:
+            continue
         lo, hi = keep.min(), keep.max() + 1
         ax.stairs(dens[lo:hi], edges[lo:hi + 1], color=COLOURS[name],
                   label=f"{label} ({st.count} impacts)")
-        ax.axvline(st.median, color=COLOURS[name], ls="--", lw=1)
-        ax.axvline(st.p95, color=COLOURS[name], ls=":", lw=1.2)
+        for q, ls in ((st.median, "--"), (st.p95, ":")):
+            if q >= edges[0]:
+                ax.axvline(q, color=COLOURS[name], ls=ls, lw=1.1)
     ax.set_xscale("log")
     ax.set_xlabel("normal approach speed v (m/s)")
     ax.set_ylabel("probability density per unit ln v (1)")
