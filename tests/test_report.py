@@ -85,6 +85,39 @@ def test_report_impacts_are_the_summarys_impacts(study):  # noqa: F811
     assert mean == pytest.approx(im["ball_ball_mean_normal_speed"], rel=1e-6)
 
 
+def test_impact_distributions_are_the_summarys_impacts(study):  # noqa: F811
+    """The distributions count every kind's impacts the DEM summary averages, with its mean and
+    standard error (another code path: vibroflow.measure.contacts.impact_stats_chunked); the
+    U's and the partitions' profiles hold all of theirs; the flags compare the summary's
+    inferred and measured speeds."""
+    from vibroflow.report.data import StudyData
+    from vibroflow.report.impact_figures import read_distributions, speed_comparisons
+
+    _, out, summary, _ = study
+    data = StudyData.read(out)
+    dist, why = read_distributions(data)
+    assert why is None
+    im = summary["methods"]["dem"]["impacts"]
+    for kind, n in im["count_by_kind"].items():
+        s = dist.stats[kind]
+        assert s.count == n
+        if n:
+            assert s.mean == pytest.approx(im["mean_normal_speed_by_kind"][kind], rel=1e-9)
+            assert s.median < s.p95
+    for key in ("ball_ball", "ball_wall"):
+        want = im[f"{key}_mean_normal_speed_stderr"]
+        if want is not None and math.isfinite(want):
+            assert dist.stats[key].mean_stderr == pytest.approx(want, rel=1e-6)
+    assert int(dist.u.count.sum()) == im["count_by_kind"]["ball_wall"]
+    assert int(dist.partitions.count.sum()) == im["count_by_kind"]["ball_partition"]
+    for row in speed_comparisons(data):
+        if row["where"] == "bed mean" and row["flagged"] is not None:
+            key = "ball_ball" if row["kind"] == "ball-ball" else "ball_wall"
+            m = summary["methods"][row["method"]]["impacts"][f"{key}_mean_normal_speed"]
+            d = im[f"{key}_mean_normal_speed"]
+            assert row["flagged"] == (abs(m - d) > 0.25 * d)
+
+
 # ----------------------------------------------------------------------------------------------
 # the page
 
@@ -223,6 +256,30 @@ def test_report_renders_in_headless_chromium(study):  # noqa: F811
         heads = driver.execute_script(
             "return Array.from(document.querySelectorAll('h2')).map(h => h.textContent.trim())")
         assert heads[:len(SECTIONS)] == list(SECTIONS.values())
+        # impact speed distributions: histograms and the wall map drawn, the statistics table,
+        # and the flags (red where a continuum's inferred speed is off by more than a quarter)
+        sec = driver.execute_script(
+            "const s = document.getElementById('impact_distributions');"
+            "return [Array.from(s.querySelectorAll('img')).map(i => [i.alt, i.naturalWidth]),"
+            " s.querySelectorAll('table.impact-stats tr').length,"
+            " Array.from(s.querySelectorAll('td[data-flag]')).map(c => [c.dataset.flag,"
+            " c.textContent, getComputedStyle(c).color])]")
+        imgs, stat_rows, flags = sec
+        assert [a for a, _ in imgs] == ["impact-speed histograms",
+                                        "ball-wall impacts along the U"]
+        assert all(w > 0 for _, w in imgs)
+        assert stat_rows >= 3  # the head, ball-ball and at least one wall kind
+        for flag, text, colour in flags:
+            if flag == "true":
+                assert "FLAG" in text and colour == "rgb(180, 35, 24)"  # .bad
+            elif flag == "false":
+                assert "within a quarter" in text
+        if flags:
+            said = driver.execute_script(
+                "return document.getElementById('impact-flag-count').textContent")
+            n_true = sum(f == "true" for f, _, _ in flags)
+            n_compared = sum(f in ("true", "false") for f, _, _ in flags)
+            assert " ".join(said.split()).startswith(f"{n_true} of {n_compared} inferred")
     finally:
         driver.quit()
 
@@ -276,6 +333,7 @@ def test_missing_pieces_are_stated_and_a_sweep_point_shows_its_sweep(study, tmp_
     Image.new("RGB", (40, 30), "white").save(sweep / "plots" / "sweep_circulation.png")
     page = write_report(copy).read_text(encoding="utf-8")
     assert "No animation" in page
+    assert "No measured impact distributions: no dem/dem.h5" in page
     assert "mu_I.png is missing" in page
     assert "no dem/fields.nc" in page
     assert "the DEM result holds no impacts" not in page and "no measured impacts" in page

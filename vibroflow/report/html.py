@@ -27,6 +27,7 @@ from markupsafe import Markup
 from vibroflow import __version__
 from vibroflow.report import figures
 from vibroflow.report.data import StudyData
+from vibroflow.report.impact_figures import impact_distribution_section
 from vibroflow.report.temperature_maps import temperature_maps
 
 #: section id -> heading, in page order (tests check the headings)
@@ -37,6 +38,7 @@ SECTIONS = {
     "shear": "Shear rate",
     "temperature": "Granular temperature and solid fraction",
     "impacts": "Impact speeds",
+    "impact_distributions": "Impact speed distributions",
     "wall": "Wall friction",
     "rheology": "mu(I) fit",
     "animation": "DEM animation",
@@ -239,6 +241,30 @@ def _impacts(data: StudyData) -> dict:
     return out
 
 
+def _impact_distributions(data: StudyData) -> dict:
+    s = impact_distribution_section(data)
+    stats = [[_text(label, "l"), _text(st.count), _pm(st.mean, st.mean_stderr),
+              _pm(st.median, st.median_stderr), _pm(st.p95, st.p95_stderr)]
+             for label, st in s["stats"]]
+    flags = []
+    for r in s["comparisons"]:
+        flag = (_text("FLAG: differs by more than a quarter", "bad") if r["flagged"] else
+                _text("within a quarter", "ok") if r["flagged"] is False else _text("n/a"))
+        flags.append([_text(r["where"], "l"), _text(r["kind"], "l"), _text(r["method"], "l"),
+                      _pm(r["measured"], r["measured_stderr"]),
+                      _pm(r["inferred"], r["inferred_stderr"]),
+                      _num(100.0 * r["relative"], "+.0f", " %"),
+                      flag.tagged(data_flag=str(r["flagged"]).lower())])
+    flagged = sum(r["flagged"] is True for r in s["comparisons"])
+    compared = sum(r["flagged"] is not None for r in s["comparisons"])
+    return {"why": s["why"], "stats": stats, "flags": flags, "flagged": flagged,
+            "compared": compared,
+            "histograms": s["histograms"] and _img(s["histograms"], "impact-speed histograms"),
+            "wall_map": s["wall_map"] and _img(s["wall_map"], "ball-wall impacts along the U"),
+            "seconds": f"{s.get('seconds', float('nan')):.3g}",
+            "n_batches": s.get("n_batches", 0)}
+
+
 def _wall(data: StudyData) -> dict:
     rows = []
     for name in data.methods:
@@ -349,6 +375,7 @@ def render(data: StudyData, gif: Path | None = None, gif_note: str | None = None
         "shear": _shear(data),
         "temperature": _temperature(data),
         "impacts": _impacts(data),
+        "impact_distributions": _impact_distributions(data),
         "wall": _wall(data),
         "rheology": _rheology(data),
         "animation": _animation(data, gif, gif_note),

@@ -75,6 +75,18 @@ def arc_to_point(s, radius):
     return x, z
 
 
+def point_to_arc(x, z, radius):
+    """Arc length s (m) along the U profile, from the bottom and positive towards +x, of the
+    profile's point nearest to the tub-frame point (x, z): R atan2(x, R - z) on the half circle
+    (z <= R), +-(pi R / 2 + z - R) on the vertical walls; the inverse of arc_to_point for a point
+    on the profile (u_wall_nearest's s, for arrays)."""
+    x = np.asarray(x, dtype=float)
+    z = np.asarray(z, dtype=float)
+    R = radius
+    side = np.where(x >= 0.0, 1.0, -1.0) * (0.5 * np.pi * R + (z - R))
+    return np.where(z <= R, R * np.arctan2(x, R - z), side)
+
+
 def distance_to_wall_np(x, z, radius):
     """Signed distance (m) from tub-frame points to the U's inner surface, positive inside."""
     x = np.asarray(x, dtype=float)
