@@ -21,8 +21,9 @@ Stages:
    [dilatancy], and with it the cyclic compaction of the continuum's compaction option from
    the cyclic cell's per-cycle packing at the tub's amplitude (compaction.py) -> [compaction];
 7. kinetic theory's constants (kinetic, wall_energy): phi_rcp of g0 fitted to the
-   phase-resolved cells' p / (rho_s phi T) with the scenario's ball-ball restitution, and the
-   walls' energy flux from the wall contacts -> [kinetic];
+   phase-resolved cells' p / (rho_s phi T) with the scenario's ball-ball restitution, the
+   walls' energy flux from the wall contacts, and the multiplier of Gidaspow's conductivity
+   from the cells' fluctuation-energy flux (energy_flux, conductivity) -> [kinetic];
 8. RUN_DIR/calibration.toml (every parameter with its uncertainty and its provenance, and
    last the [scenario] it was measured on, which the continuum checks its own against; its
    tables built by calibration_tables, checked and written as the record
@@ -48,6 +49,7 @@ from vibroflow.tub.geometry import geometry_of
 from .bed_contacts import contact_pair, contact_stiffness_at, coordination
 from .calibration_tables import calibration_tables
 from .compaction import compaction_table
+from .conductivity import conductivity_table, fit_conductivity
 from .dem_result import DEMResult
 from .elastic import affine_moduli_linear
 from .impacts import impact_relations, impact_relations_on_cells
@@ -76,9 +78,11 @@ def interrupted_calibration(run_dir: Path):
                           "again") from None
 
 
-def kinetic_record(res, phases, prog) -> dict | None:
-    """The [kinetic] table: phi_rcp fitted to the phase-resolved cells, the walls' energy flux;
-    None when the run has neither (no contact stress, no wall forces)."""
+def kinetic_record(res, phases, prog, energy_flux=None) -> dict | None:
+    """The [kinetic] table: phi_rcp fitted to the phase-resolved cells, the walls' energy flux,
+    the conductivity's multiplier from the cells' energy flux (`energy_flux`, the
+    phase-resolved Dataset of energy_flux; None: not measured); None when the run has neither
+    phi_rcp nor wall forces."""
     sc = res.scenario
     e = contact_pair(sc, sc.fill.material, sc.fill.material).restitution
     fit = None
@@ -90,11 +94,22 @@ def kinetic_record(res, phases, prog) -> dict | None:
                      f"{fit['rms_log_residual']:.3f}; {fit['status']})")
         except InputError as err:
             prog.log(f"kinetic: phi_rcp not measured: {err}")
+    cond = None
+    if fit is not None and energy_flux is not None:
+        try:
+            c = fit_conductivity(energy_flux, res.solid_density, res.diameter, e,
+                                 fit["phi_rcp"], fit["g0_form"])
+            cond = conductivity_table(c)
+            prog.log(f"kinetic: conductivity = {c['multiplier']:.3g} +- "
+                     f"{c['multiplier_stderr']:.2g} of Gidaspow's ({c['cells']} cells, R^2 "
+                     f"{c['r2']:.3g}; {c['status']})")
+        except InputError as err:
+            prog.log(f"kinetic: conductivity not measured: {err}")
     flux = wall_flux(res, phases)
     if fit is None and flux is None:
         return None
     return kinetic_table(fit, flux, e, "the scenario's ball-ball contact law (normal "
-                                       "restitution of a head-on collision)")
+                                       "restitution of a head-on collision)", cond)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -120,7 +135,8 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
         n_used = int((res.batches() >= 0).sum())
         prog.stage("coarse-grain", n_used, unit="snapshots")
         avg, phases, cg_info = coarse_grain_run(res, kernel=kernel, width=width,
-                                                progress=lambda k, n: prog.update(k))
+                                                progress=lambda k, n: prog.update(k),
+                                                energy_flux=res.has_ball_contacts)
         scatter = tub_mu_i_scatter(avg, phases)
         if not shear_cell:  # before anything is written: a bed too small is the input's fault
             check_tub_cells(scatter, sc, avg, out_dir)
@@ -171,7 +187,7 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
                              f", dphi_cyc = {cal['compaction']['excess_solid_fraction']:.4f}")
                 except InputError as e:
                     prog.log(f"compaction not measured: {e}")
-        kin = kinetic_record(res, phases, prog)
+        kin = kinetic_record(res, phases, prog, cg_info.get("energy_flux"))
         if kin is not None:
             cal["kinetic"] = kin
         cal["scenario"] = scenario_source(sc)  # last: the tables before keep their place

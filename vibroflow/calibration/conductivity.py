@@ -34,6 +34,8 @@ from .kinetic import G0_FORMS
 PHI_RANGE = (0.05, 0.6)
 PHI_BIN_EDGES = (0.05, 0.2, 0.3, 0.4, 0.5, 0.55, 0.6)
 MIN_GRADIENT_SNR = 2.0
+#: below this R^2 the status says that Fourier's law with the closure does not describe the cells
+MIN_R2 = 0.3
 MODEL = "q = -C kappa(phi, T) grad T, kappa Gidaspow's (1994) conductivity"
 
 
@@ -94,9 +96,10 @@ def fit_conductivity(flux, rho_s: float, diameter: float, restitution: float, ph
     *_stderr); rho_s (kg/m^3), diameter d (m), restitution e and the g0 closure's phi_rcp.
 
     Returns {model, multiplier, multiplier_stderr, cells, r2, cell_ratio_median, cell_ratio_p16,
-    cell_ratio_p84, down_gradient_fraction, solid_fraction_range, by_solid_fraction {edges,
-    multiplier, multiplier_stderr, cells, r2}, kinetic_share (the kinetic part of q . g over
-    the total)}.  InputError when fewer than `min_cells` cells qualify."""
+    cell_ratio_p84, down_gradient_fraction, flux_magnitude_ratio_median (|q| / |kappa_G grad
+    T|), solid_fraction_range, by_solid_fraction {edges, multiplier, multiplier_stderr, cells,
+    r2}, kinetic_share (the kinetic part of q . g over the total), status ("measured", and
+    what R^2 below MIN_R2 means)}.  InputError when fewer than `min_cells` cells qualify."""
     lo, hi = (float(v) for v in phi_range)
     if not (0.0 < lo < hi < 1.0):
         raise InputError(f"phi_range = {tuple(phi_range)!r}: must be (lo, hi) with "
@@ -155,4 +158,28 @@ def fit_conductivity(flux, rho_s: float, diameter: float, restitution: float, ph
         for key in rows:
             rows[key].append(f[key])
     out["by_solid_fraction"] = {"edges": edges, **rows}
+    mag = np.linalg.norm(qo, axis=1) / np.linalg.norm(g, axis=1)
+    out["flux_magnitude_ratio_median"] = float(np.median(mag[np.isfinite(mag)]))
+    out["status"] = "measured"
+    if not out["r2"] >= MIN_R2:
+        out["status"] += (f"; R^2 = {out['r2']:.3g}: q is not -C kappa grad T in the cells (the "
+                          f"flux runs down the gradient in {out['down_gradient_fraction']:.0%} "
+                          f"of them, and its size is {out['flux_magnitude_ratio_median']:.3g} "
+                          "times the closure's, median), so C is a projection, not a "
+                          "conductivity")
+    return out
+
+
+def conductivity_table(fit: dict) -> dict:
+    """The [kinetic.conductivity] table of calibration.toml (io.calibration_file.Conductivity)
+    from fit_conductivity's result."""
+    keys = ("model", "multiplier", "multiplier_stderr", "r2", "cells", "status",
+            "cell_ratio_median", "cell_ratio_p16", "cell_ratio_p84", "down_gradient_fraction",
+            "flux_magnitude_ratio_median", "kinetic_share", "solid_fraction_range")
+    out = {k: fit[k] for k in keys if k in fit}
+    by = fit["by_solid_fraction"]
+    out.update(solid_fraction_edges=list(by["edges"]),
+               multiplier_by_solid_fraction=[float(v) for v in by["multiplier"]],
+               multiplier_by_solid_fraction_stderr=[float(v) for v in by["multiplier_stderr"]],
+               cells_by_solid_fraction=[int(v) for v in by["cells"]])
     return out

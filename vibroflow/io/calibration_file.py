@@ -293,6 +293,29 @@ class WallFlux(Table):
     partitions_fluctuation_flux_by_phase_stderr_W_m2: list[Number] | None = None
 
 
+class Conductivity(Table):
+    """[kinetic.conductivity]: the DEM's fluctuation-energy flux q = -C kappa grad T against
+    Gidaspow's conductivity kappa (calibration.conductivity): the multiplier C with its
+    batch-means error, R^2, the cells' scatter and C by solid-fraction bin."""
+    model: Text | None = None
+    multiplier: Number | None = None
+    multiplier_stderr: Number | None = None
+    r2: Number | None = None
+    cells: Count | None = None
+    status: Text | None = None
+    cell_ratio_median: Number | None = None
+    cell_ratio_p16: Number | None = None
+    cell_ratio_p84: Number | None = None
+    down_gradient_fraction: Number | None = None
+    flux_magnitude_ratio_median: Number | None = None
+    kinetic_share: Number | None = None
+    solid_fraction_range: list[Number] | None = None
+    solid_fraction_edges: list[Number] | None = None
+    multiplier_by_solid_fraction: list[Number] | None = None
+    multiplier_by_solid_fraction_stderr: list[Number] | None = None
+    cells_by_solid_fraction: list[Count] | None = None
+
+
 class Kinetic(Table):
     """[kinetic]: kinetic theory's constants measured on the DEM: the ball-ball restitution e,
     the close packing phi_rcp of g0 fitted to p / (rho_s phi T) = 1 + 2 (1 + e) phi g0 in the
@@ -309,6 +332,7 @@ class Kinetic(Table):
     rms_log_residual: Number | None = None
     chi2_per_dof: Number | None = None
     wall_flux: WallFlux | None = None
+    conductivity: Conductivity | None = None
 
 
 class ScenarioMedia(Table):
