@@ -3,7 +3,9 @@
 Stages:
 1. coarse-grain the run's averaging window (run_fields) -> RUN_DIR/fields.nc;
 2. wall and partition friction from the wall contacts (wall_friction);
-3. impact speeds against the coarse-grained shear rate and temperature (impacts);
+3. impact speeds against the coarse-grained shear rate and temperature (impacts), their mean
+   and p95 against sqrt(T) and the shear rate side by side, and which the DEM supports better
+   (impact_temperature);
 4. the media's rheology: with --shear-cell, steady mu(I), phi(I) from Lees-Edwards simple-shear
    cells at the bed's pressure (media_tests.dem_tests: shear_cell) and the packed bed's
    elastic moduli from DEM compression and shear tests (elastic); without it, mu(I) and phi(I)
@@ -52,6 +54,7 @@ from .compaction import compaction_table
 from .conductivity import conductivity_table, fit_conductivity
 from .dem_result import DEMResult
 from .elastic import affine_moduli_linear
+from .impact_temperature import compare_impact_relations
 from .impacts import impact_relations, impact_relations_on_cells
 from .kinetic import fit_cells, kinetic_table
 from .media_tests import cyclic_modulus, dem_tests, dilatancy_table
@@ -147,6 +150,7 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
         wf = wall_friction(res)
         rel = impact_relations(res, phases, avg)
         rel["cells"] = impact_relations_on_cells(res)
+        rel["temperature"] = compare_impact_relations(res, phases)
         p_bed = bed_pressure(avg)
         z = coordination(res)
         phi_bed = median_dense(avg, "solid_fraction")  # NaN without a dense cell

@@ -171,3 +171,30 @@ def relations_of_points(mean, p95, T, shear_rate, count, diameter: float,
     r2_T = max(m["temperature"]["r2"], m["temperature_affine"]["r2"])
     rec["winner"] = "temperature" if r2_T > m["shear_rate"]["r2"] else "shear_rate"
     return rec
+
+
+AFFINE_MODEL = "v = max(b0 + b1 sqrt(T), 0) (m/s), T the phase-resolved granular temperature"
+
+
+def temperature_relation_keys(rec: dict) -> dict:
+    """The keys compare_impact_relations' record `rec` of one kind adds to calibration.toml's
+    [impacts.KIND] (io.calibration_file.ImpactRelation): the affine relation of the mean,
+    b0 (m/s) and b1, the p95 relations, the R^2 and the share within 0.8 - 1.25 of each form,
+    and preferred_relation, the winner."""
+    m, q = rec["mean"], rec["p95"]
+    ta, sr, t1 = m["temperature_affine"], m["shear_rate"], m["temperature"]
+    return {"b0_temperature_m_s": ta["c0"], "b0_temperature_stderr_m_s": ta["c0_stderr"],
+            "b1_temperature": ta["c1"], "b1_temperature_stderr": ta["c1_stderr"],
+            "r2_temperature_affine": ta["r2"],
+            "within_0_8_1_25_temperature": t1["within_0_8_1_25"],
+            "within_0_8_1_25_temperature_affine": ta["within_0_8_1_25"],
+            "within_0_8_1_25_shear_rate": sr["within_0_8_1_25"],
+            "p95_a_temperature": q["temperature"]["c1"],
+            "p95_a_maxwellian": rec["maxwell_p95"],
+            "p95_r2_temperature": q["temperature"]["r2"],
+            "p95_b0_temperature_m_s": q["temperature_affine"]["c0"],
+            "p95_b1_temperature": q["temperature_affine"]["c1"],
+            "p95_r2_temperature_affine": q["temperature_affine"]["r2"],
+            "p95_c0_m_s": q["shear_rate"]["c0"], "p95_c1": q["shear_rate"]["c1"],
+            "p95_r2_shear_rate": q["shear_rate"]["r2"],
+            "preferred_relation": rec["winner"]}
