@@ -33,7 +33,7 @@ def _run(preferred="temperature", temperature=True):
         s.add_temperatures(j, pts, np.ones(pts.shape[0]), T.ravel())
     phi = np.where(Z < 0.12, 0.55, 0.2)
     phase = SimpleNamespace(x=x, z=z, h=H, solid_fraction=phi)
-    rel = ImpactRelation(b0_temperature_m_s=B0, b1_temperature=B1,
+    rel = ImpactRelation(b0_temperature_cells_m_s=B0, b1_temperature_cells=B1,
                          preferred_relation=preferred)
     cal = SimpleNamespace(impacts=SimpleNamespace(ball_ball=rel, ball_wall=rel))
     impacts = {"ball_ball_mean_normal_speed": 0.05, "ball_wall_mean_normal_speed": 0.2}

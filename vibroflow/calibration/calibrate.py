@@ -54,7 +54,7 @@ from .compaction import compaction_table
 from .conductivity import conductivity_table, fit_conductivity
 from .dem_result import DEMResult
 from .elastic import affine_moduli_linear
-from .impact_temperature import compare_impact_relations
+from .impact_temperature import compare_impact_relations, on_nodes
 from .impacts import impact_relations, impact_relations_on_cells
 from .kinetic import fit_cells, kinetic_table
 from .media_tests import cyclic_modulus, dem_tests, dilatancy_table
@@ -151,6 +151,8 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
         rel = impact_relations(res, phases, avg)
         rel["cells"] = impact_relations_on_cells(res)
         rel["temperature"] = compare_impact_relations(res, phases)
+        rel["temperature_cells"] = compare_impact_relations(
+            res, on_nodes(phases, float(sc.analysis.cell_size)))
         p_bed = bed_pressure(avg)
         z = coordination(res)
         phi_bed = median_dense(avg, "solid_fraction")  # NaN without a dense cell

@@ -134,8 +134,11 @@ def calibration_tables(res, cg_info, wf, rel, rheo, elastic, dp, p_bed, phi_bed,
     for name, r in (rel.get("temperature") or {}).items():
         if name in cal["impacts"] and isinstance(r, dict):
             # the temperature's relations beside the shear rate's (impact_temperature)
-            cal["impacts"][name].update({k: v if isinstance(v, str) else toml_float(v)
-                                         for k, v in temperature_relation_keys(r).items()})
+            rc = (rel.get("temperature_cells") or {}).get(name)
+            g = (rel.get("cells") or {}).get(name)
+            keys = temperature_relation_keys(r, rc, g["r2"] if g else None)
+            cal["impacts"][name].update({k: v if isinstance(v, (str, int)) else toml_float(v)
+                                         for k, v in keys.items()})
             cal["impacts"]["temperature_affine_model"] = AFFINE_MODEL
     rel_cells = rel.get("cells")
     for name in ("ball_ball", "ball_wall"):

@@ -102,6 +102,18 @@ def compare_impact_relations(run, phase_fields, min_impacts: int = MIN_IMPACTS_P
             res.close()
 
 
+def on_nodes(phase_fields, cell_size: float):
+    """The phase-resolved fields at the analysis cells' centres (multiples of cell_size, m), the
+    nodes a continuum run measures on: impacts binned on them go to the nearest node, so the
+    fits of compare_impact_relations on this Dataset are the continuum's like-for-like
+    relations (as impacts.impact_relations_on_cells is for the shear rate)."""
+    def at(v):
+        v = np.asarray(v, float)
+        k = v / cell_size
+        return v[np.abs(k - np.round(k)) < 1e-6]
+    return phase_fields.sel(x=at(phase_fields["x"].values), z=at(phase_fields["z"].values))
+
+
 def _compare(res, pf, min_impacts, min_sf, chunk):
     d = res.diameter
     x = np.asarray(pf["x"].values, float)
@@ -176,14 +188,30 @@ def relations_of_points(mean, p95, T, shear_rate, count, diameter: float,
 AFFINE_MODEL = "v = max(b0 + b1 sqrt(T), 0) (m/s), T the phase-resolved granular temperature"
 
 
-def temperature_relation_keys(rec: dict) -> dict:
+def temperature_relation_keys(rec: dict, rec_cells: dict | None = None,
+                              r2_shear_cells: float | None = None) -> dict:
     """The keys compare_impact_relations' record `rec` of one kind adds to calibration.toml's
     [impacts.KIND] (io.calibration_file.ImpactRelation): the affine relation of the mean,
-    b0 (m/s) and b1, the p95 relations, the R^2 and the share within 0.8 - 1.25 of each form,
-    and preferred_relation, the winner."""
+    b0 (m/s) and b1, the p95 relations, the R^2 and the share within 0.8 - 1.25 of each form;
+    from `rec_cells` (the same on the analysis cells' centres, on_nodes) the affine relation a
+    continuum uses, b0_temperature_cells_m_s and b1_temperature_cells, and preferred_relation:
+    "temperature" where its R^2 on the cells beats the shear rate's on the continuum's measure
+    (r2_shear_cells, impacts.impact_relations_on_cells), else "shear_rate" (without the cells'
+    fits, the winner on the fine points)."""
     m, q = rec["mean"], rec["p95"]
     ta, sr, t1 = m["temperature_affine"], m["shear_rate"], m["temperature"]
-    return {"b0_temperature_m_s": ta["c0"], "b0_temperature_stderr_m_s": ta["c0_stderr"],
+    out = {}
+    winner = rec["winner"]
+    if rec_cells is not None:
+        tc = rec_cells["mean"]["temperature_affine"]
+        out = {"b0_temperature_cells_m_s": tc["c0"], "b0_temperature_cells_stderr_m_s":
+               tc["c0_stderr"], "b1_temperature_cells": tc["c1"],
+               "b1_temperature_cells_stderr": tc["c1_stderr"],
+               "r2_temperature_affine_cells": tc["r2"], "points_temperature_cells":
+               tc["points"]}
+        if r2_shear_cells is not None and math.isfinite(r2_shear_cells):
+            winner = "temperature" if tc["r2"] > r2_shear_cells else "shear_rate"
+    return {**out, "b0_temperature_m_s": ta["c0"], "b0_temperature_stderr_m_s": ta["c0_stderr"],
             "b1_temperature": ta["c1"], "b1_temperature_stderr": ta["c1_stderr"],
             "r2_temperature_affine": ta["r2"],
             "within_0_8_1_25_temperature": t1["within_0_8_1_25"],
@@ -197,4 +225,4 @@ def temperature_relation_keys(rec: dict) -> dict:
             "p95_r2_temperature_affine": q["temperature_affine"]["r2"],
             "p95_c0_m_s": q["shear_rate"]["c0"], "p95_c1": q["shear_rate"]["c1"],
             "p95_r2_shear_rate": q["shear_rate"]["r2"],
-            "preferred_relation": rec["winner"]}
+            "preferred_relation": winner}

@@ -1,10 +1,10 @@
 """Impact speeds inferred from a continuum's granular temperature, where the DEM calibration
 prefers the temperature to the shear rate (docs/decisions/impact-speed.md).
 
-The calibration's [impacts.KIND] relation v = max(b0 + b1 sqrt(T), 0) (b0_temperature_m_s,
-b1_temperature; calibration.impact_temperature) is fitted on the DEM's impacts against its
-phase-resolved coarse-grained T; its preferred_relation says which of T and the shear rate the
-DEM's impacts follow better.  A run that carries T (ContinuumOptions.temperature) and whose
+The calibration's [impacts.KIND] relation v = max(b0 + b1 sqrt(T), 0)
+(b0_temperature_cells_m_s, b1_temperature_cells; calibration.impact_temperature) is fitted on
+the DEM's impacts against its phase-resolved coarse-grained T at the analysis cells' centres;
+its preferred_relation says which of T and the shear rate the DEM's impacts follow better there.  A run that carries T (ContinuumOptions.temperature) and whose
 calibration prefers T for a kind infers that kind's mean from its time-averaged T map on the
 analysis cells (temperature_outputs.temperature_map): v at each node, solid-fraction weighted
 over the bed (ball-ball) or the nodes within a node spacing of the U (ball-wall), as the shear
@@ -29,13 +29,16 @@ RELATION = "v = max(b0 + b1 sqrt(T), 0)"
 
 
 def temperature_relation(rel) -> tuple[float, float] | None:
-    """(b0 m/s, b1) of an [impacts.KIND] table that prefers the temperature, else None."""
+    """(b0 m/s, b1) of an [impacts.KIND] table that prefers the temperature, else None: the
+    relation fitted on the analysis cells' centres (b0_temperature_cells_m_s,
+    b1_temperature_cells) where the calibration has it, else the coarse-grained points' one."""
     if rel is None or rel.preferred_relation != "temperature":
         return None
-    b0, b1 = rel.b0_temperature_m_s, rel.b1_temperature
-    if b0 is None or b1 is None or not (math.isfinite(b0) and math.isfinite(b1)):
-        return None
-    return float(b0), float(b1)
+    for b0, b1 in ((rel.b0_temperature_cells_m_s, rel.b1_temperature_cells),
+                   (rel.b0_temperature_m_s, rel.b1_temperature)):
+        if b0 is not None and b1 is not None and math.isfinite(b0) and math.isfinite(b1):
+            return float(b0), float(b1)
+    return None
 
 
 def impacts_from_temperature(calibration: Calibration | None, samples: Samples,
@@ -72,9 +75,10 @@ def impacts_from_temperature(calibration: Calibration | None, samples: Samples,
         out[name + "_mean_normal_speed_m_s_stderr"] = se
     if not out:
         return {}
-    out["relation"] = (RELATION + " (calibration.toml [impacts.KIND] b0_temperature_m_s, "
-                       "b1_temperature, preferred_relation = \"temperature\"), T the "
-                       "time-averaged map on the analysis cells, solid-fraction weighted")
+    out["relation"] = (RELATION + " (calibration.toml [impacts.KIND] "
+                       "b0_temperature_cells_m_s, b1_temperature_cells, preferred_relation = "
+                       "\"temperature\"), T the time-averaged map on the analysis cells, "
+                       "solid-fraction weighted")
     kinds = ", ".join(k for k in ("ball_ball", "ball_wall") if k + "_mean_normal_speed_m_s" in out)
     impacts["inferred_from_temperature"] = (f"{kinds}: {out['relation']}; count = 0: no impact "
                                             "is seen")

@@ -212,9 +212,10 @@ class Partitions(Table):
 class ImpactRelation(Table):
     """[impacts.ball_ball], [impacts.ball_wall]: v = c0 + c1 d gamma_dot (m/s) fitted on the
     DEM's coarse-grained field (c0_m_s, c1) and on the continuum's measure of the shear rate
-    (c0_cells_m_s, c1_cells), v = a sqrt(T), v = b0 + b1 sqrt(T) (b0_temperature_m_s,
-    b1_temperature) and which of the shear rate and the temperature the DEM supports better
-    (preferred_relation); further keys (the p95 relations, the shares within 0.8 - 1.25) are
+    (c0_cells_m_s, c1_cells), v = a sqrt(T), v = b0 + b1 sqrt(T) on the coarse-grained points
+    (b0_temperature_m_s, b1_temperature) and on the analysis cells' centres
+    (b0_temperature_cells_m_s, b1_temperature_cells), and which of the shear rate and the
+    temperature the DEM supports better on the cells (preferred_relation); further keys (the p95 relations, the shares within 0.8 - 1.25) are
     kept as they are written."""
     count: Count | None = None
     mean_normal_speed_m_s: Number | None = None
@@ -234,6 +235,9 @@ class ImpactRelation(Table):
     b1_temperature: Number | None = None
     b1_temperature_stderr: Number | None = None
     r2_temperature_affine: Number | None = None
+    b0_temperature_cells_m_s: Number | None = None
+    b1_temperature_cells: Number | None = None
+    r2_temperature_affine_cells: Number | None = None
     preferred_relation: Text | None = None
 
 
