@@ -153,6 +153,13 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
         rel["temperature"] = compare_impact_relations(res, phases)
         rel["temperature_cells"] = compare_impact_relations(
             res, on_nodes(phases, float(sc.analysis.cell_size)))
+        for name in ("ball_ball", "ball_wall"):
+            r = rel["temperature_cells"].get(name)
+            if r is not None:
+                ta, sr = r["mean"]["temperature_affine"], r["mean"]["shear_rate"]
+                prog.log(f"impacts {name} on the cells: v = {ta['c0']:.3f} + {ta['c1']:.2f} "
+                         f"sqrt(T) (R2 = {ta['r2']:.2f}; the coarse-grained shear rate's there "
+                         f"{sr['r2']:.2f})")
         p_bed = bed_pressure(avg)
         z = coordination(res)
         phi_bed = median_dense(avg, "solid_fraction")  # NaN without a dense cell
@@ -209,5 +216,9 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
                             {**rheo, "source": rheo["source"].split(" ")[0]}, rheo)
             plots.wall_friction_plot(pic / "wall_friction.png", wf)
             plots.impacts_plot(pic / "impacts.png", rel)
+            kin_t = cal.get("kinetic") or {}
+            plots.temperature_relations_plot(pic / "temperature_relations.png",
+                                             rel.get("temperature_cells"),
+                                             kin_t.get("conductivity"))
         prog.log(f"calibration in {out_dir / CALIBRATION_FILE}")
         return record

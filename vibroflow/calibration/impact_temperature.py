@@ -88,7 +88,8 @@ def compare_impact_relations(run, phase_fields, min_impacts: int = MIN_IMPACTS_P
     (module notes).  run: DEMResult, run directory or dem.h5; phase_fields: the phase-resolved
     Dataset of run_fields.coarse_grain_run.
 
-    Returns {kind: None (no impacts) or {points, count, maxwell_mean, maxwell_p95,
+    Returns {kind: None (no impacts) or {points, count, maxwell_mean, maxwell_p95, cells
+    {sqrt_T, d_gamma_dot, mean, p95, count: one value a (phase, point)},
     mean {temperature {c1 = a, ...}, temperature_affine {c0, c1}, shear_rate {c0 m/s, c1}},
     p95 {the same}, each fit with weighted_linear_fit's keys plus within_0_8_1_25 and
     median_abs_log_ratio, winner ("temperature" or "shear_rate": the higher R^2 of the mean
@@ -178,7 +179,9 @@ def relations_of_points(mean, p95, T, shear_rate, count, diameter: float,
     rec = {"points": int(w.size), "maxwell_mean": MAXWELL_MEAN[kind],
            "maxwell_p95": MAXWELL_P95[kind],
            "mean": _fits(np.asarray(mean, float), sT, dg, w),
-           "p95": _fits(np.asarray(p95, float), sT, dg, w)}
+           "p95": _fits(np.asarray(p95, float), sT, dg, w),
+           "cells": {"sqrt_T": sT, "d_gamma_dot": dg, "mean": np.asarray(mean, float),
+                     "p95": np.asarray(p95, float), "count": w}}
     m = rec["mean"]
     r2_T = max(m["temperature"]["r2"], m["temperature_affine"]["r2"])
     rec["winner"] = "temperature" if r2_T > m["shear_rate"]["r2"] else "shear_rate"
