@@ -36,7 +36,8 @@ def _run(preferred="temperature", temperature=True):
     rel = ImpactRelation(b0_temperature_cells_m_s=B0, b1_temperature_cells=B1,
                          preferred_relation=preferred)
     cal = SimpleNamespace(impacts=SimpleNamespace(ball_ball=rel, ball_wall=rel))
-    impacts = {"ball_ball_mean_normal_speed": 0.05, "ball_wall_mean_normal_speed": 0.2}
+    impacts = {"ball_ball_mean_normal_speed": 0.05, "ball_wall_mean_normal_speed": 0.2,
+               "inferred_from_shear_rate": "v = c0 + c1 d gamma_dot"}
     out = impacts_from_temperature(cal, s, phase, R, np.array([0, 0, 1, 1]), 2, impacts)
     return out, impacts, T, phi, phase
 
@@ -56,6 +57,7 @@ def test_the_temperature_relation_node_by_node_and_weighted_by_solid_fraction():
     # every sample holds the same T: no scatter between the batches
     assert block["ball_ball_mean_normal_speed_m_s_stderr"] == 0.0
     assert "ball_ball, ball_wall" in impacts["inferred_from_temperature"]
+    assert "inferred_from_shear_rate" not in impacts
 
 
 @pytest.mark.parametrize("preferred,temperature", [("shear_rate", True),
@@ -63,4 +65,5 @@ def test_the_temperature_relation_node_by_node_and_weighted_by_solid_fraction():
 def test_shear_rate_preferred_or_no_temperature_leaves_the_impacts(preferred, temperature):
     out, impacts, *_ = _run(preferred, temperature)
     assert out == {}
-    assert impacts == {"ball_ball_mean_normal_speed": 0.05, "ball_wall_mean_normal_speed": 0.2}
+    assert impacts == {"ball_ball_mean_normal_speed": 0.05, "ball_wall_mean_normal_speed": 0.2,
+                       "inferred_from_shear_rate": "v = c0 + c1 d gamma_dot"}

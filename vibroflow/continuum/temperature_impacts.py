@@ -46,7 +46,8 @@ def impacts_from_temperature(calibration: Calibration | None, samples: Samples,
                              n_batches: int, impacts: dict) -> dict:
     """The summary's "impacts_from_temperature" block ({} when nothing is inferred from T);
     the kinds inferred replace the shear rate's values in `impacts` (the DEM's keys
-    KIND_mean_normal_speed and _stderr, updated in place)."""
+    KIND_mean_normal_speed and _stderr, updated in place; its inferred_from_shear_rate goes when
+    both kinds come from T)."""
     T = temperature_map(samples)
     im = calibration.impacts if calibration is not None else None
     if T is None or phase is None or im is None:
@@ -79,7 +80,10 @@ def impacts_from_temperature(calibration: Calibration | None, samples: Samples,
                        "b0_temperature_cells_m_s, b1_temperature_cells, preferred_relation = "
                        "\"temperature\"), T the time-averaged map on the analysis cells, "
                        "solid-fraction weighted")
-    kinds = ", ".join(k for k in ("ball_ball", "ball_wall") if k + "_mean_normal_speed_m_s" in out)
+    done = [k for k in ("ball_ball", "ball_wall") if k + "_mean_normal_speed_m_s" in out]
+    kinds = ", ".join(done)
+    if len(done) == 2:  # the shear rate's inference is in continuum.impacts_from_shear_rate
+        impacts.pop("inferred_from_shear_rate", None)
     impacts["inferred_from_temperature"] = (f"{kinds}: {out['relation']}; count = 0: no impact "
                                             "is seen")
     return {"impacts_from_temperature": out}
