@@ -146,7 +146,7 @@ def _compare(res, pf, min_impacts, min_sf, chunk):
             sm[name] += np.bincount(flat[sel], weights=speed[sel], minlength=ncell)
             # histograms per (phase, point), kept only where impacts fall (sparse rows)
             cells, inv = np.unique(flat[sel], return_inverse=True)
-            hc = np.zeros((cells.size, N_SPEED_BINS))
+            hc = np.zeros((cells.size, N_SPEED_BINS), np.float32)
             np.add.at(hc, (inv, sb[sel]), 1.0)
             store = hist[name]
             for c, row in zip(cells.tolist(), hc):
@@ -162,7 +162,8 @@ def _compare(res, pf, min_impacts, min_sf, chunk):
             out[name] = None
             continue
         mean = sm[name][idx] / c[idx]
-        p95 = _quantile_of_histograms(np.stack([hist[name][int(i)] for i in idx]), edges, 0.95)
+        p95 = _quantile_of_histograms(np.stack([hist[name][int(i)] for i in idx]).astype(float),
+                                      edges, 0.95)
         rec = relations_of_points(mean, p95, T[idx], gam[idx], c[idx], d, name)
         rec["count"] = int(c.sum())
         out[name] = rec
