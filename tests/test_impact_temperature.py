@@ -9,6 +9,7 @@ against known answers.
 2. The quantile of a histogram of a known distribution.
 3. Points whose speeds follow a sqrt(T) exactly and the shear rate not at all make the
    temperature the winner with R^2 = 1, and the other way round.
+4. The analysis cells' centres picked from a finer grid are the multiples of the cell size.
 """
 from __future__ import annotations
 
@@ -16,10 +17,11 @@ import math
 
 import numpy as np
 import pytest
+import xarray as xr
 
 from vibroflow.calibration.impact_temperature import (MAXWELL_MEAN, MAXWELL_P95,
                                                       _quantile_of_histograms,
-                                                      maxwellian_impact_speed,
+                                                      maxwellian_impact_speed, on_nodes,
                                                       relations_of_points)
 
 
@@ -77,3 +79,13 @@ def test_the_relation_that_the_points_follow_wins():
     assert rec["winner"] == "shear_rate"
     assert rec["mean"]["shear_rate"]["c0"] == pytest.approx(0.01, rel=1e-6)
     assert rec["mean"]["shear_rate"]["c1"] == pytest.approx(3.0, rel=1e-6)
+
+
+def test_on_nodes_keeps_the_analysis_cells_centres_of_a_finer_grid():
+    x = np.arange(-20, 21) * 0.005
+    z = np.arange(-3, 30) * 0.005
+    ds = xr.Dataset({"temperature": (("phase", "x", "z"), np.ones((2, x.size, z.size)))},
+                    coords={"x": x, "z": z, "phase": [0.0, np.pi]})
+    nodes = on_nodes(ds, 0.015)
+    np.testing.assert_allclose(nodes["x"].values, np.arange(-6, 7) * 0.015, atol=1e-12)
+    np.testing.assert_allclose(nodes["z"].values, np.arange(-1, 10) * 0.015, atol=1e-12)
