@@ -3,7 +3,9 @@
 Stages:
 1. coarse-grain the run's averaging window (run_fields) -> RUN_DIR/fields.nc;
 2. wall and partition friction from the wall contacts (wall_friction);
-3. impact speeds against the coarse-grained shear rate and temperature (impacts);
+3. impact speeds against the coarse-grained shear rate and temperature (impacts), their mean
+   and p95 against sqrt(T) and the shear rate side by side, and which the DEM supports better
+   (impact_temperature);
 4. the media's rheology: with --shear-cell, steady mu(I), phi(I) from Lees-Edwards simple-shear
    cells at the bed's pressure (media_tests.dem_tests: shear_cell) and the packed bed's
    elastic moduli from DEM compression and shear tests (elastic); without it, mu(I) and phi(I)
@@ -21,8 +23,9 @@ Stages:
    [dilatancy], and with it the cyclic compaction of the continuum's compaction option from
    the cyclic cell's per-cycle packing at the tub's amplitude (compaction.py) -> [compaction];
 7. kinetic theory's constants (kinetic, wall_energy): phi_rcp of g0 fitted to the
-   phase-resolved cells' p / (rho_s phi T) with the scenario's ball-ball restitution, and the
-   walls' energy flux from the wall contacts -> [kinetic];
+   phase-resolved cells' p / (rho_s phi T) with the scenario's ball-ball restitution, the
+   walls' energy flux from the wall contacts, and the multiplier of Gidaspow's conductivity
+   from the cells' fluctuation-energy flux (energy_flux, conductivity) -> [kinetic];
 8. RUN_DIR/calibration.toml (every parameter with its uncertainty and its provenance, and
    last the [scenario] it was measured on, which the continuum checks its own against; its
    tables built by calibration_tables, checked and written as the record
@@ -48,8 +51,10 @@ from vibroflow.tub.geometry import geometry_of
 from .bed_contacts import contact_pair, contact_stiffness_at, coordination
 from .calibration_tables import calibration_tables
 from .compaction import compaction_table
+from .conductivity import conductivity_table, fit_conductivity
 from .dem_result import DEMResult
 from .elastic import affine_moduli_linear
+from .impact_temperature import compare_impact_relations, on_nodes
 from .impacts import impact_relations, impact_relations_on_cells
 from .kinetic import fit_cells, kinetic_table
 from .media_tests import cyclic_modulus, dem_tests, dilatancy_table
@@ -76,9 +81,11 @@ def interrupted_calibration(run_dir: Path):
                           "again") from None
 
 
-def kinetic_record(res, phases, prog) -> dict | None:
-    """The [kinetic] table: phi_rcp fitted to the phase-resolved cells, the walls' energy flux;
-    None when the run has neither (no contact stress, no wall forces)."""
+def kinetic_record(res, phases, prog, energy_flux=None) -> dict | None:
+    """The [kinetic] table: phi_rcp fitted to the phase-resolved cells, the walls' energy flux,
+    the conductivity's multiplier from the cells' energy flux (`energy_flux`, the
+    phase-resolved Dataset of energy_flux; None: not measured); None when the run has neither
+    phi_rcp nor wall forces."""
     sc = res.scenario
     e = contact_pair(sc, sc.fill.material, sc.fill.material).restitution
     fit = None
@@ -90,11 +97,22 @@ def kinetic_record(res, phases, prog) -> dict | None:
                      f"{fit['rms_log_residual']:.3f}; {fit['status']})")
         except InputError as err:
             prog.log(f"kinetic: phi_rcp not measured: {err}")
+    cond = None
+    if fit is not None and energy_flux is not None:
+        try:
+            c = fit_conductivity(energy_flux, res.solid_density, res.diameter, e,
+                                 fit["phi_rcp"], fit["g0_form"])
+            cond = conductivity_table(c)
+            prog.log(f"kinetic: conductivity = {c['multiplier']:.3g} +- "
+                     f"{c['multiplier_stderr']:.2g} of Gidaspow's ({c['cells']} cells, R^2 "
+                     f"{c['r2']:.3g}; {c['status']})")
+        except InputError as err:
+            prog.log(f"kinetic: conductivity not measured: {err}")
     flux = wall_flux(res, phases)
     if fit is None and flux is None:
         return None
     return kinetic_table(fit, flux, e, "the scenario's ball-ball contact law (normal "
-                                       "restitution of a head-on collision)")
+                                       "restitution of a head-on collision)", cond)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -120,7 +138,8 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
         n_used = int((res.batches() >= 0).sum())
         prog.stage("coarse-grain", n_used, unit="snapshots")
         avg, phases, cg_info = coarse_grain_run(res, kernel=kernel, width=width,
-                                                progress=lambda k, n: prog.update(k))
+                                                progress=lambda k, n: prog.update(k),
+                                                energy_flux=res.has_ball_contacts)
         scatter = tub_mu_i_scatter(avg, phases)
         if not shear_cell:  # before anything is written: a bed too small is the input's fault
             check_tub_cells(scatter, sc, avg, out_dir)
@@ -131,6 +150,16 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
         wf = wall_friction(res)
         rel = impact_relations(res, phases, avg)
         rel["cells"] = impact_relations_on_cells(res)
+        rel["temperature"] = compare_impact_relations(res, phases)
+        rel["temperature_cells"] = compare_impact_relations(
+            res, on_nodes(phases, float(sc.analysis.cell_size)))
+        for name in ("ball_ball", "ball_wall"):
+            r = rel["temperature_cells"].get(name)
+            if r is not None:
+                ta, sr = r["mean"]["temperature_affine"], r["mean"]["shear_rate"]
+                prog.log(f"impacts {name} on the cells: v = {ta['c0']:.3f} + {ta['c1']:.2f} "
+                         f"sqrt(T) (R2 = {ta['r2']:.2f}; the coarse-grained shear rate's there "
+                         f"{sr['r2']:.2f})")
         p_bed = bed_pressure(avg)
         z = coordination(res)
         phi_bed = median_dense(avg, "solid_fraction")  # NaN without a dense cell
@@ -171,7 +200,7 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
                              f", dphi_cyc = {cal['compaction']['excess_solid_fraction']:.4f}")
                 except InputError as e:
                     prog.log(f"compaction not measured: {e}")
-        kin = kinetic_record(res, phases, prog)
+        kin = kinetic_record(res, phases, prog, cg_info.get("energy_flux"))
         if kin is not None:
             cal["kinetic"] = kin
         cal["scenario"] = scenario_source(sc)  # last: the tables before keep their place
@@ -187,5 +216,9 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
                             {**rheo, "source": rheo["source"].split(" ")[0]}, rheo)
             plots.wall_friction_plot(pic / "wall_friction.png", wf)
             plots.impacts_plot(pic / "impacts.png", rel)
+            kin_t = cal.get("kinetic") or {}
+            plots.temperature_relations_plot(pic / "temperature_relations.png",
+                                             rel.get("temperature_cells"),
+                                             kin_t.get("conductivity"))
         prog.log(f"calibration in {out_dir / CALIBRATION_FILE}")
         return record

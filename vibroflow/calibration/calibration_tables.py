@@ -8,6 +8,7 @@ import datetime as _dt
 from vibroflow import __version__
 
 from .bed_contacts import contact_pair, young_poisson
+from .impact_temperature import AFFINE_MODEL, temperature_relation_keys
 
 
 def toml_float(x) -> float:
@@ -130,6 +131,15 @@ def calibration_tables(res, cg_info, wf, rel, rheo, elastic, dp, p_bed, phi_bed,
             "a_temperature_stderr": toml_float(t["c1_stderr"]),
             "r2_temperature": toml_float(t["r2"]), "a_maxwellian": toml_float(t["maxwell"]),
         }
+    for name, r in (rel.get("temperature") or {}).items():
+        if name in cal["impacts"] and isinstance(r, dict):
+            # the temperature's relations beside the shear rate's (impact_temperature)
+            rc = (rel.get("temperature_cells") or {}).get(name)
+            g = (rel.get("cells") or {}).get(name)
+            keys = temperature_relation_keys(r, rc, g["r2"] if g else None)
+            cal["impacts"][name].update({k: v if isinstance(v, (str, int)) else toml_float(v)
+                                         for k, v in keys.items()})
+            cal["impacts"]["temperature_affine_model"] = AFFINE_MODEL
     rel_cells = rel.get("cells")
     for name in ("ball_ball", "ball_wall"):
         g = (rel_cells or {}).get(name)

@@ -163,10 +163,10 @@ def _floats(a):
 
 
 def kinetic_table(fit: dict | None, flux: dict | None, restitution: float,
-                  restitution_source: str) -> dict:
+                  restitution_source: str, conductivity: dict | None = None) -> dict:
     """The [kinetic] table of calibration.toml (io.calibration_file.Kinetic) from a phi_rcp fit
-    (fit_phi_rcp; None: not measured) and the walls' fluxes (wall_energy.wall_flux; None: the
-    run stores no wall forces)."""
+    (fit_phi_rcp; None: not measured), the walls' fluxes (wall_energy.wall_flux; None: the
+    run stores no wall forces) and the conductivity table (conductivity.conductivity_table)."""
     out = {"model": "p / (rho_s phi T) = 1 + 2 (1 + e) phi g0(phi; phi_rcp) (Lun et al. 1984)",
            "restitution": float(restitution), "restitution_source": restitution_source}
     if fit is not None:
@@ -192,4 +192,6 @@ def kinetic_table(fit: dict | None, flux: dict | None, restitution: float,
         wf["partitions_fluctuation_flux_by_phase_W_m2"] = _floats(pf["phase"])
         wf["partitions_fluctuation_flux_by_phase_stderr_W_m2"] = _floats(pf["phase_stderr"])
         out["wall_flux"] = wf
+    if conductivity is not None:
+        out["conductivity"] = conductivity
     return out

@@ -221,3 +221,50 @@ def impacts_plot(path, rel: dict) -> Path:
         ax.grid(alpha=0.3)
     fig.suptitle("impacts by cell against the coarse-grained shear rate and temperature")
     return _save(fig, path)
+
+
+def temperature_relations_plot(path, rel_T: dict | None, conductivity: dict | None) -> Path:
+    """Left, middle: the mean and p95 impact speeds of each (phase, cell) against sqrt(T), with
+    the affine fit, the Maxwellian line and the shear rate's R^2 beside the temperature's
+    (impact_temperature); right: the conductivity's multiplier of Gidaspow's closure by
+    solid-fraction bin with batch-means errors ([kinetic.conductivity])."""
+    plt = pyplot()
+    fig, axes = plt.subplots(1, 3, figsize=(16, 4.6))
+    colors = {"ball_ball": "tab:blue", "ball_wall": "tab:red"}
+    for name, col in colors.items():
+        r = (rel_T or {}).get(name)
+        if not isinstance(r, dict):
+            continue
+        c = r["cells"]
+        for ax, stat, maxwell in ((axes[0], "mean", r["maxwell_mean"]),
+                                  (axes[1], "p95", r["maxwell_p95"])):
+            ax.scatter(c["sqrt_T"], c[stat], s=4, c=col, alpha=0.25, label=name)
+            f, g = r[stat]["temperature_affine"], r[stat]["shear_rate"]
+            xx = np.linspace(0.0, float(np.max(c["sqrt_T"])), 50)
+            ax.plot(xx, np.maximum(f["c0"] + f["c1"] * xx, 0.0), "-", color=col,
+                    label=f"{f['c0']:.3f} + {f['c1']:.2f} sqrt(T): R2 {f['r2']:.2f} "
+                          f"(shear rate's {g['r2']:.2f})")
+            ax.plot(xx, maxwell * xx, ":", color=col, label=f"Maxwellian {maxwell:.2f} sqrt(T)")
+    for ax, stat in ((axes[0], "mean"), (axes[1], "95th percentile")):
+        ax.set_xlabel("sqrt(T) (m/s)")
+        ax.set_ylabel(f"{stat} normal impact speed (m/s)")
+    ax = axes[2]
+    if conductivity is not None:
+        e = np.asarray(conductivity["solid_fraction_edges"])
+        m = np.asarray(conductivity["multiplier_by_solid_fraction"], float)
+        se = np.asarray(conductivity["multiplier_by_solid_fraction_stderr"], float)
+        ax.errorbar(0.5 * (e[1:] + e[:-1]), m, yerr=se, xerr=0.5 * np.diff(e), fmt="o",
+                    label="multiplier C by solid fraction")
+        ax.axhline(conductivity["multiplier"], color="k",
+                   label=f"all cells: C = {conductivity['multiplier']:.3g} +- "
+                         f"{conductivity['multiplier_stderr']:.2g}, R2 "
+                         f"{conductivity['r2']:.3g}")
+        ax.axhline(1.0, color="k", ls=":", label="Gidaspow (1994) as it is")
+    ax.set_xlabel("solid fraction")
+    ax.set_ylabel("q = -C kappa grad T: C")
+    for a in axes:
+        a.legend(fontsize=7)
+        a.grid(alpha=0.3)
+    fig.suptitle("the DEM's impacts against the granular temperature, and its energy flux "
+                 "against the conductivity closure")
+    return _save(fig, path)

@@ -21,6 +21,7 @@ from vibroflow.measure.stats import phase_bins
 
 from .coarse_grain import CoarseGrainer
 from .dem_result import DEMResult
+from .energy_flux import EnergyFluxGrainer
 
 _CG_KEYS = ("positions_tub", "velocities_rel_tub", "radius", "mass", "contacts_i",
             "contacts_j", "contact_force", "contact_branch", "wall_particle", "wall_force",
@@ -29,7 +30,7 @@ _CG_KEYS = ("positions_tub", "velocities_rel_tub", "radius", "mass", "contacts_i
 
 def coarse_grain_run(run, kernel: str = "gaussian", width: float | None = None,
                      cutoff: float | None = None, cell_size: float | None = None,
-                     n_phases: int | None = None, progress=None):
+                     n_phases: int | None = None, progress=None, energy_flux: bool = False):
     """Coarse-grain the averaging window of a DEM run.
 
     run : a DEMResult, a run directory or a dem.h5 path.
@@ -41,6 +42,8 @@ def coarse_grain_run(run, kernel: str = "gaussian", width: float | None = None,
         mass and momentum come back to 1e-3), which a 15 mm grid with w = d/2 would not.
     n_phases : phase bins a cycle, default the scenario's run.phases_per_cycle.
     progress : optional callable(done, total) called after each snapshot.
+    energy_flux : also coarse-grain the fluctuation-energy flux (energy_flux.EnergyFluxGrainer,
+        the same fields bit for bit): info["energy_flux"] holds its phase-resolved Dataset.
 
     Returns (time_averaged, phase_resolved, info): two xarray Datasets (coarse_grain.fields) and
     a dict {snapshots, wall_time_s, contact_stress: "ball and wall" | "wall only" | "none"}.
@@ -48,23 +51,26 @@ def coarse_grain_run(run, kernel: str = "gaussian", width: float | None = None,
     own = not isinstance(run, DEMResult)
     res = DEMResult.open(run) if own else run
     try:
-        return _coarse_grain(res, kernel, width, cutoff, cell_size, n_phases, progress)
+        return _coarse_grain(res, kernel, width, cutoff, cell_size, n_phases, progress,
+                             energy_flux)
     finally:
         if own:
             res.close()
 
 
-def _coarse_grain(res: DEMResult, kernel, width, cutoff, cell_size, n_phases, progress):
+def _coarse_grain(res: DEMResult, kernel, width, cutoff, cell_size, n_phases, progress,
+                  energy_flux=False):
     t_wall = time.perf_counter()
     sc = res.scenario
     d = res.diameter
     geometry = geometry_of(sc)
     n_phases = int(sc.run.phases_per_cycle if n_phases is None else n_phases)
-    cg = CoarseGrainer(geometry, cell_size=float(sc.analysis.cell_size / 3.0 if cell_size is None
-                                                 else cell_size),
-                       kernel=kernel, width=0.5 * d if width is None else float(width),
-                       cutoff=cutoff, depth=float(sc.tub.length), rho_s=res.solid_density,
-                       diameter=d, n_phases=n_phases, n_batches=int(sc.run.batches))
+    grainer = EnergyFluxGrainer if energy_flux else CoarseGrainer
+    cg = grainer(geometry, cell_size=float(sc.analysis.cell_size / 3.0 if cell_size is None
+                                           else cell_size),
+                 kernel=kernel, width=0.5 * d if width is None else float(width),
+                 cutoff=cutoff, depth=float(sc.tub.length), rho_s=res.solid_density,
+                 diameter=d, n_phases=n_phases, n_batches=int(sc.run.batches))
     batch = res.batches()
     used = np.nonzero(batch >= 0)[0]
     if used.size == 0:
@@ -88,6 +94,8 @@ def _coarse_grain(res: DEMResult, kernel, width, cutoff, cell_size, n_phases, pr
         ds.attrs["contact_stress"] = contact
         ds.attrs["case"] = str(sc.case)
         ds.attrs["source"] = res.source
+    if energy_flux:
+        info["energy_flux"] = cg.energy_flux_fields(phase_resolved=True)
     info["wall_time_s"] = time.perf_counter() - t_wall
     return avg, phases, info
 

@@ -20,7 +20,9 @@ Timeline (tub47.md "Procedure", the DEM's clock: t = 0 when the vibration starts
    and the shear rate with the impact speed and granular temperature it implies through the
    calibrated relations (calibration.toml [impacts]), when a calibration is given
    (shear_outputs.py); with the granular temperature (ContinuumOptions.temperature), its map
-   temperature.csv and the summary's "granular_temperature" block (temperature_outputs.py).
+   temperature.csv and the summary's "granular_temperature" block (temperature_outputs.py),
+   and, where the calibration prefers the temperature, the impact speeds it implies
+   (temperature_impacts.py).
 
 Parameters come from calibration.toml (vibroflow.io.calibration_file.read_calibration) or the
 tub47 defaults (ContinuumMaterial, material.py): the wall friction [wall] friction (default:
@@ -60,6 +62,7 @@ from .material import material_for
 from .mpm.solver import ContinuumBlowUp
 from .sampling import Samples, cell_grid_of, phase_shear_of_samples, sample_times, samples_source
 from .shear_outputs import shear_rate_outputs, write_shear_rate_csv
+from .temperature_impacts import impacts_from_temperature
 from .temperature_outputs import TEMPERATURE_CSV_NAME, temperature_outputs, write_temperature_csv
 from .timeline import (REPORT_EVERY, VibrationInterrupted, interrupted,
                        interrupted_while_settling, interrupted_while_writing, vibration_timeline)
@@ -277,6 +280,8 @@ def _results(form: Formulation, scenario, out: Path, calibration, options, vtk, 
                          material.diameter)
     wrote = write_temperature_csv(out / TEMPERATURE_CSV_NAME, samples, phase)
     summary["continuum"].update(temperature_outputs(samples, batch, run.batches, wrote))
+    summary["continuum"].update(impacts_from_temperature(
+        calibration, samples, phase, geo.radius, batch, run.batches, summary["impacts"]))
     summary = json_safe(summary)
     write_json_atomic(out / SUMMARY_NAME, summary)
     return summary

@@ -212,7 +212,11 @@ class Partitions(Table):
 class ImpactRelation(Table):
     """[impacts.ball_ball], [impacts.ball_wall]: v = c0 + c1 d gamma_dot (m/s) fitted on the
     DEM's coarse-grained field (c0_m_s, c1) and on the continuum's measure of the shear rate
-    (c0_cells_m_s, c1_cells), v = a sqrt(T)."""
+    (c0_cells_m_s, c1_cells), v = a sqrt(T), v = b0 + b1 sqrt(T) on the coarse-grained points
+    (b0_temperature_m_s, b1_temperature) and on the analysis cells' centres
+    (b0_temperature_cells_m_s, b1_temperature_cells), and which of the shear rate and the
+    temperature the DEM supports better on the cells (preferred_relation); further keys (the p95 relations, the shares within 0.8 - 1.25) are
+    kept as they are written."""
     count: Count | None = None
     mean_normal_speed_m_s: Number | None = None
     c0_m_s: Number | None = None
@@ -226,6 +230,15 @@ class ImpactRelation(Table):
     c0_cells_stderr_m_s: Number | None = None
     c1_cells: Number | None = None
     c1_cells_stderr: Number | None = None
+    b0_temperature_m_s: Number | None = None
+    b0_temperature_stderr_m_s: Number | None = None
+    b1_temperature: Number | None = None
+    b1_temperature_stderr: Number | None = None
+    r2_temperature_affine: Number | None = None
+    b0_temperature_cells_m_s: Number | None = None
+    b1_temperature_cells: Number | None = None
+    r2_temperature_affine_cells: Number | None = None
+    preferred_relation: Text | None = None
 
 
 class Impacts(Table):
@@ -293,6 +306,29 @@ class WallFlux(Table):
     partitions_fluctuation_flux_by_phase_stderr_W_m2: list[Number] | None = None
 
 
+class Conductivity(Table):
+    """[kinetic.conductivity]: the DEM's fluctuation-energy flux q = -C kappa grad T against
+    Gidaspow's conductivity kappa (calibration.conductivity): the multiplier C with its
+    batch-means error, R^2, the cells' scatter and C by solid-fraction bin."""
+    model: Text | None = None
+    multiplier: Number | None = None
+    multiplier_stderr: Number | None = None
+    r2: Number | None = None
+    cells: Count | None = None
+    status: Text | None = None
+    cell_ratio_median: Number | None = None
+    cell_ratio_p16: Number | None = None
+    cell_ratio_p84: Number | None = None
+    down_gradient_fraction: Number | None = None
+    flux_magnitude_ratio_median: Number | None = None
+    kinetic_share: Number | None = None
+    solid_fraction_range: list[Number] | None = None
+    solid_fraction_edges: list[Number] | None = None
+    multiplier_by_solid_fraction: list[Number] | None = None
+    multiplier_by_solid_fraction_stderr: list[Number] | None = None
+    cells_by_solid_fraction: list[Count] | None = None
+
+
 class Kinetic(Table):
     """[kinetic]: kinetic theory's constants measured on the DEM: the ball-ball restitution e,
     the close packing phi_rcp of g0 fitted to p / (rho_s phi T) = 1 + 2 (1 + e) phi g0 in the
@@ -309,6 +345,7 @@ class Kinetic(Table):
     rms_log_residual: Number | None = None
     chi2_per_dof: Number | None = None
     wall_flux: WallFlux | None = None
+    conductivity: Conductivity | None = None
 
 
 class ScenarioMedia(Table):
