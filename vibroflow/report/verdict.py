@@ -76,6 +76,8 @@ def verdict(e: float, limit: float | None) -> tuple[str, str]:
     agree; above it, how many times the limit."""
     if limit is None or not (isinstance(e, (int, float)) and math.isfinite(e)):
         return "no limit known for this case: not judged", ""
+    if limit <= 0:
+        return "the seeds' E is 0 (identical runs): not judged", ""
     r = e / limit
     if r <= 1.0:
         return f"{r:.2f} x the limit: within the DEM's own scatter", "ok"
