@@ -5,7 +5,8 @@ Gamma (tub47.md "Tub motion"): the peak vertical acceleration over gravity,
 Gamma = A_z omega^2 / g, with A_z the vertical amplitude (times the amplitude factor) and
 omega = 2 pi f; beside it the horizontal A_x omega^2 / g and the peak magnitude of the whole
 rigid motion's acceleration at the bottom of the U (tub point (0, 0)),
-a = (X'', Z'') + theta'' e_y x r - theta'^2 r, r the point from the pivot, over one cycle.
+a = (X'', Z'') + theta'' (-r_z, r_x) - theta'^2 r, r the point from the pivot (the turn
+counterclockwise in x-z, tub/motion.py), over one cycle.
 
 Turnover time (docs/models.md "Turnover time of the roll"): T = 2 pi / Omega_roll with
 Omega_roll = <zeta> / 2 the mean angular velocity of the roll's core, zeta = dvz/dx - dvx/dz
