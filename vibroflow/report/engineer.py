@@ -83,7 +83,10 @@ class Engineer:
                 "rows": rows, "min_solid_fraction": f"{data.min_solid_fraction:g}"}
 
     def profiles(self) -> dict:
-        p = profiles.profiles(self.tables, self.data.min_solid_fraction)
+        try:
+            p = profiles.profiles(self.tables, self.data.min_solid_fraction)
+        except ValueError as exc:  # no bed cell at x = 0 in the DEM
+            return {"img": None, "why": str(exc)}
         return {"img": image(profiles.figure(p), "velocity profiles"),
                 "z_mid": f"{p.z_mid:.3f}",
                 "with_errors": [n for n, ln in p.lines.items()
