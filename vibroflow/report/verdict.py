@@ -122,5 +122,8 @@ def e_rows(data, tables: dict) -> dict:
             a = data.summary["methods"][name].get("against_dem") or {}
             e, se = a.get("field_difference_E"), None
         words, cls = verdict(e, lim.limit if lim else None)
+        if len(seeds) >= 2:
+            words += f" (E {e:.3f}" + (f" ± {se:.3f}" if se is not None else "") + (
+                f" against the {len(seeds)} seeds)")
         rows[name] = {"E": e, "E_stderr": se, "words": words, "cls": cls}
     return {"limit": lim, "rows": rows, "note": note, "seeds": len(seeds)}
