@@ -18,11 +18,11 @@ T = 2 pi / Omega, one revolution.  With batches, T of each batch (on the whole w
 gives its batch-means standard error.
 
 Kinetic energy: the DEM's series/kinetic_energy (J, the balls' translation and spin in the lab
-frame, written every few steps) averaged over blocks of whole vibration cycles about 0.1 s long
-(the vibration's own energy swings within a cycle, not from one block to the next).  Steady: the means of the
-averaging window's first and second halves (each with its batch-means standard error over
-half the run's batches of whole cycles) differ by no more than max(STEADY_REL of their mean,
-2 combined standard errors).
+frame, written every few steps) averaged over blocks of whole vibration cycles about 0.1 s
+long (the vibration's own energy swings within a cycle, not from one block to the next).
+Steady: the means of the averaging window's first and second halves (each with its
+batch-means standard error over half the run's batches of whole cycles) differ by no more than
+max(STEADY_REL of their mean, 2 combined standard errors).
 """
 from __future__ import annotations
 
@@ -130,8 +130,8 @@ def turnover_time(table: CellTable, min_solid_fraction: float) -> Turnover:
 
 @dataclass(frozen=True)
 class KineticEnergy:
-    """The DEM's kinetic energy: the series (time s, energy J), its whole-cycle means
-    (cycle_time s at each block's middle, cycle_mean J; cycle_means), the window (t_start, t_end s), the
+    """The DEM's kinetic energy: the series (time s, energy J), its block means (cycle_time s
+    at each block's middle, cycle_mean J; cycle_means), the window (t_start, t_end s), the
     window's mean and batch-means standard error (J), the two halves' (mean, stderr) (J) and
     whether the flow is steady."""
 
