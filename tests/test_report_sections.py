@@ -167,3 +167,13 @@ def test_e_limit_from_seeds_is_the_pairs_mean():
     lim = verdict.seeds_limit([a, b])
     assert lim.e_seed == pytest.approx(0.5 * (0.1 / 1.1 + 0.1 / 1.0))
     assert lim.seeds == 2 and "measured" in lim.source
+
+
+def test_a_scenario_changed_from_its_preset_is_said_so():
+    """The ensemble figure is the preset's: a --set that changes the flow is named in the
+    caveat, a seed or a probe is not."""
+    from vibroflow.scenario.io import load_scenario
+
+    assert verdict.differs_from_preset(load_scenario("tub47-quick", ["run.seed=7"])) == ()
+    sc = load_scenario("tub47-quick", ["fill.count=400", "analysis.probes.P1.x=-0.03"])
+    assert verdict.differs_from_preset(sc) == ("fill.count",)

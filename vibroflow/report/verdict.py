@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from vibroflow.analysis.compare import FIELD_FACTOR, difference_to_seeds, seed_scatter
 from vibroflow.analysis.judge import read_result, run_folders
 from vibroflow.errors import InputError
+from vibroflow.scenario.io import load_scenario
 
 SEEDS_DIR = "dem-seeds"
 
@@ -30,6 +31,9 @@ ENSEMBLE_FLOORS = {
                            "(LIGGGHTS' CDT)"),
 }
 
+#: settings that leave the flow, and so the floor, as it is
+NOT_THE_FLOW = ("run.seed", "run.checkpoint_every", "analysis.probes", "motion.amplitude_factor")
+
 #: fewer seeds than this leave the floor low (docs/decisions/e-limit-seeds.md: it settles
 #: from seven seeds on)
 SETTLED_SEEDS = 7
@@ -38,12 +42,14 @@ SETTLED_SEEDS = 7
 @dataclass(frozen=True)
 class ELimit:
     """The DEM's seed-to-seed E (-), its standard error (None when unknown), the seeds it
-    rests on, and where it comes from (words)."""
+    rests on, where it comes from (words), and the scenario's settings that differ from the
+    case's preset the figure was measured on."""
 
     e_seed: float
     stderr: float | None
     seeds: int
     source: str
+    differs: tuple[str, ...] = ()
 
     @property
     def limit(self) -> float:
@@ -51,8 +57,37 @@ class ELimit:
 
     @property
     def caveat(self) -> str:
-        return (f"it rests on {self.seeds} seeds: likely low (the floor settles from "
-                f"{SETTLED_SEEDS} seeds on)" if self.seeds < SETTLED_SEEDS else "")
+        out = []
+        if self.seeds < SETTLED_SEEDS:
+            out.append(f"it rests on {self.seeds} seeds: likely low (the floor settles from "
+                       f"{SETTLED_SEEDS} seeds on)")
+        if self.differs:
+            shown = ", ".join(self.differs[:6]) + (", ..." if len(self.differs) > 6 else "")
+            out.append(f"measured on the preset, which this scenario changes ({shown})")
+        return "; ".join(out)
+
+
+def _flat(d: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, dict):
+            out.update(_flat(v, key + "."))
+        else:
+            out[key] = v
+    return out
+
+
+def differs_from_preset(scenario) -> tuple[str, ...]:
+    """The settings (dotted keys) in which a scenario differs from its case's preset, leaving
+    out NOT_THE_FLOW; () when the case is no preset."""
+    try:
+        preset = load_scenario(scenario.case)
+    except InputError:
+        return ()
+    a, b = _flat(scenario.model_dump()), _flat(preset.model_dump())
+    return tuple(k for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)
+                 and not any(k == n or k.startswith(n + ".") for n in NOT_THE_FLOW))
 
 
 def ensemble_limit(case: str, amplitude_factor: float) -> ELimit | None:
@@ -113,6 +148,9 @@ def e_rows(data, tables: dict) -> dict:
         lim = seeds_limit(seeds)
     else:
         lim = ensemble_limit(data.scenario.case, float(data.scenario.motion.amplitude_factor))
+        if lim is not None:
+            lim = ELimit(lim.e_seed, lim.stderr, lim.seeds, lim.source,
+                         differs_from_preset(data.scenario))
     rows = {}
     for name in data.continuum_methods:
         if len(seeds) >= 2:
