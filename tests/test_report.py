@@ -280,6 +280,17 @@ def test_report_renders_in_headless_chromium(study):  # noqa: F811
             n_true = sum(f == "true" for f, _, _ in flags)
             n_compared = sum(f in ("true", "false") for f, _, _ in flags)
             assert " ".join(said.split()).startswith(f"{n_true} of {n_compared} inferred")
+        # the engineer's sections: every figure drawn, the E limit and a verdict beside E
+        for sid in ("differences", "profiles", "bed", "rheology_bins"):
+            assert driver.execute_script(
+                f"const i = document.querySelector('#{sid} img'); "
+                "return i !== null && i.complete && i.naturalWidth > 0"), sid
+
+        def text(sid):
+            return driver.execute_script(f"return document.getElementById('{sid}').innerText")
+        assert "E limit" in text("circulation") and "x the limit" in text("circulation")
+        assert "Γ = A_z ω² / g" in text("bed") and "turnover time (s)" in text("bed")
+        assert "mean mu ± standard error" in text("rheology_bins")
     finally:
         driver.quit()
 
@@ -336,8 +347,47 @@ def test_missing_pieces_are_stated_and_a_sweep_point_shows_its_sweep(study, tmp_
     assert "No measured impact distributions: no dem/dem.h5" in page
     assert "mu_I.png is missing" in page
     assert "no dem/fields.nc" in page
+    assert "No binned mu(I): no dem/fields.nc" in page
+    assert "records no kinetic energy" in page
     assert "the DEM result holds no impacts" not in page and "no measured impacts" in page
     assert not (copy / "report" / "dem_slice.gif").exists()
     assert "No sweep in this folder" not in page
     assert "sweep_circulation.png" in page and "<td>factor-1</td>" not in page
     assert '<td class="l">factor-1</td><td>lagrangian</td><td>0.0017</td>' in page
+
+
+def test_the_e_limit_is_measured_on_the_studys_dem_seeds(study, tmp_path):  # noqa: F811
+    """A second DEM seed in DIR/dem-seeds/ whose velocities are 1.1 times the study's DEM's:
+    tub47.md's E(a, b) = sqrt(sum phi |v_a - v_b|^2 / sum phi) / (sum phi |v_b| / sum phi) is
+    0.1 R / 1.1 one way and 0.1 R the other, R = rms |v| / mean |v| (phi-weighted, cells with
+    phi >= 0.3); the seed-to-seed E is their mean, the limit 1.5 times that, and the page says
+    it was measured."""
+    from vibroflow.report import write_report
+
+    _, out, _, _ = study
+    copy = tmp_path / "run"
+    shutil.copytree(out, copy, ignore=shutil.ignore_patterns("*.png", "report*"))
+    seed = copy / "dem-seeds" / "seed2"
+    seed.mkdir(parents=True)
+    shutil.copy(out / "dem" / "summary.json", seed / "summary.json")
+    lines = (out / "dem" / "bulk_velocity.csv").read_text().splitlines()
+    head = lines[0].split(",")
+    ix, iz = head.index("vx"), head.index("vz")
+    rows = [lines[0]]
+    w, sp = [], []
+    for line in lines[1:]:
+        p = line.split(",")
+        phi = float(p[head.index("solid_fraction")])
+        if phi >= 0.3:
+            w.append(phi)
+            sp.append(math.hypot(float(p[ix]), float(p[iz])))
+        p[ix], p[iz] = repr(1.1 * float(p[ix])), repr(1.1 * float(p[iz]))
+        rows.append(",".join(p))
+    (seed / "bulk_velocity.csv").write_text("\n".join(rows) + "\n")
+    page = write_report(copy).read_text(encoding="utf-8")
+    w, sp = np.array(w), np.array(sp)
+    R = math.sqrt(np.sum(w * sp**2) / np.sum(w)) / (np.sum(w * sp) / np.sum(w))
+    want = 1.5 * 0.5 * (0.1 * R / 1.1 + 0.1 * R)
+    limits = re.findall(r'data-q="E_limit" data-value="([^"]+)"', page)
+    assert limits and all(float(v) == pytest.approx(want, rel=1e-6) for v in limits)
+    assert "measured on the study&#39;s 2 DEM seeds" in page

@@ -7,6 +7,10 @@ mu(I) fit, any sweep, the cost and the scenario, with an animation of the DEM sl
     data.py       what the page shows, read from the study folder (validated first)
     figures.py    the side-by-side figures (PNG bytes)
     animation.py  the DEM slice over the last cycles (GIF, DIR/report/dem_slice.gif)
+    engineer.py   the engineer's sections: the E limit and verdict (verdict.py), difference
+                  maps (flow_maps.py), profiles (profiles.py), Gamma, turnover time and
+                  kinetic energy (bed_state.py), binned mu(I) (mu_i_bins.py), on the methods'
+                  cell tables (cell_tables.py)
     html.py       the page
 """
 from __future__ import annotations

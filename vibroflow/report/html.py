@@ -28,19 +28,24 @@ from vibroflow import __version__
 from vibroflow.report import figures
 from vibroflow.report.data import StudyData
 from vibroflow.report.impact_figures import impact_distribution_section
+from vibroflow.report.engineer import Engineer
 from vibroflow.report.temperature_maps import temperature_maps
 
 #: section id -> heading, in page order (tests check the headings)
 SECTIONS = {
     "velocity": "Velocity field",
+    "differences": "Velocity difference to the DEM",
+    "profiles": "Velocity profiles",
     "probes": "Probes",
     "circulation": "Circulation and agreement with the DEM",
+    "bed": "Bed state: acceleration, turnover, kinetic energy",
     "shear": "Shear rate",
     "temperature": "Granular temperature and solid fraction",
     "impacts": "Impact speeds",
     "impact_distributions": "Impact speed distributions",
     "wall": "Wall friction",
     "rheology": "mu(I) fit",
+    "rheology_bins": "mu(I) binned",
     "animation": "DEM animation",
     "sweep": "Sweep",
     "cost": "Cost",
@@ -164,7 +169,7 @@ def _probes(data: StudyData) -> dict:
     return {"head": head, "rows": rows}
 
 
-def _circulation(data: StudyData) -> dict:
+def _circulation(data: StudyData, eng: Engineer) -> dict:
     rows = []
     for name in data.methods:
         m = data.summary["methods"][name]
@@ -178,9 +183,11 @@ def _circulation(data: StudyData) -> dict:
             v_cell = (_text("agrees", "ok") if verdict is True else
                       _text("differs", "bad") if verdict is False else _text("n/a"))
         rows.append([_text(name, "l"), _text(c.get("sense", "?")),
-                     _pm(c.get("strength"), c.get("strength_stderr")), e_cell, v_cell,
+                     _pm(c.get("strength"), c.get("strength_stderr")), e_cell,
+                     *eng.limit_cells(name), v_cell,
                      _text(a.get("field_difference_note") or "", "l")])
-    return {"rows": rows, "min_solid_fraction": f"{data.min_solid_fraction:g}"}
+    return {"rows": rows, "min_solid_fraction": f"{data.min_solid_fraction:g}",
+            "limit": eng.limit_note()}
 
 
 def _shear(data: StudyData) -> dict:
@@ -368,16 +375,21 @@ def _cost(data: StudyData) -> dict:
 def render(data: StudyData, gif: Path | None = None, gif_note: str | None = None) -> str:
     """The whole page (a str of HTML)."""
     s = data.summary
+    eng = Engineer(data)
     bodies = {
         "velocity": {"img": _img(figures.velocity_fields(data), "velocity fields")},
+        "differences": eng.differences(),
+        "profiles": eng.profiles(),
         "probes": _probes(data),
-        "circulation": _circulation(data),
+        "circulation": _circulation(data, eng),
+        "bed": eng.bed(),
         "shear": _shear(data),
         "temperature": _temperature(data),
         "impacts": _impacts(data),
         "impact_distributions": _impact_distributions(data),
         "wall": _wall(data),
         "rheology": _rheology(data),
+        "rheology_bins": eng.rheology_bins(),
         "animation": _animation(data, gif, gif_note),
         "sweep": _sweep(data),
         "cost": _cost(data),

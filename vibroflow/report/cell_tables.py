@@ -1,0 +1,95 @@
+"""Every method's bulk-velocity cell table as the report's new sections use it: the DEM's
+rebuilt from its snapshots with one table per batch of whole cycles (so that its profiles and
+turnover time carry batch-means standard errors, stats.py), a continuum's read from its
+bulk_velocity.csv (which keeps no batches: its values carry no error).
+
+The DEM's rebuilt table is the one its run wrote (vibroflow.measure.bulk.cell_table over the
+snapshots of the averaging window's whole cycles, batches_of_whole_cycles), so its cell means
+equal bulk_velocity.csv's; a DEM result without snapshots (a LIGGGHTS import) falls back to
+its bulk_velocity.csv.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from vibroflow.measure.bulk import CellTable, cell_table, read_csv
+from vibroflow.measure.stats import batches_of_whole_cycles
+
+DEM = "dem"
+
+
+def csv_table(data, name: str) -> CellTable:
+    """A method's bulk_velocity.csv of the study as a CellTable (no batches)."""
+    entry = data.summary["methods"].get(name, {})
+    rel = entry.get("bulk_velocity_csv", f"{name}/bulk_velocity.csv")
+    path = Path(rel) if Path(rel).is_absolute() else data.out / rel
+    if not path.is_file():
+        path = data.out / name / "bulk_velocity.csv"
+    return read_csv(path, cell_size=float(data.scenario.analysis.cell_size))
+
+
+def dem_batch_table(data) -> CellTable | None:
+    """The DEM's cell table with its batches, rebuilt from DIR/dem/dem.h5's snapshots of the
+    averaging window (module docstring); None without snapshots in the window."""
+    h5 = data.out / DEM / "dem.h5"
+    if not h5.is_file():
+        return None
+    sc = data.scenario
+    run = sc.run
+    t0, t1 = run.duration - run.average_last, run.duration
+    try:
+        with h5py.File(h5, "r") as f:
+            if "snapshots/position" not in f or f["snapshots/time"].shape[0] == 0:
+                return None
+            batch = batches_of_whole_cycles(f["snapshots/time"][:], t0, t1,
+                                            float(sc.motion.frequency), int(run.batches))
+            if not (batch >= 0).any():
+                return None
+            pivot = tuple(float(p) for p in sc.motion.pivot)
+            return cell_table(f["snapshots/position"], f["snapshots/velocity"],
+                              f["snapshots/tub_pose"][:], f["particles/radius"][:],
+                              data.geometry, float(sc.analysis.cell_size), pivot=pivot,
+                              batch_of_sample=batch, n_batches=int(run.batches))
+    except (OSError, KeyError, ValueError):
+        return None
+
+
+def method_tables(data) -> dict[str, CellTable]:
+    """method -> its cell table, the DEM first (with batches when its snapshots allow)."""
+    out: dict[str, CellTable] = {}
+    for name in data.methods:
+        table = dem_batch_table(data) if name == DEM else None
+        out[name] = table if table is not None else csv_table(data, name)
+    return out
+
+
+def grid_of(table: CellTable, ix_range: tuple[int, int], iz_range: tuple[int, int],
+            min_solid_fraction: float) -> dict:
+    """A table's cells on the grid of cell indices ix_range[0] .. ix_range[1], iz_range[0] ..
+    iz_range[1] (inclusive): arrays (nz, nx) "vx", "vz" (m/s) and their batch-means standard
+    errors "vx_stderr", "vz_stderr" (NaN without batches), NaN where the cell is missing or its
+    solid fraction is below min_solid_fraction; "solid_fraction" (0 where missing)."""
+    nx = ix_range[1] - ix_range[0] + 1
+    nz = iz_range[1] - iz_range[0] + 1
+    i, k = table.ix - ix_range[0], table.iz - iz_range[0]
+    ok = (i >= 0) & (i < nx) & (k >= 0) & (k < nz)
+    phi = np.zeros((nz, nx))
+    phi[k[ok], i[ok]] = table.solid_fraction[ok]
+    bed = phi >= min_solid_fraction
+    out = {"solid_fraction": phi}
+    for key, values in (("vx", table.vx), ("vz", table.vz), ("vx_stderr", table.vx_stderr),
+                        ("vz_stderr", table.vz_stderr)):
+        a = np.full((nz, nx), np.nan)
+        a[k[ok], i[ok]] = np.asarray(values, dtype=float)[ok]
+        out[key] = np.where(bed, a, np.nan)
+    return out
+
+
+def common_range(tables) -> tuple[tuple[int, int], tuple[int, int]]:
+    """The smallest (ix_range, iz_range) holding every cell of the tables."""
+    ix = np.concatenate([t.ix for t in tables])
+    iz = np.concatenate([t.iz for t in tables])
+    return (int(ix.min()), int(ix.max())), (int(iz.min()), int(iz.max()))

@@ -1,0 +1,167 @@
+"""The fields-agree limit beside every E, and a verdict in words (tub47.md "Judging a
+comparison"; docs/decisions/e-limit-seeds.md).
+
+The limit is FIELD_FACTOR (1.5) times the DEM's seed-to-seed E.  That floor is measured on the
+study's own DEM seeds when it has several (its dem run and the run folders in DIR/dem-seeds/,
+each a `vibroflow dem` of the same scenario with another run.seed: compare.seed_scatter, every
+ordered pair, jackknife error), and taken otherwise from the ensemble figure measured for the
+case (ENSEMBLE_FLOORS, the tables of docs/validation.md); the page says which.  With seeds, a
+continuum's E is its mean against every seed (compare.difference_to_seeds), so that E and its
+floor come from the same ensemble.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from vibroflow.analysis.compare import FIELD_FACTOR, difference_to_seeds, seed_scatter
+from vibroflow.analysis.judge import read_result, run_folders
+from vibroflow.errors import InputError
+from vibroflow.scenario.io import load_scenario
+
+SEEDS_DIR = "dem-seeds"
+
+#: (case, amplitude factor) -> (seed-to-seed E, its standard error or None, seeds, where)
+ENSEMBLE_FLOORS = {
+    ("tub47", 1.0): (0.206, 0.026, 10, "tub47.md: mean pairwise E over ten fill seeds "
+                     "(docs/decisions/e-limit-seeds.md)"),
+    ("tub47", 0.5): (0.130, 0.010, 5, "docs/validation.md section 15: five fill seeds"),
+    ("tub47", 1.5): (0.149, 0.030, 5, "docs/validation.md section 15: five fill seeds"),
+    ("tub47-quick", 1.0): (0.166, None, 2, "docs/validation.md section 16: two fill seeds "
+                           "(LIGGGHTS' CDT)"),
+}
+
+#: settings that leave the flow, and so the floor, as it is
+NOT_THE_FLOW = ("run.seed", "run.checkpoint_every", "analysis.probes", "motion.amplitude_factor")
+
+#: fewer seeds than this leave the floor low (docs/decisions/e-limit-seeds.md: it settles
+#: from seven seeds on)
+SETTLED_SEEDS = 7
+
+
+@dataclass(frozen=True)
+class ELimit:
+    """The DEM's seed-to-seed E (-), its standard error (None when unknown), the seeds it
+    rests on, where it comes from (words), and the scenario's settings that differ from the
+    case's preset the figure was measured on."""
+
+    e_seed: float
+    stderr: float | None
+    seeds: int
+    source: str
+    differs: tuple[str, ...] = ()
+
+    @property
+    def limit(self) -> float:
+        return FIELD_FACTOR * self.e_seed
+
+    @property
+    def caveat(self) -> str:
+        out = []
+        if self.seeds < SETTLED_SEEDS:
+            out.append(f"it rests on {self.seeds} seeds: likely low (the floor settles from "
+                       f"{SETTLED_SEEDS} seeds on)")
+        if self.differs:
+            shown = ", ".join(self.differs[:6]) + (", ..." if len(self.differs) > 6 else "")
+            out.append(f"measured on the preset, which this scenario changes ({shown})")
+        return "; ".join(out)
+
+
+def _flat(d: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, dict):
+            out.update(_flat(v, key + "."))
+        else:
+            out[key] = v
+    return out
+
+
+def differs_from_preset(scenario) -> tuple[str, ...]:
+    """The settings (dotted keys) in which a scenario differs from its case's preset, leaving
+    out NOT_THE_FLOW; () when the case is no preset."""
+    try:
+        preset = load_scenario(scenario.case)
+    except InputError:
+        return ()
+    a, b = _flat(scenario.model_dump()), _flat(preset.model_dump())
+    return tuple(k for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)
+                 and not any(k == n or k.startswith(n + ".") for n in NOT_THE_FLOW))
+
+
+def ensemble_limit(case: str, amplitude_factor: float) -> ELimit | None:
+    """The documented floor of a case at an amplitude factor (ENSEMBLE_FLOORS), or None."""
+    for (c, f), (e, se, n, where) in ENSEMBLE_FLOORS.items():
+        if c == case and math.isclose(f, amplitude_factor, rel_tol=1e-9):
+            return ELimit(e, se, n, f"ensemble figure of {case} at amplitude factor "
+                          f"{amplitude_factor:g}, {where}")
+    return None
+
+
+def seeds_limit(tables) -> ELimit:
+    """The floor measured on two or more DEM runs that differ only in their fill seed."""
+    sc = seed_scatter(tables)
+    return ELimit(sc.mean, sc.stderr, len(tables), f"measured on the study's {len(tables)} "
+                  f"DEM seeds: mean E over the {len(sc.pairs)} ordered pairs")
+
+
+def verdict(e: float, limit: float | None) -> tuple[str, str]:
+    """(words, css class) for a field difference E against the limit: within it, the fields
+    agree; above it, how many times the limit."""
+    if limit is None or not (isinstance(e, (int, float)) and math.isfinite(e)):
+        return "no limit known for this case: not judged", ""
+    if limit <= 0:
+        return "the seeds' E is 0 (identical runs): not judged", ""
+    r = e / limit
+    if r <= 1.0:
+        return f"{r:.2f} x the limit: within the DEM's own scatter", "ok"
+    return f"{r:.2f} x the limit: the flow differs", "bad"
+
+
+def study_seed_tables(data, dem_table) -> tuple[list, str | None]:
+    """The study's DEM cell tables: its dem run's, then those of DIR/dem-seeds/ (same case,
+    window and cell size; judge.run_folders), and a note when a seed there is unusable."""
+    folder = data.out / SEEDS_DIR
+    tables = [dem_table]
+    if not folder.is_dir():
+        return tables, None
+    dem = read_result(data.out / "dem")
+    for path in run_folders([folder]):
+        try:
+            r = read_result(path)
+        except InputError as exc:
+            return [dem_table], f"{SEEDS_DIR}: {exc.message}"
+        if (r.case, r.window, round(r.table.cell_size, 9)) != (
+                dem.case, dem.window, round(dem.table.cell_size, 9)):
+            return [dem_table], (f"{path}: another case, window or cell size than the "
+                                 "study's DEM: not used as a seed")
+        tables.append(r.table)
+    return tables, None
+
+
+def e_rows(data, tables: dict) -> dict:
+    """Per continuum method: E against the DEM (the study's, or the mean +- standard error
+    against every seed), the limit and the verdict; plus the limit and its source."""
+    seeds, note = study_seed_tables(data, tables["dem"])
+    if len(seeds) >= 2:
+        lim = seeds_limit(seeds)
+    else:
+        lim = ensemble_limit(data.scenario.case, float(data.scenario.motion.amplitude_factor))
+        if lim is not None:
+            lim = ELimit(lim.e_seed, lim.stderr, lim.seeds, lim.source,
+                         differs_from_preset(data.scenario))
+    rows = {}
+    for name in data.continuum_methods:
+        if len(seeds) >= 2:
+            d = difference_to_seeds(tables[name], seeds)
+            e, se = d.mean, d.stderr
+        else:
+            a = data.summary["methods"][name].get("against_dem") or {}
+            e, se = a.get("field_difference_E"), None
+        words, cls = verdict(e, lim.limit if lim else None)
+        if len(seeds) >= 2:
+            words += f" (E {e:.3f}" + (f" ± {se:.3f}" if se is not None else "") + (
+                f" against the {len(seeds)} seeds)")
+        rows[name] = {"E": e, "E_stderr": se, "words": words, "cls": cls}
+    return {"limit": lim, "rows": rows, "note": note, "seeds": len(seeds)}
