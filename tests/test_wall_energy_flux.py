@@ -170,11 +170,11 @@ def test_a_contact_moving_with_its_wall_feeds_nothing_and_the_landing_is_the_das
     wall = np.array([0.7, -0.4])
     v = np.array(wall) + np.zeros((2, 2))
     out = np.zeros((2, 4))
-    contact_terms(fn, ft, n, v - wall, m, l, 1e7, 0.2, out)
+    contact_terms(fn, ft, n, v - wall, m, l, 1e7, 0.2, 1e-4, out)
     assert np.all(out[:, 1:] == 0.0)          # same velocity as the wall: no slip, no landing
     out[:] = 0.0
     rel = np.array([[0.3, -0.5], [0.0, 0.0]])   # sliding at 0.3 m/s, landing at 0.5 m/s
-    contact_terms(fn, ft, n, rel, m, l, 1e7, 0.2, out)
+    contact_terms(fn, ft, n, rel, m, l, 1e7, 0.2, 1e-4, out)
     c = 2 * 0.2 * math.sqrt(0.2 * 1e7 * 0.01)
     assert out[0] == pytest.approx([0.01, 0.01 * 0.09, 0.3 * 0.3, c * 0.25], rel=1e-12)
     assert np.all(out[1, 1:] == 0.0)

@@ -24,8 +24,9 @@ fit.
 The vibrating wall's normal feed (Kumaran 1998, J. Fluid Mech. 364, 163; Warr, Huntley &
 Jacques 1995, Phys. Rev. E 52, 5583) emerges from the resolved wall motion: at each landing the
 material's normal velocity relative to the wall is stopped by the penalty contact (boundary.py),
-whose dashpot of damping c = 2 zeta sqrt(m k_n l) takes the power c v_n^2 from the mean motion;
-that inelastic jump's energy becomes fluctuation energy (the "landing" source).
+whose dashpot of damping c = 2 zeta sqrt(m k_n l) takes the power c v_n^2 from the mean motion
+while the material moves into the wall (v_n < 0), at most its normal kinetic energy m v_n^2 / 2
+a step; that inelastic jump's energy becomes fluctuation energy (the "landing" source).
 
 Per contact (a material point or a wall-layer cell touching a wall: normal force > 0) the
 kernel `contact_terms` gives its wall length l (m), l |u_slip|^2 (m^3/s^2), the friction power
@@ -103,10 +104,12 @@ def wall_cooling_coefficient(restitution, phi, length_m, h, prm):
 
 
 @nb.njit(cache=True)
-def contact_terms(fn, ft, normal, v_rel, mass, length, kn, zeta, out):
+def contact_terms(fn, ft, normal, v_rel, mass, length, kn, zeta, dt, out):
     """Adds per contact the sums `cell_wall_terms` needs to out (N, 4): wall length l (m),
     l |u_slip|^2 (m^3/s^2), the friction power |F_t u_slip| (W/m) and the landing power
-    c v_n^2 (W/m), c = 2 zeta sqrt(m k_n l); nothing where fn <= 0 (no contact).  fn, ft (N,)
+    c v_n^2 (W/m), c = 2 zeta sqrt(m k_n l), while the material still moves into the wall
+    (v_n < 0) and at most its normal kinetic energy m v_n^2 / 2 over the step dt (s): a landing
+    cannot turn more into T than the jump it stops; nothing where fn <= 0 (no contact).  fn, ft (N,)
     the wall's normal and tangential force (N/m), normal (N, 2) the wall's unit normal into the
     material, v_rel (N, 2) the velocity relative to the wall (m/s), mass (N,) kg/m, length (N,)
     contact lengths (m), kn (Pa/m), zeta (-)."""
@@ -121,7 +124,8 @@ def contact_terms(fn, ft, normal, v_rel, mass, length, kn, zeta, out):
         out[p, 0] += l
         out[p, 1] += l * vt * vt
         out[p, 2] += abs(ft[p] * vt)
-        out[p, 3] += 2.0 * zeta * math.sqrt(mass[p] * kn * l) * vn * vn
+        if vn < 0.0:
+            out[p, 3] += min(2.0 * zeta * math.sqrt(mass[p] * kn * l), 0.5 * mass[p] / dt) * vn * vn
 
 
 def normal_of_force(f, fn, ft) -> np.ndarray:

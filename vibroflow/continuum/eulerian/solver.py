@@ -312,7 +312,8 @@ def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
 def cell_wall_sums(system: EulerianSystem, state: EulerianState) -> np.ndarray:
     """The cells' wall contact terms (N, 4) of the last step (wall_energy_flux.contact_terms):
     the wall layer's contacts (the wall at rest on the mesh, its inward normal the mesh's,
-    contact length fill h as wall.wall_forces takes it) and the partitions'."""
+    contact length fill h as wall.wall_forces takes it; Johnson & Jackson's terms, no landing)
+    and the partitions'."""
     out = np.zeros((state.n, 4))
     w = system.wall
     if w is not None:
@@ -323,7 +324,11 @@ def cell_wall_sums(system: EulerianSystem, state: EulerianState) -> np.ndarray:
         part = np.zeros((c.size, 4))
         contact_terms(hist["fn"][c], hist["ft"][c], system.mesh.normal[c], state.v[c],
                       state.mass[c], fill * h, float(w.stiffness), float(w.damping_ratio),
-                      part)
+                      system.dt, part)
+        # no landing source: the wall layer's material is held by its closed faces, not by
+        # the dashpot, so its normal velocity is no approach and c v_n^2 no landing's jump (on
+        # tub47-quick it heats the side walls' cells without bound and blows the run up)
+        part[:, 3] = 0.0
         out[c] += part
     pf = system.partitions
     if pf is not None:

@@ -305,7 +305,7 @@ def point_wall_sums(system: MPMSystem, state: MPMState) -> np.ndarray:
         wv = np.asarray(b.at(state.t)[1], float) if isinstance(b, Plane) else np.zeros(2)
         contact_terms(h["fn"], h["ft"], normal_of_force(h["f"], h["fn"], h["ft"]),
                       state.v - wv, state.mass, np.sqrt(state.volume), float(b.stiffness),
-                      float(b.damping_ratio), out)
+                      float(b.damping_ratio), system.dt, out)
     return out
 
 
