@@ -26,7 +26,9 @@ Jacques 1995, Phys. Rev. E 52, 5583) emerges from the resolved wall motion: at e
 material's normal velocity relative to the wall is stopped by the penalty contact (boundary.py),
 whose dashpot of damping c = 2 zeta sqrt(m k_n l) takes the power c v_n^2 from the mean motion
 while the material moves into the wall (v_n < 0), at most its normal kinetic energy m v_n^2 / 2
-a step; that inelastic jump's energy becomes fluctuation energy (the "landing" source).
+a step; that inelastic jump's energy becomes fluctuation energy (the "landing" source; the
+material point method's: eulerian/solver.py's wall layer is held by closed faces, not by the
+dashpot, and takes none).
 
 Per contact (a material point or a wall-layer cell touching a wall: normal force > 0) the
 kernel `contact_terms` gives its wall length l (m), l |u_slip|^2 (m^3/s^2), the friction power
