@@ -25,9 +25,9 @@ from vibroflow.continuum.temperature_step import (TemperatureGrid, edge_heating_
                                                   step_temperature_walls)
 from vibroflow.continuum.timestep import stable_dt
 from vibroflow.tub.motion import TubMotion
-from vibroflow.continuum.wall_energy_flux import (WallEnergy, cell_wall_terms,
+from vibroflow.continuum.wall_energy_flux import (FRICTION_RULE, WallEnergy, cell_wall_terms,
                                                   collision_loss_W_m2, contact_terms,
-                                                  johnson_jackson_flux_W_m2,
+                                                  johnson_jackson_flux_W_m2, partition_terms,
                                                   slip_production_W_m2,
                                                   wall_cooling_coefficient)
 
@@ -50,6 +50,34 @@ def test_zero_slip_and_zero_temperature_give_zero_flux():
     assert slip_production_W_m2(1.0, 0.5, 0.01, 0.0, PRM) == 0.0
     assert johnson_jackson_flux_W_m2(1.0, 0.5, 0.5, 0.0, 0.3, PRM) == 0.0
     assert johnson_jackson_flux_W_m2(1.0, 1.0, 0.5, 0.04, 0.0, PRM) == 0.0   # elastic wall
+
+
+def test_the_friction_rule_is_the_wall_frictions_work_capped_at_a_diffuse_wall():
+    # one cell of side 1 cm touching a wall over 1 cm, slip 0.2 m/s, phi 0.5, T 0.01: J&J with
+    # phi' = 1 gives 2 x 125.76 = 251.5 W/m^2, 2.515 W/m over the contact; a friction power
+    # below it (1 W/m) is the production, one above it (5 W/m) is capped there
+    h = 0.01
+    phi = np.full((1, 1), 0.5)
+    T = np.full((1, 1), 0.01)
+    for friction_W_m, expected in ((1.0, 1.0), (5.0, 2.5152837)):
+        sums = np.array([[[h, h * 0.04, friction_W_m, 0.0]]])
+        heat, cool = cell_wall_terms(phi, T, sums, h, 1.0, FRICTION_RULE, True, 1e-3, PRM)
+        assert heat[0, 0] * h * h == pytest.approx(expected, rel=1e-6)
+        assert cool[0, 0] == 0.0                  # an elastic wall loses nothing
+
+
+def test_the_partitions_touch_a_pressed_column_over_both_faces():
+    # a column of cross-section 1e-4 m^2 between partitions 0.05 m apart touches them over
+    # 2 x 1e-4 / 0.05 = 4e-3 m per metre; its friction power is the partition friction's
+    # 2 mu_p p V / L_y |v| = 2 x 0.3 x 1000 x 1e-4 / 0.05 x 0.5 = 0.6 W/m (below the step's
+    # cap m |v| / dt); a column without pressure does not touch them
+    v = np.array([[0.3, -0.4], [0.3, -0.4]])
+    stress = np.array([[-1000.0, -1000.0, 0.0, -1000.0], [100.0, 100.0, 0.0, 100.0]])
+    out = np.zeros((2, 4))
+    partition_terms(v, np.array([0.5, 0.5]), np.array([1e-4, 1e-4]), stress, 0.3, 0.05, 1e-4,
+                    out)
+    assert out[0] == pytest.approx([4e-3, 4e-3 * 0.25, 0.6, 0.0], rel=1e-12)
+    assert np.all(out[1] == 0.0)
 
 
 def _kappa_gamma_factors(phi):

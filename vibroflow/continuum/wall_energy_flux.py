@@ -197,13 +197,3 @@ def wall_energy_of(scenario) -> WallEnergy:
         pair = find_contact(scenario, ball, ball)
     return WallEnergy(restitution=float(pair.restitution))
 
-
-def power_W_m(sums, T, phi, h, walls: WallEnergy, prm) -> float:
-    """The walls' net power into the cells (W per metre of thickness) at T: the heating minus
-    the wall loss a_w (3/2) rho_s phi T^(3/2), summed times h^2 (for the energy checks)."""
-    heat, cool = cell_wall_terms(np.asarray(phi, float), np.asarray(T, float),
-                                 np.asarray(sums, float), float(h), walls.restitution,
-                                 walls.specularity, walls.landing, 1e-3, prm)
-    T = np.asarray(T, float)
-    loss = cool * 1.5 * prm.density_kg_m3 * np.asarray(phi, float) * np.maximum(T, 0.0) ** 1.5
-    return float(np.sum(heat - loss) * h * h)
