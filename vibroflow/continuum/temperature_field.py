@@ -20,8 +20,10 @@ kinetic pressure, Lun's p_k = rho_s phi T (1 + 2 (1 + e) phi g0) at the material
 solid fraction phi = rho / rho_s, is added to the mean stress the grid sees where T > 0
 (not stored in the elastic-plastic stress, as the bed viscosity's stress is not).
 
-The grid's edges are zero-flux (a periodic direction included) and no wall feeds energy in:
-the walls' flux is the next step (docs/decisions/granular-temperature-closures.md).
+The grid's edges are zero-flux (a periodic direction included).  The walls feed energy in
+through their contacts (wall_energy_flux.py: Johnson & Jackson's slip production and
+collision loss, and the landing's inelastic normal jump), each contact's terms summed over its
+cell (`point_step`, `cell_step`'s wall_sums) and the loss integrated with the dissipation.
 """
 from __future__ import annotations
 
@@ -33,20 +35,23 @@ import numpy as np
 from vibroflow.scenario.checks import find_contact
 
 from .kinetic_theory import KineticParameters, pressure_Pa
-from .temperature_step import TemperatureGrid, step_temperature
+from .temperature_step import TemperatureGrid, step_temperature_walls
+from .wall_energy_flux import WallEnergy, cell_wall_terms, wall_energy_of
 
 
 @dataclass(frozen=True)
 class TemperatureModel:
     """What a run's temperature needs (SI): the grains' kinetic parameters, the cells'
     side spacing_m (m) of the balance's grid, the initial temperature initial_T (m^2/s^2),
-    and coupled: the kinetic pressure in the stress (default True; False carries T as a
-    passive field, the balance alone, for its checks)."""
+    coupled: the kinetic pressure in the stress (default True; False carries T as a passive
+    field, the balance alone, for its checks), and walls: the walls' feed of fluctuation
+    energy (wall_energy_flux.WallEnergy; None: the walls are adiabatic)."""
 
     params: KineticParameters
     spacing_m: float
     initial_T: float = 0.0
     coupled: bool = True
+    walls: WallEnergy | None = None
 
     @property
     def grid(self) -> TemperatureGrid:
@@ -64,12 +69,12 @@ def kinetic_parameters(scenario) -> KineticParameters:
 
 
 def temperature_model(scenario, options, spacing_m: float) -> TemperatureModel | None:
-    """The run's TemperatureModel on cells of side spacing_m (m), or None when the option
-    is off."""
+    """The run's TemperatureModel on cells of side spacing_m (m), its walls feeding energy
+    in (wall_energy_flux.wall_energy_of), or None when the option is off."""
     if not options.temperature:
         return None
     return TemperatureModel(kinetic_parameters(scenario), float(spacing_m),
-                            float(options.initial_temperature))
+                            float(options.initial_temperature), walls=wall_energy_of(scenario))
 
 
 @nb.njit(cache=True)
@@ -107,14 +112,23 @@ def production_W_m3(stress, L, gamma_dot, p_kin, out):
         out[p] = tau * gamma_dot[p] - p_kin[p] * tr
 
 
-def cell_step(T, phi, production, dt: float, model: TemperatureModel):
+def cell_step(T, phi, production, dt: float, model: TemperatureModel, wall_sums=None):
     """The cells' T (m^2/s^2, (nx, nz)) after dt (s) of the balance for their solid fraction
-    phi (-) and production (W/m^3), no wall heating (temperature_step.step_temperature)."""
+    phi (-) and production (W/m^3) (temperature_step.step_temperature_walls), with the walls'
+    heating and loss from the cells' contact sums wall_sums (nx, nz, 4)
+    (wall_energy_flux.contact_terms) when the model has walls and they are given."""
+    T = np.ascontiguousarray(T, dtype=float)
+    phi = np.ascontiguousarray(phi, dtype=float)
     zero = np.zeros_like(T)
-    return step_temperature(np.ascontiguousarray(T, dtype=float),
-                            np.ascontiguousarray(phi, dtype=float),
-                            np.ascontiguousarray(production, dtype=float), zero, zero,
-                            float(dt), model.grid, model.params)
+    heat, cool = zero, zero
+    w = model.walls
+    if w is not None and wall_sums is not None:
+        heat, cool = cell_wall_terms(phi, T, np.ascontiguousarray(wall_sums, dtype=float),
+                                     float(model.spacing_m), float(w.restitution),
+                                     float(w.specularity), bool(w.landing),
+                                     model.grid.void_solid_fraction, model.params)
+    return step_temperature_walls(T, phi, np.ascontiguousarray(production, dtype=float), heat,
+                                  cool, zero, float(dt), model.grid, model.params)
 
 
 def point_cells(x, x0: float, z0: float, h: float, shape) -> np.ndarray:
@@ -126,12 +140,14 @@ def point_cells(x, x0: float, z0: float, h: float, shape) -> np.ndarray:
     return i * nz + k
 
 
-def point_step(T, x, mass, volume, power, origin, shape, dt: float, model: TemperatureModel):
+def point_step(T, x, mass, volume, power, origin, shape, dt: float, model: TemperatureModel,
+               wall_sums=None):
     """The points' T (N,) m^2/s^2, in place, after dt (s) of the balance made on the cells of
     `shape` (nx, nz) from origin (x0, z0) (m) (module docstring): T binned mass-weighted,
     production power (N,) W/m^3 volume-weighted, phi = sum m / (rho_s h^2), each point's T
     scaled by its cell's T_new / T_old (set to T_new where T_old = 0).  mass kg/m, volume
-    m^2."""
+    m^2; wall_sums (N, 4) the points' wall contact terms (wall_energy_flux.contact_terms),
+    summed over each cell, or None."""
     h = model.spacing_m
     n = shape[0] * shape[1]
     idx = point_cells(x, origin[0], origin[1], h, shape)
@@ -140,8 +156,12 @@ def point_step(T, x, mass, volume, power, origin, shape, dt: float, model: Tempe
     P = np.bincount(idx, power * volume, n) / (h * h)
     T_old = np.divide(E, M, out=np.zeros(n), where=M > 0)
     phi = M / (model.params.density_kg_m3 * h * h)
+    sums = None
+    if wall_sums is not None:
+        sums = np.stack([np.bincount(idx, wall_sums[:, j], n) for j in range(4)], axis=1)
+        sums = sums.reshape(tuple(shape) + (4,))
     T_new = cell_step(T_old.reshape(shape), phi.reshape(shape), P.reshape(shape), dt,
-                      model).ravel()
+                      model, sums).ravel()
     warm = T_old[idx] > 0
     T[warm] *= T_new[idx[warm]] / T_old[idx[warm]]
     T[~warm] = T_new[idx[~warm]]

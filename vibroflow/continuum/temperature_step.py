@@ -28,7 +28,9 @@ void_solid_fraction is empty: it holds no fluctuation energy, exchanges none, an
 as it is.  The grid's edges are zero-flux; a given flux through them, or through a wall inside
 the grid (the walls' Johnson & Jackson flux), enters as the heating field S_wall (W/m^3): the
 flux (W/m^2) times the wall's length in the cell over the cell's area (`edge_heating_W_m3` for
-the grid's edges).  Energies are per metre of thickness (plane strain).
+the grid's edges), and the walls' stiff collision loss as a cooling coefficient added to the
+dissipation's (`step_temperature_walls`, wall_energy_flux.py).  Energies are per metre of
+thickness (plane strain).
 """
 from __future__ import annotations
 
@@ -135,6 +137,16 @@ def step_temperature(T, phi, production_W_m3, wall_heating_W_m3, shear_rate, dt,
     heating (W/m^3) and shear rate (1/s, for Jenkins' correlation length only), all (nx, nz)
     and frozen over the step; grid a TemperatureGrid, prm a KineticParameters.  Returns a new
     array."""
+    return step_temperature_walls(T, phi, production_W_m3, wall_heating_W_m3,
+                                  np.zeros(T.shape), shear_rate, dt, grid, prm)
+
+
+@nb.njit(cache=True)
+def step_temperature_walls(T, phi, production_W_m3, wall_heating_W_m3, wall_cooling, shear_rate,
+                           dt, grid, prm):
+    """`step_temperature` with the walls' collision loss dT/dt = -a_w T^(3/2) (wall_cooling =
+    a_w, (nx, nz), wall_energy_flux.wall_cooling_coefficient) added to the dissipation's
+    coefficient, so that it is integrated exactly with it (step 1 and 4)."""
     nx, nz = T.shape
     h = grid.spacing_m
     out = T.copy()
@@ -144,7 +156,8 @@ def step_temperature(T, phi, production_W_m3, wall_heating_W_m3, shear_rate, dt,
         for k in range(nz):
             if phi[i, k] >= grid.void_solid_fraction:
                 capacity[i, k] = 1.5 * prm.density_kg_m3 * phi[i, k]
-                a[i, k] = cooling_coefficient(phi[i, k], out[i, k], shear_rate[i, k], prm)
+                a[i, k] = (cooling_coefficient(phi[i, k], out[i, k], shear_rate[i, k], prm)
+                           + wall_cooling[i, k])
     kappa = np.zeros((nx, nz))
     for i in range(nx):
         for k in range(nz):

@@ -56,6 +56,7 @@ from ..grid_update import LabFrame
 from ..mpm.solver import ContinuumBlowUp
 from ..state import ContinuumState
 from ..temperature_field import advance_with_temperature, cell_step
+from ..wall_energy_flux import contact_terms, partition_terms
 from . import fused
 from .advection import remap_serial, remap_work
 from .lagrangian_step import fill_limit, material_fraction
@@ -298,11 +299,42 @@ def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
         frac = np.minimum(1.0, np.divide(state.mass, state.density * h * h,
                                          out=np.zeros(state.n), where=full))
         phi = state.mass / (model.params.density_kg_m3 * h * h)
+        sums = None if model.walls is None else cell_wall_sums(system, state)
         state.temperature[:] = cell_step(T[0], phi.reshape(shape), (power * frac).reshape(shape),
-                                         system.dt, model).ravel()
+                                         system.dt, model,
+                                         None if sums is None else sums.reshape(shape + (4,))
+                                         ).ravel()
 
     advance_with_temperature(state, n, model,
                              lambda k, p_kin: _advance(system, state, k, p_kin), balance, start)
+
+
+def cell_wall_sums(system: EulerianSystem, state: EulerianState) -> np.ndarray:
+    """The cells' wall contact terms (N, 4) of the last step (wall_energy_flux.contact_terms):
+    the wall layer's contacts (the wall at rest on the mesh, its inward normal the mesh's,
+    contact length fill h as wall.wall_forces takes it; Johnson & Jackson's terms, no landing)
+    and the partitions'."""
+    out = np.zeros((state.n, 4))
+    w = system.wall
+    if w is not None:
+        c = system.wall_cells
+        hist = state.wall
+        h = system.mesh.h
+        fill = np.minimum(1.0, state.mass[c] / (system.material.critical_density * h * h))
+        part = np.zeros((c.size, 4))
+        contact_terms(hist["fn"][c], hist["ft"][c], system.mesh.normal[c], state.v[c],
+                      state.mass[c], fill * h, float(w.stiffness), float(w.damping_ratio),
+                      system.dt, part)
+        # no landing source: the wall layer's material is held by its closed faces, not by
+        # the dashpot, so its normal velocity is no approach and c v_n^2 no landing's jump (on
+        # tub47-quick it heats the side walls' cells without bound and blows the run up)
+        part[:, 3] = 0.0
+        out[c] += part
+    pf = system.partitions
+    if pf is not None:
+        partition_terms(state.v, state.mass, state.volume, state.stress, float(pf.friction),
+                        float(pf.length), system.dt, out)
+    return out
 
 
 def _advance(system: EulerianSystem, state: EulerianState, n: int, p_kin) -> None:

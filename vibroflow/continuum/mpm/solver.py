@@ -28,7 +28,7 @@ import numpy as np
 from vibroflow.errors import InputError
 
 from .. import fused, steps
-from ..boundary import BOUNDARY_DTYPE
+from ..boundary import BOUNDARY_DTYPE, PartitionFriction, Plane
 from ..constitutive import ContinuumMaterial
 from ..grid import Grid
 from ..grid_step import chunk_bounds, grid_spec, grid_work
@@ -36,6 +36,7 @@ from ..grid_update import LabFrame
 from ..state import ContinuumState
 from ..temperature_field import advance_with_temperature, point_step
 from ..timestep import stable_dt
+from ..wall_energy_flux import contact_terms, normal_of_force, partition_terms
 
 
 class ContinuumBlowUp(RuntimeError):
@@ -280,11 +281,32 @@ def advance(system: MPMSystem, state: MPMState, n: int) -> None:
     g = system.grid
 
     def balance(power, _start):
+        sums = None if system.temperature.walls is None else point_wall_sums(system, state)
         point_step(state.temperature, state.x, state.mass, state.volume, power, (g.x0, g.z0),
-                   (g.nx, g.nz), system.dt, system.temperature)
+                   (g.nx, g.nz), system.dt, system.temperature, sums)
 
     advance_with_temperature(state, n, system.temperature,
                              lambda k, p_kin: _advance(system, state, k, p_kin), balance)
+
+
+def point_wall_sums(system: MPMSystem, state: MPMState) -> np.ndarray:
+    """The points' wall contact terms (N, 4) of the last step (wall_energy_flux.contact_terms):
+    each penalty wall's contacts, the velocity relative to that wall (a UWall is at rest in
+    the solver's frame, a Plane moves), contact length sqrt(V_p), and the partitions'."""
+    out = np.zeros((state.n, 4))
+    for b in system.boundaries:
+        if isinstance(b, PartitionFriction):
+            partition_terms(state.v, state.mass, state.volume, state.stress, b.friction,
+                            b.length, system.dt, out)
+            continue
+        if not b.has_history:
+            continue
+        h = state.history[b.slot]
+        wv = np.asarray(b.at(state.t)[1], float) if isinstance(b, Plane) else np.zeros(2)
+        contact_terms(h["fn"], h["ft"], normal_of_force(h["f"], h["fn"], h["ft"]),
+                      state.v - wv, state.mass, np.sqrt(state.volume), float(b.stiffness),
+                      float(b.damping_ratio), system.dt, out)
+    return out
 
 
 def _advance(system: MPMSystem, state: MPMState, n: int, p_kin) -> None:
