@@ -8,6 +8,7 @@ default, the lab's on request):
     tub.vtu               the tub's surface (tub frame), or in the lab frame
     tub_<ball file>.vtu   the surface moved by the tub's motion at each frame's instant, and
     tub.pvd               their collection
+    vtk.json              the options they were written with (io.vtk_frame.VtkOptions)
 
 Each ball file holds the velocity relative to the tub and the lab velocity (m/s), the angular
 velocities (rad/s), the radius (m) and the id; its field data the time (s) and the tub's pose.
@@ -19,7 +20,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from ..io.vtk_frame import VtkOptions, extra_frame_steps, pose_at
+from ..io.vtk_frame import VtkOptions, extra_frame_steps, pose_at, write_vtk_record
 from ..tub.geometry import geometry_of
 from ..tub.motion import TubMotion
 
@@ -101,9 +102,8 @@ def write_vtk(h5path: Path, out_dir: Path, scenario, options: VtkOptions,
                                     time_s=t)
                 surfaces.append((t, f"tub_{name}"))
     V.write_pvd(vdir / "snapshots.pvd", sorted(entries))
-    if geometry is None:
-        return
-    if lab:
+    if geometry is not None and lab:
         V.write_pvd(vdir / "tub.pvd", sorted(surfaces))
-    else:
+    elif geometry is not None:
         V.write_tub_surface(vdir / "tub.vtu", geometry)
+    write_vtk_record(vdir, options)

@@ -18,12 +18,15 @@ This module needs no VTK writer, so that the options can be checked before a run
 """
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from vibroflow.errors import InputError
+from vibroflow.io.atomic import write_json_atomic
 from vibroflow.tub.motion import TubMotion, lab_to_tub_np, pose_np, relative_velocity_tub_axes_np
 
 FRAMES = ("tub", "lab")
@@ -121,7 +124,7 @@ def ball_frame(frame: str, pos_lab, vel_lab, omg_lab, pose6, pivot) -> tuple[np.
     velocities m/s, angular velocities rad/s, (N, 3)) at the tub's pose `pose6` (pose_at), in
     `frame` (module docstring): velocity_relative_m_per_s, velocity_lab_m_per_s,
     angular_velocity_rad_per_s, angular_velocity_relative_rad_per_s."""
-    X, Z, th, Xd, Zd, thd = (float(a) for a in pose6)
+    X, Z, th, Xd, Zd, thd = (float(a) for a in pose6[:6])
     pivot = (float(pivot[0]), float(pivot[1]))
     rel = relative_velocity_tub_axes_np(pos_lab, vel_lab, X, Z, th, Xd, Zd, thd, pivot)
     omg_rel = np.array(omg_lab, dtype=float, copy=True)
@@ -157,7 +160,7 @@ def relative_to_frame(frame: str, pos_tub, vel_rel, pose6, pivot) -> tuple[np.nd
     """Positions (N, 3) m and velocity arrays of material given in the tub frame (positions,
     velocity relative to the tub in tub axes, m/s): the continuum's points.  The lab velocity
     adds the tub's rigid velocity at the point, (Xdot - thetadot r_z, Zdot + thetadot r_x)."""
-    X, Z, th, Xd, Zd, thd = (float(a) for a in pose6)
+    X, Z, th, Xd, Zd, thd = (float(a) for a in pose6[:6])
     pos_tub = np.asarray(pos_tub, dtype=float)
     vel_rel = np.asarray(vel_rel, dtype=float)
     pos_lab = tub_to_lab_points(pos_tub, pose6, pivot)
@@ -170,3 +173,22 @@ def relative_to_frame(frame: str, pos_tub, vel_rel, pose6, pivot) -> tuple[np.nd
                          "velocity_lab_m_per_s": _rotate(vel_lab, -th)}
     return pos_lab, {"velocity_relative_m_per_s": _rotate(vel_rel, th),
                      "velocity_lab_m_per_s": vel_lab}
+
+
+#: the record of the options a folder's ParaView files were written with, beside them
+RECORD_NAME = "vtk.json"
+
+
+def write_vtk_record(vtk_dir: Path, options: VtkOptions) -> None:
+    """Record, last, the options the ParaView files of vtk_dir were written with."""
+    write_json_atomic(Path(vtk_dir) / RECORD_NAME, options.record())
+
+
+def has_vtk(vtk_dir: Path, options: VtkOptions | None) -> bool:
+    """True when no ParaView output is asked for, or vtk_dir holds the files of `options`."""
+    if options is None:
+        return True
+    try:
+        return json.loads((Path(vtk_dir) / RECORD_NAME).read_text()) == options.record()
+    except (OSError, ValueError):
+        return False
