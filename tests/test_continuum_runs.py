@@ -187,12 +187,13 @@ def test_continuum_run_is_reproducible(tmp_path):
 
 #: per formulation: the scenario's overrides (4 cycles averaged in 2 batches, ~50 ms of
 #: vibration; three cycles, the last two averaged in 2 batches), the options, the ParaView files
-#: compared besides bulk_velocity.csv
+#: compared besides bulk_velocity.csv (tub frame, lab frame)
 RESUMES = {
     "lagrangian": (["run.duration=0.05", "run.average_last=0.043", "run.batches=2"], {},
                    ("vtk/grid.pvd", "vtk/points.pvd", "vtk/grid_00010.vtr",
-                    "vtk/points_00012.vtu")),
-    "eulerian": (THREE_CYCLES, {"dx": 0.015}, ()),
+                    "vtk/points_00012.vtu"), "tub"),
+    "eulerian": (THREE_CYCLES, {"dx": 0.015}, ("vtk/grid.pvd", "vtk/tub.pvd",
+                                               "vtk/grid_00010.vts", "vtk/tub_00012.vtu"), "lab"),
 }
 
 
@@ -205,10 +206,11 @@ def test_continuum_resume_gives_the_uninterrupted_numbers_bit_for_bit(method, tm
     from vibroflow.continuum.files import CHECKPOINT_NAME
     from vibroflow.continuum.formulation import formulation
     from vibroflow.continuum.tub_run import run_continuum
+    from vibroflow.io.vtk_frame import VtkOptions
     from vibroflow.scenario.io import load_scenario
 
-    over, kw, vtk_files = RESUMES[method]
-    vtk = bool(vtk_files)
+    over, kw, vtk_files, frame = RESUMES[method]
+    vtk = VtkOptions(frame=frame)
     opt = formulation(method).options(**kw) if kw else None
     s = load_scenario("tub47-quick", over)
     full = run_continuum(s, tmp_path / "full", method, options=opt, vtk=vtk)
