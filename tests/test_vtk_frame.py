@@ -13,8 +13,8 @@ import pytest
 from tests.cli_helpers import one_line_error
 from tests.vtk_reader import read_pvd, read_vtk
 from vibroflow.errors import InputError
-from vibroflow.io.vtk_frame import (VtkOptions, cli_vtk_options, extra_frame_steps,
-                                    relative_to_frame)
+from vibroflow.io.vtk_frame import (FIELD_UNITS, VtkOptions, cli_vtk_options,
+                                    extra_frame_steps, relative_to_frame)
 
 #: tub-frame centres (x, y, z) m of three balls held by the tub
 HELD = np.array([[0.0, 0.005, 0.01], [-0.1, 0.01, 0.12], [0.12, 0.015, 0.2]])
@@ -97,6 +97,7 @@ def test_balls_held_by_the_tub(tmp_path, frame):
         d = read_vtk(vdir / name)
         pd, pts = d["PointData"], d["Points"]["points"]
         assert d["FieldData"]["time_s"][0] == tt
+        assert set(pd) == set(FIELD_UNITS)
         assert np.abs(pd["velocity_relative_m_per_s"]).max() < 1e-6
         assert np.abs(pd["angular_velocity_relative_rad_per_s"]).max() < 1e-6
         assert np.allclose(pd["radius_m"], 0.003175)

@@ -146,8 +146,8 @@ def load_checkpoint(path) -> tuple[SimpleNamespace, dict[str, np.ndarray], dict]
 def run_fingerprint(scenario, calibration: Calibration | None, options: ContinuumOptions,
                     vtk) -> str:
     """A hash of everything that fixes a run's numbers (the scenario but for
-    run.checkpoint_every, the calibration, the options, vtk: io.vtk_frame.VtkOptions or None): a checkpoint resumes only the run
-    that wrote it (with its formulation, `check_resumable`)."""
+    run.checkpoint_every, the calibration, the options, vtk: io.vtk_frame.VtkOptions or None):
+    a checkpoint resumes only the run that wrote it (with its formulation, `check_resumable`)."""
     s = scenario.model_dump(mode="json")
     s.get("run", {}).pop("checkpoint_every", None)
     cal = calibration.to_toml_dict() if calibration is not None else None

@@ -6,8 +6,9 @@ into place with os.replace), so a reader never sees half a file.  Coordinates ar
 velocities in m/s, angular velocities in rad/s, and every array's name carries its unit
 (vibroflow.io.vtk_frame.FIELD_UNITS).  The balls and the tub's surface are written in one frame,
 the tub's (tub47.md "Frames": x across, y along the tub, z up, origin at the lowest point of the
-inner surface) or the lab's (vibroflow.io.vtk_frame).  In ParaView, show the balls with the "Point Gaussian"
-representation (radius array "radius_m") or a Glyph filter with sphere glyphs scaled by "radius_m".
+inner surface) or the lab's (vibroflow.io.vtk_frame).  In ParaView, show the balls with the
+"Point Gaussian" representation (radius array "radius_m") or a Glyph filter with sphere glyphs
+scaled by "radius_m".
 """
 from __future__ import annotations
 
