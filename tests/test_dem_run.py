@@ -319,3 +319,21 @@ def test_summary_reports_the_settling_and_the_vibration_apart(tmp_path):
     assert settle + vib == pytest.approx(s["wall_time_s"], rel=1e-12)
     assert s["particle_steps_per_s"] == pytest.approx(s["n_particles"] * s["steps"] / vib,
                                                       rel=1e-12)
+
+
+@pytest.mark.slow
+def test_vtk_frames_change_no_number(tmp_path):
+    """A run with ParaView frames before the window (which stop the stepping at their steps)
+    writes the same dem.h5 and bulk_velocity.csv, bit for bit, as the run without them."""
+    env = _env(tmp_path)
+    outs = []
+    for k, extra in enumerate(([], ["--vtk", "--vtk-frame", "lab", "--vtk-every", "0.0071",
+                                    "--vtk-from", "0.0013"])):
+        out = tmp_path / f"r{k}"
+        r = _cli("dem", "tub47-quick", "--out", str(out), *extra, *_sets(SMALL), env=env)
+        assert r.returncode == 0, r.stderr
+        outs.append(out)
+    assert len(list((outs[1] / "vtk").glob("early_*.vtu"))) == 5  # 1.3, 8.4, ... 29.7 ms
+    _same_h5(outs[0] / "dem.h5", outs[1] / "dem.h5")
+    assert (outs[0] / "bulk_velocity.csv").read_bytes() == \
+        (outs[1] / "bulk_velocity.csv").read_bytes()
