@@ -74,9 +74,9 @@ def main(argv=None) -> int:
 
         write_points = mpm_formulation._write_points_vtu
 
-        def spy(path, state, rate, length, solid_density):
+        def spy(vtk, j, t, pose6, state, *rest):
             diag.append((state.phase.copy(), state.density.copy(), state.pressure().copy()))
-            return write_points(path, state, rate, length, solid_density)
+            return write_points(vtk, j, t, pose6, state, *rest)
 
         mpm_formulation._write_points_vtu = spy
     t0 = time.perf_counter()

@@ -33,6 +33,34 @@ CALIBRATION = ("[rheology]\nmu_s = 0.35\nmu_2 = 0.60\nI_0 = 0.3\nphi_max = 0.61\
 # ----------------------------------------------------------------------------------------------
 # the command
 
+def _check_lab_grid(vdir, scenario, dx):
+    """The lab-frame grid files: taken back to the tub frame by the hand-written motion
+    (tests/test_vtk_frame.hand_motion) the nodes lie on a lattice of spacing dx, and the lab
+    velocity minus R(theta) (the velocity relative to the tub) is the tub's rigid velocity."""
+    from tests.test_vtk_frame import hand_motion
+    from tests.vtk_reader import read_pvd, read_vtk
+
+    m = scenario.motion
+    entries = read_pvd(vdir / "grid.pvd")
+    assert len(entries) == 8 and all(f.endswith(".vts") for _, f in entries)
+    assert [f for _, f in read_pvd(vdir / "tub.pvd")] == [f"tub_{f[5:10]}.vtu" for _, f in entries]
+    t, name = entries[3]
+    d = read_vtk(vdir / name)
+    assert d["kind"] == "StructuredGrid" and d["FieldData"]["time_s"][0] == t
+    X, Z, th, Xd, Zd, thd = hand_motion(m, t)
+    c, s = np.cos(th), np.sin(th)
+    p = d["Points"]["points"]
+    rx, rz = p[:, 0] - X - m.pivot[0], p[:, 2] - Z - m.pivot[1]
+    for q in (m.pivot[0] + c * rx + s * rz, m.pivot[1] - s * rx + c * rz):
+        k = (q - q.min()) / dx
+        assert np.abs(k - np.round(k)).max() < 1e-9 and np.ptp(k) > 10
+    pd = d["PointData"]
+    u, v = pd["velocity_relative_m_per_s"], pd["velocity_lab_m_per_s"]
+    assert np.abs(v[:, 0] - u[:, 0] - (Xd - thd * rz)).max() < 1e-12
+    assert np.abs(v[:, 2] - u[:, 2] - (Zd + thd * rx)).max() < 1e-12
+    assert {"solid_fraction", "density_kg_per_m3", "pressure_Pa", "shear_rate_per_s"} <= set(pd)
+
+
 @pytest.mark.parametrize("method", METHODS)
 def test_continuum_command_writes_dem_comparable_results(method, run_cli, tmp_path):
     """`vibroflow continuum --method METHOD --vtk` on a short tub47-quick: summary.json with the
@@ -55,7 +83,8 @@ def test_continuum_command_writes_dem_comparable_results(method, run_cli, tmp_pa
                 "run.average_last=0.1"]
         snapshots = 4 * 8
     else:
-        args = ["--dx", "0.015", *(a for s in THREE_CYCLES for a in ("--set", s))]
+        args = ["--dx", "0.015", "--vtk-frame", "lab",
+                *(a for s in THREE_CYCLES for a in ("--set", s))]
         snapshots = 16
     r = run_cli("continuum", "tub47-quick", "--method", method, "--out", out, "--vtk", *args)
     assert r.returncode == 0, r.stderr
@@ -76,11 +105,16 @@ def test_continuum_command_writes_dem_comparable_results(method, run_cli, tmp_pa
     # the bed's solid fraction where it is dense is the continuum's, about phi_c = 0.6
     dense = table.solid_fraction[table.z < 0.1]
     assert 0.5 < np.median(dense) < 0.7
-    # ParaView: the grid fields at the 8 samples of the last cycle, as rectilinear grids in a
-    # collection, and the tub
-    assert len(list((out / "vtk").glob("grid_*.vtr"))) == 8
-    assert (out / "vtk" / "grid.pvd").read_text().count("grid_0") == 8
-    assert (out / "vtk" / "tub.vtu").is_file()
+    # ParaView: the grid fields at the 8 samples of the last cycle in a collection, and the
+    # tub: in the tub frame rectilinear grids and one surface (Lagrangian run), in the lab
+    # frame (Eulerian run) structured grids turned with the tub and a surface at each sample
+    vdir = out / "vtk"
+    assert (vdir / "grid.pvd").read_text().count("grid_0") == 8
+    if method == "lagrangian":
+        assert len(list(vdir.glob("grid_*.vtr"))) == 8
+        assert (vdir / "tub.vtu").is_file()
+    else:
+        _check_lab_grid(vdir, load_scenario("tub47-quick", THREE_CYCLES), 0.015)
     assert not (out / "checkpoint.npz").exists()
     if method == "lagrangian":
         assert (cont["material"]["mu_s"], cont["material"]["bulk_modulus"]) == (0.35, 4.0e6)
@@ -153,12 +187,13 @@ def test_continuum_run_is_reproducible(tmp_path):
 
 #: per formulation: the scenario's overrides (4 cycles averaged in 2 batches, ~50 ms of
 #: vibration; three cycles, the last two averaged in 2 batches), the options, the ParaView files
-#: compared besides bulk_velocity.csv
+#: compared besides bulk_velocity.csv (tub frame, lab frame)
 RESUMES = {
     "lagrangian": (["run.duration=0.05", "run.average_last=0.043", "run.batches=2"], {},
                    ("vtk/grid.pvd", "vtk/points.pvd", "vtk/grid_00010.vtr",
-                    "vtk/points_00012.vtu")),
-    "eulerian": (THREE_CYCLES, {"dx": 0.015}, ()),
+                    "vtk/points_00012.vtu"), "tub"),
+    "eulerian": (THREE_CYCLES, {"dx": 0.015}, ("vtk/grid.pvd", "vtk/tub.pvd",
+                                               "vtk/grid_00010.vts", "vtk/tub_00012.vtu"), "lab"),
 }
 
 
@@ -171,10 +206,11 @@ def test_continuum_resume_gives_the_uninterrupted_numbers_bit_for_bit(method, tm
     from vibroflow.continuum.files import CHECKPOINT_NAME
     from vibroflow.continuum.formulation import formulation
     from vibroflow.continuum.tub_run import run_continuum
+    from vibroflow.io.vtk_frame import VtkOptions
     from vibroflow.scenario.io import load_scenario
 
-    over, kw, vtk_files = RESUMES[method]
-    vtk = bool(vtk_files)
+    over, kw, vtk_files, frame = RESUMES[method]
+    vtk = VtkOptions(frame=frame)
     opt = formulation(method).options(**kw) if kw else None
     s = load_scenario("tub47-quick", over)
     full = run_continuum(s, tmp_path / "full", method, options=opt, vtk=vtk)

@@ -18,6 +18,10 @@ import h5py
 import numpy as np
 import pytest
 
+from tests.test_vtk_frame import hand_motion
+from tests.vtk_reader import read_pvd, read_vtk
+from vibroflow.scenario.io import load_scenario
+
 SMALL = ["fill.count=300", "fill.settle_time=0.05", "fill.max_settle_time=0.05",
          "run.duration=0.12", "run.average_last=0.09"]
 
@@ -135,10 +139,13 @@ def test_same_numbers_on_one_thread_and_on_two(tmp_path):
 
 def test_periodic_length_and_vtk_output(tmp_path):
     """A periodic length instead of partitions: no ball lost, none against a partition; and the
-    ParaView files."""
+    ParaView files in the tub frame, with frames every 0.01 s from 0.005 s before the window
+    (which starts at 0.03 s): each ball where dem.h5 has it, moved into the tub frame by the
+    hand-written motion, its lab velocity minus its velocity relative to the tub the tub's own
+    velocity there."""
     out = tmp_path / "periodic"
-    r = _cli("dem", "tub47-quick", "--out", str(out), "--vtk",
-             *_sets(SMALL + ["tub.periodic=true"]), env=_env(tmp_path))
+    r = _cli("dem", "tub47-quick", "--out", str(out), "--vtk", "--vtk-every", "0.01",
+             "--vtk-from", "0.005", *_sets(SMALL + ["tub.periodic=true"]), env=_env(tmp_path))
     assert r.returncode == 0, r.stderr
     s = json.loads((out / "summary.json").read_text())
     assert s["balls_lost"] == 0
@@ -150,7 +157,27 @@ def test_periodic_length_and_vtk_output(tmp_path):
     vtk = out / "vtk"
     assert (vtk / "snapshots.pvd").exists() and (vtk / "tub.vtu").exists()
     assert len(list(vtk.glob("snapshot_*.vtu"))) == 32
-    assert "<Collection>" in (vtk / "snapshots.pvd").read_text()
+    entries = read_pvd(vtk / "snapshots.pvd")
+    assert [f for _, f in entries[:3]] == [f"early_{k:05d}.vtu" for k in range(3)]
+    assert [t for t, _ in entries[:3]] == pytest.approx([0.005, 0.015, 0.025], abs=1e-12)
+    assert len(entries) == 35 and all(a[0] < b[0] for a, b in zip(entries, entries[1:]))
+    with h5py.File(out / "dem.h5") as f:
+        t, lab = f["snapshots/time"][5], f["snapshots/position"][5].astype(float)
+    m = load_scenario("tub47-quick", []).motion
+    X, Z, th, Xd, Zd, thd = hand_motion(m, t)
+    d = read_vtk(vtk / "snapshot_00005.vtu")
+    c, s_ = np.cos(th), np.sin(th)
+    rx, rz = lab[:, 0] - X - m.pivot[0], lab[:, 2] - Z - m.pivot[1]
+    q = d["Points"]["points"]
+    assert np.abs(q[:, 0] - (m.pivot[0] + c * rx + s_ * rz)).max() < 1e-12
+    assert np.abs(q[:, 2] - (m.pivot[1] - s_ * rx + c * rz)).max() < 1e-12
+    # the tub's velocity at q in tub axes: R(-theta) (X', Z') + theta' (-(q_z - P_z), q_x - P_x)
+    pd = d["PointData"]
+    drag = pd["velocity_lab_m_per_s"] - pd["velocity_relative_m_per_s"]
+    assert np.abs(drag[:, 0] - (c * Xd + s_ * Zd - thd * (q[:, 2] - m.pivot[1]))).max() < 1e-6
+    assert np.abs(drag[:, 2] - (-s_ * Xd + c * Zd + thd * (q[:, 0] - m.pivot[0]))).max() < 1e-6
+    assert np.abs(drag[:, 1]).max() < 1e-7
+    assert read_vtk(vtk / "early_00001.vtu")["FieldData"]["time_s"][0] == pytest.approx(0.015)
 
 
 def test_blow_up_names_balls_and_cause(tmp_path):
@@ -292,3 +319,21 @@ def test_summary_reports_the_settling_and_the_vibration_apart(tmp_path):
     assert settle + vib == pytest.approx(s["wall_time_s"], rel=1e-12)
     assert s["particle_steps_per_s"] == pytest.approx(s["n_particles"] * s["steps"] / vib,
                                                       rel=1e-12)
+
+
+@pytest.mark.slow
+def test_vtk_frames_change_no_number(tmp_path):
+    """A run with ParaView frames before the window (which stop the stepping at their steps)
+    writes the same dem.h5 and bulk_velocity.csv, bit for bit, as the run without them."""
+    env = _env(tmp_path)
+    outs = []
+    for k, extra in enumerate(([], ["--vtk", "--vtk-frame", "lab", "--vtk-every", "0.0071",
+                                    "--vtk-from", "0.0013"])):
+        out = tmp_path / f"r{k}"
+        r = _cli("dem", "tub47-quick", "--out", str(out), *extra, *_sets(SMALL), env=env)
+        assert r.returncode == 0, r.stderr
+        outs.append(out)
+    assert len(list((outs[1] / "vtk").glob("early_*.vtu"))) == 5  # 1.3, 8.4, ... 29.7 ms
+    _same_h5(outs[0] / "dem.h5", outs[1] / "dem.h5")
+    assert (outs[0] / "bulk_velocity.csv").read_bytes() == \
+        (outs[1] / "bulk_velocity.csv").read_bytes()

@@ -231,3 +231,44 @@ def test_time_left_names_the_stages_it_cannot_estimate():
     assert _time_left(rest, kept, est, 0.5) == "time left ~ 45 s + the b stage (not estimated yet)"
     assert _time_left(rest[:1], kept, est, 1.0) == "time left ~ 30 s"
     assert _about(None).startswith("no estimate yet") and _about(150.0) == "about 2.5 min"
+
+
+@pytest.mark.slow
+def test_run_vtk_writes_the_paraview_files_of_the_dem_and_every_method(run_cli, tmp_path,
+                                                                        monkeypatch):
+    """`vibroflow run --vtk --vtk-frame lab --vtk-every 0.02` on a tiny tub: the DEM's balls
+    (early frames, the window's snapshots) and each continuum's grid, with the tub's surface at
+    each instant, in the lab frame; a rerun with the same flags, or without --vtk, keeps every
+    stage; a rerun in the tub frame runs the stages again and writes the tub-frame files."""
+    from tests.vtk_reader import read_pvd
+
+    monkeypatch.setenv("VIBROFLOW_CACHE", str(tmp_path / "cache"))
+    out = tmp_path / "run"
+    sets = [a for s in [*SMALL, "run.duration=0.12", "run.average_last=0.09"]
+            for a in ("--set", s)]
+    flags = ["--vtk", "--vtk-frame", "lab", "--vtk-every", "0.02"]
+    r = run_cli("run", "tub47-quick", "--out", out, *flags, *sets, timeout=1200)
+    assert r.returncode == 0, r.stderr
+    dem = out / "dem" / "vtk"
+    entries = read_pvd(dem / "snapshots.pvd")
+    # early frames at 0, 0.02 s before the window at 0.03 s, then 4 cycles x 8 snapshots
+    assert [f for _, f in entries[:2]] == ["early_00000.vtu", "early_00001.vtu"]
+    assert len(entries) == 2 + 32
+    assert len(read_pvd(dem / "tub.pvd")) == len(entries)
+    assert json.loads((dem / "vtk.json").read_text()) == {"frame": "lab", "every": 0.02,
+                                                          "start": 0.0}
+    for name in METHODS:
+        vdir = out / name / "vtk"
+        assert len(read_pvd(vdir / "grid.pvd")) == 8, name
+        assert all(f.endswith(".vts") for _, f in read_pvd(vdir / "grid.pvd"))
+        assert len(read_pvd(vdir / "tub.pvd")) == 8
+    for again in (flags, []):
+        r = run_cli("run", "tub47-quick", "--out", out, *again, *sets, timeout=1200)
+        assert r.returncode == 0, r.stderr
+        assert r.stdout.count("up to date, kept") == len(STAGES), r.stdout
+    r = run_cli("run", "tub47-quick", "--out", out, "--vtk", *sets, timeout=1200)
+    assert r.returncode == 0, r.stderr
+    assert any(line.startswith("[1/") and "done in" in line for line in r.stdout.splitlines())
+    assert (dem / "tub.vtu").is_file() and not (dem / "tub.pvd").exists()
+    first = out / next(iter(METHODS)) / "vtk" / "grid.pvd"
+    assert all(f.endswith(".vtr") for _, f in read_pvd(first))

@@ -14,7 +14,8 @@ from vibroflow.errors import InputError
 
 from .apps import app
 from .failures import blown_up, input_errors
-from .options import OptionalScenarioArg, OutOption, ResumeOption, SetOption, load
+from .options import (OptionalScenarioArg, OutOption, ResumeOption, SetOption, VtkFrameOption,
+                      load)
 
 
 @app.command("continuum")
@@ -91,6 +92,7 @@ def continuum(
     vtk: Annotated[bool, typer.Option("--vtk", help="Also write ParaView files of the material "
                                                     "points and the grid fields over the last "
                                                     "cycle.")] = False,
+    vtk_frame: VtkFrameOption = None,
     resume: ResumeOption = False,
     stop_after_steps: Annotated[Optional[int], typer.Option(
         "--stop-after-steps", help="Write a checkpoint and stop after this many vibration "
@@ -100,6 +102,9 @@ def continuum(
     if method not in FORMULATIONS:
         *rest, last = FORMULATIONS
         raise InputError(f"--method = {method!r}: must be {', '.join(rest)} or {last}")
+    from vibroflow.io.vtk_frame import cli_vtk_options
+
+    paraview = cli_vtk_options(vtk, vtk_frame, None, None)
     if stop_after_steps is not None and stop_after_steps < 0:
         raise InputError(f"--stop-after-steps = {stop_after_steps}: must be >= 0")
     if scenario is not None and like is not None:
@@ -147,7 +152,7 @@ def continuum(
     material_for(s, cal, options)  # validates the parameters before --out is made
     try:
         summary = run_continuum(s, out, method, calibration=cal, options=options,
-                                progress=True, vtk=vtk, resume=resume,
+                                progress=True, vtk=paraview, resume=resume,
                                 stop_after_steps=stop_after_steps)
     except ContinuumBlowUp as exc:
         blown_up(exc)

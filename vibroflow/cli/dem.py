@@ -9,7 +9,8 @@ import typer
 from .after_run import warn_empty_probes
 from .apps import app
 from .failures import blown_up, input_errors
-from .options import OutOption, ResumeOption, ScenarioArg, SetOption, load
+from .options import (OutOption, ResumeOption, ScenarioArg, SetOption, VtkEveryOption,
+                      VtkFrameOption, VtkFromOption, load)
 
 
 @app.command("dem")
@@ -18,16 +19,23 @@ def dem(
     scenario: ScenarioArg,
     out: OutOption,
     set_: SetOption = None,
-    vtk: Annotated[bool, typer.Option("--vtk", help="Also write VTK snapshots.")] = False,
+    vtk: Annotated[bool, typer.Option("--vtk", help="Also write ParaView files of the balls "
+                                                    "and the tub in DIR/vtk/.")] = False,
+    vtk_frame: VtkFrameOption = None,
+    vtk_every: VtkEveryOption = None,
+    vtk_from: VtkFromOption = None,
     resume: ResumeOption = False,
 ) -> None:
     """Run the DEM of a scenario (fill, settle, vibrate, average) into --out."""
     s = load(scenario, set_)  # before anything is written: bad input leaves --out untouched
+    from vibroflow.io.vtk_frame import cli_vtk_options
+
+    paraview = cli_vtk_options(vtk, vtk_frame, vtk_every, vtk_from)
     from vibroflow.dem.run import run_dem
     from vibroflow.dem.simulate import BlowUp
 
     try:
-        summary = run_dem(s, out_dir=out, vtk=vtk, resume=resume, progress=True)
+        summary = run_dem(s, out_dir=out, vtk=paraview, resume=resume, progress=True)
     except BlowUp as exc:
         blown_up(exc)
     warn_empty_probes("the DEM's", summary)

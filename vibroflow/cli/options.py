@@ -44,3 +44,17 @@ def load(source: str | Path, overrides: list[str] | None):
     from vibroflow.scenario.io import load_scenario
 
     return load_scenario(source, overrides or [])
+
+
+VtkFrameOption = Annotated[Optional[str], typer.Option(
+    "--vtk-frame", metavar="tub|lab",
+    help="With --vtk: the frame of the ParaView files, tub (default: the tub stands still, the "
+         "roll shows) or lab (the tub moves by its vibration).")]
+VtkEveryOption = Annotated[Optional[float], typer.Option(
+    "--vtk-every", metavar="SECONDS",
+    help="With --vtk: also a frame of the balls every SECONDS of the vibration before the "
+         "averaging window (whose snapshots are always written).")]
+VtkFromOption = Annotated[Optional[float], typer.Option(
+    "--vtk-from", metavar="SECONDS",
+    help="With --vtk-every: the time of the first of those frames (s since the vibration "
+         "started; default 0).")]

@@ -10,7 +10,8 @@ import typer
 from .after_run import warn_empty_probes
 from .apps import app
 from .failures import blown_up, input_errors
-from .options import StudyScenarioArg, load, out_option, set_option, shear_cell_option
+from .options import (StudyScenarioArg, VtkEveryOption, VtkFrameOption, VtkFromOption, load,
+                      out_option, set_option, shear_cell_option)
 
 
 @app.command("run")
@@ -25,6 +26,12 @@ def run(
     shear_cell: Annotated[bool, shear_cell_option(
         "Calibrate mu(I) and the moduli in DEM shear-cell tests (minutes) instead of the "
         "tub's own cells.")] = False,
+    vtk: Annotated[bool, typer.Option("--vtk", help="Also write ParaView files: the DEM's balls "
+                                                    "and each continuum's fields, in DIR/dem/vtk "
+                                                    "and DIR/<method>/vtk.")] = False,
+    vtk_frame: VtkFrameOption = None,
+    vtk_every: VtkEveryOption = None,
+    vtk_from: VtkFromOption = None,
 ) -> None:
     """DEM, calibration, every continuum formulation and their comparison into --out; a rerun
     redoes only the stages whose inputs changed (DIR/summary.json, vibroflow.load(DIR))."""
@@ -33,6 +40,9 @@ def run(
 
     scenario_sets, method_sets = split_settings(set_)
     s = load(scenario, scenario_sets)  # before anything is written
+    from vibroflow.io.vtk_frame import cli_vtk_options
+
+    paraview = cli_vtk_options(vtk, vtk_frame, vtk_every, vtk_from)
     check_study_dir(out)
     from vibroflow.continuum.mpm.solver import ContinuumBlowUp
     from vibroflow.dem.simulate import BlowUp
@@ -41,7 +51,7 @@ def run(
 
     try:
         summary = run_study(s, out, method_sets, shear_cell=shear_cell, progress=True,
-                            echo=typer.echo, extra_stages=[report_stage()])
+                            echo=typer.echo, extra_stages=[report_stage()], vtk=paraview)
     except (BlowUp, ContinuumBlowUp) as exc:
         blown_up(exc)
     for name, m in summary["methods"].items():

@@ -144,15 +144,16 @@ def load_checkpoint(path) -> tuple[SimpleNamespace, dict[str, np.ndarray], dict]
 
 
 def run_fingerprint(scenario, calibration: Calibration | None, options: ContinuumOptions,
-                    vtk: bool) -> str:
+                    vtk) -> str:
     """A hash of everything that fixes a run's numbers (the scenario but for
-    run.checkpoint_every, the calibration, the options, vtk): a checkpoint resumes only the run
-    that wrote it (with its formulation, `check_resumable`)."""
+    run.checkpoint_every, the calibration, the options, vtk: io.vtk_frame.VtkOptions or None):
+    a checkpoint resumes only the run that wrote it (with its formulation, `check_resumable`)."""
     s = scenario.model_dump(mode="json")
     s.get("run", {}).pop("checkpoint_every", None)
     cal = calibration.to_toml_dict() if calibration is not None else None
     text = json.dumps({"scenario": s, "calibration": cal,
-                       "options": options_record(options), "vtk": bool(vtk)},
+                       "options": options_record(options), "vtk": bool(vtk),
+                       **({"vtk_options": vtk.record()} if vtk else {})},
                       sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()
 

@@ -1,4 +1,4 @@
-"""Continuum fields on the background grid, and their ParaView files.
+"""Continuum fields on the background grid (their ParaView files: continuum.paraview).
 
 At an instant the points are scattered to the grid nodes with the solver's quadratic B-spline
 weights w_ip (stencil.py):
@@ -8,18 +8,11 @@ weights w_ip (stencil.py):
 * mass-weighted averages of the points' velocity (m/s, relative to the tub in tub axes: the
   solver's velocity), pressure p = -tr(sigma)/3 (Pa) and shear rate sqrt(2 D':D') (1/s):
   a_i = sum_p w_ip m_p a_p / sum_p w_ip m_p, zero at nodes with no mass.
-
-`write_grid_vtr` writes them as a ParaView rectilinear grid (.vtr) in the tub frame (x across,
-y = the slice's middle, z up), one node thick along y; each file is written to a temporary name
-and moved into place, so a reader never sees half a file.
 """
 from __future__ import annotations
 
 import numba as nb
 import numpy as np
-from pyevtk.hl import gridToVTK
-
-from vibroflow.io.vtk import atomic_vtk
 
 from .grid import Grid
 from .stencil import bspline_weights
@@ -67,18 +60,3 @@ def grid_fields(grid: Grid, x, v, mass, pressure, rate, solid_density: float) ->
     return {"density": density, "solid_fraction": density / solid_density,
             "velocity": gv * inv[:, :, None], "pressure": gp * inv, "shear_rate": gr * inv}
 
-
-def write_grid_vtr(path, grid: Grid, fields: dict, y: float = 0.0) -> str:
-    """Write grid_fields(...) as a ParaView rectilinear grid (.vtr) at y (m); returns the path.
-    Point data: velocity (3-vector, y component 0), solid_fraction, density, pressure,
-    shear_rate."""
-    def c(a):  # (nx, nz) -> contiguous (nx, 1, nz)
-        return np.ascontiguousarray(np.asarray(a, dtype=np.float64)[:, None, :])
-
-    vel = fields["velocity"]
-    data = {"velocity": (c(vel[:, :, 0]), c(np.zeros(vel.shape[:2])), c(vel[:, :, 1]))}
-    for name in ("solid_fraction", "density", "pressure", "shear_rate"):
-        data[name] = c(fields[name])
-    return atomic_vtk(path, lambda base: gridToVTK(base, grid.node_x(), np.array([y]),
-                                                   grid.node_z(), pointData=data),
-                      suffix=".vtr")

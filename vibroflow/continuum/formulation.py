@@ -125,8 +125,9 @@ class Formulation(ABC):
         return {}
 
     @abstractmethod
-    def sampler(self, scenario, system, state, out: Path, vtk: bool) -> Sampler:
-        """What a run's samples record (Sampler); with vtk, its ParaView files go to out/vtk."""
+    def sampler(self, scenario, system, state, out: Path, vtk) -> Sampler:
+        """What a run's samples record (Sampler); with vtk (io.vtk_frame.VtkOptions, or None),
+        its ParaView files go to out/vtk (continuum.paraview)."""
 
     @abstractmethod
     def continuum_block(self, system, state, bed_height: float) -> dict:

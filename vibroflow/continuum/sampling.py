@@ -93,7 +93,7 @@ class Samples:
         self.rate_all = np.full(n_samples, np.nan)
         self.rate_wall = np.full(n_samples, np.nan)
         self.rate_probe = np.full((n_samples, n_probes), np.nan)
-        self.vtk: dict[str, list] = {"points": [], "grid": []}  # (t s, file name)
+        self.vtk: dict[str, list] = {"points": [], "grid": [], "tub": []}  # (t s, file name)
 
     def contact_arrays(self) -> dict[str, np.ndarray]:
         return {k: (np.concatenate(v) if v else np.zeros((0, *shape), dtype))
@@ -134,7 +134,7 @@ class Samples:
         s.rate_all[:], s.rate_wall[:], s.rate_probe[:] = (a["rate_all"], a["rate_wall"],
                                                           a["rate_probe"])
         s.contacts = {k: [a["contact_" + k]] for k in cls.CONTACTS}
-        for kind in s.vtk:
+        for kind in [k for k in s.vtk if f"vtk_{k}_t" in a]:
             s.vtk[kind] = [(float(t), str(name)) for t, name in
                            zip(a[f"vtk_{kind}_t"], a[f"vtk_{kind}_name"])]
         return s

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -47,6 +48,7 @@ from vibroflow.errors import InputError
 from vibroflow.io.atomic import write_json_atomic
 from vibroflow.io.calibration_file import Calibration
 from vibroflow.io.folder_lock import folder_lock
+from vibroflow.io.vtk_frame import vtk_options, write_vtk_record
 from vibroflow.measure.stats import batches_of_whole_cycles
 from vibroflow.measure.summary import json_safe, tub_summary
 from vibroflow.progress import RunProgress
@@ -129,7 +131,7 @@ def _finished(out: Path, scenario, method: str) -> dict | None:
 
 def run_continuum(scenario, out_dir, method: str = "lagrangian",
                   calibration: Calibration | None = None, options=None, progress: bool = False,
-                  vtk: bool = False, resume: bool = False, stop_after_steps: int | None = None,
+                  vtk=None, resume: bool = False, stop_after_steps: int | None = None,
                   keep_samples: list | None = None) -> dict | None:
     """Run the continuum formulation `method` ("lagrangian", "eulerian":
     continuum.formulation.FORMULATIONS) of a tub scenario into out_dir (module docstring);
@@ -137,12 +139,11 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
     and shear_rate.csv), or None when stopped by stop_after_steps.  options: the
     formulation's (Formulation.options; default its defaults).
 
-    vtk: also write ParaView files in out_dir/vtk at the samples of the last vibration cycle:
-    the grid fields of fields.py (velocity relative to the tub, solid fraction, density,
-    pressure, shear rate on the background grid; grid_NNNNN.vtr, grid.pvd), the material
-    points of the material point method (tub frame, velocity relative to the tub, pressure,
-    shear rate, solid fraction, state; points_NNNNN.vtu, points.pvd) and the tub's surface
-    (tub.vtu).
+    vtk (io.vtk_frame.VtkOptions; True: the tub frame; None: none): also write ParaView files
+    in out_dir/vtk at the samples of the last vibration cycle, in the frame it names
+    (continuum.paraview): the grid fields of fields.py (velocity relative to the tub and lab
+    velocity, solid fraction, density, pressure, shear rate on the background grid; grid.pvd),
+    the material points of the material point method (points.pvd) and the tub's surface.
 
     Checkpoints: every run.checkpoint_every wall seconds of the vibration the whole state and
     what has been sampled go to out_dir/checkpoint.npz (checkpoint.py, atomic); resume=True
@@ -158,6 +159,7 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
     (benchmarks/wall_layer.py).
     """
     form = formulation(method)
+    vtk = vtk_options(vtk)
     if scenario.tub is None or scenario.fill is None:
         raise InputError("scenario: the continuum needs a tub-mode scenario (with [tub] and "
                          "[fill]), not explicit particles")
@@ -204,6 +206,7 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
                 for name in (SUMMARY_NAME, BULK_CSV_NAME, CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME,
                              TEMPERATURE_CSV_NAME):
                     (out / name).unlink(missing_ok=True)
+                shutil.rmtree(out / VTK_DIR, ignore_errors=True)  # another run's frames
                 with interrupted_while_settling():
                     state, h = settle(form, scenario, material, calibration, options, prog)
                 state.t = 0.0
@@ -249,10 +252,11 @@ def _results(form: Formulation, scenario, out: Path, calibration, options, vtk, 
     n = sampler.n_points
     n_steps = state.step
     if vtk:
-        from vibroflow.io.vtk import write_pvd  # noqa: PLC0415  (only with vtk: meshio)
+        from vibroflow.io.vtk import write_pvd  # noqa: PLC0415  (only with vtk: pyevtk)
 
         for kind in sampler.vtk_kinds:
             write_pvd(out / VTK_DIR / f"{kind}.pvd", samples.vtk[kind])
+        write_vtk_record(out / VTK_DIR, vtk)
     radius = sampler.radius()
     source = samples_source(scenario, samples, times, radius)
     # the DEM's top-level keys (vibroflow.dem.run), with the points or cells as its particles

@@ -3,7 +3,7 @@ write results, summarise.  The numerics live in step.py / simulate.py; this file
 when things happen and where they are written, with its helpers: fill.settled_bed (the bed),
 sampling.py (what is sampled when), checkpoint.py (checkpoints and what --resume finds),
 fingerprint.py (the scenario's identity), interrupts.py (Ctrl-C, fault injection) and
-summary.py (summary.json, VTK).
+summary.py (summary.json) and paraview.py (DIR/vtk/).
 
 Timeline of a tub run (tub47.md, "Procedure"), t counted from the start of the vibration:
     [0, duration - average_last)      vibrate
@@ -43,6 +43,7 @@ from ..errors import Interrupted
 from ..interrupts import deferred_sigint
 from ..io.atomic import write_json_atomic
 from ..io.folder_lock import folder_lock
+from ..io.vtk_frame import VtkOptions, vtk_options
 from ..progress import RunProgress
 from ..run_clock import RunClock
 from .checkpoint import (CHECKPOINT_NAME, SUMMARY_NAME, finished_summary, resume_checkpoint,
@@ -51,10 +52,11 @@ from .fill import settled_bed
 from .fingerprint import scenario_fingerprint, scenario_record, scenario_toml
 from .interrupts import fault_sigint_after_steps
 from .output import ResultWriter, fault_kill_at
+from .paraview import VTK_DIR, EarlyFrames, write_vtk
 from .sampling import impact_rows, sample_steps, write_snapshot
 from .simulate import (BlowUp, DEMState, DEMSystem, init_state, make_system, run_steps,
                        take_max_overlaps)
-from .summary import run_summary, write_vtk
+from .summary import run_summary
 
 SMALL_RUN = 1500  # below this many balls one thread is faster than two (thread wake-ups)
 
@@ -62,10 +64,13 @@ SMALL_RUN = 1500  # below this many balls one thread is faster than two (thread 
 _PREVIOUS = (CHECKPOINT_NAME, SUMMARY_NAME, "bulk_velocity.csv", "dem.h5", "dem.h5.partial")
 
 
-def run_dem(scenario, out_dir: Path, vtk: bool = False, resume: bool = False,
-            progress: bool = True, nchunk: int | None = None) -> dict:
+def run_dem(scenario, out_dir: Path, vtk: VtkOptions | bool | None = None,
+            resume: bool = False, progress: bool = True, nchunk: int | None = None) -> dict:
     """Run the scenario's DEM and write DIR/dem.h5, DIR/summary.json (and bulk_velocity.csv in
     tub mode).  Returns the summary.
+
+    vtk: ParaView files in DIR/vtk/ (dem.paraview), in the frame it names
+    (io.vtk_frame.VtkOptions; True: the tub frame, the window's snapshots; None: none).
 
     DIR is locked (io.folder_lock) while the run writes it: a second run on it is an
     InputError naming the holder.  resume=True goes on from DIR/checkpoint.h5 bit for bit, or
@@ -78,6 +83,7 @@ def run_dem(scenario, out_dir: Path, vtk: bool = False, resume: bool = False,
     VIBROFLOW_FAULT_SIGINT_AFTER_STEPS=N (a SIGINT to itself once N vibration steps are done),
     VIBROFLOW_FAULT_SIGINT_SETTLING=1 (a SIGINT after the first settling chunk)."""
     out_dir = Path(out_dir)
+    vtk = vtk_options(vtk)
     with folder_lock(out_dir, "vibroflow dem"):
         system = make_system(scenario, nchunk)
         n_balls = len(scenario.particles) if scenario.explicit else scenario.fill.count
@@ -92,7 +98,7 @@ def run_dem(scenario, out_dir: Path, vtk: bool = False, resume: bool = False,
             numba.set_num_threads(threads_before)
 
 
-def _run(scenario, out_dir: Path, system: DEMSystem, vtk: bool, resume: bool,
+def _run(scenario, out_dir: Path, system: DEMSystem, vtk: VtkOptions | None, resume: bool,
          prog: RunProgress, clock: RunClock) -> dict:
     dt = system.dt
     ckpt = out_dir / CHECKPOINT_NAME
@@ -133,6 +139,7 @@ def _run(scenario, out_dir: Path, system: DEMSystem, vtk: bool, resume: bool,
         # the run it belongs to
         for name in _PREVIOUS:
             (out_dir / name).unlink(missing_ok=True)
+        shutil.rmtree(out_dir / VTK_DIR, ignore_errors=True)  # its frames were of that run
         attrs = {"case": scenario.case, "n_particles": state.n, "dt": dt,
                  "frequency": scenario.motion.frequency,
                  "scenario_toml": scenario_toml(scenario), "source": "vibroflow",
@@ -204,6 +211,7 @@ def _vibrate(scenario, out_dir, system, state, writer, prog, settle_info, clock:
         samples, t0, t1 = sample_steps(scenario, dt)
         window = (t0, t1)
     window_start = int(round(window[0] / dt))
+    early = EarlyFrames(scenario, vtk, dt, window[0], out_dir)
     ckpt = out_dir / CHECKPOINT_NAME
     done_snapshots = writer.rows("snapshots/time")
     vstep = state.step - state.time_origin_step
@@ -222,7 +230,7 @@ def _vibrate(scenario, out_dir, system, state, writer, prog, settle_info, clock:
     with deferred_sigint() as sigint:
         _vibration_loop(state, system, writer, prog, run, samples, done_snapshots, total,
                         window_start, explicit, f, stage_steps0, n, last_ckpt, on_impacts,
-                        checkpoint, sigint, sigint_after, out_dir)
+                        checkpoint, sigint, sigint_after, out_dir, early)
     if sigint["raised"] and ckpt.exists():
         # a SIGINT while the last rows were written: the final state's checkpoint is on disk
         raise Interrupted(f"interrupted at t = {state.time(dt):.4f} s; checkpoint written; "
@@ -237,7 +245,7 @@ def _vibrate(scenario, out_dir, system, state, writer, prog, settle_info, clock:
     summary = run_summary(scenario, system, state, path, out_dir, wall, settle_info, explicit)
     summary["compile_time_s"] = clock.compile_s()
     if vtk:
-        write_vtk(path, out_dir, scenario)
+        write_vtk(path, out_dir, scenario, vtk, early)
     write_json_atomic(out_dir / SUMMARY_NAME, summary)
     fault_kill_at("summary")
     ckpt.unlink(missing_ok=True)
@@ -248,13 +256,21 @@ def _vibrate(scenario, out_dir, system, state, writer, prog, settle_info, clock:
 
 def _vibration_loop(state, system, writer, prog, run, samples, done_snapshots, total,
                     window_start, explicit, f, stage_steps0, n, last_ckpt, on_impacts,
-                    checkpoint, sigint, sigint_after, out_dir) -> None:
-    """Step to the end, writing the rows of each sample and series step before stepping on;
+                    checkpoint, sigint, sigint_after, out_dir, early: EarlyFrames) -> None:
+    """Step to the end, writing the rows of each sample and series step (and the ParaView
+    frame of each of early.steps, outside dem.h5) before stepping on;
     a checkpoint every run.checkpoint_every wall seconds and one of the final state (before
     its rows, as every checkpoint), and one at a SIGINT, which then raises Interrupted."""
     dt = system.dt
+    frames = early.steps
+    # the next early frame: a resumed run starts at its checkpoint's step, whose frame (if any)
+    # is written at the top of the loop as it was not yet (a checkpoint follows the stepping)
+    k = int(np.searchsorted(frames, state.step - state.time_origin_step))
     while True:
         vstep = state.step - state.time_origin_step
+        if k < frames.size and frames[k] == vstep:
+            early.write(k, state.time(dt), state.pos, state.vel, state.omg, state.radius)
+            k += 1
         if done_snapshots < len(samples) and samples[done_snapshots] == vstep:
             write_snapshot(writer, system, state, done_snapshots, f)
             done_snapshots += 1
@@ -268,6 +284,8 @@ def _vibration_loop(state, system, writer, prog, run, samples, done_snapshots, t
         nxt = min(total, (vstep // run.series_every + 1) * run.series_every)
         if done_snapshots < len(samples):
             nxt = min(nxt, int(samples[done_snapshots]))
+        if k < frames.size:
+            nxt = min(nxt, int(frames[k]))
         record = run.record_impacts and not explicit and vstep >= window_start
         if not explicit and vstep < window_start:
             nxt = min(nxt, window_start)

@@ -1,5 +1,5 @@
 """The summary of a DEM run (DIR/summary.json): the run's figures, its overlaps and, in tub mode,
-the measures of vibroflow.measure.summary (with bulk_velocity.csv); and its VTK output.
+the measures of vibroflow.measure.summary (with bulk_velocity.csv).
 """
 from __future__ import annotations
 
@@ -9,7 +9,6 @@ import h5py
 import numba
 
 from ..measure.summary import tub_summary
-from ..tub.geometry import geometry_of
 from .simulate import DEMState, DEMSystem
 
 
@@ -59,24 +58,3 @@ def run_summary(scenario, system: DEMSystem, state: DEMState, h5path: Path, out_
     summary.update(tub_summary(h5path, scenario, bulk_csv=out_dir / "bulk_velocity.csv"))
     return summary
 
-
-def write_vtk(h5path: Path, out_dir: Path, scenario) -> None:
-    """DIR/vtk/: a .vtu of the balls at each snapshot, their .pvd collection and the tub's
-    surface."""
-    from ..io import vtk as V  # pyevtk is loaded only when VTK output is asked for
-
-    vdir = out_dir / "vtk"
-    vdir.mkdir(exist_ok=True)
-    entries = []
-    with h5py.File(h5path, "r") as f:
-        radius = f["particles/radius"][()]
-        times = f["snapshots/time"][()]
-        for s in range(times.shape[0]):
-            name = f"snapshot_{s:05d}.vtu"
-            V.write_snapshot_vtu(vdir / name, f["snapshots/position"][s],
-                                 f["snapshots/velocity"][s],
-                                 f["snapshots/angular_velocity"][s], radius)
-            entries.append((float(times[s]), name))
-    V.write_pvd(vdir / "snapshots.pvd", entries)
-    if scenario.tub is not None:
-        V.write_tub_surface(vdir / "tub.vtu", geometry_of(scenario))

@@ -3,10 +3,12 @@ surface (.vtu quad mesh).
 
 Files are written atomically (vibroflow.io.atomic: a temporary name in the target folder, moved
 into place with os.replace), so a reader never sees half a file.  Coordinates are in m,
-velocities in m/s, angular velocities in rad/s; the frame is whatever the caller passes (the
-tub surface is in the tub frame, tub47.md "Frames": x across, y along the tub, z up, origin at
-the lowest point of the inner surface).  In ParaView, show the balls with the "Point Gaussian"
-representation (radius array "radius") or a Glyph filter with sphere glyphs scaled by "radius".
+velocities in m/s, angular velocities in rad/s, and every array's name carries its unit
+(vibroflow.io.vtk_frame.FIELD_UNITS).  The balls and the tub's surface are written in one frame,
+the tub's (tub47.md "Frames": x across, y along the tub, z up, origin at the lowest point of the
+inner surface) or the lab's (vibroflow.io.vtk_frame).  In ParaView, show the balls with the
+"Point Gaussian" representation (radius array "radius_m") or a Glyph filter with sphere glyphs
+scaled by "radius_m".
 """
 from __future__ import annotations
 
@@ -17,6 +19,7 @@ from pyevtk.hl import pointsToVTK, unstructuredGridToVTK
 from pyevtk.vtk import VtkGroup, VtkQuad
 
 from vibroflow.io.atomic import atomic_path
+from vibroflow.io.vtk_frame import ball_frame, tub_to_lab_points
 from vibroflow.tub.geometry import TubGeometry
 
 
@@ -38,30 +41,49 @@ def _c(a, dtype=np.float64):
     return np.ascontiguousarray(np.asarray(a), dtype=dtype)
 
 
-def write_snapshot_vtu(path, positions, velocities, angular_velocities, radius, ids=None,
-                       extra: dict | None = None) -> str:
-    """Write one snapshot of N balls as a .vtu point cloud; returns the file's path.
+def _field_data(field_data: dict | None) -> dict | None:
+    if not field_data:
+        return None
+    return {name: _c(np.atleast_1d(np.asarray(a, dtype=float))) for name, a in field_data.items()}
 
-    positions (N, 3) m, velocities (N, 3) m/s, angular_velocities (N, 3) rad/s, radius (N,) m,
-    ids (N,) int (default 0..N-1); extra: more point arrays name -> (N,) or (N, 3).
-    Point data: "velocity", "angular_velocity", "radius", "id" and the extras.
-    """
+
+def write_points_vtu(path, positions, point_data: dict, field_data: dict | None = None) -> str:
+    """Write N points (positions (N, 3) m) as a .vtu point cloud; returns the file's path.
+
+    point_data: name -> (N,) or (N, 3) array; field_data: name -> a number or a short array
+    (the snapshot's time, the tub's pose).  The names carry their SI units
+    (vibroflow.io.vtk_frame.FIELD_UNITS)."""
     p = np.asarray(positions, dtype=float)
-    v = np.asarray(velocities, dtype=float)
-    w = np.asarray(angular_velocities, dtype=float)
-    n = p.shape[0]
-    ids = np.arange(n) if ids is None else np.asarray(ids)
-    data = {
-        "velocity": (_c(v[:, 0]), _c(v[:, 1]), _c(v[:, 2])),
-        "angular_velocity": (_c(w[:, 0]), _c(w[:, 1]), _c(w[:, 2])),
-        "radius": _c(np.broadcast_to(np.asarray(radius, dtype=float), (n,))),
-        "id": _c(ids, np.int64),
-    }
-    for name, a in (extra or {}).items():
+    data = {}
+    for name, a in point_data.items():
         a = np.asarray(a)
-        data[name] = (tuple(_c(a[:, j]) for j in range(3)) if a.ndim == 2 else _c(a))
+        if a.ndim == 2:
+            data[name] = tuple(_c(a[:, j]) for j in range(3))
+        else:
+            data[name] = _c(a, np.int64 if a.dtype.kind in "iu" else np.float64)
+    fd = _field_data(field_data)
     return atomic_vtk(path, lambda base: pointsToVTK(base, _c(p[:, 0]), _c(p[:, 1]),
-                                                      _c(p[:, 2]), data=data))
+                                                      _c(p[:, 2]), data=data, fieldData=fd))
+
+
+def write_ball_frame(path, frame: str, pos_lab, vel_lab, omg_lab, radius, pose6, pivot,
+                     time_s: float, ids=None) -> str:
+    """Write one snapshot of N balls given in the lab (m, m/s, rad/s) as a .vtu in `frame`
+    ("tub" or "lab", vibroflow.io.vtk_frame.ball_frame) at the tub's pose `pose6`; point data
+    velocity_relative_m_per_s, velocity_lab_m_per_s, angular_velocity_rad_per_s,
+    angular_velocity_relative_rad_per_s, radius_m, id; field data time_s and the pose
+    (tub_X_m, tub_Z_m, tub_theta_rad)."""
+    pos, fields = ball_frame(frame, pos_lab, vel_lab, omg_lab, pose6, pivot)
+    n = pos.shape[0]
+    fields["radius_m"] = np.broadcast_to(np.asarray(radius, dtype=float), (n,))
+    fields["id"] = np.arange(n, dtype=np.int64) if ids is None else np.asarray(ids, np.int64)
+    return write_points_vtu(path, pos, fields, frame_field_data(time_s, pose6))
+
+
+def frame_field_data(time_s: float, pose6) -> dict:
+    """Field data of a frame: its time (s) and the tub's pose then (m, m, rad)."""
+    return {"time_s": float(time_s), "tub_X_m": float(pose6[0]), "tub_Z_m": float(pose6[1]),
+            "tub_theta_rad": float(pose6[2])}
 
 
 def write_pvd(path, entries) -> str:
@@ -100,13 +122,21 @@ def tub_surface_mesh(geometry: TubGeometry, n_profile: int = 200):
     return np.vstack(pts), np.vstack(quads).astype(np.int64), np.concatenate(part)
 
 
-def write_tub_surface(path, geometry: TubGeometry, n_profile: int = 200) -> str:
-    """Write the tub's U surface and partitions (tub frame, m) as a .vtu quad mesh with cell
-    data "part" (0 U wall, 1 partition y = 0, 2 partition y = L_y); returns the file's path."""
+def write_tub_surface(path, geometry: TubGeometry, n_profile: int = 200, pose6=None,
+                      pivot=(0.0, 0.0), time_s: float | None = None) -> str:
+    """Write the tub's U surface and partitions (m) as a .vtu quad mesh with cell data "part"
+    (0 U wall, 1 partition y = 0, 2 partition y = L_y); returns the file's path.  In the tub
+    frame unless pose6 (vibroflow.io.vtk_frame.pose_at) is given: then moved into the lab by
+    the tub's rigid motion at that pose (pivot: the motion's pivot (x, z) m), with field data
+    time_s and the pose."""
     pts, quads, part = tub_surface_mesh(geometry, n_profile)
+    fd = None
+    if pose6 is not None:
+        pts = tub_to_lab_points(pts, pose6, pivot)
+        fd = _field_data(frame_field_data(0.0 if time_s is None else time_s, pose6))
     conn = _c(quads.ravel(), np.int64)
     offsets = _c(np.arange(1, quads.shape[0] + 1) * 4, np.int64)
     types = np.full(quads.shape[0], VtkQuad.tid, dtype=np.uint8)
     return atomic_vtk(path, lambda base: unstructuredGridToVTK(
         base, _c(pts[:, 0]), _c(pts[:, 1]), _c(pts[:, 2]), connectivity=conn, offsets=offsets,
-        cell_types=types, cellData={"part": _c(part, np.int64)}))
+        cell_types=types, cellData={"part": _c(part, np.int64)}, fieldData=fd))

@@ -59,10 +59,10 @@ def _method(name: str):
         form = formulation(name)
 
         def run_method(scenario, out_dir: Path, calibration: Calibration | None, opts,
-                       progress: bool, resume: bool) -> dict:
+                       progress: bool, resume: bool, vtk=None) -> dict:
             material_for(scenario, calibration, opts)
             return run_continuum(scenario, out_dir, name, calibration=calibration,
-                                 options=opts, progress=progress, resume=resume)
+                                 options=opts, progress=progress, resume=resume, vtk=vtk)
 
         return ContinuumMethod(name=name, description=form.description,
                                options=ContinuumOptions, make=form.options, run=run_method)

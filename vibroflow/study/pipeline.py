@@ -20,6 +20,7 @@ from typing import Any
 from vibroflow import __version__
 from vibroflow.errors import CheckpointRefused, InputError, Interrupted
 from vibroflow.io.folder_lock import folder_lock
+from vibroflow.io.vtk_frame import VtkOptions
 from vibroflow.study.folder import KIND, STUDY_FILE, check_study_dir, read_json
 from vibroflow.study.methods import METHODS, method
 from vibroflow.study.results import read_summary
@@ -65,7 +66,7 @@ def _kept(study: Study, stage: Stage, h: str) -> dict | None:
     record = read_json(path, "stage record")
     if record.get("hash") != h:
         return None
-    if not all((study.out / p).exists() for p in stage.outputs):
+    if not all((study.out / p).exists() for p in stage.outputs) or not stage.ready(study):
         return None
     return record
 
@@ -155,13 +156,14 @@ def _time_left(rest: Sequence[Stage], kept: dict, estimates: dict, scale: float)
 def run_study(scenario, out: Path, settings: dict[str, dict[str, Any]] | None = None,
               shear_cell: bool = False, progress: bool = False,
               echo: Callable[[str], None] | None = print,
-              extra_stages: Sequence[Stage] = ()) -> dict:
+              extra_stages: Sequence[Stage] = (), vtk: VtkOptions | None = None) -> dict:
     """Run (or bring up to date) the study of `scenario` in `out`; returns the summary.
 
     settings: method name -> its options (`--set lagrangian.dx=0.004` gives
     {"lagrangian": {"dx": 0.004}}); echo: where the one line per stage goes (None: nowhere);
     extra_stages: stages after the comparison from the layers above the study (the report:
-    `vibroflow.report.stage.report_stage()`).
+    `vibroflow.report.stage.report_stage()`); vtk: the ParaView files of the DEM and of each
+    continuum (io.vtk_frame.VtkOptions; None: none); a stage kept without them runs again.
     """
     out = Path(out)
     check_study_dir(out)
@@ -175,17 +177,18 @@ def run_study(scenario, out: Path, settings: dict[str, dict[str, Any]] | None = 
                          "not explicit particles")
     with folder_lock(out, "vibroflow run", field="DIR"):
         check_study_dir(out)  # again under the lock: another command may have written it
-        return _run_study(scenario, out, methods, shear_cell, progress, echo, extra_stages)
+        return _run_study(scenario, out, methods, shear_cell, progress, echo, extra_stages, vtk)
 
 
 def _run_study(scenario, out: Path, methods: list, shear_cell: bool, progress: bool,
-               echo: Callable[[str], None] | None, extra_stages: Sequence[Stage]) -> dict:
+               echo: Callable[[str], None] | None, extra_stages: Sequence[Stage],
+               vtk: VtkOptions | None = None) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     if not (out / STUDY_FILE).exists():
         write_json_atomic(out / STUDY_FILE, {"kind": KIND, "vibroflow_version": __version__,
                                              "case": scenario.case})
     study = Study(out=out, scenario=scenario, methods=methods, shear_cell=shear_cell,
-                  progress=progress)
+                  progress=progress, vtk=vtk)
     stages = stages_of(study, extra_stages)
     hashes: dict[str, str] = {}
     for s in stages:  # a hash depends on the upstream hashes only, not on their results

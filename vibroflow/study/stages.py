@@ -26,6 +26,7 @@ from vibroflow.dem.run import run_dem
 from vibroflow.io.atomic import write_json_atomic
 from vibroflow.io.calibration_file import read_calibration
 from vibroflow.io.calibration_source import check_calibration_source
+from vibroflow.io.vtk_frame import VtkOptions, has_vtk
 from vibroflow.measure.bulk import read_csv
 from vibroflow.study.methods import ContinuumMethod
 
@@ -54,6 +55,8 @@ class Study:
     methods: list[tuple[ContinuumMethod, Any]]  # (method, its options)
     shear_cell: bool = False
     progress: bool = False
+    #: the ParaView files the DEM and the continuum stages write (None: none)
+    vtk: VtkOptions | None = None
     records: dict[str, dict] = dataclasses.field(default_factory=dict)
 
     def folder(self, name: str) -> Path:
@@ -70,6 +73,9 @@ class Stage:
     #: wall seconds the stage is expected to take (a light stage: about a second), None where
     #: there is no basis for a number
     estimate: Callable[[Study], float | None] = lambda study: 1.0
+    #: whether the stage's folder holds what this study asks beyond its inputs (the ParaView
+    #: files of study.vtk, which change no number and so no hash); False: it runs again
+    ready: Callable[[Study], bool] = lambda study: True
 
 
 # ----------------------------------------------------------------------------------------------
@@ -84,7 +90,7 @@ def _dem_cost(study: Study) -> float:
 
 def _run_dem(study: Study, resume: bool) -> dict:
     summary = run_dem(study.scenario, out_dir=study.folder(DEM), resume=resume,
-                      progress=study.progress)
+                      progress=study.progress, vtk=study.vtk)
     return {"summary": f"{DEM}/summary.json", "wall_time_s": summary["wall_time_s"]}
 
 
@@ -92,7 +98,7 @@ def dem_stage() -> Stage:
     return Stage(DEM, inputs=lambda st: {"scenario": scenario_inputs(st.scenario)},
                  run=_run_dem, outputs=(f"{DEM}/summary.json", f"{DEM}/bulk_velocity.csv",
                                         f"{DEM}/dem.h5"),
-                 estimate=_dem_cost)
+                 estimate=_dem_cost, ready=lambda st: has_vtk(st.folder(DEM) / "vtk", st.vtk))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -153,13 +159,14 @@ def continuum_stage(method: ContinuumMethod, options) -> Stage:
         if warning:
             sys.stderr.write(warning + "\n")
         summary = method.run(study.scenario, study.folder(method.name), cal, options,
-                             study.progress, resume)
+                             study.progress, resume, study.vtk)
         return {"summary": f"{method.name}/summary.json",
                 "wall_time_s": summary["wall_time_s"]}
 
     return Stage(method.name, inputs=inputs, run=run, upstream=(CALIBRATION,),
                  outputs=(f"{method.name}/summary.json", f"{method.name}/bulk_velocity.csv"),
-                 estimate=_continuum_cost)
+                 estimate=_continuum_cost,
+                 ready=lambda st: has_vtk(st.folder(method.name) / "vtk", st.vtk))
 
 
 def _continuum_cost(study: Study) -> float | None:

@@ -40,8 +40,7 @@ from vibroflow.tub.geometry import geometry_of
 
 from ..bed import bed_area, lithostatic
 from ..boundary import PartitionFriction
-from ..fields import grid_fields, write_grid_vtr
-from ..files import VTK_DIR
+from ..fields import grid_fields
 from ..formulation import Formulation, Sampler
 from ..material import boundary_friction
 from ..options import ContinuumOptions, default_dx
@@ -123,9 +122,9 @@ class CellSampler(Sampler):
     vtk_kinds = ("grid",)
 
     def __init__(self, scenario, system: EulerianSystem, state: EulerianState, out: Path,
-                 vtk: bool):
+                 vtk):
         self.scenario, self.system, self.state = scenario, system, state
-        self.out, self.vtk = out, vtk
+        self.out = out
         self.geo = geometry_of(scenario)
         mesh = system.mesh
         self.cells = cells = np.nonzero(mesh.inside)[0]
@@ -146,11 +145,12 @@ class CellSampler(Sampler):
         self.buf_p, self.buf_v = np.zeros((n, 3)), np.zeros((n, 3))
         self.far = np.array([0.0, 0.5 * self.geo.length, 1.0e3])  # outside every analysis cell
         self.dither = np.zeros(n)
+        self.vtk = None
         if vtk:
-            from vibroflow.io.vtk import write_tub_surface  # noqa: PLC0415  (only with vtk)
+            from ..paraview import ContinuumVtk  # noqa: PLC0415  (only with vtk: pyevtk)
 
-            (out / VTK_DIR).mkdir(exist_ok=True)
-            write_tub_surface(out / VTK_DIR / "tub.vtu", self.geo)
+            self.vtk = ContinuumVtk(scenario, out, vtk, self.pv, self.vtk_kinds)
+            self.vtk_kinds = self.vtk.kinds
 
     def record(self, j: int, samples) -> None:
         system, state, geo, mesh = self.system, self.state, self.geo, self.system.mesh
@@ -178,11 +178,10 @@ class CellSampler(Sampler):
                              hist["state"][tc], mesh.arc[tc], system.x[tc], geo.length)
         rate_all = shear_rate(state.L)
         if self.vtk and j >= S - run.phases_per_cycle:
-            name = f"grid_{j:05d}.vtr"
             fields = grid_fields(mesh.grid, system.x, state.v, state.mass,
                                  state.pressure(), rate_all, system.material.solid_density)
-            write_grid_vtr(self.out / VTK_DIR / name, mesh.grid, fields, 0.5 * geo.length)
-            samples.vtk["grid"].append((state.t, name))
+            self.vtk.grid(j, state.t, pose6, mesh.grid, fields, samples)
+            self.vtk.tub(j, state.t, pose6, samples)
         rate = rate_all[cells]
         held = state.mass[cells] >= 0.5 * self.full
         if held.any():
@@ -269,7 +268,7 @@ class FixedMesh(Formulation):
     def checkpoint_meta(self, state) -> dict:
         return {"mass0": state.mass0, "mass_error_max": state.mass_error_max}
 
-    def sampler(self, scenario, system, state, out: Path, vtk: bool) -> CellSampler:
+    def sampler(self, scenario, system, state, out: Path, vtk) -> CellSampler:
         return CellSampler(scenario, system, state, out, vtk)
 
     def continuum_block(self, system, state, bed_height: float) -> dict:

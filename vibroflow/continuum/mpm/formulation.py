@@ -9,7 +9,7 @@ sampled as a "ball" of the point's solid volume m_p L_y / rho_s at its centre, w
 position and velocity; its wall contacts are the points touching the U.  The wall's normal
 stiffness is constant: (K + 4G/3) / l0 with l0 the point spacing (the bed's elastic stiffness
 over one point), its damping ratio that of the scenario's ball-wall restitution.  With vtk,
-ParaView files of the points and of the grid fields (fields.py) over the last cycle.
+ParaView files of the points and of the grid fields over the last cycle (continuum.paraview).
 
 The column collapse: mpm/column.py's set-up.
 """
@@ -28,8 +28,7 @@ from vibroflow.tub.geometry import distance_to_wall_np, geometry_of, u_wall_near
 
 from ..bed import bed_area, bed_height, lithostatic
 from ..boundary import PartitionFriction, UWall
-from ..fields import grid_fields, write_grid_vtr
-from ..files import VTK_DIR
+from ..fields import grid_fields
 from ..formulation import Formulation, Sampler
 from ..grid import Grid
 from ..material import boundary_friction
@@ -82,19 +81,14 @@ def settled_bed(scenario, material, spacing: float):
     return x, volume, density, stress, h
 
 
-def _write_points_vtu(path: Path, state: MPMState, rate: np.ndarray, length: float,
-                      solid_density: float) -> str:
-    """The material points as a ParaView point cloud (tub frame, y = the slice's middle)."""
-    from vibroflow.io.vtk import write_snapshot_vtu  # noqa: PLC0415  (only with vtk: meshio)
-
-    n = state.n
-    pos = np.stack([state.x[:, 0], np.full(n, 0.5 * length), state.x[:, 1]], axis=1)
-    vel = np.stack([state.v[:, 0], np.zeros(n), state.v[:, 1]], axis=1)
-    side = np.sqrt(state.volume)
-    return write_snapshot_vtu(path, pos, vel, np.zeros((n, 3)), 0.5 * side,
-                              extra={"pressure": state.pressure(), "shear_rate": rate,
-                                     "solid_fraction": state.density / solid_density,
-                                     "state": state.phase.astype(np.float64)})
+def _write_points_vtu(vtk, j: int, t: float, pose6, state: MPMState, rate: np.ndarray,
+                      solid_density: float, samples) -> None:
+    """The material points as a ParaView point cloud (continuum.paraview, y = the slice's
+    middle), radius half the side of a point's square."""
+    vtk.points(j, t, pose6, state.x, state.v, 0.5 * np.sqrt(state.volume),
+               {"pressure_Pa": state.pressure(), "shear_rate_per_s": rate,
+                "solid_fraction": state.density / solid_density,
+                "state": state.phase.astype(np.float64)}, samples)
 
 
 class PointSampler(Sampler):
@@ -102,9 +96,9 @@ class PointSampler(Sampler):
 
     vtk_kinds = ("points", "grid")
 
-    def __init__(self, scenario, system: MPMSystem, state: MPMState, out: Path, vtk: bool):
+    def __init__(self, scenario, system: MPMSystem, state: MPMState, out: Path, vtk):
         self.scenario, self.system, self.state = scenario, system, state
-        self.out, self.vtk = out, vtk
+        self.out = out
         self.geo = geometry_of(scenario)
         self.n_points = n = state.n
         motion = system.frame.motion
@@ -114,11 +108,12 @@ class PointSampler(Sampler):
                             for pr in scenario.analysis.probes.values()]
         self.buf_p, self.buf_v = np.zeros((n, 3)), np.zeros((n, 3))
         self.arc, self.gap = np.zeros(n), np.zeros(n)
+        self.vtk = None
         if vtk:
-            from vibroflow.io.vtk import write_tub_surface  # noqa: PLC0415  (only with vtk)
+            from ..paraview import ContinuumVtk  # noqa: PLC0415  (only with vtk: pyevtk)
 
-            (out / VTK_DIR).mkdir(exist_ok=True)
-            write_tub_surface(out / VTK_DIR / "tub.vtu", self.geo)
+            self.vtk = ContinuumVtk(scenario, out, vtk, self.pv, self.vtk_kinds)
+            self.vtk_kinds = self.vtk.kinds
 
     def record(self, j: int, samples) -> None:
         system, state, geo, out = self.system, self.state, self.geo, self.out
@@ -137,15 +132,12 @@ class PointSampler(Sampler):
         rate = shear_rate(state.L)
         if self.vtk and j >= S - run.phases_per_cycle:
             material = system.material
-            name = f"points_{j:05d}.vtu"
-            _write_points_vtu(out / VTK_DIR / name, state, rate, geo.length,
-                              material.solid_density)
-            samples.vtk["points"].append((state.t, name))
-            name = f"grid_{j:05d}.vtr"
+            _write_points_vtu(self.vtk, j, state.t, pose6, state, rate, material.solid_density,
+                              samples)
             fields = grid_fields(system.grid, state.x, state.v, state.mass,
                                  state.pressure(), rate, material.solid_density)
-            write_grid_vtr(out / VTK_DIR / name, system.grid, fields, 0.5 * geo.length)
-            samples.vtk["grid"].append((state.t, name))
+            self.vtk.grid(j, state.t, pose6, system.grid, fields, samples)
+            self.vtk.tub(j, state.t, pose6, samples)
         samples.rate_all[j] = rate.mean()
         samples.add_cell_rates(state.x, rate)
         if state.temperature is not None:
@@ -213,7 +205,7 @@ class MaterialPointMethod(Formulation):
         return MPMState(**{f.name: getattr(saved, f.name) for f in dataclasses.fields(MPMState)
                            if f.name != "temperature" or hasattr(saved, f.name)})
 
-    def sampler(self, scenario, system, state, out: Path, vtk: bool) -> PointSampler:
+    def sampler(self, scenario, system, state, out: Path, vtk) -> PointSampler:
         return PointSampler(scenario, system, state, out, vtk)
 
     def continuum_block(self, system, state, bed_height: float) -> dict:
