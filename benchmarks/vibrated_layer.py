@@ -32,7 +32,7 @@ from vibroflow.io.atomic import json_safe, write_json_atomic
 from vibroflow.io.calibration_file import read_calibration
 
 
-def rounded(obj, digits=5):
+def rounded(obj, digits=4):
     """The JSON tree with floats to `digits` significant digits."""
     if isinstance(obj, float):
         return obj if not math.isfinite(obj) or obj == 0 else float(f"{obj:.{digits}g}")
@@ -59,7 +59,7 @@ def main(argv=None) -> int:
         dem = rounded(json_safe(vibrated_layer(scenario, setup)))
         dem["command"] = ("python benchmarks/vibrated_layer.py --dem-out "
                           f"{a.dem_out} --methods none --case {a.case} --seeds {a.seeds}")
-        write_json_atomic(a.dem_out, dem)
+        write_json_atomic(a.dem_out, dem, indent=None)
         print(f"DEM: {len(setup.seeds)} seeds, {time.time() - t0:.0f} s -> {a.dem_out}")
     else:
         with open(a.dem) as fh:

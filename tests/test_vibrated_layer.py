@@ -1,0 +1,106 @@
+"""The vibrated layer (issue 29): the DEM strip of tub47's balls on tub47's vertical stroke
+(Gamma 13.3), stored in tests/data/vibrated-layer-dem (its README says the command), against
+both continua's strip with the granular temperature on.
+
+The stored DEM is checked against known answers (the floor carries the weight over a cycle;
+the bands hold the layer's mass at every phase).  The continua are judged as issue 29 asks,
+within the DEM's seed scatter: the cycle-mean temperature and solid-fraction profiles in the
+bands the DEM's bed fills (cycle-mean solid fraction above FILLED) within 2 seed standard
+deviations, and the take-off phase within 2 seed standard deviations plus the force's bin.
+Targets still missed are strict xfails, each with a guard on today's miss
+(docs/validation.md, "The vibrated layer").
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+DATA = Path(__file__).parent / "data" / "vibrated-layer-dem" / "layer.json"
+G = 9.81
+#: the DEM bands compared: cycle-mean solid fraction above this
+FILLED = 0.1
+
+
+@pytest.fixture(scope="module")
+def dem():
+    return json.loads(DATA.read_text())
+
+
+def _cycle_means(r, key):
+    return np.nanmean(np.array(r[key], float), axis=0)
+
+
+def dem_targets(dem):
+    """The DEM's seed means and seed standard deviations of the compared measures."""
+    out = {}
+    for key in ("temperature_m2_s2", "solid_fraction"):
+        a = np.array([_cycle_means(r, key) for r in dem["seeds"]])
+        out[key] = (a.mean(0), a.std(0, ddof=1))
+    phi = out["solid_fraction"][0]
+    out["bands"] = np.nonzero(phi > FILLED)[0]
+    off = np.array([r["take_off_phase"] for r in dem["seeds"]])
+    c = dem["summary"]["take_off_phase"]
+    out["take_off_phase"] = (c, np.std(np.mod(off - c + 0.5, 1.0) - 0.5, ddof=1))
+    return out
+
+
+def misses(dem, c):
+    """Per measure: the continuum's largest |difference| / (2 seed standard deviations) over
+    the filled bands (> 1: missed), and the take-off's |difference| / its allowance."""
+    t = dem_targets(dem)
+    out = {}
+    for key in ("temperature_m2_s2", "solid_fraction"):
+        mean, sd = t[key]
+        cm = np.nan_to_num(_cycle_means(c, key)[: mean.size])
+        b = t["bands"][t["bands"] < cm.size]
+        out[key] = float(np.max(np.abs(cm[b] - mean[b]) / (2 * sd[b])))
+    off, sd = t["take_off_phase"]
+    d = abs(np.mod(c["take_off_phase"] - off + 0.5, 1.0) - 0.5)
+    out["take_off_phase"] = float(d / (2 * sd + 1.0 / len(c["force_phase"])))
+    return out
+
+
+def test_the_dem_floor_carries_the_layers_weight_over_a_cycle(dem):
+    # momentum balance: the layer's momentum is bounded, so the floor's mean force is M g
+    for r in dem["seeds"]:
+        mean, se = r["floor_force_cycle_mean_over_weight"], r["floor_force_cycle_mean_stderr"]
+        assert abs(mean - 1.0) < 3 * se + 0.01
+
+
+def test_the_dem_bands_hold_the_layers_mass_at_every_phase(dem):
+    strip = dem["strip"]
+    band = dem["setup"]["band_m"]
+    for r in dem["seeds"]:
+        phi = np.array(r["solid_fraction"])
+        held = phi.sum(1) * band * strip["length_m"] * strip["width_m"] * strip["density_kg_m3"]
+        # the stored fractions carry 4 significant digits
+        assert held == pytest.approx(np.full(phi.shape[0], r["mass_kg"]), rel=1e-3)
+
+
+def test_the_dem_layer_flies_each_cycle_after_the_block_would(dem):
+    # Gamma 13.3: a block would leave at sin(psi) = 1 / Gamma; the deep compliant bed leaves
+    # later, and is off the floor (force below a twentieth of its weight) for part of a cycle
+    block = math.asin(1.0 / dem["stroke"]["gamma"]) / (2 * math.pi)
+    s = dem["summary"]
+    assert s["take_off_phase"] > block
+    assert np.min(s["floor_force_over_weight"]) < 0.05
+    assert np.max(s["floor_force_over_weight"]) > 2.0
+
+
+@pytest.fixture(scope="module", params=["lagrangian", "eulerian"])
+def continuum(request, dem):
+    from vibroflow.calibration.vibrated_layer import LayerSetup
+    from vibroflow.calibration.vibrated_layer_continuum import continuum_layer
+    from vibroflow.io.calibration_file import read_calibration
+    from vibroflow.scenario.io import load_scenario
+
+    setup = LayerSetup(**{k: (tuple(v) if k == "seeds" else v)
+                          for k, v in dem["setup"].items()})
+    cal = read_calibration(Path(__file__).parent / "data" / "tub47-dem" / "calibration.toml")
+    mass = dem["seeds"][0]["mass_kg"] / (dem["strip"]["length_m"] * dem["strip"]["width_m"])
+    c = continuum_layer(request.param, load_scenario("tub47", []), cal, setup, mass)
+    return request.param, c, misses(dem, c)
