@@ -2,7 +2,7 @@
 (issue 29's check; vibroflow.calibration.vibrated_layer, vibrated_layer_continuum).
 
     python benchmarks/vibrated_layer.py [--case tub47] [--dem-out FILE | --dem FILE]
-        [--calibration FILE] [--methods lagrangian,eulerian] [--seeds 1,2,3,4,5]
+        [--calibration FILE] [--methods lagrangian,eulerian] [--seeds 1,2,3,4,5] [--out FILE]
 
 --dem-out FILE runs the DEM strip over the seeds and writes its profiles (JSON, atomically);
 the stored reference tests/data/vibrated-layer-dem/layer.json is
@@ -13,7 +13,7 @@ the stored reference tests/data/vibrated-layer-dem/layer.json is
 --dem FILE reads a stored one instead.  Each continuum runs the same strip and phases; printed:
 the take-off phase (the floor's psi / 2 pi), the floor force's cycle mean / weight, and by
 band of height at the phase of the floor's top (psi = pi / 2, phase 4/16) T and phi, with the
-DEM's seed mean and seed scatter beside each.
+DEM's seed mean and seed scatter beside each.  --out FILE: the continua's profiles (JSON).
 """
 from __future__ import annotations
 
@@ -51,6 +51,7 @@ def main(argv=None) -> int:
     ap.add_argument("--dem-out", default=None)
     ap.add_argument("--methods", default="lagrangian,eulerian")
     ap.add_argument("--seeds", default="1,2,3,4,5")
+    ap.add_argument("--out", default=None, help="the continua's profiles (JSON)")
     a = ap.parse_args(argv)
     scenario = bench.scenario(a.case)
     if a.dem_out:
@@ -73,9 +74,13 @@ def main(argv=None) -> int:
           "cycle-mean floor force / weight "
           + ", ".join(f"{r['floor_force_cycle_mean_over_weight']:.3f}" for r in dem["seeds"]))
     cal = read_calibration(a.calibration)
+    runs = {}
     for method in [m for m in a.methods.split(",") if m and m != "none"]:
         t0 = time.time()
         c = continuum_layer(method, scenario, cal, setup, weight / 9.81)
+        runs[method] = c
+        if a.out:
+            write_json_atomic(a.out, rounded(json_safe(runs)), indent=None)
         print(f"\n{method} ({time.time() - t0:.0f} s; {c['kinetic_source']}): take-off "
               f"{c['take_off_phase']:.3f}, cycle-mean force / weight "
               f"{c['floor_force_cycle_mean_over_weight']:.3f}")

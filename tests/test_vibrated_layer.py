@@ -91,16 +91,61 @@ def test_the_dem_layer_flies_each_cycle_after_the_block_would(dem):
     assert np.max(s["floor_force_over_weight"]) > 2.0
 
 
-@pytest.fixture(scope="module", params=["lagrangian", "eulerian"])
-def continuum(request, dem):
-    from vibroflow.calibration.vibrated_layer import LayerSetup
-    from vibroflow.calibration.vibrated_layer_continuum import continuum_layer
-    from vibroflow.io.calibration_file import read_calibration
-    from vibroflow.scenario.io import load_scenario
+_RUNS: dict = {}
 
-    setup = LayerSetup(**{k: (tuple(v) if k == "seeds" else v)
-                          for k, v in dem["setup"].items()})
-    cal = read_calibration(Path(__file__).parent / "data" / "tub47-dem" / "calibration.toml")
-    mass = dem["seeds"][0]["mass_kg"] / (dem["strip"]["length_m"] * dem["strip"]["width_m"])
-    c = continuum_layer(request.param, load_scenario("tub47", []), cal, setup, mass)
-    return request.param, c, misses(dem, c)
+
+def continuum(method, dem):
+    """The continuum's strip with T on, the DEM's setup and mass per floor area (one run a
+    formulation per session)."""
+    if method not in _RUNS:
+        from vibroflow.calibration.vibrated_layer import LayerSetup
+        from vibroflow.calibration.vibrated_layer_continuum import continuum_layer
+        from vibroflow.io.calibration_file import read_calibration
+        from vibroflow.scenario.io import load_scenario
+
+        setup = LayerSetup(**{k: (tuple(v) if k == "seeds" else v)
+                              for k, v in dem["setup"].items()})
+        cal = read_calibration(Path(__file__).parent / "data" / "tub47-dem"
+                               / "calibration.toml")
+        strip = dem["strip"]
+        mass = dem["seeds"][0]["mass_kg"] / (strip["length_m"] * strip["width_m"])
+        c = continuum_layer(method, load_scenario("tub47", []), cal, setup, mass)
+        _RUNS[method] = (c, misses(dem, c))
+    return _RUNS[method]
+
+
+def _xfail(why):
+    return pytest.mark.xfail(strict=True, reason=why)
+
+
+#: today's misses (docs/validation.md section 22): (formulation, measure) -> why
+MISSED = {}
+
+#: the guards on today's misses: the largest |difference| / allowance each may reach
+GUARD = {}
+
+CASES = [pytest.param(m, k, marks=[pytest.mark.slow]
+                      + ([_xfail(MISSED[(m, k)])] if (m, k) in MISSED else []),
+                      id=f"{m}-{k}")
+         for m in ("lagrangian", "eulerian")
+         for k in ("temperature_m2_s2", "solid_fraction", "take_off_phase")]
+
+
+@pytest.mark.parametrize("method, measure", CASES)
+def test_the_continuum_layer_is_the_dems_within_its_seed_scatter(dem, method, measure):
+    c, miss = continuum(method, dem)
+    assert miss[measure] <= 1.0, f"{method} {measure}: {miss[measure]:.2f} x the allowance"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["lagrangian", "eulerian"])
+def test_the_continuum_layers_misses_are_no_larger_than_today(dem, method):
+    c, miss = continuum(method, dem)
+    assert np.all(np.isfinite(np.array(c["floor_force_over_weight"])))
+    # the continuum's momentum balance: over whole cycles the floor carries the weight
+    assert abs(c["floor_force_cycle_mean_over_weight"] - 1.0) < 0.05
+    T = np.array(c["temperature_m2_s2"], float)
+    assert np.all(T[np.isfinite(T)] >= 0.0)
+    for (m, key), bound in GUARD.items():
+        if m == method:
+            assert miss[key] <= bound, f"{method} {key}: {miss[key]:.2f} > {bound}"
