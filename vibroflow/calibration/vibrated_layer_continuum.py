@@ -17,8 +17,8 @@ walls) is what is measured.
 The measures are measure.layer_profiles', sampled at the DEM's phases: the points' (cells')
 T mass-weighted and their solid fraction (mass / rho_s over the band's width x height); the
 floor force by the layer's momentum balance, F = M g + dP/dt with P = sum m (v_rel + v_floor)
-the lab momentum (the floor is the strip's only wall), its mean over each force bin (a quarter
-of a profile phase).
+the lab momentum (the floor is the strip's only wall), the mean over each step, binned by
+the step's mid-phase (on tub47 a step is 1/72 of a cycle, a force bin 1/64).
 """
 from __future__ import annotations
 
@@ -156,13 +156,14 @@ def continuum_layer(method: str, scenario, calibration, setup: LayerSetup,
                 has = state.mass > 0
                 acc.add_field(batch, k // sub, state.x[has, 1], state.mass[has],
                               state.mass[has] / rho_s, state.temperature[has])
-            p0, m0 = momentum()
-            t0 = state.step * dt
-            advance(system, state, step_of(setup.warm_cycles + c, k + 1) - state.step)
-            p1, _ = momentum()
-            t1 = state.step * dt
-            ratio = 1.0 + (p1 - p0) / ((t1 - t0) * m0 * G)
-            acc.add_force(batch, float(floor_phase(0.5 * (t0 + t1), f, phase)), ratio)
+            end = step_of(setup.warm_cycles + c, k + 1)
+            while state.step < end:
+                p0, m0 = momentum()
+                advance(system, state, 1)
+                p1, _ = momentum()
+                t_mid = (state.step - 0.5) * dt
+                acc.add_force(batch, float(floor_phase(t_mid, f, phase)),
+                              1.0 + (p1 - p0) / (dt * m0 * G))
     out = acc.result()
     out.update(method=method, dt_s=float(dt), dx_m=dx, bed_depth_m=float(depth),
                kinetic_source=source)

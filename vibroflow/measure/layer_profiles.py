@@ -13,7 +13,8 @@ material is binned in bands of height `band_m` above the floor (z - z_f, the flo
   mass-weighted;
 * the floor force F (N), given as F / (M g) (M the layer's mass), binned by the phase of the
   instant it is taken into FORCE_BINS_PER_PHASE P bins [j / Q, (j + 1) / Q), Q = 4 P,
-  centred on (j + 1/2) / Q.
+  centred on (j + 1/2) / Q; its cycle mean is the mean of all its samples (taken at equal
+  intervals: the time mean, whatever the bins' counts).
 
 Every profile is averaged over its samples within each batch and carries the batch-means
 standard error.  The take-off phase is the first phase after the force's maximum at which the
@@ -133,8 +134,10 @@ class LayerProfiles:
                 "solid_fraction_stderr": stderr_of_batches(phi_b).tolist(),
                 "floor_force_over_weight": f.tolist(),
                 "floor_force_over_weight_stderr": stderr_of_batches(f_b).tolist(),
-                "floor_force_cycle_mean_over_weight": float(np.mean(f)),
-                "floor_force_cycle_mean_stderr": stderr_of_batches(f_b.mean(1)),
+                "floor_force_cycle_mean_over_weight": float(self.force.sum()
+                                                            / self.force_samples.sum()),
+                "floor_force_cycle_mean_stderr": stderr_of_batches(
+                    self.force.sum(1) / self.force_samples.sum(1)),
                 "take_off_phase": off,
                 "take_off_phase_stderr": _circular_stderr(off_b, off)}
 
