@@ -94,8 +94,9 @@ def main(argv=None) -> int:
             print(f"| {1e3 * z:.0f} | {s['temperature_m2_s2'][ph][j]:.4f} | "
                   f"{s['temperature_m2_s2_seed_scatter'][ph][j]:.4f} | "
                   f"{np.nan_to_num(c['temperature_m2_s2'][ph][j]):.4f} | "
-                  f"{s['solid_fraction'][ph][j]:.3f} | {s['solid_fraction_seed_scatter'][ph][j]:.3f}"
-                  f" | {c['solid_fraction'][ph][j]:.3f} |")
+                  f"{s['solid_fraction'][ph][j]:.3f} | "
+                  f"{s['solid_fraction_seed_scatter'][ph][j]:.3f} | "
+                  f"{c['solid_fraction'][ph][j]:.3f} |")
         print("force / weight by phase: " + " ".join(
             f"{v:.2f}" for v in c["floor_force_over_weight"]))
     print("DEM force / weight by phase: " + " ".join(
