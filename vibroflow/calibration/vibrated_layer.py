@@ -17,6 +17,7 @@ deviation over seeds) are what a continuum is judged against.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -168,9 +169,12 @@ def seed_summary(results: list[dict]) -> dict:
     out = {}
     for key in ("temperature_m2_s2", "solid_fraction", "floor_force_over_weight"):
         a = np.array([r[key] for r in results], float)
-        out[key] = np.nanmean(a, axis=0).tolist() if a.size else []
-        out[key + "_seed_scatter"] = (np.nanstd(a, axis=0, ddof=1).tolist() if len(results) > 1
-                                      else np.full(a.shape[1:], np.nan).tolist())
+        with warnings.catch_warnings():  # bands no seed's bed reaches stay NaN
+            warnings.simplefilter("ignore", RuntimeWarning)
+            out[key] = np.nanmean(a, axis=0).tolist()
+            out[key + "_seed_scatter"] = (np.nanstd(a, axis=0, ddof=1).tolist()
+                                          if len(results) > 1
+                                          else np.full(a.shape[1:], np.nan).tolist())
     offs = np.array([r["take_off_phase"] for r in results], float)
     mean_force = np.nanmean([r["floor_force_over_weight"] for r in results], axis=0)
     out["take_off_phase"] = take_off_phase(mean_force)
