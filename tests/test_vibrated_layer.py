@@ -162,3 +162,13 @@ def test_the_continuum_layers_misses_are_no_larger_than_today(dem, method):
     for (m, key), bound in GUARD.items():
         if m == method:
             assert miss[key] <= bound, f"{method} {key}: {miss[key]:.2f} > {bound}"
+
+
+@pytest.mark.parametrize("field, value", [("cycles", 3), ("n_phases", 1), ("band_m", 0.0),
+                                          ("gamma", -1.0), ("seeds", ())])
+def test_a_bad_layer_setup_is_named(field, value):
+    from vibroflow.calibration.vibrated_layer import LayerSetup
+    from vibroflow.errors import InputError
+
+    with pytest.raises(InputError, match=field):
+        LayerSetup(**{field: value}).check()
