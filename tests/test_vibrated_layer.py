@@ -172,3 +172,33 @@ def test_a_bad_layer_setup_is_named(field, value):
 
     with pytest.raises(InputError, match=field):
         LayerSetup(**{field: value}).check()
+
+
+def _calibration_with_kinetic(tmp_path, table):
+    from vibroflow.io.calibration_file import read_calibration
+
+    src = (Path(__file__).parent / "data" / "tub47-dem" / "calibration.toml").read_text()
+    path = tmp_path / "calibration.toml"
+    path.write_text(src + "\n[kinetic]\n" + table)
+    return read_calibration(path)
+
+
+def test_the_continuum_layer_takes_the_calibrated_kinetic_constants(tmp_path):
+    from vibroflow.calibration.vibrated_layer_continuum import kinetic_constants
+    from vibroflow.continuum.kinetic_theory import LUN_SAVAGE
+    from vibroflow.errors import InputError
+    from vibroflow.io.calibration_file import read_calibration
+    from vibroflow.scenario.io import load_scenario
+
+    sc = load_scenario("tub47", [])
+    stored = read_calibration(Path(__file__).parent / "data" / "tub47-dem" / "calibration.toml")
+    prm, source = kinetic_constants(sc, stored)
+    assert prm.restitution == 0.85 and "no calibrated" in source  # tub47's ball-ball e
+    cal = _calibration_with_kinetic(tmp_path, 'phi_rcp = 0.62\nrestitution = 0.8\n'
+                                    'g0_form = "lun_savage"\n')
+    prm, source = kinetic_constants(sc, cal)
+    assert (prm.phi_rcp, prm.restitution, prm.g0_form) == (0.62, 0.8, LUN_SAVAGE)
+    assert source == "calibration [kinetic]"
+    bad = _calibration_with_kinetic(tmp_path, 'phi_rcp = 0.62\ng0_form = "hard"\n')
+    with pytest.raises(InputError, match="g0_form"):
+        kinetic_constants(sc, bad)
