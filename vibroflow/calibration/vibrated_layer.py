@@ -2,14 +2,14 @@
 temperature and solid-fraction profiles by height, its floor force and take-off phase
 (issue 29's check of the continuum's temperature; measure.layer_profiles defines the measures).
 
-The strip (benchmarks/strip_damping.py's, its depth set in layers): the case's balls
-(diameter, density, ball-ball law) in a box STRIP_LENGTH_M long and STRIP_WIDTH_BALLS
-diameters wide between frictionless plane side walls (the DEM's only periodic direction is
-the tub's length), on a floor of the case's ball-wall law moved vertically with the case's vertical stroke (frequency,
-amplitude_z, phase_z: tub47 47 Hz, 1.5 mm, Gamma = A omega^2 / g = 13.3) or a given Gamma.  The
-layer holds `layers` diameters of balls at solid fraction 0.6, filled on a loose lattice
-(spacing 1.06 d) jittered by the fill seed; it is shaken `warm_cycles` cycles, then sampled
-for `cycles` whole cycles in `batches` batches: the profiles at n_phases phases of the
+The strip (benchmarks/strip_damping.py's, its depth set in layers): the case's balls (diameter,
+density, ball-ball law) in a box STRIP_LENGTH_M long and STRIP_WIDTH_BALLS diameters wide
+between frictionless plane side walls (the DEM's only periodic direction is the tub's length),
+on a floor of the case's ball-wall law moved vertically with the case's vertical stroke
+(frequency, amplitude_z, phase_z: tub47 47 Hz, 1.5 mm, Gamma = A omega^2 / g = 13.3) or a given
+Gamma.  The layer holds `layers` diameters of balls at solid fraction 0.6, filled on a loose
+lattice (spacing 1.06 d) jittered by the fill seed; it is shaken `warm_cycles` cycles, then
+sampled for `cycles` whole cycles in `batches` batches: the profiles at n_phases phases of the
 floor's cycle, the floor's force every FORCE_EVERY steps (the ball-floor contacts' vertical
 force, summed).  Over the seeds, the profiles' mean and their seed scatter (the standard
 deviation over seeds) are what a continuum is judged against.
