@@ -302,12 +302,15 @@ def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
                                          system.dt, model).ravel()
 
     advance_with_temperature(state, n, model,
-                             lambda k, p_kin: _advance(system, state, k, p_kin), balance, start)
+                             lambda k, p_kin: _advance(system, state, k, p_kin), balance, start,
+                             phi_cap=system.material.critical_density
+                             / system.material.solid_density, dt=system.dt)
 
 
 def _advance(system: EulerianSystem, state: EulerianState, n: int, p_kin) -> None:
-    """`advance`'s compiled call: n steps, the kinetic pressure p_kin (N,) Pa added to the
-    scattered stress ((0,): none)."""
+    """`advance`'s compiled call: n steps, the granular temperature's stress p_kin (N, 5)
+    (kinetic_stress.py: Pa added to the scattered stress, then the return map's rate ratio;
+    (0, 5): none)."""
     mesh = system.mesh
     mat = system.material
     w = system.wall
