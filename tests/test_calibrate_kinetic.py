@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vibroflow.calibration.kinetic import fit_phi_rcp, kinetic_table, pressure_ratio
+from vibroflow.calibration.kinetic import (fit_lun_frictional, fit_phi_rcp, frictional_pressure,
+                                          kinetic_table, pressure_ratio)
 from vibroflow.calibration.wall_energy import wall_flux_of_contacts
 from vibroflow.dem.walls import WALL_PARTITION_LO, WALL_U
 from vibroflow.errors import InputError
@@ -222,3 +223,28 @@ def test_cells_scattered_far_about_the_closure_say_so_in_the_status():
     assert fit["rms_log_residual"] == pytest.approx(1.0, rel=0.1)
     assert "the closure does not describe them" in fit["status"]
     assert "scatter" not in fit_phi_rcp(*_cells(0.60, n=400, rel_p=0.1)[:3], RHO_S, E)["status"]
+
+
+def _frictional_cells(n=400, rel_p=0.05, seed=3):
+    """Cells with Lun's plus Johnson & Jackson's pressure (phi_rcp 0.63, Fr 0.02 Pa, phi_min
+    0.5, n = 2, p = 5), p scattered log-normally by rel_p."""
+    rng = np.random.default_rng(seed)
+    phi = rng.uniform(0.1, 0.6, n)
+    T = np.exp(rng.uniform(np.log(1e-4), np.log(2e-2), n))
+    p = RHO_S * phi * T * pressure_ratio(phi, 0.63, E) + frictional_pressure(phi, 0.63, 0.02, 0.5)
+    return phi, T, p * np.exp(rel_p * rng.standard_normal(n))
+
+
+def test_the_joint_fit_recovers_known_frictional_constants():
+    phi, T, p = _frictional_cells()
+    fit = fit_lun_frictional(phi, T, p, RHO_S, E)
+    for key, true in (("phi_rcp", 0.63), ("frictional_Pa", 0.02), ("frictional_phi_min", 0.5)):
+        assert abs(fit[key] - true) < 3.0 * fit[key + "_stderr"], key
+    assert fit["phi_rcp"] == pytest.approx(0.63, abs=2e-3)
+    assert fit["frictional_Pa"] == pytest.approx(0.02, rel=0.2)
+    assert fit["frictional_phi_min"] == pytest.approx(0.5, abs=0.01)
+    # the scatter is the cells' own 5 %; Lun's pressure alone cannot follow the frictional part
+    assert fit["rms_log_residual"] == pytest.approx(0.05, rel=0.15)
+    assert fit["lun_rms_log_residual"] > 2.0 * fit["rms_log_residual"]
+    table = kinetic_table(fit, None, E, "contact law")
+    assert table["frictional_Pa"] == fit["frictional_Pa"] and "Johnson" in table["model"]

@@ -251,8 +251,8 @@ def fit_lun_frictional(phi, T, p, rho_s: float, restitution: float, phi_stderr=N
 
 def fit_cells(fields, rho_s: float, restitution: float, joint: bool = False,
               **options) -> dict:
-    """fit_phi_rcp (joint: fit_lun_frictional) on a coarse-grained Dataset (run_fields.coarse_grain_run's phase-resolved
-    one, or any with solid_fraction, temperature, pressure and, optionally, their *_stderr)."""
+    """fit_phi_rcp (joint: fit_lun_frictional) on a coarse-grained Dataset
+    (run_fields.coarse_grain_run's phase-resolved one, or any with solid_fraction, temperature, pressure and, optionally, their *_stderr)."""
     for name in ("solid_fraction", "temperature", "pressure"):
         if name not in fields:
             raise InputError(f"fields: no {name!r}: not a coarse-grained field set")
