@@ -20,6 +20,7 @@ from vibroflow.continuum.rheology import mu_of_I
 from vibroflow.continuum.stress_update import update_stress_points_rated
 from vibroflow.continuum.temperature_field import production_W_m3
 from vibroflow.continuum.temperature_step import TemperatureGrid, step_temperature
+from vibroflow.continuum.timestep import kinetic_temperature_limit, kinetic_wave_speed
 
 PRM = KineticParameters(diameter_m=0.00635, density_kg_m3=7800.0, restitution=0.9,
                         phi_rcp=0.64)
@@ -41,11 +42,11 @@ def test_dilute_viscosity_is_chapman_enskogs_hard_sphere_value():
 
 
 def _one(density, T, L, stress=(0.0, 0.0, 0.0, 0.0), gamma_dot=0.0, phase=0, prm=PRM,
-         phi_cap=0.6, eta_factor=np.inf):
+         phi_cap=0.6, T_cap=np.inf, eta_factor=np.inf):
     out = np.empty((1, 5))
     kinetic_stress(np.array([density]), np.array([T]), np.array([L], float),
                    np.array([stress], float), np.array([gamma_dot]),
-                   np.array([phase], np.int8), prm, phi_cap, eta_factor, out)
+                   np.array([phase], np.int8), prm, phi_cap, T_cap, eta_factor, out)
     return out[0]
 
 
@@ -102,7 +103,7 @@ def _steady_shear(rate, T_fixed=None, steps=6000, dt=1e-5, p0=1e3):
     grid = TemperatureGrid(spacing_m=0.01)
     zero = np.zeros((1, 1))
     for _ in range(steps):
-        kinetic_stress(rho, T, L, stress, gd, st, PRM, 0.6 * 1.01, np.inf, s_kin)
+        kinetic_stress(rho, T, L, stress, gd, st, PRM, 0.6 * 1.01, np.inf, np.inf, s_kin)
         update_stress_points_rated(stress, L, rho, dt, params, gd, st,
                                    s_kin[:, RATE_RATIO].copy())
         production_W_m3(stress, L, gd, s_kin, power)
@@ -132,3 +133,15 @@ def test_material_hotter_than_its_shear_flows_at_mu_of_r_I():
     assert hot == pytest.approx(float(mu_of_I(r_hot * I_hot, mat.mu_s, mat.mu_2, mat.I_0)),
                                 rel=1e-4)
     assert hot < ratio
+
+
+def test_the_kinetic_wave_is_the_ideal_gas_sound_dilute_and_capped_at_the_elastic_one():
+    # phi -> 0: p = rho_s phi T, dp/drho = T, the isothermal sound speed sqrt(T)
+    assert kinetic_wave_speed(1e-6, 0.01, PRM) == pytest.approx(0.1, rel=1e-4)
+    # the limit T makes the wave at phi_cap as fast as the elastic one (c_k^2 linear in T)
+    T_cap = kinetic_temperature_limit(16.2, 0.57, PRM)
+    assert kinetic_wave_speed(0.57, T_cap, PRM) == pytest.approx(16.2, rel=1e-6)
+    # beyond it the pressure reads T_cap: hotter material adds no stiffness
+    s = _one(0.57 * 7800.0, 10.0 * T_cap, (0.0, 0.0, 0.0, 0.0), phase=1, phi_cap=0.57,
+             T_cap=T_cap)
+    assert s[0] == pytest.approx(-pressure_Pa(0.57, T_cap, PRM), rel=1e-12)

@@ -9,8 +9,8 @@ given stress to the scattered one and reads one number in its return map:
    solid fraction phi = rho / rho_s capped at the material's connection packing
    phi_cap = rho_c / rho_s: above it the grains are in enduring contact and the elastic-plastic
    pressure carries the compression, so g0 is never read nearer close packing than phi_cap
-   and the kinetic pressure's bulk stiffness phi dp_k/dphi stays of order rho_s T g0(phi_cap)
-   (continuum/timestep.py, `kinetic_wave_speed`).
+   and T is read at most at T_cap, the temperature at which the kinetic pressure's wave is as
+   fast as the elastic one the step is set for (timestep.kinetic_temperature_limit).
 2. In the gas (the elastic-plastic state disconnected: phase 0, the density below rho_c or a
    tensile trial state) the frictional pressure of Johnson & Jackson (1987,
    kinetic_theory.frictional_pressure_Pa) and the kinetic-theory shear viscosity of Gidaspow
@@ -78,13 +78,14 @@ def _tau(s):
 
 
 @nb.njit(cache=True)
-def kinetic_stress(density, T, L, stress, gamma_dot, phase, prm, phi_cap, eta_max_factor,
-                   out):
+def kinetic_stress(density, T, L, stress, gamma_dot, phase, prm, phi_cap, T_cap,
+                   eta_max_factor, out):
     """out (N, 5): the stress added to the scattered one, [xx, zz, xz, yy] (Pa), and the rate
     ratio r (-) of the return map, per point (module docstring).  density (N,) kg/m^3, T (N,)
     m^2/s^2, L (N, 4 or 5) [xx, xz, zx, zz(, yy)] 1/s of the last step, stress (N, 4) Pa,
     gamma_dot (N,) its plastic rate 1/s, phase (N,) int8; prm kinetic_theory.KineticParameters;
-    phi_cap (-) the connection packing rho_c / rho_s; eta_max_factor (m^2/s) dx^2 / dt, the
+    phi_cap (-) the connection packing rho_c / rho_s; T_cap (m^2/s^2) the highest T the
+    kinetic pressure reads (timestep.kinetic_temperature_limit); eta_max_factor (m^2/s) dx^2 / dt, the
     viscosity cap being 3 rho eta_max_factor / 16."""
     hoop = L.shape[1] > 4
     rho_s = prm.density_kg_m3
@@ -97,7 +98,7 @@ def kinetic_stress(density, T, L, stress, gamma_dot, phase, prm, phi_cap, eta_ma
         if not (t > 0.0 and rho > 0.0):
             continue
         phi = rho / rho_s
-        pk = pressure_Pa(min(phi, phi_cap), t, prm)
+        pk = pressure_Pa(min(phi, phi_cap), min(t, T_cap), prm)
         if phase[p] == 0:
             pk += frictional_pressure_Pa(phi, prm)
             eta = min(shear_viscosity_Pa_s(phi, t, prm), 3.0 * rho * eta_max_factor / 16.0)

@@ -27,6 +27,7 @@ the walls' flux is the next step (docs/decisions/granular-temperature-closures.m
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numba as nb
@@ -37,6 +38,7 @@ from vibroflow.scenario.checks import find_contact
 from .kinetic_stress import KINETIC_COLUMNS, kinetic_stress
 from .kinetic_theory import KineticParameters
 from .temperature_step import TemperatureGrid, step_temperature
+from .timestep import kinetic_temperature_limit
 
 
 @dataclass(frozen=True)
@@ -143,12 +145,13 @@ def point_step(T, x, mass, volume, power, origin, shape, dt: float, model: Tempe
 
 def advance_with_temperature(state, n, model: TemperatureModel | None, compiled, balance,
                              start=lambda: None, *, phi_cap: float = 1.0,
-                             dt: float = 0.0) -> None:
+                             dt: float = 0.0, wave_speed: float = math.inf) -> None:
     """n steps of a formulation: without the temperature (model None), one compiled call of n
     steps (compiled(n, s_kin) with an empty (0, 5) s_kin); with it, one call a step: the
     granular temperature's stress and rate ratio (kinetic_stress.kinetic_stress, phi_cap the
     material's connection packing rho_c / rho_s, dt (s) the step, which with the cells' side
-    caps the gas's viscosity) scattered by that step, its production (W/m^3), then the
+    caps the gas's viscosity, wave_speed (m/s) the elastic wave the step is set for, which caps
+    the T of the kinetic pressure: timestep.kinetic_temperature_limit) scattered by that step, its production (W/m^3), then the
     formulation's balance of T (balance(power, start()), start() taken before the step)."""
     n = int(n)
     if n <= 0:
@@ -159,11 +162,12 @@ def advance_with_temperature(state, n, model: TemperatureModel | None, compiled,
     s_kin = np.zeros((state.n, KINETIC_COLUMNS))
     power = np.empty(state.n)
     eta_factor = model.spacing_m ** 2 / dt if dt > 0 else np.inf
+    T_cap = kinetic_temperature_limit(wave_speed, phi_cap, model.params)
     for _ in range(n):
         if model.coupled:
             kinetic_stress(state.density, state.temperature, state.L, state.stress,
                            state.gamma_dot, state.phase, model.params, float(phi_cap),
-                           float(eta_factor), s_kin)
+                           float(T_cap), float(eta_factor), s_kin)
         else:
             s_kin[:, :4] = 0.0
             s_kin[:, 4] = 1.0

@@ -304,7 +304,8 @@ def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
     advance_with_temperature(state, n, model,
                              lambda k, p_kin: _advance(system, state, k, p_kin), balance, start,
                              phi_cap=system.material.critical_density
-                             / system.material.solid_density, dt=system.dt)
+                             / system.material.solid_density, dt=system.dt,
+                             wave_speed=system.material.p_wave_speed())
 
 
 def _advance(system: EulerianSystem, state: EulerianState, n: int, p_kin) -> None:

@@ -286,7 +286,8 @@ def advance(system: MPMSystem, state: MPMState, n: int) -> None:
     advance_with_temperature(state, n, system.temperature,
                              lambda k, p_kin: _advance(system, state, k, p_kin), balance,
                              phi_cap=system.material.critical_density
-                             / system.material.solid_density, dt=system.dt)
+                             / system.material.solid_density, dt=system.dt,
+                             wave_speed=system.material.p_wave_speed())
 
 
 def _advance(system: MPMSystem, state: MPMState, n: int, p_kin) -> None:
