@@ -60,9 +60,9 @@ def test_a_sheared_gas_carries_the_kinetic_viscosity_and_both_pressures():
     assert s[2] == pytest.approx(2.048411 * rate, rel=1e-6)   # 2 eta D_xz, D_xz = L_xz / 2
     assert s[0] == s[1] == s[3] == pytest.approx(-p, rel=1e-12)
     assert s[RATE_RATIO] == 1.0
-    # the viscosity capped at 3 rho dx^2 / (16 dt) in a nearly empty cell
+    # the viscosity capped at (3/160) rho dx^2 / dt in a nearly empty cell
     cap = _one(1.0, T, (0.0, rate, 0.0, 0.0), eta_factor=1.0)
-    assert cap[2] == pytest.approx(3.0 * 1.0 / 16.0 * rate, rel=1e-12)
+    assert cap[2] == pytest.approx(3.0 / 160.0 * rate, rel=1e-12)
 
 
 def test_connected_material_gets_only_the_capped_kinetic_pressure():

@@ -16,11 +16,13 @@ given stress to the scattered one and reads one number in its return map:
    kinetic_theory.frictional_pressure_Pa) and the kinetic-theory shear viscosity of Gidaspow
    (1994, kinetic_theory.shear_viscosity_Pa_s): a deviatoric stress 2 eta_k D', D' the
    deviator of the last step's rate of deformation (plane strain, D_yy from L[:, 4] where
-   given).  eta_k is capped at the explicit diffusion bound eta_max = 3 rho dx^2 / (16 dt)
-   ((4/3) nu dt / dx^2 <= 1/4, the 2D finite-difference limit of the longitudinal viscous
-   diffusion): only nearly empty Eulerian cells reach it (an MPM point never falls below
-   0.25 rho_c, plasticity.DILUTE_DENSITY_FLOOR).  Connected material carries none of this:
-   its deviatoric stress is the elastic-plastic law's.
+   given).  eta_k is capped at eta_max = C rho dx^2 / dt, C = VISCOSITY_CAP = 3/160.  C is
+   measured, not derived: a tenth of the 2D finite-difference bound of explicit viscous
+   diffusion ((4/3) nu dt / dx^2 <= 1/4, C = 3/16).  With that bound tub47-quick's Eulerian
+   run at the default cfl heated a surface cell that flickers between connected and
+   disconnected (phi at phi_c, where g0 and eta_k are large) without limit and blew up at
+   t = 0.84 s; with 3/160 its T stayed below 0.01 m^2/s^2 there.  Connected material carries
+   none of this: its deviatoric stress is the elastic-plastic law's.
 3. In connected material the mu(I) law's rate dependence is read from T (Kim & Kamrin 2020,
    Phys. Rev. Lett. 125, 088002: the velocity fluctuation, not the pressure alone, sets the
    inertial time).  The return map uses mu(r I), r = sqrt(T_bal / T), with T_bal the
@@ -45,6 +47,9 @@ from .kinetic_theory import (correlation_length_ratio, frictional_pressure_Pa,
                              pressure_Pa, radial_distribution, shear_viscosity_Pa_s)
 
 _SQRT_PI = math.sqrt(math.pi)
+
+#: the gas viscosity's cap eta_max = VISCOSITY_CAP rho dx^2 / dt (module docstring)
+VISCOSITY_CAP = 3.0 / 160.0
 
 #: columns of the kinetic stress array: [xx, zz, xz, yy] (Pa), then the rate ratio r (-)
 RATE_RATIO = 4
@@ -86,7 +91,7 @@ def kinetic_stress(density, T, L, stress, gamma_dot, phase, prm, phi_cap, T_cap,
     gamma_dot (N,) its plastic rate 1/s, phase (N,) int8; prm kinetic_theory.KineticParameters;
     phi_cap (-) the connection packing rho_c / rho_s; T_cap (m^2/s^2) the highest T the
     kinetic pressure reads (timestep.kinetic_temperature_limit); eta_max_factor (m^2/s) dx^2 / dt, the
-    viscosity cap being 3 rho eta_max_factor / 16."""
+    viscosity cap being VISCOSITY_CAP rho eta_max_factor."""
     hoop = L.shape[1] > 4
     rho_s = prm.density_kg_m3
     for p in range(T.shape[0]):
@@ -101,7 +106,7 @@ def kinetic_stress(density, T, L, stress, gamma_dot, phase, prm, phi_cap, T_cap,
         pk = pressure_Pa(min(phi, phi_cap), min(t, T_cap), prm)
         if phase[p] == 0:
             pk += frictional_pressure_Pa(phi, prm)
-            eta = min(shear_viscosity_Pa_s(phi, t, prm), 3.0 * rho * eta_max_factor / 16.0)
+            eta = min(shear_viscosity_Pa_s(phi, t, prm), VISCOSITY_CAP * rho * eta_max_factor)
             dxx = L[p, 0]
             dzz = L[p, 3]
             dxz = 0.5 * (L[p, 1] + L[p, 2])
