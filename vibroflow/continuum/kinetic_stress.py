@@ -90,8 +90,8 @@ def kinetic_stress(density, T, L, stress, gamma_dot, phase, prm, phi_cap, T_cap,
     m^2/s^2, L (N, 4 or 5) [xx, xz, zx, zz(, yy)] 1/s of the last step, stress (N, 4) Pa,
     gamma_dot (N,) its plastic rate 1/s, phase (N,) int8; prm kinetic_theory.KineticParameters;
     phi_cap (-) the connection packing rho_c / rho_s; T_cap (m^2/s^2) the highest T the
-    kinetic pressure reads (timestep.kinetic_temperature_limit); eta_max_factor (m^2/s) dx^2 / dt, the
-    viscosity cap being VISCOSITY_CAP rho eta_max_factor."""
+    kinetic pressure reads (timestep.kinetic_temperature_limit); eta_max_factor (m^2/s)
+    dx^2 / dt, the viscosity cap being VISCOSITY_CAP rho eta_max_factor."""
     hoop = L.shape[1] > 4
     rho_s = prm.density_kg_m3
     for p in range(T.shape[0]):
