@@ -152,7 +152,8 @@ def advance_with_temperature(state, n, model: TemperatureModel | None, compiled,
     material's connection packing rho_c / rho_s, dt (s) the step, which with the cells' side
     caps the gas's viscosity, wave_speed (m/s) the elastic wave the step is set for, which caps
     the T of the kinetic pressure: timestep.kinetic_temperature_limit) scattered by that step,
-    its production (W/m^3), then the formulation's balance of T (balance(power, start()), start() taken before the step)."""
+    its production (W/m^3), then the formulation's balance of T (balance(power, start()),
+    start() taken before the step)."""
     n = int(n)
     if n <= 0:
         return
