@@ -3,6 +3,7 @@ Lun et al.'s pressure with a known phi_rcp; the walls' energy flux of synthetic 
 sum F . v / (snapshots x area); [kinetic] in calibration.toml round-trips byte for byte."""
 from __future__ import annotations
 
+import math
 import tomllib
 from pathlib import Path
 
@@ -248,3 +249,12 @@ def test_the_joint_fit_recovers_known_frictional_constants():
     assert fit["lun_rms_log_residual"] > 2.0 * fit["rms_log_residual"]
     table = kinetic_table(fit, None, E, "contact law")
     assert table["frictional_Pa"] == fit["frictional_Pa"] and "Johnson" in table["model"]
+
+
+def test_cells_without_a_frictional_pressure_give_luns_fit_and_say_so():
+    phi, T, p, *_ = _cells(0.60, n=200, rel_p=0.05)
+    fit = fit_lun_frictional(phi, T, p, RHO_S, E)
+    lun = fit_phi_rcp(phi, T, p, RHO_S, E)
+    assert fit["frictional_Pa"] == 0.0 and math.isnan(fit["frictional_phi_min"])
+    assert fit["phi_rcp"] == lun["phi_rcp"] and fit["phi_rcp_stderr"] > 0
+    assert "no frictional pressure" in fit["status"]

@@ -195,8 +195,10 @@ def fit_lun_frictional(phi, T, p, rho_s: float, restitution: float, phi_stderr=N
 
     Returns {phi_rcp, frictional_Pa (Fr), frictional_phi_min, frictional_n, frictional_p, their
     *_stderr (phi_rcp, Fr, phi_min), points, solid_fraction_range, rms_log_residual,
-    chi2_per_dof (NaN unweighted), weighted, status}.  InputError when fewer than min_points
-    cells qualify."""
+    lun_rms_log_residual (Lun's pressure alone, fit_phi_rcp), chi2_per_dof (NaN unweighted),
+    weighted, status}; where the cells resolve no frictional pressure (Fr at its lower bound,
+    1e-12 Pa, within two standard errors of 0, or a singular fit) Lun's fit alone with Fr = 0, phi_min NaN and the status saying
+    so.  InputError when fewer than min_points cells qualify."""
     lun = fit_phi_rcp(phi, T, p, rho_s, restitution, phi_stderr, T_stderr, p_stderr,
                       phi_range, g0_form, max_log_error, min_points)
     phi, T, y, w, n, weighted = _cells_fitted(phi, T, p, rho_s, restitution, phi_stderr,
@@ -234,18 +236,28 @@ def fit_lun_frictional(phi, T, p, rho_s: float, restitution: float, phi_stderr=N
         se = np.full(3, np.nan)
     fr = math.exp(x[1])
     rms = float(math.sqrt(sse / np.sum(w)))
+    common = {"frictional_n": 2.0, "frictional_p": 5.0, "restitution": float(restitution),
+              "g0_form": g0_form, "points": n,
+              "solid_fraction_range": [float(phi.min()), float(phi.max())],
+              "lun_rms_log_residual": lun["rms_log_residual"], "weighted": weighted}
+    if not (np.all(np.isfinite(se)) and x[1] > lower[1] + 1.0 and se[1] < 0.5):
+        # Fr at its lower bound, within two standard errors of 0 (ln Fr's error above 1/2) or a
+        # singular fit: the cells resolve no frictional pressure, and the fit is Lun's alone
+        return {**common, "phi_rcp": lun["phi_rcp"], "phi_rcp_stderr": lun["phi_rcp_stderr"],
+                "frictional_Pa": 0.0, "frictional_Pa_stderr": float("nan"),
+                "frictional_phi_min": float("nan"), "frictional_phi_min_stderr": float("nan"),
+                "rms_log_residual": lun["rms_log_residual"],
+                "chi2_per_dof": lun["chi2_per_dof"],
+                "status": lun["status"] + "; no frictional pressure resolved by the cells (Fr "
+                                          "at its lower bound): Lun's pressure alone"}
     status = "measured"
     if rms > MAX_RMS_LOG_RESIDUAL:
         status += (f"; the cells scatter about the joint pressure by a factor {math.exp(rms):.3g} "
                    "(rms log residual)")
-    return {"phi_rcp": float(x[0]), "phi_rcp_stderr": float(se[0]),
+    return {**common, "phi_rcp": float(x[0]), "phi_rcp_stderr": float(se[0]),
             "frictional_Pa": fr, "frictional_Pa_stderr": float(fr * se[1]),
             "frictional_phi_min": float(x[2]), "frictional_phi_min_stderr": float(se[2]),
-            "frictional_n": 2.0, "frictional_p": 5.0, "restitution": float(restitution),
-            "g0_form": g0_form, "points": n,
-            "solid_fraction_range": [float(phi.min()), float(phi.max())],
-            "rms_log_residual": rms, "lun_rms_log_residual": lun["rms_log_residual"],
-            "chi2_per_dof": s2 if weighted else float("nan"), "weighted": weighted,
+            "rms_log_residual": rms, "chi2_per_dof": s2 if weighted else float("nan"),
             "status": status}
 
 
