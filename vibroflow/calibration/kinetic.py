@@ -249,7 +249,8 @@ def fit_lun_frictional(phi, T, p, rho_s: float, restitution: float, phi_stderr=N
                 "rms_log_residual": lun["rms_log_residual"],
                 "chi2_per_dof": lun["chi2_per_dof"],
                 "status": lun["status"] + "; no frictional pressure resolved by the cells (Fr "
-                                          "at its lower bound): Lun's pressure alone"}
+                                          "within two standard errors of 0): Lun's pressure "
+                                          "alone"}
     status = "measured"
     if rms > MAX_RMS_LOG_RESIDUAL:
         status += (f"; the cells scatter about the joint pressure by a factor {math.exp(rms):.3g} "
