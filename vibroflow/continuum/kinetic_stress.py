@@ -31,7 +31,7 @@ given stress to the scattered one and reads one number in its return map:
    Where T = T_bal (steady shear) r = 1 and the law is the calibrated mu(I) exactly; where
    the material is hotter than its shear keeps it (vibrated) r < 1 and it flows at a lower
    friction, down to mu_s (Irmer, Brodsky & Clark 2024, arXiv 2405.13236: fluctuations
-   lower the friction); T = 0 gives r = 1, today's law.  The ratio is lagged one step (the
+   lower the friction); T = 0 gives r = 1, the plain law.  The ratio is lagged one step (the
    last step's gamma_dot_p), which keeps the return map's quadratic.
 
 The work of these stresses on the step's deformation, sigma_k : D, is the temperature's
