@@ -13,6 +13,8 @@ import pytest
 from vibroflow.calibration.kinetic import (fit_lun_frictional, fit_phi_rcp, frictional_pressure,
                                           kinetic_table, pressure_ratio)
 from vibroflow.calibration.wall_energy import wall_flux_of_contacts
+from vibroflow.continuum.kinetic_theory import KineticParameters
+from vibroflow.continuum.temperature_field import calibrated_kinetic_parameters
 from vibroflow.dem.walls import WALL_PARTITION_LO, WALL_U
 from vibroflow.errors import InputError
 from vibroflow.io.calibration_file import Calibration, read_calibration, write_calibration
@@ -258,3 +260,24 @@ def test_cells_without_a_frictional_pressure_give_luns_fit_and_say_so():
     assert fit["frictional_Pa"] == 0.0 and math.isnan(fit["frictional_phi_min"])
     assert fit["phi_rcp"] == lun["phi_rcp"] and fit["phi_rcp_stderr"] > 0
     assert "no frictional pressure" in fit["status"]
+
+
+def test_a_run_reads_the_calibrated_kinetic_constants():
+    src = DATA / "tub47-quick-dem" / "calibration.toml"
+    plain = read_calibration(src)
+    prm = KineticParameters(restitution=E)
+    assert calibrated_kinetic_parameters(prm, plain) == prm       # no [kinetic]: unchanged
+    assert calibrated_kinetic_parameters(prm, None) == prm
+    fit = fit_lun_frictional(*_frictional_cells(), RHO_S, E)
+    rec = Calibration.from_dict({**tomllib.loads(src.read_text()),
+                                 "kinetic": kinetic_table(fit, None, E, "contact law")})
+    got = calibrated_kinetic_parameters(prm, rec)
+    assert (got.phi_rcp, got.frictional_Pa, got.frictional_phi_min) == (
+        fit["phi_rcp"], fit["frictional_Pa"], fit["frictional_phi_min"])
+    assert (got.frictional_n, got.frictional_p, got.restitution) == (2.0, 5.0, E)
+    # cells without a frictional pressure: phi_rcp only, Fr stays 0
+    lun = fit_lun_frictional(*_cells(0.60, n=200, rel_p=0.05)[:3], RHO_S, E)
+    rec = Calibration.from_dict({**tomllib.loads(src.read_text()),
+                                 "kinetic": kinetic_table(lun, None, E, "contact law")})
+    got = calibrated_kinetic_parameters(prm, rec)
+    assert got.phi_rcp == lun["phi_rcp"] and got.frictional_Pa == 0.0

@@ -41,9 +41,8 @@ import numba as nb
 import numpy as np
 from scipy.optimize import least_squares, minimize_scalar
 
-from vibroflow.continuum.kinetic_theory import (CHIALVO_SUNDARESAN, LUN_SAVAGE,
-                                                KineticParameters, frictional_pressure_Pa,
-                                                radial_distribution)
+from vibroflow.continuum.kinetic_theory import (G0_FORMS, KineticParameters,
+                                                frictional_pressure_Pa, radial_distribution)
 from vibroflow.errors import InputError
 
 PHI_RANGE = (0.1, 0.6)
@@ -52,7 +51,6 @@ MAX_LOG_ERROR = 0.5
 MAX_RMS_LOG_RESIDUAL = 0.5
 #: the largest phi_rcp the fit may return: the packing fraction of face-centred cubic spheres
 PHI_RCP_MAX = math.pi / (3.0 * math.sqrt(2.0))
-G0_FORMS = {"chialvo_sundaresan": CHIALVO_SUNDARESAN, "lun_savage": LUN_SAVAGE}
 
 
 @nb.njit(cache=True)

@@ -53,6 +53,8 @@ import numba as nb
 #: g0 forms (KineticParameters.g0_form)
 CHIALVO_SUNDARESAN = 0
 LUN_SAVAGE = 1
+#: the g0 forms by name, as calibration.toml's [kinetic] g0_form spells them
+G0_FORMS = {"chialvo_sundaresan": CHIALVO_SUNDARESAN, "lun_savage": LUN_SAVAGE}
 
 #: the closest a solid fraction comes to phi_rcp (-): g0 stays finite
 PHI_GAP = 1e-6

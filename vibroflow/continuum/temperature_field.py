@@ -36,7 +36,7 @@ import numpy as np
 from vibroflow.scenario.checks import find_contact
 
 from .kinetic_stress import KINETIC_COLUMNS, kinetic_stress
-from .kinetic_theory import KineticParameters
+from .kinetic_theory import G0_FORMS, KineticParameters
 from .temperature_step import TemperatureGrid, step_temperature
 from .timestep import kinetic_temperature_limit
 
@@ -68,13 +68,34 @@ def kinetic_parameters(scenario) -> KineticParameters:
                              restitution=float(pair.restitution))
 
 
-def temperature_model(scenario, options, spacing_m: float) -> TemperatureModel | None:
+def calibrated_kinetic_parameters(prm: KineticParameters, calibration) -> KineticParameters:
+    """prm with the constants calibration.toml's [kinetic] measured on the DEM
+    (vibroflow.calibration.kinetic): g0's form and phi_rcp, and Johnson & Jackson's frictional
+    pressure (Fr, phi_min, n, p) where the cells resolved one (Fr > 0); prm itself without a
+    calibration, a [kinetic] table or a fitted phi_rcp."""
+    kin = getattr(calibration, "kinetic", None) if calibration is not None else None
+    if kin is None or kin.phi_rcp is None or not math.isfinite(kin.phi_rcp):
+        return prm
+    prm = prm._replace(phi_rcp=float(kin.phi_rcp),
+                       g0_form=G0_FORMS.get(kin.g0_form or "chialvo_sundaresan", prm.g0_form))
+    fr = kin.frictional_Pa
+    if fr is not None and math.isfinite(fr) and fr > 0:
+        prm = prm._replace(frictional_Pa=float(fr),
+                           frictional_phi_min=float(kin.frictional_phi_min),
+                           frictional_n=float(kin.frictional_n or 2.0),
+                           frictional_p=float(kin.frictional_p or 5.0))
+    return prm
+
+
+def temperature_model(scenario, options, spacing_m: float,
+                      calibration=None) -> TemperatureModel | None:
     """The run's TemperatureModel on cells of side spacing_m (m), or None when the option
-    is off."""
+    is off; the grains' constants from the calibration's [kinetic] table where it has one
+    (calibrated_kinetic_parameters)."""
     if not options.temperature:
         return None
-    return TemperatureModel(kinetic_parameters(scenario), float(spacing_m),
-                            float(options.initial_temperature))
+    prm = calibrated_kinetic_parameters(kinetic_parameters(scenario), calibration)
+    return TemperatureModel(prm, float(spacing_m), float(options.initial_temperature))
 
 
 @nb.njit(cache=True)
