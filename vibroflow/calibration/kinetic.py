@@ -195,8 +195,8 @@ def fit_lun_frictional(phi, T, p, rho_s: float, restitution: float, phi_stderr=N
     *_stderr (phi_rcp, Fr, phi_min), points, solid_fraction_range, rms_log_residual,
     lun_rms_log_residual (Lun's pressure alone, fit_phi_rcp), chi2_per_dof (NaN unweighted),
     weighted, status}; where the cells resolve no frictional pressure (Fr at its lower bound,
-    1e-12 Pa, within two standard errors of 0, or a singular fit) Lun's fit alone with Fr = 0, phi_min NaN and the status saying
-    so.  InputError when fewer than min_points cells qualify."""
+    1e-12 Pa, within two standard errors of 0, or a singular fit) Lun's fit alone with Fr = 0,
+    phi_min NaN and the status saying so.  InputError when fewer than min_points cells qualify."""
     lun = fit_phi_rcp(phi, T, p, rho_s, restitution, phi_stderr, T_stderr, p_stderr,
                       phi_range, g0_form, max_log_error, min_points)
     phi, T, y, w, n, weighted = _cells_fitted(phi, T, p, rho_s, restitution, phi_stderr,
@@ -263,7 +263,8 @@ def fit_lun_frictional(phi, T, p, rho_s: float, restitution: float, phi_stderr=N
 def fit_cells(fields, rho_s: float, restitution: float, joint: bool = False,
               **options) -> dict:
     """fit_phi_rcp (joint: fit_lun_frictional) on a coarse-grained Dataset
-    (run_fields.coarse_grain_run's phase-resolved one, or any with solid_fraction, temperature, pressure and, optionally, their *_stderr)."""
+    (run_fields.coarse_grain_run's phase-resolved one, or any with solid_fraction, temperature,
+    pressure and, optionally, their *_stderr)."""
     for name in ("solid_fraction", "temperature", "pressure"):
         if name not in fields:
             raise InputError(f"fields: no {name!r}: not a coarse-grained field set")
