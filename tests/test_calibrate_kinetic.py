@@ -3,14 +3,18 @@ Lun et al.'s pressure with a known phi_rcp; the walls' energy flux of synthetic 
 sum F . v / (snapshots x area); [kinetic] in calibration.toml round-trips byte for byte."""
 from __future__ import annotations
 
+import math
 import tomllib
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from vibroflow.calibration.kinetic import fit_phi_rcp, kinetic_table, pressure_ratio
+from vibroflow.calibration.kinetic import (fit_lun_frictional, fit_phi_rcp, frictional_pressure,
+                                          kinetic_table, pressure_ratio)
 from vibroflow.calibration.wall_energy import wall_flux_of_contacts
+from vibroflow.continuum.kinetic_theory import KineticParameters
+from vibroflow.continuum.temperature_field import calibrated_kinetic_parameters
 from vibroflow.dem.walls import WALL_PARTITION_LO, WALL_U
 from vibroflow.errors import InputError
 from vibroflow.io.calibration_file import Calibration, read_calibration, write_calibration
@@ -222,3 +226,58 @@ def test_cells_scattered_far_about_the_closure_say_so_in_the_status():
     assert fit["rms_log_residual"] == pytest.approx(1.0, rel=0.1)
     assert "the closure does not describe them" in fit["status"]
     assert "scatter" not in fit_phi_rcp(*_cells(0.60, n=400, rel_p=0.1)[:3], RHO_S, E)["status"]
+
+
+def _frictional_cells(n=400, rel_p=0.05, seed=3):
+    """Cells with Lun's plus Johnson & Jackson's pressure (phi_rcp 0.63, Fr 0.02 Pa, phi_min
+    0.5, n = 2, p = 5), p scattered log-normally by rel_p."""
+    rng = np.random.default_rng(seed)
+    phi = rng.uniform(0.1, 0.6, n)
+    T = np.exp(rng.uniform(np.log(1e-4), np.log(2e-2), n))
+    p = RHO_S * phi * T * pressure_ratio(phi, 0.63, E) + frictional_pressure(phi, 0.63, 0.02, 0.5)
+    return phi, T, p * np.exp(rel_p * rng.standard_normal(n))
+
+
+def test_the_joint_fit_recovers_known_frictional_constants():
+    phi, T, p = _frictional_cells()
+    fit = fit_lun_frictional(phi, T, p, RHO_S, E)
+    for key, true in (("phi_rcp", 0.63), ("frictional_Pa", 0.02), ("frictional_phi_min", 0.5)):
+        assert abs(fit[key] - true) < 3.0 * fit[key + "_stderr"], key
+    assert fit["phi_rcp"] == pytest.approx(0.63, abs=2e-3)
+    assert fit["frictional_Pa"] == pytest.approx(0.02, rel=0.2)
+    assert fit["frictional_phi_min"] == pytest.approx(0.5, abs=0.01)
+    # the scatter is the cells' own 5 %; Lun's pressure alone cannot follow the frictional part
+    assert fit["rms_log_residual"] == pytest.approx(0.05, rel=0.15)
+    assert fit["lun_rms_log_residual"] > 2.0 * fit["rms_log_residual"]
+    table = kinetic_table(fit, None, E, "contact law")
+    assert table["frictional_Pa"] == fit["frictional_Pa"] and "Johnson" in table["model"]
+
+
+def test_cells_without_a_frictional_pressure_give_luns_fit_and_say_so():
+    phi, T, p, *_ = _cells(0.60, n=200, rel_p=0.05)
+    fit = fit_lun_frictional(phi, T, p, RHO_S, E)
+    lun = fit_phi_rcp(phi, T, p, RHO_S, E)
+    assert fit["frictional_Pa"] == 0.0 and math.isnan(fit["frictional_phi_min"])
+    assert fit["phi_rcp"] == lun["phi_rcp"] and fit["phi_rcp_stderr"] > 0
+    assert "no frictional pressure" in fit["status"]
+
+
+def test_a_run_reads_the_calibrated_kinetic_constants():
+    src = DATA / "tub47-quick-dem" / "calibration.toml"
+    plain = read_calibration(src)
+    prm = KineticParameters(restitution=E)
+    assert calibrated_kinetic_parameters(prm, plain) == prm       # no [kinetic]: unchanged
+    assert calibrated_kinetic_parameters(prm, None) == prm
+    fit = fit_lun_frictional(*_frictional_cells(), RHO_S, E)
+    rec = Calibration.from_dict({**tomllib.loads(src.read_text()),
+                                 "kinetic": kinetic_table(fit, None, E, "contact law")})
+    got = calibrated_kinetic_parameters(prm, rec)
+    assert (got.phi_rcp, got.frictional_Pa, got.frictional_phi_min) == (
+        fit["phi_rcp"], fit["frictional_Pa"], fit["frictional_phi_min"])
+    assert (got.frictional_n, got.frictional_p, got.restitution) == (2.0, 5.0, E)
+    # cells without a frictional pressure: phi_rcp only, Fr stays 0
+    lun = fit_lun_frictional(*_cells(0.60, n=200, rel_p=0.05)[:3], RHO_S, E)
+    rec = Calibration.from_dict({**tomllib.loads(src.read_text()),
+                                 "kinetic": kinetic_table(lun, None, E, "contact law")})
+    got = calibrated_kinetic_parameters(prm, rec)
+    assert got.phi_rcp == lun["phi_rcp"] and got.frictional_Pa == 0.0

@@ -19,7 +19,8 @@ from vibroflow.continuum.eulerian.wall import MeshWall
 from vibroflow.continuum.formulation import formulation
 from vibroflow.continuum.grid import Grid
 from vibroflow.continuum.grid_update import LabFrame
-from vibroflow.continuum.kinetic_theory import KineticParameters, cooling_coefficient
+from vibroflow.continuum.kinetic_theory import (KineticParameters, cooling_coefficient,
+                                                shear_viscosity_Pa_s)
 from vibroflow.continuum.mpm import solver as mpm
 from vibroflow.continuum.options import ContinuumOptions, options_record
 from vibroflow.continuum.temperature_field import TemperatureModel, fluctuation_energy_J_m
@@ -170,3 +171,62 @@ def test_a_checkpoint_carries_the_temperature(method, tmp_path):
     save_checkpoint(path, state, {}, form.checkpoint_meta(state))
     saved, _, meta = load_checkpoint(path)
     assert form.restore(system, saved, meta).temperature is None
+
+
+def _sheared_gas(method, coupled, phi=0.4, T0=0.01, A=0.01):
+    """A gas (phi below the critical packing) filling an x-periodic strip between free-slip
+    plates, no gravity, e = 1, T0 uniform, moving as the plates' first shear mode
+    v_x = A cos(pi z / DEPTH): (system, state, positions of its points or cells)."""
+    prm = KineticParameters(diameter_m=MAT.diameter, density_kg_m3=MAT.solid_density,
+                            restitution=1.0)
+    model = TemperatureModel(prm, DX, T0, coupled)
+    rho = phi * MAT.solid_density
+    k = math.pi / DEPTH
+    kn = (MAT.bulk_modulus + 4 * MAT.shear_modulus / 3) / (DX / 2)
+    if method == "lagrangian":
+        sp = DX / 2
+        plates = [Plane((0.0, 0.0), (0.0, 1.0), kn), Plane((0.0, DEPTH), (0.0, -1.0), kn)]
+        system = mpm.MPMSystem(Grid.periodic_strip(WIDTH, 0.0, DEPTH, DX), MAT,
+                               stable_dt(MAT, DX, sp, plates), frame=LabFrame((0.0, 0.0)),
+                               boundaries=plates, temperature=model)
+        x = lattice(0.0, WIDTH, 0.0, DEPTH, sp)
+        v = np.zeros_like(x)
+        v[:, 0] = A * np.cos(k * x[:, 1])
+        state = mpm.init_state(system, x, sp * sp, rho, v=v)
+        return system, state, lambda: state.x
+    mesh = EulerianMesh.box(0.0, WIDTH, 0.0, DEPTH, DX, periodic=True)
+    wall = MeshWall((MAT.bulk_modulus + 4 * MAT.shear_modulus / 3) / mesh.h, 0.0)
+    system = EulerianSystem(mesh, MAT, stable_dt(MAT, DX, mesh.h, [wall]),
+                            frame=LabFrame((0.0, 0.0)), wall=wall, temperature=model)
+    v = np.zeros((mesh.n, 2))
+    v[:, 0] = A * np.cos(k * system.x[:, 1])
+    state = eulerian.init_state(system, np.where(mesh.inside, rho * mesh.h ** 2, 0.0),
+                                density=np.full(mesh.n, rho), v=v)
+    return system, state, lambda: system.x
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_a_sheared_gas_decays_at_the_kinetic_viscositys_rate(method):
+    """The gas's shear mode decays as exp(-nu k^2 t), nu = eta_k / rho with Gidaspow's eta_k
+    (kinetic_stress.py), beyond the formulation's own numerical damping (the same run with T
+    passive): within 20 %.  Measured 13 - 14 % fast in both at six cells a half wavelength
+    and 16 % at twelve (docs/validation.md section 24: an excess that does not shrink with
+    the grid, not explained)."""
+    k = math.pi / DEPTH
+    rates = {}
+    for coupled in (False, True):
+        system, state, where = _sheared_gas(method, coupled)
+        state.temperature[:] = 0.01
+
+        def amplitude():
+            return 2.0 * np.mean(state.v[:, 0] * np.cos(k * where()[:, 1]))
+
+        a0 = amplitude()
+        n = int(round(0.1 / system.dt))
+        _advance(method, system, state, n)
+        rates[coupled] = math.log(a0 / amplitude()) / (n * system.dt)
+    prm = KineticParameters(diameter_m=MAT.diameter, density_kg_m3=MAT.solid_density,
+                            restitution=1.0)
+    nu_k2 = shear_viscosity_Pa_s(0.4, 0.01, prm) / (0.4 * MAT.solid_density) * k * k
+    assert rates[False] < 0.25 * nu_k2      # the numerical damping alone is slower
+    assert rates[True] - rates[False] == pytest.approx(nu_k2, rel=0.20)

@@ -22,10 +22,11 @@ Stages:
    sheared packings of the balls at the bed's pressure and the tub's I (dilatancy.py) ->
    [dilatancy], and with it the cyclic compaction of the continuum's compaction option from
    the cyclic cell's per-cycle packing at the tub's amplitude (compaction.py) -> [compaction];
-7. kinetic theory's constants (kinetic, wall_energy): phi_rcp of g0 fitted to the
-   phase-resolved cells' p / (rho_s phi T) with the scenario's ball-ball restitution, the
-   walls' energy flux from the wall contacts, and the multiplier of Gidaspow's conductivity
-   from the cells' fluctuation-energy flux (energy_flux, conductivity) -> [kinetic];
+7. kinetic theory's constants (kinetic, wall_energy): phi_rcp of g0 and Johnson & Jackson's
+   frictional pressure fitted jointly to the phase-resolved cells' p / (rho_s phi T) with the
+   scenario's ball-ball restitution, the walls' energy flux from the wall contacts, and the
+   multiplier of Gidaspow's conductivity from the cells' fluctuation-energy flux
+   (energy_flux, conductivity) -> [kinetic];
 8. RUN_DIR/calibration.toml (every parameter with its uncertainty and its provenance, and
    last the [scenario] it was measured on, which the continuum checks its own against; its
    tables built by calibration_tables, checked and written as the record
@@ -91,10 +92,12 @@ def kinetic_record(res, phases, prog, energy_flux=None) -> dict | None:
     fit = None
     if res.has_ball_contacts:  # the pressure holds the collisional (contact) part
         try:
-            fit = fit_cells(phases, res.solid_density, e)
-            prog.log(f"kinetic: phi_rcp = {fit['phi_rcp']:.4f} +- {fit['phi_rcp_stderr']:.4f} "
-                     f"({fit['points']} cells, rms log residual "
-                     f"{fit['rms_log_residual']:.3f}; {fit['status']})")
+            fit = fit_cells(phases, res.solid_density, e, joint=True)
+            prog.log(f"kinetic: phi_rcp = {fit['phi_rcp']:.4f} +- {fit['phi_rcp_stderr']:.4f}, "
+                     f"frictional Fr = {fit['frictional_Pa']:.3g} Pa, phi_min = "
+                     f"{fit['frictional_phi_min']:.4f} ({fit['points']} cells, rms log "
+                     f"residual {fit['rms_log_residual']:.3f}, Lun's pressure alone "
+                     f"{fit['lun_rms_log_residual']:.3f}; {fit['status']})")
         except InputError as err:
             prog.log(f"kinetic: phi_rcp not measured: {err}")
     cond = None

@@ -20,6 +20,18 @@ The fit: weighted least squares in ln(p / (rho_s phi T)), one parameter, weights
 errors (equal weights without them).  The standard error of phi_rcp is sqrt(s^2 / sum w J^2),
 J = d ln(model) / d phi_rcp and s^2 the weighted residual variance per degree of freedom, as in
 impacts.weighted_linear_fit; the scatter is the weighted rms of the log residuals.
+
+The joint fit (`fit_lun_frictional`): Lun's pressure plus Johnson & Jackson's (1987, J. Fluid
+Mech. 176, 67) frictional pressure of enduring contacts, the continuum's own
+(kinetic_theory.frictional_pressure_Pa),
+
+    p = rho_s phi T (1 + 2 (1 + e) phi g0(phi; phi_rcp)) + Fr (phi - phi_min)^n / (phi_rcp - phi)^p,
+
+n = 2 and p = 5 (Johnson & Jackson's exponents), phi_rcp, ln Fr and phi_min fitted together
+by weighted least squares in ln(p / (rho_s phi T)) over the same cells (scipy's
+trust-region least_squares, from several starting phi_min, the best kept); standard errors
+from the weighted Jacobian, s^2 (J^T W J)^-1.  The frictional part does not scale with T, which
+is what lets it describe cold dense cells that Lun's pressure alone puts far below their p.
 """
 from __future__ import annotations
 
@@ -27,10 +39,10 @@ import math
 
 import numba as nb
 import numpy as np
-from scipy.optimize import minimize_scalar
+from scipy.optimize import least_squares, minimize_scalar
 
-from vibroflow.continuum.kinetic_theory import (CHIALVO_SUNDARESAN, LUN_SAVAGE,
-                                                KineticParameters, radial_distribution)
+from vibroflow.continuum.kinetic_theory import (G0_FORMS, KineticParameters,
+                                                frictional_pressure_Pa, radial_distribution)
 from vibroflow.errors import InputError
 
 PHI_RANGE = (0.1, 0.6)
@@ -39,7 +51,6 @@ MAX_LOG_ERROR = 0.5
 MAX_RMS_LOG_RESIDUAL = 0.5
 #: the largest phi_rcp the fit may return: the packing fraction of face-centred cubic spheres
 PHI_RCP_MAX = math.pi / (3.0 * math.sqrt(2.0))
-G0_FORMS = {"chialvo_sundaresan": CHIALVO_SUNDARESAN, "lun_savage": LUN_SAVAGE}
 
 
 @nb.njit(cache=True)
@@ -48,6 +59,25 @@ def _g0_of(phi, prm):
     for k in range(phi.size):
         out[k] = radial_distribution(phi[k], prm)
     return out
+
+
+@nb.njit(cache=True)
+def _pf_of(phi, prm):
+    out = np.empty(phi.size)
+    for k in range(phi.size):
+        out[k] = frictional_pressure_Pa(phi[k], prm)
+    return out
+
+
+def frictional_pressure(phi, phi_rcp: float, frictional_Pa: float, phi_min: float,
+                        n: float = 2.0, p: float = 5.0) -> np.ndarray:
+    """Johnson & Jackson's p_f (Pa) = Fr (phi - phi_min)^n / (phi_rcp - phi)^p above phi_min
+    (kinetic_theory.frictional_pressure_Pa) at solid fractions phi."""
+    phi = np.ascontiguousarray(phi, dtype=float).ravel()
+    prm = KineticParameters(phi_rcp=float(phi_rcp), frictional_Pa=float(frictional_Pa),
+                            frictional_phi_min=float(phi_min), frictional_n=float(n),
+                            frictional_p=float(p))
+    return _pf_of(phi, prm)
 
 
 def pressure_ratio(phi, phi_rcp: float, restitution: float,
@@ -74,19 +104,10 @@ def _check(restitution, phi_range, g0_form, max_log_error):
     return lo, hi
 
 
-def fit_phi_rcp(phi, T, p, rho_s: float, restitution: float, phi_stderr=None, T_stderr=None,
-                p_stderr=None, phi_range=PHI_RANGE, g0_form: str = "chialvo_sundaresan",
-                max_log_error: float = MAX_LOG_ERROR, min_points: int = 3) -> dict:
-    """phi_rcp fitted to cells (flat arrays of solid fraction phi, temperature T (m^2/s^2) and
-    pressure p (Pa), optional batch-means errors of each); rho_s (kg/m^3).
-
-    Returns {phi_rcp, phi_rcp_stderr, restitution, g0_form, points, solid_fraction_range
-    (of the points used), rms_log_residual, chi2_per_dof (NaN unweighted), weighted,
-    status ("measured", or "at the bound ..." when the best phi_rcp is within two standard
-    errors of the densest cell's solid fraction or of PHI_RCP_MAX; the scatter said when
-    the rms log residual exceeds MAX_RMS_LOG_RESIDUAL)}.  InputError when fewer
-    than `min_points` cells qualify.
-    """
+def _cells_fitted(phi, T, p, rho_s, restitution, phi_stderr, T_stderr, p_stderr, phi_range,
+                  g0_form, max_log_error, min_points, what):
+    """The cells a fit uses (module docstring): (phi, T, y = ln(p / (rho_s phi T)), weights,
+    count, weighted); InputError naming `what` when fewer than min_points qualify."""
     lo, hi = _check(restitution, phi_range, g0_form, max_log_error)
     if not (rho_s > 0):
         raise InputError(f"rho_s = {rho_s!r}: must be > 0 kg/m^3")
@@ -109,10 +130,28 @@ def fit_phi_rcp(phi, T, p, rho_s: float, restitution: float, phi_stderr=None, T_
             w = np.ones_like(y)
     n = int(ok.sum())
     if n < min_points:
-        raise InputError(f"cells = {n}: the phi_rcp fit needs at least {min_points} cells with "
+        raise InputError(f"cells = {n}: the {what} fit needs at least {min_points} cells with "
                          f"finite p, T > 0 and solid fraction in [{lo:g}, {hi:g}]"
                          + (f" and log error <= {max_log_error:g}" if weighted else ""))
-    phi, y, w = phi[ok], y[ok], w[ok]
+    return phi[ok], T[ok], y[ok], w[ok], n, weighted
+
+
+def fit_phi_rcp(phi, T, p, rho_s: float, restitution: float, phi_stderr=None, T_stderr=None,
+                p_stderr=None, phi_range=PHI_RANGE, g0_form: str = "chialvo_sundaresan",
+                max_log_error: float = MAX_LOG_ERROR, min_points: int = 3) -> dict:
+    """phi_rcp fitted to cells (flat arrays of solid fraction phi, temperature T (m^2/s^2) and
+    pressure p (Pa), optional batch-means errors of each); rho_s (kg/m^3).
+
+    Returns {phi_rcp, phi_rcp_stderr, restitution, g0_form, points, solid_fraction_range
+    (of the points used), rms_log_residual, chi2_per_dof (NaN unweighted), weighted,
+    status ("measured", or "at the bound ..." when the best phi_rcp is within two standard
+    errors of the densest cell's solid fraction or of PHI_RCP_MAX; the scatter said when
+    the rms log residual exceeds MAX_RMS_LOG_RESIDUAL)}.  InputError when fewer
+    than `min_points` cells qualify.
+    """
+    phi, T, y, w, n, weighted = _cells_fitted(phi, T, p, rho_s, restitution, phi_stderr,
+                                              T_stderr, p_stderr, phi_range, g0_form,
+                                              max_log_error, min_points, "phi_rcp")
 
     def sse(phi_rcp):
         r = y - np.log(pressure_ratio(phi, phi_rcp, restitution, g0_form))
@@ -145,15 +184,94 @@ def fit_phi_rcp(phi, T, p, rho_s: float, restitution: float, phi_stderr=None, T_
             "status": status}
 
 
-def fit_cells(fields, rho_s: float, restitution: float, **options) -> dict:
-    """fit_phi_rcp on a coarse-grained Dataset (run_fields.coarse_grain_run's phase-resolved
-    one, or any with solid_fraction, temperature, pressure and, optionally, their *_stderr)."""
+def fit_lun_frictional(phi, T, p, rho_s: float, restitution: float, phi_stderr=None,
+                       T_stderr=None, p_stderr=None, phi_range=PHI_RANGE,
+                       g0_form: str = "chialvo_sundaresan", max_log_error: float = MAX_LOG_ERROR,
+                       min_points: int = 5) -> dict:
+    """Lun's plus Johnson & Jackson's frictional pressure fitted jointly to cells (module
+    docstring; arguments as fit_phi_rcp's).
+
+    Returns {phi_rcp, frictional_Pa (Fr), frictional_phi_min, frictional_n, frictional_p, their
+    *_stderr (phi_rcp, Fr, phi_min), points, solid_fraction_range, rms_log_residual,
+    lun_rms_log_residual (Lun's pressure alone, fit_phi_rcp), chi2_per_dof (NaN unweighted),
+    weighted, status}; where the cells resolve no frictional pressure (Fr at its lower bound,
+    1e-12 Pa, within two standard errors of 0, or a singular fit) Lun's fit alone with Fr = 0,
+    phi_min NaN and the status saying so.  InputError when fewer than min_points cells qualify."""
+    lun = fit_phi_rcp(phi, T, p, rho_s, restitution, phi_stderr, T_stderr, p_stderr,
+                      phi_range, g0_form, max_log_error, min_points)
+    phi, T, y, w, n, weighted = _cells_fitted(phi, T, p, rho_s, restitution, phi_stderr,
+                                              T_stderr, p_stderr, phi_range, g0_form,
+                                              max_log_error, min_points,
+                                              "Lun + frictional pressure")
+    sw = np.sqrt(w)
+    scale = rho_s * phi * T
+    lo_b = float(phi.max()) + 1e-4
+
+    def resid(x):
+        ratio = pressure_ratio(phi, x[0], restitution, g0_form)
+        pf = frictional_pressure(phi, x[0], math.exp(x[1]), x[2])
+        return sw * (y - np.log(ratio + pf / scale))
+
+    lower = [lo_b, math.log(1e-12), 0.0]
+    upper = [PHI_RCP_MAX, math.log(1e9), lo_b - 1e-3]
+    best = None
+    for phi_min in (0.3, 0.45, 0.55):
+        x0 = [min(max(lun["phi_rcp"], lo_b + 1e-3), PHI_RCP_MAX - 1e-3), math.log(1e-2),
+              min(phi_min, upper[2] - 1e-3)]
+        res = least_squares(resid, x0, bounds=(lower, upper), x_scale=[0.01, 1.0, 0.05],
+                            xtol=1e-12, ftol=1e-12, gtol=1e-12)
+        if best is None or res.cost < best.cost:
+            best = res
+    x = best.x
+    r = best.fun
+    sse = float(np.sum(r * r))
+    s2 = sse / max(n - 3, 1)
+    J = best.jac
+    try:
+        cov = s2 * np.linalg.inv(J.T @ J)
+        se = np.sqrt(np.diag(cov))
+    except np.linalg.LinAlgError:
+        se = np.full(3, np.nan)
+    fr = math.exp(x[1])
+    rms = float(math.sqrt(sse / np.sum(w)))
+    common = {"frictional_n": 2.0, "frictional_p": 5.0, "restitution": float(restitution),
+              "g0_form": g0_form, "points": n,
+              "solid_fraction_range": [float(phi.min()), float(phi.max())],
+              "lun_rms_log_residual": lun["rms_log_residual"], "weighted": weighted}
+    if not (np.all(np.isfinite(se)) and x[1] > lower[1] + 1.0 and se[1] < 0.5):
+        # Fr at its lower bound, within two standard errors of 0 (ln Fr's error above 1/2) or a
+        # singular fit: the cells resolve no frictional pressure, and the fit is Lun's alone
+        return {**common, "phi_rcp": lun["phi_rcp"], "phi_rcp_stderr": lun["phi_rcp_stderr"],
+                "frictional_Pa": 0.0, "frictional_Pa_stderr": float("nan"),
+                "frictional_phi_min": float("nan"), "frictional_phi_min_stderr": float("nan"),
+                "rms_log_residual": lun["rms_log_residual"],
+                "chi2_per_dof": lun["chi2_per_dof"],
+                "status": lun["status"] + "; no frictional pressure resolved by the cells (Fr "
+                                          "within two standard errors of 0): Lun's pressure "
+                                          "alone"}
+    status = "measured"
+    if rms > MAX_RMS_LOG_RESIDUAL:
+        status += (f"; the cells scatter about the joint pressure by a factor {math.exp(rms):.3g} "
+                   "(rms log residual)")
+    return {**common, "phi_rcp": float(x[0]), "phi_rcp_stderr": float(se[0]),
+            "frictional_Pa": fr, "frictional_Pa_stderr": float(fr * se[1]),
+            "frictional_phi_min": float(x[2]), "frictional_phi_min_stderr": float(se[2]),
+            "rms_log_residual": rms, "chi2_per_dof": s2 if weighted else float("nan"),
+            "status": status}
+
+
+def fit_cells(fields, rho_s: float, restitution: float, joint: bool = False,
+              **options) -> dict:
+    """fit_phi_rcp (joint: fit_lun_frictional) on a coarse-grained Dataset
+    (run_fields.coarse_grain_run's phase-resolved one, or any with solid_fraction, temperature,
+    pressure and, optionally, their *_stderr)."""
     for name in ("solid_fraction", "temperature", "pressure"):
         if name not in fields:
             raise InputError(f"fields: no {name!r}: not a coarse-grained field set")
     get = (lambda k: np.asarray(fields[k].values, float) if k in fields else None)
-    return fit_phi_rcp(get("solid_fraction"), get("temperature"), get("pressure"), rho_s,
-                       restitution, get("solid_fraction_stderr"), get("temperature_stderr"),
+    fit = fit_lun_frictional if joint else fit_phi_rcp
+    return fit(get("solid_fraction"), get("temperature"), get("pressure"), rho_s,
+               restitution, get("solid_fraction_stderr"), get("temperature_stderr"),
                        get("pressure_stderr"), **options)
 
 
@@ -174,6 +292,14 @@ def kinetic_table(fit: dict | None, flux: dict | None, restitution: float,
                    phi_rcp_stderr=fit["phi_rcp_stderr"], status=fit["status"],
                    points=int(fit["points"]), solid_fraction_range=fit["solid_fraction_range"],
                    rms_log_residual=fit["rms_log_residual"], chi2_per_dof=fit["chi2_per_dof"])
+        if "frictional_Pa" in fit:
+            out["model"] = ("p = rho_s phi T (1 + 2 (1 + e) phi g0(phi; phi_rcp)) + Fr (phi - "
+                            "phi_min)^n / (phi_rcp - phi)^p (Lun et al. 1984; Johnson & "
+                            "Jackson 1987)")
+            for key in ("frictional_Pa", "frictional_Pa_stderr", "frictional_phi_min",
+                        "frictional_phi_min_stderr", "frictional_n", "frictional_p",
+                        "lun_rms_log_residual"):
+                out[key] = float(fit[key])
     if flux is not None:
         u, p = flux["u"], flux["partitions"]
         wf = {"arc_edges_m": _floats(flux["arc_edges_m"]),

@@ -83,7 +83,7 @@ def continuum(
                                 "strip by benchmarks/strip_damping.py.")] = 0.0,
     temperature: Annotated[bool, typer.Option(
         "--temperature", help="Carry the granular temperature T (m^2/s^2) with its balance "
-                              "and kinetic pressure (continuum/temperature_field.py), and "
+                              "and its stress (continuum/kinetic_stress.py), and "
                               "write its map temperature.csv; default off.")] = False,
     initial_temperature: Annotated[float, typer.Option(
         "--initial-temperature", help="With --temperature: T of the bed at the start "

@@ -39,7 +39,8 @@ from .grid_step import grid_phase
 from .p2g import p2g
 from .plasticity import plasticity_step
 from .stress_update import damped_stress
-from .temperature_field import add_pressure
+from .kinetic_stress import RATE_RATIO
+from .temperature_field import add_stress
 from .transfer_operator import operator_of_points
 
 #: status of `advance_kernel`
@@ -47,8 +48,9 @@ OK, THROUGH_WALL, ESCAPED = 0, 1, 2
 
 #: the material points' arrays (mpm.solver.MPMState's, units there) and stress_work (N, 4) the
 #: stress scattered when the material has a bed viscosity or a kinetic pressure
-#: (stress_update.damped_stress; (0, 4) without), p_kin (N,) the kinetic pressure (Pa) added to
-#: the scattered mean stress (temperature_field.py; (0,) without the temperature)
+#: (stress_update.damped_stress; (0, 4) without), p_kin (N, 5) the granular temperature's stress
+#: (Pa) added to the scattered one and its return map's rate ratio (kinetic_stress.py; (0, 5)
+#: without the temperature)
 Points = namedtuple("Points", ["x", "v", "C", "L", "mass", "volume", "density", "stress",
                                "gamma_dot", "phase", "fext", "stress_work", "p_kin"])
 #: the step's constants: dt (s), the material's params (constitutive.ContinuumMaterial.
@@ -117,7 +119,7 @@ def advance_kernel(nsteps, t, points, step, boundaries, grid, work):
             elif kinetic:
                 stress_work[a:b] = stress[a:b]
             if kinetic:
-                add_pressure(stress_work, p_kin, a, b)
+                add_stress(stress_work, p_kin, a, b)
             p2g(x[a:b], v[a:b], C[a:b], mass[a:b], volume[a:b], scattered[a:b], fext[a:b], x0,
                 z0, dx, periodic, cm[c], cmv[c], cf[c], axis_cols > 0)
             if transfers > 1:
@@ -139,7 +141,7 @@ def advance_kernel(nsteps, t, points, step, boundaries, grid, work):
             g2p(x[a:b], v[a:b], C[a:b], L[a:b], gv, x0, z0, dx, dt, periodic, gm, gmv,
                 flip)
             plasticity_step(L[a:b], mass[a:b], volume[a:b], density[a:b], stress[a:b], dt,
-                            params, gamma_dot[a:b], phase[a:b])
+                            params, gamma_dot[a:b], phase[a:b], p_kin[a:b, RATE_RATIO])
             bad[c] = _escaped_range(a, b, x, v, box[0], box[1], box[2], box[3])
         t += dt
         n_bad = 0

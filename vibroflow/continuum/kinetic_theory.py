@@ -28,7 +28,12 @@ the two-fluid codes (MFiX, OpenFOAM's kineticTheoryModels, sedFoam) use them:
   47) correlation length in diameters L/d = max(1, c_L d gamma_dot / sqrt(T)): in dense shear
   the grains' velocities are correlated over L > d and collisions dissipate less.  Jenkins'
   dependence of L on e and on the viscosity's collisional factor is folded into c_L, which the
-  DEM shear cell measures; c_L = 0 is the plain theory.
+  DEM shear cell measures; c_L = 0 is the plain theory;
+* frictional pressure of enduring contacts below packing (Johnson & Jackson 1987, J. Fluid
+  Mech. 176, 67):
+      p_f = Fr (phi - phi_min)^n / (phi_rcp - phi)^p   for phi > phi_min, else 0,
+  Fr (Pa) = 0 (off) by default; Fr and phi_min fitted with phi_rcp to the DEM's coarse-grained
+  cells (vibroflow.calibration.kinetic), n = 2 and p = 5 Johnson & Jackson's exponents.
 
 Divided by the heat capacity per volume (3/2) rho_s phi, the dissipation is
 dT/dt = -a T^(3/2) with a = 8 (1 - e^2) phi g0 / (d sqrt(pi)) (`cooling_coefficient`), whose
@@ -48,6 +53,8 @@ import numba as nb
 #: g0 forms (KineticParameters.g0_form)
 CHIALVO_SUNDARESAN = 0
 LUN_SAVAGE = 1
+#: the g0 forms by name, as calibration.toml's [kinetic] g0_form spells them
+G0_FORMS = {"chialvo_sundaresan": CHIALVO_SUNDARESAN, "lun_savage": LUN_SAVAGE}
 
 #: the closest a solid fraction comes to phi_rcp (-): g0 stays finite
 PHI_GAP = 1e-6
@@ -62,7 +69,9 @@ class KineticParameters(NamedTuple):
     restitution: normal restitution e between grains (-), 0 < e <= 1 (1: no dissipation);
     phi_rcp: the solid fraction where g0 diverges (-), random close packing of the grains;
     g0_form: CHIALVO_SUNDARESAN (default) or LUN_SAVAGE;
-    correlation_coefficient: Jenkins' c_L (-), 0 = off (default).
+    correlation_coefficient: Jenkins' c_L (-), 0 = off (default);
+    frictional_Pa, frictional_phi_min, frictional_n, frictional_p: Johnson & Jackson's Fr (Pa,
+    0 = no frictional pressure, default), phi_min (-) and exponents n, p (-).
     """
 
     diameter_m: float = 0.00635
@@ -71,6 +80,10 @@ class KineticParameters(NamedTuple):
     phi_rcp: float = 0.64
     g0_form: int = CHIALVO_SUNDARESAN
     correlation_coefficient: float = 0.0
+    frictional_Pa: float = 0.0
+    frictional_phi_min: float = 0.5
+    frictional_n: float = 2.0
+    frictional_p: float = 5.0
 
 
 @nb.njit(cache=True)
@@ -95,6 +108,17 @@ def pressure_Pa(phi, T, prm):
     e = prm.restitution
     return prm.density_kg_m3 * phi * T * (1.0 + 2.0 * (1.0 + e) * phi
                                           * radial_distribution(phi, prm))
+
+
+@nb.njit(cache=True)
+def frictional_pressure_Pa(phi, prm):
+    """Johnson & Jackson's (1987) frictional pressure (Pa), Fr (phi - phi_min)^n /
+    (phi_rcp - phi)^p above phi_min (phi clamped below phi_rcp as in g0), else 0."""
+    if prm.frictional_Pa <= 0.0 or phi <= prm.frictional_phi_min:
+        return 0.0
+    f = min(phi, prm.phi_rcp - PHI_GAP)
+    return (prm.frictional_Pa * (f - prm.frictional_phi_min) ** prm.frictional_n
+            / (prm.phi_rcp - f) ** prm.frictional_p)
 
 
 @nb.njit(cache=True)

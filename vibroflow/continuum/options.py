@@ -105,8 +105,8 @@ class ContinuumOptions:
     they are made at damping_transfer_cfl, so that their damping of the flow does not depend on
     the grid (module docstring); damping_length = dx makes them at transfer_cfl on every grid
     (their damping then falls with the grid); temperature: the granular temperature T
-    (m^2/s^2) carried by the material, with its balance and Lun's kinetic pressure in the stress
-    (temperature_field.py; default False: not carried, the step as without it),
+    (m^2/s^2) carried by the material, with its balance and its stress (temperature_field.py,
+    kinetic_stress.py; default False: not carried, the step as without it),
     initial_temperature (m^2/s^2, >= 0): T of the material at the start (default 0).
 
     stiffness_factor s < 1 is the continuum's counterpart of the DEM's reduced Young's modulus:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numba as nb
 
 from .constitutive import P_RHO_C
-from .stress_update import update_stress_points
+from .stress_update import update_stress_points_rated
 
 
 #: the lowest density of a point, as a fraction of the critical density rho_c (see update_volume)
@@ -50,9 +50,11 @@ def update_volume(L, mass, volume, density, dt, rho_min):
 
 
 @nb.njit(cache=True)
-def plasticity_step(L, mass, volume, density, stress, dt, params, gamma_dot, phase):
+def plasticity_step(L, mass, volume, density, stress, dt, params, gamma_dot, phase,
+                    rate_ratio):
     """Volume, density and stress of every point after a step dt (s); see the module docstring.
     params = ContinuumMaterial.as_array(); gamma_dot (1/s) and phase (0 disconnected, 1 elastic,
-    2 flowing) are written per point."""
+    2 flowing) are written per point; rate_ratio (N,) the return map's ratio of the inertial
+    number read from the granular temperature (kinetic_stress.py), (0,) without it."""
     update_volume(L, mass, volume, density, dt, DILUTE_DENSITY_FLOOR * params[P_RHO_C])
-    update_stress_points(stress, L, density, dt, params, gamma_dot, phase)
+    update_stress_points_rated(stress, L, density, dt, params, gamma_dot, phase, rate_ratio)

@@ -118,9 +118,11 @@ def elastic_predictor(sxx, szz, sxz, syy, lxx, lxz, lzx, lzz, lyy, dt, K, G):
 
 
 @nb.njit(cache=True, inline="always")
-def return_map(sxx, szz, sxz, syy, density, dt, params):
+def return_map(sxx, szz, sxz, syy, density, dt, params, rate):
     """Plastic correction of a trial stress (Pa) of a point of density `density` (kg/m^3) over a
-    step dt (s); params = `ContinuumMaterial.as_array()`.
+    step dt (s); params = `ContinuumMaterial.as_array()`; rate the ratio r (-) of the inertial
+    number read from the granular temperature (mu(r I), kinetic_stress.py; 1: the plain mu(I)
+    law, 0: mu_s at any rate; the mu(I) model without dilatancy only).
 
     Returns (sxx, szz, sxz, syy, gamma_dot_p, state) with gamma_dot_p the equivalent plastic
     shear rate (1/s) and state 0 = disconnected (stress-free), 1 = elastic, 2 = flowing.
@@ -149,7 +151,14 @@ def return_map(sxx, szz, sxz, syy, density, dt, params):
         if excess <= 0.0:
             return sxx, szz, sxz, syy, 0.0, 1
         xi = params[P_I0] * np.sqrt(p / params[P_RHO_S]) / params[P_D]
-        gp = _mu_i_flow_rate(tau, excess, params[P_MU_2] * p, S, xi)
+        if rate == 1.0:
+            gp = _mu_i_flow_rate(tau, excess, params[P_MU_2] * p, S, xi)
+        elif rate > 0.0:
+            # mu(r I) = mu_s + (mu_2 - mu_s) gp / (gp + xi / r)
+            gp = _mu_i_flow_rate(tau, excess, params[P_MU_2] * p, S, xi / rate)
+        else:
+            # r = 0: mu = mu_s at any rate, tau_tr - S gp = mu_s p
+            gp = excess / S
     tau_new = tau - S * gp
     if tau_new < 0.0:
         tau_new = 0.0
@@ -259,8 +268,16 @@ def compact(sxx, szz, sxz, syy, density, gamma_dot, dt, params):
 
 @nb.njit(cache=True)
 def update_stress_points(stress, L, density, dt, params, gamma_dot, state):
+    """`update_stress_points_rated` with the plain mu(I) law (no rate ratio)."""
+    update_stress_points_rated(stress, L, density, dt, params, gamma_dot, state,
+                               np.empty(0))
+
+
+@nb.njit(cache=True)
+def update_stress_points_rated(stress, L, density, dt, params, gamma_dot, state, rate_ratio):
     """Elastic predictor and return map for every point (and the cyclic compaction where its
-    option is on, `compact`).
+    option is on, `compact`); rate_ratio (N,) the ratio r of each point's inertial number read
+    from the granular temperature (return_map, kinetic_stress.py), or (0,): none (r = 1).
 
     stress (N, 4) [xx, zz, xz, yy] (Pa, updated in place); L (N, 4) [xx, xz, zx, zz] velocity
     gradient (1/s), or (N, 5) with the out-of-plane rate D_yy (the hoop rate v_r / r of an
@@ -272,12 +289,14 @@ def update_stress_points(stress, L, density, dt, params, gamma_dot, state):
     G = params[P_G]
     compaction = params[P_GAMMA_C] > 0.0
     hoop = L.shape[1] > 4
+    rated = rate_ratio.shape[0] > 0
     for p in range(stress.shape[0]):
         lyy = L[p, 4] if hoop else 0.0
         txx, tzz, txz, tyy = elastic_predictor(stress[p, 0], stress[p, 1], stress[p, 2],
                                                stress[p, 3], L[p, 0], L[p, 1], L[p, 2], L[p, 3],
                                                lyy, dt, K, G)
-        sxx, szz, sxz, syy, gp, st = return_map(txx, tzz, txz, tyy, density[p], dt, params)
+        sxx, szz, sxz, syy, gp, st = return_map(txx, tzz, txz, tyy, density[p], dt, params,
+                                                rate_ratio[p] if rated else 1.0)
         if compaction and st != 0:
             gd = equivalent_shear_rate(L[p, 0], L[p, 1], L[p, 2], L[p, 3])
             sxx, szz, sxz, syy = compact(sxx, szz, sxz, syy, density[p], gd, dt, params)

@@ -12,13 +12,15 @@ points' mass and fluctuation energy binned to the grid's cells (mass-weighted) a
 back by the ratio of the cell's new to its old temperature, which keeps each point's T >= 0
 and the binned energy (3/2) sum m T exactly; the Eulerian cells are that grid already.
 
-Production sigma : D is what the stress update's stress does on the step's deformation:
-the plastic work tau gamma_dot_p (the equivalent shear stress times the plastic shear rate
-stress_update.py returns; the elastic part is stored, not dissipated) plus the kinetic
-pressure's work -p_k tr D (compression heats, expansion cools: Lun et al. 1984).  The
-kinetic pressure, Lun's p_k = rho_s phi T (1 + 2 (1 + e) phi g0) at the material's own
-solid fraction phi = rho / rho_s, is added to the mean stress the grid sees where T > 0
-(not stored in the elastic-plastic stress, as the bed viscosity's stress is not).
+Production sigma : D is what the stress does on the step's deformation: the plastic work
+tau gamma_dot_p (the equivalent shear stress times the plastic shear rate stress_update.py
+returns; the elastic part is stored, not dissipated) plus the work of the granular
+temperature's own stress sigma_k : D (kinetic_stress.py: Lun's kinetic pressure, whose
+-p_k tr D heats in compression and cools in expansion (Lun et al. 1984), and in the gas the
+frictional pressure and the kinetic viscosity's 2 eta_k D' : D).  That stress is added to the
+stress the grid sees (not stored in the elastic-plastic stress, as the bed viscosity's stress
+is not), and the connected material's return map reads its inertial number from T
+(kinetic_stress.py).
 
 The grid's edges are zero-flux (a periodic direction included).  The walls feed energy in
 through their contacts (wall_energy_flux.py: Johnson & Jackson's slip production and
@@ -27,6 +29,7 @@ cell (`point_step`, `cell_step`'s wall_sums) and the loss integrated with the di
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numba as nb
@@ -34,8 +37,10 @@ import numpy as np
 
 from vibroflow.scenario.checks import find_contact
 
-from .kinetic_theory import KineticParameters, pressure_Pa
+from .kinetic_stress import KINETIC_COLUMNS, kinetic_stress
+from .kinetic_theory import G0_FORMS, KineticParameters
 from .temperature_step import TemperatureGrid, step_temperature_walls
+from .timestep import kinetic_temperature_limit
 from .wall_energy_flux import WallEnergy, cell_wall_terms, wall_energy_of
 
 
@@ -68,48 +73,62 @@ def kinetic_parameters(scenario) -> KineticParameters:
                              restitution=float(pair.restitution))
 
 
-def temperature_model(scenario, options, spacing_m: float) -> TemperatureModel | None:
+def calibrated_kinetic_parameters(prm: KineticParameters, calibration) -> KineticParameters:
+    """prm with the constants calibration.toml's [kinetic] measured on the DEM
+    (vibroflow.calibration.kinetic): g0's form and phi_rcp, and Johnson & Jackson's frictional
+    pressure (Fr, phi_min, n, p) where the cells resolved one (Fr > 0); prm itself without a
+    calibration, a [kinetic] table or a fitted phi_rcp."""
+    kin = getattr(calibration, "kinetic", None) if calibration is not None else None
+    if kin is None or kin.phi_rcp is None or not math.isfinite(kin.phi_rcp):
+        return prm
+    prm = prm._replace(phi_rcp=float(kin.phi_rcp),
+                       g0_form=G0_FORMS.get(kin.g0_form or "chialvo_sundaresan", prm.g0_form))
+    fr = kin.frictional_Pa
+    if fr is not None and math.isfinite(fr) and fr > 0:
+        prm = prm._replace(frictional_Pa=float(fr),
+                           frictional_phi_min=float(kin.frictional_phi_min),
+                           frictional_n=float(kin.frictional_n or 2.0),
+                           frictional_p=float(kin.frictional_p or 5.0))
+    return prm
+
+
+def temperature_model(scenario, options, spacing_m: float,
+                      calibration=None) -> TemperatureModel | None:
     """The run's TemperatureModel on cells of side spacing_m (m), its walls feeding energy
-    in (wall_energy_flux.wall_energy_of), or None when the option is off."""
+    in (wall_energy_flux.wall_energy_of), or None when the option is off; the grains'
+    constants from the calibration's [kinetic] table where it has one
+    (calibrated_kinetic_parameters)."""
     if not options.temperature:
         return None
-    return TemperatureModel(kinetic_parameters(scenario), float(spacing_m),
-                            float(options.initial_temperature), walls=wall_energy_of(scenario))
+    prm = calibrated_kinetic_parameters(kinetic_parameters(scenario), calibration)
+    return TemperatureModel(prm, float(spacing_m), float(options.initial_temperature),
+                            walls=wall_energy_of(scenario))
 
 
 @nb.njit(cache=True)
-def kinetic_pressure(density, T, prm, coupled, out):
-    """out = Lun's pressure (Pa) at phi = density / rho_s where T > 0, else 0 (everywhere 0
-    when not coupled); density (N,) kg/m^3, T (N,) m^2/s^2."""
-    for p in range(T.shape[0]):
-        if coupled and T[p] > 0.0 and density[p] > 0.0:
-            out[p] = pressure_Pa(density[p] / prm.density_kg_m3, T[p], prm)
-        else:
-            out[p] = 0.0
-
-
-@nb.njit(cache=True)
-def add_pressure(stress, p, a, b):
-    """stress[a:b] (Pa, [xx, zz, xz, yy]) minus the pressure p[a:b] (Pa) on its normal parts."""
+def add_stress(stress, s_kin, a, b):
+    """stress[a:b] (Pa, [xx, zz, xz, yy]) plus the granular temperature's stress s_kin[a:b, :4]
+    (Pa, kinetic_stress.kinetic_stress)."""
     for q in range(a, b):
-        stress[q, 0] -= p[q]
-        stress[q, 1] -= p[q]
-        stress[q, 3] -= p[q]
+        for c in range(4):
+            stress[q, c] += s_kin[q, c]
 
 
 @nb.njit(cache=True)
-def production_W_m3(stress, L, gamma_dot, p_kin, out):
-    """out = sigma : D (W/m^3) of the step: the plastic work tau gamma_dot_p plus the kinetic
-    pressure's -p_k tr D (module docstring); stress (N, 4) [xx, zz, xz, yy] Pa, L (N, 4 or 5)
-    [xx, xz, zx, zz(, yy)] 1/s, gamma_dot (N,) 1/s, p_kin (N,) Pa."""
+def production_W_m3(stress, L, gamma_dot, s_kin, out):
+    """out = sigma : D (W/m^3) of the step: the plastic work tau gamma_dot_p plus the granular
+    temperature's stress working on the step's rate of deformation, s_kin : D (module
+    docstring); stress (N, 4) [xx, zz, xz, yy] Pa, L (N, 4 or 5) [xx, xz, zx, zz(, yy)] 1/s,
+    gamma_dot (N,) 1/s, s_kin (N, >= 4) [xx, zz, xz, yy] Pa."""
     hoop = L.shape[1] > 4
     for p in range(stress.shape[0]):
         sxx, szz, sxz, syy = stress[p, 0], stress[p, 1], stress[p, 2], stress[p, 3]
         pm = -(sxx + szz + syy) / 3.0
         dxx, dzz, dyy = sxx + pm, szz + pm, syy + pm
         tau = np.sqrt(0.5 * (dxx * dxx + dzz * dzz + dyy * dyy) + sxz * sxz)
-        tr = L[p, 0] + L[p, 3] + (L[p, 4] if hoop else 0.0)
-        out[p] = tau * gamma_dot[p] - p_kin[p] * tr
+        work = (s_kin[p, 0] * L[p, 0] + s_kin[p, 1] * L[p, 3]
+                + s_kin[p, 2] * (L[p, 1] + L[p, 2]) + (s_kin[p, 3] * L[p, 4] if hoop else 0.0))
+        out[p] = tau * gamma_dot[p] + work
 
 
 def cell_step(T, phi, production, dt: float, model: TemperatureModel, wall_sums=None):
@@ -168,24 +187,37 @@ def point_step(T, x, mass, volume, power, origin, shape, dt: float, model: Tempe
 
 
 def advance_with_temperature(state, n, model: TemperatureModel | None, compiled, balance,
-                             start=lambda: None) -> None:
+                             start=lambda: None, *, phi_cap: float = 1.0,
+                             dt: float = 0.0, wave_speed: float = math.inf) -> None:
     """n steps of a formulation: without the temperature (model None), one compiled call of n
-    steps (compiled(n, p_kin) with an empty p_kin); with it, one call a step: the kinetic
-    pressure (Pa) of the state's T scattered by that step, its production (W/m^3), then the
-    formulation's balance of T (balance(power, start()), start() taken before the step)."""
+    steps (compiled(n, s_kin) with an empty (0, 5) s_kin); with it, one call a step: the
+    granular temperature's stress and rate ratio (kinetic_stress.kinetic_stress, phi_cap the
+    material's connection packing rho_c / rho_s, dt (s) the step, which with the cells' side
+    caps the gas's viscosity, wave_speed (m/s) the elastic wave the step is set for, which caps
+    the T of the kinetic pressure: timestep.kinetic_temperature_limit) scattered by that step,
+    its production (W/m^3), then the formulation's balance of T (balance(power, start()),
+    start() taken before the step)."""
     n = int(n)
     if n <= 0:
         return
     if model is None:
-        compiled(n, np.empty(0))
+        compiled(n, np.empty((0, KINETIC_COLUMNS)))
         return
-    p_kin = np.empty(state.n)
+    s_kin = np.zeros((state.n, KINETIC_COLUMNS))
     power = np.empty(state.n)
+    eta_factor = model.spacing_m ** 2 / dt if dt > 0 else np.inf
+    T_cap = kinetic_temperature_limit(wave_speed, phi_cap, model.params)
     for _ in range(n):
-        kinetic_pressure(state.density, state.temperature, model.params, model.coupled, p_kin)
+        if model.coupled:
+            kinetic_stress(state.density, state.temperature, state.L, state.stress,
+                           state.gamma_dot, state.phase, model.params, float(phi_cap),
+                           float(T_cap), float(eta_factor), s_kin)
+        else:
+            s_kin[:, :4] = 0.0
+            s_kin[:, 4] = 1.0
         before = start()
-        compiled(1, p_kin)
-        production_W_m3(state.stress, state.L, state.gamma_dot, p_kin, power)
+        compiled(1, s_kin)
+        production_W_m3(state.stress, state.L, state.gamma_dot, s_kin, power)
         balance(power, before)
 
 

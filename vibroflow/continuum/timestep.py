@@ -23,6 +23,20 @@ default cfl is this function's 0.3 (continuum.options.DEFAULT_CFL), inside these
 (the stability margin alone) a point of tub47 at amplitude factor 1.5 can pass through the U
 wall.
 
+The granular temperature's kinetic pressure (kinetic_stress.py) is a second, T-dependent
+stiffness: p_k = rho_s T phi F(phi) (Lun et al. 1984) carries waves at c_k^2 = dp_k/drho =
+T d(phi F)/dphi (`kinetic_wave_speed`), which grows without bound as phi nears phi_rcp (g0
+diverges there) and with T.  Two things keep it inside the elastic step without a smaller step:
+Lun's pressure is read at phi <= phi_cap = rho_c / rho_s, the connection packing (above it the
+elastic-plastic pressure carries the compression), where d(phi F)/dphi is largest; and its T is
+read at most at `kinetic_temperature_limit`, the T at which c_k(phi_cap) equals the elastic
+P-wave speed c, so the kinetic wave is never faster than the one the step is set for.  For
+tub47-quick's calibration (phi_cap = 0.568, phi_rcp = 0.64, e = 0.85, c = 16.2 m/s) the limit
+is T = 0.35 m^2/s^2, sqrt(T) = 0.59 m/s, six times the DEM's bed (sqrt(T) 80 - 110 mm/s).
+Without the cap an Eulerian cell compressed towards phi_rcp (the remap's density overshoot)
+read g0 ~ 1e8 at the clamp PHI_GAP, a kinetic pressure of ~1e10 Pa and a wave far faster than
+any step: the blow-up of the Eulerian formulation with T at the default cfl.
+
 The APIC transfers' damping is not the step's business: a step makes `transfers_per_step`
 transfers (mpm.MPMSystem.transfers, transfer_operator.py), so that the damping per second is
 that of a one-transfer step of Courant number transfer_cfl, whatever the step, and the step is
@@ -33,6 +47,8 @@ from __future__ import annotations
 import math
 
 from vibroflow.errors import InputError
+
+from .kinetic_theory import pressure_Pa
 
 
 def stable_dt(material, dx: float, point_size: float, boundaries=(), v_max: float = 0.0,
@@ -82,3 +98,20 @@ def transfers_per_step(cfl: float, transfer_cfl: float | None) -> int:
     if transfer_cfl == 0:
         return 1
     return max(1, int(round(cfl / transfer_cfl)))
+
+
+def kinetic_wave_speed(phi: float, T: float, prm) -> float:
+    """c_k = sqrt(dp_k / drho) (m/s) of Lun's pressure p_k (kinetic_theory.pressure_Pa) at
+    solid fraction phi (-) and temperature T (m^2/s^2), by a central difference in phi (its
+    step 1e-7, inside phi_rcp's clamp); prm a KineticParameters."""
+    h = 1e-7
+    dp = pressure_Pa(phi + h, T, prm) - pressure_Pa(phi - h, T, prm)
+    return math.sqrt(max(dp, 0.0) / (2.0 * h * prm.density_kg_m3))
+
+
+def kinetic_temperature_limit(wave_speed: float, phi_cap: float, prm) -> float:
+    """The T (m^2/s^2) at which the kinetic pressure's wave speed at phi_cap equals wave_speed
+    (m/s): c_k^2 is linear in T, so T = wave_speed^2 / c_k(phi_cap, T = 1)^2 (module
+    docstring)."""
+    c1 = kinetic_wave_speed(min(phi_cap, prm.phi_rcp - 2e-6), 1.0, prm)
+    return wave_speed * wave_speed / (c1 * c1) if c1 > 0 else math.inf

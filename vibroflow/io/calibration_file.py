@@ -331,8 +331,10 @@ class Conductivity(Table):
 
 class Kinetic(Table):
     """[kinetic]: kinetic theory's constants measured on the DEM: the ball-ball restitution e,
-    the close packing phi_rcp of g0 fitted to p / (rho_s phi T) = 1 + 2 (1 + e) phi g0 in the
-    coarse-grained cells, and the walls' energy flux."""
+    the close packing phi_rcp of g0 fitted with Johnson & Jackson's frictional pressure (Fr,
+    phi_min, exponents n, p) to p = rho_s phi T (1 + 2 (1 + e) phi g0) + p_f in the
+    coarse-grained cells, the scatter of Lun's pressure alone beside it, and the walls' energy
+    flux."""
     model: Text | None = None
     g0_form: Text | None = None
     restitution: Number | None = None
@@ -344,6 +346,13 @@ class Kinetic(Table):
     solid_fraction_range: list[Number] | None = None
     rms_log_residual: Number | None = None
     chi2_per_dof: Number | None = None
+    frictional_Pa: Number | None = None
+    frictional_Pa_stderr: Number | None = None
+    frictional_phi_min: Number | None = None
+    frictional_phi_min_stderr: Number | None = None
+    frictional_n: Number | None = None
+    frictional_p: Number | None = None
+    lun_rms_log_residual: Number | None = None
     wall_flux: WallFlux | None = None
     conductivity: Conductivity | None = None
 

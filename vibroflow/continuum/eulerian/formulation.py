@@ -252,7 +252,8 @@ class FixedMesh(Formulation):
         return EulerianSystem(mesh, material, dt, frame=frame, wall=wall, partitions=partitions,
                               chunks=scenario.run.force_chunks,
                               transfers=self.transfers_on(options, scenario),
-                              temperature=temperature_model(scenario, options, mesh.h))
+                              temperature=temperature_model(scenario, options, mesh.h,
+                                                            calibration))
 
     def initial_state(self, scenario, system) -> tuple[EulerianState, float]:
         g = math.hypot(float(scenario.gravity[0]), float(scenario.gravity[2]))

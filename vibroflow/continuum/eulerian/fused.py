@@ -37,7 +37,8 @@ from ..boundary import partition_forces
 from ..constitutive import P_ETA_BED
 from ..grid_step import grid_phase, grid_phase_serial
 from ..stress_update import damped_stress
-from ..temperature_field import add_pressure
+from ..kinetic_stress import RATE_RATIO
+from ..temperature_field import add_stress
 from .advection import remap, remap_serial
 from .face_velocity import face_velocity_rows, match_divergence
 from .lagrangian_step import (end_density, fill_limit, material_fraction,
@@ -50,8 +51,9 @@ OK, NEGATIVE_MASS, NON_FINITE = 0, 1, 2
 
 #: the cells' arrays (solver.EulerianState's, units there), stress_work (N, 4) the stress
 #: scattered when the material has a bed viscosity (stress_update.damped_stress, on every
-#: cell) or a kinetic pressure ((0, 4) without either), p_kin (N,) the kinetic pressure (Pa)
-#: added to the scattered mean stress (temperature_field.py; (0,) without the temperature)
+#: cell) or a kinetic stress ((0, 4) without either), p_kin (N, 5) the granular temperature's
+#: stress (Pa) added to the scattered one and its return map's rate ratio (kinetic_stress.py;
+#: (0, 5) without the temperature)
 Cells = namedtuple("Cells", ["mass", "v", "C", "L", "stress", "gamma_dot", "phase", "frac",
                              "volume", "density", "fext", "stress_work", "p_kin"])
 #: the step's constants: dt (s), the material's params (constitutive.ContinuumMaterial.
@@ -144,7 +146,7 @@ def _make_advance_kernel(parallel: bool):
                     b = ((c + 1) * n) // nchunk
                     if not damped:
                         stress_work[a:b] = stress[a:b]
-                    add_pressure(stress_work, p_kin, a, b)
+                    add_stress(stress_work, p_kin, a, b)
             for c in nb.prange(nchunk):
                 a = (c * na) // nchunk
                 b = ((c + 1) * na) // nchunk
@@ -176,7 +178,8 @@ def _make_advance_kernel(parallel: bool):
             end_density(density, L, dt, end_rho)
             for c in nb.prange(nchunk):
                 update_stress_cells((c * n) // nchunk, ((c + 1) * n) // nchunk, stress, L,
-                                    end_rho, dt, params, gamma_dot, phase)
+                                    end_rho, dt, params, gamma_dot, phase,
+                                    p_kin[:, RATE_RATIO])
             # the remap of mass and of the fields it carries (solver.py, step 2)
             for p in range(n):
                 q[0, p] = v[p, 0]

@@ -30,7 +30,7 @@ from __future__ import annotations
 import numba as nb
 
 from ..constitutive import P_RHO_C
-from ..stress_update import update_stress_points
+from ..stress_update import update_stress_points_rated
 
 
 @nb.njit(cache=True)
@@ -140,8 +140,8 @@ def fill_limit(mass, density, h, weight):
 
 
 @nb.njit(cache=True)
-def update_stress_cells(a, b, stress, L, density, dt, params, gamma_dot, state):
-    """stress_update.update_stress_points (the arguments as there) on the cells a:b, with the
+def update_stress_cells(a, b, stress, L, density, dt, params, gamma_dot, state, rate_ratio):
+    """stress_update.update_stress_points_rated (the arguments as there) on the cells a:b, with the
     cells whose end-of-step density is below the critical one (the empty cells, density 0, and
     the disconnected ones) given that kernel's result for them directly: stress 0, plastic
     rate 0, state 0 (stress_update.return_map's first branch, which discards the elastic
@@ -160,6 +160,6 @@ def update_stress_cells(a, b, stress, L, density, dt, params, gamma_dot, state):
         e = p + 1
         while e < b and not density[e] < rho_c:
             e += 1
-        update_stress_points(stress[p:e], L[p:e], density[p:e], dt, params, gamma_dot[p:e],
-                             state[p:e])
+        update_stress_points_rated(stress[p:e], L[p:e], density[p:e], dt, params,
+                                   gamma_dot[p:e], state[p:e], rate_ratio[p:e])
         p = e

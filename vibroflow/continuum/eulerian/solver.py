@@ -306,7 +306,10 @@ def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
                                          ).ravel()
 
     advance_with_temperature(state, n, model,
-                             lambda k, p_kin: _advance(system, state, k, p_kin), balance, start)
+                             lambda k, p_kin: _advance(system, state, k, p_kin), balance, start,
+                             phi_cap=system.material.critical_density
+                             / system.material.solid_density, dt=system.dt,
+                             wave_speed=system.material.p_wave_speed())
 
 
 def cell_wall_sums(system: EulerianSystem, state: EulerianState) -> np.ndarray:
@@ -338,8 +341,9 @@ def cell_wall_sums(system: EulerianSystem, state: EulerianState) -> np.ndarray:
 
 
 def _advance(system: EulerianSystem, state: EulerianState, n: int, p_kin) -> None:
-    """`advance`'s compiled call: n steps, the kinetic pressure p_kin (N,) Pa added to the
-    scattered stress ((0,): none)."""
+    """`advance`'s compiled call: n steps, the granular temperature's stress p_kin (N, 5)
+    (kinetic_stress.py: Pa added to the scattered stress, then the return map's rate ratio;
+    (0, 5): none)."""
     mesh = system.mesh
     mat = system.material
     w = system.wall

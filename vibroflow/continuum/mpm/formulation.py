@@ -190,7 +190,7 @@ class MaterialPointMethod(Formulation):
         return MPMSystem(grid, material, dt, frame=frame, boundaries=boundaries,
                          chunks=scenario.run.force_chunks, flip=float(options.flip),
                          transfers=self.transfers_on(options, scenario),
-                         temperature=temperature_model(scenario, options, dx))
+                         temperature=temperature_model(scenario, options, dx, calibration))
 
     def initial_state(self, scenario, system: MPMSystem) -> tuple[MPMState, float]:
         x, volume, density, stress, h = settled_bed(scenario, system.material,

@@ -286,7 +286,10 @@ def advance(system: MPMSystem, state: MPMState, n: int) -> None:
                    (g.nx, g.nz), system.dt, system.temperature, sums)
 
     advance_with_temperature(state, n, system.temperature,
-                             lambda k, p_kin: _advance(system, state, k, p_kin), balance)
+                             lambda k, p_kin: _advance(system, state, k, p_kin), balance,
+                             phi_cap=system.material.critical_density
+                             / system.material.solid_density, dt=system.dt,
+                             wave_speed=system.material.p_wave_speed())
 
 
 def point_wall_sums(system: MPMSystem, state: MPMState) -> np.ndarray:
@@ -310,8 +313,9 @@ def point_wall_sums(system: MPMSystem, state: MPMState) -> np.ndarray:
 
 
 def _advance(system: MPMSystem, state: MPMState, n: int, p_kin) -> None:
-    """`advance`'s compiled call: n steps, the kinetic pressure p_kin (N,) Pa added to the
-    scattered stress ((0,): none)."""
+    """`advance`'s compiled call: n steps, the granular temperature's stress p_kin (N, 5)
+    (kinetic_stress.py: Pa added to the scattered stress, then the return map's rate ratio;
+    (0, 5): none)."""
     g = system.grid
     records, walls = pack_boundaries(system.boundaries)
     hist = _stack_history(state, walls)

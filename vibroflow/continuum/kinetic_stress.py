@@ -1,0 +1,124 @@
+"""How the granular temperature enters the stress (docs/models.md 5.7, "The stress").
+
+Three couplings of T (m^2/s^2) into the stress the grid sees, computed per point (or cell)
+before each step from its state after the last one (the stress, the velocity gradient L, the
+plastic rate and the phase of stress_update.py), so that the compiled step only adds a
+given stress to the scattered one and reads one number in its return map:
+
+1. Kinetic pressure (Lun et al. 1984, kinetic_theory.pressure_Pa) wherever T > 0, at the
+   solid fraction phi = rho / rho_s capped at the material's connection packing
+   phi_cap = rho_c / rho_s: above it the grains are in enduring contact and the elastic-plastic
+   pressure carries the compression, so g0 is never read nearer close packing than phi_cap
+   and T is read at most at T_cap, the temperature at which the kinetic pressure's wave is as
+   fast as the elastic one the step is set for (timestep.kinetic_temperature_limit).
+2. In the gas (the elastic-plastic state disconnected: phase 0, the density below rho_c or a
+   tensile trial state) the frictional pressure of Johnson & Jackson (1987,
+   kinetic_theory.frictional_pressure_Pa) and the kinetic-theory shear viscosity of Gidaspow
+   (1994, kinetic_theory.shear_viscosity_Pa_s): a deviatoric stress 2 eta_k D', D' the
+   deviator of the last step's rate of deformation (plane strain, D_yy from L[:, 4] where
+   given).  eta_k is capped at eta_max = C rho dx^2 / dt, C = VISCOSITY_CAP = 3/160.  C is
+   measured, not derived: a tenth of the 2D finite-difference bound of explicit viscous
+   diffusion ((4/3) nu dt / dx^2 <= 1/4, C = 3/16).  With that bound tub47-quick's Eulerian
+   run at the default cfl heated a surface cell that flickers between connected and
+   disconnected (phi at phi_c, where g0 and eta_k are large) without limit and blew up at
+   t = 0.84 s; with 3/160 its T stayed below 0.01 m^2/s^2 there.  Connected material carries
+   none of this: its deviatoric stress is the elastic-plastic law's.
+3. In connected material the mu(I) law's rate dependence is read from T (Kim & Kamrin 2020,
+   Phys. Rev. Lett. 125, 088002: the velocity fluctuation, not the pressure alone, sets the
+   inertial time).  The return map uses mu(r I), r = sqrt(T_bal / T), with T_bal the
+   temperature at which the plastic work balances the dissipation at the point's stress and
+   last plastic rate, tau gamma_dot_p = Gamma(phi, T_bal, gamma_dot_p) (`balance_temperature`).
+   Where T = T_bal (steady shear) r = 1 and the law is the calibrated mu(I) exactly; where
+   the material is hotter than its shear keeps it (vibrated) r < 1 and it flows at a lower
+   friction, down to mu_s (Irmer, Brodsky & Clark 2024, arXiv 2405.13236: fluctuations
+   lower the friction); T = 0 gives r = 1, the plain law.  The ratio is lagged one step (the
+   last step's gamma_dot_p), which keeps the return map's quadratic.
+
+The work of these stresses on the step's deformation, sigma_k : D, is the temperature's
+production besides the plastic work (temperature_field.production_W_m3).
+"""
+from __future__ import annotations
+
+import math
+
+import numba as nb
+
+from .kinetic_theory import (correlation_length_ratio, frictional_pressure_Pa,
+                             pressure_Pa, radial_distribution, shear_viscosity_Pa_s)
+
+_SQRT_PI = math.sqrt(math.pi)
+
+#: the gas viscosity's cap eta_max = VISCOSITY_CAP rho dx^2 / dt (module docstring)
+VISCOSITY_CAP = 3.0 / 160.0
+
+#: columns of the kinetic stress array: [xx, zz, xz, yy] (Pa), then the rate ratio r (-)
+RATE_RATIO = 4
+KINETIC_COLUMNS = 5
+
+
+@nb.njit(cache=True)
+def balance_temperature(phi, tau, gamma_dot, prm):
+    """T_bal (m^2/s^2) at which the plastic work tau gamma_dot (Pa, 1/s) equals Lun's
+    dissipation over Jenkins' L/d: tau gamma_dot = (3/2) rho_s phi a0 T^(3/2) min(1, sqrt(T) /
+    (c_L d gamma_dot)), a0 = 8 (1 - e^2) phi g0 / (d sqrt(pi)).  0 where no work is done or
+    nothing dissipates."""
+    work = tau * gamma_dot
+    e = prm.restitution
+    a0 = 8.0 * (1.0 - e * e) * phi * radial_distribution(phi, prm) / (prm.diameter_m * _SQRT_PI)
+    cap = 1.5 * prm.density_kg_m3 * phi * a0
+    if work <= 0.0 or cap <= 0.0:
+        return 0.0
+    T1 = (work / cap) ** (2.0 / 3.0)
+    if correlation_length_ratio(T1, gamma_dot, prm) <= 1.0:
+        return T1
+    # L/d = c_L d gamma_dot / sqrt(T) > 1: Gamma = cap T^2 / (c_L d gamma_dot)
+    return math.sqrt(work * prm.correlation_coefficient * prm.diameter_m * gamma_dot / cap)
+
+
+@nb.njit(cache=True, inline="always")
+def _tau(s):
+    pm = -(s[0] + s[1] + s[3]) / 3.0
+    dxx, dzz, dyy = s[0] + pm, s[1] + pm, s[3] + pm
+    return math.sqrt(0.5 * (dxx * dxx + dzz * dzz + dyy * dyy) + s[2] * s[2])
+
+
+@nb.njit(cache=True)
+def kinetic_stress(density, T, L, stress, gamma_dot, phase, prm, phi_cap, T_cap,
+                   eta_max_factor, out):
+    """out (N, 5): the stress added to the scattered one, [xx, zz, xz, yy] (Pa), and the rate
+    ratio r (-) of the return map, per point (module docstring).  density (N,) kg/m^3, T (N,)
+    m^2/s^2, L (N, 4 or 5) [xx, xz, zx, zz(, yy)] 1/s of the last step, stress (N, 4) Pa,
+    gamma_dot (N,) its plastic rate 1/s, phase (N,) int8; prm kinetic_theory.KineticParameters;
+    phi_cap (-) the connection packing rho_c / rho_s; T_cap (m^2/s^2) the highest T the
+    kinetic pressure reads (timestep.kinetic_temperature_limit); eta_max_factor (m^2/s)
+    dx^2 / dt, the viscosity cap being VISCOSITY_CAP rho eta_max_factor."""
+    hoop = L.shape[1] > 4
+    rho_s = prm.density_kg_m3
+    for p in range(T.shape[0]):
+        for c in range(4):
+            out[p, c] = 0.0
+        out[p, RATE_RATIO] = 1.0
+        t = T[p]
+        rho = density[p]
+        if not (t > 0.0 and rho > 0.0):
+            continue
+        phi = rho / rho_s
+        pk = pressure_Pa(min(phi, phi_cap), min(t, T_cap), prm)
+        if phase[p] == 0:
+            pk += frictional_pressure_Pa(phi, prm)
+            eta = min(shear_viscosity_Pa_s(phi, t, prm), VISCOSITY_CAP * rho * eta_max_factor)
+            dxx = L[p, 0]
+            dzz = L[p, 3]
+            dxz = 0.5 * (L[p, 1] + L[p, 2])
+            dyy = L[p, 4] if hoop else 0.0
+            third = (dxx + dzz + dyy) / 3.0
+            out[p, 0] = 2.0 * eta * (dxx - third)
+            out[p, 1] = 2.0 * eta * (dzz - third)
+            out[p, 2] = 2.0 * eta * dxz
+            out[p, 3] = 2.0 * eta * (dyy - third)
+        else:
+            tb = balance_temperature(min(phi, phi_cap), _tau(stress[p]), gamma_dot[p], prm)
+            out[p, RATE_RATIO] = math.sqrt(tb / t)
+        out[p, 0] -= pk
+        out[p, 1] -= pk
+        out[p, 3] -= pk
