@@ -34,18 +34,18 @@ def continuum(
                                           "when it has one; instead of SCENARIO.")] = None,
     allow_other_calibration: Annotated[bool, typer.Option(
         "--allow-other-calibration", help="Use a calibration measured on other media or "
-                                          "another tub than the scenario's (its \\[scenario] "
+                                          "another tub than the scenario's (its [scenario] "
                                           "differs): a warning, not an error.")] = False,
     rheology: Annotated[str, typer.Option(
         "--rheology", help="mu_i (Dunatunga & Kamrin) or drucker_prager.")] = "mu_i",
     dilatancy: Annotated[bool, typer.Option(
         "--dilatancy", help="mu_i with peak friction and dilation (Pailha & Pouliquen 2009), "
-                            "K_dil from the calibration's \\[dilatancy] (vibroflow calibrate "
+                            "K_dil from the calibration's [dilatancy] (vibroflow calibrate "
                             "--dilatancy).")] = False,
     compaction: Annotated[bool, typer.Option(
         "--compaction", help="Cyclic compaction of the connected bed towards the cyclic shear "
                              "cell's packing (Sawicki & Swidzinski 1989), from the calibration's "
-                             "\\[compaction] (vibroflow calibrate --dilatancy).")] = False,
+                             "[compaction] (vibroflow calibrate --dilatancy).")] = False,
     dx: Annotated[Optional[float], typer.Option(
         "--dx", help="Grid spacing (m); default 3 ball diameters (why: continuum/options.py, "
                     "DEFAULT_DX_DIAMETERS).")] = None,
