@@ -277,7 +277,7 @@ def test_missing_pieces_are_stated_and_a_sweep_point_shows_its_sweep(study, tmp_
     page = write_report(copy).read_text(encoding="utf-8")
     assert "No animation" in page
     assert "mu_I.png is missing" in page
-    assert "no dem/fields.nc" in page
+    assert "no calibration/fields.nc" in page
     assert "the DEM result holds no impacts" not in page and "no measured impacts" in page
     assert not (copy / "report" / "dem_slice.gif").exists()
     assert "No sweep in this folder" not in page

@@ -26,12 +26,15 @@ def continuum(
         "--method", help="Formulation: lagrangian (material point method) or eulerian (fixed "
                          "mesh of the tub); continuum/formulation.py.")] = "lagrangian",
     calibration: Annotated[Optional[Path], typer.Option(
-        "--calibration", help="calibration.toml, or a run folder holding one; default: "
-                              "--like's calibration.toml, else tub47's parameters.")] = None,
+        "--calibration", help="calibration.toml, or a folder holding one (a calibrated DEM "
+                              "run, a study's DIR/calibration); default: --like's "
+                              "calibration.toml, else tub47's parameters.")] = None,
     like: Annotated[Optional[Path], typer.Option(
         "--like", metavar="RUN_DIR", help="Run the scenario of the DEM run in RUN_DIR (its "
                                           "dem.h5's, --set on top) with its calibration.toml "
-                                          "when it has one; instead of SCENARIO.")] = None,
+                                          "when it has one (a study's DIR/dem: the study's "
+                                          "DIR/calibration/calibration.toml); instead of "
+                                          "SCENARIO.")] = None,
     allow_other_calibration: Annotated[bool, typer.Option(
         "--allow-other-calibration", help="Use a calibration measured on other media or "
                                           "another tub than the scenario's (its [scenario] "
@@ -111,8 +114,10 @@ def continuum(
         from vibroflow.calibration.dem_result import run_scenario
 
         s = run_scenario(like, set_ or [], field="--like")
-        if calibration is None and (like / "calibration.toml").is_file():
-            calibration = like / "calibration.toml"
+        if calibration is None:
+            from vibroflow.study.folder import calibration_of_run
+
+            calibration = calibration_of_run(like)
     else:
         s = load(scenario, set_)
     from vibroflow.continuum.formulation import formulation
