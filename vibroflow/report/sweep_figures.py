@@ -40,7 +40,8 @@ def _style(data: SweepData, key: tuple) -> dict[str, Any]:
     methods = sorted({r["method"] for r in data.rows if r["method"]},
                      key=lambda m: (m != "dem", m))
     others = [k for k in data.varied if k != FACTOR_KEY]
-    combos = sorted({tuple(r.get(k) for k in others) for r in data.rows}, key=str)
+    combos = sorted({tuple(r.get(k) for k in others) for r in data.rows
+                     if r["status"] == "done"}, key=str)
     mi, ci = methods.index(key[0]), combos.index(key[1])
     label = key[0] + "".join(f", {k}={v}" for k, v in zip(others, key[1]))
     return dict(color=f"C{mi}", ls=_STYLES[ci % len(_STYLES)],
@@ -49,9 +50,11 @@ def _style(data: SweepData, key: tuple) -> dict[str, Any]:
 
 def _unfinished(ax, data: SweepData) -> None:
     """A red cross on the x axis at the factor of every point that did not finish."""
+    others = [k for k in data.varied if k != FACTOR_KEY]
     seen: set[str] = set()
     for r in data.failed:
-        label = f"{r['status']} point (see the table)"
+        which = ", ".join(f"{k}={r.get(k)}" for k in others) or "point"
+        label = f"{r['status']}: {which} (see the table)"
         ax.plot([r[FACTOR_KEY]], [0.0], "x", color="#b42318", ms=11, mew=2.5, clip_on=False,
                 transform=ax.get_xaxis_transform(), zorder=5,
                 label=None if label in seen else label)

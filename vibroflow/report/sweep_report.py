@@ -186,9 +186,9 @@ def render(data: SweepData) -> str:
             + [(t, u, w) for t, u, w in COLUMNS])
     total = sum(w for _, _, w in head)
     head = [(t, u, f"{100.0 * w / total:.1f}%") for t, u, w in head]
-    counts: dict[str, int] = {}
-    for p in {r["point"]: r["status"] for r in data.rows}.values():
-        counts[p] = counts.get(p, 0) + 1
+    counts: dict[str, int] = {}  # status -> points
+    for status in {r["point"]: r["status"] for r in data.rows}.values():
+        counts[status] = counts.get(status, 0) + 1
     return environment().get_template(TEMPLATE).render(
         css=Markup(CSS), sections=SECTIONS, folder=str(data.out), version=__version__,
         written=time.strftime("%Y-%m-%d %H:%M:%S %z"), updated=created(data.record),
