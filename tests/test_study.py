@@ -6,7 +6,6 @@ import json
 import os
 import subprocess
 import sys
-import tomllib
 
 import numpy as np
 import pytest
@@ -141,10 +140,9 @@ def test_calibration_writes_into_its_own_folder_with_the_standalone_numbers(stud
     dem_files = {p.name for p in (out / "dem").iterdir()}
     assert not dem_files & {"calibration.toml", "fields.nc", "calibration"}, dem_files
     calibrate(out / "dem", progress=False, pictures=False, out=tmp_path / "again")
-    again, mine = (tomllib.loads((d / "calibration.toml").read_text())
-                   for d in (tmp_path / "again", cal))
-    assert again["source"].pop("created") and mine["source"].pop("created")
-    assert again == mine  # every number, as the study's calibration wrote it
+    again, mine = ([ln for ln in (d / "calibration.toml").read_text().splitlines()
+                    if not ln.startswith("created = ")] for d in (tmp_path / "again", cal))
+    assert again == mine  # every number as the study's calibration wrote it (NaN included)
     assert calibration_of_run(out / "dem") == (cal / "calibration.toml").resolve()
     assert calibration_of_run(tmp_path / "again") == tmp_path / "again" / "calibration.toml"
     assert calibration_of_run(tmp_path) is None
