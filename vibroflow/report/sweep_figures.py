@@ -53,8 +53,9 @@ def _unfinished(ax, data: SweepData) -> None:
     others = [k for k in data.varied if k != FACTOR_KEY]
     seen: set[str] = set()
     for r in data.failed:
-        which = ", ".join(f"{k}={r.get(k)}" for k in others) or "point"
-        label = f"{r['status']}: {which} (see the table)"
+        which = ", ".join(f"{k}={r.get(k)}" for k in others)
+        label = (f"{r['status']}: {which}" if which else f"{r['status']} point") + \
+            " (see the table)"
         ax.plot([r[FACTOR_KEY]], [0.0], "x", color="#b42318", ms=11, mew=2.5, clip_on=False,
                 transform=ax.get_xaxis_transform(), zorder=5,
                 label=None if label in seen else label)
