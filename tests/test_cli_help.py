@@ -39,6 +39,8 @@ def test_flags_are_plain_and_bracketed_words_stay(path):
     cmd = dict(COMMANDS)[path]
     out = _help(path)
     assert "<bool>" not in out
+    usage = out.splitlines()[0]
+    assert usage.startswith("Usage: vibroflow ") and "[[" not in usage, usage
     for p in cmd.params:
         if isinstance(p, click.Option) and p.is_flag:
             # the flag's own line: its names (--x / --no-x), no value placeholder after them
