@@ -4,7 +4,7 @@ in its [dilatancy] table, printed as one JSON line: circulation strength against
 ratio and the field difference E (tub47.md; vibroflow.analysis.compare.field_difference).
 
     .venv/bin/python benchmarks/dilatancy_vs_dem.py --dem-dir runs/study-quick/dem \
-        --calibration runs/study-quick/dem/calibration.toml --k-dil 6.71 --out runs/dil/L1
+        --calibration runs/study-quick/calibration/calibration.toml --k-dil 6.71 --out runs/dil/L1
 
 --compaction adds the cyclic compaction option with the calibration's [compaction] (or
 --gamma-c / --dphi-cyc); --diagnose (Lagrangian) also prints, over the samples of the last

@@ -346,8 +346,8 @@ def test_missing_pieces_are_stated_and_a_sweep_point_shows_its_sweep(study, tmp_
     assert "No animation" in page
     assert "No measured impact distributions: no dem/dem.h5" in page
     assert "mu_I.png is missing" in page
-    assert "no dem/fields.nc" in page
-    assert "No binned mu(I): no dem/fields.nc" in page
+    assert "no calibration/fields.nc" in page
+    assert "No binned mu(I): no calibration/fields.nc" in page
     assert "records no kinetic energy" in page
     assert "the DEM result holds no impacts" not in page and "no measured impacts" in page
     assert not (copy / "report" / "dem_slice.gif").exists()

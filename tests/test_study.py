@@ -125,6 +125,28 @@ def test_every_method_keeps_the_bed_mass_and_the_wall_obeys_coulomb(study):
     assert lag["continuum"]["wall_friction"] <= mu * (1 + 1e-6)
 
 
+def test_calibration_writes_into_its_own_folder_with_the_standalone_numbers(study, tmp_path):
+    """The calibration stage's files (calibration.toml, fields.nc, pictures) are in
+    DIR/calibration, none in DIR/dem; the calibration of the study's DEM into a folder of its
+    own gives the same calibration.toml (but the time it was made); `--like DIR/dem` finds it."""
+    from vibroflow.calibration.calibrate import calibrate
+    from vibroflow.study.folder import calibration_of_run
+
+    _, out, _, _ = study
+    cal = out / "calibration"
+    for name in ("calibration.toml", "fields.nc", "fields.png", "mu_I.png",
+                 "wall_friction.png", "impacts.png"):
+        assert (cal / name).is_file(), name
+    dem_files = {p.name for p in (out / "dem").iterdir()}
+    assert not dem_files & {"calibration.toml", "fields.nc", "calibration"}, dem_files
+    calibrate(out / "dem", progress=False, pictures=False, out=tmp_path / "again")
+    again, mine = ([ln for ln in (d / "calibration.toml").read_text().splitlines()
+                    if not ln.startswith("created = ")] for d in (tmp_path / "again", cal))
+    assert again == mine  # every number as the study's calibration wrote it (NaN included)
+    assert calibration_of_run(out / "dem") == (cal / "calibration.toml").resolve()
+    assert calibration_of_run(tmp_path / "again") == tmp_path / "again" / "calibration.toml"
+    assert calibration_of_run(tmp_path) is None
+
 def test_rerun_recomputes_nothing(study):
     from vibroflow.study import run_study
 

@@ -176,6 +176,17 @@ def test_failed_point_is_reported_and_the_others_finish(swept):
     assert "2 of 4 point(s) failed" in r.stderr and "Traceback" not in r.stderr
 
 
+
+def test_sweep_writes_its_report_with_the_failed_points(swept):
+    """The sweep's own report (DIR/report.html) in headless Chromium: its figures and the
+    sweep's plots loaded, the table within the page, both failed points with their reason."""
+    from tests.test_sweep_report import check_rendered, chromium
+
+    tmp, out, env, r = swept
+    assert f"{out / 'report.html'}" in r.stdout
+    with chromium(out / "report.html") as driver:
+        check_rendered(driver, 6, {_bad(f): "contact stiffness k_n too low" for f in (0.5, 1.0)})
+
 def _free_port():
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

@@ -33,6 +33,10 @@ Stages:
    vibroflow.io.calibration_file.Calibration, which the continuum solvers read with
    `read_calibration`), RUN_DIR/calibration/ pictures (plots).
 
+Where the files go: by default into RUN_DIR beside the DEM's own (`vibroflow calibrate
+RUN_DIR`), the pictures in RUN_DIR/calibration/; given a folder of its own (`out`, a study's
+DIR/calibration), the calibration writes all of them, pictures included, into that folder.
+
 This module runs the stages in order; each stage's computation lives in the module named.
 
 All files are written atomically; a stage that fails leaves the files of the stages before it.
@@ -122,11 +126,13 @@ def kinetic_record(res, phases, prog, energy_flux=None) -> dict | None:
 
 def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
               width: float | None = None, progress: bool = True, shear_cell_options=None,
-              pictures: bool = True, cyclic: bool = True, dilatancy: bool = False
-              ) -> Calibration:
+              pictures: bool = True, cyclic: bool = True, dilatancy: bool = False,
+              out=None) -> Calibration:
     """Calibrate the continuum on the DEM run in RUN (a run directory with dem.h5).
 
-    Returns the calibration record (what calibration.toml holds).  See the module notes.
+    out: the calibration's own folder (made when missing), which then holds every file it
+    writes; None: RUN, the pictures in RUN/calibration/ (the module's notes).  Returns the
+    calibration record (what calibration.toml holds).
     """
     run_dir = Path(run)
     # the run's folder is read first (a missing or foreign dem.h5 is one line and makes no
@@ -136,7 +142,8 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
           folder_lock(res.path.parent, "vibroflow calibrate", field="RUN_DIR"),
           interrupted_calibration(res.path.parent),
           RunProgress(progress) as prog):
-        out_dir = res.path.parent
+        run_dir = res.path.parent
+        out_dir = run_dir if out is None else Path(out)
         sc = res.scenario
         n_used = int((res.batches() >= 0).sum())
         prog.stage("coarse-grain", n_used, unit="snapshots")
@@ -145,7 +152,8 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
                                                 energy_flux=res.has_ball_contacts)
         scatter = tub_mu_i_scatter(avg, phases)
         if not shear_cell:  # before anything is written: a bed too small is the input's fault
-            check_tub_cells(scatter, sc, avg, out_dir)
+            check_tub_cells(scatter, sc, avg, run_dir)
+        out_dir.mkdir(parents=True, exist_ok=True)
         fields_path = write_fields(out_dir / FIELDS_FILE, avg, phases)
         prog.log(f"coarse-grained {cg_info['snapshots']} snapshots in "
                  f"{cg_info['wall_time_s']:.1f} s (contact stress: {cg_info['contact_stress']})"
@@ -173,7 +181,7 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
         if shear_cell:
             rheo, elastic, cell_points = dem_tests(sc, p_bed, prog, shear_cell_options or {})
         else:
-            rheo = fit_tub_cells(scatter, sc, avg, out_dir)
+            rheo = fit_tub_cells(scatter, sc, avg, run_dir)
             cell_points = None
             K_aff, G_aff = affine_moduli_linear(phi_bed, z["z_all"], k_n, k_t, d)
             elastic = {"bulk_modulus": K_aff, "shear_modulus": G_aff}
@@ -211,7 +219,7 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
         write_calibration(out_dir / CALIBRATION_FILE, record)
         if pictures:
             from . import plots  # matplotlib, loaded only when pictures are drawn
-            pic = out_dir / PICTURES_DIR
+            pic = out_dir / PICTURES_DIR if out is None else out_dir
             pic.mkdir(exist_ok=True)
             geometry = geometry_of(sc)
             plots.field_maps(pic / "fields.png", avg, geometry)

@@ -35,7 +35,7 @@ def calibrate(
     dilatancy: Annotated[bool, typer.Option(
         "--dilatancy", help="Also measure the dilatancy constant K_dil of the continuum's "
                             "peak-friction option on dense sheared DEM packings (about a "
-                            "minute) -> \\[dilatancy].")] = False,
+                            "minute) -> [dilatancy].")] = False,
 ) -> None:
     """Calibrate the continuum on a DEM run: RUN_DIR/calibration.toml, fields.nc, pictures."""
     if not run_dir.is_dir():

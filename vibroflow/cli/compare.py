@@ -15,11 +15,19 @@ from .failures import input_errors
 @app.command("report")
 @input_errors
 def report(
-    directory: Annotated[Path, typer.Argument(metavar="DIR", help="A finished study folder "
-                                                                  "(vibroflow run --out DIR).")],
+    directory: Annotated[Path, typer.Argument(
+        metavar="DIR", help="A finished study folder (vibroflow run --out DIR) or a sweep "
+                            "folder (vibroflow sweep --out DIR).")],
 ) -> None:
-    """Write DIR/report.html: the study side by side for the DEM and each continuum method
-    (one self-contained page) and the DEM animation DIR/report/dem_slice.gif."""
+    """Write DIR/report.html: for a study, the DEM and each continuum method side by side (one
+    self-contained page) and the DEM animation DIR/report/dem_slice.gif; for a sweep, the
+    circulation strength, sense and E against the amplitude factor for every method, with
+    every point in a table."""
+    if (directory / "sweep.json").is_file():
+        from vibroflow.report.sweep_report import write_sweep_report
+
+        typer.echo(f"sweep report in {write_sweep_report(directory)}")
+        return
     from vibroflow.report import write_report
 
     typer.echo(f"report in {write_report(directory)}")

@@ -27,26 +27,29 @@ def continuum(
         "--method", help="Formulation: lagrangian (material point method) or eulerian (fixed "
                          "mesh of the tub); continuum/formulation.py.")] = "lagrangian",
     calibration: Annotated[Optional[Path], typer.Option(
-        "--calibration", help="calibration.toml, or a run folder holding one; default: "
-                              "--like's calibration.toml, else tub47's parameters.")] = None,
+        "--calibration", help="calibration.toml, or a folder holding one (a calibrated DEM "
+                              "run, a study's DIR/calibration); default: --like's "
+                              "calibration.toml, else tub47's parameters.")] = None,
     like: Annotated[Optional[Path], typer.Option(
         "--like", metavar="RUN_DIR", help="Run the scenario of the DEM run in RUN_DIR (its "
                                           "dem.h5's, --set on top) with its calibration.toml "
-                                          "when it has one; instead of SCENARIO.")] = None,
+                                          "when it has one (a study's DIR/dem: the study's "
+                                          "DIR/calibration/calibration.toml); instead of "
+                                          "SCENARIO.")] = None,
     allow_other_calibration: Annotated[bool, typer.Option(
         "--allow-other-calibration", help="Use a calibration measured on other media or "
-                                          "another tub than the scenario's (its \\[scenario] "
+                                          "another tub than the scenario's (its [scenario] "
                                           "differs): a warning, not an error.")] = False,
     rheology: Annotated[str, typer.Option(
         "--rheology", help="mu_i (Dunatunga & Kamrin) or drucker_prager.")] = "mu_i",
     dilatancy: Annotated[bool, typer.Option(
         "--dilatancy", help="mu_i with peak friction and dilation (Pailha & Pouliquen 2009), "
-                            "K_dil from the calibration's \\[dilatancy] (vibroflow calibrate "
+                            "K_dil from the calibration's [dilatancy] (vibroflow calibrate "
                             "--dilatancy).")] = False,
     compaction: Annotated[bool, typer.Option(
         "--compaction", help="Cyclic compaction of the connected bed towards the cyclic shear "
                              "cell's packing (Sawicki & Swidzinski 1989), from the calibration's "
-                             "\\[compaction] (vibroflow calibrate --dilatancy).")] = False,
+                             "[compaction] (vibroflow calibrate --dilatancy).")] = False,
     dx: Annotated[Optional[float], typer.Option(
         "--dx", help="Grid spacing (m); default 3 ball diameters (why: continuum/options.py, "
                     "DEFAULT_DX_DIAMETERS).")] = None,
@@ -116,8 +119,10 @@ def continuum(
         from vibroflow.calibration.dem_result import run_scenario
 
         s = run_scenario(like, set_ or [], field="--like")
-        if calibration is None and (like / "calibration.toml").is_file():
-            calibration = like / "calibration.toml"
+        if calibration is None:
+            from vibroflow.study.folder import calibration_of_run
+
+            calibration = calibration_of_run(like)
     else:
         s = load(scenario, set_)
     from vibroflow.continuum.formulation import formulation

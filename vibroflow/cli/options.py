@@ -29,7 +29,7 @@ ScenarioArg = Annotated[str, typer.Argument(metavar="SCENARIO", help=SCENARIO_HE
 OptionalScenarioArg = Annotated[Optional[str], typer.Argument(
     metavar="SCENARIO", help=SCENARIO_HELP + " Or --like RUN_DIR.", show_default=False)]
 # a study's scenario, optional (default tub47-quick)
-StudyScenarioArg = Annotated[str, typer.Argument(metavar="[SCENARIO]", help=SCENARIO_HELP)]
+StudyScenarioArg = Annotated[str, typer.Argument(metavar="SCENARIO", help=SCENARIO_HELP)]
 SetOption = Annotated[Optional[list[str]], set_option(
     "Override a scenario field, e.g. --set run.duration=0.2 --set contacts.0.friction=0.3 "
     "(repeatable; the value is read as TOML).")]

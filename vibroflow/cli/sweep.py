@@ -46,7 +46,8 @@ def sweep(
         "each).")] = False,
 ) -> None:
     """The whole study (DEM, calibration, continuum, comparison) at every point of the sweep,
-    as Dask tasks: DIR/points/<point>, DIR/sweep.csv, DIR/sweep.json, DIR/plots/sweep_*.png.
+    as Dask tasks: DIR/points/<point>, DIR/sweep.csv, DIR/sweep.json, DIR/plots/sweep_*.png and
+    the sweep report DIR/report.html.
     A rerun computes only the missing points; a failed point does not stop the others."""
     from vibroflow.study.sweep_points import parse_factors, parse_vary, plan_sweep
 
@@ -74,9 +75,12 @@ def sweep(
         raise Interrupted(f"interrupted; the finished points are kept and a point cut short "
                           f"resumes: run the same command again to go on (out: {out})") from None
     print_table(record)
+    from vibroflow.report.sweep_report import write_sweep_report
+
+    page = write_sweep_report(out)
     counts = summary_of(record)
     typer.echo(", ".join(f"{v} {k}" for k, v in sorted(counts.items()))
-               + f"; results in {out}/sweep.csv, {out}/plots")
+               + f"; results in {out}/sweep.csv, {out}/plots, {page}")
     failed = failed_points(record)
     if failed:
         sys.stderr.write(f"{len(failed)} of {len(record['results'])} point(s) failed: "

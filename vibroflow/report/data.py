@@ -34,6 +34,7 @@ from vibroflow.study.results import load
 from vibroflow.tub.geometry import geometry_of
 
 DEM = "dem"
+CALIBRATION = "calibration"
 #: impacts a cell needs before its mean impact speed is drawn (a cell mean of fewer is mostly
 #: noise: the speeds' spread is about their mean, so 20 impacts give a ~ 20 % standard error)
 MIN_IMPACTS_PER_CELL = 20
@@ -188,10 +189,11 @@ class StudyData:
                 continue
             if isinstance(rec, dict) and "stage" in rec:
                 stages[str(rec["stage"])] = rec
-        calibration = _optional(out / DEM / "calibration.toml", read_calibration, notes,
-                                "calibration", f"no {DEM}/calibration.toml in the study")
-        dem_fields = _optional(out / DEM / "fields.nc", _read_dem_fields, notes, "dem_fields",
-                               f"no {DEM}/fields.nc (the calibration's coarse-grained fields)")
+        calibration = _optional(out / CALIBRATION / "calibration.toml", read_calibration, notes,
+                                "calibration", f"no {CALIBRATION}/calibration.toml in the study")
+        dem_fields = _optional(out / CALIBRATION / "fields.nc", _read_dem_fields, notes,
+                               "dem_fields", f"no {CALIBRATION}/fields.nc (the calibration's "
+                               "coarse-grained DEM fields)")
         impacts = None
         if scenario is not None:
             impacts, why = _dem_impacts(out / DEM / "dem.h5", scenario)

@@ -191,7 +191,7 @@ def shear_rate_maps(data: StudyData) -> bytes:
     for ax, name in zip(axes[0], names):
         if name == data.methods[0] and name == "dem":
             if dem_map is None:
-                ax.text(0.5, 0.5, "no coarse-grained fields\n(dem/fields.nc)",
+                ax.text(0.5, 0.5, "no coarse-grained fields\n(calibration/fields.nc)",
                         ha="center", va="center", transform=ax.transAxes)
             else:
                 x, z = ds["x"].values, ds["z"].values
@@ -346,7 +346,7 @@ def temperature_maps(data: StudyData, maps: TemperatureMaps) -> bytes:
         shown = diff_shown = None
         for ax, (name, m, kind) in zip(axes[r], cols):
             if m is None or (kind and m.get(diff_key) is None):
-                ax.text(0.5, 0.5, "no coarse-grained fields\n(dem/fields.nc)", ha="center",
+                ax.text(0.5, 0.5, "no coarse-grained fields\n(calibration/fields.nc)", ha="center",
                         va="center", transform=ax.transAxes)
             elif kind is None:
                 empty = (m[T_KEY] <= 0) & (m[PHI_KEY] <= 0)

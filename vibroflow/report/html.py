@@ -1,6 +1,6 @@
 """The report page: one self-contained HTML file (inline CSS, every image a base64 data URI,
 no script and no external link), assembled from a study's data (vibroflow.report.data), its
-figures (vibroflow.report.figures), the calibration's own pictures (dem/calibration/*.png, drawn
+figures (vibroflow.report.figures), the calibration's own pictures (calibration/*.png, drawn
 by vibroflow.calibration.plots) and the DEM animation (vibroflow.report.animation).
 
 This module computes what each section shows (numbers, table rows, figure bytes); the page
@@ -287,7 +287,7 @@ def _wall(data: StudyData) -> dict:
                      _pm(w.get("mean_ft_over_fn"), w.get("mean_ft_over_fn_stderr")),
                      _pm(w.get("sliding_fraction"), w.get("sliding_fraction_stderr")),
                      _text(w.get("count", "n/a"))])
-    out = {"picture": _picture(data, "dem/calibration/wall_friction.png",
+    out = {"picture": _picture(data, "calibration/wall_friction.png",
                                "wall friction histogram"),
            "rows": rows, "friction": None}
     if data.calibration is not None:
@@ -308,7 +308,7 @@ def _rheology(data: StudyData) -> dict:
         r = data.calibration.rheology
         fit = {k: v(r, k) for k in ("mu_s", "mu_2", "I_0", "phi_max", "phi_min")}
         fit.update(source=r.source or "", status=r.status or "n/a")
-    return {"picture": _picture(data, "dem/calibration/mu_I.png", "mu(I) fit"), "fit": fit}
+    return {"picture": _picture(data, "calibration/mu_I.png", "mu(I) fit"), "fit": fit}
 
 
 def _animation(data: StudyData, gif: Path | None, why: str | None) -> dict:

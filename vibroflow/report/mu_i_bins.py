@@ -1,5 +1,5 @@
 """Binned means over the mu(I) scatter of the tub's cells: the calibration's time-averaged
-cells (calibration.tub_rheology.tub_mu_i_scatter of dem/fields.nc: I = gamma_dot d /
+cells (calibration.tub_rheology.tub_mu_i_scatter of calibration/fields.nc: I = gamma_dot d /
 sqrt(p / rho_s), mu = tau_eq / p, cells with solid fraction >= its minimum), binned in log10 I
 (BINS_PER_DECADE bins a decade, on whole decades), per bin the mean of mu and its standard error
 std(mu, ddof=1) / sqrt(n) over the bin's cells, bins of at least MIN_PER_BIN cells; the dense

@@ -2,8 +2,8 @@
 analysis cells, side by side with their difference (continuum minus DEM), as the report shows
 them.
 
-The DEM's maps are its time-averaged coarse-grained fields (dem/fields.nc, "temperature" m^2/s^2
-and "solid_fraction") gathered onto the analysis cells: the temperature mass-weighted (by the
+The DEM's maps are its time-averaged coarse-grained fields (calibration/fields.nc,
+"temperature" m^2/s^2 and "solid_fraction") gathered onto the analysis cells: the temperature mass-weighted (by the
 fields' density) over the grid points inside a cell, the solid fraction their mean; a cell with
 no mass has T = 0.  A continuum's are its temperature.csv (continuum.temperature_outputs), which
 a run writes only when it carries the temperature (ContinuumOptions.temperature); a method

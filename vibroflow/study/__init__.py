@@ -1,7 +1,7 @@
 """The whole study in one command (`vibroflow run`): a pipeline of stages.
 
     dem          -> DIR/dem           run_dem (resumes from its checkpoint)
-    calibration  -> DIR/calibration   calibrate DIR/dem (calibration.toml lives in DIR/dem)
+    calibration  -> DIR/calibration   calibrate DIR/dem: calibration.toml, fields.nc, pictures
     <method>     -> DIR/<method>      every continuum formulation of `methods.METHODS`
     comparison   -> DIR/comparison    probes, circulation, E against the DEM, cost;
                                       writes DIR/summary.json

@@ -57,3 +57,18 @@ def check_study_dir(out: Path, must_exist: bool = False) -> None:
     if data.get("kind") != KIND:
         raise InputError(f"{marker}: not a vibroflow study record (kind = "
                          f"{data.get('kind')!r}); {remedy}")
+
+
+def calibration_of_run(run_dir: Path) -> Path | None:
+    """The calibration.toml that belongs to the DEM run in run_dir: its own (`vibroflow
+    calibrate RUN_DIR` writes it there), else, for a study's DEM (DIR/dem of `vibroflow run`),
+    the study's DIR/calibration/calibration.toml; None when there is neither."""
+    run_dir = Path(run_dir)
+    own = run_dir / "calibration.toml"
+    if own.is_file():
+        return own
+    study = run_dir.resolve().parent
+    theirs = study / "calibration" / "calibration.toml"
+    if run_dir.resolve().name == "dem" and (study / STUDY_FILE).is_file() and theirs.is_file():
+        return theirs
+    return None

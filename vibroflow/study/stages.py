@@ -24,7 +24,7 @@ from vibroflow.continuum.options import options_record
 from vibroflow.dem.run import run_dem
 # write_json_atomic is imported from here by the study's other modules
 from vibroflow.io.atomic import write_json_atomic
-from vibroflow.io.calibration_file import read_calibration
+from vibroflow.io.calibration_file import CALIBRATION_FILE, read_calibration
 from vibroflow.io.calibration_source import check_calibration_source
 from vibroflow.io.vtk_frame import VtkOptions, has_vtk
 from vibroflow.measure.bulk import read_csv
@@ -102,13 +102,19 @@ def dem_stage() -> Stage:
 
 
 # ----------------------------------------------------------------------------------------------
-# calibration (its files go next to the DEM's, where `vibroflow calibrate` puts them)
+# calibration: its files (calibration.toml, fields.nc, pictures) in its own folder DIR/calibration
+
+def calibration_file(study: Study) -> Path:
+    """The study's calibration.toml, which its continuum stages run with."""
+    return study.folder(CALIBRATION) / CALIBRATION_FILE
+
 
 def _run_calibration(study: Study, resume: bool) -> dict:
     cal = calibrate(study.folder(DEM), shear_cell=study.shear_cell, progress=study.progress,
-                    cyclic=True, dilatancy=needs_dilatancy(study))
+                    cyclic=True, dilatancy=needs_dilatancy(study),
+                    out=study.folder(CALIBRATION))
     r = cal.rheology
-    return {"calibration": f"{DEM}/calibration.toml",
+    return {"calibration": f"{CALIBRATION}/{CALIBRATION_FILE}",
             "rheology": {"mu_s": r.mu_s, "mu_2": r.mu_2, "I_0": r.I_0, "source": r.source}}
 
 
@@ -132,7 +138,7 @@ def _calibration_inputs(study: Study) -> dict:
 def calibration_stage() -> Stage:
     return Stage(CALIBRATION, inputs=_calibration_inputs,
                  run=_run_calibration, upstream=(DEM,),
-                 outputs=(f"{DEM}/calibration.toml",),
+                 outputs=(f"{CALIBRATION}/{CALIBRATION_FILE}",),
                  estimate=lambda st: 0.15 * _dem_cost(st) + 5.0
                  + (600.0 if st.shear_cell else 0.0) + (60.0 if needs_dilatancy(st) else 0.0))
 
@@ -152,7 +158,7 @@ def continuum_stage(method: ContinuumMethod, options) -> Stage:
         return {"scenario": scenario_inputs(study.scenario), "options": opts}
 
     def run(study: Study, resume: bool) -> dict:
-        path = study.folder(DEM) / "calibration.toml"
+        path = calibration_file(study)
         cal = read_calibration(path)
         # the study's own DEM made it, so it matches unless the folder was changed by hand
         warning = check_calibration_source(cal, study.scenario, where=str(path))

@@ -1,0 +1,209 @@
+"""The sweep report (DIR/report.html of a sweep, `vibroflow report SWEEP_DIR`) on sweep folders
+written by hand (points' summary.json with known numbers, a failed point): the limit on E from
+tub47.md's ten-seed figure and from the sweep's own seeds (tests/data/tub47-dem-seeds 1 - 3:
+0.106, docs/decisions/e-limit-seeds.md), the verdicts, the failed point's row, escaping, and the
+page in headless Chromium (figures loaded, the table within the page's width)."""
+from __future__ import annotations
+
+import base64
+import contextlib
+import io
+import json
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from vibroflow.scenario.io import load_scenario
+from vibroflow.study.sweep_folder import KIND, write_record
+from vibroflow.study.sweep_points import FACTOR_KEY, point_name
+
+CHROMIUM = Path(shutil.which("chromium") or "/usr/bin/chromium")
+CHROMEDRIVER = Path(shutil.which("chromedriver") or "/usr/bin/chromedriver")
+SEEDS = Path(__file__).parent / "data" / "tub47-dem-seeds"
+#: a failed point's error, with characters that HTML must escape
+ERROR = "BlowUp: balls <12> & 'x' overlap"
+
+
+def _method(strength, se, sense, E=None, agrees=None):
+    m = {"probes": {"P1": {"vx": 0.01, "vx_stderr": 0.001, "vz": 0.0, "vz_stderr": 0.001}},
+         "circulation": {"sense": sense, "strength": strength, "strength_stderr": se},
+         "impacts": {"ball_ball_mean_normal_speed": 0.1, "ball_wall_mean_normal_speed": 0.2},
+         "wall_time_s": 10.0}
+    if E is not None:
+        m["against_dem"] = {"field_difference_E": E, "circulation_agrees": agrees}
+    return m
+
+
+def make_sweep(out: Path, points: dict, varied=(FACTOR_KEY,), source="tub47") -> Path:
+    """A sweep folder: points = values -> summary's methods (dict) or an error (str)."""
+    base = load_scenario("tub47", []).model_dump(mode="json")
+    record = {"kind": KIND, "source": source, "varied": list(varied), "fixed_settings": [],
+              "base": {"scenario": base, "settings": {}, "shear_cell": False}, "points": {}}
+    for values, what in points.items():
+        vals = dict(zip(varied, values))
+        name = point_name(vals)
+        folder = out / "points" / name
+        folder.mkdir(parents=True)
+        record["points"][name] = {"values": vals, "overrides": []}
+        if isinstance(what, str):
+            (folder / "failed.json").write_text(json.dumps({"error": what}))
+        else:
+            (folder / "summary.json").write_text(json.dumps({"methods": what}))
+    write_record(out, record)
+    return out
+
+
+@pytest.fixture
+def sweep(tmp_path):
+    """Factors 0.5 and 1 finished (the Lagrangian E 0.25, then 0.5), 1.5 failed."""
+    return make_sweep(tmp_path / "sweep", {
+        (0.5,): {"dem": _method(3.27e-4, 1.4e-5, "counterclockwise"),
+                 "lagrangian": _method(3.0e-4, 2e-5, "counterclockwise", 0.25, True)},
+        (1.0,): {"dem": _method(5.0e-4, 2e-5, "counterclockwise"),
+                 "lagrangian": _method(2.0e-4, 2e-5, "clockwise", 0.5, False)},
+        (1.5,): ERROR})
+
+
+def _rows(page: str) -> dict[tuple[str, str], str]:
+    """(point, method) -> the row's HTML."""
+    out = {}
+    for m in re.finditer(r'<tr class="[^"]*" data-point="([^"]+)"[^>]*>(.*?)</tr>', page, re.S):
+        cells = re.findall(r"<td[^>]*>(.*?)</td>", m.group(2), re.S)
+        out[(m.group(1), cells[1])] = m.group(2)
+    return out
+
+
+def test_limit_verdicts_and_failed_point_against_known_answers(sweep):
+    from PIL import Image
+
+    from vibroflow.report.sweep_report import write_sweep_report
+
+    page = write_sweep_report(sweep).read_text(encoding="utf-8")
+    # tub47.md: 1.5 x the ten seeds' 0.206
+    limit = float(re.search(r'data-limit="([^"]+)"', page).group(1))
+    assert limit == pytest.approx(0.309, abs=1e-12)
+    rows = _rows(page)
+    low, high = point_name({FACTOR_KEY: 0.5}), point_name({FACTOR_KEY: 1.0})
+    assert "within the DEM&#39;s own scatter; circulation agrees" in rows[(low, "lagrangian")]
+    assert "1.6 × the limit: the flow differs; circulation differs" in rows[(high, "lagrangian")]
+    ratio = re.findall(r'data-value="([^"]+)"', rows[(high, "lagrangian")])
+    assert any(float(v) == pytest.approx(0.5 / 0.309) for v in ratio)
+    assert ">3.27 ± 0.14<" in rows[(low, "dem")]  # 1e-4 m^2/s
+    failed = rows[(point_name({FACTOR_KEY: 1.5}), "-")]
+    assert ">failed<" in failed and "BlowUp: balls &lt;12&gt; &amp; &#39;x&#39; overlap" in failed
+    assert "<12>" not in page
+    imgs = re.findall(r'src="data:image/png;base64,([^"]+)"', page)
+    assert len(imgs) == 3
+    for b in imgs:
+        assert Image.open(io.BytesIO(base64.b64decode(b))).size[0] > 100
+    assert "http" not in page.replace("http-equiv", "")  # no external link
+
+
+def test_limit_from_the_sweeps_own_seeds(tmp_path):
+    """Three points differing only in run.seed, whose DEMs are tub47's seeds 1 - 3: the limit is
+    1.5 x their mean pairwise E, 0.106 (docs/decisions/e-limit-seeds.md)."""
+    from vibroflow.report.sweep_data import SweepData
+
+    dem = _method(5e-4, 2e-5, "counterclockwise")
+    out = make_sweep(tmp_path / "seeds", {(1.0, k): {"dem": dem} for k in (1, 2, 3)},
+                     varied=(FACTOR_KEY, "run.seed"))
+    for k in (1, 2, 3):
+        dem_dir = out / "points" / point_name({FACTOR_KEY: 1.0, "run.seed": k}) / "dem"
+        dem_dir.mkdir()
+        shutil.copy(SEEDS / f"seed{k}" / "bulk_velocity.csv", dem_dir)
+    data = SweepData.read(out)
+    (lim,) = data.limits.values()
+    assert lim.E_seed == pytest.approx(0.106, abs=6e-4)
+    assert lim.limit == pytest.approx(1.5 * lim.E_seed)
+    assert "6 ordered pairs of this sweep's 3 seeds" in lim.source
+
+
+def test_no_limit_for_a_changed_case_is_said(tmp_path):
+    from vibroflow.report.sweep_report import limits_text
+    from vibroflow.report.sweep_data import SweepData
+
+    out = make_sweep(tmp_path / "s", {(1.0, 300): {"dem": _method(5e-4, 2e-5, "clockwise")}},
+                     varied=(FACTOR_KEY, "fill.count"))
+    (line,) = limits_text(SweepData.read(out))
+    assert line.startswith("No limit on E:") and "changes fill.count" in line
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-m", "vibroflow.cli", *map(str, args)],
+                          capture_output=True, text=True, stdin=subprocess.DEVNULL, timeout=300)
+
+
+def test_report_command_on_a_sweep_and_on_a_corrupt_one(sweep, tmp_path):
+    r = _cli("report", sweep)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == f"sweep report in {sweep / 'report.html'}"
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    (bad / "sweep.json").write_text("{not json")
+    r = _cli("report", bad)
+    assert r.returncode == 2 and r.stderr.startswith("error: ") and r.stderr.count("\n") == 1
+    assert "corrupt sweep record" in r.stderr and not (bad / "report.html").exists()
+
+
+@contextlib.contextmanager
+def chromium(page: Path, width: int = 1000):
+    """A headless Chromium showing `page` once loaded (skips without the Debian packages)."""
+    if not (CHROMIUM.exists() and CHROMEDRIVER.exists()):
+        pytest.skip("headless Chromium needs the Debian packages chromium and chromium-driver")
+    webdriver = pytest.importorskip("selenium.webdriver")
+    from selenium.webdriver.chrome.service import Service
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = str(CHROMIUM)
+    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
+                f"--window-size={width},900"):
+        opts.add_argument(arg)
+    driver = webdriver.Chrome(service=Service(str(CHROMEDRIVER)), options=opts)
+    try:
+        driver.set_page_load_timeout(60)
+        driver.get(page.resolve().as_uri())
+        WebDriverWait(driver, 60, poll_frequency=0.2).until(
+            lambda d: d.execute_script("return document.readyState") == "complete")
+        yield driver
+    finally:
+        driver.quit()
+
+
+def check_rendered(driver, n_images: int, failed: dict[str, str]) -> None:
+    """The sweep report as a browser shows it: the headings in order, every figure loaded, the
+    table within the page's width (no horizontal scrolling), each failed point's row with its
+    reason (failed: point -> a part of its error)."""
+    from vibroflow.report.sweep_report import SECTIONS
+
+    heads = driver.execute_script(
+        "return Array.from(document.querySelectorAll('h2')).map(h => h.textContent.trim())")
+    assert heads == list(SECTIONS.values())
+    imgs = driver.execute_script(
+        "return Array.from(document.images).map(i => [i.alt, i.complete, i.naturalWidth])")
+    assert len(imgs) == n_images and all(i[1] and i[2] > 0 for i in imgs), imgs
+    assert {i[0] for i in imgs} >= {"circulation strength against the amplitude factor",
+                                    "circulation sense against the amplitude factor",
+                                    "field difference E against the amplitude factor"}
+    widths = driver.execute_script(
+        "const t = document.querySelector('table.sweep');"
+        "return [t.scrollWidth, t.parentElement.clientWidth,"
+        " document.documentElement.scrollWidth, document.documentElement.clientWidth]")
+    assert widths[0] <= widths[1] and widths[2] <= widths[3], widths
+    rows = driver.execute_script(
+        "return Array.from(document.querySelectorAll('tr.unfinished')).map(r =>"
+        " [r.dataset.point, r.dataset.status, r.innerText, r.getBoundingClientRect().height])")
+    assert {r[0] for r in rows} == set(failed)
+    for point, status, text, height in rows:
+        assert status == "failed" and failed[point] in text and height > 0
+
+
+def test_sweep_report_renders_in_headless_chromium(sweep):
+    from vibroflow.report.sweep_report import write_sweep_report
+
+    with chromium(write_sweep_report(sweep), width=900) as driver:
+        check_rendered(driver, 3, {point_name({FACTOR_KEY: 1.5}): ERROR})

@@ -1,0 +1,207 @@
+"""The sweep report: DIR/report.html of a sweep folder (`vibroflow sweep --out DIR`, also
+`vibroflow report DIR`), one self-contained page (inline CSS, images as data URIs, no script)
+showing against the amplitude factor, for the DEM and each continuum, the circulation strength
+with its standard error, its sense and the field difference E against the DEM beside its
+limit (vibroflow.report.sweep_data), with one table row per point and method: a point that did
+not finish is a row with its status and reason, and a red cross in every figure.
+
+The table fits the page: a fixed layout over the page's width, short headers with their units
+on a line of their own, and long words (keys, errors) wrapped anywhere.  Every number cell
+carries its full value in `data-value` (the text shows it rounded), like the study report's.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from markupsafe import Markup
+
+from vibroflow import __version__
+from vibroflow.io.atomic import write_text_atomic
+from vibroflow.report.html import data_uri, environment
+from vibroflow.report.sweep_data import ELimit, SweepData, created, describe, point_report
+from vibroflow.report.sweep_figures import e_figure, sense_figure, strength_figure
+from vibroflow.study.sweep_folder import PLOTS
+from vibroflow.study.sweep_plots import NAMES as PLOT_NAMES
+from vibroflow.study.sweep_points import FACTOR_KEY
+
+REPORT_NAME = "report.html"
+TEMPLATE = "sweep_report.html.j2"
+
+#: section id -> heading, in page order (tests check the headings)
+SECTIONS = {
+    "strength": "Circulation strength",
+    "sense": "Circulation sense",
+    "E": "Field difference E against the DEM",
+    "table": "Every point",
+    "unfinished": "Points that did not finish",
+    "plots": "Probes, impacts and cost",
+}
+
+CSS = """
+body { font-family: system-ui, sans-serif; margin: 1.5em auto; max-width: 1200px; color: #222;
+       padding: 0 1em; }
+h1 { font-size: 1.6em; margin-bottom: 0.2em; }
+h2 { border-bottom: 1px solid #ccc; padding-bottom: 0.2em; margin-top: 1.6em; }
+.meta { color: #555; overflow-wrap: anywhere; }
+nav a { margin-right: 0.9em; }
+table.sweep { border-collapse: collapse; margin: 0.6em 0; font-size: 0.82em; width: 100%;
+              table-layout: fixed; }
+table.sweep th, table.sweep td { border: 1px solid #ccc; padding: 0.2em 0.35em;
+              text-align: right; overflow-wrap: anywhere; word-break: break-word;
+              vertical-align: top; }
+table.sweep th { background: #f2f2f2; font-weight: 600; }
+table.sweep th .u { display: block; font-weight: normal; color: #555; font-size: 0.9em; }
+table.sweep td.l, table.sweep th.l { text-align: left; }
+table.sweep td.why { text-align: left; color: #b42318; }
+tr.unfinished td { background: #fdf1f0; }
+img { max-width: 100%; height: auto; display: block; margin: 0.5em 0; }
+.note { color: #8a5a00; }
+.ok { color: #1a7f37; } .bad { color: #b42318; }
+"""
+
+#: the table's columns after the varied values: (heading, unit line, share of the width)
+COLUMNS = (
+    ("method", "", 9),
+    ("status", "", 6),
+    ("sense", "", 12),
+    ("strength", "(1e-4 m²/s)", 10),
+    ("E vs DEM", "(-)", 6),
+    ("E / limit", "(-)", 6),
+    ("verdict", "", 22),
+    ("impact b-b / b-w", "(m/s)", 9),
+    ("wall time", "(s)", 6),
+)
+#: the share of the width of a varied value's column
+VARIED_SHARE = 7
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One table cell: its text, class, and for a number its full value (data-value)."""
+    text: str
+    cls: str = ""
+    value: str | None = None
+    span: int = 1
+
+
+def _num(x, fmt: str = ".3g", scale: float = 1.0, se=None) -> Cell:
+    if x is None:
+        return Cell("n/a", value="nan")
+    text = format(x * scale, fmt) + ("" if se is None else f" ± {format(se * scale, '.2g')}")
+    return Cell(text, value=repr(float(x)))
+
+
+def _header(key: str) -> tuple[str, str]:
+    """A varied key's heading and unit line: the amplitude factor short, others by name (the
+    CSS wraps a long one anywhere)."""
+    if key == FACTOR_KEY:
+        return "factor", "(-)"
+    return key, ""
+
+
+def verdict(row: dict[str, Any], lim: ELimit | None) -> tuple[str, str]:
+    """(words, class) for a continuum's row: E against the limit, then the circulation."""
+    if row["method"] == "dem":
+        return "the reference", ""
+    E = row.get("E_against_dem")
+    agrees = row.get("circulation_agrees")
+    circ = {True: "circulation agrees", False: "circulation differs"}.get(agrees, "")
+    if E is None:
+        return ("E not computed" + (f"; {circ}" if circ else "")), "note"
+    if lim is None:
+        return ("no limit to judge E by" + (f"; {circ}" if circ else "")), "note"
+    ratio = E / lim.limit
+    words = ("within the DEM's own scatter" if ratio <= 1.0
+             else f"{ratio:.1f} × the limit: the flow differs")
+    ok = ratio <= 1.0 and agrees is not False
+    return words + (f"; {circ}" if circ else ""), "ok" if ok else "bad"
+
+
+def table_rows(data: SweepData) -> list[dict[str, Any]]:
+    """The table's rows: cells, a class, and the point's own report (a relative link)."""
+    out = []
+    span = len(COLUMNS) - 2
+    for r in data.rows:
+        vals = [_num(r.get(k), ".6g") if isinstance(r.get(k), (int, float))
+                and not isinstance(r.get(k), bool) else Cell(str(r.get(k)), "l")
+                for k in data.varied]
+        link = point_report(data.out, r["point"])
+        if r["status"] != "done":
+            why = r.get("error") or {"running": "running now (another process holds it)",
+                                     "pending": "not run yet"}.get(r["status"], "")
+            cells = [*vals, Cell(r["method"] or "-", "l"), Cell(r["status"], "l bad"),
+                     Cell(why, "why", span=span)]
+            out.append({"cells": cells, "cls": "unfinished", "point": r["point"],
+                        "status": r["status"], "link": link})
+            continue
+        lim = data.limit_of(r)
+        E = r.get("E_against_dem")
+        words, vcls = verdict(r, lim)
+        bb, bw = r.get("impact_ball_ball"), r.get("impact_ball_wall")
+        cells = [*vals, Cell(r["method"], "l"), Cell(r["status"], "l"),
+                 Cell(str(r.get("circulation_sense") or "n/a"), "l"),
+                 _num(r.get("circulation_strength"), ".3g", 1e4,
+                      r.get("circulation_strength_stderr")),
+                 _num(E, ".3f") if r["method"] != "dem" else Cell("-"),
+                 (_num(E / lim.limit, ".2f") if E is not None and lim is not None
+                  else Cell("-" if r["method"] == "dem" else "n/a")),
+                 Cell(words, f"l {vcls}".strip()),
+                 Cell(f"{'n/a' if bb is None else format(bb, '.3f')} / "
+                      f"{'n/a' if bw is None else format(bw, '.3f')}"),
+                 _num(r.get("wall_time_s"), ".1f")]
+        out.append({"cells": cells, "cls": "", "point": r["point"], "status": "done",
+                    "link": link})
+    return out
+
+
+def _img(payload: bytes) -> Markup:
+    return Markup(data_uri(payload, "image/png"))
+
+
+def limits_text(data: SweepData) -> list[str]:
+    """One line per limit: its value, the floor it is 1.5 x and where that comes from."""
+    if not data.limits:
+        return [f"No limit on E: {data.no_limit}."]
+    lines = []
+    for key, lim in sorted(data.limits.items(), key=lambda kv: str(kv[0])):
+        at = ("" if key is None else
+              " at " + ", ".join(f"{k} = {v}" for k, v in
+                                 zip([k for k in data.varied if k != "run.seed"], key)))
+        se = "" if lim.stderr is None else f" ± {lim.stderr:.3f}"
+        lines.append(f"Fields agree when E ≤ {lim.limit:.3f}{at}: 1.5 × the DEM's "
+                     f"seed-to-seed E {lim.E_seed:.3f}{se} ({lim.source}).")
+    return lines
+
+
+def render(data: SweepData) -> str:
+    """The page's HTML text."""
+    plots = []
+    for name in PLOT_NAMES[0], PLOT_NAMES[2], PLOT_NAMES[3]:
+        path = data.out / PLOTS / name
+        plots.append({"name": name, "src": _img(path.read_bytes()) if path.is_file() else None})
+    head = ([(*_header(k), VARIED_SHARE) for k in data.varied]
+            + [(t, u, w) for t, u, w in COLUMNS])
+    total = sum(w for _, _, w in head)
+    head = [(t, u, f"{100.0 * w / total:.1f}%") for t, u, w in head]
+    counts: dict[str, int] = {}  # status -> points
+    for status in {r["point"]: r["status"] for r in data.rows}.values():
+        counts[status] = counts.get(status, 0) + 1
+    return environment().get_template(TEMPLATE).render(
+        css=Markup(CSS), sections=SECTIONS, folder=str(data.out), version=__version__,
+        written=time.strftime("%Y-%m-%d %H:%M:%S %z"), updated=created(data.record),
+        describe=describe(data.record), counts=sorted(counts.items()),
+        strength=_img(strength_figure(data)), sense=_img(sense_figure(data)),
+        E=_img(e_figure(data)), limits=limits_text(data), limit_values=sorted(
+            {lim.limit for lim in data.limits.values()}),
+        head=head, n_varied=len(data.varied), rows=table_rows(data),
+        unfinished=[r for r in data.rows if r["status"] != "done"], plots=plots)
+
+
+def write_sweep_report(sweep_dir) -> Path:
+    """Write DIR/report.html for the sweep in sweep_dir (atomically) and return its path; a
+    folder that holds no sweep is an InputError (one line) and nothing is written."""
+    data = SweepData.read(sweep_dir)
+    return write_text_atomic(Path(sweep_dir) / REPORT_NAME, render(data))
