@@ -76,6 +76,18 @@ def test_connected_material_gets_only_the_capped_kinetic_pressure():
     assert list(_one(0.63 * 7800.0, 0.0, (0.0, 5.0, 0.0, 0.0), phase=2)) == [0, 0, 0, 0, 1]
 
 
+def test_a_gas_compressed_past_the_connection_packing_reads_both_pressures_there():
+    # a disconnected cell may be compressed past phi_cap in a step (the Eulerian's remap): both
+    # pressures are read at phi_cap, so the frictional one's (phi_rcp - phi)^-5 stays bounded
+    # (tub47-quick's calibrated Fr 10.6 Pa, phi_min 0.573, phi_rcp 0.635: at phi_cap 0.6,
+    # 10.6 0.027^2 / 0.035^5 = 147.2 Pa; at 0.6349 it would be 1.2e17 Pa)
+    prm = PRM._replace(phi_rcp=0.635, frictional_Pa=10.6, frictional_phi_min=0.573)
+    T = 0.01
+    s = _one(0.6349 * 7800.0, T, (0.0, 0.0, 0.0, 0.0), prm=prm)
+    p = pressure_Pa(0.6, T, prm) + 10.6 * 0.027 ** 2 / 0.035 ** 5
+    assert s[0] == s[1] == s[3] == pytest.approx(-p, rel=1e-9)
+
+
 @pytest.mark.parametrize("c_L", [0.0, 2.0])
 def test_the_balance_temperature_balances_the_plastic_work(c_L):
     prm = PRM._replace(correlation_coefficient=c_L)

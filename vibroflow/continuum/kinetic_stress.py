@@ -13,7 +13,9 @@ given stress to the scattered one and reads one number in its return map:
    fast as the elastic one the step is set for (timestep.kinetic_temperature_limit).
 2. In the gas (the elastic-plastic state disconnected: phase 0, the density below rho_c or a
    tensile trial state) the frictional pressure of Johnson & Jackson (1987,
-   kinetic_theory.frictional_pressure_Pa) and the kinetic-theory shear viscosity of Gidaspow
+   kinetic_theory.frictional_pressure_Pa), read at phi capped at phi_cap as Lun's (a gas cell
+   compressed past it in one step would otherwise read (phi_rcp - phi)^-5 near close packing,
+   ~1e17 Pa on tub47-quick's calibration), and the kinetic-theory shear viscosity of Gidaspow
    (1994, kinetic_theory.shear_viscosity_Pa_s): a deviatoric stress 2 eta_k D', D' the
    deviator of the last step's rate of deformation (plane strain, D_yy from L[:, 4] where
    given).  eta_k is capped at eta_max = C rho dx^2 / dt, C = VISCOSITY_CAP = 3/160.  C is
@@ -105,7 +107,7 @@ def kinetic_stress(density, T, L, stress, gamma_dot, phase, prm, phi_cap, T_cap,
         phi = rho / rho_s
         pk = pressure_Pa(min(phi, phi_cap), min(t, T_cap), prm)
         if phase[p] == 0:
-            pk += frictional_pressure_Pa(phi, prm)
+            pk += frictional_pressure_Pa(min(phi, phi_cap), prm)
             eta = min(shear_viscosity_Pa_s(phi, t, prm), VISCOSITY_CAP * rho * eta_max_factor)
             dxx = L[p, 0]
             dzz = L[p, 3]
