@@ -118,23 +118,26 @@ def _xfail(why):
     return pytest.mark.xfail(strict=True, reason=why)
 
 
-_NO_FEED = ("nothing feeds T but the plastic work (no vibrating wall's energy flux): "
-            "the core's T is near 0 against the DEM's 0.002 - 0.003 m^2/s^2")
-_DENSE = ("without the kinetic pressure of the DEM's T the bed packs at up to 0.61 - 0.62 "
-          "against the DEM's 0.53 - 0.56")
+_COLD = ("the walls' feed heats the floor band, but the core stays 3 - 30 times colder than the "
+         "DEM's 0.002 - 0.003 m^2/s^2: Gidaspow's conduction does not carry the landing's energy "
+         "up, where the DEM's flux is collisional and phase-locked to the landing (validation 22)")
+_DENSE = ("the core packs at up to 0.59 - 0.60 (Lagrangian) and 0.62 (Eulerian) against the "
+          "DEM's 0.53 - 0.56: the kinetic pressure of a core that cold cannot hold it open")
 #: today's misses (docs/validation.md section 23): (formulation, measure) -> why
-MISSED = {("lagrangian", "temperature_m2_s2"): _NO_FEED,
-          ("eulerian", "temperature_m2_s2"): _NO_FEED,
+MISSED = {("lagrangian", "temperature_m2_s2"): _COLD,
+          ("eulerian", "temperature_m2_s2"): _COLD,
           ("lagrangian", "solid_fraction"): _DENSE,
           ("eulerian", "solid_fraction"): _DENSE,
-          ("eulerian", "take_off_phase"): "the bed leaves the floor at 0.433 of the floor's "
-          "cycle against the DEM's 0.377 +- 0.055 (1.03 x the allowance)"}
+          ("lagrangian", "take_off_phase"): "the floor force falls only to 0.05 of the weight, "
+          "the take-off threshold, at its lowest: no take-off is detected (the DEM's bed leaves "
+          "at 0.377 of the floor's cycle)"}
 
 #: the guards on today's misses: the largest |difference| / allowance each may reach (today
-#: T 12.5 and 12.4, solid fraction 5.7 and 8.0, the Eulerian's take-off 1.03)
-GUARD = {("lagrangian", "temperature_m2_s2"): 13.0, ("eulerian", "temperature_m2_s2"): 13.0,
-         ("lagrangian", "solid_fraction"): 7.0, ("eulerian", "solid_fraction"): 10.0,
-         ("eulerian", "take_off_phase"): 1.3}
+#: T 10.9 and 8.3, solid fraction 2.9 and 11.2)
+GUARD = {("lagrangian", "temperature_m2_s2"): 12.0, ("eulerian", "temperature_m2_s2"): 9.5,
+         ("lagrangian", "solid_fraction"): 3.5, ("eulerian", "solid_fraction"): 12.5}
+#: the floor force's lowest value over the cycle / weight may reach (today 0.05 and -0.24)
+FLOOR_GUARD = 0.1
 
 CASES = [pytest.param(m, k, marks=[pytest.mark.slow]
                       + ([_xfail(MISSED[(m, k)])] if (m, k) in MISSED else []),
@@ -155,10 +158,11 @@ def test_the_continuum_layers_misses_are_no_larger_than_today(dem, method):
     c, miss = continuum(method, dem)
     assert np.all(np.isfinite(np.array(c["floor_force_over_weight"])))
     # the continuum's momentum balance: over whole cycles the floor carries the weight (the
-    # Eulerian's to 0.5 %; the Lagrangian's points lose 6 % of it: docs/validation.md 23)
+    # Eulerian's to 2 %, the Lagrangian's to 3 %: docs/validation.md 23)
     assert abs(c["floor_force_cycle_mean_over_weight"] - 1.0) < 0.08
     T = np.array(c["temperature_m2_s2"], float)
     assert np.all(T[np.isfinite(T)] >= 0.0)
+    assert np.nanmin(np.array(c["floor_force_over_weight"], float)) < FLOOR_GUARD
     for (m, key), bound in GUARD.items():
         if m == method:
             assert miss[key] <= bound, f"{method} {key}: {miss[key]:.2f} > {bound}"
