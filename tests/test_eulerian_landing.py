@@ -111,7 +111,8 @@ def test_a_block_resting_or_sliding_on_the_floor_lands_nowhere():
         system, state = _block((u, 0.0), settled=True, mu_w=0.0)
         row_mass = state.mass[system.wall_cells].sum()
         r = _steps(system, state, 100)
-        fed.append(fluctuation_energy_J_m(state.mass, state.temperature))
-        assert fed[-1] == pytest.approx(r[:, 1].sum(), rel=1e-6)
+        fed.append(r[:, 1].sum())
+        assert fluctuation_energy_J_m(state.mass, state.temperature) < \
+            1e-4 * 0.5 * row_mass * speed ** 2
     assert fed[1] == pytest.approx(fed[0], rel=0.02)
     assert fed[1] < 1e-4 * 0.5 * row_mass * speed ** 2
