@@ -89,7 +89,10 @@ def run(depth, cycles, method="lagrangian"):
 def run_eulerian(depth, cycles, mat, kn, motion, prm):
     """`run` in the Eulerian formulation: the layer on cells of side DX / 2 filled at the
     critical density, the mesh's floor wall (stiffness kn Pa/m, friction 0.4), its landing
-    measured (eulerian.cell_wall_sums)."""
+    measured (eulerian.cell_wall_sums).  The floor force is the layer's momentum balance in the
+    floor's frame, M (dv_z/dt + g + a_w), a_w the floor's acceleration at mid-step: the wall
+    layer's penalty force is not the whole of it (its closed faces hold the material too)."""
+    omega = 2.0 * math.pi * FREQUENCY
     mesh = EulerianMesh.box(0.0, WIDTH, 0.0, 3 * depth + 0.03, DX, periodic=True)
     wall = MeshWall(kn, friction=0.4)
     model = TemperatureModel(prm, mesh.h, 1e-4, True, WallEnergy(restitution=E_WALL))
@@ -103,11 +106,16 @@ def run_eulerian(depth, cycles, mat, kn, motion, prm):
     rows = []
     for _ in range(cycles * int(round(1.0 / (FREQUENCY * system.dt)))):
         start = (state.mass.copy(), state.v.copy())
+        p0 = float(state.mass @ state.v[:, 1])
         eulerian.advance(system, state, 1)
+        t_mid = state.t - 0.5 * system.dt
+        a_w = -AMPLITUDE * omega ** 2 * math.sin(omega * t_mid + 0.5 * math.pi)
+        force = (float(state.mass @ state.v[:, 1]) - p0) / system.dt \
+            + state.mass.sum() * (9.81 + a_w)
         m = state.mass[low].sum()
         T = float((state.mass[low] * state.temperature[low]).sum() / m) if m > 0 else 0.0
         sums = eulerian.cell_wall_sums(system, state, start)
-        rows.append((state.t, state.wall["fn"][floor].sum(), sums[floor, 3].sum() / WIDTH,
+        rows.append((state.t, force, sums[floor, 3].sum() / WIDTH,
                      T, m / (mat.solid_density * WIDTH * DX)))
     return np.array(rows), 9.81 * state.mass.sum(), prm
 
