@@ -2,18 +2,20 @@
 and T, and both against the DEM's measured wall flux (docs/validation.md, section 22).
 
     python benchmarks/wall_feed.py [--cycles 35] [--skip 5] [--depth 0.05]
-        [--calibration CALIBRATION_TOML]
+        [--method lagrangian|eulerian] [--calibration CALIBRATION_TOML]
 
 A layer of the default continuum material, `--depth` (m) deep and 4 cm wide (x-periodic),
 rests on a frictional floor moved vertically as tub47's tub is, z = A (sin(omega t + pi/2) - 1),
 A = 1.5 mm at 47 Hz (U_w = A omega = 0.44 m/s, 13.3 g), its granular temperature on and coupled
-(temperature_field.py), the material point method.  Over the cycles after the first `--skip`,
+(temperature_field.py), the material point method (`--method lagrangian`, default) or the
+Eulerian formulation on cells of the same side (`--method eulerian`).  Over the cycles after the first `--skip`,
 it prints by eighth of the cycle (the tub's phase convention) and over the cycle, with the
 batch-means standard error over five batches of whole cycles:
 
 * the floor force over the layer's weight (zero: the layer is off the floor);
-* the landing source (W/m^2 of floor): the penalty dashpot's power c v_n^2 at the floor, the
-  inelastic normal jump's energy, which the run puts into T (wall_energy_flux.py);
+* the landing source (W/m^2 of floor): the inelastic normal jump's energy, which the run puts
+  into T (wall_energy_flux.py): the penalty dashpot's power c v_n^2 at the floor (Lagrangian),
+  the normal kinetic energy the step took from the floor cells approaching it (Eulerian);
 * the flux form, Johnson & Jackson's wall law with the wall's mean squared normal velocity
   U_w^2 / 2 as the slip and phi' = 1, at the floor row's phi and T (Kumaran 1998's
   leading-order scaling rho_s phi g0 sqrt(T) U_w^2, net of the collision loss, e_w 0.8);
@@ -29,6 +31,9 @@ import numpy as np
 
 from vibroflow.continuum.boundary import Plane
 from vibroflow.continuum.constitutive import ContinuumMaterial
+from vibroflow.continuum.eulerian import solver as eulerian
+from vibroflow.continuum.eulerian.mesh import EulerianMesh
+from vibroflow.continuum.eulerian.wall import MeshWall
 from vibroflow.continuum.grid import Grid
 from vibroflow.continuum.grid_update import TubFrame
 from vibroflow.continuum.kinetic_theory import KineticParameters
@@ -52,16 +57,18 @@ def lattice(depth, spacing):
     return np.column_stack([X.ravel(), Z.ravel()])
 
 
-def run(depth, cycles):
+def run(depth, cycles, method="lagrangian"):
     """Per step of the shaken layer: time (s), floor force (N/m), landing power per floor
     width (W/m^2), the floor row's T (m^2/s^2) and phi (-); the layer's weight (N/m)."""
     mat = ContinuumMaterial()
     sp = DX / 2
-    floor = Plane((0.0, 0.0), (0.0, 1.0), (mat.bulk_modulus + 4 * mat.shear_modulus / 3) / sp,
-                  friction=0.4)
+    kn = (mat.bulk_modulus + 4 * mat.shear_modulus / 3) / sp
     motion = TubMotion(frequency=FREQUENCY, amplitude_x=0.0, amplitude_z=AMPLITUDE,
                        phase_z=0.5 * math.pi, amplitude_theta=0.0)
     prm = KineticParameters(diameter_m=mat.diameter, density_kg_m3=mat.solid_density)
+    if method == "eulerian":
+        return run_eulerian(depth, cycles, mat, kn, motion, prm)
+    floor = Plane((0.0, 0.0), (0.0, 1.0), kn, friction=0.4)
     model = TemperatureModel(prm, DX, 1e-4, True, WallEnergy(restitution=E_WALL))
     system = mpm.MPMSystem(Grid.periodic_strip(WIDTH, 0.0, 3 * depth + 0.03, DX), mat,
                            stable_dt(mat, DX, sp, [floor]), frame=TubFrame(motion),
@@ -79,14 +86,49 @@ def run(depth, cycles):
     return np.array(rows), 9.81 * state.mass.sum(), prm
 
 
+def run_eulerian(depth, cycles, mat, kn, motion, prm):
+    """`run` in the Eulerian formulation: the layer on cells of side DX / 2 filled at the
+    critical density, the mesh's floor wall (stiffness kn Pa/m, friction 0.4), its landing
+    measured (eulerian.cell_wall_sums).  The floor force is the layer's momentum balance in the
+    floor's frame, M (dv_z/dt + g + a_w), a_w the floor's acceleration at mid-step: the wall
+    layer's penalty force is not the whole of it (its closed faces hold the material too)."""
+    omega = 2.0 * math.pi * FREQUENCY
+    mesh = EulerianMesh.box(0.0, WIDTH, 0.0, 3 * depth + 0.03, DX, periodic=True)
+    wall = MeshWall(kn, friction=0.4)
+    model = TemperatureModel(prm, mesh.h, 1e-4, True, WallEnergy(restitution=E_WALL))
+    system = eulerian.EulerianSystem(mesh, mat, stable_dt(mat, DX, mesh.h, [wall]),
+                                     frame=TubFrame(motion), wall=wall, temperature=model)
+    z = system.x[:, 1]
+    fill = mesh.inside & (z < depth)
+    state = eulerian.init_state(system, np.where(fill, mat.critical_density * mesh.h ** 2, 0.0))
+    floor = system.wall_cells[mesh.normal[system.wall_cells, 1] > 0.5]
+    low = z < DX
+    rows = []
+    for _ in range(cycles * int(round(1.0 / (FREQUENCY * system.dt)))):
+        start = (state.mass.copy(), state.v.copy())
+        p0 = float(state.mass @ state.v[:, 1])
+        eulerian.advance(system, state, 1)
+        t_mid = state.t - 0.5 * system.dt
+        a_w = -AMPLITUDE * omega ** 2 * math.sin(omega * t_mid + 0.5 * math.pi)
+        force = (float(state.mass @ state.v[:, 1]) - p0) / system.dt \
+            + state.mass.sum() * (9.81 + a_w)
+        m = state.mass[low].sum()
+        T = float((state.mass[low] * state.temperature[low]).sum() / m) if m > 0 else 0.0
+        sums = eulerian.cell_wall_sums(system, state, start)
+        rows.append((state.t, force, sums[floor, 3].sum() / WIDTH,
+                     T, m / (mat.solid_density * WIDTH * DX)))
+    return np.array(rows), 9.81 * state.mass.sum(), prm
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cycles", type=int, default=35)
     ap.add_argument("--skip", type=int, default=5)
     ap.add_argument("--depth", type=float, default=0.05)
+    ap.add_argument("--method", choices=("lagrangian", "eulerian"), default="lagrangian")
     ap.add_argument("--calibration")
     a = ap.parse_args(argv)
-    r, weight, prm = run(a.depth, a.cycles)
+    r, weight, prm = run(a.depth, a.cycles, a.method)
     u_w = AMPLITUDE * 2 * math.pi * FREQUENCY
     flux_form = np.array([slip_production_W_m2(1.0, f, T, u_w / math.sqrt(2), prm)
                           - collision_loss_W_m2(E_WALL, f, T, prm) for T, f in r[:, 3:5]])
@@ -100,7 +142,7 @@ def main(argv=None):
         per = np.array([values[keep & np.isin(cycle, b)].mean() for b in batch])
         return per.mean(), float(stderr_of_batches(per))
 
-    print(f"{len(used)} cycles, layer {a.depth} m, U_w = {u_w:.3f} m/s")
+    print(f"{a.method}: {len(used)} cycles, layer {a.depth} m, U_w = {u_w:.3f} m/s")
     for name, v in (("floor force / weight", r[:, 1] / weight),
                     ("landing source W/m^2", r[:, 2]), ("flux form W/m^2", flux_form)):
         by = [cycle_mean(v, eighth == k) for k in range(8)]

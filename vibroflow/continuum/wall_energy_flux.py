@@ -26,9 +26,11 @@ Jacques 1995, Phys. Rev. E 52, 5583) emerges from the resolved wall motion: at e
 material's normal velocity relative to the wall is stopped by the penalty contact (boundary.py),
 whose dashpot of damping c = 2 zeta sqrt(m k_n l) takes the power c v_n^2 from the mean motion
 while the material moves into the wall (v_n < 0), at most its normal kinetic energy m v_n^2 / 2
-a step; that inelastic jump's energy becomes fluctuation energy (the "landing" source; the
-material point method's: eulerian/solver.py's wall layer is held by closed faces, not by the
-dashpot, and takes none).
+a step; that inelastic jump's energy becomes fluctuation energy (the "landing" source).  The
+Eulerian wall layer (eulerian/solver.py) is held by its closed faces, not by the dashpot, so
+its landing is measured instead (`landing_terms`): the normal kinetic energy relative to the
+wall that a wall cell approaching it (v_n < 0 at the step's start) has lost by the step's end,
+at most the m v_n^2 / 2 it had.
 
 Per contact (a material point or a wall-layer cell touching a wall: normal force > 0) the
 kernel `contact_terms` gives its wall length l (m), l |u_slip|^2 (m^3/s^2), the friction power
@@ -128,6 +130,23 @@ def contact_terms(fn, ft, normal, v_rel, mass, length, kn, zeta, dt, out):
         out[p, 2] += abs(ft[p] * vt)
         if vn < 0.0:
             out[p, 3] += min(2.0 * zeta * math.sqrt(mass[p] * kn * l), 0.5 * mass[p] / dt) * vn * vn
+
+
+def landing_terms(v0, m0, v1, m1, normal, fn, dt, out) -> None:
+    """Adds the Eulerian wall cells' landing power (W/m) to out[:, 3] (`contact_terms`' column):
+    the normal kinetic energy relative to the wall lost over the step of dt (s) by a cell whose
+    material approached the wall, E_0 = m_0 v_n0^2 / 2 with v_n0 < 0 at the step's start, less
+    what is left of it at the end, E_1 = m_1 min(v_n1, 0)^2 / 2, clipped to [0, E_0], over dt:
+    the inelastic normal jump of the landing, which a cell leaving the wall (v_n1 > 0) or still
+    falling faster (E_1 > E_0) does not make; only where the cell touches the wall (fn > 0).
+    v0, v1 (N, 2) the cells' velocities relative to the wall (m/s) and m0, m1 (N,) their
+    masses (kg/m) at the step's start and end, normal (N, 2) the wall's inward unit normal,
+    fn (N,) its normal force (N/m)."""
+    vn0 = v0[:, 0] * normal[:, 0] + v0[:, 1] * normal[:, 1]
+    vn1 = np.minimum(v1[:, 0] * normal[:, 0] + v1[:, 1] * normal[:, 1], 0.0)
+    e0 = np.where((vn0 < 0.0) & (fn > 0.0), 0.5 * m0 * vn0 * vn0, 0.0)
+    lost = np.clip(e0 - 0.5 * m1 * vn1 * vn1, 0.0, e0)
+    out[:, 3] += lost / dt
 
 
 def normal_of_force(f, fn, ft) -> np.ndarray:

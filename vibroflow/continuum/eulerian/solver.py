@@ -56,7 +56,7 @@ from ..grid_update import LabFrame
 from ..mpm.solver import ContinuumBlowUp
 from ..state import ContinuumState
 from ..temperature_field import advance_with_temperature, cell_step
-from ..wall_energy_flux import contact_terms, partition_terms
+from ..wall_energy_flux import contact_terms, landing_terms, partition_terms
 from . import fused
 from .advection import remap_serial, remap_work
 from .lagrangian_step import fill_limit, material_fraction
@@ -287,9 +287,13 @@ def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
     periodic = system.grid_spec[3]
 
     def start():
-        return state.mass.reshape(shape).copy()
+        return state.mass.reshape(shape).copy(), state.v.copy()
 
-    def balance(power, m_start):
+    def balance(power, before):
+        m_start, v_start = before
+        # the start's masses for the landing: the remap below moves m_start in place
+        landing_start = (m_start.ravel().copy(), v_start) if model.walls is not None and \
+            model.walls.landing else None
         # T carried with the mass: the same transport of the step's start mass by the same
         # face velocities as the kernel's remap
         T = state.temperature.reshape((1,) + shape)
@@ -299,7 +303,8 @@ def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
         frac = np.minimum(1.0, np.divide(state.mass, state.density * h * h,
                                          out=np.zeros(state.n), where=full))
         phi = state.mass / (model.params.density_kg_m3 * h * h)
-        sums = None if model.walls is None else cell_wall_sums(system, state)
+        sums = None if model.walls is None else \
+            cell_wall_sums(system, state, landing_start)
         state.temperature[:] = cell_step(T[0], phi.reshape(shape), (power * frac).reshape(shape),
                                          system.dt, model,
                                          None if sums is None else sums.reshape(shape + (4,))
@@ -312,11 +317,16 @@ def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
                              wave_speed=system.material.p_wave_speed())
 
 
-def cell_wall_sums(system: EulerianSystem, state: EulerianState) -> np.ndarray:
+def cell_wall_sums(system: EulerianSystem, state: EulerianState, start=None) -> np.ndarray:
     """The cells' wall contact terms (N, 4) of the last step (wall_energy_flux.contact_terms):
     the wall layer's contacts (the wall at rest on the mesh, its inward normal the mesh's,
-    contact length fill h as wall.wall_forces takes it; Johnson & Jackson's terms, no landing)
-    and the partitions'."""
+    contact length fill h as wall.wall_forces takes it) and the partitions'.  The landing
+    column is not the dashpot's c v_n^2: the wall layer's material is held by its closed
+    faces, not by the dashpot, so its normal velocity is no approach (fed with c v_n^2,
+    tub47-quick's side-wall cells heat without bound).  With start = (mass (N,) kg/m, v (N, 2)
+    m/s) the cells' at the step's start, it is the landing measured
+    (wall_energy_flux.landing_terms: the normal kinetic energy the step took from the wall
+    cells that approached the wall); without, none."""
     out = np.zeros((state.n, 4))
     w = system.wall
     if w is not None:
@@ -328,10 +338,11 @@ def cell_wall_sums(system: EulerianSystem, state: EulerianState) -> np.ndarray:
         contact_terms(hist["fn"][c], hist["ft"][c], system.mesh.normal[c], state.v[c],
                       state.mass[c], fill * h, float(w.stiffness), float(w.damping_ratio),
                       system.dt, part)
-        # no landing source: the wall layer's material is held by its closed faces, not by
-        # the dashpot, so its normal velocity is no approach and c v_n^2 no landing's jump (on
-        # tub47-quick it heats the side walls' cells without bound and blows the run up)
         part[:, 3] = 0.0
+        if start is not None:
+            m0, v0 = start
+            landing_terms(v0[c], m0[c], state.v[c], state.mass[c], system.mesh.normal[c],
+                          hist["fn"][c], system.dt, part)
         out[c] += part
     pf = system.partitions
     if pf is not None:
