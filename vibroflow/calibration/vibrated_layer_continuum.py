@@ -11,7 +11,8 @@ at the start.  The temperature (ContinuumOptions.temperature, temperature_field.
 `initial_T` and runs with the kinetic constants of the calibration's [kinetic] table (e,
 phi_rcp, g0 form) where it has one, else the scenario's ball-ball restitution and kinetic
 theory's default phi_rcp (continuum.kinetic_theory.KineticParameters): `kinetic_source` says
-which.  Whatever balance of T the continuum carries (its production, conduction, dissipation,
+which.  The floor feeds T as the tub's wall does (continuum.wall_energy_flux.wall_energy_of:
+Johnson & Jackson's slip terms and the landing).  Whatever balance of T the continuum carries (its production, conduction, dissipation,
 walls) is what is measured.
 
 The measures are measure.layer_profiles', sampled at the DEM's phases: the points' (cells')
@@ -35,6 +36,7 @@ from vibroflow.continuum.material import material_for
 from vibroflow.continuum.options import default_dx
 from vibroflow.continuum.temperature_field import TemperatureModel
 from vibroflow.continuum.timestep import stable_dt
+from vibroflow.continuum.wall_energy_flux import wall_energy_of
 from vibroflow.errors import InputError
 from vibroflow.measure.layer_profiles import FORCE_BINS_PER_PHASE, LayerProfiles, floor_phase
 from vibroflow.tub.motion import TubMotion
@@ -73,7 +75,7 @@ def build(method: str, scenario, calibration, motion: TubMotion, bed_mass_kg_m2:
     opts = formulation(method).options(temperature=True, initial_temperature=float(initial_T))
     material = material_for(scenario, calibration, opts)
     prm, source = kinetic_constants(scenario, calibration)
-    model = TemperatureModel(prm, float(dx), float(initial_T))
+    model = TemperatureModel(prm, float(dx), float(initial_T), walls=wall_energy_of(scenario))
     frame = TubFrame(motion, (0.0, -G))
     period = 1.0 / motion.frequency
     h = dx / 2
