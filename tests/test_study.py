@@ -259,7 +259,7 @@ def test_time_left_names_the_stages_it_cannot_estimate():
 def test_run_vtk_writes_the_paraview_files_of_the_dem_and_every_method(run_cli, tmp_path,
                                                                         monkeypatch):
     """`vibroflow run --vtk --vtk-frame lab --vtk-every 0.02` on a tiny tub: the DEM's balls
-    (early frames, the window's snapshots) and each continuum's grid, with the tub's surface at
+    and each continuum's grid (early frames, the window's snapshots), with the tub's surface at
     each instant, in the lab frame; a rerun with the same flags, or without --vtk, keeps every
     stage; a rerun in the tub frame runs the stages again and writes the tub-frame files."""
     from tests.vtk_reader import read_pvd
@@ -280,10 +280,13 @@ def test_run_vtk_writes_the_paraview_files_of_the_dem_and_every_method(run_cli, 
     assert json.loads((dem / "vtk.json").read_text()) == {"frame": "lab", "every": 0.02,
                                                           "start": 0.0}
     for name in METHODS:
+        # the continua's too: the early frames at 0 and 0.02 s, then the last cycle's 8
         vdir = out / name / "vtk"
-        assert len(read_pvd(vdir / "grid.pvd")) == 8, name
-        assert all(f.endswith(".vts") for _, f in read_pvd(vdir / "grid.pvd"))
-        assert len(read_pvd(vdir / "tub.pvd")) == 8
+        grid = read_pvd(vdir / "grid.pvd")
+        assert [f for _, f in grid[:2]] == ["grid_early_00000.vts", "grid_early_00001.vts"]
+        assert len(grid) == 2 + 8, name
+        assert all(f.endswith(".vts") for _, f in grid)
+        assert len(read_pvd(vdir / "tub.pvd")) == 2 + 8
     for again in (flags, []):
         r = run_cli("run", "tub47-quick", "--out", out, *again, *sets, timeout=1200)
         assert r.returncode == 0, r.stderr

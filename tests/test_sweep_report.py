@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import base64
 import contextlib
+import html
 import io
 import json
 import re
@@ -207,3 +208,102 @@ def test_sweep_report_renders_in_headless_chromium(sweep):
 
     with chromium(write_sweep_report(sweep), width=900) as driver:
         check_rendered(driver, 3, {point_name({FACTOR_KEY: 1.5}): ERROR})
+
+
+def _cells(page: str) -> list[list[str]]:
+    """Every table row's cells as text (the value in data-value where there is one)."""
+    rows = []
+    for m in re.finditer(r'<tr class="[^"]*" data-point="[^"]+"[^>]*>(.*?)</tr>', page, re.S):
+        rows.append([html.unescape(c) for c in re.findall(r"<td[^>]*>(.*?)</td>", m.group(1),
+                                                           re.S)])
+    return rows
+
+
+@pytest.fixture
+def seeded(tmp_path):
+    """Seeds 1 - 3 at factors 0.5 and 1.0; seed 3 at 1.0 failed. The DEMs at 1.0 are tub47's
+    seeds 1 and 2 (their E, 0.106 +- ..., gives the limit there); at 0.5 there are none."""
+    dem = {1: 4.0e-4, 2: 5.0e-4, 3: 6.0e-4}
+    E = {1: 0.2, 2: 0.3, 3: 0.4}
+    points = {}
+    for f in (0.5, 1.0):
+        for k in (1, 2, 3):
+            points[(f, k)] = (ERROR if (f, k) == (1.0, 3) else {
+                "dem": _method(dem[k], 2e-5, "counterclockwise"),
+                "lagrangian": _method(5.0e-4, 3e-5, "clockwise" if k == 3 else
+                                      "counterclockwise", E[k], k != 3)})
+    out = make_sweep(tmp_path / "seeded", points, varied=(FACTOR_KEY, "run.seed"))
+    for k in (1, 2):
+        dem_dir = out / "points" / point_name({FACTOR_KEY: 1.0, "run.seed": k}) / "dem"
+        dem_dir.mkdir()
+        shutil.copy(SEEDS / f"seed{k}" / "bulk_velocity.csv", dem_dir)
+    return out
+
+
+def test_seeds_pool_into_means_with_standard_errors_by_hand(seeded):
+    """Strength 4, 5, 6 (1e-4 m^2/s, each +- 0.2): mean 5, seed-to-seed error 1/sqrt(3), the
+    batch errors combined sqrt(3 x 0.2^2)/3 = 0.2/sqrt(3); strength 5, 5, 5 (+- 0.3): no scatter,
+    so the error is the batch one, 0.3/sqrt(3). E 0.2, 0.3, 0.4: mean 0.3 +- 0.1/sqrt(3)."""
+    from vibroflow.report.sweep_data import SweepData
+
+    data = SweepData.read(seeded)
+    pooled = {(r[FACTOR_KEY], r["method"]): r for r in data.pooled if r["status"] == "done"}
+    assert set(pooled) == {(0.5, "dem"), (0.5, "lagrangian"), (1.0, "dem"), (1.0, "lagrangian")}
+    dem = pooled[(0.5, "dem")]
+    assert dem["n_seeds"] == 3 and dem["seeds"] == [1, 2, 3]
+    assert dem["circulation_strength"] == pytest.approx(5.0e-4, rel=1e-12)
+    assert dem["circulation_strength_stderr_seeds"] == pytest.approx(1e-4 / 3 ** 0.5, rel=1e-12)
+    assert dem["circulation_strength_stderr_batch"] == pytest.approx(2e-5 / 3 ** 0.5, rel=1e-12)
+    assert dem["circulation_strength_stderr"] == pytest.approx(1e-4 / 3 ** 0.5, rel=1e-12)
+    assert dem["circulation_sense"] == "counterclockwise" and dem["sense_mean"] == 1.0
+    lag = pooled[(0.5, "lagrangian")]
+    assert lag["circulation_strength_stderr_seeds"] == 0.0
+    assert lag["circulation_strength_stderr"] == pytest.approx(3e-5 / 3 ** 0.5, rel=1e-12)
+    assert lag["E_against_dem"] == pytest.approx(0.3, rel=1e-12)
+    assert lag["E_against_dem_stderr"] == pytest.approx(0.1 / 3 ** 0.5, rel=1e-12)
+    assert lag["circulation_sense"] == "mixed (1 cw, 2 ccw)"
+    assert lag["sense_mean"] == pytest.approx(1.0 / 3.0)
+    assert lag["circulation_agrees"] is False
+    # factor 1.0: seed 3 failed, so two seeds: E 0.2, 0.3 -> 0.25 +- 0.05
+    lag1 = pooled[(1.0, "lagrangian")]
+    assert lag1["n_seeds"] == 2 and lag1["circulation_agrees"] is True
+    assert lag1["E_against_dem"] == pytest.approx(0.25, rel=1e-12)
+    assert lag1["E_against_dem_stderr"] == pytest.approx(0.05, rel=1e-12)
+    assert pooled[(1.0, "dem")]["circulation_strength"] == pytest.approx(4.5e-4, rel=1e-12)
+    failed = [r for r in data.pooled if r["status"] != "done"]
+    assert [(r[FACTOR_KEY], r["run.seed"]) for r in failed] == [(1.0, 3)]
+
+
+def test_seeded_sweep_report_shows_pooled_rows_and_their_limit(seeded):
+    """The page: one row per factor and method with n seeds, the pooled E judged against the
+    limit from the two DEM seeds at 1.0 (1.5 x their E; tub47 seeds 1 and 2); at 0.5 no DEM
+    fields, so no limit there."""
+    from vibroflow.report.sweep_data import SweepData
+    from vibroflow.report.sweep_report import write_sweep_report
+
+    lim = SweepData.read(seeded).limits[(1.0,)]
+    assert "2 ordered pairs of this sweep's 2 seeds" in lim.source
+    page = write_sweep_report(seeded).read_text(encoding="utf-8")
+    rows = _cells(page)
+    done = {(r[0], r[2]): r for r in rows if len(r) > 5}
+    assert set(done) == {("0.5", "dem"), ("0.5", "lagrangian"), ("1", "dem"),
+                         ("1", "lagrangian")}
+    assert done[("0.5", "dem")][1] == "3" and done[("1", "lagrangian")][1] == "2"
+    assert done[("0.5", "dem")][5].startswith("5 ± 0.58 (seeds ± 0.58, batch ± 0.12)")
+    assert done[("0.5", "lagrangian")][6] == "0.300 ± 0.058"
+    assert done[("1", "lagrangian")][6] == "0.250 ± 0.05"
+    ratio = 0.25 / lim.limit
+    assert done[("1", "lagrangian")][7] == f"{ratio:.2f}"
+    assert "circulation agrees" in done[("1", "lagrangian")][8]
+    assert "no limit to judge E by" in done[("0.5", "lagrangian")][8]
+    (failed,) = [r for r in rows if len(r) <= 5]
+    assert failed[1:4] == ["1", "-", "failed"] and failed[4].startswith("run.seed = 3: BlowUp")
+    assert "<12>" not in page
+
+
+def test_seeded_sweep_report_renders_in_headless_chromium(seeded):
+    from vibroflow.report.sweep_report import write_sweep_report
+
+    point = point_name({FACTOR_KEY: 1.0, "run.seed": 3})
+    with chromium(write_sweep_report(seeded), width=900) as driver:
+        check_rendered(driver, 3, {point: ERROR})

@@ -14,8 +14,8 @@ from vibroflow.errors import InputError
 
 from .apps import app
 from .failures import blown_up, input_errors
-from .options import (OptionalScenarioArg, OutOption, ResumeOption, SetOption, VtkFrameOption,
-                      load)
+from .options import (OptionalScenarioArg, OutOption, ResumeOption, SetOption, VtkEveryOption,
+                      VtkFrameOption, VtkFromOption, load)
 
 
 @app.command("continuum")
@@ -94,8 +94,11 @@ def continuum(
     set_: SetOption = None,
     vtk: Annotated[bool, typer.Option("--vtk", help="Also write ParaView files of the material "
                                                     "points and the grid fields over the last "
-                                                    "cycle.")] = False,
+                                                    "cycle (and before it with "
+                                                    "--vtk-every).")] = False,
     vtk_frame: VtkFrameOption = None,
+    vtk_every: VtkEveryOption = None,
+    vtk_from: VtkFromOption = None,
     resume: ResumeOption = False,
     stop_after_steps: Annotated[Optional[int], typer.Option(
         "--stop-after-steps", help="Write a checkpoint and stop after this many vibration "
@@ -107,7 +110,7 @@ def continuum(
         raise InputError(f"--method = {method!r}: must be {', '.join(rest)} or {last}")
     from vibroflow.io.vtk_frame import cli_vtk_options
 
-    paraview = cli_vtk_options(vtk, vtk_frame, None, None)
+    paraview = cli_vtk_options(vtk, vtk_frame, vtk_every, vtk_from)
     if stop_after_steps is not None and stop_after_steps < 0:
         raise InputError(f"--stop-after-steps = {stop_after_steps}: must be >= 0")
     if scenario is not None and like is not None:

@@ -52,8 +52,9 @@ VtkFrameOption = Annotated[Optional[str], typer.Option(
          "roll shows) or lab (the tub moves by its vibration).")]
 VtkEveryOption = Annotated[Optional[float], typer.Option(
     "--vtk-every", metavar="SECONDS",
-    help="With --vtk: also a frame of the balls every SECONDS of the vibration before the "
-         "averaging window (whose snapshots are always written).")]
+    help="With --vtk: also a frame of the balls (the continuum's points and grid fields) "
+         "every SECONDS of the vibration before the averaging window (whose snapshots are "
+         "always written).")]
 VtkFromOption = Annotated[Optional[float], typer.Option(
     "--vtk-from", metavar="SECONDS",
     help="With --vtk-every: the time of the first of those frames (s since the vibration "

@@ -64,6 +64,11 @@ class Sampler(ABC):
     def radius(self):
         """The radius (m) of each sampled ball, (n_points,): its solid volume over the slice."""
 
+    @abstractmethod
+    def early_frame(self, k: int, samples) -> None:
+        """The ParaView files of the k-th frame before the averaging window, of the state now
+        (VtkOptions.every; only called when the sampler writes ParaView files)."""
+
     def arrays(self) -> dict:
         """The sampler's own arrays to keep in a checkpoint (name -> array)."""
         return {}

@@ -10,7 +10,11 @@ tub's by default, the lab's on request), the DEM's frames' counterpart (dem.para
                        density_kg_per_m3, pressure_Pa, shear_rate_per_s
     tub.vtu            the tub's surface (tub frame), or in the lab frame
     tub_NNNNN.vtu      the surface moved by the tub's motion at each sample, and tub.pvd
-    points.pvd, grid.pvd   the collections; vtk.json the options (io.vtk_frame.write_vtk_record)
+    points_early_NNNNN.vtu, grid_early_NNNNN.vt[rs], tub_early_NNNNN.vtu
+                       with VtkOptions.every: the same every `every` seconds from `start` up
+                       to the averaging window, written as the run passes them
+    points.pvd, grid.pvd   the collections, in time order; vtk.json the options
+                       (io.vtk_frame.write_vtk_record)
 
 Each file's field data holds its time (s) and the tub's pose then.  The solver's velocity is
 relative to the tub, in tub axes (grid_update.py); the lab velocity adds the tub's rigid
@@ -34,7 +38,8 @@ from .grid import Grid
 
 class ContinuumVtk:
     """Writes a continuum run's ParaView files (module docstring) into out/vtk; each writer
-    appends (t s, file name) to samples.vtk[kind]."""
+    appends (t s, file name) to samples.vtk[kind]; `tag` names the frame (files.sample_tag,
+    files.early_tag)."""
 
     def __init__(self, scenario, out: Path, options: VtkOptions, pivot, kinds: tuple[str, ...]):
         self.options, self.pivot = options, (float(pivot[0]), float(pivot[1]))
@@ -47,15 +52,16 @@ class ContinuumVtk:
         if not self.lab:
             write_tub_surface(self.dir / "tub.vtu", self.geo)
 
-    def tub(self, j: int, t: float, pose6, samples) -> None:
-        """The tub's surface at sample j (lab frame only: in the tub frame it stands still)."""
+    def tub(self, tag: str, t: float, pose6, samples) -> None:
+        """The tub's surface at frame `tag` (lab frame only: in the tub frame it stands
+        still)."""
         if self.lab:
-            name = f"tub_{j:05d}.vtu"
+            name = f"tub_{tag}.vtu"
             write_tub_surface(self.dir / name, self.geo, pose6=pose6, pivot=self.pivot,
                               time_s=t)
             samples.vtk["tub"].append((t, name))
 
-    def points(self, j: int, t: float, pose6, x, v, radius, extra: dict, samples) -> None:
+    def points(self, tag: str, t: float, pose6, x, v, radius, extra: dict, samples) -> None:
         """Material points at tub-frame x (N, 2) m with velocities v (N, 2) m/s relative to the
         tub, half-sides radius (N,) m, and more point arrays `extra` (named with units)."""
         n = x.shape[0]
@@ -64,12 +70,12 @@ class ContinuumVtk:
         pos, fields = relative_to_frame(self.options.frame, pos_tub, vel_rel, pose6, self.pivot)
         fields["radius_m"] = np.asarray(radius, dtype=float)
         fields.update(extra)
-        name = f"points_{j:05d}.vtu"
+        name = f"points_{tag}.vtu"
         write_points_vtu(self.dir / name, pos, fields, frame_field_data(t, pose6))
         samples.vtk["points"].append((t, name))
 
-    def grid(self, j: int, t: float, pose6, grid: Grid, fields: dict, samples) -> None:
-        """The grid fields (fields.grid_fields) at sample j."""
+    def grid(self, tag: str, t: float, pose6, grid: Grid, fields: dict, samples) -> None:
+        """The grid fields (fields.grid_fields) at frame `tag`."""
         xs, zs = grid.node_x(), grid.node_z()
         X, Z = np.meshgrid(xs, zs, indexing="ij")  # (nx, nz)
         nodes = np.stack([X, np.full(X.shape, self.y), Z], axis=-1)
@@ -88,10 +94,10 @@ class ContinuumVtk:
         data["shear_rate_per_s"] = c(fields["shear_rate"])
         fd = {k: np.atleast_1d(np.float64(val)) for k, val in frame_field_data(t, pose6).items()}
         if self.lab:
-            name, suffix = f"grid_{j:05d}.vts", ".vts"
+            name, suffix = f"grid_{tag}.vts", ".vts"
             coords = (c(pos[..., 0]), c(pos[..., 1]), c(pos[..., 2]))
         else:
-            name, suffix = f"grid_{j:05d}.vtr", ".vtr"
+            name, suffix = f"grid_{tag}.vtr", ".vtr"
             coords = (np.ascontiguousarray(xs, dtype=np.float64), np.array([self.y]),
                       np.ascontiguousarray(zs, dtype=np.float64))
         atomic_vtk(self.dir / name, lambda base: gridToVTK(base, *coords, pointData=data,

@@ -1,6 +1,7 @@
 """What a continuum tub run samples, as the DEM samples its balls: the sample instants (the
 DEM's phases), the sampled points or cells as the DEM's snapshots in the lab frame, their wall
-contacts and shear rates (`Samples`, carried through a checkpoint unchanged), and the samples
+contacts and shear rates, the ParaView frames written (`Samples`, carried through a checkpoint
+unchanged), and the samples
 as the dem.h5 layout that vibroflow.measure.summary.tub_summary reads (`samples_source`)."""
 from __future__ import annotations
 
@@ -94,6 +95,7 @@ class Samples:
         self.rate_wall = np.full(n_samples, np.nan)
         self.rate_probe = np.full((n_samples, n_probes), np.nan)
         self.vtk: dict[str, list] = {"points": [], "grid": [], "tub": []}  # (t s, file name)
+        self.frames = 0  # the ParaView frames before the window written (VtkOptions.every)
 
     def contact_arrays(self) -> dict[str, np.ndarray]:
         return {k: (np.concatenate(v) if v else np.zeros((0, *shape), dtype))
@@ -113,6 +115,7 @@ class Samples:
             if self.cell_grid is not None:
                 out["temperature_cell_sum"] = self.temperature_cell_sum
                 out["temperature_cell_n"] = self.temperature_cell_n
+        out["vtk_frames"] = np.array(self.frames, dtype=np.int64)
         for kind, entries in self.vtk.items():
             out[f"vtk_{kind}_t"] = np.array([t for t, _ in entries], dtype=np.float64)
             out[f"vtk_{kind}_name"] = np.array([name for _, name in entries], dtype=np.str_)
@@ -134,6 +137,7 @@ class Samples:
         s.rate_all[:], s.rate_wall[:], s.rate_probe[:] = (a["rate_all"], a["rate_wall"],
                                                           a["rate_probe"])
         s.contacts = {k: [a["contact_" + k]] for k in cls.CONTACTS}
+        s.frames = int(a["vtk_frames"]) if "vtk_frames" in a else 0
         for kind in [k for k in s.vtk if f"vtk_{k}_t" in a]:
             s.vtk[kind] = [(float(t), str(name)) for t, name in
                            zip(a[f"vtk_{kind}_t"], a[f"vtk_{kind}_name"])]

@@ -25,13 +25,17 @@ REPORT_EVERY = 200
 
 def vibration_timeline(state, n_steps: int, sample_step: np.ndarray, samples: Samples,
                        record, advance_steps, checkpoint, prog: RunProgress, per_step: int,
-                       checkpoint_every: float, stop_after_steps: int | None) -> bool:
+                       checkpoint_every: float, stop_after_steps: int | None,
+                       frame_step: np.ndarray | None = None, frame=None) -> bool:
     """The vibration's timeline, the same for both formulations: from state.step to n_steps,
     record(j) at each sample step sample_step[j] (samples.j counts them, so a resumed run goes
     on where it stopped), checkpoint() every checkpoint_every wall seconds, the steps between
     two events (next_event) in one advance_steps(m) call, progress reported as simulated time
     and per_step particle-steps a step.  False when stopped by stop_after_steps (after its
-    checkpoint), True at the end.
+    checkpoint), True at the end.  frame(i) at each step frame_step[i] (increasing; the
+    ParaView frames before the window, io.vtk_frame.extra_frame_steps), counted by
+    samples.frames as the samples are, so that a resumed run writes each frame once; the
+    frames add events, and the steps between events are the same steps, so no number changes.
 
     A Ctrl-C (SIGINT) stops the timeline at its next look, between two steps and two samples,
     where state and samples agree: checkpoint() and VibrationInterrupted(t, checkpointed=True),
@@ -40,6 +44,8 @@ def vibration_timeline(state, n_steps: int, sample_step: np.ndarray, samples: Sa
     checkpointed=False), no checkpoint of a state that may be half-way through a sample (the
     last periodic one, if any, stays)."""
     S = sample_step.size
+    frame_step = np.zeros(0, np.int64) if frame_step is None else frame_step
+    F = frame_step.size
     k0 = k = state.step
     last_ckpt = time.perf_counter()
     fault = FaultSigint(k0)
@@ -50,6 +56,9 @@ def vibration_timeline(state, n_steps: int, sample_step: np.ndarray, samples: Sa
                 while samples.j < S and sample_step[samples.j] == k:
                     record(samples.j)
                     samples.j += 1
+                while samples.frames < F and frame_step[samples.frames] <= k:
+                    frame(samples.frames)
+                    samples.frames += 1
                 if stop["raised"]:
                     break
                 if k == n_steps:
@@ -63,7 +72,8 @@ def vibration_timeline(state, n_steps: int, sample_step: np.ndarray, samples: Sa
                     last_ckpt = time.perf_counter()
                 # the steps up to the next sample, stop or progress report, in one compiled
                 # call
-                nxt = next_event(k, n_steps, sample_step, samples.j, k0, stop_after_steps)
+                nxt = next_event(k, n_steps, sample_step, samples.j, k0, stop_after_steps,
+                                 frame_step[samples.frames:samples.frames + 1])
                 advance_steps(nxt - k)
                 k = nxt
                 prog.update(state.t, (k - k0) * per_step)
@@ -145,11 +155,14 @@ class FaultSigint:
 
 
 def next_event(k: int, n_steps: int, sample_step, j: int, k0: int,
-               stop_after_steps: int | None) -> int:
+               stop_after_steps: int | None, frame_next=()) -> int:
     """The step after k at which a vibration loop must look again: the next sample (sample
-    steps sample_step[j:]), the end n_steps, the stop after stop_after_steps steps from k0, or
-    the next multiple of REPORT_EVERY."""
+    steps sample_step[j:]), the next ParaView frame (frame_next: its step, or empty), the end
+    n_steps, the stop after stop_after_steps steps from k0, or the next multiple of
+    REPORT_EVERY."""
     nxt = min(n_steps, (k // REPORT_EVERY + 1) * REPORT_EVERY)
+    if len(frame_next):
+        nxt = min(nxt, int(frame_next[0]))
     if j < len(sample_step):
         nxt = min(nxt, int(sample_step[j]))
     if stop_after_steps is not None:

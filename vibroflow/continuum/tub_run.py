@@ -48,7 +48,7 @@ from vibroflow.errors import InputError
 from vibroflow.io.atomic import write_json_atomic
 from vibroflow.io.calibration_file import Calibration
 from vibroflow.io.folder_lock import folder_lock
-from vibroflow.io.vtk_frame import vtk_options, write_vtk_record
+from vibroflow.io.vtk_frame import extra_frame_steps, vtk_options, write_vtk_record
 from vibroflow.measure.stats import batches_of_whole_cycles
 from vibroflow.measure.summary import json_safe, tub_summary
 from vibroflow.progress import RunProgress
@@ -143,7 +143,9 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
     in out_dir/vtk at the samples of the last vibration cycle, in the frame it names
     (continuum.paraview): the grid fields of fields.py (velocity relative to the tub and lab
     velocity, solid fraction, density, pressure, shear rate on the background grid; grid.pvd),
-    the material points of the material point method (points.pvd) and the tub's surface.
+    the material points of the material point method (points.pvd) and the tub's surface; with
+    vtk.every, also every `every` seconds from vtk.start up to the averaging window (the
+    "early_" files), all listed in time order.  They change no number of the run.
 
     Checkpoints: every run.checkpoint_every wall seconds of the vibration the whole state and
     what has been sampled go to out_dir/checkpoint.npz (checkpoint.py, atomic); resume=True
@@ -171,7 +173,7 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
     options = options or form.options()
     system, material = tub_system(form, scenario, calibration, options)
     geo = geometry_of(scenario)
-    times = sample_times(scenario)[0]
+    times, window_start, _ = sample_times(scenario)
     S = times.size
     n_probes = len(scenario.analysis.probes)
     cell_grid = cell_grid_of(geo, scenario.analysis.cell_size)
@@ -221,13 +223,15 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
 
             run = scenario.run
             sample_step = np.rint(times / system.dt).astype(np.int64)
+            frame_step = extra_frame_steps(vtk, system.dt, window_start)
             n_steps = int(round(run.duration / system.dt))
             prog.stage(f"continuum ({form.name})", run.duration)
             try:
                 done = vibration_timeline(
                     state, n_steps, sample_step, samples, lambda j: sampler.record(j, samples),
                     lambda m: form.advance(system, state, m), checkpoint, prog,
-                    sampler.n_points, run.checkpoint_every, stop_after_steps)
+                    sampler.n_points, run.checkpoint_every, stop_after_steps, frame_step,
+                    lambda i: sampler.early_frame(i, samples))
             except ContinuumBlowUp:
                 ckpt.unlink(missing_ok=True)  # a blown-up run has nothing to resume
                 raise
@@ -255,7 +259,7 @@ def _results(form: Formulation, scenario, out: Path, calibration, options, vtk, 
         from vibroflow.io.vtk import write_pvd  # noqa: PLC0415  (only with vtk: pyevtk)
 
         for kind in sampler.vtk_kinds:
-            write_pvd(out / VTK_DIR / f"{kind}.pvd", samples.vtk[kind])
+            write_pvd(out / VTK_DIR / f"{kind}.pvd", sorted(samples.vtk[kind]))
         write_vtk_record(out / VTK_DIR, vtk)
     radius = sampler.radius()
     source = samples_source(scenario, samples, times, radius)

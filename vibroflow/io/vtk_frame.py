@@ -46,9 +46,10 @@ FIELD_UNITS = {
 class VtkOptions:
     """What ParaView output a run writes.
 
-    frame: "tub" or "lab" (module docstring).  every (s, DEM only): also a frame of the balls
-    every `every` seconds of the vibration from `start` (s) up to the averaging window, whose
-    snapshots are always written; None: the window's snapshots alone.
+    frame: "tub" or "lab" (module docstring).  every (s): also a frame of the balls (the
+    continuum's points and grid fields) every `every` seconds of the vibration from `start` (s)
+    up to the averaging window, whose snapshots are always written; None: the window's
+    snapshots alone.
     """
 
     frame: str = "tub"

@@ -23,13 +23,12 @@ from typing import Any
 from vibroflow.analysis.compare import FIELD_FACTOR, seed_scatter
 from vibroflow.errors import InputError
 from vibroflow.measure.bulk import read_csv
+from vibroflow.report.sweep_pool import SEED_KEY, pool_seeds
 from vibroflow.study.methods import METHODS
 from vibroflow.study.pipeline import split_settings
 from vibroflow.study.sweep_folder import dir_lock, point_dir, read_record
 from vibroflow.study.sweep_points import FACTOR_KEY
 from vibroflow.study.sweep_table import sweep_rows
-
-SEED_KEY = "run.seed"
 
 
 @dataclass(frozen=True)
@@ -60,9 +59,11 @@ ENSEMBLE = {
 class SweepData:
     """A sweep folder's record, rows and limits.
 
-    rows: vibroflow.study.sweep_table's rows, sorted by the varied values; limits: the key of a
-    row's group (its varied values without run.seed, `group_key`) -> ELimit, or one ELimit for
-    every group under None; no_limit: why there is none (when limits is empty)."""
+    rows: vibroflow.study.sweep_table's rows, sorted by the varied values; pooled: the rows
+    pooled over run.seed (vibroflow.report.sweep_pool; the rows themselves, each with n_seeds
+    1, when the sweep keeps one seed); limits: the key of a row's group (its varied values
+    without run.seed, `group_key`) -> ELimit, or one ELimit for every group under None;
+    no_limit: why there is none (when limits is empty)."""
 
     out: Path
     record: dict[str, Any]
@@ -70,6 +71,7 @@ class SweepData:
     rows: list[dict[str, Any]]
     limits: dict[tuple | None, ELimit]
     no_limit: str | None
+    pooled: list[dict[str, Any]]
 
     @classmethod
     def read(cls, out) -> SweepData:
@@ -88,12 +90,22 @@ class SweepData:
             rows = sweep_rows(out, record["points"], varied)
         limits, why = e_limits(out, record, rows)
         return cls(out=out, record=record, varied=varied, rows=rows, limits=limits,
-                   no_limit=why)
+                   no_limit=why, pooled=pool_seeds(rows, varied))
 
     def limit_of(self, row: dict[str, Any]) -> ELimit | None:
         if None in self.limits:
             return self.limits[None]
         return self.limits.get(group_key(row, self.varied))
+
+    @property
+    def seeds_pooled(self) -> bool:
+        """Whether the sweep varies run.seed (its rows are pooled over the seeds)."""
+        return SEED_KEY in self.varied
+
+    @property
+    def shown(self) -> list[str]:
+        """The varied keys a pooled row carries: every one but run.seed."""
+        return [k for k in self.varied if k != SEED_KEY]
 
     @property
     def failed(self) -> list[dict[str, Any]]:

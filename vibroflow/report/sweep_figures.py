@@ -3,7 +3,9 @@ factor: the circulation strength (+- its batch-means standard error), its sense,
 continuum's field difference E against the DEM with the fields-agree limit drawn.
 
 One line per method (colour) and, when other keys vary too, per combination of their values
-(line style).  A point that did not finish is drawn as a red cross on the axis at its factor
+(line style).  A sweep that varies run.seed draws its rows pooled over the seeds
+(vibroflow.report.sweep_pool): the mean over seeds with its standard error, for the strength
+and for E alike.  A point that did not finish is drawn as a red cross on the axis at its factor
 (labelled with its status), not left out.
 """
 from __future__ import annotations
@@ -13,21 +15,20 @@ from typing import Any
 
 from vibroflow.report.figures import png_bytes
 from vibroflow.report.sweep_data import SweepData, group_key
+from vibroflow.report.sweep_pool import SENSES
 from vibroflow.io.pictures import pyplot
 from vibroflow.study.sweep_points import FACTOR_KEY
 
 XLABEL = "amplitude factor (-)"
 _STYLES = ("-", "--", ":", "-.")
 _MARKERS = ("o", "s", "^", "D", "v", "P")
-#: y of each circulation sense in the sense figure
-SENSES = {"counterclockwise": 1.0, "none": 0.0, "clockwise": -1.0}
 
 
 def _series(data: SweepData, methods: set[str] | None = None) -> dict[tuple, list[dict]]:
-    """(method, other varied values) -> its finished rows in order of the factor."""
-    others = [k for k in data.varied if k != FACTOR_KEY]
+    """(method, other varied values) -> its finished (pooled) rows in order of the factor."""
+    others = [k for k in data.shown if k != FACTOR_KEY]
     out: dict[tuple, list[dict]] = defaultdict(list)
-    for r in data.rows:
+    for r in data.pooled:
         if r["status"] == "done" and r["method"] and (methods is None or r["method"] in methods):
             out[(r["method"], tuple(r.get(k) for k in others))].append(r)
     for rows in out.values():
@@ -39,8 +40,8 @@ def _series(data: SweepData, methods: set[str] | None = None) -> dict[tuple, lis
 def _style(data: SweepData, key: tuple) -> dict[str, Any]:
     methods = sorted({r["method"] for r in data.rows if r["method"]},
                      key=lambda m: (m != "dem", m))
-    others = [k for k in data.varied if k != FACTOR_KEY]
-    combos = sorted({tuple(r.get(k) for k in others) for r in data.rows
+    others = [k for k in data.shown if k != FACTOR_KEY]
+    combos = sorted({tuple(r.get(k) for k in others) for r in data.pooled
                      if r["status"] == "done"}, key=str)
     mi, ci = methods.index(key[0]), combos.index(key[1])
     label = key[0] + "".join(f", {k}={v}" for k, v in zip(others, key[1]))
@@ -79,9 +80,11 @@ def _finish(fig, ax) -> bytes:
 
 
 def strength_figure(data: SweepData) -> bytes:
-    """Circulation strength (1e-4 m^2/s) +- its standard error, every method."""
+    """Circulation strength (1e-4 m^2/s) +- its standard error, every method (over seeds: the
+    larger of the seed-to-seed and the combined batch-means error)."""
     plt = pyplot()
-    fig, ax = _axes(plt, "circulation strength, mean ± standard error",
+    fig, ax = _axes(plt, "circulation strength, mean" + (" over seeds" if data.seeds_pooled
+                                                          else "") + " ± standard error",
                     "circulation strength (1e-4 m²/s)")
     for key, rows in _series(data).items():
         y = [_scaled(r.get("circulation_strength"), 1e4) for r in rows]
@@ -105,7 +108,7 @@ def sense_figure(data: SweepData) -> bytes:
     for i, (key, rows) in enumerate(series.items()):
         dx = (i - (n - 1) / 2) * 0.5 * step / n
         ax.plot([r[FACTOR_KEY] + dx for r in rows],
-                [SENSES.get(r.get("circulation_sense"), 0.0) for r in rows], ms=7,
+                [_sense_y(r) for r in rows], ms=7,
                 **{**_style(data, key), "ls": "none"})
     ax.set_yticks(list(SENSES.values()), [f"{k} ({v:+.0f})" for k, v in SENSES.items()])
     ax.set_ylim(-1.5, 1.5)
@@ -114,15 +117,18 @@ def sense_figure(data: SweepData) -> bytes:
 
 
 def e_figure(data: SweepData) -> bytes:
-    """Each continuum's E against the DEM; the fields-agree limit as a line (one value) or a
-    step per group (measured on seeds: its standard error as a band)."""
+    """Each continuum's E against the DEM (over seeds: the mean with its seed-to-seed standard
+    error); the fields-agree limit as a line (one value) or a step per group (measured on
+    seeds: its standard error as a band)."""
     plt = pyplot()
-    fig, ax = _axes(plt, "field difference E against the DEM (tub47.md)", "E (-)")
+    fig, ax = _axes(plt, "field difference E against the DEM (tub47.md)" +
+                    (", mean over seeds ± standard error" if data.seeds_pooled else ""), "E (-)")
     continua = {r["method"] for r in data.rows if r["method"] and r["method"] != "dem"}
     for key, rows in _series(data, continua).items():
-        ax.plot([r[FACTOR_KEY] for r in rows],
-                [_scaled(r.get("E_against_dem"), 1.0) for r in rows], ms=5,
-                **_style(data, key))
+        ax.errorbar([r[FACTOR_KEY] for r in rows],
+                    [_scaled(r.get("E_against_dem"), 1.0) for r in rows],
+                    yerr=[_scaled(r.get("E_against_dem_stderr"), 1.0, 0.0) for r in rows],
+                    ms=5, capsize=3, **_style(data, key))
     if None in data.limits:
         lim = data.limits[None]
         ax.axhline(lim.limit, color="k", ls="--", lw=1.2,
@@ -140,6 +146,13 @@ def e_figure(data: SweepData) -> bytes:
     ax.set_ylim(bottom=0.0)
     _unfinished(ax, data)
     return _finish(fig, ax)
+
+
+def _sense_y(row: dict) -> float:
+    """A row's sense as +1, 0, -1; pooled over seeds, the mean over them."""
+    if row.get("sense_mean") is not None:
+        return float(row["sense_mean"])
+    return SENSES.get(row.get("circulation_sense"), 0.0)
 
 
 def _scaled(v, scale: float, missing: float = float("nan")) -> float:

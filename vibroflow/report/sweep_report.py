@@ -5,6 +5,10 @@ with its standard error, its sense and the field difference E against the DEM be
 limit (vibroflow.report.sweep_data), with one table row per point and method: a point that did
 not finish is a row with its status and reason, and a red cross in every figure.
 
+A sweep that varies run.seed shows its rows pooled over the seeds (vibroflow.report.sweep_pool):
+one row per amplitude factor and method with its number of seeds, the strength and E as means
+over the seeds with their standard errors; a seed's point that did not finish keeps its own row.
+
 The table fits the page: a fixed layout over the page's width, short headers with their units
 on a line of their own, and long words (keys, errors) wrapped anywhere.  Every number cell
 carries its full value in `data-value` (the text shows it rounded), like the study report's.
@@ -76,6 +80,8 @@ COLUMNS = (
 )
 #: the share of the width of a varied value's column
 VARIED_SHARE = 7
+#: the column a sweep over run.seed adds after the varied values: the seeds pooled in a row
+SEEDS_COLUMN = ("seeds", "(n)", 5)
 
 
 @dataclass(frozen=True)
@@ -120,18 +126,50 @@ def verdict(row: dict[str, Any], lim: ELimit | None) -> tuple[str, str]:
     return words + (f"; {circ}" if circ else ""), "ok" if ok else "bad"
 
 
+def _strength(r: dict[str, Any]) -> Cell:
+    """The strength cell (1e-4 m^2/s): over seeds, the mean +- the error drawn, then the
+    seed-to-seed and the combined batch-means errors apart."""
+    cell = _num(r.get("circulation_strength"), ".3g", 1e4, r.get("circulation_strength_stderr"))
+    if r.get("n_seeds", 1) < 2 or r.get("circulation_strength") is None:
+        return cell
+    parts = [f"{name} ± {format(e * 1e4, '.2g')}" for name, e in
+             (("seeds", r.get("circulation_strength_stderr_seeds")),
+              ("batch", r.get("circulation_strength_stderr_batch"))) if e is not None]
+    return Cell(f"{cell.text} ({', '.join(parts)})", value=cell.value)
+
+
+def _E(r: dict[str, Any]) -> Cell:
+    if r["method"] == "dem":
+        return Cell("-")
+    return _num(r.get("E_against_dem"), ".3f", se=r.get("E_against_dem_stderr"))
+
+
+def _seeds(r: dict[str, Any]) -> Cell:
+    """The number of seeds in a pooled row (its seeds in the title); '1' for an unfinished
+    seed's own row."""
+    if r["status"] != "done":
+        return Cell("1", value="1")
+    return Cell(str(r["n_seeds"]), value=str(r["n_seeds"]))
+
+
 def table_rows(data: SweepData) -> list[dict[str, Any]]:
-    """The table's rows: cells, a class, and the point's own report (a relative link)."""
+    """The table's rows: cells, a class, and the point's own report (a relative link); over
+    seeds, one row per group and method after data.pooled (an unfinished seed's row names its
+    seed in the reason)."""
     out = []
     span = len(COLUMNS) - 2
-    for r in data.rows:
+    for r in data.pooled:
         vals = [_num(r.get(k), ".6g") if isinstance(r.get(k), (int, float))
                 and not isinstance(r.get(k), bool) else Cell(str(r.get(k)), "l")
-                for k in data.varied]
+                for k in data.shown]
+        if data.seeds_pooled:
+            vals.append(_seeds(r))
         link = point_report(data.out, r["point"])
         if r["status"] != "done":
             why = r.get("error") or {"running": "running now (another process holds it)",
                                      "pending": "not run yet"}.get(r["status"], "")
+            if data.seeds_pooled:
+                why = f"run.seed = {r.get('run.seed')}: {why}"
             cells = [*vals, Cell(r["method"] or "-", "l"), Cell(r["status"], "l bad"),
                      Cell(why, "why", span=span)]
             out.append({"cells": cells, "cls": "unfinished", "point": r["point"],
@@ -143,9 +181,7 @@ def table_rows(data: SweepData) -> list[dict[str, Any]]:
         bb, bw = r.get("impact_ball_ball"), r.get("impact_ball_wall")
         cells = [*vals, Cell(r["method"], "l"), Cell(r["status"], "l"),
                  Cell(str(r.get("circulation_sense") or "n/a"), "l"),
-                 _num(r.get("circulation_strength"), ".3g", 1e4,
-                      r.get("circulation_strength_stderr")),
-                 _num(E, ".3f") if r["method"] != "dem" else Cell("-"),
+                 _strength(r), _E(r),
                  (_num(E / lim.limit, ".2f") if E is not None and lim is not None
                   else Cell("-" if r["method"] == "dem" else "n/a")),
                  Cell(words, f"l {vcls}".strip()),
@@ -168,12 +204,21 @@ def limits_text(data: SweepData) -> list[str]:
     lines = []
     for key, lim in sorted(data.limits.items(), key=lambda kv: str(kv[0])):
         at = ("" if key is None else
-              " at " + ", ".join(f"{k} = {v}" for k, v in
-                                 zip([k for k in data.varied if k != "run.seed"], key)))
+              " at " + ", ".join(f"{k} = {v}" for k, v in zip(data.shown, key)))
         se = "" if lim.stderr is None else f" ± {lim.stderr:.3f}"
         lines.append(f"Fields agree when E ≤ {lim.limit:.3f}{at}: 1.5 × the DEM's "
                      f"seed-to-seed E {lim.E_seed:.3f}{se} ({lim.source}).")
     return lines
+
+
+def point_links(data: SweepData) -> list[tuple[str, str]]:
+    """(point, its report) for every finished point that has one, in the table's order."""
+    seen: dict[str, str] = {}
+    for r in data.rows:
+        link = point_report(data.out, r["point"]) if r["status"] == "done" else None
+        if link and r["point"] not in seen:
+            seen[r["point"]] = link
+    return list(seen.items())
 
 
 def render(data: SweepData) -> str:
@@ -182,7 +227,8 @@ def render(data: SweepData) -> str:
     for name in PLOT_NAMES[0], PLOT_NAMES[2], PLOT_NAMES[3]:
         path = data.out / PLOTS / name
         plots.append({"name": name, "src": _img(path.read_bytes()) if path.is_file() else None})
-    head = ([(*_header(k), VARIED_SHARE) for k in data.varied]
+    head = ([(*_header(k), VARIED_SHARE) for k in data.shown]
+            + ([SEEDS_COLUMN] if data.seeds_pooled else [])
             + [(t, u, w) for t, u, w in COLUMNS])
     total = sum(w for _, _, w in head)
     head = [(t, u, f"{100.0 * w / total:.1f}%") for t, u, w in head]
@@ -196,7 +242,8 @@ def render(data: SweepData) -> str:
         strength=_img(strength_figure(data)), sense=_img(sense_figure(data)),
         E=_img(e_figure(data)), limits=limits_text(data), limit_values=sorted(
             {lim.limit for lim in data.limits.values()}),
-        head=head, n_varied=len(data.varied), rows=table_rows(data),
+        head=head, n_varied=len(head) - len(COLUMNS), rows=table_rows(data),
+        links=point_links(data), pooled=data.seeds_pooled,
         unfinished=[r for r in data.rows if r["status"] != "done"], plots=plots)
 
 

@@ -41,6 +41,7 @@ from vibroflow.tub.geometry import geometry_of
 from ..bed import bed_area, lithostatic
 from ..boundary import PartitionFriction
 from ..fields import grid_fields
+from ..files import early_tag, sample_tag
 from ..formulation import Formulation, Sampler
 from ..material import boundary_friction
 from ..options import ContinuumOptions, default_dx
@@ -178,10 +179,7 @@ class CellSampler(Sampler):
                              hist["state"][tc], mesh.arc[tc], system.x[tc], geo.length)
         rate_all = shear_rate(state.L)
         if self.vtk and j >= S - run.phases_per_cycle:
-            fields = grid_fields(mesh.grid, system.x, state.v, state.mass,
-                                 state.pressure(), rate_all, system.material.solid_density)
-            self.vtk.grid(j, state.t, pose6, mesh.grid, fields, samples)
-            self.vtk.tub(j, state.t, pose6, samples)
+            self._frame(sample_tag(j), pose6, rate_all, samples)
         rate = rate_all[cells]
         held = state.mass[cells] >= 0.5 * self.full
         if held.any():
@@ -196,6 +194,18 @@ class CellSampler(Sampler):
         for q, inside in enumerate(self.in_probe):
             if (inside & held).any():
                 samples.rate_probe[j, q] = rate[inside & held].mean()
+
+    def _frame(self, tag: str, pose6, rate_all, samples) -> None:
+        """The ParaView files of the state now (grid fields, tub) as frame `tag`."""
+        system, state = self.system, self.state
+        fields = grid_fields(system.mesh.grid, system.x, state.v, state.mass,
+                             state.pressure(), rate_all, system.material.solid_density)
+        self.vtk.grid(tag, state.t, pose6, system.mesh.grid, fields, samples)
+        self.vtk.tub(tag, state.t, pose6, samples)
+
+    def early_frame(self, k: int, samples) -> None:
+        self._frame(early_tag(k), np.array(self.system.frame.pose(self.state.t)),
+                    shear_rate(self.state.L), samples)
 
     def radius(self):
         material = self.system.material

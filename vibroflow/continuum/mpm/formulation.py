@@ -29,6 +29,7 @@ from vibroflow.tub.geometry import distance_to_wall_np, geometry_of, u_wall_near
 from ..bed import bed_area, bed_height, lithostatic
 from ..boundary import PartitionFriction, UWall
 from ..fields import grid_fields
+from ..files import early_tag, sample_tag
 from ..formulation import Formulation, Sampler
 from ..grid import Grid
 from ..material import boundary_friction
@@ -81,11 +82,11 @@ def settled_bed(scenario, material, spacing: float):
     return x, volume, density, stress, h
 
 
-def _write_points_vtu(vtk, j: int, t: float, pose6, state: MPMState, rate: np.ndarray,
+def _write_points_vtu(vtk, tag: str, t: float, pose6, state: MPMState, rate: np.ndarray,
                       solid_density: float, samples) -> None:
     """The material points as a ParaView point cloud (continuum.paraview, y = the slice's
     middle), radius half the side of a point's square."""
-    vtk.points(j, t, pose6, state.x, state.v, 0.5 * np.sqrt(state.volume),
+    vtk.points(tag, t, pose6, state.x, state.v, 0.5 * np.sqrt(state.volume),
                {"pressure_Pa": state.pressure(), "shear_rate_per_s": rate,
                 "solid_fraction": state.density / solid_density,
                 "state": state.phase.astype(np.float64)}, samples)
@@ -131,13 +132,7 @@ class PointSampler(Sampler):
                              state.x[touching], geo.length)
         rate = shear_rate(state.L)
         if self.vtk and j >= S - run.phases_per_cycle:
-            material = system.material
-            _write_points_vtu(self.vtk, j, state.t, pose6, state, rate, material.solid_density,
-                              samples)
-            fields = grid_fields(system.grid, state.x, state.v, state.mass,
-                                 state.pressure(), rate, material.solid_density)
-            self.vtk.grid(j, state.t, pose6, system.grid, fields, samples)
-            self.vtk.tub(j, state.t, pose6, samples)
+            self._frame(sample_tag(j), pose6, rate, samples)
         samples.rate_all[j] = rate.mean()
         samples.add_cell_rates(state.x, rate)
         if state.temperature is not None:
@@ -151,6 +146,21 @@ class PointSampler(Sampler):
             inside = (ci == pi) & (ck == pk)
             if inside.any():
                 samples.rate_probe[j, q] = rate[inside].mean()
+
+    def _frame(self, tag: str, pose6, rate, samples) -> None:
+        """The ParaView files of the state now (points, grid fields, tub) as frame `tag`."""
+        system, state = self.system, self.state
+        material = system.material
+        _write_points_vtu(self.vtk, tag, state.t, pose6, state, rate, material.solid_density,
+                          samples)
+        fields = grid_fields(system.grid, state.x, state.v, state.mass,
+                             state.pressure(), rate, material.solid_density)
+        self.vtk.grid(tag, state.t, pose6, system.grid, fields, samples)
+        self.vtk.tub(tag, state.t, pose6, samples)
+
+    def early_frame(self, k: int, samples) -> None:
+        self._frame(early_tag(k), np.array(self.system.frame.pose(self.state.t)),
+                    shear_rate(self.state.L), samples)
 
     def radius(self):
         return np.cbrt(3.0 * self.state.mass * self.geo.length
