@@ -99,8 +99,9 @@ def with_batches(table: CellTable, path) -> CellTable:
     cells = np.array([key.get((int(i), int(k)), -1) for i, k in zip(ii, kk)], dtype=np.int64)
     if (cells < 0).any():
         r = int(np.flatnonzero(cells < 0)[0])
-        raise ValueError(f"row {r + 1}: cell x = {data[r, 1]!r}, z = {data[r, 2]!r} m is not a "
-                         "cell of bulk_velocity.csv")
+        x, z = float(data[r, 1]), float(data[r, 2])
+        raise ValueError(f"row {r + 1}: cell x = {x!r}, z = {z!r} m is not a cell of "
+                         "bulk_velocity.csv")
     nb, n = int(b.max()) + 1, len(table)
     phi = np.zeros((nb, n))
     vx, vz = np.full((nb, n), np.nan), np.full((nb, n), np.nan)
