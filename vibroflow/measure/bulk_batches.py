@@ -13,7 +13,8 @@ n < 2; the solid fraction over every batch, 0 where the cell held none), batches
 
 bulk_velocity_batches.csv, one row per cell and batch in which it held a ball-sample, by batch
 then as bulk_velocity.csv: batch (0-based), x, z (m), solid_fraction (-), vx_m_s, vz_m_s (m/s),
-samples (ball-samples); the numbers as Python's repr, so they read back bit for bit.  A cell
+samples (ball-samples); the means as Python's repr, so they read back bit for bit.  In both
+files the cell centres are written as bulk_velocity.csv writes them.  A cell
 missing in a batch held no ball there: solid fraction 0, velocity undefined.
 """
 from __future__ import annotations
@@ -42,6 +43,11 @@ def _held(table: CellTable) -> np.ndarray:
     return np.isfinite(np.asarray(table.batch_vx, dtype=float))
 
 
+def _centre(table: CellTable, j: int) -> str:
+    """Cell j's x,z as bulk_velocity.csv writes them (measure.bulk.write_csv)."""
+    return f"{table.x[j]:.10g},{table.z[j]:.10g}"
+
+
 def _number(v: float) -> str:
     return repr(float(v)) if np.isfinite(v) else ""
 
@@ -58,7 +64,7 @@ def write_batch_csvs(table: CellTable, folder) -> None:
     n = held.sum(axis=0)
     lines = [",".join(STDERR_COLUMNS)]
     for j in order:
-        lines.append(f"{float(table.x[j])!r},{float(table.z[j])!r},{_number(se['vx'][j])},"
+        lines.append(f"{_centre(table, j)},{_number(se['vx'][j])},"
                      f"{_number(se['vz'][j])},{_number(se['phi'][j])},{int(n[j])}")
     write_text_atomic(folder / STDERR_CSV_NAME, "\n".join(lines) + "\n")
     samples = (np.asarray(table.batch_samples) if table.batch_samples is not None
@@ -66,7 +72,7 @@ def write_batch_csvs(table: CellTable, folder) -> None:
     lines = [",".join(BATCHES_COLUMNS)]
     for b in range(table.n_batches):
         for j in order[held[b, order]]:
-            lines.append(f"{b},{float(table.x[j])!r},{float(table.z[j])!r},"
+            lines.append(f"{b},{_centre(table, j)},"
                          f"{float(table.batch_phi[b, j])!r},{float(table.batch_vx[b, j])!r},"
                          f"{float(table.batch_vz[b, j])!r},{int(samples[b, j])}")
     write_text_atomic(folder / BATCHES_CSV_NAME, "\n".join(lines) + "\n")
