@@ -101,6 +101,12 @@ def test_continuum_command_writes_dem_comparable_results(method, run_cli, tmp_pa
     assert summary["window"]["snapshots"] == snapshots
     table = read_csv(out / "bulk_velocity.csv", cell_size=0.015)
     assert len(table) == summary["cells"]
+    # its batches beside it: a standard error for every cell, in bulk_velocity.csv's order
+    se = (out / "bulk_velocity_stderr.csv").read_text().splitlines()
+    assert se[0] == "x,z,vx_stderr_m_s,vz_stderr_m_s,solid_fraction_stderr,batches"
+    cells = np.loadtxt(out / "bulk_velocity_stderr.csv", delimiter=",", skiprows=1, ndmin=2,
+                       usecols=(0, 1))
+    assert np.array_equal(cells, np.column_stack([table.x, table.z]))
     assert np.allclose(np.round(table.x / 0.015) * 0.015, table.x)
     # the bed's solid fraction where it is dense is the continuum's, about phi_c = 0.6
     dense = table.solid_fraction[table.z < 0.1]
@@ -200,8 +206,9 @@ RESUMES = {
 @pytest.mark.parametrize("method", METHODS)
 def test_continuum_resume_gives_the_uninterrupted_numbers_bit_for_bit(method, tmp_path):
     """A run stopped twice (checkpoint, then resume) inside its averaging window, with
-    checkpoints at every step in between, writes the same bulk_velocity.csv, summary (wall
-    times aside) and ParaView files as the run never interrupted; a stopped run leaves no
+    checkpoints at every step in between, writes the same bulk_velocity.csv with its batches
+    (bulk_velocity_stderr.csv, bulk_velocity_batches.csv), summary (wall times aside) and
+    ParaView files as the run never interrupted; a stopped run leaves no
     summary.json; a checkpoint of other options is refused."""
     from vibroflow.continuum.files import CHECKPOINT_NAME
     from vibroflow.continuum.formulation import formulation
@@ -233,7 +240,8 @@ def test_continuum_resume_gives_the_uninterrupted_numbers_bit_for_bit(method, tm
             summary.pop(key)
         summary["continuum"].pop("wall_time_s")
     assert json.dumps(resumed, sort_keys=True) == json.dumps(full, sort_keys=True)
-    for name in ("bulk_velocity.csv",) + vtk_files:
+    for name in ("bulk_velocity.csv", "bulk_velocity_stderr.csv",
+                 "bulk_velocity_batches.csv") + vtk_files:
         assert (split / name).read_bytes() == (tmp_path / "full" / name).read_bytes(), name
 
 

@@ -220,6 +220,21 @@ def test_report_is_self_contained_and_shows_the_summary(study):  # noqa: F811
     n_probes = len(methods["dem"]["probes"])
     assert seen == n_probes * (2 + 4 * (len(methods) - 1))
     assert "No sweep in this folder" in (out / "report.html").read_text()
+    # the continua's profiles and turnover times carry batch-means standard errors over the
+    # same batches as the DEM's (their bulk_velocity_batches.csv)
+    html = (out / "report.html").read_text(encoding="utf-8")
+    flat = " ".join(html.split())
+    assert "no error bars (no batches" not in flat
+    assert f"batches of whole cycles ({', '.join(methods)}: the DEM's from" in flat
+    turnover = {re.search(r'data-method="(\w+)"', tag).group(1): tag for tag in
+                re.findall(r"<td[^>]*turnover_s[^>]*>", html)}
+    assert set(turnover) == set(methods)
+    timed = [name for name, tag in turnover.items()
+             if math.isfinite(float(re.search(r'data-value="([^"]*)"', tag).group(1)))]
+    assert "dem" in timed and set(timed) - {"dem"}  # a continuum with a roll's core
+    for name in timed:
+        se = re.search(r'data-stderr="([^"]*)"', turnover[name])
+        assert se and math.isfinite(float(se.group(1))) and float(se.group(1)) >= 0, name
 
 
 def test_report_renders_in_headless_chromium(study):  # noqa: F811

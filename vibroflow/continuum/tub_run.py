@@ -14,7 +14,10 @@ Timeline (tub47.md "Procedure", the DEM's clock: t = 0 when the vibration starts
    interval (timeline.py).
 3. Results, through vibroflow.measure (the DEM's own code): each sampled point or cell is a
    "ball" (Formulation.sampler) with its lab position and velocity at the sample;
-   bulk_velocity.csv (CellTable / write_csv on the scenario's cells) and summary.json with the
+   bulk_velocity.csv (CellTable / write_csv on the scenario's cells) with its batches of whole
+   cycles beside it (bulk_velocity_stderr.csv, bulk_velocity_batches.csv:
+   measure.bulk_batches; from the samples, which the checkpoint carries, so a resumed run
+   writes the same files) and summary.json with the
    DEM's keys (probes, circulation, wall_contacts from the points or cells touching the U,
    impacts: none, window, cells), plus a "continuum" block: the method, numerics, material,
    and the shear rate with the impact speed and granular temperature it implies through the
@@ -49,6 +52,7 @@ from vibroflow.io.atomic import write_json_atomic
 from vibroflow.io.calibration_file import Calibration
 from vibroflow.io.folder_lock import folder_lock
 from vibroflow.io.vtk_frame import extra_frame_steps, vtk_options, write_vtk_record
+from vibroflow.measure.bulk_batches import BATCHES_CSV_NAME, STDERR_CSV_NAME
 from vibroflow.measure.stats import batches_of_whole_cycles
 from vibroflow.measure.summary import json_safe, tub_summary
 from vibroflow.progress import RunProgress
@@ -205,8 +209,8 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
                                  "again")
                         return done
                     prog.log(f"no checkpoint in {out}: starting afresh")
-                for name in (SUMMARY_NAME, BULK_CSV_NAME, CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME,
-                             TEMPERATURE_CSV_NAME):
+                for name in (SUMMARY_NAME, BULK_CSV_NAME, BATCHES_CSV_NAME, STDERR_CSV_NAME,
+                             CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME, TEMPERATURE_CSV_NAME):
                     (out / name).unlink(missing_ok=True)
                 shutil.rmtree(out / VTK_DIR, ignore_errors=True)  # another run's frames
                 with interrupted_while_settling():
@@ -269,7 +273,7 @@ def _results(form: Formulation, scenario, out: Path, calibration, options, vtk, 
                "simulated_time_s": n_steps * system.dt, "wall_time_s": wall_time,
                "compile_time_s": clock.compile_s(),
                "particle_steps_per_s": n * n_steps / wall_time if wall_time > 0 else None}
-    summary.update(tub_summary(source, scenario, bulk_csv=out / BULK_CSV_NAME))
+    summary.update(tub_summary(source, scenario, bulk_csv=out / BULK_CSV_NAME, batch_csvs=True))
     run = scenario.run
     batch = batches_of_whole_cycles(times, run.duration - run.average_last, run.duration,
                                     scenario.motion.frequency, run.batches) \

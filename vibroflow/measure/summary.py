@@ -30,6 +30,7 @@ import numpy as np
 
 from vibroflow.io.atomic import json_safe
 from vibroflow.measure.bulk import cell_table, probe_values, write_csv
+from vibroflow.measure.bulk_batches import write_batch_csvs
 from vibroflow.measure.circulation import circulation
 from vibroflow.measure.contacts import impact_stats, impact_stats_chunked, wall_contact_stats
 from vibroflow.measure.stats import batches_of_whole_cycles, cycles_in_window
@@ -61,7 +62,8 @@ def _attrs(src) -> Mapping:
     return a if a is not None else {}
 
 
-def tub_summary(source, scenario, bulk_csv=None, t_end: float | None = None) -> dict:
+def tub_summary(source, scenario, bulk_csv=None, t_end: float | None = None,
+                batch_csvs: bool = False) -> dict:
     """Summary of a tub run and its bulk_velocity.csv.
 
     Parameters
@@ -73,6 +75,8 @@ def tub_summary(source, scenario, bulk_csv=None, t_end: float | None = None) -> 
     bulk_csv : where to write the cell table; default bulk_velocity.csv next to the dem.h5 file
         (not written when source is not a path and bulk_csv is None).
     t_end : end of the averaging window (s); default scenario.run.duration.
+    batch_csvs : also write the table's batches beside bulk_csv (bulk_velocity_stderr.csv and
+        bulk_velocity_batches.csv, bulk_batches.py), for a method whose snapshots are not kept.
 
     Returns a JSON-ready dict: probes {name: {x, z, cell_x, cell_z, vx, vz, vx_stderr,
     vz_stderr, solid_fraction, samples}}, circulation {sense, strength, strength_stderr,
@@ -86,11 +90,11 @@ def tub_summary(source, scenario, bulk_csv=None, t_end: float | None = None) -> 
         if bulk_csv is None:
             bulk_csv = os.path.join(os.path.dirname(os.path.abspath(path)), BULK_CSV_NAME)
         with h5py.File(path, "r") as f:
-            return _summary(f, scenario, bulk_csv, t_end)
-    return _summary(source, scenario, bulk_csv, t_end)
+            return _summary(f, scenario, bulk_csv, t_end, batch_csvs)
+    return _summary(source, scenario, bulk_csv, t_end, batch_csvs)
 
 
-def _summary(src, scenario, bulk_csv, t_end) -> dict:
+def _summary(src, scenario, bulk_csv, t_end, batch_csvs: bool = False) -> dict:
     geometry = geometry_of(scenario)
     run, motion, analysis = scenario.run, scenario.motion, scenario.analysis
     freq = float(motion.frequency)
@@ -116,6 +120,8 @@ def _summary(src, scenario, bulk_csv, t_end) -> dict:
                        batch_of_sample=batch, n_batches=nb)
     if bulk_csv is not None:
         write_csv(table, bulk_csv)
+        if batch_csvs:
+            write_batch_csvs(table, os.path.dirname(os.path.abspath(bulk_csv)))
 
     probes = probe_values(table, analysis.probes)
     circ = circulation(table)

@@ -1,7 +1,9 @@
-"""Every method's bulk-velocity cell table as the report's new sections use it: the DEM's
-rebuilt from its snapshots with one table per batch of whole cycles (so that its profiles and
-turnover time carry batch-means standard errors, stats.py), a continuum's read from its
-bulk_velocity.csv (which keeps no batches: its values carry no error).
+"""Every method's bulk-velocity cell table as the report's new sections use it, with one table
+per batch of whole cycles (so that its profiles and turnover time carry batch-means standard
+errors over the study's batches, stats.py): the DEM's rebuilt from its snapshots, a
+continuum's read from its bulk_velocity.csv with the batches its run wrote beside it
+(bulk_velocity_batches.csv, measure.bulk_batches); a table whose batches are missing (a
+continuum run older than that file) carries no errors.
 
 The DEM's rebuilt table is the one its run wrote (vibroflow.measure.bulk.cell_table over the
 snapshots of the averaging window's whole cycles, batches_of_whole_cycles), so its cell means
@@ -16,19 +18,29 @@ import h5py
 import numpy as np
 
 from vibroflow.measure.bulk import CellTable, cell_table, read_csv
+from vibroflow.measure.bulk_batches import BATCHES_CSV_NAME, with_batches
 from vibroflow.measure.stats import batches_of_whole_cycles
 
 DEM = "dem"
 
 
 def csv_table(data, name: str) -> CellTable:
-    """A method's bulk_velocity.csv of the study as a CellTable (no batches)."""
+    """A method's bulk_velocity.csv of the study as a CellTable, with the batches of the
+    bulk_velocity_batches.csv beside it where there is one that fits it (no batches
+    otherwise)."""
     entry = data.summary["methods"].get(name, {})
     rel = entry.get("bulk_velocity_csv", f"{name}/bulk_velocity.csv")
     path = Path(rel) if Path(rel).is_absolute() else data.out / rel
     if not path.is_file():
         path = data.out / name / "bulk_velocity.csv"
-    return read_csv(path, cell_size=float(data.scenario.analysis.cell_size))
+    table = read_csv(path, cell_size=float(data.scenario.analysis.cell_size))
+    batches = path.parent / BATCHES_CSV_NAME
+    if not batches.is_file():
+        return table
+    try:
+        return with_batches(table, batches)
+    except (OSError, ValueError):
+        return table
 
 
 def dem_batch_table(data) -> CellTable | None:

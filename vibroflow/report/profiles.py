@@ -2,9 +2,9 @@
 in the column of cells at x = 0, and vz against x in the row of cells at mid-depth (the cell
 row nearest half the DEM bed's height at x = 0, its top the highest cell there with solid
 fraction >= min_solid_fraction).  Cells below min_solid_fraction are left out.  Error bars:
-the batch-means standard error of each cell (stats.py), which the DEM's table has
-(cell_tables.dem_batch_table); a continuum's bulk_velocity.csv keeps no batches, so its points
-carry none."""
+the batch-means standard error of each cell (stats.py) over the study's batches of whole
+cycles, which the DEM's table has from its snapshots and a continuum's from its
+bulk_velocity_batches.csv (cell_tables.py); a table without batches carries none."""
 from __future__ import annotations
 
 from dataclasses import dataclass
