@@ -15,6 +15,8 @@ from typing import Any
 
 from pydantic_core import PydanticCustomError
 
+from vibroflow.scenario.part_checks import check_parts, parts_volume_m3
+
 #: a vibroflow.scenario.model.Scenario (and its Tub, ContactPair): read here, not imported
 Scenario = Any
 Tub = Any
@@ -40,6 +42,7 @@ def check_consistent(s: Scenario) -> None:
     _check_time_step(s)
     _check_vibration_step(s)
     _check_size(s)
+    check_parts(s, fail)
     if s.explicit:
         _check_particles(s)
     else:
@@ -59,7 +62,7 @@ def _q(name: str) -> str:
 class TouchingPair:
     """A pair of materials that can touch in a scenario, with the smallest bodies involved.
 
-    `kind` is "ball-ball", "ball-tub wall", "ball-partition" or "ball-plane wall"; m_eff (kg)
+    `kind` is "ball-ball", "ball-tub wall", "ball-partition", "ball-plane wall" or "ball-part"; m_eff (kg)
     and r_eff (m) are those of the smallest balls of the pair (a wall: the ball's own mass and
     radius), which give the shortest contact time; `field`/`value` name the scenario field that
     brought the pair in (for error messages).
@@ -103,6 +106,8 @@ def wall_materials(s: Scenario) -> list[tuple[str, str, str]]:
             out.append((s.tub.partition_material, "ball-partition", "tub.partition_material"))
     for i, w in enumerate(s.walls or []):
         out.append((w.material, "ball-plane wall", f"walls.{i}.material"))
+    for i, p in enumerate(s.parts or []):
+        out.append((p.material, "ball-part", f"parts.{i}.material"))
     return out
 
 
@@ -163,6 +168,7 @@ def _check_materials(s: Scenario) -> None:
                  ("tub.partition_material", s.tub.partition_material)]
     used += [(f"particles.{i}.material", p.material) for i, p in enumerate(s.particles or [])]
     used += [(f"walls.{i}.material", w.material) for i, w in enumerate(s.walls or [])]
+    used += [(f"parts.{i}.material", p.material) for i, p in enumerate(s.parts or [])]
     for field, name in used:
         if name not in s.materials:
             fail(f"{field} = {_q(name)}: no such material (materials: {known})")
@@ -298,12 +304,12 @@ def _check_tub_fill(s: Scenario) -> None:
         fail(f"tub.length = {tub.length!r}: shorter than one insertion lattice layer of "
               f"balls (fill.diameter x fill.lattice_spacing); must be at least {need:.4g} m")
     bed = fill.count * math.pi * d**3 / 6.0 / LOOSE_PACKING
-    room = tub_volume(tub)
+    room = tub_volume(tub) - (parts_volume_m3(s) if s.parts else 0.0)
     if bed > room:
         fits = int(room * LOOSE_PACKING / (math.pi * d**3 / 6.0))
         fail(f"fill.count = {fill.count}: {fill.count} balls of d = {d:g} m take "
               f"{bed:.3g} m^3 at a loose packing ({LOOSE_PACKING}), more than the tub holds "
-              f"below its rim ({room:.3g} m^3); must be at most {fits}, or make the tub larger")
+              f"below its rim{' less its parts' if s.parts else ''} ({room:.3g} m^3); must be at most {fits}, or make the tub larger")
 
 
 def _check_particles(s: Scenario) -> None:

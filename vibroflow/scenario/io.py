@@ -64,11 +64,23 @@ def _read_source(source: str | Path) -> tuple[dict[str, Any], str]:
         # a user file that does not name its case is not tub47 (which the defaults would say):
         # it is named after the file, made a safe name (model.NAME_PATTERN)
         raw.setdefault("case", _name_of_file(path))
+        _resolve_part_files(raw, path.parent)
         return raw, str(path)
     if str(source) in PRESETS:
         return _parse_toml(read_preset_text(str(source)), f"preset {source}"), str(source)
     raise InputError(f"{source}: no such scenario file or preset (presets: "
                      f"{', '.join(PRESETS)})")
+
+
+def _resolve_part_files(raw: dict[str, Any], base: Path) -> None:
+    # an STL part's file is named relative to the scenario file that names it, so a scenario
+    # and its meshes travel together; the record keeps the absolute path
+    parts = raw.get("parts")
+    if isinstance(parts, list):
+        for part in parts:
+            if isinstance(part, dict) and isinstance(part.get("file"), str):
+                f = Path(part["file"]).expanduser()
+                part["file"] = str(f if f.is_absolute() else (base / f).resolve())
 
 
 def _name_of_file(path: Path) -> str:

@@ -217,6 +217,32 @@ class WallSpec(_Strict):
         return tuple(c / n for c in v)
 
 
+class PartSpec(_Strict):
+    """A rigid part in the bed (vibroflow/tub/parts.py), fixed in the tub frame (it moves with
+    the tub) or in the lab.  Shapes: a cylinder across the slice (axis along y through
+    `center`'s x and z, spanning partition to partition), a box (edge lengths `size` along x, y,
+    z, turned by `angle_y` about y), a sphere, or a triangulated STL surface (`file`, its
+    coordinates times `scale` placed at `center`).  Which fields a shape takes is checked in
+    vibroflow/scenario/part_checks.py."""
+
+    name: str
+    shape: Literal["cylinder", "box", "sphere", "stl"]
+    center: Vector3 = Field(description="m, tub frame (the lab's at t = 0)")
+    radius: float | None = Field(None, gt=0, description="m; cylinder and sphere")
+    size: Vector3 | None = Field(None, description="m, edge lengths along x, y, z; box")
+    angle_y: float = Field(0.0, description="rad, the box turned about y (x towards z); box")
+    file: str | None = Field(None, description="a binary or ASCII STL file, its path relative to the scenario file; stl")
+    scale: float = Field(1.0, gt=0, description="m per STL file unit (0.001 for mm); stl")
+    material: str = "steel"
+    frame: Literal["tub", "lab"] = Field("tub", description="tub: moves with the tub; lab: "
+                                         "held still")
+
+    @field_validator("name")
+    @classmethod
+    def _name(cls, v: str) -> str:
+        return check_name("parts.name", v)
+
+
 def _default_materials() -> dict[str, Material]:
     return {
         "steel": Material(density=7800.0, youngs_modulus=2.0e11, poisson_ratio=0.3),
@@ -250,6 +276,7 @@ class Scenario(_Strict):
     analysis: Analysis = Field(default_factory=Analysis)
     particles: list[ParticleSpec] | None = None
     walls: list[WallSpec] | None = None
+    parts: list[PartSpec] | None = None
 
     @field_validator("case")
     @classmethod

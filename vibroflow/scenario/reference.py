@@ -32,6 +32,7 @@ from vibroflow.scenario.model import (
     Run,
     Scenario,
     Tub,
+    PartSpec,
     WallSpec,
 )
 
@@ -50,6 +51,9 @@ TABLES: tuple[tuple[str, type[BaseModel], str], ...] = (
     ("[analysis.probes.NAME]", Probe, "One probe point per name, in the tub frame."),
     ("[[particles]]", ParticleSpec, "Explicit mode: one entry per ball, placed as given."),
     ("[[walls]]", WallSpec, "Explicit mode: infinite plane walls."),
+    ("[[parts]]", PartSpec, "Rigid parts in the bed (a workpiece, a fixture, a sensor), in "
+     "either mode: a cylinder across the slice, a box, a sphere or an STL surface, fixed in the "
+     "tub frame or in the lab; what each receives is recorded."),
 )
 
 # Units and meanings of the fields whose records carry no `description`: the model's own
@@ -67,6 +71,10 @@ _NOTES: dict[tuple[str, str], str] = {
     ("Scenario", "analysis"): "cells and probes",
     ("Scenario", "particles"): "explicit mode's balls; given, there is no tub and no fill",
     ("Scenario", "walls"): "explicit mode's plane walls",
+    ("Scenario", "parts"): "rigid parts in the bed",
+    ("PartSpec", "name"): "a name (file names, the report)",
+    ("PartSpec", "material"): "a key of [materials]; each ball material needs a contact law "
+                              "with it",
     ("ContactPair", "pair"): "the two materials' names; their order does not matter",
     ("ContactPair", "model"): "normal force law: linear spring-dashpot or Hertz-Mindlin",
     ("Run", "record_impacts"): "record every impact (time, kind, normal speed, place)",
