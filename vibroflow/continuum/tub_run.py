@@ -66,6 +66,7 @@ from .formulation import Formulation, formulation
 from .grid_update import LabFrame, TubFrame
 from .material import material_for
 from .mpm.solver import ContinuumBlowUp
+from .part_obstacle import continuum_parts
 from .sampling import Samples, cell_grid_of, phase_shear_of_samples, sample_times, samples_source
 from .shear_outputs import shear_rate_outputs, write_shear_rate_csv
 from .temperature_impacts import impacts_from_temperature
@@ -175,6 +176,7 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
     if stop_after_steps is not None and not int(stop_after_steps) >= 0:
         raise InputError(f"stop_after_steps = {stop_after_steps!r}: must be >= 0")
     options = options or form.options()
+    parts = continuum_parts(scenario)
     system, material = tub_system(form, scenario, calibration, options)
     geo = geometry_of(scenario)
     times, window_start, _ = sample_times(scenario)
@@ -196,7 +198,7 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
                 h = float(meta["bed_height_m"])
                 sampler = form.sampler(scenario, system, state, out, vtk)
                 samples = Samples.from_arrays(arrays, S, sampler.n_points, n_probes, cell_grid,
-                                              options.temperature)
+                                              options.temperature, len(parts))
                 sampler.restore(arrays)
                 clock.resume_from(float(meta["wall_time_s"]))
                 prog.log(f"resuming from {ckpt} at t = {state.t:.4f} s")
@@ -218,7 +220,8 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
                 state.t = 0.0
                 state.step = 0
                 sampler = form.sampler(scenario, system, state, out, vtk)
-                samples = Samples(S, sampler.n_points, n_probes, cell_grid, options.temperature)
+                samples = Samples(S, sampler.n_points, n_probes, cell_grid, options.temperature,
+                                  len(parts))
 
             def checkpoint():
                 save_checkpoint(ckpt, state, {**samples.arrays(), **sampler.arrays()}, {

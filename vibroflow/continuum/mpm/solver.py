@@ -28,7 +28,7 @@ import numpy as np
 from vibroflow.errors import InputError
 
 from .. import fused, steps
-from ..boundary import BOUNDARY_DTYPE, PartitionFriction, Plane
+from ..boundary import BOUNDARY_DTYPE, NO_PARTS, PartitionFriction, PartWall, Plane
 from ..constitutive import ContinuumMaterial
 from ..grid import Grid
 from ..grid_step import chunk_bounds, grid_spec, grid_work
@@ -312,6 +312,11 @@ def point_wall_sums(system: MPMSystem, state: MPMState) -> np.ndarray:
     return out
 
 
+def packed_parts(system: MPMSystem) -> tuple:
+    """The packed parts of the system's part walls (boundary.PartWall; NO_PARTS without)."""
+    return next((b.packed for b in system.boundaries if isinstance(b, PartWall)), NO_PARTS)
+
+
 def _advance(system: MPMSystem, state: MPMState, n: int, p_kin) -> None:
     """`advance`'s compiled call: n steps, the granular temperature's stress p_kin (N, 5)
     (kinetic_stress.py: Pa added to the scattered stress, then the return map's rate ratio;
@@ -333,7 +338,8 @@ def _advance(system: MPMSystem, state: MPMState, n: int, p_kin) -> None:
     step = fused.MPMStep(float(system.dt), system.params, system.frame.as_array(), box,
                          chunk_bounds(state.n, system.chunks), float(system.flip))
     done, t, status, which = fused.advance_kernel(
-        n, float(state.t), points, step, fused.Boundaries(records, *hist), system.grid_spec,
+        n, float(state.t), points, step, fused.Boundaries(records, *hist, packed_parts(system)),
+        system.grid_spec,
         system.work)
     _unstack_history(state, walls, hist)
     state.t = t
