@@ -351,6 +351,22 @@ def part_gaps(parts, k, y, x, gap_out):
         gap_out[p] = part_section_nearest(parts, k, y, x[p, 0], x[p, 1])[0]
 
 
+@nb.njit(cache=True)
+def _section_nearest_loop(parts, k, y, x, z, out):
+    for p in range(x.shape[0]):
+        out[p, 0], out[p, 1], out[p, 2] = part_section_nearest(parts, k, y, x[p], z[p])
+
+
+def part_section_nearest_np(parts, k: int, y: float, x, z):
+    """(gap m, nx, nz) arrays of part_section_nearest at the points (x, z) (m)."""
+    xs = np.ascontiguousarray(np.ravel(x), dtype=float)
+    zs = np.ascontiguousarray(np.ravel(z), dtype=float)
+    out = np.zeros((xs.size, 3))
+    _section_nearest_loop(parts, int(k), float(y), xs, zs, out)
+    shape = np.shape(x)
+    return out[:, 0].reshape(shape), out[:, 1].reshape(shape), out[:, 2].reshape(shape)
+
+
 @dataclass
 class PartWall(_Contact):
     """Part `index` of the packed parts `packed` (a tuple in NO_PARTS' layout; tub.parts.pack

@@ -1,0 +1,253 @@
+"""Parts in the continuum against known answers: a layer on a part's flat top carries its weight
+onto the part (both formulations); no material point ends inside a part, no Eulerian cell inside
+one ever holds material; a bed on a part in a tub shaken up and down stays at rest relative to
+the tub and the part feels m (g + Z''); the impact speed inferred by patch is the calibrated
+relation applied to the surface nodes' shear rate (hand computed); parts.nc's force by phase is
+the mean of the samples in each phase; a part the 2D continuum cannot take is a one-line error.
+"""
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from continuum_helpers import G_ACC, lattice
+from vibroflow.continuum.boundary import PartWall, UWall
+from vibroflow.continuum.constitutive import ContinuumMaterial
+from vibroflow.continuum.eulerian import solver as eulerian
+from vibroflow.continuum.eulerian.mesh import EulerianMesh
+from vibroflow.continuum.eulerian.solver import EulerianSystem
+from vibroflow.continuum.eulerian.wall import MeshWall, wall_force_on_material
+from vibroflow.continuum.grid import Grid
+from vibroflow.continuum.grid_update import LabFrame, TubFrame
+from vibroflow.continuum.mpm.solver import MPMSystem, init_state, run_steps
+from vibroflow.continuum.part_obstacle import (continuum_parts, packed_section,
+                                               section_area_below)
+from vibroflow.continuum.part_outputs import part_dataset, surface_nodes
+from vibroflow.continuum.sampling import Samples
+from vibroflow.continuum.timestep import stable_dt
+from vibroflow.errors import InputError
+from vibroflow.io.calibration_file import ImpactRelation
+from vibroflow.io.parts_file import MAX_PATCHES, read_parts, write_parts
+from vibroflow.measure.phase_shear import PhaseShear
+from vibroflow.scenario.model import Scenario
+from vibroflow.tub.geometry import TubGeometry
+from vibroflow.tub.motion import TubMotion, pose_np
+from vibroflow.tub.parts import Part, pack
+
+#: a small U (m) and a box across it whose flat top is at z = R, where the U's sides turn
+#: vertical: a layer on it between frictionless sides rests on the part alone
+R, L_Y = 0.05, 0.02
+GEO = TubGeometry(radius=R, rim_height=0.1, length=L_Y)
+SHELF = Part(name="shelf", shape="box", center=(0.0, 0.5 * L_Y, R - 0.005), material="steel",
+             half_size=(R + 0.01, 0.5 * L_Y, 0.005))
+MAT = ContinuumMaterial(bulk_modulus=1e6, shear_modulus=5e5)
+DX = 0.005
+H_LAYER = 0.02
+
+
+def _mpm_layer_on_shelf(frame):
+    """(system, state, part wall) of the material points: a layer H_LAYER deep on the shelf's
+    top, frictionless U and shelf (the same wall law)."""
+    sp = 0.5 * DX
+    grid = Grid.covering(-R, R, 0.0, GEO.rim_height, DX)
+    kn = (MAT.bulk_modulus + 4 * MAT.shear_modulus / 3) / sp
+    packed = packed_section((SHELF,))
+    u = UWall(radius=R, stiffness=kn, friction=0.0, damping_ratio=0.5)
+    part = PartWall(name="shelf", packed=packed, index=0, y=0.5 * L_Y, stiffness=kn,
+                    friction=0.0, damping_ratio=0.5)
+    system = MPMSystem(grid, MAT, stable_dt(MAT, DX, sp, [u, part]), frame=frame,
+                       boundaries=[u, part])
+    x = lattice(-R + 0.25 * sp, R - 0.25 * sp, R, R + H_LAYER, sp)
+    rho_c = MAT.critical_density
+    p = rho_c * G_ACC * (R + H_LAYER - x[:, 1])
+    stress = np.zeros((len(x), 4))
+    stress[:, 1] = -p
+    stress[:, 0] = stress[:, 3] = -(1 - math.sin(math.atan(MAT.mu_s))) * p
+    state = init_state(system, x, sp * sp, rho_c, stress=stress)
+    return system, state, part
+
+
+def test_mpm_layer_on_a_part_carries_its_weight_and_no_point_enters_it():
+    """The material points' layer on the shelf: after settling, the wall law's force on the
+    part is the layer's weight per metre (within 1 %), and no point's centre ever lies inside
+    the part."""
+    system, state, part = _mpm_layer_on_shelf(LabFrame((0.0, -G_ACC)))
+    least = [np.inf]
+
+    def watch(s):
+        least[0] = min(least[0], float(part.gap(s.x).min()))
+
+    run_steps(system, state, int(0.08 / system.dt), watch)
+    force_on_part = -state.history[part.slot]["f"].sum(axis=0)
+    weight = state.mass.sum() * G_ACC
+    assert force_on_part[1] == pytest.approx(weight, rel=0.01)
+    assert abs(force_on_part[0]) < 1e-6 * weight
+    assert least[0] > 0.0
+
+
+def test_eulerian_layer_on_a_part_carries_its_weight_and_no_cell_in_it_fills():
+    """The Eulerian mesh's layer on the shelf: the cells inside the part are outside the domain
+    and never hold material; the part's wall layer carries the layer's weight (within 1 %)."""
+    dx = mesh_dx = 2 * R / 20
+    mesh = EulerianMesh.tub(GEO, mesh_dx, (SHELF,), packed_section((SHELF,)))
+    h = mesh.h
+    wall = MeshWall((MAT.bulk_modulus + 4 * MAT.shear_modulus / 3) / h, friction=0.0,
+                    damping_ratio=0.5)
+    system = EulerianSystem(mesh, MAT, stable_dt(MAT, dx, h, [wall]),
+                            frame=LabFrame((0.0, -G_ACC)), wall=wall)
+    c = system.x
+    in_part = (np.abs(c[:, 0]) < SHELF.half_size[0]) & (np.abs(c[:, 1] - SHELF.center[2])
+                                                         < SHELF.half_size[2])
+    assert not mesh.inside[in_part].any()
+    filled = mesh.inside & (c[:, 1] > R) & (c[:, 1] < R + H_LAYER)
+    rho_c = MAT.critical_density
+    p = rho_c * G_ACC * np.clip(R + H_LAYER - c[:, 1], 0.0, None) * filled
+    stress = np.zeros((mesh.n, 4))
+    stress[:, 1] = -p
+    stress[:, 0] = stress[:, 3] = -(1 - math.sin(math.atan(MAT.mu_s))) * p
+    state = eulerian.init_state(system, np.where(filled, rho_c * h * h, 0.0), rho_c,
+                                stress=stress)
+    eulerian.run_steps(system, state, int(0.08 / system.dt))
+    assert state.mass[in_part].sum() == 0.0
+    cells = np.nonzero(mesh.part_of == 0)[0]
+    force_on_part = -wall_force_on_material(cells, mesh.normal, state.wall)
+    weight = state.total_mass() * G_ACC
+    assert force_on_part[1] == pytest.approx(weight, rel=0.01)
+
+
+def test_mpm_part_in_a_shaken_tub_feels_the_frame_and_the_bed_stays_with_it():
+    """Galilean check: the layer on a tub-fixed part in a tub shaken up and down at 10 Hz with
+    0.3 g stays at rest relative to the tub (speeds below 2 mm/s, against the tub's 47 mm/s),
+    and the part feels the layer's weight in the moving frame, m (g + Z''(t)), within 3 %."""
+    f, a = 10.0, 0.3 * G_ACC
+    motion = TubMotion(frequency=f, amplitude_x=0.0, amplitude_z=a / (2 * math.pi * f) ** 2,
+                       phase_z=0.0, amplitude_theta=0.0)
+    system, state, part = _mpm_layer_on_shelf(TubFrame(motion, (0.0, -G_ACC)))
+    run_steps(system, state, int(0.02 / system.dt))  # the start's elastic transient
+    ratios, speeds = [], []
+
+    def watch(s):
+        zdd = pose_np(motion.as_array(), s.t)[7]
+        ratios.append(-s.history[part.slot]["f"][:, 1].sum() / (s.mass.sum() * (G_ACC + zdd)))
+        speeds.append(float(np.hypot(s.v[:, 0], s.v[:, 1]).max()))
+
+    run_steps(system, state, int(0.1 / system.dt), watch)
+    assert np.max(speeds) < 2e-3
+    assert np.mean(ratios) == pytest.approx(1.0, abs=0.01)
+    assert np.max(np.abs(np.array(ratios) - 1.0)) < 0.03
+
+
+def test_a_part_section_below_a_height_is_its_area():
+    """The section of a cylinder below its axis is half its disc, of a box its width times the
+    height above its base (the bed around parts rises by it)."""
+    bar = Part(name="bar", shape="cylinder", center=(0.0, 0.01, 0.05), material="steel",
+               radius=0.01)
+    packed = packed_section((bar, SHELF))
+    assert section_area_below((bar,), packed_section((bar,)), 0.01, 0.05) == \
+        pytest.approx(0.5 * math.pi * 0.01**2, rel=1e-3)
+    assert section_area_below((SHELF,), packed_section((SHELF,)), 0.01, R - 0.004) == \
+        pytest.approx(2 * SHELF.half_size[0] * 0.006, rel=1e-3)
+    assert section_area_below((bar, SHELF), packed, 0.01, 1.0) == pytest.approx(
+        math.pi * 0.01**2 + 4 * SHELF.half_size[0] * SHELF.half_size[2], rel=1e-3)
+
+
+def _phase_field(x, z, shear_rate, solid_fraction, n_batches=2):
+    nz, nx = shear_rate.shape
+    return PhaseShear(x=x, z=z, h=float(x[1] - x[0]), solid_fraction=solid_fraction,
+                      shear_rate=shear_rate, phase_shear_rate=shear_rate[None],
+                      phase_solid_fraction=solid_fraction[None],
+                      batch_shear_rate=np.stack([shear_rate * 0.9, shear_rate * 1.1]),
+                      batch_solid_fraction=np.stack([solid_fraction] * n_batches),
+                      roll_shear_rate=shear_rate)
+
+
+def test_inferred_speed_by_patch_is_the_relation_on_the_surface_nodes():
+    """On a hand-made field around a bar (nodes 5 mm apart, the shear rate 10 1/s on the
+    nodes right of the bar's axis and 30 1/s left of it), the speed inferred on the sector
+    0-10 deg is c0 + c1 d 10 and on 180-190 deg c0 + c1 d 30, with the error |c1| d se of the
+    batches' rates (0.9 and 1.1 times: se = 0.1 gamma); the node at (x0 + r + h/2, z0) is in
+    sector 0, the one at (x0, z0 + r + h/2) in sector 9 (90-100 deg)."""
+    bar = Part(name="bar", shape="cylinder", center=(0.0, 0.01, 0.05), material="steel",
+               radius=0.0125)
+    h = 0.005
+    x = np.arange(-8, 9) * h
+    z = np.arange(0, 21) * h
+    X, _ = np.meshgrid(x, z)
+    rate = np.where(X > 0, 10.0, 30.0)
+    phi = np.full(rate.shape, 0.5)
+    phase = _phase_field(x, z, rate, phi)
+    patches = surface_nodes(bar, pack((bar,)), 0, 0.01, phase)
+    k0, i_right = 10, int(np.argmin(np.abs(x - 0.015)))
+    assert patches[k0, i_right] == 0
+    assert patches[int(np.argmin(np.abs(z - 0.065))), 8] == 9
+    c0, c1, d = 0.1, 0.5, 0.00635
+    calib = SimpleNamespace(impacts=SimpleNamespace(ball_wall=ImpactRelation(
+        c0_cells_m_s=c0, c1_cells=c1)))
+    scen = Scenario(tub={"radius": 0.05, "rim_height": 0.1, "length": 0.02},
+                    fill={"count": 200},
+                    parts=[{"name": "bar", "shape": "cylinder", "center": [0.0, 0.01, 0.05],
+                            "radius": 0.0125}])
+    samples = Samples(0, 1, 0)
+    ds = part_dataset("lagrangian", scen, (bar,), pack((bar,)), calib, d, phase, samples,
+                      np.zeros(0), np.zeros(0, np.int64), 1.0, None)
+    v = ds["normal_speed_mean"].sel(part="bar").values
+    se = ds["normal_speed_mean_stderr"].sel(part="bar").values
+    assert v[0] == pytest.approx(c0 + c1 * d * 10.0)
+    assert v[18] == pytest.approx(c0 + c1 * d * 30.0)
+    assert se[0] == pytest.approx(c1 * d * 1.0)
+    assert se[18] == pytest.approx(c1 * d * 3.0)
+    assert np.isnan(v[36:]).all() and v.size == MAX_PATCHES
+    assert "ball_wall" in ds.attrs["inferred_from"]
+
+
+def test_parts_nc_force_by_phase_is_the_mean_of_its_samples(tmp_path):
+    """Four cycles of two phases, two batches: the force by phase is the mean of that phase's
+    samples, its error the batch means' (hand computed), and parts.nc reads back."""
+    bar = Part(name="bar-1", shape="cylinder", center=(0.0, 0.01, 0.05), material="steel",
+               radius=0.0125)
+    scen = Scenario(tub={"radius": 0.05, "rim_height": 0.1, "length": 0.02},
+                    fill={"count": 200},
+                    run={"phases_per_cycle": 2, "batches": 2, "duration": 1.0,
+                         "average_last": 0.5},
+                    parts=[{"name": "bar-1", "shape": "cylinder",
+                            "center": [0.0, 0.01, 0.05], "radius": 0.0125}])
+    f = scen.motion.frequency
+    times = np.arange(8) / (2 * f)
+    batch = np.array([0, 0, 0, 0, 1, 1, 1, 1])
+    samples = Samples(8, 1, 0, n_parts=1)
+    fz = np.array([1.0, 5.0, 3.0, 7.0, 2.0, 6.0, 4.0, 8.0])  # phase 0: 1 3 2 4, phase 1: 5 7 6 8
+    for j in range(8):
+        samples.add_part_forces(j, np.array([[0.0, -fz[j]]]), 1.0)
+    samples.j = 8
+    ds = part_dataset("eulerian", scen, (bar,), pack((bar,)), None, 0.00635, None, samples,
+                      times, batch, 4 / f, None)
+    write_parts(tmp_path / "parts.nc", ds)
+    back = read_parts(tmp_path / "parts.nc")
+    force = back["force"].sel(part="bar-1", component="z").values
+    assert force == pytest.approx([2.5, 6.5])
+    # batch means 2 and 3 (phase 0): se = std([2, 3], ddof=1) / sqrt(2) = 0.5
+    assert back["force_stderr"].sel(part="bar-1", component="z").values == \
+        pytest.approx([0.5, 0.5])
+    assert back.attrs["method"] == "eulerian" and back.attrs["batches"] == 2
+    assert np.isnan(back["impact_rate_per_area"]).all()
+    assert back["force"].attrs["units"] == "N"
+
+
+@pytest.mark.parametrize("part, says", [
+    ({"shape": "sphere", "radius": 0.01, "center": [0.0, 0.01, 0.05]}, "shape = \"sphere\""),
+    ({"shape": "box", "size": [0.02, 0.01, 0.02], "center": [0.0, 0.01, 0.05]},
+     "spans y = 0.005 .. 0.015 m"),
+    ({"shape": "cylinder", "radius": 0.01, "center": [0.0, 0.01, 0.05], "frame": "lab"},
+     "frame = \"lab\""),
+])
+def test_a_part_the_continuum_cannot_take_is_one_line(part, says):
+    scen = Scenario(tub={"radius": 0.05, "rim_height": 0.1, "length": 0.02},
+                    fill={"count": 200},
+                    parts=[{"name": "p1", **part}])
+    with pytest.raises(InputError) as e:
+        continuum_parts(scen)
+    text = str(e.value)
+    assert "\n" not in text and "parts.0 (\"p1\")" in text and says in text
