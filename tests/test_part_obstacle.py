@@ -34,7 +34,7 @@ from vibroflow.io.parts_file import MAX_PATCHES, read_parts, write_parts
 from vibroflow.measure.phase_shear import PhaseShear
 from vibroflow.scenario.model import Scenario
 from vibroflow.tub.geometry import TubGeometry
-from vibroflow.tub.motion import TubMotion, pose_np
+from vibroflow.tub.motion import TubMotion, pose
 from vibroflow.tub.parts import Part, pack
 
 #: a small U (m) and a box across it whose flat top is at z = R, where the U's sides turn
@@ -72,7 +72,7 @@ def _mpm_layer_on_shelf(frame):
 
 def test_mpm_layer_on_a_part_carries_its_weight_and_no_point_enters_it():
     """The material points' layer on the shelf: after settling, the wall law's force on the
-    part is the layer's weight per metre (within 1 %), and no point's centre ever lies inside
+    part is the layer's weight per metre, downwards (within 1 %), and no point's centre ever lies inside
     the part."""
     system, state, part = _mpm_layer_on_shelf(LabFrame((0.0, -G_ACC)))
     least = [np.inf]
@@ -83,14 +83,14 @@ def test_mpm_layer_on_a_part_carries_its_weight_and_no_point_enters_it():
     run_steps(system, state, int(0.08 / system.dt), watch)
     force_on_part = -state.history[part.slot]["f"].sum(axis=0)
     weight = state.mass.sum() * G_ACC
-    assert force_on_part[1] == pytest.approx(weight, rel=0.01)
+    assert force_on_part[1] == pytest.approx(-weight, rel=0.01)  # pressed down
     assert abs(force_on_part[0]) < 1e-6 * weight
     assert least[0] > 0.0
 
 
 def test_eulerian_layer_on_a_part_carries_its_weight_and_no_cell_in_it_fills():
     """The Eulerian mesh's layer on the shelf: the cells inside the part are outside the domain
-    and never hold material; the part's wall layer carries the layer's weight (within 1 %)."""
+    and never hold material; the part's wall layer carries the layer's weight (within 1 %), pressed downwards."""
     dx = mesh_dx = 2 * R / 20
     mesh = EulerianMesh.tub(GEO, mesh_dx, (SHELF,), packed_section((SHELF,)))
     h = mesh.h
@@ -115,29 +115,33 @@ def test_eulerian_layer_on_a_part_carries_its_weight_and_no_cell_in_it_fills():
     cells = np.nonzero(mesh.part_of == 0)[0]
     force_on_part = -wall_force_on_material(cells, mesh.normal, state.wall)
     weight = state.total_mass() * G_ACC
-    assert force_on_part[1] == pytest.approx(weight, rel=0.01)
+    assert force_on_part[1] == pytest.approx(-weight, rel=0.01)  # pressed down
 
 
 def test_mpm_part_in_a_shaken_tub_feels_the_frame_and_the_bed_stays_with_it():
     """Galilean check: the layer on a tub-fixed part in a tub shaken up and down at 10 Hz with
     0.3 g stays at rest relative to the tub (speeds below 2 mm/s, against the tub's 47 mm/s),
-    and the part feels the layer's weight in the moving frame, m (g + Z''(t)), within 3 %."""
+    and the part feels the layer's weight in the moving frame, m (g + Z''(t)): the force per
+    unit mass less g against Z'' has slope 1 (within 5 %, the layer's own elastic lag) and no
+    offset (within 1 % of g)."""
     f, a = 10.0, 0.3 * G_ACC
     motion = TubMotion(frequency=f, amplitude_x=0.0, amplitude_z=a / (2 * math.pi * f) ** 2,
                        phase_z=0.0, amplitude_theta=0.0)
     system, state, part = _mpm_layer_on_shelf(TubFrame(motion, (0.0, -G_ACC)))
-    run_steps(system, state, int(0.02 / system.dt))  # the start's elastic transient
-    ratios, speeds = [], []
+    run_steps(system, state, int(0.06 / system.dt))  # the start's settling transient
+    acc, held, speeds = [], [], []
 
     def watch(s):
-        zdd = pose_np(motion.as_array(), s.t)[7]
-        ratios.append(-s.history[part.slot]["f"][:, 1].sum() / (s.mass.sum() * (G_ACC + zdd)))
+        acc.append(pose(motion.as_array(), float(s.t))[7])
+        # the part holds the layer up: its force on the material is m (g + Z'')
+        held.append(s.history[part.slot]["f"][:, 1].sum() / s.mass.sum() - G_ACC)
         speeds.append(float(np.hypot(s.v[:, 0], s.v[:, 1]).max()))
 
     run_steps(system, state, int(0.1 / system.dt), watch)
     assert np.max(speeds) < 2e-3
-    assert np.mean(ratios) == pytest.approx(1.0, abs=0.01)
-    assert np.max(np.abs(np.array(ratios) - 1.0)) < 0.03
+    slope, offset = np.polyfit(acc, held, 1)
+    assert slope == pytest.approx(1.0, abs=0.05)
+    assert abs(offset) < 0.01 * G_ACC
 
 
 def test_a_part_section_below_a_height_is_its_area():
