@@ -255,3 +255,38 @@ def test_a_part_the_continuum_cannot_take_is_one_line(part, says):
         continuum_parts(scen)
     text = str(e.value)
     assert "\n" not in text and "parts.0 (\"p1\")" in text and says in text
+
+
+def test_section_outlines_are_the_parts_sections(tmp_path):
+    """The ParaView outline of a cylinder's section lies on its circle; a box turned by 30
+    degrees has its four corners where the rotation puts them; an STL prism of that box (12
+    triangles across the slice) cut at the slice's middle has the box's perimeter; the file
+    holds one line cell per segment with its part's index."""
+    from vtk_reader import read_vtk
+    from vibroflow.continuum.part_obstacle import section_segments
+    from vibroflow.io.vtk import write_section_lines
+
+    bar = Part(name="bar", shape="cylinder", center=(0.05, 0.01, 0.1), material="steel",
+               radius=0.0125)
+    seg = section_segments(bar, 0.01)
+    assert np.hypot(seg[..., 0] - 0.05, seg[..., 1] - 0.1) == pytest.approx(0.0125)
+    box = Part(name="box", shape="box", center=(0.0, 0.01, 0.05), material="steel",
+               half_size=(0.02, 0.01, 0.01), angle_y=math.radians(30))
+    corners = section_segments(box, 0.01)[:, 0]
+    c, s = math.cos(math.radians(30)), math.sin(math.radians(30))
+    assert corners[1] == pytest.approx([0.02 * c + 0.01 * s, 0.05 + 0.02 * s - 0.01 * c])
+    hx, hz = 0.02, 0.01
+    v = np.array([[x, y, z] for x in (-hx, hx) for y in (0.0, 0.02) for z in (-hz, hz)])
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    tri = np.array([[v[a], v[b], v[c_]] for q in quads
+                    for a, b, c_ in ((q[0], q[1], q[2]), (q[0], q[2], q[3]))])
+    prism = Part(name="prism", shape="stl", center=(0.0, 0.01, 0.0), material="steel",
+                 triangles=tri)
+    cut = section_segments(prism, 0.01)
+    assert np.linalg.norm(cut[:, 1] - cut[:, 0], axis=1).sum() == pytest.approx(
+        4 * (hx + hz))
+    write_section_lines(tmp_path / "parts.vtu", [seg, cut], 0.01)
+    got = read_vtk(tmp_path / "parts.vtu")
+    assert got["CellData"]["part"].tolist() == [0] * len(seg) + [1] * len(cut)
+    (points,) = got["Points"].values()
+    assert points[:, 1] == pytest.approx(0.01)

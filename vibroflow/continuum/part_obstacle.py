@@ -91,6 +91,37 @@ def section_bounds(part: Part) -> tuple[float, float, float, float]:
             float(t[:, :, 2].max()))
 
 
+def section_segments(part: Part, y: float, n_arc: int = 72) -> np.ndarray:
+    """The outline of the part's section at y as line segments (M, 2, 2) ((start, end), (x, z)
+    m): a cylinder's circle as n_arc chords, a box's four edges, an STL's triangles cut by the
+    plane y (each triangle crossing it gives one segment)."""
+    cx, _, cz = part.center
+    if part.shape == "cylinder":
+        a = np.linspace(0.0, 2.0 * math.pi, n_arc + 1)
+        pts = np.stack([cx + part.radius * np.cos(a), cz + part.radius * np.sin(a)], axis=1)
+        return np.stack([pts[:-1], pts[1:]], axis=1)
+    if part.shape == "box":
+        hx, _, hz = part.half_size
+        c, s = math.cos(part.angle_y), math.sin(part.angle_y)
+        q = np.array([[-hx, -hz], [hx, -hz], [hx, hz], [-hx, hz], [-hx, -hz]])
+        # the box's axes turned by angle_y about y (x towards z), as tub.parts.part_nearest
+        pts = np.stack([cx + c * q[:, 0] - s * q[:, 1], cz + s * q[:, 0] + c * q[:, 1]], axis=1)
+        return np.stack([pts[:-1], pts[1:]], axis=1)
+    segs = []
+    for tri in part.triangles:
+        d = tri[:, 1] - y
+        cut = []
+        for i in range(3):
+            a, b = tri[i], tri[(i + 1) % 3]
+            da, db = d[i], d[(i + 1) % 3]
+            if (da < 0.0) != (db < 0.0):
+                w = da / (da - db)
+                cut.append([a[0] + w * (b[0] - a[0]), a[2] + w * (b[2] - a[2])])
+        if len(cut) == 2:
+            segs.append(cut)
+    return np.array(segs, dtype=float).reshape(-1, 2, 2)
+
+
 def section_gaps(parts: tuple[Part, ...], packed: tuple, y: float, x: np.ndarray,
                  z: np.ndarray) -> np.ndarray:
     """The least gap (m; negative inside) of the points (x, z) from any part's section at y;
