@@ -72,8 +72,8 @@ def _mpm_layer_on_shelf(frame):
 
 def test_mpm_layer_on_a_part_carries_its_weight_and_no_point_enters_it():
     """The material points' layer on the shelf: after settling, the wall law's force on the
-    part is the layer's weight per metre, downwards (within 1 %), and no point's centre ever lies inside
-    the part."""
+    part is the layer's weight per metre, downwards (within 1 %), and no point's centre ever
+    lies inside the part."""
     system, state, part = _mpm_layer_on_shelf(LabFrame((0.0, -G_ACC)))
     least = [np.inf]
 
@@ -90,7 +90,8 @@ def test_mpm_layer_on_a_part_carries_its_weight_and_no_point_enters_it():
 
 def test_eulerian_layer_on_a_part_carries_its_weight_and_no_cell_in_it_fills():
     """The Eulerian mesh's layer on the shelf: the cells inside the part are outside the domain
-    and never hold material; the part's wall layer carries the layer's weight (within 1 %), pressed downwards."""
+    and never hold material; the part's wall layer carries the layer's weight, pressed
+    downwards (within 1 %)."""
     dx = mesh_dx = 2 * R / 20
     mesh = EulerianMesh.tub(GEO, mesh_dx, (SHELF,), packed_section((SHELF,)))
     h = mesh.h

@@ -5,9 +5,9 @@ to the points' external force before the particle-to-grid transfer, using the po
 and velocity at the start of the step.  A boundary object gives the compiled step loop
 (fused.py) its numbers as one record of BOUNDARY_DTYPE (`record()`: its kind, and the fields
 of that kind by name), and `boundary_forces` runs the kernel of the record's kind
-(`u_wall_forces`, `plane_forces`, `part_wall_forces`, `partition_forces`): a new kind of boundary is a class, a
-kernel and a branch of `boundary_forces` here, and the step loop stays as it is.  A boundary
-with a per-point history (`init_history(n)`, `state.history[self.slot]`; the penalty walls)
+(`u_wall_forces`, `plane_forces`, `part_wall_forces`, `partition_forces`): a new kind of
+boundary is a class, a kernel and a branch of `boundary_forces` here, and the step loop stays
+as it is.  A boundary with a per-point history (`init_history(n)`, `state.history[self.slot]`; the penalty walls)
 says so (`has_history`); the walls also have `lost(state)`: the ids of the points the last
 step found through the wall by more than their own side, which the solver reports as a
 blow-up (mpm/solver.py).
