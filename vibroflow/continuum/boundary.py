@@ -7,10 +7,10 @@ and velocity at the start of the step.  A boundary object gives the compiled ste
 of that kind by name), and `boundary_forces` runs the kernel of the record's kind
 (`u_wall_forces`, `plane_forces`, `part_wall_forces`, `partition_forces`): a new kind of
 boundary is a class, a kernel and a branch of `boundary_forces` here, and the step loop stays
-as it is.  A boundary with a per-point history (`init_history(n)`, `state.history[self.slot]`; the penalty walls)
-says so (`has_history`); the walls also have `lost(state)`: the ids of the points the last
-step found through the wall by more than their own side, which the solver reports as a
-blow-up (mpm/solver.py).
+as it is.  A boundary with a per-point history (`init_history(n)`,
+`state.history[self.slot]`; the penalty walls) says so (`has_history`); the walls also have
+`lost(state)`: the ids of the points the last step found through the wall by more than their
+own side, which the solver reports as a blow-up (mpm/solver.py).
 
 Wall contact (`UWall`, `Plane`): a penalty contact with a constant normal stiffness, as the
 published finite element study of the tub did (a linear pressure-overclosure law), and Coulomb
