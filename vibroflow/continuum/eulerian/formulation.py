@@ -24,6 +24,10 @@ The tub (continuum.tub_run's timeline):
    their force over the slice (N).  The summary's "continuum" block holds the shear rates from
    the cells holding at least half a cell of material and the mass error (M_end - M_0) / M_0
    with its largest magnitude over the run.
+3. Parts (part_obstacle.py): the mesh leaves out the cells inside each part and gives the cells
+   along it a wall layer of the U's law (mesh.py); the U's contacts and near-wall shear rate
+   are the U's wall layer's alone, and each sample records the force on each part
+   (wall.wall_force_on_material over its wall layer).
 
 The column collapse: eulerian/column.py's set-up.
 """

@@ -8,7 +8,9 @@ share the bed's area (their lattice misses a sliver along the curved wall).  Eac
 sampled as a "ball" of the point's solid volume m_p L_y / rho_s at its centre, with its lab
 position and velocity; its wall contacts are the points touching the U.  The wall's normal
 stiffness is constant: (K + 4G/3) / l0 with l0 the point spacing (the bed's elastic stiffness
-over one point), its damping ratio that of the scenario's ball-wall restitution.  With vtk,
+over one point), its damping ratio that of the scenario's ball-wall restitution.  Each part of
+the scenario's [[parts]] is a wall of the same law (boundary.PartWall, part_obstacle.py), the
+bed's points filled around it, and each sample records the force on it.  With vtk,
 ParaView files of the points and of the grid fields over the last cycle (continuum.paraview).
 
 The column collapse: mpm/column.py's set-up.

@@ -238,7 +238,7 @@ def pack_boundaries(boundaries) -> tuple[np.ndarray, list]:
     for j, b in enumerate(boundaries):
         if not hasattr(b, "record"):
             raise InputError(f"boundary {type(b).__name__}: has no record() for the MPM step "
-                             "(boundary.py: UWall, Plane, PartitionFriction)")
+                             "(boundary.py: UWall, Plane, PartWall, PartitionFriction)")
         records[j] = b.record()
         if b.has_history:
             records[j]["hist"] = len(walls)
