@@ -310,3 +310,17 @@ def test_section_outlines_are_the_parts_sections(tmp_path):
     assert got["CellData"]["part"].tolist() == [0] * len(seg) + [1] * len(cut)
     (points,) = got["Points"].values()
     assert points[:, 1] == pytest.approx(0.01)
+
+
+def test_a_study_refuses_a_part_the_continuum_cannot_take_before_it_starts(tmp_path):
+    """`vibroflow run` with a sphere in the bed: the one-line error before any stage, no
+    folder made (the DEM would otherwise run first)."""
+    from vibroflow.study.pipeline import run_study
+
+    scen = Scenario(tub={"radius": 0.05, "rim_height": 0.1, "length": 0.02},
+                    fill={"count": 200},
+                    parts=[{"name": "ball", "shape": "sphere", "radius": 0.008,
+                            "center": [0.0, 0.01, 0.05]}])
+    with pytest.raises(InputError, match=r"parts\.0 \(\"ball\"\)\.shape = \"sphere\""):
+        run_study(scen, tmp_path / "study", echo=None)
+    assert not (tmp_path / "study").exists()
