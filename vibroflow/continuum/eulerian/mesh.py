@@ -33,6 +33,7 @@ from vibroflow.tub.geometry import distance_to_wall_np, u_wall_nearest
 
 from ..boundary import part_section_nearest_np as section_nearest
 from ..grid import Grid
+from ..part_obstacle import packed_section
 
 
 @dataclass
@@ -116,7 +117,8 @@ class EulerianMesh:
         """The U of vibroflow.tub.geometry (tub frame) up to its rim, cells of side dx/2 (m);
         dx must divide the tub's width 2R into an even number of cells.  parts (tub.parts.Part,
         spanning the slice) with their packing (part_obstacle.packed_section): obstacles in the
-        U (module docstring), their section at the slice's middle."""
+        U (module docstring), their section at the slice's middle (packed: computed when not
+        given)."""
         R = geometry.radius
         h = 0.5 * dx
         n = 2.0 * R / h
@@ -126,6 +128,8 @@ class EulerianMesh:
         zmax = h * math.ceil(geometry.rim_height / h - 1e-9)
 
         y = 0.5 * geometry.length
+        if parts and packed is None:
+            packed = packed_section(parts)
         which = {}
 
         def level_set(x, z):
