@@ -324,3 +324,35 @@ def test_a_study_refuses_a_part_the_continuum_cannot_take_before_it_starts(tmp_p
     with pytest.raises(InputError, match=r"parts\.0 \(\"ball\"\)\.shape = \"sphere\""):
         run_study(scen, tmp_path / "study", echo=None)
     assert not (tmp_path / "study").exists()
+
+
+def test_inferred_speed_by_patch_from_the_temperature_where_the_calibration_prefers_it():
+    """With a calibration preferring T at the wall and a run carrying T: the speed on a patch
+    is max(b0 + b1 sqrt(T), 0) of the T map at its nodes (T = 0.01 m^2/s^2 right of the bar,
+    0.04 left of it: 0.05 + 2 x 0.1 = 0.25 m/s and 0.05 + 2 x 0.2 = 0.45 m/s), its error the
+    bed-mean T's carried through, b1 se(T) / (2 sqrt(T_bed))."""
+    bar = Part(name="bar", shape="cylinder", center=(0.0, 0.01, 0.05), material="steel",
+               radius=0.0125)
+    h = 0.005
+    nxh, nz = 8, 21
+    x = np.arange(-nxh, nxh + 1) * h
+    z = np.arange(nz) * h
+    X, _ = np.meshgrid(x, z)
+    phase = _phase_field(x, z, np.full(X.shape, 10.0), np.full(X.shape, 0.5))
+    samples = Samples(0, 1, 0, cell_grid=(h, nxh, nz), temperature=True)
+    samples.temperature_cell_sum[:] = np.where(X > 0, 0.01, 0.04)
+    samples.temperature_cell_n[:] = 1.0
+    calib = SimpleNamespace(impacts=SimpleNamespace(ball_wall=ImpactRelation(
+        c0_cells_m_s=9.0, c1_cells=9.0, preferred_relation="temperature",
+        b0_temperature_cells_m_s=0.05, b1_temperature_cells=2.0)))
+    scen = Scenario(tub={"radius": 0.05, "rim_height": 0.1, "length": 0.02},
+                    fill={"count": 200},
+                    parts=[{"name": "bar", "shape": "cylinder", "center": [0.0, 0.01, 0.05],
+                            "radius": 0.0125}])
+    ds = part_dataset("eulerian", scen, (bar,), pack((bar,)), calib, 0.00635, phase, samples,
+                      np.zeros(0), np.zeros(0, np.int64), 1.0, (0.0225, 0.003))
+    v = ds["normal_speed_mean"].sel(part="bar").values
+    assert v[0] == pytest.approx(0.25) and v[18] == pytest.approx(0.45)
+    assert ds["normal_speed_mean_stderr"].sel(part="bar").values[0] == pytest.approx(
+        2.0 * 0.003 / (2 * math.sqrt(0.0225)))
+    assert "sqrt(T)" in ds.attrs["inferred_from"]
