@@ -70,9 +70,8 @@ def cell_wall_sums(boundaries, normal, mass, v, volume, stress, rho_c, h, dt, st
 
 
 def _make_kernel(parallel: bool):
-    """The compiled loop over fused.advance_kernel (`parallel`) or advance_kernel_serial; a
-    closure constant, so the two are cached apart."""
-    step_kernel = fused.advance_kernel if parallel else fused.advance_kernel_serial
+    """The compiled loop over fused.advance_kernel (`parallel`) or advance_kernel_serial;
+    `parallel` is a closure constant, so the two are cached apart."""
 
     @nb.njit(cache=True)
     def advance_temperature_kernel(nsteps, t, mass_error_max, cells, step, mesh, boundaries,
@@ -103,8 +102,12 @@ def _make_kernel(parallel: bool):
                               cells.phase, ts, p_kin)
             m_start = mass.copy()
             v_start = v.copy()
-            done, t, status, lowest, mass_error_max = step_kernel(
-                1, t, mass_error_max, cells, step, mesh, boundaries, grid, work, cell_work)
+            if parallel:
+                done, t, status, lowest, mass_error_max = fused.advance_kernel(
+                    1, t, mass_error_max, cells, step, mesh, boundaries, grid, work, cell_work)
+            else:
+                done, t, status, lowest, mass_error_max = fused.advance_kernel_serial(
+                    1, t, mass_error_max, cells, step, mesh, boundaries, grid, work, cell_work)
             if status != fused.OK:
                 return s + done, t, status, lowest, mass_error_max
             production_W_m3(cells.stress, cells.L, cells.gamma_dot, p_kin, power)
