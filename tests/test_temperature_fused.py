@@ -5,8 +5,10 @@ the same state to round-off after many steps of a shaken, sheared layer with eve
 (the kinetic stress, the walls' slip and landing feed, the partitions, conduction)."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
+import numba
 import numpy as np
 import pytest
 
@@ -90,3 +92,29 @@ def test_the_compiled_balance_is_the_step_by_step_one(method):
         a, b = getattr(fused, name), getattr(stepwise, name)
         scale = np.abs(b).max()
         assert np.abs(a - b).max() <= 1e-9 * scale, f"{name} differs"
+
+
+def _on_threads(method, threads):
+    """The layer after a cycle and a tenth with `threads` numba threads, the Eulerian mesh
+    made to take its parallel loop (serial_below 0)."""
+    if numba.config.NUMBA_NUM_THREADS < threads:
+        pytest.skip(f"numba has fewer than {threads} threads here")
+    solver = mpm if method == "lagrangian" else eulerian
+    system, state = _layer(method)
+    if method == "eulerian":
+        system = dataclasses.replace(system, serial_below=0)
+    numba.set_num_threads(threads)
+    try:
+        solver.advance(system, state, int(round(1.1 / (FREQUENCY * system.dt))))
+    finally:
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    return state
+
+
+@pytest.mark.parametrize("method", ["lagrangian", "eulerian"])
+def test_the_compiled_balance_gives_the_same_numbers_on_one_thread_and_on_two(method):
+    # the balance runs serially between the step's chunked parallel loops (DEVELOPERS.md,
+    # "Threads"): the numbers depend on the chunks, never on the threads
+    one, two = _on_threads(method, 1), _on_threads(method, 2)
+    for name in ("temperature", "v", "stress", "mass"):
+        assert np.array_equal(getattr(one, name), getattr(two, name)), f"{name} differs"
