@@ -7,8 +7,8 @@ They are temperature_field.py's step-by-step path (`point_step`, `cell_step`,
 operations: the points binned to the balance's cells in point order (np.bincount's order), the
 cells' balance (temperature_step.step_temperature_walls with wall_energy_flux.cell_wall_terms),
 each point's T scaled by its cell's T_new / T_old.  They run serially, so the numbers do not
-depend on the number of threads; on tub47-quick they cost less than a tenth of the mechanical
-step (docs/decisions/granular-temperature-closures.md, "Cost").
+depend on the number of threads (docs/decisions/granular-temperature-closures.md, "Cost", for
+what they cost).
 
 `TemperatureStep` is a run's TemperatureModel (temperature_field.py) as a numba record, with the
 caps of the kinetic stress that advance_with_temperature derives.
