@@ -26,7 +26,9 @@ kernels shows.  A kernel timed from Python pays its call (~1 us with these many 
 --temperature: every case is run twice, without and with the granular temperature (its
 balance made inside the compiled loops: mpm/temperature_loop.py, eulerian/temperature_loop.py;
 initial T --initial-temperature, default 0.01 m^2/s^2), the column T saying which, and the
-ratio of their wall times printed; with --kernels, the whole step is timed both ways too.
+ratio of their wall times printed; with --kernels, the step is also timed on one bed 3000 steps
+into a run with T: the mechanical step alone, with T in the compiled loop, and with T step by
+step (`temperature_steps`).
 
 --dem-dir: a `vibroflow dem` folder (or a study's dem/) of the same case: its summary.json's
 wall_time_s and bulk_velocity.csv.  --calibration: a calibration.toml (default: the DEM
@@ -271,13 +273,42 @@ def kernels(a) -> dict:
             lambda: advance(system, state, 20), 10) / 20
         t["whole step (one step a call)"] = _per_call(lambda: advance(system, state, 1), 100)
         if a.temperature:
-            a.temperature_on = True
-            system, state, advance = _settled(method, scenario, cal, _options(method, a))
-            a.temperature_on = False
-            t["whole step with T (compiled loop, 20 steps a call)"] = _per_call(
-                lambda: advance(system, state, 20), 10) / 20
+            t.update(temperature_steps(method, scenario, cal, a))
         out[method] = {"points": int(state.n if method == "lagrangian"
                                      else (state.mass > 0).sum()), "us_per_call": t}
+    return out
+
+
+def temperature_steps(method, scenario, cal, a, warm: int = 3000, n: int = 200) -> dict:
+    """Microseconds a step on one bed, the settled bed `warm` steps into a run with the
+    granular temperature (hotter and looser than without it): the mechanical step alone (the
+    fused loop without T), the compiled loop with T, and the step-by-step path
+    (solver.advance_stepwise), each best of 3 runs of n steps from a copy of the same state."""
+    import copy
+
+    import numpy as np
+
+    from vibroflow.continuum.eulerian import solver as eulerian
+    from vibroflow.continuum.mpm import solver as mpm
+
+    solver = mpm if method == "lagrangian" else eulerian
+    a.temperature_on = True
+    system, state, advance = _settled(method, scenario, cal, _options(method, a))
+    a.temperature_on = False
+    advance(system, state, warm)
+    out = {}
+    for name, run in ((f"mechanical step alone ({warm} steps into T)",
+                       lambda s: solver._advance(system, s, n, np.empty((0, 5)))),
+                      ("step with T (compiled loop)", lambda s: advance(system, s, n)),
+                      ("step with T (step by step)",
+                       lambda s: solver.advance_stepwise(system, s, n))):
+        best = math.inf
+        for _ in range(3):
+            s = copy.deepcopy(state)
+            t0 = time.perf_counter()
+            run(s)
+            best = min(best, time.perf_counter() - t0)
+        out[name] = 1e6 * best / n
     return out
 
 
