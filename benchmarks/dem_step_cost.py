@@ -42,7 +42,11 @@ def _settled(scenario, system):
     from vibroflow.dem import fill as F
     from vibroflow.dem.output import load_state_file, save_state_file
 
-    path = F.cache_dir() / "fills" / f"{F.fill_cache_key(scenario, system.nchunk)}.h5"
+    try:  # the key of this checkout, or of a peer whose DEM had force chunks
+        key = F.fill_cache_key(scenario)
+    except TypeError:
+        key = F.fill_cache_key(scenario, system.nchunk)
+    path = F.cache_dir() / "fills" / f"{key}.h5"
     if not path.exists():
         state = F.fill_state(system, scenario)
         info = F.settle(system, state, scenario)

@@ -100,7 +100,7 @@ class Sim:
 
     def __init__(self, sc: Scenario):
         self.scenario = sc
-        self.system = S.make_system(sc, nchunk=1)
+        self.system = S.make_system(sc)
         names = self.system.material_names
         ps = sc.particles
         with one_thread():

@@ -10,6 +10,11 @@ Each list entry carries its contact's history (tangential spring and rolling tor
 saying whether the pair was touching at the last step; on a rebuild, `transfer_history` copies
 them from the old list to the new one, so a contact keeps its history for its whole life.
 
+For the tub step's force assembly (vibroflow.dem.step) the list also carries, made at each
+build (`index_pairs`), a slot of nine numbers per entry for the pair's force and torques and the
+reverse index: for each ball j, the entries (i, j) where it is the second ball, in ascending
+order, so that each ball gathers its pairs' forces in a fixed order.
+
 Periodic length in y: positions are wrapped into [0, L) at each build and distances use the
 minimum image.
 """
@@ -154,6 +159,25 @@ def transfer_history(old_start, old_nbr, old_hist, old_flag, new_start, new_nbr)
     return hist, flag
 
 
+@nb.njit(cache=True)
+def reverse_index(nbr, n):
+    """(rstart (n + 1,), rslot (M,)): for each ball j, the list entries k with nbr[k] == j in
+    ascending k (a counting sort: the same on any machine)."""
+    m = nbr.shape[0]
+    rstart = np.zeros(n + 1, np.int64)
+    for k in range(m):
+        rstart[nbr[k] + 1] += 1
+    for j in range(n):
+        rstart[j + 1] += rstart[j]
+    fill = rstart[:-1].copy()
+    rslot = np.empty(m, np.int64)
+    for k in range(m):
+        j = nbr[k]
+        rslot[fill[j]] = k
+        fill[j] += 1
+    return rstart, rslot
+
+
 class NeighbourList:
     """Cell grid and half Verlet list of one configuration (arrays only; see module doc)."""
 
@@ -166,6 +190,9 @@ class NeighbourList:
         self.flag = np.zeros(0, np.uint8)
         self.builds = 0
         self._bounds = None
+        self.slot = None
+        self.rstart = None
+        self.rslot = None
 
     def build(self, pos: np.ndarray, radius: np.ndarray) -> None:
         """Rebuild from the positions `pos` (wrapped in y in place when periodic)."""
@@ -189,7 +216,17 @@ class NeighbourList:
             flag = np.zeros(nbr.shape[0], np.uint8)
         self.start, self.nbr, self.hist, self.flag = start, nbr, hist, flag
         self._bounds = None
+        self.slot = None
+        self.index_pairs()
         self.builds += 1
+
+    def index_pairs(self) -> None:
+        """The reverse index and the pair slots of the current list (see the module doc),
+        made when missing (after a build, or a list read from a file)."""
+        if self.slot is not None and self.slot.shape[0] == self.nbr.shape[0]:
+            return
+        self.rstart, self.rslot = reverse_index(self.nbr, self.start.shape[0] - 1)
+        self.slot = np.zeros((self.nbr.shape[0], 9))
 
     def chunk_bounds(self, nchunk: int) -> np.ndarray:
         """Split the balls into `nchunk` contiguous chunks of about equal work (list entries,

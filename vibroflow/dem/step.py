@@ -10,11 +10,20 @@ the caller (dem/simulate.py) rebuilds and calls again.  All loops over balls are
 The kernels take the records of vibroflow.dem.records and read their fields into local
 variables first.
 
-Parallel force assembly without races or atomics: balls are split into `nchunk` contiguous
-chunks; the pair forces of chunk c go to its own buffer fbuf[c], then the buffers are summed in
-a fixed order.  The result is reproducible bit for bit for a given chunk count (the checkpoint
-records it), whatever the number of threads: the chunk count is a constant
-(the scenario's run.force_chunks), not the thread count.
+Force assembly whose numbers do not depend on the thread count (DEVELOPERS.md, "Threads"):
+
+1. pairs: every entry k of the half neighbour list (i, j > i) is evaluated once, its contact
+   history advanced once, and its force on i and torques on i and j written to its own slot
+   `out[k]` (no two entries share a slot: no races, no atomics);
+2. gather: each ball sums its slots in a fixed order, those where it is the second ball
+   (`rstart`/`rslot`, ascending entry) then its own, then adds gravity and its walls
+   (`ball_walls`), and finishes the step.
+
+Each sum is over the same terms in the same order whatever the threads.  The balls are cut into
+NBLOCK contiguous blocks of about equal work (a function of the list alone); the threads share
+the blocks, and each block keeps its own impact buffer and diagnostics, so the impacts come out
+block by block in an order that is the same on any machine.  With the other-ball slots first
+the sums are those of a serial loop over the list that adds each pair to both balls.
 """
 from __future__ import annotations
 
@@ -22,17 +31,25 @@ import numba as nb
 import numpy as np
 
 from ..tub.motion import pose as tub_pose
-from .contact import (add_pair, branch_vector, contact_force, forget, pair_contact_velocity,
-                      put3, unit_normal)
+from .contact import (branch_vector, contact_force, forget, pair_contact_velocity, put3,
+                      unit_normal)
 from .walls import (KIND_BALL_BALL, KIND_BALL_PARTITION, KIND_BALL_PLANE, KIND_BALL_TUB,
                     TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT, WALL_PLANE0, WALL_U, plane_wall,
                     u_wall)
 
-# columns of the per-chunk diagnostics
+# columns of the per-block diagnostics
 D_BALL_OVERLAP, D_BALL_I, D_BALL_J, D_WALL_OVERLAP, D_WALL_I, D_WALL_W, D_NAN, D_LOST = range(8)
 N_DIAG = 8
 # status codes returned by advance
 DONE, REBUILD, IMPACTS_FULL, BLOWUP = 0, 1, 2, 3
+# blocks of balls of the parallel loops: a constant, so that the impacts' order and the
+# diagnostics are the same on any number of threads (up to NBLOCK of them share the work)
+NBLOCK = 256
+# what fixes a run's numbers beyond its scenario (checkpoints and the fill cache record it)
+ASSEMBLY = f"pair slots, gathered per ball; {NBLOCK} blocks"
+# columns of a pair slot: force on i (N), torque on i, torque on j (N m)
+S_F, S_TI, S_TJ = 0, 3, 6
+N_SLOT = 9
 
 
 @nb.njit(cache=True, inline="always")
@@ -49,13 +66,16 @@ def _record_impact(imp_buf, imp_count, c, t, kind, x, y, z, speed):
 
 
 @nb.njit(cache=True)
-def _pair_chunk(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, table, work):
+def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, slots, table,
+                work):
+    """The list entries of the balls of block c: each touching pair's force and torques into
+    its slot (step 1 of the module docstring)."""
     pos, vel, omg = balls.pos, balls.vel, balls.omg
     radius, mass, mat = balls.radius, balls.mass, balls.mat
     nbr_start, nbr, hist, flag = pairs.start, pairs.nbr, pairs.hist, pairs.flag
     bounds = pairs.bounds
-    fbuf, tbuf, imp_buf, imp_count, diag = (work.fbuf, work.tbuf, work.imp_buf, work.imp_count,
-                                            work.diag)
+    out = slots.out
+    imp_buf, imp_count, diag = work.imp_buf, work.imp_count, work.diag
     lo, hi = bounds[c], bounds[c + 1]
     for i in range(lo, hi):
         ri = radius[i]
@@ -86,7 +106,15 @@ def _pair_chunk(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, ta
                 delta, nx, ny, nz, vx, vy, vz,
                 omg[i, 0] - omg[j, 0], omg[i, 1] - omg[j, 1], omg[i, 2] - omg[j, 2],
                 ri, rj, r_eff, m_eff, par, hist[k], dt_hist)
-            add_pair(fbuf, tbuf, c, i, j, fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz)
+            out[k, S_F] = fx
+            out[k, S_F + 1] = fy
+            out[k, S_F + 2] = fz
+            out[k, S_TI] = tix
+            out[k, S_TI + 1] = tiy
+            out[k, S_TI + 2] = tiz
+            out[k, S_TJ] = tjx
+            out[k, S_TJ + 1] = tjy
+            out[k, S_TJ + 2] = tjz
             if delta > diag[c, D_BALL_OVERLAP]:
                 diag[c, D_BALL_OVERLAP] = delta
                 diag[c, D_BALL_I] = i
@@ -106,158 +134,193 @@ def _pose_array(motion, pivot_x, pivot_z, t, out):
     out[7] = pivot_z
 
 
-@nb.njit(cache=True)
-def _finish_chunk(c, t, kick, record_impacts, balls, walls, bounds, params, work):
-    """For the balls of chunk c: gather the pair forces from every chunk's buffer (and clear
-    it), add gravity and the walls, and with `kick` finish the step (second half kick) and
-    measure the largest move since the last list build (tub frame) into moved[c].
+@nb.njit(cache=True, inline="always")
+def _gather(i, pairs, slots):
+    """Sum of ball i's pair forces and torques (step 2 of the module docstring): the slots where
+    it is the second ball (force reversed, torque on j), then its own."""
+    nbr_start, flag = pairs.start, pairs.flag
+    out, rstart, rslot = slots.out, slots.rstart, slots.rslot
+    fx = 0.0
+    fy = 0.0
+    fz = 0.0
+    tx = 0.0
+    ty = 0.0
+    tz = 0.0
+    for r in range(rstart[i], rstart[i + 1]):
+        k = rslot[r]
+        if flag[k]:
+            fx -= out[k, S_F]
+            fy -= out[k, S_F + 1]
+            fz -= out[k, S_F + 2]
+            tx += out[k, S_TJ]
+            ty += out[k, S_TJ + 1]
+            tz += out[k, S_TJ + 2]
+    for k in range(nbr_start[i], nbr_start[i + 1]):
+        if flag[k]:
+            fx += out[k, S_F]
+            fy += out[k, S_F + 1]
+            fz += out[k, S_F + 2]
+            tx += out[k, S_TI]
+            ty += out[k, S_TI + 1]
+            tz += out[k, S_TI + 2]
+    return fx, fy, fz, tx, ty, tz
 
-    Everything is in this one loop on purpose: a numba call that passes arrays costs a
-    reference-count update per array, which per ball and wall slot cost more than the
-    contact itself.  Without `kick` (the set-up force evaluation) contact histories are not
-    advanced, as in LAMMPS' setup."""
-    pos, vel, omg, force, torque = balls.pos, balls.vel, balls.omg, balls.force, balls.torque
-    radius, mass, mat, ref_tub = balls.radius, balls.mass, balls.mat, balls.ref_tub
+
+@nb.njit(cache=True, inline="always")
+def ball_walls(i, c, t, dt_hist, record_impacts, balls, walls, params, work, cth, sth,
+               fx, fy, fz, tx, ty, tz):
+    """Ball i's contacts with the tub's U wall, its partitions and the plane walls, at time t
+    (s) with the tub's pose in work.pose (cth, sth: cos and sin of its angle): each contact's
+    force and torque added to (fx, fy, fz, tx, ty, tz), returned; the wall slots' histories
+    advanced by dt_hist, their forces and contact points stored, new contacts recorded as
+    impacts into block c's buffer and the largest overlap into its diagnostics."""
+    pos, vel, omg = balls.pos, balls.vel, balls.omg
+    radius, mass, mat = balls.radius, balls.mass, balls.mat
     wall_hist, wall_flag, wall_fn, wall_ft = walls.hist, walls.flag, walls.fn, walls.ft
     wall_slide, wall_point, wall_force, wall_arc = walls.slide, walls.point, walls.force, walls.arc
-    dt, gravity, table, tub = params.dt, params.gravity, params.table, params.tub
-    wall_mat, planes = params.wall_mat, params.planes
-    fbuf, tbuf, imp_buf, imp_count, diag = (work.fbuf, work.tbuf, work.imp_buf, work.imp_count,
-                                            work.diag)
-    pose, moved = work.pose, work.moved
-    nchunk = fbuf.shape[0]
+    table, tub, wall_mat, planes = params.table, params.tub, params.wall_mat, params.planes
+    imp_buf, imp_count, diag, pose = work.imp_buf, work.imp_count, work.diag, work.pose
+    has_tub = tub[TUB_PRESENT] > 0.0
+    partitions = has_tub and tub[TUB_PERIODIC] == 0.0
+    length = tub[TUB_LENGTH]
+    n_walls = WALL_PLANE0 + planes.shape[0]
+    r = radius[i]
+    # ball-tub frame quantities used by the tub's walls
+    rx = pos[i, 0] - pose[0] - pose[6]
+    rz = pos[i, 2] - pose[1] - pose[7]
+    for w in range(n_walls):
+        # geometry of slot w: overlap, normal (wall -> ball), wall velocity and spin (y),
+        # contact point
+        if w == WALL_U:
+            if not has_tub:
+                continue
+            delta, nx, nz, vwx, vwz, cx, cz, s, outside = u_wall(
+                pos[i, 0], pos[i, 2], r, tub, pose, cth, sth)
+            if outside and diag[c, D_LOST] < 0.0:
+                diag[c, D_LOST] = i
+            if delta <= 0.0 and not wall_flag[i, w]:
+                continue
+            if delta > 0.0:
+                wall_arc[i] = s
+            ny = 0.0
+            vwy = 0.0
+            wwy = -pose[5]
+            cy = pos[i, 1]
+            kind = KIND_BALL_TUB
+        elif w < WALL_PLANE0:
+            if not partitions:
+                continue
+            y = pos[i, 1]
+            if w == 1:
+                if (y < 0.0 or y > length) and diag[c, D_LOST] < 0.0:
+                    diag[c, D_LOST] = i
+                delta = r - y
+                ny = 1.0
+                cy = 0.0
+            else:
+                delta = r - (length - y)
+                ny = -1.0
+                cy = length
+            if delta <= 0.0 and not wall_flag[i, w]:
+                continue
+            nx = 0.0
+            nz = 0.0
+            vwx = pose[3] - pose[5] * rz
+            vwz = pose[4] + pose[5] * rx
+            vwy = 0.0
+            wwy = -pose[5]
+            cx = pose[6] + cth * rx + sth * rz
+            cz = pose[7] - sth * rx + cth * rz
+            kind = KIND_BALL_PARTITION
+        else:
+            k = w - WALL_PLANE0
+            delta, vwx, vwy, vwz = plane_wall(pos[i, 0], pos[i, 1], pos[i, 2], r,
+                                              planes[k], t)
+            if delta <= 0.0 and not wall_flag[i, w]:
+                continue
+            nx = planes[k, 3]
+            ny = planes[k, 4]
+            nz = planes[k, 5]
+            wwy = 0.0
+            cx = pos[i, 0] - (r - delta) * nx
+            cy = pos[i, 1] - (r - delta) * ny
+            cz = pos[i, 2] - (r - delta) * nz
+            kind = KIND_BALL_PLANE
+        if delta <= 0.0:
+            # the contact has just ended: forget its history
+            wall_flag[i, w] = 0
+            for q in range(6):
+                wall_hist[i, w, q] = 0.0
+            wall_fn[i, w] = 0.0
+            wall_ft[i, w] = 0.0
+            wall_slide[i, w] = 0
+            continue
+        vx = vel[i, 0] - r * (omg[i, 1] * nz - omg[i, 2] * ny) - vwx
+        vy = vel[i, 1] - r * (omg[i, 2] * nx - omg[i, 0] * nz) - vwy
+        vz = vel[i, 2] - r * (omg[i, 0] * ny - omg[i, 1] * nx) - vwz
+        if not wall_flag[i, w]:
+            wall_flag[i, w] = 1
+            if record_impacts:
+                vn = vx * nx + vy * ny + vz * nz
+                _record_impact(imp_buf, imp_count, c, t, kind, pos[i, 0] - r * nx,
+                               pos[i, 1] - r * ny, pos[i, 2] - r * nz, -vn)
+        wfx, wfy, wfz, tix, tiy, tiz, _tjx, _tjy, _tjz, fn, ft, sl = contact_force(
+            delta, nx, ny, nz, vx, vy, vz, omg[i, 0], omg[i, 1] - wwy, omg[i, 2],
+            r, 0.0, r, mass[i], table[mat[i], wall_mat[w]], wall_hist[i, w], dt_hist)
+        fx += wfx
+        fy += wfy
+        fz += wfz
+        tx += tix
+        ty += tiy
+        tz += tiz
+        wall_fn[i, w] = fn
+        wall_ft[i, w] = ft
+        wall_slide[i, w] = sl
+        wall_point[i, w, 0] = cx
+        wall_point[i, w, 1] = cy
+        wall_point[i, w, 2] = cz
+        wall_force[i, w, 0] = wfx
+        wall_force[i, w, 1] = wfy
+        wall_force[i, w, 2] = wfz
+        if delta > diag[c, D_WALL_OVERLAP]:
+            diag[c, D_WALL_OVERLAP] = delta
+            diag[c, D_WALL_I] = i
+            diag[c, D_WALL_W] = w
+    return fx, fy, fz, tx, ty, tz
+
+
+@nb.njit(cache=True)
+def _finish_block(c, t, kick, record_impacts, balls, pairs, slots, walls, params, work):
+    """For the balls of block c: gather the pair forces, add gravity and the walls, and with
+    `kick` finish the step (second half kick) and measure the largest move since the last list
+    build (tub frame) into moved[c].
+
+    One loop on purpose: a numba call that passes arrays costs a reference-count update per
+    array, which per ball cost more than its contacts; the helpers are inlined.  Without
+    `kick` (the set-up force evaluation) contact histories are not advanced, as in LAMMPS'
+    setup."""
+    pos, vel, omg, force, torque = balls.pos, balls.vel, balls.omg, balls.force, balls.torque
+    radius, mass, ref_tub = balls.radius, balls.mass, balls.ref_tub
+    dt, gravity = params.dt, params.gravity
+    diag, pose, moved = work.diag, work.pose, work.moved
+    bounds = pairs.bounds
     lo, hi = bounds[c], bounds[c + 1]
     cth = np.cos(pose[2])
     sth = np.sin(pose[2])
     half_dt = 0.5 * dt
     dt_hist = dt if kick else 0.0
-    has_tub = tub[TUB_PRESENT] > 0.0
-    partitions = has_tub and tub[TUB_PERIODIC] == 0.0
-    length = tub[TUB_LENGTH]
-    n_walls = WALL_PLANE0 + planes.shape[0]
     m2 = 0.0
     for i in range(lo, hi):
-        fx = mass[i] * gravity[0]
-        fy = mass[i] * gravity[1]
-        fz = mass[i] * gravity[2]
-        tx = 0.0
-        ty = 0.0
-        tz = 0.0
-        for b in range(nchunk):
-            fx += fbuf[b, i, 0]
-            fy += fbuf[b, i, 1]
-            fz += fbuf[b, i, 2]
-            tx += tbuf[b, i, 0]
-            ty += tbuf[b, i, 1]
-            tz += tbuf[b, i, 2]
-            for a in range(3):
-                fbuf[b, i, a] = 0.0
-                tbuf[b, i, a] = 0.0
-        r = radius[i]
-        # ball-tub frame quantities used by the tub's walls
-        rx = pos[i, 0] - pose[0] - pose[6]
-        rz = pos[i, 2] - pose[1] - pose[7]
-        for w in range(n_walls):
-            # geometry of slot w: overlap, normal (wall -> ball), wall velocity and spin (y),
-            # contact point
-            if w == WALL_U:
-                if not has_tub:
-                    continue
-                delta, nx, nz, vwx, vwz, cx, cz, s, outside = u_wall(
-                    pos[i, 0], pos[i, 2], r, tub, pose, cth, sth)
-                if outside and diag[c, D_LOST] < 0.0:
-                    diag[c, D_LOST] = i
-                if delta <= 0.0 and not wall_flag[i, w]:
-                    continue
-                if delta > 0.0:
-                    wall_arc[i] = s
-                ny = 0.0
-                vwy = 0.0
-                wwy = -pose[5]
-                cy = pos[i, 1]
-                kind = KIND_BALL_TUB
-            elif w < WALL_PLANE0:
-                if not partitions:
-                    continue
-                y = pos[i, 1]
-                if w == 1:
-                    if (y < 0.0 or y > length) and diag[c, D_LOST] < 0.0:
-                        diag[c, D_LOST] = i
-                    delta = r - y
-                    ny = 1.0
-                    cy = 0.0
-                else:
-                    delta = r - (length - y)
-                    ny = -1.0
-                    cy = length
-                if delta <= 0.0 and not wall_flag[i, w]:
-                    continue
-                nx = 0.0
-                nz = 0.0
-                vwx = pose[3] - pose[5] * rz
-                vwz = pose[4] + pose[5] * rx
-                vwy = 0.0
-                wwy = -pose[5]
-                cx = pose[6] + cth * rx + sth * rz
-                cz = pose[7] - sth * rx + cth * rz
-                kind = KIND_BALL_PARTITION
-            else:
-                k = w - WALL_PLANE0
-                delta, vwx, vwy, vwz = plane_wall(pos[i, 0], pos[i, 1], pos[i, 2], r,
-                                                  planes[k], t)
-                if delta <= 0.0 and not wall_flag[i, w]:
-                    continue
-                nx = planes[k, 3]
-                ny = planes[k, 4]
-                nz = planes[k, 5]
-                wwy = 0.0
-                cx = pos[i, 0] - (r - delta) * nx
-                cy = pos[i, 1] - (r - delta) * ny
-                cz = pos[i, 2] - (r - delta) * nz
-                kind = KIND_BALL_PLANE
-            if delta <= 0.0:
-                # the contact has just ended: forget its history
-                wall_flag[i, w] = 0
-                for q in range(6):
-                    wall_hist[i, w, q] = 0.0
-                wall_fn[i, w] = 0.0
-                wall_ft[i, w] = 0.0
-                wall_slide[i, w] = 0
-                continue
-            vx = vel[i, 0] - r * (omg[i, 1] * nz - omg[i, 2] * ny) - vwx
-            vy = vel[i, 1] - r * (omg[i, 2] * nx - omg[i, 0] * nz) - vwy
-            vz = vel[i, 2] - r * (omg[i, 0] * ny - omg[i, 1] * nx) - vwz
-            if not wall_flag[i, w]:
-                wall_flag[i, w] = 1
-                if record_impacts:
-                    vn = vx * nx + vy * ny + vz * nz
-                    _record_impact(imp_buf, imp_count, c, t, kind, pos[i, 0] - r * nx,
-                                   pos[i, 1] - r * ny, pos[i, 2] - r * nz, -vn)
-            wfx, wfy, wfz, tix, tiy, tiz, _tjx, _tjy, _tjz, fn, ft, sl = contact_force(
-                delta, nx, ny, nz, vx, vy, vz, omg[i, 0], omg[i, 1] - wwy, omg[i, 2],
-                r, 0.0, r, mass[i], table[mat[i], wall_mat[w]], wall_hist[i, w], dt_hist)
-            fx += wfx
-            fy += wfy
-            fz += wfz
-            tx += tix
-            ty += tiy
-            tz += tiz
-            wall_fn[i, w] = fn
-            wall_ft[i, w] = ft
-            wall_slide[i, w] = sl
-            wall_point[i, w, 0] = cx
-            wall_point[i, w, 1] = cy
-            wall_point[i, w, 2] = cz
-            wall_force[i, w, 0] = wfx
-            wall_force[i, w, 1] = wfy
-            wall_force[i, w, 2] = wfz
-            if delta > diag[c, D_WALL_OVERLAP]:
-                diag[c, D_WALL_OVERLAP] = delta
-                diag[c, D_WALL_I] = i
-                diag[c, D_WALL_W] = w
+        px, py, pz, tx, ty, tz = _gather(i, pairs, slots)
+        fx = mass[i] * gravity[0] + px
+        fy = mass[i] * gravity[1] + py
+        fz = mass[i] * gravity[2] + pz
+        fx, fy, fz, tx, ty, tz = ball_walls(i, c, t, dt_hist, record_impacts, balls, walls,
+                                            params, work, cth, sth, fx, fy, fz, tx, ty, tz)
         put3(force, i, fx, fy, fz)
         put3(torque, i, tx, ty, tz)
         if kick:
+            r = radius[i]
             im = 1.0 / mass[i]
             ii = 1.0 / (0.4 * mass[i] * r * r)
             for a in range(3):
@@ -278,25 +341,25 @@ def _finish_chunk(c, t, kick, record_impacts, balls, walls, bounds, params, work
 
 
 @nb.njit(cache=True, parallel=True)
-def compute_forces(t, kick, record_impacts, balls, pairs, walls, params, work):
+def compute_forces(t, kick, record_impacts, balls, pairs, slots, walls, params, work):
     """Forces and torques at the current positions (gravity, pairs, walls) at time t (s), with
     the tub's pose in work.pose; with `kick`, also the step's second half kick.  Two parallel
-    loops: pairs into the chunk buffers, then each chunk's balls."""
-    nchunk = work.fbuf.shape[0]
+    loops over the blocks: the pairs into their slots, then each ball's gather."""
+    nblock = work.diag.shape[0]
     tub = params.tub
     periodic_length = tub[TUB_LENGTH] if (tub[TUB_PRESENT] > 0.0 and
                                           tub[TUB_PERIODIC] > 0.0) else 0.0
     dt_hist = params.dt if kick else 0.0  # the set-up evaluation does not advance histories
-    for c in nb.prange(nchunk):
-        _pair_chunk(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, params.table,
-                    work)
-    for c in nb.prange(nchunk):
-        _finish_chunk(c, t, kick, record_impacts, balls, walls, pairs.bounds, params, work)
+    for c in nb.prange(nblock):
+        _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, slots,
+                    params.table, work)
+    for c in nb.prange(nblock):
+        _finish_block(c, t, kick, record_impacts, balls, pairs, slots, walls, params, work)
 
 
 @nb.njit(cache=True, parallel=True)
-def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pairs, walls, params,
-            work):
+def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pairs, slots, walls,
+            params, work):
     """Run up to `nsteps` velocity-Verlet steps from step `step0`.
 
     Time is t = (step - time_origin_step) dt, so that the vibration's phase comes from an
@@ -309,7 +372,7 @@ def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pair
     imp_buf, imp_count, diag, pose, moved = (work.imp_buf, work.imp_count, work.diag, work.pose,
                                              work.moved)
     n = pos.shape[0]
-    nchunk = work.fbuf.shape[0]
+    nblock = diag.shape[0]
     half_dt = 0.5 * dt
     hs2 = half_skin * half_skin
     cap = imp_buf.shape[1]
@@ -325,11 +388,11 @@ def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pair
         step = step0 + k + 1
         t = (step - time_origin_step) * dt
         _pose_array(motion, pose[6], pose[7], t, pose)
-        compute_forces(t, True, record_impacts, balls, pairs, walls, params, work)
+        compute_forces(t, True, record_impacts, balls, pairs, slots, walls, params, work)
         blown = False
         rebuild = False
         full = False
-        for c in range(nchunk):
+        for c in range(nblock):
             if diag[c, D_NAN] >= 0.0 or diag[c, D_LOST] >= 0.0:
                 blown = True
             if diag[c, D_BALL_OVERLAP] > max_overlap or diag[c, D_WALL_OVERLAP] > max_overlap:
