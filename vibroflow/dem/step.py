@@ -134,47 +134,54 @@ def _pose_array(motion, pivot_x, pivot_z, t, out):
     out[7] = pivot_z
 
 
-@nb.njit(cache=True, inline="always")
-def _gather(i, pairs, slots):
-    """Sum of ball i's pair forces and torques (step 2 of the module docstring): the slots where
-    it is the second ball (force reversed, torque on j), then its own."""
-    nbr_start, flag = pairs.start, pairs.flag
+@nb.njit(cache=True)
+def _gather_block(c, balls, pairs, slots, params):
+    """Step 2 of the module docstring for the balls of block c: force = weight + the pair
+    forces, torque = the pair torques, each sum over the slots where the ball is the second
+    ball (force reversed, torque on j) and then its own, in ascending entry order."""
+    force, torque, mass = balls.force, balls.torque, balls.mass
+    nbr_start, flag, bounds = pairs.start, pairs.flag, pairs.bounds
     out, rstart, rslot = slots.out, slots.rstart, slots.rslot
-    fx = 0.0
-    fy = 0.0
-    fz = 0.0
-    tx = 0.0
-    ty = 0.0
-    tz = 0.0
-    for r in range(rstart[i], rstart[i + 1]):
-        k = rslot[r]
-        if flag[k]:
-            fx -= out[k, S_F]
-            fy -= out[k, S_F + 1]
-            fz -= out[k, S_F + 2]
-            tx += out[k, S_TJ]
-            ty += out[k, S_TJ + 1]
-            tz += out[k, S_TJ + 2]
-    for k in range(nbr_start[i], nbr_start[i + 1]):
-        if flag[k]:
-            fx += out[k, S_F]
-            fy += out[k, S_F + 1]
-            fz += out[k, S_F + 2]
-            tx += out[k, S_TI]
-            ty += out[k, S_TI + 1]
-            tz += out[k, S_TI + 2]
-    return fx, fy, fz, tx, ty, tz
+    gravity = params.gravity
+    gx, gy, gz = gravity[0], gravity[1], gravity[2]
+    for i in range(bounds[c], bounds[c + 1]):
+        fx = 0.0
+        fy = 0.0
+        fz = 0.0
+        tx = 0.0
+        ty = 0.0
+        tz = 0.0
+        for r in range(rstart[i], rstart[i + 1]):
+            k = rslot[r]
+            if flag[k]:
+                fx -= out[k, S_F]
+                fy -= out[k, S_F + 1]
+                fz -= out[k, S_F + 2]
+                tx += out[k, S_TJ]
+                ty += out[k, S_TJ + 1]
+                tz += out[k, S_TJ + 2]
+        for k in range(nbr_start[i], nbr_start[i + 1]):
+            if flag[k]:
+                fx += out[k, S_F]
+                fy += out[k, S_F + 1]
+                fz += out[k, S_F + 2]
+                tx += out[k, S_TI]
+                ty += out[k, S_TI + 1]
+                tz += out[k, S_TI + 2]
+        m = mass[i]
+        put3(force, i, m * gx + fx, m * gy + fy, m * gz + fz)
+        put3(torque, i, tx, ty, tz)
 
 
-@nb.njit(cache=True, inline="always")
-def ball_walls(i, c, t, dt_hist, record_impacts, balls, walls, params, work, cth, sth,
-               fx, fy, fz, tx, ty, tz):
-    """Ball i's contacts with the tub's U wall, its partitions and the plane walls, at time t
-    (s) with the tub's pose in work.pose (cth, sth: cos and sin of its angle): each contact's
-    force and torque added to (fx, fy, fz, tx, ty, tz), returned; the wall slots' histories
-    advanced by dt_hist, their forces and contact points stored, new contacts recorded as
-    impacts into block c's buffer and the largest overlap into its diagnostics."""
-    pos, vel, omg = balls.pos, balls.vel, balls.omg
+@nb.njit(cache=True)
+def ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work):
+    """The wall-contact pass of the balls of block c: each ball's contacts with the tub's U
+    wall, its partitions and the plane walls, at time t (s) with the tub's pose in work.pose,
+    their forces and torques added to the ball's force and torque, one contact after the
+    other; the wall slots' histories advanced by dt_hist, their forces and contact points
+    stored, new contacts recorded as impacts into block c's buffer and the largest overlap into
+    its diagnostics."""
+    pos, vel, omg, force, torque = balls.pos, balls.vel, balls.omg, balls.force, balls.torque
     radius, mass, mat = balls.radius, balls.mass, balls.mat
     wall_hist, wall_flag, wall_fn, wall_ft = walls.hist, walls.flag, walls.fn, walls.ft
     wall_slide, wall_point, wall_force, wall_arc = walls.slide, walls.point, walls.force, walls.arc
@@ -184,159 +191,148 @@ def ball_walls(i, c, t, dt_hist, record_impacts, balls, walls, params, work, cth
     partitions = has_tub and tub[TUB_PERIODIC] == 0.0
     length = tub[TUB_LENGTH]
     n_walls = WALL_PLANE0 + planes.shape[0]
-    r = radius[i]
-    # ball-tub frame quantities used by the tub's walls
-    rx = pos[i, 0] - pose[0] - pose[6]
-    rz = pos[i, 2] - pose[1] - pose[7]
-    for w in range(n_walls):
-        # geometry of slot w: overlap, normal (wall -> ball), wall velocity and spin (y),
-        # contact point
-        if w == WALL_U:
-            if not has_tub:
-                continue
-            delta, nx, nz, vwx, vwz, cx, cz, s, outside = u_wall(
-                pos[i, 0], pos[i, 2], r, tub, pose, cth, sth)
-            if outside and diag[c, D_LOST] < 0.0:
-                diag[c, D_LOST] = i
-            if delta <= 0.0 and not wall_flag[i, w]:
-                continue
-            if delta > 0.0:
-                wall_arc[i] = s
-            ny = 0.0
-            vwy = 0.0
-            wwy = -pose[5]
-            cy = pos[i, 1]
-            kind = KIND_BALL_TUB
-        elif w < WALL_PLANE0:
-            if not partitions:
-                continue
-            y = pos[i, 1]
-            if w == 1:
-                if (y < 0.0 or y > length) and diag[c, D_LOST] < 0.0:
+    cth = np.cos(pose[2])
+    sth = np.sin(pose[2])
+    for i in range(pairs.bounds[c], pairs.bounds[c + 1]):
+        fx, fy, fz = force[i, 0], force[i, 1], force[i, 2]
+        tx, ty, tz = torque[i, 0], torque[i, 1], torque[i, 2]
+        r = radius[i]
+        m = mass[i]
+        mat_i = mat[i]
+        # ball-tub frame quantities used by the tub's walls
+        rx = pos[i, 0] - pose[0] - pose[6]
+        rz = pos[i, 2] - pose[1] - pose[7]
+        for w in range(n_walls):
+            # geometry of slot w: overlap, normal (wall -> ball), wall velocity and spin (y),
+            # contact point
+            if w == WALL_U:
+                if not has_tub:
+                    continue
+                delta, nx, nz, vwx, vwz, cx, cz, s, outside = u_wall(
+                    pos[i, 0], pos[i, 2], r, tub, pose, cth, sth)
+                if outside and diag[c, D_LOST] < 0.0:
                     diag[c, D_LOST] = i
-                delta = r - y
-                ny = 1.0
-                cy = 0.0
+                if delta <= 0.0 and not wall_flag[i, w]:
+                    continue
+                if delta > 0.0:
+                    wall_arc[i] = s
+                ny = 0.0
+                vwy = 0.0
+                wwy = -pose[5]
+                cy = pos[i, 1]
+                kind = KIND_BALL_TUB
+            elif w < WALL_PLANE0:
+                if not partitions:
+                    continue
+                y = pos[i, 1]
+                if w == 1:
+                    if (y < 0.0 or y > length) and diag[c, D_LOST] < 0.0:
+                        diag[c, D_LOST] = i
+                    delta = r - y
+                    ny = 1.0
+                    cy = 0.0
+                else:
+                    delta = r - (length - y)
+                    ny = -1.0
+                    cy = length
+                if delta <= 0.0 and not wall_flag[i, w]:
+                    continue
+                nx = 0.0
+                nz = 0.0
+                vwx = pose[3] - pose[5] * rz
+                vwz = pose[4] + pose[5] * rx
+                vwy = 0.0
+                wwy = -pose[5]
+                cx = pose[6] + cth * rx + sth * rz
+                cz = pose[7] - sth * rx + cth * rz
+                kind = KIND_BALL_PARTITION
             else:
-                delta = r - (length - y)
-                ny = -1.0
-                cy = length
-            if delta <= 0.0 and not wall_flag[i, w]:
+                k = w - WALL_PLANE0
+                delta, vwx, vwy, vwz = plane_wall(pos[i, 0], pos[i, 1], pos[i, 2], r,
+                                                  planes[k], t)
+                if delta <= 0.0 and not wall_flag[i, w]:
+                    continue
+                nx = planes[k, 3]
+                ny = planes[k, 4]
+                nz = planes[k, 5]
+                wwy = 0.0
+                cx = pos[i, 0] - (r - delta) * nx
+                cy = pos[i, 1] - (r - delta) * ny
+                cz = pos[i, 2] - (r - delta) * nz
+                kind = KIND_BALL_PLANE
+            if delta <= 0.0:
+                # the contact has just ended: forget its history
+                wall_flag[i, w] = 0
+                for q in range(6):
+                    wall_hist[i, w, q] = 0.0
+                wall_fn[i, w] = 0.0
+                wall_ft[i, w] = 0.0
+                wall_slide[i, w] = 0
                 continue
-            nx = 0.0
-            nz = 0.0
-            vwx = pose[3] - pose[5] * rz
-            vwz = pose[4] + pose[5] * rx
-            vwy = 0.0
-            wwy = -pose[5]
-            cx = pose[6] + cth * rx + sth * rz
-            cz = pose[7] - sth * rx + cth * rz
-            kind = KIND_BALL_PARTITION
-        else:
-            k = w - WALL_PLANE0
-            delta, vwx, vwy, vwz = plane_wall(pos[i, 0], pos[i, 1], pos[i, 2], r,
-                                              planes[k], t)
-            if delta <= 0.0 and not wall_flag[i, w]:
-                continue
-            nx = planes[k, 3]
-            ny = planes[k, 4]
-            nz = planes[k, 5]
-            wwy = 0.0
-            cx = pos[i, 0] - (r - delta) * nx
-            cy = pos[i, 1] - (r - delta) * ny
-            cz = pos[i, 2] - (r - delta) * nz
-            kind = KIND_BALL_PLANE
-        if delta <= 0.0:
-            # the contact has just ended: forget its history
-            wall_flag[i, w] = 0
-            for q in range(6):
-                wall_hist[i, w, q] = 0.0
-            wall_fn[i, w] = 0.0
-            wall_ft[i, w] = 0.0
-            wall_slide[i, w] = 0
-            continue
-        vx = vel[i, 0] - r * (omg[i, 1] * nz - omg[i, 2] * ny) - vwx
-        vy = vel[i, 1] - r * (omg[i, 2] * nx - omg[i, 0] * nz) - vwy
-        vz = vel[i, 2] - r * (omg[i, 0] * ny - omg[i, 1] * nx) - vwz
-        if not wall_flag[i, w]:
-            wall_flag[i, w] = 1
-            if record_impacts:
-                vn = vx * nx + vy * ny + vz * nz
-                _record_impact(imp_buf, imp_count, c, t, kind, pos[i, 0] - r * nx,
-                               pos[i, 1] - r * ny, pos[i, 2] - r * nz, -vn)
-        wfx, wfy, wfz, tix, tiy, tiz, _tjx, _tjy, _tjz, fn, ft, sl = contact_force(
-            delta, nx, ny, nz, vx, vy, vz, omg[i, 0], omg[i, 1] - wwy, omg[i, 2],
-            r, 0.0, r, mass[i], table[mat[i], wall_mat[w]], wall_hist[i, w], dt_hist)
-        fx += wfx
-        fy += wfy
-        fz += wfz
-        tx += tix
-        ty += tiy
-        tz += tiz
-        wall_fn[i, w] = fn
-        wall_ft[i, w] = ft
-        wall_slide[i, w] = sl
-        wall_point[i, w, 0] = cx
-        wall_point[i, w, 1] = cy
-        wall_point[i, w, 2] = cz
-        wall_force[i, w, 0] = wfx
-        wall_force[i, w, 1] = wfy
-        wall_force[i, w, 2] = wfz
-        if delta > diag[c, D_WALL_OVERLAP]:
-            diag[c, D_WALL_OVERLAP] = delta
-            diag[c, D_WALL_I] = i
-            diag[c, D_WALL_W] = w
-    return fx, fy, fz, tx, ty, tz
+            vx = vel[i, 0] - r * (omg[i, 1] * nz - omg[i, 2] * ny) - vwx
+            vy = vel[i, 1] - r * (omg[i, 2] * nx - omg[i, 0] * nz) - vwy
+            vz = vel[i, 2] - r * (omg[i, 0] * ny - omg[i, 1] * nx) - vwz
+            if not wall_flag[i, w]:
+                wall_flag[i, w] = 1
+                if record_impacts:
+                    vn = vx * nx + vy * ny + vz * nz
+                    _record_impact(imp_buf, imp_count, c, t, kind, pos[i, 0] - r * nx,
+                                   pos[i, 1] - r * ny, pos[i, 2] - r * nz, -vn)
+            wfx, wfy, wfz, tix, tiy, tiz, _tjx, _tjy, _tjz, fn, ft, sl = contact_force(
+                delta, nx, ny, nz, vx, vy, vz, omg[i, 0], omg[i, 1] - wwy, omg[i, 2],
+                r, 0.0, r, m, table[mat_i, wall_mat[w]], wall_hist[i, w], dt_hist)
+            fx += wfx
+            fy += wfy
+            fz += wfz
+            tx += tix
+            ty += tiy
+            tz += tiz
+            wall_fn[i, w] = fn
+            wall_ft[i, w] = ft
+            wall_slide[i, w] = sl
+            wall_point[i, w, 0] = cx
+            wall_point[i, w, 1] = cy
+            wall_point[i, w, 2] = cz
+            wall_force[i, w, 0] = wfx
+            wall_force[i, w, 1] = wfy
+            wall_force[i, w, 2] = wfz
+            if delta > diag[c, D_WALL_OVERLAP]:
+                diag[c, D_WALL_OVERLAP] = delta
+                diag[c, D_WALL_I] = i
+                diag[c, D_WALL_W] = w
+        put3(force, i, fx, fy, fz)
+        put3(torque, i, tx, ty, tz)
 
 
 @nb.njit(cache=True)
-def _finish_block(c, t, kick, record_impacts, balls, pairs, slots, walls, params, work):
-    """For the balls of block c: gather the pair forces, add gravity and the walls, and with
-    `kick` finish the step (second half kick) and measure the largest move since the last list
-    build (tub frame) into moved[c].
-
-    One loop on purpose: a numba call that passes arrays costs a reference-count update per
-    array, which per ball cost more than its contacts; the helpers are inlined.  Without
-    `kick` (the set-up force evaluation) contact histories are not advanced, as in LAMMPS'
-    setup."""
+def _kick_block(c, balls, pairs, params, work):
+    """The step's second half kick of the balls of block c, and the largest squared move of
+    one of them since the last list build (tub frame) into moved[c]."""
     pos, vel, omg, force, torque = balls.pos, balls.vel, balls.omg, balls.force, balls.torque
     radius, mass, ref_tub = balls.radius, balls.mass, balls.ref_tub
-    dt, gravity = params.dt, params.gravity
     diag, pose, moved = work.diag, work.pose, work.moved
-    bounds = pairs.bounds
-    lo, hi = bounds[c], bounds[c + 1]
+    half_dt = 0.5 * params.dt
     cth = np.cos(pose[2])
     sth = np.sin(pose[2])
-    half_dt = 0.5 * dt
-    dt_hist = dt if kick else 0.0
     m2 = 0.0
-    for i in range(lo, hi):
-        px, py, pz, tx, ty, tz = _gather(i, pairs, slots)
-        fx = mass[i] * gravity[0] + px
-        fy = mass[i] * gravity[1] + py
-        fz = mass[i] * gravity[2] + pz
-        fx, fy, fz, tx, ty, tz = ball_walls(i, c, t, dt_hist, record_impacts, balls, walls,
-                                            params, work, cth, sth, fx, fy, fz, tx, ty, tz)
-        put3(force, i, fx, fy, fz)
-        put3(torque, i, tx, ty, tz)
-        if kick:
-            r = radius[i]
-            im = 1.0 / mass[i]
-            ii = 1.0 / (0.4 * mass[i] * r * r)
-            for a in range(3):
-                vel[i, a] += half_dt * force[i, a] * im
-                omg[i, a] += half_dt * torque[i, a] * ii
-            rx = pos[i, 0] - pose[0] - pose[6]
-            rz = pos[i, 2] - pose[1] - pose[7]
-            dx = pose[6] + cth * rx + sth * rz - ref_tub[i, 0]
-            dy = pos[i, 1] - ref_tub[i, 1]
-            dz = pose[7] - sth * rx + cth * rz - ref_tub[i, 2]
-            d2 = dx * dx + dy * dy + dz * dz
-            if not (d2 < 1e300):  # NaN or infinite
-                if diag[c, D_NAN] < 0.0:
-                    diag[c, D_NAN] = i
-            elif d2 > m2:
-                m2 = d2
+    for i in range(pairs.bounds[c], pairs.bounds[c + 1]):
+        r = radius[i]
+        im = 1.0 / mass[i]
+        ii = 1.0 / (0.4 * mass[i] * r * r)
+        for a in range(3):
+            vel[i, a] += half_dt * force[i, a] * im
+            omg[i, a] += half_dt * torque[i, a] * ii
+        rx = pos[i, 0] - pose[0] - pose[6]
+        rz = pos[i, 2] - pose[1] - pose[7]
+        dx = pose[6] + cth * rx + sth * rz - ref_tub[i, 0]
+        dy = pos[i, 1] - ref_tub[i, 1]
+        dz = pose[7] - sth * rx + cth * rz - ref_tub[i, 2]
+        d2 = dx * dx + dy * dy + dz * dz
+        if not (d2 < 1e300):  # NaN or infinite
+            if diag[c, D_NAN] < 0.0:
+                diag[c, D_NAN] = i
+        elif d2 > m2:
+            m2 = d2
     moved[c] = m2
 
 
@@ -344,7 +340,11 @@ def _finish_block(c, t, kick, record_impacts, balls, pairs, slots, walls, params
 def compute_forces(t, kick, record_impacts, balls, pairs, slots, walls, params, work):
     """Forces and torques at the current positions (gravity, pairs, walls) at time t (s), with
     the tub's pose in work.pose; with `kick`, also the step's second half kick.  Two parallel
-    loops over the blocks: the pairs into their slots, then each ball's gather."""
+    loops over the blocks: the pairs into their slots; then, block by block, each ball's gather,
+    its wall contacts and its kick.  Each is a loop over a block's balls in one compiled
+    function: a numba call that passes arrays costs a reference-count update per array, which
+    per ball would cost more than its contacts.  Without `kick` (the set-up force evaluation)
+    contact histories are not advanced, as in LAMMPS' setup."""
     nblock = work.diag.shape[0]
     tub = params.tub
     periodic_length = tub[TUB_LENGTH] if (tub[TUB_PRESENT] > 0.0 and
@@ -354,7 +354,12 @@ def compute_forces(t, kick, record_impacts, balls, pairs, slots, walls, params, 
         _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, slots,
                     params.table, work)
     for c in nb.prange(nblock):
-        _finish_block(c, t, kick, record_impacts, balls, pairs, slots, walls, params, work)
+        _gather_block(c, balls, pairs, slots, params)
+        ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work)
+        if kick:
+            _kick_block(c, balls, pairs, params, work)
+        else:
+            work.moved[c] = 0.0
 
 
 @nb.njit(cache=True, parallel=True)
