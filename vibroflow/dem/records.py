@@ -38,11 +38,14 @@ class Pairs(NamedTuple):
 
 
 class PairSlots(NamedTuple):
-    """The tub step's per-pair results and the list's reverse index (vibroflow.dem.step)."""
+    """The half list's entries in reverse order, ball j by ball j (the entries (i, j) where j
+    is the second ball, ascending), with each touching entry's force and torque on j: the tub
+    step's force assembly (vibroflow.dem.step, vibroflow.dem.neighbours)."""
 
-    out: np.ndarray        # (M, 9) force on i (N), torques on i and on j (N m) of each entry
-    rstart: np.ndarray     # (N + 1,) first reverse entry of each ball
-    rslot: np.ndarray      # (M,) entries where the ball is the second (j), ascending
+    out: np.ndarray        # (M, 6) force (N) and torque (N m) on j, in reverse order
+    rstart: np.ndarray     # (N + 1,) first reverse position of each ball
+    rpos: np.ndarray       # (M,) reverse position of each list entry
+    rflag: np.ndarray      # (M,) uint8 the list's contact flags in reverse order
 
 
 class Walls(NamedTuple):
@@ -106,7 +109,7 @@ def pairs_of(nl, nblock: int = 1) -> Pairs:
 def slots_of(nl) -> PairSlots:
     """The PairSlots record of a vibroflow.dem.neighbours.NeighbourList's current arrays."""
     nl.index_pairs()
-    return PairSlots(nl.slot, nl.rstart, nl.rslot)
+    return PairSlots(nl.rout, nl.rstart, nl.rpos, nl.rflag)
 
 class BoxBalls(NamedTuple):
     """The balls of the Lees-Edwards box (vibroflow.dem.periodic_step), one row a ball (SI)."""

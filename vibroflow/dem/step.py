@@ -12,18 +12,20 @@ variables first.
 
 Force assembly whose numbers do not depend on the thread count (DEVELOPERS.md, "Threads"):
 
-1. pairs: every entry k of the half neighbour list (i, j > i) is evaluated once, its contact
-   history advanced once, and its force on i and torques on i and j written to its own slot
-   `out[k]` (no two entries share a slot: no races, no atomics);
-2. gather: each ball sums its slots in a fixed order, those where it is the second ball
-   (`rstart`/`rslot`, ascending entry) then its own, then adds gravity and its walls
-   (`ball_walls`), and finishes the step.
+1. pairs (`_pair_block`): every entry k of the half neighbour list (i, j > i) is evaluated
+   once, by the thread that has ball i, its contact history advanced once; the force and the
+   torque on i are summed into i's force and torque (from its weight) as the entries come, and
+   the force and torque on j are written to the entry's own slot, kept in the list's reverse
+   order (vibroflow.dem.neighbours: no two entries share a slot, no races, no atomics);
+2. gather (`_gather_block`): each ball j adds the slots of the entries where it is the second
+   ball, in ascending entry order, reading them in sequence;
+3. walls (`ball_walls`): each ball's wall contacts, added one after the other;
+4. kick (`_kick_block`): the step's second half kick.
 
 Each sum is over the same terms in the same order whatever the threads.  The balls are cut into
 NBLOCK contiguous blocks of about equal work (a function of the list alone); the threads share
 the blocks, and each block keeps its own impact buffer and diagnostics, so the impacts come out
-block by block in an order that is the same on any machine.  With the other-ball slots first
-the sums are those of a serial loop over the list that adds each pair to both balls.
+block by block in an order that is the same on any machine.
 """
 from __future__ import annotations
 
@@ -43,13 +45,12 @@ N_DIAG = 8
 # status codes returned by advance
 DONE, REBUILD, IMPACTS_FULL, BLOWUP = 0, 1, 2, 3
 # blocks of balls of the parallel loops: a constant, so that the impacts' order and the
-# diagnostics are the same on any number of threads (up to NBLOCK of them share the work)
-NBLOCK = 256
+# diagnostics are the same on any number of threads (up to NBLOCK of them share the work; on
+# tub47-quick's 4 200 balls 256 blocks cost a third more a step on one thread than 64, each
+# block pass paying for its records, benchmarks/README.md)
+NBLOCK = 64
 # what fixes a run's numbers beyond its scenario (checkpoints and the fill cache record it)
 ASSEMBLY = f"pair slots, gathered per ball; {NBLOCK} blocks"
-# columns of a pair slot: force on i (N), torque on i, torque on j (N m)
-S_F, S_TI, S_TJ = 0, 3, 6
-N_SLOT = 9
 
 
 @nb.njit(cache=True, inline="always")
@@ -66,33 +67,47 @@ def _record_impact(imp_buf, imp_count, c, t, kind, x, y, z, speed):
 
 
 @nb.njit(cache=True)
-def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, slots, table,
+def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, slots, params,
                 work):
-    """The list entries of the balls of block c: each touching pair's force and torques into
-    its slot (step 1 of the module docstring)."""
+    """The list entries of the balls of block c (step 1 of the module docstring): each
+    touching pair's force and torques into its slot, and each ball's force set to its weight
+    plus its own entries' forces (torque: their torques on it)."""
     pos, vel, omg = balls.pos, balls.vel, balls.omg
     radius, mass, mat = balls.radius, balls.mass, balls.mat
     nbr_start, nbr, hist, flag = pairs.start, pairs.nbr, pairs.hist, pairs.flag
     bounds = pairs.bounds
-    out = slots.out
+    rout, rpos, rflag = slots.out, slots.rpos, slots.rflag
+    table = params.table
     imp_buf, imp_count, diag = work.imp_buf, work.imp_count, work.diag
+    force, torque, gravity = balls.force, balls.torque, params.gravity
     lo, hi = bounds[c], bounds[c + 1]
     for i in range(lo, hi):
         ri = radius[i]
         mi = mass[i]
+        # ball i's weight and its own entries' forces, summed as they come
+        sfx = mi * gravity[0]
+        sfy = mi * gravity[1]
+        sfz = mi * gravity[2]
+        stx = 0.0
+        sty = 0.0
+        stz = 0.0
         for k in range(nbr_start[i], nbr_start[i + 1]):
             j = nbr[k]
             dx, dy, dz = branch_vector(pos, i, j, periodic_length)
             rsum = ri + radius[j]
             d2 = dx * dx + dy * dy + dz * dz
             if d2 >= rsum * rsum:
-                forget(hist, flag, k)
+                if flag[k]:
+                    forget(hist, flag, k)
+                    rflag[rpos[k]] = 0
                 continue
             delta, nx, ny, nz = unit_normal(dx, dy, dz, d2, rsum)
             rj = radius[j]
             vx, vy, vz = pair_contact_velocity(vel, omg, i, j, ri, rj, nx, ny, nz)
+            q = rpos[k]
             if not flag[k]:
                 flag[k] = 1
+                rflag[q] = 1
                 if record_impacts:
                     vn = vx * nx + vy * ny + vz * nz
                     _record_impact(imp_buf, imp_count, c, t, KIND_BALL_BALL,
@@ -106,19 +121,24 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
                 delta, nx, ny, nz, vx, vy, vz,
                 omg[i, 0] - omg[j, 0], omg[i, 1] - omg[j, 1], omg[i, 2] - omg[j, 2],
                 ri, rj, r_eff, m_eff, par, hist[k], dt_hist)
-            out[k, S_F] = fx
-            out[k, S_F + 1] = fy
-            out[k, S_F + 2] = fz
-            out[k, S_TI] = tix
-            out[k, S_TI + 1] = tiy
-            out[k, S_TI + 2] = tiz
-            out[k, S_TJ] = tjx
-            out[k, S_TJ + 1] = tjy
-            out[k, S_TJ + 2] = tjz
+            rout[q, 0] = -fx
+            rout[q, 1] = -fy
+            rout[q, 2] = -fz
+            rout[q, 3] = tjx
+            rout[q, 4] = tjy
+            rout[q, 5] = tjz
+            sfx += fx
+            sfy += fy
+            sfz += fz
+            stx += tix
+            sty += tiy
+            stz += tiz
             if delta > diag[c, D_BALL_OVERLAP]:
                 diag[c, D_BALL_OVERLAP] = delta
                 diag[c, D_BALL_I] = i
                 diag[c, D_BALL_J] = j
+        put3(force, i, sfx, sfy, sfz)
+        put3(torque, i, stx, sty, stz)
 
 
 @nb.njit(cache=True)
@@ -135,41 +155,28 @@ def _pose_array(motion, pivot_x, pivot_z, t, out):
 
 
 @nb.njit(cache=True)
-def _gather_block(c, balls, pairs, slots, params):
-    """Step 2 of the module docstring for the balls of block c: force = weight + the pair
-    forces, torque = the pair torques, each sum over the slots where the ball is the second
-    ball (force reversed, torque on j) and then its own, in ascending entry order."""
-    force, torque, mass = balls.force, balls.torque, balls.mass
-    nbr_start, flag, bounds = pairs.start, pairs.flag, pairs.bounds
-    out, rstart, rslot = slots.out, slots.rstart, slots.rslot
-    gravity = params.gravity
-    gx, gy, gz = gravity[0], gravity[1], gravity[2]
+def _gather_block(c, balls, pairs, slots):
+    """Step 2 of the module docstring for the balls of block c: to each ball's force and
+    torque (weight and own entries, from _pair_block) add the slots where it is the second
+    ball, force reversed and the torque on j, in ascending entry order."""
+    force, torque = balls.force, balls.torque
+    bounds = pairs.bounds
+    rout, rstart, rflag = slots.out, slots.rstart, slots.rflag
     for i in range(bounds[c], bounds[c + 1]):
-        fx = 0.0
-        fy = 0.0
-        fz = 0.0
-        tx = 0.0
-        ty = 0.0
-        tz = 0.0
-        for r in range(rstart[i], rstart[i + 1]):
-            k = rslot[r]
-            if flag[k]:
-                fx -= out[k, S_F]
-                fy -= out[k, S_F + 1]
-                fz -= out[k, S_F + 2]
-                tx += out[k, S_TJ]
-                ty += out[k, S_TJ + 1]
-                tz += out[k, S_TJ + 2]
-        for k in range(nbr_start[i], nbr_start[i + 1]):
-            if flag[k]:
-                fx += out[k, S_F]
-                fy += out[k, S_F + 1]
-                fz += out[k, S_F + 2]
-                tx += out[k, S_TI]
-                ty += out[k, S_TI + 1]
-                tz += out[k, S_TI + 2]
-        m = mass[i]
-        put3(force, i, m * gx + fx, m * gy + fy, m * gz + fz)
+        r0, r1 = rstart[i], rstart[i + 1]
+        if r0 == r1:
+            continue
+        fx, fy, fz = force[i, 0], force[i, 1], force[i, 2]
+        tx, ty, tz = torque[i, 0], torque[i, 1], torque[i, 2]
+        for r in range(r0, r1):
+            if rflag[r]:
+                fx += rout[r, 0]
+                fy += rout[r, 1]
+                fz += rout[r, 2]
+                tx += rout[r, 3]
+                ty += rout[r, 4]
+                tz += rout[r, 5]
+        put3(force, i, fx, fy, fz)
         put3(torque, i, tx, ty, tz)
 
 
@@ -337,29 +344,42 @@ def _kick_block(c, balls, pairs, params, work):
 
 
 @nb.njit(cache=True, parallel=True)
-def compute_forces(t, kick, record_impacts, balls, pairs, slots, walls, params, work):
-    """Forces and torques at the current positions (gravity, pairs, walls) at time t (s), with
-    the tub's pose in work.pose; with `kick`, also the step's second half kick.  Two parallel
-    loops over the blocks: the pairs into their slots; then, block by block, each ball's gather,
-    its wall contacts and its kick.  Each is a loop over a block's balls in one compiled
-    function: a numba call that passes arrays costs a reference-count update per array, which
-    per ball would cost more than its contacts.  Without `kick` (the set-up force evaluation)
-    contact histories are not advanced, as in LAMMPS' setup."""
-    nblock = work.diag.shape[0]
-    tub = params.tub
-    periodic_length = tub[TUB_LENGTH] if (tub[TUB_PRESENT] > 0.0 and
-                                          tub[TUB_PERIODIC] > 0.0) else 0.0
-    dt_hist = params.dt if kick else 0.0  # the set-up evaluation does not advance histories
-    for c in nb.prange(nblock):
+def _pair_pass(t, dt_hist, periodic_length, record_impacts, balls, pairs, slots, params, work):
+    """Step 1 for every block, in parallel."""
+    for c in nb.prange(work.diag.shape[0]):
         _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, slots,
-                    params.table, work)
-    for c in nb.prange(nblock):
-        _gather_block(c, balls, pairs, slots, params)
+                    params, work)
+
+
+@nb.njit(cache=True, parallel=True)
+def _ball_pass(t, dt_hist, kick, record_impacts, balls, pairs, slots, walls, params, work):
+    """Steps 2 to 4 for every block, in parallel."""
+    for c in nb.prange(work.diag.shape[0]):
+        _gather_block(c, balls, pairs, slots)
         ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work)
         if kick:
             _kick_block(c, balls, pairs, params, work)
         else:
             work.moved[c] = 0.0
+
+
+@nb.njit(cache=True)
+def compute_forces(t, kick, record_impacts, balls, pairs, slots, walls, params, work):
+    """Forces and torques at the current positions (gravity, pairs, walls) at time t (s), with
+    the tub's pose in work.pose; with `kick`, also the step's second half kick.  Two parallel
+    loops over the blocks, each in its own function (numba fuses two parallel loops of one
+    function when they run over the same range, and the gather must wait for every block's
+    pairs): the pairs; then, block by block, each ball's gather, its wall contacts and its kick.
+    Each pass over a block's balls is one compiled function: a numba call that passes arrays
+    costs a reference-count update per array, which per ball would cost more than its contacts.
+    Without `kick` (the set-up force evaluation) contact histories are not advanced, as in
+    LAMMPS' setup."""
+    tub = params.tub
+    periodic_length = tub[TUB_LENGTH] if (tub[TUB_PRESENT] > 0.0 and
+                                          tub[TUB_PERIODIC] > 0.0) else 0.0
+    dt_hist = params.dt if kick else 0.0  # the set-up evaluation does not advance histories
+    _pair_pass(t, dt_hist, periodic_length, record_impacts, balls, pairs, slots, params, work)
+    _ball_pass(t, dt_hist, kick, record_impacts, balls, pairs, slots, walls, params, work)
 
 
 @nb.njit(cache=True, parallel=True)
