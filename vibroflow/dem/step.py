@@ -46,8 +46,8 @@ N_DIAG = 8
 DONE, REBUILD, IMPACTS_FULL, BLOWUP = 0, 1, 2, 3
 # blocks of balls of the parallel loops: a constant, so that the impacts' order and the
 # diagnostics are the same on any number of threads (up to NBLOCK of them share the work; on
-# tub47-quick's 4 200 balls 256 blocks cost a third more a step on one thread than 64, each
-# block pass paying for its records, benchmarks/README.md)
+# tub47-quick's 4 200 balls 256 blocks cost about a quarter more a step on one thread than 64:
+# each block pass pays for unpacking its records)
 NBLOCK = 64
 # what fixes a run's numbers beyond its scenario (checkpoints and the fill cache record it)
 ASSEMBLY = f"pair slots, gathered per ball; {NBLOCK} blocks"
