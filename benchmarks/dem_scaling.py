@@ -9,7 +9,7 @@ Sizes: `quick` is tub47-quick (4 200 balls in a 19.05 mm slice), `tub47` the ref
 fill.count=140000`).  Each (size, threads) runs in its own process with NUMBA_NUM_THREADS set:
 the balls are placed on the fill lattice closed up to 1.01 d from the floor
 (vibroflow.dem.fill.fill_state, no settling: the same start at every size) and fall into the
-vibrating tub for 1 000 untimed steps (numba's cache load or compilation, the first neighbour
+vibrating tub for 2 500 untimed steps (numba's cache load or compilation, the first neighbour
 lists, the first contacts), then `--repeats` times `--steps` steps are timed
 (wall and CPU), neighbour rebuilds included.  Then the passes of one step are timed apart,
 each `--steps` times on the same state (each its own parallel loop over the blocks, so their sum
@@ -40,7 +40,7 @@ ROOT = Path(__file__).resolve().parent.parent
 DENSE = ["fill.lattice_spacing=1.01", "fill.insert_above=0.0"]
 SIZES = {"quick": ("tub47-quick", DENSE), "tub47": ("tub47", DENSE),
          "long": ("tub47", DENSE + ["tub.length=0.635", "fill.count=140000"])}
-WARMUP = 1000
+WARMUP = 2500
 
 
 def worker(size: str, steps: int, repeats: int) -> dict:
