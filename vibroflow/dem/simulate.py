@@ -24,10 +24,10 @@ from .blowup import (BlowUp, blowup_message, check_finite_start, check_overlaps_
                      coincident_message, coincident_pair)
 from .laws import material_index, pair_table
 from .neighbours import NeighbourList
-from .records import Params, Work, balls_of, pairs_of, walls_of
+from .records import Params, Work, balls_of, pairs_of, slots_of, walls_of
 from .walls import N_PLANE, WALL_PLANE0, wall_kind
 
-IMPACT_CAPACITY = 1 << 15  # per chunk, between flushes
+IMPACT_CAPACITY = 1 << 11  # per block of balls (step.NBLOCK), between flushes
 
 
 @dataclass
@@ -43,7 +43,6 @@ class DEMSystem:
     motion: TubMotion              # the tub's vibration (amplitude factor applied)
     skin: float                    # Verlet skin (m)
     max_overlap: float             # blow-up bound (m)
-    nchunk: int                    # force-assembly chunks (fixes the summation order)
     material_names: list[str]
     notes: dict = field(default_factory=dict)
     params: Params = field(init=False, repr=False, compare=False)  # the kernels' constants
@@ -103,9 +102,9 @@ class DEMState:
                      + 0.5 * np.sum(inertia * np.sum(self.omg**2, axis=1)))
 
 
-def make_system(scenario, nchunk: int | None = None) -> DEMSystem:
-    """Constant parameters of a scenario's run (nchunk: force-assembly chunks, default
-    run.force_chunks: a scenario's numbers do not depend on the number of threads)."""
+def make_system(scenario) -> DEMSystem:
+    """Constant parameters of a scenario's run (its numbers do not depend on the number of
+    threads: vibroflow.dem.step)."""
     index = material_index(scenario)
     table = pair_table(scenario)
     if scenario.tub is not None:
@@ -138,7 +137,7 @@ def make_system(scenario, nchunk: int | None = None) -> DEMSystem:
         dt=scenario.run.dt, gravity=np.array(scenario.gravity, dtype=float), table=table,
         tub=tub, wall_mat=np.array(wall_mats, dtype=np.int64), planes=planes, motion=motion,
         skin=scenario.run.skin * diam, max_overlap=scenario.run.max_overlap * diam,
-        nchunk=nchunk or scenario.run.force_chunks, material_names=list(index), notes=notes,
+        material_names=list(index), notes=notes,
     )
 
 
@@ -177,11 +176,11 @@ class _Buffers:
     made once per run."""
 
     def __init__(self, system: DEMSystem, state: DEMState):
-        n, nchunk = state.n, system.nchunk
-        self.work = Work(fbuf=np.zeros((nchunk, n, 3)), tbuf=np.zeros((nchunk, n, 3)),
-                         imp_buf=np.zeros((nchunk, IMPACT_CAPACITY, 6)),
-                         imp_count=np.zeros(nchunk, np.int64), diag=np.empty((nchunk, K.N_DIAG)),
-                         pose=np.zeros(8), moved=np.zeros(nchunk))
+        nblock = K.NBLOCK
+        self.n = state.n
+        self.work = Work(imp_buf=np.zeros((nblock, IMPACT_CAPACITY, 6)),
+                         imp_count=np.zeros(nblock, np.int64), diag=np.empty((nblock, K.N_DIAG)),
+                         pose=np.zeros(8), moved=np.zeros(nblock))
         self.balls = balls_of(state)
         self.walls = walls_of(state)
         self.reset_diag()
@@ -195,7 +194,7 @@ class _Buffers:
 
 def _buf(system: DEMSystem, state: DEMState) -> _Buffers:
     b = state.scratch
-    if b is None or b.work.fbuf.shape[1] != state.n or b.work.fbuf.shape[0] != system.nchunk:
+    if b is None or b.n != state.n:
         b = state.scratch = _Buffers(system, state)
     return b
 
@@ -219,17 +218,17 @@ def rebuild(system: DEMSystem, state: DEMState) -> None:
 def _forces_now(system: DEMSystem, state: DEMState) -> None:
     b = _buf(system, state)
     b.work.pose[:] = _tub_pose(system, state)
-    K.compute_forces(state.time(system.dt), False, False, b.balls,
-                     pairs_of(state.nl, system.nchunk), b.walls, system.params, b.work)
+    K.compute_forces(state.time(system.dt), False, False, b.balls, pairs_of(state.nl, K.NBLOCK),
+                     slots_of(state.nl), b.walls, system.params, b.work)
     b.work.imp_count[:] = 0
 
 
 def take_impacts(system: DEMSystem, state: DEMState) -> np.ndarray:
     """Impacts recorded since the last call: (M, 6) [time, kind, x, y, z, speed] (lab), in a
-    fixed order (chunk by chunk)."""
+    fixed order: block of balls by block (step.NBLOCK), each block's in the order recorded."""
     b = _buf(system, state)
     buf, count = b.work.imp_buf, b.work.imp_count
-    parts = [buf[c, :min(count[c], IMPACT_CAPACITY)] for c in range(system.nchunk)]
+    parts = [buf[c, :min(count[c], IMPACT_CAPACITY)] for c in range(K.NBLOCK)]
     count[:] = 0
     return np.concatenate(parts) if parts else np.zeros((0, 6))
 
@@ -265,8 +264,8 @@ def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: b
     while left > 0:
         try:
             done, status = K.advance(state.step, left, state.time_origin_step, motion,
-                                     record_impacts, b.balls, pairs_of(state.nl, system.nchunk),
-                                     b.walls, system.params, b.work)
+                                     record_impacts, b.balls, pairs_of(state.nl, K.NBLOCK),
+                                     slots_of(state.nl), b.walls, system.params, b.work)
         except ZeroDivisionError:
             # 1/d of two coincident balls (numba raises it, as Python does); the step count is
             # unknown here, so the time is that of the call's start
