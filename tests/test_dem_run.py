@@ -8,6 +8,7 @@ runs the same checks on a small bed.  The 2 % bound between balls is not met on 
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -258,29 +259,39 @@ def tub47_quick_summary(tub47_quick_run):
 
 
 STORED_QUICK = Path(__file__).parent / "data" / "tub47-quick-dem"
+STORED_QUICK_SEEDS = Path(__file__).parent / "data" / "tub47-quick-dem-seeds"
 
 
 @pytest.mark.slow
 def test_tub47_quick_agrees_with_the_stored_dem_table(tub47_quick_run, tub47_quick_summary):
-    """The stored tub47-quick DEM table (tests/data/tub47-quick-dem, the continuum checks'
-    reference) is what the DEM gives today: on the machine that made it, byte for byte (same
-    scenario, same seed, numbers independent of the thread count); on a machine whose compiled
-    kernels round otherwise the chaotic bed follows another trajectory, so the check is
-    tub47.md's: the strengths agree (3.5725e-3 +- 0.0932e-3 m^2/s stored) and the fields differ
-    by less than the DEM's own seed-to-seed E (0.156, the data's README)."""
-    from vibroflow.analysis.compare import field_difference, strengths_agree
+    """Today's DEM and the stored tub47-quick table (tests/data/tub47-quick-dem, the continuum
+    checks' reference, made with another summation order of the pair forces) are draws of one
+    chaotic ensemble, judged by the DEM's own scatter over five fill seeds
+    (tests/data/tub47-quick-dem-seeds): both strengths lie in the seeds' 95 % prediction
+    interval (Student's t, 4 degrees of freedom), and the fields differ by less than tub47.md's
+    limit, 1.5 times the seeds' mean pairwise E.  On the machine that made the seeds, today's
+    run is seed 1's table byte for byte (printed)."""
+    from vibroflow.analysis.compare import field_difference, seed_scatter
     from vibroflow.measure.bulk import read_csv
 
+    seeds = [STORED_QUICK_SEEDS / f"seed{k}" for k in range(1, 6)]
+    strengths = np.array([json.loads((d / "summary.json").read_text())["circulation"]["strength"]
+                          for d in seeds])
+    mean, sd = strengths.mean(), strengths.std(ddof=1)
+    half_width = 2.776 * sd * math.sqrt(1.0 + 1.0 / len(seeds))  # t(0.975, 4 dof)
+    limit = 1.5 * seed_scatter([read_csv(d / "bulk_velocity.csv") for d in seeds]).mean
     now = (tub47_quick_run / "bulk_velocity.csv").read_bytes()
-    stored = (STORED_QUICK / "bulk_velocity.csv").read_bytes()
     c = tub47_quick_summary["circulation"]
     E = field_difference(read_csv(tub47_quick_run / "bulk_velocity.csv"),
                          read_csv(STORED_QUICK / "bulk_velocity.csv"))
-    print(f"\ntub47-quick against the stored table: {'identical' if now == stored else 'differs'}"
-          f", E {E:.3f}, strength {c['strength']:.4e}")
+    same = now == (seeds[0] / "bulk_velocity.csv").read_bytes()
+    print(f"\ntub47-quick: {'identical to' if same else 'differs from'} the stored seed 1; "
+          f"against the stored table E {E:.3f} (limit {limit:.3f}), strength {c['strength']:.4e} "
+          f"(seeds {mean:.4e} +- {half_width:.4e})")
     assert c["sense"] == "counterclockwise"
-    assert strengths_agree(c["strength"], c["strength_stderr"], 3.5725e-3, 0.0932e-3)
-    assert E < 0.156
+    assert abs(c["strength"] - mean) <= half_width
+    assert abs(3.5725e-3 - mean) <= half_width
+    assert E <= limit
 
 
 @pytest.mark.slow
