@@ -22,6 +22,7 @@ import numba as nb
 import numpy as np
 
 from ..tub.motion import pose as tub_pose
+from .parts import ball_parts, clear_loads
 from .contact import (add_pair, branch_vector, contact_force, forget, pair_contact_velocity,
                       put3, unit_normal)
 from .walls import (KIND_BALL_BALL, KIND_BALL_PARTITION, KIND_BALL_PLANE, KIND_BALL_TUB,
@@ -107,9 +108,9 @@ def _pose_array(motion, pivot_x, pivot_z, t, out):
 
 
 @nb.njit(cache=True)
-def _finish_chunk(c, t, kick, record_impacts, balls, walls, bounds, params, work):
+def _finish_chunk(c, t, kick, record_impacts, balls, walls, bounds, params, work, prt):
     """For the balls of chunk c: gather the pair forces from every chunk's buffer (and clear
-    it), add gravity and the walls, and with `kick` finish the step (second half kick) and
+    it), add gravity, the walls and the parts (vibroflow.dem.parts, record prt), and with `kick` finish the step (second half kick) and
     measure the largest move since the last list build (tub frame) into moved[c].
 
     Everything is in this one loop on purpose: a numba call that passes arrays costs a
@@ -135,6 +136,10 @@ def _finish_chunk(c, t, kick, record_impacts, balls, walls, bounds, params, work
     partitions = has_tub and tub[TUB_PERIODIC] == 0.0
     length = tub[TUB_LENGTH]
     n_walls = WALL_PLANE0 + planes.shape[0]
+    n_parts = prt.shape.shape[0]
+    if n_parts > 0:
+        clear_loads(prt, c)
+    periodic_length = length if has_tub and tub[TUB_PERIODIC] > 0.0 else 0.0
     m2 = 0.0
     for i in range(lo, hi):
         fx = mass[i] * gravity[0]
@@ -255,6 +260,20 @@ def _finish_chunk(c, t, kick, record_impacts, balls, walls, bounds, params, work
                 diag[c, D_WALL_OVERLAP] = delta
                 diag[c, D_WALL_I] = i
                 diag[c, D_WALL_W] = w
+        if n_parts > 0:
+            pfx, pfy, pfz, ptx, pty, ptz, pdelta, pk = ball_parts(
+                i, c, t, dt_hist, record_impacts, pos[i, 0], pos[i, 1], pos[i, 2], r, mass[i],
+                vel, omg, mat[i], table, pose, cth, sth, periodic_length, prt)
+            fx += pfx
+            fy += pfy
+            fz += pfz
+            tx += ptx
+            ty += pty
+            tz += ptz
+            if pdelta > diag[c, D_WALL_OVERLAP]:
+                diag[c, D_WALL_OVERLAP] = pdelta
+                diag[c, D_WALL_I] = i
+                diag[c, D_WALL_W] = n_walls + pk  # a part: after the wall slots
         put3(force, i, fx, fy, fz)
         put3(torque, i, tx, ty, tz)
         if kick:
@@ -278,7 +297,7 @@ def _finish_chunk(c, t, kick, record_impacts, balls, walls, bounds, params, work
 
 
 @nb.njit(cache=True, parallel=True)
-def compute_forces(t, kick, record_impacts, balls, pairs, walls, params, work):
+def compute_forces(t, kick, record_impacts, balls, pairs, walls, params, work, prt):
     """Forces and torques at the current positions (gravity, pairs, walls) at time t (s), with
     the tub's pose in work.pose; with `kick`, also the step's second half kick.  Two parallel
     loops: pairs into the chunk buffers, then each chunk's balls."""
@@ -291,12 +310,12 @@ def compute_forces(t, kick, record_impacts, balls, pairs, walls, params, work):
         _pair_chunk(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, params.table,
                     work)
     for c in nb.prange(nchunk):
-        _finish_chunk(c, t, kick, record_impacts, balls, walls, pairs.bounds, params, work)
+        _finish_chunk(c, t, kick, record_impacts, balls, walls, pairs.bounds, params, work, prt)
 
 
 @nb.njit(cache=True, parallel=True)
 def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pairs, walls, params,
-            work):
+            work, prt):
     """Run up to `nsteps` velocity-Verlet steps from step `step0`.
 
     Time is t = (step - time_origin_step) dt, so that the vibration's phase comes from an
@@ -325,7 +344,7 @@ def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pair
         step = step0 + k + 1
         t = (step - time_origin_step) * dt
         _pose_array(motion, pose[6], pose[7], t, pose)
-        compute_forces(t, True, record_impacts, balls, pairs, walls, params, work)
+        compute_forces(t, True, record_impacts, balls, pairs, walls, params, work, prt)
         blown = False
         rebuild = False
         full = False
@@ -336,7 +355,7 @@ def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pair
                 blown = True
             if moved[c] > hs2:
                 rebuild = True
-            if imp_count[c] > cap // 2:
+            if imp_count[c] > cap // 2 or prt.imp_count[c] > prt.imp.shape[1] // 2:
                 full = True
         if blown:
             return k + 1, BLOWUP
