@@ -1,0 +1,169 @@
+"""DEM verification, parts in the bed (vibroflow.dem.parts): single balls on a cylinder, a box
+(face, edge, corner) and an STL cylinder against the analytic linear spring-dashpot law, and the
+momentum the balls lose to a fixed part against the force the part records.
+
+Expected numbers (test_dem_collisions.py's module docstring has the law): a ball meeting a fixed
+surface head-on with the linear law leaves with e times its speed, reversed along the contact
+normal; without friction a contact whose normal n stays fixed (a flat face, a straight edge met
+with a velocity along the edge) changes only the normal velocity, v' = v - (1 + e) (v . n) n.
+The normal of a box's edge is the bisector of its faces' (the ball's centre lies in the edge's
+Voronoi region), a corner's the diagonal.  A polygonal STL cylinder of `SECTIONS` facets turns
+the contact normal by at most pi / SECTIONS from the round one's, so the rebound velocities of
+the two agree within (1 + e) v sin(pi / SECTIONS).
+
+Momentum: velocity Verlet changes the balls' momentum over a step by dt (F_k + F_k+1) / 2, so
+over a run that starts and ends with the balls apart the balls' momentum change equals minus dt
+times the sum of the loads the part recorded at each step, to round-off.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import trimesh
+
+from dem_helpers import (M_STEEL, R_STEEL, Sim, ball, contact, linear_contact_time, one_thread,
+                         rel, scenario)
+from vibroflow.dem import simulate as S
+from vibroflow.scenario.model import PartSpec
+from vibroflow.scenario.part_shapes import placed_triangles
+
+E = 0.85
+V = 0.5
+SECTIONS = 64
+BAR_R = 0.0125
+DT = 2e-6
+
+
+def _sim(part: PartSpec, balls, mu=0.0, e=E) -> Sim:
+    sc = scenario(balls, [contact(e=e, mu=mu)], dt=DT, duration=0.05)
+    return Sim(sc.model_copy(update={"parts": [part]}))
+
+
+def _bounce(part: PartSpec, start, vel, mu=0.0, e=E, t=0.004) -> np.ndarray:
+    """The ball's velocity (m/s) after it has hit the part and left it."""
+    sim = _sim(part, [ball(start, vel=vel)], mu=mu, e=e)
+    sim.run(int(round(t / DT)))
+    assert not sim.state.part_key[0, 0].max() >= -1, "the ball is still touching the part"
+    return sim.state.vel[0].copy()
+
+
+def _bar(**kw) -> PartSpec:
+    return PartSpec(name="bar", shape="cylinder", center=(0.0, 0.0, 0.0), radius=BAR_R,
+                    frame="lab", **kw)
+
+
+def _box() -> PartSpec:
+    return PartSpec(name="block", shape="box", center=(0.0, 0.0, 0.0), size=(0.02, 0.02, 0.02),
+                    frame="lab")
+
+
+GAP = 1e-4  # m between the ball and the part at the start
+
+
+def test_ball_on_cylinder_top_rebounds_with_restitution():
+    v = _bounce(_bar(), (0.0, 0.0, BAR_R + R_STEEL + GAP), (0.0, 0.0, -V))
+    assert rel(v[2], E * V) < 0.01
+    assert abs(v[0]) < 1e-12 and abs(v[1]) < 1e-12
+
+
+def test_ball_on_cylinder_off_centre_leaves_along_the_mirrored_normal():
+    # frictionless: only the normal velocity changes; the normal at the contact is radial
+    a = math.radians(60.0)
+    n = np.array([math.cos(a), 0.0, math.sin(a)])
+    start = (BAR_R + R_STEEL + GAP) * n + np.array([0.0, 0.0, 0.0])
+    vel = np.array([0.0, 0.0, -V])
+    expect = vel - (1.0 + E) * (vel @ n) * n
+    v = _bounce(_bar(), start, vel)
+    # the ball slides along the curved surface while in contact, so the normal turns by
+    # dphi = v_t t_c / (R + r); the impulse (1 + e) |v_n| m is off the fixed-normal answer by
+    # about its size times dphi (twice that allowed)
+    vn, vt = abs(vel @ n), math.sqrt(V * V - (vel @ n) ** 2)
+    t_c = linear_contact_time(1.0e5, M_STEEL, E)
+    dphi = vt * t_c / (BAR_R + R_STEEL)
+    assert np.linalg.norm(v - expect) < 2.0 * (1.0 + E) * vn * dphi
+    assert rel(v @ n, E * vn) < 0.02
+
+
+@pytest.mark.parametrize("where", ["face", "edge", "corner"])
+def test_ball_on_box_rebounds_along_the_feature_normal(where):
+    h = 0.01
+    feature = {"face": np.array([0.0, 0.0, h]), "edge": np.array([h, 0.0, h]),
+               "corner": np.array([h, h, h])}[where]
+    n = {"face": np.array([0.0, 0.0, 1.0]), "edge": np.array([1.0, 0.0, 1.0]) / math.sqrt(2),
+         "corner": np.ones(3) / math.sqrt(3)}[where]
+    start = feature + (R_STEEL + GAP) * n
+    v = _bounce(_box(), start, -V * n)
+    assert rel(v @ n, E * V) < 0.01
+    assert np.linalg.norm(v - (v @ n) * n) < 1e-9
+
+
+def test_ball_sliding_along_a_box_edge_keeps_its_edge_velocity():
+    h = 0.01
+    n = np.array([1.0, 0.0, 1.0]) / math.sqrt(2)
+    start = np.array([h, 0.0, h]) + (R_STEEL + GAP) * n
+    vel = -V * n + np.array([0.0, 0.3, 0.0])
+    v = _bounce(_box(), start, vel)
+    expect = vel - (1.0 + E) * (vel @ n) * n
+    assert np.linalg.norm(v - expect) < 0.01 * V
+
+
+def _stl_cylinder(tmp_path) -> PartSpec:
+    mesh = trimesh.creation.cylinder(radius=BAR_R, height=0.05, sections=SECTIONS)
+    mesh.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, [1, 0, 0]))
+    path = tmp_path / "bar.stl"
+    mesh.export(path)
+    return PartSpec(name="bar", shape="stl", file=str(path), center=(0.0, 0.0, 0.0),
+                    frame="lab")
+
+
+@pytest.mark.parametrize("angle_deg", [90.0, 73.0, 40.0])
+def test_stl_cylinder_agrees_with_the_round_one_within_its_facets(tmp_path, angle_deg):
+    a = math.radians(angle_deg)
+    n = np.array([math.cos(a), 0.0, math.sin(a)])
+    start = (BAR_R + R_STEEL + GAP) * n
+    vel = (0.0, 0.0, -V)
+    round_v = _bounce(_bar(), start, vel)
+    stl_v = _bounce(_stl_cylinder(tmp_path), start, vel)
+    bound = (1.0 + E) * V * math.sin(math.pi / SECTIONS)
+    assert np.linalg.norm(stl_v - round_v) < bound
+    assert rel(np.linalg.norm(stl_v), np.linalg.norm(round_v)) < 0.02
+
+
+def test_stl_edge_gives_one_contact_not_one_per_triangle(tmp_path):
+    # a ball dropped onto a facet edge of the polygonal cylinder (its top edge at 90 degrees
+    # when SECTIONS is a multiple of 4 with a vertex there, or the face next to it): whatever
+    # it meets, a head-on drop on the top rebounds with e, not (1 + e) more from a double contact
+    part = _stl_cylinder(tmp_path)
+    top = placed_triangles(part).reshape(-1, 3)
+    z_top = float(top[:, 2].max())
+    x_at = float(top[np.argmax(top[:, 2]), 0])  # an edge along y at the very top
+    v = _bounce(part, (x_at, 0.0, z_top + R_STEEL + GAP), (0.0, 0.0, -V))
+    assert rel(np.linalg.norm(v), E * V) < 0.01
+
+
+def test_force_on_a_fixed_part_equals_the_momentum_the_balls_lose():
+    # six balls from all sides onto the box's faces, edges and corners, with friction
+    rng = np.random.default_rng(4)
+    balls = []
+    for n in rng.normal(size=(6, 3)):
+        n /= np.linalg.norm(n)
+        balls.append(ball(0.022 * n, vel=tuple(-1.0 * n + 0.2 * rng.normal(size=3))))
+    sim = _sim(_box(), balls, mu=0.3)
+    system, state = sim.system, sim.state
+    assert np.all(np.abs(S.part_loads_now(system, state)) == 0.0)
+    p0 = sim.momentum()
+    impulse = np.zeros(3)
+    touched = 0
+    with one_thread():
+        for _ in range(int(round(0.01 / DT))):
+            S.run_steps(system, state, 1)
+            load = S.part_loads_now(system, state)
+            impulse += load[0, :3] * DT
+            touched += bool(np.any(load[0] != 0.0))
+    assert touched > 20  # balls did hit the box
+    assert not np.any(state.part_key >= -1)  # and have left it
+    dp = sim.momentum() - p0
+    assert np.linalg.norm(dp) > 1e-4  # a real change of momentum, ...
+    assert np.allclose(dp, -impulse, rtol=1e-9, atol=1e-15)  # ... all of it the part's
