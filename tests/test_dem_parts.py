@@ -18,6 +18,7 @@ times the sum of the loads the part recorded at each step, to round-off.
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import h5py
 import numpy as np
@@ -26,14 +27,22 @@ import trimesh
 
 from dem_helpers import (M_STEEL, R_STEEL, Sim, ball, contact, linear_contact_time, one_thread,
                          rel, scenario)
+from vtk_reader import read_vtk
 from vibroflow.dem import simulate as S
 from vibroflow.dem.fill import lattice_fill
 from vibroflow.dem.run import run_dem
+from vibroflow.io.part_vtk import part_surface
 from vibroflow.io.parts_nc import read_parts_nc
 from vibroflow.scenario.io import load_scenario
 from vibroflow.scenario.model import PartSpec
 from vibroflow.scenario.part_shapes import placed_triangles, signed_distance
 from vibroflow.tub.motion import lab_to_tub_np
+from vibroflow.tub.parts import parts_of, patch_layout
+
+
+def parts_of_specs(specs):
+    """The Part records of PartSpecs (vibroflow.tub.parts.parts_of reads a scenario's)."""
+    return parts_of(SimpleNamespace(parts=specs))
 
 E = 0.85
 V = 0.5
@@ -198,7 +207,7 @@ def test_tub_run_with_a_bar_writes_parts_nc(tmp_path, monkeypatch):
     monkeypatch.setenv("VIBROFLOW_CACHE", str(tmp_path / "cache"))
     sc = load_scenario("tub47-bar", BAR_SET)
     out = tmp_path / "run"
-    summary = run_dem(sc, out, progress=False)
+    summary = run_dem(sc, out, vtk=True, progress=False)
     ds = read_parts_nc(out / "parts.nc")
     with h5py.File(out / "dem.h5", "r") as f:
         t = f["part_impacts/time"][()]
@@ -223,3 +232,23 @@ def test_tub_run_with_a_bar_writes_parts_nc(tmp_path, monkeypatch):
     tub = lab_to_tub_np(last.astype(float), X, Z, theta, tuple(sc.motion.pivot))
     r = 0.5 * sc.fill.diameter
     assert signed_distance(sc.parts[0], tub).min() > 0.9 * r
+    # ParaView: the bar's surface carries parts.nc's map, patch by patch
+    surface = read_vtk(out / "vtk" / "part_bar.vtu")["CellData"]
+    rate = ds["impact_rate_per_area"][0].values
+    assert np.array_equal(surface["impact_rate_per_area_1_per_m2_s"], rate[surface["patch"]],
+                          equal_nan=True)
+
+
+@pytest.mark.parametrize("shape", ["cylinder", "box", "sphere"])
+def test_part_surface_covers_each_patch_with_its_area(shape):
+    # the ParaView triangulation: every patch's triangles add up to the patch's area (a
+    # cylinder's and a sphere's to within the polygon's chord error)
+    kw = {"cylinder": dict(radius=0.0125), "sphere": dict(radius=0.02),
+          "box": dict(size=(0.02, 0.03, 0.04), angle_y=0.3)}[shape]
+    spec = PartSpec(name="p", shape=shape, center=(0.05, 0.01, 0.1), frame="tub", **kw)
+    part = parts_of_specs([spec])[0]
+    tri, patch = part_surface(part, 0.02)
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    by_patch = np.bincount(patch, weights=area)
+    _, expect = patch_layout(part, 0.02)
+    assert by_patch == pytest.approx(expect, rel=0.01)
