@@ -18,6 +18,7 @@ times the sum of the loads the part recorded at each step, to round-off.
 from __future__ import annotations
 
 import math
+import signal
 from types import SimpleNamespace
 
 import h5py
@@ -27,17 +28,21 @@ import trimesh
 
 from dem_helpers import (M_STEEL, R_STEEL, Sim, ball, contact, linear_contact_time, one_thread,
                          rel, scenario)
+from tests.test_dem_run import _cli, _env, _same_h5, _sets
 from vtk_reader import read_vtk
 from vibroflow.dem import simulate as S
+from vibroflow.dem.blowup import BlowUp
 from vibroflow.dem.fill import lattice_fill
+from vibroflow.dem.laws import pair_table
+from vibroflow.dem.parts import EMPTY, SLOTS, ball_parts, parts_record
 from vibroflow.dem.run import run_dem
 from vibroflow.io.part_vtk import part_surface
 from vibroflow.io.parts_nc import read_parts_nc
 from vibroflow.scenario.io import load_scenario
 from vibroflow.scenario.model import PartSpec
 from vibroflow.scenario.part_shapes import placed_triangles, signed_distance
-from vibroflow.tub.motion import lab_to_tub_np
-from vibroflow.tub.parts import parts_of, patch_layout
+from vibroflow.tub.motion import lab_to_tub_np, rigid_velocity, tub_to_lab
+from vibroflow.tub.parts import pack, parts_of, patch_layout
 
 
 def parts_of_specs(specs):
@@ -252,3 +257,73 @@ def test_part_surface_covers_each_patch_with_its_area(shape):
     by_patch = np.bincount(patch, weights=area)
     _, expect = patch_layout(part, 0.02)
     assert by_patch == pytest.approx(expect, rel=0.01)
+
+
+def test_a_tub_fixed_part_moves_with_the_tub():
+    # a ball carried rigidly by the moving, turning tub, pressed delta into a tub-fixed bar:
+    # no relative velocity at the contact, so the force is the spring's alone, k_n delta along
+    # the bar's normal turned by the tub's angle; a lab-fixed bar at the same place feels the
+    # tub's velocity as an approach and damps it
+    k_n, delta = 1.0e5, 2e-5
+    X, Z, th, Xd, Zd, thd, pvx, pvz = 1e-3, 1.5e-3, 4e-3, 0.3, -0.2, 1.5, 0.0, -0.1
+    pose = np.array([X, Z, th, Xd, Zd, thd, pvx, pvz])
+    a = math.radians(70.0)
+    n_tub = np.array([math.cos(a), 0.0, math.sin(a)])
+    centre = np.array([0.05, 0.0, 0.1])
+    p_tub = centre + (BAR_R + R_STEEL - delta) * n_tub
+    lx, lz = tub_to_lab(p_tub[0], p_tub[2], X, Z, th, pvx, pvz)
+    vx, vz = rigid_velocity(lx, lz, X, Z, Xd, Zd, thd, pvx, pvz)
+    n_lab = np.array([math.cos(th) * n_tub[0] - math.sin(th) * n_tub[2], 0.0,
+                      math.sin(th) * n_tub[0] + math.cos(th) * n_tub[2]])
+    vel = np.array([[vx, 0.0, vz]])
+    omg = np.array([[0.0, -thd, 0.0]])
+    table = pair_table(scenario([ball((0, 0, 0))], [contact(k_n=k_n, e=E, mu=0.3)]))
+    for frame in ("tub", "lab"):
+        spec = PartSpec(name="bar", shape="cylinder", center=tuple(centre), radius=BAR_R,
+                        frame=frame)
+        packed = pack(parts_of_specs([spec]))
+        rec = parts_record(packed, np.zeros(1, np.int64), np.zeros((1, 1, SLOTS, 6)),
+                           np.full((1, 1, SLOTS), EMPTY, np.int64), np.zeros((1, 1, 6)))
+        # dt_hist 0: the tangential spring is not advanced (the ball's contact point is taken
+        # at r from its centre, as at the walls, which leaves a slip theta' delta)
+        out = ball_parts(0, 0, 0.0, 0.0, False, lx, 0.0, lz, R_STEEL, M_STEEL, vel, omg, 0,
+                         table, pose, math.cos(th), math.sin(th), 0.0, rec)
+        force = np.array(out[:3])
+        if frame == "tub":
+            assert force == pytest.approx(k_n * delta * n_lab, rel=1e-9, abs=1e-12)
+            assert out[6] == pytest.approx(delta, rel=1e-9)
+            # the part's load: the opposite force, in tub axes
+            assert rec.load[0, 0, :3] == pytest.approx(-k_n * delta * n_tub, rel=1e-9,
+                                                       abs=1e-12)
+        else:
+            assert np.linalg.norm(force - k_n * delta * n_lab) > 1e-3 * k_n * delta
+
+
+def test_a_blow_up_on_a_part_names_it():
+    # a ball at 25 m/s into a soft box: the overlap passes run.max_overlap (0.25 d)
+    h = 0.01
+    sc = scenario([ball((0.0, 0.0, h + R_STEEL + GAP), vel=(0.0, 0.0, -25.0))],
+                  [contact(e=E)], dt=DT, duration=0.01)
+    sim = Sim(sc.model_copy(update={"parts": [_box()]}))
+    with pytest.raises(BlowUp, match="part 'block'"):
+        sim.run(2000)
+
+
+@pytest.mark.slow
+def test_killed_and_resumed_run_with_a_part_equals_uninterrupted(tmp_path):
+    env = _env(tmp_path)
+    small = BAR_SET[:2] + ["parts.0.center=[0.0,0.0,0.03]"] + BAR_SET[3:]
+    ref = tmp_path / "ref"
+    r = _cli("dem", "tub47-bar", "--out", str(ref), *_sets(small), env=env)
+    assert r.returncode == 0, r.stderr
+    assert "part bar (cylinder, tub frame):" in r.stdout
+    out = tmp_path / "killed"
+    sets = _sets(small + ["run.checkpoint_every=0.05"])
+    r = _cli("dem", "tub47-bar", "--out", str(out), *sets,
+             env=dict(env, VIBROFLOW_FAULT_KILL_AFTER_CHECKPOINT="1"))
+    assert r.returncode == -signal.SIGKILL, (r.returncode, r.stderr)
+    r = _cli("dem", "tub47-bar", "--out", str(out), "--resume", *sets, env=env)
+    assert r.returncode == 0, r.stderr
+    _same_h5(ref / "dem.h5", out / "dem.h5")
+    a, b = read_parts_nc(ref / "parts.nc"), read_parts_nc(out / "parts.nc")
+    assert a.equals(b)
