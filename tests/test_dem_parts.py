@@ -34,6 +34,7 @@ from vibroflow.dem import simulate as S
 from vibroflow.dem.blowup import BlowUp
 from vibroflow.dem.fill import lattice_fill
 from vibroflow.dem.laws import pair_table
+from vibroflow.dem.output import PART_UNITS
 from vibroflow.dem.parts import EMPTY, SLOTS, ball_parts, parts_record
 from vibroflow.dem.run import run_dem
 from vibroflow.io.part_vtk import part_surface
@@ -215,6 +216,8 @@ def test_tub_run_with_a_bar_writes_parts_nc(tmp_path, monkeypatch):
     summary = run_dem(sc, out, vtk=True, progress=False)
     ds = read_parts_nc(out / "parts.nc")
     with h5py.File(out / "dem.h5", "r") as f:
+        for key, (units, _) in PART_UNITS.items():
+            assert f[key].attrs["units"] == units
         t = f["part_impacts/time"][()]
         part = f["part_impacts/part"][()]
         vn = f["part_impacts/normal_speed"][()]

@@ -18,6 +18,8 @@ importer and read by vibroflow.analysis):
                periodic).  For the coarse-grained contact stress (vibroflow.calibration).
     /impacts/time, kind, position_tub, normal_speed (M, ...)
     /series/time, kinetic_energy, max_overlap_ball, max_overlap_wall (K,)
+    /part_impacts/..., /part_loads/... (only with parts in the bed, PART_UNITS): every
+               ball-part impact of the window, the load on each part at the snapshots
 
 Checkpoints hold the whole DEMState plus the number of complete result parts; on resume the
 parts after those are dropped, so a resumed run writes exactly what an uninterrupted one would.
@@ -97,6 +99,14 @@ UNITS = {
     "impacts/kind": ("1", "0 ball-ball, 1 ball-U, 2 ball-partition, 3 ball-plane"),
     "impacts/position_tub": ("m", "contact point, tub frame"),
     "impacts/normal_speed": ("m/s", "normal approach speed at the first step of the contact"),
+    "series/time": ("s", "time since the vibration started"),
+    "series/kinetic_energy": ("J", "kinetic energy of the balls, spin included, lab frame"),
+    "series/max_overlap_ball": ("m", "largest ball-ball overlap since the previous row"),
+    "series/max_overlap_wall": ("m", "largest ball-wall overlap since the previous row"),
+}
+
+#: the same for a run with parts in the bed
+PART_UNITS = {
     "part_impacts/time": ("s", "time of the ball-part contact's first step"),
     "part_impacts/part": ("1", "part index, in the scenario's order"),
     "part_impacts/patch": ("1", "surface patch of the part (vibroflow.tub.parts.patch_layout)"),
@@ -109,10 +119,6 @@ UNITS = {
     "part_loads/part": ("1", "part index, in the scenario's order"),
     "part_loads/force": ("N", "force of the balls on the part, part frame axes"),
     "part_loads/torque": ("N m", "torque of the balls about the part's centre, part frame axes"),
-    "series/time": ("s", "time since the vibration started"),
-    "series/kinetic_energy": ("J", "kinetic energy of the balls, spin included, lab frame"),
-    "series/max_overlap_ball": ("m", "largest ball-ball overlap since the previous row"),
-    "series/max_overlap_wall": ("m", "largest ball-wall overlap since the previous row"),
 }
 
 # groups of millions of rows: lzf keeps the file small at little cost
@@ -121,10 +127,6 @@ _COMPRESSED = ("impacts", "ball_contacts")
 _COPY_ROWS = 1_000_000
 
 _PARTICLE_FIELDS = ("position", "velocity", "angular_velocity")
-
-
-def _part_keys() -> set[str]:
-    return {f"{g}/{name}" for g, fields in _PART_SCHEMA.items() for name in fields}
 
 
 class DamagedFile(Exception):
@@ -312,9 +314,8 @@ class ResultWriter:
                                        chunks=chunks if total else None,
                                        compression="lzf" if key.split("/")[0] in _COMPRESSED
                                        and total else None)
-            for key, (units, long_name) in UNITS.items():
-                if key.split("/")[0] not in self.schema and key in _part_keys():
-                    continue
+            units_of = {**UNITS, **(PART_UNITS if "part_impacts" in self.schema else {})}
+            for key, (units, long_name) in units_of.items():
                 out[key].attrs["units"] = units
                 out[key].attrs["long_name"] = long_name
             offsets = {key: 0 for key in totals}
