@@ -330,3 +330,27 @@ def test_killed_and_resumed_run_with_a_part_equals_uninterrupted(tmp_path):
     _same_h5(ref / "dem.h5", out / "dem.h5")
     a, b = read_parts_nc(ref / "parts.nc"), read_parts_nc(out / "parts.nc")
     assert a.equals(b)
+
+
+def test_a_periodic_tub_touches_a_part_through_its_image():
+    # a box spanning y in [0, 0.01] in a periodic tub of length L: a ball at y = L - 0.001 lies
+    # 0.001 m beyond the box's y = 0 face through the periodic boundary, and overlaps it by
+    # r - 0.001 (the same as a ball at y = -0.001)
+    length = 0.03
+    spec = PartSpec(name="block", shape="box", center=(0.0, 0.005, 0.05),
+                    size=(0.02, 0.01, 0.02), frame="lab")
+    packed = pack(parts_of_specs([spec]))
+    table = pair_table(scenario([ball((0, 0, 0))], [contact(e=E)]))
+    pose = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -0.1])
+    forces = []
+    for y, periodic in ((length - 0.001, length), (-0.001, 0.0), (length - 0.001, 0.0)):
+        rec = parts_record(packed, np.zeros(1, np.int64), np.zeros((1, 1, SLOTS, 6)),
+                           np.full((1, 1, SLOTS), EMPTY, np.int64), np.zeros((1, 1, 6)))
+        out = ball_parts(0, 0, 0.0, 0.0, False, 0.0, y, 0.05, R_STEEL, M_STEEL,
+                         np.zeros((1, 3)), np.zeros((1, 3)), 0, table, pose, 1.0, 0.0,
+                         periodic, rec)
+        forces.append(np.array(out[:3]))
+    k_n = 1.0e5
+    assert forces[1] == pytest.approx([0.0, -k_n * (R_STEEL - 0.001), 0.0], abs=1e-12)
+    assert forces[0] == pytest.approx(forces[1], rel=1e-9)
+    assert not np.any(forces[2])  # without the periodic length: far from the box

@@ -172,8 +172,8 @@ def _stl_candidates(prt, k, qx, qy, qz, r, sc):
 
 
 @nb.njit(cache=True, inline="always")
-def _one_contact(i, k, slot, c, t, dt_hist, first, qx, qy, qz, r, m, vel, omg, mat_i, table,
-                 pose, cth, sth, tub_fixed, sc, j, prt, fx, fy, fz, tx, ty, tz):
+def _one_contact(i, k, slot, c, t, dt_hist, first, r, m, vel, omg, mat_i, table, pose, cth, sth,
+                 tub_fixed, sc, j, prt, fx, fy, fz, tx, ty, tz):
     """Contact j of the scratch rows in slot `slot`: the force and torque on the ball added to
     (fx .. tz) and returned, the opposite added to the part's load, the impact written when
     `first`.  Contact point and normal are in the part's frame; the force law works in the
@@ -241,7 +241,7 @@ def ball_parts(i, c, t, dt_hist, record, px, py, pz, r, m, vel, omg, mat_i, tabl
     the part it is with, as (fx, fy, fz, tx, ty, tz, delta_max, k_max) (k_max -1: none).
     Updates the ball's slots, adds the opposite to the parts' loads in prt.load[c] and, with
     `record`, writes the impacts.  pose is the tub's (vibroflow.dem.step._pose_array)."""
-    hist, key, load, sc = prt.hist, prt.key, prt.load, prt.scratch[c]
+    hist, key, sc = prt.hist, prt.key, prt.scratch[c]
     fx = fy = fz = tx = ty = tz = 0.0
     dmax = 0.0
     kmax = -1
@@ -301,8 +301,8 @@ def ball_parts(i, c, t, dt_hist, record, px, py, pz, r, m, vel, omg, mat_i, tabl
                     taken |= 1 << s
                     sc[j, 0] = DONE
                     fx, fy, fz, tx, ty, tz = _one_contact(
-                        i, k, s, c, t, dt_hist, False, qx, qy, qz, r, m, vel, omg, mat_i,
-                        table, pose, cth, sth, tub_fixed, sc, j, prt, fx, fy, fz, tx, ty, tz)
+                        i, k, s, c, t, dt_hist, False, r, m, vel, omg, mat_i, table, pose,
+                        cth, sth, tub_fixed, sc, j, prt, fx, fy, fz, tx, ty, tz)
                     break
         for j in range(n):
             if sc[j, 0] == DONE:
@@ -322,8 +322,8 @@ def ball_parts(i, c, t, dt_hist, record, px, py, pz, r, m, vel, omg, mat_i, tabl
             key[i, k, slot] = int(sc[j, 0])
             taken |= 1 << slot
             fx, fy, fz, tx, ty, tz = _one_contact(
-                i, k, slot, c, t, dt_hist, first, qx, qy, qz, r, m, vel, omg, mat_i, table,
-                pose, cth, sth, tub_fixed, sc, j, prt, fx, fy, fz, tx, ty, tz)
+                i, k, slot, c, t, dt_hist, first, r, m, vel, omg, mat_i, table, pose, cth, sth,
+                tub_fixed, sc, j, prt, fx, fy, fz, tx, ty, tz)
             first = False
         for s in range(SLOTS):
             if not (taken >> s) & 1 and key[i, k, s] != EMPTY:

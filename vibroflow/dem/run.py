@@ -266,7 +266,8 @@ def _vibration_loop(state, system, writer, prog, run, samples, done_snapshots, t
                     window_start, explicit, f, stage_steps0, n, last_ckpt, on_impacts,
                     checkpoint, sigint, sigint_after, out_dir, early: EarlyFrames) -> None:
     """Step to the end, writing the rows of each sample and series step (and the ParaView
-    frame of each of early.steps, outside dem.h5) before stepping on;
+    frame of each of early.steps, outside dem.h5) before stepping on, and the impacts the
+    callbacks on_impacts = (balls', parts') receive;
     a checkpoint every run.checkpoint_every wall seconds and one of the final state (before
     its rows, as every checkpoint), and one at a SIGINT, which then raises Interrupted."""
     dt = system.dt
