@@ -16,6 +16,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from ..io.atomic import json_safe
 from ..io.parts_nc import empty_dataset, write_parts_nc as write_file
 from ..measure.stats import (batch_means, batches_of_whole_cycles, cycles_in_window, phase_bins,
                              stderr_of_batches)
@@ -109,10 +110,11 @@ def summary_lines(ds, parts) -> list[dict]:
 
 
 def write_parts_nc(h5path: Path, out_dir: Path, scenario, system) -> list[dict]:
-    """Write DIR/parts.nc of a finished tub run and return the summary's entries per part."""
+    """Write DIR/parts.nc of a finished tub run and return the summary's entries per part
+    (NaN as None: valid JSON)."""
     ds = part_dataset(h5path, scenario, system.parts)
     write_file(Path(out_dir) / PARTS_NC, ds)
-    return summary_lines(ds, system.parts)
+    return json_safe(summary_lines(ds, system.parts))
 
 
 def part_line(entry: dict) -> str:
