@@ -354,3 +354,16 @@ def test_a_periodic_tub_touches_a_part_through_its_image():
     assert forces[1] == pytest.approx([0.0, -k_n * (R_STEEL - 0.001), 0.0], abs=1e-12)
     assert forces[0] == pytest.approx(forces[1], rel=1e-9)
     assert not np.any(forces[2])  # without the periodic length: far from the box
+
+
+def test_a_ball_over_the_diagonal_of_a_flat_stl_face_feels_one_contact(tmp_path):
+    # a box's STL (trimesh: each face two triangles); a ball dropped head-on onto the top
+    # face's diagonal, where both triangles' nearest points coincide, rebounds with e as on
+    # the analytic box's face, not from two contacts
+    mesh = trimesh.creation.box(extents=(0.02, 0.02, 0.02))
+    path = tmp_path / "box.stl"
+    mesh.export(path)
+    spec = PartSpec(name="block", shape="stl", file=str(path), center=(0.0, 0.0, 0.0),
+                    frame="lab")
+    v = _bounce(spec, (0.0, 0.0, 0.01 + R_STEEL + GAP), (0.0, 0.0, -V))
+    assert rel(v[2], E * V) < 0.01 and abs(v[0]) < 1e-12 and abs(v[1]) < 1e-12

@@ -14,10 +14,10 @@ its own history and a key (the feature it is on; EMPTY when free).  A cylinder, 
 sphere are convex: a ball touches one at one point, the nearest (part_nearest), in slot 0.  An
 STL is touched as LIGGGHTS touches a mesh, triangle by triangle: every triangle whose nearest
 point lies within the ball's radius is a candidate; face candidates (the nearest point inside
-the triangle) are all contacts (a ball in a concave fold touches both faces); an edge or vertex
-candidate is a contact only when the ball has no face contact with the part and no earlier
-candidate sits at the same point (the triangles sharing an edge or a vertex give it once, not
-once each).  A contact keeps its slot while its key (triangle) stays; a contact on a new
+the triangle) are contacts (a ball in a concave fold touches both faces); an edge or vertex
+candidate is a contact only when the ball has no face contact with the part; and no candidate
+is a contact where an earlier one sits at the same point (the triangles sharing an edge or a
+vertex give it once, not once each).  A contact keeps its slot while its key (triangle) stays; a contact on a new
 triangle takes over the history of a slot whose contact ended in the same step (a ball sliding
 across the mesh keeps its tangential spring), else starts one afresh.
 
@@ -137,14 +137,15 @@ def _stl_candidates(prt, k, qx, qy, qz, r, sc):
             continue
         if region == 0 and faces == 0 and n > 0:
             n = 0  # the first face contact replaces the edge and vertex candidates so far
-        if region != 0:
-            same = False
-            for j in range(n):
-                ex, ey, ez = sc[j, 1] - cx, sc[j, 2] - cy, sc[j, 3] - cz
-                if ex * ex + ey * ey + ez * ez < 1e-12 * r * r:
-                    same = True
-            if same:
-                continue
+        # one contact per point: the triangles sharing an edge or a vertex (or two coplanar
+        # ones whose common edge the ball sits over) give it once
+        same = False
+        for j in range(n):
+            ex, ey, ez = sc[j, 1] - cx, sc[j, 2] - cy, sc[j, 3] - cz
+            if ex * ex + ey * ey + ez * ez < 1e-12 * r * r:
+                same = True
+        if same:
+            continue
         if n == sc.shape[0]:
             continue
         d = math.sqrt(d2)
