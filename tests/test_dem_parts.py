@@ -14,6 +14,11 @@ the two agree within (1 + e) v sin(pi / SECTIONS).
 Momentum: velocity Verlet changes the balls' momentum over a step by dt (F_k + F_k+1) / 2, so
 over a run that starts and ends with the balls apart the balls' momentum change equals minus dt
 times the sum of the loads the part recorded at each step, to round-off.
+
+A tub-fixed part's contact is checked against the tub's rigid motion (a ball carried by it feels
+the spring alone), a periodic tub's through the image; the fill against the part's signed
+distance; short tub runs (slow) against their own impact records (parts.nc counts each once),
+a resumed and an uninterrupted run, and one thread against two.
 """
 from __future__ import annotations
 
@@ -22,6 +27,7 @@ import signal
 from types import SimpleNamespace
 
 import h5py
+import numba
 import numpy as np
 import pytest
 import trimesh
@@ -367,3 +373,23 @@ def test_a_ball_over_the_diagonal_of_a_flat_stl_face_feels_one_contact(tmp_path)
                     frame="lab")
     v = _bounce(spec, (0.0, 0.0, 0.01 + R_STEEL + GAP), (0.0, 0.0, -V))
     assert rel(v[2], E * V) < 0.01 and abs(v[0]) < 1e-12 and abs(v[1]) < 1e-12
+
+
+@pytest.mark.slow
+def test_same_part_numbers_on_one_thread_and_on_two(tmp_path):
+    # the part loads are summed per chunk in ball order, the chunks in chunk order: the same
+    # bits whatever the threads (1600 balls: above the one-thread size)
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("numba has a single thread here")
+    sets = ["fill.count=1600", "tub.length=0.01905", "parts.0.center=[0.0,0.0,0.05]",
+            "fill.settle_time=0.05", "fill.max_settle_time=0.05", "run.duration=0.15",
+            "run.average_last=0.1"]
+    outs = []
+    for threads in (1, 2):
+        out = tmp_path / f"threads{threads}"
+        r = _cli("dem", "tub47-bar", "--out", str(out), *_sets(sets),
+                 env=dict(_env(tmp_path), NUMBA_NUM_THREADS=str(threads)))
+        assert r.returncode == 0, r.stderr
+        outs.append(out)
+    _same_h5(outs[0] / "dem.h5", outs[1] / "dem.h5")
+    assert read_parts_nc(outs[0] / "parts.nc").equals(read_parts_nc(outs[1] / "parts.nc"))
