@@ -25,7 +25,7 @@ from .blowup import (BlowUp, blowup_message, check_finite_start, check_overlaps_
                      coincident_message, coincident_pair)
 from .laws import material_index, pair_table
 from .neighbours import NeighbourList
-from .parts import IMP_BALL, N_LOAD, SLOTS, EMPTY, parts_record
+from .parts import EMPTY, IMP_BALL, N_LOAD, SLOTS, parts_record
 from .records import Params, Work, balls_of, pairs_of, walls_of
 from .walls import N_PLANE, WALL_PLANE0, wall_kind
 

@@ -22,9 +22,9 @@ import numba as nb
 import numpy as np
 
 from ..tub.motion import pose as tub_pose
-from .parts import ball_parts, clear_loads
 from .contact import (add_pair, branch_vector, contact_force, forget, pair_contact_velocity,
                       put3, unit_normal)
+from .parts import ball_parts, clear_loads
 from .walls import (KIND_BALL_BALL, KIND_BALL_PARTITION, KIND_BALL_PLANE, KIND_BALL_TUB,
                     TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT, WALL_PLANE0, WALL_U, plane_wall,
                     u_wall)
