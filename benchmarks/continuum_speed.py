@@ -2,7 +2,8 @@
 
     python benchmarks/continuum_speed.py [--case tub47-quick] [--calibration FILE]
         [--dem-dir DIR] [--methods lagrangian,eulerian] [--threads 1,2] [--cfl C]
-        [--dx M] [--stiffness-factor 1.0] [--set KEY=VALUE ...] [--kernels] [--json PATH]
+        [--dx M] [--stiffness-factor 1.0] [--set KEY=VALUE ...] [--kernels]
+        [--temperature] [--initial-temperature T] [--json PATH]
 
 Every (method, thread count) case runs in its own process (NUMBA_NUM_THREADS set before numba
 is imported): it first times the compiled kernels' first call (numba's cache load, or the
@@ -21,6 +22,13 @@ material fraction, wall, partitions, p2g over the cells holding material, the ch
 grid update, g2p, face velocities, stress update, remap) and of a whole step made by the
 compiled loop (mpm.advance / eulerian.solver.advance), so the step's overhead beyond its
 kernels shows.  A kernel timed from Python pays its call (~1 us with these many arguments).
+
+--temperature: every case is run twice, without and with the granular temperature (its
+balance made inside the compiled loops: mpm/temperature_loop.py, eulerian/temperature_loop.py;
+initial T --initial-temperature, default 0.01 m^2/s^2), the column T saying which, and the
+ratio of their wall times printed; with --kernels, the step is also timed on one bed 3000 steps
+into a run with T: the mechanical step alone, with T in the compiled loop, and with T step by
+step (`temperature_steps`).
 
 --dem-dir: a `vibroflow dem` folder (or a study's dem/) of the same case: its summary.json's
 wall_time_s and bulk_velocity.csv.  --calibration: a calibration.toml (default: the DEM
@@ -49,6 +57,8 @@ def _options(method: str, a):
     extra = {} if a.cfl is None else {"cfl": a.cfl}  # None: the options' default
     if a.transfer_cfl is not None:  # 0: one transfer a step
         extra["transfer_cfl"] = a.transfer_cfl
+    if getattr(a, "temperature_on", False):
+        extra.update(temperature=True, initial_temperature=a.initial_temperature)
     return formulation(method).options(dx=a.dx, stiffness_factor=a.stiffness_factor, **extra)
 
 
@@ -104,7 +114,8 @@ def worker(a) -> dict:
     c = summary["continuum"]
     steps = summary["steps"] + int(math.ceil(opts.settle_time / c["dt_s"]))
     wall = summary["wall_time_s"]
-    res.update({"method": a.method, "threads": numba.get_num_threads(), "points": c["points"],
+    res.update({"method": a.method, "temperature": bool(a.temperature_on),
+                "threads": numba.get_num_threads(), "points": c["points"],
                 "steps": steps, "dt_s": c["dt_s"], "wall_time_s": wall,
                 "steps_per_s": steps / wall, "point_steps_per_s": c["points"] * steps / wall,
                 "first_call_s": first, "load_before": load0, "load_after": load1,
@@ -261,8 +272,43 @@ def kernels(a) -> dict:
         t["whole step (compiled loop, 20 steps a call)"] = _per_call(
             lambda: advance(system, state, 20), 10) / 20
         t["whole step (one step a call)"] = _per_call(lambda: advance(system, state, 1), 100)
+        if a.temperature:
+            t.update(temperature_steps(method, scenario, cal, a))
         out[method] = {"points": int(state.n if method == "lagrangian"
                                      else (state.mass > 0).sum()), "us_per_call": t}
+    return out
+
+
+def temperature_steps(method, scenario, cal, a, warm: int = 3000, n: int = 200) -> dict:
+    """Microseconds a step on one bed, the settled bed `warm` steps into a run with the
+    granular temperature (hotter and looser than without it): the mechanical step alone (the
+    fused loop without T), the compiled loop with T, and the step-by-step path
+    (solver.advance_stepwise), each best of 3 runs of n steps from a copy of the same state."""
+    import copy
+
+    import numpy as np
+
+    from vibroflow.continuum.eulerian import solver as eulerian
+    from vibroflow.continuum.mpm import solver as mpm
+
+    solver = mpm if method == "lagrangian" else eulerian
+    a.temperature_on = True
+    system, state, advance = _settled(method, scenario, cal, _options(method, a))
+    a.temperature_on = False
+    advance(system, state, warm)
+    out = {}
+    for name, run in ((f"mechanical step alone ({warm} steps into T)",
+                       lambda s: solver._advance(system, s, n, np.empty((0, 5)))),
+                      ("step with T (compiled loop)", lambda s: advance(system, s, n)),
+                      ("step with T (step by step)",
+                       lambda s: solver.advance_stepwise(system, s, n))):
+        best = math.inf
+        for _ in range(3):
+            s = copy.deepcopy(state)
+            t0 = time.perf_counter()
+            run(s)
+            best = min(best, time.perf_counter() - t0)
+        out[name] = 1e6 * best / n
     return out
 
 
@@ -280,6 +326,9 @@ def main(argv=None) -> int:
     p.add_argument("--stiffness-factor", type=float, default=1.0)
     p.add_argument("--set", action="append", default=[])
     p.add_argument("--kernels", action="store_true")
+    p.add_argument("--temperature", action="store_true")
+    p.add_argument("--initial-temperature", type=float, default=0.01)
+    p.add_argument("--temperature-on", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--json", default=str(ROOT / "runs" / "continuum_speed.json"))
     p.add_argument("--method", help=argparse.SUPPRESS)  # a worker's case
     a = p.parse_args(argv)
@@ -307,14 +356,18 @@ def main(argv=None) -> int:
             print(f"{method}: {k['points']} points, one thread, us per call")
             for name, us in k["us_per_call"].items():
                 print(f"  {name:45s} {us:9.1f}")
-    head = (f"{'method':11s} {'thr':>3s} {'points':>6s} {'steps':>6s} {'wall s':>7s} "
+    head = (f"{'method':11s} {'T':>3s} {'thr':>3s} {'points':>6s} {'steps':>6s} {'wall s':>7s} "
             f"{'steps/s':>8s} {'Mpt-st/s':>8s} {'1st call':>8s} {'DEM/cont':>8s} {'E':>6s} "
             f"{'circ':>8s} {'load':>9s}")
     print(head)
     for method in a.methods:
-        for th in [int(t) for t in a.threads.split(",") if t]:
+        for th, t_on in [(int(t), on) for t in a.threads.split(",") if t
+                         for on in ((False, True) if a.temperature else (False,))]:
             cmd = [sys.executable, __file__, "--method", method, "--case", a.case,
-                   "--stiffness-factor", str(a.stiffness_factor)]
+                   "--stiffness-factor", str(a.stiffness_factor),
+                   "--initial-temperature", str(a.initial_temperature)]
+            if t_on:
+                cmd.append("--temperature-on")
             for flag, val in (("--calibration", a.calibration), ("--dem-dir", a.dem_dir),
                               ("--dx", a.dx), ("--cfl", a.cfl),
                               ("--transfer-cfl", a.transfer_cfl)):
@@ -333,11 +386,16 @@ def main(argv=None) -> int:
             report["cases"].append(res)
             ratio = f"{res['dem_over_continuum']:8.1f}" if dem_wall else f"{'-':>8s}"
             E = f"{res['E']:6.3f}" if "E" in res else f"{'-':>6s}"
-            print(f"{method:11s} {th:3d} {res['points']:6d} {res['steps']:6d} "
+            print(f"{method:11s} {'on' if t_on else 'off':>3s} {th:3d} {res['points']:6d} {res['steps']:6d} "
                   f"{res['wall_time_s']:7.2f} {res['steps_per_s']:8.0f} "
                   f"{res['point_steps_per_s'] / 1e6:8.2f} {res['first_call_s']:8.2f} {ratio} "
                   f"{E} {res['circulation']:8.5f} "
                   f"{res['load_before']:4.1f}/{res['load_after']:4.1f}")
+            off = report["cases"][-2] if len(report["cases"]) > 1 else None
+            if t_on and off and not off["temperature"] and off["method"] == method \
+                    and off["threads"] == res["threads"]:
+                print(f"{'':11s} T on / off wall time "
+                      f"{res['wall_time_s'] / off['wall_time_s']:.2f}")
     if dem_wall:
         print(f"DEM wall time {dem_wall:.1f} s ({a.dem_dir})")
     path = bench.write_json(a.json, report)

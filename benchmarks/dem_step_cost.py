@@ -1,10 +1,13 @@
 """Cost of the DEM's compiled step on a case's settled bed, in this checkout and in a peer
-checkout of vibroflow, on one thread, the same machine, the same hour.
+checkout of vibroflow, on a given number of threads, the same machine, the same hour.
 
     python benchmarks/dem_step_cost.py [--peer DIR] [--case tub47-quick] [--steps 300]
-        [--repeats 7] [--rounds 2] [--json PATH]
+        [--repeats 7] [--rounds 2] [--threads 1] [--set KEY=VALUE] [--peer-set KEY=VALUE]
+        [--json PATH]
 
-Each (checkout, round) runs in its own process, with NUMBA_NUM_THREADS=1, the checkout first on
+Each (checkout, round) runs in its own process, with NUMBA_NUM_THREADS=--threads (1 by
+default), the case's scenario with the --set overrides (and, for the peer, --peer-set too: e.g.
+run.force_chunks=64 for a vibroflow whose DEM sums per-chunk buffers), the checkout first on
 the path (PYTHONPATH) and its own interpreter (DIR/.venv/bin/python when there is one, else
 this one).  The process loads the case's settled bed from the fill cache
 (vibroflow.dem.fill.cache_dir; settled and cached there when absent, as `vibroflow dem CASE`
@@ -18,7 +21,7 @@ Printed per checkout: balls, the median wall time and CPU time of a step (micros
 every repeat of every round with the fastest and slowest, nanoseconds per ball-step, the
 neighbour builds of a repeat, and the ratios of the medians (this / peer: <= 1 means the step
 costs no more here); the 1-minute load average before and after each process.  On a shared
-machine the CPU time (the process's own, one thread) is the figure to compare: the wall time
+machine the CPU time (the process's own; on one thread) is the figure to compare: the wall time
 also counts the time the process waited for a core.  Both checkouts must give the same kinetic
 energy after the steps (printed): the step is the same computation.
 """
@@ -42,7 +45,11 @@ def _settled(scenario, system):
     from vibroflow.dem import fill as F
     from vibroflow.dem.output import load_state_file, save_state_file
 
-    path = F.cache_dir() / "fills" / f"{F.fill_cache_key(scenario, system.nchunk)}.h5"
+    try:  # the key of this checkout, or of a peer whose DEM had force chunks
+        key = F.fill_cache_key(scenario)
+    except TypeError:
+        key = F.fill_cache_key(scenario, system.nchunk)
+    path = F.cache_dir() / "fills" / f"{key}.h5"
     if not path.exists():
         state = F.fill_state(system, scenario)
         info = F.settle(system, state, scenario)
@@ -54,7 +61,7 @@ def _settled(scenario, system):
     return state
 
 
-def worker(case: str, steps: int, repeats: int) -> dict:
+def worker(case: str, steps: int, repeats: int, sets: list[str]) -> dict:
     """Time run_steps in this process (NUMBA_NUM_THREADS set by the caller)."""
     # imported here, in the worker: each checkout's own package (PYTHONPATH), numba after
     # NUMBA_NUM_THREADS is set
@@ -64,7 +71,7 @@ def worker(case: str, steps: int, repeats: int) -> dict:
     from vibroflow.dem.simulate import make_system, run_steps
     from vibroflow.scenario.io import load_scenario
 
-    scenario = load_scenario(case, [])
+    scenario = load_scenario(case, sets)
     system = make_system(scenario)
     state = _settled(scenario, system)
     t0 = time.perf_counter()
@@ -89,10 +96,12 @@ def _interpreter(checkout: Path) -> str:
     return str(own) if own.exists() else sys.executable
 
 
-def _run(checkout: Path, a) -> dict:
-    env = dict(os.environ, NUMBA_NUM_THREADS="1", PYTHONPATH=str(checkout))
+def _run(checkout: Path, a, sets: list[str]) -> dict:
+    env = dict(os.environ, NUMBA_NUM_THREADS=str(a.threads), PYTHONPATH=str(checkout))
     cmd = [_interpreter(checkout), str(Path(__file__).resolve()), "--worker", "--case", a.case,
            "--steps", str(a.steps), "--repeats", str(a.repeats)]
+    for kv in sets:
+        cmd += ["--set", kv]
     load0 = os.getloadavg()[0]
     out = subprocess.run(cmd, env=env, cwd=checkout, capture_output=True, text=True)
     if out.returncode != 0:
@@ -109,11 +118,16 @@ def main(argv=None) -> None:
     p.add_argument("--steps", type=int, default=300, help="vibration steps a repeat")
     p.add_argument("--repeats", type=int, default=7, help="timed repeats a process")
     p.add_argument("--rounds", type=int, default=2, help="processes a checkout, alternated")
+    p.add_argument("--threads", type=int, default=1, help="NUMBA_NUM_THREADS of each process")
+    p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
+                   help="scenario override for both checkouts (repeatable)")
+    p.add_argument("--peer-set", dest="peer_sets", action="append", default=[],
+                   metavar="KEY=VALUE", help="scenario override for the peer only (repeatable)")
     p.add_argument("--json", type=Path, default=ROOT / "runs" / "dem_step_cost.json")
     p.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     a = p.parse_args(argv)
     if a.worker:
-        print(json.dumps(worker(a.case, a.steps, a.repeats)))
+        print(json.dumps(worker(a.case, a.steps, a.repeats, a.sets)))
         return
     checkouts = {"this": ROOT}
     if a.peer is not None:
@@ -122,7 +136,7 @@ def main(argv=None) -> None:
     for r in range(a.rounds):
         order = list(checkouts.items())
         for name, path in (order if r % 2 == 0 else order[::-1]):
-            res = _run(path, a)
+            res = _run(path, a, a.sets + (a.peer_sets if name == "peer" else []))
             runs[name].append(res)
             us = [1e6 * t / a.steps for t in res["times_s"]]
             cpu = [1e6 * t / a.steps for t in res["cpu_s"]]
@@ -143,7 +157,7 @@ def main(argv=None) -> None:
                          "builds_per_repeat": rs[0]["builds"][0],
                          "kinetic_energy_J": rs[0]["kinetic_energy_J"],
                          "first_call_s": [res["first_call_s"] for res in rs]}
-    print(f"\n{a.case}, one thread, {a.steps} vibration steps from the settled bed, "
+    print(f"\n{a.case}, {a.threads} thread(s), {a.steps} vibration steps from the settled bed, "
           f"{a.rounds} x {a.repeats} repeats a checkout")
     print(f"{'':6s}{'balls':>7s}{'wall us/step: median':>22s}{'min':>9s}{'max':>9s}"
           f"{'CPU us/step: median':>21s}{'min':>9s}{'max':>9s}{'ns/ball-step':>14s}"

@@ -86,6 +86,7 @@ def vibroflow_speed(s, steps: int) -> dict:
 
     from vibroflow.dem import fill as F
     from vibroflow.dem.simulate import make_system, run_steps
+    from vibroflow.dem.step import ASSEMBLY
 
     system = make_system(s)
     state = F.fill_state(system, s)
@@ -97,7 +98,7 @@ def vibroflow_speed(s, steps: int) -> dict:
     run_steps(system, state, steps)
     wall = time.perf_counter() - t0
     return {"code": "vibroflow", "n_particles": state.n, "steps": steps, "wall_time_s": wall,
-            "threads": numba.get_num_threads(), "chunks": system.nchunk,
+            "threads": numba.get_num_threads(), "assembly": ASSEMBLY,
             "particle_steps_per_s": state.n * steps / wall if wall > 0 else math.nan}
 
 

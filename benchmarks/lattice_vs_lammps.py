@@ -170,6 +170,7 @@ def run_vibroflow(args) -> dict:
 
     numba.set_num_threads(args.threads_one)
     from vibroflow.dem import simulate as S
+    from vibroflow.dem.step import ASSEMBLY
 
     t_build = time.perf_counter()
     system, state, lo, hi = vibroflow_setup(args)
@@ -214,7 +215,7 @@ def run_vibroflow(args) -> dict:
                         "rebuild_s": rebuild_log["seconds"]})
     S.rebuild = original_rebuild
     final = {"step": total_steps, **sample()}
-    out = {"code": "vibroflow", "threads": numba.get_num_threads(), "nchunk": system.nchunk,
+    out = {"code": "vibroflow", "threads": numba.get_num_threads(), "assembly": ASSEMBLY,
            "threading_layer": _numba_layer(), "balls": n, "steps": args.steps,
            "setup_s": setup_s, "warmup_s": warmup_s, "timings": timings, "series": series,
            "final": final, "neighbours_per_ball": float(state.nl.nbr.shape[0]) / n}

@@ -3,7 +3,7 @@ test_dem_plates.py): small explicit scenarios driven straight through the engine
 (`vibroflow.dem.simulate`), with nothing written to disk.
 
 These systems hold one or two balls, where numba's thread wake-ups cost more than the work, so
-every run here is done on one thread with one force-assembly chunk (the thread count is put back
+every run here is done on one thread (the thread count is put back
 afterwards, so other tests are not affected).
 """
 from __future__ import annotations
@@ -100,7 +100,7 @@ class Sim:
 
     def __init__(self, sc: Scenario):
         self.scenario = sc
-        self.system = S.make_system(sc, nchunk=1)
+        self.system = S.make_system(sc)
         names = self.system.material_names
         ps = sc.particles
         with one_thread():

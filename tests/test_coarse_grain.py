@@ -266,7 +266,7 @@ def test_snapshot_from_a_vibrating_tub_state_is_in_tub_frame_and_axes():
     from vibroflow.tub.motion import pose_np, tub_to_lab
 
     sc = Scenario(motion=Motion(amplitude_theta=0.3, amplitude_x=0.01, amplitude_z=0.01))
-    system = S.make_system(sc, nchunk=1)
+    system = S.make_system(sc)
     step = int(round(0.3 / 47.0 / system.dt))
     pz = {k: float(v) for k, v in pose_np(system.motion, step * system.dt).items()}
     assert abs(pz["theta"]) > 0.25

@@ -286,7 +286,7 @@ def dem_column(L0, a, slab=3, seed=1, dt=1.0e-5, ke_fraction=1.0e-4, t_max_tau=1
         # 1. fill behind the gate and settle
         balls = [tuple(p) for p in col] + under
         glued = np.arange(len(balls)) >= n
-        system = S.make_system(_column_scenario(balls, glued, W, L0, dt), nchunk=1)
+        system = S.make_system(_column_scenario(balls, glued, W, L0, dt))
         st = _column_state(system, balls, glued)
         while True:
             S.run_steps(system, st, chunk)
@@ -300,7 +300,7 @@ def dem_column(L0, a, slab=3, seed=1, dt=1.0e-5, ke_fraction=1.0e-4, t_max_tau=1
         # 2. release: the gate gone, the rest of the glued floor laid, the histories kept
         balls2 = [tuple(p) for p in st.pos] + beyond
         glued2 = np.concatenate([glued, np.ones(len(beyond), bool)])
-        system2 = S.make_system(_column_scenario(balls2, glued2, W, 1.0e3, dt), nchunk=1)
+        system2 = S.make_system(_column_scenario(balls2, glued2, W, 1.0e3, dt))
         st2 = _column_state(system2, balls2, glued2)
         k = len(balls)
         st2.vel[:k], st2.omg[:k] = st.vel, st.omg

@@ -33,7 +33,7 @@ def _oscillation(friction: float, seconds: float = 2.2) -> tuple[float, float, f
         f"contacts.1.friction={friction}", "contacts.1.rolling_friction=0.0"])
     R, r = s.tub.radius, 0.5 * s.fill.diameter
     arm = R - r
-    system = S.make_system(s, 1)
+    system = S.make_system(s)
     x0, z0 = arm * math.sin(THETA0), R - arm * math.cos(THETA0)
     state = S.init_state(system, [[x0, 0.5 * s.tub.length, z0]], [[0.0, 0.0, 0.0]],
                          [[0.0, 0.0, 0.0]], [r], [s.materials["steel"].density],

@@ -483,7 +483,7 @@ def test_blow_up_of_a_ball_outside_the_tub(tmp_path):
     """A library call that starts a tub run with a ball below the tub's floor."""
     from vibroflow.dem import simulate as S
     sc = load_scenario("tub47-quick", SMALL_FILL)
-    system = S.make_system(sc, nchunk=1)
+    system = S.make_system(sc)
     # beside the tub, above its rim: touching no wall, outside all the same
     y = 0.5 * sc.tub.length
     pos = [(0.0, y, 0.01), (sc.tub.radius + 0.05, y, sc.tub.rim_height + 0.01)]

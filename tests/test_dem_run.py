@@ -117,8 +117,8 @@ def test_killed_and_resumed_run_equals_uninterrupted(tmp_path):
 def test_same_numbers_on_one_thread_and_on_two(tmp_path):
     """Reproducible means: the same scenario and seed give the same numbers bit for bit however
     many threads run them (a sweep's one-thread Dask worker and a two-thread `vibroflow run`
-    alike): the force assembly's summation order is fixed by run.force_chunks, not the threads.
-    1600 balls: above the size below which the run uses one thread anyway."""
+    alike): each ball sums its pair forces in a fixed order (vibroflow.dem.step), whatever the
+    threads.  1600 balls: above the size below which the run uses one thread by default."""
     import numba
 
     if numba.config.NUMBA_NUM_THREADS < 2:
@@ -133,8 +133,40 @@ def test_same_numbers_on_one_thread_and_on_two(tmp_path):
         assert r.returncode == 0, r.stderr
         outs.append(out)
     s1, s2 = (json.loads((o / "summary.json").read_text()) for o in outs)
-    assert (s1["threads"], s2["threads"]) == (1, 2) and s1["chunks"] == s2["chunks"] == 2
+    assert (s1["threads"], s2["threads"]) == (1, 2) and s1["assembly"] == s2["assembly"]
     _same_h5(outs[0] / "dem.h5", outs[1] / "dem.h5")
+
+
+@pytest.mark.slow
+def test_same_numbers_on_one_two_and_four_threads(tmp_path):
+    """The same small run on 1, 2 and 4 threads (NUMBA_NUM_THREADS and --threads, which also
+    lifts the one-thread default of small runs; 4 threads share this machine's 2 cores): dem.h5's
+    snapshots, wall contacts, impacts (in their recorded order) and series are bit for bit the
+    same, and so are the summaries' probes and circulation."""
+    outs = []
+    for threads in (1, 2, 4):
+        env = dict(_env(tmp_path), NUMBA_NUM_THREADS=str(threads))
+        out = tmp_path / f"threads{threads}"
+        r = _cli("dem", "tub47-quick", "--out", str(out), "--threads", str(threads),
+                 *_sets(SMALL), env=env)
+        assert r.returncode == 0, r.stderr
+        assert json.loads((out / "summary.json").read_text())["threads"] == threads
+        outs.append(out)
+    summaries = [json.loads((o / "summary.json").read_text()) for o in outs]
+    for out, s in zip(outs[1:], summaries[1:]):
+        _same_h5(outs[0] / "dem.h5", out / "dem.h5")
+        assert s["probes"] == summaries[0]["probes"]
+        assert s["circulation"] == summaries[0]["circulation"]
+
+
+def test_threads_option_out_of_range(tmp_path):
+    """--threads 0: one line naming the option and what is allowed, exit code 2, nothing run."""
+    out = tmp_path / "zero"
+    r = _cli("dem", "tub47-quick", "--out", str(out), "--threads", "0", env=_env(tmp_path))
+    assert r.returncode == 2
+    assert r.stderr.strip().splitlines() == ["error: --threads = 0: a whole number of threads, "
+                                             "at least 1"]
+    assert not out.exists()
 
 
 def test_periodic_length_and_vtk_output(tmp_path):

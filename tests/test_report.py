@@ -406,3 +406,72 @@ def test_the_e_limit_is_measured_on_the_studys_dem_seeds(study, tmp_path):  # no
     limits = re.findall(r'data-q="E_limit" data-value="([^"]+)"', page)
     assert limits and all(float(v) == pytest.approx(want, rel=1e-6) for v in limits)
     assert "measured on the study&#39;s 2 DEM seeds" in page
+
+
+def _study_with_parts(out: Path, new: Path) -> Path:
+    """A view of the study `out` in `new` (links to its files, its method and report folders
+    real) with a synthetic parts.nc (tests.test_report_parts) in dem/ and lagrangian/, of a
+    part whose name needs escaping."""
+    from tests.test_report_parts import synthetic_parts
+    from vibroflow.io.parts_file import write_parts
+
+    new.mkdir()
+    for p in out.iterdir():
+        if p.is_dir() and p.name in ("dem", "lagrangian", "eulerian", "report"):
+            (new / p.name).mkdir()
+            for q in p.iterdir():
+                (new / p.name / q.name).symlink_to(q.resolve())
+        elif p.name != "report.html":
+            (new / p.name).symlink_to(p.resolve())
+    for method, speed in (("dem", 0.2), ("lagrangian", 0.25)):
+        write_parts(new / method / "parts.nc", synthetic_parts(method, "bar<&>", speed))
+    return new
+
+
+@pytest.mark.slow
+def test_report_has_a_section_per_part_with_its_name_escaped(study, tmp_path):  # noqa: F811
+    """The tiny study with parts.nc in two of its methods' folders: one section per part after
+    the fixed ones, its name escaped, the table's values the files' (data-value), the missing
+    Eulerian file said; rendered by headless Chromium with its figures drawn."""
+    from vibroflow.report.html import SECTIONS
+
+    _, out, _, _ = study
+    new = _study_with_parts(out, tmp_path / "study")
+    r = _cli("report", new)
+    assert r.returncode == 0, r.stderr
+    html = (new / "report.html").read_text(encoding="utf-8")
+    page = _Page()
+    page.feed(html)
+    assert page.h2[:len(SECTIONS)] == list(SECTIONS.values())
+    assert "Part bar<&>" in page.h2
+    assert "bar&lt;&amp;&gt;" in html and "bar<&>" not in html
+    assert "eulerian: no parts.nc" in html
+    values = re.findall(r'<table class="part-patches">.*?</table>', html, re.S)[0]
+    first = re.findall(r'data-value="([^"]*)"', values.split("</tr>")[1])
+    # area, DEM 0.2, lagrangian 0.25, difference 0.05, DEM rate 1e4, energy flux 3
+    assert [float(v) for v in first] == pytest.approx(
+        [2 * math.pi * 0.0125 / 36 * 0.019, 0.2, 0.25, 0.05, 1e4, 3.0])
+    if not (CHROMIUM.exists() and CHROMEDRIVER.exists()):
+        return
+    webdriver = pytest.importorskip("selenium.webdriver")
+    from selenium.webdriver.chrome.service import Service
+
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = str(CHROMIUM)
+    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage"):
+        opts.add_argument(arg)
+    driver = webdriver.Chrome(service=Service(str(CHROMEDRIVER)), options=opts)
+    try:
+        driver.set_page_load_timeout(60)
+        driver.get((new / "report.html").resolve().as_uri())
+        from selenium.webdriver.support.ui import WebDriverWait
+        WebDriverWait(driver, 60, poll_frequency=0.2).until(
+            lambda d: d.execute_script("return document.readyState") == "complete")
+        imgs = driver.execute_script(
+            "const s = document.getElementById('part-1');"
+            "return [s.querySelector('h2').textContent,"
+            " Array.from(s.querySelectorAll('img')).map(i => [i.complete, i.naturalWidth])]")
+        assert imgs[0] == "Part bar<&>"
+        assert len(imgs[1]) == 2 and all(c and w > 0 for c, w in imgs[1])
+    finally:
+        driver.quit()

@@ -38,6 +38,12 @@ if not {"NUMBA_THREADING_LAYER", "NUMBA_THREADING_LAYER_PRIORITY"} & set(_os.env
 if not {"GOMP_SPINCOUNT", "OMP_WAIT_POLICY"} & set(_os.environ):
     _os.environ["GOMP_SPINCOUNT"] = "1000"
 
+# numba's threads: every core the process may use (vibroflow/threads.py), unless
+# NUMBA_NUM_THREADS says otherwise
+from vibroflow import threads as _threads  # noqa: E402
+
+_threads.default_threads_env()
+
 # numba's cache keys a kernel on its own file only; kernels inline code from other files, so
 # after an edit the cache is dropped whole (vibroflow/_kernel_cache.py says why)
 from vibroflow import _kernel_cache  # noqa: E402

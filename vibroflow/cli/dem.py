@@ -6,11 +6,12 @@ from typing import Annotated
 
 import typer
 
+from ..threads import use_threads
 from .after_run import warn_empty_probes
 from .apps import app
 from .failures import blown_up, input_errors
-from .options import (OutOption, ResumeOption, ScenarioArg, SetOption, VtkEveryOption,
-                      VtkFrameOption, VtkFromOption, load)
+from .options import (OutOption, ResumeOption, ScenarioArg, SetOption, ThreadsOption,
+                      VtkEveryOption, VtkFrameOption, VtkFromOption, load)
 
 
 @app.command("dem")
@@ -25,9 +26,11 @@ def dem(
     vtk_every: VtkEveryOption = None,
     vtk_from: VtkFromOption = None,
     resume: ResumeOption = False,
+    threads: ThreadsOption = None,
 ) -> None:
     """Run the DEM of a scenario (fill, settle, vibrate, average) into --out."""
     s = load(scenario, set_)  # before anything is written: bad input leaves --out untouched
+    use_threads(threads)
     from vibroflow.io.vtk_frame import cli_vtk_options
 
     paraview = cli_vtk_options(vtk, vtk_frame, vtk_every, vtk_from)

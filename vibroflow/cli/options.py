@@ -34,6 +34,10 @@ SetOption = Annotated[Optional[list[str]], set_option(
     "Override a scenario field, e.g. --set run.duration=0.2 --set contacts.0.friction=0.3 "
     "(repeatable; the value is read as TOML).")]
 OutOption = Annotated[Path, out_option("Output folder.")]
+ThreadsOption = Annotated[Optional[int], typer.Option(
+    "--threads", metavar="N",
+    help="Threads of the solvers' parallel loops (default: every core the process may use, or "
+         "NUMBA_NUM_THREADS); the numbers are the same on any count.", show_default=False)]
 ResumeOption = Annotated[bool, typer.Option("--resume", help="Go on from the last checkpoint "
                                                              "in --out.")]
 

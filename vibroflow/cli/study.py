@@ -7,11 +7,12 @@ from typing import Annotated, Optional
 
 import typer
 
+from ..threads import use_threads
 from .after_run import warn_empty_probes
 from .apps import app
 from .failures import blown_up, input_errors
-from .options import (StudyScenarioArg, VtkEveryOption, VtkFrameOption, VtkFromOption, load,
-                      out_option, set_option, shear_cell_option)
+from .options import (StudyScenarioArg, ThreadsOption, VtkEveryOption, VtkFrameOption,
+                      VtkFromOption, load, out_option, set_option, shear_cell_option)
 
 
 @app.command("run")
@@ -32,6 +33,7 @@ def run(
     vtk_frame: VtkFrameOption = None,
     vtk_every: VtkEveryOption = None,
     vtk_from: VtkFromOption = None,
+    threads: ThreadsOption = None,
 ) -> None:
     """DEM, calibration, every continuum formulation and their comparison into --out; a rerun
     redoes only the stages whose inputs changed (DIR/summary.json, vibroflow.load(DIR))."""
@@ -40,6 +42,7 @@ def run(
 
     scenario_sets, method_sets = split_settings(set_)
     s = load(scenario, scenario_sets)  # before anything is written
+    use_threads(threads)
     from vibroflow.io.vtk_frame import cli_vtk_options
 
     paraview = cli_vtk_options(vtk, vtk_frame, vtk_every, vtk_from)

@@ -5,12 +5,12 @@ to the points' external force before the particle-to-grid transfer, using the po
 and velocity at the start of the step.  A boundary object gives the compiled step loop
 (fused.py) its numbers as one record of BOUNDARY_DTYPE (`record()`: its kind, and the fields
 of that kind by name), and `boundary_forces` runs the kernel of the record's kind
-(`u_wall_forces`, `plane_forces`, `partition_forces`): a new kind of boundary is a class, a
-kernel and a branch of `boundary_forces` here, and the step loop stays as it is.  A boundary
-with a per-point history (`init_history(n)`, `state.history[self.slot]`; the penalty walls)
-says so (`has_history`); the walls also have `lost(state)`: the ids of the points the last
-step found through the wall by more than their own side, which the solver reports as a
-blow-up (mpm/solver.py).
+(`u_wall_forces`, `plane_forces`, `part_wall_forces`, `partition_forces`): a new kind of
+boundary is a class, a kernel and a branch of `boundary_forces` here, and the step loop stays
+as it is.  A boundary with a per-point history (`init_history(n)`,
+`state.history[self.slot]`; the penalty walls) says so (`has_history`); the walls also have
+`lost(state)`: the ids of the points the last step found through the wall by more than their
+own side, which the solver reports as a blow-up (mpm/solver.py).
 
 Wall contact (`UWall`, `Plane`): a penalty contact with a constant normal stiffness, as the
 published finite element study of the tub did (a linear pressure-overclosure law), and Coulomb
@@ -29,7 +29,10 @@ friction (the point-wall analogue of Bardenhagen, Brackbill & Sulsky 2000's fric
 `UWall` is the tub's U (vibroflow.tub.geometry.u_wall_nearest: the same surface the DEM's balls
 touch) fixed in the tub frame, where the solver works (grid_update.py); its motion enters through
 the frame's inertial forces, computed from vibroflow.tub.motion.  `Plane` is a flat wall moving
-with constant acceleration, for tests.
+with constant acceleration, for tests.  `PartWall` is a rigid part of the scenario's [[parts]]
+(vibroflow.tub.parts) fixed in the tub frame, with the U wall's law: the point's gap and normal
+are those of the part's nearest surface point in the slice's section y = L_y / 2
+(tub.parts.part_nearest; a part spanning the slice, continuum/part_obstacle.py).
 
 `PartitionFriction`: the two partitions at y = 0 and y = L_y as a depth-averaged body force
 f = -2 mu_p p / L_y along the velocity relative to the tub, per unit volume (Jop, Forterre &
@@ -46,24 +49,32 @@ import numpy as np
 
 from vibroflow.errors import InputError
 from vibroflow.tub.geometry import distance_to_wall_np, u_wall_nearest
+from vibroflow.tub.parts import part_nearest
 
 NO_CONTACT, STICK, SLIDE = 0, 1, 2
 
 #: kinds of boundary (BOUNDARY_DTYPE's `kind`): the tub's U wall, a moving plane wall, the
-#: partitions' friction
-U_WALL, PLANE_WALL, PARTITIONS = 0, 1, 2
+#: partitions' friction, a part (tub.parts) in the tub frame
+U_WALL, PLANE_WALL, PARTITIONS, PART_WALL = 0, 1, 2, 3
 
 #: a boundary's numbers for the compiled step (`record()`): kind; hist, the row of a wall's
 #: history in the step's stacked histories (mpm.solver.pack_boundaries); a penalty wall's k_n,
 #: k_t (Pa/m), damping ratio zeta and friction mu; the U's radius (m); a plane through (px, pz) +
 #: (vx, vz) t + (ax, az) t^2 / 2 (m) with unit normal (nx, nz); the partitions' friction mu_p
-#: and spacing L_y (m)
+#: and spacing L_y (m); a part's index `part` in the packed parts (tub.parts.pack) and the
+#: section's y (m)
 BOUNDARY_DTYPE = np.dtype([("kind", np.int64), ("hist", np.int64), ("kn", np.float64),
                            ("kt", np.float64), ("zeta", np.float64), ("mu", np.float64),
                            ("radius", np.float64), ("px", np.float64), ("pz", np.float64),
                            ("nx", np.float64), ("nz", np.float64), ("vx", np.float64),
                            ("vz", np.float64), ("ax", np.float64), ("az", np.float64),
-                           ("friction", np.float64), ("length", np.float64)])
+                           ("friction", np.float64), ("length", np.float64),
+                           ("part", np.int64), ("y", np.float64)])
+
+#: no parts, packed as `boundary_forces` takes them: shape codes, parameters, triangles, their
+#: normals and first indices (tub.parts.PackedParts)
+NO_PARTS = (np.zeros(0, np.int64), np.zeros((0, 10)), np.zeros((0, 3, 3)), np.zeros((0, 3)),
+            np.zeros(1, np.int64))
 
 
 @nb.njit(cache=True, inline="always")
@@ -152,6 +163,33 @@ def plane_forces(x, v, mass, volume, xi, fext, f_out, fn_out, ft_out, state_out,
     return deep
 
 
+@nb.njit(cache=True, inline="always")
+def part_section_nearest(parts, k, y, px, pz):
+    """(gap m, nx, nz) of the point (px, pz) from part k of the packed parts (NO_PARTS'
+    layout) in the section at y (m): tub.parts.part_nearest's gap with its normal's x-z part
+    made unit (a part spanning the slice has none along y near its surface)."""
+    shape, prm, tri, tri_normal, tri_start = parts
+    gap, nx, ny, nz, cx, cy, cz, feat = part_nearest(shape, prm, tri, tri_normal, tri_start, k,
+                                                     px, y, pz)
+    n = np.sqrt(nx * nx + nz * nz)
+    if n < 1.0e-12:
+        return gap, 0.0, 1.0
+    return gap, nx / n, nz / n
+
+
+@nb.njit(cache=True)
+def part_wall_forces(x, v, mass, volume, xi, fext, f_out, fn_out, ft_out, state_out, parts, k,
+                     y, kn, kt, zeta, mu, dt):
+    """Add the contact force of part k of the packed parts (at rest in the solver's frame) in
+    the section at y (m) to fext; as `u_wall_forces` (with its return)."""
+    deep = 0
+    for p in range(x.shape[0]):
+        gap, nx, nz = part_section_nearest(parts, k, y, x[p, 0], x[p, 1])
+        deep += _contact(p, gap, nx, nz, v[p, 0], v[p, 1], mass, volume, xi, fext, f_out,
+                         fn_out, ft_out, state_out, kn, kt, zeta, mu, dt)
+    return deep
+
+
 @nb.njit(cache=True)
 def partition_forces(v, mass, volume, stress, fext, mu_p, length, dt):
     """Add the partitions' friction -2 mu_p p V_p / L_y along -v (N/m) to fext, capped at
@@ -172,12 +210,13 @@ def partition_forces(v, mass, volume, stress, fext, mu_p, length, dt):
 
 
 @nb.njit(cache=True)
-def boundary_forces(b, x, v, mass, volume, stress, fext, hist, a, e, t, dt):
+def boundary_forces(b, x, v, mass, volume, stress, fext, hist, parts, a, e, t, dt):
     """Add the force of the boundary b (a BOUNDARY_DTYPE record) on the points a:e to fext
     (N, 2) (N/m) at time t (s) over dt (s), with its kind's kernel; x, v (N, 2), mass, volume
     (N,), stress (N, 4) the points' (mpm.solver.MPMState); hist = (xi, f, fn, ft, state) the
-    walls' stacked histories (mpm.solver.pack_boundaries), row b.hist this wall's.  Returns the
-    number of points gone through a wall (0 for the partitions)."""
+    walls' stacked histories (mpm.solver.pack_boundaries), row b.hist this wall's; parts the
+    packed parts (NO_PARTS' layout).  Returns the number of points gone through a wall (0 for
+    the partitions)."""
     if b.kind == PARTITIONS:
         partition_forces(v[a:e], mass[a:e], volume[a:e], stress[a:e], fext[a:e], b.friction,
                          b.length, dt)
@@ -188,6 +227,10 @@ def boundary_forces(b, x, v, mass, volume, stress, fext, hist, a, e, t, dt):
         return u_wall_forces(x[a:e], v[a:e], mass[a:e], volume[a:e], xi[q, a:e], fext[a:e],
                              f[q, a:e], fn[q, a:e], ft[q, a:e], st[q, a:e], b.radius, b.kn,
                              b.kt, b.zeta, b.mu, dt)
+    if b.kind == PART_WALL:
+        return part_wall_forces(x[a:e], v[a:e], mass[a:e], volume[a:e], xi[q, a:e], fext[a:e],
+                                f[q, a:e], fn[q, a:e], ft[q, a:e], st[q, a:e], parts, b.part,
+                                b.y, b.kn, b.kt, b.zeta, b.mu, dt)
     px, pz, wvx, wvz = plane_motion(b.px, b.pz, b.vx, b.vz, b.ax, b.az, t)
     return plane_forces(x[a:e], v[a:e], mass[a:e], volume[a:e], xi[q, a:e], fext[a:e],
                         f[q, a:e], fn[q, a:e], ft[q, a:e], st[q, a:e], px, pz, b.nx, b.nz, wvx,
@@ -299,6 +342,64 @@ class Plane(_Contact):
     def _gap(self, state) -> np.ndarray:
         (px, pz), _ = self.at(self._t_last)
         return (state.x[:, 0] - px) * self.normal[0] + (state.x[:, 1] - pz) * self.normal[1]
+
+
+@nb.njit(cache=True)
+def part_gaps(parts, k, y, x, gap_out):
+    """Gaps (m) of the points x (N, 2) from part k in the section at y (part_section_nearest)."""
+    for p in range(x.shape[0]):
+        gap_out[p] = part_section_nearest(parts, k, y, x[p, 0], x[p, 1])[0]
+
+
+@nb.njit(cache=True)
+def _section_nearest_loop(parts, k, y, x, z, out):
+    for p in range(x.shape[0]):
+        out[p, 0], out[p, 1], out[p, 2] = part_section_nearest(parts, k, y, x[p], z[p])
+
+
+def part_section_nearest_np(parts, k: int, y: float, x, z):
+    """(gap m, nx, nz) arrays of part_section_nearest at the points (x, z) (m)."""
+    xs = np.ascontiguousarray(np.ravel(x), dtype=float)
+    zs = np.ascontiguousarray(np.ravel(z), dtype=float)
+    out = np.zeros((xs.size, 3))
+    _section_nearest_loop(parts, int(k), float(y), xs, zs, out)
+    shape = np.shape(x)
+    return out[:, 0].reshape(shape), out[:, 1].reshape(shape), out[:, 2].reshape(shape)
+
+
+@dataclass
+class PartWall(_Contact):
+    """Part `index` of the packed parts `packed` (a tuple in NO_PARTS' layout; tub.parts.pack
+    of the run's parts, every PartWall of a system sharing it) as a wall in the tub frame, in
+    the section at y (m), named `name`; stiffness (Pa/m), friction mu_w (-), damping ratio (-),
+    k_t / k_n as the U wall's."""
+
+    name: str
+    packed: tuple
+    index: int
+    y: float
+    stiffness: float
+    friction: float
+    damping_ratio: float = 0.16
+    tangential_ratio: float = 1.0
+
+    def __post_init__(self):
+        self._check()
+
+    def record(self) -> np.ndarray:
+        """Its BOUNDARY_DTYPE record (module docstring)."""
+        r = self._record(PART_WALL)
+        r["part"], r["y"] = self.index, self.y
+        return r
+
+    def gap(self, x: np.ndarray) -> np.ndarray:
+        """Gaps (m) of the points x (N, 2) from the part's surface (positive outside)."""
+        out = np.zeros(x.shape[0])
+        part_gaps(self.packed, self.index, self.y, np.ascontiguousarray(x, dtype=float), out)
+        return out
+
+    def _gap(self, state) -> np.ndarray:
+        return self.gap(state.x)
 
 
 @dataclass

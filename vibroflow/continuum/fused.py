@@ -59,8 +59,9 @@ Points = namedtuple("Points", ["x", "v", "C", "L", "mass", "volume", "density", 
 #: flip the FLIP fraction (mpm.solver.MPMSystem.flip)
 MPMStep = namedtuple("MPMStep", ["dt", "params", "frame", "box", "bounds", "flip"])
 #: records (nb,) of boundary.BOUNDARY_DTYPE in the system's order, and the walls' histories
-#: (walls, N, ...) xi, f, fn, ft, state (boundary.py; row `hist` of a wall's record)
-Boundaries = namedtuple("Boundaries", ["records", "xi", "f", "fn", "ft", "state"])
+#: (walls, N, ...) xi, f, fn, ft, state (boundary.py; row `hist` of a wall's record), and the
+#: packed parts the part walls use (boundary.NO_PARTS' layout)
+Boundaries = namedtuple("Boundaries", ["records", "xi", "f", "fn", "ft", "state", "parts"])
 
 
 @nb.njit(cache=True)
@@ -90,6 +91,7 @@ def advance_kernel(nsteps, t, points, step, boundaries, grid, work):
     dt, params, frame, box, bounds, flip = step
     records = boundaries.records
     hist = (boundaries.xi, boundaries.f, boundaries.fn, boundaries.ft, boundaries.state)
+    parts = boundaries.parts
     x0, z0, dx, periodic, no_slip_rows, axis_cols = grid
     cm, cmv, cf, gm, gmv, gf, gv, transfers, cb, B, gtmp = work
     nchunk = bounds.shape[0] - 1
@@ -108,7 +110,7 @@ def advance_kernel(nsteps, t, points, step, boundaries, grid, work):
             fext[a:b] = 0.0
             for j in range(nb_):
                 deep[c, j] = boundary_forces(records[j], x, v, mass, volume, stress, fext,
-                                             hist, a, b, t, dt)
+                                             hist, parts, a, b, t, dt)
             cm[c] = 0.0
             cmv[c] = 0.0
             cf[c] = 0.0

@@ -10,6 +10,9 @@ tub's by default, the lab's on request), the DEM's frames' counterpart (dem.para
                        density_kg_per_m3, pressure_Pa, shear_rate_per_s
     tub.vtu            the tub's surface (tub frame), or in the lab frame
     tub_NNNNN.vtu      the surface moved by the tub's motion at each sample, and tub.pvd
+    parts.vtu          with parts: the outline of each part's section at the slice's middle
+                       (line cells, cell data "part" the part's index; tub frame), or in the
+                       lab frame parts_NNNNN.vtu at each sample, as tub_NNNNN.vtu
     points_early_NNNNN.vtu, grid_early_NNNNN.vt[rs], tub_early_NNNNN.vtu
                        with VtkOptions.every: the same every `every` seconds from `start` up
                        to the averaging window, written as the run passes them
@@ -28,12 +31,13 @@ import numpy as np
 from pyevtk.hl import gridToVTK
 
 from vibroflow.io.vtk import (atomic_vtk, frame_field_data, write_points_vtu,
-                              write_tub_surface)
+                              write_section_lines, write_tub_surface)
 from vibroflow.io.vtk_frame import VtkOptions, relative_to_frame
 from vibroflow.tub.geometry import geometry_of
 
 from .files import VTK_DIR
 from .grid import Grid
+from .part_obstacle import continuum_parts, section_segments
 
 
 class ContinuumVtk:
@@ -49,8 +53,11 @@ class ContinuumVtk:
         self.lab = options.frame == "lab"
         self.kinds = kinds + (("tub",) if self.lab else ())
         self.dir.mkdir(parents=True, exist_ok=True)
+        self.outlines = [section_segments(p, self.y) for p in continuum_parts(scenario)]
         if not self.lab:
             write_tub_surface(self.dir / "tub.vtu", self.geo)
+            if self.outlines:
+                write_section_lines(self.dir / "parts.vtu", self.outlines, self.y)
 
     def tub(self, tag: str, t: float, pose6, samples) -> None:
         """The tub's surface at frame `tag` (lab frame only: in the tub frame it stands
@@ -60,6 +67,9 @@ class ContinuumVtk:
             write_tub_surface(self.dir / name, self.geo, pose6=pose6, pivot=self.pivot,
                               time_s=t)
             samples.vtk["tub"].append((t, name))
+            if self.outlines:
+                write_section_lines(self.dir / f"parts_{tag}.vtu", self.outlines, self.y,
+                                    pose6=pose6, pivot=self.pivot, time_s=t)
 
     def points(self, tag: str, t: float, pose6, x, v, radius, extra: dict, samples) -> None:
         """Material points at tub-frame x (N, 2) m with velocities v (N, 2) m/s relative to the

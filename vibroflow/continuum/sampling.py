@@ -66,8 +66,13 @@ class Samples:
                 "position_tub": ((3,), np.float64)}
 
     def __init__(self, n_samples: int, n_points: int, n_probes: int, cell_grid=None,
-                 temperature: bool = False):
+                 temperature: bool = False, n_parts: int = 0):
         self.j = 0
+        # with parts (part_obstacle.py): per sample the wall law's force on each part (N, over
+        # the slice; x, y, z in tub axes), the reaction of its contact forces on the material
+        self.n_parts = int(n_parts)
+        if self.n_parts:
+            self.part_force = np.full((n_samples, self.n_parts, 3), np.nan)
         # with the granular temperature (ContinuumOptions.temperature): per sample the
         # mass-weighted mean T over the material (m^2/s^2) and, on the analysis cells, the sum
         # over samples of the mass-weighted mean T in the cell and the samples that held
@@ -115,6 +120,8 @@ class Samples:
             if self.cell_grid is not None:
                 out["temperature_cell_sum"] = self.temperature_cell_sum
                 out["temperature_cell_n"] = self.temperature_cell_n
+        if self.n_parts:
+            out["part_force"] = self.part_force
         out["vtk_frames"] = np.array(self.frames, dtype=np.int64)
         for kind, entries in self.vtk.items():
             out[f"vtk_{kind}_t"] = np.array([t for t, _ in entries], dtype=np.float64)
@@ -123,8 +130,10 @@ class Samples:
 
     @classmethod
     def from_arrays(cls, a: dict, n_samples: int, n_points: int, n_probes: int,
-                    cell_grid=None, temperature: bool = False) -> "Samples":
-        s = cls(n_samples, n_points, n_probes, cell_grid, temperature)
+                    cell_grid=None, temperature: bool = False, n_parts: int = 0) -> "Samples":
+        s = cls(n_samples, n_points, n_probes, cell_grid, temperature, n_parts)
+        if s.n_parts and "part_force" in a:
+            s.part_force[:] = a["part_force"]
         if cell_grid is not None and "rate_cell_sum" in a:
             s.rate_cell_sum[:], s.rate_cell_n[:] = a["rate_cell_sum"], a["rate_cell_n"]
         if s.temperature and "temperature_all" in a:
@@ -159,6 +168,14 @@ class Samples:
         c["arc"].append(np.array(arc, dtype=np.float64))
         c["position_tub"].append(np.stack(
             [x[:, 0], np.full(particle.size, 0.5 * length), x[:, 1]], axis=1))
+
+    def add_part_forces(self, j: int, force_on_material: np.ndarray, length: float) -> None:
+        """Sample j's forces on the parts: force_on_material (n_parts, 2) the wall law's force
+        (N/m, x and z) on the material from each part, whose reaction over the slice's length
+        (m) the part feels."""
+        self.part_force[j, :, 0] = -force_on_material[:, 0] * length
+        self.part_force[j, :, 1] = 0.0
+        self.part_force[j, :, 2] = -force_on_material[:, 1] * length
 
     def add_cell_rates(self, x: np.ndarray, rate: np.ndarray) -> None:
         """Add one sample's shear rates (1/s) at tub-frame positions x (N, 2) m to the map: the

@@ -189,8 +189,10 @@ def point_step(T, x, mass, volume, power, origin, shape, dt: float, model: Tempe
 def advance_with_temperature(state, n, model: TemperatureModel | None, compiled, balance,
                              start=lambda: None, *, phi_cap: float = 1.0,
                              dt: float = 0.0, wave_speed: float = math.inf) -> None:
-    """n steps of a formulation: without the temperature (model None), one compiled call of n
-    steps (compiled(n, s_kin) with an empty (0, 5) s_kin); with it, one call a step: the
+    """n steps of a formulation, the step-by-step path (the solvers' advance_stepwise; their
+    advance runs the same balance inside the compiled loops, temperature_balance.py): without
+    the temperature (model None), one compiled call of n steps (compiled(n, s_kin) with an
+    empty (0, 5) s_kin); with it, one call a step: the
     granular temperature's stress and rate ratio (kinetic_stress.kinetic_stress, phi_cap the
     material's connection packing rho_c / rho_s, dt (s) the step, which with the cells' side
     caps the gas's viscosity, wave_speed (m/s) the elastic wave the step is set for, which caps

@@ -69,11 +69,10 @@ def _face(k1, k2):
 
 
 @nb.njit(cache=True)
-def _thomas(lower, diag, upper, rhs, out, n):
+def _thomas(lower, diag, upper, rhs, out, n, cp, dp):
     """Solves the tridiagonal system (lower[i] x[i-1] + diag[i] x[i] + upper[i] x[i+1] = rhs[i])
-    into out[:n] (Thomas algorithm; stable for the diagonally dominant rows built here)."""
-    cp = np.empty(n)
-    dp = np.empty(n)
+    into out[:n] (Thomas algorithm; stable for the diagonally dominant rows built here); cp,
+    dp scratch of length >= n."""
     cp[0] = upper[0] / diag[0]
     dp[0] = rhs[0] / diag[0]
     for i in range(1, n):
@@ -86,10 +85,19 @@ def _thomas(lower, diag, upper, rhs, out, n):
 
 
 @nb.njit(cache=True)
-def _sweep_line(T, capacity, kappa, r, lo, di, up, rhs, line):
+def _sweep_line(T, capacity, kappa, r, lo, di, up, rhs, line, cp, dp):
     """One line of cells (1-D views T, capacity, kappa along x or z) after a backward-Euler step
-    of conduction along it, written into T; r = dt / h^2 (s/m^2); lo .. line are scratch."""
+    of conduction along it, written into T; r = dt / h^2 (s/m^2); lo .. dp are scratch.  A
+    line of empty cells only (the space above the bed, outside the tub) is left as it is: its
+    system is the identity."""
     n = T.shape[0]
+    empty = True
+    for i in range(n):
+        if capacity[i] > 0.0:
+            empty = False
+            break
+    if empty:
+        return
     for i in range(n):
         if capacity[i] <= 0.0:
             lo[i] = 0.0
@@ -103,7 +111,7 @@ def _sweep_line(T, capacity, kappa, r, lo, di, up, rhs, line):
         up[i] = -r * kf
         di[i] = capacity[i] + r * (kb + kf)
         rhs[i] = capacity[i] * T[i]
-    _thomas(lo, di, up, rhs, line, n)
+    _thomas(lo, di, up, rhs, line, n, cp, dp)
     for i in range(n):
         T[i] = line[i]
 
@@ -123,10 +131,12 @@ def conduct(T, capacity, kappa, dt, h):
     up = np.empty(n)
     rhs = np.empty(n)
     line = np.empty(n)
+    cp = np.empty(n)
+    dp = np.empty(n)
     for k in range(nz):
-        _sweep_line(out[:, k], capacity[:, k], kappa[:, k], r, lo, di, up, rhs, line)
+        _sweep_line(out[:, k], capacity[:, k], kappa[:, k], r, lo, di, up, rhs, line, cp, dp)
     for i in range(nx):
-        _sweep_line(out[i, :], capacity[i, :], kappa[i, :], r, lo, di, up, rhs, line)
+        _sweep_line(out[i, :], capacity[i, :], kappa[i, :], r, lo, di, up, rhs, line, cp, dp)
     return out
 
 

@@ -25,7 +25,9 @@ Timeline (tub47.md "Procedure", the DEM's clock: t = 0 when the vibration starts
    (shear_outputs.py); with the granular temperature (ContinuumOptions.temperature), its map
    temperature.csv and the summary's "granular_temperature" block (temperature_outputs.py),
    and, where the calibration prefers the temperature, the impact speeds it implies
-   (temperature_impacts.py).
+   (temperature_impacts.py).  With parts (part_obstacle.py), parts.nc: the impact speed each
+   part's surface patches receive as the calibrated relation infers it and the force on each
+   part by phase (part_outputs.py, io/parts_file.py's schema).
 
 Parameters come from calibration.toml (vibroflow.io.calibration_file.read_calibration) or the
 tub47 defaults (ContinuumMaterial, material.py): the wall friction [wall] friction (default:
@@ -51,14 +53,16 @@ from vibroflow.errors import InputError
 from vibroflow.io.atomic import write_json_atomic
 from vibroflow.io.calibration_file import Calibration
 from vibroflow.io.folder_lock import folder_lock
+from vibroflow.io.parts_file import PARTS_NC_NAME, write_parts
 from vibroflow.io.vtk_frame import extra_frame_steps, vtk_options, write_vtk_record
 from vibroflow.measure.bulk_batches import BATCHES_CSV_NAME, STDERR_CSV_NAME
-from vibroflow.measure.stats import batches_of_whole_cycles
+from vibroflow.measure.stats import batch_means, batches_of_whole_cycles
 from vibroflow.measure.summary import json_safe, tub_summary
 from vibroflow.progress import RunProgress
 from vibroflow.run_clock import RunClock
 from vibroflow.tub.geometry import geometry_of
 from vibroflow.tub.motion import TubMotion
+from vibroflow.tub.parts import pack
 
 from .checkpoint import check_resumable, load_checkpoint, run_fingerprint, save_checkpoint
 from .files import BULK_CSV_NAME, CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME, SUMMARY_NAME, VTK_DIR
@@ -66,6 +70,8 @@ from .formulation import Formulation, formulation
 from .grid_update import LabFrame, TubFrame
 from .material import material_for
 from .mpm.solver import ContinuumBlowUp
+from .part_obstacle import continuum_parts
+from .part_outputs import part_dataset
 from .sampling import Samples, cell_grid_of, phase_shear_of_samples, sample_times, samples_source
 from .shear_outputs import shear_rate_outputs, write_shear_rate_csv
 from .temperature_impacts import impacts_from_temperature
@@ -175,6 +181,7 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
     if stop_after_steps is not None and not int(stop_after_steps) >= 0:
         raise InputError(f"stop_after_steps = {stop_after_steps!r}: must be >= 0")
     options = options or form.options()
+    parts = continuum_parts(scenario)
     system, material = tub_system(form, scenario, calibration, options)
     geo = geometry_of(scenario)
     times, window_start, _ = sample_times(scenario)
@@ -196,7 +203,7 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
                 h = float(meta["bed_height_m"])
                 sampler = form.sampler(scenario, system, state, out, vtk)
                 samples = Samples.from_arrays(arrays, S, sampler.n_points, n_probes, cell_grid,
-                                              options.temperature)
+                                              options.temperature, len(parts))
                 sampler.restore(arrays)
                 clock.resume_from(float(meta["wall_time_s"]))
                 prog.log(f"resuming from {ckpt} at t = {state.t:.4f} s")
@@ -210,7 +217,8 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
                         return done
                     prog.log(f"no checkpoint in {out}: starting afresh")
                 for name in (SUMMARY_NAME, BULK_CSV_NAME, BATCHES_CSV_NAME, STDERR_CSV_NAME,
-                             CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME, TEMPERATURE_CSV_NAME):
+                             CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME, TEMPERATURE_CSV_NAME,
+                             PARTS_NC_NAME):
                     (out / name).unlink(missing_ok=True)
                 shutil.rmtree(out / VTK_DIR, ignore_errors=True)  # another run's frames
                 with interrupted_while_settling():
@@ -218,7 +226,8 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
                 state.t = 0.0
                 state.step = 0
                 sampler = form.sampler(scenario, system, state, out, vtk)
-                samples = Samples(S, sampler.n_points, n_probes, cell_grid, options.temperature)
+                samples = Samples(S, sampler.n_points, n_probes, cell_grid, options.temperature,
+                                  len(parts))
 
             def checkpoint():
                 save_checkpoint(ckpt, state, {**samples.arrays(), **sampler.arrays()}, {
@@ -294,6 +303,19 @@ def _results(form: Formulation, scenario, out: Path, calibration, options, vtk, 
     summary["continuum"].update(temperature_outputs(samples, batch, run.batches, wrote))
     summary["continuum"].update(impacts_from_temperature(
         calibration, samples, phase, geo.radius, batch, run.batches, summary["impacts"]))
+    parts = continuum_parts(scenario)
+    if parts:
+        window = sample_times(scenario)[1:]
+        bed_T = None
+        if samples.temperature and np.isfinite(samples.temperature_all).any():
+            ok = np.isfinite(samples.temperature_all)
+            bed_T = batch_means(samples.temperature_all[ok], batch[ok], run.batches)
+        write_parts(out / PARTS_NC_NAME, part_dataset(
+            form.name, scenario, parts, pack(parts), calibration, material.diameter, phase,
+            samples, times, batch, window[1] - window[0], bed_T))
+        summary["continuum"]["parts"] = {
+            "file": PARTS_NC_NAME, "names": [p.name for p in parts],
+            "obstacle": "each part a wall of the U wall's law in the slice's section"}
     summary = json_safe(summary)
     write_json_atomic(out / SUMMARY_NAME, summary)
     return summary

@@ -132,7 +132,8 @@ def contact_terms(fn, ft, normal, v_rel, mass, length, kn, zeta, dt, out):
             out[p, 3] += min(2.0 * zeta * math.sqrt(mass[p] * kn * l), 0.5 * mass[p] / dt) * vn * vn
 
 
-def landing_terms(v0, m0, v1, m1, normal, fn, dt, out) -> None:
+@nb.njit(cache=True)
+def landing_terms(v0, m0, v1, m1, normal, fn, dt, out):
     """Adds the Eulerian wall cells' landing power (W/m) to out[:, 3] (`contact_terms`' column):
     the normal kinetic energy relative to the wall lost over the step of dt (s) by a cell whose
     material approached the wall, E_0 = m_0 v_n0^2 / 2 with v_n0 < 0 at the step's start, less
@@ -142,11 +143,12 @@ def landing_terms(v0, m0, v1, m1, normal, fn, dt, out) -> None:
     v0, v1 (N, 2) the cells' velocities relative to the wall (m/s) and m0, m1 (N,) their
     masses (kg/m) at the step's start and end, normal (N, 2) the wall's inward unit normal,
     fn (N,) its normal force (N/m)."""
-    vn0 = v0[:, 0] * normal[:, 0] + v0[:, 1] * normal[:, 1]
-    vn1 = np.minimum(v1[:, 0] * normal[:, 0] + v1[:, 1] * normal[:, 1], 0.0)
-    e0 = np.where((vn0 < 0.0) & (fn > 0.0), 0.5 * m0 * vn0 * vn0, 0.0)
-    lost = np.clip(e0 - 0.5 * m1 * vn1 * vn1, 0.0, e0)
-    out[:, 3] += lost / dt
+    for p in range(fn.shape[0]):
+        vn0 = v0[p, 0] * normal[p, 0] + v0[p, 1] * normal[p, 1]
+        vn1 = min(v1[p, 0] * normal[p, 0] + v1[p, 1] * normal[p, 1], 0.0)
+        e0 = 0.5 * m0[p] * vn0 * vn0 if (vn0 < 0.0 and fn[p] > 0.0) else 0.0
+        lost = min(max(e0 - 0.5 * m1[p] * vn1 * vn1, 0.0), e0)
+        out[p, 3] += lost / dt
 
 
 def normal_of_force(f, fn, ft) -> np.ndarray:
@@ -161,21 +163,25 @@ def normal_of_force(f, fn, ft) -> np.ndarray:
     return out
 
 
-def partition_terms(v, mass, volume, stress, friction, spacing_m, dt, out) -> None:
+@nb.njit(cache=True)
+def partition_terms(v, mass, volume, stress, friction, spacing_m, dt, out):
     """Adds the partitions' contacts to out (N, 4) (`contact_terms`): a material's column of
     cross-section V_p between partitions L_y apart touches them over l = 2 V_p / L_y per metre
     (the two faces), where its pressure is positive; the slip is its whole velocity (the
     partitions move with the tub, in whose frame v is) and the friction power that of
     boundary.partition_forces, f |v| with f = min(2 mu_p p V_p / L_y, m |v| / dt); no landing
     (the partitions move in their own plane)."""
-    p = -(stress[:, 0] + stress[:, 1] + stress[:, 3]) / 3.0
-    on = p > 0.0
-    sp2 = v[:, 0] ** 2 + v[:, 1] ** 2
-    l = np.where(on, 2.0 * volume / spacing_m, 0.0)
-    f = np.minimum(friction * l * np.maximum(p, 0.0), mass * np.sqrt(sp2) / dt)
-    out[:, 0] += l
-    out[:, 1] += l * sp2
-    out[:, 2] += np.where(on, f * np.sqrt(sp2), 0.0)
+    for q in range(v.shape[0]):
+        p = -(stress[q, 0] + stress[q, 1] + stress[q, 3]) / 3.0
+        if not p > 0.0:
+            continue
+        sp2 = v[q, 0] * v[q, 0] + v[q, 1] * v[q, 1]
+        sp = math.sqrt(sp2)
+        l = 2.0 * volume[q] / spacing_m
+        f = min(friction * l * p, mass[q] * sp / dt)
+        out[q, 0] += l
+        out[q, 1] += l * sp2
+        out[q, 2] += f * sp
 
 
 @nb.njit(cache=True)

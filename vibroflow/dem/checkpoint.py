@@ -16,7 +16,8 @@ from ..run_clock import RunClock
 from .fingerprint import first_difference
 from .interrupts import fault_after_checkpoint
 from .output import DamagedFile, ResultWriter, load_state_file, save_state_file
-from .simulate import DEMState, DEMSystem, make_system, overlap_maxima, set_overlap_maxima
+from .simulate import DEMState, DEMSystem, overlap_maxima, set_overlap_maxima
+from .step import ASSEMBLY
 
 CHECKPOINT_NAME = "checkpoint.h5"
 SUMMARY_NAME = "summary.json"
@@ -59,8 +60,9 @@ def resume_checkpoint(scenario, out_dir: Path, system: DEMSystem, clock: RunCloc
         there = attrs.get("scenario_json")
         diff = first_difference(json.loads(there) if there else None, record)
         raise refuse(ckpt, f"is the checkpoint of another scenario ({diff})")
-    if int(attrs["nchunk"]) != system.nchunk:
-        system = make_system(scenario, int(attrs["nchunk"]))
+    if attrs.get("assembly") != ASSEMBLY:
+        raise refuse(ckpt, f"was written by another force assembly ({attrs.get('assembly')}; "
+                     f"this vibroflow's: {ASSEMBLY}), whose numbers differ; {START_AFRESH}")
     settle_info = json.loads(attrs["settle_info"])
     try:
         writer = ResultWriter(out_dir, state.n, {}, state.radius,
@@ -87,7 +89,7 @@ def write_checkpoint(path: Path, state: DEMState, writer: ResultWriter, system: 
     # the overlap maxima since the last series row travel too, so the series is exact
     diag = overlap_maxima(state)
     save_state_file(path, state, {"parts_done": parts_done,
-                                  "nchunk": system.nchunk, "wall_time_s": wall,
+                                  "assembly": ASSEMBLY, "wall_time_s": wall,
                                   "settle_info": json.dumps(settle_info),
                                   "diag": json.dumps(diag.tolist() if diag is not None
                                                      else None),

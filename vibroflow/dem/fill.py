@@ -33,6 +33,7 @@ from ..tub.parts import parts_of
 from .interrupts import fault_sigint_settling
 from .output import DamagedFile, load_state_file, save_state_file
 from .simulate import DEMState, DEMSystem, init_state, run_steps
+from .step import ASSEMBLY
 
 
 def lattice_fill(scenario, rng: np.random.Generator) -> np.ndarray:
@@ -107,15 +108,17 @@ def clear_of_parts(scenario, sites: np.ndarray, margin: float) -> np.ndarray:
     return ok
 
 
-def fill_cache_key(scenario, nchunk: int) -> str:
-    """Hash of everything that shapes the settled bed."""
+def fill_cache_key(scenario) -> str:
+    """Hash of everything that shapes the settled bed (the force assembly, step.ASSEMBLY,
+    included: it fixes the summation order)."""
     payload = {
         "fill": scenario.fill.model_dump(mode="json"),
         "tub": scenario.tub.model_dump(mode="json"),
         "materials": {k: v.model_dump(mode="json") for k, v in scenario.materials.items()},
         "contacts": [c.model_dump(mode="json") for c in scenario.contacts],
         "gravity": list(scenario.gravity), "dt": scenario.run.dt, "seed": scenario.run.seed,
-        "skin": scenario.run.skin, "pivot": list(scenario.motion.pivot), "nchunk": nchunk,
+        "skin": scenario.run.skin, "pivot": list(scenario.motion.pivot),
+        "assembly": ASSEMBLY,
         # format 2: entries carry a checksum (output.save_state_file)
         "version": __version__, "format": 2,
     }
@@ -172,7 +175,7 @@ def settled_bed(system: DEMSystem, scenario, prog: RunProgress) -> tuple[DEMStat
     """The settled bed, from the cache or made now (and cached).  A cache entry that is
     unreadable or fails its checksum (output.load_state_file) is made again; a cache that
     cannot be written costs only the time of the next run's settling (a warning)."""
-    key = fill_cache_key(scenario, system.nchunk)
+    key = fill_cache_key(scenario)
     path = cache_dir() / "fills" / f"{key}.h5"
     if path.exists():
         try:

@@ -10,6 +10,13 @@ Each list entry carries its contact's history (tangential spring and rolling tor
 saying whether the pair was touching at the last step; on a rebuild, `transfer_history` copies
 them from the old list to the new one, so a contact keeps its history for its whole life.
 
+For the tub step's force assembly (vibroflow.dem.step) the list also carries, made at each
+build (`index_pairs`), its reverse order: for each ball j, the entries (i, j) where it is the
+second ball, in ascending order (rstart, and rpos: each entry's place in that order), with a
+slot of six numbers for the pair's force and torque on j and a copy of the contact flags in
+that order (rflag), so that each ball gathers its pairs' forces in a fixed order, reading
+memory in sequence.
+
 Periodic length in y: positions are wrapped into [0, L) at each build and distances use the
 minimum image.
 """
@@ -154,6 +161,25 @@ def transfer_history(old_start, old_nbr, old_hist, old_flag, new_start, new_nbr)
     return hist, flag
 
 
+@nb.njit(cache=True)
+def reverse_index(nbr, n):
+    """(rstart (n + 1,), rslot (M,)): for each ball j, the list entries k with nbr[k] == j in
+    ascending k (a counting sort: the same on any machine)."""
+    m = nbr.shape[0]
+    rstart = np.zeros(n + 1, np.int64)
+    for k in range(m):
+        rstart[nbr[k] + 1] += 1
+    for j in range(n):
+        rstart[j + 1] += rstart[j]
+    fill = rstart[:-1].copy()
+    rslot = np.empty(m, np.int64)
+    for k in range(m):
+        j = nbr[k]
+        rslot[fill[j]] = k
+        fill[j] += 1
+    return rstart, rslot
+
+
 class NeighbourList:
     """Cell grid and half Verlet list of one configuration (arrays only; see module doc)."""
 
@@ -166,6 +192,10 @@ class NeighbourList:
         self.flag = np.zeros(0, np.uint8)
         self.builds = 0
         self._bounds = None
+        self.rout = None
+        self.rstart = None
+        self.rpos = None
+        self.rflag = None
 
     def build(self, pos: np.ndarray, radius: np.ndarray) -> None:
         """Rebuild from the positions `pos` (wrapped in y in place when periodic)."""
@@ -189,7 +219,20 @@ class NeighbourList:
             flag = np.zeros(nbr.shape[0], np.uint8)
         self.start, self.nbr, self.hist, self.flag = start, nbr, hist, flag
         self._bounds = None
+        self.rout = None
+        self.index_pairs()
         self.builds += 1
+
+    def index_pairs(self) -> None:
+        """The reverse order of the current list (see the module doc), made when missing
+        (after a build, or a list read from a file); its flags are the list's."""
+        if self.rout is not None and self.rout.shape[0] == self.nbr.shape[0]:
+            return
+        self.rstart, rslot = reverse_index(self.nbr, self.start.shape[0] - 1)
+        self.rpos = np.empty_like(rslot)
+        self.rpos[rslot] = np.arange(rslot.shape[0])
+        self.rflag = np.ascontiguousarray(self.flag[rslot])
+        self.rout = np.zeros((self.nbr.shape[0], 6))
 
     def chunk_bounds(self, nchunk: int) -> np.ndarray:
         """Split the balls into `nchunk` contiguous chunks of about equal work (list entries,

@@ -1,5 +1,5 @@
 """Ball-part contacts in the DEM (docs/models.md, "Parts in the bed"): the kernel the tub step
-calls once per ball (`ball_parts`, from vibroflow.dem.step._finish_chunk), the kernels' record of
+calls once per ball (`ball_parts`, from vibroflow.dem.step.ball_walls), the kernels' record of
 the parts (`PartsRec`) and its arrays (`parts_record`).
 
 Geometry is vibroflow.tub.parts: a part fixed in the tub frame is met in the tub frame (the
@@ -22,7 +22,7 @@ triangle takes over the history of a slot whose contact ended in the same step (
 across the mesh keeps its tangential spring), else starts one afresh.
 
 What the part receives: the force and torque of every contact on each part (the opposite of the
-ball's, torque about the part's centre, tub axes for a tub-fixed part), summed per chunk in ball
+ball's, torque about the part's centre, tub axes for a tub-fixed part), summed per block of balls in ball
 order into load[c, k] (fixed order: the same sums whatever the threads); and with impacts
 recorded, one row per impact (a ball's contact with a part that had none in the step before):
 IMP_* columns below.  The impact energy is 0.5 m v_n^2, the ball's kinetic energy of its normal
@@ -50,7 +50,7 @@ DONE = -3.0          # a candidate that has its slot (scratch marker)
 (IMP_TIME, IMP_PART, IMP_PATCH, IMP_X, IMP_Y, IMP_Z, IMP_VN, IMP_VT, IMP_ENERGY,
  IMP_BALL) = range(10)
 N_IMP = 10
-IMPACT_CAPACITY = 1 << 12  # per chunk, between flushes
+IMPACT_CAPACITY = 1 << 10  # per block of balls (step.NBLOCK), between flushes
 # columns of load[c, k]: force (N) and torque about the part's centre (N m), part frame axes
 N_LOAD = 6
 
@@ -58,9 +58,9 @@ N_LOAD = 6
 class PartsRec(NamedTuple):
     """The parts for the kernels (SI): packed geometry (vibroflow.tub.parts.PackedParts), the
     material index mat (P,) and bounding reach (P,) (m, from the centre; a cylinder's in x-z),
-    the per-ball contact slots hist (N, P, SLOTS, 6) and key (N, P, SLOTS), the per-chunk
-    loads (nchunk, P, N_LOAD), impact rows imp (nchunk, IMPACT_CAPACITY, N_IMP) with their
-    counts imp_count (nchunk,), and scratch (nchunk, SLOTS, 9) for an STL's candidates."""
+    the per-ball contact slots hist (N, P, SLOTS, 6) and key (N, P, SLOTS), the per-block
+    loads (nblock, P, N_LOAD), impact rows imp (nblock, IMPACT_CAPACITY, N_IMP) with their
+    counts imp_count (nblock,), and scratch (nblock, SLOTS, 9) for an STL's candidates (nblock: step.NBLOCK, the blocks of balls)."""
 
     shape: np.ndarray
     prm: np.ndarray
@@ -98,11 +98,11 @@ def reach_of(packed: PackedParts) -> np.ndarray:
 def parts_record(packed: PackedParts, mat: np.ndarray, hist: np.ndarray, key: np.ndarray,
                  load: np.ndarray) -> PartsRec:
     """The kernels' record of the packed parts and a state's slot and load arrays."""
-    nchunk = load.shape[0]
+    nblock = load.shape[0]
     return PartsRec(packed.shape, packed.prm, packed.tri, packed.tri_normal, packed.tri_group,
                     packed.tri_start, np.ascontiguousarray(mat, dtype=np.int64), reach_of(packed),
-                    hist, key, load, np.zeros((nchunk, IMPACT_CAPACITY, N_IMP)),
-                    np.zeros(nchunk, np.int64), np.zeros((nchunk, SLOTS, 9)))
+                    hist, key, load, np.zeros((nblock, IMPACT_CAPACITY, N_IMP)),
+                    np.zeros(nblock, np.int64), np.zeros((nblock, SLOTS, 9)))
 
 
 @nb.njit(cache=True, inline="always")
@@ -114,7 +114,7 @@ def _clear(hist, key, i, k, s):
 
 @nb.njit(cache=True)
 def clear_loads(prt, c):
-    """Zero chunk c's part loads (before its balls are summed)."""
+    """Zero block c's part loads (before its balls are summed)."""
     for k in range(prt.load.shape[1]):
         for a in range(N_LOAD):
             prt.load[c, k, a] = 0.0

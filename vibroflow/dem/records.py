@@ -28,13 +28,24 @@ class Balls(NamedTuple):
 
 
 class Pairs(NamedTuple):
-    """The half neighbour list (vibroflow.dem.neighbours) and its force-assembly chunks."""
+    """The half neighbour list (vibroflow.dem.neighbours) and its blocks of balls."""
 
     start: np.ndarray      # (N + 1,) first list entry of each ball
     nbr: np.ndarray        # (M,) the other ball of each entry
     hist: np.ndarray       # (M, 6) contact histories (vibroflow.dem.contact)
     flag: np.ndarray       # (M,) uint8, 1 while in contact
-    bounds: np.ndarray     # (nchunk + 1,) first ball of each chunk
+    bounds: np.ndarray     # (nblock + 1,) first ball of each block
+
+
+class PairSlots(NamedTuple):
+    """The half list's entries in reverse order, ball j by ball j (the entries (i, j) where j
+    is the second ball, ascending), with each touching entry's force and torque on j: the tub
+    step's force assembly (vibroflow.dem.step, vibroflow.dem.neighbours)."""
+
+    out: np.ndarray        # (M, 6) force (N) and torque (N m) on j, in reverse order
+    rstart: np.ndarray     # (N + 1,) first reverse position of each ball
+    rpos: np.ndarray       # (M,) reverse position of each list entry
+    rflag: np.ndarray      # (M,) uint8 the list's contact flags in reverse order
 
 
 class Walls(NamedTuple):
@@ -52,15 +63,13 @@ class Walls(NamedTuple):
 
 
 class Work(NamedTuple):
-    """Scratch arrays of the force assembly, one block a chunk."""
+    """Scratch arrays of the tub step, one row a block of balls (vibroflow.dem.step.NBLOCK)."""
 
-    fbuf: np.ndarray       # (nchunk, N, 3) pair forces
-    tbuf: np.ndarray       # (nchunk, N, 3) pair torques
-    imp_buf: np.ndarray    # (nchunk, capacity, 6) impacts
-    imp_count: np.ndarray  # (nchunk,) impacts recorded
-    diag: np.ndarray       # (nchunk, step.N_DIAG) diagnostics
+    imp_buf: np.ndarray    # (nblock, capacity, 6) impacts
+    imp_count: np.ndarray  # (nblock,) impacts recorded
+    diag: np.ndarray       # (nblock, step.N_DIAG) diagnostics
     pose: np.ndarray       # (8,) tub pose (step._pose_array)
-    moved: np.ndarray      # (nchunk,) largest squared move since the list build (m^2)
+    moved: np.ndarray      # (nblock,) largest squared move since the list build (m^2)
 
 
 class Params(NamedTuple):
@@ -87,14 +96,20 @@ def walls_of(state) -> Walls:
     return Walls(*(getattr(state, "wall_" + name) for name in Walls._fields))
 
 
-def pairs_of(nl, nchunk: int = 1) -> Pairs:
+def pairs_of(nl, nblock: int = 1) -> Pairs:
     """The Pairs record of a vibroflow.dem.neighbours.NeighbourList's current arrays, in
-    `nchunk` force-assembly chunks."""
-    if nchunk > 1:
-        bounds = nl.chunk_bounds(nchunk)
+    `nblock` blocks of balls."""
+    if nblock > 1:
+        bounds = nl.chunk_bounds(nblock)
     else:
         bounds = np.array([0, nl.start.shape[0] - 1], np.int64)
     return Pairs(nl.start, nl.nbr, nl.hist, nl.flag, bounds)
+
+
+def slots_of(nl) -> PairSlots:
+    """The PairSlots record of a vibroflow.dem.neighbours.NeighbourList's current arrays."""
+    nl.index_pairs()
+    return PairSlots(nl.rout, nl.rstart, nl.rpos, nl.rflag)
 
 class BoxBalls(NamedTuple):
     """The balls of the Lees-Edwards box (vibroflow.dem.periodic_step), one row a ball (SI)."""

@@ -46,6 +46,7 @@ from ..io.folder_lock import folder_lock
 from ..io.vtk_frame import VtkOptions, vtk_options
 from ..progress import RunProgress
 from ..run_clock import RunClock
+from ..threads import requested_threads
 from .checkpoint import (CHECKPOINT_NAME, SUMMARY_NAME, finished_summary, resume_checkpoint,
                          write_checkpoint)
 from .fill import settled_bed
@@ -67,7 +68,7 @@ _PREVIOUS = (CHECKPOINT_NAME, SUMMARY_NAME, "bulk_velocity.csv", "dem.h5", "dem.
 
 
 def run_dem(scenario, out_dir: Path, vtk: VtkOptions | bool | None = None,
-            resume: bool = False, progress: bool = True, nchunk: int | None = None) -> dict:
+            resume: bool = False, progress: bool = True) -> dict:
     """Run the scenario's DEM and write DIR/dem.h5, DIR/summary.json (and bulk_velocity.csv in
     tub mode).  Returns the summary.
 
@@ -87,11 +88,11 @@ def run_dem(scenario, out_dir: Path, vtk: VtkOptions | bool | None = None,
     out_dir = Path(out_dir)
     vtk = vtk_options(vtk)
     with folder_lock(out_dir, "vibroflow dem"):
-        system = make_system(scenario, nchunk)
+        system = make_system(scenario)
         n_balls = len(scenario.particles) if scenario.explicit else scenario.fill.count
         threads_before = numba.get_num_threads()
-        if n_balls < SMALL_RUN:
-            numba.set_num_threads(1)  # same results: the chunking, not the threads, fixes order
+        if n_balls < SMALL_RUN and requested_threads() is None:
+            numba.set_num_threads(1)  # the same numbers on any thread count (dem.step)
         try:
             # the solver's time, numba's compilation apart (vibroflow.run_clock)
             with RunProgress(progress) as prog, RunClock() as clock:

@@ -26,10 +26,10 @@ from .blowup import (BlowUp, blowup_message, check_finite_start, check_overlaps_
 from .laws import material_index, pair_table
 from .neighbours import NeighbourList
 from .parts import EMPTY, IMP_BALL, N_LOAD, SLOTS, parts_record
-from .records import Params, Work, balls_of, pairs_of, walls_of
+from .records import Params, Work, balls_of, pairs_of, slots_of, walls_of
 from .walls import N_PLANE, WALL_PLANE0, wall_kind
 
-IMPACT_CAPACITY = 1 << 15  # per chunk, between flushes
+IMPACT_CAPACITY = 1 << 11  # per block of balls (step.NBLOCK), between flushes
 
 
 @dataclass
@@ -45,7 +45,6 @@ class DEMSystem:
     motion: TubMotion              # the tub's vibration (amplitude factor applied)
     skin: float                    # Verlet skin (m)
     max_overlap: float             # blow-up bound (m)
-    nchunk: int                    # force-assembly chunks (fixes the summation order)
     material_names: list[str]
     notes: dict = field(default_factory=dict)
     parts: tuple[Part, ...] = ()   # the scenario's parts (vibroflow.tub.parts)
@@ -98,7 +97,7 @@ class DEMState:
     wall_arc: np.ndarray           # (N,) arc coordinate of the nearest U point (m)
     part_hist: np.ndarray | None = None  # (N, P, SLOTS, 6) ball-part contact histories
     part_key: np.ndarray | None = None   # (N, P, SLOTS) int64 their features (parts.EMPTY)
-    part_load: np.ndarray | None = None  # (nchunk, P, 6) force, torque on the parts, per chunk
+    part_load: np.ndarray | None = None  # (step.NBLOCK, P, 6) force, torque on the parts, per block
     vibrating: bool = False
     scratch: object = field(default=None, repr=False, compare=False)  # not part of the state
 
@@ -116,9 +115,9 @@ class DEMState:
                      + 0.5 * np.sum(inertia * np.sum(self.omg**2, axis=1)))
 
 
-def make_system(scenario, nchunk: int | None = None) -> DEMSystem:
-    """Constant parameters of a scenario's run (nchunk: force-assembly chunks, default
-    run.force_chunks: a scenario's numbers do not depend on the number of threads)."""
+def make_system(scenario) -> DEMSystem:
+    """Constant parameters of a scenario's run (its numbers do not depend on the number of
+    threads: vibroflow.dem.step)."""
     index = material_index(scenario)
     table = pair_table(scenario)
     if scenario.tub is not None:
@@ -151,8 +150,7 @@ def make_system(scenario, nchunk: int | None = None) -> DEMSystem:
         dt=scenario.run.dt, gravity=np.array(scenario.gravity, dtype=float), table=table,
         tub=tub, wall_mat=np.array(wall_mats, dtype=np.int64), planes=planes, motion=motion,
         skin=scenario.run.skin * diam, max_overlap=scenario.run.max_overlap * diam,
-        nchunk=nchunk or scenario.run.force_chunks, material_names=list(index), notes=notes,
-        parts=parts_of(scenario),
+        material_names=list(index), notes=notes, parts=parts_of(scenario),
         part_mat=np.array([index[p.material] for p in scenario.parts or []], dtype=np.int64),
     )
 
@@ -195,8 +193,8 @@ def ensure_part_arrays(system: DEMSystem, state: DEMState) -> None:
     if state.part_key is None or state.part_key.shape != (n, p, SLOTS):
         state.part_hist = np.zeros((n, p, SLOTS, 6))
         state.part_key = np.full((n, p, SLOTS), EMPTY, np.int64)
-    if state.part_load is None or state.part_load.shape != (system.nchunk, p, N_LOAD):
-        state.part_load = np.zeros((system.nchunk, p, N_LOAD))
+    if state.part_load is None or state.part_load.shape != (K.NBLOCK, p, N_LOAD):
+        state.part_load = np.zeros((K.NBLOCK, p, N_LOAD))
 
 
 class _Buffers:
@@ -204,11 +202,11 @@ class _Buffers:
     made once per run."""
 
     def __init__(self, system: DEMSystem, state: DEMState):
-        n, nchunk = state.n, system.nchunk
-        self.work = Work(fbuf=np.zeros((nchunk, n, 3)), tbuf=np.zeros((nchunk, n, 3)),
-                         imp_buf=np.zeros((nchunk, IMPACT_CAPACITY, 6)),
-                         imp_count=np.zeros(nchunk, np.int64), diag=np.empty((nchunk, K.N_DIAG)),
-                         pose=np.zeros(8), moved=np.zeros(nchunk))
+        nblock = K.NBLOCK
+        self.n = state.n
+        self.work = Work(imp_buf=np.zeros((nblock, IMPACT_CAPACITY, 6)),
+                         imp_count=np.zeros(nblock, np.int64), diag=np.empty((nblock, K.N_DIAG)),
+                         pose=np.zeros(8), moved=np.zeros(nblock))
         self.balls = balls_of(state)
         self.walls = walls_of(state)
         ensure_part_arrays(system, state)
@@ -225,7 +223,7 @@ class _Buffers:
 
 def _buf(system: DEMSystem, state: DEMState) -> _Buffers:
     b = state.scratch
-    if b is None or b.work.fbuf.shape[1] != state.n or b.work.fbuf.shape[0] != system.nchunk:
+    if b is None or b.n != state.n:
         b = state.scratch = _Buffers(system, state)
     return b
 
@@ -249,18 +247,18 @@ def rebuild(system: DEMSystem, state: DEMState) -> None:
 def _forces_now(system: DEMSystem, state: DEMState) -> None:
     b = _buf(system, state)
     b.work.pose[:] = _tub_pose(system, state)
-    K.compute_forces(state.time(system.dt), False, False, b.balls,
-                     pairs_of(state.nl, system.nchunk), b.walls, system.params, b.work, b.parts)
+    K.compute_forces(state.time(system.dt), False, False, b.balls, pairs_of(state.nl, K.NBLOCK),
+                     slots_of(state.nl), b.walls, system.params, b.work, b.parts)
     b.work.imp_count[:] = 0
     b.parts.imp_count[:] = 0
 
 
 def take_impacts(system: DEMSystem, state: DEMState) -> np.ndarray:
     """Impacts recorded since the last call: (M, 6) [time, kind, x, y, z, speed] (lab), in a
-    fixed order (chunk by chunk)."""
+    fixed order: block of balls by block (step.NBLOCK), each block's in the order recorded."""
     b = _buf(system, state)
     buf, count = b.work.imp_buf, b.work.imp_count
-    parts = [buf[c, :min(count[c], IMPACT_CAPACITY)] for c in range(system.nchunk)]
+    parts = [buf[c, :min(count[c], IMPACT_CAPACITY)] for c in range(K.NBLOCK)]
     count[:] = 0
     return np.concatenate(parts) if parts else np.zeros((0, 6))
 
@@ -270,7 +268,7 @@ def take_part_impacts(system: DEMSystem, state: DEMState) -> np.ndarray:
     IMP_* columns, chunk by chunk (a fixed order)."""
     rec = _buf(system, state).parts
     count = rec.imp_count
-    rows = [rec.imp[c, :min(count[c], rec.imp.shape[1])] for c in range(system.nchunk)]
+    rows = [rec.imp[c, :min(count[c], rec.imp.shape[1])] for c in range(K.NBLOCK)]
     count[:] = 0
     return np.concatenate(rows) if rows else np.zeros((0, IMP_BALL + 1))
 
@@ -280,7 +278,7 @@ def part_loads_now(system: DEMSystem, state: DEMState) -> np.ndarray:
     the last step, part axes (tub axes for a tub-fixed part): the chunks' sums added in chunk
     order."""
     out = np.zeros((system.n_parts, N_LOAD))
-    for c in range(system.nchunk):
+    for c in range(K.NBLOCK):
         out += state.part_load[c]
     return out
 
@@ -319,8 +317,8 @@ def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: b
     while left > 0:
         try:
             done, status = K.advance(state.step, left, state.time_origin_step, motion,
-                                     record_impacts, b.balls, pairs_of(state.nl, system.nchunk),
-                                     b.walls, system.params, b.work, b.parts)
+                                     record_impacts, b.balls, pairs_of(state.nl, K.NBLOCK),
+                                     slots_of(state.nl), b.walls, system.params, b.work, b.parts)
         except ZeroDivisionError:
             # 1/d of two coincident balls (numba raises it, as Python does); the step count is
             # unknown here, so the time is that of the call's start

@@ -10,11 +10,22 @@ the caller (dem/simulate.py) rebuilds and calls again.  All loops over balls are
 The kernels take the records of vibroflow.dem.records and read their fields into local
 variables first.
 
-Parallel force assembly without races or atomics: balls are split into `nchunk` contiguous
-chunks; the pair forces of chunk c go to its own buffer fbuf[c], then the buffers are summed in
-a fixed order.  The result is reproducible bit for bit for a given chunk count (the checkpoint
-records it), whatever the number of threads: the chunk count is a constant
-(the scenario's run.force_chunks), not the thread count.
+Force assembly whose numbers do not depend on the thread count (DEVELOPERS.md, "Threads"):
+
+1. pairs (`_pair_block`): every entry k of the half neighbour list (i, j > i) is evaluated
+   once, by the thread that has ball i, its contact history advanced once; the force and the
+   torque on i are summed into i's force and torque (from its weight) as the entries come, and
+   the force and torque on j are written to the entry's own slot, kept in the list's reverse
+   order (vibroflow.dem.neighbours: no two entries share a slot, no races, no atomics);
+2. gather (`_gather_block`): each ball j adds the slots of the entries where it is the second
+   ball, in ascending entry order, reading them in sequence;
+3. walls (`ball_walls`): each ball's wall contacts, added one after the other;
+4. kick (`_kick_block`): the step's second half kick.
+
+Each sum is over the same terms in the same order whatever the threads.  The balls are cut into
+NBLOCK contiguous blocks of about equal work (a function of the list alone); the threads share
+the blocks, and each block keeps its own impact buffer and diagnostics, so the impacts come out
+block by block in an order that is the same on any machine.
 """
 from __future__ import annotations
 
@@ -22,18 +33,24 @@ import numba as nb
 import numpy as np
 
 from ..tub.motion import pose as tub_pose
-from .contact import (add_pair, branch_vector, contact_force, forget, pair_contact_velocity,
-                      put3, unit_normal)
-from .parts import ball_parts, clear_loads
+from .contact import (branch_vector, contact_force, forget, pair_contact_velocity, put3,
+                      unit_normal)
 from .walls import (KIND_BALL_BALL, KIND_BALL_PARTITION, KIND_BALL_PLANE, KIND_BALL_TUB,
                     TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT, WALL_PLANE0, WALL_U, plane_wall,
                     u_wall)
 
-# columns of the per-chunk diagnostics
+# columns of the per-block diagnostics
 D_BALL_OVERLAP, D_BALL_I, D_BALL_J, D_WALL_OVERLAP, D_WALL_I, D_WALL_W, D_NAN, D_LOST = range(8)
 N_DIAG = 8
 # status codes returned by advance
 DONE, REBUILD, IMPACTS_FULL, BLOWUP = 0, 1, 2, 3
+# blocks of balls of the parallel loops: a constant, so that the impacts' order and the
+# diagnostics are the same on any number of threads (up to NBLOCK of them share the work; on
+# tub47-quick's 4 200 balls 256 blocks cost about a quarter more a step on one thread than 64:
+# each block pass pays for unpacking its records)
+NBLOCK = 64
+# what fixes a run's numbers beyond its scenario (checkpoints and the fill cache record it)
+ASSEMBLY = f"pair slots, gathered per ball; {NBLOCK} blocks"
 
 
 @nb.njit(cache=True, inline="always")
@@ -50,30 +67,47 @@ def _record_impact(imp_buf, imp_count, c, t, kind, x, y, z, speed):
 
 
 @nb.njit(cache=True)
-def _pair_chunk(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, table, work):
+def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, slots, params,
+                work):
+    """The list entries of the balls of block c (step 1 of the module docstring): each
+    touching pair's force and torques into its slot, and each ball's force set to its weight
+    plus its own entries' forces (torque: their torques on it)."""
     pos, vel, omg = balls.pos, balls.vel, balls.omg
     radius, mass, mat = balls.radius, balls.mass, balls.mat
     nbr_start, nbr, hist, flag = pairs.start, pairs.nbr, pairs.hist, pairs.flag
     bounds = pairs.bounds
-    fbuf, tbuf, imp_buf, imp_count, diag = (work.fbuf, work.tbuf, work.imp_buf, work.imp_count,
-                                            work.diag)
+    rout, rpos, rflag = slots.out, slots.rpos, slots.rflag
+    table = params.table
+    imp_buf, imp_count, diag = work.imp_buf, work.imp_count, work.diag
+    force, torque, gravity = balls.force, balls.torque, params.gravity
     lo, hi = bounds[c], bounds[c + 1]
     for i in range(lo, hi):
         ri = radius[i]
         mi = mass[i]
+        # ball i's weight and its own entries' forces, summed as they come
+        sfx = mi * gravity[0]
+        sfy = mi * gravity[1]
+        sfz = mi * gravity[2]
+        stx = 0.0
+        sty = 0.0
+        stz = 0.0
         for k in range(nbr_start[i], nbr_start[i + 1]):
             j = nbr[k]
             dx, dy, dz = branch_vector(pos, i, j, periodic_length)
             rsum = ri + radius[j]
             d2 = dx * dx + dy * dy + dz * dz
             if d2 >= rsum * rsum:
-                forget(hist, flag, k)
+                if flag[k]:
+                    forget(hist, flag, k)
+                    rflag[rpos[k]] = 0
                 continue
             delta, nx, ny, nz = unit_normal(dx, dy, dz, d2, rsum)
             rj = radius[j]
             vx, vy, vz = pair_contact_velocity(vel, omg, i, j, ri, rj, nx, ny, nz)
+            q = rpos[k]
             if not flag[k]:
                 flag[k] = 1
+                rflag[q] = 1
                 if record_impacts:
                     vn = vx * nx + vy * ny + vz * nz
                     _record_impact(imp_buf, imp_count, c, t, KIND_BALL_BALL,
@@ -87,11 +121,24 @@ def _pair_chunk(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, ta
                 delta, nx, ny, nz, vx, vy, vz,
                 omg[i, 0] - omg[j, 0], omg[i, 1] - omg[j, 1], omg[i, 2] - omg[j, 2],
                 ri, rj, r_eff, m_eff, par, hist[k], dt_hist)
-            add_pair(fbuf, tbuf, c, i, j, fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz)
+            rout[q, 0] = -fx
+            rout[q, 1] = -fy
+            rout[q, 2] = -fz
+            rout[q, 3] = tjx
+            rout[q, 4] = tjy
+            rout[q, 5] = tjz
+            sfx += fx
+            sfy += fy
+            sfz += fz
+            stx += tix
+            sty += tiy
+            stz += tiz
             if delta > diag[c, D_BALL_OVERLAP]:
                 diag[c, D_BALL_OVERLAP] = delta
                 diag[c, D_BALL_I] = i
                 diag[c, D_BALL_J] = j
+        put3(force, i, sfx, sfy, sfz)
+        put3(torque, i, stx, sty, stz)
 
 
 @nb.njit(cache=True)
@@ -108,30 +155,45 @@ def _pose_array(motion, pivot_x, pivot_z, t, out):
 
 
 @nb.njit(cache=True)
-def _finish_chunk(c, t, kick, record_impacts, balls, walls, bounds, params, work, prt):
-    """For the balls of chunk c: gather the pair forces from every chunk's buffer (and clear
-    it), add gravity, the walls and the parts (vibroflow.dem.parts, record prt), and with `kick` finish the step (second half kick) and
-    measure the largest move since the last list build (tub frame) into moved[c].
+def _gather_block(c, balls, pairs, slots):
+    """Step 2 of the module docstring for the balls of block c: to each ball's force and
+    torque (weight and own entries, from _pair_block) add the slots where it is the second
+    ball, force reversed and the torque on j, in ascending entry order."""
+    force, torque = balls.force, balls.torque
+    bounds = pairs.bounds
+    rout, rstart, rflag = slots.out, slots.rstart, slots.rflag
+    for i in range(bounds[c], bounds[c + 1]):
+        r0, r1 = rstart[i], rstart[i + 1]
+        if r0 == r1:
+            continue
+        fx, fy, fz = force[i, 0], force[i, 1], force[i, 2]
+        tx, ty, tz = torque[i, 0], torque[i, 1], torque[i, 2]
+        for r in range(r0, r1):
+            if rflag[r]:
+                fx += rout[r, 0]
+                fy += rout[r, 1]
+                fz += rout[r, 2]
+                tx += rout[r, 3]
+                ty += rout[r, 4]
+                tz += rout[r, 5]
+        put3(force, i, fx, fy, fz)
+        put3(torque, i, tx, ty, tz)
 
-    Everything is in this one loop on purpose: a numba call that passes arrays costs a
-    reference-count update per array, which per ball and wall slot cost more than the
-    contact itself.  Without `kick` (the set-up force evaluation) contact histories are not
-    advanced, as in LAMMPS' setup."""
+
+@nb.njit(cache=True)
+def ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work, prt):
+    """The wall-contact pass of the balls of block c: each ball's contacts with the tub's U
+    wall, its partitions and the plane walls, at time t (s) with the tub's pose in work.pose,
+    their forces and torques added to the ball's force and torque, one contact after the
+    other; the wall slots' histories advanced by dt_hist, their forces and contact points
+    stored, new contacts recorded as impacts into block c's buffer and the largest overlap into
+    its diagnostics."""
     pos, vel, omg, force, torque = balls.pos, balls.vel, balls.omg, balls.force, balls.torque
-    radius, mass, mat, ref_tub = balls.radius, balls.mass, balls.mat, balls.ref_tub
+    radius, mass, mat = balls.radius, balls.mass, balls.mat
     wall_hist, wall_flag, wall_fn, wall_ft = walls.hist, walls.flag, walls.fn, walls.ft
     wall_slide, wall_point, wall_force, wall_arc = walls.slide, walls.point, walls.force, walls.arc
-    dt, gravity, table, tub = params.dt, params.gravity, params.table, params.tub
-    wall_mat, planes = params.wall_mat, params.planes
-    fbuf, tbuf, imp_buf, imp_count, diag = (work.fbuf, work.tbuf, work.imp_buf, work.imp_count,
-                                            work.diag)
-    pose, moved = work.pose, work.moved
-    nchunk = fbuf.shape[0]
-    lo, hi = bounds[c], bounds[c + 1]
-    cth = np.cos(pose[2])
-    sth = np.sin(pose[2])
-    half_dt = 0.5 * dt
-    dt_hist = dt if kick else 0.0
+    table, tub, wall_mat, planes = params.table, params.tub, params.wall_mat, params.planes
+    imp_buf, imp_count, diag, pose = work.imp_buf, work.imp_count, work.diag, work.pose
     has_tub = tub[TUB_PRESENT] > 0.0
     partitions = has_tub and tub[TUB_PERIODIC] == 0.0
     length = tub[TUB_LENGTH]
@@ -140,25 +202,14 @@ def _finish_chunk(c, t, kick, record_impacts, balls, walls, bounds, params, work
     if n_parts > 0:
         clear_loads(prt, c)
     periodic_length = length if has_tub and tub[TUB_PERIODIC] > 0.0 else 0.0
-    m2 = 0.0
-    for i in range(lo, hi):
-        fx = mass[i] * gravity[0]
-        fy = mass[i] * gravity[1]
-        fz = mass[i] * gravity[2]
-        tx = 0.0
-        ty = 0.0
-        tz = 0.0
-        for b in range(nchunk):
-            fx += fbuf[b, i, 0]
-            fy += fbuf[b, i, 1]
-            fz += fbuf[b, i, 2]
-            tx += tbuf[b, i, 0]
-            ty += tbuf[b, i, 1]
-            tz += tbuf[b, i, 2]
-            for a in range(3):
-                fbuf[b, i, a] = 0.0
-                tbuf[b, i, a] = 0.0
+    cth = np.cos(pose[2])
+    sth = np.sin(pose[2])
+    for i in range(pairs.bounds[c], pairs.bounds[c + 1]):
+        fx, fy, fz = force[i, 0], force[i, 1], force[i, 2]
+        tx, ty, tz = torque[i, 0], torque[i, 1], torque[i, 2]
         r = radius[i]
+        m = mass[i]
+        mat_i = mat[i]
         # ball-tub frame quantities used by the tub's walls
         rx = pos[i, 0] - pose[0] - pose[6]
         rz = pos[i, 2] - pose[1] - pose[7]
@@ -240,7 +291,7 @@ def _finish_chunk(c, t, kick, record_impacts, balls, walls, bounds, params, work
                                    pos[i, 1] - r * ny, pos[i, 2] - r * nz, -vn)
             wfx, wfy, wfz, tix, tiy, tiz, _tjx, _tjy, _tjz, fn, ft, sl = contact_force(
                 delta, nx, ny, nz, vx, vy, vz, omg[i, 0], omg[i, 1] - wwy, omg[i, 2],
-                r, 0.0, r, mass[i], table[mat[i], wall_mat[w]], wall_hist[i, w], dt_hist)
+                r, 0.0, r, m, table[mat_i, wall_mat[w]], wall_hist[i, w], dt_hist)
             fx += wfx
             fy += wfy
             fz += wfz
@@ -276,46 +327,82 @@ def _finish_chunk(c, t, kick, record_impacts, balls, walls, bounds, params, work
                 diag[c, D_WALL_W] = n_walls + pk  # a part: after the wall slots
         put3(force, i, fx, fy, fz)
         put3(torque, i, tx, ty, tz)
-        if kick:
-            im = 1.0 / mass[i]
-            ii = 1.0 / (0.4 * mass[i] * r * r)
-            for a in range(3):
-                vel[i, a] += half_dt * force[i, a] * im
-                omg[i, a] += half_dt * torque[i, a] * ii
-            rx = pos[i, 0] - pose[0] - pose[6]
-            rz = pos[i, 2] - pose[1] - pose[7]
-            dx = pose[6] + cth * rx + sth * rz - ref_tub[i, 0]
-            dy = pos[i, 1] - ref_tub[i, 1]
-            dz = pose[7] - sth * rx + cth * rz - ref_tub[i, 2]
-            d2 = dx * dx + dy * dy + dz * dz
-            if not (d2 < 1e300):  # NaN or infinite
-                if diag[c, D_NAN] < 0.0:
-                    diag[c, D_NAN] = i
-            elif d2 > m2:
-                m2 = d2
+
+
+@nb.njit(cache=True)
+def _kick_block(c, balls, pairs, params, work):
+    """The step's second half kick of the balls of block c, and the largest squared move of
+    one of them since the last list build (tub frame) into moved[c]."""
+    pos, vel, omg, force, torque = balls.pos, balls.vel, balls.omg, balls.force, balls.torque
+    radius, mass, ref_tub = balls.radius, balls.mass, balls.ref_tub
+    diag, pose, moved = work.diag, work.pose, work.moved
+    half_dt = 0.5 * params.dt
+    cth = np.cos(pose[2])
+    sth = np.sin(pose[2])
+    m2 = 0.0
+    for i in range(pairs.bounds[c], pairs.bounds[c + 1]):
+        r = radius[i]
+        im = 1.0 / mass[i]
+        ii = 1.0 / (0.4 * mass[i] * r * r)
+        for a in range(3):
+            vel[i, a] += half_dt * force[i, a] * im
+            omg[i, a] += half_dt * torque[i, a] * ii
+        rx = pos[i, 0] - pose[0] - pose[6]
+        rz = pos[i, 2] - pose[1] - pose[7]
+        dx = pose[6] + cth * rx + sth * rz - ref_tub[i, 0]
+        dy = pos[i, 1] - ref_tub[i, 1]
+        dz = pose[7] - sth * rx + cth * rz - ref_tub[i, 2]
+        d2 = dx * dx + dy * dy + dz * dz
+        if not (d2 < 1e300):  # NaN or infinite
+            if diag[c, D_NAN] < 0.0:
+                diag[c, D_NAN] = i
+        elif d2 > m2:
+            m2 = d2
     moved[c] = m2
 
 
 @nb.njit(cache=True, parallel=True)
-def compute_forces(t, kick, record_impacts, balls, pairs, walls, params, work, prt):
+def _pair_pass(t, dt_hist, periodic_length, record_impacts, balls, pairs, slots, params, work):
+    """Step 1 for every block, in parallel."""
+    for c in nb.prange(work.diag.shape[0]):
+        _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, slots,
+                    params, work)
+
+
+@nb.njit(cache=True, parallel=True)
+def _ball_pass(t, dt_hist, kick, record_impacts, balls, pairs, slots, walls, params, work, prt):
+    """Steps 2 to 4 for every block, in parallel."""
+    for c in nb.prange(work.diag.shape[0]):
+        _gather_block(c, balls, pairs, slots)
+        ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work, prt)
+        if kick:
+            _kick_block(c, balls, pairs, params, work)
+        else:
+            work.moved[c] = 0.0
+
+
+@nb.njit(cache=True)
+def compute_forces(t, kick, record_impacts, balls, pairs, slots, walls, params, work, prt):
     """Forces and torques at the current positions (gravity, pairs, walls) at time t (s), with
     the tub's pose in work.pose; with `kick`, also the step's second half kick.  Two parallel
-    loops: pairs into the chunk buffers, then each chunk's balls."""
-    nchunk = work.fbuf.shape[0]
+    loops over the blocks, each in its own function (numba fuses two parallel loops of one
+    function when they run over the same range, and the gather must wait for every block's
+    pairs): the pairs; then, block by block, each ball's gather, its wall contacts and its kick.
+    Each pass over a block's balls is one compiled function: a numba call that passes arrays
+    costs a reference-count update per array, which per ball would cost more than its contacts.
+    Without `kick` (the set-up force evaluation) contact histories are not advanced, as in
+    LAMMPS' setup."""
     tub = params.tub
     periodic_length = tub[TUB_LENGTH] if (tub[TUB_PRESENT] > 0.0 and
                                           tub[TUB_PERIODIC] > 0.0) else 0.0
     dt_hist = params.dt if kick else 0.0  # the set-up evaluation does not advance histories
-    for c in nb.prange(nchunk):
-        _pair_chunk(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, params.table,
-                    work)
-    for c in nb.prange(nchunk):
-        _finish_chunk(c, t, kick, record_impacts, balls, walls, pairs.bounds, params, work, prt)
+    _pair_pass(t, dt_hist, periodic_length, record_impacts, balls, pairs, slots, params, work)
+    _ball_pass(t, dt_hist, kick, record_impacts, balls, pairs, slots, walls, params, work, prt)
 
 
 @nb.njit(cache=True, parallel=True)
-def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pairs, walls, params,
-            work, prt):
+def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pairs, slots, walls,
+            params, work, prt):
     """Run up to `nsteps` velocity-Verlet steps from step `step0`.
 
     Time is t = (step - time_origin_step) dt, so that the vibration's phase comes from an
@@ -328,7 +415,7 @@ def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pair
     imp_buf, imp_count, diag, pose, moved = (work.imp_buf, work.imp_count, work.diag, work.pose,
                                              work.moved)
     n = pos.shape[0]
-    nchunk = work.fbuf.shape[0]
+    nblock = diag.shape[0]
     half_dt = 0.5 * dt
     hs2 = half_skin * half_skin
     cap = imp_buf.shape[1]
@@ -344,11 +431,11 @@ def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pair
         step = step0 + k + 1
         t = (step - time_origin_step) * dt
         _pose_array(motion, pose[6], pose[7], t, pose)
-        compute_forces(t, True, record_impacts, balls, pairs, walls, params, work, prt)
+        compute_forces(t, True, record_impacts, balls, pairs, slots, walls, params, work, prt)
         blown = False
         rebuild = False
         full = False
-        for c in range(nchunk):
+        for c in range(nblock):
             if diag[c, D_NAN] >= 0.0 or diag[c, D_LOST] >= 0.0:
                 blown = True
             if diag[c, D_BALL_OVERLAP] > max_overlap or diag[c, D_WALL_OVERLAP] > max_overlap:

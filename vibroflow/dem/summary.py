@@ -10,6 +10,7 @@ import numba
 
 from ..measure.summary import tub_summary
 from .simulate import DEMState, DEMSystem
+from .step import ASSEMBLY
 
 
 def run_summary(scenario, system: DEMSystem, state: DEMState, h5path: Path, out_dir: Path,
@@ -42,7 +43,7 @@ def run_summary(scenario, system: DEMSystem, state: DEMState, h5path: Path, out_
         else 0.0,
         "max_wall_overlap_over_d_window": float(ow[in_window].max() / d) if in_window.any()
         else 0.0,
-        "balls_lost": 0, "threads": numba.get_num_threads(), "chunks": system.nchunk,
+        "balls_lost": 0, "threads": numba.get_num_threads(), "assembly": ASSEMBLY,
         "neighbour_builds": state.nl.builds,
     }
     if settle_info:

@@ -16,7 +16,7 @@ import os
 
 import numpy as np
 from pyevtk.hl import pointsToVTK, unstructuredGridToVTK
-from pyevtk.vtk import VtkGroup, VtkQuad
+from pyevtk.vtk import VtkGroup, VtkLine, VtkQuad
 
 from vibroflow.io.atomic import atomic_path
 from vibroflow.io.vtk_frame import ball_frame, tub_to_lab_points
@@ -140,3 +140,25 @@ def write_tub_surface(path, geometry: TubGeometry, n_profile: int = 200, pose6=N
     return atomic_vtk(path, lambda base: unstructuredGridToVTK(
         base, _c(pts[:, 0]), _c(pts[:, 1]), _c(pts[:, 2]), connectivity=conn, offsets=offsets,
         cell_types=types, cellData={"part": _c(part, np.int64)}, fieldData=fd))
+
+
+def write_section_lines(path, segments: list[np.ndarray], y: float, pose6=None,
+                        pivot=(0.0, 0.0), time_s: float | None = None) -> str:
+    """Write outlines in the plane y (m) as a .vtu of line cells with cell data "part" (the
+    index of each outline in `segments`, a list of (M, 2, 2) arrays of ((start, end), (x, z))
+    m in the tub frame); moved into the lab at the pose pose6 as write_tub_surface does."""
+    part = np.concatenate([np.full(len(s), k, np.int64) for k, s in enumerate(segments)]
+                          or [np.zeros(0, np.int64)])
+    seg = (np.concatenate(segments) if segments else np.zeros((0, 2, 2))).reshape(-1, 2)
+    pts = np.column_stack([seg[:, 0], np.full(len(seg), y), seg[:, 1]])
+    fd = None
+    if pose6 is not None:
+        pts = tub_to_lab_points(pts, pose6, pivot)
+        fd = _field_data(frame_field_data(0.0 if time_s is None else time_s, pose6))
+    n = part.size
+    return atomic_vtk(path, lambda base: unstructuredGridToVTK(
+        base, _c(pts[:, 0]), _c(pts[:, 1]), _c(pts[:, 2]),
+        connectivity=_c(np.arange(2 * n), np.int64),
+        offsets=_c(np.arange(1, n + 1) * 2, np.int64),
+        cell_types=np.full(n, VtkLine.tid, dtype=np.uint8),
+        cellData={"part": _c(part, np.int64)}, fieldData=fd))

@@ -29,6 +29,7 @@ from vibroflow.report import figures
 from vibroflow.report.data import StudyData
 from vibroflow.report.impact_figures import impact_distribution_section
 from vibroflow.report.engineer import Engineer
+from vibroflow.report.part_sections import part_sections
 from vibroflow.report.temperature_maps import temperature_maps
 
 #: section id -> heading, in page order (tests check the headings)
@@ -370,6 +371,44 @@ def _cost(data: StudyData) -> dict:
     return {"rows": rows}
 
 
+def _parts(data: StudyData) -> tuple[list[dict], list[str]]:
+    """The part sections (vibroflow.report.part_sections), one per part, their tables'
+    cells formatted; and the notes on methods without parts.nc."""
+    sections, notes = part_sections(data)
+    out = []
+    for s in sections:
+        dem, continua = s["has_dem"], s["continua"]
+        head = (["patch", "area (m^2)"] + (["DEM (m/s)"] if dem else [])
+                + [f"{m} inferred (m/s)" for m in continua]
+                + ([f"{m} - DEM (m/s)" for m in continua] if dem else [])
+                + (["DEM impacts per area and s (1/(m^2 s))", "DEM energy flux (W/m^2)"]
+                   if dem else []))
+        rows, dist = [], []
+        for r in s["rows"]:
+            row = [_text(r["patch"], "l"), _num(r["area"], ".3g")]
+            if dem:
+                row.append(_pm(*r["dem"]))
+            row += [_pm(*r[m]) for m in continua]
+            if dem:
+                row += [_pm(*r[m + "_diff"]) for m in continua]
+                row += [_pm(*r["rate"]), _pm(*r["flux"])]
+                dist.append([_text(r["patch"], "l"), _pm(*r["dem"]), _num(r["median"]),
+                             _num(r["p95"])])
+            rows.append(row)
+        forces = []
+        for m, (f, se) in s["forces"].items():
+            for ph in range(f.shape[0]):
+                forces.append([_text(m, "l"), _text(ph), _pm(f[ph, 0], se[ph, 0]),
+                               _pm(f[ph, 2], se[ph, 2])])
+        out.append({"name": s["name"], "shape": s["shape"], "head": head, "rows": rows,
+                    "dist": dist, "forces": forces,
+                    "map": _img(s["map"], f"impact map of {s['name']}"),
+                    "distribution": s["distribution"] and _img(
+                        s["distribution"], f"DEM normal impact speeds on {s['name']}"),
+                    "inferred_from": s["inferred_from"]})
+    return out, notes
+
+
 # ----------------------------------------------------------------------------------------------
 
 def render(data: StudyData, gif: Path | None = None, gif_note: str | None = None) -> str:
@@ -395,6 +434,7 @@ def render(data: StudyData, gif: Path | None = None, gif_note: str | None = None
         "cost": _cost(data),
         "scenario": {"toml": data.scenario_toml or ""},
     }
+    parts, part_notes = _parts(data)
     return environment().get_template(TEMPLATE).render(
         css=CSS,
         case=s.get("case", "?"),
@@ -405,5 +445,7 @@ def render(data: StudyData, gif: Path | None = None, gif_note: str | None = None
         methods=list(data.methods),
         sections=SECTIONS,
         bodies=bodies,
+        parts=parts,
+        part_notes=part_notes,
         notes=dict(data.notes),
     )

@@ -115,10 +115,11 @@ class Run(_Strict):
     series_every: int = Field(100, ge=1, description="steps between time-series samples")
     max_overlap: float = Field(0.25, gt=0, description="blow-up bound on overlap / diameter")
     record_impacts: bool = True
-    force_chunks: int = Field(2, ge=1, le=1024, description="chunks of the DEM's parallel force "
-                              "assembly and of the continuum's parallel particle-to-grid "
-                              "scatter: they fix the summation order, so the numbers depend on "
-                              "them and not on the thread count; threads beyond them idle")
+    force_chunks: int = Field(2, ge=1, le=1024, description="chunks of the continuum's "
+                              "parallel particle-to-grid scatter: they fix its summation order, "
+                              "so the continuum's numbers depend on them and not on the thread "
+                              "count; threads beyond them idle there (the DEM's numbers depend "
+                              "on neither)")
 
 
 class Fill(_Strict):

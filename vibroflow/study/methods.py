@@ -18,6 +18,7 @@ from typing import Any
 from vibroflow.continuum.formulation import FORMULATIONS, formulation
 from vibroflow.continuum.material import material_for
 from vibroflow.continuum.options import ContinuumOptions
+from vibroflow.continuum.part_obstacle import continuum_parts
 from vibroflow.continuum.tub_run import run_continuum
 from vibroflow.errors import InputError
 from vibroflow.io.calibration_file import Calibration
@@ -27,13 +28,16 @@ from vibroflow.io.calibration_file import Calibration
 class ContinuumMethod:
     """name: stage and folder name; options: the dataclass of its options; make: the options
     from settings (the formulation's defaults and checks); run(scenario, out_dir,
-    calibration, options, progress, resume) -> summary."""
+    calibration, options, progress, resume) -> summary; check(scenario): the input errors the
+    method's run would raise on the scenario itself (the parts it cannot take), raised before
+    the study starts."""
 
     name: str
     description: str
     options: type
     make: Callable[..., Any]
     run: Callable[..., dict]
+    check: Callable[[Any], Any]
 
     def make_options(self, settings: dict[str, Any]):
         """The options from `--set NAME.key=value` settings (key -> value); input errors name
@@ -65,7 +69,8 @@ def _method(name: str):
                                  options=opts, progress=progress, resume=resume, vtk=vtk)
 
         return ContinuumMethod(name=name, description=form.description,
-                               options=ContinuumOptions, make=form.options, run=run_method)
+                               options=ContinuumOptions, make=form.options, run=run_method,
+                               check=continuum_parts)
     return factory
 
 

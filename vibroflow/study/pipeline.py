@@ -175,6 +175,8 @@ def run_study(scenario, out: Path, settings: dict[str, dict[str, Any]] | None = 
     if scenario.tub is None or scenario.fill is None:
         raise InputError("scenario: a study needs a tub-mode scenario (with [tub] and [fill]), "
                          "not explicit particles")
+    for m, _ in methods:
+        m.check(scenario)
     with folder_lock(out, "vibroflow run", field="DIR"):
         check_study_dir(out)  # again under the lock: another command may have written it
         return _run_study(scenario, out, methods, shear_cell, progress, echo, extra_stages, vtk)

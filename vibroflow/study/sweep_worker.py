@@ -9,8 +9,9 @@ one bad point does not cost the others.
 Threads: one worker per core runs one point at a time on one numba thread.  The local cluster
 sets NUMBA_NUM_THREADS=1 in its workers' environment before anything imports numba; on a
 cluster started by hand (`dask worker`) the task sets it itself when numba is not loaded yet,
-and otherwise limits the running thread with numba.set_num_threads(1).  The DEM's force
-chunking follows the thread count, so every point of a sweep uses the same summation order.
+and otherwise limits the running thread with numba.set_num_threads(1).  The DEM's numbers do
+not depend on the thread count (vibroflow.dem.step), so a point gives the numbers of the same
+scenario run alone on any number of threads.
 """
 from __future__ import annotations
 

@@ -24,6 +24,10 @@ The tub (continuum.tub_run's timeline):
    their force over the slice (N).  The summary's "continuum" block holds the shear rates from
    the cells holding at least half a cell of material and the mass error (M_end - M_0) / M_0
    with its largest magnitude over the run.
+3. Parts (part_obstacle.py): the mesh leaves out the cells inside each part and gives the cells
+   along it a wall layer of the U's law (mesh.py); the U's contacts and near-wall shear rate
+   are the U's wall layer's alone, and each sample records the force on each part
+   (wall.wall_force_on_material over its wall layer).
 
 The column collapse: eulerian/column.py's set-up.
 """
@@ -45,13 +49,14 @@ from ..files import early_tag, sample_tag
 from ..formulation import Formulation, Sampler
 from ..material import boundary_friction
 from ..options import ContinuumOptions, default_dx
+from ..part_obstacle import continuum_parts, packed_section
 from ..sampling import shear_rate, to_lab
 from ..temperature_field import temperature_model
 from ..timestep import stable_dt
 from . import column
 from .mesh import EulerianMesh
 from .solver import EulerianState, EulerianSystem, advance, init_state, state_from_checkpoint
-from .wall import MeshWall
+from .wall import MeshWall, wall_force_on_material
 
 #: the pseudo-ball's mass in full cells at the critical density (module docstring, 2)
 UNIT = 1.1
@@ -141,8 +146,12 @@ class CellSampler(Sampler):
         ci = np.floor(xc[:, 0] / cell + 0.5)
         ck = np.floor(xc[:, 1] / cell + 0.5)
         self.in_probe = [(ci == pi) & (ck == pk) for pi, pk in probe_cells]
-        self.near_wall = mesh.wall[cells]
+        # the U's wall layer (a part's is its own: part_of)
+        self.near_wall = mesh.wall[cells] if mesh.part_of is None else \
+            (mesh.wall & (mesh.part_of < 0))[cells]
         self.wall_cells = cells[self.near_wall]
+        self.part_cells = [] if mesh.part_of is None else \
+            [np.nonzero(mesh.part_of == k)[0] for k in range(len(scenario.parts or []))]
         self.buf_p, self.buf_v = np.zeros((n, 3)), np.zeros((n, 3))
         self.far = np.array([0.0, 0.5 * self.geo.length, 1.0e3])  # outside every analysis cell
         self.dither = np.zeros(n)
@@ -177,6 +186,8 @@ class CellSampler(Sampler):
         tc = wall_cells[touching]
         samples.add_contacts(j, np.searchsorted(cells, tc), hist["fn"][tc], hist["ft"][tc],
                              hist["state"][tc], mesh.arc[tc], system.x[tc], geo.length)
+        if samples.n_parts:
+            samples.add_part_forces(j, self._part_forces(), geo.length)
         rate_all = shear_rate(state.L)
         if self.vtk and j >= S - run.phases_per_cycle:
             self._frame(sample_tag(j), pose6, rate_all, samples)
@@ -194,6 +205,12 @@ class CellSampler(Sampler):
         for q, inside in enumerate(self.in_probe):
             if (inside & held).any():
                 samples.rate_probe[j, q] = rate[inside & held].mean()
+
+    def _part_forces(self) -> np.ndarray:
+        """(n_parts, 2) the wall law's force (N/m) on the material from each part's wall
+        layer (wall.wall_force_on_material)."""
+        return np.array([wall_force_on_material(c, self.system.mesh.normal, self.state.wall)
+                         for c in self.part_cells]).reshape(-1, 2)
 
     def _frame(self, tag: str, pose6, rate_all, samples) -> None:
         """The ParaView files of the state now (grid fields, tub) as frame `tag`."""
@@ -246,7 +263,8 @@ class FixedMesh(Formulation):
         the time step."""
         geo = geometry_of(scenario)
         dx = self.grid(options, scenario)
-        mesh = EulerianMesh.tub(geo, dx)
+        parts = continuum_parts(scenario)
+        mesh = EulerianMesh.tub(geo, dx, parts, packed_section(parts))
         wall_pair, mu_w, mu_p = boundary_friction(scenario, calibration)
         M = material.bulk_modulus + 4.0 * material.shear_modulus / 3.0
         k_wall = options.wall_stiffness if options.wall_stiffness is not None else M / mesh.h

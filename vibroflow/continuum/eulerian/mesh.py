@@ -14,6 +14,12 @@ Inside / wall: a cell is part of the material domain when its centre lies inside
 A face between two domain cells is open; every other face is closed (no flux: the wall is
 impermeable to mass).  Domain cells whose centre is less than h from the wall form the wall
 layer: they carry the wall's penalty contact (wall.py) along the level set's inward normal.
+
+Parts (continuum/part_obstacle.py): a tub's mesh with parts takes the least of the U's and the
+parts' level sets (a part's signed distance is positive outside it, in the material): the cells
+whose centre lies inside a part are outside the domain, their faces closed, and the domain
+cells within h of the part form its wall layer, with the part's outward normal; `part_of` says
+which part's (-1: the U's).
 """
 from __future__ import annotations
 
@@ -25,7 +31,9 @@ import numpy as np
 from vibroflow.errors import InputError
 from vibroflow.tub.geometry import distance_to_wall_np, u_wall_nearest
 
+from ..boundary import part_section_nearest_np as section_nearest
 from ..grid import Grid
+from ..part_obstacle import packed_section
 
 
 @dataclass
@@ -33,7 +41,8 @@ class EulerianMesh:
     """Cells of side h (m) covering [xmin, xmin + ncx h] x [zmin, zmin + ncz h] (m); grid: the
     node grid (spacing 2 h); inside (N,) bool; open_x (ncx + 1, ncz), open_z (ncx, ncz + 1) bool
     faces; wall (N,) bool wall layer with inward unit normals normal (N, 2); arc (N,) arc-length
-    coordinate (m) of the nearest wall point (0 where unknown); periodic along x."""
+    coordinate (m) of the nearest wall point (0 where unknown); periodic along x; part_of (N,)
+    int64 the part whose wall layer a wall cell is in (-1: the U's; None: no parts)."""
 
     xmin: float
     zmin: float
@@ -48,6 +57,7 @@ class EulerianMesh:
     normal: np.ndarray
     arc: np.ndarray
     periodic: bool = False
+    part_of: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -102,9 +112,13 @@ class EulerianMesh:
         return mesh
 
     @classmethod
-    def tub(cls, geometry, dx: float) -> "EulerianMesh":
+    def tub(cls, geometry, dx: float, parts: tuple = (), packed: tuple | None = None
+            ) -> "EulerianMesh":
         """The U of vibroflow.tub.geometry (tub frame) up to its rim, cells of side dx/2 (m);
-        dx must divide the tub's width 2R into an even number of cells."""
+        dx must divide the tub's width 2R into an even number of cells.  parts (tub.parts.Part,
+        spanning the slice) with their packing (part_obstacle.packed_section): obstacles in the
+        U (module docstring), their section at the slice's middle (packed: computed when not
+        given)."""
         R = geometry.radius
         h = 0.5 * dx
         n = 2.0 * R / h
@@ -113,12 +127,30 @@ class EulerianMesh:
                              "whole cells of dx/2")
         zmax = h * math.ceil(geometry.rim_height / h - 1e-9)
 
+        y = 0.5 * geometry.length
+        if parts and packed is None:
+            packed = packed_section(parts)
+        which = {}
+
         def level_set(x, z):
             out = np.array([u_wall_nearest(a, b, R) for a, b in zip(x, z)])
             gap = distance_to_wall_np(x, z, R)
-            return gap, out[:, 1], out[:, 2], out[:, 5]
+            nx, nz, arc = out[:, 1], out[:, 2], out[:, 5]
+            owner = np.full(np.shape(x), -1, np.int64)
+            for k in range(len(parts)):
+                pg, pnx, pnz = section_nearest(packed, k, y, x, z)
+                nearer = pg < gap
+                gap = np.where(nearer, pg, gap)
+                nx, nz = np.where(nearer, pnx, nx), np.where(nearer, pnz, nz)
+                arc = np.where(nearer, 0.0, arc)
+                owner = np.where(nearer, k, owner)
+            which["owner"] = owner
+            return gap, nx, nz, arc
 
-        return cls.from_level_set(-R, R, 0.0, zmax, dx, level_set)
+        mesh = cls.from_level_set(-R, R, 0.0, zmax, dx, level_set)
+        if parts:
+            mesh.part_of = np.where(mesh.wall, which["owner"], -1).astype(np.int64)
+        return mesh
 
     @classmethod
     def box(cls, xmin, xmax, zmin, zmax, dx, periodic=False, axis=False) -> "EulerianMesh":

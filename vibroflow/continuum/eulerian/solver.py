@@ -55,9 +55,11 @@ from ..grid_step import grid_spec, grid_work
 from ..grid_update import LabFrame
 from ..mpm.solver import ContinuumBlowUp
 from ..state import ContinuumState
+from ..kinetic_stress import KINETIC_COLUMNS
+from ..temperature_balance import temperature_step
 from ..temperature_field import advance_with_temperature, cell_step
 from ..wall_energy_flux import contact_terms, landing_terms, partition_terms
-from . import fused
+from . import fused, temperature_loop
 from .advection import remap_serial, remap_work
 from .lagrangian_step import fill_limit, material_fraction
 from .mesh import EulerianMesh
@@ -277,9 +279,29 @@ def _blowup(system, state, ids, what):
 def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
     """n steps of system.dt (the Lagrangian step, then the remap: module docstring) in one
     compiled call (fused.py); raises mpm.ContinuumBlowUp when a cell's mass goes negative or
-    its velocity non-finite.  With the temperature (EulerianSystem.temperature), one call a
-    step, each followed by the temperature's remap with the step's mass fluxes and its balance
-    on the cells (temperature_field.py)."""
+    its velocity non-finite.  With the temperature (EulerianSystem.temperature), the same call
+    carries T: each step followed by the temperature's remap with the step's mass fluxes and
+    its balance on the cells (temperature_loop.py)."""
+    n = int(n)
+    if n <= 0:
+        return
+    if system.temperature is None:
+        _advance(system, state, n, np.empty((0, KINETIC_COLUMNS)))
+        return
+    _advance(system, state, n, np.zeros((state.n, KINETIC_COLUMNS)),
+             temperature_step(system.temperature, _phi_cap(system), system.dt,
+                              system.material.p_wave_speed()))
+
+
+def _phi_cap(system) -> float:
+    """The material's connection packing rho_c / rho_s (-)."""
+    return system.material.critical_density / system.material.solid_density
+
+
+def advance_stepwise(system: EulerianSystem, state: EulerianState, n: int) -> None:
+    """`advance` with the temperature's remap and balance made in Python between compiled
+    one-step calls (temperature_field.advance_with_temperature, `cell_step`): the readable
+    reference of the compiled path, to which tests hold it."""
     model = system.temperature
     mesh = system.mesh
     shape = (mesh.ncx, mesh.ncz)
@@ -312,8 +334,7 @@ def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
 
     advance_with_temperature(state, n, model,
                              lambda k, p_kin: _advance(system, state, k, p_kin), balance, start,
-                             phi_cap=system.material.critical_density
-                             / system.material.solid_density, dt=system.dt,
+                             phi_cap=_phi_cap(system), dt=system.dt,
                              wave_speed=system.material.p_wave_speed())
 
 
@@ -351,10 +372,11 @@ def cell_wall_sums(system: EulerianSystem, state: EulerianState, start=None) -> 
     return out
 
 
-def _advance(system: EulerianSystem, state: EulerianState, n: int, p_kin) -> None:
+def _advance(system: EulerianSystem, state: EulerianState, n: int, p_kin, ts=None) -> None:
     """`advance`'s compiled call: n steps, the granular temperature's stress p_kin (N, 5)
     (kinetic_stress.py: Pa added to the scattered stress, then the return map's rate ratio;
-    (0, 5): none)."""
+    (0, 5): none); with ts (temperature_balance.TemperatureStep) the loop that computes p_kin
+    and makes the balance of state.temperature after every step (temperature_loop.py)."""
     mesh = system.mesh
     mat = system.material
     w = system.wall
@@ -377,9 +399,15 @@ def _advance(system: EulerianSystem, state: EulerianState, n: int, p_kin) -> Non
                          if w is not None else (0.0, 0.0, 0.0, 0.0)),
         pf is not None, *((float(pf.friction), float(pf.length)) if pf is not None
                           else (0.0, 1.0)))
-    done, t, status, lowest, err_max = kernel(
-        n, float(state.t), float(state.mass_error_max), cells, step, system.mesh_record,
-        boundaries, system.grid_spec, system.work, system.cell_work)
+    args = (n, float(state.t), float(state.mass_error_max), cells, step, system.mesh_record,
+            boundaries, system.grid_spec, system.work, system.cell_work)
+    if ts is None:
+        done, t, status, lowest, err_max = kernel(*args)
+    else:
+        t_kernel = temperature_loop.advance_temperature_kernel if parallel else \
+            temperature_loop.advance_temperature_kernel_serial
+        done, t, status, lowest, err_max = t_kernel(*args, state.temperature, ts,
+                                                    system.temperature_work)
     state.t = t
     state.step += done
     state.mass_error_max = err_max

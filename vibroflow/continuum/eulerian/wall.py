@@ -104,6 +104,15 @@ class MeshWall:
         return self.stiffness * self.tangential_ratio
 
 
+def wall_force_on_material(cells, normal, hist) -> np.ndarray:
+    """(2,) the wall's force (N/m, x and z) on the material of the wall-layer cells `cells`
+    (indices): their normal and tangential forces fn, ft (hist, empty_history's) along the
+    inward normal n and t = (n_z, -n_x), as wall_forces adds them (boundary._penalty)."""
+    fn, ft = hist["fn"][cells], hist["ft"][cells]
+    nx, nz = normal[cells, 0], normal[cells, 1]
+    return np.array([np.sum(fn * nx + ft * nz), np.sum(fn * nz - ft * nx)])
+
+
 def empty_history(n: int) -> dict:
     """Per-cell wall arrays: overclosure delta, slip xi (m), fn, ft (N/m), state (int8)."""
     return {"delta": np.zeros(n), "xi": np.zeros(n), "fn": np.zeros(n), "ft": np.zeros(n),

@@ -8,7 +8,9 @@ share the bed's area (their lattice misses a sliver along the curved wall).  Eac
 sampled as a "ball" of the point's solid volume m_p L_y / rho_s at its centre, with its lab
 position and velocity; its wall contacts are the points touching the U.  The wall's normal
 stiffness is constant: (K + 4G/3) / l0 with l0 the point spacing (the bed's elastic stiffness
-over one point), its damping ratio that of the scenario's ball-wall restitution.  With vtk,
+over one point), its damping ratio that of the scenario's ball-wall restitution.  Each part of
+the scenario's [[parts]] is a wall of the same law (boundary.PartWall, part_obstacle.py), the
+bed's points filled around it, and each sample records the force on it.  With vtk,
 ParaView files of the points and of the grid fields over the last cycle (continuum.paraview).
 
 The column collapse: mpm/column.py's set-up.
@@ -27,13 +29,14 @@ from vibroflow.scenario.laws import damping_ratio
 from vibroflow.tub.geometry import distance_to_wall_np, geometry_of, u_wall_nearest
 
 from ..bed import bed_area, bed_height, lithostatic
-from ..boundary import PartitionFriction, UWall
+from ..boundary import PartitionFriction, PartWall, UWall
 from ..fields import grid_fields
 from ..files import early_tag, sample_tag
 from ..formulation import Formulation, Sampler
 from ..grid import Grid
 from ..material import boundary_friction
 from ..options import ContinuumOptions, default_dx
+from ..part_obstacle import bed_height_around, continuum_parts, packed_section, section_gaps
 from ..sampling import shear_rate, to_lab
 from ..temperature_field import temperature_model
 from ..timestep import stable_dt
@@ -59,15 +62,23 @@ def _wall_gap_arc(x, radius, gap_out, arc_out):
 
 def settled_bed(scenario, material, spacing: float):
     """Points of the settled bed (tub frame): positions (N, 2) m, volumes (N,) m^2, densities
-    (N,) kg/m^3, stresses (N, 4) Pa, and the bed height h (m) (module docstring)."""
+    (N,) kg/m^3, stresses (N, 4) Pa, and the bed height h (m) (module docstring).  Around parts
+    (part_obstacle.py) the bed rises by their sections below it and no point's square reaches
+    into one."""
     geo = geometry_of(scenario)
     area = bed_area(scenario, material)
-    h = bed_height(geo.radius, area, geo.rim_height)
+    parts = continuum_parts(scenario)
+    packed = packed_section(parts)
+    y = 0.5 * geo.length
+    h = bed_height_around(lambda a: bed_height(geo.radius, a, geo.rim_height), area, parts,
+                          packed, y) if parts else bed_height(geo.radius, area, geo.rim_height)
     xs = np.arange(-geo.radius + spacing / 2, geo.radius, spacing)
     zs = np.arange(spacing / 2, h, spacing)
     X, Z = np.meshgrid(xs, zs, indexing="ij")
     X, Z = X.ravel(), Z.ravel()
     keep = distance_to_wall_np(X, Z, geo.radius) >= 0.5 * spacing  # the square inside the U
+    if parts:
+        keep &= section_gaps(parts, packed, y, X, Z) >= 0.5 * spacing
     x = np.stack([X[keep], Z[keep]], axis=1)
     n = x.shape[0]
     if n == 0:
@@ -130,6 +141,10 @@ class PointSampler(Sampler):
         samples.add_contacts(j, touching, wall_hist["fn"][touching], wall_hist["ft"][touching],
                              wall_hist["state"][touching], self.arc[touching],
                              state.x[touching], geo.length)
+        if samples.n_parts:
+            samples.add_part_forces(j, np.array([state.history[b.slot]["f"].sum(axis=0)
+                                                 for b in system.boundaries
+                                                 if isinstance(b, PartWall)]), geo.length)
         rate = shear_rate(state.L)
         if self.vtk and j >= S - run.phases_per_cycle:
             self._frame(sample_tag(j), pose6, rate, samples)
@@ -188,8 +203,16 @@ class MaterialPointMethod(Formulation):
         wall_pair, mu_w, mu_p = boundary_friction(scenario, calibration)
         M = material.bulk_modulus + 4.0 * material.shear_modulus / 3.0
         k_wall = options.wall_stiffness if options.wall_stiffness is not None else M / spacing
+        zeta = damping_ratio(wall_pair.restitution)
         boundaries: list = [UWall(radius=geo.radius, stiffness=k_wall, friction=mu_w,
-                                  damping_ratio=damping_ratio(wall_pair.restitution))]
+                                  damping_ratio=zeta)]
+        parts = continuum_parts(scenario)
+        packed = packed_section(parts)
+        # each part with the U wall's law (part_obstacle.py), after the U, before the
+        # partitions
+        boundaries += [PartWall(name=p.name, packed=packed, index=k, y=0.5 * geo.length,
+                                stiffness=k_wall, friction=mu_w, damping_ratio=zeta)
+                       for k, p in enumerate(parts)]
         if mu_p is not None:
             boundaries.append(PartitionFriction(friction=mu_p, length=geo.length))
         dt = stable_dt(material, dx, spacing, boundaries, v_max=2.0, cfl=options.cfl)
@@ -225,7 +248,8 @@ class MaterialPointMethod(Formulation):
             "grid_spacing_m": system.grid.dx, "point_spacing_m": 0.5 * system.grid.dx,
             "points": state.n,
             "wall_friction": walls[0].friction, "wall_stiffness_Pa_m": walls[0].stiffness,
-            "partition_friction": walls[1].friction if len(walls) > 1 else None,
+            "partition_friction": next((b.friction for b in walls
+                                        if isinstance(b, PartitionFriction)), None),
         }
 
     def column_system(self, L0, H0, dx, material, floor_friction, wall_friction, symmetric,

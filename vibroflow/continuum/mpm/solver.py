@@ -28,15 +28,18 @@ import numpy as np
 from vibroflow.errors import InputError
 
 from .. import fused, steps
-from ..boundary import BOUNDARY_DTYPE, PartitionFriction, Plane
+from ..boundary import BOUNDARY_DTYPE, NO_PARTS, PartitionFriction, PartWall, Plane
 from ..constitutive import ContinuumMaterial
 from ..grid import Grid
 from ..grid_step import chunk_bounds, grid_spec, grid_work
 from ..grid_update import LabFrame
 from ..state import ContinuumState
+from ..kinetic_stress import KINETIC_COLUMNS
+from ..temperature_balance import temperature_step
 from ..temperature_field import advance_with_temperature, point_step
 from ..timestep import stable_dt
 from ..wall_energy_flux import contact_terms, normal_of_force, partition_terms
+from .temperature_loop import advance_temperature_kernel
 
 
 class ContinuumBlowUp(RuntimeError):
@@ -238,7 +241,7 @@ def pack_boundaries(boundaries) -> tuple[np.ndarray, list]:
     for j, b in enumerate(boundaries):
         if not hasattr(b, "record"):
             raise InputError(f"boundary {type(b).__name__}: has no record() for the MPM step "
-                             "(boundary.py: UWall, Plane, PartitionFriction)")
+                             "(boundary.py: UWall, Plane, PartWall, PartitionFriction)")
         records[j] = b.record()
         if b.has_history:
             records[j]["hist"] = len(walls)
@@ -276,8 +279,23 @@ def advance(system: MPMSystem, state: MPMState, n: int) -> None:
     """n steps (module docstring) in one compiled call (fused.py), parallel over the system's
     point chunks; raises ContinuumBlowUp naming the points and the likely cause when a point
     goes through a wall (boundary.py `lost`), leaves the grid or stops being finite.  With the
-    temperature (MPMSystem.temperature), one call a step, each followed by the temperature's
-    balance (temperature_field.py)."""
+    temperature (MPMSystem.temperature), the same call carries T: each step followed by the
+    temperature's balance (temperature_loop.py)."""
+    n = int(n)
+    if n <= 0:
+        return
+    if system.temperature is None:
+        _advance(system, state, n, np.empty((0, KINETIC_COLUMNS)))
+        return
+    _advance(system, state, n, np.zeros((state.n, KINETIC_COLUMNS)),
+             temperature_step(system.temperature, _phi_cap(system), system.dt,
+                              system.material.p_wave_speed()))
+
+
+def advance_stepwise(system: MPMSystem, state: MPMState, n: int) -> None:
+    """`advance` with the temperature's balance made in Python between compiled one-step calls
+    (temperature_field.advance_with_temperature, `point_step`): the readable reference of the
+    compiled path, to which tests hold it."""
     g = system.grid
 
     def balance(power, _start):
@@ -287,9 +305,13 @@ def advance(system: MPMSystem, state: MPMState, n: int) -> None:
 
     advance_with_temperature(state, n, system.temperature,
                              lambda k, p_kin: _advance(system, state, k, p_kin), balance,
-                             phi_cap=system.material.critical_density
-                             / system.material.solid_density, dt=system.dt,
+                             phi_cap=_phi_cap(system), dt=system.dt,
                              wave_speed=system.material.p_wave_speed())
+
+
+def _phi_cap(system) -> float:
+    """The material's connection packing rho_c / rho_s (-)."""
+    return system.material.critical_density / system.material.solid_density
 
 
 def point_wall_sums(system: MPMSystem, state: MPMState) -> np.ndarray:
@@ -312,10 +334,16 @@ def point_wall_sums(system: MPMSystem, state: MPMState) -> np.ndarray:
     return out
 
 
-def _advance(system: MPMSystem, state: MPMState, n: int, p_kin) -> None:
+def packed_parts(system: MPMSystem) -> tuple:
+    """The packed parts of the system's part walls (boundary.PartWall; NO_PARTS without)."""
+    return next((b.packed for b in system.boundaries if isinstance(b, PartWall)), NO_PARTS)
+
+
+def _advance(system: MPMSystem, state: MPMState, n: int, p_kin, ts=None) -> None:
     """`advance`'s compiled call: n steps, the granular temperature's stress p_kin (N, 5)
     (kinetic_stress.py: Pa added to the scattered stress, then the return map's rate ratio;
-    (0, 5): none)."""
+    (0, 5): none); with ts (temperature_balance.TemperatureStep) the loop that computes
+    p_kin and makes the balance of state.temperature after every step (temperature_loop.py)."""
     g = system.grid
     records, walls = pack_boundaries(system.boundaries)
     hist = _stack_history(state, walls)
@@ -332,9 +360,14 @@ def _advance(system: MPMSystem, state: MPMState, n: int, p_kin) -> None:
         else np.empty((0, 4)), p_kin)
     step = fused.MPMStep(float(system.dt), system.params, system.frame.as_array(), box,
                          chunk_bounds(state.n, system.chunks), float(system.flip))
-    done, t, status, which = fused.advance_kernel(
-        n, float(state.t), points, step, fused.Boundaries(records, *hist), system.grid_spec,
-        system.work)
+    boundaries = fused.Boundaries(records, *hist, packed_parts(system))
+    if ts is None:
+        done, t, status, which = fused.advance_kernel(
+            n, float(state.t), points, step, boundaries, system.grid_spec, system.work)
+    else:
+        done, t, status, which = advance_temperature_kernel(
+            n, float(state.t), points, step, boundaries, system.grid_spec, system.work,
+            state.temperature, ts, (float(g.x0), float(g.z0), int(g.nx), int(g.nz)))
     _unstack_history(state, walls, hist)
     state.t = t
     state.step += done

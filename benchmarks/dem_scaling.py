@@ -1,0 +1,173 @@
+"""The DEM step's cost against the ball count and the thread count, its memory, and where a
+step's time goes.
+
+    python benchmarks/dem_scaling.py [--sizes quick,tub47,long] [--threads 1,2] [--steps 300]
+        [--repeats 3] [--json runs/dem_scaling.json]
+
+Sizes: `quick` is tub47-quick (4 200 balls in a 19.05 mm slice), `tub47` the reference case
+(14 000 balls, 63.5 mm), `long` tub47 ten times longer (`--set tub.length=0.635 --set
+fill.count=140000`).  Each (size, threads) runs in its own process with NUMBA_NUM_THREADS set:
+the balls are placed on the fill lattice closed up to 1.01 d from the floor
+(vibroflow.dem.fill.fill_state, no settling: the same start at every size) and fall into the
+vibrating tub for 2 500 untimed steps (numba's cache load or compilation, the first neighbour
+lists, the first contacts), then `--repeats` times `--steps` steps are timed
+(wall and CPU), neighbour rebuilds included.  Then the passes of one step are timed apart,
+each `--steps` times on the same state (each its own parallel loop over the blocks, so their sum
+is a little more than a step): the pairs (step._pair_block), the gather (_gather_block), the
+walls (ball_walls), the kick and drift, and one neighbour-list rebuild (simulate.rebuild: cell
+binning, list, history transfer, reverse order).
+
+Printed per process: balls, median wall and CPU microseconds a step, nanoseconds per ball-step,
+the passes' shares, and the process's peak resident memory (ru_maxrss); at the end the time per
+step against the ball count relative to the smallest size (1.0: the cost grows as the ball
+count).  On a shared machine compare the rows of one run, and repeat under load.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+# the fill lattice closed up (1.01 d) and at the floor, so that the bed is in contact after
+# the warm-up at every size
+DENSE = ["fill.lattice_spacing=1.01", "fill.insert_above=0.0"]
+SIZES = {"quick": ("tub47-quick", DENSE), "tub47": ("tub47", DENSE),
+         "long": ("tub47", DENSE + ["tub.length=0.635", "fill.count=140000"])}
+WARMUP = 2500
+
+
+def worker(size: str, steps: int, repeats: int) -> dict:
+    """Time the steps in this process (NUMBA_NUM_THREADS set by the caller)."""
+    import numba
+    import numpy as np
+
+    from vibroflow.dem import fill as F
+    from vibroflow.dem import simulate as S
+    from vibroflow.dem import step as K
+    from vibroflow.dem.records import pairs_of, slots_of
+    from vibroflow.scenario.io import load_scenario
+
+    case, sets = SIZES[size]
+    scenario = load_scenario(case, sets)
+    system = S.make_system(scenario)
+    state = F.fill_state(system, scenario)
+    state.vibrating = True
+    S.run_steps(system, state, WARMUP)
+    wall, cpu = [], []
+    b0 = state.nl.builds
+    for _ in range(repeats):
+        t0, c0 = time.perf_counter(), time.process_time()
+        S.run_steps(system, state, steps)
+        wall.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+    builds = state.nl.builds - b0
+
+    @numba.njit(parallel=True)
+    def gather(balls, pairs, slots, nblock):
+        for c in numba.prange(nblock):
+            K._gather_block(c, balls, pairs, slots)
+
+    @numba.njit(parallel=True)
+    def walls(t, balls, pairs, w, params, work, nblock):
+        for c in numba.prange(nblock):
+            K.ball_walls(c, t, 0.0, False, balls, pairs, w, params, work)
+
+    @numba.njit(parallel=True)
+    def kick(balls, pairs, params, work, nblock):
+        for c in numba.prange(nblock):
+            K._kick_block(c, balls, pairs, params, work)
+
+    buf = S._buf(system, state)
+    pairs, slots = pairs_of(state.nl, K.NBLOCK), slots_of(state.nl)
+    t = state.time(system.dt)
+    saved = {name: getattr(state, name).copy() for name in ("vel", "omg")}
+    hist, flag, rflag = state.nl.hist.copy(), state.nl.flag.copy(), state.nl.rflag.copy()
+    passes = {
+        "pairs": lambda: K._pair_pass(t, 0.0, 0.0, False, buf.balls, pairs, slots,
+                                      system.params, buf.work),
+        "gather": lambda: gather(buf.balls, pairs, slots, K.NBLOCK),
+        "walls": lambda: walls(t, buf.balls, pairs, buf.walls, system.params, buf.work,
+                               K.NBLOCK),
+        "kick": lambda: kick(buf.balls, pairs, system.params, buf.work, K.NBLOCK),
+    }
+    profile = {}
+    for name, fn in passes.items():
+        fn()
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            fn()
+        profile[name] = 1e6 * (time.perf_counter() - t0) / steps
+    state.vel[:], state.omg[:] = saved["vel"], saved["omg"]
+    state.nl.hist[:], state.nl.flag[:], state.nl.rflag[:] = hist, flag, rflag
+    S.rebuild(system, state)
+    t0 = time.perf_counter()
+    S.rebuild(system, state)
+    profile["rebuild_once"] = 1e6 * (time.perf_counter() - t0)
+    profile["rebuild_per_step"] = profile["rebuild_once"] * builds / (repeats * steps)
+    return {"size": size, "balls": state.n, "threads": numba.get_num_threads(),
+            "steps": steps, "wall_s": wall, "cpu_s": cpu, "builds": builds,
+            "list_entries": int(state.nl.nbr.shape[0]),
+            "contacts": int(np.count_nonzero(state.nl.flag)),
+            "profile_us": profile,
+            "max_rss_MB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
+
+
+def main(argv=None) -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--sizes", default="quick,tub47,long")
+    p.add_argument("--threads", default="1,2")
+    p.add_argument("--steps", type=int, default=300)
+    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--json", type=Path, default=ROOT / "runs" / "dem_scaling.json")
+    p.add_argument("--worker", help=argparse.SUPPRESS)
+    a = p.parse_args(argv)
+    if a.worker:
+        print(json.dumps(worker(a.worker, a.steps, a.repeats)))
+        return
+    rows = []
+    for size in a.sizes.split(","):
+        for threads in (int(x) for x in a.threads.split(",")):
+            env = dict(os.environ, NUMBA_NUM_THREADS=str(threads))
+            load0 = os.getloadavg()[0]
+            out = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--worker",
+                                  size, "--steps", str(a.steps), "--repeats", str(a.repeats)],
+                                 env=env, capture_output=True, text=True)
+            if out.returncode != 0:
+                raise SystemExit(f"{size} on {threads} threads failed:\n{out.stderr[-3000:]}")
+            r = json.loads(out.stdout.strip().splitlines()[-1])
+            r["load"] = (load0, os.getloadavg()[0])
+            us = 1e6 * statistics.median(r["wall_s"]) / a.steps
+            cpu = 1e6 * statistics.median(r["cpu_s"]) / a.steps
+            r.update(median_us_per_step=us, median_cpu_us_per_step=cpu,
+                     ns_per_ball_step=1e3 * us / r["balls"])
+            prof = r["profile_us"]
+            print(f"{size:6s} {r['balls']:7d} balls, {threads} thread(s): {us:9.1f} us/step wall "
+                  f"({cpu:9.1f} CPU), {r['ns_per_ball_step']:6.1f} ns/ball-step, "
+                  f"{r['builds']} builds, {r['contacts']} contacts, max RSS "
+                  f"{r['max_rss_MB']:.0f} MB (load {r['load'][0]:.1f} -> {r['load'][1]:.1f})",
+                  flush=True)
+            print("        passes (us): " + ", ".join(f"{k} {v:.1f}" for k, v in prof.items()),
+                  flush=True)
+            rows.append(r)
+    smallest = {}
+    for r in rows:
+        base = smallest.setdefault(r["threads"], r)
+        r["cost_growth_over_ball_growth"] = ((r["median_us_per_step"] / base["median_us_per_step"])
+                                             / (r["balls"] / base["balls"]))
+        print(f"{r['size']:6s} {r['threads']} thread(s): time per step grows "
+              f"{r['cost_growth_over_ball_growth']:.2f} x the ball count's growth from "
+              f"{base['size']}")
+    a.json.parent.mkdir(parents=True, exist_ok=True)
+    a.json.write_text(json.dumps(rows, indent=1))
+    print(f"written {a.json}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,136 @@
+"""Many Eulerian steps with the granular temperature in one numba call.
+
+Each step is the step-by-step path's (temperature_field.advance_with_temperature with
+solver.py's balance) made without leaving compiled code: the granular temperature's stress
+from the cells' state (temperature_balance.kinetic_stress_of), one step of the fused
+mechanical loop (fused.py, parallel or serial as without T), the production sigma : D
+(temperature_field.production_W_m3), T carried with the cells' mass by the same transport of
+the step's start mass with the step's face velocities as the kernel's remap, the wall layer's
+and the partitions' contact terms (`cell_wall_sums`, solver.cell_wall_sums compiled) and the
+balance on the cells (temperature_balance.balance_cells).  T is state carried through the
+loop as the mechanical fields are.
+
+The balance's part runs serially after the step: its numbers depend on nothing but the state
+(the mechanical step's on the cell chunks, never on the threads).
+"""
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from ..temperature_balance import balance_cells, kinetic_stress_of
+from ..temperature_field import production_W_m3
+from ..wall_energy_flux import contact_terms, landing_terms, partition_terms
+from . import fused
+from .advection import remap_serial
+
+
+@nb.njit(cache=True)
+def cell_wall_sums(boundaries, normal, mass, v, volume, stress, rho_c, h, dt, start_mass,
+                   start_v, landing, out):
+    """out (N, 4): the cells' wall contact terms of the step (solver.cell_wall_sums): the wall
+    layer's contacts (boundaries a fused.MeshBoundaries; the wall at rest on the mesh, its
+    inward normal (N, 2) the mesh's, contact length fill h), their landing measured from the
+    step's start masses and velocities start_mass (N,) kg/m, start_v (N, 2) m/s when landing
+    (wall_energy_flux.landing_terms), and the partitions'."""
+    out[:] = 0.0
+    if boundaries.wall_on:
+        c = boundaries.wall_cells
+        nc = c.shape[0]
+        fn = np.empty(nc)
+        ft = np.empty(nc)
+        nrm = np.empty((nc, 2))
+        vc = np.empty((nc, 2))
+        mc = np.empty(nc)
+        length = np.empty(nc)
+        v0 = np.empty((nc, 2))
+        m0 = np.empty(nc)
+        for r in range(nc):
+            p = c[r]
+            fn[r] = boundaries.fn[p]
+            ft[r] = boundaries.ft[p]
+            mc[r] = mass[p]
+            m0[r] = start_mass[p]
+            for j in range(2):
+                nrm[r, j] = normal[p, j]
+                vc[r, j] = v[p, j]
+                v0[r, j] = start_v[p, j]
+            length[r] = min(1.0, mass[p] / (rho_c * h * h)) * h
+        part = np.zeros((nc, 4))
+        contact_terms(fn, ft, nrm, vc, mc, length, boundaries.kn, boundaries.zeta, dt, part)
+        for r in range(nc):
+            part[r, 3] = 0.0
+        if landing:
+            landing_terms(v0, m0, vc, mc, nrm, fn, dt, part)
+        for r in range(nc):
+            for j in range(4):
+                out[c[r], j] += part[r, j]
+    if boundaries.partitions_on:
+        partition_terms(v, mass, volume, stress, boundaries.mu_p, boundaries.length, dt, out)
+
+
+def _make_kernel(parallel: bool):
+    """The compiled loop over fused.advance_kernel (`parallel`) or advance_kernel_serial;
+    `parallel` is a closure constant, so the two are cached apart."""
+
+    @nb.njit(cache=True)
+    def advance_temperature_kernel(nsteps, t, mass_error_max, cells, step, mesh, boundaries,
+                                   grid, work, cell_work, T, ts, t_work):
+        """Up to nsteps Eulerian steps with the granular temperature T (N,) m^2/s^2 of the
+        cells, in place (module docstring); the arguments to t_work as fused.advance_kernel's,
+        cells.p_kin (N, 5) the kinetic stress's array; ts a temperature_balance.TemperatureStep;
+        t_work the temperature's remap work (advection.remap_work with one field).
+
+        Returns fused.advance_kernel's (steps done, t, status, lowest cell mass, largest
+        |M - M0| / M0): on a status other than OK the step that found it had no balance."""
+        mass = cells.mass
+        v = cells.v
+        p_kin = cells.p_kin
+        h = mesh.h
+        periodic = grid[3]
+        ncx = mesh.open_z.shape[0]
+        ncz = mesh.open_x.shape[1]
+        n = mass.shape[0]
+        power = np.empty(n)
+        sums = np.zeros((n, 4))
+        production = np.empty(n)
+        phi = np.empty(n)
+        rho_s = ts.prm.density_kg_m3
+        landing = ts.walls and ts.landing
+        for s in range(nsteps):
+            kinetic_stress_of(cells.density, T, cells.L, cells.stress, cells.gamma_dot,
+                              cells.phase, ts, p_kin)
+            m_start = mass.copy()
+            v_start = v.copy()
+            if parallel:
+                done, t, status, lowest, mass_error_max = fused.advance_kernel(
+                    1, t, mass_error_max, cells, step, mesh, boundaries, grid, work, cell_work)
+            else:
+                done, t, status, lowest, mass_error_max = fused.advance_kernel_serial(
+                    1, t, mass_error_max, cells, step, mesh, boundaries, grid, work, cell_work)
+            if status != fused.OK:
+                return s + done, t, status, lowest, mass_error_max
+            production_W_m3(cells.stress, cells.L, cells.gamma_dot, p_kin, power)
+            if ts.walls:
+                cell_wall_sums(boundaries, mesh.normal, mass, v, cells.volume, cells.stress,
+                               step.rho_c, h, ts.dt, m_start, v_start, landing, sums)
+            # T carried with the mass: the step's start mass moved by the step's face velocities
+            m_move = m_start.reshape((ncx, ncz)).copy()
+            remap_serial(m_move, T.reshape((1, ncx, ncz)), cell_work.ux, cell_work.uz, h, ts.dt,
+                         periodic, t_work)
+            density = cells.density
+            for p in range(n):
+                frac = min(1.0, mass[p] / (density[p] * h * h)) if density[p] > 0.0 else 0.0
+                production[p] = power[p] * frac
+                phi[p] = mass[p] / (rho_s * h * h)
+            T_new = balance_cells(T.reshape((ncx, ncz)), phi.reshape((ncx, ncz)),
+                                  production.reshape((ncx, ncz)), sums.reshape((ncx, ncz, 4)),
+                                  ts).ravel()
+            T[:] = T_new
+        return nsteps, t, fused.OK, 0.0, mass_error_max
+
+    return advance_temperature_kernel
+
+
+advance_temperature_kernel = _make_kernel(True)
+advance_temperature_kernel_serial = _make_kernel(False)
