@@ -35,6 +35,7 @@ import numpy as np
 from ..tub.motion import pose as tub_pose
 from .contact import (branch_vector, contact_force, forget, pair_contact_velocity, put3,
                       unit_normal)
+from .parts import ball_parts, clear_loads
 from .walls import (KIND_BALL_BALL, KIND_BALL_PARTITION, KIND_BALL_PLANE, KIND_BALL_TUB,
                     TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT, WALL_PLANE0, WALL_U, plane_wall,
                     u_wall)
