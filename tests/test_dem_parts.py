@@ -44,7 +44,7 @@ from vibroflow.dem.output import PART_UNITS
 from vibroflow.dem.parts import EMPTY, SLOTS, ball_parts, parts_record
 from vibroflow.dem.run import run_dem
 from vibroflow.io.part_vtk import part_surface
-from vibroflow.io.parts_nc import read_parts_nc
+from vibroflow.io.parts_file import read_parts as read_parts_nc
 from vibroflow.scenario.io import load_scenario
 from vibroflow.scenario.model import PartSpec
 from vibroflow.scenario.part_shapes import placed_triangles, signed_distance

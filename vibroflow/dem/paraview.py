@@ -24,7 +24,7 @@ import numpy as np
 
 from ..io.vtk_frame import VtkOptions, extra_frame_steps, pose_at, write_vtk_record
 from ..tub.geometry import geometry_of
-from ..io.parts_nc import read_parts_nc
+from ..io.parts_file import read_parts as read_parts_nc
 from ..tub.motion import TubMotion
 from ..tub.parts import parts_of
 from .part_output import PARTS_NC

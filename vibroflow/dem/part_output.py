@@ -1,4 +1,4 @@
-"""What the parts in the bed receive in a DEM run: DIR/parts.nc (vibroflow.io.parts_nc's schema)
+"""What the parts in the bed receive in a DEM run: DIR/parts.nc (vibroflow.io.parts_file's schema)
 from dem.h5's /part_impacts and /part_loads, and the summary's lines per part.
 
 Over the averaging window [duration - average_last, duration), split into run.batches batches of
@@ -17,13 +17,21 @@ import h5py
 import numpy as np
 
 from ..io.atomic import json_safe
-from ..io.parts_nc import empty_dataset, write_parts_nc as write_file
+from ..io.parts_file import empty_parts_dataset, write_parts as write_file
 from ..measure.stats import (batch_means, batches_of_whole_cycles, cycles_in_window, phase_bins,
                              stderr_of_batches)
 from ..tub.parts import patch_layout
 
 PARTS_NC = "parts.nc"
 
+
+def _empty_dataset(parts, slice_length_m: float, n_phases: int, method: str, window_s: float,
+                   batches: int, inferred_from: str):
+    """The shared parts.nc layout (vibroflow/io/parts_file.py) for these parts' patches."""
+    layouts = [patch_layout(p, slice_length_m) for p in parts]
+    return empty_parts_dataset([p.name for p in parts], [n for n, _ in layouts],
+                               [a for _, a in layouts], n_phases, method, window_s, batches,
+                               inferred_from)
 
 def _batch_seconds(n_cycles: int, n_batches: int, frequency: float) -> np.ndarray:
     """Duration (s) of each batch of whole cycles (cycle k in batch k n_b // n_c)."""
@@ -40,7 +48,7 @@ def part_dataset(h5path: Path, scenario, parts):
     nb = run.batches
     n_cycles = cycles_in_window(t0, t1, f)
     window = n_cycles / f
-    ds = empty_dataset(parts, scenario.tub.length, run.phases_per_cycle, "dem", window, nb,
+    ds = _empty_dataset(parts, scenario.tub.length, run.phases_per_cycle, "dem", window, nb,
                        "every ball-part contact of the DEM (impacts: its first step) and the "
                        "contact forces at the snapshots")
     with h5py.File(h5path, "r") as h5:
