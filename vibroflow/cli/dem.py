@@ -42,4 +42,8 @@ def dem(
     except BlowUp as exc:
         blown_up(exc)
     warn_empty_probes("the DEM's", summary)
+    from vibroflow.dem.part_output import part_line
+
+    for entry in summary.get("parts", []):
+        typer.echo(part_line(entry))
     typer.echo(f"results in {out}")

@@ -32,7 +32,11 @@ def _ids(ids, at_most: int = 10) -> str:
     return str(ids[:at_most]) + more
 
 
-def _wall_name(w: int) -> str:
+def _wall_name(w: int, system=None) -> str:
+    """The wall slot w, or the part whose index follows the slots (vibroflow.dem.step)."""
+    if system is not None and w >= system.n_walls:
+        part = system.parts[w - system.n_walls]
+        return f"part {part.name!r} ({part.shape}, parts[{w - system.n_walls}])"
     if w == WALL_U:
         return "wall 0 (the tub's U wall)"
     if w == WALL_PARTITION_LO:
@@ -117,11 +121,11 @@ def check_overlaps_at_start(system, state, diag: np.ndarray) -> None:
         delta = float(diag[cw, K.D_WALL_OVERLAP])
         r = float(state.radius[i])
         if delta >= r:
-            raise BlowUp(f"blow-up at t = 0 s: ball {i} is behind {_wall_name(w)} at the start: "
-                         f"its centre {_vec(state.pos[i])} m lies {(delta - r) * 1e3:.3g} mm "
+            raise BlowUp(f"blow-up at t = 0 s: ball {i} is behind {_wall_name(w, system)} at "
+                         f"the start: its centre {_vec(state.pos[i])} m lies {(delta - r) * 1e3:.3g} mm "
                          "beyond the wall; the starting positions put it there; not a "
                          "time-step problem")
-        raise BlowUp(f"blow-up at t = 0 s: ball {i} overlaps {_wall_name(w)} by "
+        raise BlowUp(f"blow-up at t = 0 s: ball {i} overlaps {_wall_name(w, system)} by "
                      f"{delta / d:.1%} of d at the start (bound {bound / d:.0%}): the starting "
                      "positions put it into the wall; not a time-step problem")
     lost = [int(x) for x in diag[:, K.D_LOST] if x >= 0]
@@ -174,7 +178,7 @@ def blowup_message(system, state, diag: np.ndarray) -> str:
                 f"their relative speed {v:.3g} m/s ({dt_words}: enough)")
     if diag[cw, K.D_WALL_OVERLAP] > system.max_overlap:
         i, w = int(diag[cw, K.D_WALL_I]), int(diag[cw, K.D_WALL_W])
-        where = (f"blow-up at t = {t:.6g} s: ball {i} overlaps {_wall_name(w)} by "
+        where = (f"blow-up at t = {t:.6g} s: ball {i} overlaps {_wall_name(w, system)} by "
                  f"{diag[cw, K.D_WALL_OVERLAP] / d:.1%} of d (bound "
                  f"{system.max_overlap / d:.0%})")
         if dt_is_cause:

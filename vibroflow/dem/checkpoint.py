@@ -69,7 +69,8 @@ def resume_checkpoint(scenario, out_dir: Path, system: DEMSystem, clock: RunCloc
                               parts_done=int(attrs["parts_done"]),
                               part_hashes=json.loads(attrs["parts_sha256"]),
                               meta_hash=str(attrs["meta_sha256"]),
-                              rows_done=json.loads(attrs.get("rows_done", "null")))
+                              rows_done=json.loads(attrs.get("rows_done", "null")),
+                              parts=bool(scenario.parts))
     except DamagedFile as exc:
         raise refuse(exc.path, f"is damaged ({exc.reason}), a part {ckpt.name} counts on") \
             from None

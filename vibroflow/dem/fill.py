@@ -27,7 +27,9 @@ import numpy as np
 from .. import __version__
 from ..errors import InputError
 from ..progress import RunProgress
+from ..scenario.part_shapes import signed_distance
 from ..tub.geometry import distance_to_wall_np
+from ..tub.parts import parts_of
 from .interrupts import fault_sigint_settling
 from .output import DamagedFile, load_state_file, save_state_file
 from .simulate import DEMState, DEMSystem, init_state, run_steps
@@ -62,21 +64,48 @@ def lattice_fill(scenario, rng: np.random.Generator) -> np.ndarray:
     need = math.ceil(fill.count / ny)
     z = fill.insert_above + margin
     rows = []
-    while sum(len(rw) for rw in rows) < need:
-        dist = distance_to_wall_np(xs, np.full_like(xs, z), tub.radius)
-        ok = xs[(dist >= margin) & (np.abs(xs) <= tub.radius - margin)]
-        rows.append([(x, z) for x in ok])
-        z += s
-        if z > tub.rim_height + 10.0:
-            raise ValueError("fill.count too large to insert")
-    sites_xz = np.array([p for rw in rows for p in rw])
-    sites = np.array([(x, y, z) for (x, z) in sites_xz for y in ys])
+    sites = np.zeros((0, 3))
+    while sites.shape[0] < fill.count:
+        if not scenario.parts:
+            while sum(len(rw) for rw in rows) < need:
+                z = _add_row(rows, xs, z, s, margin, tub)
+        else:
+            z = _add_row(rows, xs, z, s, margin, tub)
+        sites_xz = np.array([p for rw in rows for p in rw]).reshape(-1, 2)
+        sites = np.array([(x, y, z) for (x, z) in sites_xz for y in ys]).reshape(-1, 3)
+        # sites within reach of a part (with the jitter) are not used: the bed settles around it
+        # (the jitter moves a ball up to sqrt(3) jitter)
+        sites = sites[clear_of_parts(scenario, sites, r + math.sqrt(3.0) * jitter + 1e-9)]
     order = np.lexsort((sites[:, 1], sites[:, 0], sites[:, 2]))
     sites = sites[order][: fill.count]
     sites += rng.uniform(-jitter, jitter, size=sites.shape)
     # kept in lattice order (by height, then x, then y): neighbours in space are neighbours in
     # memory, which keeps the force loops cache-friendly
     return sites
+
+
+def _add_row(rows: list, xs: np.ndarray, z: float, s: float, margin: float, tub) -> float:
+    """Append the lattice row at height z (the sites at least `margin` from the U wall);
+    returns the next row's height."""
+    dist = distance_to_wall_np(xs, np.full_like(xs, z), tub.radius)
+    ok = xs[(dist >= margin) & (np.abs(xs) <= tub.radius - margin)]
+    rows.append([(x, z) for x in ok])
+    if z + s > tub.rim_height + 10.0:
+        raise ValueError("fill.count too large to insert")
+    return z + s
+
+
+def clear_of_parts(scenario, sites: np.ndarray, margin: float) -> np.ndarray:
+    """Whether each site (m, tub frame) lies at least `margin` (m) outside every part (the
+    minimum image along y in a periodic tub)."""
+    ok = np.ones(sites.shape[0], bool)
+    length = scenario.tub.length
+    shifts = (-length, 0.0, length) if scenario.tub.periodic else (0.0,)
+    for spec, part in zip(scenario.parts or [], parts_of(scenario)):
+        for dy in shifts:
+            q = sites + np.array([0.0, dy, 0.0])
+            ok &= signed_distance(spec, q, part.triangles) >= margin
+    return ok
 
 
 def fill_cache_key(scenario) -> str:
@@ -93,6 +122,8 @@ def fill_cache_key(scenario) -> str:
         # format 2: entries carry a checksum (output.save_state_file)
         "version": __version__, "format": 2,
     }
+    if scenario.parts:  # the bed settles around them (a scenario without parts keeps its key)
+        payload["parts"] = [p.model_dump(mode="json") for p in scenario.parts]
     text = json.dumps(payload, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 

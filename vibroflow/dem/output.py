@@ -18,6 +18,8 @@ importer and read by vibroflow.analysis):
                periodic).  For the coarse-grained contact stress (vibroflow.calibration).
     /impacts/time, kind, position_tub, normal_speed (M, ...)
     /series/time, kinetic_energy, max_overlap_ball, max_overlap_wall (K,)
+    /part_impacts/..., /part_loads/... (only with parts in the bed, PART_UNITS): every
+               ball-part impact of the window, the load on each part at the snapshots
 
 Checkpoints hold the whole DEMState plus the number of complete result parts; on resume the
 parts after those are dropped, so a resumed run writes exactly what an uninterrupted one would.
@@ -59,6 +61,16 @@ _SCHEMA = {
                "max_overlap_ball": ((), "f8"), "max_overlap_wall": ((), "f8")},
 }
 
+# what a run with parts adds (vibroflow.dem.parts): every ball-part impact, and the load on each
+# part at the snapshots
+_PART_SCHEMA = {
+    "part_impacts": {"time": ((), "f8"), "part": ((), "i2"), "patch": ((), "i2"),
+                     "position_part": ((3,), "f4"), "normal_speed": ((), "f4"),
+                     "tangential_speed": ((), "f4"), "energy": ((), "f8"), "ball": ((), "i4")},
+    "part_loads": {"snapshot": ((), "i4"), "part": ((), "i2"), "force": ((3,), "f8"),
+                   "torque": ((3,), "f8")},
+}
+
 #: every dataset's "units" (SI; "1" for a count, an index or a flag) and "long_name" attributes
 UNITS = {
     "particles/radius": ("m", "ball radius"),
@@ -91,6 +103,22 @@ UNITS = {
     "series/kinetic_energy": ("J", "kinetic energy of the balls, spin included, lab frame"),
     "series/max_overlap_ball": ("m", "largest ball-ball overlap since the previous row"),
     "series/max_overlap_wall": ("m", "largest ball-wall overlap since the previous row"),
+}
+
+#: the same for a run with parts in the bed
+PART_UNITS = {
+    "part_impacts/time": ("s", "time of the ball-part contact's first step"),
+    "part_impacts/part": ("1", "part index, in the scenario's order"),
+    "part_impacts/patch": ("1", "surface patch of the part (vibroflow.tub.parts.patch_layout)"),
+    "part_impacts/position_part": ("m", "contact point from the part's centre, part frame"),
+    "part_impacts/normal_speed": ("m/s", "normal approach speed relative to the part"),
+    "part_impacts/tangential_speed": ("m/s", "tangential slip speed relative to the part"),
+    "part_impacts/energy": ("J", "impact energy 0.5 m v_n^2"),
+    "part_impacts/ball": ("1", "ball index"),
+    "part_loads/snapshot": ("1", "snapshot index"),
+    "part_loads/part": ("1", "part index, in the scenario's order"),
+    "part_loads/force": ("N", "force of the balls on the part, part frame axes"),
+    "part_loads/torque": ("N m", "torque of the balls about the part's centre, part frame axes"),
 }
 
 # groups of millions of rows: lzf keeps the file small at little cost
@@ -162,13 +190,16 @@ class ResultWriter:
 
     def __init__(self, out_dir: Path, n_particles: int, attrs: dict, radius: np.ndarray,
                  parts_done: int | None = None, part_hashes: list[str] | None = None,
-                 meta_hash: str | None = None, rows_done: dict[str, int] | None = None):
+                 meta_hash: str | None = None, rows_done: dict[str, int] | None = None,
+                 parts: bool = False):
         """A fresh writer (parts_done None: DIR/dem.parts made anew with meta.h5), or one that
         goes on after `parts_done` complete parts (resume).  On resume, `part_hashes` (the
         sha256 of each complete part) and `meta_hash` (of meta.h5), as the checkpoint recorded
         them, are verified: DamagedFile when a part is missing or changed; `rows_done` (the
         rows of each dataset in those parts, `rows_done` of the checkpoint's writer) is taken
-        as recorded, the checksums vouching for the parts."""
+        as recorded, the checksums vouching for the parts.  `parts`: the run has parts in the
+        bed (the part_impacts and part_loads groups)."""
+        self.schema = {**_SCHEMA, **(_PART_SCHEMA if parts else {})}
         self.out_dir = Path(out_dir)
         self.final = self.out_dir / "dem.h5"
         self.partial = self.out_dir / "dem.h5.partial"
@@ -217,9 +248,8 @@ class ResultWriter:
             if file_sha256(path) != expected:
                 raise DamagedFile(path, "checksum mismatch")
 
-    @staticmethod
-    def _keys():
-        keys = [f"{g}/{name}" for g, fields in _SCHEMA.items() for name in fields]
+    def _keys(self):
+        keys = [f"{g}/{name}" for g, fields in self.schema.items() for name in fields]
         return keys + [f"snapshots/{name}" for name in _PARTICLE_FIELDS]
 
     def _part(self, k: int) -> Path:
@@ -227,7 +257,7 @@ class ResultWriter:
 
     def _open_part(self) -> h5py.File:
         f = h5py.File(self._part(self.index), "w")
-        for group, fields in _SCHEMA.items():
+        for group, fields in self.schema.items():
             for name, (shape, dtype) in fields.items():
                 f.create_dataset(f"{group}/{name}", shape=(0, *shape), maxshape=(None, *shape),
                                  dtype=dtype, chunks=(16384, *shape),
@@ -284,7 +314,8 @@ class ResultWriter:
                                        chunks=chunks if total else None,
                                        compression="lzf" if key.split("/")[0] in _COMPRESSED
                                        and total else None)
-            for key, (units, long_name) in UNITS.items():
+            units_of = {**UNITS, **(PART_UNITS if "part_impacts" in self.schema else {})}
+            for key, (units, long_name) in units_of.items():
                 out[key].attrs["units"] = units
                 out[key].attrs["long_name"] = long_name
             offsets = {key: 0 for key in totals}
@@ -340,13 +371,21 @@ def _state_nodes(state: DEMState, attrs: dict) -> dict[str, tuple[np.ndarray | N
                                          "builds": nl.builds})}
     for name in _STATE_ARRAYS:
         nodes[f"state/{name}"] = (getattr(state, name), {})
+    if state.part_key is not None and state.part_key.shape[1] > 0:
+        # only a run with parts has them: the files of one without are as they were
+        for name in _PART_ARRAYS:
+            nodes[f"state/{name}"] = (getattr(state, name), {})
     for name in ("start", "nbr", "hist", "flag"):
         nodes[f"state/neighbours/{name}"] = (getattr(nl, name), {})
     return nodes
 
 
+_PART_ARRAYS = ("part_hist", "part_key", "part_load")
+
+
 def read_state(group: h5py.Group) -> DEMState:
     arrays = {name: group[name][()] for name in _STATE_ARRAYS}
+    arrays.update({name: group[name][()] for name in _PART_ARRAYS if name in group})
     g = group["neighbours"]
     nl = NeighbourList(float(g.attrs["skin"]), float(g.attrs["periodic_length"]))
     nl.start, nl.nbr, nl.hist, nl.flag = (g["start"][()], g["nbr"][()], g["hist"][()],

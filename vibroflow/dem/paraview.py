@@ -8,6 +8,8 @@ default, the lab's on request):
     tub.vtu               the tub's surface (tub frame), or in the lab frame
     tub_<ball file>.vtu   the surface moved by the tub's motion at each frame's instant, and
     tub.pvd               their collection
+    part_<name>.vtu       each part's surface (tub frame at rest) with its impact map from
+                          DIR/parts.nc (vibroflow.io.part_vtk)
     vtk.json              the options they were written with (io.vtk_frame.VtkOptions)
 
 Each ball file holds the velocity relative to the tub and the lab velocity (m/s), the angular
@@ -22,7 +24,10 @@ import numpy as np
 
 from ..io.vtk_frame import VtkOptions, extra_frame_steps, pose_at, write_vtk_record
 from ..tub.geometry import geometry_of
+from ..io.parts_file import read_parts as read_parts_nc
 from ..tub.motion import TubMotion
+from ..tub.parts import parts_of
+from .part_output import PARTS_NC
 
 VTK_DIR = "vtk"
 
@@ -106,4 +111,18 @@ def write_vtk(h5path: Path, out_dir: Path, scenario, options: VtkOptions,
         V.write_pvd(vdir / "tub.pvd", sorted(surfaces))
     elif geometry is not None:
         V.write_tub_surface(vdir / "tub.vtu", geometry)
+    _write_parts(out_dir, vdir, scenario)
     write_vtk_record(vdir, options)
+
+
+def _write_parts(out_dir: Path, vdir: Path, scenario) -> None:
+    """DIR/vtk/part_<name>.vtu of each part with its impact map (when DIR/parts.nc is there)."""
+    nc = out_dir / PARTS_NC
+    if not scenario.parts or not nc.is_file() or scenario.tub is None:
+        return
+    from ..io.part_vtk import MAP_FIELDS, write_part_surface
+
+    ds = read_parts_nc(nc)
+    for k, part in enumerate(parts_of(scenario)):
+        maps = {var: ds[var][k].values for var in MAP_FIELDS.values()}
+        write_part_surface(vdir / f"part_{part.name}.vtu", part, scenario.tub.length, maps)

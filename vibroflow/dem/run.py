@@ -54,7 +54,8 @@ from .fingerprint import scenario_fingerprint, scenario_record, scenario_toml
 from .interrupts import fault_sigint_after_steps
 from .output import ResultWriter, fault_kill_at
 from .paraview import VTK_DIR, EarlyFrames, write_vtk
-from .sampling import impact_rows, sample_steps, write_snapshot
+from .part_output import write_parts_nc
+from .sampling import impact_rows, part_impact_rows, sample_steps, write_snapshot
 from .simulate import (BlowUp, DEMState, DEMSystem, init_state, make_system, run_steps,
                        take_max_overlaps)
 from .summary import run_summary
@@ -62,7 +63,8 @@ from .summary import run_summary
 SMALL_RUN = 1500  # below this many balls one thread is faster than two (thread wake-ups)
 
 # what a fresh run removes before it writes: the previous run's results and checkpoint
-_PREVIOUS = (CHECKPOINT_NAME, SUMMARY_NAME, "bulk_velocity.csv", "dem.h5", "dem.h5.partial")
+_PREVIOUS = (CHECKPOINT_NAME, SUMMARY_NAME, "bulk_velocity.csv", "dem.h5", "dem.h5.partial",
+             "parts.nc")
 
 
 def run_dem(scenario, out_dir: Path, vtk: VtkOptions | bool | None = None,
@@ -146,7 +148,7 @@ def _run(scenario, out_dir: Path, system: DEMSystem, vtk: VtkOptions | None, res
                  "scenario_toml": scenario_toml(scenario), "source": "vibroflow",
                  "fingerprint": fingerprint,
                  "scenario_json": json.dumps(record, sort_keys=True, default=str)}
-        writer = ResultWriter(out_dir, state.n, attrs, state.radius)
+        writer = ResultWriter(out_dir, state.n, attrs, state.radius, parts=bool(scenario.parts))
     try:
         summary = _vibrate(scenario, out_dir, system, state, writer, prog, settle_info,
                            clock, explicit, vtk, fingerprint, record)
@@ -223,6 +225,9 @@ def _vibrate(scenario, out_dir, system, state, writer, prog, settle_info, clock:
     def on_impacts(imp):
         writer.append("impacts", **impact_rows(system, imp))
 
+    def on_part_impacts(imp):
+        writer.append("part_impacts", **part_impact_rows(imp))
+
     def checkpoint():
         write_checkpoint(ckpt, state, writer, system, settle_info, clock.solver_s(), fingerprint,
                          record)
@@ -230,8 +235,9 @@ def _vibrate(scenario, out_dir, system, state, writer, prog, settle_info, clock:
     sigint_after = fault_sigint_after_steps()
     with deferred_sigint() as sigint:
         _vibration_loop(state, system, writer, prog, run, samples, done_snapshots, total,
-                        window_start, explicit, f, stage_steps0, n, last_ckpt, on_impacts,
-                        checkpoint, sigint, sigint_after, out_dir, early)
+                        window_start, explicit, f, stage_steps0, n, last_ckpt,
+                        (on_impacts, on_part_impacts), checkpoint, sigint, sigint_after, out_dir,
+                        early)
     if sigint["raised"] and ckpt.exists():
         # a SIGINT while the last rows were written: the final state's checkpoint is on disk
         raise Interrupted(f"interrupted at t = {state.time(dt):.4f} s; checkpoint written; "
@@ -245,6 +251,8 @@ def _vibrate(scenario, out_dir, system, state, writer, prog, settle_info, clock:
     fault_kill_at("assembled")
     summary = run_summary(scenario, system, state, path, out_dir, wall, settle_info, explicit)
     summary["compile_time_s"] = clock.compile_s()
+    if scenario.parts and not explicit:
+        summary["parts"] = write_parts_nc(path, out_dir, scenario, system)
     if vtk:
         write_vtk(path, out_dir, scenario, vtk, early)
     write_json_atomic(out_dir / SUMMARY_NAME, summary)
@@ -259,7 +267,8 @@ def _vibration_loop(state, system, writer, prog, run, samples, done_snapshots, t
                     window_start, explicit, f, stage_steps0, n, last_ckpt, on_impacts,
                     checkpoint, sigint, sigint_after, out_dir, early: EarlyFrames) -> None:
     """Step to the end, writing the rows of each sample and series step (and the ParaView
-    frame of each of early.steps, outside dem.h5) before stepping on;
+    frame of each of early.steps, outside dem.h5) before stepping on, and the impacts the
+    callbacks on_impacts = (balls', parts') receive;
     a checkpoint every run.checkpoint_every wall seconds and one of the final state (before
     its rows, as every checkpoint), and one at a SIGINT, which then raises Interrupted."""
     dt = system.dt
@@ -291,7 +300,8 @@ def _vibration_loop(state, system, writer, prog, run, samples, done_snapshots, t
         if not explicit and vstep < window_start:
             nxt = min(nxt, window_start)
         run_steps(system, state, nxt - vstep, record_impacts=record,
-                  on_impacts=on_impacts if record else None)
+                  on_impacts=on_impacts[0] if record else None,
+                  on_part_impacts=on_impacts[1] if record else None)
         now = state.step - state.time_origin_step
         prog.update(state.time(dt), (now - stage_steps0) * n)
         if sigint_after is not None and now >= sigint_after:

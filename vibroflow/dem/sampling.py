@@ -9,9 +9,10 @@ import math
 import numpy as np
 
 from ..tub.motion import pose_np
+from . import parts as P
 from .output import ResultWriter
 from .query import ball_contacts_now
-from .simulate import DEMState, DEMSystem, wall_contacts_now
+from .simulate import DEMState, DEMSystem, part_loads_now, wall_contacts_now
 
 
 def sample_steps(scenario, dt: float) -> tuple[np.ndarray, float, float]:
@@ -45,6 +46,16 @@ def impact_rows(system: DEMSystem, imp: np.ndarray) -> dict:
             "normal_speed": imp[:, 5].astype(np.float32)}
 
 
+def part_impact_rows(imp: np.ndarray) -> dict:
+    """Ball-part impacts (vibroflow.dem.parts' IMP_* columns) -> /part_impacts columns."""
+    return {"time": imp[:, P.IMP_TIME], "part": imp[:, P.IMP_PART].astype(np.int16),
+            "patch": imp[:, P.IMP_PATCH].astype(np.int16),
+            "position_part": imp[:, P.IMP_X:P.IMP_Z + 1].astype(np.float32),
+            "normal_speed": imp[:, P.IMP_VN].astype(np.float32),
+            "tangential_speed": imp[:, P.IMP_VT].astype(np.float32),
+            "energy": imp[:, P.IMP_ENERGY], "ball": imp[:, P.IMP_BALL].astype(np.int32)}
+
+
 def write_snapshot(writer: ResultWriter, system: DEMSystem, state: DEMState, index: int,
                    frequency: float) -> None:
     """The rows of snapshot `index` of the state now: balls, wall contacts, ball contacts."""
@@ -64,6 +75,11 @@ def write_snapshot(writer: ResultWriter, system: DEMSystem, state: DEMState, ind
                       position_tub=wc["position_tub"], arc=wc["arc"], fn=wc["fn"],
                       ft=wc["ft"], sliding=wc["sliding"],
                       force_lab=wc["force"].astype(np.float32))
+    if system.n_parts:
+        load = part_loads_now(system, state)
+        writer.append("part_loads", snapshot=np.full(system.n_parts, index, np.int32),
+                      part=np.arange(system.n_parts, dtype=np.int16), force=load[:, :3],
+                      torque=load[:, 3:])
     bc = ball_contacts_now(system, state)
     b = bc["i"].shape[0]
     if b:

@@ -19,11 +19,13 @@ import numpy as np
 
 from ..scenario.checks import contact_times
 from ..tub.motion import TubMotion, lab_to_tub_np, pose_np
+from ..tub.parts import Part, PackedParts, pack, parts_of
 from . import step as K
 from .blowup import (BlowUp, blowup_message, check_finite_start, check_overlaps_at_start,
                      coincident_message, coincident_pair)
 from .laws import material_index, pair_table
 from .neighbours import NeighbourList
+from .parts import EMPTY, IMP_BALL, N_LOAD, SLOTS, parts_record
 from .records import Params, Work, balls_of, pairs_of, slots_of, walls_of
 from .walls import N_PLANE, WALL_PLANE0, wall_kind
 
@@ -45,11 +47,19 @@ class DEMSystem:
     max_overlap: float             # blow-up bound (m)
     material_names: list[str]
     notes: dict = field(default_factory=dict)
+    parts: tuple[Part, ...] = ()   # the scenario's parts (vibroflow.tub.parts)
+    part_mat: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    packed: PackedParts = field(init=False, repr=False, compare=False)
     params: Params = field(init=False, repr=False, compare=False)  # the kernels' constants
 
     def __post_init__(self):
         self.params = Params(float(self.dt), self.gravity, self.table, self.tub, self.wall_mat,
                              self.planes, 0.5 * self.skin, float(self.max_overlap))
+        self.packed = pack(self.parts)
+
+    @property
+    def n_parts(self) -> int:
+        return len(self.parts)
 
     @property
     def n_walls(self) -> int:
@@ -85,6 +95,9 @@ class DEMState:
     wall_point: np.ndarray         # (N, W, 3) contact point (tub frame for tub walls)
     wall_force: np.ndarray         # (N, W, 3) force on the ball (N, lab axes), last step
     wall_arc: np.ndarray           # (N,) arc coordinate of the nearest U point (m)
+    part_hist: np.ndarray | None = None  # (N, P, SLOTS, 6) ball-part contact histories
+    part_key: np.ndarray | None = None   # (N, P, SLOTS) int64 their features (parts.EMPTY)
+    part_load: np.ndarray | None = None  # (step.NBLOCK, P, 6) force, torque on the parts, per block
     vibrating: bool = False
     scratch: object = field(default=None, repr=False, compare=False)  # not part of the state
 
@@ -137,7 +150,8 @@ def make_system(scenario) -> DEMSystem:
         dt=scenario.run.dt, gravity=np.array(scenario.gravity, dtype=float), table=table,
         tub=tub, wall_mat=np.array(wall_mats, dtype=np.int64), planes=planes, motion=motion,
         skin=scenario.run.skin * diam, max_overlap=scenario.run.max_overlap * diam,
-        material_names=list(index), notes=notes,
+        material_names=list(index), notes=notes, parts=parts_of(scenario),
+        part_mat=np.array([index[p.material] for p in scenario.parts or []], dtype=np.int64),
     )
 
 
@@ -161,6 +175,7 @@ def init_state(system: DEMSystem, pos, vel, omg, radius, density, mat) -> DEMSta
         wall_force=np.zeros((n, w, 3)),
         wall_arc=np.zeros(n),
     )
+    ensure_part_arrays(system, state)
     check_finite_start(state)
     rebuild(system, state)
     pair = coincident_pair(system, state)
@@ -169,6 +184,17 @@ def init_state(system: DEMSystem, pos, vel, omg, radius, density, mat) -> DEMSta
     _forces_now(system, state)
     check_overlaps_at_start(system, state, _buf(system, state).work.diag)
     return state
+
+
+def ensure_part_arrays(system: DEMSystem, state: DEMState) -> None:
+    """Give the state its ball-part contact arrays (free slots, zero loads) where it has none
+    of the system's shape."""
+    p, n = system.n_parts, state.n
+    if state.part_key is None or state.part_key.shape != (n, p, SLOTS):
+        state.part_hist = np.zeros((n, p, SLOTS, 6))
+        state.part_key = np.full((n, p, SLOTS), EMPTY, np.int64)
+    if state.part_load is None or state.part_load.shape != (K.NBLOCK, p, N_LOAD):
+        state.part_load = np.zeros((K.NBLOCK, p, N_LOAD))
 
 
 class _Buffers:
@@ -183,6 +209,9 @@ class _Buffers:
                          pose=np.zeros(8), moved=np.zeros(nblock))
         self.balls = balls_of(state)
         self.walls = walls_of(state)
+        ensure_part_arrays(system, state)
+        self.parts = parts_record(system.packed, system.part_mat, state.part_hist,
+                                  state.part_key, state.part_load)
         self.reset_diag()
 
     def reset_diag(self):
@@ -219,8 +248,9 @@ def _forces_now(system: DEMSystem, state: DEMState) -> None:
     b = _buf(system, state)
     b.work.pose[:] = _tub_pose(system, state)
     K.compute_forces(state.time(system.dt), False, False, b.balls, pairs_of(state.nl, K.NBLOCK),
-                     slots_of(state.nl), b.walls, system.params, b.work)
+                     slots_of(state.nl), b.walls, system.params, b.work, b.parts)
     b.work.imp_count[:] = 0
+    b.parts.imp_count[:] = 0
 
 
 def take_impacts(system: DEMSystem, state: DEMState) -> np.ndarray:
@@ -231,6 +261,26 @@ def take_impacts(system: DEMSystem, state: DEMState) -> np.ndarray:
     parts = [buf[c, :min(count[c], IMPACT_CAPACITY)] for c in range(K.NBLOCK)]
     count[:] = 0
     return np.concatenate(parts) if parts else np.zeros((0, 6))
+
+
+def take_part_impacts(system: DEMSystem, state: DEMState) -> np.ndarray:
+    """Ball-part impacts recorded since the last call: (M, N_IMP) rows of vibroflow.dem.parts'
+    IMP_* columns, chunk by chunk (a fixed order)."""
+    rec = _buf(system, state).parts
+    count = rec.imp_count
+    rows = [rec.imp[c, :min(count[c], rec.imp.shape[1])] for c in range(K.NBLOCK)]
+    count[:] = 0
+    return np.concatenate(rows) if rows else np.zeros((0, IMP_BALL + 1))
+
+
+def part_loads_now(system: DEMSystem, state: DEMState) -> np.ndarray:
+    """(P, 6) force (N) and torque about each part's centre (N m) of the balls on each part at
+    the last step, part axes (tub axes for a tub-fixed part): the chunks' sums added in chunk
+    order."""
+    out = np.zeros((system.n_parts, N_LOAD))
+    for c in range(K.NBLOCK):
+        out += state.part_load[c]
+    return out
 
 
 def take_max_overlaps(system: DEMSystem, state: DEMState) -> tuple[float, float]:
@@ -255,8 +305,11 @@ def set_overlap_maxima(system: DEMSystem, state: DEMState, diag: np.ndarray) -> 
 
 
 def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: bool = False,
-              on_impacts: Callable[[np.ndarray], None] | None = None) -> None:
-    """Advance the state by `nsteps` steps in place (rebuilding the list as needed)."""
+              on_impacts: Callable[[np.ndarray], None] | None = None,
+              on_part_impacts: Callable[[np.ndarray], None] | None = None) -> None:
+    """Advance the state by `nsteps` steps in place (rebuilding the list as needed); the
+    recorded impacts go to on_impacts (take_impacts' rows) and on_part_impacts
+    (take_part_impacts')."""
     b = _buf(system, state)
     motion = system.motion_array(state.vibrating)
     b.work.pose[6], b.work.pose[7] = system.motion.pivot_x, system.motion.pivot_z
@@ -265,7 +318,7 @@ def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: b
         try:
             done, status = K.advance(state.step, left, state.time_origin_step, motion,
                                      record_impacts, b.balls, pairs_of(state.nl, K.NBLOCK),
-                                     slots_of(state.nl), b.walls, system.params, b.work)
+                                     slots_of(state.nl), b.walls, system.params, b.work, b.parts)
         except ZeroDivisionError:
             # 1/d of two coincident balls (numba raises it, as Python does); the step count is
             # unknown here, so the time is that of the call's start
@@ -285,6 +338,10 @@ def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: b
                 on_impacts(imp)
         elif status == K.IMPACTS_FULL:
             take_impacts(system, state)
+        if system.n_parts and (status == K.IMPACTS_FULL or left == 0):
+            rows = take_part_impacts(system, state)
+            if on_part_impacts is not None and rows.shape[0]:
+                on_part_impacts(rows)
 
 
 def wall_contacts_now(system: DEMSystem, state: DEMState) -> dict[str, np.ndarray]:

@@ -35,6 +35,7 @@ import numpy as np
 from ..tub.motion import pose as tub_pose
 from .contact import (branch_vector, contact_force, forget, pair_contact_velocity, put3,
                       unit_normal)
+from .parts import ball_parts, clear_loads
 from .walls import (KIND_BALL_BALL, KIND_BALL_PARTITION, KIND_BALL_PLANE, KIND_BALL_TUB,
                     TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT, WALL_PLANE0, WALL_U, plane_wall,
                     u_wall)
@@ -181,7 +182,7 @@ def _gather_block(c, balls, pairs, slots):
 
 
 @nb.njit(cache=True)
-def ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work):
+def ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work, prt):
     """The wall-contact pass of the balls of block c: each ball's contacts with the tub's U
     wall, its partitions and the plane walls, at time t (s) with the tub's pose in work.pose,
     their forces and torques added to the ball's force and torque, one contact after the
@@ -198,6 +199,10 @@ def ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work)
     partitions = has_tub and tub[TUB_PERIODIC] == 0.0
     length = tub[TUB_LENGTH]
     n_walls = WALL_PLANE0 + planes.shape[0]
+    n_parts = prt.shape.shape[0]
+    if n_parts > 0:
+        clear_loads(prt, c)
+    periodic_length = length if has_tub and tub[TUB_PERIODIC] > 0.0 else 0.0
     cth = np.cos(pose[2])
     sth = np.sin(pose[2])
     for i in range(pairs.bounds[c], pairs.bounds[c + 1]):
@@ -307,6 +312,20 @@ def ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work)
                 diag[c, D_WALL_OVERLAP] = delta
                 diag[c, D_WALL_I] = i
                 diag[c, D_WALL_W] = w
+        if n_parts > 0:
+            pfx, pfy, pfz, ptx, pty, ptz, pdelta, pk = ball_parts(
+                i, c, t, dt_hist, record_impacts, pos[i, 0], pos[i, 1], pos[i, 2], r, mass[i],
+                vel, omg, mat[i], table, pose, cth, sth, periodic_length, prt)
+            fx += pfx
+            fy += pfy
+            fz += pfz
+            tx += ptx
+            ty += pty
+            tz += ptz
+            if pdelta > diag[c, D_WALL_OVERLAP]:
+                diag[c, D_WALL_OVERLAP] = pdelta
+                diag[c, D_WALL_I] = i
+                diag[c, D_WALL_W] = n_walls + pk  # a part: after the wall slots
         put3(force, i, fx, fy, fz)
         put3(torque, i, tx, ty, tz)
 
@@ -352,11 +371,11 @@ def _pair_pass(t, dt_hist, periodic_length, record_impacts, balls, pairs, slots,
 
 
 @nb.njit(cache=True, parallel=True)
-def _ball_pass(t, dt_hist, kick, record_impacts, balls, pairs, slots, walls, params, work):
+def _ball_pass(t, dt_hist, kick, record_impacts, balls, pairs, slots, walls, params, work, prt):
     """Steps 2 to 4 for every block, in parallel."""
     for c in nb.prange(work.diag.shape[0]):
         _gather_block(c, balls, pairs, slots)
-        ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work)
+        ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work, prt)
         if kick:
             _kick_block(c, balls, pairs, params, work)
         else:
@@ -364,7 +383,7 @@ def _ball_pass(t, dt_hist, kick, record_impacts, balls, pairs, slots, walls, par
 
 
 @nb.njit(cache=True)
-def compute_forces(t, kick, record_impacts, balls, pairs, slots, walls, params, work):
+def compute_forces(t, kick, record_impacts, balls, pairs, slots, walls, params, work, prt):
     """Forces and torques at the current positions (gravity, pairs, walls) at time t (s), with
     the tub's pose in work.pose; with `kick`, also the step's second half kick.  Two parallel
     loops over the blocks, each in its own function (numba fuses two parallel loops of one
@@ -379,12 +398,12 @@ def compute_forces(t, kick, record_impacts, balls, pairs, slots, walls, params, 
                                           tub[TUB_PERIODIC] > 0.0) else 0.0
     dt_hist = params.dt if kick else 0.0  # the set-up evaluation does not advance histories
     _pair_pass(t, dt_hist, periodic_length, record_impacts, balls, pairs, slots, params, work)
-    _ball_pass(t, dt_hist, kick, record_impacts, balls, pairs, slots, walls, params, work)
+    _ball_pass(t, dt_hist, kick, record_impacts, balls, pairs, slots, walls, params, work, prt)
 
 
 @nb.njit(cache=True, parallel=True)
 def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pairs, slots, walls,
-            params, work):
+            params, work, prt):
     """Run up to `nsteps` velocity-Verlet steps from step `step0`.
 
     Time is t = (step - time_origin_step) dt, so that the vibration's phase comes from an
@@ -413,7 +432,7 @@ def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pair
         step = step0 + k + 1
         t = (step - time_origin_step) * dt
         _pose_array(motion, pose[6], pose[7], t, pose)
-        compute_forces(t, True, record_impacts, balls, pairs, slots, walls, params, work)
+        compute_forces(t, True, record_impacts, balls, pairs, slots, walls, params, work, prt)
         blown = False
         rebuild = False
         full = False
@@ -424,7 +443,7 @@ def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pair
                 blown = True
             if moved[c] > hs2:
                 rebuild = True
-            if imp_count[c] > cap // 2:
+            if imp_count[c] > cap // 2 or prt.imp_count[c] > prt.imp.shape[1] // 2:
                 full = True
         if blown:
             return k + 1, BLOWUP

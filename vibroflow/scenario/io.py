@@ -26,7 +26,7 @@ from pydantic import BaseModel, ValidationError
 from vibroflow.errors import InputError
 from vibroflow.scenario.model import Scenario
 
-PRESETS: tuple[str, ...] = ("tub47", "tub47-quick")
+PRESETS: tuple[str, ...] = ("tub47", "tub47-quick", "tub47-bar")
 
 __all__ = [
     "PRESETS", "load_scenario", "parse_scenario", "apply_overrides", "dump_scenario",
