@@ -25,7 +25,7 @@ from vibroflow.continuum.grid_update import LabFrame, TubFrame
 from vibroflow.continuum.mpm.solver import MPMSystem, init_state, run_steps
 from vibroflow.continuum.part_obstacle import (continuum_parts, packed_section,
                                                section_area_below)
-from vibroflow.continuum.part_outputs import part_dataset, surface_nodes
+from vibroflow.continuum.part_outputs import part_dataset, patch_weights
 from vibroflow.continuum.sampling import Samples
 from vibroflow.continuum.timestep import stable_dt
 from vibroflow.errors import InputError
@@ -191,9 +191,9 @@ def _phase_field(x, z, shear_rate, solid_fraction, n_batches=2):
 def test_inferred_speed_by_patch_is_the_relation_on_the_surface_nodes():
     """On a hand-made field around a bar (nodes 5 mm apart, the shear rate 10 1/s on the
     nodes right of the bar's axis and 30 1/s left of it), the speed inferred on the sector
-    0-10 deg is c0 + c1 d 10 and on 180-190 deg c0 + c1 d 30, with the error |c1| d se of the
-    batches' rates (0.9 and 1.1 times: se = 0.1 gamma); the node at (x0 + r + h/2, z0) is in
-    sector 0, the one at (x0, z0 + r + h/2) in sector 9 (90-100 deg)."""
+    0-10 deg is c0 + c1 d 10 and on 180-190 deg c0 + c1 d 30 (their nodes within two spacings
+    lie on one side), with the error |c1| d se of the batches' rates (0.9 and 1.1 times:
+    se = 0.1 gamma); the node at (x0 + r + h/2, z0) weighs in sector 0, not in 180-190."""
     bar = Part(name="bar", shape="cylinder", center=(0.0, 0.01, 0.05), material="steel",
                radius=0.0125)
     h = 0.005
@@ -203,10 +203,9 @@ def test_inferred_speed_by_patch_is_the_relation_on_the_surface_nodes():
     rate = np.where(X > 0, 10.0, 30.0)
     phi = np.full(rate.shape, 0.5)
     phase = _phase_field(x, z, rate, phi)
-    patches = surface_nodes(bar, pack((bar,)), 0, 0.01, phase)
+    w = patch_weights(bar, pack((bar,)), 0, 0.01, phase, 36)
     k0, i_right = 10, int(np.argmin(np.abs(x - 0.015)))
-    assert patches[k0, i_right] == 0
-    assert patches[int(np.argmin(np.abs(z - 0.065))), 8] == 9
+    assert w[0, k0, i_right] > 0 and w[18, k0, i_right] == 0
     c0, c1, d = 0.1, 0.5, 0.00635
     calib = SimpleNamespace(impacts=SimpleNamespace(ball_wall=ImpactRelation(
         c0_cells_m_s=c0, c1_cells=c1)))
@@ -225,6 +224,38 @@ def test_inferred_speed_by_patch_is_the_relation_on_the_surface_nodes():
     assert se[18] == pytest.approx(c1 * d * 3.0)
     assert np.isnan(v[36:]).all() and v.size == MAX_PATCHES
     assert "ball_wall" in ds.attrs["inferred_from"]
+
+
+def test_a_uniform_bed_gives_every_covered_patch_the_same_speed_and_none_above_it():
+    """A uniform shear rate (20 1/s, solid fraction 0.5) around a bar of radius 12.5 mm on
+    nodes 5 mm apart: buried, all 36 sectors get c0 + c1 d 20; with the bed's surface at the
+    bar's axis (no material above z0), the sectors near the bar's top (80-100 deg, 12.5 mm
+    above the nearest material node, beyond the two-spacing reach) are NaN and those at the
+    axis's height (0-10 deg, 170-180 deg) keep the uniform value."""
+    bar = Part(name="bar", shape="cylinder", center=(0.0, 0.01, 0.05), material="steel",
+               radius=0.0125)
+    h = 0.005
+    x = np.arange(-8, 9) * h
+    z = np.arange(0, 21) * h
+    X, Z = np.meshgrid(x, z)
+    c0, c1, d = 0.1, 0.5, 0.00635
+    calib = SimpleNamespace(impacts=SimpleNamespace(ball_wall=ImpactRelation(
+        c0_cells_m_s=c0, c1_cells=c1)))
+    scen = Scenario(tub={"radius": 0.05, "rim_height": 0.1, "length": 0.02},
+                    fill={"count": 200},
+                    parts=[{"name": "bar", "shape": "cylinder", "center": [0.0, 0.01, 0.05],
+                            "radius": 0.0125}])
+    expected = c0 + c1 * d * 20.0
+    for phi in (np.full(X.shape, 0.5), np.where(Z <= 0.05 + 1e-9, 0.5, 0.0)):
+        phase = _phase_field(x, z, np.where(phi > 0, 20.0, np.nan), phi)
+        ds = part_dataset("lagrangian", scen, (bar,), pack((bar,)), calib, d, phase,
+                          Samples(0, 1, 0), np.zeros(0), np.zeros(0, np.int64), 1.0, None)
+        v = ds["normal_speed_mean"].sel(part="bar").values[:36]
+        if phi.min() > 0:
+            assert v == pytest.approx(np.full(36, expected))
+        else:
+            assert np.isnan(v[8:10]).all()
+            assert v[[0, 17, 18, 35]] == pytest.approx(np.full(4, expected))
 
 
 def test_parts_nc_force_by_phase_is_the_mean_of_its_samples(tmp_path):

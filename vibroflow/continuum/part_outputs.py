@@ -5,15 +5,17 @@ speed at a surface from its shear rate through the calibrated relation the run u
 tub's wall (calibration.toml [impacts.ball_wall]: v = c0 + c1 d gamma_dot, shear_outputs.
 impact_relation), or from its granular temperature where the calibration prefers it
 (v = max(b0 + b1 sqrt(T), 0), temperature_impacts.temperature_relation) and the run carries
-T.  At a part, the field is that of the analysis cells' centres (the nodes of the phase-resolved
-field, measure.phase_shear) within a node spacing of the part's surface (signed distance from
--h/2 to h, as the U's near-wall nodes, measure.phase_shear.near_wall_nodes), each node given to
-the patch of its nearest surface point (tub.parts.patch_of on the part's section at the slice's
-middle): per patch the solid-fraction weighted mean shear rate with its batch-means error,
-put through the relation (error |c1| d se); from T, the nodes' speeds' weighted mean with the
-bed-mean T's error carried through, as temperature_impacts does.  A patch with no such node
-holding material (the cylinder's sectors finer than the nodes, the slice's ends of a box) is
-NaN.  Impact rates, the speed distribution and the energy flux are NaN: the continuum infers no
+T.  At a part, each patch takes the field of the analysis cells' centres (the nodes of the
+phase-resolved field, measure.phase_shear) near its surface: the patch's trace in the slice's
+middle plane (the nearest surface points of a fine grid of points just outside the part, each
+given its patch by tub.parts.patch_of) weights each node by its solid fraction times the tent
+max(0, 1 - r / (2 h)) of its distance r to the trace, averaged over the trace's points (nodes
+deeper in the part than h/2 left out).  Per patch: the weighted mean shear rate, its batch-means
+error from each batch's field weighted alike, put through the relation (error |c1| d se); from
+T, the nodes' speeds' weighted mean with the bed-mean T's error carried through, as
+temperature_impacts does.  Every patch with material within two node spacings gets a value; a
+patch with none (above the free surface, a box's faces at the slice's ends, which the plane
+does not cut) is NaN.  Impact rates, the speed distribution and the energy flux are NaN: the continuum infers no
 impact count.
 
 Force by phase: the wall law's force on each part at each sample (sampling.Samples.part_force:
@@ -38,58 +40,112 @@ from .shear_outputs import impact_relation
 from .temperature_impacts import RELATION, temperature_relation
 from .temperature_outputs import temperature_map
 
+#: a patch's value takes the nodes within REACH node spacings of its surface (module docstring)
+REACH = 2.0
+#: grid points across a part when tracing its surface in the plane (surface_trace)
+TRACE_STEPS = 100
 
-def surface_nodes(part: Part, packed, k: int, y: float, phase: PhaseShear) -> np.ndarray:
-    """(nz, nx) patch index of each node of `phase` within a node spacing of part k's surface
-    (gap in (-h/2, h), module docstring); -1 elsewhere.  packed: tub.parts.pack of the run's
-    parts."""
-    out = np.full((phase.z.size, phase.x.size), -1, np.int64)
-    shape = packed.shape[k]
-    for a, z in enumerate(phase.z):
-        for b, x in enumerate(phase.x):
-            gap, nx, ny, nz, _, _, _, feat = part_nearest(
+
+def surface_trace(part: Part, packed, k: int, y: float) -> tuple[np.ndarray, np.ndarray]:
+    """The part's surface in the plane at y (m): points (m, 2) (x, z) m, the nearest surface
+    points of a fine grid's points (TRACE_STEPS across the part) lying just outside it, and
+    the patch of each (m,)."""
+    if part.shape == "stl":
+        tri = packed.tri[packed.tri_start[k]:packed.tri_start[k + 1]]
+        ext = float(np.max(np.abs(tri[..., [0, 2]] - np.array(part.center)[[0, 2]])))
+    elif part.shape == "box":
+        ext = float(np.hypot(part.half_size[0], part.half_size[2]))
+    else:
+        ext = part.radius
+    step = 2.0 * ext / TRACE_STEPS
+    cx, cz = part.center[0], part.center[2]
+    pts, patch = [], []
+    for x in cx + np.arange(-TRACE_STEPS // 2 - 2, TRACE_STEPS // 2 + 3) * step:
+        for z in cz + np.arange(-TRACE_STEPS // 2 - 2, TRACE_STEPS // 2 + 3) * step:
+            gap, nx, ny, nz, sx, _, sz, feat = part_nearest(
                 packed.shape, packed.prm, packed.tri, packed.tri_normal, packed.tri_start, k,
                 float(x), y, float(z))
-            if -0.5 * phase.h < gap < phase.h:
-                if gap < 0.0:  # the normal points inwards there; the patch is the outward one's
-                    nx, ny, nz = -nx, -ny, -nz
-                out[a, b] = patch_of(shape, packed.tri_group, nx, ny, nz, feat)
-    return out
+            if 0.0 <= gap < step:
+                pts.append((sx, sz))
+                patch.append(patch_of(packed.shape[k], packed.tri_group, nx, ny, nz, feat))
+    return np.array(pts, float).reshape(-1, 2), np.array(patch, np.int64)
 
 
-def inferred_speeds(patches: np.ndarray, n_patches: int, phase: PhaseShear, diameter: float,
-                    calibration, samples: Samples, batch_se_T: tuple[float, float] | None
+def patch_weights(part: Part, packed, k: int, y: float, phase: PhaseShear,
+                  n_patches: int) -> np.ndarray:
+    """(n_patches, nz, nx) weight of each node of `phase` in each patch's value (module
+    docstring): the tent max(0, 1 - r / (REACH h)) of the node's distance r to the patch's
+    trace in the plane at y, averaged over the trace's points; zero for nodes deeper in the
+    part than h/2 and for patches the plane does not cut."""
+    X, Z = np.meshgrid(phase.x, phase.z)
+    outside = np.zeros(X.shape, bool)
+    for a in range(X.shape[0]):
+        for b in range(X.shape[1]):
+            gap = part_nearest(packed.shape, packed.prm, packed.tri, packed.tri_normal,
+                               packed.tri_start, k, float(X[a, b]), y, float(Z[a, b]))[0]
+            outside[a, b] = gap > -0.5 * phase.h
+    pts, patch = surface_trace(part, packed, k, y)
+    w = np.zeros((n_patches,) + X.shape)
+    nodes = np.stack([X.ravel(), Z.ravel()], axis=1)
+    for j in range(n_patches):
+        s = pts[patch == j]
+        if s.size == 0:
+            continue
+        r = np.linalg.norm(nodes[:, None, :] - s[None, :, :], axis=2)
+        tent = np.maximum(1.0 - r / (REACH * phase.h), 0.0).mean(axis=1)
+        w[j] = tent.reshape(X.shape) * outside
+    return w
+
+
+def _weighted(field: np.ndarray, solid: np.ndarray, w: np.ndarray) -> float:
+    """Sum of w solid field over sum of w solid on the finite nodes with material (NaN with
+    none)."""
+    m = np.isfinite(field) & (np.nan_to_num(solid) > 0) & (w > 0)
+    return float(np.sum(w[m] * solid[m] * field[m]) / np.sum(w[m] * solid[m])) if m.any() \
+        else float("nan")
+
+
+def inferred_speeds(weights: np.ndarray, phase: PhaseShear, diameter: float, calibration,
+                    samples: Samples, batch_se_T: tuple[float, float] | None
                     ) -> tuple[np.ndarray, np.ndarray, str]:
-    """(mean, stderr) (n_patches,) m/s of the normal impact speed by patch (module docstring)
-    and what it was inferred from ("" with no relation)."""
+    """(mean, stderr) (n_patches,) m/s of the normal impact speed by patch from the nodes'
+    weights (patch_weights; module docstring) and what it was inferred from ("" with no
+    relation)."""
+    n_patches = weights.shape[0]
     mean, se = np.full(n_patches, np.nan), np.full(n_patches, np.nan)
     im = calibration.impacts if calibration is not None else None
     rel = getattr(im, "ball_wall", None) if im is not None else None
     T = temperature_map(samples)
     trel = temperature_relation(rel)
+    phi = np.asarray(phase.solid_fraction, float)
+    where = (f"at each patch's trace in the slice's middle plane, the nodes within {REACH:g} "
+             "node spacings weighted by solid fraction and a tent in distance")
     if trel is not None and T is not None and batch_se_T is not None:
         b0, b1 = trel
-        phi = np.nan_to_num(np.asarray(phase.solid_fraction, float))
         T_bed, T_se = batch_se_T
+        v = np.where(T > 0, np.maximum(b0 + b1 * np.sqrt(np.where(T > 0, T, 0.0)), 0.0),
+                     np.nan)
         for j in range(n_patches):
-            m = (patches == j) & (phi > 0) & (T > 0)
-            if m.any():
-                v = np.maximum(b0 + b1 * np.sqrt(T[m]), 0.0)
-                mean[j] = float(np.sum(phi[m] * v) / np.sum(phi[m]))
+            mean[j] = _weighted(v, phi, weights[j])
+            if np.isfinite(mean[j]):
                 se[j] = abs(b1) * T_se / (2.0 * math.sqrt(T_bed)) if T_bed > 0 else np.nan
         return mean, se, (RELATION + " (calibration.toml [impacts.ball_wall], preferred_relation"
-                          " = \"temperature\"), T the time-averaged map at the analysis cells' "
-                          "centres within a node spacing of the part")
+                          " = \"temperature\"), T the time-averaged map " + where)
     c0, c1, which = impact_relation(rel)
     if c0 is None:
         return mean, se, ""
     for j in range(n_patches):
-        g, g_se = phase.weighted_mean(patches == j)
+        g = _weighted(phase.shear_rate, phi, weights[j])
+        if not np.isfinite(g):
+            continue
+        per = [_weighted(gb, fb, weights[j])
+               for gb, fb in zip(phase.batch_shear_rate, phase.batch_solid_fraction)]
+        per = [p for p in per if np.isfinite(p)]
+        g_se = float(np.std(per, ddof=1) / math.sqrt(len(per))) if len(per) >= 2 else np.nan
         mean[j] = c0 + c1 * diameter * g
         se[j] = abs(c1) * diameter * g_se
     return mean, se, (f"v = c0 + c1 d gamma_dot (calibration.toml [impacts.ball_wall] {which}), "
-                      "gamma_dot of the phase-resolved field at the analysis cells' centres "
-                      "within a node spacing of the part")
+                      "gamma_dot the phase-resolved field's cycle mean " + where)
 
 
 def part_dataset(method: str, scenario, parts: tuple[Part, ...], packed, calibration,
@@ -108,8 +164,8 @@ def part_dataset(method: str, scenario, parts: tuple[Part, ...], packed, calibra
         if phase is None:
             speeds.append((np.full(n, np.nan), np.full(n, np.nan)))
             continue
-        patches = surface_nodes(p, packed, k, 0.5 * L, phase)
-        v, se, text = inferred_speeds(patches, n, phase, diameter, calibration, samples, bed_T)
+        w = patch_weights(p, packed, k, 0.5 * L, phase, n)
+        v, se, text = inferred_speeds(w, phase, diameter, calibration, samples, bed_T)
         speeds.append((v, se))
         if text:
             how.add(text)
