@@ -113,6 +113,25 @@ def test_ball_on_cylinder_off_centre_leaves_along_the_mirrored_normal():
     assert rel(v @ n, E * vn) < 0.02
 
 
+def test_a_ball_pressing_on_a_cylinder_off_its_centre_line_gives_the_hand_torque():
+    """A ball at rest overlapping the bar by delta = 10 um at 30 deg around its axis and
+    y0 = 5 mm along it, frictionless: the part feels F = -k_n delta n at the surface point
+    y0 e_y + R n, so its torque about its centre is y0 e_y x F = y0 k_n delta (-n_z, 0, n_x)
+    (the radial part R n x F vanishes); one step of 2 us moves the ball by nanometres, and its
+    damping force (c v ~ 2 mN against 1 N) is inside the 1 % allowed."""
+    a, y0, delta, k_n = math.radians(30.0), 0.005, 1.0e-5, 1.0e5
+    n = np.array([math.cos(a), 0.0, math.sin(a)])
+    start = (BAR_R + R_STEEL - delta) * n + np.array([0.0, y0, 0.0])
+    sim = _sim(_bar(), [ball(start)])
+    sim.run(1)
+    load = S.part_loads_now(sim.system, sim.state)[0]
+    force = -k_n * delta * n
+    torque = y0 * k_n * delta * np.array([-n[2], 0.0, n[0]])
+    assert np.allclose(load[:3], force, rtol=0.0, atol=0.01 * k_n * delta)
+    assert np.allclose(load[3:], torque, rtol=0.0, atol=0.01 * y0 * k_n * delta)
+    assert abs(load[4]) < 1e-12
+
+
 @pytest.mark.parametrize("where", ["face", "edge", "corner"])
 def test_ball_on_box_rebounds_along_the_feature_normal(where):
     h = 0.01
@@ -236,6 +255,7 @@ def test_tub_run_with_a_bar_writes_parts_nc(tmp_path, monkeypatch):
     assert float(np.nanmax(ds["normal_speed_p95"][0])) <= float(vn[in_window].max())
     assert ds.attrs["method"] == "dem" and ds.attrs["batches"] == sc.run.batches
     assert np.isfinite(ds["force"][0]).all() and np.isfinite(ds["force_stderr"][0]).all()
+    assert np.isfinite(ds["torque"][0]).all() and ds["torque"].attrs["units"] == "N m"
     assert summary["parts"][0]["name"] == "bar"
     assert summary["parts"][0]["impacts_per_s"] == pytest.approx(in_window.sum() / window)
     with h5py.File(out / "dem.h5", "r") as f:

@@ -289,6 +289,7 @@ def test_parts_nc_force_by_phase_is_the_mean_of_its_samples(tmp_path):
     assert back.attrs["method"] == "eulerian" and back.attrs["batches"] == 2
     assert np.isnan(back["impact_rate_per_area"]).all()
     assert back["force"].attrs["units"] == "N"
+    assert np.isnan(back["torque"]).all() and back["torque"].attrs["units"] == "N m"
 
 
 @pytest.mark.parametrize("part, says", [

@@ -21,7 +21,7 @@ impact count.
 Force by phase: the wall law's force on each part at each sample (sampling.Samples.part_force:
 the reaction of the contact forces on the material, N over the slice, tub axes), averaged over
 the window's samples in each phase bin of the cycle (measure.stats.phase_bins) with its
-batch-means error over whole cycles.
+batch-means error over whole cycles.  Torque is NaN: the samples keep the force alone.
 """
 from __future__ import annotations
 
@@ -172,7 +172,8 @@ def part_dataset(method: str, scenario, parts: tuple[Part, ...], packed, calibra
     inferred = ("normal_speed_mean and its stderr by patch: " + "; ".join(sorted(how))
                 if how else "normal_speed_mean: NaN, the run has no calibrated impact relation")
     inferred += ("; force: the wall law's contact forces on the part (their reaction on the "
-                 "material summed), by phase bin over the window's samples; impact rates, "
+                 "material summed), by phase bin over the window's samples; torque: NaN, "
+                 "the samples keep no moment; impact rates, "
                  "speed median and p95, energy flux: NaN, a continuum sees no impacts")
     ds = empty_parts_dataset([p.name for p in parts], [lay[0] for lay in layouts],
                              [lay[1] for lay in layouts], run.phases_per_cycle, method,

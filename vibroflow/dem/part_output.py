@@ -7,7 +7,7 @@ whole cycles (vibroflow.measure.stats): per part and patch, the impact rate per 
 batch time)), each with its batch-means standard error, and the median and 95th percentile of
 the normal speed over the window's impacts; per part, the force of the balls on it at the
 snapshots, by phase of the cycle (the snapshots sit at the phases k / phases_per_cycle), with
-the standard error of its batch means.
+the standard error of its batch means, and likewise its torque about the part's centre.
 """
 from __future__ import annotations
 
@@ -50,7 +50,7 @@ def part_dataset(h5path: Path, scenario, parts):
     window = n_cycles / f
     ds = _empty_dataset(parts, scenario.tub.length, run.phases_per_cycle, "dem", window, nb,
                        "every ball-part contact of the DEM (impacts: its first step) and the "
-                       "contact forces at the snapshots")
+                       "contact forces and their torques at the snapshots")
     with h5py.File(h5path, "r") as h5:
         imp = {k: h5["part_impacts"][k][()] for k in h5["part_impacts"]}
         load = {k: h5["part_loads"][k][()] for k in h5["part_loads"]}
@@ -82,13 +82,14 @@ def part_dataset(h5path: Path, scenario, parts):
         t = snap_time[load["snapshot"][rows]]
         sb = batches_of_whole_cycles(t, t0, t1, f, nb)
         ph = phase_bins(t, f, run.phases_per_cycle)
-        force = load["force"][rows]
-        for q in range(run.phases_per_cycle):
-            at = ph == q
-            if np.any(at & (sb >= 0)):
-                mean, se = batch_means(force[at], sb[at], nb)
-                ds["force"][k, q] = mean
-                ds["force_stderr"][k, q] = se
+        for var in ("force", "torque"):
+            value = load[var][rows]
+            for q in range(run.phases_per_cycle):
+                at = ph == q
+                if np.any(at & (sb >= 0)):
+                    mean, se = batch_means(value[at], sb[at], nb)
+                    ds[var][k, q] = mean
+                    ds[var + "_stderr"][k, q] = se
     return ds
 
 

@@ -7,7 +7,8 @@ unused entries NaN), `phase` (run.phases_per_cycle bins of the cycle), `componen
 "z").  Variables (VARIABLES: dims, units, long_name; every one carries its units and
 long_name): the patches' names and areas, the impact rate per area, the normal impact speed's
 mean, median and 95th percentile, the energy flux, each mean with its batch-means standard
-error (`_stderr`), and the force on the part by phase of the cycle.  Dataset attrs: `method`
+error (`_stderr`), and the force on the part and its torque about the part's centre by
+phase of the cycle.  Dataset attrs: `method`
 ("dem", "lagrangian", "eulerian"), `window_s` (the averaging window, s), `batches`, and
 `inferred_from` (what the values come from; a method that infers only some variables leaves
 the others NaN and says so here).
@@ -49,6 +50,11 @@ VARIABLES = {
                                                     "part)"),
     "force_stderr": (("part", "phase", "component"), "N", "batch-means standard error of "
                                                            "force"),
+    "torque": (("part", "phase", "component"), "N m", "torque of the media on the part about "
+                                                      "its centre by phase of the cycle (tub "
+                                                      "axes for a tub-fixed part)"),
+    "torque_stderr": (("part", "phase", "component"), "N m", "batch-means standard error of "
+                                                             "torque"),
 }
 
 
