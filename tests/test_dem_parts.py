@@ -223,6 +223,35 @@ BAR_SET = ["fill.count=400", "tub.length=0.01905", "parts.0.center=[0.0, 0.0, 0.
            "fill.max_settle_time=0.05", "run.series_every=200"]
 
 
+def test_explicit_run_counts_the_balls_dropped_on_each_face_of_a_box(tmp_path):
+    """Explicit mode (no tub, no gravity), a lab-fixed 20 mm box: three balls sent at its +z
+    face, two at +x, one at -x, one past it; each hits once and leaves, so parts.nc's impact
+    count per face (rate x area x window) is 1, 2, 0, 0, 0, 3 (faces -x, +x, -y, +y, -z, +z)
+    and dem.h5 keeps no ball-ball or wall impacts (an explicit run records its parts' alone)."""
+    top = 0.01 + R_STEEL + 0.001
+    balls = [ball((-0.005, -0.005, top), vel=(0.0, 0.0, -0.5)),
+             ball((0.005, 0.005, top), vel=(0.0, 0.0, -0.5)),
+             ball((0.005, -0.005, top), vel=(0.0, 0.0, -0.5)),
+             ball((top, 0.0, -0.005), vel=(-0.5, 0.0, 0.0)),
+             ball((top, 0.0, 0.005), vel=(-0.5, 0.0, 0.0)),
+             ball((-top, 0.0, 0.0), vel=(0.5, 0.0, 0.0)),
+             ball((0.03, 0.03, 0.0), vel=(-0.5, 0.0, 0.0))]
+    sc = scenario(balls, [contact()], dt=DT, duration=0.01)
+    sc = sc.model_copy(update={"parts": [_box()]})
+    summary = run_dem(sc, tmp_path / "run", progress=False)
+    ds = read_parts_nc(tmp_path / "run" / "parts.nc")
+    window = ds.attrs["window_s"]
+    assert window == pytest.approx(0.01)
+    counts = (ds["impact_rate_per_area"][0] * ds["patch_area_m2"][0]).values[:6] * window
+    assert counts == pytest.approx([1, 2, 0, 0, 0, 3], abs=1e-9)
+    assert summary["parts"][0]["impacts_per_s"] == pytest.approx(6 / window)
+    vn = ds["normal_speed_mean"][0].values
+    assert vn[[0, 1, 5]] == pytest.approx([0.5, 0.5, 0.5], rel=1e-6)
+    with h5py.File(tmp_path / "run" / "dem.h5", "r") as f:
+        assert f["part_impacts/time"].shape[0] == 6
+        assert "impacts" not in f or f["impacts/time"].shape[0] == 0
+
+
 def test_the_fill_keeps_clear_of_the_parts():
     sc = load_scenario("tub47-bar", BAR_SET)
     pos = lattice_fill(sc, np.random.default_rng(sc.run.seed))

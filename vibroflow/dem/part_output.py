@@ -23,6 +23,8 @@ from ..measure.stats import (batch_means, batches_of_whole_cycles, cycles_in_win
 from ..tub.parts import patch_layout
 
 PARTS_NC = "parts.nc"
+#: m of an explicit run's cylinder (unbounded along y) over which its patches' areas are taken
+EXPLICIT_LENGTH_M = 1.0
 
 
 def _empty_dataset(parts, slice_length_m: float, n_phases: int, method: str, window_s: float,
@@ -39,26 +41,58 @@ def _batch_seconds(n_cycles: int, n_batches: int, frequency: float) -> np.ndarra
     return cycles / frequency
 
 
+def _even_batches(times, t_start: float, t_end: float, n_batches: int) -> np.ndarray:
+    """Batch index of each time in n_batches equal spans of [t_start, t_end) (-1 outside)."""
+    t = np.asarray(times, dtype=float)
+    b = np.floor((t - t_start) / (t_end - t_start) * n_batches).astype(np.int64)
+    return np.where((t >= t_start) & (t < t_end) & (b < n_batches), b, -1)
+
+
 def part_dataset(h5path: Path, scenario, parts):
     """The parts.nc Dataset of a finished DEM run's dem.h5 (parts: vibroflow.tub.parts.Part
-    records in the scenario's order)."""
-    run, f = scenario.run, scenario.motion.frequency
-    t1 = run.duration
-    t0 = t1 - run.average_last
+    records in the scenario's order).  A tub run's window and phases are its cycles' (module
+    docstring); an explicit run's window is the whole run [0, duration) in run.batches equal
+    spans, with one phase bin, and an (unbounded) cylinder's patches are over EXPLICIT_LENGTH_M
+    of its axis."""
+    run = scenario.run
     nb = run.batches
-    n_cycles = cycles_in_window(t0, t1, f)
-    window = n_cycles / f
-    ds = _empty_dataset(parts, scenario.tub.length, run.phases_per_cycle, "dem", window, nb,
+    if scenario.explicit:
+        t0, t1, n_phases, length = 0.0, run.duration, 1, EXPLICIT_LENGTH_M
+        window = t1 - t0
+        tb = np.full(nb, window / nb)
+
+        def batch_of(t):
+            return _even_batches(t, t0, t1, nb)
+
+        def phase_of(t):
+            return np.zeros(np.shape(t), np.int64)
+    else:
+        f = scenario.motion.frequency
+        t1 = run.duration
+        t0 = t1 - run.average_last
+        n_cycles = cycles_in_window(t0, t1, f)
+        window = n_cycles / f
+        n_phases, length = run.phases_per_cycle, scenario.tub.length
+        tb = _batch_seconds(n_cycles, nb, f)
+
+        def batch_of(t):
+            return batches_of_whole_cycles(t, t0, t1, f, nb)
+
+        def phase_of(t):
+            return phase_bins(t, f, n_phases)
+    ds = _empty_dataset(parts, length, n_phases, "dem", window, nb,
                        "every ball-part contact of the DEM (impacts: its first step) and the "
-                       "contact forces and their torques at the snapshots")
+                       "contact forces and their torques at the snapshots"
+                       + ("; an explicit run: the whole run in one phase bin, a cylinder's "
+                          f"patches over {EXPLICIT_LENGTH_M:g} m of its axis"
+                          if scenario.explicit else ""))
     with h5py.File(h5path, "r") as h5:
         imp = {k: h5["part_impacts"][k][()] for k in h5["part_impacts"]}
         load = {k: h5["part_loads"][k][()] for k in h5["part_loads"]}
         snap_time = h5["snapshots/time"][()]
-    tb = _batch_seconds(n_cycles, nb, f)
-    batch = batches_of_whole_cycles(imp["time"], t0, t1, f, nb)
+    batch = batch_of(imp["time"])
     for k, part in enumerate(parts):
-        _, area = patch_layout(part, scenario.tub.length)
+        _, area = patch_layout(part, length)
         for p in range(area.size):
             sel = (imp["part"] == k) & (imp["patch"] == p) & (batch >= 0)
             vn = imp["normal_speed"][sel].astype(float)
@@ -80,11 +114,11 @@ def part_dataset(h5path: Path, scenario, parts):
                 ds["normal_speed_p95"][k, p] = np.percentile(vn, 95.0)
         rows = load["part"] == k
         t = snap_time[load["snapshot"][rows]]
-        sb = batches_of_whole_cycles(t, t0, t1, f, nb)
-        ph = phase_bins(t, f, run.phases_per_cycle)
+        sb = batch_of(t)
+        ph = phase_of(t)
         for var in ("force", "torque"):
             value = load[var][rows]
-            for q in range(run.phases_per_cycle):
+            for q in range(n_phases):
                 at = ph == q
                 if np.any(at & (sb >= 0)):
                     mean, se = batch_means(value[at], sb[at], nb)
@@ -119,7 +153,7 @@ def summary_lines(ds, parts) -> list[dict]:
 
 
 def write_parts_nc(h5path: Path, out_dir: Path, scenario, system) -> list[dict]:
-    """Write DIR/parts.nc of a finished tub run and return the summary's entries per part
+    """Write DIR/parts.nc of a finished run (tub or explicit) and return the summary's entries per part
     (NaN as None: valid JSON)."""
     ds = part_dataset(h5path, scenario, system.parts)
     write_file(Path(out_dir) / PARTS_NC, ds)

@@ -251,7 +251,7 @@ def _vibrate(scenario, out_dir, system, state, writer, prog, settle_info, clock:
     fault_kill_at("assembled")
     summary = run_summary(scenario, system, state, path, out_dir, wall, settle_info, explicit)
     summary["compile_time_s"] = clock.compile_s()
-    if scenario.parts and not explicit:
+    if scenario.parts:
         summary["parts"] = write_parts_nc(path, out_dir, scenario, system)
     if vtk:
         write_vtk(path, out_dir, scenario, vtk, early)
@@ -296,11 +296,13 @@ def _vibration_loop(state, system, writer, prog, run, samples, done_snapshots, t
             nxt = min(nxt, int(samples[done_snapshots]))
         if k < frames.size:
             nxt = min(nxt, int(frames[k]))
-        record = run.record_impacts and not explicit and vstep >= window_start
+        # an explicit run records its ball-part impacts alone, over the whole run
+        record = run.record_impacts and (system.n_parts > 0 if explicit
+                                         else vstep >= window_start)
         if not explicit and vstep < window_start:
             nxt = min(nxt, window_start)
         run_steps(system, state, nxt - vstep, record_impacts=record,
-                  on_impacts=on_impacts[0] if record else None,
+                  on_impacts=on_impacts[0] if record and not explicit else None,
                   on_part_impacts=on_impacts[1] if record else None)
         now = state.step - state.time_origin_step
         prog.update(state.time(dt), (now - stage_steps0) * n)
