@@ -8,8 +8,11 @@ default, the lab's on request):
     tub.vtu               the tub's surface (tub frame), or in the lab frame
     tub_<ball file>.vtu   the surface moved by the tub's motion at each frame's instant, and
     tub.pvd               their collection
-    part_<name>.vtu       each part's surface (tub frame at rest) with its impact map from
-                          DIR/parts.nc (vibroflow.io.part_vtk)
+    part_<name>.vtu       each part's surface with its impact map from DIR/parts.nc
+                          (vibroflow.io.part_vtk), at rest where the frame is the part's own
+                          (a tub-fixed part in the tub frame, a lab-fixed one in the lab's)
+    part_<name>_<ball file>.vtu  otherwise the surface carried by the tub's motion to each
+    part_<name>.pvd       frame's instant, and their collection
     vtk.json              the options they were written with (io.vtk_frame.VtkOptions)
 
 Each ball file holds the velocity relative to the tub and the lab velocity (m/s), the angular
@@ -83,13 +86,15 @@ def write_vtk(h5path: Path, out_dir: Path, scenario, options: VtkOptions,
     pivot = _pivot(scenario)
     geometry = geometry_of(scenario) if scenario.tub is not None else None
     lab = options.frame == "lab"
-    entries, surfaces = [], []
+    entries, surfaces, poses_of = [], [], {}
+    motion = TubMotion.of_scenario(scenario)
     if early is not None:
         for k, step in enumerate(early.steps):
             name = early_name(k)
             if (vdir / name).is_file():
                 t = float(step) * early.dt
                 entries.append((t, name))
+                poses_of[name] = pose_at(motion, t)
                 if lab and geometry is not None:
                     surfaces.append((t, f"tub_{name}"))
     with h5py.File(h5path, "r") as f:
@@ -102,6 +107,7 @@ def write_vtk(h5path: Path, out_dir: Path, scenario, options: VtkOptions,
                                f["snapshots/velocity"][s], f["snapshots/angular_velocity"][s],
                                radius, poses[s], pivot, t)
             entries.append((t, name))
+            poses_of[name] = poses[s]
             if lab and geometry is not None:
                 V.write_tub_surface(vdir / f"tub_{name}", geometry, pose6=poses[s], pivot=pivot,
                                     time_s=t)
@@ -111,18 +117,29 @@ def write_vtk(h5path: Path, out_dir: Path, scenario, options: VtkOptions,
         V.write_pvd(vdir / "tub.pvd", sorted(surfaces))
     elif geometry is not None:
         V.write_tub_surface(vdir / "tub.vtu", geometry)
-    _write_parts(out_dir, vdir, scenario)
+    frames = [(t, name, poses_of[name]) for t, name in sorted(entries)]
+    _write_parts(out_dir, vdir, scenario, options.frame, frames, pivot)
     write_vtk_record(vdir, options)
 
 
-def _write_parts(out_dir: Path, vdir: Path, scenario) -> None:
-    """DIR/vtk/part_<name>.vtu of each part with its impact map (when DIR/parts.nc is there)."""
+def _write_parts(out_dir: Path, vdir: Path, scenario, frame: str, frames, pivot) -> None:
+    """Each part's surface with its impact map (when DIR/parts.nc is there): part_<name>.vtu
+    where `frame` is the part's own, else one file per frame (t s, ball file, pose) carried by
+    the tub's motion and part_<name>.pvd (module docstring)."""
     nc = out_dir / PARTS_NC
     if not scenario.parts or not nc.is_file() or scenario.tub is None:
         return
+    from ..io import vtk as V
     from ..io.part_vtk import MAP_FIELDS, write_part_surface
 
     ds = read_parts_nc(nc)
     for k, part in enumerate(parts_of(scenario)):
         maps = {var: ds[var][k].values for var in MAP_FIELDS.values()}
-        write_part_surface(vdir / f"part_{part.name}.vtu", part, scenario.tub.length, maps)
+        base = f"part_{part.name}"
+        if part.frame == frame:
+            write_part_surface(vdir / f"{base}.vtu", part, scenario.tub.length, maps)
+            continue
+        for t, name, pose6 in frames:
+            write_part_surface(vdir / f"{base}_{name}", part, scenario.tub.length, maps,
+                               pose6=pose6, pivot=pivot, time_s=t)
+        V.write_pvd(vdir / f"{base}.pvd", [(t, f"{base}_{name}") for t, name, _ in frames])

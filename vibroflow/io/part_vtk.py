@@ -1,6 +1,7 @@
 """ParaView files of the parts in the bed: DIR/vtk/part_<name>.vtu, each part's surface as
-triangles (m, tub frame at rest: where the scenario places it) with its impact map from parts.nc
-as cell data, one value per triangle from the patch it lies on:
+triangles (m, where the scenario places it, in the frame the part is fixed in; carried by the
+tub's motion into the other frame at a given pose) with its impact map from parts.nc as cell
+data, one value per triangle from the patch it lies on:
 
     patch                          the patch index (vibroflow.tub.parts.patch_layout)
     impact_rate_per_area_1_per_m2_s  impacts per unit area and time (1/(m^2 s))
@@ -19,8 +20,10 @@ import numpy as np
 from pyevtk.hl import unstructuredGridToVTK
 from pyevtk.vtk import VtkTriangle
 
+from ..tub.motion import lab_to_tub_np
 from ..tub.parts import CYLINDER_SECTORS, SPHERE_BANDS, Part, pack
-from .vtk import _c, atomic_vtk
+from .vtk import _c, _field_data, atomic_vtk, frame_field_data
+from .vtk_frame import tub_to_lab_points
 
 SUB = 4            # facets per cylinder sector
 MERIDIANS = 36     # of a sphere's triangulation
@@ -82,11 +85,23 @@ def part_surface(part: Part, slice_length_m: float) -> tuple[np.ndarray, np.ndar
     return packed.tri.copy(), packed.tri_group.copy()
 
 
-def write_part_surface(path: Path, part: Part, slice_length_m: float, maps: dict) -> str:
+def write_part_surface(path: Path, part: Part, slice_length_m: float, maps: dict,
+                       pose6=None, pivot=(0.0, 0.0), time_s: float | None = None) -> str:
     """Write a part's surface with its impact map: `maps` holds MAP_FIELDS' parts.nc variables
-    of this part, one value per patch (NaN where nothing is known)."""
+    of this part, one value per patch (NaN where nothing is known).  Where the scenario places
+    it unless pose6 (vibroflow.io.vtk_frame.pose_at) is given: then the surface is carried
+    from the frame it is fixed in to the other one by the tub's rigid motion at that pose
+    (pivot: the motion's pivot (x, z) m), a tub-fixed part into the lab and a lab-fixed one
+    into the tub frame, with field data time_s and the pose."""
     tri, patch = part_surface(part, slice_length_m)
     pts = tri.reshape(-1, 3)
+    fd = None
+    if pose6 is not None:
+        if part.frame == "tub":
+            pts = tub_to_lab_points(pts, pose6, pivot)
+        else:
+            pts = lab_to_tub_np(pts, float(pose6[0]), float(pose6[1]), float(pose6[2]), pivot)
+        fd = _field_data(frame_field_data(0.0 if time_s is None else time_s, pose6))
     conn = _c(np.arange(pts.shape[0]), np.int64)
     offsets = _c(np.arange(1, tri.shape[0] + 1) * 3, np.int64)
     types = np.full(tri.shape[0], VtkTriangle.tid, dtype=np.uint8)
@@ -96,4 +111,4 @@ def write_part_surface(path: Path, part: Part, slice_length_m: float, maps: dict
         cells[field] = _c(values[patch])
     return atomic_vtk(path, lambda base: unstructuredGridToVTK(
         base, _c(pts[:, 0]), _c(pts[:, 1]), _c(pts[:, 2]), connectivity=conn, offsets=offsets,
-        cell_types=types, cellData=cells))
+        cell_types=types, cellData=cells, fieldData=fd))
