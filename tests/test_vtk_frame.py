@@ -173,35 +173,37 @@ def test_vtk_flags_without_vtk_are_one_line_errors(run_cli, tmp_path):
     assert "--vtk-frame = 'sideways': must be tub or lab" in line
 
 
-@pytest.mark.parametrize("frame", ["tub", "lab"])
-def test_a_tub_fixed_part_moves_with_the_tub_in_the_lab_frame(tmp_path, frame):
-    """tub47-bar's bar (tub-fixed) over the HELD snapshots: in the tub frame one surface at
-    rest; in the lab frame one surface per snapshot, its points the tub-frame surface carried
-    by the hand-written motion (hand_lab) at that snapshot's time, its impact map the same
-    (parts.nc's, patch by patch), collected in part_bar.pvd in the snapshots' order."""
+@pytest.mark.parametrize("part_frame, frame", [("tub", "tub"), ("tub", "lab"), ("lab", "tub")])
+def test_a_part_moves_in_the_frame_it_is_not_fixed_in(tmp_path, part_frame, frame):
+    """tub47-bar's bar over the HELD snapshots: in its own frame one surface at rest; in the
+    other frame one surface per snapshot, collected in part_bar.pvd in the snapshots' order,
+    with parts.nc's map patch by patch: a tub-fixed bar in the lab frame is its surface at rest
+    carried by the hand-written motion (hand_lab) at the snapshot's time, and a lab-fixed bar
+    in the tub frame is the surface that motion carries back onto the one at rest."""
     from vibroflow.dem.paraview import write_vtk
     from vibroflow.io.parts_file import empty_parts_dataset, write_parts
     from vibroflow.scenario.io import load_scenario
     from vibroflow.tub.parts import parts_of, patch_layout
 
-    s = load_scenario("tub47-bar", [])
+    s = load_scenario("tub47-bar", [f"parts.0.frame={part_frame}"])
     m = s.motion
     bar = parts_of(s)[0]
+    assert bar.frame == part_frame
     names, areas = patch_layout(bar, s.tub.length)
-    for out in (tmp_path / frame, tmp_path / "ref"):
+    for out in (tmp_path / "out", tmp_path / "ref"):
         out.mkdir()
         _held_h5(out / "dem.h5", s, TIMES)
         ds = empty_parts_dataset([bar.name], [names], [areas], 8, "dem", 1.0, 4, "hand")
         ds["impact_rate_per_area"].values[0, :len(names)] = np.arange(len(names), dtype=float)
         write_parts(out / "parts.nc", ds)
-    write_vtk(tmp_path / frame / "dem.h5", tmp_path / frame, s, VtkOptions(frame=frame))
-    write_vtk(tmp_path / "ref" / "dem.h5", tmp_path / "ref", s, VtkOptions(frame="tub"))
+    write_vtk(tmp_path / "out" / "dem.h5", tmp_path / "out", s, VtkOptions(frame=frame))
+    write_vtk(tmp_path / "ref" / "dem.h5", tmp_path / "ref", s, VtkOptions(frame=part_frame))
     rest = read_vtk(tmp_path / "ref" / "vtk" / "part_bar.vtu")
     at_rest = rest["Points"]["points"]
     assert np.array_equal(rest["CellData"]["impact_rate_per_area_1_per_m2_s"],
                           rest["CellData"]["patch"].astype(float))
-    vdir = tmp_path / frame / "vtk"
-    if frame == "tub":
+    vdir = tmp_path / "out" / "vtk"
+    if frame == part_frame:
         assert (vdir / "part_bar.vtu").is_file() and not (vdir / "part_bar.pvd").exists()
         return
     assert not (vdir / "part_bar.vtu").exists()
@@ -210,8 +212,12 @@ def test_a_tub_fixed_part_moves_with_the_tub_in_the_lab_frame(tmp_path, frame):
     assert [f for _, f in entries] == [f"part_bar_{n}" for _, n in balls]
     for (t, name), tt in zip(entries, TIMES):
         d = read_vtk(vdir / name)
+        pts = d["Points"]["points"]
         assert d["FieldData"]["time_s"][0] == tt
-        assert np.abs(d["Points"]["points"] - hand_lab(m, tt, at_rest)[0]).max() < 1e-12
+        if part_frame == "tub":
+            assert np.abs(pts - hand_lab(m, tt, at_rest)[0]).max() < 1e-12
+        else:
+            assert np.abs(hand_lab(m, tt, pts)[0] - at_rest).max() < 1e-12
         assert np.array_equal(d["CellData"]["impact_rate_per_area_1_per_m2_s"],
                               rest["CellData"]["impact_rate_per_area_1_per_m2_s"])
     # the motion does move it: about half a millimetre at the second snapshot
