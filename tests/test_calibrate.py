@@ -33,6 +33,7 @@ SMALL = ["fill.count=400", "tub.radius=0.04", "tub.rim_height=0.12", "fill.settl
 # ----------------------------------------------------------------------------------------------
 # Impact speeds of a Maxwellian gas (models.md "Impact velocity from the continuum")
 
+@pytest.mark.slow
 def test_impact_speeds_of_an_elastic_gas_follow_kinetic_theory():
     """In a gas of elastic spheres with a Maxwellian velocity distribution of temperature T
     (per-component variance), the normal approach speed u of the collisions is distributed as

@@ -204,6 +204,7 @@ def test_foreign_or_corrupt_dir_is_a_one_line_error(tmp_path):
     assert not (tmp_path / "new").exists()
 
 
+@pytest.mark.slow
 def test_a_killed_run_resumes_where_it_stopped(study, tmp_path):
     """`vibroflow run` killed (SIGKILL) in the middle of its DEM stage, then run again: the DEM
     resumes from its checkpoint (stage record `resumed`), no stage of the killed run looks
