@@ -159,7 +159,7 @@ def test_a_dense_layer_takes_off_near_the_block_phase_and_the_floor_carries_its_
     twentieth of the weight; where the tail lingers at that level one seed's crossing comes a
     twentieth of a cycle later (seed 1: 0.231), so the check takes the median of three fill
     seeds.  Over whole cycles the floor's force carries the layer's weight (momentum balance:
-    the layer's momentum is bounded), within 3 standard errors, in each seed."""
+    the layer's momentum is bounded), within 3 standard errors of the seeds' pooled mean."""
     from vibroflow.calibration.vibrated_layer import LayerSetup, run_seed
     from vibroflow.measure.layer_profiles import TAKE_OFF_LEVEL
     from vibroflow.scenario.io import load_scenario
@@ -173,5 +173,7 @@ def test_a_dense_layer_takes_off_near_the_block_phase_and_the_floor_carries_its_
     for r in runs:
         f = np.array(r["floor_force_over_weight"])
         assert f[:8].min() > 0.2 and f.max() < 5.0  # carried from the landing to psi = 0.12
-        mean, se = r["floor_force_cycle_mean_over_weight"], r["floor_force_cycle_mean_stderr"]
-        assert abs(mean - 1.0) < 3 * se
+    # the three seeds' cycle means pooled: their mean and its standard error
+    mean = float(np.mean([r["floor_force_cycle_mean_over_weight"] for r in runs]))
+    se = float(np.sqrt(np.sum([r["floor_force_cycle_mean_stderr"] ** 2 for r in runs]))) / 3
+    assert abs(mean - 1.0) < 3 * se
