@@ -13,6 +13,7 @@ shifted by `center`.
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -24,12 +25,21 @@ class ShapeError(ValueError):
 
 def read_stl_triangles(path: str | Path) -> np.ndarray:
     """The triangles (n, 3, 3) of a binary or ASCII STL file, in the file's units.  The
-    surface must be closed (every edge shared by two triangles), so that it has an inside."""
-    import trimesh  # lazy: only STL parts need it
-
+    surface must be closed (every edge shared by two triangles), so that it has an inside.
+    A file is parsed once per content version (its modification time and size): the scenario's
+    checks, the fill and every solver read the same part."""
     p = Path(path)
     if not p.is_file():
         raise ShapeError("no such file")
+    st = p.stat()
+    return _parsed_stl(str(p.resolve()), st.st_mtime_ns, st.st_size).copy()
+
+
+@lru_cache(maxsize=32)
+def _parsed_stl(path: str, mtime_ns: int, size: int) -> np.ndarray:
+    import trimesh  # lazy: only STL parts need it
+
+    p = Path(path)
     try:
         mesh = trimesh.load(str(p), file_type="stl", force="mesh", process=True)
     except Exception as e:  # trimesh raises many types for a damaged file
