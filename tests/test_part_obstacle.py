@@ -3,7 +3,8 @@ onto the part (both formulations); no material point ends inside a part, no Eule
 one ever holds material; a bed on a part in a tub shaken up and down stays at rest relative to
 the tub and the part feels m (g + Z''); the impact speed inferred by patch is the calibrated
 relation applied to the surface nodes' shear rate (hand computed); parts.nc's force by phase is
-the mean of the samples in each phase; a part the 2D continuum cannot take is a one-line error.
+the mean of the samples in each phase; a part the 2D continuum cannot take is a one-line error;
+the torque of a layer on a part about a centre beside it is its weight times the lever arm.
 """
 from __future__ import annotations
 
@@ -19,12 +20,13 @@ from vibroflow.continuum.constitutive import ContinuumMaterial
 from vibroflow.continuum.eulerian import solver as eulerian
 from vibroflow.continuum.eulerian.mesh import EulerianMesh
 from vibroflow.continuum.eulerian.solver import EulerianSystem
-from vibroflow.continuum.eulerian.wall import MeshWall, wall_force_on_material
+from vibroflow.continuum.eulerian.wall import (MeshWall, wall_force_on_material,
+                                               wall_forces_by_cell)
 from vibroflow.continuum.grid import Grid
 from vibroflow.continuum.grid_update import LabFrame, TubFrame
 from vibroflow.continuum.mpm.solver import MPMSystem, init_state, run_steps
 from vibroflow.continuum.part_obstacle import (continuum_parts, packed_section,
-                                               section_area_below)
+                                               section_area_below, torque_on_part)
 from vibroflow.continuum.part_outputs import part_dataset, patch_weights
 from vibroflow.continuum.sampling import Samples
 from vibroflow.continuum.timestep import stable_dt
@@ -46,6 +48,13 @@ SHELF = Part(name="shelf", shape="box", center=(0.0, 0.5 * L_Y, R - 0.005), mate
 MAT = ContinuumMaterial(bulk_modulus=1e6, shear_modulus=5e5)
 DX = 0.005
 H_LAYER = 0.02
+#: the torque's lever arm: the shelf's centre taken OFFSET_M along +x (the same top face, still
+#: spanning the U): the layer, resting symmetrically about x = 0, presses its weight W at
+#: r_x = -OFFSET_M from that centre, (r x F)_y = -r_x F_z = -OFFSET_M W
+OFFSET_M = 0.01
+OFFSET_SHELF = Part(name="shelf", shape="box",
+                    center=(OFFSET_M, SHELF.center[1], SHELF.center[2]), material="steel",
+                    half_size=SHELF.half_size)
 
 
 def _mpm_layer_on_shelf(frame):
@@ -72,8 +81,9 @@ def _mpm_layer_on_shelf(frame):
 
 def test_mpm_layer_on_a_part_carries_its_weight_and_no_point_enters_it():
     """The material points' layer on the shelf: after settling, the wall law's force on the
-    part is the layer's weight per metre, downwards (within 1 %), and no point's centre ever
-    lies inside the part."""
+    part is the layer's weight per metre, downwards (within 1 %), its torque about a centre
+    OFFSET_M along x is -OFFSET_M W (within 2 %), and no point's centre ever lies inside the
+    part."""
     system, state, part = _mpm_layer_on_shelf(LabFrame((0.0, -G_ACC)))
     least = [np.inf]
 
@@ -86,6 +96,10 @@ def test_mpm_layer_on_a_part_carries_its_weight_and_no_point_enters_it():
     assert force_on_part[1] == pytest.approx(-weight, rel=0.01)  # pressed down
     assert abs(force_on_part[0]) < 1e-6 * weight
     assert least[0] > 0.0
+    touching = np.nonzero(state.history[part.slot]["state"] > 0)[0]
+    torque = torque_on_part(packed_section((OFFSET_SHELF,)), 0, 0.5 * L_Y, state.x[touching],
+                            state.history[part.slot]["f"][touching])
+    assert torque == pytest.approx(-OFFSET_M * weight, rel=0.02)
 
 
 def _eulerian_layer_on_shelf(frame):
@@ -114,7 +128,7 @@ def _eulerian_layer_on_shelf(frame):
 def test_eulerian_layer_on_a_part_carries_its_weight_and_no_cell_in_it_fills():
     """The Eulerian mesh's layer on the shelf: the cells inside the part are outside the domain
     and never hold material; the part's wall layer carries the layer's weight, pressed
-    downwards (within 1 %)."""
+    downwards (within 1 %), with the torque -OFFSET_M W about a centre OFFSET_M along x (2 %)."""
     system, state, cells, in_part = _eulerian_layer_on_shelf(LabFrame((0.0, -G_ACC)))
     assert in_part.any() and not system.mesh.inside[in_part].any()
     eulerian.run_steps(system, state, int(0.08 / system.dt))
@@ -122,6 +136,9 @@ def test_eulerian_layer_on_a_part_carries_its_weight_and_no_cell_in_it_fills():
     force_on_part = -wall_force_on_material(cells, system.mesh.normal, state.wall)
     weight = state.total_mass() * G_ACC
     assert force_on_part[1] == pytest.approx(-weight, rel=0.01)  # pressed down
+    torque = torque_on_part(packed_section((OFFSET_SHELF,)), 0, 0.5 * L_Y, system.x[cells],
+                            wall_forces_by_cell(cells, system.mesh.normal, state.wall))
+    assert torque == pytest.approx(-OFFSET_M * weight, rel=0.02)
 
 
 @pytest.mark.parametrize("method", ["lagrangian", "eulerian"])
@@ -275,7 +292,7 @@ def test_parts_nc_force_by_phase_is_the_mean_of_its_samples(tmp_path):
     samples = Samples(8, 1, 0, n_parts=1)
     fz = np.array([1.0, 5.0, 3.0, 7.0, 2.0, 6.0, 4.0, 8.0])  # phase 0: 1 3 2 4, phase 1: 5 7 6 8
     for j in range(8):
-        samples.add_part_forces(j, np.array([[0.0, -fz[j]]]), 1.0)
+        samples.add_part_forces(j, np.array([[0.0, -fz[j]]]), np.array([0.1 * fz[j]]), 1.0)
     samples.j = 8
     ds = part_dataset("eulerian", scen, (bar,), pack((bar,)), None, 0.00635, None, samples,
                       times, batch, 4 / f, None)
@@ -289,7 +306,9 @@ def test_parts_nc_force_by_phase_is_the_mean_of_its_samples(tmp_path):
     assert back.attrs["method"] == "eulerian" and back.attrs["batches"] == 2
     assert np.isnan(back["impact_rate_per_area"]).all()
     assert back["force"].attrs["units"] == "N"
-    assert np.isnan(back["torque"]).all() and back["torque"].attrs["units"] == "N m"
+    assert back["torque"].sel(part="bar-1", component="y").values == pytest.approx([0.25, 0.65])
+    assert (back["torque"].sel(part="bar-1", component=["x", "z"]).values == 0.0).all()
+    assert back["torque"].attrs["units"] == "N m"
 
 
 @pytest.mark.parametrize("part, says", [
@@ -420,3 +439,4 @@ def test_a_tub_run_with_a_bar_writes_parts_nc_and_resumes_to_it_bit_for_bit(meth
     again = read_parts(split / "parts.nc")
     for var in ("force", "force_stderr", "normal_speed_mean", "normal_speed_mean_stderr"):
         assert np.array_equal(again[var].values, ds[var].values, equal_nan=True), var
+

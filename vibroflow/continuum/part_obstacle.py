@@ -24,9 +24,9 @@ import math
 import numpy as np
 
 from vibroflow.errors import InputError
-from vibroflow.tub.parts import P_HY, Part, pack, parts_of
+from vibroflow.tub.parts import P_CX, P_CZ, P_HY, Part, pack, parts_of
 
-from .boundary import part_gaps
+from .boundary import part_gaps, part_section_nearest_np
 
 #: a box's or STL's y extent may miss a partition by this much (m) and still span the slice
 SPAN_TOLERANCE_M = 1.0e-9
@@ -73,6 +73,24 @@ def packed_section(parts: tuple[Part, ...]) -> tuple:
         if p.shape == "box":
             prm[k, P_HY] = FAR_Y_M
     return (packed.shape, prm, packed.tri, packed.tri_normal, packed.tri_start)
+
+
+def torque_on_part(packed: tuple, k: int, y: float, x: np.ndarray,
+                   f_on_material: np.ndarray) -> float:
+    """The y component (N m per metre of slice) of the torque on part k about its centre of
+    the forces f_on_material (M, 2) (N/m, x and z) that its wall law applies to the material
+    at the points or wall cells x (M, 2) (m, tub frame): their reactions -f, each acting at
+    the nearest surface point of the part's section at y (the contact point), summed as
+    (r x F)_y = r_z F_x - r_x F_z with r from the centre (the DEM's convention, dem/parts.py).
+    The x and z components vanish: the depth-averaged forces spread evenly along the part's
+    span on either side of its centre."""
+    if x.shape[0] == 0:
+        return 0.0
+    g, nx, nz = part_section_nearest_np(packed, k, y, x[:, 0], x[:, 1])
+    prm = packed[1]
+    rx = x[:, 0] - g * nx - prm[k, P_CX]
+    rz = x[:, 1] - g * nz - prm[k, P_CZ]
+    return float(np.sum(rz * -f_on_material[:, 0] - rx * -f_on_material[:, 1]))
 
 
 def section_bounds(part: Part) -> tuple[float, float, float, float]:

@@ -18,10 +18,12 @@ patch with none (above the free surface, a box's faces at the slice's ends, whic
 does not cut) is NaN.  Impact rates, the speed distribution and the energy flux are NaN: the continuum infers no
 impact count.
 
-Force by phase: the wall law's force on each part at each sample (sampling.Samples.part_force:
-the reaction of the contact forces on the material, N over the slice, tub axes), averaged over
-the window's samples in each phase bin of the cycle (measure.stats.phase_bins) with its
-batch-means error over whole cycles.  Torque is NaN: the samples keep the force alone.
+Force and torque by phase: the wall law's force on each part at each sample (sampling.Samples.
+part_force: the reaction of the contact forces on the material, N over the slice, tub axes) and
+its torque about the part's centre (part_torque, N m: each reaction acting at its contact's
+nearest surface point, part_obstacle.torque_on_part; only the y component, the depth average's
+forces having no moment about x or z), averaged over the window's samples in each phase bin of
+the cycle (measure.stats.phase_bins) with its batch-means error over whole cycles.
 """
 from __future__ import annotations
 
@@ -171,9 +173,10 @@ def part_dataset(method: str, scenario, parts: tuple[Part, ...], packed, calibra
             how.add(text)
     inferred = ("normal_speed_mean and its stderr by patch: " + "; ".join(sorted(how))
                 if how else "normal_speed_mean: NaN, the run has no calibrated impact relation")
-    inferred += ("; force: the wall law's contact forces on the part (their reaction on the "
-                 "material summed), by phase bin over the window's samples; torque: NaN, "
-                 "the samples keep no moment; impact rates, "
+    inferred += ("; force and torque: the wall law's contact forces on the part (their "
+                 "reaction on the material summed; the torque about the part's centre, each "
+                 "reaction at its contact's surface point, about y only), by phase bin over "
+                 "the window's samples; impact rates, "
                  "speed median and p95, energy flux: NaN, a continuum sees no impacts")
     ds = empty_parts_dataset([p.name for p in parts], [lay[0] for lay in layouts],
                              [lay[1] for lay in layouts], run.phases_per_cycle, method,
@@ -185,13 +188,14 @@ def part_dataset(method: str, scenario, parts: tuple[Part, ...], packed, calibra
     j = min(samples.j, times.size)
     if j and samples.n_parts:
         bins = phase_bins(times[:j], scenario.motion.frequency, run.phases_per_cycle)
-        force = samples.part_force[:j]
-        for ph in range(run.phases_per_cycle):
-            sel = bins == ph
-            if not sel.any():
-                continue
-            m, se = batch_means(force[sel], batch[:j][sel], run.batches)
-            ds["force"].values[:, ph, :] = m
-            ds["force_stderr"].values[:, ph, :] = se
+        for var, values in (("force", samples.part_force[:j]),
+                            ("torque", samples.part_torque[:j])):
+            for ph in range(run.phases_per_cycle):
+                sel = bins == ph
+                if not sel.any():
+                    continue
+                m, se = batch_means(values[sel], batch[:j][sel], run.batches)
+                ds[var].values[:, ph, :] = m
+                ds[var + "_stderr"].values[:, ph, :] = se
     return ds
 

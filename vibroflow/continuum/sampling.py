@@ -69,10 +69,12 @@ class Samples:
                  temperature: bool = False, n_parts: int = 0):
         self.j = 0
         # with parts (part_obstacle.py): per sample the wall law's force on each part (N, over
-        # the slice; x, y, z in tub axes), the reaction of its contact forces on the material
+        # the slice; x, y, z in tub axes), the reaction of its contact forces on the material,
+        # and its torque about the part's centre (N m; part_obstacle.torque_on_part)
         self.n_parts = int(n_parts)
         if self.n_parts:
             self.part_force = np.full((n_samples, self.n_parts, 3), np.nan)
+            self.part_torque = np.full((n_samples, self.n_parts, 3), np.nan)
         # with the granular temperature (ContinuumOptions.temperature): per sample the
         # mass-weighted mean T over the material (m^2/s^2) and, on the analysis cells, the sum
         # over samples of the mass-weighted mean T in the cell and the samples that held
@@ -122,6 +124,7 @@ class Samples:
                 out["temperature_cell_n"] = self.temperature_cell_n
         if self.n_parts:
             out["part_force"] = self.part_force
+            out["part_torque"] = self.part_torque
         out["vtk_frames"] = np.array(self.frames, dtype=np.int64)
         for kind, entries in self.vtk.items():
             out[f"vtk_{kind}_t"] = np.array([t for t, _ in entries], dtype=np.float64)
@@ -134,6 +137,8 @@ class Samples:
         s = cls(n_samples, n_points, n_probes, cell_grid, temperature, n_parts)
         if s.n_parts and "part_force" in a:
             s.part_force[:] = a["part_force"]
+        if s.n_parts and "part_torque" in a:
+            s.part_torque[:] = a["part_torque"]
         if cell_grid is not None and "rate_cell_sum" in a:
             s.rate_cell_sum[:], s.rate_cell_n[:] = a["rate_cell_sum"], a["rate_cell_n"]
         if s.temperature and "temperature_all" in a:
@@ -169,13 +174,18 @@ class Samples:
         c["position_tub"].append(np.stack(
             [x[:, 0], np.full(particle.size, 0.5 * length), x[:, 1]], axis=1))
 
-    def add_part_forces(self, j: int, force_on_material: np.ndarray, length: float) -> None:
+    def add_part_forces(self, j: int, force_on_material: np.ndarray, torque_on_part: np.ndarray,
+                        length: float) -> None:
         """Sample j's forces on the parts: force_on_material (n_parts, 2) the wall law's force
         (N/m, x and z) on the material from each part, whose reaction over the slice's length
-        (m) the part feels."""
+        (m) the part feels; torque_on_part (n_parts,) the reactions' torque about y (N m/m,
+        part_obstacle.torque_on_part) over the same length."""
         self.part_force[j, :, 0] = -force_on_material[:, 0] * length
         self.part_force[j, :, 1] = 0.0
         self.part_force[j, :, 2] = -force_on_material[:, 1] * length
+        self.part_torque[j, :, 0] = 0.0
+        self.part_torque[j, :, 1] = torque_on_part * length
+        self.part_torque[j, :, 2] = 0.0
 
     def add_cell_rates(self, x: np.ndarray, rate: np.ndarray) -> None:
         """Add one sample's shear rates (1/s) at tub-frame positions x (N, 2) m to the map: the

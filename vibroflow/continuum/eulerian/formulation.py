@@ -49,14 +49,14 @@ from ..files import early_tag, sample_tag
 from ..formulation import Formulation, Sampler
 from ..material import boundary_friction
 from ..options import ContinuumOptions, default_dx
-from ..part_obstacle import continuum_parts, packed_section
+from ..part_obstacle import continuum_parts, packed_section, torque_on_part
 from ..sampling import shear_rate, to_lab
 from ..temperature_field import temperature_model
 from ..timestep import stable_dt
 from . import column
 from .mesh import EulerianMesh
 from .solver import EulerianState, EulerianSystem, advance, init_state, state_from_checkpoint
-from .wall import MeshWall, wall_force_on_material
+from .wall import MeshWall, wall_force_on_material, wall_forces_by_cell
 
 #: the pseudo-ball's mass in full cells at the critical density (module docstring, 2)
 UNIT = 1.1
@@ -152,6 +152,7 @@ class CellSampler(Sampler):
         self.wall_cells = cells[self.near_wall]
         self.part_cells = [] if mesh.part_of is None else \
             [np.nonzero(mesh.part_of == k)[0] for k in range(len(scenario.parts or []))]
+        self.part_packed = packed_section(continuum_parts(scenario)) if self.part_cells else None
         self.buf_p, self.buf_v = np.zeros((n, 3)), np.zeros((n, 3))
         self.far = np.array([0.0, 0.5 * self.geo.length, 1.0e3])  # outside every analysis cell
         self.dither = np.zeros(n)
@@ -187,7 +188,7 @@ class CellSampler(Sampler):
         samples.add_contacts(j, np.searchsorted(cells, tc), hist["fn"][tc], hist["ft"][tc],
                              hist["state"][tc], mesh.arc[tc], system.x[tc], geo.length)
         if samples.n_parts:
-            samples.add_part_forces(j, self._part_forces(), geo.length)
+            samples.add_part_forces(j, self._part_forces(), self._part_torques(), geo.length)
         rate_all = shear_rate(state.L)
         if self.vtk and j >= S - run.phases_per_cycle:
             self._frame(sample_tag(j), pose6, rate_all, samples)
@@ -211,6 +212,15 @@ class CellSampler(Sampler):
         layer (wall.wall_force_on_material)."""
         return np.array([wall_force_on_material(c, self.system.mesh.normal, self.state.wall)
                          for c in self.part_cells]).reshape(-1, 2)
+
+    def _part_torques(self) -> np.ndarray:
+        """(n_parts,) the torque (N m/m, about y) on each part of its wall layer's forces
+        (part_obstacle.torque_on_part)."""
+        y = 0.5 * self.geo.length
+        return np.array([torque_on_part(self.part_packed, k, y, self.system.x[c],
+                                        wall_forces_by_cell(c, self.system.mesh.normal,
+                                                            self.state.wall))
+                         for k, c in enumerate(self.part_cells)])
 
     def _frame(self, tag: str, pose6, rate_all, samples) -> None:
         """The ParaView files of the state now (grid fields, tub) as frame `tag`."""

@@ -113,6 +113,14 @@ def wall_force_on_material(cells, normal, hist) -> np.ndarray:
     return np.array([np.sum(fn * nx + ft * nz), np.sum(fn * nz - ft * nx)])
 
 
+def wall_forces_by_cell(cells, normal, hist) -> np.ndarray:
+    """(M, 2) the wall's force (N/m, x and z) on the material of each wall-layer cell of
+    `cells`, the terms that wall_force_on_material sums."""
+    fn, ft = hist["fn"][cells], hist["ft"][cells]
+    nx, nz = normal[cells, 0], normal[cells, 1]
+    return np.stack([fn * nx + ft * nz, fn * nz - ft * nx], axis=1)
+
+
 def empty_history(n: int) -> dict:
     """Per-cell wall arrays: overclosure delta, slip xi (m), fn, ft (N/m), state (int8)."""
     return {"delta": np.zeros(n), "xi": np.zeros(n), "fn": np.zeros(n), "ft": np.zeros(n),

@@ -36,7 +36,8 @@ from ..formulation import Formulation, Sampler
 from ..grid import Grid
 from ..material import boundary_friction
 from ..options import ContinuumOptions, default_dx
-from ..part_obstacle import bed_height_around, continuum_parts, packed_section, section_gaps
+from ..part_obstacle import (bed_height_around, continuum_parts, packed_section, section_gaps,
+                             torque_on_part)
 from ..sampling import shear_rate, to_lab
 from ..temperature_field import temperature_model
 from ..timestep import stable_dt
@@ -58,6 +59,14 @@ def _wall_gap_arc(x, radius, gap_out, arc_out):
         r = u_wall_nearest(x[p, 0], x[p, 1], radius)
         gap_out[p] = r[0]
         arc_out[p] = r[5]
+
+
+def _part_torque(wall: PartWall, state) -> float:
+    """The torque (N m/m, about y) on the part of `wall` of its contact forces on the points
+    touching it (part_obstacle.torque_on_part)."""
+    f = state.history[wall.slot]["f"]
+    touching = np.nonzero(state.history[wall.slot]["state"] > 0)[0]
+    return torque_on_part(wall.packed, wall.index, wall.y, state.x[touching], f[touching])
 
 
 def settled_bed(scenario, material, spacing: float):
@@ -128,7 +137,7 @@ class PointSampler(Sampler):
             self.vtk_kinds = self.vtk.kinds
 
     def record(self, j: int, samples) -> None:
-        system, state, geo, out = self.system, self.state, self.geo, self.out
+        system, state, geo = self.system, self.state, self.geo
         run = self.scenario.run
         S = samples.pos.shape[0]
         wall_hist = state.history[0]
@@ -142,9 +151,11 @@ class PointSampler(Sampler):
                              wall_hist["state"][touching], self.arc[touching],
                              state.x[touching], geo.length)
         if samples.n_parts:
+            walls = [b for b in system.boundaries if isinstance(b, PartWall)]
             samples.add_part_forces(j, np.array([state.history[b.slot]["f"].sum(axis=0)
-                                                 for b in system.boundaries
-                                                 if isinstance(b, PartWall)]), geo.length)
+                                                 for b in walls]),
+                                    np.array([_part_torque(b, state) for b in walls]),
+                                    geo.length)
         rate = shear_rate(state.L)
         if self.vtk and j >= S - run.phases_per_cycle:
             self._frame(sample_tag(j), pose6, rate, samples)
