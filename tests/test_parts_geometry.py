@@ -1,6 +1,7 @@
 """The parts' geometry (vibroflow/tub/parts.py, vibroflow/scenario/part_shapes.py) against
-hand-computed distances, the shapes' analytic areas, an STL facetting's known error, and the
-scenario's one-line checks of [[parts]]."""
+hand-computed distances, the shapes' analytic areas, an STL facetting's known error, each
+other (the checks' numpy distance against the solvers' compiled one), and the scenario's
+one-line checks of [[parts]]."""
 from __future__ import annotations
 
 import math
@@ -11,6 +12,7 @@ import trimesh
 
 from vibroflow.errors import InputError
 from vibroflow.scenario.io import load_scenario, parse_scenario
+from vibroflow.scenario.part_shapes import signed_distance
 from vibroflow.tub.parts import (SHAPE_BOX, pack, part_nearest, parts_of, patch_layout,
                                  patch_of)
 
@@ -143,3 +145,29 @@ def test_an_explicit_ball_inside_a_part_is_refused():
     raw["parts"][0]["frame"] = "tub"
     with pytest.raises(InputError, match='parts.0.frame = "tub": explicit mode has no tub'):
         parse_scenario(raw)
+
+
+def test_the_checks_and_the_solvers_measure_the_same_distance(stl_cylinder, tmp_path):
+    """Two implementations of a part's signed distance agree: the scenario checks' numpy one
+    (part_shapes.signed_distance; an STL's sign from its winding number) and the solvers'
+    compiled one (tub.parts.part_nearest; an STL's sign from its nearest feature's normal), on
+    random points in and around a cylinder, a turned box, a sphere and an STL cylinder."""
+    toml = tmp_path / "case.toml"
+    toml.write_text(
+        '[[parts]]\nname = "bar"\nshape = "cylinder"\ncenter = [-0.07, 0.0, 0.10]\n'
+        'radius = 0.0125\n'
+        '[[parts]]\nname = "block"\nshape = "box"\ncenter = [0.0, 0.03, 0.25]\n'
+        'size = [0.04, 0.02, 0.03]\nangle_y = 0.4\n'
+        '[[parts]]\nname = "ball"\nshape = "sphere"\ncenter = [-0.06, 0.03, 0.25]\n'
+        'radius = 0.01\n'
+        '[[parts]]\nname = "mesh"\nshape = "stl"\nfile = "bar.stl"\nscale = 0.001\n'
+        'center = [0.05, 0.03, 0.10]\n')
+    s = load_scenario(toml)
+    parts = parts_of(s)
+    pk = pack(parts)
+    rng = np.random.default_rng(7)
+    for k, (spec, part) in enumerate(zip(s.parts, parts)):
+        p = np.array(part.center) + rng.uniform(-0.03, 0.03, size=(300, 3))
+        numpy_gap = signed_distance(spec, p, part.triangles)
+        compiled_gap = np.array([_nearest(pk, k, q)[0] for q in p])
+        assert compiled_gap == pytest.approx(numpy_gap, abs=1e-12), spec.name
