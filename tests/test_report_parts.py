@@ -1,7 +1,7 @@
 """The report's part sections (vibroflow.report.part_sections) on synthetic parts.nc files made
 from the schema (vibroflow.io.parts_file): the DEM's measured speeds beside a continuum's
 inferred ones with their difference and its error (hand computed), the force by phase as the
-files hold it, a method without parts.nc said, none at all: no section; and the page of a
+files hold it, the whole map's difference and the force's cycle mean (hand computed), a method without parts.nc said, none at all: no section; and the page of a
 tiny study with them: one section per part, its name escaped, its figures drawn."""
 from __future__ import annotations
 
@@ -59,8 +59,15 @@ def test_part_section_sets_each_continuum_beside_the_dem(tmp_path):
     assert row["lagrangian_diff"] == pytest.approx((0.05, math.sqrt(2) * 0.01))
     assert row["rate"] == pytest.approx((4e4, 1e2)) and row["p95"] == pytest.approx(0.46)
     assert row["area"] == pytest.approx(2 * math.pi * 0.0125 / 36 * SLICE_M)
-    f, se = s["forces"]["dem"]
+    f, se, _, _ = s["forces"]["dem"]
     assert f[:, 2] == pytest.approx([0, -1, -2, -3]) and se[2, 0] == pytest.approx(0.1)
+    # as a whole: every sector 0.05 m/s off, over the DEM's 36 x 0.2 + 0.01 x 630 = 13.5 m/s;
+    # the noise 2 x 36 x 0.01 / 13.5; the force's cycle mean (0 + 1 + 2 + 3) / 4 +- 0.1 / 2
+    d, noise, n = s["whole"]["lagrangian"]["map"]
+    assert (d, noise, n) == (pytest.approx(1.8 / 13.5), pytest.approx(0.72 / 13.5), 36)
+    m, m_se = s["whole"]["dem"]["force"]
+    assert m[0] == pytest.approx(1.5) and m_se[0] == pytest.approx(0.05)
+    assert "map" not in s["whole"]["dem"]
     assert s["map"][:8] == b"\x89PNG\r\n\x1a\n" and s["distribution"][:8] == b"\x89PNG\r\n\x1a\n"
 
 

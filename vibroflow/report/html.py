@@ -396,12 +396,18 @@ def _parts(data: StudyData) -> tuple[list[dict], list[str]]:
                              _num(r["p95"])])
             rows.append(row)
         forces = []
-        for m, (f, se) in s["forces"].items():
+        for m, (f, se, tq, tq_se) in s["forces"].items():
             for ph in range(f.shape[0]):
                 forces.append([_text(m, "l"), _text(ph), _pm(f[ph, 0], se[ph, 0]),
-                               _pm(f[ph, 2], se[ph, 2])])
+                               _pm(f[ph, 2], se[ph, 2]), _pm(tq[ph, 1], tq_se[ph, 1])])
+        whole = []
+        for m, w in s["whole"].items():
+            (f, fse), (tq, tq_se) = w["force"], w["torque"]
+            d, noise, _ = w.get("map", (float("nan"),) * 3)
+            whole.append([_text(m, "l"), _num(d), _num(noise), _pm(f[0], fse[0]),
+                          _pm(f[2], fse[2]), _pm(tq[1], tq_se[1])])
         out.append({"name": s["name"], "shape": s["shape"], "head": head, "rows": rows,
-                    "dist": dist, "forces": forces,
+                    "dist": dist, "forces": forces, "whole": whole,
                     "map": _img(s["map"], f"impact map of {s['name']}"),
                     "distribution": s["distribution"] and _img(
                         s["distribution"], f"DEM normal impact speeds on {s['name']}"),

@@ -7,7 +7,9 @@ or an STL), each method with its batch-means error bars; a table by patch with t
 beside each continuum's and their difference (continuum - DEM, its error the two errors in
 quadrature), the DEM's rate and energy flux per area; the DEM's normal-speed distribution by
 patch (mean with its error, median, 95th percentile); the force on the part by phase of the
-cycle for each method.  A method whose folder has no parts.nc is left out and said so; a study
+cycle for each method; each continuum judged against the DEM as a whole (analysis.part_maps:
+the map's difference beside the DEM's noise, and every method's cycle-mean force and torque).
+A method whose folder has no parts.nc is left out and said so; a study
 with no parts.nc at all has no part section.  Figures are PNG bytes (matplotlib, Agg); part
 and patch names are the page's text, escaped by the template.  Units: SI.
 """
@@ -17,6 +19,7 @@ import math
 
 import numpy as np
 
+from vibroflow.analysis.part_maps import cycle_mean, map_difference
 from vibroflow.errors import InputError
 from vibroflow.io.parts_file import PARTS_NC_NAME, read_parts
 from vibroflow.io.pictures import pyplot
@@ -161,13 +164,20 @@ def part_sections(data: StudyData) -> tuple[list[dict], list[str]]:
                     d, dse = row["dem"]
                     row[m + "_diff"] = (v - d, math.hypot(se, dse))
             rows.append(row)
-        forces = {}
+        forces, whole = {}, {}
         for m, ds in files.items():
             if part in ds["part"].values:
-                forces[m] = (np.asarray(ds["force"].sel(part=part).values, float),
-                             np.asarray(ds["force_stderr"].sel(part=part).values, float))
+                forces[m] = tuple(np.asarray(ds[v].sel(part=part).values, float)
+                                  for v in ("force", "force_stderr", "torque", "torque_stderr"))
+                whole[m] = {"force": cycle_mean(forces[m][0], forces[m][1]),
+                            "torque": cycle_mean(forces[m][2], forces[m][3])}
+                if dem is not None and m != DEM:
+                    whole[m]["map"] = map_difference(
+                        _values(ds, part, "normal_speed_mean", n),
+                        _values(dem, part, "normal_speed_mean", n),
+                        _values(dem, part, "normal_speed_mean_stderr", n))
         out.append({"name": part, "shape": shape, "continua": continua,
-                    "has_dem": dem is not None, "rows": rows, "forces": forces,
+                    "has_dem": dem is not None, "rows": rows, "forces": forces, "whole": whole,
                     "inferred_from": {m: str(ds.attrs.get("inferred_from", ""))
                                       for m, ds in files.items()},
                     "map": _map_figure(part, shape, names, files),
