@@ -1,0 +1,158 @@
+"""The landing counted where the falling material is stopped (continuum/compaction_landing.py):
+the pairs of Eulerian cells that stop each other where voids close, against hand values, the
+energy bookkeeping of a loose block landing on a floor, and Galilean invariance.
+
+A loose block (its material below the critical density: voids to close) falling onto the floor
+at V is stopped row by row from the floor up, a completely inelastic compaction (Mehta & Luck
+1990's block): with no dissipation and no other source (e = e_w = 1, an elastic material, T
+passive), the fluctuation energy gained is, step by step, the normal kinetic energy the floor
+row and the colliding pairs lose (to round-off), and over the landing it is the block's
+kinetic energy ½ M V^2 plus gravity's work while it stops, less the elastic energy left in
+the compacted block, never more than the mean motion loses.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vibroflow.continuum.compaction_landing import compaction_terms
+from vibroflow.continuum.constitutive import ContinuumMaterial
+from vibroflow.continuum.eulerian import solver as eulerian
+from vibroflow.continuum.eulerian.mesh import EulerianMesh
+from vibroflow.continuum.eulerian.wall import MeshWall
+from vibroflow.continuum.grid_update import LabFrame
+from vibroflow.continuum.kinetic_theory import KineticParameters
+from vibroflow.continuum.temperature_field import TemperatureModel, fluctuation_energy_J_m
+from vibroflow.continuum.timestep import stable_dt
+from vibroflow.continuum.wall_energy_flux import WallEnergy, landing_terms
+
+G_ACC = 9.81
+DX = 0.01
+RHO_C = 1500.0
+
+
+def test_a_pair_stopping_where_a_void_closes_loses_its_relative_normal_energy():
+    # a column of three cells (h = 0.1 m) over a 2-cell periodic row, dt = 1e-4 s: hand values
+    h, dt = 0.1, 1e-4
+    full = RHO_C * h * h
+    open_x = np.zeros((2, 3), bool)
+    open_z = np.zeros((1, 4), bool)
+    open_z[0, 1:3] = True
+    # a: full, connected, at rest; b: half full, falling 0.5 -> 0.1 m/s; c: full, falling with b
+    m0 = np.array([1.01 * full, 0.5 * full, 1.01 * full])
+    rho0 = np.array([1.01 * RHO_C, RHO_C, 1.01 * RHO_C])
+    v0 = np.array([[0.0, 0.0], [0.3, -0.5], [0.0, -0.5]])
+    v1 = np.array([[0.0, 0.0], [0.3, -0.1], [0.0, -0.5]])
+    out = np.zeros((3, 4))
+    compaction_terms(m0, v0, rho0, v1, h, open_x, open_z, RHO_C, dt, out)
+    mu = m0[0] * m0[1] / (m0[0] + m0[1])
+    lost = 0.5 * mu * (0.5 ** 2 - 0.1 ** 2)           # b against a; c moved with b at the start
+    shares = np.array([m0[1], m0[0], 0.0]) / (m0[0] + m0[1])
+    assert out[:, 3] * dt == pytest.approx(lost * shares, rel=1e-12, abs=1e-15)
+    assert np.all(out[:, :3] == 0.0)
+    # the same pair both full and connected: elastic, nothing; separating: nothing
+    out[:] = 0.0
+    compaction_terms(np.full(3, 1.01 * full), v0, np.full(3, 1.01 * RHO_C), v1, h, open_x,
+                     open_z, RHO_C, dt, out)
+    assert np.all(out == 0.0)
+    compaction_terms(m0, -v0, rho0, -v1, h, open_x, open_z, RHO_C, dt, out)
+    assert np.all(out == 0.0)
+
+
+def test_the_wall_is_the_pairs_infinitely_heavy_limit_and_the_pair_is_galilean():
+    # two cells side by side across a periodic x face (ncx = 2, ncz = 1), the right one loose
+    h, dt = 0.1, 1e-4
+    open_x = np.ones((3, 1), bool)
+    open_x[1] = False                            # only the periodic face 0 between 1 and 0
+    open_z = np.zeros((2, 2), bool)
+    heavy = 1e12
+    m0 = np.array([heavy, 0.3])
+    rho0 = np.array([RHO_C, 0.9 * RHO_C])
+    v0 = np.array([[0.0, 0.0], [0.4, 0.0]])      # cell 1 moves towards cell 0 through face 0
+    v1 = np.array([[0.0, 0.0], [0.1, 0.0]])
+    out = np.zeros((2, 4))
+    compaction_terms(m0, v0, rho0, v1, h, open_x, open_z, RHO_C, dt, out)
+    wall = np.zeros((1, 4))
+    landing_terms(v0[1:], m0[1:], v1[1:], m0[1:], np.array([[-1.0, 0.0]]), np.ones(1), dt, wall)
+    assert out[:, 3].sum() == pytest.approx(wall[0, 3], rel=1e-9)
+    assert out[1, 3] == pytest.approx(wall[0, 3], rel=1e-9)
+    moved = np.zeros((2, 4))
+    u = np.array([2.0, -3.0])
+    compaction_terms(m0, v0 + u, rho0, v1 + u, h, open_x, open_z, RHO_C, dt, moved)
+    assert moved[:, 3] == pytest.approx(out[:, 3], rel=1e-12)
+
+
+def _loose_block(v, looseness, height, settled=False):
+    """(system, state): a block `height` deep over a 4 cm x-periodic floor, the default media
+    made elastic (mu_s = 10: no plastic work), its T passive from 0 with no dissipation
+    (e = e_w = 1, a smooth wall), moving at v (m/s): its material at `looseness` times the
+    critical density, stress-free (loose: voids to close), or settled at its lithostatic
+    stress and density."""
+    mat = ContinuumMaterial(mu_s=10.0, mu_2=20.0)
+    mesh = EulerianMesh.box(0.0, 0.04, 0.0, 0.08, DX, periodic=True)
+    h = mesh.h
+    wall = MeshWall((mat.bulk_modulus + 4 * mat.shear_modulus / 3) / h, 0.0)
+    prm = KineticParameters(diameter_m=mat.diameter, density_kg_m3=mat.solid_density,
+                            restitution=1.0)
+    model = TemperatureModel(prm, h, 0.0, False, WallEnergy(restitution=1.0, specularity=0.0))
+    system = eulerian.EulerianSystem(mesh, mat, stable_dt(mat, DX, h, [wall]),
+                                     frame=LabFrame((0.0, -G_ACC)), wall=wall,
+                                     temperature=model)
+    z = system.x[:, 1]
+    fill = mesh.inside & (z < height)
+    rho = np.full(mesh.n, looseness * mat.critical_density)
+    stress = np.zeros((mesh.n, 4))
+    if settled:
+        p = mat.critical_density * G_ACC * np.clip(height - z, 0.0, None) * fill
+        rho = mat.critical_density * np.exp(p / mat.bulk_modulus)
+        stress[:, 0] = stress[:, 1] = stress[:, 3] = -p
+    state = eulerian.init_state(system, np.where(fill, rho * h * h, 0.0), rho, stress=stress)
+    state.v[fill] = v
+    return system, state
+
+
+def _mechanical_energy(system, state):
+    """The mean motion's kinetic plus gravity's potential energy (J/m)."""
+    return float(0.5 * (state.mass * (state.v ** 2).sum(axis=1)).sum()
+                 + G_ACC * (state.mass * system.x[:, 1]).sum())
+
+
+def _landing_steps(system, state, n):
+    """Per step: the fluctuation energy gained (J/m), the landing the states give (the floor
+    row's and the pairs', J/m), the mechanical energy lost (J/m) and the largest shear rate."""
+    c = system.wall_cells
+    rows = []
+    for _ in range(n):
+        start = (state.mass.copy(), state.v.copy(), state.density.copy())
+        e_before = fluctuation_energy_J_m(state.mass, state.temperature)
+        k_before = _mechanical_energy(system, state)
+        eulerian.advance(system, state, 1)
+        sums = eulerian.cell_wall_sums(system, state, start)
+        rows.append((fluctuation_energy_J_m(state.mass, state.temperature) - e_before,
+                     sums[:, 3].sum() * system.dt, k_before - _mechanical_energy(system, state),
+                     state.gamma_dot.max(), sums[c, 3].sum() * system.dt))
+    return np.array(rows)
+
+
+def test_a_loose_block_landing_turns_its_kinetic_energy_into_temperature():
+    speed, height = 0.5, 0.04
+    system, state = _loose_block((0.0, -speed), 0.8, height)
+    mass = state.mass.sum()
+    r = _landing_steps(system, state, 400)
+    assert np.all(r[:, 3] == 0.0)                # elastic: no plastic work
+    # step by step the pairs' and the floor row's loss is the fluctuation energy's gain
+    assert r[:, 0] == pytest.approx(r[:, 1], rel=1e-9, abs=1e-15)
+    gained = r[:, 0].sum()
+    lost = r[:, 2].sum()
+    impact = 0.5 * mass * speed ** 2
+    print(f"gained {gained:.6g} J/m, mechanical energy lost {lost:.6g}, impact {impact:.6g}, "
+          f"floor row {r[:, 4].sum():.6g}, KE left {0.5 * (state.mass * (state.v ** 2).sum(1)).sum():.3g}")
+    assert gained <= lost
+    assert gained == pytest.approx(impact, rel=0.3)
+
+
+def test_a_settled_block_resting_or_sliding_compacts_nothing():
+    for u in (0.0, 0.5):
+        system, state = _loose_block((u, 0.0), 1.0, 0.04, settled=True)
+        r = _landing_steps(system, state, 100)
+        assert r[:, 1].sum() == 0.0
