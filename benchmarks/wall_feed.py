@@ -38,8 +38,10 @@ from vibroflow.continuum.eulerian.mesh import EulerianMesh
 from vibroflow.continuum.eulerian.wall import MeshWall
 from vibroflow.continuum.grid import Grid
 from vibroflow.continuum.grid_update import TubFrame
+from vibroflow.continuum.kinetic_stress import KINETIC_COLUMNS
 from vibroflow.continuum.kinetic_theory import KineticParameters
 from vibroflow.continuum.mpm import solver as mpm
+from vibroflow.continuum.temperature_balance import kinetic_stress_of, temperature_step
 from vibroflow.continuum.temperature_field import TemperatureModel
 from vibroflow.continuum.timestep import stable_dt
 from vibroflow.continuum.wall_energy_flux import (WallEnergy, collision_loss_W_m2,
@@ -106,9 +108,16 @@ def run_eulerian(depth, cycles, mat, kn, motion, prm):
     state = eulerian.init_state(system, np.where(fill, mat.critical_density * mesh.h ** 2, 0.0))
     floor = system.wall_cells[mesh.normal[system.wall_cells, 1] > 0.5]
     low = z < DX
+    ts = temperature_step(model, mat.critical_density / mat.solid_density, system.dt,
+                          mat.p_wave_speed())
+    p_kin = np.zeros((state.n, KINETIC_COLUMNS))
     rows = []
     for _ in range(cycles * int(round(1.0 / (FREQUENCY * system.dt)))):
-        start = (state.mass.copy(), state.v.copy(), state.density.copy())
+        # the stress the step scatters, the kinetic one as the run's loop computes it
+        kinetic_stress_of(state.density, state.temperature, state.L, state.stress,
+                          state.gamma_dot, state.phase, ts, p_kin)
+        start = (state.mass.copy(), state.v.copy(), state.density.copy(),
+                 state.stress + p_kin[:, :4])
         p0 = float(state.mass @ state.v[:, 1])
         eulerian.advance(system, state, 1)
         t_mid = state.t - 0.5 * system.dt

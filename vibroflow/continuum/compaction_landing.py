@@ -18,12 +18,19 @@ a completely inelastic collision can destroy.  Over a step of dt the pair's mome
 (the grid's and the remap's momentum transfer between them, the continuum's contact impulse)
 takes from it
 
-    E_lost = mu (w_0^2 - min(w_1, 0)^2) / 2, clipped to [0, mu w_0^2 / 2],
+    E_lost = mu (w_0^2 - min(w_1, 0)^2) / 2 - p_f h max(-(w_0 + w_1) / 2, 0) dt,
+             clipped to [0, mu w_0^2 / 2],
 
 w_0, w_1 the relative normal velocities at the step's start and end: what the stopping has
 destroyed, never more than the pair had, nothing for a pair separating (w_1 > 0 is a stop and
-a rebound: only the stop counts) or still approaching faster.  The reduced mass is the start's:
-mass moving between cells changes no velocity.  Each cell gets its own share of it, its
+a rebound: only the stop counts) or still approaching faster.  The second term is the part the
+stress took: the face's compressive normal stress p_f (Pa, the mean of the two cells' scattered
+normal stress at the step's start, elastic-plastic plus the temperature's kinetic pressure)
+on the face of length h (m) working on the approach.  That work is stored (elastic) or is
+already the temperature's production (the kinetic pressure's -p_k tr D): counted again, it
+would make energy (a hot, loose layer then heats itself without bound).  What remains is the
+momentum exchange that no stress carries, the void's closing.  The reduced mass is the
+start's: mass moving between cells changes no velocity.  Each cell gets its own share of it, its
 kinetic energy in the pair's centre-of-mass frame, m_b / (m_a + m_b) of E_lost for a and
 m_a / (m_a + m_b) for b.  The wall's landing is the limit of an infinitely heavy b at rest.
 
@@ -48,7 +55,7 @@ FULL = 1.0 - 1.0e-9
 
 
 @nb.njit(cache=True)
-def _pair(a, b, j, m0, v0, full0, rho0, v1, rho_c, dt, out):
+def _pair(a, b, j, m0, v0, full0, rho0, sigma0, v1, h, rho_c, dt, out):
     """Adds the pair (a, b)'s compaction loss along axis j (0: x, 1: z; the face's normal from a
     to b) to out[a, 3] and out[b, 3] (module docstring); full0 (m^2) the area times FULL that a
     full cell's mass over its density reaches."""
@@ -61,34 +68,40 @@ def _pair(a, b, j, m0, v0, full0, rho0, v1, rho_c, dt, out):
         return
     if ma >= full0 * rho0[a] and mb >= full0 * rho0[b] and rho0[a] >= rho_c and rho0[b] >= rho_c:
         return
-    w1 = min(v1[b, j] - v1[a, j], 0.0)
+    w1 = v1[b, j] - v1[a, j]
     m = ma + mb
     mu = ma * mb / m
     e0 = 0.5 * mu * w0 * w0
-    lost = min(max(e0 - 0.5 * mu * w1 * w1, 0.0), e0) / dt
+    # the reversible part: the face's compressive normal stress working on the approach
+    p_face = -0.5 * (sigma0[a, j] + sigma0[b, j])
+    stored = max(p_face, 0.0) * h * max(-0.5 * (w0 + w1), 0.0) * dt
+    w1 = min(w1, 0.0)
+    lost = min(max(e0 - 0.5 * mu * w1 * w1 - stored, 0.0), e0) / dt
     out[a, 3] += lost * mb / m
     out[b, 3] += lost * ma / m
 
 
 @nb.njit(cache=True)
-def compaction_terms(m0, v0, rho0, v1, h, open_x, open_z, rho_c, dt, out):
+def compaction_terms(m0, v0, rho0, sigma0, v1, h, open_x, open_z, rho_c, dt, out):
     """Adds the cells' compaction landing power (W/m) of a step of dt (s) to out[:, 3] (module
     docstring), over every open face of an Eulerian mesh (eulerian/mesh.py: open_x
     (ncx + 1, ncz), open_z (ncx, ncz + 1), cell p = i ncz + k; a periodic mesh's face 0 is its
-    face ncx, between cells ncx - 1 and 0; plane strain).  m0 (N,) kg/m, v0 (N, 2) m/s and rho0
-    (N,) the material's density (kg/m^3) at the step's start, v1 (N, 2) m/s at its end, h (m)
-    the cells' side, rho_c (kg/m^3) the critical density."""
+    face ncx, between cells ncx - 1 and 0; plane strain).  m0 (N,) kg/m, v0 (N, 2) m/s, rho0
+    (N,) the material's density (kg/m^3) and sigma0 (N, >= 2) the stress the step scatters
+    (Pa, [xx, zz, ...], tension positive: the elastic-plastic stress plus the temperature's)
+    at the step's start, v1 (N, 2) m/s at its end, h (m) the cells' side, rho_c (kg/m^3) the
+    critical density."""
     ncx = open_z.shape[0]
     ncz = open_x.shape[1]
     full0 = FULL * h * h
     for i in range(ncx):
         for k in range(1, ncz):
             if open_z[i, k]:
-                _pair(i * ncz + k - 1, i * ncz + k, 1, m0, v0, full0, rho0, v1, rho_c, dt, out)
+                _pair(i * ncz + k - 1, i * ncz + k, 1, m0, v0, full0, rho0, sigma0, v1, h, rho_c, dt, out)
     for k in range(ncz):
         for i in range(1, ncx):
             if open_x[i, k]:
-                _pair((i - 1) * ncz + k, i * ncz + k, 0, m0, v0, full0, rho0, v1, rho_c, dt,
+                _pair((i - 1) * ncz + k, i * ncz + k, 0, m0, v0, full0, rho0, sigma0, v1, h, rho_c, dt,
                       out)
         if ncx > 1 and open_x[0, k]:
-            _pair((ncx - 1) * ncz + k, k, 0, m0, v0, full0, rho0, v1, rho_c, dt, out)
+            _pair((ncx - 1) * ncz + k, k, 0, m0, v0, full0, rho0, sigma0, v1, h, rho_c, dt, out)

@@ -309,13 +309,14 @@ def advance_stepwise(system: EulerianSystem, state: EulerianState, n: int) -> No
     h = mesh.h
     periodic = system.grid_spec[3]
 
-    def start():
-        return state.mass.reshape(shape).copy(), state.v.copy(), state.density.copy()
+    def start(s_kin):
+        return (state.mass.reshape(shape).copy(), state.v.copy(), state.density.copy(),
+                state.stress + s_kin[:, :4])
 
     def balance(power, before):
-        m_start, v_start, rho_start = before
+        m_start, v_start, rho_start, sigma_start = before
         # the start's masses for the landing: the remap below moves m_start in place
-        landing_start = (m_start.ravel().copy(), v_start, rho_start) \
+        landing_start = (m_start.ravel().copy(), v_start, rho_start, sigma_start) \
             if model.walls is not None and model.walls.landing else None
         # T carried with the mass: the same transport of the step's start mass by the same
         # face velocities as the kernel's remap
@@ -346,15 +347,17 @@ def cell_wall_sums(system: EulerianSystem, state: EulerianState, start=None) -> 
     column is not the dashpot's c v_n^2: the wall layer's material is held by its closed
     faces, not by the dashpot, so its normal velocity is no approach (fed with c v_n^2,
     tub47-quick's side-wall cells heat without bound).  With start = (mass (N,) kg/m, v (N, 2)
-    m/s, density (N,) kg/m^3) the cells' at the step's start, it is the landing measured: the
+    m/s, density (N,) kg/m^3, the stress the step scatters (N, 4) Pa: the elastic-plastic plus
+    the temperature's) the cells' at the step's start, it is the landing measured: the
     normal kinetic energy the step took from the wall cells that approached the wall
     (wall_energy_flux.landing_terms) and from the pairs of cells that approached each other
     where voids close (compaction_landing.compaction_terms); without, none."""
     out = np.zeros((state.n, 4))
     if start is not None:
         mesh = system.mesh
-        compaction_terms(start[0], start[1], start[2], state.v, mesh.h, mesh.open_x,
-                         mesh.open_z, system.material.critical_density, system.dt, out)
+        compaction_terms(start[0], start[1], start[2], start[3], state.v, mesh.h,
+                         mesh.open_x, mesh.open_z, system.material.critical_density,
+                         system.dt, out)
     w = system.wall
     if w is not None:
         c = system.wall_cells
