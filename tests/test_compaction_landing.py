@@ -12,6 +12,9 @@ the compacted block, never more than the mean motion loses.
 """
 from __future__ import annotations
 
+import importlib.util
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -25,6 +28,7 @@ from vibroflow.continuum.kinetic_theory import KineticParameters
 from vibroflow.continuum.temperature_field import TemperatureModel, fluctuation_energy_J_m
 from vibroflow.continuum.timestep import stable_dt
 from vibroflow.continuum.wall_energy_flux import WallEnergy, landing_terms
+from vibroflow.measure.stats import stderr_of_batches
 
 G_ACC = 9.81
 DX = 0.01
@@ -193,3 +197,47 @@ def test_a_settled_block_resting_or_sliding_compacts_nothing():
         fed.append(_landing_steps(system, state, 100)[:, 1].sum())
     assert fed[1] == pytest.approx(fed[0], rel=0.02)
     assert fed[1] < 1e-4 * impact
+
+
+def _wall_feed():
+    """benchmarks/wall_feed.py, loaded from its file (benchmarks/ is no package)."""
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "wall_feed.py"
+    spec = importlib.util.spec_from_file_location("wall_feed", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def shaken_layer():
+    """The Eulerian shaken layer of benchmarks/wall_feed.py (5 cm, tub47's 1.5 mm at 47 Hz,
+    T coupled), 35 cycles: the cycle-mean landing feed and the floor row's part (W/m^2), each
+    with its batch-means standard error over five batches of the 30 cycles after the first 5."""
+    wf = _wall_feed()
+    r, _, _ = wf.run(0.05, 35, "eulerian")
+    cycle = np.floor(r[:, 0] * wf.FREQUENCY + 1e-9).astype(int)
+    batches = np.array_split(np.arange(5, cycle.max() + 1), 5)
+
+    def mean(col):
+        per = np.array([r[np.isin(cycle, b), col].mean() for b in batches])
+        return per.mean(), float(stderr_of_batches(per))
+
+    return mean(2), mean(5)
+
+
+@pytest.mark.slow
+def test_the_shaken_layers_landing_is_counted_where_the_layer_is_stopped(shaken_layer):
+    # the floor row alone fed 4.5 +- 1.6 W/m^2 (docs/validation.md section 22); the pairs
+    # above it, where the layer's voids close, feed most of the landing (38 +- 20 W/m^2)
+    (total, _), (floor, _) = shaken_layer
+    assert total > 25.0
+    assert total > 5.0 * floor
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="the Eulerian layer's landing feeds 38 +- 20 W/m^2, 0.14 "
+                   "of the DEM's 274 +- 12 (the Lagrangian's dashpot 73.5 +- 19): the pairs "
+                   "count a fraction of the compaction front's loss (the loose block's 0.18)")
+def test_the_shaken_layers_landing_feeds_the_dems_wall_flux(shaken_layer):
+    (total, se), _ = shaken_layer
+    assert abs(total - 274.0) < 3.0 * np.hypot(se, 12.0)
