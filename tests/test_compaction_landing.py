@@ -89,7 +89,8 @@ def test_the_wall_is_the_pairs_infinitely_heavy_limit_and_the_pair_is_galilean()
     assert out[1, 3] == pytest.approx(wall[0, 3], rel=1e-9)
     moved = np.zeros((2, 4))
     u = np.array([2.0, -3.0])
-    compaction_terms(m0, v0 + u, rho0, np.zeros((2, 4)), v1 + u, h, open_x, open_z, RHO_C, dt, moved)
+    compaction_terms(m0, v0 + u, rho0, np.zeros((2, 4)), v1 + u, h, open_x, open_z, RHO_C, dt,
+                     moved)
     assert moved[:, 3] == pytest.approx(out[:, 3], rel=1e-12)
 
 
