@@ -15,7 +15,9 @@ batch-means standard error over five batches of whole cycles:
 * the floor force over the layer's weight (zero: the layer is off the floor);
 * the landing source (W/m^2 of floor): the inelastic normal jump's energy, which the run puts
   into T (wall_energy_flux.py): the penalty dashpot's power c v_n^2 at the floor (Lagrangian),
-  the normal kinetic energy the step took from the floor cells approaching it (Eulerian);
+  the normal kinetic energy the step took from the floor cells approaching it and from the
+  pairs of cells stopping each other where voids close, in the whole layer (Eulerian:
+  wall_energy_flux.landing_terms, compaction_landing.py), the floor row's part printed apart;
 * the flux form, Johnson & Jackson's wall law with the wall's mean squared normal velocity
   U_w^2 / 2 as the slip and phi' = 1, at the floor row's phi and T (Kumaran 1998's
   leading-order scaling rho_s phi g0 sqrt(T) U_w^2, net of the collision loss, e_w 0.8);
@@ -36,8 +38,10 @@ from vibroflow.continuum.eulerian.mesh import EulerianMesh
 from vibroflow.continuum.eulerian.wall import MeshWall
 from vibroflow.continuum.grid import Grid
 from vibroflow.continuum.grid_update import TubFrame
+from vibroflow.continuum.kinetic_stress import KINETIC_COLUMNS
 from vibroflow.continuum.kinetic_theory import KineticParameters
 from vibroflow.continuum.mpm import solver as mpm
+from vibroflow.continuum.temperature_balance import kinetic_stress_of, temperature_step
 from vibroflow.continuum.temperature_field import TemperatureModel
 from vibroflow.continuum.timestep import stable_dt
 from vibroflow.continuum.wall_energy_flux import (WallEnergy, collision_loss_W_m2,
@@ -59,7 +63,8 @@ def lattice(depth, spacing):
 
 def run(depth, cycles, method="lagrangian"):
     """Per step of the shaken layer: time (s), floor force (N/m), landing power per floor
-    width (W/m^2), the floor row's T (m^2/s^2) and phi (-); the layer's weight (N/m)."""
+    width (W/m^2), the floor row's T (m^2/s^2) and phi (-) (Eulerian: and the floor row's part
+    of the landing, W/m^2); the layer's weight (N/m)."""
     mat = ContinuumMaterial()
     sp = DX / 2
     kn = (mat.bulk_modulus + 4 * mat.shear_modulus / 3) / sp
@@ -103,9 +108,16 @@ def run_eulerian(depth, cycles, mat, kn, motion, prm):
     state = eulerian.init_state(system, np.where(fill, mat.critical_density * mesh.h ** 2, 0.0))
     floor = system.wall_cells[mesh.normal[system.wall_cells, 1] > 0.5]
     low = z < DX
+    ts = temperature_step(model, mat.critical_density / mat.solid_density, system.dt,
+                          mat.p_wave_speed())
+    p_kin = np.zeros((state.n, KINETIC_COLUMNS))
     rows = []
     for _ in range(cycles * int(round(1.0 / (FREQUENCY * system.dt)))):
-        start = (state.mass.copy(), state.v.copy())
+        # the stress the step scatters, the kinetic one as the run's loop computes it
+        kinetic_stress_of(state.density, state.temperature, state.L, state.stress,
+                          state.gamma_dot, state.phase, ts, p_kin)
+        start = (state.mass.copy(), state.v.copy(), state.density.copy(),
+                 state.stress + p_kin[:, :4])
         p0 = float(state.mass @ state.v[:, 1])
         eulerian.advance(system, state, 1)
         t_mid = state.t - 0.5 * system.dt
@@ -115,8 +127,8 @@ def run_eulerian(depth, cycles, mat, kn, motion, prm):
         m = state.mass[low].sum()
         T = float((state.mass[low] * state.temperature[low]).sum() / m) if m > 0 else 0.0
         sums = eulerian.cell_wall_sums(system, state, start)
-        rows.append((state.t, force, sums[floor, 3].sum() / WIDTH,
-                     T, m / (mat.solid_density * WIDTH * DX)))
+        rows.append((state.t, force, sums[:, 3].sum() / WIDTH,
+                     T, m / (mat.solid_density * WIDTH * DX), sums[floor, 3].sum() / WIDTH))
     return np.array(rows), 9.81 * state.mass.sum(), prm
 
 
@@ -143,8 +155,11 @@ def main(argv=None):
         return per.mean(), float(stderr_of_batches(per))
 
     print(f"{a.method}: {len(used)} cycles, layer {a.depth} m, U_w = {u_w:.3f} m/s")
-    for name, v in (("floor force / weight", r[:, 1] / weight),
-                    ("landing source W/m^2", r[:, 2]), ("flux form W/m^2", flux_form)):
+    shown = [("floor force / weight", r[:, 1] / weight), ("landing source W/m^2", r[:, 2]),
+             ("flux form W/m^2", flux_form)]
+    if r.shape[1] > 5:
+        shown.append(("floor row's landing W/m^2", r[:, 5]))
+    for name, v in shown:
         by = [cycle_mean(v, eighth == k) for k in range(8)]
         m, s = cycle_mean(v)
         print(f"{name:22s} mean {m:8.3g} +- {s:.2g}; by eighth: "

@@ -187,7 +187,7 @@ def point_step(T, x, mass, volume, power, origin, shape, dt: float, model: Tempe
 
 
 def advance_with_temperature(state, n, model: TemperatureModel | None, compiled, balance,
-                             start=lambda: None, *, phi_cap: float = 1.0,
+                             start=lambda s_kin: None, *, phi_cap: float = 1.0,
                              dt: float = 0.0, wave_speed: float = math.inf) -> None:
     """n steps of a formulation, the step-by-step path (the solvers' advance_stepwise; their
     advance runs the same balance inside the compiled loops, temperature_balance.py): without
@@ -197,8 +197,8 @@ def advance_with_temperature(state, n, model: TemperatureModel | None, compiled,
     material's connection packing rho_c / rho_s, dt (s) the step, which with the cells' side
     caps the gas's viscosity, wave_speed (m/s) the elastic wave the step is set for, which caps
     the T of the kinetic pressure: timestep.kinetic_temperature_limit) scattered by that step,
-    its production (W/m^3), then the formulation's balance of T (balance(power, start()),
-    start() taken before the step)."""
+    its production (W/m^3), then the formulation's balance of T (balance(power, start(s_kin)),
+    start taken before the step, given the stress s_kin the step scatters)."""
     n = int(n)
     if n <= 0:
         return
@@ -217,7 +217,7 @@ def advance_with_temperature(state, n, model: TemperatureModel | None, compiled,
         else:
             s_kin[:, :4] = 0.0
             s_kin[:, 4] = 1.0
-        before = start()
+        before = start(s_kin)
         compiled(1, s_kin)
         production_W_m3(state.stress, state.L, state.gamma_dot, s_kin, power)
         balance(power, before)

@@ -189,7 +189,8 @@ def cell_wall_terms(phi, T, sums, h, restitution, specularity, landing, void, pr
     """The cells' wall heating (W/m^3) and wall cooling coefficient a_w (module docstring),
     both (nx, nz), from the cells' solid fraction phi, temperature T (m^2/s^2) and per-cell sums
     (nx, nz, 4) of `contact_terms`; h cell side (m); a cell below the void solid fraction gets
-    nothing."""
+    nothing, a cell touching no wall only its landing column (the material stopped in it:
+    compaction_landing.py)."""
     nx, nz = phi.shape
     heat = np.zeros((nx, nz))
     cool = np.zeros((nx, nz))
@@ -197,7 +198,13 @@ def cell_wall_terms(phi, T, sums, h, restitution, specularity, landing, void, pr
     for i in range(nx):
         for k in range(nz):
             f = phi[i, k]
-            if f < void or sums[i, k, 0] <= 0.0:
+            if f < void:
+                continue
+            if sums[i, k, 0] <= 0.0:
+                # no wall here: only the landing of the material stopped in the cell
+                # (compaction_landing.py)
+                if landing and sums[i, k, 3] > 0.0:
+                    heat[i, k] = sums[i, k, 3] / area
                 continue
             if specularity >= 0.0:
                 q = slip_production_W_m2(specularity, f, T[i, k], 1.0, prm) * sums[i, k, 1]

@@ -55,6 +55,7 @@ from ..grid_step import grid_spec, grid_work
 from ..grid_update import LabFrame
 from ..mpm.solver import ContinuumBlowUp
 from ..state import ContinuumState
+from ..compaction_landing import compaction_terms
 from ..kinetic_stress import KINETIC_COLUMNS
 from ..temperature_balance import temperature_step
 from ..temperature_field import advance_with_temperature, cell_step
@@ -308,14 +309,15 @@ def advance_stepwise(system: EulerianSystem, state: EulerianState, n: int) -> No
     h = mesh.h
     periodic = system.grid_spec[3]
 
-    def start():
-        return state.mass.reshape(shape).copy(), state.v.copy()
+    def start(s_kin):
+        return (state.mass.reshape(shape).copy(), state.v.copy(), state.density.copy(),
+                state.stress + s_kin[:, :4])
 
     def balance(power, before):
-        m_start, v_start = before
+        m_start, v_start, rho_start, sigma_start = before
         # the start's masses for the landing: the remap below moves m_start in place
-        landing_start = (m_start.ravel().copy(), v_start) if model.walls is not None and \
-            model.walls.landing else None
+        landing_start = (m_start.ravel().copy(), v_start, rho_start, sigma_start) \
+            if model.walls is not None and model.walls.landing else None
         # T carried with the mass: the same transport of the step's start mass by the same
         # face velocities as the kernel's remap
         T = state.temperature.reshape((1,) + shape)
@@ -345,10 +347,17 @@ def cell_wall_sums(system: EulerianSystem, state: EulerianState, start=None) -> 
     column is not the dashpot's c v_n^2: the wall layer's material is held by its closed
     faces, not by the dashpot, so its normal velocity is no approach (fed with c v_n^2,
     tub47-quick's side-wall cells heat without bound).  With start = (mass (N,) kg/m, v (N, 2)
-    m/s) the cells' at the step's start, it is the landing measured
-    (wall_energy_flux.landing_terms: the normal kinetic energy the step took from the wall
-    cells that approached the wall); without, none."""
+    m/s, density (N,) kg/m^3, the stress the step scatters (N, 4) Pa: the elastic-plastic plus
+    the temperature's) the cells' at the step's start, it is the landing measured: the
+    normal kinetic energy the step took from the wall cells that approached the wall
+    (wall_energy_flux.landing_terms) and from the pairs of cells that approached each other
+    where voids close (compaction_landing.compaction_terms); without, none."""
     out = np.zeros((state.n, 4))
+    if start is not None:
+        mesh = system.mesh
+        compaction_terms(start[0], start[1], start[2], start[3], state.v, mesh.h,
+                         mesh.open_x, mesh.open_z, system.material.critical_density,
+                         system.dt, out)
     w = system.wall
     if w is not None:
         c = system.wall_cells
@@ -361,7 +370,7 @@ def cell_wall_sums(system: EulerianSystem, state: EulerianState, start=None) -> 
                       system.dt, part)
         part[:, 3] = 0.0
         if start is not None:
-            m0, v0 = start
+            m0, v0 = start[0], start[1]
             landing_terms(v0[c], m0[c], state.v[c], state.mass[c], system.mesh.normal[c],
                           hist["fn"][c], system.dt, part)
         out[c] += part

@@ -1,0 +1,244 @@
+"""The landing counted where the falling material is stopped (continuum/compaction_landing.py):
+the pairs of Eulerian cells that stop each other where voids close, against hand values, the
+energy bookkeeping of a loose block landing on a floor, and Galilean invariance.
+
+A loose block (its material below the critical density: voids to close) falling onto the floor
+at V is stopped row by row from the floor up, a completely inelastic compaction (Mehta & Luck
+1990's block): with no dissipation and no other source (e = e_w = 1, an elastic material, T
+passive), the fluctuation energy gained is, step by step, the normal kinetic energy the floor
+row and the colliding pairs lose (to round-off), and over the landing it is the block's
+kinetic energy ½ M V^2 plus gravity's work while it stops, less the elastic energy left in
+the compacted block, never more than the mean motion loses.
+"""
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vibroflow.continuum.compaction_landing import compaction_terms
+from vibroflow.continuum.constitutive import ContinuumMaterial
+from vibroflow.continuum.eulerian import solver as eulerian
+from vibroflow.continuum.eulerian.mesh import EulerianMesh
+from vibroflow.continuum.eulerian.wall import MeshWall
+from vibroflow.continuum.grid_update import LabFrame
+from vibroflow.continuum.kinetic_theory import KineticParameters
+from vibroflow.continuum.temperature_field import TemperatureModel, fluctuation_energy_J_m
+from vibroflow.continuum.timestep import stable_dt
+from vibroflow.continuum.wall_energy_flux import WallEnergy, landing_terms
+from vibroflow.measure.stats import stderr_of_batches
+
+G_ACC = 9.81
+DX = 0.01
+RHO_C = 1500.0
+
+
+def test_a_pair_stopping_where_a_void_closes_loses_its_relative_normal_energy():
+    # a column of three cells (h = 0.1 m) over a 2-cell periodic row, dt = 1e-4 s: hand values
+    h, dt = 0.1, 1e-4
+    full = RHO_C * h * h
+    open_x = np.zeros((2, 3), bool)
+    open_z = np.zeros((1, 4), bool)
+    open_z[0, 1:3] = True
+    # a: full, connected, at rest; b: half full, falling 0.5 -> 0.1 m/s; c: full, falling with b
+    m0 = np.array([1.01 * full, 0.5 * full, 1.01 * full])
+    rho0 = np.array([1.01 * RHO_C, RHO_C, 1.01 * RHO_C])
+    v0 = np.array([[0.0, 0.0], [0.3, -0.5], [0.0, -0.5]])
+    v1 = np.array([[0.0, 0.0], [0.3, -0.1], [0.0, -0.5]])
+    out = np.zeros((3, 4))
+    compaction_terms(m0, v0, rho0, np.zeros((3, 4)), v1, h, open_x, open_z, RHO_C, dt, out)
+    mu = m0[0] * m0[1] / (m0[0] + m0[1])
+    lost = 0.5 * mu * (0.5 ** 2 - 0.1 ** 2)           # b against a; c moved with b at the start
+    shares = np.array([m0[1], m0[0], 0.0]) / (m0[0] + m0[1])
+    assert out[:, 3] * dt == pytest.approx(lost * shares, rel=1e-12, abs=1e-15)
+    assert np.all(out[:, :3] == 0.0)
+    # the same pair both full and connected: elastic, nothing; separating: nothing
+    out[:] = 0.0
+    compaction_terms(np.full(3, 1.01 * full), v0, np.full(3, 1.01 * RHO_C), np.zeros((3, 4)), v1,
+                     h, open_x,
+                     open_z, RHO_C, dt, out)
+    assert np.all(out == 0.0)
+    compaction_terms(m0, -v0, rho0, np.zeros((3, 4)), -v1, h, open_x, open_z, RHO_C, dt, out)
+    assert np.all(out == 0.0)
+    # a compressive normal stress of 2000 Pa on a and b: its work on the approach,
+    # 2000 Pa x 0.1 m x (0.5 + 0.1) / 2 m/s x dt, is stored, not lost
+    sigma = np.zeros((3, 4))
+    sigma[:2, 1] = -2000.0
+    compaction_terms(m0, v0, rho0, sigma, v1, h, open_x, open_z, RHO_C, dt, out)
+    assert out[:, 3] * dt == pytest.approx((lost - 2000.0 * h * 0.3 * dt) * shares, rel=1e-12)
+
+
+def test_the_wall_is_the_pairs_infinitely_heavy_limit_and_the_pair_is_galilean():
+    # two cells side by side across a periodic x face (ncx = 2, ncz = 1), the right one loose
+    h, dt = 0.1, 1e-4
+    open_x = np.ones((3, 1), bool)
+    open_x[1] = False                            # only the periodic face 0 between 1 and 0
+    open_z = np.zeros((2, 2), bool)
+    heavy = 1e12
+    m0 = np.array([heavy, 0.3])
+    rho0 = np.array([RHO_C, 0.9 * RHO_C])
+    v0 = np.array([[0.0, 0.0], [0.4, 0.0]])      # cell 1 moves towards cell 0 through face 0
+    v1 = np.array([[0.0, 0.0], [0.1, 0.0]])
+    out = np.zeros((2, 4))
+    compaction_terms(m0, v0, rho0, np.zeros((2, 4)), v1, h, open_x, open_z, RHO_C, dt, out)
+    wall = np.zeros((1, 4))
+    landing_terms(v0[1:], m0[1:], v1[1:], m0[1:], np.array([[-1.0, 0.0]]), np.ones(1), dt, wall)
+    assert out[:, 3].sum() == pytest.approx(wall[0, 3], rel=1e-9)
+    assert out[1, 3] == pytest.approx(wall[0, 3], rel=1e-9)
+    moved = np.zeros((2, 4))
+    u = np.array([2.0, -3.0])
+    compaction_terms(m0, v0 + u, rho0, np.zeros((2, 4)), v1 + u, h, open_x, open_z, RHO_C, dt,
+                     moved)
+    assert moved[:, 3] == pytest.approx(out[:, 3], rel=1e-12)
+
+
+def _loose_block(v, looseness, height, settled=False):
+    """(system, state): a block `height` deep over a 4 cm x-periodic floor, the default media
+    made elastic (mu_s = 10: no plastic work), its T passive from 0 with no dissipation
+    (e = e_w = 1, a smooth wall), moving at v (m/s): its material at `looseness` times the
+    critical density, stress-free (loose: voids to close), or settled at its lithostatic
+    stress and density."""
+    mat = ContinuumMaterial(mu_s=10.0, mu_2=20.0)
+    mesh = EulerianMesh.box(0.0, 0.04, 0.0, 0.08, DX, periodic=True)
+    h = mesh.h
+    wall = MeshWall((mat.bulk_modulus + 4 * mat.shear_modulus / 3) / h, 0.0)
+    prm = KineticParameters(diameter_m=mat.diameter, density_kg_m3=mat.solid_density,
+                            restitution=1.0)
+    model = TemperatureModel(prm, h, 0.0, False, WallEnergy(restitution=1.0, specularity=0.0))
+    system = eulerian.EulerianSystem(mesh, mat, stable_dt(mat, DX, h, [wall]),
+                                     frame=LabFrame((0.0, -G_ACC)), wall=wall,
+                                     temperature=model)
+    z = system.x[:, 1]
+    fill = mesh.inside & (z < height)
+    rho = np.full(mesh.n, looseness * mat.critical_density)
+    stress = np.zeros((mesh.n, 4))
+    if settled:
+        p = mat.critical_density * G_ACC * np.clip(height - z, 0.0, None) * fill
+        rho = mat.critical_density * np.exp(p / mat.bulk_modulus)
+        stress[:, 0] = stress[:, 1] = stress[:, 3] = -p
+    state = eulerian.init_state(system, np.where(fill, rho * h * h, 0.0), rho, stress=stress)
+    state.v[fill] = v
+    return system, state
+
+
+def _mechanical_energy(system, state):
+    """The mean motion's kinetic plus gravity's potential energy (J/m)."""
+    return float(0.5 * (state.mass * (state.v ** 2).sum(axis=1)).sum()
+                 + G_ACC * (state.mass * system.x[:, 1]).sum())
+
+
+def _landing_steps(system, state, n):
+    """Per step: the fluctuation energy gained (J/m), the landing the states give (the floor
+    row's and the pairs', J/m), the mechanical energy lost (J/m) and the largest shear rate."""
+    c = system.wall_cells
+    h = system.mesh.h
+    rho_s = system.temperature.params.density_kg_m3
+    void = system.temperature.grid.void_solid_fraction
+    rows = []
+    for _ in range(n):
+        start = (state.mass.copy(), state.v.copy(), state.density.copy(), state.stress.copy())
+        e_before = fluctuation_energy_J_m(state.mass, state.temperature)
+        k_before = _mechanical_energy(system, state)
+        eulerian.advance(system, state, 1)
+        sums = eulerian.cell_wall_sums(system, state, start)
+        # a cell below the void solid fraction holds no fluctuation energy (temperature_step)
+        held = state.mass / (rho_s * h * h) >= void
+        rows.append((fluctuation_energy_J_m(state.mass, state.temperature) - e_before,
+                     sums[held, 3].sum() * system.dt, k_before - _mechanical_energy(system, state),
+                     state.gamma_dot.max(), sums[c, 3].sum() * system.dt))
+    return np.array(rows)
+
+
+def _loose_landing():
+    """A 4 cm loose block (0.8 of the critical density) landing at 0.5 m/s, the 200 steps
+    (14 ms) until it has stopped: its mass (kg/m), its kinetic energy at impact (J/m) and
+    _landing_steps' rows."""
+    speed = 0.5
+    system, state = _loose_block((0.0, -speed), 0.8, 0.04)
+    mass = state.mass.sum()
+    return mass, 0.5 * mass * speed ** 2, _landing_steps(system, state, 200)
+
+
+def test_a_loose_block_landing_feeds_what_its_collisions_destroy():
+    mass, impact, r = _loose_landing()
+    assert np.all(r[:, 3] == 0.0)                # elastic: no plastic work
+    # step by step the pairs' and the floor row's loss is the fluctuation energy's gain, to
+    # the round-off of the block's fluctuation energy (0.16 J/m)
+    assert r[:, 0] == pytest.approx(r[:, 1], rel=1e-9, abs=1e-13)
+    gained, lost = r[:, 0].sum(), r[:, 2].sum()
+    # never more than the mean motion loses (kinetic plus gravity's potential energy: 1.18 of
+    # the impact's, the compaction's 8 mm of fall adding to it); today 0.21 of the impact's
+    assert gained <= lost
+    assert gained > 0.2 * impact
+    # the pairs add half as much again to the floor row's landing (0.108 J/m of the 0.159)
+    assert r[:, 4].sum() < 0.75 * gained
+
+
+@pytest.mark.xfail(strict=True, reason="the pairs count 0.18 of what the mean motion loses "
+                   "(0.159 of 0.887 J/m): the grid's transfer spreads the compaction front over "
+                   "several cells, whose pairs each see a fraction of the velocity jump")
+def test_a_loose_block_landing_feeds_all_that_its_mean_motion_loses():
+    # the completely inelastic compaction (Mehta & Luck 1990's block): the mean motion's whole
+    # loss becomes fluctuation energy
+    _, _, r = _loose_landing()
+    assert r[:, 0].sum() == pytest.approx(r[:, 2].sum(), rel=0.2)
+
+
+def test_a_settled_block_resting_or_sliding_compacts_nothing():
+    # Galilean: a settled block sliding at 0.5 m/s along a smooth floor feeds what it feeds at
+    # rest (its surface's residual ringing), and that is nothing beside a landing at the same
+    # speed (M u^2 / 2)
+    speed = 0.5
+    fed = []
+    for u in (0.0, speed):
+        system, state = _loose_block((u, 0.0), 1.0, 0.04, settled=True)
+        impact = 0.5 * state.mass.sum() * speed ** 2
+        fed.append(_landing_steps(system, state, 100)[:, 1].sum())
+    assert fed[1] == pytest.approx(fed[0], rel=0.02)
+    assert fed[1] < 1e-4 * impact
+
+
+def _wall_feed():
+    """benchmarks/wall_feed.py, loaded from its file (benchmarks/ is no package)."""
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "wall_feed.py"
+    spec = importlib.util.spec_from_file_location("wall_feed", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def shaken_layer():
+    """The Eulerian shaken layer of benchmarks/wall_feed.py (5 cm, tub47's 1.5 mm at 47 Hz,
+    T coupled), 35 cycles: the cycle-mean landing feed and the floor row's part (W/m^2), each
+    with its batch-means standard error over five batches of the 30 cycles after the first 5."""
+    wf = _wall_feed()
+    r, _, _ = wf.run(0.05, 35, "eulerian")
+    cycle = np.floor(r[:, 0] * wf.FREQUENCY + 1e-9).astype(int)
+    batches = np.array_split(np.arange(5, cycle.max() + 1), 5)
+
+    def mean(col):
+        per = np.array([r[np.isin(cycle, b), col].mean() for b in batches])
+        return per.mean(), float(stderr_of_batches(per))
+
+    return mean(2), mean(5)
+
+
+@pytest.mark.slow
+def test_the_shaken_layers_landing_is_counted_where_the_layer_is_stopped(shaken_layer):
+    # the floor row alone fed 4.5 +- 1.6 W/m^2 (docs/validation.md section 22); the pairs
+    # above it, where the layer's voids close, feed most of the landing (38 +- 20 W/m^2)
+    (total, _), (floor, _) = shaken_layer
+    assert total > 25.0
+    assert total > 5.0 * floor
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="the Eulerian layer's landing feeds 38 +- 20 W/m^2, 0.14 "
+                   "of the DEM's 274 +- 12 (the Lagrangian's dashpot 73.5 +- 19): the pairs "
+                   "count a fraction of the compaction front's loss (the loose block's 0.18)")
+def test_the_shaken_layers_landing_feeds_the_dems_wall_flux(shaken_layer):
+    (total, se), _ = shaken_layer
+    assert abs(total - 274.0) < 3.0 * np.hypot(se, 12.0)
