@@ -309,7 +309,10 @@ class WallFlux(Table):
 class Conductivity(Table):
     """[kinetic.conductivity]: the DEM's fluctuation-energy flux q = -C kappa grad T against
     Gidaspow's conductivity kappa (calibration.conductivity): the multiplier C with its
-    batch-means error, R^2, the cells' scatter and C by solid-fraction bin."""
+    batch-means error, R^2, the cells' scatter and C by solid-fraction bin; and (gd_*) the
+    two-term law q = -A kappa_GD grad T - B mu_GD grad phi of Garzo & Dufty
+    (calibration.heat_flux_law): A, B, R^2 and the share of cells it points the right way, as
+    it is and fitted, by solid-fraction bin and on the cycle means."""
     model: Text | None = None
     multiplier: Number | None = None
     multiplier_stderr: Number | None = None
@@ -327,6 +330,39 @@ class Conductivity(Table):
     multiplier_by_solid_fraction: list[Number] | None = None
     multiplier_by_solid_fraction_stderr: list[Number] | None = None
     cells_by_solid_fraction: list[Count] | None = None
+    r2_by_solid_fraction: list[Number] | None = None
+    # Garzo & Dufty's q = -A kappa grad T - B mu grad phi (calibration.heat_flux_law)
+    gd_model: Text | None = None
+    gd_status: Text | None = None
+    gd_conductivity_multiplier: Number | None = None
+    gd_conductivity_multiplier_stderr: Number | None = None
+    gd_density_multiplier: Number | None = None
+    gd_density_multiplier_stderr: Number | None = None
+    gd_r2: Number | None = None
+    gd_direction_fraction: Number | None = None
+    gd_r2_as_is: Number | None = None
+    gd_direction_fraction_as_is: Number | None = None
+    gd_density_share: Number | None = None
+    gd_conductivity_multiplier_by_solid_fraction: list[Number] | None = None
+    gd_conductivity_multiplier_stderr_by_solid_fraction: list[Number] | None = None
+    gd_density_multiplier_by_solid_fraction: list[Number] | None = None
+    gd_density_multiplier_stderr_by_solid_fraction: list[Number] | None = None
+    gd_r2_by_solid_fraction: list[Number] | None = None
+    gd_direction_fraction_by_solid_fraction: list[Number] | None = None
+    gd_cycle_mean_cells: Count | None = None
+    gd_cycle_mean_conductivity_multiplier: Number | None = None
+    gd_cycle_mean_conductivity_multiplier_stderr: Number | None = None
+    gd_cycle_mean_density_multiplier: Number | None = None
+    gd_cycle_mean_density_multiplier_stderr: Number | None = None
+    gd_cycle_mean_r2: Number | None = None
+    gd_cycle_mean_direction_fraction: Number | None = None
+    gd_cycle_mean_unweighted_cells: Count | None = None
+    gd_cycle_mean_unweighted_conductivity_multiplier: Number | None = None
+    gd_cycle_mean_unweighted_conductivity_multiplier_stderr: Number | None = None
+    gd_cycle_mean_unweighted_density_multiplier: Number | None = None
+    gd_cycle_mean_unweighted_density_multiplier_stderr: Number | None = None
+    gd_cycle_mean_unweighted_r2: Number | None = None
+    gd_cycle_mean_unweighted_direction_fraction: Number | None = None
 
 
 class Kinetic(Table):
