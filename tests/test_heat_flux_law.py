@@ -109,8 +109,12 @@ def test_fit_recovers_known_multipliers(A0, B0):
         assert abs(a - A0) < 4 * sa and abs(b - B0) < 4 * sb
     if A0 == B0 == 1.0:
         assert fit["r2_as_is"] == pytest.approx(fit["r2"], abs=0.01)
-    table = heat_flux_law_table(fit)
+    flat = fit_heat_flux_law(_cells(A0, B0), RHO_S, D, E, PHI_RCP, weighted=False)
+    for key, v in (("conductivity_multiplier", A0), ("density_multiplier", B0)):
+        assert abs(flat[key] - v) < 3 * flat[key + "_stderr"]
+    table = heat_flux_law_table(fit, unweighted=flat)
     assert table["gd_status"] == "measured"
+    assert table["gd_unweighted_r2"] == flat["r2"]
 
 
 def test_cycle_mean_fit_recovers_known_multipliers():

@@ -101,6 +101,7 @@ def heat_flux_law_record(energy_flux, res, e, fit, prog) -> dict:
              f"{gd['conductivity_multiplier_stderr']:.2g}, B = {gd['density_multiplier']:.3g} "
              f"+- {gd['density_multiplier_stderr']:.2g} ({gd['cells']} cells, R^2 "
              f"{gd['r2']:.3g}, the flux's direction right in {gd['direction_fraction']:.0%})")
+    unweighted = fit_heat_flux_law(*args, weighted=False)
     cycle = {}
     for weighted in (True, False):
         try:
@@ -108,7 +109,7 @@ def heat_flux_law_record(energy_flux, res, e, fit, prog) -> dict:
         except InputError as err:
             prog.log(f"kinetic: the cycle-mean heat flux not fitted: {err}")
             cycle[weighted] = None
-    return heat_flux_law_table(gd, cycle[True], cycle[False])
+    return heat_flux_law_table(gd, cycle[True], cycle[False], unweighted)
 
 
 def kinetic_record(res, phases, prog, energy_flux=None) -> dict | None:

@@ -139,10 +139,12 @@ def _usable(phi, T, gT, gp, q, phib, Tb, gTb, gpb, qb, lo, hi, axis):
 def fit_heat_flux_law(flux, rho_s: float, diameter: float, restitution: float, phi_rcp: float,
                       g0_form: str = "chialvo_sundaresan", phi_range=PHI_RANGE,
                       phi_bin_edges=PHI_BIN_EDGES, min_gradient_snr: float = MIN_GRADIENT_SNR,
-                      min_cells: int = 10) -> dict:
+                      weighted: bool = True, min_cells: int = 10) -> dict:
     """A and B fitted on an energy-flux Dataset (energy_flux.EnergyFluxGrainer.
     energy_flux_fields, with solid_fraction_gradient and the *_batches, *_stderr); rho_s
-    (kg/m^3), diameter d (m), restitution e and the g0 closure's phi_rcp.
+    (kg/m^3), diameter d (m), restitution e and the g0 closure's phi_rcp; `weighted` False:
+    equal weights (the batch-means errors of q from a few batches scatter widely, and weights
+    from them favour the quiet cells; equal weights favour the loud ones).
 
     Returns {model, conductivity_multiplier (A), density_multiplier (B), their *_stderr, cells,
     r2, direction_fraction, r2_as_is, direction_fraction_as_is (A = B = 1), density_share (the
@@ -159,7 +161,7 @@ def fit_heat_flux_law(flux, rho_s: float, diameter: float, restitution: float, p
         if "energy_flux_stderr" in flux:
             qse = np.asarray(flux["energy_flux_stderr"].values, float)[..., (0, 2)]
             ok &= np.all(qse > 0, axis=-1)
-            w_all = 1.0 / np.where(qse > 0, qse, 1.0) ** 2
+            w_all = 1.0 / np.where(qse > 0, qse, 1.0) ** 2 if weighted else np.ones_like(q)
         else:
             w_all = np.ones_like(q)
     n = int(ok.sum())
@@ -245,9 +247,11 @@ def fit_cycle_mean(flux, rho_s: float, diameter: float, restitution: float, phi_
 
 
 def heat_flux_law_table(fit: dict, cycle: dict | None = None,
-                        cycle_unweighted: dict | None = None) -> dict:
-    """The keys fit_heat_flux_law's (and the cycle-mean fits') results add to calibration.toml's
-    [kinetic.conductivity] table (io.calibration_file.Conductivity), each prefixed gd_."""
+                        cycle_unweighted: dict | None = None,
+                        unweighted: dict | None = None) -> dict:
+    """The keys fit_heat_flux_law's (weighted, and `unweighted`) and the cycle-mean fits'
+    results add to calibration.toml's [kinetic.conductivity] table
+    (io.calibration_file.Conductivity), each prefixed gd_."""
     out = {"gd_model": fit["model"]}
     for k in ("conductivity_multiplier", "conductivity_multiplier_stderr", "density_multiplier",
               "density_multiplier_stderr", "r2", "direction_fraction", "r2_as_is",
@@ -257,7 +261,8 @@ def heat_flux_law_table(fit: dict, cycle: dict | None = None,
     for k in ("conductivity_multiplier", "conductivity_multiplier_stderr", "density_multiplier",
               "density_multiplier_stderr", "r2", "direction_fraction"):
         out[f"gd_{k}_by_solid_fraction"] = [float(v) for v in by[k]]
-    for tag, c in (("cycle_mean", cycle), ("cycle_mean_unweighted", cycle_unweighted)):
+    for tag, c in (("unweighted", unweighted), ("cycle_mean", cycle),
+                   ("cycle_mean_unweighted", cycle_unweighted)):
         if c is None:
             continue
         out[f"gd_{tag}_cells"] = int(c["cells"])

@@ -349,6 +349,13 @@ class Conductivity(Table):
     gd_density_multiplier_stderr_by_solid_fraction: list[Number] | None = None
     gd_r2_by_solid_fraction: list[Number] | None = None
     gd_direction_fraction_by_solid_fraction: list[Number] | None = None
+    gd_unweighted_cells: Count | None = None
+    gd_unweighted_conductivity_multiplier: Number | None = None
+    gd_unweighted_conductivity_multiplier_stderr: Number | None = None
+    gd_unweighted_density_multiplier: Number | None = None
+    gd_unweighted_density_multiplier_stderr: Number | None = None
+    gd_unweighted_r2: Number | None = None
+    gd_unweighted_direction_fraction: Number | None = None
     gd_cycle_mean_cells: Count | None = None
     gd_cycle_mean_conductivity_multiplier: Number | None = None
     gd_cycle_mean_conductivity_multiplier_stderr: Number | None = None
