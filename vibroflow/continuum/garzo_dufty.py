@@ -7,8 +7,8 @@ density gradient (Brey, Dufty, Kim & Santos 1998, Phys. Rev. E 58, 4638, dilute;
     q = -kappa grad T - mu grad n = -kappa grad T - mu_phi grad phi,   mu_phi = mu n / phi,
 
 with T (m^2/s^2) the granular temperature, n the number density and phi the solid fraction.
-In the first Sonine approximation (Garzo & Dufty 1999, section IV and appendix C;
-chi = g0 of the continuum's form, chi' = d g0 / d phi):
+In the first Sonine approximation of Garzo & Dufty (1999), with chi = g0 of the
+continuum's form and chi' = d g0 / d phi:
 
     c*    = 32 (1 - e)(1 - 2 e^2) / (81 - 17 e + 30 e^2 (1 - e))
     zeta* = (5/12) chi (1 - e^2)(1 + 3 c* / 32)                          cooling rate
