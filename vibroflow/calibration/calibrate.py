@@ -25,8 +25,9 @@ Stages:
 7. kinetic theory's constants (kinetic, wall_energy): phi_rcp of g0 and Johnson & Jackson's
    frictional pressure fitted jointly to the phase-resolved cells' p / (rho_s phi T) with the
    scenario's ball-ball restitution, the walls' energy flux from the wall contacts, and the
-   multiplier of Gidaspow's conductivity from the cells' fluctuation-energy flux
-   (energy_flux, conductivity) -> [kinetic];
+   multiplier of Gidaspow's conductivity from the cells' fluctuation-energy flux, and beside
+   it Garzo & Dufty's two-term heat flux (energy_flux, conductivity, heat_flux_law) ->
+   [kinetic];
 8. RUN_DIR/calibration.toml (every parameter with its uncertainty and its provenance, and
    last the [scenario] it was measured on, which the continuum checks its own against; its
    tables built by calibration_tables, checked and written as the record
@@ -57,6 +58,7 @@ from .bed_contacts import contact_pair, contact_stiffness_at, coordination
 from .calibration_tables import calibration_tables
 from .compaction import compaction_table
 from .conductivity import conductivity_table, fit_conductivity
+from .heat_flux_law import fit_cycle_mean, fit_heat_flux_law, heat_flux_law_table
 from .dem_result import DEMResult
 from .elastic import affine_moduli_linear
 from .impact_temperature import compare_impact_relations, on_nodes
@@ -84,6 +86,30 @@ def interrupted_calibration(run_dir: Path):
         raise Interrupted(f"interrupted while calibrating {run_dir}; nothing to resume (every "
                           f"file written is whole): run `vibroflow calibrate {run_dir}` "
                           "again") from None
+
+
+def heat_flux_law_record(energy_flux, res, e, fit, prog) -> dict:
+    """The gd_* keys of [kinetic.conductivity]: Garzo & Dufty's two-term heat flux fitted to
+    the cells (heat_flux_law), per phase and on the cycle means; {} when not measurable."""
+    args = (energy_flux, res.solid_density, res.diameter, e, fit["phi_rcp"], fit["g0_form"])
+    try:
+        gd = fit_heat_flux_law(*args)
+    except InputError as err:
+        prog.log(f"kinetic: Garzo & Dufty's heat flux not measured: {err}")
+        return {}
+    prog.log(f"kinetic: Garzo & Dufty's heat flux: A = {gd['conductivity_multiplier']:.3g} +- "
+             f"{gd['conductivity_multiplier_stderr']:.2g}, B = {gd['density_multiplier']:.3g} "
+             f"+- {gd['density_multiplier_stderr']:.2g} ({gd['cells']} cells, R^2 "
+             f"{gd['r2']:.3g}, the flux's direction right in {gd['direction_fraction']:.0%})")
+    unweighted = fit_heat_flux_law(*args, weighted=False)
+    cycle = {}
+    for weighted in (True, False):
+        try:
+            cycle[weighted] = fit_cycle_mean(*args, weighted=weighted)
+        except InputError as err:
+            prog.log(f"kinetic: the cycle-mean heat flux not fitted: {err}")
+            cycle[weighted] = None
+    return heat_flux_law_table(gd, cycle[True], cycle[False], unweighted)
 
 
 def kinetic_record(res, phases, prog, energy_flux=None) -> dict | None:
@@ -115,6 +141,8 @@ def kinetic_record(res, phases, prog, energy_flux=None) -> dict | None:
                      f"{c['r2']:.3g}; {c['status']})")
         except InputError as err:
             prog.log(f"kinetic: conductivity not measured: {err}")
+        if cond is not None:
+            cond.update(heat_flux_law_record(energy_flux, res, e, fit, prog))
     flux = wall_flux(res, phases)
     if fit is None and flux is None:
         return None

@@ -181,5 +181,6 @@ def conductivity_table(fit: dict) -> dict:
     out.update(solid_fraction_edges=list(by["edges"]),
                multiplier_by_solid_fraction=[float(v) for v in by["multiplier"]],
                multiplier_by_solid_fraction_stderr=[float(v) for v in by["multiplier_stderr"]],
-               cells_by_solid_fraction=[int(v) for v in by["cells"]])
+               cells_by_solid_fraction=[int(v) for v in by["cells"]],
+               r2_by_solid_fraction=[float(v) for v in by["r2"]])
     return out

@@ -22,7 +22,9 @@ fluctuation velocity of ball i about the coarse-grained velocity V = P / rho at 
   with the wall's load in sigma_c as the contact stress has it;
 * temperature T = (tr K - P . V) / (3 rho) and its gradient exactly from the kernel gradients:
   with G_b = sum m |v|^2 dW/dx_b, grad T = (grad A - 3 T grad rho) / (3 rho),
-  grad_b A = G_b - 2 P_a dP_a/dx_b / rho + |P|^2 d rho/dx_b / rho^2.
+  grad_b A = G_b - 2 P_a dP_a/dx_b / rho + |P|^2 d rho/dx_b / rho^2;
+* solid fraction gradient grad phi = grad rho / rho_s (one grain density), what the
+  density-gradient term of the heat flux is driven by (conductivity.py).
 
 `EnergyFluxGrainer` is a CoarseGrainer (its fields are the same, bit for bit) that deposits
 these sums as well, with the same compiled deposits: the balls' with m |v|^2 as the mass gives
@@ -159,13 +161,16 @@ class EnergyFluxGrainer(CoarseGrainer):
         Vf = np.nan_to_num(V)
         qc = E - np.einsum("...a,...ab->...b", Vf, sig_c)
         qk = np.where((rho > 0)[..., None], qk, 0.0)
-        return {"solid_fraction": ball[..., B_VOL, :, :] * s, "temperature": T,
+        rho_s = self.solid_density()
+        return {"solid_fraction": ball[..., B_VOL, :, :] * s,
+                "solid_fraction_gradient": drho / rho_s, "velocity": V, "temperature": T,
                 "temperature_gradient": gradT, "kinetic_energy_flux": qk,
                 "collisional_energy_flux": qc, "energy_flux": qk + qc}
 
     def energy_flux_fields(self, phase_resolved: bool = True) -> xr.Dataset:
-        """Dataset of solid_fraction (-), temperature (m^2/s^2), temperature_gradient (m/s^2,
-        last dim k = x, z), kinetic_, collisional_ and energy_flux (W/m^2, last dim i = x, y,
+        """Dataset of solid_fraction (-), its gradient solid_fraction_gradient (1/m, last dim
+        k = x, z), velocity V (m/s, the tub frame's, last dim i), temperature (m^2/s^2),
+        temperature_gradient (m/s^2, last dim k), kinetic_, collisional_ and energy_flux (W/m^2, last dim i = x, y,
         z), dims (phase,) x, z; each with <name>_stderr (batch means, when n_batches >= 2) and
         <name>_batches (leading dim batch: the field of each batch alone)."""
         if self._weight.sum() <= 0:
@@ -182,11 +187,11 @@ class EnergyFluxGrainer(CoarseGrainer):
             main = self._flux_of(*(a.sum(axis=(0, 1)) for a in acc), self._weight.sum())
             per = self._flux_of(*(a.sum(axis=1) for a in acc), self._weight.sum(axis=1))
             lead = ()
-        units = {"solid_fraction": "1", "temperature": "m2 s-2",
-                 "temperature_gradient": "m s-2"}
+        units = {"solid_fraction": "1", "solid_fraction_gradient": "m-1", "velocity": "m s-1",
+                 "temperature": "m2 s-2", "temperature_gradient": "m s-2"}
         data = {}
         for name, arr in main.items():
-            extra = (("k",) if name == "temperature_gradient" else ("i",)) \
+            extra = (("k",) if name.endswith("_gradient") else ("i",)) \
                 if arr.ndim > len(lead) + 2 else ()
             dims = lead + ("x", "z") + extra
             u = units.get(name, "W m-2")

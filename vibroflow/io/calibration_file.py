@@ -9,98 +9,23 @@ it is read, not a solver that runs on a default; every other table and key is op
 value carries its standard error (`*_stderr`, NaN where none could be estimated); keys a table
 does not declare are kept as they are (extra="allow"), and the record keeps the file's key order,
 so `Calibration.to_toml_dict` gives back exactly the tables the file holds and a record written
-and read again is the same file, byte for byte.  Units are SI, named in the keys (`_Pa`, `_m`,
+and read again is the same file, byte for byte (the types and `Table`:
+calibration_table.py).  Units are SI, named in the keys (`_Pa`, `_m`,
 `_m_s`, `_1_s`, `_kg_m3`).
 """
 from __future__ import annotations
 
-import math
 import tomllib
 from pathlib import Path
-from typing import Annotated, Any
 
-import numpy as np
 import tomli_w
-from pydantic import BaseModel, ConfigDict, PlainValidator, PrivateAttr, ValidationError, \
-    model_validator
+from pydantic import ValidationError
 
 from vibroflow.errors import InputError
 from vibroflow.io.atomic import write_text_atomic
+from vibroflow.io.calibration_table import Count, Finite, Number, Table, Text
 
 CALIBRATION_FILE = "calibration.toml"
-
-
-def _finite(v):
-    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
-            or not math.isfinite(v):
-        raise ValueError("must be a finite number")
-    return v
-
-
-def _number(v):
-    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
-        raise ValueError("must be a number (nan where it could not be estimated)")
-    return v
-
-
-def _count(v):
-    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
-        raise ValueError("must be a whole number >= 0")
-    return v
-
-
-def _text(v):
-    if not isinstance(v, str):
-        raise ValueError("must be a string")
-    return v
-
-
-# the values keep the type they are given (an int stays an int, so the file is written back as
-# it was read); NaN and inf are allowed where a value may be unknown
-Finite = Annotated[float, PlainValidator(_finite)]
-Number = Annotated[float, PlainValidator(_number)]
-Count = Annotated[int, PlainValidator(_count)]
-Text = Annotated[str, PlainValidator(_text)]
-
-
-def _plain(obj):
-    """A value as TOML writes it: numpy scalars as Python's, None left out, records as tables."""
-    if isinstance(obj, Table):
-        return obj.to_toml_dict()
-    if isinstance(obj, dict):
-        return {str(k): _plain(v) for k, v in obj.items() if v is not None}
-    if isinstance(obj, (list, tuple)):
-        return [_plain(v) for v in obj]
-    if isinstance(obj, (np.floating, float)):
-        return float(obj)
-    if isinstance(obj, (np.integer,)):
-        return int(obj)
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    return obj
-
-
-class Table(BaseModel):
-    """One table of calibration.toml: declared keys typed, others kept, the key order kept."""
-
-    model_config = ConfigDict(frozen=True, extra="allow")
-    _order: tuple = PrivateAttr(default=())
-
-    @model_validator(mode="wrap")
-    @classmethod
-    def _keep_order(cls, data: Any, handler):
-        rec = handler(data)
-        if isinstance(data, dict):
-            rec._order = tuple(str(k) for k in data)
-        return rec
-
-    def to_toml_dict(self) -> dict:
-        """The table as the file holds it: its keys in the file's order (declared keys given
-        otherwise after them), None left out, sub-tables as dicts."""
-        values = {**{k: getattr(self, k) for k in type(self).model_fields},
-                  **(self.__pydantic_extra__ or {})}
-        keys = [*self._order, *(k for k in values if k not in self._order)]
-        return {k: _plain(values[k]) for k in keys if values.get(k) is not None}
 
 
 class CoarseGraining(Table):
@@ -309,7 +234,10 @@ class WallFlux(Table):
 class Conductivity(Table):
     """[kinetic.conductivity]: the DEM's fluctuation-energy flux q = -C kappa grad T against
     Gidaspow's conductivity kappa (calibration.conductivity): the multiplier C with its
-    batch-means error, R^2, the cells' scatter and C by solid-fraction bin."""
+    batch-means error, R^2, the cells' scatter and C by solid-fraction bin; and (gd_*) the
+    two-term law q = -A kappa_GD grad T - B mu_GD grad phi of Garzo & Dufty
+    (calibration.heat_flux_law): A, B, R^2 and the share of cells it points the right way, as
+    it is and fitted, by solid-fraction bin and on the cycle means."""
     model: Text | None = None
     multiplier: Number | None = None
     multiplier_stderr: Number | None = None
@@ -327,6 +255,46 @@ class Conductivity(Table):
     multiplier_by_solid_fraction: list[Number] | None = None
     multiplier_by_solid_fraction_stderr: list[Number] | None = None
     cells_by_solid_fraction: list[Count] | None = None
+    r2_by_solid_fraction: list[Number] | None = None
+    # Garzo & Dufty's q = -A kappa grad T - B mu grad phi (calibration.heat_flux_law)
+    gd_model: Text | None = None
+    gd_status: Text | None = None
+    gd_conductivity_multiplier: Number | None = None
+    gd_conductivity_multiplier_stderr: Number | None = None
+    gd_density_multiplier: Number | None = None
+    gd_density_multiplier_stderr: Number | None = None
+    gd_r2: Number | None = None
+    gd_direction_fraction: Number | None = None
+    gd_r2_as_is: Number | None = None
+    gd_direction_fraction_as_is: Number | None = None
+    gd_density_share: Number | None = None
+    gd_conductivity_multiplier_by_solid_fraction: list[Number] | None = None
+    gd_conductivity_multiplier_stderr_by_solid_fraction: list[Number] | None = None
+    gd_density_multiplier_by_solid_fraction: list[Number] | None = None
+    gd_density_multiplier_stderr_by_solid_fraction: list[Number] | None = None
+    gd_r2_by_solid_fraction: list[Number] | None = None
+    gd_direction_fraction_by_solid_fraction: list[Number] | None = None
+    gd_unweighted_cells: Count | None = None
+    gd_unweighted_conductivity_multiplier: Number | None = None
+    gd_unweighted_conductivity_multiplier_stderr: Number | None = None
+    gd_unweighted_density_multiplier: Number | None = None
+    gd_unweighted_density_multiplier_stderr: Number | None = None
+    gd_unweighted_r2: Number | None = None
+    gd_unweighted_direction_fraction: Number | None = None
+    gd_cycle_mean_cells: Count | None = None
+    gd_cycle_mean_conductivity_multiplier: Number | None = None
+    gd_cycle_mean_conductivity_multiplier_stderr: Number | None = None
+    gd_cycle_mean_density_multiplier: Number | None = None
+    gd_cycle_mean_density_multiplier_stderr: Number | None = None
+    gd_cycle_mean_r2: Number | None = None
+    gd_cycle_mean_direction_fraction: Number | None = None
+    gd_cycle_mean_unweighted_cells: Count | None = None
+    gd_cycle_mean_unweighted_conductivity_multiplier: Number | None = None
+    gd_cycle_mean_unweighted_conductivity_multiplier_stderr: Number | None = None
+    gd_cycle_mean_unweighted_density_multiplier: Number | None = None
+    gd_cycle_mean_unweighted_density_multiplier_stderr: Number | None = None
+    gd_cycle_mean_unweighted_r2: Number | None = None
+    gd_cycle_mean_unweighted_direction_fraction: Number | None = None
 
 
 class Kinetic(Table):
