@@ -21,7 +21,7 @@ from collections import namedtuple
 import numba as nb
 import numpy as np
 
-from .kinetic_stress import RATE_RATIO, kinetic_stress
+from .kinetic_stress import KINETIC_COLUMNS, RATE_RATIO, kinetic_stress
 from .temperature_step import TemperatureGrid, step_temperature_walls
 from .timestep import kinetic_temperature_limit
 from .wall_energy_flux import cell_wall_terms
@@ -34,6 +34,24 @@ from .wall_energy_flux import cell_wall_terms
 TemperatureStep = namedtuple("TemperatureStep", [
     "prm", "grid", "phi_cap", "T_cap", "eta_factor", "coupled", "walls", "restitution",
     "specularity", "landing", "dt"])
+
+
+def phi_cap_of(material) -> float:
+    """The material's connection packing rho_c / rho_s (-), where the temperature's closures
+    cap the solid fraction."""
+    return material.critical_density / material.solid_density
+
+
+def loop_arguments(system, n: int) -> tuple:
+    """What a formulation's compiled multi-step call takes for the temperature, for a system
+    (MPMSystem or EulerianSystem) of n points or cells: the kinetic stress's buffer (n,
+    KINETIC_COLUMNS), and the TemperatureStep when the system carries T; without T an empty
+    buffer alone (the loop without the balance)."""
+    if system.temperature is None:
+        return (np.empty((0, KINETIC_COLUMNS)),)
+    return (np.zeros((n, KINETIC_COLUMNS)),
+            temperature_step(system.temperature, phi_cap_of(system.material), system.dt,
+                             system.material.p_wave_speed()))
 
 
 def temperature_step(model, phi_cap: float, dt: float, wave_speed: float) -> TemperatureStep:

@@ -56,8 +56,7 @@ from ..grid_update import LabFrame
 from ..mpm.solver import ContinuumBlowUp
 from ..state import ContinuumState
 from ..compaction_landing import compaction_terms
-from ..kinetic_stress import KINETIC_COLUMNS
-from ..temperature_balance import temperature_step
+from ..temperature_balance import loop_arguments, phi_cap_of
 from ..temperature_field import advance_with_temperature, cell_step
 from ..wall_energy_flux import contact_terms, landing_terms, partition_terms
 from . import fused, temperature_loop
@@ -286,17 +285,8 @@ def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
     n = int(n)
     if n <= 0:
         return
-    if system.temperature is None:
-        _advance(system, state, n, np.empty((0, KINETIC_COLUMNS)))
-        return
-    _advance(system, state, n, np.zeros((state.n, KINETIC_COLUMNS)),
-             temperature_step(system.temperature, _phi_cap(system), system.dt,
-                              system.material.p_wave_speed()))
+    _advance(system, state, n, *loop_arguments(system, state.n))
 
-
-def _phi_cap(system) -> float:
-    """The material's connection packing rho_c / rho_s (-)."""
-    return system.material.critical_density / system.material.solid_density
 
 
 def advance_stepwise(system: EulerianSystem, state: EulerianState, n: int) -> None:
@@ -336,7 +326,7 @@ def advance_stepwise(system: EulerianSystem, state: EulerianState, n: int) -> No
 
     advance_with_temperature(state, n, model,
                              lambda k, p_kin: _advance(system, state, k, p_kin), balance, start,
-                             phi_cap=_phi_cap(system), dt=system.dt,
+                             phi_cap=phi_cap_of(system.material), dt=system.dt,
                              wave_speed=system.material.p_wave_speed())
 
 

@@ -34,8 +34,7 @@ from ..grid import Grid
 from ..grid_step import chunk_bounds, grid_spec, grid_work
 from ..grid_update import LabFrame
 from ..state import ContinuumState
-from ..kinetic_stress import KINETIC_COLUMNS
-from ..temperature_balance import temperature_step
+from ..temperature_balance import loop_arguments, phi_cap_of
 from ..temperature_field import advance_with_temperature, point_step
 from ..timestep import stable_dt
 from ..wall_energy_flux import contact_terms, normal_of_force, partition_terms
@@ -284,12 +283,7 @@ def advance(system: MPMSystem, state: MPMState, n: int) -> None:
     n = int(n)
     if n <= 0:
         return
-    if system.temperature is None:
-        _advance(system, state, n, np.empty((0, KINETIC_COLUMNS)))
-        return
-    _advance(system, state, n, np.zeros((state.n, KINETIC_COLUMNS)),
-             temperature_step(system.temperature, _phi_cap(system), system.dt,
-                              system.material.p_wave_speed()))
+    _advance(system, state, n, *loop_arguments(system, state.n))
 
 
 def advance_stepwise(system: MPMSystem, state: MPMState, n: int) -> None:
@@ -305,13 +299,9 @@ def advance_stepwise(system: MPMSystem, state: MPMState, n: int) -> None:
 
     advance_with_temperature(state, n, system.temperature,
                              lambda k, p_kin: _advance(system, state, k, p_kin), balance,
-                             phi_cap=_phi_cap(system), dt=system.dt,
+                             phi_cap=phi_cap_of(system.material), dt=system.dt,
                              wave_speed=system.material.p_wave_speed())
 
-
-def _phi_cap(system) -> float:
-    """The material's connection packing rho_c / rho_s (-)."""
-    return system.material.critical_density / system.material.solid_density
 
 
 def point_wall_sums(system: MPMSystem, state: MPMState) -> np.ndarray:
