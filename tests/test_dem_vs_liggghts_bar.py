@@ -1,0 +1,73 @@
+"""The bar's impact map: vibroflow's DEM against LIGGGHTS 3.8 with the same bar as an STL mesh
+(the export carries the part), on a short tub47-bar, judged against the seed-to-seed scatter.
+
+The short case is benchmarks/bar_maps.py's SHORT_SETS (tub47-bar 19.05 mm long, 1500 balls,
+the bar at z = 0.045 m under about 4 cm of media, 0.25 s of vibration averaged over the last
+0.2 s).  Each code runs fill seed 1 here; the scatter is each code's map difference between
+fill seeds 1 and 2, measured once with `python benchmarks/bar_maps.py --seeds 1 2` and stored in
+tests/data/tub47-bar-short-maps/ (README.md there says how).  The maps are compared as
+tub47.md compares fields: E(LIGGGHTS, DEM) of the impact rate per patch and of the mean normal
+speed per patch (vibroflow.analysis.impact_maps) at most 1.5 times the DEM's seed-to-seed E.
+"""
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from vibroflow import liggghts as LG
+from vibroflow.analysis.impact_maps import (part_map, rate_difference, read_map_csv,
+                                            speed_difference)
+from vibroflow.dem.run import run_dem
+from vibroflow.scenario.io import load_scenario
+
+needs_liggghts = pytest.mark.skipif(
+    LG.find_liggghts() is None or shutil.which("mpirun") is None,
+    reason="LIGGGHTS (apt-get install liggghts) or mpirun not installed")
+
+pytestmark = [pytest.mark.slow, needs_liggghts]
+
+DATA = Path(__file__).parent / "data" / "tub47-bar-short-maps"
+#: benchmarks/bar_maps.py's SHORT_SETS
+SHORT_SETS = ["tub.length=0.01905", "fill.count=1500", "parts.0.center=[0.05, 0.0, 0.045]",
+              "fill.settle_time=0.3", "fill.max_settle_time=0.4", "run.duration=0.25",
+              "run.average_last=0.2"]
+
+
+def short_case(seed: int):
+    return load_scenario("tub47-bar", [*SHORT_SETS, f"run.seed={seed}"])
+
+
+@pytest.fixture(scope="module")
+def maps(tmp_path_factory):
+    root = tmp_path_factory.mktemp("bar_maps")
+    s = short_case(1)
+    run_dem(s, root / "dem", progress=False)
+    LG.export_deck(s, root / "deck")
+    LG.run_deck(root / "deck", nprocs=2, timeout=3600)
+    LG.import_run(root / "deck" / "post", s, root / "liggghts")
+    return {"dem": part_map(root / "dem" / "parts.nc", "bar"),
+            "liggghts": part_map(root / "liggghts" / "parts.nc", "bar"),
+            "dem1": read_map_csv(DATA / "dem-seed1.csv"),
+            "dem2": read_map_csv(DATA / "dem-seed2.csv")}
+
+
+def test_the_bar_receives_its_impacts_in_both_codes(maps):
+    """Both codes hit the bar, on its upper half most (the bed rests on it)."""
+    for code in ("dem", "liggghts"):
+        rate = maps[code]["rate"]
+        assert rate.sum() > 0, code
+        assert rate[:18].sum() > rate[18:].sum(), code  # 0 - 180 degrees: the upper half
+
+
+def test_the_bar_maps_differ_by_no_more_than_the_seeds_do(maps):
+    """tub47.md's rule for fields, on the bar's map: E(LIGGGHTS, DEM) <= 1.5 E_seed(DEM)."""
+    e_seed_rate = rate_difference(maps["dem2"], maps["dem1"])
+    e_seed_speed = speed_difference(maps["dem2"], maps["dem1"])
+    e_rate = rate_difference(maps["liggghts"], maps["dem"])
+    e_speed = speed_difference(maps["liggghts"], maps["dem"])
+    print(f"\nE_rate between the codes {e_rate:.3f} (DEM seeds {e_seed_rate:.3f}), E_speed "
+          f"{e_speed:.3f} (DEM seeds {e_seed_speed:.3f})")
+    assert e_rate <= 1.5 * e_seed_rate
+    assert e_speed <= 1.5 * e_seed_speed
