@@ -53,13 +53,11 @@ from vibroflow.errors import InputError
 from vibroflow.io.atomic import write_text_atomic
 from vibroflow.io.folder_lock import check_writable_dir, folder_lock
 from vibroflow.liggghts.part_deck import (add_part_dump, add_part_meshes, check_part_names,
-                                          moving_meshes, near_box, part_file, part_mesh_ids)
-from vibroflow.liggghts.part_meshes import part_triangles
+                                          moving_meshes, part_mesh_ids, write_part_meshes)
 from vibroflow.liggghts.parameters import (PairTables, _check_exportable, _contact_law_deck,
                                            dump_vibration_steps, model_arguments, pair_tables,
                                            seed_primes, type_materials)
-from vibroflow.liggghts.stl import (DEFAULT_MAX_SAGITTA, arc_segments, sagitta, write_stl,
-                                    write_tub_meshes)
+from vibroflow.liggghts.stl import DEFAULT_MAX_SAGITTA, arc_segments, sagitta, write_tub_meshes
 from vibroflow.liggghts.template import _PROCESSORS, _SLOT, _Deck, _fmt, _short, _whole, safe_name
 from vibroflow.scenario.io import dump_scenario
 from vibroflow.tub.geometry import geometry_of
@@ -389,10 +387,8 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
         # 10 digits: the default %g would round the ids above 999999 and the forces to 6 digits
         add('dump_modify dpairs every v_pnext format "' + " ".join(["%.10g"] * 6) + '"' + first)
     if parts:
-        window_start = int(round((run.duration - run.average_last) / dt))
-        part_tris = [part_triangles(part, L, max_sagitta) for part in parts]
-        add_part_dump(deck, near_box(part_tris, d + skin + reach + swing),
-                      max(1, window_start - 1))
+        add_part_dump(deck, parts, L, max_sagitta, d + skin + reach + swing,
+                      int(round((run.duration - run.average_last) / dt)))
     add("variable tvib equal (step-${n0})*{}", _fmt(dt))
     add(f'fix series all print {S} "${{tvib}} ${{ekin}}" file {POST_DIR}/{SERIES_FILE} '
         'screen no title "# t_vibration_s kinetic_energy_J"', ke_every)
@@ -413,9 +409,7 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
                                           {"partitions": PARTITION_MESH_FILE})}:
             raise RuntimeError(f"vibroflow.liggghts.stl wrote {names}, the deck names "
                                f"{U_MESH_FILE}, {PARTITION_MESH_FILE}")
-        for part in parts:
-            write_stl(out_dir / part_file(part.name), part_triangles(part, L, max_sagitta),
-                      part.name)
+        write_part_meshes(out_dir, parts, L, max_sagitta)
         write_text_atomic(out_dir / POST_DIR / "dump_steps.txt", step_lines)
         deck_path = write_text_atomic(out_dir / DECK_NAME, deck_text)
         write_text_atomic(out_dir / "scenario.toml", toml_text)

@@ -23,10 +23,13 @@ motion and the per-step dump of the balls near it (docs/liggghts.md, "Parts in t
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from vibroflow.errors import InputError
-from vibroflow.liggghts.part_meshes import crease_angle_deg
+from vibroflow.liggghts.part_meshes import crease_angle_deg, part_triangles
+from vibroflow.liggghts.stl import write_stl
 from vibroflow.liggghts.template import _SLOT, _Deck, _fmt, safe_name
 
 #: post/ file of the balls near the parts, every step of the window
@@ -85,13 +88,23 @@ def near_box(meshes, pad: float) -> np.ndarray:
     return np.array([lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]])
 
 
-def add_part_dump(deck: _Deck, box, first_step: int) -> None:
-    """The per-step dump of the balls in `box` (near_box), from vibration step `first_step` on
-    (relative to n0, >= 1), into post/PART_DUMP."""
+def add_part_dump(deck: _Deck, parts, length: float, max_sagitta: float, pad: float,
+                  window_start: int) -> None:
+    """The per-step dump of the balls in the box around the parts' meshes widened by `pad` (m),
+    from one step before the window's first vibration step `window_start` (relative to n0; at
+    least step 1), into post/PART_DUMP."""
+    box = near_box([part_triangles(p, length, max_sagitta) for p in parts], pad)
     deck.add("# the balls near the parts, every step from one step before the window")
     deck.add("region pnear block {} {} {} {} {} {} units box", *(_fmt(v) for v in box))
-    deck.add("variable pfirst equal ${n0}+" + _SLOT, first_step)
+    deck.add("variable pfirst equal ${n0}+" + _SLOT, max(1, window_start - 1))
     deck.add("variable pstep equal (step>=v_pfirst)*(step+1)+(step<v_pfirst)*v_pfirst")
     deck.add("dump dpart all custom 1 post/" + PART_DUMP + " " + " ".join(PART_DUMP_COLUMNS))
     deck.add('dump_modify dpart every v_pstep region pnear sort id format "%d '
              + " ".join(["%.10g"] * 3 + ["%.7g"] * (len(PART_DUMP_COLUMNS) - 4)) + '"')
+
+
+def write_part_meshes(out_dir, parts, length: float, max_sagitta: float) -> None:
+    """Each part's mesh as out_dir/part_<name>.stl (ASCII, written atomically)."""
+    for p in parts:
+        write_stl(Path(out_dir) / part_file(p.name), part_triangles(p, length, max_sagitta),
+                  p.name)
