@@ -128,6 +128,7 @@ def test_a_part_name_that_could_change_the_deck_is_refused(tmp_path, field):
     assert not (tmp_path / "deck").exists()
 
 
+@pytest.mark.slow  # a fresh interpreter imports vibroflow: about 10 s
 def test_cli_refuses_a_part_name_with_a_space(tmp_path):
     """The scenario's own check refuses it first: one line, exit 2, nothing written."""
     r = subprocess.run([sys.executable, "-m", "vibroflow.cli", "export", "liggghts", "tub47-bar",
