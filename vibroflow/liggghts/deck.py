@@ -52,8 +52,9 @@ import numpy as np
 from vibroflow.errors import InputError
 from vibroflow.io.atomic import write_text_atomic
 from vibroflow.io.folder_lock import check_writable_dir, folder_lock
-from vibroflow.liggghts.part_deck import (add_part_dump, add_part_meshes, check_part_names,
-                                          moving_meshes, part_mesh_ids, write_part_meshes)
+from vibroflow.liggghts.part_deck import (add_part_dump, add_part_exclusions, add_part_meshes,
+                                          check_part_names, moving_meshes, part_mesh_ids,
+                                          write_part_meshes)
 from vibroflow.liggghts.parameters import (PairTables, _check_exportable, _contact_law_deck,
                                            dump_vibration_steps, model_arguments, pair_tables,
                                            seed_primes, type_materials)
@@ -308,7 +309,8 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
         *(_fmt(v) for v in (-R + margin, R - margin, iy_lo, iy_hi, R, ins_z_hi)))
     add("region uin union 2 ucyl ublk")
     add("region zcut block INF INF INF INF {} {} units box", _fmt(ins_z_lo), _fmt(ins_z_hi))
-    add("region ins intersect 2 uin zcut")
+    outside = add_part_exclusions(deck, parts, L, max_sagitta, margin)
+    add("region ins intersect {} uin zcut" + " {}" * len(outside), 2 + len(outside), *outside)
     add("fix ins all insert/rate/region seed {} distributiontemplate pdd1 nparticles {} "
         "particlerate {} insert_every {} overlapcheck yes all_in no maxattempt 200 vel "
         "constant 0. 0. 0. region ins ntry_mc 200000", seeds[2], count, _fmt(rate),

@@ -88,6 +88,25 @@ def near_box(meshes, pad: float) -> np.ndarray:
     return np.array([lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]])
 
 
+def add_part_exclusions(deck: _Deck, parts, length: float, max_sagitta: float,
+                        margin: float) -> list[str]:
+    """The regions outside each part (`side out`) for the fill's insertion region, so that no
+    ball is inserted in or on a part (LIGGGHTS' insertion checks overlaps with balls, not with
+    meshes): a cylinder's circle widened by `margin` (m, the ball radius and half the skin),
+    another part's mesh bounds widened by it.  Returns the regions' ids."""
+    ids = []
+    for k, p in enumerate(parts, 1):
+        if p.shape == "cylinder":
+            deck.add(f"region pout{k} cylinder y {_SLOT} {_SLOT} {_SLOT} INF INF side out "
+                     "units box", _fmt(p.center[0]), _fmt(p.center[2]), _fmt(p.radius + margin))
+        else:
+            box = near_box([part_triangles(p, length, max_sagitta)], margin)
+            deck.add(f"region pout{k} block {_SLOT} {_SLOT} {_SLOT} {_SLOT} {_SLOT} {_SLOT} "
+                     "side out units box", *(_fmt(v) for v in box))
+        ids.append(f"pout{k}")
+    return ids
+
+
 def add_part_dump(deck: _Deck, parts, length: float, max_sagitta: float, pad: float,
                   window_start: int) -> None:
     """The per-step dump of the balls in the box around the parts' meshes widened by `pad` (m),
