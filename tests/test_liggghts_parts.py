@@ -105,6 +105,11 @@ def test_the_deck_carries_the_bar_with_its_type_law_and_motion(tmp_path):
     assert g[0, 3] == pytest.approx(gn, rel=1e-9) and g[3, 0] == g[0, 3]
     assert info.tables.friction[0, 3] == 0.2
     # the balls near the bar every step from the step before the window (1000 - 1)
+    # the fill leaves the bar out: its circle widened by r + skin/2
+    margin = R_BALL + 0.5 * 0.3 * 2 * R_BALL
+    assert (f"region pout1 cylinder y 0.05 0.1 {R_BAR + margin:.10g} INF INF side out units box"
+            in deck)
+    assert "region ins intersect 3 uin zcut pout1\n" in deck
     assert "variable pfirst equal ${n0}+999\n" in deck
     assert "dump_modify dpart every v_pstep region pnear sort id" in deck
 
@@ -218,6 +223,15 @@ def test_a_known_contact_is_a_known_impact_and_load(tmp_path):
     ds = read_parts(tmp_path / "out" / "parts.nc")
     assert ds.attrs["method"] == "dem" and summary["parts"][0]["name"] == "bar"
     assert float(ds["impact_rate_per_area"].sel(part="bar")[9]) > 0
+    # a ball inside the bar (a fill that did not leave it out) is refused
+    good = (post / LG.BALL_DUMP).read_text()
+    (post / LG.BALL_DUMP).write_text(_dump(snaps, lambda k, st: [
+        _ball(5, (BAR[0], 0.01, BAR[2] + 0.005)).replace("5 ", "5 1 ", 1),
+        _ball(8, _on_bar(90.0, -1e-6)).replace("8 ", "8 1 ", 1)], cols))
+    with pytest.raises(InputError, match=r"balls.dump: ball id 5 \(and 0 more\) lies inside "
+                                         r"part 'bar' at the first snapshot"):
+        LG.import_run(post, None, tmp_path / "out2")
+    (post / LG.BALL_DUMP).write_text(good)
     # a part dump that skips a step is refused
     (post / PART_DUMP).write_text(_dump([N0 + 999, N0 + 1001], part_rows,
                                         cols.replace(" type", "")))

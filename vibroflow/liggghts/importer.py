@@ -29,7 +29,8 @@ from vibroflow.liggghts.deck import (BALL_DUMP, PAIR_DUMP, POST_DIR, SERIES_FILE
 from vibroflow.liggghts.dumps import DumpSnapshot, _StepReader, _whole_column, read_dump
 from vibroflow.liggghts.launch import loop_times
 from vibroflow.liggghts.parameters import _check_exportable
-from vibroflow.liggghts.part_contacts import PartGeometry, part_impacts, part_load_rows
+from vibroflow.liggghts.part_contacts import (PartGeometry, check_outside, part_impacts,
+                                              part_load_rows)
 from vibroflow.liggghts.part_deck import PART_DUMP
 from vibroflow.liggghts.template import _short
 from vibroflow.measure.summary import tub_summary
@@ -193,6 +194,9 @@ def _import(post: Path, scenario, n0: int, tmp_dir: Path) -> dict:
                 pos[:, 1] = np.mod(pos[:, 1], scenario.tub.length)
             vel = data[:, [c["vx"], c["vy"], c["vz"]]]
             omg = data[:, [c["omegax"], c["omegay"], c["omegaz"]]]
+            if parts and n_snap == 0:
+                check_outside(part_geom, pos, (pose[0], pose[1], pose[2], motion.pivot_x,
+                                               motion.pivot_z), ids, ball_path)
             writer.append("snapshots", time=[t], step=[step - n0], phase=[(t * f) % 1.0],
                           tub_pose=pose[None], position=pos[None].astype(np.float32),
                           velocity=vel[None].astype(np.float32),

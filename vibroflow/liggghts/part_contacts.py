@@ -105,6 +105,18 @@ def _tub_pose(motion, t: float):
             float(p["thetadot"]))
 
 
+def check_outside(geom: PartGeometry, pos_lab: np.ndarray, pose, ids, path) -> None:
+    """InputError when a ball's centre lies inside a part (pose: X, Z, theta, pivot_x,
+    pivot_z): its contacts from the inside would read as impacts."""
+    for k, p in enumerate(geom.parts):
+        inside = geom.exact_nearest(k, geom.frame_points(k, pos_lab, pose))[:, 0] < 0.0
+        if np.any(inside):
+            j = int(np.argmax(inside))
+            raise InputError(f"{path}: ball id {ids[j]} (and {int(inside.sum()) - 1} more) lies "
+                             f"inside part {p.name!r} at the first snapshot; the deck's fill must "
+                             "leave the parts out (export the deck again)")
+
+
 def part_impacts(path, geom: PartGeometry, motion, n0: int, dt: float, first_step: int,
                  ids: np.ndarray, density: float) -> dict:
     """The /part_impacts columns (module docstring) from the part dump at `path`: impacts at
