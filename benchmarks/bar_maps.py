@@ -5,7 +5,8 @@ an STL mesh) on a short tub47-bar, each code with several fill seeds.
 
 The short case (SHORT_SETS; tests/test_dem_vs_liggghts_bar.py runs the same): tub47-bar 19.05 mm
 long (three ball diameters) with 1500 balls, the bar lowered to z = 0.045 m so that it lies
-under about 4 cm of media, 0.3 s of settling (LIGGGHTS' balls need it to land), 0.25 s of
+under about 4 cm of media, 0.5 s of settling (at most 0.6 s: LIGGGHTS' balls, inserted at
+random up to the rim, need it to land and come to rest), 0.25 s of
 vibration averaged over its last 0.2 s (9 cycles).  Writes DIR/<code>-seed<N>/ (the runs),
 DIR/<code>-seed<N>.csv (the bar's map, vibroflow.analysis.impact_maps.write_map_csv) and prints
 the map differences E_rate and E_speed between the seeds of each code and between the codes.
@@ -26,7 +27,7 @@ from vibroflow.scenario.io import load_scenario
 
 #: the short tub47-bar of the comparison
 SHORT_SETS = ["tub.length=0.01905", "fill.count=1500", "parts.0.center=[0.05, 0.0, 0.045]",
-              "fill.settle_time=0.3", "fill.max_settle_time=0.4", "run.duration=0.25",
+              "fill.settle_time=0.5", "fill.max_settle_time=0.6", "run.duration=0.25",
               "run.average_last=0.2"]
 
 

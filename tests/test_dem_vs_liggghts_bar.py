@@ -31,7 +31,7 @@ pytestmark = [pytest.mark.slow, needs_liggghts]
 DATA = Path(__file__).parent / "data" / "tub47-bar-short-maps"
 #: benchmarks/bar_maps.py's SHORT_SETS
 SHORT_SETS = ["tub.length=0.01905", "fill.count=1500", "parts.0.center=[0.05, 0.0, 0.045]",
-              "fill.settle_time=0.3", "fill.max_settle_time=0.4", "run.duration=0.25",
+              "fill.settle_time=0.5", "fill.max_settle_time=0.6", "run.duration=0.25",
               "run.average_last=0.2"]
 
 
