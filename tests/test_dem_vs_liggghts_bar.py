@@ -8,6 +8,8 @@ fill seeds 1 and 2, measured once with `python benchmarks/bar_maps.py --seeds 1 
 tests/data/tub47-bar-short-maps/ (README.md there says how).  The maps are compared as
 tub47.md compares fields: E(LIGGGHTS, DEM) of the impact rate per patch and of the mean normal
 speed per patch (vibroflow.analysis.impact_maps) at most 1.5 times the DEM's seed-to-seed E.
+The rate maps agree; the speed maps do not (a strict xfail, its reason the measured numbers).
+About 5 minutes on 2 quiet cores (LIGGGHTS 2 ranks: 5 CPU minutes; the DEM: 2).
 """
 from __future__ import annotations
 
@@ -59,13 +61,30 @@ def test_the_bar_receives_impacts_all_around_in_both_codes(maps):
         assert (maps[code]["rate"] > 0).all(), code
 
 
-def test_the_bar_maps_differ_by_no_more_than_the_seeds_do(maps):
-    """tub47.md's rule for fields, on the bar's map: E(LIGGGHTS, DEM) <= 1.5 E_seed(DEM)."""
-    e_seed_rate = rate_difference(maps["dem2"], maps["dem1"])
-    e_seed_speed = speed_difference(maps["dem2"], maps["dem1"])
-    e_rate = rate_difference(maps["liggghts"], maps["dem"])
-    e_speed = speed_difference(maps["liggghts"], maps["dem"])
-    print(f"\nE_rate between the codes {e_rate:.3f} (DEM seeds {e_seed_rate:.3f}), E_speed "
-          f"{e_speed:.3f} (DEM seeds {e_seed_speed:.3f})")
-    assert e_rate <= 1.5 * e_seed_rate
-    assert e_speed <= 1.5 * e_seed_speed
+def _print(name, e_codes, e_seed):
+    print(f"\n{name}: E between the codes {e_codes:.3f}, the DEM's seed-to-seed E {e_seed:.3f}, "
+          f"limit {1.5 * e_seed:.3f}")
+
+
+def test_the_impact_rate_maps_differ_by_no_more_than_the_seeds_do(maps):
+    """tub47.md's rule for fields, on the bar's impact rate per patch:
+    E_rate(LIGGGHTS, DEM) <= 1.5 E_rate(DEM seed 2, DEM seed 1) (stored: 0.552)."""
+    e_seed = rate_difference(maps["dem2"], maps["dem1"])
+    e_codes = rate_difference(maps["liggghts"], maps["dem"])
+    _print("impact rate", e_codes, e_seed)
+    assert e_codes <= 1.5 * e_seed
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "LIGGGHTS' impacts on the bar are about 40 % faster and 40 % fewer than the DEM's, with "
+    "about the same energy flux: E_speed(LIGGGHTS, DEM) 0.57 - 0.64 against the limit 0.36 "
+    "(1.5 x the DEM's seed-to-seed 0.240; LIGGGHTS' own is 0.296). LIGGGHTS' randomly inserted "
+    "bed is still flowing when the vibration starts (2.6e-5 and 1.1e-5 J per ball at "
+    "max_settle_time, the DEM's 1e-8 J), 0.05 s before the window (docs/validation.md 25)"))
+def test_the_impact_speed_maps_differ_by_no_more_than_the_seeds_do(maps):
+    """The same rule on the mean normal impact speed per patch:
+    E_speed(LIGGGHTS, DEM) <= 1.5 E_speed(DEM seed 2, DEM seed 1) (stored: 0.240)."""
+    e_seed = speed_difference(maps["dem2"], maps["dem1"])
+    e_codes = speed_difference(maps["liggghts"], maps["dem"])
+    _print("mean normal speed", e_codes, e_seed)
+    assert e_codes <= 1.5 * e_seed
