@@ -7,11 +7,12 @@ dumps imported back as vibroflow results, so the two codes are compared with the
     import_run(DIR/post, scenario, OUT) OUT/dem.h5 (vibroflow's DEM layout, source "liggghts"),
                                     OUT/summary.json, OUT/bulk_velocity.csv
 
-Modules: stl (the tub's triangle meshes), parameters (the contact law, seeds and snapshot steps a
-scenario gives the deck), template (what user input may put into a deck), deck (the export),
-launch (running LIGGGHTS; its log's loop times), dumps (reading LIGGGHTS text dumps), contacts
-(the dumped contacts as dem.h5 rows), importer (a run's dumps as dem.h5, summary.json and
-bulk_velocity.csv).
+Modules: stl (the tub's triangle meshes), part_meshes (the parts' meshes), parameters (the
+contact law, seeds and snapshot steps a scenario gives the deck), template (what user input may
+put into a deck), deck (the export), part_deck (the parts' lines of the deck), launch (running
+LIGGGHTS; its log's loop times), dumps (reading LIGGGHTS text dumps), contacts (the dumped
+contacts as dem.h5 rows), part_contacts (the parts' impacts and loads), importer (a run's dumps
+as dem.h5, summary.json, bulk_velocity.csv and, with parts, parts.nc).
 """
 from vibroflow.liggghts.deck import (BALL_DUMP, DECK_NAME, PAIR_DUMP, POST_DIR, SERIES_FILE,
                                      START_FILE, WALL_DUMP, DeckInfo, export_deck)

@@ -39,7 +39,7 @@ def _wall_rows(snap, snap_index, ids, pos_lab, pose, motion, scenario, geom, pat
     """vibroflow wall_contacts rows from one snapshot of the wall/gran/local dump.
 
     Columns (compute wall/gran/local id force_normal force_tangential): mesh id (0 = the U,
-    1 = the partitions), triangle id, particle id, F_n (3), F_t (3) on the ball, lab frame.
+    1 = the partitions, then the parts, whose rows are left out here), triangle id, particle id, F_n (3), F_t (3) on the ball, lab frame.
     LIGGGHTS-PUBLIC 3.8 does not fill contactPoint (it dumps zeros), so the contact point is
     taken as vibroflow does: the point of the analytic wall nearest to the ball's centre (tub
     frame); it differs from the facet's by at most the facets' sagitta.  F_n is |F_n| signed by
@@ -58,7 +58,8 @@ def _wall_rows(snap, snap_index, ids, pos_lab, pose, motion, scenario, geom, pat
     fnv = data[:, 3:6]
     ftv = data[:, 6:9]
     k = np.clip(np.searchsorted(ids, pid), 0, ids.size - 1)
-    good = ids[k] == pid
+    # mesh indices from the parts' on are the parts' contacts (vibroflow.liggghts.part_contacts)
+    good = (ids[k] == pid) & (mesh < (1 if scenario.tub.periodic else 2))
     mesh, tri, k, fnv, ftv = mesh[good], tri[good], k[good], fnv[good], ftv[good]
     if scenario.tub.periodic:
         wall = np.zeros(mesh.shape, np.int8)

@@ -11,7 +11,9 @@ docs/liggghts.md):
   for ball-ball, m for ball-wall (models.md), gammat_abs = 0; Coulomb friction and the CDT rolling
   resistance from the pair's mu and mu_r.  A scenario whose contacts are all Hertz gets LIGGGHTS'
   `hertz` (moduli from the materials, restitution through LIGGGHTS' own damping formula).
-* Atom types: 1 = the balls' material, 2 = the tub wall's, 3 = the partitions'.
+* Atom types: 1 = the balls' material, 2 = the tub wall's, 3 = the partitions', 4 and up one
+  per part of [[parts]] (its mesh, wall fix, motion and per-step dump:
+  vibroflow.liggghts.part_deck).
 * Walls: the U and the partitions as STL meshes (vibroflow.liggghts.stl; the U's facets joined
   into one smooth surface by `curvature`, so contact histories cross their creases), moved rigidly
   with the tub by two superposed `fix move/mesh` per mesh: `linear/variable` (the translation) then
@@ -50,6 +52,9 @@ import numpy as np
 from vibroflow.errors import InputError
 from vibroflow.io.atomic import write_text_atomic
 from vibroflow.io.folder_lock import check_writable_dir, folder_lock
+from vibroflow.liggghts.part_deck import (add_part_dump, add_part_exclusions, add_part_meshes,
+                                          check_part_names, moving_meshes, part_mesh_ids,
+                                          write_part_meshes)
 from vibroflow.liggghts.parameters import (PairTables, _check_exportable, _contact_law_deck,
                                            dump_vibration_steps, model_arguments, pair_tables,
                                            seed_primes, type_materials)
@@ -58,6 +63,7 @@ from vibroflow.liggghts.template import _PROCESSORS, _SLOT, _Deck, _fmt, _short,
 from vibroflow.scenario.io import dump_scenario
 from vibroflow.tub.geometry import geometry_of
 from vibroflow.tub.motion import TubMotion
+from vibroflow.tub.parts import parts_of
 
 #: the files of a deck folder: the deck, and what LIGGGHTS writes into post/ for the importer
 DECK_NAME = "in.tub"
@@ -143,6 +149,8 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     """
     _check_exportable(scenario)
     _check_names(scenario)
+    check_part_names(scenario)
+    parts = parts_of(scenario)
     if not isinstance(processors, str) or _PROCESSORS.fullmatch(processors) is None:
         raise InputError(f"processors = {_short(processors)}: must be three counts, each a "
                          "whole number >= 1 or *, such as '* 1 1'")
@@ -227,7 +235,10 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     add = deck.add
     add("# LIGGGHTS 3.8 deck written by vibroflow.liggghts for case '{}'", scenario.case)
     add("# Run in this folder:  mpirun -np 2 liggghts -in in.tub   (see README.txt)")
-    add("# SI units.  Atom types: 1 = balls ({}), 2 = tub wall ({}), 3 = partitions ({}).", *mats)
+    add("# SI units.  Atom types: 1 = balls ({}), 2 = tub wall ({}), 3 = partitions ({}).",
+        *mats[:3])
+    for k, part in enumerate(parts):
+        add("# Atom type {}: part {} ({})", k + 4, part.name, mats[k + 3])
     add()
     add("atom_style      granular")
     add("atom_modify     map array sort 0 0")
@@ -240,7 +251,7 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     add()
     add("region          domain block {} {} {} {} {} {} units box",
         *(_fmt(v) for v in (x_lo, x_hi, y_lo, y_hi, z_lo, z_hi)))
-    add("create_box      3 domain")
+    add("create_box      {} domain", len(mats))
     add("neighbor        {} bin", _fmt(skin))
     add("neigh_modify    delay 0")
     add()
@@ -265,8 +276,10 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     if not periodic:
         add("fix parts all mesh/surface file {} type 3",
             safe_name("partition mesh file", PARTITION_MESH_FILE))
-    add(f"fix walls all wall/gran {model_args} mesh n_meshes "
-        + ("1 meshes tub " if periodic else "2 meshes tub parts ") + model_kw)
+    add_part_meshes(deck, parts, max_sagitta)
+    meshes = ["tub"] + ([] if periodic else ["parts"]) + part_mesh_ids(parts)
+    add(f"fix walls all wall/gran {model_args} mesh n_meshes {len(meshes)} meshes "
+        + " ".join(meshes) + " " + model_kw)
     add()
     add("# ---- output between runs")
     add("compute ke all ke")
@@ -296,7 +309,8 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
         *(_fmt(v) for v in (-R + margin, R - margin, iy_lo, iy_hi, R, ins_z_hi)))
     add("region uin union 2 ucyl ublk")
     add("region zcut block INF INF INF INF {} {} units box", _fmt(ins_z_lo), _fmt(ins_z_hi))
-    add("region ins intersect 2 uin zcut")
+    outside = add_part_exclusions(deck, parts, L, max_sagitta, margin)
+    add("region ins intersect {} uin zcut" + " {}" * len(outside), 2 + len(outside), *outside)
     add("fix ins all insert/rate/region seed {} distributiontemplate pdd1 nparticles {} "
         "particlerate {} insert_every {} overlapcheck yes all_in no maxattempt 200 vel "
         "constant 0. 0. 0. region ins ntry_mc 200000", seeds[2], count, _fmt(rate),
@@ -347,7 +361,7 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     add("# theta > 0 turns x towards z: a turn about -y")
     add("variable wT equal {}*cos({}*v_tmid+{})", _fmt(motion.amplitude_theta * w), _fmt(w),
         _fmt(motion.phase_theta))
-    for mesh in (["tub"] if periodic else ["tub", "parts"]):
+    for mesh in (["tub"] if periodic else ["tub", "parts"]) + moving_meshes(parts):
         add(f"fix move_{mesh}_t all move/mesh mesh {mesh} linear/variable v_vX v_vY v_vZ")
         add(f"fix move_{mesh}_r all move/mesh mesh {mesh} rotate/variable origin {S} 0. {S} "
             "axis 0. -1. 0. omega v_wT", _fmt(motion.pivot_x), _fmt(motion.pivot_z))
@@ -374,6 +388,9 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
             + " ".join(f"c_pairc[{k}]" for k in range(1, 7)))
         # 10 digits: the default %g would round the ids above 999999 and the forces to 6 digits
         add('dump_modify dpairs every v_pnext format "' + " ".join(["%.10g"] * 6) + '"' + first)
+    if parts:
+        add_part_dump(deck, parts, L, max_sagitta, d + skin + reach + swing,
+                      int(round((run.duration - run.average_last) / dt)))
     add("variable tvib equal (step-${n0})*{}", _fmt(dt))
     add(f'fix series all print {S} "${{tvib}} ${{ekin}}" file {POST_DIR}/{SERIES_FILE} '
         'screen no title "# t_vibration_s kinetic_energy_J"', ke_every)
@@ -394,6 +411,7 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
                                           {"partitions": PARTITION_MESH_FILE})}:
             raise RuntimeError(f"vibroflow.liggghts.stl wrote {names}, the deck names "
                                f"{U_MESH_FILE}, {PARTITION_MESH_FILE}")
+        write_part_meshes(out_dir, parts, L, max_sagitta)
         write_text_atomic(out_dir / POST_DIR / "dump_steps.txt", step_lines)
         deck_path = write_text_atomic(out_dir / DECK_NAME, deck_text)
         write_text_atomic(out_dir / "scenario.toml", toml_text)

@@ -18,28 +18,37 @@ from pathlib import Path
 import numpy as np
 
 from vibroflow.dem.output import ResultWriter
+from vibroflow.dem.part_output import PARTS_NC, part_dataset, summary_lines
 from vibroflow.errors import InputError
 from vibroflow.io.atomic import TMP_PREFIX, json_safe, write_json_atomic
 from vibroflow.io.folder_lock import folder_lock
+from vibroflow.io.parts_file import write_parts
 from vibroflow.liggghts.contacts import PairCheck, _pair_rows, _wall_rows
 from vibroflow.liggghts.deck import (BALL_DUMP, PAIR_DUMP, POST_DIR, SERIES_FILE, START_FILE,
                                      WALL_DUMP, _scenario_toml)
-from vibroflow.liggghts.dumps import _StepReader, _whole_column, read_dump
+from vibroflow.liggghts.dumps import DumpSnapshot, _StepReader, _whole_column, read_dump
 from vibroflow.liggghts.launch import loop_times
 from vibroflow.liggghts.parameters import _check_exportable
+from vibroflow.liggghts.part_contacts import (PartGeometry, check_outside, part_impacts,
+                                              part_load_rows)
+from vibroflow.liggghts.part_deck import PART_DUMP
 from vibroflow.liggghts.template import _short
 from vibroflow.measure.summary import tub_summary
 from vibroflow.scenario.io import load_scenario
 from vibroflow.tub.geometry import geometry_of
 from vibroflow.tub.motion import TubMotion, pose_np
+from vibroflow.tub.parts import parts_of
 
 #: the ball dump's columns the import reads (the deck's `dump custom`)
 BALL_COLUMNS = ("id", "x", "y", "z", "vx", "vy", "vz", "omegax", "omegay", "omegaz", "radius")
 BULK_CSV = "bulk_velocity.csv"
-#: what an import writes into its out folder, in the order they are moved into place
+#: what an import writes into its out folder, in the order they are moved into place (and
+#: PARTS_NC before summary.json for a scenario with parts)
 IMPORT_FILES = ("dem.h5", BULK_CSV, "summary.json")
 #: dem.h5 stores positions and velocities as float32: larger magnitudes would be inf there
 FLOAT32_MAX = float(np.finfo(np.float32).max)
+#: a wall dump's snapshot without contacts (a step the dump has no entry for)
+_NO_ROWS = DumpSnapshot(0, [], np.zeros((0, 9)), 0, 0)
 
 
 def import_run(dump_dir, scenario=None, out_dir=None) -> dict:
@@ -73,7 +82,9 @@ def import_run(dump_dir, scenario=None, out_dir=None) -> dict:
                 summary = _import(post, scenario, n0, tmp_dir)
                 summary["bulk_velocity_csv"] = os.fspath(out_dir / BULK_CSV)
                 write_json_atomic(tmp_dir / "summary.json", json_safe(summary))
-                for name in IMPORT_FILES:  # summary.json last: it says the import is done
+                names = IMPORT_FILES if not scenario.parts else (*IMPORT_FILES[:-1], PARTS_NC,
+                                                                 IMPORT_FILES[-1])
+                for name in names:  # summary.json last: it says the import is done
                     os.replace(tmp_dir / name, out_dir / name)
             finally:
                 shutil.rmtree(tmp_dir, ignore_errors=True)
@@ -103,6 +114,12 @@ def _import(post: Path, scenario, n0: int, tmp_dir: Path) -> dict:
     pairs = _StepReader(pair_path) if pair_path.is_file() else None
     pair_check = PairCheck()
     period = float(scenario.tub.length) if scenario.tub.periodic else 0.0
+    parts = parts_of(scenario)
+    part_geom = PartGeometry(parts, scenario.tub.length, scenario.tub.periodic) if parts else None
+    part_path = post / PART_DUMP
+    if parts and not part_path.is_file():
+        raise InputError(f"{post}: no {PART_DUMP}; the scenario has parts, and a deck exported "
+                         "with them dumps the balls near them there")
 
     writer = None
     ids = radius = None
@@ -158,7 +175,7 @@ def _import(post: Path, scenario, n0: int, tmp_dir: Path) -> dict:
                 attrs = {"case": scenario.case, "n_particles": int(n), "dt": float(dt),
                          "frequency": float(f), "scenario_toml": _scenario_toml(scenario),
                          "source": "liggghts"}
-                writer = ResultWriter(tmp_dir, n, attrs, radius)
+                writer = ResultWriter(tmp_dir, n, attrs, radius, parts=bool(parts))
             elif these.size != ids.size or np.any(these != ids):
                 gone = np.setdiff1d(ids, these)
                 new = np.setdiff1d(these, ids)
@@ -177,6 +194,9 @@ def _import(post: Path, scenario, n0: int, tmp_dir: Path) -> dict:
                 pos[:, 1] = np.mod(pos[:, 1], scenario.tub.length)
             vel = data[:, [c["vx"], c["vy"], c["vz"]]]
             omg = data[:, [c["omegax"], c["omegay"], c["omegaz"]]]
+            if parts and n_snap == 0:
+                check_outside(part_geom, pos, (pose[0], pose[1], pose[2], motion.pivot_x,
+                                               motion.pivot_z), ids, ball_path)
             writer.append("snapshots", time=[t], step=[step - n0], phase=[(t * f) % 1.0],
                           tub_pose=pose[None], position=pos[None].astype(np.float32),
                           velocity=vel[None].astype(np.float32),
@@ -193,6 +213,11 @@ def _import(post: Path, scenario, n0: int, tmp_dir: Path) -> dict:
                                   wall_path)
                 if rows is not None:
                     writer.append("wall_contacts", **rows)
+            if parts and walls is not None:
+                writer.append("part_loads", **part_load_rows(
+                    wsnap if wsnap is not None else _NO_ROWS, n_snap, ids, pos,
+                    (pose[0], pose[1], pose[2], motion.pivot_x, motion.pivot_z), part_geom,
+                    1 if scenario.tub.periodic else 2, wall_path))
             # ball-ball contacts of this step: every snapshot must have its entry (a missing
             # one would read as a snapshot without contacts and bias the contact stress)
             if pairs is not None:
@@ -216,6 +241,10 @@ def _import(post: Path, scenario, n0: int, tmp_dir: Path) -> dict:
         nan = np.full(st.shape, np.nan)
         writer.append("series", time=st, kinetic_energy=sv, max_overlap_ball=nan,
                       max_overlap_wall=nan)
+        if parts:
+            writer.append("part_impacts", **part_impacts(
+                part_path, part_geom, motion, n0, dt,
+                int(round((run.duration - run.average_last) / dt)), ids, rho))
         h5 = writer.finish()
         writer = None
     finally:
@@ -244,6 +273,10 @@ def _import(post: Path, scenario, n0: int, tmp_dir: Path) -> dict:
         summary["ball_contacts_repulsive_fraction"] = (
             pair_check.repulsive / pair_check.contacts if pair_check.contacts else float("nan"))
     summary["impacts_available"] = False
+    if parts:
+        ds = part_dataset(h5, scenario, parts)
+        write_parts(tmp_dir / PARTS_NC, ds)
+        summary["parts"] = json_safe(summary_lines(ds, parts))
     summary.update(tub_summary(h5, scenario, bulk_csv=tmp_dir / BULK_CSV))
     return summary
 

@@ -49,8 +49,10 @@ def _check_exportable(scenario) -> None:
 
 
 def type_materials(scenario) -> list[str]:
-    """Material of atom types 1, 2, 3: the balls, the tub wall, the partitions."""
-    return [scenario.fill.material, scenario.tub.wall_material, scenario.tub.partition_material]
+    """Material of atom types 1, 2, 3: the balls, the tub wall, the partitions; then one type
+    per part of [[parts]] (4, 5, ...), in the scenario's order, each its own part's material."""
+    return [scenario.fill.material, scenario.tub.wall_material,
+            scenario.tub.partition_material, *(p.material for p in scenario.parts or [])]
 
 
 def ball_mass(scenario) -> float:
@@ -60,7 +62,8 @@ def ball_mass(scenario) -> float:
 
 @dataclass(frozen=True)
 class PairTables:
-    """Per-type-pair property tables (3 x 3, symmetric) for `fix property/global`."""
+    """Per-type-pair property tables (n x n, symmetric; n = 3 + the number of parts) for
+    `fix property/global`."""
 
     model: str                  # "hooke/stiffness" or "hertz"
     rolling: str                # "cdt", "epsd2" or "none"
@@ -74,17 +77,20 @@ class PairTables:
 
 
 def pair_tables(scenario) -> PairTables:
-    """LIGGGHTS per-type-pair tables of a tub scenario (types: ball, tub wall, partition).
+    """LIGGGHTS per-type-pair tables of a tub scenario (types: ball, tub wall, partition, then
+    each part).
 
-    Ball-ball pairs use m_eff = m/2, ball-wall pairs m_eff = m (a wall is infinitely heavy), so
-    gamman_abs = 2 zeta sqrt(m_eff k_n) (models.md).  Pairs that never touch (wall-wall) copy the
-    ball-ball entry, since LIGGGHTS wants every entry to be valid.
+    Ball-ball pairs use m_eff = m/2, ball-wall and ball-part pairs m_eff = m (a wall or a fixed
+    part is infinitely heavy), so gamman_abs = 2 zeta sqrt(m_eff k_n) (models.md).  Pairs that
+    never touch (wall-wall, wall-part) copy the ball-ball entry, since LIGGGHTS wants every
+    entry to be valid.
     """
     _check_exportable(scenario)
     mats = type_materials(scenario)
     m = ball_mass(scenario)
-    needed = {(0, 0): 0.5 * m, (0, 1): m, (0, 2): m}
-    shape = (3, 3)
+    n_types = len(mats)
+    needed = {(0, 0): 0.5 * m, **{(0, t): m for t in range(1, n_types)}}
+    shape = (n_types, n_types)
     kn, kt, gn, gt = (np.zeros(shape) for _ in range(4))
     e, mu, mur = (np.zeros(shape) for _ in range(3))
     models, rolls = set(), set()
@@ -109,8 +115,8 @@ def pair_tables(scenario) -> PairTables:
     if len(rolls) > 1:
         raise InputError(f"contacts.rolling_model = {sorted(rolls)}: LIGGGHTS uses one rolling "
                          "model for all pairs; make them equal")
-    for i in range(3):
-        for j in range(3):
+    for i in range(n_types):
+        for j in range(n_types):
             if (min(i, j), max(i, j)) not in needed:
                 for arr in (kn, kt, gn, e, mu, mur):
                     arr[i, j] = arr[0, 0]
@@ -135,7 +141,8 @@ def _contact_law_deck(scenario, tables: PairTables | None = None) -> _Deck:
     mats = type_materials(scenario)
     deck = _Deck()
     for fix, field in (("youngsModulus", "youngs_modulus"), ("poissonsRatio", "poisson_ratio")):
-        deck.add(f"fix {fix} all property/global {fix} peratomtype {_SLOT} {_SLOT} {_SLOT}",
+        deck.add(f"fix {fix} all property/global {fix} peratomtype "
+                 + " ".join([_SLOT] * len(mats)),
                  *(_fmt(getattr(scenario.materials[mt], field)) for mt in mats))
     _table(deck, "coefficientRestitution", tables.restitution)
     _table(deck, "coefficientFriction", tables.friction)
@@ -158,7 +165,7 @@ def _contact_law_deck(scenario, tables: PairTables | None = None) -> _Deck:
 
 def contact_law_lines(scenario, tables: PairTables | None = None) -> list[str]:
     """Deck lines that define the materials and the contact law: the `fix property/global`
-    tables (types 1 = balls, 2 = tub wall, 3 = partitions), `pair_style gran` and
+    tables (types 1 = balls, 2 = tub wall, 3 = partitions, 4 and up the parts), `pair_style gran` and
     `pair_coeff`.  The wall fix uses the same model (`model_arguments`)."""
     return _contact_law_deck(scenario, tables).lines()
 

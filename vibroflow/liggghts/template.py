@@ -142,6 +142,9 @@ def _fill(template: str, values) -> str:
 
 
 def _table(deck: _Deck, name: str, arr: np.ndarray) -> None:
-    deck.add(f"fix {name} all property/global {name} peratomtypepair 3 "
-             + " ".join([_SLOT] * 9), *(_fmt(v) for v in np.asarray(arr).ravel()))
+    """A per-type-pair `fix property/global` line of the n x n table `arr`."""
+    arr = np.asarray(arr)
+    n = arr.shape[0]
+    deck.add(f"fix {name} all property/global {name} peratomtypepair {n} "
+             + " ".join([_SLOT] * (n * n)), *(_fmt(v) for v in arr.ravel()))
 

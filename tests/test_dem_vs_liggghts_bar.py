@@ -1,0 +1,90 @@
+"""The bar's impact map: vibroflow's DEM against LIGGGHTS 3.8 with the same bar as an STL mesh
+(the export carries the part), on a short tub47-bar, judged against the seed-to-seed scatter.
+
+The short case is benchmarks/bar_maps.py's SHORT_SETS (tub47-bar 19.05 mm long, 1500 balls,
+the bar at z = 0.045 m under about 4 cm of media, 0.25 s of vibration averaged over the last
+0.2 s).  Each code runs fill seed 1 here; the scatter is each code's map difference between
+fill seeds 1 and 2, measured once with `python benchmarks/bar_maps.py --seeds 1 2` and stored in
+tests/data/tub47-bar-short-maps/ (README.md there says how).  The maps are compared as
+tub47.md compares fields: E(LIGGGHTS, DEM) of the impact rate per patch and of the mean normal
+speed per patch (vibroflow.analysis.impact_maps) at most 1.5 times the DEM's seed-to-seed E.
+The rate maps agree; the speed maps do not (a strict xfail, its reason the measured numbers).
+About 5 minutes on 2 quiet cores (LIGGGHTS 2 ranks: 5 CPU minutes; the DEM: 2).
+"""
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from vibroflow import liggghts as LG
+from vibroflow.analysis.impact_maps import (part_map, rate_difference, read_map_csv,
+                                            speed_difference)
+from vibroflow.dem.run import run_dem
+from vibroflow.scenario.io import load_scenario
+
+needs_liggghts = pytest.mark.skipif(
+    LG.find_liggghts() is None or shutil.which("mpirun") is None,
+    reason="LIGGGHTS (apt-get install liggghts) or mpirun not installed")
+
+pytestmark = [pytest.mark.slow, needs_liggghts]
+
+DATA = Path(__file__).parent / "data" / "tub47-bar-short-maps"
+#: benchmarks/bar_maps.py's SHORT_SETS
+SHORT_SETS = ["tub.length=0.01905", "fill.count=1500", "parts.0.center=[0.05, 0.0, 0.045]",
+              "fill.settle_time=0.5", "fill.max_settle_time=0.6", "run.duration=0.25",
+              "run.average_last=0.2"]
+
+
+def short_case(seed: int):
+    return load_scenario("tub47-bar", [*SHORT_SETS, f"run.seed={seed}"])
+
+
+@pytest.fixture(scope="module")
+def maps(tmp_path_factory):
+    root = tmp_path_factory.mktemp("bar_maps")
+    s = short_case(1)
+    run_dem(s, root / "dem", progress=False)
+    LG.export_deck(s, root / "deck")
+    LG.run_deck(root / "deck", nprocs=2, timeout=3600)
+    LG.import_run(root / "deck" / "post", s, root / "liggghts")
+    return {"dem": part_map(root / "dem" / "parts.nc", "bar"),
+            "liggghts": part_map(root / "liggghts" / "parts.nc", "bar"),
+            "dem1": read_map_csv(DATA / "dem-seed1.csv"),
+            "dem2": read_map_csv(DATA / "dem-seed2.csv")}
+
+
+def test_the_bar_receives_impacts_all_around_in_both_codes(maps):
+    """The bar lies in the bed: both codes hit every one of its 36 sectors."""
+    for code in ("dem", "liggghts"):
+        assert (maps[code]["rate"] > 0).all(), code
+
+
+def _print(name, e_codes, e_seed):
+    print(f"\n{name}: E between the codes {e_codes:.3f}, the DEM's seed-to-seed E {e_seed:.3f}, "
+          f"limit {1.5 * e_seed:.3f}")
+
+
+def test_the_impact_rate_maps_differ_by_no_more_than_the_seeds_do(maps):
+    """tub47.md's rule for fields, on the bar's impact rate per patch:
+    E_rate(LIGGGHTS, DEM) <= 1.5 E_rate(DEM seed 2, DEM seed 1) (stored: 0.552)."""
+    e_seed = rate_difference(maps["dem2"], maps["dem1"])
+    e_codes = rate_difference(maps["liggghts"], maps["dem"])
+    _print("impact rate", e_codes, e_seed)
+    assert e_codes <= 1.5 * e_seed
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "LIGGGHTS' impacts on the bar are about 40 % faster and 40 % fewer than the DEM's, with "
+    "about the same energy flux: E_speed(LIGGGHTS, DEM) 0.57 - 0.64 against the limit 0.36 "
+    "(1.5 x the DEM's seed-to-seed 0.240; LIGGGHTS' own is 0.296). LIGGGHTS' randomly inserted "
+    "bed is still flowing when the vibration starts (2.6e-5 and 1.1e-5 J per ball at "
+    "max_settle_time, the DEM's 1e-8 J), 0.05 s before the window (docs/validation.md 25)"))
+def test_the_impact_speed_maps_differ_by_no_more_than_the_seeds_do(maps):
+    """The same rule on the mean normal impact speed per patch:
+    E_speed(LIGGGHTS, DEM) <= 1.5 E_speed(DEM seed 2, DEM seed 1) (stored: 0.240)."""
+    e_seed = speed_difference(maps["dem2"], maps["dem1"])
+    e_codes = speed_difference(maps["liggghts"], maps["dem"])
+    _print("mean normal speed", e_codes, e_seed)
+    assert e_codes <= 1.5 * e_seed
