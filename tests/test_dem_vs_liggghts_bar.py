@@ -80,7 +80,7 @@ def test_the_impact_rate_maps_differ_by_no_more_than_the_seeds_do(maps):
     "about the same energy flux: E_speed(LIGGGHTS, DEM) 0.57 - 0.64 against the limit 0.36 "
     "(1.5 x the DEM's seed-to-seed 0.240; LIGGGHTS' own is 0.296). LIGGGHTS' randomly inserted "
     "bed is still flowing when the vibration starts (2.6e-5 and 1.1e-5 J per ball at "
-    "max_settle_time, the DEM's 1e-8 J), 0.05 s before the window (docs/validation.md 25)"))
+    "max_settle_time, the DEM's 1e-8 J), 0.05 s before the window (docs/validation.md section 27)"))
 def test_the_impact_speed_maps_differ_by_no_more_than_the_seeds_do(maps):
     """The same rule on the mean normal impact speed per patch:
     E_speed(LIGGGHTS, DEM) <= 1.5 E_speed(DEM seed 2, DEM seed 1) (stored: 0.240)."""
