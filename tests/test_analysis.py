@@ -16,7 +16,7 @@ import pytest
 
 from tests.vtk_reader import read_vtk
 from vibroflow.analysis import field_difference, fields_agree, strengths_agree
-from vibroflow.analysis.part_maps import cycle_mean, map_difference
+from vibroflow.analysis.impact_maps import cycle_mean, speed_difference, speed_noise
 from vibroflow.io import vtk
 from vibroflow.measure import (CellTable, batch_means, batches_of_whole_cycles, cell_table,
                                circulation, impact_stats, probe_values, read_csv,
@@ -611,13 +611,17 @@ def test_vtk_outputs(tmp_path):
     assert not list(tmp_path.glob(".tmp-*"))
 
 
-def test_part_map_difference_and_cycle_mean_by_hand():
-    """vibroflow.analysis.part_maps on hand-made maps: |0.2-0.1| + |0.1-0.3| over 0.4 = 0.75,
-    the noise 2 (0.01 + 0.03) / 0.4 = 0.2, the NaN patch left out; the cycle mean of 1, 3 with
-    errors 0.3, 0.4 is 2 +- 0.5 / 2."""
-    d, noise, n = map_difference([0.2, 0.1, np.nan], [0.1, 0.3, 0.5], [0.01, 0.03, 0.02])
-    assert (d, noise, n) == (pytest.approx(0.75), pytest.approx(0.2), 2)
-    assert np.isnan(map_difference([np.nan], [0.1], [0.01])[0])
+def test_part_speed_map_e_its_noise_and_cycle_mean_by_hand():
+    """vibroflow.analysis.impact_maps on hand-made maps: E_speed over the patches with speeds in
+    both, weighted by the reference's rates 1, 3: sqrt((0.1^2 + 3 x 0.2^2) / 4) / (1 / 4);
+    the noise of twice the errors on all three patches (rates 1, 3, 2): sqrt((0.02^2 + 3 x
+    0.06^2 + 2 x 0.04^2) / 6) / (2 / 6); the cycle mean of 1, 3 with errors 0.3, 0.4 is 2 +-
+    0.5 / 2."""
+    a = {"speed": np.array([0.2, 0.1, np.nan])}
+    b = {"speed": np.array([0.1, 0.3, 0.5]), "rate": np.array([1.0, 3.0, 2.0]),
+         "speed_stderr": np.array([0.01, 0.03, 0.02])}
+    assert speed_difference(a, b) == pytest.approx(math.sqrt(0.13 / 4) / 0.25)
+    assert speed_noise(b) == pytest.approx(math.sqrt(0.0144 / 6) / (2 / 6))
     m, se = cycle_mean(np.array([[1.0, np.nan], [3.0, np.nan]]),
                        np.array([[0.3, 0.1], [0.4, 0.1]]))
     assert m[0] == pytest.approx(2.0) and se[0] == pytest.approx(0.25)

@@ -61,10 +61,13 @@ def test_part_section_sets_each_continuum_beside_the_dem(tmp_path):
     assert row["area"] == pytest.approx(2 * math.pi * 0.0125 / 36 * SLICE_M)
     f, se, _, _ = s["forces"]["dem"]
     assert f[:, 2] == pytest.approx([0, -1, -2, -3]) and se[2, 0] == pytest.approx(0.1)
-    # as a whole: every sector 0.05 m/s off, over the DEM's 36 x 0.2 + 0.01 x 630 = 13.5 m/s;
-    # the noise 2 x 36 x 0.01 / 13.5; the force's cycle mean (0 + 1 + 2 + 3) / 4 +- 0.1 / 2
-    d, noise, n = s["whole"]["lagrangian"]["map"]
-    assert (d, noise, n) == (pytest.approx(1.8 / 13.5), pytest.approx(0.72 / 13.5), 36)
+    # as a whole: every sector 0.05 m/s off, its E that over the DEM's mean speed weighted by
+    # its rates 1e4 (1 + k); the noise 2 x 0.01 over the same; the force's cycle mean
+    # (0 + 1 + 2 + 3) / 4 +- 0.1 / 2
+    k = np.arange(36)
+    v_mean = np.sum((1 + k) * (0.2 + 0.01 * k)) / np.sum(1 + k)
+    d, noise = s["whole"]["lagrangian"]["map"]
+    assert (d, noise) == (pytest.approx(0.05 / v_mean), pytest.approx(0.02 / v_mean))
     m, m_se = s["whole"]["dem"]["force"]
     assert m[0] == pytest.approx(1.5) and m_se[0] == pytest.approx(0.05)
     assert "map" not in s["whole"]["dem"]

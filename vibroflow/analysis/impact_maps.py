@@ -12,7 +12,14 @@ over the part's patches p (impact rates r, m^-2 s^-1; a patch without impacts ha
 
 over the patches with impacts in both, weighted by b's rate w_p = r_b,p (mean normal speeds v,
 m/s).  Two maps agree when E between them is no more than 1.5 times the seed-to-seed E of the
-reference code (tub47.md's rule for fields).
+reference code (tub47.md's rule for fields).  A continuum infers speeds and no rates, so its
+map is judged by E_speed against the DEM's, beside the E_speed that the DEM's own batch-means
+errors give (`speed_noise`: MAP_ERRORS standard errors on every patch) when only one DEM seed
+is at hand (docs/validation.md section 25).
+
+`cycle_mean`: the mean over the phase bins of a by-phase quantity (parts.nc's force, torque),
+its standard error the bins' errors combined in quadrature over the bin count (each bin
+averages its own samples).
 """
 from __future__ import annotations
 
@@ -23,6 +30,8 @@ import numpy as np
 
 from vibroflow.io.parts_file import read_parts
 
+#: the allowance of `speed_noise`: two batch-means standard errors on every patch
+MAP_ERRORS = 2.0
 #: the columns of a stored map (`write_map_csv`), SI units
 MAP_COLUMNS = ("patch", "patch_name", "area_m2", "impact_rate_per_area_m-2_s-1",
                "impact_rate_per_area_stderr_m-2_s-1", "normal_speed_mean_m_s",
@@ -32,7 +41,11 @@ MAP_COLUMNS = ("patch", "patch_name", "area_m2", "impact_rate_per_area_m-2_s-1",
 def part_map(parts_nc, part: str) -> dict:
     """The impact map of `part` in a parts.nc file: patch areas (m^2), rates (m^-2 s^-1) and
     mean normal speeds (m/s) with their batch-means errors, over the part's patches."""
-    ds = read_parts(parts_nc)
+    return map_of(read_parts(parts_nc), part)
+
+
+def map_of(ds, part: str) -> dict:
+    """`part_map` of a parts.nc Dataset already read (a rate NaN, a continuum's, counts 0)."""
     sel = ds.sel(part=part)
     area = sel["patch_area_m2"].values
     used = np.isfinite(area)
@@ -87,3 +100,27 @@ def speed_difference(a: dict, b: dict) -> float:
     w = b["rate"][both]
     rms = np.sqrt(np.sum(w * (a["speed"][both] - b["speed"][both]) ** 2) / np.sum(w))
     return float(rms / (np.sum(w * b["speed"][both]) / np.sum(w)))
+
+
+def speed_noise(b: dict, errors: float = MAP_ERRORS) -> float:
+    """The E_speed that `errors` of b's batch-means standard errors on every patch give (the
+    module docstring's weights and patches)."""
+    both = np.isfinite(b["speed"]) & np.isfinite(b["speed_stderr"]) & (b["rate"] > 0)
+    if not np.any(both):
+        raise ValueError("the reference map has no impacts")
+    w = b["rate"][both]
+    rms = np.sqrt(np.sum(w * (errors * b["speed_stderr"][both]) ** 2) / np.sum(w))
+    return float(rms / (np.sum(w * b["speed"][both]) / np.sum(w)))
+
+
+def cycle_mean(values, stderr) -> tuple[np.ndarray, np.ndarray]:
+    """(mean, standard error) over the phase bins (axis 0) of values (phase, ...) with their
+    batch-means errors stderr alike (module docstring), bins with a non-finite value left
+    out."""
+    values, stderr = np.asarray(values, float), np.asarray(stderr, float)
+    ok = np.isfinite(values) & np.isfinite(stderr)
+    n = ok.sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(ok, values, 0.0).sum(axis=0) / n
+        se = np.sqrt((np.where(ok, stderr, 0.0) ** 2).sum(axis=0)) / n
+    return np.where(n > 0, mean, np.nan), np.where(n > 0, se, np.nan)

@@ -403,7 +403,7 @@ def _parts(data: StudyData) -> tuple[list[dict], list[str]]:
         whole = []
         for m, w in s["whole"].items():
             (f, fse), (tq, tq_se) = w["force"], w["torque"]
-            d, noise, _ = w.get("map", (float("nan"),) * 3)
+            d, noise = w.get("map", (float("nan"),) * 2)
             whole.append([_text(m, "l"), _num(d), _num(noise), _pm(f[0], fse[0]),
                           _pm(f[2], fse[2]), _pm(tq[1], tq_se[1])])
         out.append({"name": s["name"], "shape": s["shape"], "head": head, "rows": rows,

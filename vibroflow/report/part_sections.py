@@ -7,8 +7,9 @@ or an STL), each method with its batch-means error bars; a table by patch with t
 beside each continuum's and their difference (continuum - DEM, its error the two errors in
 quadrature), the DEM's rate and energy flux per area; the DEM's normal-speed distribution by
 patch (mean with its error, median, 95th percentile); the force on the part by phase of the
-cycle for each method; each continuum judged against the DEM as a whole (analysis.part_maps:
-the map's difference beside the DEM's noise, and every method's cycle-mean force and torque).
+cycle for each method; each continuum judged against the DEM as a whole (analysis.impact_maps:
+the speed map's E beside the E of the DEM's own errors, and every method's cycle-mean force and
+torque).
 A method whose folder has no parts.nc is left out and said so; a study
 with no parts.nc at all has no part section.  Figures are PNG bytes (matplotlib, Agg); part
 and patch names are the page's text, escaped by the template.  Units: SI.
@@ -19,7 +20,7 @@ import math
 
 import numpy as np
 
-from vibroflow.analysis.part_maps import cycle_mean, map_difference
+from vibroflow.analysis.impact_maps import cycle_mean, map_of, speed_difference, speed_noise
 from vibroflow.errors import InputError
 from vibroflow.io.parts_file import PARTS_NC_NAME, read_parts
 from vibroflow.io.pictures import pyplot
@@ -172,10 +173,7 @@ def part_sections(data: StudyData) -> tuple[list[dict], list[str]]:
                 whole[m] = {"force": cycle_mean(forces[m][0], forces[m][1]),
                             "torque": cycle_mean(forces[m][2], forces[m][3])}
                 if dem is not None and m != DEM:
-                    whole[m]["map"] = map_difference(
-                        _values(ds, part, "normal_speed_mean", n),
-                        _values(dem, part, "normal_speed_mean", n),
-                        _values(dem, part, "normal_speed_mean_stderr", n))
+                    whole[m]["map"] = _speed_e(ds, dem, part)
         out.append({"name": part, "shape": shape, "continua": continua,
                     "has_dem": dem is not None, "rows": rows, "forces": forces, "whole": whole,
                     "inferred_from": {m: str(ds.attrs.get("inferred_from", ""))
@@ -184,6 +182,16 @@ def part_sections(data: StudyData) -> tuple[list[dict], list[str]]:
                     "distribution": (_distribution_figure(part, names, dem)
                                      if dem is not None else None)})
     return out, notes
+
+
+def _speed_e(ds, dem, part: str) -> tuple[float, float]:
+    """(E_speed of the method's map against the DEM's, the E of the DEM's own errors);
+    NaNs where the DEM's map has no impacts or the two share no patch."""
+    try:
+        ref = map_of(dem, part)
+        return speed_difference(map_of(ds, part), ref), speed_noise(ref)
+    except ValueError:
+        return float("nan"), float("nan")
 
 
 def _shape_of(data: StudyData, part: str) -> str:
