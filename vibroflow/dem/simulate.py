@@ -24,6 +24,7 @@ from . import step as K
 from .blowup import (BlowUp, blowup_message, check_finite_start, check_overlaps_at_start,
                      coincident_message, coincident_pair)
 from .laws import material_index, pair_table
+from .memory_order import MEMORY_ORDER_FROM, SORT_EVERY, by_id, space_order, store
 from .neighbours import NeighbourList
 from .parts import EMPTY, IMP_BALL, N_LOAD, SLOTS, parts_record
 from .records import Params, Work, balls_of, pairs_of, slots_of, walls_of
@@ -207,6 +208,9 @@ class _Buffers:
         self.work = Work(imp_buf=np.zeros((nblock, IMPACT_CAPACITY, 6)),
                          imp_count=np.zeros(nblock, np.int64), diag=np.empty((nblock, K.N_DIAG)),
                          pose=np.zeros(8), moved=np.zeros(nblock))
+        #: the storage order of the last space sort (memory_order), taken up again by the
+        #: next run_steps call
+        self.order: np.ndarray | None = None
         self.balls = balls_of(state)
         self.walls = walls_of(state)
         ensure_part_arrays(system, state)
@@ -236,9 +240,17 @@ def _tub_pose(system: DEMSystem, state: DEMState) -> np.ndarray:
     return pose
 
 
-def rebuild(system: DEMSystem, state: DEMState) -> None:
-    """Rebuild the neighbour list (keeping contact histories) and its reference positions."""
-    state.nl.build(state.pos, state.radius)
+def rebuild(system: DEMSystem, state: DEMState, sort: bool = False) -> None:
+    """Rebuild the neighbour list (keeping contact histories) and its reference positions;
+    with `sort`, store the balls in space order first (vibroflow.dem.memory_order)."""
+    old_of = None
+    if sort:
+        b = _buf(system, state)
+        old_of = space_order(state.pos, state.radius, system.skin,
+                             state.nl.id_arrays(state.n)[0])
+        store(state, b.work.diag, b.parts, old_of, keep_list=False)
+        b.order = state.nl.ids
+    state.nl.build(state.pos, state.radius, old_of)
     pose = _tub_pose(system, state)
     state.ref_tub[:] = lab_to_tub_np(state.pos, pose[0], pose[1], pose[2],
                                      (pose[6], pose[7]))
@@ -304,12 +316,37 @@ def set_overlap_maxima(system: DEMSystem, state: DEMState, diag: np.ndarray) -> 
     _buf(system, state).work.diag[:] = diag
 
 
+def _store_by_id(system: DEMSystem, state: DEMState) -> None:
+    """The balls stored back by id (memory_order), where a space sort stored them anew."""
+    rows = by_id(state)
+    if rows is not None:
+        b = _buf(system, state)
+        store(state, b.work.diag, b.parts, rows)
+
+
 def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: bool = False,
               on_impacts: Callable[[np.ndarray], None] | None = None,
-              on_part_impacts: Callable[[np.ndarray], None] | None = None) -> None:
+              on_part_impacts: Callable[[np.ndarray], None] | None = None,
+              memory_order: bool | None = None) -> None:
     """Advance the state by `nsteps` steps in place (rebuilding the list as needed); the
     recorded impacts go to on_impacts (take_impacts' rows) and on_part_impacts
-    (take_part_impacts')."""
+    (take_part_impacts', ball ids).  memory_order: store the balls in space order during the
+    steps (vibroflow.dem.memory_order; None: from MEMORY_ORDER_FROM balls on); the state
+    comes back stored by id, with the same numbers either way."""
+    b = _buf(system, state)
+    if memory_order is None:
+        memory_order = state.n >= MEMORY_ORDER_FROM
+    if memory_order and b.order is not None and b.order.shape[0] == state.n:
+        store(state, b.work.diag, b.parts, b.order)
+    try:
+        _run_steps(system, state, nsteps, record_impacts, on_impacts, on_part_impacts,
+                   memory_order)
+    finally:
+        _store_by_id(system, state)
+
+
+def _run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: bool,
+               on_impacts, on_part_impacts, memory_order: bool) -> None:
     b = _buf(system, state)
     motion = system.motion_array(state.vibrating)
     b.work.pose[6], b.work.pose[7] = system.motion.pivot_x, system.motion.pivot_z
@@ -322,6 +359,7 @@ def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: b
         except ZeroDivisionError:
             # 1/d of two coincident balls (numba raises it, as Python does); the step count is
             # unknown here, so the time is that of the call's start
+            _store_by_id(system, state)
             pair = coincident_pair(system, state)
             if pair is None:
                 raise
@@ -329,9 +367,10 @@ def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: b
         state.step += done
         left -= done
         if status == K.BLOWUP:
+            _store_by_id(system, state)
             raise BlowUp(blowup_message(system, state, b.work.diag))
         if status == K.REBUILD:
-            rebuild(system, state)
+            rebuild(system, state, sort=memory_order and state.nl.builds % SORT_EVERY == 0)
         if on_impacts is not None and (status == K.IMPACTS_FULL or left == 0):
             imp = take_impacts(system, state)
             if imp.shape[0]:
@@ -340,6 +379,8 @@ def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: b
             take_impacts(system, state)
         if system.n_parts and (status == K.IMPACTS_FULL or left == 0):
             rows = take_part_impacts(system, state)
+            if state.nl.ids is not None and rows.shape[0]:
+                rows[:, IMP_BALL] = state.nl.ids[rows[:, IMP_BALL].astype(np.int64)]
             if on_part_impacts is not None and rows.shape[0]:
                 on_part_impacts(rows)
 
