@@ -20,6 +20,7 @@ threads.md): MEMORY_ORDER_FROM and SORT_EVERY are the figures chosen there.
 """
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 
 from . import step as K
@@ -63,6 +64,20 @@ def space_order(pos: np.ndarray, radius: np.ndarray, skin: float,
     return np.lexsort((ids, key)).astype(np.int64)
 
 
+@nb.njit(cache=True, parallel=True)
+def _permute_rows(a, order):
+    """a[:] = a[order] for a 2-d array, row by row in parallel."""
+    tmp = np.empty_like(a)
+    m = a.shape[1]
+    for r in nb.prange(a.shape[0]):
+        o = order[r]
+        for c in range(m):
+            tmp[r, c] = a[o, c]
+    for r in nb.prange(a.shape[0]):
+        for c in range(m):
+            a[r, c] = tmp[r, c]
+
+
 def store(state, diag: np.ndarray, prt, order: np.ndarray, keep_list: bool = True) -> None:
     """Store the balls of `state` anew, in place: place r holds the ball of old place
     order[r].  The per-ball arrays, the places in the diagnostics `diag` and in the buffered
@@ -73,8 +88,8 @@ def store(state, diag: np.ndarray, prt, order: np.ndarray, keep_list: bool = Tru
     place[order] = np.arange(n, dtype=np.int64)
     for name in PER_BALL:
         a = getattr(state, name)
-        if a is not None and a.shape[0] == n:
-            a[:] = a[order]
+        if a is not None and a.shape[0] == n and a.size:
+            _permute_rows(a.reshape(n, -1), order)
     for col in BALL_COLUMNS:
         x = diag[:, col]
         held = x >= 0.0

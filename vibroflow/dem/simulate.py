@@ -112,8 +112,14 @@ class DEMState:
     def kinetic_energy(self) -> float:
         """Translational + rotational kinetic energy in the lab frame (J)."""
         inertia = 0.4 * self.mass * self.radius**2
-        return float(0.5 * np.sum(self.mass * np.sum(self.vel**2, axis=1))
-                     + 0.5 * np.sum(inertia * np.sum(self.omg**2, axis=1)))
+        move = self.mass * np.sum(self.vel**2, axis=1)
+        spin = inertia * np.sum(self.omg**2, axis=1)
+        if self.nl.ids is not None:  # summed by ball id, whatever the storage order
+            by_id = np.empty((2, self.n))
+            by_id[0, self.nl.ids] = move
+            by_id[1, self.nl.ids] = spin
+            move, spin = by_id
+        return float(0.5 * np.sum(move) + 0.5 * np.sum(spin))
 
 
 def make_system(scenario) -> DEMSystem:
@@ -316,8 +322,9 @@ def set_overlap_maxima(system: DEMSystem, state: DEMState, diag: np.ndarray) -> 
     _buf(system, state).work.diag[:] = diag
 
 
-def _store_by_id(system: DEMSystem, state: DEMState) -> None:
-    """The balls stored back by id (memory_order), where a space sort stored them anew."""
+def store_by_id(system: DEMSystem, state: DEMState) -> None:
+    """The balls stored back by id (memory_order), where a space sort stored them anew: what
+    run_steps(keep_order=True)'s caller does before it reads the state's arrays."""
     rows = by_id(state)
     if rows is not None:
         b = _buf(system, state)
@@ -327,22 +334,28 @@ def _store_by_id(system: DEMSystem, state: DEMState) -> None:
 def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: bool = False,
               on_impacts: Callable[[np.ndarray], None] | None = None,
               on_part_impacts: Callable[[np.ndarray], None] | None = None,
-              memory_order: bool | None = None) -> None:
+              memory_order: bool | None = None, keep_order: bool = False) -> None:
     """Advance the state by `nsteps` steps in place (rebuilding the list as needed); the
     recorded impacts go to on_impacts (take_impacts' rows) and on_part_impacts
     (take_part_impacts', ball ids).  memory_order: store the balls in space order during the
-    steps (vibroflow.dem.memory_order; None: from MEMORY_ORDER_FROM balls on); the state
-    comes back stored by id, with the same numbers either way."""
+    steps (vibroflow.dem.memory_order; None: from MEMORY_ORDER_FROM balls on), with the same
+    numbers either way.  The state comes back stored by id, or with `keep_order` as the steps
+    left it (a caller that reads its arrays calls store_by_id first; kinetic_energy needs
+    not), which spares the storing of calls that only step on."""
     b = _buf(system, state)
     if memory_order is None:
         memory_order = state.n >= MEMORY_ORDER_FROM
-    if memory_order and b.order is not None and b.order.shape[0] == state.n:
-        store(state, b.work.diag, b.parts, b.order)
+    if (memory_order and state.nl.ids is None and b.order is not None
+            and b.order.shape[0] == state.n):
+        store(state, b.work.diag, b.parts, b.order)  # the last sort's order, taken up again
     try:
         _run_steps(system, state, nsteps, record_impacts, on_impacts, on_part_impacts,
                    memory_order)
-    finally:
-        _store_by_id(system, state)
+    except BaseException:
+        store_by_id(system, state)
+        raise
+    if not keep_order:
+        store_by_id(system, state)
 
 
 def _run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: bool,
@@ -359,7 +372,7 @@ def _run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: 
         except ZeroDivisionError:
             # 1/d of two coincident balls (numba raises it, as Python does); the step count is
             # unknown here, so the time is that of the call's start
-            _store_by_id(system, state)
+            store_by_id(system, state)
             pair = coincident_pair(system, state)
             if pair is None:
                 raise
@@ -367,7 +380,7 @@ def _run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: 
         state.step += done
         left -= done
         if status == K.BLOWUP:
-            _store_by_id(system, state)
+            store_by_id(system, state)
             raise BlowUp(blowup_message(system, state, b.work.diag))
         if status == K.REBUILD:
             rebuild(system, state, sort=memory_order and state.nl.builds % SORT_EVERY == 0)
