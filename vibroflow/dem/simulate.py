@@ -24,7 +24,8 @@ from . import step as K
 from .blowup import (BlowUp, blowup_message, check_finite_start, check_overlaps_at_start,
                      coincident_message, coincident_pair)
 from .laws import material_index, pair_table
-from .memory_order import MEMORY_ORDER_FROM, SORT_EVERY, by_id, space_order, store
+from . import memory_order as M
+from .memory_order import by_id, space_order, store
 from .neighbours import NeighbourList
 from .parts import EMPTY, IMP_BALL, N_LOAD, SLOTS, parts_record
 from .records import Params, Work, balls_of, pairs_of, slots_of, walls_of
@@ -344,7 +345,7 @@ def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: b
     not), which spares the storing of calls that only step on."""
     b = _buf(system, state)
     if memory_order is None:
-        memory_order = state.n >= MEMORY_ORDER_FROM
+        memory_order = state.n >= M.MEMORY_ORDER_FROM
     if (memory_order and state.nl.ids is None and b.order is not None
             and b.order.shape[0] == state.n):
         store(state, b.work.diag, b.parts, b.order)  # the last sort's order, taken up again
@@ -383,7 +384,7 @@ def _run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: 
             store_by_id(system, state)
             raise BlowUp(blowup_message(system, state, b.work.diag))
         if status == K.REBUILD:
-            rebuild(system, state, sort=memory_order and state.nl.builds % SORT_EVERY == 0)
+            rebuild(system, state, sort=memory_order and state.nl.builds % M.SORT_EVERY == 0)
         if on_impacts is not None and (status == K.IMPACTS_FULL or left == 0):
             imp = take_impacts(system, state)
             if imp.shape[0]:
