@@ -70,9 +70,9 @@ def test_a_bed_sorted_at_every_rebuild_has_the_numbers_of_the_unsorted_one(
     system, plain = _bed()
     _s, stored = _bed()
     imp_plain, imp_stored = [], []
-    _steps(system, plain, 60, False, imp_plain)
-    assert _steps(system, stored, 60, True, imp_stored)  # the balls were stored anew
-    assert plain.nl.builds > 10 and np.count_nonzero(plain.nl.flag) > 20
+    _steps(system, plain, 40, False, imp_plain)
+    assert _steps(system, stored, 40, True, imp_stored)  # the balls were stored anew
+    assert plain.nl.builds > 10 and np.count_nonzero(plain.nl.flag) > 10
     _same_state(plain, stored)
     assert plain.kinetic_energy() == stored.kinetic_energy()
     a, b = _rows(imp_plain), _rows(imp_stored)
@@ -82,13 +82,13 @@ def test_a_bed_sorted_at_every_rebuild_has_the_numbers_of_the_unsorted_one(
 def test_a_state_saved_in_space_order_resumes_to_the_same_numbers(tmp_path,
                                                                   sort_at_every_rebuild):
     system, whole = _bed()
-    _steps(system, whole, 30, True)
+    _steps(system, whole, 20, True)
     _s, first = _bed()
-    _steps(system, first, 15, True)
+    _steps(system, first, 10, True)
     save_state_file(tmp_path / "state.h5", first)
     again, _attrs = load_state_file(tmp_path / "state.h5")
     again.vibrating = True
-    _steps(system, again, 15, True)
+    _steps(system, again, 10, True)
     _same_state(whole, again)
 
 
