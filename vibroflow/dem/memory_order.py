@@ -15,8 +15,8 @@ order does change: the impacts of one flush come block of stored balls by block 
 order on any thread count, and the same rows), and with parts the per-block sums of the part
 loads are added in another grouping (rounding).
 
-Measured on the 2-core development machine (benchmarks/dem_memory_order.py, docs/decisions/
-threads.md): MEMORY_ORDER_FROM and SORT_EVERY are the figures chosen there.
+MEMORY_ORDER_FROM and SORT_EVERY are chosen by benchmarks/dem_memory_order.py on the 2-core
+development machine (docs/decisions/threads.md).
 """
 from __future__ import annotations
 
@@ -26,12 +26,14 @@ import numpy as np
 from . import step as K
 from .parts import IMP_BALL
 
-#: ball count from which run_steps stores the balls in space order (below it the whole bed
-#: fits in the cache and the storing costs more than it gains: docs/decisions/threads.md)
+#: ball count from which run_steps stores the balls in space order: above tub47's 14 000, so
+#: that the reference cases keep their dem.h5 bit for bit, impact order included (tub47-quick,
+#: 4 200 balls: 1.03 x the unsorted CPU time as filled, 0.96 x mixed; docs/decisions/threads.md)
 MEMORY_ORDER_FROM = 20_000
-#: neighbour-list rebuilds between two space sorts (the bed moves a fraction of a ball
-#: diameter between rebuilds: docs/decisions/threads.md)
-SORT_EVERY = 4
+#: neighbour-list rebuilds between two space sorts: on the 140 000-ball tub every 8th rebuild
+#: took 0.85 x the unsorted CPU time as filled and 0.80 x on a mixed bed, every rebuild 1.21 x
+#: and 0.84 x (the bed moves a fraction of a cell between rebuilds; docs/decisions/threads.md)
+SORT_EVERY = 8
 #: the state's arrays with one row a ball (vibroflow.dem.simulate.DEMState)
 PER_BALL = ("pos", "vel", "omg", "force", "torque", "radius", "mass", "mat", "ref_tub",
             "wall_hist", "wall_flag", "wall_fn", "wall_ft", "wall_slide", "wall_point",
