@@ -113,3 +113,32 @@ def test_part_impacts_name_the_ids_of_the_balls(sort_at_every_rebuild):
     assert sorted(set(plain[:, IMP_BALL].astype(int))) == list(range(6))  # every ball hit
     assert np.array_equal(plain, stored)
     assert np.array_equal(a.pos, b.pos) and np.array_equal(a.part_hist, b.part_hist)
+
+
+@pytest.mark.slow
+def test_a_run_sorted_from_the_first_ball_writes_the_rows_of_the_unsorted_run(tmp_path,
+                                                                             monkeypatch):
+    # run_dem in this process, the sort forced on a 400-ball tub: every snapshot, wall contact
+    # and time-series row by ball id as without it; the impacts the same rows
+    import h5py
+
+    from tests.test_calibrate import SMALL
+    from vibroflow.dem.run import run_dem
+
+    monkeypatch.setenv("VIBROFLOW_CACHE", str(tmp_path / "cache"))
+    sc = load_scenario("tub47-quick", SMALL)
+    monkeypatch.setattr(M, "SORT_EVERY", 1)
+    run_dem(sc, out_dir=tmp_path / "plain")
+    monkeypatch.setattr(M, "MEMORY_ORDER_FROM", 0)
+    run_dem(sc, out_dir=tmp_path / "sorted")
+    with h5py.File(tmp_path / "plain" / "dem.h5") as fa, \
+            h5py.File(tmp_path / "sorted" / "dem.h5") as fb:
+        for group in ("snapshots", "wall_contacts", "series"):
+            for name in fa[group]:
+                assert np.array_equal(fa[group][name][()], fb[group][name][()],
+                                      equal_nan=True), f"{group}/{name}"
+        a, b = (np.hstack([f["impacts"][k][()].astype(float).reshape(f["impacts"][k].shape[0],
+                                                                        -1)
+                           for k in sorted(f["impacts"])]) for f in (fa, fb))
+        assert a.shape[0] > 0
+        assert np.array_equal(a[np.lexsort(a.T[::-1])], b[np.lexsort(b.T[::-1])])
