@@ -1,7 +1,7 @@
 """Time per ball-step of the DEM with and without the space sort (vibroflow.dem.memory_order).
 
     python benchmarks/dem_memory_order.py [--sizes quick,long] [--threads 2] [--steps 400]
-        [--repeats 3] [--every 1,4] [--json runs/dem_memory_order.json]
+        [--repeats 3] [--every 1,8] [--json runs/dem_memory_order.json]
 
 Sizes as benchmarks/dem_scaling.py: `quick` is tub47-quick (4 200 balls), `long` tub47 ten
 times longer (`--set tub.length=0.635 --set fill.count=140000`).  Each size runs in its own
@@ -95,7 +95,7 @@ def main(argv=None) -> None:
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--steps", type=int, default=400)
     p.add_argument("--repeats", type=int, default=3)
-    p.add_argument("--every", default="1,4")
+    p.add_argument("--every", default="1,8")
     p.add_argument("--json", type=Path, default=ROOT / "runs" / "dem_memory_order.json")
     p.add_argument("--worker", help=argparse.SUPPRESS)
     a = p.parse_args(argv)
