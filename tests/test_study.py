@@ -13,7 +13,7 @@ import pytest
 from tests.test_calibrate import SMALL
 
 from vibroflow.report.stage import report_stage
-from vibroflow.study.methods import METHODS
+from vibroflow.study.methods import METHODS, method
 
 #: every registered continuum method is a stage of its own (a method is one more entry)
 STAGES = ("dem", "calibration", *METHODS, "comparison", "report")
@@ -298,3 +298,24 @@ def test_run_vtk_writes_the_paraview_files_of_the_dem_and_every_method(run_cli, 
     assert (dem / "tub.vtu").is_file() and not (dem / "tub.pvd").exists()
     first = out / next(iter(METHODS)) / "vtk" / "grid.pvd"
     assert all(f.endswith(".vtr") for _, f in read_pvd(first))
+
+
+def test_force_chunks_changes_the_continuum_stage_hash_and_not_the_dem_stage_hash(tmp_path):
+    # run.force_chunks fixes the continuum's scatter sums only (DEVELOPERS.md "Threads")
+    from vibroflow.scenario.io import load_scenario
+    from vibroflow.study.pipeline import stage_hash
+    from vibroflow.study.stages import Study, stages_of
+
+    def hashes(chunks):
+        scenario = load_scenario("tub47-quick", [*SMALL, f"run.force_chunks={chunks}"])
+        methods = [(m, m.make_options({})) for m in map(method, METHODS)]
+        study = Study(out=tmp_path, scenario=scenario, methods=methods)
+        h: dict[str, str] = {}
+        for s in stages_of(study):
+            h[s.name] = stage_hash(s, study, h)
+        return h
+
+    two, three = hashes(2), hashes(3)
+    assert two["dem"] == three["dem"] and two["calibration"] == three["calibration"]
+    for name in METHODS:
+        assert two[name] != three[name]

@@ -19,11 +19,18 @@ def scenario_toml(scenario) -> str:
         return json.dumps(scenario.model_dump(mode="json"))
 
 
+#: run fields that shape no DEM number: run.checkpoint_every (a wall-clock interval) and
+#: run.force_chunks (the continuum's scatter chunks; the DEM's sums do not depend on them)
+NOT_DEM_FIELDS = ("checkpoint_every", "force_chunks")
+
+
 def scenario_record(scenario) -> dict:
-    """The scenario as plain data, less what may change on resume (run.checkpoint_every, a
-    wall-clock interval that shapes no number)."""
+    """The scenario as plain data, less the run fields that shape no DEM number
+    (NOT_DEM_FIELDS): the DEM checkpoint's record and the study's DEM stage inputs."""
     record = scenario.model_dump(mode="json")
-    record.get("run", {}).pop("checkpoint_every", None)
+    run = record.get("run", {})
+    for name in NOT_DEM_FIELDS:
+        run.pop(name, None)
     return record
 
 

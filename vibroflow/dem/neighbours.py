@@ -17,6 +17,12 @@ slot of six numbers for the pair's force and torque on j and a copy of the conta
 that order (rflag), so that each ball gathers its pairs' forces in a fixed order, reading
 memory in sequence.
 
+The balls may be stored in any order (vibroflow.dem.memory_order keeps them in space order
+during a run): `ids` gives each stored ball's id and the list is the same as that of the balls
+stored by id.  A pair's entry belongs to the ball of the lower id, each cell's members are
+visited in id order, and the reverse order runs over the first balls by id, so that every
+ball's entries, their orientation and its sums are those of the balls stored by id.
+
 Periodic length in y: positions are wrapped into [0, L) at each build and distances use the
 minimum image.
 """
@@ -37,11 +43,13 @@ class Cells(NamedTuple):
     dims: np.ndarray           # (3,) cells along x, y, z
     skin: float                # m
     periodic_length: float     # m along y; 0 when not periodic
+    ids: np.ndarray            # (N,) the id of each stored ball
 
 
 @nb.njit(cache=True)
-def bin_particles(pos, lo, cell_size, dims, periodic_length):
-    """Counting sort of particles into cells.
+def bin_particles(pos, lo, cell_size, dims, periodic_length, rows):
+    """Counting sort of particles into cells, each cell's members in id order (`rows`: the
+    stored place of each id).
 
     Returns (cell_start (ncell+1,), cell_members (N,), cell_of (N, 3) integer cell coordinates).
     """
@@ -73,7 +81,8 @@ def bin_particles(pos, lo, cell_size, dims, periodic_length):
     start = counts.copy()
     fill = counts[:-1].copy()
     members = np.empty(n, np.int64)
-    for i in range(n):
+    for d in range(n):
+        i = rows[d]
         f = flat[i]
         members[fill[f]] = i
         fill[f] += 1
@@ -82,9 +91,10 @@ def bin_particles(pos, lo, cell_size, dims, periodic_length):
 
 @nb.njit(cache=True, inline="always")
 def _scan(i, pos, radius, cells, out, offset, write):
-    """Visit the neighbour cells of i; count (write=False) or store (write=True) its j > i."""
+    """Visit the neighbour cells of i; count (write=False) or store (write=True) its partners
+    of higher id."""
     cell_start, cell_members, cell_of, dims = cells.start, cells.members, cells.cell_of, cells.dims
-    skin, periodic_length = cells.skin, cells.periodic_length
+    skin, periodic_length, ids = cells.skin, cells.periodic_length, cells.ids
     nx, ny, nz = dims[0], dims[1], dims[2]
     cx, cy, cz = cell_of[i, 0], cell_of[i, 1], cell_of[i, 2]
     count = 0
@@ -109,7 +119,7 @@ def _scan(i, pos, radius, cells, out, offset, write):
                 f = (ax * ny + ay) * nz + az
                 for m in range(cell_start[f], cell_start[f + 1]):
                     j = cell_members[m]
-                    if j <= i:
+                    if ids[j] <= ids[i]:
                         continue
                     ddx = pos[i, 0] - pos[j, 0]
                     ddy = pos[i, 1] - pos[j, 1]
@@ -136,22 +146,31 @@ def build_half_list(pos, radius, cells):
         counts[i + 1] += counts[i]
     nbr = np.empty(counts[n], np.int64)
     for i in nb.prange(n):
-        # within a cell, members are in index order, so each i's list is reproducible
+        # within a cell, members are in id order, so each i's list is reproducible
         _scan(i, pos, radius, cells, nbr, counts[i], True)
     return counts, nbr
 
 
-@nb.njit(cache=True, parallel=True)
 def transfer_history(old_start, old_nbr, old_hist, old_flag, new_start, new_nbr):
-    """Carry each pair's contact history from the old list to the new one."""
+    """Carry each pair's contact history from the old list to the new one (the balls stored
+    in the same order)."""
+    return transfer_history_moved(old_start, old_nbr, old_hist, old_flag, new_start, new_nbr,
+                                  np.arange(new_start.shape[0] - 1, dtype=np.int64))
+
+
+@nb.njit(cache=True, parallel=True)
+def transfer_history_moved(old_start, old_nbr, old_hist, old_flag, new_start, new_nbr, old_of):
+    """Carry each pair's contact history from the old list to the new one (`old_of`: each
+    stored ball's place in the old list's storage)."""
     n = new_start.shape[0] - 1
     m = new_nbr.shape[0]
     hist = np.zeros((m, old_hist.shape[1]))
     flag = np.zeros(m, np.uint8)
     for i in nb.prange(n):
+        oi = old_of[i]
         for k in range(new_start[i], new_start[i + 1]):
-            j = new_nbr[k]
-            for q in range(old_start[i], old_start[i + 1]):
+            j = old_of[new_nbr[k]]
+            for q in range(old_start[oi], old_start[oi + 1]):
                 if old_nbr[q] == j:
                     if old_flag[q]:
                         for c in range(old_hist.shape[1]):
@@ -162,9 +181,11 @@ def transfer_history(old_start, old_nbr, old_hist, old_flag, new_start, new_nbr)
 
 
 @nb.njit(cache=True)
-def reverse_index(nbr, n):
-    """(rstart (n + 1,), rslot (M,)): for each ball j, the list entries k with nbr[k] == j in
-    ascending k (a counting sort: the same on any machine)."""
+def reverse_index(start, nbr, rows):
+    """(rstart (n + 1,), rslot (M,)): for each ball j, the list entries k with nbr[k] == j,
+    their first balls by ascending id (`rows`: the stored place of each id), each one's in
+    list order (a counting sort: the same on any machine)."""
+    n = start.shape[0] - 1
     m = nbr.shape[0]
     rstart = np.zeros(n + 1, np.int64)
     for k in range(m):
@@ -173,11 +194,38 @@ def reverse_index(nbr, n):
         rstart[j + 1] += rstart[j]
     fill = rstart[:-1].copy()
     rslot = np.empty(m, np.int64)
-    for k in range(m):
-        j = nbr[k]
-        rslot[fill[j]] = k
-        fill[j] += 1
+    for d in range(n):
+        i = rows[d]
+        for k in range(start[i], start[i + 1]):
+            j = nbr[k]
+            rslot[fill[j]] = k
+            fill[j] += 1
     return rstart, rslot
+
+
+@nb.njit(cache=True)
+def regroup(start, nbr, hist, flag, order, place):
+    """The list of the balls stored anew (place r holds the ball of old place order[r];
+    `place`: the new place of each old one): each ball's entries in their order, their
+    second balls renumbered."""
+    n = start.shape[0] - 1
+    new_start = np.zeros(n + 1, np.int64)
+    for r in range(n):
+        o = order[r]
+        new_start[r + 1] = new_start[r] + start[o + 1] - start[o]
+    new_nbr = np.empty_like(nbr)
+    new_hist = np.empty_like(hist)
+    new_flag = np.empty_like(flag)
+    for r in range(n):
+        o = order[r]
+        k = new_start[r]
+        for q in range(start[o], start[o + 1]):
+            new_nbr[k] = place[nbr[q]]
+            for c in range(hist.shape[1]):
+                new_hist[k, c] = hist[q, c]
+            new_flag[k] = flag[q]
+            k += 1
+    return new_start, new_nbr, new_hist, new_flag
 
 
 class NeighbourList:
@@ -191,14 +239,28 @@ class NeighbourList:
         self.hist = np.zeros((0, hist_width))
         self.flag = np.zeros(0, np.uint8)
         self.builds = 0
+        #: the id of each stored ball; None: the balls are stored by id
+        self.ids: np.ndarray | None = None
         self._bounds = None
         self.rout = None
         self.rstart = None
         self.rpos = None
         self.rflag = None
 
-    def build(self, pos: np.ndarray, radius: np.ndarray) -> None:
-        """Rebuild from the positions `pos` (wrapped in y in place when periodic)."""
+    def id_arrays(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """(ids, rows): the id of each stored ball and the stored place of each id."""
+        if self.ids is None:
+            ids = np.arange(n, dtype=np.int64)
+            return ids, ids
+        rows = np.empty(n, np.int64)
+        rows[self.ids] = np.arange(n, dtype=np.int64)
+        return self.ids, rows
+
+    def build(self, pos: np.ndarray, radius: np.ndarray,
+              old_of: np.ndarray | None = None) -> None:
+        """Rebuild from the positions `pos` (wrapped in y in place when periodic); `old_of`:
+        each stored ball's place at the last build when the balls were stored anew since
+        (vibroflow.dem.memory_order), None when they were not."""
         if self.periodic_length > 0.0:
             pos[:, 1] %= self.periodic_length
         cell = 2.0 * float(radius.max()) + self.skin
@@ -209,11 +271,15 @@ class NeighbourList:
             dims[1] = max(int(self.periodic_length / cell), 1)
             if dims[1] < 3:
                 dims[1] = 1
-        cells = Cells(*bin_particles(pos, lo, cell, dims, self.periodic_length), dims,
-                      self.skin, self.periodic_length)
+        ids, rows = self.id_arrays(pos.shape[0])
+        cells = Cells(*bin_particles(pos, lo, cell, dims, self.periodic_length, rows), dims,
+                      self.skin, self.periodic_length, ids)
         start, nbr = build_half_list(pos, radius, cells)
         if self.nbr.shape[0] and self.start.shape[0] == start.shape[0]:
-            hist, flag = transfer_history(self.start, self.nbr, self.hist, self.flag, start, nbr)
+            if old_of is None:
+                old_of = np.arange(pos.shape[0], dtype=np.int64)
+            hist, flag = transfer_history_moved(self.start, self.nbr, self.hist, self.flag,
+                                                start, nbr, old_of)
         else:
             hist = np.zeros((nbr.shape[0], self.hist.shape[1]))
             flag = np.zeros(nbr.shape[0], np.uint8)
@@ -223,12 +289,24 @@ class NeighbourList:
         self.index_pairs()
         self.builds += 1
 
+    def store(self, order: np.ndarray, place: np.ndarray) -> None:
+        """The list of the balls stored anew: place r holds the ball of old place order[r]
+        (`place`: the new place of each old one); the same pairs, histories and sums."""
+        self.start, self.nbr, self.hist, self.flag = regroup(self.start, self.nbr, self.hist,
+                                                             self.flag, order, place)
+        ids = order if self.ids is None else self.ids[order]
+        self.ids = None if np.array_equal(ids, np.arange(ids.shape[0])) else ids
+        self._bounds = None
+        self.rout = None
+        self.index_pairs()
+
     def index_pairs(self) -> None:
         """The reverse order of the current list (see the module doc), made when missing
         (after a build, or a list read from a file); its flags are the list's."""
         if self.rout is not None and self.rout.shape[0] == self.nbr.shape[0]:
             return
-        self.rstart, rslot = reverse_index(self.nbr, self.start.shape[0] - 1)
+        self.rstart, rslot = reverse_index(self.start, self.nbr,
+                                           self.id_arrays(self.start.shape[0] - 1)[1])
         self.rpos = np.empty_like(rslot)
         self.rpos[rslot] = np.arange(rslot.shape[0])
         self.rflag = np.ascontiguousarray(self.flag[rslot])

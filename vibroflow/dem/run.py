@@ -57,7 +57,7 @@ from .paraview import VTK_DIR, EarlyFrames, write_vtk
 from .part_output import write_parts_nc
 from .sampling import impact_rows, part_impact_rows, sample_steps, write_snapshot
 from .simulate import (BlowUp, DEMState, DEMSystem, init_state, make_system, run_steps,
-                       take_max_overlaps)
+                       store_by_id, take_max_overlaps)
 from .summary import run_summary
 
 SMALL_RUN = 1500  # below this many balls one thread is faster than two (thread wake-ups)
@@ -229,15 +229,19 @@ def _vibrate(scenario, out_dir, system, state, writer, prog, settle_info, clock:
         writer.append("part_impacts", **part_impact_rows(imp))
 
     def checkpoint():
+        store_by_id(system, state)
         write_checkpoint(ckpt, state, writer, system, settle_info, clock.solver_s(), fingerprint,
                          record)
 
     sigint_after = fault_sigint_after_steps()
     with deferred_sigint() as sigint:
-        _vibration_loop(state, system, writer, prog, run, samples, done_snapshots, total,
-                        window_start, explicit, f, stage_steps0, n, last_ckpt,
-                        (on_impacts, on_part_impacts), checkpoint, sigint, sigint_after, out_dir,
-                        early)
+        try:
+            _vibration_loop(state, system, writer, prog, run, samples, done_snapshots, total,
+                            window_start, explicit, f, stage_steps0, n, last_ckpt,
+                            (on_impacts, on_part_impacts), checkpoint, sigint, sigint_after,
+                            out_dir, early)
+        finally:
+            store_by_id(system, state)
     if sigint["raised"] and ckpt.exists():
         # a SIGINT while the last rows were written: the final state's checkpoint is on disk
         raise Interrupted(f"interrupted at t = {state.time(dt):.4f} s; checkpoint written; "
@@ -279,9 +283,11 @@ def _vibration_loop(state, system, writer, prog, run, samples, done_snapshots, t
     while True:
         vstep = state.step - state.time_origin_step
         if k < frames.size and frames[k] == vstep:
+            store_by_id(system, state)
             early.write(k, state.time(dt), state.pos, state.vel, state.omg, state.radius)
             k += 1
         if done_snapshots < len(samples) and samples[done_snapshots] == vstep:
+            store_by_id(system, state)
             write_snapshot(writer, system, state, done_snapshots, f)
             done_snapshots += 1
         if vstep % run.series_every == 0:
@@ -301,7 +307,8 @@ def _vibration_loop(state, system, writer, prog, run, samples, done_snapshots, t
                                          else vstep >= window_start)
         if not explicit and vstep < window_start:
             nxt = min(nxt, window_start)
-        run_steps(system, state, nxt - vstep, record_impacts=record,
+        # the balls may stay in space order until a row reads them (memory_order)
+        run_steps(system, state, nxt - vstep, record_impacts=record, keep_order=True,
                   on_impacts=on_impacts[0] if record and not explicit else None,
                   on_part_impacts=on_impacts[1] if record else None)
         now = state.step - state.time_origin_step

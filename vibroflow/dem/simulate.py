@@ -24,6 +24,8 @@ from . import step as K
 from .blowup import (BlowUp, blowup_message, check_finite_start, check_overlaps_at_start,
                      coincident_message, coincident_pair)
 from .laws import material_index, pair_table
+from . import memory_order as M
+from .memory_order import by_id, space_order, store
 from .neighbours import NeighbourList
 from .parts import EMPTY, IMP_BALL, N_LOAD, SLOTS, parts_record
 from .records import Params, Work, balls_of, pairs_of, slots_of, walls_of
@@ -111,8 +113,14 @@ class DEMState:
     def kinetic_energy(self) -> float:
         """Translational + rotational kinetic energy in the lab frame (J)."""
         inertia = 0.4 * self.mass * self.radius**2
-        return float(0.5 * np.sum(self.mass * np.sum(self.vel**2, axis=1))
-                     + 0.5 * np.sum(inertia * np.sum(self.omg**2, axis=1)))
+        move = self.mass * np.sum(self.vel**2, axis=1)
+        spin = inertia * np.sum(self.omg**2, axis=1)
+        if self.nl.ids is not None:  # summed by ball id, whatever the storage order
+            by_id = np.empty((2, self.n))
+            by_id[0, self.nl.ids] = move
+            by_id[1, self.nl.ids] = spin
+            move, spin = by_id
+        return float(0.5 * np.sum(move) + 0.5 * np.sum(spin))
 
 
 def make_system(scenario) -> DEMSystem:
@@ -207,6 +215,9 @@ class _Buffers:
         self.work = Work(imp_buf=np.zeros((nblock, IMPACT_CAPACITY, 6)),
                          imp_count=np.zeros(nblock, np.int64), diag=np.empty((nblock, K.N_DIAG)),
                          pose=np.zeros(8), moved=np.zeros(nblock))
+        #: the storage order of the last space sort (memory_order), taken up again by the
+        #: next run_steps call
+        self.order: np.ndarray | None = None
         self.balls = balls_of(state)
         self.walls = walls_of(state)
         ensure_part_arrays(system, state)
@@ -236,9 +247,17 @@ def _tub_pose(system: DEMSystem, state: DEMState) -> np.ndarray:
     return pose
 
 
-def rebuild(system: DEMSystem, state: DEMState) -> None:
-    """Rebuild the neighbour list (keeping contact histories) and its reference positions."""
-    state.nl.build(state.pos, state.radius)
+def rebuild(system: DEMSystem, state: DEMState, sort: bool = False) -> None:
+    """Rebuild the neighbour list (keeping contact histories) and its reference positions;
+    with `sort`, store the balls in space order first (vibroflow.dem.memory_order)."""
+    old_of = None
+    if sort:
+        b = _buf(system, state)
+        old_of = space_order(state.pos, state.radius, system.skin,
+                             state.nl.id_arrays(state.n)[0])
+        store(state, b.work.diag, b.parts, old_of, keep_list=False)
+        b.order = state.nl.ids
+    state.nl.build(state.pos, state.radius, old_of)
     pose = _tub_pose(system, state)
     state.ref_tub[:] = lab_to_tub_np(state.pos, pose[0], pose[1], pose[2],
                                      (pose[6], pose[7]))
@@ -304,12 +323,44 @@ def set_overlap_maxima(system: DEMSystem, state: DEMState, diag: np.ndarray) -> 
     _buf(system, state).work.diag[:] = diag
 
 
+def store_by_id(system: DEMSystem, state: DEMState) -> None:
+    """The balls stored back by id (memory_order), where a space sort stored them anew: what
+    run_steps(keep_order=True)'s caller does before it reads the state's arrays."""
+    rows = by_id(state)
+    if rows is not None:
+        b = _buf(system, state)
+        store(state, b.work.diag, b.parts, rows)
+
+
 def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: bool = False,
               on_impacts: Callable[[np.ndarray], None] | None = None,
-              on_part_impacts: Callable[[np.ndarray], None] | None = None) -> None:
+              on_part_impacts: Callable[[np.ndarray], None] | None = None,
+              memory_order: bool | None = None, keep_order: bool = False) -> None:
     """Advance the state by `nsteps` steps in place (rebuilding the list as needed); the
     recorded impacts go to on_impacts (take_impacts' rows) and on_part_impacts
-    (take_part_impacts')."""
+    (take_part_impacts', ball ids).  memory_order: store the balls in space order during the
+    steps (vibroflow.dem.memory_order; None: from MEMORY_ORDER_FROM balls on), with the same
+    numbers either way.  The state comes back stored by id, or with `keep_order` as the steps
+    left it (a caller that reads its arrays calls store_by_id first; kinetic_energy needs
+    not), which spares the storing of calls that only step on."""
+    b = _buf(system, state)
+    if memory_order is None:
+        memory_order = state.n >= M.MEMORY_ORDER_FROM
+    if (memory_order and state.nl.ids is None and b.order is not None
+            and b.order.shape[0] == state.n):
+        store(state, b.work.diag, b.parts, b.order)  # the last sort's order, taken up again
+    try:
+        _run_steps(system, state, nsteps, record_impacts, on_impacts, on_part_impacts,
+                   memory_order)
+    except BaseException:
+        store_by_id(system, state)
+        raise
+    if not keep_order:
+        store_by_id(system, state)
+
+
+def _run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: bool,
+               on_impacts, on_part_impacts, memory_order: bool) -> None:
     b = _buf(system, state)
     motion = system.motion_array(state.vibrating)
     b.work.pose[6], b.work.pose[7] = system.motion.pivot_x, system.motion.pivot_z
@@ -322,6 +373,7 @@ def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: b
         except ZeroDivisionError:
             # 1/d of two coincident balls (numba raises it, as Python does); the step count is
             # unknown here, so the time is that of the call's start
+            store_by_id(system, state)
             pair = coincident_pair(system, state)
             if pair is None:
                 raise
@@ -329,9 +381,10 @@ def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: b
         state.step += done
         left -= done
         if status == K.BLOWUP:
+            store_by_id(system, state)
             raise BlowUp(blowup_message(system, state, b.work.diag))
         if status == K.REBUILD:
-            rebuild(system, state)
+            rebuild(system, state, sort=memory_order and state.nl.builds % M.SORT_EVERY == 0)
         if on_impacts is not None and (status == K.IMPACTS_FULL or left == 0):
             imp = take_impacts(system, state)
             if imp.shape[0]:
@@ -340,6 +393,8 @@ def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: b
             take_impacts(system, state)
         if system.n_parts and (status == K.IMPACTS_FULL or left == 0):
             rows = take_part_impacts(system, state)
+            if state.nl.ids is not None and rows.shape[0]:
+                rows[:, IMP_BALL] = state.nl.ids[rows[:, IMP_BALL].astype(np.int64)]
             if on_part_impacts is not None and rows.shape[0]:
                 on_part_impacts(rows)
 

@@ -21,6 +21,7 @@ from vibroflow import __version__
 from vibroflow.analysis.compare import field_difference, strengths_agree
 from vibroflow.calibration.calibrate import calibrate
 from vibroflow.continuum.options import options_record
+from vibroflow.dem.fingerprint import scenario_record
 from vibroflow.dem.run import run_dem
 # write_json_atomic is imported from here by the study's other modules
 from vibroflow.io.atomic import write_json_atomic
@@ -39,7 +40,8 @@ ASSUMED_RATE = 2.0e6
 
 
 def scenario_inputs(scenario) -> dict:
-    """The scenario's fields that fix the numbers (all but run.checkpoint_every)."""
+    """The scenario's fields that fix a continuum's numbers (all but run.checkpoint_every); the
+    DEM stage's are fewer (dem.fingerprint.scenario_record: no run.force_chunks either)."""
     s = scenario.model_dump(mode="json")
     s.get("run", {}).pop("checkpoint_every", None)
     return s
@@ -95,7 +97,7 @@ def _run_dem(study: Study, resume: bool) -> dict:
 
 
 def dem_stage() -> Stage:
-    return Stage(DEM, inputs=lambda st: {"scenario": scenario_inputs(st.scenario)},
+    return Stage(DEM, inputs=lambda st: {"scenario": scenario_record(st.scenario)},
                  run=_run_dem, outputs=(f"{DEM}/summary.json", f"{DEM}/bulk_velocity.csv",
                                         f"{DEM}/dem.h5"),
                  estimate=_dem_cost, ready=lambda st: has_vtk(st.folder(DEM) / "vtk", st.vtk))

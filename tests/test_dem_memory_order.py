@@ -1,0 +1,144 @@
+"""The balls stored in space order during a run (vibroflow.dem.memory_order) give the numbers of
+the balls stored by id, bit for bit:
+
+- a falling bed, whose contacts and impacts start and end at every step, sorted at every
+  neighbour rebuild, has the positions, velocities, forces, wall and pair histories of the
+  unsorted run, and the same impacts (the rows of a flush come in another order);
+- a run saved to a state file while its balls are in space order, read back and stepped on,
+  ends where the uninterrupted one does;
+- the ball-part impacts name the ids of the balls that hit the part.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dem_helpers import ball
+from tests.test_dem_parts import _box, _sim
+from vibroflow.dem import fill as F
+from vibroflow.dem import memory_order as M
+from vibroflow.dem import simulate as S
+from vibroflow.dem.output import load_state_file, save_state_file
+from vibroflow.dem.parts import IMP_BALL
+from vibroflow.scenario.io import load_scenario
+
+ARRAYS = ("pos", "vel", "omg", "force", "torque", "ref_tub", "wall_hist", "wall_flag",
+          "wall_fn", "wall_point", "wall_arc")
+
+
+@pytest.fixture
+def sort_at_every_rebuild(monkeypatch):
+    monkeypatch.setattr(M, "SORT_EVERY", 1)
+
+
+def _bed():
+    sc = load_scenario("tub47-quick", ["fill.count=300"])
+    system = S.make_system(sc)
+    state = F.fill_state(system, sc)
+    state.vibrating = True
+    return system, state
+
+
+def _steps(system, state, calls: int, sort: bool, impacts: list | None = None) -> bool:
+    """`calls` run_steps calls of 100 steps, the balls left as the steps leave them between
+    calls; whether they were ever stored other than by id."""
+    moved = False
+    for _ in range(calls):
+        S.run_steps(system, state, 100, record_impacts=impacts is not None,
+                    on_impacts=None if impacts is None else impacts.append,
+                    memory_order=sort, keep_order=True)
+        moved |= state.nl.ids is not None
+    S.store_by_id(system, state)
+    return moved
+
+
+def _rows(imp: list) -> np.ndarray:
+    a = np.concatenate(imp)
+    return a[np.lexsort(a.T[::-1])]
+
+
+def _same_state(a, b) -> None:
+    for name in ARRAYS:
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    for name in ("start", "nbr", "hist", "flag"):
+        assert np.array_equal(getattr(a.nl, name), getattr(b.nl, name)), name
+    assert a.nl.builds == b.nl.builds
+
+
+def test_a_bed_sorted_at_every_rebuild_has_the_numbers_of_the_unsorted_one(
+        sort_at_every_rebuild):
+    system, plain = _bed()
+    _s, stored = _bed()
+    imp_plain, imp_stored = [], []
+    _steps(system, plain, 40, False, imp_plain)
+    assert _steps(system, stored, 40, True, imp_stored)  # the balls were stored anew
+    assert plain.nl.builds > 10 and np.count_nonzero(plain.nl.flag) > 10
+    _same_state(plain, stored)
+    assert plain.kinetic_energy() == stored.kinetic_energy()
+    a, b = _rows(imp_plain), _rows(imp_stored)
+    assert a.shape[0] > 100 and np.array_equal(a, b)
+
+
+def test_a_state_saved_in_space_order_resumes_to_the_same_numbers(tmp_path,
+                                                                  sort_at_every_rebuild):
+    system, whole = _bed()
+    _steps(system, whole, 20, True)
+    _s, first = _bed()
+    _steps(system, first, 10, True)
+    save_state_file(tmp_path / "state.h5", first)
+    again, _attrs = load_state_file(tmp_path / "state.h5")
+    again.vibrating = True
+    _steps(system, again, 10, True)
+    _same_state(whole, again)
+
+
+def test_part_impacts_name_the_ids_of_the_balls(sort_at_every_rebuild):
+    # six balls from all sides onto a box, each one's id known from its start
+    rng = np.random.default_rng(4)
+    dirs = rng.normal(size=(6, 3))
+    dirs /= np.linalg.norm(dirs, axis=1)[:, None]
+    balls = [ball(0.022 * n, vel=tuple(-1.0 * n)) for n in dirs]
+    runs = {}
+    for sort in (False, True):
+        sim = _sim(_box(), balls, mu=0.3)
+        rows, moved = [], False
+        for _ in range(100):
+            S.run_steps(sim.system, sim.state, 50, record_impacts=True,
+                        on_part_impacts=rows.append, memory_order=sort, keep_order=True)
+            moved |= sim.state.nl.ids is not None
+        S.store_by_id(sim.system, sim.state)
+        runs[sort] = (_rows(rows), moved, sim.state)
+    (plain, _, a), (stored, moved, b) = runs[False], runs[True]
+    assert moved
+    assert sorted(set(plain[:, IMP_BALL].astype(int))) == list(range(6))  # every ball hit
+    assert np.array_equal(plain, stored)
+    assert np.array_equal(a.pos, b.pos) and np.array_equal(a.part_hist, b.part_hist)
+
+
+@pytest.mark.slow
+def test_a_run_sorted_from_the_first_ball_writes_the_rows_of_the_unsorted_run(tmp_path,
+                                                                             monkeypatch):
+    # run_dem in this process, the sort forced on a 400-ball tub: every snapshot, wall contact
+    # and time-series row by ball id as without it; the impacts the same rows
+    import h5py
+
+    from tests.test_calibrate import SMALL
+    from vibroflow.dem.run import run_dem
+
+    monkeypatch.setenv("VIBROFLOW_CACHE", str(tmp_path / "cache"))
+    sc = load_scenario("tub47-quick", SMALL)
+    monkeypatch.setattr(M, "SORT_EVERY", 1)
+    run_dem(sc, out_dir=tmp_path / "plain")
+    monkeypatch.setattr(M, "MEMORY_ORDER_FROM", 0)
+    run_dem(sc, out_dir=tmp_path / "sorted")
+    with h5py.File(tmp_path / "plain" / "dem.h5") as fa, \
+            h5py.File(tmp_path / "sorted" / "dem.h5") as fb:
+        for group in ("snapshots", "wall_contacts", "series"):
+            for name in fa[group]:
+                assert np.array_equal(fa[group][name][()], fb[group][name][()],
+                                      equal_nan=True), f"{group}/{name}"
+        a, b = (np.hstack([f["impacts"][k][()].astype(float).reshape(f["impacts"][k].shape[0],
+                                                                        -1)
+                           for k in sorted(f["impacts"])]) for f in (fa, fb))
+        assert a.shape[0] > 0
+        assert np.array_equal(a[np.lexsort(a.T[::-1])], b[np.lexsort(b.T[::-1])])

@@ -1,0 +1,119 @@
+"""The balls stored in space order during a run, so that a step walks memory in sequence.
+
+A bed that has mixed holds neighbours far apart in memory: every pair's read of its second
+ball, and each ball's gather of its reverse slots, misses the cache.  At neighbour-list
+rebuilds (every SORT_EVERY-th) `run_steps` (vibroflow.dem.simulate) stores the balls anew in
+the Morton (Z-order) order of their neighbour cells, each cell's balls by id; it keeps the id
+of each stored ball in the list (`NeighbourList.ids`) and stores them back by id before it
+returns, so that everything outside a `run_steps` call (dem.h5, checkpoints, sampling,
+ParaView files, blow-up messages) sees the balls by id, as always.
+
+The numbers do not depend on the storage order (vibroflow.dem.neighbours: a pair belongs to
+its ball of lower id, each ball's entries and reverse slots come in id order), so a stored run
+gives the same positions, velocities, forces and contact histories bit for bit.  What the
+order does change: the impacts of one flush come block of stored balls by block (the same
+order on any thread count, and the same rows), and with parts the per-block sums of the part
+loads are added in another grouping (rounding).
+
+MEMORY_ORDER_FROM and SORT_EVERY are chosen by benchmarks/dem_memory_order.py on the 2-core
+development machine (docs/decisions/threads.md).
+"""
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from . import step as K
+from .parts import IMP_BALL
+
+#: ball count from which run_steps stores the balls in space order: above tub47's 14 000, so
+#: that the reference cases keep their dem.h5 bit for bit, impact order included (tub47-quick,
+#: 4 200 balls: 1.03 x the unsorted CPU time as filled, 0.96 x mixed; docs/decisions/threads.md)
+MEMORY_ORDER_FROM = 20_000
+#: neighbour-list rebuilds between two space sorts: on the 140 000-ball tub every 8th rebuild
+#: took 0.85 x the unsorted CPU time as filled and 0.80 x on a mixed bed, every rebuild 1.21 x
+#: and 0.84 x (the bed moves a fraction of a cell between rebuilds; docs/decisions/threads.md)
+SORT_EVERY = 8
+#: the state's arrays with one row a ball (vibroflow.dem.simulate.DEMState)
+PER_BALL = ("pos", "vel", "omg", "force", "torque", "radius", "mass", "mat", "ref_tub",
+            "wall_hist", "wall_flag", "wall_fn", "wall_ft", "wall_slide", "wall_point",
+            "wall_force", "wall_arc", "part_hist", "part_key")
+#: the diagnostics' columns that hold a stored ball's place (vibroflow.dem.step)
+BALL_COLUMNS = (K.D_BALL_I, K.D_BALL_J, K.D_WALL_I, K.D_NAN, K.D_LOST)
+_BITS = 21  # Morton key: 21 bits a cell coordinate, 63 bits in all
+
+
+def _spread(v: np.ndarray) -> np.ndarray:
+    """The bits of v (< 2^21) two zero bits apart (the Morton interleave)."""
+    v = v.astype(np.uint64) & np.uint64(0x1FFFFF)
+    v = (v | (v << np.uint64(32))) & np.uint64(0x1F00000000FFFF)
+    v = (v | (v << np.uint64(16))) & np.uint64(0x1F0000FF0000FF)
+    v = (v | (v << np.uint64(8))) & np.uint64(0x100F00F00F00F00F)
+    v = (v | (v << np.uint64(4))) & np.uint64(0x10C30C30C30C30C3)
+    v = (v | (v << np.uint64(2))) & np.uint64(0x1249249249249249)
+    return v
+
+
+def space_order(pos: np.ndarray, radius: np.ndarray, skin: float,
+                ids: np.ndarray) -> np.ndarray:
+    """The stored places in Morton order of their neighbour cells (2 r_max + skin, m), each
+    cell's balls by id: place r of the new storage holds the ball of place order[r]."""
+    cell = 2.0 * float(radius.max()) + skin
+    c = np.floor((pos - pos.min(axis=0)) / cell).astype(np.int64)
+    np.clip(c, 0, (1 << _BITS) - 1, out=c)
+    key = _spread(c[:, 0]) | (_spread(c[:, 1]) << np.uint64(1)) | (_spread(c[:, 2])
+                                                                   << np.uint64(2))
+    return np.lexsort((ids, key)).astype(np.int64)
+
+
+@nb.njit(cache=True, parallel=True)
+def _permute_rows(a, order):
+    """a[:] = a[order] for a 2-d array, row by row in parallel."""
+    tmp = np.empty_like(a)
+    m = a.shape[1]
+    for r in nb.prange(a.shape[0]):
+        o = order[r]
+        for c in range(m):
+            tmp[r, c] = a[o, c]
+    for r in nb.prange(a.shape[0]):
+        for c in range(m):
+            a[r, c] = tmp[r, c]
+
+
+def store(state, diag: np.ndarray, prt, order: np.ndarray, keep_list: bool = True) -> None:
+    """Store the balls of `state` anew, in place: place r holds the ball of old place
+    order[r].  The per-ball arrays, the places in the diagnostics `diag` and in the buffered
+    ball-part impacts of `prt` (vibroflow.dem.parts' record) follow; the neighbour list is
+    regrouped (keep_list) or only told the new ids (a rebuild follows, vibroflow.dem.simulate)."""
+    n = order.shape[0]
+    place = np.empty(n, np.int64)
+    place[order] = np.arange(n, dtype=np.int64)
+    for name in PER_BALL:
+        a = getattr(state, name)
+        if a is not None and a.shape[0] == n and a.size:
+            _permute_rows(a.reshape(n, -1), order)
+    for col in BALL_COLUMNS:
+        x = diag[:, col]
+        held = x >= 0.0
+        x[held] = place[x[held].astype(np.int64)]
+    imp = prt.imp
+    for c in range(imp.shape[0]):
+        rows = imp[c, :min(int(prt.imp_count[c]), imp.shape[1])]
+        if rows.shape[0]:
+            rows[:, IMP_BALL] = place[rows[:, IMP_BALL].astype(np.int64)]
+    nl = state.nl
+    if keep_list:
+        nl.store(order, place)
+    else:
+        ids = order if nl.ids is None else nl.ids[order]
+        nl.ids = None if np.array_equal(ids, np.arange(n)) else ids
+
+
+def by_id(state) -> np.ndarray | None:
+    """The order that stores the balls of `state` back by id (None: they are)."""
+    ids = state.nl.ids
+    if ids is None:
+        return None
+    rows = np.empty(ids.shape[0], np.int64)
+    rows[ids] = np.arange(ids.shape[0], dtype=np.int64)
+    return rows
