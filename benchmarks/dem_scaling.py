@@ -75,9 +75,9 @@ def worker(size: str, steps: int, repeats: int) -> dict:
             K._gather_block(c, balls, pairs, slots)
 
     @numba.njit(parallel=True)
-    def walls(t, balls, pairs, w, params, work, nblock):
+    def walls(t, balls, pairs, w, params, work, prt, nblock):
         for c in numba.prange(nblock):
-            K.ball_walls(c, t, 0.0, False, balls, pairs, w, params, work)
+            K.ball_walls(c, t, 0.0, False, balls, pairs, w, params, work, prt)
 
     @numba.njit(parallel=True)
     def kick(balls, pairs, params, work, nblock):
@@ -94,7 +94,7 @@ def worker(size: str, steps: int, repeats: int) -> dict:
                                       system.params, buf.work),
         "gather": lambda: gather(buf.balls, pairs, slots, K.NBLOCK),
         "walls": lambda: walls(t, buf.balls, pairs, buf.walls, system.params, buf.work,
-                               K.NBLOCK),
+                               buf.parts, K.NBLOCK),
         "kick": lambda: kick(buf.balls, pairs, system.params, buf.work, K.NBLOCK),
     }
     profile = {}
