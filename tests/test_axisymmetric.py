@@ -211,6 +211,7 @@ def test_eulerian_radial_expansion_hoop_rate_and_mass_per_radian():
 # ----------------------------------------------------------------------------------------------
 # the cylinder against the planar column, tub47's glass-bead media
 
+@pytest.mark.slow
 def test_axisymmetric_low_column_keeps_its_top():
     """a = 0.5 < 0.74, R0 = 1 m, dx = R0/20, rough floor: the top of a low cylinder never
     moves, so H_inf = H0 (Lajeunesse et al. 2004's small-a branch, H_inf / R0 = a), within the
@@ -235,6 +236,7 @@ def test_axisymmetric_low_column_keeps_its_top():
     assert float(np.sum(dep.h * dep.x) * bw) == pytest.approx(0.5 * a, rel=0.01)
 
 
+@pytest.mark.slow
 def test_axisymmetric_column_spreads_less_than_the_planar_one():
     """a = 3, R0 = L0 = 1 m, dx = L0/20, rough floor, APIC: the cylinder's run-out is shorter
     than the plane-strain column's, as the experiments' are (Lube et al. 2004's 1.6 a^(1/2) =
@@ -310,6 +312,7 @@ def test_tall_sand_cylinder_meets_lube_and_lajeunesse_2004(a):
     assert height == pytest.approx(LAJEUNESSE_2004.height(a), rel=0.10)
 
 
+@pytest.mark.slow
 def test_eulerian_sand_cylinder_agrees_with_the_lagrangian():
     """a = 3, R0 = 1 m, dx = R0/10, the sand of the Lagrangian checks above, in the Eulerian
     formulation's axisymmetric section (about 30 s): the mass per radian is conserved to

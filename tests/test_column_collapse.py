@@ -554,6 +554,7 @@ def mpm_dem_tolerance(value_dem, seed_spread=0.0):
 SEED_SPREAD = {"tall": (0.15, 0.08), "low": (0.20, 0.02)}
 
 
+@pytest.mark.slow
 def test_mpm_against_dem_low_column():
     """a ~ 0.5, L0 = 10 balls (166 balls, 8 s of DEM): the DEM of tub47's balls (block
     comment above the DEM helpers) and the MPM column of the same size agree on the run-out and
@@ -659,6 +660,7 @@ def _formulation_deposit(L0, H0, dx, method):
     return (dep.runout - L0) / L0, dep.height / L0, err
 
 
+@pytest.mark.slow
 def test_column_collapse_conserves_mass_and_agrees_with_the_lagrangian():
     """A square column (a = 1, half-width 5 cm, 10 node spacings across, released both ways)
     collapses on the fixed mesh with its free surface: the mass is conserved to round-off (far

@@ -91,6 +91,7 @@ def _steps(system, state, n):
     return np.array(rows)
 
 
+@pytest.mark.slow
 def test_a_landing_block_turns_its_floor_rows_normal_energy_into_temperature():
     speed = 0.5
     system, state = _block((0.0, -speed), settled=False)

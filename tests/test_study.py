@@ -125,6 +125,7 @@ def test_every_method_keeps_the_bed_mass_and_the_wall_obeys_coulomb(study):
     assert lag["continuum"]["wall_friction"] <= mu * (1 + 1e-6)
 
 
+@pytest.mark.slow
 def test_calibration_writes_into_its_own_folder_with_the_standalone_numbers(study, tmp_path):
     """The calibration stage's files (calibration.toml, fields.nc, pictures) are in
     DIR/calibration, none in DIR/dem; the calibration of the study's DEM into a folder of its
@@ -159,6 +160,7 @@ def test_rerun_recomputes_nothing(study):
     assert set(summary["methods"]) == {"dem", *METHODS}
 
 
+@pytest.mark.slow
 def test_continuum_setting_reruns_only_continuum_and_comparison(study):
     from vibroflow.study import run_study
 
@@ -181,6 +183,7 @@ def _cli(*args):
                           capture_output=True, text=True, env=env, stdin=subprocess.DEVNULL)
 
 
+@pytest.mark.slow
 def test_foreign_or_corrupt_dir_is_a_one_line_error(tmp_path):
     import vibroflow
     from vibroflow.errors import InputError

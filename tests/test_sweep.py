@@ -353,6 +353,7 @@ def test_bad_factors_or_vary_are_one_line_errors_naming_them(tmp_path):
     assert p.points[2].scenario["motion"]["amplitude_factor"] == 0.5
 
 
+@pytest.mark.slow
 def test_two_reruns_together_compute_nothing_and_leave_the_folder_whole(swept):
     """Two reruns of the fixture's sweep started together on its folder: the finished points
     are kept (their stage files untouched), the failed ones are tried again and fail again,
