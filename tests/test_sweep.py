@@ -91,6 +91,7 @@ def swept(tmp_path_factory):
     return tmp, out, env, r
 
 
+@pytest.mark.slow
 def test_sweep_table_matches_points_and_tub_speed_scales_with_factor(swept):
     import h5py
     import numpy as np
@@ -161,6 +162,7 @@ def test_sweep_table_matches_points_and_tub_speed_scales_with_factor(swept):
     assert "vibroflow sweep" in r.stdout and "lagrangian" in r.stdout  # the rich table
 
 
+@pytest.mark.slow
 def test_failed_point_is_reported_and_the_others_finish(swept):
     tmp, out, env, r = swept
     rows = _rows(out)
@@ -177,6 +179,7 @@ def test_failed_point_is_reported_and_the_others_finish(swept):
 
 
 
+@pytest.mark.slow
 def test_sweep_writes_its_report_with_the_failed_points(swept):
     """The sweep's own report (DIR/report.html) in headless Chromium: its figures and the
     sweep's plots loaded, the table within the page, both failed points with their reason."""
@@ -244,6 +247,7 @@ def _on_cluster(tmp, out, env, factors, counts):
     return r, worker_pids
 
 
+@pytest.mark.slow
 def test_sweep_on_a_scheduler_started_by_hand(swept, tmp_path):
     """The kept points of the fixture (copied) and a failing one run as tasks of a worker
     started with `dask worker`: one numba thread there too (set by the task itself)."""
@@ -283,6 +287,7 @@ def _one_line_error(r):
     assert "Traceback" not in r.stderr
 
 
+@pytest.mark.slow
 def test_foreign_corrupt_or_other_base_dir_is_a_one_line_error(swept, tmp_path):
     _, src, env, _ = swept
     foreign = tmp_path / "foreign"

@@ -111,6 +111,7 @@ def _on_threads(method, threads):
     return state
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["lagrangian", "eulerian"])
 def test_the_compiled_balance_gives_the_same_numbers_on_one_thread_and_on_two(method):
     # the balance runs serially between the step's chunked parallel loops (DEVELOPERS.md,
