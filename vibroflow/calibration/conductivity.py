@@ -87,6 +87,20 @@ def _fit(q, g, w, qb, gb):
             "down_gradient_fraction": float(np.mean(np.sum(q * g, axis=1) < 0))}
 
 
+def resolved_cells(flux, ok, gT, q, min_gradient_snr: float, weighted: bool):
+    """(ok narrowed to the cells whose temperature gradient is at least min_gradient_snr
+    times its batch-means error and whose flux has a positive error, the fit's weights
+    1 / se_q^2 (ones when not weighted or without errors)) of the flux dataset's cells."""
+    if "temperature_gradient_stderr" in flux:
+        se = np.asarray(flux["temperature_gradient_stderr"].values, float)
+        ok = ok & (np.linalg.norm(gT, axis=-1) >= min_gradient_snr * np.linalg.norm(se, axis=-1))
+    if "energy_flux_stderr" not in flux:
+        return ok, np.ones_like(q)
+    qse = np.asarray(flux["energy_flux_stderr"].values, float)[..., (0, 2)]
+    ok = ok & np.all(qse > 0, axis=-1)
+    return ok, (1.0 / np.where(qse > 0, qse, 1.0) ** 2 if weighted else np.ones_like(q))
+
+
 def fit_conductivity(flux, rho_s: float, diameter: float, restitution: float, phi_rcp: float,
                      g0_form: str = "chialvo_sundaresan", phi_range=PHI_RANGE,
                      phi_bin_edges=PHI_BIN_EDGES, min_gradient_snr: float = MIN_GRADIENT_SNR,
@@ -122,15 +136,7 @@ def fit_conductivity(flux, rho_s: float, diameter: float, restitution: float, ph
         ok = np.isfinite(T) & (T > 0) & (phi >= lo) & (phi <= hi) & np.all(np.isfinite(gT), -1)
         ok &= np.all(np.isfinite(q), -1) & np.all(np.isfinite(gTb), axis=(0, -1))
         ok &= np.all(np.isfinite(Tb) & (Tb > 0), axis=0) & np.all(np.isfinite(qb), axis=(0, -1))
-        if "temperature_gradient_stderr" in flux:
-            se = arr("temperature_gradient_stderr")
-            ok &= np.linalg.norm(gT, axis=-1) >= min_gradient_snr * np.linalg.norm(se, axis=-1)
-        if "energy_flux_stderr" in flux:
-            qse = arr("energy_flux_stderr")[..., (0, 2)]
-            ok &= np.all(qse > 0, axis=-1)
-            w_all = 1.0 / np.where(qse > 0, qse, 1.0) ** 2
-        else:
-            w_all = np.ones_like(q)
+        ok, w_all = resolved_cells(flux, ok, gT, q, min_gradient_snr, weighted=True)
     n = int(ok.sum())
     if n < min_cells:
         raise InputError(f"cells = {n}: the conductivity fit needs at least {min_cells} cells "

@@ -35,7 +35,7 @@ from vibroflow.continuum.kinetic_theory import KineticParameters
 from vibroflow.errors import InputError
 from vibroflow.measure.stats import stderr_of_batches
 
-from .conductivity import MIN_GRADIENT_SNR, MIN_R2, PHI_BIN_EDGES, PHI_RANGE
+from .conductivity import MIN_GRADIENT_SNR, MIN_R2, PHI_BIN_EDGES, PHI_RANGE, resolved_cells
 from .kinetic import G0_FORMS
 
 MODEL = ("q = -A kappa(phi, T) grad T - B mu(phi, T) grad phi, kappa and mu Garzo & Dufty's "
@@ -155,15 +155,7 @@ def fit_heat_flux_law(flux, rho_s: float, diameter: float, restitution: float, p
     phi, T, gT, gp, q, phib, Tb, gTb, gpb, qb = _fields(flux)
     with np.errstate(invalid="ignore", divide="ignore"):
         ok = _usable(phi, T, gT, gp, q, phib, Tb, gTb, gpb, qb, lo, hi, 0)
-        if "temperature_gradient_stderr" in flux:
-            se = np.asarray(flux["temperature_gradient_stderr"].values, float)
-            ok &= np.linalg.norm(gT, axis=-1) >= min_gradient_snr * np.linalg.norm(se, axis=-1)
-        if "energy_flux_stderr" in flux:
-            qse = np.asarray(flux["energy_flux_stderr"].values, float)[..., (0, 2)]
-            ok &= np.all(qse > 0, axis=-1)
-            w_all = 1.0 / np.where(qse > 0, qse, 1.0) ** 2 if weighted else np.ones_like(q)
-        else:
-            w_all = np.ones_like(q)
+        ok, w_all = resolved_cells(flux, ok, gT, q, min_gradient_snr, weighted)
     n = int(ok.sum())
     if n < min_cells:
         raise InputError(f"cells = {n}: the heat-flux law's fit needs at least {min_cells} cells "
