@@ -45,3 +45,33 @@ def write_toml(tmp_path):
         return path
 
     return write
+
+
+@pytest.fixture(scope="session")
+def study_run(tmp_path_factory):
+    """The tiny study (tests.test_calibrate.SMALL: 400 balls, 0.2 s of vibration), run once for
+    the whole session with its report stage: (scenario, folder, summary, echoed lines, the fill
+    cache it used).  Tests read the folder; only slow ones rerun stages in it."""
+    from tests.test_calibrate import SMALL
+    from vibroflow.report.stage import report_stage
+    from vibroflow.scenario.io import load_scenario
+    from vibroflow.study import run_study
+
+    tmp = tmp_path_factory.mktemp("study")
+    cache = tmp / "cache"
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("VIBROFLOW_CACHE", str(cache))
+        scenario = load_scenario("tub47-quick", SMALL)
+        lines: list[str] = []
+        out = tmp / "run"
+        summary = run_study(scenario, out, echo=lines.append, extra_stages=[report_stage()])
+    return scenario, out, summary, lines, cache
+
+
+@pytest.fixture
+def study(study_run, monkeypatch):
+    """The session's tiny study as (scenario, folder, summary, echoed lines), with
+    VIBROFLOW_CACHE at its fill cache while the test runs (a rerun finds the fill there)."""
+    scenario, out, summary, lines, cache = study_run
+    monkeypatch.setenv("VIBROFLOW_CACHE", str(cache))
+    return scenario, out, summary, lines

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import os
+import shutil
 import subprocess
 import sys
 
@@ -113,15 +114,13 @@ def _cli(*args, env):
 
 
 @pytest.fixture(scope="module")
-def calibrated_run(tmp_path_factory):
+def calibrated_run(study_run, tmp_path_factory):
+    """`vibroflow calibrate` on a copy of the session's tiny study's DEM (tub47-quick with
+    SMALL), as a DEM run folder of its own."""
     tmp = tmp_path_factory.mktemp("calibrate")
     env = dict(os.environ, VIBROFLOW_CACHE=str(tmp / "cache"), NO_COLOR="1")
     out = tmp / "run"
-    sets = []
-    for s in SMALL:
-        sets += ["--set", s]
-    r = _cli("dem", "tub47-quick", "--out", out, *sets, env=env)
-    assert r.returncode == 0, r.stderr
+    shutil.copytree(study_run[1] / "dem", out, ignore=shutil.ignore_patterns("stage.json"))
     r = _cli("calibrate", out, env=env)
     assert r.returncode == 0, r.stderr
     return out, r

@@ -1,6 +1,6 @@
 """The study report (DIR/report.html, `vibroflow report DIR`): the helpers against known
 answers (the shear rate of analytic flows, impacts binned by cell against the DEM summary's own
-count and mean), and the page of a tiny study (tests.test_study's fixture, which ends with
+count and mean), and the page of a tiny study (tests.conftest's study fixture, which ends with
 the report stage): self-contained, every image a valid PNG/GIF, the probe table equal to
 summary.json, rendered by headless Chromium with every figure loaded; bad folders are a one-line
 error that writes nothing."""
@@ -22,7 +22,6 @@ import h5py
 import numpy as np
 import pytest
 
-from tests.test_study import study  # noqa: F401  (the module-scoped tiny study fixture)
 
 # Debian's packages chromium and chromium-driver
 CHROMIUM = Path(shutil.which("chromium") or "/usr/bin/chromium")
@@ -71,7 +70,7 @@ def test_impacts_binned_by_analysis_cell():
     assert int(cells.count.sum()) == 4
 
 
-def test_report_impacts_are_the_summarys_impacts(study):  # noqa: F811
+def test_report_impacts_are_the_summarys_impacts(study):
     """The impact map counts exactly the ball-ball impacts the DEM summary averages (another
     code path: vibroflow.measure.contacts.impact_stats_chunked), with the same mean speed."""
     from vibroflow.report.data import StudyData
@@ -85,7 +84,7 @@ def test_report_impacts_are_the_summarys_impacts(study):  # noqa: F811
     assert mean == pytest.approx(im["ball_ball_mean_normal_speed"], rel=1e-6)
 
 
-def test_impact_distributions_are_the_summarys_impacts(study):  # noqa: F811
+def test_impact_distributions_are_the_summarys_impacts(study):
     """The distributions count every kind's impacts the DEM summary averages, with its mean and
     standard error (another code path: vibroflow.measure.contacts.impact_stats_chunked); the
     U's and the partitions' profiles hold all of theirs; the flags compare the summary's
@@ -161,7 +160,7 @@ def _cli(*args):
                           capture_output=True, text=True, env=env, stdin=subprocess.DEVNULL)
 
 
-def test_report_is_self_contained_and_shows_the_summary(study):  # noqa: F811
+def test_report_is_self_contained_and_shows_the_summary(study):
     from PIL import Image
 
     from vibroflow.report.animation import MAX_FRAMES
@@ -237,7 +236,7 @@ def test_report_is_self_contained_and_shows_the_summary(study):  # noqa: F811
         assert se and math.isfinite(float(se.group(1))) and float(se.group(1)) >= 0, name
 
 
-def test_report_renders_in_headless_chromium(study):  # noqa: F811
+def test_report_renders_in_headless_chromium(study):
     if not (CHROMIUM.exists() and CHROMEDRIVER.exists()):
         pytest.skip("headless Chromium needs the Debian packages chromium and chromium-driver "
                     f"({CHROMIUM}, {CHROMEDRIVER})")
@@ -339,7 +338,7 @@ def test_report_of_a_bad_folder_is_a_one_line_error(tmp_path):
     assert not missing.exists()
 
 
-def test_missing_pieces_are_stated_and_a_sweep_point_shows_its_sweep(study, tmp_path):  # noqa: F811,E501
+def test_missing_pieces_are_stated_and_a_sweep_point_shows_its_sweep(study, tmp_path):  # noqa: E501
     """Optional pieces missing (no dem.h5: no animation, no measured impacts; no fields.nc; no
     calibration pictures) are stated in the page, not a crash; a study that is a point of a
     sweep (SWEEP/points/NAME, `vibroflow sweep`) shows the sweep's plots and table."""
@@ -371,7 +370,7 @@ def test_missing_pieces_are_stated_and_a_sweep_point_shows_its_sweep(study, tmp_
     assert '<td class="l">factor-1</td><td>lagrangian</td><td>0.0017</td>' in page
 
 
-def test_the_e_limit_is_measured_on_the_studys_dem_seeds(study, tmp_path):  # noqa: F811
+def test_the_e_limit_is_measured_on_the_studys_dem_seeds(study, tmp_path):
     """A second DEM seed in DIR/dem-seeds/ whose velocities are 1.1 times the study's DEM's:
     tub47.md's E(a, b) = sqrt(sum phi |v_a - v_b|^2 / sum phi) / (sum phi |v_b| / sum phi) is
     0.1 R / 1.1 one way and 0.1 R the other, R = rms |v| / mean |v| (phi-weighted, cells with
@@ -429,7 +428,7 @@ def _study_with_parts(out: Path, new: Path) -> Path:
 
 
 @pytest.mark.slow
-def test_report_has_a_section_per_part_with_its_name_escaped(study, tmp_path):  # noqa: F811
+def test_report_has_a_section_per_part_with_its_name_escaped(study, tmp_path):
     """The tiny study with parts.nc in two of its methods' folders: one section per part after
     the fixed ones, its name escaped, the table's values the files' (data-value), the missing
     Eulerian file said; rendered by headless Chromium with its figures drawn."""

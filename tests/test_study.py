@@ -23,27 +23,6 @@ def _mtimes(out):
     return {s: (out / s / "stage.json").stat().st_mtime_ns for s in STAGES}
 
 
-@pytest.fixture(scope="module")
-def study(tmp_path_factory):
-    from vibroflow.scenario.io import load_scenario
-    from vibroflow.study import run_study
-
-    tmp = tmp_path_factory.mktemp("study")
-    old = os.environ.get("VIBROFLOW_CACHE")
-    os.environ["VIBROFLOW_CACHE"] = str(tmp / "cache")
-    try:
-        scenario = load_scenario("tub47-quick", SMALL)
-        lines: list[str] = []
-        out = tmp / "run"
-        summary = run_study(scenario, out, echo=lines.append, extra_stages=[report_stage()])
-        yield scenario, out, summary, lines
-    finally:
-        if old is None:
-            os.environ.pop("VIBROFLOW_CACHE", None)
-        else:
-            os.environ["VIBROFLOW_CACHE"] = old
-
-
 def test_pipeline_runs_end_to_end(study):
     import xarray as xr
 

@@ -278,12 +278,11 @@ class _Contact:
                 "state": np.zeros(n, np.int8)}
 
 
-@dataclass
-class UWall(_Contact):
-    """The tub's U wall (tub frame): radius (m) of tub.geometry, contact stiffness (Pa/m),
+@dataclass(kw_only=True)
+class _TubLaw(_Contact):
+    """The wall law of the tub's own surfaces, the U and the parts: contact stiffness (Pa/m),
     Coulomb friction mu_w (-), damping ratio (-), k_t / k_n."""
 
-    radius: float
     stiffness: float
     friction: float
     damping_ratio: float = 0.16
@@ -291,6 +290,13 @@ class UWall(_Contact):
 
     def __post_init__(self):
         self._check()
+
+
+@dataclass(kw_only=True)
+class UWall(_TubLaw):
+    """The tub's U wall (tub frame): radius (m) of tub.geometry, with the tub's wall law."""
+
+    radius: float
 
     def record(self) -> np.ndarray:
         """Its BOUNDARY_DTYPE record (module docstring)."""
@@ -367,24 +373,16 @@ def part_section_nearest_np(parts, k: int, y: float, x, z):
     return out[:, 0].reshape(shape), out[:, 1].reshape(shape), out[:, 2].reshape(shape)
 
 
-@dataclass
-class PartWall(_Contact):
+@dataclass(kw_only=True)
+class PartWall(_TubLaw):
     """Part `index` of the packed parts `packed` (a tuple in NO_PARTS' layout; tub.parts.pack
     of the run's parts, every PartWall of a system sharing it) as a wall in the tub frame, in
-    the section at y (m), named `name`; stiffness (Pa/m), friction mu_w (-), damping ratio (-),
-    k_t / k_n as the U wall's."""
+    the section at y (m), named `name`, with the tub's wall law."""
 
     name: str
     packed: tuple
     index: int
     y: float
-    stiffness: float
-    friction: float
-    damping_ratio: float = 0.16
-    tangential_ratio: float = 1.0
-
-    def __post_init__(self):
-        self._check()
 
     def record(self) -> np.ndarray:
         """Its BOUNDARY_DTYPE record (module docstring)."""
