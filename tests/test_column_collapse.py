@@ -368,6 +368,7 @@ def friction_runouts() -> dict[str, float]:
             for k, kw in runs.items()}
 
 
+@pytest.mark.slow
 def test_mpm_runout_prefactor_falls_with_the_grain_friction():
     """a = 3 (the power-law branch, a > 2.8), L0 = 1 m, dx = L0/10.  The run-out's prefactor
     depends on the grains' friction: the tub47 material (glass-bead mu(I), mu_s = tan 20.9 deg)
@@ -729,6 +730,7 @@ def _rough_deposit(a: float, n: int, method: str):
     return (dep.runout - L_BIG) / L_BIG, dep.height / L_BIG
 
 
+@pytest.mark.slow
 def test_rough_floor_low_column_agrees_with_the_lagrangian():
     """a = 0.5, L0 = 1 m, dx = L0/20, both formulations on the same rough floor (about 10 s):
     the top never moves (H_inf = H0 within 1 %, the small-a branch of every experiment) and

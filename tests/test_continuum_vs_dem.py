@@ -128,6 +128,7 @@ def test_regression_guard_field_on_tub47(runs, method, guard):
         assert r["seeds"]["E_mean_field"] < r["seeds"]["E_mean"]
 
 
+@pytest.mark.slow
 def test_regression_guard_lagrangian_transfers_beat_one_transfer_a_step(runs, tmp_path):
     """Regression guard of a model choice (continuum/mpm/formulation.py DEFAULT_TRANSFER_CFL): the
     transfers' rate set apart from the step gives a field closer to the DEM's than one APIC

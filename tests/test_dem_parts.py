@@ -317,6 +317,7 @@ def test_part_surface_covers_each_patch_with_its_area(shape):
     assert by_patch == pytest.approx(expect, rel=0.01)
 
 
+@pytest.mark.slow
 def test_a_tub_fixed_part_moves_with_the_tub():
     # a ball carried rigidly by the moving, turning tub, pressed delta into a tub-fixed bar:
     # no relative velocity at the contact, so the force is the spring's alone, k_n delta along

@@ -92,6 +92,7 @@ def test_small_tub_run_outputs_and_bounds(tmp_path):
     _same_h5(out / "dem.h5", out2 / "dem.h5")
 
 
+@pytest.mark.slow
 def test_killed_and_resumed_run_equals_uninterrupted(tmp_path):
     env = _env(tmp_path)
     sets = _sets(SMALL + ["run.checkpoint_every=0.05"])
@@ -115,6 +116,7 @@ def test_killed_and_resumed_run_equals_uninterrupted(tmp_path):
     assert a["circulation"] == b["circulation"]
 
 
+@pytest.mark.slow
 def test_same_numbers_on_one_thread_and_on_two(tmp_path):
     """Reproducible means: the same scenario and seed give the same numbers bit for bit however
     many threads run them (a sweep's one-thread Dask worker and a two-thread `vibroflow run`

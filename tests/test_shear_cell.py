@@ -190,6 +190,7 @@ def test_mu_increases_and_phi_decreases_with_I(frictional_cell):
         assert r["pressure"] == pytest.approx(2.0e4, rel=0.1)
 
 
+@pytest.mark.slow
 def test_frictionless_spheres_have_peyneau_roux_friction():
     """Frictionless spheres (friction = 0, rolling = 0) at I = 0.01.  Peyneau & Roux (2008):
     mu* = 0.10 in the quasi-static limit, rising as a power of I (mu - mu* ~ I^0.35 or so in
