@@ -39,11 +39,16 @@ sum_k (m_k^1 - m_k^0) v_k^0 v_k^1 / 2, which the faces do not see).  For one pai
 J = mu (w_1 - w_0) and -J (w_0 + w_1) / 2 = mu (w_0^2 - w_1^2) / 2: the pair's own loss
 (compaction_landing.py) is the special case.
 
-Of that the face's compressive normal stress p_f (Pa, the mean of its two cells' scattered
--sigma_zz at the step's start, elastic-plastic plus the temperature's kinetic pressure) takes
-p_f h (-wbar_f) dt: stored elastically, or the kinetic pressure's work, already the
-temperature's production (counted again, it makes energy: compaction_landing.py).  The face's
-landing is what remains,
+Of that the face's compressive normal stress p_f takes p_f h (-wbar_f) dt: stored
+elastically, or the kinetic pressure's work, already the temperature's production (counted
+again, it makes energy: compaction_landing.py).  The grid's transfers spread a cell's stress
+over its neighbours' nodes, and an impact raises it within the step, so the stress a face
+carries is no one cell's at one time: p_f is the largest of its two cells' -sigma_zz at the
+step's start (Pa, the scattered stress: elastic-plastic plus the temperature's kinetic
+pressure) and at its end (the elastic-plastic), the most it can have carried.  With the mean
+of the two at the start, the part of the stress's work the face does not carry is counted as
+landing wherever the layer compresses: on the shaken layer (docs/validation.md section 22)
+the faces then count several times the DEM's feed.  The face's landing is what remains,
 
     E_f = -J_f wbar_f - max(p_f, 0) h max(-wbar_f, 0) dt,
           clipped to [0, sum_{j > k} m_j^0 (v_j^0 - v_k^0)^2 / 2],
@@ -108,16 +113,17 @@ def _side_shear_N_m(i, k, ncx, ncz, sigma0, open_x, h):
 
 
 @nb.njit(cache=True)
-def column_terms(m0, v0, rho0, sigma0, m1, v1, body_z, fext_z, h, open_x, open_z, rho_c, dt,
-                 out):
+def column_terms(m0, v0, rho0, sigma0, m1, v1, sigma1, body_z, fext_z, h, open_x, open_z, rho_c,
+                 dt, out):
     """Adds the cells' column landing power (W/m) of a step of dt (s) to out[:, 3] (module
     docstring), over every open z face of an Eulerian mesh (eulerian/mesh.py: open_x
     (ncx + 1, ncz), open_z (ncx, ncz + 1), cell p = i ncz + k; plane strain).  m0 (N,) kg/m,
     v0 (N, 2) m/s, rho0 (N,) kg/m^3 and sigma0 (N, 4) the stress the step scatters (Pa,
-    [xx, zz, xz, yy], tension positive) at the step's start; m1 (N,) kg/m, v1 (N, 2) m/s at
-    its end; body_z (N,) the frame's body acceleration (m/s^2, `body_acceleration_z` at
-    mid-step), fext_z (N,) the wall's and partitions' z force of the step (N/m); h (m) the
-    cells' side, rho_c (kg/m^3) the critical density."""
+    [xx, zz, xz, yy], tension positive) at the step's start; m1 (N,) kg/m, v1 (N, 2) m/s and
+    sigma1 (N, 4) the elastic-plastic stress (Pa) at its end; body_z (N,) the frame's body
+    acceleration (m/s^2, `body_acceleration_z` at mid-step), fext_z (N,) the wall's and
+    partitions' z force of the step (N/m); h (m) the cells' side, rho_c (kg/m^3) the critical
+    density."""
     ncx = open_z.shape[0]
     ncz = open_x.shape[1]
     full0 = FULL * h * h
@@ -159,7 +165,9 @@ def column_terms(m0, v0, rho0, sigma0, m1, v1, body_z, fext_z, h, open_x, open_z
                     and rho0[b] >= rho_c:
                 continue
             wbar = 0.5 * (w0 + v1[b, 1] - v1[a, 1])
-            p_face = -0.5 * (sigma0[a, 1] + sigma0[b, 1])
+            # the most the stress can have carried through the face: the largest of its two
+            # cells' compressive normal stresses at the step's start and end
+            p_face = max(max(-sigma0[a, 1], -sigma0[b, 1]), max(-sigma1[a, 1], -sigma1[b, 1]))
             stored = max(p_face, 0.0) * h * max(-wbar, 0.0) * dt
             va = v0[a, 1]
             cap = 0.5 * (s2 - 2.0 * va * s1 + va * va * s0)
@@ -171,13 +179,13 @@ def column_terms(m0, v0, rho0, sigma0, m1, v1, body_z, fext_z, h, open_x, open_z
             out[b, 3] += lost * ma / m
 
 
-def column_landing(m0, v0, rho0, sigma0, m1, v1, fext, frame, t_mid, x0, z0, h, open_x, open_z,
-                   rho_c, dt, out):
+def column_landing(m0, v0, rho0, sigma0, m1, v1, sigma1, fext, frame, t_mid, x0, z0, h, open_x,
+                   open_z, rho_c, dt, out):
     """`column_terms` with the body acceleration of the packed frame (grid_update.
     FRAME_FIELDS) at the step's middle t_mid (s) and the step's external forces fext (N, 2)
     (N/m), cells from (x0, z0) (m)."""
     ncx, ncz = open_z.shape[0], open_x.shape[1]
     body = np.empty(m0.shape[0])
     body_acceleration_z(frame, t_mid, x0, z0, h, ncx, ncz, v0, body)
-    column_terms(m0, v0, rho0, sigma0, m1, v1, body, np.ascontiguousarray(fext[:, 1]), h,
-                 open_x, open_z, rho_c, dt, out)
+    column_terms(m0, v0, rho0, sigma0, m1, v1, sigma1, body, np.ascontiguousarray(fext[:, 1]),
+                 h, open_x, open_z, rho_c, dt, out)

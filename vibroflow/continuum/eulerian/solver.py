@@ -349,7 +349,8 @@ def cell_wall_sums(system: EulerianSystem, state: EulerianState, start=None) -> 
     if start is not None:
         mesh = system.mesh
         rho_c = system.material.critical_density
-        column_landing(start[0], start[1], start[2], start[3], state.mass, state.v, state.fext,
+        column_landing(start[0], start[1], start[2], start[3], state.mass, state.v,
+                       state.stress, state.fext,
                        system.frame.as_array(), state.t - 0.5 * system.dt, mesh.xmin,
                        mesh.zmin, mesh.h, mesh.open_x, mesh.open_z, rho_c, system.dt, out)
         x_face_terms(start[0], start[1], start[2], start[3], state.v, mesh.h, mesh.open_x,

@@ -44,7 +44,7 @@ def cell_wall_sums(boundaries, normal, open_x, open_z, mass, v, volume, stress, 
     the pairs (compaction_landing.x_face_terms), and the partitions'."""
     out[:] = 0.0
     if landing:
-        column_terms(start_mass, start_v, start_density, start_stress, mass, v, body_z,
+        column_terms(start_mass, start_v, start_density, start_stress, mass, v, stress, body_z,
                      np.ascontiguousarray(fext[:, 1]), h, open_x, open_z, rho_c, dt, out)
         x_face_terms(start_mass, start_v, start_density, start_stress, v, h, open_x, rho_c, dt,
                      out)
