@@ -59,20 +59,22 @@ def spinning_compressed_disc(flip: float, transfers: int = 1):
 
 
 def eulerian_block(v, height, looseness=1.0, settled=False, mu_w=0.0, box_height=0.08,
-                   dx=0.01):
+                   dx=0.01, columns=False):
     """(system, state): an Eulerian block `height` (m) deep over a 4 cm x-periodic floor
     (cells of side dx / 2 in a box `box_height` (m) tall, the wall's friction mu_w), the
     default media made elastic (mu_s = 10: no plastic work), its T passive from 0 with no
     dissipation (e = e_w = 1, a smooth wall: specularity 0), moving at v (m/s): its material
     at `looseness` times the critical density, stress-free (below 1: voids to close), or
-    settled at its lithostatic stress and density."""
+    settled at its lithostatic stress and density; columns: its landing counted along the
+    columns (wall_energy_flux.WallEnergy), otherwise by the pairs."""
     mat = ContinuumMaterial(mu_s=10.0, mu_2=20.0)
     mesh = EulerianMesh.box(0.0, 0.04, 0.0, box_height, dx, periodic=True)
     h = mesh.h
     wall = MeshWall((mat.bulk_modulus + 4 * mat.shear_modulus / 3) / h, mu_w)
     prm = KineticParameters(diameter_m=mat.diameter, density_kg_m3=mat.solid_density,
                             restitution=1.0)
-    model = TemperatureModel(prm, h, 0.0, False, WallEnergy(restitution=1.0, specularity=0.0))
+    model = TemperatureModel(prm, h, 0.0, False, WallEnergy(restitution=1.0, specularity=0.0,
+                                                            columns=columns))
     system = eulerian.EulerianSystem(mesh, mat, stable_dt(mat, dx, h, [wall]),
                                      frame=LabFrame((0.0, -G_ACC)), wall=wall,
                                      temperature=model)

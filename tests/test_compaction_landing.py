@@ -173,8 +173,9 @@ def test_a_pair_alone_is_the_column_faces_special_case_and_free_fall_feeds_nothi
 
 
 def _loose_block(v, looseness, height, settled=False):
-    """(system, state): continuum_helpers.eulerian_block on a smooth floor in an 8 cm box."""
-    return eulerian_block(v, height, looseness=looseness, settled=settled, dx=DX)
+    """(system, state): continuum_helpers.eulerian_block on a smooth floor in an 8 cm box, its
+    landing counted along the columns."""
+    return eulerian_block(v, height, looseness=looseness, settled=settled, dx=DX, columns=True)
 
 
 def _mechanical_energy(system, state):
