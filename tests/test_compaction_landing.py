@@ -325,3 +325,15 @@ def test_the_columns_count_the_shaken_layers_whole_landing(shaken_layer_columns)
 def test_the_columns_landing_feeds_the_dems_wall_flux(shaken_layer_columns):
     (total, _), _ = shaken_layer_columns
     assert 274.0 / 1.5 < total < 1.5 * 274.0
+
+
+def test_the_compiled_loop_counts_the_columns_as_the_step_by_step_path_does():
+    # the loose block's first 60 steps (its front moving up): the compiled loop
+    # (eulerian/temperature_loop.py) and the step-by-step path (solver.cell_wall_sums) give the
+    # same temperature and velocities, bit for bit
+    runs = [_loose_block((0.0, -0.5), 0.8, 0.04) for _ in range(2)]
+    eulerian.advance(*runs[0], 60)
+    eulerian.advance_stepwise(*runs[1], 60)
+    assert runs[0][1].temperature.max() > 0.0
+    assert np.array_equal(runs[0][1].temperature, runs[1][1].temperature)
+    assert np.array_equal(runs[0][1].v, runs[1][1].v)
