@@ -30,14 +30,19 @@ its mean velocity vbar_k = (v_k^0 + v_k^1) / 2 and summing by parts,
 
     sum_k (m_k^1 v_k^1 - m_k^0 v_k^0 - E_k) vbar_k = -sum_faces J_f wbar_f,
 
-wbar_f = vbar_{k+1} - vbar_k the face's mean relative velocity.  With a cell's mass unchanged
-over the step the left side is the kinetic energy's change less the external forces' work,
-so -J_f wbar_f is the kinetic energy of the mean motion that the momentum exchange through face
-f destroys, and the faces' terms sum to the step's whole loss (as Eulerian hydrocodes return
-the remap's kinetic-energy loss to the internal energy; the masses moved by the remap add
-sum_k (m_k^1 - m_k^0) v_k^0 v_k^1 / 2, which the faces do not see).  For one pair alone,
-J = mu (w_1 - w_0) and -J (w_0 + w_1) / 2 = mu (w_0^2 - w_1^2) / 2: the pair's own loss
-(compaction_landing.py) is the special case.
+wbar_f = vbar_{k+1} - vbar_k the face's mean relative velocity.  Since (m^1 v^1 - m^0 v^0) vbar
+= (m^1 (v^1)^2 - m^0 (v^0)^2) / 2 + (m^1 - m^0) v^0 v^1 / 2, the left side is the kinetic
+energy's change less the external forces' work plus the remap's term sum_k Delta m_k q_k / 2,
+q = v^0 v^1; with Delta m_k = F_{k-1/2} - F_{k+1/2}, F_f = sum_{j > k} Delta m_j the mass
+carried up through face f, that term is sum_f F_f (q_{k+1} - q_k) / 2 by parts.  So
+
+    -J_f wbar_f + F_f (q_{k+1} - q_k) / 2
+
+is the kinetic energy of the mean motion that the momentum exchange through face f destroys,
+and the faces' terms sum to the column's whole loss above its lowest cell (as Eulerian
+hydrocodes return the remap's kinetic-energy loss to the internal energy).  For one pair
+alone, masses unmoved, J = mu (w_1 - w_0) and -J (w_0 + w_1) / 2 = mu (w_0^2 - w_1^2) / 2:
+the pair's own loss (compaction_landing.py) is the special case.
 
 Of that the face's compressive normal stress p_f takes p_f h (-wbar_f) dt: stored
 elastically, or the kinetic pressure's work, already the temperature's production (counted
@@ -50,7 +55,7 @@ of the two at the start, the part of the stress's work the face does not carry i
 landing wherever the layer compresses: on the shaken layer (docs/validation.md section 22)
 the faces then count several times the DEM's feed.  The face's landing is what remains,
 
-    E_f = -J_f wbar_f - max(p_f, 0) h max(-wbar_f, 0) dt,
+    E_f = -J_f wbar_f + F_f (q_{k+1} - q_k) / 2 - max(p_f, 0) h max(-wbar_f, 0) dt,
           clipped to [0, sum_{j > k} m_j^0 (v_j^0 - v_k^0)^2 / 2],
 
 never more than the normal kinetic energy the material above the face had relative to the cell
@@ -58,10 +63,9 @@ below it (what stopping all of it on that cell destroys).  It counts where the p
 counts: a face whose two cells approach at the step's start (w_0 < 0) and one of them holds a
 void or disconnected material (compaction_landing.py); two full, connected cells compress
 elastically, a block resting, sliding or falling as a body has w_0 = 0 across every face and
-feeds nothing, and only velocity differences and momentum changes enter (Galilean: a uniform
-velocity u adds m^1 u - m^0 u to a momentum change, which a column whose masses the step does
-not move does not see).  Each cell of the face gets its centre-of-mass share, m_b / (m_a + m_b)
-of E_f for the lower cell a and m_a / (m_a + m_b) for the upper b.
+feeds nothing, and the term is Galilean: a uniform velocity u adds u F_f to J_f and
+u F_f wbar_f to the remap's term, which cancel.  Each cell of the face gets its centre-of-mass
+share, m_b / (m_a + m_b) of E_f for the lower cell a and m_a / (m_a + m_b) for the upper b.
 
 It is determined along a column, the 1D landing: the exchange between columns through the side
 faces other than their shear stress (the transfers' share, the remap's side fluxes) is counted
