@@ -2,7 +2,7 @@
 and T, and both against the DEM's measured wall flux (docs/validation.md, section 22).
 
     python benchmarks/wall_feed.py [--cycles 35] [--skip 5] [--depth 0.05]
-        [--method lagrangian|eulerian] [--calibration CALIBRATION_TOML]
+        [--method lagrangian|eulerian] [--columns] [--calibration CALIBRATION_TOML]
 
 A layer of the default continuum material, `--depth` (m) deep and 4 cm wide (x-periodic),
 rests on a frictional floor moved vertically as tub47's tub is, z = A (sin(omega t + pi/2) - 1),
@@ -17,7 +17,8 @@ batch-means standard error over five batches of whole cycles:
   into T (wall_energy_flux.py): the penalty dashpot's power c v_n^2 at the floor (Lagrangian),
   the normal kinetic energy the step took from the floor cells approaching it and from the
   pairs of cells stopping each other where voids close, in the whole layer (Eulerian:
-  wall_energy_flux.landing_terms, compaction_landing.py), the floor row's part printed apart;
+  wall_energy_flux.landing_terms, compaction_landing.py; with `--columns` the impulse through
+  each z face along the columns, column_landing.py), the floor row's part printed apart;
 * the flux form, Johnson & Jackson's wall law with the wall's mean squared normal velocity
   U_w^2 / 2 as the slip and phi' = 1, at the floor row's phi and T (Kumaran 1998's
   leading-order scaling rho_s phi g0 sqrt(T) U_w^2, net of the collision loss, e_w 0.8);
@@ -61,10 +62,11 @@ def lattice(depth, spacing):
     return np.column_stack([X.ravel(), Z.ravel()])
 
 
-def run(depth, cycles, method="lagrangian"):
+def run(depth, cycles, method="lagrangian", columns=False):
     """Per step of the shaken layer: time (s), floor force (N/m), landing power per floor
     width (W/m^2), the floor row's T (m^2/s^2) and phi (-) (Eulerian: and the floor row's part
-    of the landing, W/m^2); the layer's weight (N/m)."""
+    of the landing, W/m^2); the layer's weight (N/m).  columns: the Eulerian landing along the
+    columns (wall_energy_flux.WallEnergy)."""
     mat = ContinuumMaterial()
     sp = DX / 2
     kn = (mat.bulk_modulus + 4 * mat.shear_modulus / 3) / sp
@@ -72,7 +74,7 @@ def run(depth, cycles, method="lagrangian"):
                        phase_z=0.5 * math.pi, amplitude_theta=0.0)
     prm = KineticParameters(diameter_m=mat.diameter, density_kg_m3=mat.solid_density)
     if method == "eulerian":
-        return run_eulerian(depth, cycles, mat, kn, motion, prm)
+        return run_eulerian(depth, cycles, mat, kn, motion, prm, columns)
     floor = Plane((0.0, 0.0), (0.0, 1.0), kn, friction=0.4)
     model = TemperatureModel(prm, DX, 1e-4, True, WallEnergy(restitution=E_WALL))
     system = mpm.MPMSystem(Grid.periodic_strip(WIDTH, 0.0, 3 * depth + 0.03, DX), mat,
@@ -91,7 +93,7 @@ def run(depth, cycles, method="lagrangian"):
     return np.array(rows), 9.81 * state.mass.sum(), prm
 
 
-def run_eulerian(depth, cycles, mat, kn, motion, prm):
+def run_eulerian(depth, cycles, mat, kn, motion, prm, columns=False):
     """`run` in the Eulerian formulation: the layer on cells of side DX / 2 filled at the
     critical density, the mesh's floor wall (stiffness kn Pa/m, friction 0.4), its landing
     measured (eulerian.cell_wall_sums).  The floor force is the layer's momentum balance in the
@@ -100,7 +102,8 @@ def run_eulerian(depth, cycles, mat, kn, motion, prm):
     omega = 2.0 * math.pi * FREQUENCY
     mesh = EulerianMesh.box(0.0, WIDTH, 0.0, 3 * depth + 0.03, DX, periodic=True)
     wall = MeshWall(kn, friction=0.4)
-    model = TemperatureModel(prm, mesh.h, 1e-4, True, WallEnergy(restitution=E_WALL))
+    model = TemperatureModel(prm, mesh.h, 1e-4, True,
+                             WallEnergy(restitution=E_WALL, columns=columns))
     system = eulerian.EulerianSystem(mesh, mat, stable_dt(mat, DX, mesh.h, [wall]),
                                      frame=TubFrame(motion), wall=wall, temperature=model)
     z = system.x[:, 1]
@@ -138,9 +141,11 @@ def main(argv=None):
     ap.add_argument("--skip", type=int, default=5)
     ap.add_argument("--depth", type=float, default=0.05)
     ap.add_argument("--method", choices=("lagrangian", "eulerian"), default="lagrangian")
+    ap.add_argument("--columns", action="store_true",
+                    help="the Eulerian landing along the columns (column_landing.py)")
     ap.add_argument("--calibration")
     a = ap.parse_args(argv)
-    r, weight, prm = run(a.depth, a.cycles, a.method)
+    r, weight, prm = run(a.depth, a.cycles, a.method, a.columns)
     u_w = AMPLITUDE * 2 * math.pi * FREQUENCY
     flux_form = np.array([slip_production_W_m2(1.0, f, T, u_w / math.sqrt(2), prm)
                           - collision_loss_W_m2(E_WALL, f, T, prm) for T, f in r[:, 3:5]])

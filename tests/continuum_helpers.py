@@ -1,4 +1,4 @@
-"""Set-ups the continuum's tests share: point lattices, the spinning disc, the Eulerian layer
+"""Set-ups the continuum's tests share: point lattices, the spinning disc, the Eulerian block
 on a floor, the short tub47-quick runs."""
 from __future__ import annotations
 
@@ -7,10 +7,16 @@ import math
 import numpy as np
 
 from vibroflow.continuum.constitutive import ContinuumMaterial
+from vibroflow.continuum.eulerian import solver as eulerian
+from vibroflow.continuum.eulerian.mesh import EulerianMesh
+from vibroflow.continuum.eulerian.wall import MeshWall
 from vibroflow.continuum.grid import Grid
 from vibroflow.continuum.grid_update import LabFrame
+from vibroflow.continuum.kinetic_theory import KineticParameters
 from vibroflow.continuum.mpm.solver import MPMSystem, init_state
+from vibroflow.continuum.temperature_field import TemperatureModel
 from vibroflow.continuum.timestep import stable_dt
+from vibroflow.continuum.wall_energy_flux import WallEnergy
 
 G_ACC = 9.81
 
@@ -50,3 +56,36 @@ def spinning_compressed_disc(flip: float, transfers: int = 1):
                        transfers=transfers)
     return system, init_state(system, x, sp * sp, rho, v=v, stress=stress), p0
 
+
+
+def eulerian_block(v, height, looseness=1.0, settled=False, mu_w=0.0, box_height=0.08,
+                   dx=0.01, columns=False):
+    """(system, state): an Eulerian block `height` (m) deep over a 4 cm x-periodic floor
+    (cells of side dx / 2 in a box `box_height` (m) tall, the wall's friction mu_w), the
+    default media made elastic (mu_s = 10: no plastic work), its T passive from 0 with no
+    dissipation (e = e_w = 1, a smooth wall: specularity 0), moving at v (m/s): its material
+    at `looseness` times the critical density, stress-free (below 1: voids to close), or
+    settled at its lithostatic stress and density; columns: its landing counted along the
+    columns (wall_energy_flux.WallEnergy), otherwise by the pairs."""
+    mat = ContinuumMaterial(mu_s=10.0, mu_2=20.0)
+    mesh = EulerianMesh.box(0.0, 0.04, 0.0, box_height, dx, periodic=True)
+    h = mesh.h
+    wall = MeshWall((mat.bulk_modulus + 4 * mat.shear_modulus / 3) / h, mu_w)
+    prm = KineticParameters(diameter_m=mat.diameter, density_kg_m3=mat.solid_density,
+                            restitution=1.0)
+    model = TemperatureModel(prm, h, 0.0, False, WallEnergy(restitution=1.0, specularity=0.0,
+                                                            columns=columns))
+    system = eulerian.EulerianSystem(mesh, mat, stable_dt(mat, dx, h, [wall]),
+                                     frame=LabFrame((0.0, -G_ACC)), wall=wall,
+                                     temperature=model)
+    z = system.x[:, 1]
+    fill = mesh.inside & (z < height)
+    rho = np.full(mesh.n, looseness * mat.critical_density)
+    stress = np.zeros((mesh.n, 4))
+    if settled:
+        p = mat.critical_density * G_ACC * np.clip(height - z, 0.0, None) * fill
+        rho = mat.critical_density * np.exp(p / mat.bulk_modulus)
+        stress[:, 0] = stress[:, 1] = stress[:, 3] = -p
+    state = eulerian.init_state(system, np.where(fill, rho * h * h, 0.0), rho, stress=stress)
+    state.v[fill] = v
+    return system, state

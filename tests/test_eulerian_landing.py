@@ -12,16 +12,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from continuum_helpers import eulerian_block
 
-from vibroflow.continuum.constitutive import ContinuumMaterial
 from vibroflow.continuum.eulerian import solver as eulerian
-from vibroflow.continuum.eulerian.mesh import EulerianMesh
-from vibroflow.continuum.eulerian.wall import MeshWall
-from vibroflow.continuum.grid_update import LabFrame, TubFrame
-from vibroflow.continuum.kinetic_theory import KineticParameters
-from vibroflow.continuum.temperature_field import TemperatureModel, fluctuation_energy_J_m
-from vibroflow.continuum.timestep import stable_dt
-from vibroflow.continuum.wall_energy_flux import WallEnergy, landing_terms
+from vibroflow.continuum.grid_update import TubFrame
+from vibroflow.continuum.temperature_field import fluctuation_energy_J_m
+from vibroflow.continuum.wall_energy_flux import landing_terms
 from vibroflow.tub.motion import TubMotion
 
 G_ACC = 9.81
@@ -45,31 +41,9 @@ def test_the_landing_is_the_normal_kinetic_energy_lost_while_approaching():
 
 
 def _block(v, settled, mu_w=0.3):
-    """(system, state): a block HEIGHT deep over a 4 cm x-periodic floor, the default media
-    made elastic (mu_s = 10: no plastic work), its T passive from 0 with no dissipation
-    (e = e_w = 1, a smooth wall: specularity 0), moving at v (m/s); settled: at its
-    lithostatic stress and density, otherwise stress-free at the critical density."""
-    mat = ContinuumMaterial(mu_s=10.0, mu_2=20.0)
-    mesh = EulerianMesh.box(0.0, 0.04, 0.0, 0.06, DX, periodic=True)
-    h = mesh.h
-    wall = MeshWall((mat.bulk_modulus + 4 * mat.shear_modulus / 3) / h, mu_w)
-    prm = KineticParameters(diameter_m=mat.diameter, density_kg_m3=mat.solid_density,
-                            restitution=1.0)
-    model = TemperatureModel(prm, h, 0.0, False, WallEnergy(restitution=1.0, specularity=0.0))
-    system = eulerian.EulerianSystem(mesh, mat, stable_dt(mat, DX, h, [wall]),
-                                     frame=LabFrame((0.0, -G_ACC)), wall=wall,
-                                     temperature=model)
-    z = system.x[:, 1]
-    fill = mesh.inside & (z < HEIGHT)
-    rho = np.full(mesh.n, mat.critical_density)
-    stress = np.zeros((mesh.n, 4))
-    if settled:
-        p = mat.critical_density * G_ACC * np.clip(HEIGHT - z, 0.0, None) * fill
-        rho = mat.critical_density * np.exp(p / mat.bulk_modulus)
-        stress[:, 0] = stress[:, 1] = stress[:, 3] = -p
-    state = eulerian.init_state(system, np.where(fill, rho * h * h, 0.0), rho, stress=stress)
-    state.v[fill] = v
-    return system, state
+    """(system, state): a block HEIGHT deep in a 6 cm box (continuum_helpers.eulerian_block),
+    at the critical density, moving at v (m/s), its landing above the floor row by the pairs."""
+    return eulerian_block(v, HEIGHT, settled=settled, mu_w=mu_w, box_height=0.06, dx=DX)
 
 
 def _steps(system, state, n):

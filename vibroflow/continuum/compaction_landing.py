@@ -83,6 +83,35 @@ def _pair(a, b, j, m0, v0, full0, rho0, sigma0, v1, h, rho_c, dt, out):
 
 
 @nb.njit(cache=True)
+def z_face_terms(m0, v0, rho0, sigma0, v1, h, open_z, rho_c, dt, out):
+    """`compaction_terms` over the open z faces alone."""
+    ncx = open_z.shape[0]
+    ncz = open_z.shape[1] - 1
+    full0 = FULL * h * h
+    for i in range(ncx):
+        for k in range(1, ncz):
+            if open_z[i, k]:
+                _pair(i * ncz + k - 1, i * ncz + k, 1, m0, v0, full0, rho0, sigma0, v1, h,
+                      rho_c, dt, out)
+
+
+@nb.njit(cache=True)
+def x_face_terms(m0, v0, rho0, sigma0, v1, h, open_x, rho_c, dt, out):
+    """`compaction_terms` over the open x faces alone (a periodic mesh's face 0 is its face
+    ncx, between cells ncx - 1 and 0)."""
+    ncx = open_x.shape[0] - 1
+    ncz = open_x.shape[1]
+    full0 = FULL * h * h
+    for k in range(ncz):
+        for i in range(1, ncx):
+            if open_x[i, k]:
+                _pair((i - 1) * ncz + k, i * ncz + k, 0, m0, v0, full0, rho0, sigma0, v1, h,
+                      rho_c, dt, out)
+        if ncx > 1 and open_x[0, k]:
+            _pair((ncx - 1) * ncz + k, k, 0, m0, v0, full0, rho0, sigma0, v1, h, rho_c, dt, out)
+
+
+@nb.njit(cache=True)
 def compaction_terms(m0, v0, rho0, sigma0, v1, h, open_x, open_z, rho_c, dt, out):
     """Adds the cells' compaction landing power (W/m) of a step of dt (s) to out[:, 3] (module
     docstring), over every open face of an Eulerian mesh (eulerian/mesh.py: open_x
@@ -92,18 +121,5 @@ def compaction_terms(m0, v0, rho0, sigma0, v1, h, open_x, open_z, rho_c, dt, out
     (Pa, [xx, zz, ...], tension positive: the elastic-plastic stress plus the temperature's)
     at the step's start, v1 (N, 2) m/s at its end, h (m) the cells' side, rho_c (kg/m^3) the
     critical density."""
-    ncx = open_z.shape[0]
-    ncz = open_x.shape[1]
-    full0 = FULL * h * h
-    for i in range(ncx):
-        for k in range(1, ncz):
-            if open_z[i, k]:
-                _pair(i * ncz + k - 1, i * ncz + k, 1, m0, v0, full0, rho0, sigma0, v1, h,
-                      rho_c, dt, out)
-    for k in range(ncz):
-        for i in range(1, ncx):
-            if open_x[i, k]:
-                _pair((i - 1) * ncz + k, i * ncz + k, 0, m0, v0, full0, rho0, sigma0, v1, h,
-                      rho_c, dt, out)
-        if ncx > 1 and open_x[0, k]:
-            _pair((ncx - 1) * ncz + k, k, 0, m0, v0, full0, rho0, sigma0, v1, h, rho_c, dt, out)
+    z_face_terms(m0, v0, rho0, sigma0, v1, h, open_z, rho_c, dt, out)
+    x_face_terms(m0, v0, rho0, sigma0, v1, h, open_x, rho_c, dt, out)

@@ -30,10 +30,11 @@ from .wall_energy_flux import cell_wall_terms
 #: TemperatureGrid), phi_cap (-) the connection packing rho_c / rho_s, T_cap (m^2/s^2) the
 #: highest T the kinetic pressure reads, eta_factor (m^2/s) h^2 / dt of the gas viscosity's cap
 #: (kinetic_stress.py), coupled (the kinetic stress on), walls (the walls' feed on),
-#: restitution e_w (-), specularity (-), landing (wall_energy_flux.WallEnergy), dt (s)
+#: restitution e_w (-), specularity (-), landing and columns (wall_energy_flux.WallEnergy),
+#: dt (s)
 TemperatureStep = namedtuple("TemperatureStep", [
     "prm", "grid", "phi_cap", "T_cap", "eta_factor", "coupled", "walls", "restitution",
-    "specularity", "landing", "dt"])
+    "specularity", "landing", "columns", "dt"])
 
 
 def phi_cap_of(material) -> float:
@@ -65,7 +66,8 @@ def temperature_step(model, phi_cap: float, dt: float, wave_speed: float) -> Tem
         float(model.spacing_m ** 2 / dt if dt > 0 else math.inf), bool(model.coupled),
         w is not None, float(w.restitution) if w is not None else 0.0,
         float(w.specularity) if w is not None else 0.0,
-        bool(w.landing) if w is not None else False, float(dt))
+        bool(w.landing) if w is not None else False,
+        bool(w.columns) if w is not None else False, float(dt))
 
 
 @nb.njit(cache=True)

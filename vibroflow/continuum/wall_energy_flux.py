@@ -61,11 +61,15 @@ JJ_LOSS = math.sqrt(3.0) * math.pi / 4.0
 class WallEnergy(NamedTuple):
     """The walls' feed of fluctuation energy: restitution e_w (-) of the balls on the wall,
     0 <= e_w <= 1; specularity phi' (-) in [0, 1] or FRICTION_RULE (default); landing: the
-    landing's normal velocity jump becomes T (default True)."""
+    landing's normal velocity jump becomes T (default True); columns: the Eulerian landing
+    above the wall row is counted along each column of cells by the impulse through its z
+    faces (column_landing.py) rather than by the pairs across them (compaction_landing.py;
+    default False: docs/decisions/granular-temperature-closures.md)."""
 
     restitution: float
     specularity: float = FRICTION_RULE
     landing: bool = True
+    columns: bool = False
 
 
 @nb.njit(cache=True)

@@ -55,7 +55,8 @@ from ..grid_step import grid_spec, grid_work
 from ..grid_update import LabFrame
 from ..mpm.solver import ContinuumBlowUp
 from ..state import ContinuumState
-from ..compaction_landing import compaction_terms
+from ..column_landing import column_landing
+from ..compaction_landing import compaction_terms, x_face_terms
 from ..temperature_balance import loop_arguments, phi_cap_of
 from ..temperature_field import advance_with_temperature, cell_step
 from ..wall_energy_flux import contact_terms, landing_terms, partition_terms
@@ -340,14 +341,25 @@ def cell_wall_sums(system: EulerianSystem, state: EulerianState, start=None) -> 
     m/s, density (N,) kg/m^3, the stress the step scatters (N, 4) Pa: the elastic-plastic plus
     the temperature's) the cells' at the step's start, it is the landing measured: the
     normal kinetic energy the step took from the wall cells that approached the wall
-    (wall_energy_flux.landing_terms) and from the pairs of cells that approached each other
-    where voids close (compaction_landing.compaction_terms); without, none."""
+    (wall_energy_flux.landing_terms) and the momentum exchange that stopped the material where
+    voids close: the pairs' across the open faces (compaction_landing.compaction_terms), or
+    with the walls' `columns` (wall_energy_flux.WallEnergy) along each column each open z
+    face's impulse on its mean relative velocity (column_landing.py) and the pairs' across the
+    x faces; without, none."""
     out = np.zeros((state.n, 4))
     if start is not None:
         mesh = system.mesh
-        compaction_terms(start[0], start[1], start[2], start[3], state.v, mesh.h,
-                         mesh.open_x, mesh.open_z, system.material.critical_density,
-                         system.dt, out)
+        rho_c = system.material.critical_density
+        if not system.temperature.walls.columns:
+            compaction_terms(start[0], start[1], start[2], start[3], state.v, mesh.h,
+                             mesh.open_x, mesh.open_z, rho_c, system.dt, out)
+        else:
+            column_landing(start[0], start[1], start[2], start[3], state.mass, state.v,
+                           state.stress, state.fext,
+                           system.frame.as_array(), state.t - 0.5 * system.dt, mesh.xmin,
+                           mesh.zmin, mesh.h, mesh.open_x, mesh.open_z, rho_c, system.dt, out)
+            x_face_terms(start[0], start[1], start[2], start[3], state.v, mesh.h, mesh.open_x,
+                         rho_c, system.dt, out)
     w = system.wall
     if w is not None:
         c = system.wall_cells

@@ -19,7 +19,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from ..compaction_landing import compaction_terms
+from ..column_landing import body_acceleration_z, column_terms
+from ..compaction_landing import compaction_terms, x_face_terms
 from ..temperature_balance import balance_cells, kinetic_stress_of
 from ..temperature_field import production_W_m3
 from ..wall_energy_flux import contact_terms, landing_terms, partition_terms
@@ -28,18 +29,27 @@ from .advection import remap_serial
 
 
 @nb.njit(cache=True)
-def cell_wall_sums(boundaries, normal, open_x, open_z, mass, v, volume, stress, rho_c, h, dt,
-                   start_mass, start_v, start_density, start_stress, landing, out):
+def cell_wall_sums(boundaries, normal, open_x, open_z, mass, v, volume, stress, fext, body_z,
+                   rho_c, h, dt, start_mass, start_v, start_density, start_stress, landing,
+                   columns, out):
     """out (N, 4): the cells' wall contact terms of the step (solver.cell_wall_sums): the wall
     layer's contacts (boundaries a fused.MeshBoundaries; the wall at rest on the mesh, its
     inward normal (N, 2) the mesh's, contact length fill h), their landing measured from the
     step's start masses and velocities start_mass (N,) kg/m, start_v (N, 2) m/s when landing
     (wall_energy_flux.landing_terms), the landing of the material stopped by its neighbours
     across the mesh's open faces open_x, open_z with the start's densities start_density (N,)
-    kg/m^3 and scattered stresses start_stress (N, 4) Pa (compaction_landing.compaction_terms),
-    and the partitions'."""
+    kg/m^3 and scattered stresses start_stress (N, 4) Pa: by the pairs across the open faces
+    (compaction_landing.compaction_terms), or with `columns` along each column by the impulse
+    through its z faces (column_landing.column_terms, with the step's external forces fext
+    (N, 2) N/m and the frame's body acceleration body_z (N,) m/s^2) and across the x faces by
+    the pairs (compaction_landing.x_face_terms); and the partitions'."""
     out[:] = 0.0
-    if landing:
+    if landing and columns:
+        column_terms(start_mass, start_v, start_density, start_stress, mass, v, stress, body_z,
+                     np.ascontiguousarray(fext[:, 1]), h, open_x, open_z, rho_c, dt, out)
+        x_face_terms(start_mass, start_v, start_density, start_stress, v, h, open_x, rho_c, dt,
+                     out)
+    elif landing:
         compaction_terms(start_mass, start_v, start_density, start_stress, v, h, open_x, open_z,
                          rho_c, dt, out)
     if boundaries.wall_on:
@@ -103,6 +113,7 @@ def _make_kernel(parallel: bool):
         sums = np.zeros((n, 4))
         production = np.empty(n)
         phi = np.empty(n)
+        body_z = np.zeros(n)
         rho_s = ts.prm.density_kg_m3
         landing = ts.walls and ts.landing
         for s in range(nsteps):
@@ -129,9 +140,13 @@ def _make_kernel(parallel: bool):
                 return s + done, t, status, lowest, mass_error_max
             production_W_m3(cells.stress, cells.L, cells.gamma_dot, p_kin, power)
             if ts.walls:
+                if landing and ts.columns:
+                    body_acceleration_z(step.frame, t - 0.5 * ts.dt, grid[0], grid[1], h, ncx,
+                                        ncz, v_start, body_z)
                 cell_wall_sums(boundaries, mesh.normal, mesh.open_x, mesh.open_z, mass, v,
-                               cells.volume, cells.stress, step.rho_c, h, ts.dt, m_start,
-                               v_start, rho_start, sigma_start, landing, sums)
+                               cells.volume, cells.stress, cells.fext, body_z, step.rho_c, h,
+                               ts.dt, m_start, v_start, rho_start, sigma_start, landing, ts.columns,
+                               sums)
             # T carried with the mass: the step's start mass moved by the step's face velocities
             m_move = m_start.reshape((ncx, ncz)).copy()
             remap_serial(m_move, T.reshape((1, ncx, ncz)), cell_work.ux, cell_work.uz, h, ts.dt,
