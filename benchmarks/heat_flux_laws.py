@@ -1,7 +1,7 @@
 """Which conduction law the DEM's fluctuation-energy flux follows (docs/decisions/
 granular-temperature-closures.md, "Conductivity against the DEM"; docs/validation.md).
 
-    python benchmarks/heat_flux_laws.py RUN_DIR [--width-factor 2]
+    python benchmarks/heat_flux_laws.py RUN_DIR [--width-factor 2] [--batches N --thermal-only]
 
 RUN_DIR: a finished DEM run (dem.h5 with snapshots and ball contacts) and its calibration.toml
 ([kinetic] phi_rcp, g0_form, restitution), e.g. a `vibroflow run` of tub47-quick.  It
@@ -16,7 +16,13 @@ diameters), and prints for each:
 * Fourier's law with Gidaspow's conductivity (conductivity.py) and Garzo & Dufty's two-term law
   (heat_flux_law.py), weighted (1 / batch-means error^2) and with equal weights: the
   multipliers with their batch-means errors, R^2, the share of cells whose flux the law points
-  the right way, by solid-fraction band, and the cycle-mean fits.
+  the right way, by solid-fraction band, and the cycle-mean fits;
+* for the thermal flux, the shape of its conductivity in phi: C(phi) = C_0 (phi / 0.4)^beta
+  fitted to the bands' equal-weight multipliers, weighted by their batch-means errors (log C
+  against log phi), with beta's standard error (beta = 0: Gidaspow's own phi dependence).
+
+--batches N: the thermal flux's batches of whole cycles (default the scenario's run.batches):
+more batches, steadier weights; --thermal-only: only the thermal flux.
 """
 from __future__ import annotations
 
@@ -81,10 +87,30 @@ def report(name, ds, args):
               f"right {cm['direction_fraction']:.0%} ({cm['cells']} cells)")
 
 
+def phi_shape(ds, args) -> None:
+    """C(phi) = C_0 (phi / 0.4)^beta over the equal-weight bands (module docstring)."""
+    c = fit_conductivity(ds.drop_vars("energy_flux_stderr"), *args)["by_solid_fraction"]
+    edges = np.asarray(c["edges"], float)
+    mid = 0.5 * (edges[:-1] + edges[1:])
+    C, se = np.asarray(c["multiplier"], float), np.asarray(c["multiplier_stderr"], float)
+    ok = np.isfinite(C) & np.isfinite(se) & (C > 0) & (se > 0)
+    x, y, w = np.log(mid[ok] / 0.4), np.log(C[ok]), (C[ok] / se[ok]) ** 2
+    A = np.stack([np.ones_like(x), x], axis=1)
+    cov = np.linalg.inv(A.T @ (A * w[:, None]))
+    coef = cov @ (A.T @ (w * y))
+    chi2 = float(np.sum(w * (y - A @ coef) ** 2)) / max(int(ok.sum()) - 2, 1)
+    err = np.sqrt(np.diag(cov) * max(chi2, 1.0))
+    print(f"  C(phi) = {np.exp(coef[0]):.3g} (phi / 0.4)^beta, beta = {coef[1]:.2f} +- "
+          f"{err[1]:.2f} (bands {np.round(mid[ok], 3)}, C {np.round(C[ok], 2)} +- "
+          f"{np.round(se[ok], 2)}; reduced chi^2 {chi2:.2f})")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("run_dir", type=Path)
     ap.add_argument("--width-factor", type=float, default=2.0)
+    ap.add_argument("--batches", type=int, default=None)
+    ap.add_argument("--thermal-only", action="store_true")
     a = ap.parse_args()
     cal = a.run_dir / "calibration" / "calibration.toml"
     if not cal.is_file():
@@ -95,13 +121,17 @@ def main() -> None:
         args = (res.solid_density, res.diameter, kin["restitution"], kin["phi_rcp"],
                 kin["g0_form"])
         n = int(res.scenario.run.phases_per_cycle)
-        print("bed's mean v_z, scatter from cycle to cycle (m/s), whole bed / lowest fifth:")
-        for k, (s_all, s_low) in enumerate(collective_scatter(res, n)):
-            print(f"  phase {k}/{n}: {s_all:.3f} / {s_low:.3f}")
-        _, _, info = coarse_grain_run(res, energy_flux=True)
-        report("about each phase's mean over the cycles", info["energy_flux"], args)
-        report(f"about each snapshot's own velocity (width {a.width_factor:g} d)",
-               thermal_energy_flux(res, a.width_factor), args)
+        if not a.thermal_only:
+            print("bed's mean v_z, scatter from cycle to cycle (m/s), whole bed / lowest "
+                  "fifth:")
+            for k, (s_all, s_low) in enumerate(collective_scatter(res, n)):
+                print(f"  phase {k}/{n}: {s_all:.3f} / {s_low:.3f}")
+            _, _, info = coarse_grain_run(res, energy_flux=True)
+            report("about each phase's mean over the cycles", info["energy_flux"], args)
+        thermal = thermal_energy_flux(res, a.width_factor, n_batches=a.batches)
+        report(f"about each snapshot's own velocity (width {a.width_factor:g} d, "
+               f"{thermal.attrs['n_batches']} batches)", thermal, args)
+        phi_shape(thermal, args)
 
 
 if __name__ == "__main__":

@@ -150,6 +150,10 @@ def test_calibrate_writes_its_files_and_reads_back(calibrated_run):
     assert ds["velocity"].attrs["units"] == "m s-1"
     ph = read_fields(out / "fields.nc", phase_resolved=True)
     assert ph.sizes["phase"] == 8
+    # the thermal temperature beside the phase-resolved one, with its units and errors
+    assert ph["thermal_temperature"].attrs["units"] == "m2 s-2"
+    assert "thermal_temperature_stderr" in ph
+    assert ds["thermal_temperature_cycle_mean"].attrs["units"] == "m2 s-2"
     assert not list(out.glob("*.tmp*"))
 
 

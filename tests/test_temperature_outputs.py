@@ -137,3 +137,43 @@ def test_report_sets_each_continuum_beside_the_dem_and_their_difference(tmp_path
     assert lag["solid_fraction_difference"][0, i0 + 1] == pytest.approx(0.2)
     data.fields = {}
     assert figures.temperature_maps(data, maps).startswith(b"\x89PNG")
+
+
+def test_report_takes_each_continuums_difference_against_the_dems_thermal_temperature(tmp_path):
+    """With the thermal T in the fields the DEM shows both cycle means, the continuum's
+    difference is to the thermal T, and E is tub47.md's for a scalar, by hand: cells (0, 0) and
+    (1, 0) at phi 0.5 with thermal T 1 and 2, the continuum's 5 and 1 at phi 0.6:
+    E = sqrt((16 + 1) / 2) / 1.5; against the phase-resolved T (4 and 4): sqrt((1 + 9) / 2) / 4."""
+    s = load_scenario("tub47-quick")
+    h = float(s.analysis.cell_size)
+    x = np.arange(-0.16, 0.16 + 1e-9, 0.005)
+    z = np.arange(0.0, 0.06 + 1e-9, 0.005)
+    X, Z = np.meshgrid(x, z, indexing="ij")
+    row = np.abs(Z) < 0.5 * h - 1e-9
+    c0 = row & (np.abs(X) < 0.5 * h - 1e-9)
+    c1 = row & (np.abs(X - h) < 0.5 * h - 1e-9)
+    on = c0 | c1
+    ds = _dem_fields(x, z, 9.0 * on, np.where(on, 0.5, 0.0), 1.0 * on)
+    dims = ("x", "z")
+    ds["temperature_cycle_mean"] = (dims, 4.0 * on)
+    ds["thermal_temperature_cycle_mean"] = (dims, 1.0 * c0 + 2.0 * c1)
+    ds["thermal_temperature_cycle_mean_stderr"] = (dims, 0.1 * on)
+    (tmp_path / "lagrangian").mkdir()
+    (tmp_path / "lagrangian" / "temperature.csv").write_text(
+        "x,z,granular_temperature_m2_s2,solid_fraction,samples\n0.0,0.0,5.0,0.6,4\n"
+        f"{h!r},0.0,1.0,0.6,4\n")
+    data = SimpleNamespace(
+        geometry=geometry_of(s), scenario=s, dem_fields=ds, continuum_methods=["lagrangian"],
+        out=tmp_path, summary={"methods": {"dem": {}, "lagrangian": {}}})
+    maps = temperature_maps(data)
+    i0 = int(np.argmin(np.abs(maps.x)))
+    assert maps.dem[T_KEY][0, i0] == pytest.approx(4.0)
+    assert maps.dem_thermal[T_KEY][0, i0 + 1] == pytest.approx(2.0)
+    lag = maps.continua["lagrangian"]
+    assert lag["temperature_difference_m2_s2"][0, i0] == pytest.approx(4.0)
+    assert lag["temperature_difference_m2_s2"][0, i0 + 1] == pytest.approx(-1.0)
+    assert lag["E_thermal"] == pytest.approx(np.sqrt(8.5) / 1.5)
+    assert lag["E_phase_resolved"] == pytest.approx(np.sqrt(5.0) / 4.0)
+    assert maps.E_dem_error == pytest.approx(0.1 / 1.5)
+    data.fields = {}
+    assert figures.temperature_maps(data, maps).startswith(b"\x89PNG")

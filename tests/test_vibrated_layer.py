@@ -166,7 +166,8 @@ def test_the_continuum_layers_misses_are_no_larger_than_today(dem, method):
 
 
 @pytest.mark.parametrize("field, value", [("cycles", 3), ("n_phases", 1), ("band_m", 0.0),
-                                          ("gamma", -1.0), ("seeds", ())])
+                                          ("gamma", -1.0), ("seeds", ()),
+                                          ("thermal_width_d", 0.0)])
 def test_a_bad_layer_setup_is_named(field, value):
     from vibroflow.calibration.vibrated_layer import LayerSetup
     from vibroflow.errors import InputError

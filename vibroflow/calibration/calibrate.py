@@ -1,7 +1,9 @@
 """`vibroflow calibrate RUN_DIR [--shear-cell]`: from a DEM run to the continuum's parameters.
 
 Stages:
-1. coarse-grain the run's averaging window (run_fields) -> RUN_DIR/fields.nc;
+1. coarse-grain the run's averaging window (run_fields) -> RUN_DIR/fields.nc, with the thermal
+   temperature beside the phase-resolved one (thermal_temperature: the balls' velocities about
+   each snapshot's own coarse-grained velocity, the continuum's like-for-like target);
 2. wall and partition friction from the wall contacts (wall_friction);
 3. impact speeds against the coarse-grained shear rate and temperature (impacts), their mean
    and p95 against sqrt(T) and the shear rate side by side, and which the DEM supports better
@@ -177,7 +179,8 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
         prog.stage("coarse-grain", n_used, unit="snapshots")
         avg, phases, cg_info = coarse_grain_run(res, kernel=kernel, width=width,
                                                 progress=lambda k, n: prog.update(k),
-                                                energy_flux=res.has_ball_contacts)
+                                                energy_flux=res.has_ball_contacts,
+                                                thermal=True)
         scatter = tub_mu_i_scatter(avg, phases)
         if not shear_cell:  # before anything is written: a bed too small is the input's fault
             check_tub_cells(scatter, sc, avg, run_dir)

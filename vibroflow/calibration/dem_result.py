@@ -150,12 +150,13 @@ class DEMResult:
         run = self.scenario.run
         return float(run.duration - run.average_last), float(run.duration)
 
-    def batches(self) -> np.ndarray:
-        """Batch of whole cycles (0 .. run.batches-1, or -1 outside the window) of each
-        snapshot (vibroflow.measure.stats.batches_of_whole_cycles)."""
+    def batches(self, n_batches: int | None = None) -> np.ndarray:
+        """Batch of whole cycles (0 .. n_batches-1, default run.batches, or -1 outside the
+        window) of each snapshot (vibroflow.measure.stats.batches_of_whole_cycles)."""
         t0, t1 = self.window()
+        n = int(self.scenario.run.batches if n_batches is None else n_batches)
         return batches_of_whole_cycles(self.times, t0, t1, float(self.scenario.motion.frequency),
-                                       int(self.scenario.run.batches))
+                                       n)
 
     def has(self, key: str) -> bool:
         return key in self.file and self.file[key].shape[0] > 0

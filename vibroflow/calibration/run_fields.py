@@ -4,7 +4,10 @@ at the scenario's sampling phases, with batch-means standard errors (tub47.md "P
 
 `coarse_grain_run(run)` returns both Datasets; `write_fields(path, time_avg, phases)` stores
 them in one NetCDF-4 file (the time averages at the root, the phase-resolved fields in the group
-"phase_resolved"), read back with `read_fields`.
+"phase_resolved"), read back with `read_fields`.  With thermal=True both also hold the thermal
+temperature (thermal_temperature.py: the balls' velocities about each snapshot's own
+coarse-grained velocity), its phase-resolved field beside the phase-resolved T and its cycle
+mean beside the T's.
 """
 from __future__ import annotations
 
@@ -22,6 +25,7 @@ from vibroflow.measure.stats import phase_bins
 from .coarse_grain import CoarseGrainer
 from .dem_result import DEMResult
 from .energy_flux import EnergyFluxGrainer
+from .thermal_temperature import ThermalTemperatureGrainer
 
 _CG_KEYS = ("positions_tub", "velocities_rel_tub", "radius", "mass", "contacts_i",
             "contacts_j", "contact_force", "contact_branch", "wall_particle", "wall_force",
@@ -30,7 +34,8 @@ _CG_KEYS = ("positions_tub", "velocities_rel_tub", "radius", "mass", "contacts_i
 
 def coarse_grain_run(run, kernel: str = "gaussian", width: float | None = None,
                      cutoff: float | None = None, cell_size: float | None = None,
-                     n_phases: int | None = None, progress=None, energy_flux: bool = False):
+                     n_phases: int | None = None, progress=None, energy_flux: bool = False,
+                     thermal: bool = False):
     """Coarse-grain the averaging window of a DEM run.
 
     run : a DEMResult, a run directory or a dem.h5 path.
@@ -44,6 +49,9 @@ def coarse_grain_run(run, kernel: str = "gaussian", width: float | None = None,
     progress : optional callable(done, total) called after each snapshot.
     energy_flux : also coarse-grain the fluctuation-energy flux (energy_flux.EnergyFluxGrainer,
         the same fields bit for bit): info["energy_flux"] holds its phase-resolved Dataset.
+    thermal : also the thermal temperature (thermal_temperature.ThermalTemperatureGrainer, the
+        same grid, kernel, phases and batches): thermal_temperature (+ _stderr) in the
+        phase-resolved Dataset, thermal_temperature_cycle_mean (+ _stderr) in the time averages.
 
     Returns (time_averaged, phase_resolved, info): two xarray Datasets (coarse_grain.fields) and
     a dict {snapshots, wall_time_s, contact_stress: "ball and wall" | "wall only" | "none"}.
@@ -52,25 +60,27 @@ def coarse_grain_run(run, kernel: str = "gaussian", width: float | None = None,
     res = DEMResult.open(run) if own else run
     try:
         return _coarse_grain(res, kernel, width, cutoff, cell_size, n_phases, progress,
-                             energy_flux)
+                             energy_flux, thermal)
     finally:
         if own:
             res.close()
 
 
 def _coarse_grain(res: DEMResult, kernel, width, cutoff, cell_size, n_phases, progress,
-                  energy_flux=False):
+                  energy_flux=False, thermal=False):
     t_wall = time.perf_counter()
     sc = res.scenario
     d = res.diameter
     geometry = geometry_of(sc)
     n_phases = int(sc.run.phases_per_cycle if n_phases is None else n_phases)
     grainer = EnergyFluxGrainer if energy_flux else CoarseGrainer
-    cg = grainer(geometry, cell_size=float(sc.analysis.cell_size / 3.0 if cell_size is None
-                                           else cell_size),
-                 kernel=kernel, width=0.5 * d if width is None else float(width),
-                 cutoff=cutoff, depth=float(sc.tub.length), rho_s=res.solid_density,
-                 diameter=d, n_phases=n_phases, n_batches=int(sc.run.batches))
+    params = dict(cell_size=float(sc.analysis.cell_size / 3.0 if cell_size is None
+                                  else cell_size),
+                  kernel=kernel, width=0.5 * d if width is None else float(width),
+                  cutoff=cutoff, depth=float(sc.tub.length), rho_s=res.solid_density,
+                  diameter=d, n_phases=n_phases, n_batches=int(sc.run.batches))
+    cg = grainer(geometry, **params)
+    th = ThermalTemperatureGrainer(geometry, **params) if thermal else None
     batch = res.batches()
     used = np.nonzero(batch >= 0)[0]
     if used.size == 0:
@@ -80,6 +90,9 @@ def _coarse_grain(res: DEMResult, kernel, width, cutoff, cell_size, n_phases, pr
     for k, (s, snap) in enumerate(res.iter_snapshots(used)):
         cg.add_snapshot(**{key: snap[key] for key in _CG_KEYS if key in snap},
                         phase_bin=int(ph[s]), batch=int(batch[s]))
+        if th is not None:
+            th.add_snapshot(snap["positions_tub"], snap["velocities_rel_tub"], snap["radius"],
+                            snap["mass"], phase_bin=int(ph[s]), batch=int(batch[s]))
         if progress is not None:
             progress(k + 1, used.size)
     contact = ("ball and wall" if res.has_ball_contacts and res.has_wall_forces else
@@ -90,6 +103,11 @@ def _coarse_grain(res: DEMResult, kernel, width, cutoff, cell_size, n_phases, pr
     avg = cg.fields(phase_resolved=False)
     phases = cg.fields(phase_resolved=True)
     add_cycle_means(avg, phases)
+    if th is not None:
+        th_phase, th_cycle = th.fields()
+        phases.update(th_phase.data_vars)
+        avg.update(th_cycle.data_vars)
+        info["thermal_mean_width_m"] = th.mean_width_m
     for ds in (avg, phases):
         ds.attrs["contact_stress"] = contact
         ds.attrs["case"] = str(sc.case)

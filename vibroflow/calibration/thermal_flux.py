@@ -50,11 +50,13 @@ def thermal_velocities(positions, velocities, radius, mass, mean_field: CoarseGr
     return vel - at(xz)
 
 
-def thermal_energy_flux(run, width_factor: float = 2.0, n_phases: int | None = None):
+def thermal_energy_flux(run, width_factor: float = 2.0, n_phases: int | None = None,
+                        n_batches: int | None = None):
     """The phase-resolved energy-flux Dataset (energy_flux.EnergyFluxGrainer.
     energy_flux_fields) of a DEM run's averaging window with each ball's velocity taken about
     its snapshot's coarse-grained velocity (kernel width width_factor diameters); the grid, the
-    kernel of the fields (d/2), the phases and batches as run_fields.coarse_grain_run's.
+    kernel of the fields (d/2), the phases and batches as run_fields.coarse_grain_run's, or
+    n_batches batches of whole cycles (measure.stats) when given.
     run: a DEMResult, a run directory or a dem.h5 path."""
     if not (width_factor > 0):
         raise InputError(f"width_factor = {width_factor!r}: must be > 0 (diameters)")
@@ -67,9 +69,10 @@ def thermal_energy_flux(run, width_factor: float = 2.0, n_phases: int | None = N
         n_phases = int(sc.run.phases_per_cycle if n_phases is None else n_phases)
         common = dict(cell_size=float(sc.analysis.cell_size / 3.0), kernel="gaussian",
                       depth=float(sc.tub.length), rho_s=res.solid_density, diameter=d)
-        cg = EnergyFluxGrainer(geometry, width=0.5 * d, n_phases=n_phases,
-                               n_batches=int(sc.run.batches), **common)
-        batch = res.batches()
+        nb = int(sc.run.batches if n_batches is None else n_batches)
+        cg = EnergyFluxGrainer(geometry, width=0.5 * d, n_phases=n_phases, n_batches=nb,
+                               **common)
+        batch = res.batches(nb)
         used = np.nonzero(batch >= 0)[0]
         if used.size == 0:
             raise InputError(f"{res.path}: no snapshot in the averaging window")

@@ -11,7 +11,10 @@ Gamma.  The layer holds `layers` diameters of balls at solid fraction 0.6, fille
 lattice (spacing 1.06 d) jittered by the fill seed; it is shaken `warm_cycles` cycles, then
 sampled for `cycles` whole cycles in `batches` batches: the profiles at n_phases phases of the
 floor's cycle, the floor's force every FORCE_EVERY steps (the ball-floor contacts' vertical
-force, summed).  Over the seeds, the profiles' mean and their seed scatter (the standard
+force, summed).  Beside the temperature about each band's mean velocity, the thermal
+temperature: the same profile of each ball's velocity about its snapshot's own Gaussian mean
+velocity over the x-z plane (measure.thermal, width thermal_width_d diameters), the agitation a
+continuum's T models.  Over the seeds, the profiles' mean and their seed scatter (the standard
 deviation over seeds) are what a continuum is judged against.
 """
 from __future__ import annotations
@@ -26,6 +29,7 @@ from vibroflow.dem import simulate as S
 from vibroflow.dem.walls import WALL_PLANE0
 from vibroflow.errors import InputError
 from vibroflow.measure.layer_profiles import LayerProfiles, floor_phase, take_off_phase
+from vibroflow.measure.thermal import thermal_velocities
 from vibroflow.scenario.checks import find_contact
 from vibroflow.scenario.model import Material, ParticleSpec, Run, Scenario, WallSpec
 
@@ -45,7 +49,8 @@ class LayerSetup:
     default 31.5, tub47's 0.2 m deep bed), warm and sampled cycles, batches, phases a cycle,
     band_m (m) the profiles' band of height (default the continuum's node spacing on tub47,
     three diameters), gamma: the floor's peak acceleration / g (None: the case's amplitude_z),
-    the fill seeds."""
+    the fill seeds, thermal_width_d: the thermal temperature's local-mean kernel width in ball
+    diameters."""
 
     layers: float = 31.5
     warm_cycles: int = 20
@@ -55,6 +60,7 @@ class LayerSetup:
     band_m: float = 0.01875
     gamma: float | None = None
     seeds: tuple[int, ...] = (1, 2, 3, 4, 5)
+    thermal_width_d: float = 2.0
 
     def check(self) -> None:
         for name in ("warm_cycles", "cycles", "batches", "n_phases"):
@@ -67,6 +73,9 @@ class LayerSetup:
                              f"{self.batches}")
         if not self.layers > 0 or not self.band_m > 0:
             raise InputError(f"layers = {self.layers}, band_m = {self.band_m}: must be > 0")
+        if not self.thermal_width_d > 0:
+            raise InputError(f"thermal_width_d = {self.thermal_width_d}: must be > 0 "
+                             "(ball diameters)")
         if self.gamma is not None and not self.gamma > 0:
             raise InputError(f"gamma = {self.gamma}: must be > 0 (or None: the case's)")
         if len(self.seeds) < 1:
@@ -139,6 +148,8 @@ def run_seed(scenario, setup: LayerSetup, seed: int) -> dict:
     area = STRIP_LENGTH_M * STRIP_WIDTH_BALLS * 2 * r
     n_bands = int(math.ceil(3 * setup.layers * 2 * r / setup.band_m)) + 1
     acc = LayerProfiles(P, n_bands, setup.band_m, setup.batches, area)
+    thermal = LayerProfiles(P, n_bands, setup.band_m, setup.batches, area)
+    width = setup.thermal_width_d * 2 * r
     # sample times: the floor's phase psi / (2 pi) = c + k / P, c counted from its first cycle
     c0 = math.floor(phase / (2 * math.pi)) + 1
 
@@ -153,13 +164,20 @@ def run_seed(scenario, setup: LayerSetup, seed: int) -> dict:
             t = st.step * dt
             zf = amp * (math.sin(omega * t + phase) - math.sin(phase))
             acc.add_grains(batch, k, st.pos[:, 2] - zf, st.vel, st.mass, volume)
+            thermal.add_grains(batch, k, st.pos[:, 2] - zf,
+                               thermal_velocities(st.pos, st.vel, st.mass, width), st.mass,
+                               volume)
             while st.step < end:
                 S.run_steps(system, st, min(FORCE_EVERY, end - st.step))
                 on = st.wall_flag[:, WALL_PLANE0] != 0
                 fz = float(st.wall_force[on, WALL_PLANE0, 2].sum())
                 acc.add_force(batch, float(floor_phase(st.step * dt, f, phase)), fz / weight)
     out = acc.result()
-    out.update(seed=int(seed), balls=int(n), mass_kg=float(st.mass.sum()))
+    th = thermal.result()
+    out.update(seed=int(seed), balls=int(n), mass_kg=float(st.mass.sum()),
+               thermal_temperature_m2_s2=th["temperature_m2_s2"],
+               thermal_temperature_stderr_m2_s2=th["temperature_stderr_m2_s2"],
+               thermal_width_m=float(width))
     return out
 
 
@@ -167,7 +185,10 @@ def seed_summary(results: list[dict]) -> dict:
     """The seeds' mean of each profile and its seed scatter (standard deviation over seeds,
     ddof 1; NaN with one seed)."""
     out = {}
-    for key in ("temperature_m2_s2", "solid_fraction", "floor_force_over_weight"):
+    keys = ("temperature_m2_s2", "solid_fraction", "floor_force_over_weight")
+    if all("thermal_temperature_m2_s2" in r for r in results):
+        keys += ("thermal_temperature_m2_s2",)
+    for key in keys:
         a = np.array([r[key] for r in results], float)
         with warnings.catch_warnings():  # bands no seed's bed reaches stay NaN
             warnings.simplefilter("ignore", RuntimeWarning)

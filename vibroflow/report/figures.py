@@ -321,13 +321,26 @@ def impact_maps(data: StudyData) -> bytes:
     return png_bytes(fig)
 
 
+def _upper(values) -> float:
+    """The 99th percentile of a map's positive values (0 when it has none)."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v) & (v > 0)]
+    return float(np.percentile(v, 99)) if v.size else 0.0
+
+
 def temperature_maps(data: StudyData, maps: TemperatureMaps) -> bytes:
     """The granular temperature (top row, m^2/s^2) and solid fraction (bottom row) on the
-    analysis cells (report.temperature_maps): the DEM's, then each continuum's that carries the
-    temperature beside its difference to the DEM (continuum minus DEM, a diverging scale
-    centred on 0); cells with no material in a map are left blank."""
+    analysis cells (report.temperature_maps): the DEM's (its phase-resolved T's cycle mean,
+    then, when the fields hold it, its thermal T's), then each continuum's that carries the
+    temperature beside its difference to the DEM's thermal T (or its phase-resolved T without
+    one; continuum minus DEM, a diverging scale centred on 0); cells with no material in a map
+    are left blank."""
     plt = pyplot()
-    cols = [("dem", maps.dem, None)]
+    cols = [("DEM, phase-resolved T", maps.dem, None)]
+    if maps.dem_thermal is not None:
+        cols.append(("DEM, thermal T", maps.dem_thermal, None))
+    ref = maps.dem_thermal if maps.dem_thermal is not None else maps.dem
+    against = "DEM thermal" if maps.dem_thermal is not None else "DEM"
     for name, m in maps.continua.items():
         cols.append((name, m, None))
         cols.append((name, m, "difference"))
@@ -337,11 +350,12 @@ def temperature_maps(data: StudyData, maps: TemperatureMaps) -> bytes:
     rows = ((T_KEY, "temperature_difference_m2_s2", "granular temperature T (m²/s²)"),
             (PHI_KEY, "solid_fraction_difference", "solid fraction"))
     for r, (key, diff_key, label) in enumerate(rows):
+        # the scales end at the 99th percentile: a few hot wall cells would darken the rest
         values = [m[key] for _, m, kind in cols if m is not None and kind is None]
-        hi = max([float(np.max(v)) for v in values] + [1e-12])
+        hi = max([_upper(v) for v in values] + [1e-12])
         norm = Normalize(0.0, hi)
         diffs = [m[diff_key] for _, m, kind in cols if kind and m.get(diff_key) is not None]
-        dhi = max([float(np.max(np.abs(d))) for d in diffs] + [1e-12])
+        dhi = max([_upper(np.abs(d)) for d in diffs] + [1e-12])
         dnorm = Normalize(-dhi, dhi)
         shown = diff_shown = None
         for ax, (name, m, kind) in zip(axes[r], cols):
@@ -354,15 +368,18 @@ def temperature_maps(data: StudyData, maps: TemperatureMaps) -> bytes:
                                       shading="nearest", cmap="viridis", norm=norm)
             else:
                 empty = ((m[T_KEY] <= 0) & (m[PHI_KEY] <= 0)
-                         & (maps.dem[T_KEY] <= 0) & (maps.dem[PHI_KEY] <= 0))
+                         & (ref[T_KEY] <= 0) & (ref[PHI_KEY] <= 0))
                 diff_shown = ax.pcolormesh(maps.x, maps.z, np.where(empty, np.nan, m[diff_key]),
                                            shading="nearest", cmap="RdBu_r", norm=dnorm)
-            what = "difference (continuum − DEM)" if kind else label.split(" (")[0]
+            what = f"difference (continuum − {against})" if kind else label.split(" (")[0]
+            if kind and r == 0 and m.get("E_thermal") is not None:
+                what += f", E = {m['E_thermal']:.2f}"
             ax.set_title(f"{name}: {what}", fontsize=9)
             _outline(ax, data, top)
         if shown is not None:
-            fig.colorbar(shown, ax=list(axes[r]), shrink=0.8, label=label)
+            fig.colorbar(shown, ax=list(axes[r]), shrink=0.8, label=label, extend="max")
         if diff_shown is not None:
-            fig.colorbar(diff_shown, ax=list(axes[r]), shrink=0.8, label="difference")
-    fig.suptitle("granular temperature and solid fraction, time-averaged")
+            fig.colorbar(diff_shown, ax=list(axes[r]), shrink=0.8, label="difference",
+                         extend="both")
+    fig.suptitle("granular temperature (cycle means) and solid fraction")
     return png_bytes(fig)

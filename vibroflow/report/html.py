@@ -208,10 +208,13 @@ def _shear(data: StudyData) -> dict:
 
 def _temperature(data: StudyData) -> dict:
     maps = temperature_maps(data)
+    rows = [[_text(name, "l"), _num(m.get("E_thermal"), ".3g"),
+             _num(m.get("E_phase_resolved"), ".3g")] for name, m in maps.continua.items()]
     return {"img": _img(figures.temperature_maps(data, maps), "granular temperature and "
                         "solid-fraction maps"),
             "with": list(maps.continua), "without": maps.without,
-            "dem_fields": maps.dem is not None}
+            "dem_fields": maps.dem is not None, "thermal": maps.dem_thermal is not None,
+            "rows": rows, "dem_error": _num(maps.E_dem_error, ".3g")}
 
 
 def _impacts(data: StudyData) -> dict:
