@@ -427,8 +427,8 @@ def test_a_ball_over_the_diagonal_of_a_flat_stl_face_feels_one_contact(tmp_path)
 
 @pytest.mark.slow
 def test_same_part_numbers_on_one_thread_and_on_two(tmp_path):
-    # the part loads are summed per chunk in ball order, the chunks in chunk order: the same
-    # bits whatever the threads (1600 balls: above the one-thread size)
+    # the part loads are summed per block of the balls by id, ball by id, the blocks in block
+    # order: the same bits whatever the threads (1600 balls: above the one-thread size)
     if numba.config.NUMBA_NUM_THREADS < 2:
         pytest.skip("numba has a single thread here")
     sets = ["fill.count=1600", "tub.length=0.01905", "parts.0.center=[0.0,0.0,0.05]",
