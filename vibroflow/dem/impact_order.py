@@ -74,10 +74,17 @@ class ImpactOrder:
         self.pool = [np.zeros((0, b.shape[2])) for b in buffers]
         #: steps since the last flush at which the list was rebuilt
         self.rebuilds: list[int] = []
+        #: the ids of balls stored by id
+        self._identity = np.zeros(0, np.int64)
 
     def tag(self, buffers, counts, nl, origin: int, dt: float) -> None:
         """Tag the rows recorded since the last call, with the list of their step `nl`."""
-        ids, _rows = nl.id_arrays(nl.start.shape[0] - 1)
+        ids = nl.ids
+        if ids is None:
+            n = nl.start.shape[0] - 1
+            if self._identity.shape[0] != n:
+                self._identity = np.arange(n, dtype=np.int64)
+            ids = self._identity
         block = nl.id_blocks(self.nblock)[1]
         for kind in range(2):
             _tag(buffers[kind], counts[kind], self.tagged[kind], BALL_COLUMN[kind], ids,

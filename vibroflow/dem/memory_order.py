@@ -26,9 +26,12 @@ import numpy as np
 
 from . import step as K
 
-#: ball count from which run_steps stores the balls in space order: above tub47's 14 000, so
-#: that the reference cases keep their dem.h5 bit for bit, impact order included (tub47-quick,
-#: 4 200 balls: 1.03 x the unsorted CPU time as filled, 0.96 x mixed; docs/decisions/threads.md)
+#: ball count from which run_steps stores the balls in space order, a matter of speed alone
+#: (the output is the same either way): the sort every 8th rebuild took 1.04 x the unsorted CPU
+#: time on tub47-quick (4 200 balls) as filled and 1.08 x mixed, 1.12 - 1.27 x on tub47
+#: (14 000) as filled and 0.77 - 0.83 x mixed, on the 140 000-ball tub 0.85 and 1.35 x as
+#: filled and 0.70 - 0.80 x mixed (docs/decisions/threads.md); a run's bed starts in its fill's
+#: order (stored layer by layer) and mixes
 MEMORY_ORDER_FROM = 20_000
 #: neighbour-list rebuilds between two space sorts: on the 140 000-ball tub every 8th rebuild
 #: took 0.85 x the unsorted CPU time as filled and 0.80 x on a mixed bed, every rebuild 1.21 x
