@@ -14,14 +14,14 @@ stored by id, in the same order and the same flushes:
 - a flush after each step at which some block's rows since the last flush pass half a block's
   buffer (ball-ball and wall rows, or ball-part rows), or, when the list is rebuilt at that
   step, after the next step that is not a rebuild; and at the end of a run_steps call (the
-  ball-ball and wall rows only when the call takes them, as before).
+  ball-ball and wall rows only when the call has a callback for them, else they wait).
 
 After each `advance` call the new rows are tagged (`ImpactOrder.tag`): their ball's id, its
 block and the step written into the columns after the row's own.  The rows wait in the
 buffers, then in a pool (`settle`), until their flush is known; the buffers' own limit (half a
 block's buffer, step.advance) only makes `settle` drain them sooner.  A row past a block's
-capacity in one step is lost, as in the buffers: a step would have to start over a thousand
-contacts in one block.
+buffer is lost: a block would have to record more than half its buffer (1 024 rows, 512
+ball-part rows) in one step.
 """
 from __future__ import annotations
 
