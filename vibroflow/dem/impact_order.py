@@ -21,7 +21,7 @@ block and the step written into the columns after the row's own.  The rows wait 
 buffers, then in a pool (`settle`), until their flush is known; the buffers' own limit (half a
 block's buffer, step.advance) only makes `settle` drain them sooner.  A row past a block's
 buffer is lost: a block would have to record more than half its buffer (1 024 rows, 512
-ball-part rows) in one step.
+ball-part rows) within two steps.
 """
 from __future__ import annotations
 
