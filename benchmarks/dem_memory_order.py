@@ -1,20 +1,22 @@
 """Time per ball-step of the DEM with and without the space sort (vibroflow.dem.memory_order).
 
-    python benchmarks/dem_memory_order.py [--sizes quick,long] [--threads 2] [--steps 400]
-        [--repeats 3] [--every 1,8] [--json runs/dem_memory_order.json]
+    python benchmarks/dem_memory_order.py [--sizes quick,tub47,long] [--threads 2] [--steps 400]
+        [--repeats 3] [--every 1,8] [--no-impacts] [--json runs/dem_memory_order.json]
 
-Sizes as benchmarks/dem_scaling.py: `quick` is tub47-quick (4 200 balls), `long` tub47 ten
-times longer (`--set tub.length=0.635 --set fill.count=140000`).  Each size runs in its own
-process with NUMBA_NUM_THREADS set: the balls are placed on the closed-up fill lattice and fall
-into the vibrating tub for the warm-up steps; then, in the same process on the same bed, calls
-of 100 steps (as `vibroflow dem` makes them, one a time-series row; the balls stored back by
-id every third call, as for a snapshot every 266 steps in tub47's window) are timed, alternating
-between the balls stored by id (`off`) and stored in space order at every `every`-th rebuild
-(`sort/every`), `--repeats` rounds of `--steps` steps each.  Two beds: `as filled` (ids in
-the fill lattice's order, already near space order) and `mixed` (the ids shuffled, as after a
-long run has mixed the bed).  The numbers of the runs are the same with and without the sort
-(tests/test_dem_memory_order.py); only the time differs.  Printed: wall and CPU nanoseconds per
-ball-step (medians), and their ratio to `off`.
+Sizes as benchmarks/dem_scaling.py: `quick` is tub47-quick (4 200 balls), `tub47` tub47
+(14 000), `long` tub47 ten times longer (`--set tub.length=0.635 --set fill.count=140000`).
+Each size runs in its own process with NUMBA_NUM_THREADS set: the balls are placed on the
+closed-up fill lattice and fall into the vibrating tub for the warm-up steps; then, in the same
+process on the same bed, calls of 100 steps (as `vibroflow dem` makes them, one a time-series
+row; the balls stored back by id every third call, as for a snapshot every 266 steps in tub47's
+window) are timed, alternating between the balls stored by id (`off`) and stored in space
+order at every `every`-th rebuild (`sort/every`), `--repeats` rounds of `--steps` steps each,
+impacts recorded as in `vibroflow dem`'s window unless `--no-impacts` (the rows in the order
+of the balls by id, vibroflow.dem.impact_order).  Two beds: `as filled` (ids in the fill
+lattice's order, already near space order) and `mixed` (the ids shuffled, as after a long run
+has mixed the bed).  The numbers and the impact rows of the runs are the same with and without
+the sort (tests/test_dem_memory_order.py); only the time differs.  Printed: wall and CPU
+nanoseconds per ball-step (medians), and their ratio to `off`.
 """
 from __future__ import annotations
 
@@ -30,12 +32,13 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 DENSE = ["fill.lattice_spacing=1.01", "fill.insert_above=0.0"]
 SIZES = {"quick": ("tub47-quick", DENSE, 2500),
+         "tub47": ("tub47", DENSE, 2000),
          "long": ("tub47", DENSE + ["tub.length=0.635", "fill.count=140000"], 1500)}
 CALL = 100  # steps a run_steps call (run.series_every's default)
 SNAPSHOT = 3  # calls between two reads of the state by id (tub47's 266 steps between snapshots)
 
 
-def worker(size: str, steps: int, repeats: int, everies: list[int]) -> dict:
+def worker(size: str, steps: int, repeats: int, everies: list[int], impacts: bool) -> dict:
     import numpy as np
 
     from vibroflow.dem import fill as F
@@ -49,13 +52,18 @@ def worker(size: str, steps: int, repeats: int, everies: list[int]) -> dict:
     state = F.fill_state(system, scenario)
     state.vibrating = True
     S.run_steps(system, state, warmup, memory_order=False)
+    seen = [0]
+
+    def rows_seen(imp) -> None:
+        seen[0] += imp.shape[0]
+
     rows = []
     for bed in ("as filled", "mixed"):
         if bed == "mixed":
             # new ids at random: the storage by id is then scattered in space
             b = S._buf(system, state)
             S.store_by_id(system, state)
-            M.store(state, b.work.diag, b.parts,
+            M.store(state, b.work.diag,
                     np.random.default_rng(1).permutation(state.n).astype(np.int64))
             state.nl.ids = None
             b.order = None
@@ -64,7 +72,8 @@ def worker(size: str, steps: int, repeats: int, everies: list[int]) -> dict:
         for mode, every in modes:  # compile each path once, untimed
             if every is not None:
                 M.SORT_EVERY = every
-            S.run_steps(system, state, CALL, memory_order=every is not None)
+            S.run_steps(system, state, CALL, memory_order=every is not None,
+                        record_impacts=True, on_impacts=rows_seen)
         S.store_by_id(system, state)
         for _ in range(repeats):
             for mode, every in modes:
@@ -73,7 +82,8 @@ def worker(size: str, steps: int, repeats: int, everies: list[int]) -> dict:
                 t0, c0 = time.perf_counter(), time.process_time()
                 for call in range(steps // CALL):
                     S.run_steps(system, state, CALL, memory_order=every is not None,
-                                keep_order=True)
+                                keep_order=True, record_impacts=impacts,
+                                on_impacts=rows_seen, on_part_impacts=rows_seen)
                     if call % SNAPSHOT == SNAPSHOT - 1:
                         S.store_by_id(system, state)
                 S.store_by_id(system, state)
@@ -96,12 +106,13 @@ def main(argv=None) -> None:
     p.add_argument("--steps", type=int, default=400)
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--every", default="1,8")
+    p.add_argument("--no-impacts", action="store_true", help="time the steps without impacts")
     p.add_argument("--json", type=Path, default=ROOT / "runs" / "dem_memory_order.json")
     p.add_argument("--worker", help=argparse.SUPPRESS)
     a = p.parse_args(argv)
     everies = [int(x) for x in a.every.split(",")]
     if a.worker:
-        print(json.dumps(worker(a.worker, a.steps, a.repeats, everies)))
+        print(json.dumps(worker(a.worker, a.steps, a.repeats, everies, not a.no_impacts)))
         return
     rows = []
     for size in a.sizes.split(","):
@@ -109,7 +120,8 @@ def main(argv=None) -> None:
         load0 = os.getloadavg()[0]
         out = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--worker", size,
                               "--steps", str(a.steps), "--repeats", str(a.repeats),
-                              "--every", a.every], env=env, capture_output=True, text=True)
+                              "--every", a.every] + ["--no-impacts"] * a.no_impacts,
+                             env=env, capture_output=True, text=True)
         if out.returncode != 0:
             raise SystemExit(f"{size} failed:\n{out.stderr[-3000:]}")
         got = json.loads(out.stdout.strip().splitlines()[-1])["rows"]

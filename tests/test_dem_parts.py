@@ -342,7 +342,7 @@ def test_a_tub_fixed_part_moves_with_the_tub():
                         frame=frame)
         packed = pack(parts_of_specs([spec]))
         rec = parts_record(packed, np.zeros(1, np.int64), np.zeros((1, 1, SLOTS, 6)),
-                           np.full((1, 1, SLOTS), EMPTY, np.int64), np.zeros((1, 1, 6)))
+                           np.full((1, 1, SLOTS), EMPTY, np.int64), 1)
         # dt_hist 0: the tangential spring is not advanced (the ball's contact point is taken
         # at r from its centre, as at the walls, which leaves a slip theta' delta)
         out = ball_parts(0, 0, 0.0, 0.0, False, lx, 0.0, lz, R_STEEL, M_STEEL, vel, omg, 0,
@@ -352,7 +352,8 @@ def test_a_tub_fixed_part_moves_with_the_tub():
             assert force == pytest.approx(k_n * delta * n_lab, rel=1e-9, abs=1e-12)
             assert out[6] == pytest.approx(delta, rel=1e-9)
             # the part's load: the opposite force, in tub axes
-            assert rec.load[0, 0, :3] == pytest.approx(-k_n * delta * n_tub, rel=1e-9,
+            assert rec.ncontrib[0, 0] == 1
+            assert rec.contrib[0, 0, 0, :3] == pytest.approx(-k_n * delta * n_tub, rel=1e-9,
                                                        abs=1e-12)
         else:
             assert np.linalg.norm(force - k_n * delta * n_lab) > 1e-3 * k_n * delta
@@ -401,7 +402,7 @@ def test_a_periodic_tub_touches_a_part_through_its_image():
     forces = []
     for y, periodic in ((length - 0.001, length), (-0.001, 0.0), (length - 0.001, 0.0)):
         rec = parts_record(packed, np.zeros(1, np.int64), np.zeros((1, 1, SLOTS, 6)),
-                           np.full((1, 1, SLOTS), EMPTY, np.int64), np.zeros((1, 1, 6)))
+                           np.full((1, 1, SLOTS), EMPTY, np.int64), 1)
         out = ball_parts(0, 0, 0.0, 0.0, False, 0.0, y, 0.05, R_STEEL, M_STEEL,
                          np.zeros((1, 3)), np.zeros((1, 3)), 0, table, pose, 1.0, 0.0,
                          periodic, rec)
@@ -427,8 +428,8 @@ def test_a_ball_over_the_diagonal_of_a_flat_stl_face_feels_one_contact(tmp_path)
 
 @pytest.mark.slow
 def test_same_part_numbers_on_one_thread_and_on_two(tmp_path):
-    # the part loads are summed per chunk in ball order, the chunks in chunk order: the same
-    # bits whatever the threads (1600 balls: above the one-thread size)
+    # the part loads are summed per block of the balls by id, ball by id, the blocks in block
+    # order: the same bits whatever the threads (1600 balls: above the one-thread size)
     if numba.config.NUMBA_NUM_THREADS < 2:
         pytest.skip("numba has a single thread here")
     sets = ["fill.count=1600", "tub.length=0.01905", "parts.0.center=[0.0,0.0,0.05]",

@@ -8,12 +8,13 @@ of each stored ball in the list (`NeighbourList.ids`) and stores them back by id
 returns, so that everything outside a `run_steps` call (dem.h5, checkpoints, sampling,
 ParaView files, blow-up messages) sees the balls by id, as always.
 
-The numbers do not depend on the storage order (vibroflow.dem.neighbours: a pair belongs to
-its ball of lower id, each ball's entries and reverse slots come in id order), so a stored run
-gives the same positions, velocities, forces and contact histories bit for bit.  What the
-order does change: the impacts of one flush come block of stored balls by block (the same
-order on any thread count, and the same rows), and with parts the per-block sums of the part
-loads are added in another grouping (rounding).
+Nothing a run writes depends on the storage order.  A pair belongs to its ball of lower id,
+each ball's entries and reverse slots come in id order (vibroflow.dem.neighbours), so a stored
+run gives the same positions, velocities, forces and contact histories bit for bit; the
+impact rows come in the order and the flushes of the balls stored by id
+(vibroflow.dem.impact_order); the part loads are summed by block of the balls by id, each
+block's balls by id (vibroflow.dem.parts.sum_loads).  So dem.h5 and parts.nc are the same
+bytes of data with the sort and without it, on any thread count.
 
 MEMORY_ORDER_FROM and SORT_EVERY are chosen by benchmarks/dem_memory_order.py on the 2-core
 development machine (docs/decisions/threads.md).
@@ -24,11 +25,13 @@ import numba as nb
 import numpy as np
 
 from . import step as K
-from .parts import IMP_BALL
 
-#: ball count from which run_steps stores the balls in space order: above tub47's 14 000, so
-#: that the reference cases keep their dem.h5 bit for bit, impact order included (tub47-quick,
-#: 4 200 balls: 1.03 x the unsorted CPU time as filled, 0.96 x mixed; docs/decisions/threads.md)
+#: ball count from which run_steps stores the balls in space order, a matter of speed alone
+#: (the output is the same either way): the sort every 8th rebuild took 1.04 x the unsorted CPU
+#: time on tub47-quick (4 200 balls) as filled and 1.08 x mixed, 1.12 - 1.27 x on tub47
+#: (14 000) as filled and 0.77 - 0.83 x mixed, on the 140 000-ball tub 0.85 and 1.35 x as
+#: filled and 0.70 - 0.80 x mixed (docs/decisions/threads.md); a run's bed starts in its fill's
+#: order (stored layer by layer) and mixes
 MEMORY_ORDER_FROM = 20_000
 #: neighbour-list rebuilds between two space sorts: on the 140 000-ball tub every 8th rebuild
 #: took 0.85 x the unsorted CPU time as filled and 0.80 x on a mixed bed, every rebuild 1.21 x
@@ -80,10 +83,10 @@ def _permute_rows(a, order):
             a[r, c] = tmp[r, c]
 
 
-def store(state, diag: np.ndarray, prt, order: np.ndarray, keep_list: bool = True) -> None:
+def store(state, diag: np.ndarray, order: np.ndarray, keep_list: bool = True) -> None:
     """Store the balls of `state` anew, in place: place r holds the ball of old place
-    order[r].  The per-ball arrays, the places in the diagnostics `diag` and in the buffered
-    ball-part impacts of `prt` (vibroflow.dem.parts' record) follow; the neighbour list is
+    order[r].  The per-ball arrays and the places in the diagnostics `diag` follow (the
+    buffered impact rows hold ball ids, vibroflow.dem.impact_order); the neighbour list is
     regrouped (keep_list) or only told the new ids (a rebuild follows, vibroflow.dem.simulate)."""
     n = order.shape[0]
     place = np.empty(n, np.int64)
@@ -96,11 +99,6 @@ def store(state, diag: np.ndarray, prt, order: np.ndarray, keep_list: bool = Tru
         x = diag[:, col]
         held = x >= 0.0
         x[held] = place[x[held].astype(np.int64)]
-    imp = prt.imp
-    for c in range(imp.shape[0]):
-        rows = imp[c, :min(int(prt.imp_count[c]), imp.shape[1])]
-        if rows.shape[0]:
-            rows[:, IMP_BALL] = place[rows[:, IMP_BALL].astype(np.int64)]
     nl = state.nl
     if keep_list:
         nl.store(order, place)

@@ -242,6 +242,7 @@ class NeighbourList:
         #: the id of each stored ball; None: the balls are stored by id
         self.ids: np.ndarray | None = None
         self._bounds = None
+        self._id_blocks = None
         self.rout = None
         self.rstart = None
         self.rpos = None
@@ -285,6 +286,7 @@ class NeighbourList:
             flag = np.zeros(nbr.shape[0], np.uint8)
         self.start, self.nbr, self.hist, self.flag = start, nbr, hist, flag
         self._bounds = None
+        self._id_blocks = None
         self.rout = None
         self.index_pairs()
         self.builds += 1
@@ -297,6 +299,7 @@ class NeighbourList:
         ids = order if self.ids is None else self.ids[order]
         self.ids = None if np.array_equal(ids, np.arange(ids.shape[0])) else ids
         self._bounds = None
+        self._id_blocks = None
         self.rout = None
         self.index_pairs()
 
@@ -320,9 +323,36 @@ class NeighbourList:
         cached = getattr(self, "_bounds", None)
         if cached is not None and cached.shape[0] == nchunk + 1:
             return cached
-        n = self.start.shape[0] - 1
-        work = self.start.astype(np.float64) + 4.0 * np.arange(n + 1)
-        targets = work[-1] * np.arange(1, nchunk) / nchunk
-        inner = np.searchsorted(work, targets)
-        self._bounds = np.concatenate([[0], inner, [n]]).astype(np.int64)
+        self._bounds = _equal_work(self.start, nchunk)
         return self._bounds
+
+    def id_blocks(self, nchunk: int) -> tuple[np.ndarray, np.ndarray]:
+        """(bounds (nchunk + 1,), block (N,)): the chunks of chunk_bounds for the balls stored
+        by id (first id of each), and the chunk of each stored ball among them: the same
+        whatever the storage (the impacts' order and the part loads' sums,
+        vibroflow.dem.impact_order)."""
+        cached = getattr(self, "_id_blocks", None)
+        if cached is not None and cached[0].shape[0] == nchunk + 1:
+            return cached
+        n = self.start.shape[0] - 1
+        if self.ids is None:
+            bounds = self.chunk_bounds(nchunk)
+            block = np.repeat(np.arange(nchunk, dtype=np.int64), np.diff(bounds))
+        else:
+            rows = self.id_arrays(n)[1]
+            start = np.zeros(n + 1, np.int64)
+            np.cumsum(np.diff(self.start)[rows], out=start[1:])
+            bounds = _equal_work(start, nchunk)
+            block = (np.searchsorted(bounds, self.ids, side="right") - 1).astype(np.int64)
+        self._id_blocks = (bounds, block)
+        return self._id_blocks
+
+
+def _equal_work(start: np.ndarray, nchunk: int) -> np.ndarray:
+    """The first ball of each of `nchunk` contiguous chunks of about equal work (list entries
+    `start`, CSR, plus 4 units a ball) and the ball count: (nchunk + 1,)."""
+    n = start.shape[0] - 1
+    work = start.astype(np.float64) + 4.0 * np.arange(n + 1)
+    targets = work[-1] * np.arange(1, nchunk) / nchunk
+    inner = np.searchsorted(work, targets)
+    return np.concatenate([[0], inner, [n]]).astype(np.int64)

@@ -22,11 +22,14 @@ triangle takes over the history of a slot whose contact ended in the same step (
 across the mesh keeps its tangential spring), else starts one afresh.
 
 What the part receives: the force and torque of every contact on each part (the opposite of the
-ball's, torque about the part's centre, tub axes for a tub-fixed part), summed per block of balls in ball
-order into load[c, k] (fixed order: the same sums whatever the threads); and with impacts
-recorded, one row per impact (a ball's contact with a part that had none in the step before):
-IMP_* columns below.  The impact energy is 0.5 m v_n^2, the ball's kinetic energy of its normal
-approach: for a part that does not move under the hit it is also 0.5 m_eff v_n^2.
+ball's, torque about the part's centre, tub axes for a tub-fixed part), kept per ball and part in
+the order of the ball's contacts (contrib, ncontrib) and summed by `sum_loads`, block of balls
+by id by block, each block's balls by id (the same sums whatever the threads and the storage
+order, vibroflow.dem.memory_order); and with impacts recorded, one row per impact (a ball's
+contact with a part that had none in the step before): IMP_* columns below, then the ball's
+block and the step (vibroflow.dem.impact_order).  The impact energy is 0.5 m v_n^2, the
+ball's kinetic energy of its normal approach: for a part that does not move under the hit it is
+also 0.5 m_eff v_n^2.
 """
 from __future__ import annotations
 
@@ -50,17 +53,20 @@ DONE = -3.0          # a candidate that has its slot (scratch marker)
 (IMP_TIME, IMP_PART, IMP_PATCH, IMP_X, IMP_Y, IMP_Z, IMP_VN, IMP_VT, IMP_ENERGY,
  IMP_BALL) = range(10)
 N_IMP = 10
+N_IMP_BUF = N_IMP + 2  # a buffered row: the IMP_* columns, the ball's block, the step
 IMPACT_CAPACITY = 1 << 10  # per block of balls (step.NBLOCK), between flushes
-# columns of load[c, k]: force (N) and torque about the part's centre (N m), part frame axes
+# columns of a load: force (N) and torque about the part's centre (N m), part frame axes
 N_LOAD = 6
 
 
 class PartsRec(NamedTuple):
     """The parts for the kernels (SI): packed geometry (vibroflow.tub.parts.PackedParts), the
     material index mat (P,) and bounding reach (P,) (m, from the centre; a cylinder's in x-z),
-    the per-ball contact slots hist (N, P, SLOTS, 6) and key (N, P, SLOTS), the per-block
-    loads (nblock, P, N_LOAD), impact rows imp (nblock, IMPACT_CAPACITY, N_IMP) with their
-    counts imp_count (nblock,), and scratch (nblock, SLOTS, 9) for an STL's candidates (nblock: step.NBLOCK, the blocks of balls)."""
+    the per-ball contact slots hist (N, P, SLOTS, 6) and key (N, P, SLOTS), each ball's
+    loads on each part at the step, one row a contact, contrib (N, P, SLOTS, N_LOAD) with
+    their counts ncontrib (N, P), impact rows imp (nblock, IMPACT_CAPACITY, N_IMP_BUF) with
+    their counts imp_count (nblock,), and scratch (nblock, SLOTS, 9) for an STL's candidates
+    (nblock: step.NBLOCK, the blocks of balls)."""
 
     shape: np.ndarray
     prm: np.ndarray
@@ -72,7 +78,8 @@ class PartsRec(NamedTuple):
     reach: np.ndarray
     hist: np.ndarray
     key: np.ndarray
-    load: np.ndarray
+    contrib: np.ndarray
+    ncontrib: np.ndarray
     imp: np.ndarray
     imp_count: np.ndarray
     scratch: np.ndarray
@@ -96,13 +103,15 @@ def reach_of(packed: PackedParts) -> np.ndarray:
 
 
 def parts_record(packed: PackedParts, mat: np.ndarray, hist: np.ndarray, key: np.ndarray,
-                 load: np.ndarray) -> PartsRec:
-    """The kernels' record of the packed parts and a state's slot and load arrays."""
-    nblock = load.shape[0]
+                 nblock: int) -> PartsRec:
+    """The kernels' record of the packed parts and a state's slot arrays, for `nblock`
+    blocks of balls."""
+    n, p = key.shape[0], key.shape[1]
     return PartsRec(packed.shape, packed.prm, packed.tri, packed.tri_normal, packed.tri_group,
                     packed.tri_start, np.ascontiguousarray(mat, dtype=np.int64), reach_of(packed),
-                    hist, key, load, np.zeros((nblock, IMPACT_CAPACITY, N_IMP)),
-                    np.zeros(nblock, np.int64), np.zeros((nblock, SLOTS, 9)))
+                    hist, key, np.zeros((n, p, SLOTS, N_LOAD)), np.zeros((n, p), np.int64),
+                    np.zeros((nblock, IMPACT_CAPACITY, N_IMP_BUF)), np.zeros(nblock, np.int64),
+                    np.zeros((nblock, SLOTS, 9)))
 
 
 @nb.njit(cache=True, inline="always")
@@ -112,12 +121,22 @@ def _clear(hist, key, i, k, s):
         hist[i, k, s, q] = 0.0
 
 
-@nb.njit(cache=True)
-def clear_loads(prt, c):
-    """Zero block c's part loads (before its balls are summed)."""
-    for k in range(prt.load.shape[1]):
-        for a in range(N_LOAD):
-            prt.load[c, k, a] = 0.0
+@nb.njit(cache=True, parallel=True)
+def sum_loads(contrib, ncontrib, rows, bounds, load):
+    """load[c, k] (N, N m): the loads on part k of the balls of block c (ids bounds[c] to
+    bounds[c + 1]; `rows`: the stored place of each id), added ball by ball by id, each
+    ball's contacts in their order, from zero: the same sums whatever the threads and the
+    storage."""
+    for c in nb.prange(load.shape[0]):
+        for k in range(load.shape[1]):
+            for a in range(N_LOAD):
+                load[c, k, a] = 0.0
+        for d in range(bounds[c], bounds[c + 1]):
+            i = rows[d]
+            for k in range(load.shape[1]):
+                for q in range(ncontrib[i, k]):
+                    for a in range(N_LOAD):
+                        load[c, k, a] += contrib[i, k, q, a]
 
 
 @nb.njit(cache=True)
@@ -176,9 +195,9 @@ def _stl_candidates(prt, k, qx, qy, qz, r, sc):
 def _one_contact(i, k, slot, c, t, dt_hist, first, r, m, vel, omg, mat_i, table, pose, cth, sth,
                  tub_fixed, sc, j, prt, fx, fy, fz, tx, ty, tz):
     """Contact j of the scratch rows in slot `slot`: the force and torque on the ball added to
-    (fx .. tz) and returned, the opposite added to the part's load, the impact written when
-    `first`.  Contact point and normal are in the part's frame; the force law works in the
-    lab."""
+    (fx .. tz) and returned, the opposite kept as the ball's next load on part k, the impact
+    written when `first`.  Contact point and normal are in the part's frame; the force law
+    works in the lab."""
     cx, cy, cz = sc[j, 1], sc[j, 2], sc[j, 3]
     nx, ny, nz, delta = sc[j, 4], sc[j, 5], sc[j, 6], sc[j, 7]
     if tub_fixed:
@@ -224,13 +243,15 @@ def _one_contact(i, k, slot, c, t, dt_hist, first, r, m, vel, omg, mat_i, table,
         mx, mz = cth * mx + sth * mz, -sth * mx + cth * mz
     prm = prt.prm[k]
     ax, ay, az = cx - prm[P_CX], cy - prm[P_CY], cz - prm[P_CZ]
-    load = prt.load[c, k]
-    load[0] += gx
-    load[1] += gy
-    load[2] += gz
-    load[3] += ay * gz - az * gy + mx
-    load[4] += az * gx - ax * gz + my
-    load[5] += ax * gy - ay * gx + mz
+    q = prt.ncontrib[i, k]
+    load = prt.contrib[i, k, q]
+    load[0] = gx
+    load[1] = gy
+    load[2] = gz
+    load[3] = ay * gz - az * gy + mx
+    load[4] = az * gx - ax * gz + my
+    load[5] = ax * gy - ay * gx + mz
+    prt.ncontrib[i, k] = q + 1
     return fx + wfx, fy + wfy, fz + wfz, tx + tix, ty + tiy, tz + tiz
 
 
@@ -240,14 +261,16 @@ def ball_parts(i, c, t, dt_hist, record, px, py, pz, r, m, vel, omg, mat_i, tabl
     """The contacts of ball i (centre (px, py, pz), lab; radius r, mass m) of chunk c with every
     part at time t: their force and torque on the ball (lab axes) and the largest overlap with
     the part it is with, as (fx, fy, fz, tx, ty, tz, delta_max, k_max) (k_max -1: none).
-    Updates the ball's slots, adds the opposite to the parts' loads in prt.load[c] and, with
-    `record`, writes the impacts.  pose is the tub's (vibroflow.dem.step._pose_array)."""
+    Updates the ball's slots, keeps the opposite as the ball's loads on the parts
+    (prt.contrib) and, with `record`, writes the impacts.  pose is the tub's
+    (vibroflow.dem.step._pose_array)."""
     hist, key, sc = prt.hist, prt.key, prt.scratch[c]
     fx = fy = fz = tx = ty = tz = 0.0
     dmax = 0.0
     kmax = -1
     X, Z, pvx, pvz = pose[0], pose[1], pose[6], pose[7]
     for k in range(prt.shape.shape[0]):
+        prt.ncontrib[i, k] = 0
         prm = prt.prm[k]
         tub_fixed = prm[P_FRAME] == FRAME_TUB
         if tub_fixed:

@@ -25,9 +25,10 @@ from .blowup import (BlowUp, blowup_message, check_finite_start, check_overlaps_
                      coincident_message, coincident_pair)
 from .laws import material_index, pair_table
 from . import memory_order as M
+from .impact_order import ImpactOrder
 from .memory_order import by_id, space_order, store
 from .neighbours import NeighbourList
-from .parts import EMPTY, IMP_BALL, N_LOAD, SLOTS, parts_record
+from .parts import EMPTY, N_LOAD, SLOTS, parts_record, sum_loads
 from .records import Params, Work, balls_of, pairs_of, slots_of, walls_of
 from .walls import N_PLANE, WALL_PLANE0, wall_kind
 
@@ -99,7 +100,8 @@ class DEMState:
     wall_arc: np.ndarray           # (N,) arc coordinate of the nearest U point (m)
     part_hist: np.ndarray | None = None  # (N, P, SLOTS, 6) ball-part contact histories
     part_key: np.ndarray | None = None   # (N, P, SLOTS) int64 their features (parts.EMPTY)
-    part_load: np.ndarray | None = None  # (step.NBLOCK, P, 6) force, torque on the parts, per block
+    part_load: np.ndarray | None = None  # (step.NBLOCK, P, 6) force, torque on the parts, per
+    # block of the balls by id (vibroflow.dem.parts.sum_loads)
     vibrating: bool = False
     scratch: object = field(default=None, repr=False, compare=False)  # not part of the state
 
@@ -212,7 +214,7 @@ class _Buffers:
     def __init__(self, system: DEMSystem, state: DEMState):
         nblock = K.NBLOCK
         self.n = state.n
-        self.work = Work(imp_buf=np.zeros((nblock, IMPACT_CAPACITY, 6)),
+        self.work = Work(imp_buf=np.zeros((nblock, IMPACT_CAPACITY, K.N_IMP_BUF)),
                          imp_count=np.zeros(nblock, np.int64), diag=np.empty((nblock, K.N_DIAG)),
                          pose=np.zeros(8), moved=np.zeros(nblock))
         #: the storage order of the last space sort (memory_order), taken up again by the
@@ -222,8 +224,20 @@ class _Buffers:
         self.walls = walls_of(state)
         ensure_part_arrays(system, state)
         self.parts = parts_record(system.packed, system.part_mat, state.part_hist,
-                                  state.part_key, state.part_load)
+                                  state.part_key, nblock)
+        #: the impact rows' flushes, in the order of the balls by id (impact_order)
+        self.impacts = ImpactOrder(nblock, self.buffers)
         self.reset_diag()
+
+    @property
+    def buffers(self) -> tuple[np.ndarray, np.ndarray]:
+        """The impact buffers: ball-ball and wall rows, ball-part rows."""
+        return self.work.imp_buf, self.parts.imp
+
+    @property
+    def counts(self) -> tuple[np.ndarray, np.ndarray]:
+        """Their rows recorded, per block of stored balls."""
+        return self.work.imp_count, self.parts.imp_count
 
     def reset_diag(self):
         diag = self.work.diag
@@ -255,7 +269,7 @@ def rebuild(system: DEMSystem, state: DEMState, sort: bool = False) -> None:
         b = _buf(system, state)
         old_of = space_order(state.pos, state.radius, system.skin,
                              state.nl.id_arrays(state.n)[0])
-        store(state, b.work.diag, b.parts, old_of, keep_list=False)
+        store(state, b.work.diag, old_of, keep_list=False)
         b.order = state.nl.ids
     state.nl.build(state.pos, state.radius, old_of)
     pose = _tub_pose(system, state)
@@ -268,33 +282,23 @@ def _forces_now(system: DEMSystem, state: DEMState) -> None:
     b.work.pose[:] = _tub_pose(system, state)
     K.compute_forces(state.time(system.dt), False, False, b.balls, pairs_of(state.nl, K.NBLOCK),
                      slots_of(state.nl), b.walls, system.params, b.work, b.parts)
-    b.work.imp_count[:] = 0
-    b.parts.imp_count[:] = 0
+    _sum_part_loads(system, state)
+    for count in b.counts:
+        count[:] = 0
 
 
-def take_impacts(system: DEMSystem, state: DEMState) -> np.ndarray:
-    """Impacts recorded since the last call: (M, 6) [time, kind, x, y, z, speed] (lab), in a
-    fixed order: block of balls by block (step.NBLOCK), each block's in the order recorded."""
-    b = _buf(system, state)
-    buf, count = b.work.imp_buf, b.work.imp_count
-    parts = [buf[c, :min(count[c], IMPACT_CAPACITY)] for c in range(K.NBLOCK)]
-    count[:] = 0
-    return np.concatenate(parts) if parts else np.zeros((0, 6))
-
-
-def take_part_impacts(system: DEMSystem, state: DEMState) -> np.ndarray:
-    """Ball-part impacts recorded since the last call: (M, N_IMP) rows of vibroflow.dem.parts'
-    IMP_* columns, chunk by chunk (a fixed order)."""
-    rec = _buf(system, state).parts
-    count = rec.imp_count
-    rows = [rec.imp[c, :min(count[c], rec.imp.shape[1])] for c in range(K.NBLOCK)]
-    count[:] = 0
-    return np.concatenate(rows) if rows else np.zeros((0, IMP_BALL + 1))
+def _sum_part_loads(system: DEMSystem, state: DEMState) -> None:
+    """state.part_load from the balls' loads on the parts at the last step, block of the balls
+    by id by block (vibroflow.dem.parts.sum_loads; the list of that step)."""
+    if system.n_parts:
+        prt, nl = _buf(system, state).parts, state.nl
+        sum_loads(prt.contrib, prt.ncontrib, nl.id_arrays(state.n)[1], nl.id_blocks(K.NBLOCK)[0],
+                  state.part_load)
 
 
 def part_loads_now(system: DEMSystem, state: DEMState) -> np.ndarray:
     """(P, 6) force (N) and torque about each part's centre (N m) of the balls on each part at
-    the last step, part axes (tub axes for a tub-fixed part): the chunks' sums added in chunk
+    the last step, part axes (tub axes for a tub-fixed part): the blocks' sums added in block
     order."""
     out = np.zeros((system.n_parts, N_LOAD))
     for c in range(K.NBLOCK):
@@ -328,8 +332,7 @@ def store_by_id(system: DEMSystem, state: DEMState) -> None:
     run_steps(keep_order=True)'s caller does before it reads the state's arrays."""
     rows = by_id(state)
     if rows is not None:
-        b = _buf(system, state)
-        store(state, b.work.diag, b.parts, rows)
+        store(state, _buf(system, state).work.diag, rows)
 
 
 def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: bool = False,
@@ -337,18 +340,20 @@ def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: b
               on_part_impacts: Callable[[np.ndarray], None] | None = None,
               memory_order: bool | None = None, keep_order: bool = False) -> None:
     """Advance the state by `nsteps` steps in place (rebuilding the list as needed); the
-    recorded impacts go to on_impacts (take_impacts' rows) and on_part_impacts
-    (take_part_impacts', ball ids).  memory_order: store the balls in space order during the
-    steps (vibroflow.dem.memory_order; None: from MEMORY_ORDER_FROM balls on), with the same
-    numbers either way.  The state comes back stored by id, or with `keep_order` as the steps
-    left it (a caller that reads its arrays calls store_by_id first; kinetic_energy needs
-    not), which spares the storing of calls that only step on."""
+    recorded impacts go to on_impacts ((M, 6) rows [time, kind, x, y, z, speed], lab) and
+    on_part_impacts ((M, N_IMP) rows of vibroflow.dem.parts' IMP_* columns, ball ids), in
+    flushes in the order of the balls by id (vibroflow.dem.impact_order).  memory_order:
+    store the balls in space order during the steps (vibroflow.dem.memory_order; None: from
+    MEMORY_ORDER_FROM balls on), with the same numbers and rows either way.  The state comes
+    back stored by id, or with `keep_order` as the steps left it (a caller that reads its
+    arrays calls store_by_id first; kinetic_energy needs not), which spares the storing of
+    calls that only step on."""
     b = _buf(system, state)
     if memory_order is None:
         memory_order = state.n >= M.MEMORY_ORDER_FROM
     if (memory_order and state.nl.ids is None and b.order is not None
             and b.order.shape[0] == state.n):
-        store(state, b.work.diag, b.parts, b.order)  # the last sort's order, taken up again
+        store(state, b.work.diag, b.order)  # the last sort's order, taken up again
     try:
         _run_steps(system, state, nsteps, record_impacts, on_impacts, on_part_impacts,
                    memory_order)
@@ -380,23 +385,21 @@ def _run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: 
             raise BlowUp(coincident_message(system, state, pair)) from None
         state.step += done
         left -= done
+        order = b.impacts
+        if record_impacts:  # with the list of the steps, before a rebuild
+            order.tag(b.buffers, b.counts, state.nl, state.time_origin_step, system.dt)
+        if left == 0:
+            _sum_part_loads(system, state)
         if status == K.BLOWUP:
             store_by_id(system, state)
             raise BlowUp(blowup_message(system, state, b.work.diag))
         if status == K.REBUILD:
+            order.rebuilds.append(state.step)
             rebuild(system, state, sort=memory_order and state.nl.builds % M.SORT_EVERY == 0)
-        if on_impacts is not None and (status == K.IMPACTS_FULL or left == 0):
-            imp = take_impacts(system, state)
-            if imp.shape[0]:
-                on_impacts(imp)
-        elif status == K.IMPACTS_FULL:
-            take_impacts(system, state)
-        if system.n_parts and (status == K.IMPACTS_FULL or left == 0):
-            rows = take_part_impacts(system, state)
-            if state.nl.ids is not None and rows.shape[0]:
-                rows[:, IMP_BALL] = state.nl.ids[rows[:, IMP_BALL].astype(np.int64)]
-            if on_part_impacts is not None and rows.shape[0]:
-                on_part_impacts(rows)
+        if status == K.IMPACTS_FULL or left == 0 or order.exceeded():
+            order.settle(b.buffers, b.counts, state.step, (on_impacts, on_part_impacts))
+        if left == 0:
+            order.finish((on_impacts, on_part_impacts), on_impacts is not None)
 
 
 def wall_contacts_now(system: DEMSystem, state: DEMState) -> dict[str, np.ndarray]:

@@ -24,8 +24,9 @@ Force assembly whose numbers do not depend on the thread count (DEVELOPERS.md, "
 
 Each sum is over the same terms in the same order whatever the threads.  The balls are cut into
 NBLOCK contiguous blocks of about equal work (a function of the list alone); the threads share
-the blocks, and each block keeps its own impact buffer and diagnostics, so the impacts come out
-block by block in an order that is the same on any machine.
+the blocks, and each block keeps its own impact buffer and diagnostics.  An impact row also
+holds the stored place of its ball (IMP_COLUMNS on), from which vibroflow.dem.impact_order
+puts the rows in an order that does not depend on the threads or on the storage order.
 """
 from __future__ import annotations
 
@@ -35,7 +36,7 @@ import numpy as np
 from ..tub.motion import pose as tub_pose
 from .contact import (branch_vector, contact_force, forget, pair_contact_velocity, put3,
                       unit_normal)
-from .parts import ball_parts, clear_loads
+from .parts import ball_parts
 from .walls import (KIND_BALL_BALL, KIND_BALL_PARTITION, KIND_BALL_PLANE, KIND_BALL_TUB,
                     TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT, WALL_PLANE0, WALL_U, plane_wall,
                     u_wall)
@@ -52,10 +53,16 @@ DONE, REBUILD, IMPACTS_FULL, BLOWUP = 0, 1, 2, 3
 NBLOCK = 64
 # what fixes a run's numbers beyond its scenario (checkpoints and the fill cache record it)
 ASSEMBLY = f"pair slots, gathered per ball; {NBLOCK} blocks"
+# an impact row: time (s), kind (walls.KIND_*), contact point x, y, z (m, lab), normal speed
+# (m/s); then the ball (its stored place, then its id), its block and the step
+# (vibroflow.dem.impact_order)
+IMP_COLUMNS = 6
+ROW_BALL = 6
+N_IMP_BUF = 9
 
 
 @nb.njit(cache=True, inline="always")
-def _record_impact(imp_buf, imp_count, c, t, kind, x, y, z, speed):
+def _record_impact(imp_buf, imp_count, c, t, kind, x, y, z, speed, i):
     k = imp_count[c]
     if k < imp_buf.shape[1]:
         imp_buf[c, k, 0] = t
@@ -64,6 +71,7 @@ def _record_impact(imp_buf, imp_count, c, t, kind, x, y, z, speed):
         imp_buf[c, k, 3] = y
         imp_buf[c, k, 4] = z
         imp_buf[c, k, 5] = speed
+        imp_buf[c, k, ROW_BALL] = i
     imp_count[c] = k + 1
 
 
@@ -113,7 +121,7 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
                     vn = vx * nx + vy * ny + vz * nz
                     _record_impact(imp_buf, imp_count, c, t, KIND_BALL_BALL,
                                    pos[i, 0] - ri * nx, pos[i, 1] - ri * ny,
-                                   pos[i, 2] - ri * nz, -vn)
+                                   pos[i, 2] - ri * nz, -vn, i)
             mj = mass[j]
             m_eff = mi * mj / (mi + mj)
             r_eff = ri * rj / (ri + rj)
@@ -200,8 +208,6 @@ def ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work,
     length = tub[TUB_LENGTH]
     n_walls = WALL_PLANE0 + planes.shape[0]
     n_parts = prt.shape.shape[0]
-    if n_parts > 0:
-        clear_loads(prt, c)
     periodic_length = length if has_tub and tub[TUB_PERIODIC] > 0.0 else 0.0
     cth = np.cos(pose[2])
     sth = np.sin(pose[2])
@@ -289,7 +295,7 @@ def ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work,
                 if record_impacts:
                     vn = vx * nx + vy * ny + vz * nz
                     _record_impact(imp_buf, imp_count, c, t, kind, pos[i, 0] - r * nx,
-                                   pos[i, 1] - r * ny, pos[i, 2] - r * nz, -vn)
+                                   pos[i, 1] - r * ny, pos[i, 2] - r * nz, -vn, i)
             wfx, wfy, wfz, tix, tiy, tiz, _tjx, _tjy, _tjz, fn, ft, sl = contact_force(
                 delta, nx, ny, nz, vx, vy, vz, omg[i, 0], omg[i, 1] - wwy, omg[i, 2],
                 r, 0.0, r, m, table[mat_i, wall_mat[w]], wall_hist[i, w], dt_hist)

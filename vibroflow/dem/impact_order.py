@@ -1,0 +1,163 @@
+"""The impact rows of a run in the order of the balls stored by id, whatever the storage.
+
+The kernels record each new contact into the buffer of its block of stored balls
+(vibroflow.dem.step, vibroflow.dem.parts), with the stored place of its ball.  `run_steps`
+(vibroflow.dem.simulate) gives the rows to its callers in flushes, as the buffers of the
+blocks of the balls stored by id (`NeighbourList.id_blocks`) would give them, so that a run
+whose balls are stored in space order (vibroflow.dem.memory_order) writes the rows of the run
+stored by id, in the same order and the same flushes:
+
+- within a flush, block (of the balls by id, at the row's step) by block, then step by step,
+  the ball-ball rows before the wall rows (the pair pass comes first), ball by id, each
+  ball's rows in the order recorded (its list entries, its wall slots, its parts): the order
+  in which the blocks' buffers fill;
+- a flush after each step at which some block's rows since the last flush pass half a block's
+  buffer (ball-ball and wall rows, or ball-part rows), or, when the list is rebuilt at that
+  step, after the next step that is not a rebuild; and at the end of a run_steps call (the
+  ball-ball and wall rows only when the call has a callback for them, else they wait).
+
+After each `advance` call the new rows are tagged (`ImpactOrder.tag`): their ball's id, its
+block and the step written into the columns after the row's own.  The rows wait in the
+buffers, then in a pool (`settle`), until their flush is known; the buffers' own limit (half a
+block's buffer, step.advance) only makes `settle` drain them sooner.  A row past a block's
+buffer is lost: a block would have to record more than half its buffer (1 024 rows, 512
+ball-part rows) within two steps.
+"""
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from .parts import IMP_BALL, N_IMP
+from .step import IMP_COLUMNS, ROW_BALL
+from .walls import KIND_BALL_BALL
+
+#: the ball's column in a buffered row (its stored place, its id once tagged); its block and
+#: the step follow: ball-ball and wall rows (step), ball-part rows (parts)
+BALL_COLUMN = (ROW_BALL, IMP_BALL)
+#: the columns of a row the callers receive
+OUT_COLUMNS = (IMP_COLUMNS, N_IMP)
+
+
+@nb.njit(cache=True)
+def _tag(buf, count, tagged, col, ids, block, origin, dt, per_block):
+    """The rows of buf[c] from tagged[c] on: column col (stored place) set to the ball's id,
+    col + 1 to its block of the balls by id, col + 2 to the step of the row's time (column 0,
+    s; t = (step - origin) dt); per_block counts them by that block."""
+    cap = buf.shape[1]
+    for c in range(buf.shape[0]):
+        end = min(count[c], cap)
+        for r in range(tagged[c], end):
+            p = int(buf[c, r, col])
+            b = block[p]
+            buf[c, r, col] = ids[p]
+            buf[c, r, col + 1] = b
+            buf[c, r, col + 2] = origin + np.rint(buf[c, r, 0] / dt)
+            per_block[b] += 1
+        tagged[c] = end
+
+
+class ImpactOrder:
+    """The flushes of a run's impact rows (module docstring): kind 0 the ball-ball and wall
+    rows (`work.imp_buf`, vibroflow.dem.records.Work), kind 1 the ball-part rows (`prt.imp`,
+    vibroflow.dem.parts.PartsRec)."""
+
+    def __init__(self, nblock: int, buffers: tuple[np.ndarray, np.ndarray]):
+        self.nblock = nblock
+        #: half a block's buffer: more rows of one block since the last flush flush them
+        self.half = np.array([b.shape[1] // 2 for b in buffers], np.int64)
+        #: rows of each buffer block already tagged
+        self.tagged = np.zeros((2, nblock), np.int64)
+        #: rows since the last flush, by block of the balls by id
+        self.count = np.zeros((2, nblock), np.int64)
+        #: tagged rows drained from the buffers, not yet flushed
+        self.pool = [np.zeros((0, b.shape[2])) for b in buffers]
+        #: steps since the last flush at which the list was rebuilt
+        self.rebuilds: list[int] = []
+        #: the ids of balls stored by id
+        self._identity = np.zeros(0, np.int64)
+
+    def tag(self, buffers, counts, nl, origin: int, dt: float) -> None:
+        """Tag the rows recorded since the last call, with the list of their step `nl`."""
+        ids = nl.ids
+        if ids is None:
+            n = nl.start.shape[0] - 1
+            if self._identity.shape[0] != n:
+                self._identity = np.arange(n, dtype=np.int64)
+            ids = self._identity
+        block = nl.id_blocks(self.nblock)[1]
+        for kind in range(2):
+            _tag(buffers[kind], counts[kind], self.tagged[kind], BALL_COLUMN[kind], ids,
+                 block, origin, dt, self.count[kind])
+
+    def exceeded(self) -> bool:
+        """Whether some block's rows since the last flush pass half a buffer."""
+        return bool(np.any(self.count > self.half[:, None]))
+
+    def settle(self, buffers, counts, step: int, on_rows) -> None:
+        """Drain the (tagged) buffers into the pool and give each flush up to `step` to
+        on_rows = (ball-ball and wall rows' callback or None, ball-part rows' or None)."""
+        for kind in range(2):
+            n = np.minimum(counts[kind], buffers[kind].shape[1])
+            if n.any():
+                self.pool[kind] = np.concatenate(
+                    [self.pool[kind]] + [buffers[kind][c, :n[c]] for c in range(self.nblock)
+                                         if n[c]])
+            counts[kind][:] = 0
+            self.tagged[kind] = 0
+        if not self.exceeded():
+            return
+        steps = [p[:, BALL_COLUMN[k] + 2].astype(np.int64) for k, p in enumerate(self.pool)]
+        blocks = [p[:, BALL_COLUMN[k] + 1].astype(np.int64) for k, p in enumerate(self.pool)]
+        by_step = [np.argsort(s, kind="stable") for s in steps]
+        sorted_steps = [s[o] for s, o in zip(steps, by_step)]
+        rebuilt = set(self.rebuilds)
+        # a flush can only come at a step with rows, or the step after a rebuild
+        candidates = np.unique(np.concatenate(steps + [np.array(self.rebuilds, np.int64) + 1]))
+        count = np.zeros_like(self.count)
+        at = [0, 0]
+        last = None
+        for s in candidates[candidates <= step]:
+            for kind in range(2):
+                end = int(np.searchsorted(sorted_steps[kind], s, side="right"))
+                count[kind] += np.bincount(blocks[kind][by_step[kind][at[kind]:end]],
+                                           minlength=self.nblock)
+                at[kind] = end
+            if np.any(count > self.half[:, None]) and int(s) not in rebuilt:
+                self._flush(int(s), on_rows, (True, True))
+                count[:] = 0
+                last = int(s)
+        self.count = count
+        if last is not None:
+            self.rebuilds = [r for r in self.rebuilds if r > last]
+
+    def finish(self, on_rows, take_balls: bool) -> None:
+        """The end of a run_steps call: flush the pool's ball-part rows, and its ball-ball and
+        wall rows with `take_balls` (else they wait for the next flush)."""
+        self._flush(None, on_rows, (take_balls, True))
+        if not any(p.shape[0] for p in self.pool):
+            self.rebuilds = []
+
+    def _flush(self, upto: int | None, on_rows, take: tuple[bool, bool]) -> None:
+        """Give the pool's rows of the steps up to `upto` (None: all) of each kind taken, in
+        the module's order, to their callback (rows are dropped without one)."""
+        for kind in range(2):
+            if not take[kind]:
+                continue
+            pool, col = self.pool[kind], BALL_COLUMN[kind]
+            if upto is None:
+                out, keep = pool, pool[:0]
+                self.count[kind] = 0
+            else:
+                mine = pool[:, col + 2] <= upto
+                out, keep = pool[mine], pool[~mine]
+            self.pool[kind] = keep
+            if not out.shape[0] or on_rows[kind] is None:
+                continue
+            # np.lexsort is stable: a ball's rows of one step stay in the order recorded
+            keys = [out[:, col], out[:, col + 2], out[:, col + 1]]
+            if kind == 0:
+                keys.insert(1, out[:, 1] != KIND_BALL_BALL)
+            out = out[np.lexsort(keys)]
+            on_rows[kind](np.ascontiguousarray(out[:, :OUT_COLUMNS[kind]]))
+
