@@ -80,7 +80,11 @@ def _run_scenario(run_dir: Path):
             radius = np.asarray(f["particles/radius"][()], dtype=float)
         text = attrs["scenario_toml"]
         text = text.decode() if isinstance(text, bytes) else str(text)
-        scenario = parse_scenario(tomllib.loads(text))
+        try:
+            raw = tomllib.loads(text)
+        except tomllib.TOMLDecodeError:  # dem.h5 keeps JSON where TOML cannot hold the scenario
+            raw = json.loads(text)
+        scenario = parse_scenario(raw)
         summary = json.loads((run_dir / "summary.json").read_text())
     except (OSError, KeyError, ValueError, TypeError, InputError,
             tomllib.TOMLDecodeError) as exc:
