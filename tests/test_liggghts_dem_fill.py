@@ -96,17 +96,20 @@ def test_a_periodic_tub_takes_y_into_its_period(tmp_path):
 
 def test_the_deck_reads_the_dem_bed_and_inserts_nothing(tmp_path):
     """read_data instead of create_box, no insertion, 0.02 s of settling then at most 8 chunks
-    of 0.01 s, and from the vibration on the very lines of the inserted deck."""
+    of 0.01 s, facets within 1 um of the circles (the U's half circle of R = 0.15 m in 431 arcs:
+    R (1 - cos(pi / 862)) = 0.99 um, 430 arcs 1.0007 um), and from the vibration on the very
+    lines of the inserted deck with the same facets."""
     s = case()
     bed = LG.dem_fill(dem_run(tmp_path / "dem", s), s)
     assert np.array_equal(bed.position, BED) and np.array_equal(bed.radius, np.full(3, R_BALL))
     info = LG.export_deck(s, tmp_path / "deck", fill_from=bed)
-    LG.export_deck(s, tmp_path / "inserted")
+    LG.export_deck(s, tmp_path / "inserted", max_sagitta=1e-6)
     deck = (tmp_path / "deck" / "in.tub").read_text()
     inserted = (tmp_path / "inserted" / "in.tub").read_text()
     assert "read_data       fill.data\n" in deck and "create_box" not in deck
     for word in ("insert/rate/region", "particletemplate", "fillpass"):
         assert word in inserted and word not in deck, word
+    assert "(431 arcs on the half circle, sagitta 0.0010 mm)" in deck
     assert "\nrun 2000\n" in deck and "variable settlepass loop 8\n" in deck
     assert info.settle_steps == 2000
     vib = "# ---- vibration"

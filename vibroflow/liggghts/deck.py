@@ -52,8 +52,9 @@ import numpy as np
 from vibroflow.errors import InputError
 from vibroflow.io.atomic import write_text_atomic
 from vibroflow.io.folder_lock import check_writable_dir, folder_lock
-from vibroflow.liggghts.dem_fill import (DATA_NAME, FROM_FILL_MAX_SETTLE_TIME,
-                                         FROM_FILL_SETTLE_TIME, DemFill, data_file_text)
+from vibroflow.liggghts.dem_fill import (DATA_NAME, FROM_FILL_MAX_SAGITTA,
+                                         FROM_FILL_MAX_SETTLE_TIME, FROM_FILL_SETTLE_TIME,
+                                         DemFill, data_file_text)
 from vibroflow.liggghts.fill_deck import add_fill_from_data, add_insertion
 from vibroflow.liggghts.part_deck import (add_part_dump, add_part_meshes, check_part_names,
                                           moving_meshes, part_mesh_ids, write_part_meshes)
@@ -129,7 +130,7 @@ PARTITION_MESH_FILE = "partitions.stl"
 
 
 def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts: bool = True,
-                max_sagitta: float = DEFAULT_MAX_SAGITTA, thermo_every: int | None = None,
+                max_sagitta: float | None = None, thermo_every: int | None = None,
                 processors: str = "* 1 1", mesh_curvature_deg: float | None = None,
                 fill_from: DemFill | None = None) -> DeckInfo:
     """Write a LIGGGHTS 3.8 deck for a tub scenario into out_dir (see the module docstring).
@@ -144,6 +145,8 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     across their common edge, no edge contact).  Default: twice the angle between neighbouring
     arc facets (5.9 degrees for tub47), so the faceted circle acts as one surface like the
     analytic one; 0 keeps LIGGGHTS' default (0.26 degrees: every crease is an edge).
+    max_sagitta: largest chord-to-circle deviation of the U's and the parts' facets (m);
+    default DEFAULT_MAX_SAGITTA (0.05 mm), with fill_from FROM_FILL_MAX_SAGITTA (1 um).
     fill_from: a DEM run's settled bed (vibroflow.liggghts.dem_fill.dem_fill): the deck reads
     it from DIR/fill.data instead of inserting balls, and settles it only briefly.
     Returns a DeckInfo.
@@ -153,6 +156,8 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     they are written atomically under out_dir's folder lock.
     """
     _check_exportable(scenario)
+    if max_sagitta is None:
+        max_sagitta = DEFAULT_MAX_SAGITTA if fill_from is None else FROM_FILL_MAX_SAGITTA
     _check_names(scenario)
     check_part_names(scenario)
     parts = parts_of(scenario)
