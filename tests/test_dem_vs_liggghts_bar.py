@@ -9,10 +9,15 @@ tests/data/tub47-bar-short-maps/ (README.md there says how).  The maps are compa
 tub47.md compares fields: E(LIGGGHTS, DEM) of the impact rate per patch and of the mean normal
 speed per patch (vibroflow.analysis.impact_maps) at most 1.5 times the DEM's seed-to-seed E.
 The rate maps agree; the speed maps do not (a strict xfail, its reason the measured numbers).
-About 5 minutes on 2 quiet cores (LIGGGHTS 2 ranks: 5 CPU minutes; the DEM: 2).
+The same two checks with LIGGGHTS started from the DEM run's own settled bed (export_deck's
+fill_from, 1 um facets, 0.1 s of settling): the rate maps agree, the speed maps come closer
+but still miss (a strict xfail).  About 5 minutes on 2 quiet cores for the inserted run
+(LIGGGHTS 2 ranks: 5 CPU minutes; the DEM: 2), some 30 more for the run from the DEM's bed (its
+fine moving meshes: 32 min wall on 2 ranks on a shared machine).
 """
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -109,12 +114,34 @@ def fromdem(root):
             "liggghts": part_map(root / "liggghts-fromdem" / "parts.nc", "bar"),
             "dem1": read_map_csv(DATA / "dem-seed1.csv"),
             "dem2": read_map_csv(DATA / "dem-seed2.csv"),
-            "settle": (root / "deck-fromdem" / "post" / LG.deck.SETTLE_FILE).read_text()}
+            "summary": json.loads((root / "liggghts-fromdem" / "summary.json").read_text())}
 
 
 def test_from_the_dems_bed_liggghts_keeps_every_ball_and_hits_the_bar_all_around(fromdem):
-    """The DEM's 1500 balls stay in LIGGGHTS (the settle's print: step, kinetic energy per
-    ball) and hit every one of the bar's 36 sectors."""
+    """The DEM's 1500 balls all stay in LIGGGHTS' run and hit every one of the bar's 36
+    sectors."""
+    assert fromdem["summary"]["n_particles"] == 1500
+    assert fromdem["summary"]["balls_lost"] == 0
     assert (fromdem["liggghts"]["rate"] > 0).all()
-    step, ke = fromdem["settle"].split()
-    assert float(ke) >= 0.0
+
+
+def test_from_the_dems_bed_the_impact_rate_maps_differ_by_no_more_than_the_seeds_do(fromdem):
+    """E_rate(LIGGGHTS from the DEM's bed, DEM) <= 1.5 E_rate(DEM seed 2, DEM seed 1)."""
+    e_seed = rate_difference(fromdem["dem2"], fromdem["dem1"])
+    e_codes = rate_difference(fromdem["liggghts"], fromdem["dem"])
+    _print("impact rate, the DEM's bed", e_codes, e_seed)
+    assert e_codes <= 1.5 * e_seed
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "From the DEM's own bed LIGGGHTS' impacts on the bar are still about 20 % faster and half "
+    "as many as the DEM's: E_speed(LIGGGHTS, DEM) 0.450 and 0.471 (against DEM seeds 1 and 2) "
+    "against the limit 0.360, down from 0.566 - 0.637 with LIGGGHTS' inserted bed; the bed, "
+    "without its contacts' tangential and rolling histories, creeps in LIGGGHTS (1.6e-6 J per "
+    "ball after 0.1 s at rest, the DEM's 6e-10 J) (docs/validation.md section 27)"))
+def test_from_the_dems_bed_the_impact_speed_maps_differ_by_no_more_than_the_seeds_do(fromdem):
+    """E_speed(LIGGGHTS from the DEM's bed, DEM) <= 1.5 E_speed(DEM seed 2, DEM seed 1)."""
+    e_seed = speed_difference(fromdem["dem2"], fromdem["dem1"])
+    e_codes = speed_difference(fromdem["liggghts"], fromdem["dem"])
+    _print("mean normal speed, the DEM's bed", e_codes, e_seed)
+    assert e_codes <= 1.5 * e_seed
