@@ -121,6 +121,8 @@ def test_the_deck_reads_the_dem_bed_and_inserts_nothing(tmp_path):
     assert bounds == pytest.approx(box, rel=1e-9)
     assert data[8:] == data_file_text(bed, box, 4).splitlines()[8:]
     assert not (tmp_path / "inserted" / "fill.data").exists()
+    readme = (tmp_path / "deck" / "README.txt").read_text()
+    assert "reads the 3 balls of a vibroflow DEM run's settled bed from fill.data" in readme
 
 
 # ----------------------------------------------------------------------------------------------

@@ -222,8 +222,8 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     rate = per_event / (event_steps * dt)
     max_passes = 4 * math.ceil(count / per_event) + 20
 
-    settle_time, max_settle_time = ((fill.settle_time, fill.max_settle_time) if fill_from is None
-                                    else (FROM_FILL_SETTLE_TIME, FROM_FILL_MAX_SETTLE_TIME))
+    settle_time, max_settle_time = ((FROM_FILL_SETTLE_TIME, FROM_FILL_MAX_SETTLE_TIME) if fill_from
+                                    else (fill.settle_time, fill.max_settle_time))
     settle_steps = int(round(settle_time / dt))
     chunk_steps = max(1, int(round(SETTLE_CHUNK / dt)))
     extra_settle = max(0.0, max_settle_time - settle_time)
@@ -396,8 +396,8 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     deck_text = deck.render(DECK_NAME)
     data_text = None if fill_from is None else data_file_text(
         fill_from, (x_lo, x_hi, y_lo, y_hi, z_lo, z_hi), len(mats), L if periodic else None)
-    readme_text = _readme(scenario, vib_steps, dsteps.size, wall_contacts,
-                          pair_contacts).render("README.txt")
+    readme_text = _readme(scenario, vib_steps, dsteps.size, wall_contacts, pair_contacts,
+                          fill_from is not None).render("README.txt")
     toml_text = _scenario_toml(scenario)
 
     with folder_lock(out_dir, "vibroflow export liggghts", field="DIR"):
@@ -458,8 +458,8 @@ LIGGGHTS: it is a known function of time, recomputed from the scenario by the im
 
 
 def _readme(scenario, vib_steps: int, n_snap: int, wall_contacts: bool,
-            pair_contacts: bool = True) -> _Deck:
-    """README.txt of a deck folder, as checked template lines (`_Deck`)."""
+            pair_contacts: bool = True, from_dem: bool = False) -> _Deck:
+    """README.txt of a deck folder as checked template lines (`_Deck`); from_dem: fill.data's."""
     outputs = [f"{_SLOT} snapshots of the balls to post/{BALL_DUMP}"]
     if wall_contacts:
         outputs.append(f"the ball-wall contacts to post/{WALL_DUMP}")
@@ -467,6 +467,9 @@ def _readme(scenario, vib_steps: int, n_snap: int, wall_contacts: bool,
         outputs.append(f"the ball-ball contacts (ids, force) to post/{PAIR_DUMP}")
     written = ", ".join(outputs[:-1]) + (" and " if len(outputs) > 1 else "") + outputs[-1]
     template = _README.replace("WRITTEN", written).replace("SERIES", SERIES_FILE)
+    if from_dem:
+        template = template.replace("inserts {} balls at random in the tub,", "reads the {} balls "
+                                    f"of a vibroflow DEM run's settled bed from {DATA_NAME},")
     if template.endswith("\n"):
         template = template[:-1]
     run = scenario.run
