@@ -2,6 +2,7 @@
 an STL mesh) on a short tub47-bar, each code with several fill seeds.
 
     python benchmarks/bar_maps.py [--seeds 1 2] [--codes dem liggghts] [--out DIR]
+                                  [--from-dem-fill]
 
 The short case (SHORT_SETS; tests/test_dem_vs_liggghts_bar.py runs the same): tub47-bar 19.05 mm
 long (three ball diameters) with 1500 balls, the bar lowered to z = 0.045 m so that it lies
@@ -10,7 +11,8 @@ random up to the rim, need it to land and come to rest), 0.25 s of
 vibration averaged over its last 0.2 s (9 cycles).  Writes DIR/<code>-seed<N>/ (the runs),
 DIR/<code>-seed<N>.csv (the bar's map, vibroflow.analysis.impact_maps.write_map_csv) and prints
 the map differences E_rate and E_speed between the seeds of each code and between the codes.
-Default DIR: runs/bar_maps (git-ignored).
+Default DIR: runs/bar_maps (git-ignored).  --from-dem-fill: LIGGGHTS starts from the DEM run's
+settled bed of the same seed (vibroflow.liggghts.dem_fill; its maps liggghts-fromdem-seed<N>).
 """
 from __future__ import annotations
 
@@ -35,17 +37,25 @@ def short_case(seed: int):
     return load_scenario("tub47-bar", [*SHORT_SETS, f"run.seed={seed}"])
 
 
-def run_code(code: str, seed: int, root: Path) -> Path:
-    """Run one code on the short case; returns the folder holding its parts.nc."""
+def run_code(code: str, seed: int, root: Path, from_dem_fill: bool = False) -> Path:
+    """Run one code on the short case; returns the folder holding its parts.nc.  from_dem_fill:
+    LIGGGHTS starts from the settled bed of the DEM run root/dem-seed<N> (made first if
+    missing) instead of inserting its own."""
     s = short_case(seed)
     if code == "dem":
         out = root / f"dem-seed{seed}"
         run_dem(s, out, progress=False)
         return out
-    deck = root / f"liggghts-seed{seed}"
-    LG.export_deck(s, deck)
+    tag = "liggghts-fromdem" if from_dem_fill else "liggghts"
+    deck = root / f"{tag}-seed{seed}"
+    bed = None
+    if from_dem_fill:
+        if not (root / f"dem-seed{seed}" / "summary.json").is_file():
+            run_code("dem", seed, root)
+        bed = LG.dem_fill(root / f"dem-seed{seed}", s)
+    LG.export_deck(s, deck, fill_from=bed)
     LG.run_deck(deck, nprocs=2, timeout=7200)
-    out = root / f"liggghts-seed{seed}-result"
+    out = root / f"{tag}-seed{seed}-result"
     LG.import_run(deck / "post", s, out)
     return out
 
@@ -55,15 +65,18 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--codes", nargs="+", default=["dem", "liggghts"])
     ap.add_argument("--out", type=Path, default=Path("runs/bar_maps"))
+    ap.add_argument("--from-dem-fill", action="store_true",
+                    help="LIGGGHTS starts from the DEM run's settled bed of the same seed")
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     maps = {}
     for code in args.codes:
         for seed in args.seeds:
             t0 = time.perf_counter()
-            folder = run_code(code, seed, args.out)
-            maps[code, seed] = part_map(folder / "parts.nc", "bar")
-            write_map_csv(args.out / f"{code}-seed{seed}.csv", maps[code, seed])
+            folder = run_code(code, seed, args.out, args.from_dem_fill)
+            name = "liggghts-fromdem" if code == "liggghts" and args.from_dem_fill else code
+            maps[name, seed] = part_map(folder / "parts.nc", "bar")
+            write_map_csv(args.out / f"{name}-seed{seed}.csv", maps[name, seed])
             print(f"{code} seed {seed}: {time.perf_counter() - t0:.0f} s", flush=True)
     for (ka, a), (kb, b) in itertools.combinations(maps.items(), 2):
         print(f"E({ka[0]} {ka[1]}, {kb[0]} {kb[1]}): rate {rate_difference(a, b):.3f}, "

@@ -20,12 +20,17 @@ def export_liggghts(
     scenario: ScenarioArg,
     directory: Annotated[Path, typer.Argument(metavar="DIR", help="Folder for the deck.")],
     set_: SetOption = None,
+    fill_from: Annotated[Optional[Path], typer.Option(
+        "--fill-from", metavar="DEM_RUN_DIR",
+        help="Start from this finished `vibroflow dem` run's settled bed (same scenario, fill "
+             "and seed) instead of inserting balls.")] = None,
 ) -> None:
     """Write a LIGGGHTS input deck (with STL walls) for a scenario into DIR."""
     s = load(scenario, set_)
-    from vibroflow.liggghts import export_deck
+    from vibroflow.liggghts import dem_fill, export_deck
 
-    export_deck(s, Path(directory))
+    bed = None if fill_from is None else dem_fill(fill_from, s)
+    export_deck(s, Path(directory), fill_from=bed)
 
 
 def _import_scenario_source(dumpdir: Path, scenario: str | None) -> str | Path:

@@ -26,7 +26,8 @@ docs/liggghts.md):
   0.05 s apart, repeated until all N balls are in; then settling with the tub at rest for
   fill.settle_time and, like vibroflow, on in 0.01 s chunks until the kinetic energy per ball
   is below fill.settle_kinetic_energy or fill.max_settle_time has passed.  Seeds are primes
-  derived from run.seed (`seed_primes`).
+  derived from run.seed (`seed_primes`).  Or, with fill_from, the DEM's settled bed read from
+  fill.data, briefly settled (vibroflow.liggghts.dem_fill; the fill's lines: fill_deck).
 * Vibration for run.duration from step n0 (written to post/vibration_start_step.txt), snapshots
   (`dump custom`, post/balls.dump), ball-wall contacts (`compute wall/gran/local`,
   post/wall.dump) and ball-ball contacts (`compute pair/gran/local id force`, post/pairs.dump)
@@ -52,9 +53,12 @@ import numpy as np
 from vibroflow.errors import InputError
 from vibroflow.io.atomic import write_text_atomic
 from vibroflow.io.folder_lock import check_writable_dir, folder_lock
-from vibroflow.liggghts.part_deck import (add_part_dump, add_part_exclusions, add_part_meshes,
-                                          check_part_names, moving_meshes, part_mesh_ids,
-                                          write_part_meshes)
+from vibroflow.liggghts.dem_fill import (DATA_NAME, FROM_FILL_MAX_SAGITTA,
+                                         FROM_FILL_MAX_SETTLE_TIME, FROM_FILL_SETTLE_TIME,
+                                         DemFill, data_file_text)
+from vibroflow.liggghts.fill_deck import add_fill_from_data, add_insertion
+from vibroflow.liggghts.part_deck import (add_part_dump, add_part_meshes, check_part_names,
+                                          moving_meshes, part_mesh_ids, write_part_meshes)
 from vibroflow.liggghts.parameters import (PairTables, _check_exportable, _contact_law_deck,
                                            dump_vibration_steps, model_arguments, pair_tables,
                                            seed_primes, type_materials)
@@ -127,8 +131,9 @@ PARTITION_MESH_FILE = "partitions.stl"
 
 
 def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts: bool = True,
-                max_sagitta: float = DEFAULT_MAX_SAGITTA, thermo_every: int | None = None,
-                processors: str = "* 1 1", mesh_curvature_deg: float | None = None) -> DeckInfo:
+                max_sagitta: float | None = None, thermo_every: int | None = None,
+                processors: str = "* 1 1", mesh_curvature_deg: float | None = None,
+                fill_from: DemFill | None = None) -> DeckInfo:
     """Write a LIGGGHTS 3.8 deck for a tub scenario into out_dir (see the module docstring).
 
     wall_contacts: dump the ball-wall contacts at the snapshots (compute wall/gran/local).
@@ -141,6 +146,10 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     across their common edge, no edge contact).  Default: twice the angle between neighbouring
     arc facets (5.9 degrees for tub47), so the faceted circle acts as one surface like the
     analytic one; 0 keeps LIGGGHTS' default (0.26 degrees: every crease is an edge).
+    max_sagitta: largest chord-to-circle deviation of the U's and the parts' facets (m);
+    default DEFAULT_MAX_SAGITTA (0.05 mm), with fill_from FROM_FILL_MAX_SAGITTA (1 um).
+    fill_from: a DEM run's settled bed (vibroflow.liggghts.dem_fill.dem_fill): the deck reads
+    it from DIR/fill.data instead of inserting balls, and settles it only briefly.
     Returns a DeckInfo.
 
     Every file is made and checked in memory first (names through `safe_name`, the deck and
@@ -148,6 +157,8 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     they are written atomically under out_dir's folder lock.
     """
     _check_exportable(scenario)
+    if max_sagitta is None:
+        max_sagitta = DEFAULT_MAX_SAGITTA if fill_from is None else FROM_FILL_MAX_SAGITTA
     _check_names(scenario)
     check_part_names(scenario)
     parts = parts_of(scenario)
@@ -157,6 +168,9 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     out_dir = Path(out_dir)
     run, fill, tub = scenario.run, scenario.fill, scenario.tub
     count = _whole("fill.count", fill.count, 1)
+    if fill_from is not None and fill_from.n != count:
+        raise InputError(f"--fill-from = {str(fill_from.source)!r}: {fill_from.n} balls, the "
+                         f"scenario's fill.count is {count}")
     ke_every = _whole("run.series_every", run.series_every, 1)
     geom = geometry_of(scenario)
     motion = TubMotion.of_scenario(scenario)
@@ -208,9 +222,11 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     rate = per_event / (event_steps * dt)
     max_passes = 4 * math.ceil(count / per_event) + 20
 
-    settle_steps = int(round(fill.settle_time / dt))
+    settle_time, max_settle_time = ((FROM_FILL_SETTLE_TIME, FROM_FILL_MAX_SETTLE_TIME) if fill_from
+                                    else (fill.settle_time, fill.max_settle_time))
+    settle_steps = int(round(settle_time / dt))
     chunk_steps = max(1, int(round(SETTLE_CHUNK / dt)))
-    extra_settle = max(0.0, fill.max_settle_time - fill.settle_time)
+    extra_settle = max(0.0, max_settle_time - settle_time)
     max_chunks = int(math.ceil(extra_settle / (chunk_steps * dt) - 1e-9))
 
     vib_steps = int(round(run.duration / dt))
@@ -251,7 +267,10 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     add()
     add("region          domain block {} {} {} {} {} {} units box",
         *(_fmt(v) for v in (x_lo, x_hi, y_lo, y_hi, z_lo, z_hi)))
-    add("create_box      {} domain", len(mats))
+    if fill_from is None:
+        add("create_box      {} domain", len(mats))
+    else:
+        add(f"read_data       {DATA_NAME}")
     add("neighbor        {} bin", _fmt(skin))
     add("neigh_modify    delay 0")
     add()
@@ -298,40 +317,16 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     add("thermo          {}", thermo_every)
     add("thermo_modify   lost error norm no")
     add()
-    add("# ---- fill: {} balls, d = {} m, in events of {} every {} steps, until all are in",
-        count, _fmt(d), per_event, event_steps)
-    add("fix pts1 all particletemplate/sphere {} atom_type 1 density constant {} radius "
-        "constant {}", seeds[0], _fmt(scenario.materials[fill.material].density), _fmt(r))
-    add("fix pdd1 all particledistribution/discrete {} 1 pts1 1.0", seeds[1])
-    add("region ucyl cylinder y 0 {} {} {} {} units box",
-        *(_fmt(v) for v in (R, R - margin, iy_lo, iy_hi)))
-    add("region ublk block {} {} {} {} {} {} units box",
-        *(_fmt(v) for v in (-R + margin, R - margin, iy_lo, iy_hi, R, ins_z_hi)))
-    add("region uin union 2 ucyl ublk")
-    add("region zcut block INF INF INF INF {} {} units box", _fmt(ins_z_lo), _fmt(ins_z_hi))
-    outside = add_part_exclusions(deck, parts, L, max_sagitta, margin)
-    add("region ins intersect {} uin zcut" + " {}" * len(outside), 2 + len(outside), *outside)
-    add("fix ins all insert/rate/region seed {} distributiontemplate pdd1 nparticles {} "
-        "particlerate {} insert_every {} overlapcheck yes all_in no maxattempt 200 vel "
-        "constant 0. 0. 0. region ins ntry_mc 200000", seeds[2], count, _fmt(rate),
-        event_steps)
-    add("variable fillpass loop {}", max_passes)
-    add("label fill_loop")
-    add("run {}", event_steps)
-    add('if "${natoms} >= {}" then "jump SELF fill_done"', count)
-    add("next fillpass")
-    add("jump SELF fill_loop")
-    add("label fill_done")
-    add("variable fillpass delete")
-    add("unfix ins")
-    add("variable stepnow equal step")
-    add(f'print "${{stepnow}} ${{natoms}}" file {POST_DIR}/{FILL_FILE}')
-    add('if "${natoms} < {}" then "print \'vibroflow: the fill inserted only ${natoms} of {} '
-        'balls\'"', count, count)
+    if fill_from is not None:
+        add_fill_from_data(deck, count, POST_DIR, FILL_FILE)
+    else:
+        add_insertion(deck, scenario, parts, count, per_event, event_steps, seeds, rate,
+                      max_passes, margin, (iy_lo, iy_hi, ins_z_lo, ins_z_hi), max_sagitta,
+                      POST_DIR, FILL_FILE)
     add()
     add("# ---- settle with the tub at rest: {} s, then on in {} s chunks until the kinetic "
-        "energy per ball < {} J (at most {} s)", _fmt(fill.settle_time),
-        _fmt(chunk_steps * dt), _fmt(fill.settle_kinetic_energy), _fmt(fill.max_settle_time))
+        "energy per ball < {} J (at most {} s)", _fmt(settle_time),
+        _fmt(chunk_steps * dt), _fmt(fill.settle_kinetic_energy), _fmt(max_settle_time))
     if settle_steps > 0:
         add("run {}", settle_steps)
     if max_chunks > 0:
@@ -399,8 +394,10 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
 
     # everything is made and checked before anything is written
     deck_text = deck.render(DECK_NAME)
-    readme_text = _readme(scenario, vib_steps, dsteps.size, wall_contacts,
-                          pair_contacts).render("README.txt")
+    data_text = None if fill_from is None else data_file_text(
+        fill_from, (x_lo, x_hi, y_lo, y_hi, z_lo, z_hi), len(mats), L if periodic else None)
+    readme_text = _readme(scenario, vib_steps, dsteps.size, wall_contacts, pair_contacts,
+                          fill_from is not None).render("README.txt")
     toml_text = _scenario_toml(scenario)
 
     with folder_lock(out_dir, "vibroflow export liggghts", field="DIR"):
@@ -412,6 +409,8 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
             raise RuntimeError(f"vibroflow.liggghts.stl wrote {names}, the deck names "
                                f"{U_MESH_FILE}, {PARTITION_MESH_FILE}")
         write_part_meshes(out_dir, parts, L, max_sagitta)
+        if data_text is not None:
+            write_text_atomic(out_dir / DATA_NAME, data_text)
         write_text_atomic(out_dir / POST_DIR / "dump_steps.txt", step_lines)
         deck_path = write_text_atomic(out_dir / DECK_NAME, deck_text)
         write_text_atomic(out_dir / "scenario.toml", toml_text)
@@ -459,8 +458,8 @@ LIGGGHTS: it is a known function of time, recomputed from the scenario by the im
 
 
 def _readme(scenario, vib_steps: int, n_snap: int, wall_contacts: bool,
-            pair_contacts: bool = True) -> _Deck:
-    """README.txt of a deck folder, as checked template lines (`_Deck`)."""
+            pair_contacts: bool = True, from_dem: bool = False) -> _Deck:
+    """README.txt of a deck folder as checked template lines (`_Deck`); from_dem: fill.data's."""
     outputs = [f"{_SLOT} snapshots of the balls to post/{BALL_DUMP}"]
     if wall_contacts:
         outputs.append(f"the ball-wall contacts to post/{WALL_DUMP}")
@@ -468,6 +467,9 @@ def _readme(scenario, vib_steps: int, n_snap: int, wall_contacts: bool,
         outputs.append(f"the ball-ball contacts (ids, force) to post/{PAIR_DUMP}")
     written = ", ".join(outputs[:-1]) + (" and " if len(outputs) > 1 else "") + outputs[-1]
     template = _README.replace("WRITTEN", written).replace("SERIES", SERIES_FILE)
+    if from_dem:
+        template = template.replace("inserts {} balls at random in the tub,", "reads the {} balls "
+                                    f"of a vibroflow DEM run's settled bed from {DATA_NAME},")
     if template.endswith("\n"):
         template = template[:-1]
     run = scenario.run
