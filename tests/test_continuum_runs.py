@@ -370,6 +370,7 @@ def test_sampled_solid_fraction_is_even_on_cells_that_do_not_divide_the_analysis
 
 
 
+@pytest.mark.slow
 def test_resume_of_a_finished_run_says_so_and_reruns_nothing(run_cli, tmp_path):
     """--resume on a folder whose run finished (summary.json, no checkpoint) keeps the results
     as they are and says the run is finished; on another formulation's finished run it is a

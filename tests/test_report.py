@@ -309,6 +309,7 @@ def test_report_renders_in_headless_chromium(study):
         driver.quit()
 
 
+@pytest.mark.slow
 def test_report_of_a_bad_folder_is_a_one_line_error(tmp_path):
     foreign = tmp_path / "foreign"
     foreign.mkdir()
