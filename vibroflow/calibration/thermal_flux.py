@@ -11,9 +11,10 @@ V_s the snapshot's own velocity field coarse-grained with a Gaussian of width `w
 two diameters: several balls, so V_s is a local mean, not the ball itself), interpolated
 bilinearly to the ball; the flux, temperature and gradients are then energy_flux.py's, of c.
 
-`thermal_velocities` does one snapshot; `thermal_energy_flux(run)` coarse-grains the averaging
-window of a DEM run as run_fields.coarse_grain_run does, with these velocities, and returns the
-phase-resolved energy-flux Dataset.
+`thermal_velocities` does one snapshot; `ThermalFluxGrainer` accumulates snapshots with these
+velocities (thermal_temperature.py's grainer is one); `thermal_energy_flux(run)` coarse-grains
+the averaging window of a DEM run as run_fields.coarse_grain_run does, with these velocities,
+and returns the phase-resolved energy-flux Dataset.
 """
 from __future__ import annotations
 
@@ -28,6 +29,8 @@ from .coarse_grain import CoarseGrainer
 from .dem_result import DEMResult
 from .energy_flux import EnergyFluxGrainer
 
+#: the local mean velocity's Gaussian width, ball diameters
+MEAN_WIDTH_D = 2.0
 _KEYS = ("positions_tub", "velocities_rel_tub", "radius", "mass", "contacts_i", "contacts_j",
          "contact_force", "contact_branch", "wall_particle", "wall_force", "wall_point")
 
@@ -50,7 +53,50 @@ def thermal_velocities(positions, velocities, radius, mass, mean_field: CoarseGr
     return vel - at(xz)
 
 
-def thermal_energy_flux(run, width_factor: float = 2.0, n_phases: int | None = None,
+class ThermalFluxGrainer:
+    """Accumulates snapshots with each ball's velocity about its snapshot's own coarse-grained
+    velocity (thermal_velocities; a Gaussian of mean_width_d diameters): an EnergyFluxGrainer of
+    those velocities, of cell_size, depth (m), rho_s (kg/m^3), diameter (m), n_phases, n_batches,
+    kernel, width (m, default d / 2), cutoff, extent (m, without a geometry) as the
+    CoarseGrainer of the run's fields, so that the grids agree."""
+
+    def __init__(self, geometry, cell_size: float, depth: float, rho_s: float, diameter: float,
+                 n_phases: int, n_batches: int, kernel: str = "gaussian",
+                 width: float | None = None, cutoff: float | None = None,
+                 mean_width_d: float = MEAN_WIDTH_D, extent=None):
+        common = dict(cell_size=float(cell_size), depth=float(depth), rho_s=rho_s,
+                      diameter=float(diameter), extent=extent)
+        self.mean_width_m = float(mean_width_d) * float(diameter)
+        self._geometry, self._common = geometry, common
+        self._grainer = EnergyFluxGrainer(
+            geometry, kernel=kernel, width=0.5 * diameter if width is None else float(width),
+            cutoff=cutoff, n_phases=int(n_phases), n_batches=int(n_batches), **common)
+
+    def add_snapshot(self, positions_tub, velocities_rel_tub, radius, mass, phase_bin: int,
+                     batch: int, **contacts) -> None:
+        """One snapshot (positions m and velocities m/s in the tub frame, radii m, masses kg;
+        contacts: EnergyFluxGrainer.add_snapshot's contact arrays, for the collisional flux);
+        batch < 0: not used."""
+        if batch < 0:
+            return
+        mean = CoarseGrainer(self._geometry, kernel="gaussian", width=self.mean_width_m,
+                             **self._common)
+        c = thermal_velocities(positions_tub, velocities_rel_tub, radius, mass, mean)
+        self._grainer.add_snapshot(positions_tub=positions_tub, velocities_rel_tub=c,
+                                   radius=radius, mass=mass, phase_bin=int(phase_bin),
+                                   batch=int(batch), **contacts)
+
+    def energy_flux_fields(self):
+        """The phase-resolved Dataset of EnergyFluxGrainer.energy_flux_fields of the thermal
+        velocities, its attribute velocity_reference saying about what."""
+        ds = self._grainer.energy_flux_fields(phase_resolved=True)
+        ds.attrs["velocity_reference"] = (
+            f"each snapshot's own coarse-grained velocity (Gaussian, width "
+            f"{self.mean_width_m:.6g} m = {self.mean_width_m / ds.attrs['diameter_m']:g} d)")
+        return ds
+
+
+def thermal_energy_flux(run, width_factor: float = MEAN_WIDTH_D, n_phases: int | None = None,
                         n_batches: int | None = None):
     """The phase-resolved energy-flux Dataset (energy_flux.EnergyFluxGrainer.
     energy_flux_fields) of a DEM run's averaging window with each ball's velocity taken about
@@ -67,25 +113,20 @@ def thermal_energy_flux(run, width_factor: float = 2.0, n_phases: int | None = N
         d = res.diameter
         geometry = geometry_of(sc)
         n_phases = int(sc.run.phases_per_cycle if n_phases is None else n_phases)
-        common = dict(cell_size=float(sc.analysis.cell_size / 3.0), kernel="gaussian",
-                      depth=float(sc.tub.length), rho_s=res.solid_density, diameter=d)
         nb = int(sc.run.batches if n_batches is None else n_batches)
-        cg = EnergyFluxGrainer(geometry, width=0.5 * d, n_phases=n_phases, n_batches=nb,
-                               **common)
+        cg = ThermalFluxGrainer(geometry, cell_size=float(sc.analysis.cell_size / 3.0),
+                                depth=float(sc.tub.length), rho_s=res.solid_density,
+                                diameter=d, n_phases=n_phases, n_batches=nb,
+                                mean_width_d=width_factor)
         batch = res.batches(nb)
         used = np.nonzero(batch >= 0)[0]
         if used.size == 0:
             raise InputError(f"{res.path}: no snapshot in the averaging window")
         ph = phase_bins(res.times, float(sc.motion.frequency), n_phases)
         for s, snap in res.iter_snapshots(used):
-            snap = {k: snap[k] for k in _KEYS if k in snap}
-            snap["velocities_rel_tub"] = thermal_velocities(
-                snap["positions_tub"], snap["velocities_rel_tub"], snap["radius"], snap["mass"],
-                CoarseGrainer(geometry, width=width_factor * d, **common))
-            cg.add_snapshot(**snap, phase_bin=int(ph[s]), batch=int(batch[s]))
-        ds = cg.energy_flux_fields(phase_resolved=True)
-        ds.attrs["velocity_reference"] = (f"each snapshot's own coarse-grained velocity, "
-                                          f"Gaussian width {width_factor:g} d")
+            cg.add_snapshot(**{k: snap[k] for k in _KEYS if k in snap}, phase_bin=int(ph[s]),
+                            batch=int(batch[s]))
+        ds = cg.energy_flux_fields()
         return ds
     finally:
         if own:

@@ -30,53 +30,22 @@ import xarray as xr
 
 from vibroflow.measure.stats import stderr_of_batches
 
-from .coarse_grain import CoarseGrainer
-from .energy_flux import EnergyFluxGrainer
-from .thermal_flux import thermal_velocities
+from .thermal_flux import ThermalFluxGrainer
 
-#: the local mean velocity's Gaussian width, ball diameters
-MEAN_WIDTH_D = 2.0
 NAME = "thermal_temperature"
 
 
-class ThermalTemperatureGrainer:
-    """Accumulates the thermal temperature of snapshots (module docstring).  geometry,
-    cell_size (m), kernel, width (m, default d / 2), cutoff, depth (m), rho_s (kg/m^3),
-    diameter (m), n_phases, n_batches, extent (m, without a geometry): as the CoarseGrainer
-    of the run's fields, so that the grids agree; mean_width_d: the local mean's Gaussian width
-    in diameters."""
-
-    def __init__(self, geometry, cell_size: float, depth: float, rho_s: float, diameter: float,
-                 n_phases: int, n_batches: int, kernel: str = "gaussian",
-                 width: float | None = None, cutoff: float | None = None,
-                 mean_width_d: float = MEAN_WIDTH_D, extent=None):
-        common = dict(cell_size=float(cell_size), depth=float(depth), rho_s=rho_s,
-                      diameter=float(diameter), extent=extent)
-        self.mean_width_m = float(mean_width_d) * float(diameter)
-        self._geometry, self._common = geometry, common
-        self._grainer = EnergyFluxGrainer(
-            geometry, kernel=kernel, width=0.5 * diameter if width is None else float(width),
-            cutoff=cutoff, n_phases=int(n_phases), n_batches=int(n_batches), **common)
-
-    def add_snapshot(self, positions_tub, velocities_rel_tub, radius, mass, phase_bin: int,
-                     batch: int) -> None:
-        """One snapshot (positions m and velocities m/s in the tub frame, radii m, masses kg);
-        batch < 0: not used."""
-        if batch < 0:
-            return
-        mean = CoarseGrainer(self._geometry, kernel="gaussian", width=self.mean_width_m,
-                             **self._common)
-        c = thermal_velocities(positions_tub, velocities_rel_tub, radius, mass, mean)
-        self._grainer.add_snapshot(positions_tub, c, radius, mass, phase_bin=int(phase_bin),
-                                   batch=int(batch))
+class ThermalTemperatureGrainer(ThermalFluxGrainer):
+    """Accumulates the thermal temperature of snapshots (module docstring; add_snapshot and
+    the arguments as thermal_flux.ThermalFluxGrainer's, mean_width_d: the local mean's
+    Gaussian width in diameters, thermal_flux.MEAN_WIDTH_D by default)."""
 
     def fields(self) -> tuple[xr.Dataset, xr.Dataset]:
         """(phase-resolved, cycle mean) Datasets: thermal_temperature (phase, x, z) and
         thermal_temperature_cycle_mean (x, z), m^2/s^2, each with <name>_stderr (batch means,
         when n_batches >= 2)."""
-        ds = self._grainer.energy_flux_fields(phase_resolved=True)
-        ref = (f"each snapshot's own coarse-grained velocity (Gaussian, width "
-               f"{self.mean_width_m:.6g} m = {self.mean_width_m / ds.attrs['diameter_m']:g} d)")
+        ds = self.energy_flux_fields()
+        ref = ds.attrs["velocity_reference"]
         attrs = {"units": "m2 s-2", "velocity_reference": ref,
                  "mean_velocity_width_m": self.mean_width_m}
         phase = xr.Dataset(attrs={"kernel": ds.attrs["kernel"], "width_m": ds.attrs["width_m"]})
