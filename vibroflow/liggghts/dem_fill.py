@@ -43,8 +43,9 @@ FROM_FILL_SETTLE_TIME = 0.02
 FROM_FILL_MAX_SETTLE_TIME = 0.1
 #: the facets' largest deviation from the U's and the parts' circles (m) for a deck from a DEM
 #: bed: the bed rests on the analytic circles with overlaps of about 1 um (k_n = 1e5 N/m against
-#: the weight of a few balls), so the default 0.05 mm chords would press the balls at the wall
-#: with up to 5 N, some 500 ball weights, and the bed would burst as the vibration starts
+#: the weight of a few balls), and the default 0.05 mm chords press the balls at the wall with
+#: up to 2.5 N at step 0 (measured; some 240 ball weights), the fine ones at most the DEM's own
+#: 0.3 N (docs/validation.md section 27)
 FROM_FILL_MAX_SAGITTA = 1.0e-6
 #: the fields that shape the settled bed (vibroflow.dem.fill.fill_cache_key), named in the
 #: refusal of a foreign run's fill
