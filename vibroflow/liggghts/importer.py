@@ -29,8 +29,8 @@ from vibroflow.liggghts.deck import (BALL_DUMP, PAIR_DUMP, POST_DIR, SERIES_FILE
 from vibroflow.liggghts.dumps import DumpSnapshot, _StepReader, _whole_column, read_dump
 from vibroflow.liggghts.launch import loop_times
 from vibroflow.liggghts.parameters import _check_exportable
-from vibroflow.liggghts.part_contacts import (PartGeometry, check_outside, part_impacts,
-                                              part_load_rows)
+from vibroflow.liggghts.part_contacts import (PartGeometry, check_outside, deck_meshes,
+                                              part_impacts, part_load_rows)
 from vibroflow.liggghts.part_deck import PART_DUMP
 from vibroflow.liggghts.template import _short
 from vibroflow.measure.summary import tub_summary
@@ -115,11 +115,12 @@ def _import(post: Path, scenario, n0: int, tmp_dir: Path) -> dict:
     pair_check = PairCheck()
     period = float(scenario.tub.length) if scenario.tub.periodic else 0.0
     parts = parts_of(scenario)
-    part_geom = PartGeometry(parts, scenario.tub.length, scenario.tub.periodic) if parts else None
     part_path = post / PART_DUMP
     if parts and not part_path.is_file():
         raise InputError(f"{post}: no {PART_DUMP}; the scenario has parts, and a deck exported "
                          "with them dumps the balls near them there")
+    part_geom = (PartGeometry(parts, scenario.tub.length, scenario.tub.periodic,
+                              deck_meshes(post.parent, parts)) if parts else None)
 
     writer = None
     ids = radius = None

@@ -3,8 +3,12 @@ own layout, vibroflow.dem.output), from the deck's dumps (vibroflow.liggghts.par
 
 Impacts (`PartImpacts`): post/part_contacts.dump holds, every step from one step before the
 averaging window, the balls near the parts.  A ball touches part k at a step when its centre
-is closer than its radius to the part's mesh, the triangles LIGGGHTS itself uses
-(vibroflow.liggghts.part_meshes; LIGGGHTS' contact rule for a sphere on a mesh); an impact is a
+is closer than its radius to the part's mesh, the triangles LIGGGHTS itself used: the deck's
+part_<name>.stl (`deck_meshes`; 0.05 mm chords by default, 1 um with --fill-from), LIGGGHTS'
+contact rule for a sphere on a mesh.  A mesh coarser than the deck's would start and end its
+contacts elsewhere: the default 36 chords lie up to 48 um inside the bar, deeper than a
+0.4 m/s impact's peak overlap v sqrt(m/k), and lose about 40 % of the contacts that LIGGGHTS'
+250 chords make (docs/validation.md section 27).  An impact is a
 step at which it touches the part and did not at the step before (the DEM's rule,
 vibroflow.dem.parts), counted from the window's first step.  At that step, as the DEM takes
 it: the contact point and outward normal n are those of the part's analytic surface nearest to
@@ -24,17 +28,19 @@ torque of at most mu_r r |F_n| per contact).
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numba as nb
 import numpy as np
 
 from vibroflow.errors import InputError
 from vibroflow.liggghts.dumps import _whole_column, read_dump
+from vibroflow.liggghts.part_deck import part_file
 from vibroflow.liggghts.part_meshes import part_triangles
-from vibroflow.liggghts.stl import DEFAULT_MAX_SAGITTA
+from vibroflow.liggghts.stl import DEFAULT_MAX_SAGITTA, read_stl
 from vibroflow.tub.motion import lab_to_tub_np, pose_np
-from vibroflow.tub.parts import FRAME_TUB, P_CX, P_CY, P_CZ, P_FRAME, Part, pack, part_nearest, \
-    patch_of
+from vibroflow.tub.parts import FRAME_TUB, P_CX, P_CY, P_CZ, P_FRAME, Part, closest_on_triangle, \
+    pack, part_nearest, patch_of
 
 #: the part dump's columns the import reads
 PART_COLUMNS = ("id", "x", "y", "z", "vx", "vy", "vz", "omegax", "omegay", "omegaz", "radius")
@@ -54,20 +60,53 @@ def _nearest_many(shape, prm, tri, tri_normal, tri_start, tri_group, k, pts):
     return out
 
 
+@nb.njit(cache=True)
+def _touching(tri, lo, hi, pts, rad):
+    """For each point (n, 3): whether a triangle of tri (T, 3, 3; bounds lo, hi (T, 3)) lies
+    closer than rad (n,) to it (LIGGGHTS' contact of a sphere with a mesh)."""
+    out = np.zeros(pts.shape[0], np.bool_)
+    for i in range(pts.shape[0]):
+        px, py, pz, r = pts[i, 0], pts[i, 1], pts[i, 2], rad[i]
+        for t in range(tri.shape[0]):
+            if (px < lo[t, 0] - r or px > hi[t, 0] + r or py < lo[t, 1] - r
+                    or py > hi[t, 1] + r or pz < lo[t, 2] - r or pz > hi[t, 2] + r):
+                continue
+            cx, cy, cz, _ = closest_on_triangle(px, py, pz, tri, t)
+            if (px - cx) ** 2 + (py - cy) ** 2 + (pz - cz) ** 2 < r * r:
+                out[i] = True
+                break
+    return out
+
+
+def deck_meshes(deck_dir, parts: tuple[Part, ...]) -> list[np.ndarray]:
+    """The triangles (T, 3, 3) of each part's mesh in the deck folder (part_<name>.stl, the
+    file LIGGGHTS read); InputError naming the file when one is missing."""
+    out = []
+    for p in parts:
+        path = Path(deck_dir) / part_file(p.name)
+        if not path.is_file():
+            raise InputError(f"{path}: no such file; the import finds the contacts with part "
+                             f"{p.name!r} on the mesh LIGGGHTS used, which the deck writes there")
+        out.append(read_stl(path)[0])
+    return out
+
+
 class PartGeometry:
-    """The parts' analytic surfaces (vibroflow.tub.parts.pack) and their LIGGGHTS meshes (each
-    as an STL part), for points in the parts' frames."""
+    """The parts' analytic surfaces (vibroflow.tub.parts.pack) and their LIGGGHTS meshes
+    (`meshes`: each part's triangles, (T, 3, 3) in the part's frame at rest; default the
+    export's 0.05 mm chords, part_triangles), for points in the parts' frames."""
 
     def __init__(self, parts: tuple[Part, ...], length: float, periodic: bool,
-                 max_sagitta: float = DEFAULT_MAX_SAGITTA):
+                 meshes: list[np.ndarray] | None = None):
         self.parts = parts
         self.length = float(length)
         self.periodic = bool(periodic)
         self.exact = pack(parts)
-        self.meshes = [pack((Part(name=p.name, shape="stl", center=p.center,
-                                  material=p.material, frame=p.frame,
-                                  triangles=part_triangles(p, length, max_sagitta)),))
-                       for p in parts]
+        if meshes is None:
+            meshes = [part_triangles(p, length, DEFAULT_MAX_SAGITTA) for p in parts]
+        self.meshes = [np.ascontiguousarray(m, dtype=float) for m in meshes]
+        self._lo = [m.min(axis=1) for m in self.meshes]
+        self._hi = [m.max(axis=1) for m in self.meshes]
 
     def frame_points(self, k: int, pos_lab: np.ndarray, pose) -> np.ndarray:
         """Ball centres (n, 3, lab) in part k's frame: the tub frame for a tub-fixed part (pose:
@@ -92,11 +131,18 @@ class PartGeometry:
         return _nearest_many(e.shape, e.prm, e.tri, e.tri_normal, e.tri_start, e.tri_group, k,
                              np.ascontiguousarray(pts))
 
-    def mesh_gap(self, k: int, pts: np.ndarray) -> np.ndarray:
-        """Distance (m) of the points to part k's mesh (positive outside)."""
-        m = self.meshes[k]
-        return _nearest_many(m.shape, m.prm, m.tri, m.tri_normal, m.tri_start, m.tri_group, 0,
-                             np.ascontiguousarray(pts))[:, 0]
+    def mesh_touch(self, k: int, pts: np.ndarray, rad: np.ndarray) -> np.ndarray:
+        """Whether each ball (centres pts (n, 3) in part k's frame, radii rad) touches part k's
+        mesh.  Only balls within their radius of the analytic surface are tested: every
+        vertex of a mesh lies on its (convex) part, so the mesh lies inside it and no farther
+        ball can touch it."""
+        out = np.zeros(pts.shape[0], bool)
+        near = self.exact_nearest(k, pts)[:, 0] < rad if pts.shape[0] else out
+        if np.any(near):
+            out[near] = _touching(self.meshes[k], self._lo[k], self._hi[k],
+                                  np.ascontiguousarray(pts[near]),
+                                  np.ascontiguousarray(rad[near], dtype=float))
+        return out
 
 
 def _tub_pose(motion, t: float):
@@ -154,7 +200,7 @@ def part_impacts(path, geom: PartGeometry, motion, n0: int, dt: float, first_ste
         count = last is not None and snap.step - n0 >= first_step
         for k in range(n_parts):
             pts = geom.frame_points(k, pos, (X, Z, th, *piv))
-            touch = geom.mesh_gap(k, pts) < rad if pts.shape[0] else np.zeros(0, bool)
+            touch = geom.mesh_touch(k, pts, rad)
             now = pid[touch]
             if count:
                 new = touch.copy()
