@@ -2,7 +2,7 @@
 an STL mesh) on a short tub47-bar, each code with several fill seeds.
 
     python benchmarks/bar_maps.py [--seeds 1 2] [--codes dem liggghts] [--out DIR]
-                                  [--from-dem-fill]
+                                  [--from-dem-fill] [--judge]
 
 The short case (SHORT_SETS; tests/test_dem_vs_liggghts_bar.py runs the same): tub47-bar 19.05 mm
 long (three ball diameters) with 1500 balls, the bar lowered to z = 0.045 m so that it lies
@@ -13,17 +13,27 @@ DIR/<code>-seed<N>.csv (the bar's map, vibroflow.analysis.impact_maps.write_map_
 the map differences E_rate and E_speed between the seeds of each code and between the codes.
 Default DIR: runs/bar_maps (git-ignored).  --from-dem-fill: LIGGGHTS starts from the DEM run's
 settled bed of the same seed (vibroflow.liggghts.dem_fill; its maps liggghts-fromdem-seed<N>).
+--judge: runs nothing; judges the finished runs already in DIR (dem-seed<N>,
+liggghts[-fromdem]-seed<N>-result; a LIGGGHTS deck whose import is missing is imported first),
+and prints per run the impacts per second on the bar, their mean normal speed and the energy
+delivered (summary.json's part line, over the window's whole cycles), the cycle-mean force on
+the bar with its batch-means error (parts.nc, vibroflow.analysis.impact_maps.cycle_mean), and
+the map differences E(b, a) of each pair, a the reference (the DEM first, then the lower seed).
 """
 from __future__ import annotations
 
 import argparse
 import itertools
+import json
 import time
 from pathlib import Path
 
 from vibroflow import liggghts as LG
-from vibroflow.analysis.impact_maps import (part_map, rate_difference, speed_difference,
-                                            write_map_csv)
+import numpy as np
+
+from vibroflow.analysis.impact_maps import (cycle_mean, part_map, rate_difference,
+                                            speed_difference, write_map_csv)
+from vibroflow.io.parts_file import read_parts
 from vibroflow.dem.run import run_dem
 from vibroflow.scenario.io import load_scenario
 
@@ -60,6 +70,35 @@ def run_code(code: str, seed: int, root: Path, from_dem_fill: bool = False) -> P
     return out
 
 
+def mean_force(run_dir: Path, part: str = "bar") -> tuple[np.ndarray, np.ndarray]:
+    """The cycle-mean force on the part (N, part axes) and its batch-means error (parts.nc)."""
+    sel = read_parts(run_dir / "parts.nc").sel(part=part)
+    return cycle_mean(sel["force"].values, sel["force_stderr"].values)
+
+
+def judge(root: Path, seeds: list[int]) -> dict:
+    """Print what the module docstring says of the finished runs in root; returns the maps."""
+    maps = {}
+    for name in ("dem", "liggghts", "liggghts-fromdem"):
+        for seed in seeds:
+            folder = root / (f"dem-seed{seed}" if name == "dem" else f"{name}-seed{seed}-result")
+            deck = root / f"{name}-seed{seed}"
+            if name != "dem" and not (folder / "summary.json").is_file() and (
+                    deck / "post" / LG.BALL_DUMP).is_file():
+                LG.import_run(deck / "post", short_case(seed), folder)
+            if not (folder / "parts.nc").is_file():
+                continue
+            maps[name, seed] = part_map(folder / "parts.nc", "bar")
+            write_map_csv(root / f"{name}-seed{seed}.csv", maps[name, seed])
+            tot = json.loads((folder / "summary.json").read_text())["parts"][0]
+            f, e = mean_force(folder)
+            print(f"{name} seed {seed}: {tot['impacts_per_s']:.0f} impacts/s, mean normal speed "
+                  f"{tot['normal_speed_mean_m_s']:.3f} m/s, {tot['energy_per_s_W']:.3f} W; "
+                  "mean force on the bar "
+                  f"x {f[0]:+.2f} +- {e[0]:.2f} N, z {f[2]:+.2f} +- {e[2]:.2f} N")
+    return maps
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
@@ -67,10 +106,12 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("runs/bar_maps"))
     ap.add_argument("--from-dem-fill", action="store_true",
                     help="LIGGGHTS starts from the DEM run's settled bed of the same seed")
+    ap.add_argument("--judge", action="store_true",
+                    help="run nothing: judge the finished runs already in --out")
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    maps = {}
-    for code in args.codes:
+    maps = judge(args.out, args.seeds) if args.judge else {}
+    for code in [] if args.judge else args.codes:
         for seed in args.seeds:
             t0 = time.perf_counter()
             folder = run_code(code, seed, args.out, args.from_dem_fill)
@@ -79,8 +120,8 @@ def main() -> None:
             write_map_csv(args.out / f"{name}-seed{seed}.csv", maps[name, seed])
             print(f"{code} seed {seed}: {time.perf_counter() - t0:.0f} s", flush=True)
     for (ka, a), (kb, b) in itertools.combinations(maps.items(), 2):
-        print(f"E({ka[0]} {ka[1]}, {kb[0]} {kb[1]}): rate {rate_difference(a, b):.3f}, "
-              f"speed {speed_difference(a, b):.3f}")
+        print(f"E({kb[0]} {kb[1]} against {ka[0]} {ka[1]}): rate {rate_difference(b, a):.3f}, "
+              f"speed {speed_difference(b, a):.3f}")
 
 
 if __name__ == "__main__":

@@ -1,7 +1,8 @@
 """The parts of [[parts]] in the LIGGGHTS round trip (vibroflow.liggghts.part_meshes, part_deck,
 part_contacts): the meshes lie on the parts with outward normals, the deck carries each part
 (its mesh, atom type, contact law, motion), a name that could change the deck is refused, and
-the import turns a hand-made dump of a known contact into the known impact and load.
+the import turns a hand-made dump of a known contact into the known impact and load, on the
+deck's own mesh.
 """
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ from vibroflow.errors import InputError
 from vibroflow.io.parts_file import read_parts
 from vibroflow.liggghts.part_deck import PART_DUMP
 from vibroflow.liggghts.part_meshes import part_triangles
-from vibroflow.liggghts.stl import facet_normals
+from vibroflow.liggghts.stl import facet_normals, write_stl
 from vibroflow.scenario.io import load_scenario
 from vibroflow.tub.parts import Part
 
@@ -238,3 +239,45 @@ def test_a_known_contact_is_a_known_impact_and_load(tmp_path):
     with pytest.raises(InputError, match=r"part_contacts.dump: line \d+: step 8001 after step "
                                          r"7999: the part dump must hold every step"):
         LG.import_run(post, None, tmp_path / "out2")
+
+
+def test_the_import_finds_contacts_on_the_decks_own_mesh(tmp_path):
+    """A ball pressed 20 um into the bar at 95 degrees touches a mesh of 1 um chords (250 around
+    the bar, the --fill-from deck's) but not the default 36 chords, whose facet lies
+    r (1 - cos 5 deg) = 48 um inside the circle there: the import counts its impact, at the
+    dumped 0.3 m/s, exactly when the deck's part_bar.stl is the fine mesh."""
+    s = bar_case("parts.0.frame=lab")
+    info = LG.export_deck(s, tmp_path / "deck")
+    post = tmp_path / "deck" / "post"
+    (post / LG.START_FILE).write_text(f"{N0}\n")
+    snaps = [N0 + int(k) for k in info.dump_steps]
+    cols = "id type x y z vx vy vz omegax omegay omegaz radius"
+    (post / LG.BALL_DUMP).write_text(_dump(snaps, lambda k, st: [
+        _ball(5, (0.0, 0.01, 0.02)).replace("5 ", "5 1 ", 1)], cols))
+    a = math.radians(95.0)
+    v = (-0.3 * math.cos(a), 0.0, -0.3 * math.sin(a))
+
+    def part_rows(k, step):
+        return [_ball(5, _on_bar(95.0, 1e-4 if step < N0 + 1001 else -2e-5), v)]
+
+    (post / PART_DUMP).write_text(_dump(list(range(N0 + 999, N0 + 1003)), part_rows,
+                                        cols.replace(" type", "")))
+    (post / LG.WALL_DUMP).write_text("")
+
+    def impacts(out):
+        LG.import_run(post, None, tmp_path / out)
+        with h5py.File(tmp_path / out / "dem.h5") as f:
+            return f["part_impacts/normal_speed"][()], f["part_impacts/time"][()]
+
+    assert impacts("coarse")[0].size == 0
+    fine = part_triangles(Part("bar", "cylinder", BAR, "steel", radius=R_BAR), 0.01905, 1e-6)
+    assert len(fine) > 36 * 2
+    write_stl(tmp_path / "deck" / "part_bar.stl", fine, "part_bar")
+    speed, time = impacts("fine")
+    assert speed.tolist() == pytest.approx([0.3], abs=1e-6)
+    assert time.tolist() == pytest.approx([1001 * 1e-5], abs=1e-12)
+    # a deck without the part's mesh is refused in one line naming the file
+    (tmp_path / "deck" / "part_bar.stl").unlink()
+    with pytest.raises(InputError, match=r"part_bar.stl: no such file; the import finds the "
+                                         r"contacts with part 'bar' on the mesh LIGGGHTS used"):
+        LG.import_run(post, None, tmp_path / "gone")
