@@ -2,7 +2,7 @@
 part_contacts): the meshes lie on the parts with outward normals, the deck carries each part
 (its mesh, atom type, contact law, motion), a name that could change the deck is refused, and
 the import turns a hand-made dump of a known contact into the known impact and load, on the
-deck's own mesh.
+deck's own mesh, with LIGGGHTS' CDT rolling moment in the load.
 """
 from __future__ import annotations
 
@@ -20,11 +20,13 @@ from tests.cli_helpers import one_line_error
 from vibroflow import liggghts as LG
 from vibroflow.errors import InputError
 from vibroflow.io.parts_file import read_parts
+from vibroflow.liggghts.dumps import DumpSnapshot
+from vibroflow.liggghts.part_contacts import PartGeometry, part_load_rows, part_rolling
 from vibroflow.liggghts.part_deck import PART_DUMP
 from vibroflow.liggghts.part_meshes import part_triangles
 from vibroflow.liggghts.stl import facet_normals, write_stl
 from vibroflow.scenario.io import load_scenario
-from vibroflow.tub.parts import Part
+from vibroflow.tub.parts import Part, closest_on_triangle, parts_of
 
 R_BAR = 0.0125        # m, tub47-bar's bar
 R_BALL = 0.003175     # m
@@ -281,3 +283,38 @@ def test_the_import_finds_contacts_on_the_decks_own_mesh(tmp_path):
     with pytest.raises(InputError, match=r"part_bar.stl: no such file; the import finds the "
                                          r"contacts with part 'bar' on the mesh LIGGGHTS used"):
         LG.import_run(post, None, tmp_path / "gone")
+
+
+def test_the_load_holds_liggghts_cdt_rolling_moment(tmp_path):
+    """A ball 20 um into the bar's facet at 95 degrees, spinning at 30 rad/s about y and
+    40 rad/s about the normal n: LIGGGHTS' CDT moment on the bar is mu_r k_n delta (r - delta/2)
+    times the unit spin's tangential part, (0, 30, 0) / 50 (rolling_model_cdt.h: the whole spin
+    normalised, then its normal part removed): 0.002 1e5 N/m 2e-5 m (r - 1e-5 m) 0.6 along +y,
+    added to the contact force's moment; none without the rolling law."""
+    s = bar_case("parts.0.frame=lab")
+    parts = parts_of(s)
+    geom = PartGeometry(parts, 0.01905, False)
+    a = math.radians(95.0)
+    n = np.array([math.cos(a), 0.0, math.sin(a)])
+    delta = 2e-5
+    centre = np.array(BAR) + (R_BAR * math.cos(math.radians(5.0)) + R_BALL - delta) * n
+    centre[1] = 0.01
+    tri = geom.meshes[0]
+    near = [closest_on_triangle(*centre, tri, t) for t in range(len(tri))]
+    t_hit = min((t for t in range(len(tri)) if near[t][3] == 0),
+                key=lambda t: np.linalg.norm(centre - near[t][:3]))
+    omega = np.array([0.0, 30.0, 0.0]) + 40.0 * n
+    f_ball = 2.0 * n                                       # F_n on the ball, F_t = 0
+    cols = [f"c_wallc[{i}]" for i in range(1, 10)]
+    snap = DumpSnapshot(N0, cols, np.array([[2, t_hit, 5, *f_ball, 0, 0, 0]], float), 1, 9)
+    pose = (0.0, 0.0, 0.0, 0.0, -0.1)
+    ids = np.array([5])
+    with_roll = part_load_rows(snap, 0, ids, centre[None], pose, geom, 2, "wall.dump",
+                               omega[None], np.array([R_BALL]), part_rolling(s))
+    plain = part_load_rows(snap, 0, ids, centre[None], pose, geom, 2, "wall.dump")
+    arm = R_BAR * n + np.array([0.0, 0.01, 0.0])
+    assert np.allclose(plain["torque"][0], np.cross(arm, -f_ball), atol=1e-12)
+    moment = 0.002 * 1e5 * delta * (R_BALL - 0.5 * delta) * np.array([0.0, 0.6, 0.0])
+    assert np.allclose(with_roll["torque"][0] - plain["torque"][0], moment, rtol=1e-6,
+                       atol=1e-13)
+    assert np.array_equal(with_roll["force"], plain["force"])

@@ -30,7 +30,7 @@ from vibroflow.liggghts.dumps import DumpSnapshot, _StepReader, _whole_column, r
 from vibroflow.liggghts.launch import loop_times
 from vibroflow.liggghts.parameters import _check_exportable
 from vibroflow.liggghts.part_contacts import (PartGeometry, check_outside, deck_meshes,
-                                              part_impacts, part_load_rows)
+                                              part_impacts, part_load_rows, part_rolling)
 from vibroflow.liggghts.part_deck import PART_DUMP
 from vibroflow.liggghts.template import _short
 from vibroflow.measure.summary import tub_summary
@@ -121,6 +121,7 @@ def _import(post: Path, scenario, n0: int, tmp_dir: Path) -> dict:
                          "with them dumps the balls near them there")
     part_geom = (PartGeometry(parts, scenario.tub.length, scenario.tub.periodic,
                               deck_meshes(post.parent, parts)) if parts else None)
+    rolling = part_rolling(scenario) if parts else None
 
     writer = None
     ids = radius = None
@@ -218,7 +219,7 @@ def _import(post: Path, scenario, n0: int, tmp_dir: Path) -> dict:
                 writer.append("part_loads", **part_load_rows(
                     wsnap if wsnap is not None else _NO_ROWS, n_snap, ids, pos,
                     (pose[0], pose[1], pose[2], motion.pivot_x, motion.pivot_z), part_geom,
-                    1 if scenario.tub.periodic else 2, wall_path))
+                    1 if scenario.tub.periodic else 2, wall_path, omg, radius, rolling))
             # ball-ball contacts of this step: every snapshot must have its entry (a missing
             # one would read as a snapshot without contacts and bias the contact stress)
             if pairs is not None:

@@ -21,23 +21,34 @@ and the energy 0.5 m v_n^2.
 Loads (`part_load_rows`): at each snapshot, the part's rows of the wall/gran/local dump (mesh
 index after the U's and the partitions'): the force on the part is minus the sum of the
 contact forces on the balls, in the part's axes (tub axes for a tub-fixed part), and its torque
-about the part's centre is that of each force at the analytic contact point.  The rolling
-resistance's moment on the part is not in the dump and not in the torque (the DEM adds it: a
-torque of at most mu_r r |F_n| per contact).
+about the part's centre is that of each force at the analytic contact point, plus the
+rolling resistance's moment, which the dump does not hold but LIGGGHTS' CDT model lets one
+rebuild exactly from what it does (`PartRolling`; LIGGGHTS-PUBLIC 3.8 rolling_model_cdt.h and
+surface_model_default.h, wall branch): for a contact of a ball (radius r, angular velocity
+omega, lab) with triangle t of the part's mesh (the row's triangle), the overlap
+delta = r - |c - q| (c the centre, q its nearest point on t), n = (c - q) / |c - q|, the elastic
+normal force F_el = k_n delta (linear law; Hertz: 4/3 E* sqrt(r delta) delta), and the moment
+on the part M = mu_r F_el (r - delta / 2) (w - (w . n) n) with w = omega / |omega| (LIGGGHTS
+takes the ball's whole spin, not relative to a moving mesh, and removes the normal part after
+scaling; the ball gets -M).  EPSD (`epsd2`) keeps its rolling moment as contact history, which
+no dump holds: there the torque has no rolling part.
 """
 from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
 
 from vibroflow.errors import InputError
 from vibroflow.liggghts.dumps import _whole_column, read_dump
+from vibroflow.liggghts.parameters import pair_tables
 from vibroflow.liggghts.part_deck import part_file
 from vibroflow.liggghts.part_meshes import part_triangles
 from vibroflow.liggghts.stl import DEFAULT_MAX_SAGITTA, read_stl
+from vibroflow.scenario.laws import effective_moduli
 from vibroflow.tub.motion import lab_to_tub_np, pose_np
 from vibroflow.tub.parts import FRAME_TUB, P_CX, P_CY, P_CZ, P_FRAME, Part, closest_on_triangle, \
     pack, part_nearest, patch_of
@@ -254,11 +265,61 @@ def _impact_rows(rows, geom: PartGeometry, k: int, t: float, pts, vel, omg, rad,
     rows["ball"].append(ball)
 
 
+class PartRolling(NamedTuple):
+    """LIGGGHTS' rolling model for the balls' contacts with each part (module docstring): cdt
+    (False: none or EPSD, no moment rebuilt), and per part mu_r, the linear k_n (N/m) or, with
+    hertz, the Hertz modulus E* (Pa)."""
+
+    cdt: bool
+    hertz: bool
+    mu_r: np.ndarray
+    k_n: np.ndarray
+    e_star: np.ndarray
+
+
+def part_rolling(scenario) -> PartRolling:
+    """The deck's rolling law for the balls' pairs with the parts (types 4, 5, ...)."""
+    tables = pair_tables(scenario)
+    ball = scenario.materials[scenario.fill.material]
+    parts = scenario.parts or []
+    e_star = np.array([effective_moduli(ball, scenario.materials[p.material])[0]
+                       for p in parts], dtype=float)
+    return PartRolling(tables.rolling == "cdt", tables.model == "hertz",
+                       tables.rolling_friction[0, 3:3 + len(parts)].copy(),
+                       tables.kn[0, 3:3 + len(parts)].copy(), e_star)
+
+
+def _rolling_moments(rolling: PartRolling, k: int, tri, t, pts, omg, rad) -> np.ndarray:
+    """The CDT moments (n, 3; N m) on part k of the balls at part-frame centres pts with
+    angular velocities omg (part axes) and radii rad, each on triangle t of the part's mesh
+    (module docstring)."""
+    out = np.zeros((len(t), 3))
+    for i in range(len(t)):
+        if not 0 <= t[i] < len(tri):
+            continue
+        qx, qy, qz, _ = closest_on_triangle(pts[i, 0], pts[i, 1], pts[i, 2], tri, int(t[i]))
+        d = pts[i] - (qx, qy, qz)
+        dist = float(np.linalg.norm(d))
+        delta = rad[i] - dist
+        w = float(np.linalg.norm(omg[i]))
+        if delta <= 0.0 or dist == 0.0 or w == 0.0:
+            continue
+        n = d / dist
+        f_el = (4.0 / 3.0 * rolling.e_star[k] * math.sqrt(rad[i] * delta) * delta
+                if rolling.hertz else rolling.k_n[k] * delta)
+        u = omg[i] / w
+        out[i] = rolling.mu_r[k] * f_el * (rad[i] - 0.5 * delta) * (u - np.dot(u, n) * n)
+    return out
+
+
 def part_load_rows(snap, snap_index: int, ids, pos_lab, pose, geom: PartGeometry,
-                   first_mesh: int, path) -> dict:
+                   first_mesh: int, path, omg_lab=None, radius=None,
+                   rolling: PartRolling | None = None) -> dict:
     """The /part_loads rows (one per part) of one snapshot of the wall/gran/local dump (columns
     mesh, triangle, atom id, F_n (3), F_t (3) on the ball, lab axes); part k's rows have mesh
-    index first_mesh + k.  pose: X, Z, theta, pivot_x, pivot_z."""
+    index first_mesh + k.  pose: X, Z, theta, pivot_x, pivot_z.  With the balls' angular
+    velocities omg_lab and radii (by sorted id) and a CDT `rolling`, the torque holds the
+    rolling moments (module docstring)."""
     data = snap.data
     n_parts = len(geom.parts)
     force = np.zeros((n_parts, 3))
@@ -282,5 +343,13 @@ def part_load_rows(snap, snap_index: int, ids, pos_lab, pose, geom: PartGeometry
             arm = geom.exact_nearest(k, pts)[:, 4:7] - geom.exact.prm[k, [P_CX, P_CY, P_CZ]]
             force[k] = g.sum(axis=0)
             torque[k] = np.cross(arm, g).sum(axis=0)
+            if rolling is not None and rolling.cdt and omg_lab is not None:
+                w = omg_lab[j[ok]]
+                if geom.exact.prm[k, P_FRAME] == FRAME_TUB:
+                    w = np.stack([c * w[:, 0] + s * w[:, 2], w[:, 1],
+                                  -s * w[:, 0] + c * w[:, 2]], axis=1)
+                tri = _whole_column(path, snap, 1)[sel][ok]
+                torque[k] += _rolling_moments(rolling, k, geom.meshes[k], tri, pts, w,
+                                              radius[j[ok]]).sum(axis=0)
     return {"snapshot": np.full(n_parts, snap_index, np.int32),
             "part": np.arange(n_parts, dtype=np.int16), "force": force, "torque": torque}
