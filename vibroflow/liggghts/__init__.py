@@ -10,13 +10,15 @@ dumps imported back as vibroflow results, so the two codes are compared with the
 Modules: stl (the tub's triangle meshes), dem_fill (a DEM run's settled bed as the deck's
 start), fill_deck (the fill's lines of the deck), part_meshes (the parts' meshes), parameters (the
 contact law, seeds and snapshot steps a scenario gives the deck), template (what user input may
-put into a deck), deck (the export), part_deck (the parts' lines of the deck), launch (running
-LIGGGHTS; its log's loop times), dumps (reading LIGGGHTS text dumps), contacts (the dumped
+put into a deck), deck (the export), deck_files (a deck folder's file names and README),
+motion_deck (the tub's motion in the deck), part_deck (the parts' lines of the deck), launch
+(running LIGGGHTS; its log's loop times), dumps (reading LIGGGHTS text dumps), contacts (the dumped
 contacts as dem.h5 rows), part_contacts (the parts' impacts and loads), importer (a run's dumps
 as dem.h5, summary.json, bulk_velocity.csv and, with parts, parts.nc).
 """
-from vibroflow.liggghts.deck import (BALL_DUMP, DECK_NAME, PAIR_DUMP, POST_DIR, SERIES_FILE,
-                                     START_FILE, WALL_DUMP, DeckInfo, export_deck)
+from vibroflow.liggghts.deck import DeckInfo, export_deck
+from vibroflow.liggghts.deck_files import (BALL_DUMP, DECK_NAME, PAIR_DUMP, POST_DIR,
+                                           SERIES_FILE, START_FILE, WALL_DUMP)
 from vibroflow.liggghts.dem_fill import DemFill, dem_fill
 from vibroflow.liggghts.dumps import DumpSnapshot, iter_dump, read_dump
 from vibroflow.liggghts.importer import import_run

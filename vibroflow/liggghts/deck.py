@@ -1,5 +1,5 @@
 """A LIGGGHTS 3.8 deck for a tub scenario: DIR/in.tub, tub_u.stl, partitions.stl, scenario.toml,
-README.txt and post/ (where LIGGGHTS writes).
+README.txt and post/ (where LIGGGHTS writes; the names: vibroflow.liggghts.deck_files).
 
 What the deck does, and why (details and the deviations from vibroflow's own DEM in
 docs/liggghts.md):
@@ -16,12 +16,9 @@ docs/liggghts.md):
   vibroflow.liggghts.part_deck).
 * Walls: the U and the partitions as STL meshes (vibroflow.liggghts.stl; the U's facets joined
   into one smooth surface by `curvature`, so contact histories cross their creases), moved rigidly
-  with the tub by two superposed `fix move/mesh` per mesh: `linear/variable` (the translation) then
-  `rotate/variable` about the pivot (whose origin rides with the translation).  Their velocity
-  variables are the exact derivatives of s(a, phi, t) = a [sin(omega t + phi) - sin(phi)], and
-  LIGGGHTS integrates them once a step with the step counter already advanced, so the variables
-  are evaluated at the middle of the step, t = (step - n0 - 1/2) dt: the midpoint rule, which
-  reproduces X(t), Z(t), theta(t) with every phase to O(dt^2) (measured: 1e-8 m).
+  with the tub by two superposed `fix move/mesh` per mesh, whose velocities are the exact
+  derivatives of the tub's motion at mid-step (vibroflow.liggghts.motion_deck; measured: the
+  pose to 1e-8 m).
 * Fill: `fix insert/rate/region` (random, no overlaps) in the U above insert_above, in events
   0.05 s apart, repeated until all N balls are in; then settling with the tub at rest for
   fill.settle_time and, like vibroflow, on in 0.01 s chunks until the kinetic energy per ball
@@ -56,7 +53,12 @@ from vibroflow.io.folder_lock import check_writable_dir, folder_lock
 from vibroflow.liggghts.dem_fill import (DATA_NAME, FROM_FILL_MAX_SAGITTA,
                                          FROM_FILL_MAX_SETTLE_TIME, FROM_FILL_SETTLE_TIME,
                                          DemFill, data_file_text)
+from vibroflow.liggghts.deck_files import (BALL_DUMP, DECK_NAME, FILL_FILE, PAIR_DUMP,
+                                           PARTITION_MESH_FILE, POST_DIR, SERIES_FILE,
+                                           SETTLE_FILE, START_FILE, U_MESH_FILE, WALL_DUMP,
+                                           readme)
 from vibroflow.liggghts.fill_deck import add_fill_from_data, add_insertion
+from vibroflow.liggghts.motion_deck import add_tub_motion
 from vibroflow.liggghts.part_deck import (add_part_dump, add_part_meshes, check_part_names,
                                           moving_meshes, part_mesh_ids, write_part_meshes)
 from vibroflow.liggghts.parameters import (PairTables, _check_exportable, _contact_law_deck,
@@ -68,17 +70,6 @@ from vibroflow.scenario.io import dump_scenario
 from vibroflow.tub.geometry import geometry_of
 from vibroflow.tub.motion import TubMotion
 from vibroflow.tub.parts import parts_of
-
-#: the files of a deck folder: the deck, and what LIGGGHTS writes into post/ for the importer
-DECK_NAME = "in.tub"
-POST_DIR = "post"
-BALL_DUMP = "balls.dump"
-WALL_DUMP = "wall.dump"
-PAIR_DUMP = "pairs.dump"
-SERIES_FILE = "series.txt"
-START_FILE = "vibration_start_step.txt"
-FILL_FILE = "fill_done.txt"
-SETTLE_FILE = "settle_done.txt"
 
 #: seconds between insertion events of the fill
 FILL_EVENT_INTERVAL = 0.05
@@ -123,11 +114,6 @@ class DeckInfo:
     fill_event_steps: int
     settle_steps: int
     tables: PairTables
-
-
-#: the meshes' files, as vibroflow.liggghts.stl.write_tub_meshes names them
-U_MESH_FILE = "tub_u.stl"
-PARTITION_MESH_FILE = "partitions.stl"
 
 
 def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts: bool = True,
@@ -235,7 +221,6 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     thermo_every = _whole("thermo_every", thermo_every, 1) if thermo_every else \
         max(1, int(round(0.01 / dt)))
 
-    w = motion.omega
     # dump steps relative to the vibration start; a sentinel far beyond the run ends the list
     first_now = dsteps.size and dsteps[0] == 0
     rest = dsteps[1:] if first_now else dsteps
@@ -344,22 +329,8 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     add("# ---- vibration: t = (step - n0) dt")
     add("variable n0 equal ${stepnow}")
     add(f'print "${{n0}}" file {POST_DIR}/{START_FILE}')
-    add("# tub velocity = d/dt of s(a, phi, t) = a [sin(w t + phi) - sin(phi)], evaluated at the")
-    add("# middle of each step (LIGGGHTS advances the step counter before moving the mesh), so")
-    add("# the integrated pose is exact to O(dt^2) with every phase")
-    add("variable tmid equal (step-${n0}-0.5)*{}", _fmt(dt))
-    add("variable vX equal {}*cos({}*v_tmid+{})", _fmt(motion.amplitude_x * w), _fmt(w),
-        _fmt(motion.phase_x))
-    add("variable vY equal 0.0")
-    add("variable vZ equal {}*cos({}*v_tmid+{})", _fmt(motion.amplitude_z * w), _fmt(w),
-        _fmt(motion.phase_z))
-    add("# theta > 0 turns x towards z: a turn about -y")
-    add("variable wT equal {}*cos({}*v_tmid+{})", _fmt(motion.amplitude_theta * w), _fmt(w),
-        _fmt(motion.phase_theta))
-    for mesh in (["tub"] if periodic else ["tub", "parts"]) + moving_meshes(parts):
-        add(f"fix move_{mesh}_t all move/mesh mesh {mesh} linear/variable v_vX v_vY v_vZ")
-        add(f"fix move_{mesh}_r all move/mesh mesh {mesh} rotate/variable origin {S} 0. {S} "
-            "axis 0. -1. 0. omega v_wT", _fmt(motion.pivot_x), _fmt(motion.pivot_z))
+    add_tub_motion(deck, motion, dt, (['tub'] if periodic else ['tub', 'parts'])
+                   + moving_meshes(parts))
     add()
     add(f"# snapshots at {S} vibration steps ({POST_DIR}/dump_steps.txt, relative to n0)",
         dsteps.size)
@@ -396,7 +367,7 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     deck_text = deck.render(DECK_NAME)
     data_text = None if fill_from is None else data_file_text(
         fill_from, (x_lo, x_hi, y_lo, y_hi, z_lo, z_hi), len(mats), L if periodic else None)
-    readme_text = _readme(scenario, vib_steps, dsteps.size, wall_contacts, pair_contacts,
+    readme_text = readme(scenario, vib_steps, dsteps.size, wall_contacts, pair_contacts,
                           fill_from is not None).render("README.txt")
     toml_text = _scenario_toml(scenario)
 
@@ -427,55 +398,3 @@ def _shrunk_u_area(R: float, margin: float, z_lo: float, z_hi: float) -> float:
     half = np.where(zs >= R, rr, np.sqrt(np.clip(rr**2 - (zs - R) ** 2, 0.0, None)))
     return float(np.trapezoid(2.0 * half, zs) if hasattr(np, "trapezoid")
                  else np.trapz(2.0 * half, zs))
-
-
-_README = """LIGGGHTS deck for the vibroflow scenario '{}' (SI units)
-=====================================================================
-
-Files: in.tub (the deck), tub_u.stl (the U-shaped tub wall), partitions.stl (the glass
-partitions at y = 0 and y = L_y), scenario.toml (the scenario it was written from), post/ (where
-LIGGGHTS writes its output; post/dump_steps.txt lists the snapshot steps).
-
-Run it in this folder with LIGGGHTS 3.8 on 2 MPI ranks:
-
-    mpirun -np 2 liggghts -in in.tub
-
-(as root Open MPI also wants --allow-run-as-root, and --oversubscribe on a machine with fewer
-cores than ranks; the Debian package's executable is `liggghts`, a source build's `lmp_auto`).
-
-What it does: inserts {} balls at random in the tub, lets them settle with the
-tub at rest, then vibrates the tub for {} s ({} steps of
-{} s) and writes WRITTEN (all at the same
-steps), and the kinetic energy every {} steps to post/SERIES.
-
-Then convert the results into vibroflow's format (dem.h5, summary.json, bulk_velocity.csv):
-
-    vibroflow import liggghts post --out results
-
-(the scenario is read from scenario.toml next to post/).  The tub's pose is not written by
-LIGGGHTS: it is a known function of time, recomputed from the scenario by the importer.
-"""
-
-
-def _readme(scenario, vib_steps: int, n_snap: int, wall_contacts: bool,
-            pair_contacts: bool = True, from_dem: bool = False) -> _Deck:
-    """README.txt of a deck folder as checked template lines (`_Deck`); from_dem: fill.data's."""
-    outputs = [f"{_SLOT} snapshots of the balls to post/{BALL_DUMP}"]
-    if wall_contacts:
-        outputs.append(f"the ball-wall contacts to post/{WALL_DUMP}")
-    if pair_contacts:
-        outputs.append(f"the ball-ball contacts (ids, force) to post/{PAIR_DUMP}")
-    written = ", ".join(outputs[:-1]) + (" and " if len(outputs) > 1 else "") + outputs[-1]
-    template = _README.replace("WRITTEN", written).replace("SERIES", SERIES_FILE)
-    if from_dem:
-        template = template.replace("inserts {} balls at random in the tub,", "reads the {} balls "
-                                    f"of a vibroflow DEM run's settled bed from {DATA_NAME},")
-    if template.endswith("\n"):
-        template = template[:-1]
-    run = scenario.run
-    text = _Deck()
-    text.add_block(template, safe_name("case", scenario.case),
-                   _whole("fill.count", scenario.fill.count, 1), _fmt(run.duration), vib_steps,
-                   _fmt(run.dt), n_snap, _whole("run.series_every", run.series_every, 1))
-    return text
-

@@ -24,8 +24,9 @@ from vibroflow.io.atomic import TMP_PREFIX, json_safe, write_json_atomic
 from vibroflow.io.folder_lock import folder_lock
 from vibroflow.io.parts_file import write_parts
 from vibroflow.liggghts.contacts import PairCheck, _pair_rows, _wall_rows
-from vibroflow.liggghts.deck import (BALL_DUMP, PAIR_DUMP, POST_DIR, SERIES_FILE, START_FILE,
-                                     WALL_DUMP, _scenario_toml)
+from vibroflow.liggghts.deck import _scenario_toml
+from vibroflow.liggghts.deck_files import (BALL_DUMP, PAIR_DUMP, POST_DIR, SERIES_FILE,
+                                           START_FILE, WALL_DUMP)
 from vibroflow.liggghts.dumps import DumpSnapshot, _StepReader, _whole_column, read_dump
 from vibroflow.liggghts.launch import loop_times
 from vibroflow.liggghts.parameters import _check_exportable

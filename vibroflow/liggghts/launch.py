@@ -9,7 +9,7 @@ import subprocess
 from dataclasses import dataclass
 from pathlib import Path
 
-from vibroflow.liggghts.deck import DECK_NAME
+from vibroflow.liggghts.deck_files import DECK_NAME
 
 #: names the LIGGGHTS executable goes by (Debian: liggghts; source builds: lmp_auto)
 BINARY_NAMES = ("liggghts", "lmp_auto", "lmp_fedora", "lmp_ubuntu", "lmp")
