@@ -29,7 +29,9 @@ the step's start masses, volumes and scattered stress (the elastic-plastic plus 
 temperature's kinetic stress), the step's external forces, the node masses and momenta the
 step's scatter left in the grid's work arrays, the B-spline weight tables, and the frame at
 mid-step.  The sums over nodes are the scatter's and the gather's in another order: S_p and
-E_p are the step's to round-off.
+E_p are the step's to round-off.  A bed viscosity's Kelvin-Voigt stress (constitutive.
+ContinuumMaterial.bed_viscosity, 0 by default), scattered but not stored, is not in the
+stress given here: its impulse counts with the exchange.
 """
 from __future__ import annotations
 
