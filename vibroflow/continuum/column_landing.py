@@ -15,13 +15,13 @@ of cell k changes over a step of dt by
     m_k^1 v_k^1 - m_k^0 v_k^0 = J_{k-1/2} - J_{k+1/2} + E_k,
 
 J_{k+1/2} the impulse through the face between k and k + 1 on the material above it (the
-grid's and the remap's momentum exchange: the continuum's contact impulse), E_k the external
-impulse on cell k: the frame's body force m_k^0 a_z dt (gravity less the tub's acceleration,
-with the rotating frame's terms, grid_update.grid_update), the wall's and the partitions'
-forces (the step's f_ext) and the shear stress on the cell's side faces, h (sigma_xz,right -
-sigma_xz,left) dt (Pa, the step's start, each face the mean of its two cells; a closed side
-face's force is the wall's).  Summed from the top of the column down, the impulse through a face
-is the momentum change of all the material above it less the external impulse on that material:
+grid's and the remap's momentum exchange and the stress: the continuum's contact impulse), E_k
+the external impulse on cell k as the grid delivers it: the frame's body force (gravity less
+the tub's acceleration, with the rotating frame's terms, grid_update.grid_update) and the
+wall's and the partitions' forces (the step's f_ext), each a nodal force gathered
+(eulerian/face_impulse.py).  The stress on the cell's side faces is the stress's, counted in
+S below.  Summed from the top of the column down, the impulse through a face is the momentum
+change of all the material above it less the external impulse on that material:
 
     J_{k+1/2} = sum_{j > k} (m_j^1 v_j^1 - m_j^0 v_j^0 - E_j),
 
@@ -44,18 +44,24 @@ hydrocodes return the remap's kinetic-energy loss to the internal energy).  For 
 alone, masses unmoved, J = mu (w_1 - w_0) and -J (w_0 + w_1) / 2 = mu (w_0^2 - w_1^2) / 2:
 the pair's own loss (compaction_landing.py) is the special case.
 
-Of that the face's compressive normal stress p_f takes p_f h (-wbar_f) dt: stored
-elastically, or the kinetic pressure's work, already the temperature's production (counted
-again, it makes energy: compaction_landing.py).  The grid's transfers spread a cell's stress
-over its neighbours' nodes, and an impact raises it within the step, so the stress a face
-carries is no one cell's at one time: p_f is the largest of its two cells' -sigma_zz at the
-step's start (Pa, the scattered stress: elastic-plastic plus the temperature's kinetic
-pressure) and at its end (the elastic-plastic), the most it can have carried.  With the mean
-of the two at the start, the part of the stress's work the face does not carry is counted as
-landing wherever the layer compresses: on the shaken layer (docs/validation.md section 22)
-the faces then count several times the DEM's feed.  The face's landing is what remains,
+Of that the stress carries its own part: its work is elastic (stored) or the kinetic
+pressure's and the plastic flow's (already the temperature's production: counted again, it
+makes energy, compaction_landing.py).  The Lagrangian step's momentum change of a cell splits
+exactly, the gather being linear (eulerian/face_impulse.py), into the stress's impulse S_k
+(its nodal forces, the divergence of the cells' stresses over the B-spline stencil, gathered),
+the external forces' and the frame's E_k (the wall's, the partitions' and the body forces'
+nodal shares, gathered), and the transfer's exchange (the APIC round trip, which moves momentum
+between neighbours without a force); the remap then moves momentum with the mass.  So the
+impulse through a face, with E_k the external impulse as the grid delivers it, is
 
-    E_f = -J_f wbar_f + F_f (q_{k+1} - q_k) / 2 - max(p_f, 0) h max(-wbar_f, 0) dt,
+    J_{k+1/2} = S_{k+1/2} + X_{k+1/2},   S_{k+1/2} = sum_{j > k} S_j,
+
+the stress's impulse through the face (for a block at rest, the weight above it less what
+the floor's nodal force gives the cells above directly) and X the rest: the transfers' and
+the remap's exchange, the grid's completely inelastic contact.  Summed by parts, -S_f wbar_f
+is the stress's work on the mean motion; the face's landing is the rest's,
+
+    E_f = -X_f wbar_f + F_f (q_{k+1} - q_k) / 2,
           clipped to [0, sum_{j > k} m_j^0 (v_j^0 - v_k^0)^2 / 2],
 
 never more than the normal kinetic energy the material above the face had relative to the cell
@@ -79,80 +85,69 @@ import numba as nb
 import numpy as np
 
 from .compaction_landing import FULL
-from .grid_update import frame_body
 
 
 @nb.njit(cache=True)
-def body_acceleration_z(frame, t, x0, z0, h, ncx, ncz, v0, out):
-    """The frame's body acceleration's z component (m/s^2) on each cell centre (N,) at time t (s)
-    (grid_update.grid_update's: a0 - alpha J q + w^2 q - 2 w J v, v the cell's velocity v0
-    (N, 2) m/s), into out (N,); cells of side h (m) from (x0, z0) (m), p = i ncz + k."""
-    a0x, a0z, w, alpha, pvx, pvz = frame_body(frame, t)
+def face_impulses(m0, v0, m1, v1, S, E, open_z):
+    """The z faces' impulses over a step (N s/m, (ncx, ncz + 1), face k between cells k - 1
+    and k of a column; module docstring): J the whole impulse on the material above the face,
+    S_f the stress's (the sum above it of the cells' stress impulses S (N,), eulerian/
+    face_impulse.py), and the mass F (kg/m) carried up through it; m0, v0 and m1, v1 the cells'
+    masses (N,) kg/m and velocities (N, 2) m/s at the step's start and end, E (N,) the
+    external impulse the grid gave each cell (N s/m), open_z (ncx, ncz + 1) the open z faces.
+    A closed face holds what is above it: the column starts again below it (the faces' values
+    there 0)."""
+    ncx = open_z.shape[0]
+    ncz = open_z.shape[1] - 1
+    J = np.zeros((ncx, ncz + 1))
+    Sf = np.zeros((ncx, ncz + 1))
+    F = np.zeros((ncx, ncz + 1))
     for i in range(ncx):
-        qx = x0 + (i + 0.5) * h - pvx
-        for k in range(ncz):
-            p = i * ncz + k
-            qz = z0 + (k + 0.5) * h - pvz
-            out[p] = a0z - alpha * qx + w * w * qz - 2.0 * w * v0[p, 0]
+        j = 0.0
+        s = 0.0
+        dm = 0.0
+        for k in range(ncz - 1, 0, -1):
+            b = i * ncz + k
+            if m0[b] > 0.0 or m1[b] > 0.0:
+                j += m1[b] * v1[b, 1] - m0[b] * v0[b, 1] - E[b]
+                s += S[b]
+                dm += m1[b] - m0[b]
+            if not open_z[i, k]:
+                j = 0.0
+                s = 0.0
+                dm = 0.0
+                continue
+            J[i, k] = j
+            Sf[i, k] = s
+            F[i, k] = dm
+    return J, Sf, F
 
 
 @nb.njit(cache=True)
-def _side_shear_N_m(i, k, ncx, ncz, sigma0, open_x, h):
-    """The z force (N/m) of the start's shear stress on cell (i, k)'s two side faces; a
-    periodic mesh's face 0 is its face ncx."""
-    f = 0.0
-    p = i * ncz + k
-    right = i + 1
-    if right == ncx:
-        if ncx > 1 and open_x[0, k]:
-            f += 0.5 * (sigma0[p, 2] + sigma0[k, 2]) * h
-    elif right < ncx and open_x[right, k]:
-        f += 0.5 * (sigma0[p, 2] + sigma0[right * ncz + k, 2]) * h
-    if i == 0:
-        if ncx > 1 and open_x[0, k]:
-            f -= 0.5 * (sigma0[p, 2] + sigma0[(ncx - 1) * ncz + k, 2]) * h
-    elif open_x[i, k]:
-        f -= 0.5 * (sigma0[p, 2] + sigma0[(i - 1) * ncz + k, 2]) * h
-    return f
-
-
-@nb.njit(cache=True)
-def column_terms(m0, v0, rho0, sigma0, m1, v1, sigma1, body_z, fext_z, h, open_x, open_z, rho_c,
-                 dt, out):
+def column_terms(m0, v0, rho0, m1, v1, S, E, h, open_z, rho_c, dt, out):
     """Adds the cells' column landing power (W/m) of a step of dt (s) to out[:, 3] (module
-    docstring), over every open z face of an Eulerian mesh (eulerian/mesh.py: open_x
-    (ncx + 1, ncz), open_z (ncx, ncz + 1), cell p = i ncz + k; plane strain).  m0 (N,) kg/m,
-    v0 (N, 2) m/s, rho0 (N,) kg/m^3 and sigma0 (N, 4) the stress the step scatters (Pa,
-    [xx, zz, xz, yy], tension positive) at the step's start; m1 (N,) kg/m, v1 (N, 2) m/s and
-    sigma1 (N, 4) the elastic-plastic stress (Pa) at its end; body_z (N,) the frame's body
-    acceleration (m/s^2, `body_acceleration_z` at mid-step), fext_z (N,) the wall's and
-    partitions' z force of the step (N/m); h (m) the cells' side, rho_c (kg/m^3) the critical
+    docstring), over every open z face of an Eulerian mesh (eulerian/mesh.py: open_z
+    (ncx, ncz + 1), cell p = i ncz + k; plane strain).  m0 (N,) kg/m, v0 (N, 2) m/s and rho0
+    (N,) kg/m^3 at the step's start, m1 (N,) kg/m and v1 (N, 2) m/s at its end; S, E (N,) the
+    stress's and the external z impulses (N s/m) the step's grid gave each cell
+    (eulerian/face_impulse.cell_impulse_z); h (m) the cells' side, rho_c (kg/m^3) the critical
     density."""
     ncx = open_z.shape[0]
-    ncz = open_x.shape[1]
+    ncz = open_z.shape[1] - 1
     full0 = FULL * h * h
+    J, Sf, F = face_impulses(m0, v0, m1, v1, S, E, open_z)
     for i in range(ncx):
-        # from the top down: the impulse J (N s/m) through the face below the cells passed,
-        # and the material's sums m, m v, m v^2 (start) above it
-        J = 0.0
-        dm = 0.0
+        # from the top down: the start's sums m, m v, m v^2 of the material above each face
         s0 = 0.0
         s1 = 0.0
         s2 = 0.0
         for k in range(ncz - 1, 0, -1):
             b = i * ncz + k
-            if m0[b] > 0.0 or m1[b] > 0.0:
-                ext = (m0[b] * body_z[b] + fext_z[b]
-                       + _side_shear_N_m(i, k, ncx, ncz, sigma0, open_x, h)) * dt
-                J += m1[b] * v1[b, 1] - m0[b] * v0[b, 1] - ext
-                dm += m1[b] - m0[b]
+            if m0[b] > 0.0:
                 s0 += m0[b]
                 s1 += m0[b] * v0[b, 1]
                 s2 += m0[b] * v0[b, 1] * v0[b, 1]
             if not open_z[i, k]:
-                # a closed face holds what is above it: the column starts again below
-                J = 0.0
-                dm = 0.0
                 s0 = 0.0
                 s1 = 0.0
                 s2 = 0.0
@@ -169,27 +164,12 @@ def column_terms(m0, v0, rho0, sigma0, m1, v1, sigma1, body_z, fext_z, h, open_x
                     and rho0[b] >= rho_c:
                 continue
             wbar = 0.5 * (w0 + v1[b, 1] - v1[a, 1])
-            # the most the stress can have carried through the face: the largest of its two
-            # cells' compressive normal stresses at the step's start and end
-            p_face = max(max(-sigma0[a, 1], -sigma0[b, 1]), max(-sigma1[a, 1], -sigma1[b, 1]))
-            stored = max(p_face, 0.0) * h * max(-wbar, 0.0) * dt
             va = v0[a, 1]
             cap = 0.5 * (s2 - 2.0 * va * s1 + va * va * s0)
-            # the mass dm carried up through the face: its part of the remap's loss
-            moved = 0.5 * dm * (v0[b, 1] * v1[b, 1] - v0[a, 1] * v1[a, 1])
-            lost = min(max(-J * wbar + moved - stored, 0.0), cap) / dt
+            # the mass carried up through the face: its part of the remap's loss
+            moved = 0.5 * F[i, k] * (v0[b, 1] * v1[b, 1] - v0[a, 1] * v1[a, 1])
+            # the exchange no stress carries, on the face's mean relative velocity
+            lost = min(max(-(J[i, k] - Sf[i, k]) * wbar + moved, 0.0), cap) / dt
             m = ma + mb
             out[a, 3] += lost * mb / m
             out[b, 3] += lost * ma / m
-
-
-def column_landing(m0, v0, rho0, sigma0, m1, v1, sigma1, fext, frame, t_mid, x0, z0, h, open_x,
-                   open_z, rho_c, dt, out):
-    """`column_terms` with the body acceleration of the packed frame (grid_update.
-    FRAME_FIELDS) at the step's middle t_mid (s) and the step's external forces fext (N, 2)
-    (N/m), cells from (x0, z0) (m)."""
-    ncx, ncz = open_z.shape[0], open_x.shape[1]
-    body = np.empty(m0.shape[0])
-    body_acceleration_z(frame, t_mid, x0, z0, h, ncx, ncz, v0, body)
-    column_terms(m0, v0, rho0, sigma0, m1, v1, sigma1, body, np.ascontiguousarray(fext[:, 1]),
-                 h, open_x, open_z, rho_c, dt, out)

@@ -55,11 +55,8 @@ from ..grid_step import grid_spec, grid_work
 from ..grid_update import LabFrame
 from ..mpm.solver import ContinuumBlowUp
 from ..state import ContinuumState
-from ..column_landing import column_landing
-from ..compaction_landing import compaction_terms, x_face_terms
 from ..temperature_balance import loop_arguments, phi_cap_of
 from ..temperature_field import advance_with_temperature, cell_step
-from ..wall_energy_flux import contact_terms, landing_terms, partition_terms
 from . import fused, temperature_loop
 from .advection import remap_serial, remap_work
 from .lagrangian_step import fill_limit, material_fraction
@@ -344,43 +341,36 @@ def cell_wall_sums(system: EulerianSystem, state: EulerianState, start=None) -> 
     (wall_energy_flux.landing_terms) and the momentum exchange that stopped the material where
     voids close: the pairs' across the open faces (compaction_landing.compaction_terms), or
     with the walls' `columns` (wall_energy_flux.WallEnergy) along each column each open z
-    face's impulse on its mean relative velocity (column_landing.py) and the pairs' across the
-    x faces; without, none."""
+    face's impulse that no stress carries on its mean relative velocity (column_landing.py,
+    from the step's grid: face_impulse.py) and the pairs' across the x faces; without, none.
+    The compiled loop's own definition (temperature_loop.cell_wall_sums), on the state and
+    the grid's work arrays as the last step left them."""
     out = np.zeros((state.n, 4))
-    if start is not None:
-        mesh = system.mesh
-        rho_c = system.material.critical_density
-        if not system.temperature.walls.columns:
-            compaction_terms(start[0], start[1], start[2], start[3], state.v, mesh.h,
-                             mesh.open_x, mesh.open_z, rho_c, system.dt, out)
-        else:
-            column_landing(start[0], start[1], start[2], start[3], state.mass, state.v,
-                           state.stress, state.fext,
-                           system.frame.as_array(), state.t - 0.5 * system.dt, mesh.xmin,
-                           mesh.zmin, mesh.h, mesh.open_x, mesh.open_z, rho_c, system.dt, out)
-            x_face_terms(start[0], start[1], start[2], start[3], state.v, mesh.h, mesh.open_x,
-                         rho_c, system.dt, out)
-    w = system.wall
-    if w is not None:
-        c = system.wall_cells
-        hist = state.wall
-        h = system.mesh.h
-        fill = np.minimum(1.0, state.mass[c] / (system.material.critical_density * h * h))
-        part = np.zeros((c.size, 4))
-        contact_terms(hist["fn"][c], hist["ft"][c], system.mesh.normal[c], state.v[c],
-                      state.mass[c], fill * h, float(w.stiffness), float(w.damping_ratio),
-                      system.dt, part)
-        part[:, 3] = 0.0
-        if start is not None:
-            m0, v0 = start[0], start[1]
-            landing_terms(v0[c], m0[c], state.v[c], state.mass[c], system.mesh.normal[c],
-                          hist["fn"][c], system.dt, part)
-        out[c] += part
-    pf = system.partitions
-    if pf is not None:
-        partition_terms(state.v, state.mass, state.volume, state.stress, float(pf.friction),
-                        float(pf.length), system.dt, out)
+    landing = start is not None
+    if not landing:
+        start = (state.mass, state.v, state.density, state.stress)
+    temperature_loop.cell_wall_sums(
+        _boundaries(system, state), system.mesh_record, system.grid_spec, system.work,
+        system.frame.as_array(), state.t - 0.5 * system.dt, state.mass, state.v, state.volume,
+        state.stress, state.fext, float(system.material.critical_density), float(system.dt),
+        *(np.ascontiguousarray(a, dtype=float) for a in start), landing,
+        bool(landing and system.temperature.walls.columns), out)
     return out
+
+
+def _boundaries(system: EulerianSystem, state: EulerianState):
+    """The wall's and the partitions' fused.MeshBoundaries record over the state's wall
+    history."""
+    w = system.wall
+    hist = state.wall
+    pf = system.partitions
+    return fused.MeshBoundaries(
+        w is not None, system.wall_cells, hist["delta"], hist["xi"], hist["fn"], hist["ft"],
+        hist["state"], *((float(w.stiffness), float(w.tangential_stiffness),
+                          float(w.damping_ratio), float(w.friction))
+                         if w is not None else (0.0, 0.0, 0.0, 0.0)),
+        pf is not None, *((float(pf.friction), float(pf.length)) if pf is not None
+                          else (0.0, 1.0)))
 
 
 def _advance(system: EulerianSystem, state: EulerianState, n: int, p_kin, ts=None) -> None:
@@ -390,9 +380,6 @@ def _advance(system: EulerianSystem, state: EulerianState, n: int, p_kin, ts=Non
     and makes the balance of state.temperature after every step (temperature_loop.py)."""
     mesh = system.mesh
     mat = system.material
-    w = system.wall
-    hist = state.wall
-    pf = system.partitions
     # the loop without numba's parallel loops on one thread (their launches cost time even
     # then) and on a small mesh (SERIAL_BELOW)
     parallel = nb.get_num_threads() > 1 and mesh.n >= system.serial_below
@@ -403,13 +390,7 @@ def _advance(system: EulerianSystem, state: EulerianState, n: int, p_kin, ts=Non
                         else np.empty((0, 4)), p_kin)
     step = fused.CellStep(float(system.dt), system.params, system.frame.as_array(),
                           float(mat.critical_density), float(state.mass0))
-    boundaries = fused.MeshBoundaries(
-        w is not None, system.wall_cells, hist["delta"], hist["xi"], hist["fn"], hist["ft"],
-        hist["state"], *((float(w.stiffness), float(w.tangential_stiffness),
-                          float(w.damping_ratio), float(w.friction))
-                         if w is not None else (0.0, 0.0, 0.0, 0.0)),
-        pf is not None, *((float(pf.friction), float(pf.length)) if pf is not None
-                          else (0.0, 1.0)))
+    boundaries = _boundaries(system, state)
     args = (n, float(state.t), float(state.mass_error_max), cells, step, system.mesh_record,
             boundaries, system.grid_spec, system.work, system.cell_work)
     if ts is None:

@@ -19,34 +19,49 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from ..column_landing import body_acceleration_z, column_terms
+from ..column_landing import column_terms
 from ..compaction_landing import compaction_terms, x_face_terms
 from ..temperature_balance import balance_cells, kinetic_stress_of
 from ..temperature_field import production_W_m3
 from ..wall_energy_flux import contact_terms, landing_terms, partition_terms
 from . import fused
 from .advection import remap_serial
+from .face_impulse import cell_impulse_z
 
 
 @nb.njit(cache=True)
-def cell_wall_sums(boundaries, normal, open_x, open_z, mass, v, volume, stress, fext, body_z,
-                   rho_c, h, dt, start_mass, start_v, start_density, start_stress, landing,
-                   columns, out):
-    """out (N, 4): the cells' wall contact terms of the step (solver.cell_wall_sums): the wall
-    layer's contacts (boundaries a fused.MeshBoundaries; the wall at rest on the mesh, its
-    inward normal (N, 2) the mesh's, contact length fill h), their landing measured from the
+def cell_wall_sums(boundaries, mesh, grid, work, frame, t_mid, mass, v, volume, stress, fext,
+                   rho_c, dt, start_mass, start_v, start_density, start_stress, landing, columns,
+                   out):
+    """out (N, 4): the cells' wall contact terms of the step just made, the one definition of
+    both paths (the compiled loop's and solver.cell_wall_sums'): the wall layer's contacts
+    (boundaries a fused.MeshBoundaries; the wall at rest on the mesh (mesh a fused.MeshRecord),
+    its inward normal the mesh's, contact length fill h), their landing measured from the
     step's start masses and velocities start_mass (N,) kg/m, start_v (N, 2) m/s when landing
     (wall_energy_flux.landing_terms), the landing of the material stopped by its neighbours
-    across the mesh's open faces open_x, open_z with the start's densities start_density (N,)
-    kg/m^3 and scattered stresses start_stress (N, 4) Pa: by the pairs across the open faces
-    (compaction_landing.compaction_terms), or with `columns` along each column by the impulse
-    through its z faces (column_landing.column_terms, with the step's external forces fext
-    (N, 2) N/m and the frame's body acceleration body_z (N,) m/s^2) and across the x faces by
-    the pairs (compaction_landing.x_face_terms); and the partitions'."""
+    across the mesh's open faces with the start's densities start_density (N,) kg/m^3 and
+    scattered stresses start_stress (N, 4) Pa: by the pairs across the open faces
+    (compaction_landing.compaction_terms), or with `columns` along each column by the
+    impulse through its z faces that no stress carries (column_landing.column_terms, the
+    stress's and the external impulses from the step's grid: face_impulse.cell_impulse_z with
+    the grid grid (grid_step.GridSpec) and its work arrays work (GridWork), the step's volumes
+    volume (N,) m^2 and external forces fext (N, 2) N/m, the frame at t_mid (s)) and across the
+    x faces by the pairs (compaction_landing.x_face_terms); and the partitions'.  mass, v,
+    stress: the cells' at the step's end."""
     out[:] = 0.0
+    h = mesh.h
+    open_x = mesh.open_x
+    open_z = mesh.open_z
+    normal = mesh.normal
     if landing and columns:
-        column_terms(start_mass, start_v, start_density, start_stress, mass, v, stress, body_z,
-                     np.ascontiguousarray(fext[:, 1]), h, open_x, open_z, rho_c, dt, out)
+        n = mass.shape[0]
+        S = np.empty(n)
+        E = np.empty(n)
+        cell_impulse_z(start_mass, volume, start_stress, fext, mesh.tables, open_x.shape[1],
+                       work.gm, work.gmv, grid.x0, grid.z0, grid.dx, grid.periodic,
+                       grid.no_slip_rows, frame, t_mid, dt, S, E)
+        column_terms(start_mass, start_v, start_density, mass, v, S, E, h, open_z, rho_c, dt,
+                     out)
         x_face_terms(start_mass, start_v, start_density, start_stress, v, h, open_x, rho_c, dt,
                      out)
     elif landing:
@@ -113,7 +128,6 @@ def _make_kernel(parallel: bool):
         sums = np.zeros((n, 4))
         production = np.empty(n)
         phi = np.empty(n)
-        body_z = np.zeros(n)
         rho_s = ts.prm.density_kg_m3
         landing = ts.walls and ts.landing
         for s in range(nsteps):
@@ -140,12 +154,9 @@ def _make_kernel(parallel: bool):
                 return s + done, t, status, lowest, mass_error_max
             production_W_m3(cells.stress, cells.L, cells.gamma_dot, p_kin, power)
             if ts.walls:
-                if landing and ts.columns:
-                    body_acceleration_z(step.frame, t - 0.5 * ts.dt, grid[0], grid[1], h, ncx,
-                                        ncz, v_start, body_z)
-                cell_wall_sums(boundaries, mesh.normal, mesh.open_x, mesh.open_z, mass, v,
-                               cells.volume, cells.stress, cells.fext, body_z, step.rho_c, h,
-                               ts.dt, m_start, v_start, rho_start, sigma_start, landing, ts.columns,
+                cell_wall_sums(boundaries, mesh, grid, work, step.frame, t - 0.5 * ts.dt, mass,
+                               v, cells.volume, cells.stress, cells.fext, step.rho_c, ts.dt,
+                               m_start, v_start, rho_start, sigma_start, landing, ts.columns,
                                sums)
             # T carried with the mass: the step's start mass moved by the step's face velocities
             m_move = m_start.reshape((ncx, ncz)).copy()
