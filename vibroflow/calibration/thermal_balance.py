@@ -22,6 +22,14 @@ is the production, so that a cell's two terms are taken over the same contacts. 
 cycle the springs' storage averages out, so the cycle mean is the dissipation; a phase bin's
 value also holds the storage's rate at that phase.
 
+The walls' feed: with a wall contact's stress carried along its branch to the contact point c_w,
+the momentum balance holds the wall's force f_w as a force density at c_w, so the mean flow's
+energy gains f_w . V(c_w) and the fluctuation's W_w = -f_w . V(c_w): the wall's force against
+the bed's coarse-grained slip and approach there (Johnson & Jackson's slip production, and the
+landing), deposited at c_w with the kernel, V bilinear on the grid.  Over the bed and a steady
+cycle the fluctuation energy's rate and the flux's divergence integrate to zero, so
+int (Pi + W_w) = int D (tub47-quick: docs/validation.md section 29).
+
 `ThermalBalanceGrainer` accumulates snapshots; `thermal_balance_run(run)` does a DEM run's
 averaging window (its spins from dem.h5) and returns the Dataset, and the springs' stored
 energy at each snapshot for the check that it averages out.
@@ -30,13 +38,14 @@ from __future__ import annotations
 
 import numpy as np
 import xarray as xr
+from scipy.interpolate import RegularGridInterpolator
 
 from vibroflow.errors import InputError
 from vibroflow.measure.stats import phase_bins, stderr_of_batches
 from vibroflow.tub.geometry import geometry_of
 
 from .coarse_grain import CoarseGrainer
-from .coarse_grain_kernel import deposit_contacts
+from .coarse_grain_kernel import B_RHO, N_BALL_Q, deposit_balls, deposit_contacts
 from .contact_power import (elastic_energy_J, pair_power_loss, rolling_reconstructable,
                             wall_power_loss)
 from .dem_result import DEMResult, _to_tub_axes
@@ -44,9 +53,10 @@ from .thermal_temperature import ThermalTemperatureGrainer
 
 #: the dissipation's parts, in the accumulator's rows
 PARTS = ("normal", "tangential", "rolling")
-# rows of the accumulator: the production, its contact part, then the dissipation's parts
-_R_PROD, _R_PROD_C, _R_DISS = 0, 1, 2
-_N_ROWS = 2 + len(PARTS)
+# rows of the accumulator: the production, its contact part, the walls' feed, then the
+# dissipation's parts
+_R_PROD, _R_PROD_C, _R_WALL, _R_DISS = 0, 1, 2, 3
+_N_ROWS = 3 + len(PARTS)
 
 
 class ThermalBalanceGrainer:
@@ -72,6 +82,7 @@ class ThermalBalanceGrainer:
         self._acc = np.zeros((self.n_batches, self.n_phases, _N_ROWS, g.nx, g.nz))
         self._weight = np.zeros((self.n_batches, self.n_phases))
         self._scratch = np.zeros((9, g.nx, g.nz))
+        self._scratch_b = np.zeros((N_BALL_Q, g.nx, g.nz))
 
     def add_snapshot(self, positions_tub, velocities_rel_tub, spins_rel_tub, radius, mass,
                      phase_bin: int, batch: int, contacts_i=None, contacts_j=None,
@@ -124,8 +135,26 @@ class ThermalBalanceGrainer:
                     parts[k][on] = p
             self._deposit(pos[i], b, parts, acc)
             total += float(sum(p.sum() for p in parts))
+            self._wall_feed(np.asarray(wall_point, float), np.asarray(wall_force, float),
+                            np.nan_to_num(f["velocity"]), acc)
         self._weight[int(batch), int(phase_bin)] += 1.0
         return total
+
+    def _wall_feed(self, point, force, V, acc):
+        """The walls' feed -f_w . V(c_w) (W) at each wall contact point c_w, V the snapshot's
+        coarse-grained velocity there (bilinear on the grid), deposited with the kernel."""
+        g = self._snap
+        at = RegularGridInterpolator((g.x, g.z), V, bounds_error=False, fill_value=None)
+        xz = np.stack([np.clip(point[:, 0], g.x[0], g.x[-1]),
+                       np.clip(point[:, 2], g.z[0], g.z[-1])], axis=1)
+        feed = -np.einsum("ij,ij->i", force, at(xz))
+        kind, amp, inv2w2, shift, rc = g._kp
+        sb = self._scratch_b
+        sb[...] = 0.0
+        deposit_balls(point[:, 0].copy(), point[:, 2].copy(), np.ascontiguousarray(feed),
+                      np.zeros(feed.size), np.zeros((feed.size, 3)), 1.0, g.i_min * g.h,
+                      g.k_min * g.h, g.h, g.nx, g.nz, kind, amp, inv2w2, shift, rc, sb)
+        acc[_R_WALL] += sb[B_RHO] / g.depth
 
     def _deposit(self, start, branch, parts, acc):
         """Each part's power (W) along each branch: f = P b / |b|^2 makes the trace of the
@@ -144,7 +173,8 @@ class ThermalBalanceGrainer:
             acc[_R_DISS + k] += (self._scratch[0] + self._scratch[4] + self._scratch[8]) / g.depth
 
     def fields(self) -> xr.Dataset:
-        """production, production_contact, dissipation and dissipation_<part> (W/m^3): (phase,
+        """production, production_contact, wall_feed, dissipation and dissipation_<part>
+        (W/m^3): (phase,
         x, z) phase means and <name>_cycle_mean (x, z), the mean over the phase bins (each an
         equal share of the cycle), with <name>_cycle_mean_stderr (batch means, n_batches >= 2)."""
         if self._weight.sum() <= 0:
@@ -155,7 +185,8 @@ class ThermalBalanceGrainer:
         mean = self._acc.sum(axis=0) / w_ph[:, None, None, None]
         with np.errstate(invalid="ignore", divide="ignore"):
             per = self._acc / self._weight[:, :, None, None, None]
-        names = ["production", "production_contact"] + [f"dissipation_{p}" for p in PARTS]
+        names = (["production", "production_contact", "wall_feed"]
+                 + [f"dissipation_{p}" for p in PARTS])
         data = {}
         cm, cm_b = mean.mean(axis=0), np.nanmean(per, axis=1)
         attrs = {"units": "W m-3"}
