@@ -32,12 +32,19 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
+from vibroflow.calibration.shear_temperature import (dense_dissipation_coefficient,
+                                                     kinetic_parameters)
 from vibroflow.calibration.thermal_balance import PARTS, thermal_balance_run
 from vibroflow.continuum.kinetic_theory import G0_FORMS, KineticParameters, dissipation_W_m3
 from vibroflow.report.temperature_maps import PHI_KEY, T_KEY, read_temperature_csv
 from vibroflow.scenario import load_scenario
 
 H = 0.015          # tub47's analysis cells (m)
+#: the DEM shear cell's steady points (docs/validation.md section 21: tub47's balls, seed 1):
+#: I, phi, gamma_dot (1/s), T (m^2/s^2), mu = tau / p, p (Pa)
+SHEAR_CELL = ((0.03, 0.598, 3.59, 4.28e-4, 0.350, 4334.0),
+              (0.1, 0.591, 11.97, 3.08e-3, 0.383, 4525.0),
+              (0.3, 0.564, 35.9, 1.71e-2, 0.470, 4561.0))
 
 
 def gamma_closure(phi, T, prm) -> np.ndarray:
@@ -83,6 +90,13 @@ def main() -> None:
                             density_kg_m3=float(sc.materials[sc.fill.material].density),
                             restitution=float(kin["restitution"]), phi_rcp=float(kin["phi_rcp"]),
                             g0_form=G0_FORMS[kin["g0_form"]])
+    # the sliding loss's k_f from the shear cell, never from the tub
+    cell_prm = kinetic_parameters(float(sc.fill.diameter), prm.density_kg_m3, prm.restitution)
+    ks = [dense_dissipation_coefficient(phi, gd, T, mu * p, p, cell_prm)
+          for _I, phi, gd, T, mu, p in SHEAR_CELL]
+    k_f = float(np.mean(ks))
+    print("shear cell's k_f at I = " + ", ".join(f"{c[0]}: {k:.3f}" for c, k in zip(SHEAR_CELL, ks))
+          + f"; mean {k_f:.3f}")
     x, z = ds.x.values, ds.z.values
     dA = float(ds.attrs["cell_size_m"]) ** 2 * float(ds.attrs["depth_m"])
 
@@ -103,6 +117,8 @@ def main() -> None:
     T_ph = ds.thermal_temperature.values
     G_ph = gamma_closure(phi_ph, T_ph, prm)
     G_cm = G_ph.mean(axis=0)
+    Gf_cm = (k_f * np.nan_to_num(ds.pressure.values).clip(min=0.0)
+             * np.sqrt(np.nan_to_num(T_ph).clip(min=0.0)) / prm.diameter_m).mean(axis=0)
     tot = {"production": float(ds.production_cycle_mean.sum()) * dA,
            "production (contact stress)": float(ds.production_contact_cycle_mean.sum()) * dA}
     tot["walls' feed"] = float(ds.wall_feed_cycle_mean.sum()) * dA
@@ -111,6 +127,8 @@ def main() -> None:
     tot["dissipation"] = float(ds.dissipation_cycle_mean.sum()) * dA
     tot["kinetic theory's Gamma at the DEM's phi, thermal T (phase by phase)"] = \
         float(G_cm.sum()) * dA
+    tot["the sliding loss k_f p sqrt(T_th) / d at the DEM's p, thermal T"] = \
+        float(Gf_cm.sum()) * dA
     for k, v in tot.items():
         print(f"  {k}: {v:.3f} W")
 
@@ -127,14 +145,15 @@ def main() -> None:
     W = cells(x, z, nxh, nz, ds.wall_feed_cycle_mean.values)
     Ds = {p: cells(x, z, nxh, nz, ds[f"dissipation_{p}_cycle_mean"].values) for p in PARTS}
     G = cells(x, z, nxh, nz, G_cm)
+    Gf = cells(x, z, nxh, nz, Gf_cm)
     G_mean_state = gamma_closure(phi_c, T_c, prm)
     cont = {}
     for name, d in (("lagrangian", a.lagrangian), ("eulerian", a.eulerian)):
         m = read_temperature_csv(Path(d) / "temperature.csv", H, nxh, nz)
         cont[name] = (m[T_KEY], m[PHI_KEY], gamma_closure(m[PHI_KEY], m[T_KEY], prm))
     print("\n| z (mm) | phi | T_th (m2/s2) | Pi (W/m3) | D (W/m3) | Pi/D | sliding, rolling / D "
-          "| walls' feed W | (Pi + W)/D | Gamma(phi, T_th) | D/Gamma | T_eq/T_th | Lag T/T_th, Gamma_c | Eul T/T_th, Gamma_c |")
-    print("|---" * 14 + "|")
+          "| walls' feed W | (Pi + W)/D | Gamma(phi, T_th) | D/Gamma | T_eq/T_th | D/(Gamma + Gamma_f) | Lag T/T_th, Gamma_c | Eul T/T_th, Gamma_c |")
+    print("|---" * 15 + "|")
     for k in range(nz):
         on = phi_c[k] >= 0.3
         if not on.any():
@@ -148,7 +167,8 @@ def main() -> None:
                f"{m(D):.0f} +- {m(Dse):.0f} | {m(Pi) / m(D):.2f} | "
                f"{m(Ds['tangential']) / m(D):.2f}, {m(Ds['rolling']) / m(D):.3f} | {m(W):.0f} | "
                f"{(m(Pi) + m(W)) / m(D):.2f} | {m(G):.0f} "
-               f"(mean state {m(G_mean_state):.0f}) | {ratio:.1f} | {ratio ** (2 / 3):.1f} |")
+               f"(mean state {m(G_mean_state):.0f}) | {ratio:.1f} | {ratio ** (2 / 3):.1f} | "
+               f"{m(D) / (m(G) + m(Gf)):.2f} |")
         for name, (Tc, phic, Gc) in cont.items():
             onc = on & (phic[k] >= 0.3)
             if not onc.any():

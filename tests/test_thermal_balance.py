@@ -128,3 +128,15 @@ def test_simple_shear_of_a_uniform_stress_produces_tau_gamma_dot():
     assert float(ds.production_contact_cycle_mean.sel(x=nx * a / 2, z=nz * a / 2,
                                                       method="nearest")) == \
         pytest.approx(hand, rel=1e-4)
+
+
+def test_dense_dissipation_coefficient_closes_a_hand_made_balance():
+    from vibroflow.calibration.shear_temperature import (dense_dissipation_coefficient,
+                                                         kinetic_parameters)
+    from vibroflow.continuum.kinetic_theory import dissipation_W_m3
+    prm = kinetic_parameters(0.00635, 7800.0, 0.85)
+    phi, T, p, k_f, gd = 0.59, 3e-3, 4500.0, 0.37, 12.0
+    # tau gamma_dot = Lun's Gamma + k_f p sqrt(T) / d, written out by hand
+    tau = (dissipation_W_m3(phi, T, gd, prm) + k_f * p * np.sqrt(T) / 0.00635) / gd
+    assert dense_dissipation_coefficient(phi, gd, T, tau, p, prm) == pytest.approx(k_f,
+                                                                                   rel=1e-12)

@@ -13,6 +13,12 @@ Gidaspow's viscosity and Lun et al.'s dissipation over Jenkins' correlation leng
 max(1, c_L d gamma_dot / sqrt(T)).  Both sides scale with T (eta ~ sqrt(T), Gamma ~ T^(3/2) / L),
 so the root is unique; `closure_temperature` finds it by bisection in ln T.
 
+The dense dissipation (`dense_dissipation_coefficient`): the shear cell's balls spend their
+shear work tau gamma_dot mostly in sliding contacts, which Lun's Gamma omits.  A contact pressed
+with a force ~ p d^2 slipping at ~ sqrt(T) loses ~ mu p d^2 sqrt(T), so per volume the sliding
+loss is Gamma_f = k_f p sqrt(T) / d; in steady shear tau gamma_dot = Gamma + Gamma_f gives
+k_f = (tau gamma_dot - Gamma(phi, T)) d / (p sqrt(T)) from one measured point.
+
 Jenkins' c_L from the shear cell (`fit_correlation_coefficient`): the c_L at which the closure's
 T equals the measured T of one point, c_L = (L/d) sqrt(T) / (d gamma_dot) with L/d =
 Gamma_plain(T) / (eta(T) gamma_dot^2); zero when the plain closure's T is already below the
@@ -94,3 +100,18 @@ def fit_correlation_coefficient(phi: float, shear_rate: float, temperature: floa
     if ratio <= 1.0:
         return 0.0
     return ratio * math.sqrt(T) / (prm.diameter_m * gd)
+
+
+def dense_dissipation_coefficient(phi: float, shear_rate: float, temperature: float,
+                                  shear_stress: float, pressure: float,
+                                  prm: KineticParameters) -> float:
+    """k_f (-) of the sliding loss Gamma_f = k_f p sqrt(T) / d (module notes) that closes
+    steady shear's balance tau gamma_dot = Gamma(phi, T) + Gamma_f at the shear cell's measured
+    phi (-), shear_rate (1/s), temperature (m^2/s^2), shear_stress tau and pressure p (Pa);
+    Lun's Gamma without Jenkins' length."""
+    gd, T, p = abs(float(shear_rate)), float(temperature), float(pressure)
+    if not (T > 0 and p > 0):
+        raise ValueError(f"temperature, pressure = {temperature!r}, {pressure!r}: must be > 0")
+    plain = prm._replace(correlation_coefficient=0.0)
+    work = float(shear_stress) * gd
+    return (work - dissipation_W_m3(phi, T, gd, plain)) * prm.diameter_m / (p * math.sqrt(T))

@@ -53,10 +53,10 @@ from .thermal_temperature import ThermalTemperatureGrainer
 
 #: the dissipation's parts, in the accumulator's rows
 PARTS = ("normal", "tangential", "rolling")
-# rows of the accumulator: the production, its contact part, the walls' feed, then the
-# dissipation's parts
-_R_PROD, _R_PROD_C, _R_WALL, _R_DISS = 0, 1, 2, 3
-_N_ROWS = 3 + len(PARTS)
+# rows of the accumulator: the production, its contact part, the walls' feed, the pressure, then
+# the dissipation's parts
+_R_PROD, _R_PROD_C, _R_WALL, _R_P, _R_DISS = 0, 1, 2, 3, 4
+_N_ROWS = 4 + len(PARTS)
 
 
 class ThermalBalanceGrainer:
@@ -107,6 +107,7 @@ class ThermalBalanceGrainer:
         L = np.nan_to_num(f["velocity_gradient"])
         acc[_R_PROD] += -np.einsum("...ab,...ab->...", f["stress"], L)
         acc[_R_PROD_C] += -np.einsum("...ab,...ab->...", f["contact_stress"], L)
+        acc[_R_P] += f["pressure"]
         pos = np.asarray(positions_tub, float)
         vel = np.asarray(velocities_rel_tub, float)
         w = np.asarray(spins_rel_tub, float)
@@ -174,7 +175,7 @@ class ThermalBalanceGrainer:
 
     def fields(self) -> xr.Dataset:
         """production, production_contact, wall_feed, dissipation and dissipation_<part>
-        (W/m^3): (phase,
+        (W/m^3), and the snapshots' pressure (Pa, the mean of tr(P) / 3): (phase,
         x, z) phase means and <name>_cycle_mean (x, z), the mean over the phase bins (each an
         equal share of the cycle), with <name>_cycle_mean_stderr (batch means, n_batches >= 2)."""
         if self._weight.sum() <= 0:
@@ -185,17 +186,18 @@ class ThermalBalanceGrainer:
         mean = self._acc.sum(axis=0) / w_ph[:, None, None, None]
         with np.errstate(invalid="ignore", divide="ignore"):
             per = self._acc / self._weight[:, :, None, None, None]
-        names = (["production", "production_contact", "wall_feed"]
+        names = (["production", "production_contact", "wall_feed", "pressure"]
                  + [f"dissipation_{p}" for p in PARTS])
         data = {}
         cm, cm_b = mean.mean(axis=0), np.nanmean(per, axis=1)
-        attrs = {"units": "W m-3"}
         for k, name in enumerate(names):
+            attrs = {"units": "Pa" if name == "pressure" else "W m-3"}
             data[name] = (("phase", "x", "z"), mean[:, k], attrs)
             data[name + "_cycle_mean"] = (("x", "z"), cm[k], attrs)
             if self.n_batches >= 2:
                 data[name + "_cycle_mean_stderr"] = (
                     ("x", "z"), np.asarray(stderr_of_batches(cm_b[:, k], axis=0)), attrs)
+        attrs = {"units": "W m-3"}
         diss = sum(data[f"dissipation_{p}"][1] for p in PARTS)
         data["dissipation"] = (("phase", "x", "z"), diss, attrs)
         data["dissipation_cycle_mean"] = (("x", "z"), diss.mean(axis=0), attrs)
