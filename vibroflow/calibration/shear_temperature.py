@@ -115,3 +115,31 @@ def dense_dissipation_coefficient(phi: float, shear_rate: float, temperature: fl
     plain = prm._replace(correlation_coefficient=0.0)
     work = float(shear_stress) * gd
     return (work - dissipation_W_m3(phi, T, gd, plain)) * prm.diameter_m / (p * math.sqrt(T))
+
+
+def sliding_table(rows, diameter: float, density: float, restitution: float,
+                  phi_rcp: float = 0.64) -> dict | None:
+    """The [kinetic] keys of the dense sliding loss from the shear cell's steady points (rows
+    of shear_cell.run_shear_cell: phi, shear_rate, granular_temperature, mu_eq and
+    mean_pressure, so tau = mu_eq p): sliding_coefficient, the mean of each point's k_f
+    (dense_dissipation_coefficient), its standard error (the points' scatter over sqrt(n)),
+    the per-point values and the source; dense_dissipation = false (the balance takes k_f only
+    when it is set true).  None without steady points."""
+    prm = kinetic_parameters(diameter, density, restitution, phi_rcp)
+    ks = []
+    for r in rows:
+        if not r.get("steady", True):
+            continue
+        p = float(r["mean_pressure"])
+        ks.append(dense_dissipation_coefficient(r["phi"], r["shear_rate"],
+                                                r["granular_temperature"], r["mu_eq"] * p, p,
+                                                prm))
+    if not ks:
+        return None
+    k = np.asarray(ks)
+    se = float(k.std(ddof=1) / math.sqrt(k.size)) if k.size >= 2 else math.nan
+    return {"sliding_coefficient": float(k.mean()), "sliding_coefficient_stderr": se,
+            "sliding_coefficient_source": (
+                "DEM shear cell: tau gamma_dot = Gamma_Lun(phi, T) + k_f p sqrt(T) / d at each "
+                "steady point, k_f = " + ", ".join(f"{v:.4g}" for v in k)),
+            "dense_dissipation": False}
