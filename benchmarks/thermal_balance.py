@@ -108,9 +108,10 @@ def main() -> None:
           f"({P.size} snapshots), phase-bin means "
           + ", ".join(f"{float(ds.dissipation[p].sum()) * dA:.2f}" for p in range(ds.phase.size))
           + " W")
-    print(f"springs' stored energy {E[0]:.3e} J -> {E[-1]:.3e} J: "
-          f"{(E[-1] - E[0]) / (t[-1] - t[0]):.2e} W, {abs(E[-1] - E[0]) / (t[-1] - t[0]) / P.mean():.1e}"
-          f" of the mean power; its range over the snapshots {E.min():.2e} - {E.max():.2e} J")
+    rate = (E[-1] - E[0]) / (t[-1] - t[0])
+    print(f"springs' stored energy {E[0]:.3e} J -> {E[-1]:.3e} J: {rate:.2e} W, "
+          f"{abs(rate) / P.mean():.1e} of the mean power; its range over the snapshots "
+          f"{E.min():.2e} - {E.max():.2e} J")
 
     # -- whole bed
     phi_ph = ds.solid_fraction.values
@@ -152,7 +153,8 @@ def main() -> None:
         m = read_temperature_csv(Path(d) / "temperature.csv", H, nxh, nz)
         cont[name] = (m[T_KEY], m[PHI_KEY], gamma_closure(m[PHI_KEY], m[T_KEY], prm))
     print("\n| z (mm) | phi | T_th (m2/s2) | Pi (W/m3) | D (W/m3) | Pi/D | sliding, rolling / D "
-          "| walls' feed W | (Pi + W)/D | Gamma(phi, T_th) | D/Gamma | T_eq/T_th | D/(Gamma + Gamma_f) | Lag T/T_th, Gamma_c | Eul T/T_th, Gamma_c |")
+          "| walls' feed W | (Pi + W)/D | Gamma(phi, T_th) | D/Gamma | T_eq/T_th "
+          "| D/(Gamma + Gamma_f) | Lag T/T_th, Gamma_c | Eul T/T_th, Gamma_c |")
     print("|---" * 15 + "|")
     for k in range(nz):
         on = phi_c[k] >= 0.3

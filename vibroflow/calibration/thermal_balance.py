@@ -89,8 +89,9 @@ class ThermalBalanceGrainer:
                      contact_force=None, contact_branch=None, wall_particle=None,
                      wall_force=None, wall_point=None, wall_kind=None,
                      frame_spin=(0.0, 0.0, 0.0)) -> float:
-        """One snapshot, returning its contacts' total power taken out (W): positions (m) and velocities (m/s) in the tub frame, spins (rad/s)
-        relative to the tub (tub axes), radii (m), masses (kg); the contacts as
+        """One snapshot, returning its contacts' total power taken out (W): positions (m) and
+        velocities (m/s) in the tub frame, spins (rad/s) relative to the tub (tub axes), radii
+        (m), masses (kg); the contacts as
         CoarseGrainer.add_snapshot's, wall_kind (W,) each wall contact's slot, frame_spin the
         tub's angular velocity (rad/s, tub axes); batch < 0: not used."""
         if batch < 0:
