@@ -296,7 +296,7 @@ def thermal_balance_run(run, n_batches: int | None = None, thermal: bool = True)
             phase, cycle = th.fields()
             ds = xr.merge([ds, phase.drop_vars("phase", errors="ignore")
                            .assign_coords(phase=ds.phase), cycle], compat="override")
-            sf = th._grainer.energy_flux_fields()["solid_fraction"]
+            sf = th.energy_flux_fields()["solid_fraction"]
             ds["solid_fraction"] = (("phase", "x", "z"), np.asarray(sf.values))
         ds["elastic_energy"] = (("snapshot",), energy, {"units": "J"})
         ds["contact_power"] = (("snapshot",), power, {
