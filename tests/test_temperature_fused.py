@@ -42,13 +42,13 @@ def _motion():
                      amplitude_z=GAMMA_Z * 9.81 / w2, phase_z=0.0, amplitude_theta=0.0)
 
 
-def _model(h):
+def _model(h, sliding=0.0):
     prm = KineticParameters(diameter_m=MAT.diameter, density_kg_m3=MAT.solid_density,
-                            restitution=0.8)
+                            restitution=0.8, sliding_coefficient=sliding)
     return TemperatureModel(prm, h, 1e-3, True, WallEnergy(restitution=0.7))
 
 
-def _layer(method):
+def _layer(method, sliding=0.0):
     """(system, state): a layer DEPTH deep of the critical density on a frictional floor of
     an x-periodic strip WIDTH wide, between partitions, in the shaken frame, T0 = 1e-3."""
     frame = TubFrame(_motion())
@@ -59,7 +59,8 @@ def _layer(method):
         floor = Plane((0.0, 0.0), (0.0, 1.0), kn, friction=0.4)
         system = mpm.MPMSystem(Grid.periodic_strip(WIDTH, 0.0, 3 * DEPTH, DX), MAT,
                                stable_dt(MAT, DX, sp, [floor]), frame=frame,
-                               boundaries=[floor, partitions], temperature=_model(DX))
+                               boundaries=[floor, partitions],
+                               temperature=_model(DX, sliding))
         state = mpm.init_state(system, lattice(0.0, WIDTH, 0.0, DEPTH, sp), sp * sp,
                                MAT.critical_density)
         return system, state
@@ -67,7 +68,7 @@ def _layer(method):
     wall = MeshWall((MAT.bulk_modulus + 4 * MAT.shear_modulus / 3) / mesh.h, 0.4)
     system = eulerian.EulerianSystem(mesh, MAT, stable_dt(MAT, DX, mesh.h, [wall]), frame=frame,
                                      wall=wall, partitions=partitions,
-                                     temperature=_model(mesh.h))
+                                     temperature=_model(mesh.h, sliding))
     fill = mesh.inside & (system.x[:, 1] < DEPTH)
     state = eulerian.init_state(system, np.where(fill, MAT.critical_density * mesh.h ** 2, 0.0))
     return system, state
@@ -92,6 +93,24 @@ def test_the_compiled_balance_is_the_step_by_step_one(method):
         a, b = getattr(fused, name), getattr(stepwise, name)
         scale = np.abs(b).max()
         assert np.abs(a - b).max() <= 1e-9 * scale, f"{name} differs"
+
+
+@pytest.mark.parametrize("method", ["lagrangian", "eulerian"])
+def test_the_compiled_balance_with_the_dense_sliding_loss_is_the_step_by_step_one(method):
+    solver = mpm if method == "lagrangian" else eulerian
+    system, fused = _layer(method, sliding=0.358)
+    _, stepwise = _layer(method, sliding=0.358)
+    _, off = _layer(method)
+    n = int(round(1.1 / (FREQUENCY * system.dt)))
+    solver.advance(system, fused, n)
+    solver.advance_stepwise(system, stepwise, n)
+    solver.advance(_layer(method)[0], off, n)
+    held = stepwise.mass > 0
+    # the pressed layer loses more: the sliding loss is on
+    assert stepwise.temperature[held].mean() < 0.9 * off.temperature[off.mass > 0].mean()
+    for name in ("temperature", "v", "stress", "mass"):
+        a, b = getattr(fused, name), getattr(stepwise, name)
+        assert np.abs(a - b).max() <= 1e-9 * np.abs(b).max(), f"{name} differs"
 
 
 def _on_threads(method, threads):

@@ -67,6 +67,7 @@ from .impact_temperature import compare_impact_relations, on_nodes
 from .impacts import impact_relations, impact_relations_on_cells
 from .kinetic import fit_cells, kinetic_table
 from .media_tests import cyclic_modulus, dem_tests, dilatancy_table
+from .shear_temperature import sliding_table
 from .rheology_fit import drucker_prager_equivalent
 from .run_fields import coarse_grain_run, write_fields
 from .tub_rheology import (bed_pressure, check_tub_cells, fit_tub_cells, median_dense,
@@ -243,6 +244,14 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
                 except InputError as e:
                     prog.log(f"compaction not measured: {e}")
         kin = kinetic_record(res, phases, prog, cg_info.get("energy_flux"))
+        if kin is not None and cell_points:
+            slide = sliding_table(cell_points, d, rho_s, kin["restitution"])
+            if slide is not None:
+                kin.update(slide)
+                prog.log(f"kinetic: the shear cell's sliding loss k_f = "
+                         f"{slide['sliding_coefficient']:.4g} +- "
+                         f"{slide['sliding_coefficient_stderr']:.2g} (off until "
+                         f"dense_dissipation = true)")
         if kin is not None:
             cal["kinetic"] = kin
         cal["scenario"] = scenario_source(sc)  # last: the tables before keep their place

@@ -249,6 +249,24 @@ class CoarseGrainer:
         self._mass += float(m.sum())
         self._volume += float(vol.sum())
 
+    def reset(self) -> None:
+        """Forget every snapshot added: the same grid and kernel, empty (one grid serves a
+        snapshot at a time, as a local mean's or a snapshot's own fields need)."""
+        self._ball[...] = 0.0
+        self._cont[...] = 0.0
+        self._weight[...] = 0.0
+        self._snapshots = 0
+        self._mass = 0.0
+        self._volume = 0.0
+
+    def averaged_arrays(self, gradient: str = "kernel") -> dict:
+        """The time-averaged fields over every snapshot added as plain arrays (nx, nz, ...)
+        (coarse_grain_fields.derive_fields' dict), without errors or coordinates."""
+        if self._weight.sum() <= 0:
+            raise InputError("averaged_arrays(): no snapshot with positive weight was added")
+        return self._fields_of(self._ball.sum(axis=(0, 1)), self._cont.sum(axis=(0, 1)),
+                               self._weight.sum(), gradient)
+
     # ------------------------------------------------------------------------------------------
     @property
     def n_snapshots(self) -> int:

@@ -13,6 +13,12 @@ Gidaspow's viscosity and Lun et al.'s dissipation over Jenkins' correlation leng
 max(1, c_L d gamma_dot / sqrt(T)).  Both sides scale with T (eta ~ sqrt(T), Gamma ~ T^(3/2) / L),
 so the root is unique; `closure_temperature` finds it by bisection in ln T.
 
+The dense dissipation (`dense_dissipation_coefficient`): the shear cell's balls spend their
+shear work tau gamma_dot mostly in sliding contacts, which Lun's Gamma omits.  A contact pressed
+with a force ~ p d^2 slipping at ~ sqrt(T) loses ~ mu p d^2 sqrt(T), so per volume the sliding
+loss is Gamma_f = k_f p sqrt(T) / d; in steady shear tau gamma_dot = Gamma + Gamma_f gives
+k_f = (tau gamma_dot - Gamma(phi, T)) d / (p sqrt(T)) from one measured point.
+
 Jenkins' c_L from the shear cell (`fit_correlation_coefficient`): the c_L at which the closure's
 T equals the measured T of one point, c_L = (L/d) sqrt(T) / (d gamma_dot) with L/d =
 Gamma_plain(T) / (eta(T) gamma_dot^2); zero when the plain closure's T is already below the
@@ -94,3 +100,46 @@ def fit_correlation_coefficient(phi: float, shear_rate: float, temperature: floa
     if ratio <= 1.0:
         return 0.0
     return ratio * math.sqrt(T) / (prm.diameter_m * gd)
+
+
+def dense_dissipation_coefficient(phi: float, shear_rate: float, temperature: float,
+                                  shear_stress: float, pressure: float,
+                                  prm: KineticParameters) -> float:
+    """k_f (-) of the sliding loss Gamma_f = k_f p sqrt(T) / d (module notes) that closes
+    steady shear's balance tau gamma_dot = Gamma(phi, T) + Gamma_f at the shear cell's measured
+    phi (-), shear_rate (1/s), temperature (m^2/s^2), shear_stress tau and pressure p (Pa);
+    Lun's Gamma without Jenkins' length."""
+    gd, T, p = abs(float(shear_rate)), float(temperature), float(pressure)
+    if not (T > 0 and p > 0):
+        raise ValueError(f"temperature, pressure = {temperature!r}, {pressure!r}: must be > 0")
+    plain = prm._replace(correlation_coefficient=0.0)
+    work = float(shear_stress) * gd
+    return (work - dissipation_W_m3(phi, T, gd, plain)) * prm.diameter_m / (p * math.sqrt(T))
+
+
+def sliding_table(rows, diameter: float, density: float, restitution: float,
+                  phi_rcp: float = 0.64) -> dict | None:
+    """The [kinetic] keys of the dense sliding loss from the shear cell's steady points (rows
+    of shear_cell.run_shear_cell: phi, shear_rate, granular_temperature, mu_eq and
+    mean_pressure, so tau = mu_eq p): sliding_coefficient, the mean of each point's k_f
+    (dense_dissipation_coefficient), its standard error (the points' scatter over sqrt(n)),
+    the per-point values and the source; dense_dissipation = false (the balance takes k_f only
+    when it is set true).  None without steady points."""
+    prm = kinetic_parameters(diameter, density, restitution, phi_rcp)
+    ks = []
+    for r in rows:
+        if not r.get("steady", True):
+            continue
+        p = float(r["mean_pressure"])
+        ks.append(dense_dissipation_coefficient(r["phi"], r["shear_rate"],
+                                                r["granular_temperature"], r["mu_eq"] * p, p,
+                                                prm))
+    if not ks:
+        return None
+    k = np.asarray(ks)
+    se = float(k.std(ddof=1) / math.sqrt(k.size)) if k.size >= 2 else math.nan
+    return {"sliding_coefficient": float(k.mean()), "sliding_coefficient_stderr": se,
+            "sliding_coefficient_source": (
+                "DEM shear cell: tau gamma_dot = Gamma_Lun(phi, T) + k_f p sqrt(T) / d at each "
+                "steady point, k_f = " + ", ".join(f"{v:.4g}" for v in k)),
+            "dense_dissipation": False}

@@ -45,9 +45,8 @@ def thermal_velocities(positions, velocities, radius, mass, mean_field: CoarseGr
     pos = np.asarray(positions, float)
     vel = np.asarray(velocities, float)
     mean_field.add_snapshot(pos, vel, radius, mass)
-    f = mean_field.fields()
-    V = np.nan_to_num(np.asarray(f["velocity"].values, float))
-    x, z = np.asarray(f.x.values, float), np.asarray(f.z.values, float)
+    V = np.nan_to_num(np.asarray(mean_field.averaged_arrays()["velocity"], float))
+    x, z = np.asarray(mean_field.x, float), np.asarray(mean_field.z, float)
     at = RegularGridInterpolator((x, z), V, bounds_error=False, fill_value=None)
     xz = np.stack([np.clip(pos[:, 0], x[0], x[-1]), np.clip(pos[:, 2], z[0], z[-1])], axis=1)
     return vel - at(xz)
@@ -67,7 +66,9 @@ class ThermalFluxGrainer:
         common = dict(cell_size=float(cell_size), depth=float(depth), rho_s=rho_s,
                       diameter=float(diameter), extent=extent)
         self.mean_width_m = float(mean_width_d) * float(diameter)
-        self._geometry, self._common = geometry, common
+        # one grid for the local mean, emptied before each snapshot
+        self._mean = CoarseGrainer(geometry, kernel="gaussian", width=self.mean_width_m,
+                                   **common)
         self._grainer = EnergyFluxGrainer(
             geometry, kernel=kernel, width=0.5 * diameter if width is None else float(width),
             cutoff=cutoff, n_phases=int(n_phases), n_batches=int(n_batches), **common)
@@ -79,9 +80,8 @@ class ThermalFluxGrainer:
         batch < 0: not used."""
         if batch < 0:
             return
-        mean = CoarseGrainer(self._geometry, kernel="gaussian", width=self.mean_width_m,
-                             **self._common)
-        c = thermal_velocities(positions_tub, velocities_rel_tub, radius, mass, mean)
+        self._mean.reset()
+        c = thermal_velocities(positions_tub, velocities_rel_tub, radius, mass, self._mean)
         self._grainer.add_snapshot(positions_tub=positions_tub, velocities_rel_tub=c,
                                    radius=radius, mass=mass, phase_bin=int(phase_bin),
                                    batch=int(batch), **contacts)

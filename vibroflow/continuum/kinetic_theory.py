@@ -29,6 +29,13 @@ the two-fluid codes (MFiX, OpenFOAM's kineticTheoryModels, sedFoam) use them:
   the grains' velocities are correlated over L > d and collisions dissipate less.  Jenkins'
   dependence of L on e and on the viscosity's collisional factor is folded into c_L, which the
   DEM shear cell measures; c_L = 0 is the plain theory;
+* dense (sliding) dissipation, an option: the enduring contacts of a pressed packing slip at
+  about sqrt(T) under forces of about p d^2, so they lose
+      Gamma_f = k_f p sqrt(T) / d,
+  p (Pa) the material's compressive mean stress; k_f (-) from the DEM shear cell, where it
+  closes steady shear's balance tau gamma_dot = Gamma + Gamma_f at one constant from I = 0.03 to
+  0.3 (calibration.shear_temperature.dense_dissipation_coefficient; docs/validation.md
+  section 29); k_f = 0 (off) by default;
 * frictional pressure of enduring contacts below packing (Johnson & Jackson 1987, J. Fluid
   Mech. 176, 67):
       p_f = Fr (phi - phi_min)^n / (phi_rcp - phi)^p   for phi > phi_min, else 0,
@@ -71,7 +78,8 @@ class KineticParameters(NamedTuple):
     g0_form: CHIALVO_SUNDARESAN (default) or LUN_SAVAGE;
     correlation_coefficient: Jenkins' c_L (-), 0 = off (default);
     frictional_Pa, frictional_phi_min, frictional_n, frictional_p: Johnson & Jackson's Fr (Pa,
-    0 = no frictional pressure, default), phi_min (-) and exponents n, p (-).
+    0 = no frictional pressure, default), phi_min (-) and exponents n, p (-);
+    sliding_coefficient: k_f (-) of the dense sliding loss k_f p sqrt(T) / d, 0 = off (default).
     """
 
     diameter_m: float = 0.00635
@@ -84,6 +92,7 @@ class KineticParameters(NamedTuple):
     frictional_phi_min: float = 0.5
     frictional_n: float = 2.0
     frictional_p: float = 5.0
+    sliding_coefficient: float = 0.0
 
 
 @nb.njit(cache=True)
@@ -179,3 +188,21 @@ def dissipation_W_m3(phi, T, shear_rate, prm):
     Tp = max(T, 0.0)
     return (1.5 * prm.density_kg_m3 * phi * cooling_coefficient(phi, Tp, shear_rate, prm)
             * Tp * math.sqrt(Tp))
+
+
+@nb.njit(cache=True)
+def sliding_dissipation_W_m3(pressure, T, prm):
+    """The dense sliding loss Gamma_f = k_f p sqrt(T) / d (W/m^3) at the compressive mean stress
+    pressure (Pa; tension counts 0) and T (m^2/s^2)."""
+    return (prm.sliding_coefficient * max(pressure, 0.0) * math.sqrt(max(T, 0.0))
+            / prm.diameter_m)
+
+
+@nb.njit(cache=True)
+def sliding_rate(phi, pressure, prm):
+    """b (m/s^2) of dT/dt = -b sqrt(T): Gamma_f / ((3/2) rho_s phi sqrt(T)); 0 without
+    material or without the option."""
+    if phi <= 0.0 or prm.sliding_coefficient <= 0.0:
+        return 0.0
+    return (prm.sliding_coefficient * max(pressure, 0.0)
+            / (prm.diameter_m * 1.5 * prm.density_kg_m3 * phi))

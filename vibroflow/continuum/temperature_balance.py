@@ -22,7 +22,7 @@ import numba as nb
 import numpy as np
 
 from .kinetic_stress import KINETIC_COLUMNS, RATE_RATIO, kinetic_stress
-from .temperature_step import TemperatureGrid, step_temperature_walls
+from .temperature_step import TemperatureGrid, step_temperature_pressed
 from .timestep import kinetic_temperature_limit
 from .wall_energy_flux import cell_wall_terms
 
@@ -85,10 +85,12 @@ def kinetic_stress_of(density, T, L, stress, gamma_dot, phase, ts, out):
 
 
 @nb.njit(cache=True)
-def balance_cells(T, phi, production, sums, ts):
+def balance_cells(T, phi, production, pressure, sums, ts):
     """The cells' T (m^2/s^2, (nx, nz)) after the step's balance for their solid fraction phi
-    (-) and production (W/m^3), with the walls' heating and loss from the cells' contact sums
-    (nx, nz, 4) when ts.walls (temperature_field.cell_step).  Returns a new array."""
+    (-), production (W/m^3) and compressive mean stress pressure (Pa, the dense sliding loss's,
+    read when ts.prm.sliding_coefficient > 0), with the walls' heating and loss from the cells'
+    contact sums (nx, nz, 4) when ts.walls (temperature_field.cell_step).  Returns a new
+    array."""
     zero = np.zeros_like(T)
     heat = zero
     cool = zero
@@ -96,14 +98,16 @@ def balance_cells(T, phi, production, sums, ts):
         heat, cool = cell_wall_terms(phi, T, sums, ts.grid.spacing_m, ts.restitution,
                                      ts.specularity, ts.landing, ts.grid.void_solid_fraction,
                                      ts.prm)
-    return step_temperature_walls(T, phi, production, heat, cool, zero, ts.dt, ts.grid, ts.prm)
+    return step_temperature_pressed(T, phi, production, heat, cool, zero, pressure, ts.dt,
+                                    ts.grid, ts.prm)
 
 
 @nb.njit(cache=True)
-def balance_points(T, x, mass, volume, power, sums, x0, z0, nx, nz, ts):
+def balance_points(T, x, mass, volume, power, pressure, sums, x0, z0, nx, nz, ts):
     """The points' T (N,) m^2/s^2, in place, after the step's balance on the cells (nx, nz) of
     side ts.grid.spacing_m from (x0, z0) (m) (temperature_field.point_step): T binned
-    mass-weighted, production power (N,) W/m^3 volume-weighted, phi = sum m / (rho_s h^2), each
+    mass-weighted, production power (N,) W/m^3 and compressive mean stress pressure (N,) Pa
+    volume-weighted, phi = sum m / (rho_s h^2), each
     point's T scaled by its cell's T_new / T_old (T_new where T_old = 0).  mass kg/m, volume
     m^2; sums (N, 4) the points' wall contact terms (wall_energy_flux.contact_terms), read
     when ts.walls."""
@@ -114,6 +118,7 @@ def balance_points(T, x, mass, volume, power, sums, x0, z0, nx, nz, ts):
     M = np.zeros(n)
     E = np.zeros(n)
     P = np.zeros(n)
+    Pr = np.zeros(n)
     S = np.zeros((n, 4))
     for p in range(npt):
         i = min(max(np.int64(math.floor((x[p, 0] - x0) / h)), 0), nx - 1)
@@ -123,6 +128,7 @@ def balance_points(T, x, mass, volume, power, sums, x0, z0, nx, nz, ts):
         M[c] += mass[p]
         E[c] += mass[p] * T[p]
         P[c] += power[p] * volume[p]
+        Pr[c] += pressure[p] * volume[p]
         if ts.walls:
             for j in range(4):
                 S[c, j] += sums[p, j]
@@ -132,11 +138,13 @@ def balance_points(T, x, mass, volume, power, sums, x0, z0, nx, nz, ts):
     phi = np.empty(n)
     for c in range(n):
         P[c] /= hh
+        Pr[c] /= hh
         if M[c] > 0.0:
             T_old[c] = E[c] / M[c]
         phi[c] = M[c] / (rho * h * h)
     T_new = balance_cells(T_old.reshape((nx, nz)), phi.reshape((nx, nz)),
-                          P.reshape((nx, nz)), S.reshape((nx, nz, 4)), ts).ravel()
+                          P.reshape((nx, nz)), Pr.reshape((nx, nz)), S.reshape((nx, nz, 4)),
+                          ts).ravel()
     for p in range(npt):
         c = idx[p]
         if T_old[c] > 0.0:

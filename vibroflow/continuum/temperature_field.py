@@ -39,7 +39,7 @@ from vibroflow.scenario.checks import find_contact
 
 from .kinetic_stress import KINETIC_COLUMNS, kinetic_stress
 from .kinetic_theory import G0_FORMS, KineticParameters
-from .temperature_step import TemperatureGrid, step_temperature_walls
+from .temperature_step import TemperatureGrid, step_temperature_pressed
 from .timestep import kinetic_temperature_limit
 from .wall_energy_flux import WallEnergy, cell_wall_terms, wall_energy_of
 
@@ -76,10 +76,16 @@ def kinetic_parameters(scenario) -> KineticParameters:
 def calibrated_kinetic_parameters(prm: KineticParameters, calibration) -> KineticParameters:
     """prm with the constants calibration.toml's [kinetic] measured on the DEM
     (vibroflow.calibration.kinetic): g0's form and phi_rcp, and Johnson & Jackson's frictional
-    pressure (Fr, phi_min, n, p) where the cells resolved one (Fr > 0); prm itself without a
-    calibration, a [kinetic] table or a fitted phi_rcp."""
+    pressure (Fr, phi_min, n, p) where the cells resolved one (Fr > 0), and the dense sliding
+    loss's k_f where the table asks for it (dense_dissipation = true, sliding_coefficient > 0);
+    prm itself without a calibration or a [kinetic] table."""
     kin = getattr(calibration, "kinetic", None) if calibration is not None else None
-    if kin is None or kin.phi_rcp is None or not math.isfinite(kin.phi_rcp):
+    if kin is None:
+        return prm
+    k_f = kin.sliding_coefficient
+    if kin.dense_dissipation and k_f is not None and math.isfinite(k_f) and k_f > 0:
+        prm = prm._replace(sliding_coefficient=float(k_f))
+    if kin.phi_rcp is None or not math.isfinite(kin.phi_rcp):
         return prm
     prm = prm._replace(phi_rcp=float(kin.phi_rcp),
                        g0_form=G0_FORMS.get(kin.g0_form or "chialvo_sundaresan", prm.g0_form))
@@ -131,11 +137,21 @@ def production_W_m3(stress, L, gamma_dot, s_kin, out):
         out[p] = tau * gamma_dot[p] + work
 
 
-def cell_step(T, phi, production, dt: float, model: TemperatureModel, wall_sums=None):
+@nb.njit(cache=True)
+def pressure_Pa(stress, out):
+    """out = the compressive mean stress max(0, -(s_xx + s_zz + s_yy) / 3) (Pa) of stress (N, 4)
+    [xx, zz, xz, yy] Pa: what the dense sliding loss reads (kinetic_theory)."""
+    for p in range(stress.shape[0]):
+        out[p] = max(0.0, -(stress[p, 0] + stress[p, 1] + stress[p, 3]) / 3.0)
+
+
+def cell_step(T, phi, production, dt: float, model: TemperatureModel, wall_sums=None,
+              pressure=None):
     """The cells' T (m^2/s^2, (nx, nz)) after dt (s) of the balance for their solid fraction
-    phi (-) and production (W/m^3) (temperature_step.step_temperature_walls), with the walls'
+    phi (-) and production (W/m^3) (temperature_step.step_temperature_pressed), with the walls'
     heating and loss from the cells' contact sums wall_sums (nx, nz, 4)
-    (wall_energy_flux.contact_terms) when the model has walls and they are given."""
+    (wall_energy_flux.contact_terms) when the model has walls and they are given, and the
+    dense sliding loss of the cells' compressive mean stress pressure (nx, nz) Pa when given."""
     T = np.ascontiguousarray(T, dtype=float)
     phi = np.ascontiguousarray(phi, dtype=float)
     zero = np.zeros_like(T)
@@ -146,8 +162,9 @@ def cell_step(T, phi, production, dt: float, model: TemperatureModel, wall_sums=
                                      float(model.spacing_m), float(w.restitution),
                                      float(w.specularity), bool(w.landing),
                                      model.grid.void_solid_fraction, model.params)
-    return step_temperature_walls(T, phi, np.ascontiguousarray(production, dtype=float), heat,
-                                  cool, zero, float(dt), model.grid, model.params)
+    pr = zero if pressure is None else np.ascontiguousarray(pressure, dtype=float)
+    return step_temperature_pressed(T, phi, np.ascontiguousarray(production, dtype=float), heat,
+                                    cool, zero, pr, float(dt), model.grid, model.params)
 
 
 def point_cells(x, x0: float, z0: float, h: float, shape) -> np.ndarray:
@@ -160,13 +177,14 @@ def point_cells(x, x0: float, z0: float, h: float, shape) -> np.ndarray:
 
 
 def point_step(T, x, mass, volume, power, origin, shape, dt: float, model: TemperatureModel,
-               wall_sums=None):
+               wall_sums=None, pressure=None):
     """The points' T (N,) m^2/s^2, in place, after dt (s) of the balance made on the cells of
     `shape` (nx, nz) from origin (x0, z0) (m) (module docstring): T binned mass-weighted,
     production power (N,) W/m^3 volume-weighted, phi = sum m / (rho_s h^2), each point's T
     scaled by its cell's T_new / T_old (set to T_new where T_old = 0).  mass kg/m, volume
     m^2; wall_sums (N, 4) the points' wall contact terms (wall_energy_flux.contact_terms),
-    summed over each cell, or None."""
+    summed over each cell, or None; pressure (N,) Pa the points' compressive mean stress,
+    binned volume-weighted as the production, or None."""
     h = model.spacing_m
     n = shape[0] * shape[1]
     idx = point_cells(x, origin[0], origin[1], h, shape)
@@ -179,8 +197,9 @@ def point_step(T, x, mass, volume, power, origin, shape, dt: float, model: Tempe
     if wall_sums is not None:
         sums = np.stack([np.bincount(idx, wall_sums[:, j], n) for j in range(4)], axis=1)
         sums = sums.reshape(tuple(shape) + (4,))
+    Pr = None if pressure is None else np.bincount(idx, pressure * volume, n) / (h * h)
     T_new = cell_step(T_old.reshape(shape), phi.reshape(shape), P.reshape(shape), dt,
-                      model, sums).ravel()
+                      model, sums, None if Pr is None else Pr.reshape(shape)).ravel()
     warm = T_old[idx] > 0
     T[warm] *= T_new[idx[warm]] / T_old[idx[warm]]
     T[~warm] = T_new[idx[~warm]]

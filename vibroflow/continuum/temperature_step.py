@@ -40,7 +40,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from .kinetic_theory import conductivity_kg_m_s, cooling_coefficient
+from .kinetic_theory import conductivity_kg_m_s, cooling_coefficient, sliding_rate
 
 
 class TemperatureGrid(NamedTuple):
@@ -58,6 +58,26 @@ def exact_cooling(T, a, dt):
         return 0.0
     s = 1.0 + 0.5 * a * math.sqrt(T) * dt
     return T / (s * s)
+
+
+@nb.njit(cache=True)
+def exact_cooling_sliding(T, a, b, dt):
+    """T (m^2/s^2) after dt (s) of dT/dt = -a T^(3/2) - b T^(1/2) (a, b >= 0; b the dense
+    sliding loss's rate, kinetic_theory.sliding_rate): with s = sqrt(T), ds/dt = -(a s^2 + b)/2,
+    so s = r tan(atan(s0 / r) - sqrt(a b) dt / 2), r = sqrt(b / a), until s reaches 0 (a = 0:
+    s0 - b dt / 2); exact_cooling when b = 0."""
+    if b <= 0.0:
+        return exact_cooling(T, a, dt)
+    if T <= 0.0:
+        return 0.0
+    s0 = math.sqrt(T)
+    if a <= 0.0:
+        s = s0 - 0.5 * b * dt
+    else:
+        r = math.sqrt(b / a)
+        theta = math.atan(s0 / r) - 0.5 * math.sqrt(a * b) * dt
+        s = r * math.tan(theta) if theta > 0.0 else 0.0
+    return s * s if s > 0.0 else 0.0
 
 
 @nb.njit(cache=True)
@@ -157,10 +177,22 @@ def step_temperature_walls(T, phi, production_W_m3, wall_heating_W_m3, wall_cool
     """`step_temperature` with the walls' collision loss dT/dt = -a_w T^(3/2) (wall_cooling =
     a_w, (nx, nz), wall_energy_flux.wall_cooling_coefficient) added to the dissipation's
     coefficient, so that it is integrated exactly with it (step 1 and 4)."""
+    return step_temperature_pressed(T, phi, production_W_m3, wall_heating_W_m3, wall_cooling,
+                                    shear_rate, np.zeros(T.shape), dt, grid, prm)
+
+
+@nb.njit(cache=True)
+def step_temperature_pressed(T, phi, production_W_m3, wall_heating_W_m3, wall_cooling,
+                             shear_rate, pressure_Pa, dt, grid, prm):
+    """`step_temperature_walls` with the dense sliding loss of the cells' compressive mean
+    stress pressure_Pa (nx, nz) (kinetic_theory.sliding_dissipation_W_m3, on when
+    prm.sliding_coefficient > 0), integrated exactly with the collisional loss in steps 1 and 4
+    (exact_cooling_sliding)."""
     nx, nz = T.shape
     h = grid.spacing_m
     out = T.copy()
     a = np.zeros((nx, nz))
+    b = np.zeros((nx, nz))
     capacity = np.zeros((nx, nz))
     for i in range(nx):
         for k in range(nz):
@@ -168,11 +200,12 @@ def step_temperature_walls(T, phi, production_W_m3, wall_heating_W_m3, wall_cool
                 capacity[i, k] = 1.5 * prm.density_kg_m3 * phi[i, k]
                 a[i, k] = (cooling_coefficient(phi[i, k], out[i, k], shear_rate[i, k], prm)
                            + wall_cooling[i, k])
+                b[i, k] = sliding_rate(phi[i, k], pressure_Pa[i, k], prm)
     kappa = np.zeros((nx, nz))
     for i in range(nx):
         for k in range(nz):
             if capacity[i, k] > 0.0:
-                t = exact_cooling(out[i, k], a[i, k], 0.5 * dt)
+                t = exact_cooling_sliding(out[i, k], a[i, k], b[i, k], 0.5 * dt)
                 t += dt * (production_W_m3[i, k] + wall_heating_W_m3[i, k]) / capacity[i, k]
                 out[i, k] = max(t, 0.0)
                 kappa[i, k] = conductivity_kg_m_s(phi[i, k], out[i, k], prm)
@@ -180,7 +213,7 @@ def step_temperature_walls(T, phi, production_W_m3, wall_heating_W_m3, wall_cool
     for i in range(nx):
         for k in range(nz):
             if capacity[i, k] > 0.0:
-                out[i, k] = exact_cooling(out[i, k], a[i, k], 0.5 * dt)
+                out[i, k] = exact_cooling_sliding(out[i, k], a[i, k], b[i, k], 0.5 * dt)
     return out
 
 

@@ -301,8 +301,9 @@ class Kinetic(Table):
     """[kinetic]: kinetic theory's constants measured on the DEM: the ball-ball restitution e,
     the close packing phi_rcp of g0 fitted with Johnson & Jackson's frictional pressure (Fr,
     phi_min, exponents n, p) to p = rho_s phi T (1 + 2 (1 + e) phi g0) + p_f in the
-    coarse-grained cells, the scatter of Lun's pressure alone beside it, and the walls' energy
-    flux."""
+    coarse-grained cells, the scatter of Lun's pressure alone beside it, the walls' energy
+    flux, and the dense sliding loss's k_f (sliding_coefficient, from the shear cell), which the
+    temperature's balance takes only where dense_dissipation = true."""
     model: Text | None = None
     g0_form: Text | None = None
     restitution: Number | None = None
@@ -321,6 +322,10 @@ class Kinetic(Table):
     frictional_n: Number | None = None
     frictional_p: Number | None = None
     lun_rms_log_residual: Number | None = None
+    sliding_coefficient: Number | None = None
+    sliding_coefficient_stderr: Number | None = None
+    sliding_coefficient_source: Text | None = None
+    dense_dissipation: bool | None = None
     wall_flux: WallFlux | None = None
     conductivity: Conductivity | None = None
 

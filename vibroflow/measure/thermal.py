@@ -21,6 +21,12 @@ which a symmetric kernel reproduces exactly) give c = 0; Maxwellian noise of tem
 about them gives <|c|^2> / 3 = T (1 - 2 w_ii + sum_j w_ij^2), w_ij the normalised weights; for
 n grains per x-z area, N_eff = (sum W)^2 / sum W^2 = 4 pi w^2 n, w_ii = 2 / N_eff and
 sum w_ij^2 = 1 / N_eff, so T (1 - 3 / N_eff).
+
+The tub's calibration takes the same local mean from its coarse-graining grid instead
+(calibration.thermal_flux.thermal_velocities: the grid's field, bilinear at each ball), because
+its fields are on that grid anyway; the vibrated layer's strip has no such grid, and this exact
+sum at each grain is cheap for its balls, so both stay (the measure layer cannot use the
+calibration's grid).
 """
 from __future__ import annotations
 

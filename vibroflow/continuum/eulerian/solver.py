@@ -56,7 +56,7 @@ from ..grid_update import LabFrame
 from ..mpm.solver import ContinuumBlowUp
 from ..state import ContinuumState
 from ..temperature_balance import loop_arguments, phi_cap_of
-from ..temperature_field import advance_with_temperature, cell_step
+from ..temperature_field import advance_with_temperature, cell_step, pressure_Pa
 from . import fused, temperature_loop
 from .advection import remap_serial, remap_work
 from .lagrangian_step import fill_limit, material_fraction
@@ -317,10 +317,15 @@ def advance_stepwise(system: EulerianSystem, state: EulerianState, n: int) -> No
         phi = state.mass / (model.params.density_kg_m3 * h * h)
         sums = None if model.walls is None else \
             cell_wall_sums(system, state, landing_start)
+        pressure = None
+        if model.params.sliding_coefficient > 0.0:
+            pressure = np.zeros(state.n)
+            pressure_Pa(state.stress, pressure)
+            pressure = (pressure * frac).reshape(shape)
         state.temperature[:] = cell_step(T[0], phi.reshape(shape), (power * frac).reshape(shape),
                                          system.dt, model,
-                                         None if sums is None else sums.reshape(shape + (4,))
-                                         ).ravel()
+                                         None if sums is None else sums.reshape(shape + (4,)),
+                                         pressure).ravel()
 
     advance_with_temperature(state, n, model,
                              lambda k, p_kin: _advance(system, state, k, p_kin), balance, start,

@@ -22,7 +22,7 @@ import numpy as np
 from ..column_landing import column_terms
 from ..compaction_landing import compaction_terms, x_face_terms
 from ..temperature_balance import balance_cells, kinetic_stress_of
-from ..temperature_field import production_W_m3
+from ..temperature_field import pressure_Pa, production_W_m3
 from ..wall_energy_flux import contact_terms, landing_terms, partition_terms
 from . import fused
 from .advection import remap_serial
@@ -127,6 +127,8 @@ def _make_kernel(parallel: bool):
         power = np.empty(n)
         sums = np.zeros((n, 4))
         production = np.empty(n)
+        pressure = np.zeros(n)
+        sliding = ts.prm.sliding_coefficient > 0.0
         phi = np.empty(n)
         rho_s = ts.prm.density_kg_m3
         landing = ts.walls and ts.landing
@@ -153,6 +155,8 @@ def _make_kernel(parallel: bool):
             if status != fused.OK:
                 return s + done, t, status, lowest, mass_error_max
             production_W_m3(cells.stress, cells.L, cells.gamma_dot, p_kin, power)
+            if sliding:
+                pressure_Pa(cells.stress, pressure)
             if ts.walls:
                 cell_wall_sums(boundaries, mesh, grid, work, step.frame, t - 0.5 * ts.dt, mass,
                                v, cells.volume, cells.stress, cells.fext, step.rho_c, ts.dt,
@@ -166,9 +170,12 @@ def _make_kernel(parallel: bool):
             for p in range(n):
                 frac = min(1.0, mass[p] / (density[p] * h * h)) if density[p] > 0.0 else 0.0
                 production[p] = power[p] * frac
+                if sliding:
+                    pressure[p] *= frac
                 phi[p] = mass[p] / (rho_s * h * h)
             T_new = balance_cells(T.reshape((ncx, ncz)), phi.reshape((ncx, ncz)),
-                                  production.reshape((ncx, ncz)), sums.reshape((ncx, ncz, 4)),
+                                  production.reshape((ncx, ncz)),
+                                  pressure.reshape((ncx, ncz)), sums.reshape((ncx, ncz, 4)),
                                   ts).ravel()
             T[:] = T_new
         return nsteps, t, fused.OK, 0.0, mass_error_max

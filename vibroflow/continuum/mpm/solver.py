@@ -35,7 +35,7 @@ from ..grid_step import chunk_bounds, grid_spec, grid_work
 from ..grid_update import LabFrame
 from ..state import ContinuumState
 from ..temperature_balance import loop_arguments, phi_cap_of
-from ..temperature_field import advance_with_temperature, point_step
+from ..temperature_field import advance_with_temperature, point_step, pressure_Pa
 from ..timestep import stable_dt
 from ..wall_energy_flux import contact_terms, normal_of_force, partition_terms
 from .temperature_loop import advance_temperature_kernel
@@ -294,8 +294,12 @@ def advance_stepwise(system: MPMSystem, state: MPMState, n: int) -> None:
 
     def balance(power, _start):
         sums = None if system.temperature.walls is None else point_wall_sums(system, state)
+        pressure = None
+        if system.temperature.params.sliding_coefficient > 0.0:
+            pressure = np.zeros(state.n)
+            pressure_Pa(state.stress, pressure)
         point_step(state.temperature, state.x, state.mass, state.volume, power, (g.x0, g.z0),
-                   (g.nx, g.nz), system.dt, system.temperature, sums)
+                   (g.nx, g.nz), system.dt, system.temperature, sums, pressure)
 
     advance_with_temperature(state, n, system.temperature,
                              lambda k, p_kin: _advance(system, state, k, p_kin), balance,

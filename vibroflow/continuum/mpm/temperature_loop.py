@@ -21,7 +21,7 @@ import numpy as np
 from ..boundary import PARTITIONS, PLANE_WALL, plane_motion
 from ..fused import OK, advance_kernel
 from ..temperature_balance import balance_points, kinetic_stress_of
-from ..temperature_field import production_W_m3
+from ..temperature_field import pressure_Pa, production_W_m3
 from ..wall_energy_flux import contact_terms, partition_terms
 
 
@@ -81,6 +81,8 @@ def advance_temperature_kernel(nsteps, t, points, step, boundaries, grid, work, 
     x0, z0, nx, nz = cells
     npt = T.shape[0]
     power = np.empty(npt)
+    pressure = np.zeros(npt)
+    sliding = ts.prm.sliding_coefficient > 0.0
     sums = np.zeros((npt, 4))
     normal = np.zeros((npt, 2))
     v_rel = np.zeros((npt, 2))
@@ -93,8 +95,10 @@ def advance_temperature_kernel(nsteps, t, points, step, boundaries, grid, work, 
         if status != OK:
             return s + done, t, status, which
         production_W_m3(points.stress, points.L, points.gamma_dot, p_kin, power)
+        if sliding:
+            pressure_Pa(points.stress, pressure)
         if ts.walls:
             point_wall_sums(boundaries.records, hist, v, mass, volume, points.stress, t, ts.dt,
                             sums, normal, v_rel, length)
-        balance_points(T, x, mass, volume, power, sums, x0, z0, nx, nz, ts)
+        balance_points(T, x, mass, volume, power, pressure, sums, x0, z0, nx, nz, ts)
     return nsteps, t, OK, -1
