@@ -186,7 +186,8 @@ class ContinuumOptions:
             raise InputError(f"landing = {self.landing!r}: must be pairs or columns")
         if self.landing != "pairs" and not self.temperature:
             raise InputError(f"landing = {self.landing!r}: only with the temperature "
-                             "(--temperature); without it only pairs")
+                             "(--temperature, in a study METHOD.temperature=true); without it "
+                             "only pairs")
 
     def transfers(self, dx: float | None = None, default_length: float | None = None) -> int:
         """The APIC transfers a step makes on a grid of spacing dx (m): timestep.
