@@ -60,7 +60,7 @@ def test_samples_average_the_temperature_mass_weighted_in_each_cell(tmp_path):
 def test_continuum_command_with_temperature_writes_its_map(method, args, run_cli, tmp_path):
     """`vibroflow continuum --temperature` on a short tub47-quick: temperature.csv on every
     analysis cell, T > 0 in the cells that held material and 0 in the others, and the summary's
-    granular_temperature block with its units."""
+    granular_temperature block with its units and the run's initial T and landing."""
     out = tmp_path / "o"
     r = run_cli("continuum", "tub47-quick", "--out", out, "--method", method, *args,
                 "--temperature",
@@ -75,6 +75,8 @@ def test_continuum_command_with_temperature_writes_its_map(method, args, run_cli
     block = json.loads((out / "summary.json").read_text())["continuum"]["granular_temperature"]
     assert block["mean_m2_s2"] > 0 and block["map_csv"] == "temperature.csv"
     assert block["map_units"]["granular_temperature_m2_s2"] == "m2 s-2"
+    # the run's temperature options, as given (the landing at its default)
+    assert block["initial_m2_s2"] == 0.001 and block["landing"] == "pairs"
 
 
 def test_a_bad_initial_temperature_is_one_line(run_cli, tmp_path):

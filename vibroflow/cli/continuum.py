@@ -12,6 +12,8 @@ import typer
 from vibroflow.continuum.formulation import FORMULATIONS
 from vibroflow.errors import InputError
 
+from vibroflow.continuum.options import LANDINGS
+
 from .apps import app
 from .failures import blown_up, input_errors
 from .options import (OptionalScenarioArg, OutOption, ResumeOption, SetOption, VtkEveryOption,
@@ -91,6 +93,12 @@ def continuum(
     initial_temperature: Annotated[float, typer.Option(
         "--initial-temperature", help="With --temperature: T of the bed at the start "
                                       "(m^2/s^2, >= 0); default 0.")] = 0.0,
+    landing: Annotated[str, typer.Option(
+        "--landing", help="With --temperature, Eulerian only: where the wall cells' landing "
+                          "above the wall row becomes T: pairs (the pairs of cells across each "
+                          "z face, compaction_landing.py) or columns (along each column by the "
+                          "impulse through its z faces, column_landing.py); default "
+                          "pairs.")] = "pairs",
     set_: SetOption = None,
     vtk: Annotated[bool, typer.Option("--vtk", help="Also write ParaView files of the material "
                                                     "points and the grid fields over the last "
@@ -111,6 +119,7 @@ def continuum(
     from vibroflow.io.vtk_frame import cli_vtk_options
 
     paraview = cli_vtk_options(vtk, vtk_frame, vtk_every, vtk_from)
+    check_landing(landing, method, temperature)
     if stop_after_steps is not None and stop_after_steps < 0:
         raise InputError(f"--stop-after-steps = {stop_after_steps}: must be >= 0")
     if scenario is not None and like is not None:
@@ -156,7 +165,7 @@ def continuum(
                            stiffness_factor=stiffness_factor, compaction=compaction, flip=flip,
                            bed_viscosity=bed_viscosity, damping_length=damping_length,
                            temperature=temperature, initial_temperature=initial_temperature,
-                           **step)
+                           landing=landing, **step)
     material_for(s, cal, options)  # validates the parameters before --out is made
     try:
         summary = run_continuum(s, out, method, calibration=cal, options=options,
@@ -172,3 +181,18 @@ def continuum(
     typer.echo(f"circulation {c['sense']}, strength {c['strength']:.4g} m^2/s; "
                f"{summary['n_particles']} points, {summary['wall_time_s']:.1f} s")
     typer.echo(f"results in {out}")
+
+
+def check_landing(landing: str, method: str, temperature: bool) -> None:
+    """--landing's checks, named by its flag: one of LANDINGS, and columns only for the
+    Eulerian formulation with --temperature."""
+    if landing not in LANDINGS:
+        raise InputError(f"--landing = {landing!r}: must be {' or '.join(LANDINGS)}")
+    if landing == "pairs":
+        return
+    if method != "eulerian":
+        raise InputError(f"--landing = {landing!r}: columns is Eulerian only (--method "
+                         f"eulerian); with --method {method} only pairs")
+    if not temperature:
+        raise InputError(f"--landing = {landing!r}: only with --temperature; without it only "
+                         "pairs")

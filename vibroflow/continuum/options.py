@@ -64,6 +64,10 @@ DEFAULT_DX_DIAMETERS = 3.0
 DEFAULT_CFL = 0.3
 DEFAULT_GRID = f"{DEFAULT_DX_DIAMETERS:g} ball diameters"
 DEFAULT_DAMPING = "the default grid's spacing"
+#: ContinuumOptions.landing: where the Eulerian wall cells' landing above the wall row is
+#: counted, by the pairs of cells across each z face (compaction_landing.py) or along each
+#: column by the impulse through its z faces (column_landing.py)
+LANDINGS = ("pairs", "columns")
 
 
 def damping_transfer_cfl(transfer_cfl: float | None, dx: float, damping_length: float
@@ -107,7 +111,10 @@ class ContinuumOptions:
     (their damping then falls with the grid); temperature: the granular temperature T
     (m^2/s^2) carried by the material, with its balance and its stress (temperature_field.py,
     kinetic_stress.py; default False: not carried, the step as without it),
-    initial_temperature (m^2/s^2, >= 0): T of the material at the start (default 0).
+    initial_temperature (m^2/s^2, >= 0): T of the material at the start (default 0);
+    landing (LANDINGS): how the Eulerian formulation counts the landing above the wall row
+    (wall_energy_flux.WallEnergy.columns; default "pairs"; "columns" only with the
+    temperature, and the Eulerian formulation's check refuses it elsewhere).
 
     stiffness_factor s < 1 is the continuum's counterpart of the DEM's reduced Young's modulus:
     the elastic moduli K and G (and with them the default wall stiffness) are multiplied by s,
@@ -125,7 +132,7 @@ class ContinuumOptions:
     #: stages hashed without them stay up to date (vibroflow.study.stages)
     LATER_OPTIONS: ClassVar[tuple[str, ...]] = ("dilatancy", "stiffness_factor", "compaction",
                                                 "flip", "bed_viscosity", "damping_length",
-                                                "temperature", "initial_temperature")
+                                                "temperature", "initial_temperature", "landing")
 
     transfer_cfl: float | None
     dx: float | None = None
@@ -141,6 +148,7 @@ class ContinuumOptions:
     damping_length: float | None = None
     temperature: bool = False
     initial_temperature: float = 0.0
+    landing: str = "pairs"
 
     def __post_init__(self):
         if not (isinstance(self.flip, (int, float)) and 0.0 <= self.flip <= 1.0):
@@ -174,6 +182,12 @@ class ContinuumOptions:
                 and math.isfinite(self.initial_temperature) and self.initial_temperature >= 0):
             raise InputError(f"initial_temperature = {self.initial_temperature!r}: must be a "
                              "temperature >= 0 m^2/s^2")
+        if self.landing not in LANDINGS:
+            raise InputError(f"landing = {self.landing!r}: must be pairs or columns")
+        if self.landing != "pairs" and not self.temperature:
+            raise InputError(f"landing = {self.landing!r}: only with the temperature "
+                             "(--temperature, in a study METHOD.temperature=true); without it "
+                             "only pairs")
 
     def transfers(self, dx: float | None = None, default_length: float | None = None) -> int:
         """The APIC transfers a step makes on a grid of spacing dx (m): timestep.
@@ -203,12 +217,14 @@ class ContinuumOptions:
 def options_record(options: ContinuumOptions) -> dict:
     """The options as a plain dict for a fingerprint or a study's inputs, an unset dx spelled
     out as the rule that sets it (DEFAULT_GRID).  The temperature's options are left out while
-    the field is not carried, so that the record (and a run's fingerprint) is the one of a run
-    made without them."""
+    the field is not carried, and the landing at its default (pairs), so that the record (and a
+    run's fingerprint) is the one of a run made without them."""
     record = dataclasses.asdict(options)
     if not record.get("temperature", False):
         record.pop("temperature", None)
         record.pop("initial_temperature", None)
+    if record.get("landing") == "pairs" or not record.get("temperature", False):
+        record.pop("landing", None)
     if record.get("dx") is None:
         record["dx"] = DEFAULT_GRID
     elif record.get("damping_length") is None:

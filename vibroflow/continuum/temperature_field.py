@@ -101,14 +101,15 @@ def calibrated_kinetic_parameters(prm: KineticParameters, calibration) -> Kineti
 def temperature_model(scenario, options, spacing_m: float,
                       calibration=None) -> TemperatureModel | None:
     """The run's TemperatureModel on cells of side spacing_m (m), its walls feeding energy
-    in (wall_energy_flux.wall_energy_of), or None when the option is off; the grains'
-    constants from the calibration's [kinetic] table where it has one
-    (calibrated_kinetic_parameters)."""
+    in (wall_energy_flux.wall_energy_of, its landing counted along the columns with
+    options.landing "columns"), or None when the option is off; the grains' constants from the
+    calibration's [kinetic] table where it has one (calibrated_kinetic_parameters)."""
     if not options.temperature:
         return None
     prm = calibrated_kinetic_parameters(kinetic_parameters(scenario), calibration)
+    walls = wall_energy_of(scenario)._replace(columns=options.landing == "columns")
     return TemperatureModel(prm, float(spacing_m), float(options.initial_temperature),
-                            walls=wall_energy_of(scenario))
+                            walls=walls)
 
 
 @nb.njit(cache=True)

@@ -301,6 +301,9 @@ def _results(form: Formulation, scenario, out: Path, calibration, options, vtk, 
                          material.diameter)
     wrote = write_temperature_csv(out / TEMPERATURE_CSV_NAME, samples, phase)
     summary["continuum"].update(temperature_outputs(samples, batch, run.batches, wrote))
+    if options.temperature:
+        summary["continuum"]["granular_temperature"].update(
+            initial_m2_s2=options.initial_temperature, landing=options.landing)
     summary["continuum"].update(impacts_from_temperature(
         calibration, samples, phase, geo.radius, batch, run.batches, summary["impacts"]))
     parts = continuum_parts(scenario)

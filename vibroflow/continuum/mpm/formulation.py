@@ -200,7 +200,14 @@ class MaterialPointMethod(Formulation):
     description = "material point method (vibroflow.continuum.mpm)"
 
     def options(self, **settings) -> ContinuumOptions:
-        return ContinuumOptions(**{"transfer_cfl": DEFAULT_TRANSFER_CFL, **settings})
+        """No column landing: the points' landing is the wall dashpot's (wall_energy_flux.py),
+        with no columns of cells to count it along."""
+        options = ContinuumOptions(**{"transfer_cfl": DEFAULT_TRANSFER_CFL, **settings})
+        if options.landing != "pairs":
+            raise InputError(f"landing = {options.landing!r}: the Lagrangian formulation's "
+                             "landing is its wall contacts' (only pairs); columns is Eulerian "
+                             "only")
+        return options
 
     def default_grid(self, scenario) -> float:
         """options.default_dx: 3 ball diameters."""
