@@ -1,0 +1,92 @@
+"""Does the DEM's thermal temperature collapse the tub's mu(I) scatter?  (docs/validation.md
+section 30; calibration/mu_temperature.py.)
+
+    python benchmarks/mu_temperature.py FIELDS_NC BALANCE CALIBRATION_TOML
+
+FIELDS_NC: the DEM run's fields.nc (`vibroflow calibrate`; its phase-resolved group);
+BALANCE: the thermal balance on the same grid, a NetCDF that `benchmarks/thermal_balance.py
+--save` wrote (or a DEM run directory with ball contacts, coarse-grained here); it gives the
+thermal temperature and the measured dissipation per cell and phase.  CALIBRATION_TOML: the
+run's calibration ([kinetic]: e, phi_rcp, g0's form; [rheology]: the calibrated mu(I)).
+
+Printed: the dense cells' spread (percentiles of mu, I, T, Theta, r), each abscissa's best
+curve and rms log residual (and the calibrated mu(I)'s at that abscissa), and the binned
+medians of mu with their batch-means errors and quartiles.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+from vibroflow.calibration import mu_temperature as mt
+from vibroflow.calibration.run_fields import read_fields
+from vibroflow.calibration.thermal_balance import thermal_balance_run
+from vibroflow.continuum.kinetic_theory import G0_FORMS, KineticParameters
+from vibroflow.scenario import load_scenario
+
+LABELS = {"I": "(a) I", "rI": "(b) r I, T_bal from Lun's Gamma",
+          "rI_dem": "(b') r_D I, T_bal from the DEM's dissipation",
+          "Theta": "(c) Theta^a F(I) (Kim & Kamrin)"}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("fields")
+    ap.add_argument("balance")
+    ap.add_argument("calibration")
+    ap.add_argument("--case", default="tub47-quick")
+    a = ap.parse_args(argv)
+    ph = read_fields(a.fields, phase_resolved=True)
+    src = Path(a.balance)
+    bal = xr.load_dataset(src) if src.is_file() else thermal_balance_run(src)
+    if not (np.allclose(ph.x, bal.x) and np.allclose(ph.z, bal.z)):
+        print(f"BALANCE = {a.balance!r}: its grid is not the fields' grid", file=sys.stderr)
+        return 2
+    cal = tomllib.loads(Path(a.calibration).read_text())
+    kin = cal["kinetic"]
+    sc = load_scenario(a.case)
+    prm = KineticParameters(diameter_m=float(sc.fill.diameter),
+                            density_kg_m3=float(sc.materials[sc.fill.material].density),
+                            restitution=float(kin["restitution"]), phi_rcp=float(kin["phi_rcp"]),
+                            g0_form=G0_FORMS[kin["g0_form"]])
+    pts = mt.cell_points(ph, bal.thermal_temperature.values, prm, bal.dissipation.values)
+    print(f"{pts['mu'].size} dense cells x phases (phi >= {mt.DENSE_SOLID_FRACTION}, shear rate "
+          f"above {mt.RESOLVED:g} batch-means errors)")
+    r, rd = pts["rI"] / pts["I"], pts["rI_dem"] / pts["I"]
+    for name, v in (("mu", pts["mu"]), ("I", pts["I"]), ("T (m2/s2)", pts["T"]),
+                    ("Theta", pts["Theta"]), ("r (Lun)", r), ("r_D (DEM dissipation)", rd)):
+        q = np.nanpercentile(v, [5, 25, 50, 75, 95])
+        print(f"  {name}: 5/25/50/75/95 % " + " / ".join(f"{x:.3g}" for x in q))
+    print(f"  share of cells hotter than their shear keeps (r < 1): Lun {np.mean(r < 1):.2f}, "
+          f"DEM dissipation {np.nanmean(rd < 1):.2f}")
+    tab = mt.collapse_table(pts, cal["rheology"])
+    print(f"\nrms log residual of mu about its median (no abscissa): {tab['baseline']:.3f}")
+    print("| abscissa | cells | best curve | rms log residual | narrowed by | calibrated mu(x) |")
+    print("|---|---|---|---|---|---|")
+    for key, label in LABELS.items():
+        if key not in tab:
+            continue
+        f = tab[key]
+        curve = (f"mu_s {f['mu_s']:.3f}, mu_2 {f['mu_2']:.3f}, x_0 {f['x_0']:.3g}"
+                 + (f", a {f['a']:.3f}" if key == "Theta" else ""))
+        cal_r = f.get("calibrated_rms_log_residual")
+        print(f"| {label} | {f['points']} | {curve} | {f['rms_log_residual']:.3f} | "
+              f"{1 - f['rms_log_residual'] / tab['baseline']:.1%} | "
+              + (f"{cal_r:.3f}" if cal_r is not None else "-") + " |")
+    for key in ("I", "rI", "rI_dem"):
+        x = pts[key]
+        edges = np.geomspace(np.nanpercentile(x, 1), np.nanpercentile(x, 99) * 1.0001, 9)
+        print(f"\n{LABELS[key]}: binned medians of mu (+- batch-means error) [quartiles]")
+        for b in mt.binned_medians(x, pts["mu"], pts["mu_stderr"], edges):
+            print(f"  {b['lo']:.3g} - {b['hi']:.3g} (n {b['n']}, median {b['x']:.3g}): "
+                  f"{b['mu']:.3f} +- {b['mu_stderr']:.3f} [{b['mu_q1']:.3f}, {b['mu_q3']:.3f}]")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
