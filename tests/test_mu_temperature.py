@@ -63,6 +63,7 @@ def test_cells_from_mu_of_rI_collapse_on_rI_only():
     assert tab["rI"]["rms_log_residual"] < 1e-6
     assert tab["rI"]["calibrated_rms_log_residual"] < 1e-12
     assert tab["I"]["rms_log_residual"] > 0.05
+    assert tab["noise"] == pytest.approx(np.sqrt(np.mean((0.01 / mu) ** 2)), rel=1e-12)
 
 
 def test_kim_kamrin_exponent_comes_back():

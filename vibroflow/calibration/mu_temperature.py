@@ -13,7 +13,9 @@ cells' friction mu = tau / p against three abscissae (docs/validation.md section
 
 F is Jop's mu_s + (mu_2 - mu_s) / (1 + X_0 / X) throughout, fitted to log mu (the scatter is a
 factor, 0.1 - 1), so each abscissa's rms log residual says how far the best curve of that family
-leaves the cells; the scatter about the cells' median mu is the baseline it narrows.
+leaves the cells; the scatter about the cells' median mu is the baseline it narrows, and the
+cells' own batch-means error as an rms log, sqrt(mean((se_mu / mu)^2)), the noise floor no
+abscissa can go below (the excess over it: sqrt(rms^2 - noise^2)).
 
 A cell is used where its solid fraction is >= dense_solid_fraction (0.5: dense flow, the regime
 mu(I) claims), its shear rate is resolved (above `resolved` times its batch-means standard error)
@@ -50,8 +52,9 @@ def cell_points(phase_fields, thermal_temperature, prm, dissipation=None,
     inertial_number, pressure, shear_rate, solid_fraction, each with _stderr where measured);
     thermal_temperature: array (m^2/s^2) on its grid (phase, x, z); prm:
     kinetic_theory.KineticParameters; dissipation: the DEM's dissipation (W/m^3) on the same
-    grid, or None.  Returns {mu, mu_stderr, I, T, Theta, phi, pressure, shear_rate, rI, rI_dem
-    (NaN without dissipation)}."""
+    grid, or None.  Returns {mu, mu_stderr, I, T, Theta, phi, pressure, shear_rate, phase (the
+    cell's phase bin), rI, rI_median_T (the control: r at the cells' median T), rI_dem (NaN
+    without dissipation)}."""
     mu = _flat(phase_fields, "friction_coefficient")
     I = _flat(phase_fields, "inertial_number")
     p = _flat(phase_fields, "pressure")
@@ -69,12 +72,14 @@ def cell_points(phase_fields, thermal_temperature, prm, dissipation=None,
               & np.isfinite(T) & (phi >= dense_solid_fraction) & (phi < prm.phi_rcp)
               & (gd > resolved * np.nan_to_num(gd_se)))
     out = {"mu": mu[ok], "mu_stderr": se[ok], "I": I[ok], "T": T[ok], "phi": phi[ok],
-           "pressure": p[ok], "shear_rate": gd[ok]}
+           "pressure": p[ok], "shear_rate": gd[ok],
+           "phase": np.indices(phase_fields["friction_coefficient"].shape)[0].ravel()[ok]}
     out["Theta"] = prm.density_kg_m3 * out["T"] / out["pressure"]
     tau = out["mu"] * out["pressure"]
     t_bal = np.array([balance_temperature(float(f), float(t), float(g), prm)
                       for f, t, g in zip(out["phi"], tau, out["shear_rate"])])
     out["rI"] = np.sqrt(t_bal / out["T"]) * out["I"]
+    out["rI_median_T"] = np.sqrt(t_bal / np.median(out["T"])) * out["I"]
     if dissipation is None:
         out["rI_dem"] = np.full(out["I"].size, np.nan)
     else:
@@ -144,13 +149,15 @@ def binned_medians(x, mu, mu_stderr, edges) -> list[dict]:
 
 
 def collapse_table(points: dict, calibrated=None) -> dict:
-    """Each abscissa's collapse: {"baseline": rms log of mu about its median, name: fit_collapse
+    """Each abscissa's collapse: {"baseline": rms log of mu about its median, "noise": the
+    cells' batch-means error as an rms log (module docstring), name: fit_collapse
     (+ "calibrated_rms_log_residual" of the calibrated mu(x) {mu_s, mu_2, I_0} where given)}
-    for name in I, rI, rI_dem (where measured), Theta (Kim & Kamrin's mu = Theta^a F(I))."""
+    for name in I, rI, rI_median_T, rI_dem (where measured), Theta (Kim & Kamrin's mu = Theta^a F(I))."""
     mu = points["mu"]
     out = {"baseline": float(np.sqrt(np.mean(np.log(mu / np.median(mu)) ** 2))),
-           "points": int(mu.size)}
-    for name in ("I", "rI", "rI_dem"):
+           "points": int(mu.size),
+           "noise": float(np.sqrt(np.nanmean((points["mu_stderr"] / mu) ** 2)))}
+    for name in ("I", "rI", "rI_median_T", "rI_dem"):
         x = points[name]
         if not np.isfinite(x).any():
             continue
