@@ -90,13 +90,19 @@ def main(argv=None) -> int:
               + (f"{cal_r:.3f}" if cal_r is not None else "-") + " |")
     print("\nby phase bin (each abscissa's curve fitted within the bin): cells, median mu, "
           "rms log about the median, about the best mu(I), about the best mu(r I)")
+    pooled = np.zeros(3)
     for k in np.unique(pts["phase"]):
         s = pts["phase"] == k
         mu = pts["mu"][s]
         base = np.sqrt(np.mean(np.log(mu / np.median(mu)) ** 2))
         fi, fr = mt.fit_collapse(pts["I"][s], mu), mt.fit_collapse(pts["rI"][s], mu)
-        print(f"  phase {k}/{int(ph.phase.size)} of the cycle: {int(s.sum())}, {np.median(mu):.3f}, "
+        pooled += s.sum() * np.array([base, fi["rms_log_residual"], fr["rms_log_residual"]]) ** 2
+        print(f"  phase {k}/{int(ph.phase.size)} of the cycle: {int(s.sum())}, "
+              f"{np.median(mu):.3f}, "
               f"{base:.3f}, {fi['rms_log_residual']:.3f}, {fr['rms_log_residual']:.3f}")
+    b, i, r = np.sqrt(pooled / pts["mu"].size)
+    print(f"  pooled over the bins: about the bins' medians {b:.3f}, about a mu(I) per bin "
+          f"{i:.3f}, about a mu(r I) per bin {r:.3f}")
     for key in ("I", "rI", "rI_dem"):
         x = pts[key]
         edges = np.geomspace(np.nanpercentile(x, 1), np.nanpercentile(x, 99) * 1.0001, 9)

@@ -152,7 +152,8 @@ def collapse_table(points: dict, calibrated=None) -> dict:
     """Each abscissa's collapse: {"baseline": rms log of mu about its median, "noise": the
     cells' batch-means error as an rms log (module docstring), name: fit_collapse
     (+ "calibrated_rms_log_residual" of the calibrated mu(x) {mu_s, mu_2, I_0} where given)}
-    for name in I, rI, rI_median_T, rI_dem (where measured), Theta (Kim & Kamrin's mu = Theta^a F(I))."""
+    for name in I, rI, rI_median_T, rI_dem (where measured), and Theta (Kim & Kamrin's
+    mu = Theta^a F(I))."""
     mu = points["mu"]
     out = {"baseline": float(np.sqrt(np.mean(np.log(mu / np.median(mu)) ** 2))),
            "points": int(mu.size),
