@@ -91,3 +91,5 @@ def test_cell_selection_and_binned_errors():
     assert rows[0]["mu_stderr"] == pytest.approx(mt.MEDIAN_ERROR * 0.02 * 2.0 / 4.0)
     with pytest.raises(InputError):
         mt.fit_collapse(I[:3], mu[:3])
+    with pytest.raises(InputError, match="dissipation: 3 values"):
+        mt.cell_points(ds, np.full((1, 1, 4), 1e-3), PRM, np.ones(3))

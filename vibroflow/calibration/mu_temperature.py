@@ -83,7 +83,10 @@ def cell_points(phase_fields, thermal_temperature, prm, dissipation=None,
     if dissipation is None:
         out["rI_dem"] = np.full(out["I"].size, np.nan)
     else:
-        D = np.asarray(dissipation, float).ravel()[ok]
+        D = np.asarray(dissipation, float).ravel()
+        if D.size != mu.size:
+            raise InputError(f"dissipation: {D.size} values, the fields' grid has {mu.size}")
+        D = D[ok]
         with np.errstate(invalid="ignore", divide="ignore"):
             out["rI_dem"] = np.where(D > 0, np.cbrt(tau * out["shear_rate"] / D), np.nan) * out["I"]
     return out
