@@ -82,7 +82,7 @@ def worker(size: str, steps: int, repeats: int) -> dict:
     @numba.njit(parallel=True)
     def kick(balls, pairs, params, work, nblock):
         for c in numba.prange(nblock):
-            K._kick_block(c, balls, pairs, params, work)
+            K._kick_block(c, balls, pairs, params, work, True)
 
     buf = S._buf(system, state)
     pairs, slots = pairs_of(state.nl, K.NBLOCK), slots_of(state.nl)

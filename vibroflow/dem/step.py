@@ -45,7 +45,7 @@ from .walls import (KIND_BALL_BALL, KIND_BALL_PARTITION, KIND_BALL_PLANE, KIND_B
 D_BALL_OVERLAP, D_BALL_I, D_BALL_J, D_WALL_OVERLAP, D_WALL_I, D_WALL_W, D_NAN, D_LOST = range(8)
 N_DIAG = 8
 # status codes returned by advance
-DONE, REBUILD, IMPACTS_FULL, BLOWUP = 0, 1, 2, 3
+DONE, REBUILD, IMPACTS_FULL, BLOWUP, IMPACTS_LOST = 0, 1, 2, 3, 4
 # blocks of balls of the parallel loops: a constant, so that the impacts' order and the
 # diagnostics are the same on any number of threads (up to NBLOCK of them share the work; on
 # tub47-quick's 4 200 balls 256 blocks cost about a quarter more a step on one thread than 64:
@@ -337,13 +337,16 @@ def ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work,
 
 
 @nb.njit(cache=True)
-def _kick_block(c, balls, pairs, params, work):
+def _kick_block(c, balls, pairs, params, work, drift):
     """The step's second half kick of the balls of block c, and the largest squared move of
-    one of them since the last list build (tub frame) into moved[c]."""
+    one of them since the last list build (tub frame) into moved[c]; with `drift`, then each
+    ball's state saved into work.save and the next step's first half kick and drift (the
+    same operations, in the same order, as `_kick_drift`)."""
     pos, vel, omg, force, torque = balls.pos, balls.vel, balls.omg, balls.force, balls.torque
     radius, mass, ref_tub = balls.radius, balls.mass, balls.ref_tub
-    diag, pose, moved = work.diag, work.pose, work.moved
-    half_dt = 0.5 * params.dt
+    diag, pose, moved, save = work.diag, work.pose, work.moved, work.save
+    dt = params.dt
+    half_dt = 0.5 * dt
     cth = np.cos(pose[2])
     sth = np.sin(pose[2])
     m2 = 0.0
@@ -365,7 +368,42 @@ def _kick_block(c, balls, pairs, params, work):
                 diag[c, D_NAN] = i
         elif d2 > m2:
             m2 = d2
+        if drift:
+            for a in range(3):
+                save[i, a] = pos[i, a]
+                save[i, 3 + a] = vel[i, a]
+                save[i, 6 + a] = omg[i, a]
+                vel[i, a] += half_dt * force[i, a] * im
+                omg[i, a] += half_dt * torque[i, a] * ii
+                pos[i, a] += dt * vel[i, a]
     moved[c] = m2
+
+
+@nb.njit(cache=True, parallel=True)
+def _kick_drift(balls, params):
+    """A step's first half kick and drift of every ball, in parallel."""
+    pos, vel, omg, force, torque = balls.pos, balls.vel, balls.omg, balls.force, balls.torque
+    radius, mass = balls.radius, balls.mass
+    dt = params.dt
+    half_dt = 0.5 * dt
+    for i in nb.prange(pos.shape[0]):
+        im = 1.0 / mass[i]
+        ii = 1.0 / (0.4 * mass[i] * radius[i] * radius[i])
+        for a in range(3):
+            vel[i, a] += half_dt * force[i, a] * im
+            omg[i, a] += half_dt * torque[i, a] * ii
+            pos[i, a] += dt * vel[i, a]
+
+
+@nb.njit(cache=True)
+def _undo_drift(balls, save):
+    """Every ball's position, velocity and spin back from `save` (_kick_block's)."""
+    pos, vel, omg = balls.pos, balls.vel, balls.omg
+    for i in range(pos.shape[0]):
+        for a in range(3):
+            pos[i, a] = save[i, a]
+            vel[i, a] = save[i, 3 + a]
+            omg[i, a] = save[i, 6 + a]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -377,19 +415,22 @@ def _pair_pass(t, dt_hist, periodic_length, record_impacts, balls, pairs, slots,
 
 
 @nb.njit(cache=True, parallel=True)
-def _ball_pass(t, dt_hist, kick, record_impacts, balls, pairs, slots, walls, params, work, prt):
-    """Steps 2 to 4 for every block, in parallel."""
+def _ball_pass(t, dt_hist, kick, drift, record_impacts, balls, pairs, slots, walls, params,
+               work, prt):
+    """Steps 2 to 4 for every block, in parallel; with `drift`, also the next step's first
+    half kick and drift (_kick_block)."""
     for c in nb.prange(work.diag.shape[0]):
         _gather_block(c, balls, pairs, slots)
         ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work, prt)
         if kick:
-            _kick_block(c, balls, pairs, params, work)
+            _kick_block(c, balls, pairs, params, work, drift)
         else:
             work.moved[c] = 0.0
 
 
 @nb.njit(cache=True)
-def compute_forces(t, kick, record_impacts, balls, pairs, slots, walls, params, work, prt):
+def compute_forces(t, kick, drift, record_impacts, balls, pairs, slots, walls, params, work,
+                   prt):
     """Forces and torques at the current positions (gravity, pairs, walls) at time t (s), with
     the tub's pose in work.pose; with `kick`, also the step's second half kick.  Two parallel
     loops over the blocks, each in its own function (numba fuses two parallel loops of one
@@ -404,44 +445,44 @@ def compute_forces(t, kick, record_impacts, balls, pairs, slots, walls, params, 
                                           tub[TUB_PERIODIC] > 0.0) else 0.0
     dt_hist = params.dt if kick else 0.0  # the set-up evaluation does not advance histories
     _pair_pass(t, dt_hist, periodic_length, record_impacts, balls, pairs, slots, params, work)
-    _ball_pass(t, dt_hist, kick, record_impacts, balls, pairs, slots, walls, params, work, prt)
+    _ball_pass(t, dt_hist, kick, drift, record_impacts, balls, pairs, slots, walls, params, work,
+               prt)
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True)
 def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pairs, slots, walls,
             params, work, prt):
     """Run up to `nsteps` velocity-Verlet steps from step `step0`.
 
     Time is t = (step - time_origin_step) dt, so that the vibration's phase comes from an
     integer step count (exact on resume).  work.pose receives the tub pose of the last step.
-    Returns (steps done, status) with status DONE, REBUILD, IMPACTS_FULL or BLOWUP.
+    Returns (steps done, status) with status DONE, REBUILD, IMPACTS_FULL, IMPACTS_LOST or
+    BLOWUP.  Two parallel loops a step: the first step's kick and drift run alone, each later
+    one's in the ball pass of the step before (_kick_block); a step after which the call
+    stops gives its balls back from work.save, so that the state is the step's, bit for bit.
     """
-    pos, vel, omg, force, torque = balls.pos, balls.vel, balls.omg, balls.force, balls.torque
-    radius, mass = balls.radius, balls.mass
     dt, half_skin, max_overlap = params.dt, params.half_skin, params.max_overlap
-    imp_buf, imp_count, diag, pose, moved = (work.imp_buf, work.imp_count, work.diag, work.pose,
-                                             work.moved)
-    n = pos.shape[0]
+    imp_count, diag, pose, moved = work.imp_count, work.diag, work.pose, work.moved
     nblock = diag.shape[0]
-    half_dt = 0.5 * dt
     hs2 = half_skin * half_skin
-    cap = imp_buf.shape[1]
+    cap = work.imp_buf.shape[1]
+    part_cap = prt.imp.shape[1]
+    tub = params.tub
+    periodic_length = tub[TUB_LENGTH] if (tub[TUB_PRESENT] > 0.0 and
+                                          tub[TUB_PERIODIC] > 0.0) else 0.0
+    _kick_drift(balls, params)
     for k in range(nsteps):
-        # kick and drift
-        for i in nb.prange(n):
-            im = 1.0 / mass[i]
-            ii = 1.0 / (0.4 * mass[i] * radius[i] * radius[i])
-            for a in range(3):
-                vel[i, a] += half_dt * force[i, a] * im
-                omg[i, a] += half_dt * torque[i, a] * ii
-                pos[i, a] += dt * vel[i, a]
         step = step0 + k + 1
         t = (step - time_origin_step) * dt
         _pose_array(motion, pose[6], pose[7], t, pose)
-        compute_forces(t, True, record_impacts, balls, pairs, slots, walls, params, work, prt)
+        drift = k + 1 < nsteps
+        _pair_pass(t, dt, periodic_length, record_impacts, balls, pairs, slots, params, work)
+        _ball_pass(t, dt, True, drift, record_impacts, balls, pairs, slots, walls, params, work,
+                   prt)
         blown = False
         rebuild = False
         full = False
+        lost = False
         for c in range(nblock):
             if diag[c, D_NAN] >= 0.0 or diag[c, D_LOST] >= 0.0:
                 blown = True
@@ -449,12 +490,14 @@ def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pair
                 blown = True
             if moved[c] > hs2:
                 rebuild = True
-            if imp_count[c] > cap // 2 or prt.imp_count[c] > prt.imp.shape[1] // 2:
+            if imp_count[c] > cap // 2 or prt.imp_count[c] > part_cap // 2:
                 full = True
-        if blown:
-            return k + 1, BLOWUP
-        if rebuild:
-            return k + 1, REBUILD
-        if full:
-            return k + 1, IMPACTS_FULL
+            if imp_count[c] > cap or prt.imp_count[c] > part_cap:
+                lost = True
+        status = (BLOWUP if blown else IMPACTS_LOST if lost else REBUILD if rebuild else
+                  IMPACTS_FULL if full else DONE)
+        if status != DONE:
+            if drift:
+                _undo_drift(balls, work.save)
+            return k + 1, status
     return nsteps, DONE
