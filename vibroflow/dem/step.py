@@ -38,8 +38,8 @@ from .contact import (branch_vector, contact_force, forget, pair_contact_velocit
                       unit_normal)
 from .parts import ball_parts
 from .walls import (KIND_BALL_BALL, KIND_BALL_PARTITION, KIND_BALL_PLANE, KIND_BALL_TUB,
-                    TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT, WALL_PLANE0, WALL_U, plane_wall,
-                    u_wall)
+                    TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT, TUB_RADIUS, TUB_RIM, WALL_PLANE0,
+                    WALL_U, plane_wall, u_wall)
 
 # columns of the per-block diagnostics
 D_BALL_OVERLAP, D_BALL_I, D_BALL_J, D_WALL_OVERLAP, D_WALL_I, D_WALL_W, D_NAN, D_LOST = range(8)
@@ -189,6 +189,34 @@ def _gather_block(c, balls, pairs, slots):
         put3(torque, i, tx, ty, tz)
 
 
+# a ball whose centre is this fraction of (R - r) nearer the U's axis than R - r is clear of
+# it: far above the rounding of u_wall's gap (a few ulp of R), so `_clear` never drops a contact
+CLEAR_MARGIN = 1e-9
+
+
+@nb.njit(cache=True, inline="always")
+def _clear(px, py, pz, r, tub, pose, cth, sth, partitions):
+    """Whether a ball provably touches neither the U wall nor a partition and is inside the
+    tub: then u_wall and the partitions' tests (ball_walls) would find no overlap and no lost
+    ball.  The U's test is u_wall's gap, squared, with CLEAR_MARGIN; the partitions' is theirs."""
+    if partitions:
+        if not (r - py <= 0.0 and r - (tub[TUB_LENGTH] - py) <= 0.0):  # NaN: not clear
+            return False
+    rx = px - pose[0] - pose[6]
+    rz = pz - pose[1] - pose[7]
+    tx = pose[6] + cth * rx + sth * rz
+    tz = pose[7] - sth * rx + cth * rz
+    R = tub[TUB_RADIUS]
+    if tz > tub[TUB_RIM]:
+        return False
+    room = (R - r) * (1.0 - CLEAR_MARGIN)
+    if room <= 0.0:
+        return False
+    if tz <= R:
+        return tx * tx + (tz - R) * (tz - R) < room * room
+    return abs(tx) < room
+
+
 @nb.njit(cache=True)
 def ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work, prt):
     """The wall-contact pass of the balls of block c: each ball's contacts with the tub's U
@@ -211,16 +239,26 @@ def ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work,
     periodic_length = length if has_tub and tub[TUB_PERIODIC] > 0.0 else 0.0
     cth = np.cos(pose[2])
     sth = np.sin(pose[2])
+    # the tub's walls alone: a ball clear of them, with no wall contact to end, is skipped
+    cull = has_tub and n_walls == WALL_PLANE0
     for i in range(pairs.bounds[c], pairs.bounds[c + 1]):
+        r = radius[i]
+        skip = False
+        if cull and _clear(pos[i, 0], pos[i, 1], pos[i, 2], r, tub, pose, cth, sth, partitions):
+            skip = True
+            for w in range(n_walls):
+                if wall_flag[i, w]:
+                    skip = False
+            if skip and n_parts == 0:
+                continue
         fx, fy, fz = force[i, 0], force[i, 1], force[i, 2]
         tx, ty, tz = torque[i, 0], torque[i, 1], torque[i, 2]
-        r = radius[i]
         m = mass[i]
         mat_i = mat[i]
         # ball-tub frame quantities used by the tub's walls
         rx = pos[i, 0] - pose[0] - pose[6]
         rz = pos[i, 2] - pose[1] - pose[7]
-        for w in range(n_walls):
+        for w in range(0 if skip else n_walls):
             # geometry of slot w: overlap, normal (wall -> ball), wall velocity and spin (y),
             # contact point
             if w == WALL_U:
