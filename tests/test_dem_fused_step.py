@@ -5,10 +5,10 @@ velocity-Verlet step:
   ball pass of the step before, undone where the call stops at a rebuild) ends on the state of
   the same steps made one call a step (no step made in the pass before: the plain order of
   kick, drift, forces, kick), bit for bit, with the same impact rows;
-- the wall pass's cull (`step._clear`) passes over no ball that the U wall or a partition
-  touches or that has left the tub: on points on both sides of the surfaces, at distances of
-  a few ulp to millimetres, the cleared ones have no overlap by u_wall's and the partitions'
-  own tests;
+- the wall pass's cull (`wall_pass.clear_of_walls`) passes over no ball that the U wall or a
+  partition touches or that has left the tub: on points on both sides of the surfaces, at
+  distances of a few ulp to millimetres, the cleared ones have no overlap by u_wall's and the
+  partitions' own tests;
 - a block of balls that records more impact rows than its buffer holds stops the run with
   ImpactsLost, which names the block, instead of losing rows.
 """
@@ -22,6 +22,7 @@ from vibroflow.dem import fill as F
 from vibroflow.dem import simulate as S
 from vibroflow.dem import step as K
 from vibroflow.dem.impact_order import ImpactsLost
+from vibroflow.dem.wall_pass import clear_of_walls
 from vibroflow.dem.walls import TUB_LENGTH, TUB_RADIUS, TUB_RIM, u_wall
 from vibroflow.scenario.io import load_scenario
 
@@ -92,7 +93,7 @@ def test_the_wall_cull_clears_no_ball_that_touches_a_wall():
             # tub frame -> lab (tub/motion.py tub_to_lab)
             px = pose[0] + pose[6] + cth * (x - pose[6]) - sth * (z - pose[7])
             pz = pose[1] + pose[7] + sth * (x - pose[6]) + cth * (z - pose[7])
-            if not K._clear(px, y, pz, r, tub, pose, cth, sth, True):
+            if not clear_of_walls(px, y, pz, r, tub, pose, cth, sth, True):
                 continue
             cleared += 1
             delta, *_rest, outside = u_wall(px, pz, r, tub, pose, cth, sth)
@@ -102,10 +103,10 @@ def test_the_wall_cull_clears_no_ball_that_touches_a_wall():
     assert cleared > 100
     # a ball on the U's axis, mid-length, is clear; one a hair past R - r is not
     pose = np.zeros(8)
-    assert K._clear(0.0, 0.5 * length, tub[TUB_RADIUS], r, tub, pose, 1.0, 0.0, True)
-    assert not K._clear(0.0, 0.5 * length, -1e-15 + r, r, tub, pose, 1.0, 0.0, True)
-    assert not K._clear(0.0, 0.5 * length, tub[TUB_RIM] + 1e-9, r, tub, pose, 1.0, 0.0, True)
-    assert not K._clear(0.0, np.nan, tub[TUB_RADIUS], r, tub, pose, 1.0, 0.0, True)
+    assert clear_of_walls(0.0, 0.5 * length, tub[TUB_RADIUS], r, tub, pose, 1.0, 0.0, True)
+    assert not clear_of_walls(0.0, 0.5 * length, -1e-15 + r, r, tub, pose, 1.0, 0.0, True)
+    assert not clear_of_walls(0.0, 0.5 * length, tub[TUB_RIM] + 1e-9, r, tub, pose, 1.0, 0.0, True)
+    assert not clear_of_walls(0.0, np.nan, tub[TUB_RADIUS], r, tub, pose, 1.0, 0.0, True)
 
 
 def test_a_block_past_its_impact_buffer_stops_the_run(one_thread, monkeypatch):

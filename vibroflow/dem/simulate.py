@@ -280,8 +280,9 @@ def rebuild(system: DEMSystem, state: DEMState, sort: bool = False) -> None:
 def _forces_now(system: DEMSystem, state: DEMState) -> None:
     b = _buf(system, state)
     b.work.pose[:] = _tub_pose(system, state)
-    K.compute_forces(state.time(system.dt), False, False, False, b.balls, pairs_of(state.nl, K.NBLOCK),
-                     slots_of(state.nl), b.walls, system.params, b.work, b.parts)
+    K.compute_forces(state.time(system.dt), False, False, False, b.balls,
+                     pairs_of(state.nl, K.NBLOCK), slots_of(state.nl), b.walls, system.params,
+                     b.work, b.parts)
     _sum_part_loads(system, state)
     for count in b.counts:
         count[:] = 0
