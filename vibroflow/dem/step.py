@@ -10,6 +10,16 @@ the caller (dem/simulate.py) rebuilds and calls again.  All loops over balls are
 The kernels take the records of vibroflow.dem.records and read their fields into local
 variables first.
 
+A step is two parallel loops over the blocks of balls: the pairs, then the ball pass (gather,
+walls, the second half kick and, when another step of the call follows, that step's first half
+kick and drift: the same operations in the same order as a loop of their own).  Each loop is a
+wake-up and a barrier of numba's threads, 20 - 85 us on the 2-core machine, so the third loop
+the first half kick and drift had of their own cost more than the work in it.  A step after
+which `advance` stops (rebuild, impacts, blow-up) has drifted its balls already; `_kick_block`
+saves each ball's position, velocity and spin before that in work.save, and `_undo_drift`
+gives them back, so that the caller sees the step's state bit for bit.  The wall pass skips a
+ball clear of the tub's walls (vibroflow.dem.wall_pass).
+
 Force assembly whose numbers do not depend on the thread count (DEVELOPERS.md, "Threads"):
 
 1. pairs (`_pair_block`): every entry k of the half neighbour list (i, j > i) is evaluated
@@ -19,8 +29,8 @@ Force assembly whose numbers do not depend on the thread count (DEVELOPERS.md, "
    order (vibroflow.dem.neighbours: no two entries share a slot, no races, no atomics);
 2. gather (`_gather_block`): each ball j adds the slots of the entries where it is the second
    ball, in ascending entry order, reading them in sequence;
-3. walls (`ball_walls`): each ball's wall contacts, added one after the other;
-4. kick (`_kick_block`): the step's second half kick.
+3. walls (`wall_pass.ball_walls`): each ball's wall contacts, added one after the other;
+4. kick (`_kick_block`): the step's second half kick (and the next step's first, and drift).
 
 Each sum is over the same terms in the same order whatever the threads.  The balls are cut into
 NBLOCK contiguous blocks of about equal work (a function of the list alone); the threads share
@@ -264,7 +274,8 @@ def _ball_pass(t, dt_hist, kick, drift, record_impacts, balls, pairs, slots, wal
 def compute_forces(t, kick, drift, record_impacts, balls, pairs, slots, walls, params, work,
                    prt):
     """Forces and torques at the current positions (gravity, pairs, walls) at time t (s), with
-    the tub's pose in work.pose; with `kick`, also the step's second half kick.  Two parallel
+    the tub's pose in work.pose; with `kick`, also the step's second half kick, and with
+    `drift` the next step's first half kick and drift (_kick_block).  Two parallel
     loops over the blocks, each in its own function (numba fuses two parallel loops of one
     function when they run over the same range, and the gather must wait for every block's
     pairs): the pairs; then, block by block, each ball's gather, its wall contacts and its kick.
