@@ -104,6 +104,9 @@ def worker(size: str, steps: int, repeats: int) -> dict:
     }
     profile = {}
     for name, fn in passes.items():
+        # each pass from the same state (the kick and drift move the balls)
+        state.pos[:], state.vel[:], state.omg[:] = saved["pos"], saved["vel"], saved["omg"]
+        state.nl.hist[:], state.nl.flag[:], state.nl.rflag[:] = hist, flag, rflag
         fn()
         t0 = time.perf_counter()
         for _ in range(steps):
