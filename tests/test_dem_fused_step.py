@@ -10,7 +10,7 @@ velocity-Verlet step:
   distances of a few ulp to millimetres, the cleared ones have no overlap by u_wall's and the
   partitions' own tests;
 - a block of balls that records more impact rows than its buffer holds stops the run with
-  ImpactsLost, which names the block, instead of losing rows.
+  ImpactsLost, which names the block, instead of losing rows; run_dem leaves no result.
 """
 from __future__ import annotations
 
@@ -22,6 +22,7 @@ from vibroflow.dem import fill as F
 from vibroflow.dem import simulate as S
 from vibroflow.dem import step as K
 from vibroflow.dem.impact_order import ImpactsLost
+from vibroflow.dem.run import run_dem
 from vibroflow.dem.wall_pass import clear_of_walls
 from vibroflow.dem.walls import TUB_LENGTH, TUB_RADIUS, TUB_RIM, u_wall
 from vibroflow.scenario.io import load_scenario
@@ -117,3 +118,18 @@ def test_a_block_past_its_impact_buffer_stops_the_run(one_thread, monkeypatch):
                                           r"balls recorded [2-9]\d* ball-ball and wall rows, "
                                           r"its buffer holds 1"):
         S.run_steps(system, state, 3000, record_impacts=True, on_impacts=lambda rows: None)
+
+
+
+@pytest.mark.slow
+def test_a_run_short_of_impact_rows_stops_and_leaves_no_result(tmp_path, monkeypatch):
+    # a 400-ball tub recording its impacts from 10 ms into the vibration, one row a block
+    from tests.test_calibrate import SMALL
+
+    monkeypatch.setenv("VIBROFLOW_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setattr(S, "IMPACT_CAPACITY", 1)
+    sc = load_scenario("tub47-quick", SMALL + ["run.duration=0.1", "run.average_last=0.09"])
+    out = tmp_path / "out"
+    with pytest.raises(ImpactsLost, match=r"^impact rows lost at step \d+: block \d+ "):
+        run_dem(sc, out, progress=False)
+    assert not (out / "summary.json").exists()
