@@ -13,14 +13,14 @@ variables first.
 A step is two parallel loops over the blocks of balls: the pairs, then the ball pass (gather,
 walls, the second half kick and, when another step of the call follows, that step's first half
 kick and drift: the same operations in the same order as a loop of their own).  Each loop is a
-wake-up and a barrier of numba's threads, 20 - 85 us on the 2-core machine, so the third loop
-the first half kick and drift had of their own cost more than the work in it.  A step after
-which `advance` stops (rebuild, impacts, blow-up) has drifted its balls already; `_kick_block`
-saves each ball's position, velocity and spin before that in work.save, and `_undo_drift`
-gives them back, so that the caller sees the step's state bit for bit.  The wall pass skips a
-ball clear of the tub's walls (vibroflow.dem.wall_pass).  Measured on tub47-quick under load
-(docs/validation.md section 6): the step costs 0.67 x the CPU time of the three-loop step
-with every ball through the wall pass on one thread, 0.77 x on two.
+wake-up and a barrier of numba's threads, 20 - 85 us on the 2-core machine: a loop of their own
+for the first half kick and drift would cost more in its wake-up than in its work.  A step
+after which `advance` stops (rebuild, impacts, blow-up) has drifted its balls already;
+`_kick_block` saves each ball's position, velocity and spin before that in work.save, and
+`_undo_drift` gives them back, so that the caller sees the step's state bit for bit.  The wall
+pass skips a ball clear of the tub's walls (vibroflow.dem.wall_pass).  Measured on tub47-quick
+under load (docs/validation.md section 6): the step costs 0.67 x the CPU time of the three-loop
+step with every ball through the wall pass on one thread, 0.77 x on two.
 
 Force assembly whose numbers do not depend on the thread count (DEVELOPERS.md, "Threads"):
 
@@ -111,8 +111,8 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
                 if record_impacts:
                     vn = vx * nx + vy * ny + vz * nz
                     record_impact(imp_buf, imp_count, c, t, KIND_BALL_BALL,
-                                   pos[i, 0] - ri * nx, pos[i, 1] - ri * ny,
-                                   pos[i, 2] - ri * nz, -vn, i)
+                                  pos[i, 0] - ri * nx, pos[i, 1] - ri * ny,
+                                  pos[i, 2] - ri * nz, -vn, i)
             mj = mass[j]
             m_eff = mi * mj / (mi + mj)
             r_eff = ri * rj / (ri + rj)

@@ -159,7 +159,7 @@ def ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work,
                 if record_impacts:
                     vn = vx * nx + vy * ny + vz * nz
                     record_impact(imp_buf, imp_count, c, t, kind, pos[i, 0] - r * nx,
-                                   pos[i, 1] - r * ny, pos[i, 2] - r * nz, -vn, i)
+                                  pos[i, 1] - r * ny, pos[i, 2] - r * nz, -vn, i)
             wfx, wfy, wfz, tix, tiy, tiz, _tjx, _tjy, _tjz, fn, ft, sl = contact_force(
                 delta, nx, ny, nz, vx, vy, vz, omg[i, 0], omg[i, 1] - wwy, omg[i, 2],
                 r, 0.0, r, m, table[mat_i, wall_mat[w]], wall_hist[i, w], dt_hist)
