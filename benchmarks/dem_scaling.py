@@ -12,10 +12,13 @@ the balls are placed on the fill lattice closed up to 1.01 d from the floor
 vibrating tub for 2 500 untimed steps (numba's cache load or compilation, the first neighbour
 lists, the first contacts), then `--repeats` times `--steps` steps are timed
 (wall and CPU), neighbour rebuilds included.  Then the passes of one step are timed apart,
-each `--steps` times on the same state (each its own parallel loop over the blocks, so their sum
-is a little more than a step): the pairs (step._pair_block), the gather (_gather_block), the
-walls (ball_walls), the kick and drift, and one neighbour-list rebuild (simulate.rebuild: cell
-binning, list, history transfer, reverse order).
+each `--steps` times from the same saved state, each its own parallel loop over the blocks:
+the pairs (step._pair_block, a step's first loop), the gather (_gather_block), the walls
+(wall_pass.ball_walls), the second half kick with the next step's first half kick and drift
+(step._kick_block, as the ball pass makes them), and the step's second loop whole less that
+drift (step._ball_pass: gather, walls, second half kick; a pass that drifted the balls 2 000
+times under frozen forces would fling them against the walls); and one neighbour-list
+rebuild (simulate.rebuild: cell binning, list, history transfer, reverse order).
 
 Printed per process: balls, median wall and CPU microseconds a step, nanoseconds per ball-step,
 the passes' shares, and the process's peak resident memory (ru_maxrss); at the end the time per
@@ -82,12 +85,12 @@ def worker(size: str, steps: int, repeats: int) -> dict:
     @numba.njit(parallel=True)
     def kick(balls, pairs, params, work, nblock):
         for c in numba.prange(nblock):
-            K._kick_block(c, balls, pairs, params, work)
+            K._kick_block(c, balls, pairs, params, work, True)
 
     buf = S._buf(system, state)
     pairs, slots = pairs_of(state.nl, K.NBLOCK), slots_of(state.nl)
     t = state.time(system.dt)
-    saved = {name: getattr(state, name).copy() for name in ("vel", "omg")}
+    saved = {name: getattr(state, name).copy() for name in ("pos", "vel", "omg")}
     hist, flag, rflag = state.nl.hist.copy(), state.nl.flag.copy(), state.nl.rflag.copy()
     passes = {
         "pairs": lambda: K._pair_pass(t, 0.0, 0.0, False, buf.balls, pairs, slots,
@@ -95,16 +98,21 @@ def worker(size: str, steps: int, repeats: int) -> dict:
         "gather": lambda: gather(buf.balls, pairs, slots, K.NBLOCK),
         "walls": lambda: walls(t, buf.balls, pairs, buf.walls, system.params, buf.work,
                                buf.parts, K.NBLOCK),
-        "kick": lambda: kick(buf.balls, pairs, system.params, buf.work, K.NBLOCK),
+        "kick_drift": lambda: kick(buf.balls, pairs, system.params, buf.work, K.NBLOCK),
+        "ball_pass": lambda: K._ball_pass(t, 0.0, True, False, False, buf.balls, pairs, slots,
+                                          buf.walls, system.params, buf.work, buf.parts),
     }
     profile = {}
     for name, fn in passes.items():
+        # each pass from the same state (the kick and drift move the balls)
+        state.pos[:], state.vel[:], state.omg[:] = saved["pos"], saved["vel"], saved["omg"]
+        state.nl.hist[:], state.nl.flag[:], state.nl.rflag[:] = hist, flag, rflag
         fn()
         t0 = time.perf_counter()
         for _ in range(steps):
             fn()
         profile[name] = 1e6 * (time.perf_counter() - t0) / steps
-    state.vel[:], state.omg[:] = saved["vel"], saved["omg"]
+    state.pos[:], state.vel[:], state.omg[:] = saved["pos"], saved["vel"], saved["omg"]
     state.nl.hist[:], state.nl.flag[:], state.nl.rflag[:] = hist, flag, rflag
     S.rebuild(system, state)
     t0 = time.perf_counter()

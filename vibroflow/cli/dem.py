@@ -9,7 +9,7 @@ import typer
 from ..threads import use_threads
 from .after_run import warn_empty_probes
 from .apps import app
-from .failures import blown_up, input_errors
+from .failures import EXIT_FAILED, blown_up, fail, input_errors
 from .options import (OutOption, ResumeOption, ScenarioArg, SetOption, ThreadsOption,
                       VtkEveryOption, VtkFrameOption, VtkFromOption, load)
 
@@ -34,6 +34,7 @@ def dem(
     from vibroflow.io.vtk_frame import cli_vtk_options
 
     paraview = cli_vtk_options(vtk, vtk_frame, vtk_every, vtk_from)
+    from vibroflow.dem.impact_order import ImpactsLost
     from vibroflow.dem.run import run_dem
     from vibroflow.dem.simulate import BlowUp
 
@@ -41,6 +42,8 @@ def dem(
         summary = run_dem(s, out_dir=out, vtk=paraview, resume=resume, progress=True)
     except BlowUp as exc:
         blown_up(exc)
+    except ImpactsLost as exc:
+        fail(str(exc), EXIT_FAILED)
     warn_empty_probes("the DEM's", summary)
     from vibroflow.dem.part_output import part_line
 

@@ -10,7 +10,7 @@ import typer
 from ..threads import use_threads
 from .after_run import warn_empty_probes
 from .apps import app
-from .failures import blown_up, input_errors
+from .failures import EXIT_FAILED, blown_up, fail, input_errors
 from .options import (StudyScenarioArg, ThreadsOption, VtkEveryOption, VtkFrameOption,
                       VtkFromOption, load, out_option, set_option, shear_cell_option)
 
@@ -48,6 +48,7 @@ def run(
     paraview = cli_vtk_options(vtk, vtk_frame, vtk_every, vtk_from)
     check_study_dir(out)
     from vibroflow.continuum.mpm.solver import ContinuumBlowUp
+    from vibroflow.dem.impact_order import ImpactsLost
     from vibroflow.dem.simulate import BlowUp
     from vibroflow.report.stage import report_stage
     from vibroflow.study.pipeline import run_study
@@ -57,6 +58,8 @@ def run(
                             echo=typer.echo, extra_stages=[report_stage()], vtk=paraview)
     except (BlowUp, ContinuumBlowUp) as exc:
         blown_up(exc)
+    except ImpactsLost as exc:
+        fail(str(exc), EXIT_FAILED)
     for name, m in summary["methods"].items():
         warn_empty_probes(f"{name}:", m)
         c = m["circulation"]

@@ -19,9 +19,10 @@ stored by id, in the same order and the same flushes:
 After each `advance` call the new rows are tagged (`ImpactOrder.tag`): their ball's id, its
 block and the step written into the columns after the row's own.  The rows wait in the
 buffers, then in a pool (`settle`), until their flush is known; the buffers' own limit (half a
-block's buffer, step.advance) only makes `settle` drain them sooner.  A row past a block's
-buffer is lost: a block would have to record more than half its buffer (1 024 rows, 512
-ball-part rows) within two steps.
+block's buffer, step.advance) only makes `settle` drain them sooner.  A block whose rows pass
+its whole buffer (it would have to record more than half of it, 1 024 ball-ball and wall rows
+or 512 ball-part rows, within two steps) loses the rows past it: `advance` stops at that step
+(step.IMPACTS_LOST) and `run_steps` raises ImpactsLost, naming the block and its rows.
 """
 from __future__ import annotations
 
@@ -55,6 +56,21 @@ def _tag(buf, count, tagged, col, ids, block, origin, dt, per_block):
             buf[c, r, col + 2] = origin + np.rint(buf[c, r, 0] / dt)
             per_block[b] += 1
         tagged[c] = end
+
+
+class ImpactsLost(RuntimeError):
+    """A block of balls recorded more impact rows than its buffer holds (module docstring)."""
+
+
+def lost_message(buffers, counts, step: int) -> str:
+    """The ImpactsLost message: the first block whose rows overflowed, at `step`."""
+    for name, buf, count in zip(("ball-ball and wall", "ball-part"), buffers, counts):
+        over = np.nonzero(count > buf.shape[1])[0]
+        if over.size:
+            c = int(over[0])
+            return (f"impact rows lost at step {step}: block {c} of stored balls recorded "
+                    f"{int(count[c])} {name} rows, its buffer holds {buf.shape[1]}")
+    return f"impact rows lost at step {step}"
 
 
 class ImpactOrder:

@@ -63,13 +63,15 @@ class Walls(NamedTuple):
 
 
 class Work(NamedTuple):
-    """Scratch arrays of the tub step, one row a block of balls (vibroflow.dem.step.NBLOCK)."""
+    """Scratch arrays of the tub step, one row a block of balls (vibroflow.dem.step.NBLOCK),
+    and one a ball for `save` (SI units)."""
 
     imp_buf: np.ndarray    # (nblock, capacity, 6) impacts
     imp_count: np.ndarray  # (nblock,) impacts recorded
     diag: np.ndarray       # (nblock, step.N_DIAG) diagnostics
     pose: np.ndarray       # (8,) tub pose (step._pose_array)
     moved: np.ndarray      # (nblock,) largest squared move since the list build (m^2)
+    save: np.ndarray       # (N, 9) each ball's position, velocity, spin before a drift
 
 
 class Params(NamedTuple):

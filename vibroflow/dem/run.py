@@ -56,6 +56,7 @@ from .output import ResultWriter, fault_kill_at
 from .paraview import VTK_DIR, EarlyFrames, write_vtk
 from .part_output import write_parts_nc
 from .sampling import impact_rows, part_impact_rows, sample_steps, write_snapshot
+from .impact_order import ImpactsLost
 from .simulate import (BlowUp, DEMState, DEMSystem, init_state, make_system, run_steps,
                        store_by_id, take_max_overlaps)
 from .summary import run_summary
@@ -152,8 +153,9 @@ def _run(scenario, out_dir: Path, system: DEMSystem, vtk: VtkOptions | None, res
     try:
         summary = _vibrate(scenario, out_dir, system, state, writer, prog, settle_info,
                            clock, explicit, vtk, fingerprint, record)
-    except BlowUp:
-        # nothing half-written stays behind: a blown-up run has no result to resume
+    except (BlowUp, ImpactsLost):
+        # nothing half-written stays behind: a blown-up run (or one short of impact rows) has
+        # no result to resume
         writer.discard()
         ckpt.unlink(missing_ok=True)
         raise

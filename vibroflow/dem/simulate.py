@@ -25,7 +25,7 @@ from .blowup import (BlowUp, blowup_message, check_finite_start, check_overlaps_
                      coincident_message, coincident_pair)
 from .laws import material_index, pair_table
 from . import memory_order as M
-from .impact_order import ImpactOrder
+from .impact_order import ImpactOrder, ImpactsLost, lost_message
 from .memory_order import by_id, space_order, store
 from .neighbours import NeighbourList
 from .parts import EMPTY, N_LOAD, SLOTS, parts_record, sum_loads
@@ -216,7 +216,7 @@ class _Buffers:
         self.n = state.n
         self.work = Work(imp_buf=np.zeros((nblock, IMPACT_CAPACITY, K.N_IMP_BUF)),
                          imp_count=np.zeros(nblock, np.int64), diag=np.empty((nblock, K.N_DIAG)),
-                         pose=np.zeros(8), moved=np.zeros(nblock))
+                         pose=np.zeros(8), moved=np.zeros(nblock), save=np.zeros((state.n, 9)))
         #: the storage order of the last space sort (memory_order), taken up again by the
         #: next run_steps call
         self.order: np.ndarray | None = None
@@ -280,8 +280,9 @@ def rebuild(system: DEMSystem, state: DEMState, sort: bool = False) -> None:
 def _forces_now(system: DEMSystem, state: DEMState) -> None:
     b = _buf(system, state)
     b.work.pose[:] = _tub_pose(system, state)
-    K.compute_forces(state.time(system.dt), False, False, b.balls, pairs_of(state.nl, K.NBLOCK),
-                     slots_of(state.nl), b.walls, system.params, b.work, b.parts)
+    K.compute_forces(state.time(system.dt), False, False, False, b.balls,
+                     pairs_of(state.nl, K.NBLOCK), slots_of(state.nl), b.walls, system.params,
+                     b.work, b.parts)
     _sum_part_loads(system, state)
     for count in b.counts:
         count[:] = 0
@@ -385,6 +386,8 @@ def _run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: 
             raise BlowUp(coincident_message(system, state, pair)) from None
         state.step += done
         left -= done
+        if status == K.IMPACTS_LOST:
+            raise ImpactsLost(lost_message(b.buffers, b.counts, state.step))
         order = b.impacts
         if record_impacts:  # with the list of the steps, before a rebuild
             order.tag(b.buffers, b.counts, state.nl, state.time_origin_step, system.dt)

@@ -10,6 +10,18 @@ the caller (dem/simulate.py) rebuilds and calls again.  All loops over balls are
 The kernels take the records of vibroflow.dem.records and read their fields into local
 variables first.
 
+A step is two parallel loops over the blocks of balls: the pairs, then the ball pass (gather,
+walls, the second half kick and, when another step of the call follows, that step's first half
+kick and drift: the same operations in the same order as a loop of their own).  Each loop is a
+wake-up and a barrier of numba's threads, 20 - 85 us on the 2-core machine: a loop of their own
+for the first half kick and drift would cost more in its wake-up than in its work.  A step
+after which `advance` stops (rebuild, impacts, blow-up) has drifted its balls already;
+`_kick_block` saves each ball's position, velocity and spin before that in work.save, and
+`_undo_drift` gives them back, so that the caller sees the step's state bit for bit.  The wall
+pass skips a ball clear of the tub's walls (vibroflow.dem.wall_pass).  Measured on tub47-quick
+under load (docs/validation.md section 6): the step costs 0.67 x the CPU time of the three-loop
+step with every ball through the wall pass on one thread, 0.77 x on two.
+
 Force assembly whose numbers do not depend on the thread count (DEVELOPERS.md, "Threads"):
 
 1. pairs (`_pair_block`): every entry k of the half neighbour list (i, j > i) is evaluated
@@ -19,8 +31,8 @@ Force assembly whose numbers do not depend on the thread count (DEVELOPERS.md, "
    order (vibroflow.dem.neighbours: no two entries share a slot, no races, no atomics);
 2. gather (`_gather_block`): each ball j adds the slots of the entries where it is the second
    ball, in ascending entry order, reading them in sequence;
-3. walls (`ball_walls`): each ball's wall contacts, added one after the other;
-4. kick (`_kick_block`): the step's second half kick.
+3. walls (`wall_pass.ball_walls`): each ball's wall contacts, added one after the other;
+4. kick (`_kick_block`): the step's second half kick (and the next step's first, and drift).
 
 Each sum is over the same terms in the same order whatever the threads.  The balls are cut into
 NBLOCK contiguous blocks of about equal work (a function of the list alone); the threads share
@@ -34,18 +46,17 @@ import numba as nb
 import numpy as np
 
 from ..tub.motion import pose as tub_pose
+# the blocks' records' columns, read by the callers as step.D_*, step.IMP_COLUMNS, ...
+from .block_record import (D_BALL_I, D_BALL_J, D_BALL_OVERLAP, D_LOST, D_NAN,  # noqa: F401
+                           D_WALL_I, D_WALL_OVERLAP, D_WALL_W, IMP_COLUMNS, N_DIAG, N_IMP_BUF,
+                           ROW_BALL, record_impact)
 from .contact import (branch_vector, contact_force, forget, pair_contact_velocity, put3,
                       unit_normal)
-from .parts import ball_parts
-from .walls import (KIND_BALL_BALL, KIND_BALL_PARTITION, KIND_BALL_PLANE, KIND_BALL_TUB,
-                    TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT, WALL_PLANE0, WALL_U, plane_wall,
-                    u_wall)
+from .wall_pass import ball_walls
+from .walls import KIND_BALL_BALL, TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT
 
-# columns of the per-block diagnostics
-D_BALL_OVERLAP, D_BALL_I, D_BALL_J, D_WALL_OVERLAP, D_WALL_I, D_WALL_W, D_NAN, D_LOST = range(8)
-N_DIAG = 8
 # status codes returned by advance
-DONE, REBUILD, IMPACTS_FULL, BLOWUP = 0, 1, 2, 3
+DONE, REBUILD, IMPACTS_FULL, BLOWUP, IMPACTS_LOST = 0, 1, 2, 3, 4
 # blocks of balls of the parallel loops: a constant, so that the impacts' order and the
 # diagnostics are the same on any number of threads (up to NBLOCK of them share the work; on
 # tub47-quick's 4 200 balls 256 blocks cost about a quarter more a step on one thread than 64:
@@ -53,26 +64,6 @@ DONE, REBUILD, IMPACTS_FULL, BLOWUP = 0, 1, 2, 3
 NBLOCK = 64
 # what fixes a run's numbers beyond its scenario (checkpoints and the fill cache record it)
 ASSEMBLY = f"pair slots, gathered per ball; {NBLOCK} blocks"
-# an impact row: time (s), kind (walls.KIND_*), contact point x, y, z (m, lab), normal speed
-# (m/s); then the ball (its stored place, then its id), its block and the step
-# (vibroflow.dem.impact_order)
-IMP_COLUMNS = 6
-ROW_BALL = 6
-N_IMP_BUF = 9
-
-
-@nb.njit(cache=True, inline="always")
-def _record_impact(imp_buf, imp_count, c, t, kind, x, y, z, speed, i):
-    k = imp_count[c]
-    if k < imp_buf.shape[1]:
-        imp_buf[c, k, 0] = t
-        imp_buf[c, k, 1] = kind
-        imp_buf[c, k, 2] = x
-        imp_buf[c, k, 3] = y
-        imp_buf[c, k, 4] = z
-        imp_buf[c, k, 5] = speed
-        imp_buf[c, k, ROW_BALL] = i
-    imp_count[c] = k + 1
 
 
 @nb.njit(cache=True)
@@ -119,9 +110,9 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
                 rflag[q] = 1
                 if record_impacts:
                     vn = vx * nx + vy * ny + vz * nz
-                    _record_impact(imp_buf, imp_count, c, t, KIND_BALL_BALL,
-                                   pos[i, 0] - ri * nx, pos[i, 1] - ri * ny,
-                                   pos[i, 2] - ri * nz, -vn, i)
+                    record_impact(imp_buf, imp_count, c, t, KIND_BALL_BALL,
+                                  pos[i, 0] - ri * nx, pos[i, 1] - ri * ny,
+                                  pos[i, 2] - ri * nz, -vn, i)
             mj = mass[j]
             m_eff = mi * mj / (mi + mj)
             r_eff = ri * rj / (ri + rj)
@@ -190,160 +181,16 @@ def _gather_block(c, balls, pairs, slots):
 
 
 @nb.njit(cache=True)
-def ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work, prt):
-    """The wall-contact pass of the balls of block c: each ball's contacts with the tub's U
-    wall, its partitions and the plane walls, at time t (s) with the tub's pose in work.pose,
-    their forces and torques added to the ball's force and torque, one contact after the
-    other; the wall slots' histories advanced by dt_hist, their forces and contact points
-    stored, new contacts recorded as impacts into block c's buffer and the largest overlap into
-    its diagnostics."""
-    pos, vel, omg, force, torque = balls.pos, balls.vel, balls.omg, balls.force, balls.torque
-    radius, mass, mat = balls.radius, balls.mass, balls.mat
-    wall_hist, wall_flag, wall_fn, wall_ft = walls.hist, walls.flag, walls.fn, walls.ft
-    wall_slide, wall_point, wall_force, wall_arc = walls.slide, walls.point, walls.force, walls.arc
-    table, tub, wall_mat, planes = params.table, params.tub, params.wall_mat, params.planes
-    imp_buf, imp_count, diag, pose = work.imp_buf, work.imp_count, work.diag, work.pose
-    has_tub = tub[TUB_PRESENT] > 0.0
-    partitions = has_tub and tub[TUB_PERIODIC] == 0.0
-    length = tub[TUB_LENGTH]
-    n_walls = WALL_PLANE0 + planes.shape[0]
-    n_parts = prt.shape.shape[0]
-    periodic_length = length if has_tub and tub[TUB_PERIODIC] > 0.0 else 0.0
-    cth = np.cos(pose[2])
-    sth = np.sin(pose[2])
-    for i in range(pairs.bounds[c], pairs.bounds[c + 1]):
-        fx, fy, fz = force[i, 0], force[i, 1], force[i, 2]
-        tx, ty, tz = torque[i, 0], torque[i, 1], torque[i, 2]
-        r = radius[i]
-        m = mass[i]
-        mat_i = mat[i]
-        # ball-tub frame quantities used by the tub's walls
-        rx = pos[i, 0] - pose[0] - pose[6]
-        rz = pos[i, 2] - pose[1] - pose[7]
-        for w in range(n_walls):
-            # geometry of slot w: overlap, normal (wall -> ball), wall velocity and spin (y),
-            # contact point
-            if w == WALL_U:
-                if not has_tub:
-                    continue
-                delta, nx, nz, vwx, vwz, cx, cz, s, outside = u_wall(
-                    pos[i, 0], pos[i, 2], r, tub, pose, cth, sth)
-                if outside and diag[c, D_LOST] < 0.0:
-                    diag[c, D_LOST] = i
-                if delta <= 0.0 and not wall_flag[i, w]:
-                    continue
-                if delta > 0.0:
-                    wall_arc[i] = s
-                ny = 0.0
-                vwy = 0.0
-                wwy = -pose[5]
-                cy = pos[i, 1]
-                kind = KIND_BALL_TUB
-            elif w < WALL_PLANE0:
-                if not partitions:
-                    continue
-                y = pos[i, 1]
-                if w == 1:
-                    if (y < 0.0 or y > length) and diag[c, D_LOST] < 0.0:
-                        diag[c, D_LOST] = i
-                    delta = r - y
-                    ny = 1.0
-                    cy = 0.0
-                else:
-                    delta = r - (length - y)
-                    ny = -1.0
-                    cy = length
-                if delta <= 0.0 and not wall_flag[i, w]:
-                    continue
-                nx = 0.0
-                nz = 0.0
-                vwx = pose[3] - pose[5] * rz
-                vwz = pose[4] + pose[5] * rx
-                vwy = 0.0
-                wwy = -pose[5]
-                cx = pose[6] + cth * rx + sth * rz
-                cz = pose[7] - sth * rx + cth * rz
-                kind = KIND_BALL_PARTITION
-            else:
-                k = w - WALL_PLANE0
-                delta, vwx, vwy, vwz = plane_wall(pos[i, 0], pos[i, 1], pos[i, 2], r,
-                                                  planes[k], t)
-                if delta <= 0.0 and not wall_flag[i, w]:
-                    continue
-                nx = planes[k, 3]
-                ny = planes[k, 4]
-                nz = planes[k, 5]
-                wwy = 0.0
-                cx = pos[i, 0] - (r - delta) * nx
-                cy = pos[i, 1] - (r - delta) * ny
-                cz = pos[i, 2] - (r - delta) * nz
-                kind = KIND_BALL_PLANE
-            if delta <= 0.0:
-                # the contact has just ended: forget its history
-                wall_flag[i, w] = 0
-                for q in range(6):
-                    wall_hist[i, w, q] = 0.0
-                wall_fn[i, w] = 0.0
-                wall_ft[i, w] = 0.0
-                wall_slide[i, w] = 0
-                continue
-            vx = vel[i, 0] - r * (omg[i, 1] * nz - omg[i, 2] * ny) - vwx
-            vy = vel[i, 1] - r * (omg[i, 2] * nx - omg[i, 0] * nz) - vwy
-            vz = vel[i, 2] - r * (omg[i, 0] * ny - omg[i, 1] * nx) - vwz
-            if not wall_flag[i, w]:
-                wall_flag[i, w] = 1
-                if record_impacts:
-                    vn = vx * nx + vy * ny + vz * nz
-                    _record_impact(imp_buf, imp_count, c, t, kind, pos[i, 0] - r * nx,
-                                   pos[i, 1] - r * ny, pos[i, 2] - r * nz, -vn, i)
-            wfx, wfy, wfz, tix, tiy, tiz, _tjx, _tjy, _tjz, fn, ft, sl = contact_force(
-                delta, nx, ny, nz, vx, vy, vz, omg[i, 0], omg[i, 1] - wwy, omg[i, 2],
-                r, 0.0, r, m, table[mat_i, wall_mat[w]], wall_hist[i, w], dt_hist)
-            fx += wfx
-            fy += wfy
-            fz += wfz
-            tx += tix
-            ty += tiy
-            tz += tiz
-            wall_fn[i, w] = fn
-            wall_ft[i, w] = ft
-            wall_slide[i, w] = sl
-            wall_point[i, w, 0] = cx
-            wall_point[i, w, 1] = cy
-            wall_point[i, w, 2] = cz
-            wall_force[i, w, 0] = wfx
-            wall_force[i, w, 1] = wfy
-            wall_force[i, w, 2] = wfz
-            if delta > diag[c, D_WALL_OVERLAP]:
-                diag[c, D_WALL_OVERLAP] = delta
-                diag[c, D_WALL_I] = i
-                diag[c, D_WALL_W] = w
-        if n_parts > 0:
-            pfx, pfy, pfz, ptx, pty, ptz, pdelta, pk = ball_parts(
-                i, c, t, dt_hist, record_impacts, pos[i, 0], pos[i, 1], pos[i, 2], r, mass[i],
-                vel, omg, mat[i], table, pose, cth, sth, periodic_length, prt)
-            fx += pfx
-            fy += pfy
-            fz += pfz
-            tx += ptx
-            ty += pty
-            tz += ptz
-            if pdelta > diag[c, D_WALL_OVERLAP]:
-                diag[c, D_WALL_OVERLAP] = pdelta
-                diag[c, D_WALL_I] = i
-                diag[c, D_WALL_W] = n_walls + pk  # a part: after the wall slots
-        put3(force, i, fx, fy, fz)
-        put3(torque, i, tx, ty, tz)
-
-
-@nb.njit(cache=True)
-def _kick_block(c, balls, pairs, params, work):
+def _kick_block(c, balls, pairs, params, work, drift):
     """The step's second half kick of the balls of block c, and the largest squared move of
-    one of them since the last list build (tub frame) into moved[c]."""
+    one of them since the last list build (tub frame) into moved[c]; with `drift`, then each
+    ball's state saved into work.save and the next step's first half kick and drift (the
+    same operations, in the same order, as `_kick_drift`)."""
     pos, vel, omg, force, torque = balls.pos, balls.vel, balls.omg, balls.force, balls.torque
     radius, mass, ref_tub = balls.radius, balls.mass, balls.ref_tub
-    diag, pose, moved = work.diag, work.pose, work.moved
-    half_dt = 0.5 * params.dt
+    diag, pose, moved, save = work.diag, work.pose, work.moved, work.save
+    dt = params.dt
+    half_dt = 0.5 * dt
     cth = np.cos(pose[2])
     sth = np.sin(pose[2])
     m2 = 0.0
@@ -365,7 +212,42 @@ def _kick_block(c, balls, pairs, params, work):
                 diag[c, D_NAN] = i
         elif d2 > m2:
             m2 = d2
+        if drift:
+            for a in range(3):
+                save[i, a] = pos[i, a]
+                save[i, 3 + a] = vel[i, a]
+                save[i, 6 + a] = omg[i, a]
+                vel[i, a] += half_dt * force[i, a] * im
+                omg[i, a] += half_dt * torque[i, a] * ii
+                pos[i, a] += dt * vel[i, a]
     moved[c] = m2
+
+
+@nb.njit(cache=True, parallel=True)
+def _kick_drift(balls, params):
+    """A step's first half kick and drift of every ball, in parallel."""
+    pos, vel, omg, force, torque = balls.pos, balls.vel, balls.omg, balls.force, balls.torque
+    radius, mass = balls.radius, balls.mass
+    dt = params.dt
+    half_dt = 0.5 * dt
+    for i in nb.prange(pos.shape[0]):
+        im = 1.0 / mass[i]
+        ii = 1.0 / (0.4 * mass[i] * radius[i] * radius[i])
+        for a in range(3):
+            vel[i, a] += half_dt * force[i, a] * im
+            omg[i, a] += half_dt * torque[i, a] * ii
+            pos[i, a] += dt * vel[i, a]
+
+
+@nb.njit(cache=True)
+def _undo_drift(balls, save):
+    """Every ball's position, velocity and spin back from `save` (_kick_block's)."""
+    pos, vel, omg = balls.pos, balls.vel, balls.omg
+    for i in range(pos.shape[0]):
+        for a in range(3):
+            pos[i, a] = save[i, a]
+            vel[i, a] = save[i, 3 + a]
+            omg[i, a] = save[i, 6 + a]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -377,21 +259,25 @@ def _pair_pass(t, dt_hist, periodic_length, record_impacts, balls, pairs, slots,
 
 
 @nb.njit(cache=True, parallel=True)
-def _ball_pass(t, dt_hist, kick, record_impacts, balls, pairs, slots, walls, params, work, prt):
-    """Steps 2 to 4 for every block, in parallel."""
+def _ball_pass(t, dt_hist, kick, drift, record_impacts, balls, pairs, slots, walls, params,
+               work, prt):
+    """Steps 2 to 4 for every block, in parallel; with `drift`, also the next step's first
+    half kick and drift (_kick_block)."""
     for c in nb.prange(work.diag.shape[0]):
         _gather_block(c, balls, pairs, slots)
         ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work, prt)
         if kick:
-            _kick_block(c, balls, pairs, params, work)
+            _kick_block(c, balls, pairs, params, work, drift)
         else:
             work.moved[c] = 0.0
 
 
 @nb.njit(cache=True)
-def compute_forces(t, kick, record_impacts, balls, pairs, slots, walls, params, work, prt):
+def compute_forces(t, kick, drift, record_impacts, balls, pairs, slots, walls, params, work,
+                   prt):
     """Forces and torques at the current positions (gravity, pairs, walls) at time t (s), with
-    the tub's pose in work.pose; with `kick`, also the step's second half kick.  Two parallel
+    the tub's pose in work.pose; with `kick`, also the step's second half kick, and with
+    `drift` the next step's first half kick and drift (_kick_block).  Two parallel
     loops over the blocks, each in its own function (numba fuses two parallel loops of one
     function when they run over the same range, and the gather must wait for every block's
     pairs): the pairs; then, block by block, each ball's gather, its wall contacts and its kick.
@@ -404,44 +290,44 @@ def compute_forces(t, kick, record_impacts, balls, pairs, slots, walls, params, 
                                           tub[TUB_PERIODIC] > 0.0) else 0.0
     dt_hist = params.dt if kick else 0.0  # the set-up evaluation does not advance histories
     _pair_pass(t, dt_hist, periodic_length, record_impacts, balls, pairs, slots, params, work)
-    _ball_pass(t, dt_hist, kick, record_impacts, balls, pairs, slots, walls, params, work, prt)
+    _ball_pass(t, dt_hist, kick, drift, record_impacts, balls, pairs, slots, walls, params, work,
+               prt)
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True)
 def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pairs, slots, walls,
             params, work, prt):
     """Run up to `nsteps` velocity-Verlet steps from step `step0`.
 
     Time is t = (step - time_origin_step) dt, so that the vibration's phase comes from an
     integer step count (exact on resume).  work.pose receives the tub pose of the last step.
-    Returns (steps done, status) with status DONE, REBUILD, IMPACTS_FULL or BLOWUP.
+    Returns (steps done, status) with status DONE, REBUILD, IMPACTS_FULL, IMPACTS_LOST or
+    BLOWUP.  Two parallel loops a step: the first step's kick and drift run alone, each later
+    one's in the ball pass of the step before (_kick_block); a step after which the call
+    stops gives its balls back from work.save, so that the state is the step's, bit for bit.
     """
-    pos, vel, omg, force, torque = balls.pos, balls.vel, balls.omg, balls.force, balls.torque
-    radius, mass = balls.radius, balls.mass
     dt, half_skin, max_overlap = params.dt, params.half_skin, params.max_overlap
-    imp_buf, imp_count, diag, pose, moved = (work.imp_buf, work.imp_count, work.diag, work.pose,
-                                             work.moved)
-    n = pos.shape[0]
+    imp_count, diag, pose, moved = work.imp_count, work.diag, work.pose, work.moved
     nblock = diag.shape[0]
-    half_dt = 0.5 * dt
     hs2 = half_skin * half_skin
-    cap = imp_buf.shape[1]
+    cap = work.imp_buf.shape[1]
+    part_cap = prt.imp.shape[1]
+    tub = params.tub
+    periodic_length = tub[TUB_LENGTH] if (tub[TUB_PRESENT] > 0.0 and
+                                          tub[TUB_PERIODIC] > 0.0) else 0.0
+    _kick_drift(balls, params)
     for k in range(nsteps):
-        # kick and drift
-        for i in nb.prange(n):
-            im = 1.0 / mass[i]
-            ii = 1.0 / (0.4 * mass[i] * radius[i] * radius[i])
-            for a in range(3):
-                vel[i, a] += half_dt * force[i, a] * im
-                omg[i, a] += half_dt * torque[i, a] * ii
-                pos[i, a] += dt * vel[i, a]
         step = step0 + k + 1
         t = (step - time_origin_step) * dt
         _pose_array(motion, pose[6], pose[7], t, pose)
-        compute_forces(t, True, record_impacts, balls, pairs, slots, walls, params, work, prt)
+        drift = k + 1 < nsteps
+        _pair_pass(t, dt, periodic_length, record_impacts, balls, pairs, slots, params, work)
+        _ball_pass(t, dt, True, drift, record_impacts, balls, pairs, slots, walls, params, work,
+                   prt)
         blown = False
         rebuild = False
         full = False
+        lost = False
         for c in range(nblock):
             if diag[c, D_NAN] >= 0.0 or diag[c, D_LOST] >= 0.0:
                 blown = True
@@ -449,12 +335,14 @@ def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pair
                 blown = True
             if moved[c] > hs2:
                 rebuild = True
-            if imp_count[c] > cap // 2 or prt.imp_count[c] > prt.imp.shape[1] // 2:
+            if imp_count[c] > cap // 2 or prt.imp_count[c] > part_cap // 2:
                 full = True
-        if blown:
-            return k + 1, BLOWUP
-        if rebuild:
-            return k + 1, REBUILD
-        if full:
-            return k + 1, IMPACTS_FULL
+            if imp_count[c] > cap or prt.imp_count[c] > part_cap:
+                lost = True
+        status = (BLOWUP if blown else IMPACTS_LOST if lost else REBUILD if rebuild else
+                  IMPACTS_FULL if full else DONE)
+        if status != DONE:
+            if drift:
+                _undo_drift(balls, work.save)
+            return k + 1, status
     return nsteps, DONE
