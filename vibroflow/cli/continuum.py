@@ -12,8 +12,6 @@ import typer
 from vibroflow.continuum.formulation import FORMULATIONS
 from vibroflow.errors import InputError
 
-from vibroflow.continuum.options import LANDINGS
-
 from .apps import app
 from .failures import blown_up, input_errors
 from .options import (OptionalScenarioArg, OutOption, ResumeOption, SetOption, VtkEveryOption,
@@ -186,6 +184,8 @@ def continuum(
 def check_landing(landing: str, method: str, temperature: bool) -> None:
     """--landing's checks, named by its flag: one of LANDINGS, and columns only for the
     Eulerian formulation with --temperature."""
+    from vibroflow.continuum.options import LANDINGS  # here: the options load numba
+
     if landing not in LANDINGS:
         raise InputError(f"--landing = {landing!r}: must be {' or '.join(LANDINGS)}")
     if landing == "pairs":
