@@ -168,6 +168,7 @@ def test_second_run_on_a_locked_folder_is_refused_and_leaves_it_alone(tmp_path, 
 # B. resume checks the scenario
 
 
+@pytest.mark.slow  # 5 - 8 s of DEM or CLI subprocesses
 def test_resume_with_another_scenario_is_refused(tmp_path, bounce_toml):
     """A checkpoint resumes only its own scenario: another --set is refused in one line that
     names the first field that differs; run.checkpoint_every may change."""
@@ -314,6 +315,7 @@ SMALL_FILL = ["fill.count=200", "fill.settle_time=0.02", "fill.max_settle_time=0
               "run.duration=0.086", "run.average_last=0.086"]
 
 
+@pytest.mark.slow  # 5 - 8 s of DEM or CLI subprocesses
 def test_damaged_fill_cache_entry_is_made_again(tmp_path, monkeypatch):
     """A cached settled bed with a flipped byte is settled again (the same bed: the settling
     is deterministic), never used."""

@@ -172,6 +172,7 @@ def test_threads_option_out_of_range(tmp_path):
     assert not out.exists()
 
 
+@pytest.mark.slow  # 5 - 8 s of DEM or CLI subprocesses
 def test_periodic_length_and_vtk_output(tmp_path):
     """A periodic length instead of partitions: no ball lost, none against a partition; and the
     ParaView files in the tub frame, with frames every 0.01 s from 0.005 s before the window

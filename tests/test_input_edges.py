@@ -212,6 +212,7 @@ def test_scenario_check_says_it_in_one_line_and_dem_writes_nothing(drop, tmp_pat
 # ---------------------------------------------------------------------------------------------
 # Output folders: one writer at a time; a file or a read-only folder is bad input
 
+@pytest.mark.slow  # 5 - 8 s of DEM or CLI subprocesses
 def test_a_folder_in_use_is_refused_naming_its_holder(drop, tmp_path):
     out = tmp_path / "out"
     with folder_lock(out, "vibroflow dem"):

@@ -508,6 +508,7 @@ def test_import_refuses_an_out_folder_whose_result_names_are_folders(run):
 # ----------------------------------------------------------------------------------------------
 # Through the CLI: exit code 2, one line, no traceback, --out as it was
 
+@pytest.mark.slow  # 5 - 8 s of DEM or CLI subprocesses
 def test_cli_import_of_bad_dumps(run, tmp_path):
     post, steps, out = run
     empty = tmp_path / "empty"
