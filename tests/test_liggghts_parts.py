@@ -164,6 +164,17 @@ def _ball(i, pos, vel=(0.0, 0.0, 0.0), omg=(0.0, 0.0, 0.0)) -> str:
     return f"{i} " + " ".join(f"{v:.10g}" for v in (*pos, *vel, *omg, R_BALL))
 
 
+def _still_bar_deck(tmp_path):
+    """The bar case held still in the lab (the relative velocity is the ball's), its deck
+    exported under tmp_path/deck with the vibration starting at step N0: (scenario, the
+    deck's post folder, the steps of its snapshots)."""
+    s = bar_case("parts.0.frame=lab")
+    info = LG.export_deck(s, tmp_path / "deck")
+    post = tmp_path / "deck" / "post"
+    (post / LG.START_FILE).write_text(f"{N0}\n")
+    return s, post, [N0 + int(k) for k in info.dump_steps]
+
+
 def _on_bar(angle_deg: float, gap: float, y: float = 0.01):
     """A ball centre at `angle_deg` around the bar (from +x towards +z), its surface `gap` (m)
     from the bar's analytic surface."""
@@ -173,11 +184,7 @@ def _on_bar(angle_deg: float, gap: float, y: float = 0.01):
 
 
 def test_a_known_contact_is_a_known_impact_and_load(tmp_path):
-    s = bar_case("parts.0.frame=lab")  # a still bar: the relative velocity is the ball's
-    info = LG.export_deck(s, tmp_path / "deck")
-    post = tmp_path / "deck" / "post"
-    (post / LG.START_FILE).write_text(f"{N0}\n")
-    snaps = [N0 + int(k) for k in info.dump_steps]
+    s, post, snaps = _still_bar_deck(tmp_path)
     cols = "id type x y z vx vy vz omegax omegay omegaz radius"
     (post / LG.BALL_DUMP).write_text(_dump(snaps, lambda k, st: [
         _ball(5, (0.0, 0.01, 0.02)).replace("5 ", "5 1 ", 1),
@@ -248,11 +255,7 @@ def test_the_import_finds_contacts_on_the_decks_own_mesh(tmp_path):
     the bar, the --fill-from deck's) but not the default 36 chords, whose facet lies
     r (1 - cos 5 deg) = 48 um inside the circle there: the import counts its impact, at the
     dumped 0.3 m/s, exactly when the deck's part_bar.stl is the fine mesh."""
-    s = bar_case("parts.0.frame=lab")
-    info = LG.export_deck(s, tmp_path / "deck")
-    post = tmp_path / "deck" / "post"
-    (post / LG.START_FILE).write_text(f"{N0}\n")
-    snaps = [N0 + int(k) for k in info.dump_steps]
+    s, post, snaps = _still_bar_deck(tmp_path)
     cols = "id type x y z vx vy vz omegax omegay omegaz radius"
     (post / LG.BALL_DUMP).write_text(_dump(snaps, lambda k, st: [
         _ball(5, (0.0, 0.01, 0.02)).replace("5 ", "5 1 ", 1)], cols))
