@@ -14,8 +14,6 @@ stress's work at the front being the rest.
 """
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -27,6 +25,7 @@ from vibroflow.continuum.eulerian import solver as eulerian
 from vibroflow.continuum.temperature_field import fluctuation_energy_J_m
 from vibroflow.continuum.wall_energy_flux import landing_terms
 from vibroflow.measure.stats import stderr_of_batches
+from benchmark_module import load_benchmark
 
 G_ACC = 9.81
 DX = 0.01
@@ -257,21 +256,12 @@ def test_a_settled_block_resting_or_sliding_compacts_nothing():
     assert fed[1] < 1e-4 * impact
 
 
-def _wall_feed():
-    """benchmarks/wall_feed.py, loaded from its file (benchmarks/ is no package)."""
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "wall_feed.py"
-    spec = importlib.util.spec_from_file_location("wall_feed", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def _shaken_layer(columns):
     """The Eulerian shaken layer of benchmarks/wall_feed.py (5 cm, tub47's 1.5 mm at 47 Hz,
     T coupled, its landing by the pairs or along the `columns`), 35 cycles: the cycle-mean
     landing feed and the floor row's part (W/m^2), each with its batch-means standard error
     over five batches of the 30 cycles after the first 5."""
-    wf = _wall_feed()
+    wf = load_benchmark("wall_feed")
     r, _, _ = wf.run(0.05, 35, "eulerian", columns)
     cycle = np.floor(r[:, 0] * wf.FREQUENCY + 1e-9).astype(int)
     batches = np.array_split(np.arange(5, cycle.max() + 1), 5)

@@ -3,9 +3,7 @@ run's balance's slip production, landing and collision loss, in W per metre of t
 U's arc regions, and the take-off phase of a force sampled at the phases k / P."""
 from __future__ import annotations
 
-import importlib.util
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,18 +11,10 @@ import pytest
 from vibroflow.continuum.kinetic_theory import LUN_SAVAGE, KineticParameters
 from vibroflow.continuum.temperature_field import TemperatureModel
 from vibroflow.continuum.wall_energy_flux import WallEnergy
+from benchmark_module import load_benchmark
 
 PRM = KineticParameters(diameter_m=0.00635, density_kg_m3=7800.0, restitution=0.9,
                         phi_rcp=0.64, g0_form=LUN_SAVAGE)
-
-
-def _bench():
-    """benchmarks/tub_wall_feed.py, loaded from its file (benchmarks/ is no package)."""
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "tub_wall_feed.py"
-    spec = importlib.util.spec_from_file_location("tub_wall_feed", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def test_a_wall_cells_feed_is_slip_production_plus_landing_less_the_loss():
@@ -33,7 +23,7 @@ def test_a_wall_cells_feed_is_slip_production_plus_landing_less_the_loss():
     # production 2 x 125.76 W/m^2 x 0.01 m = 2.5152 W/m (test_wall_energy_flux.py's hand
     # value at phi' = 0.5, doubled), loss 33.956 W/m^2 x 0.01 m = 0.33956 W/m, landing
     # 0.2 W/m: 2.5152 + 0.2 - 0.33956 = 2.3756 W/m
-    bench = _bench()
+    bench = load_benchmark("tub_wall_feed")
     model = TemperatureModel(PRM, 0.01, 0.0, True, WallEnergy(restitution=0.8))
     sums = np.array([[[0.01, 0.01 * 0.04, 100.0, 0.2]]])
     feed = bench.cell_feed_W_m(np.full((1, 1), 0.5), np.full((1, 1), 0.01), sums, 0.01, model)
@@ -45,7 +35,7 @@ def test_a_wall_cells_feed_is_slip_production_plus_landing_less_the_loss():
 
 
 def test_the_regions_split_the_u_and_the_take_off_is_read_at_the_sampled_phases():
-    bench = _bench()
+    bench = load_benchmark("tub_wall_feed")
     R = 0.15
     s = np.array([0.0, R * math.radians(29.0), -R * math.radians(31.0), 0.5 * math.pi * R - 1e-6,
                   0.5 * math.pi * R + 0.01])
