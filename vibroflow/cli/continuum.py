@@ -10,6 +10,7 @@ from typing import Annotated, Optional
 import typer
 
 from vibroflow.continuum.formulation import FORMULATIONS
+from vibroflow.continuum.landing_choices import LANDINGS
 from vibroflow.errors import InputError
 
 from .apps import app
@@ -184,8 +185,6 @@ def continuum(
 def check_landing(landing: str, method: str, temperature: bool) -> None:
     """--landing's checks, named by its flag: one of LANDINGS, and columns only for the
     Eulerian formulation with --temperature."""
-    from vibroflow.continuum.options import LANDINGS  # here: the options load numba
-
     if landing not in LANDINGS:
         raise InputError(f"--landing = {landing!r}: must be {' or '.join(LANDINGS)}")
     if landing == "pairs":

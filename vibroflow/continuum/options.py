@@ -58,16 +58,13 @@ from typing import ClassVar
 from vibroflow.errors import InputError
 
 from .constitutive import check_bed_viscosity
+from .landing_choices import LANDINGS
 from .timestep import transfers_per_step
 
 DEFAULT_DX_DIAMETERS = 3.0
 DEFAULT_CFL = 0.3
 DEFAULT_GRID = f"{DEFAULT_DX_DIAMETERS:g} ball diameters"
 DEFAULT_DAMPING = "the default grid's spacing"
-#: ContinuumOptions.landing: where the Eulerian wall cells' landing above the wall row is
-#: counted, by the pairs of cells across each z face (compaction_landing.py) or along each
-#: column by the impulse through its z faces (column_landing.py)
-LANDINGS = ("pairs", "columns")
 
 
 def damping_transfer_cfl(transfer_cfl: float | None, dx: float, damping_length: float
@@ -183,7 +180,7 @@ class ContinuumOptions:
             raise InputError(f"initial_temperature = {self.initial_temperature!r}: must be a "
                              "temperature >= 0 m^2/s^2")
         if self.landing not in LANDINGS:
-            raise InputError(f"landing = {self.landing!r}: must be pairs or columns")
+            raise InputError(f"landing = {self.landing!r}: must be {' or '.join(LANDINGS)}")
         if self.landing != "pairs" and not self.temperature:
             raise InputError(f"landing = {self.landing!r}: only with the temperature "
                              "(--temperature, in a study METHOD.temperature=true); without it "
