@@ -19,7 +19,9 @@ Timeline (tub47.md "Procedure", the DEM's clock: t = 0 when the vibration starts
    measure.bulk_batches; from the samples, which the checkpoint carries, so a resumed run
    writes the same files) and summary.json with the
    DEM's keys (probes, circulation, wall_contacts from the points or cells touching the U,
-   impacts: none, window, cells), plus a "continuum" block: the method, numerics, material,
+   impacts: none, window, cells), the floor's force over the cycle and the bed's take-off
+   (floor.csv and the summary's "floor": measure.floor_force, as the DEM's), plus a
+   "continuum" block: the method, numerics, material,
    and the shear rate with the impact speed and granular temperature it implies through the
    calibrated relations (calibration.toml [impacts]), when a calibration is given
    (shear_outputs.py); with the granular temperature (ContinuumOptions.temperature), its map
@@ -56,6 +58,7 @@ from vibroflow.io.folder_lock import folder_lock
 from vibroflow.io.parts_file import PARTS_NC_NAME, write_parts
 from vibroflow.io.vtk_frame import extra_frame_steps, vtk_options, write_vtk_record
 from vibroflow.measure.bulk_batches import BATCHES_CSV_NAME, STDERR_CSV_NAME
+from vibroflow.measure.floor_force import FLOOR_CSV_NAME, floor_cycle, weight_of, write_floor_csv
 from vibroflow.measure.stats import batch_means, batches_of_whole_cycles
 from vibroflow.measure.summary import json_safe, tub_summary
 from vibroflow.progress import RunProgress
@@ -218,7 +221,7 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
                     prog.log(f"no checkpoint in {out}: starting afresh")
                 for name in (SUMMARY_NAME, BULK_CSV_NAME, BATCHES_CSV_NAME, STDERR_CSV_NAME,
                              CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME, TEMPERATURE_CSV_NAME,
-                             PARTS_NC_NAME):
+                             PARTS_NC_NAME, FLOOR_CSV_NAME):
                     (out / name).unlink(missing_ok=True)
                 shutil.rmtree(out / VTK_DIR, ignore_errors=True)  # another run's frames
                 with interrupted_while_settling():
@@ -306,6 +309,13 @@ def _results(form: Formulation, scenario, out: Path, calibration, options, vtk, 
             initial_m2_s2=options.initial_temperature, landing=options.landing)
     summary["continuum"].update(impacts_from_temperature(
         calibration, samples, phase, geo.radius, batch, run.batches, summary["impacts"]))
+    if times.size:
+        floor = floor_cycle(samples.floor_force[:times.size], times,
+                            run.duration - run.average_last, run.duration,
+                            scenario.motion.frequency, run.phases_per_cycle, run.batches,
+                            weight_of(scenario.gravity, state.mass.sum() * geo.length))
+        write_floor_csv(out / FLOOR_CSV_NAME, floor)
+        summary["floor"] = floor.as_dict()
     parts = continuum_parts(scenario)
     if parts:
         window = sample_times(scenario)[1:]

@@ -187,6 +187,9 @@ class CellSampler(Sampler):
         tc = wall_cells[touching]
         samples.add_contacts(j, np.searchsorted(cells, tc), hist["fn"][tc], hist["ft"][tc],
                              hist["state"][tc], mesh.arc[tc], system.x[tc], geo.length)
+        # the wall layer's penalty force (not the share its closed faces carry)
+        samples.add_floor_force(j, wall_forces_by_cell(wall_cells, mesh.normal, hist)[:, 1],
+                                system.x[wall_cells], geo.radius, geo.length)
         if samples.n_parts:
             samples.add_part_forces(j, self._part_forces(), self._part_torques(), geo.length)
         rate_all = shear_rate(state.L)

@@ -150,6 +150,8 @@ class PointSampler(Sampler):
         samples.add_contacts(j, touching, wall_hist["fn"][touching], wall_hist["ft"][touching],
                              wall_hist["state"][touching], self.arc[touching],
                              state.x[touching], geo.length)
+        samples.add_floor_force(j, wall_hist["f"][touching, 1], state.x[touching], geo.radius,
+                                geo.length)
         if samples.n_parts:
             walls = [b for b in system.boundaries if isinstance(b, PartWall)]
             samples.add_part_forces(j, np.array([state.history[b.slot]["f"].sum(axis=0)

@@ -1,0 +1,202 @@
+"""The U floor's force over the vibration cycle and the bed's take-off, the same for every
+method (docs/validation.md section 22, "The floor over the cycle").
+
+The floor is the U wall within FLOOR_DEG (30 degrees) of its bottom: arc positions |s| <= R
+pi / 6 (tub.geometry.point_to_arc).  At each sample the floor force F_z (N) is the sum over
+the wall's contacts there of the z component, in the tub's axes, of the wall's force on the
+material: the DEM's sampled ball-wall contacts (dem.h5 /wall_contacts/force_lab, lab axes,
+rotated by the tub's angle theta: F_z = -sin(theta) F_X + cos(theta) F_Z), a continuum's
+penalty force on its points or wall-layer cells.  Over the bed's weight M |g| it is binned by
+the samples' phase of the cycle, t f mod 1, at the run's P sampled phases k / P, each phase's
+mean over the window's whole cycles carrying its batch-means standard error (stats.py).
+
+The take-off phase is where that force first falls to TAKE_OFF_LEVEL of the weight after its
+maximum (layer_profiles.take_off_phase, section 23's definition), on the sampled phases k / P
+(not the bins' centres (k + 1/2) / P that take_off_phase assumes): a block resting on a floor
+shaken at Gamma = A omega^2 / g leaves it at sin(psi) = 1 / Gamma.  NaN (None in JSON) where the
+force never falls that low: the bed never leaves the floor.
+
+The regions of the U (REGIONS: the floor, the arcs to 90 degrees, the side walls) also split a
+run's wall feed of fluctuation energy (`region_of`, `region_lengths`).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from vibroflow.io.atomic import write_text_atomic
+from vibroflow.tub.geometry import point_to_arc
+
+from .layer_profiles import TAKE_OFF_LEVEL, take_off_phase
+from .stats import batches_of_whole_cycles, phase_bins
+
+FLOOR_CSV_NAME = "floor.csv"
+#: the floor: the U within this angle (degrees) of its bottom, either side
+FLOOR_DEG = 30.0
+#: the U's regions, by index of region_of
+REGIONS = ("floor", "arcs", "side walls")
+#: floor.csv's columns and their units (SI; "1": a number)
+FLOOR_COLUMNS = {"phase": "1", "force_over_weight": "1", "force_over_weight_stderr": "1",
+                 "samples": "1"}
+
+
+def region_of(s, radius: float) -> np.ndarray:
+    """Region index (REGIONS) of arc positions s (m) on a U of `radius` (m)."""
+    a = np.abs(np.asarray(s, float))
+    return np.where(a <= radius * math.radians(FLOOR_DEG), 0,
+                    np.where(a <= 0.5 * math.pi * radius, 1, 2))
+
+
+def region_lengths(radius: float, wall_height: float) -> np.ndarray:
+    """Arc length (m) of each region (REGIONS) on both sides of a U of `radius` (m) whose side
+    walls rise to `wall_height` (m) above its bottom."""
+    floor = 2 * radius * math.radians(FLOOR_DEG)
+    return np.array([floor, math.pi * radius - floor, 2 * (wall_height - radius)])
+
+
+def on_floor(x, z, radius: float) -> np.ndarray:
+    """True where the tub-frame point (x, z) (m) is nearest the floor of a U of `radius` (m)."""
+    return region_of(point_to_arc(x, z, radius), radius) == 0
+
+
+def tub_z(force_lab, theta) -> np.ndarray:
+    """The z component in the tub's axes (N) of lab-frame forces (n, 3) (N; x, y, z) at the
+    tub's angles theta (n,) (rad, the tub pose's third entry)."""
+    f = np.asarray(force_lab, float)
+    th = np.asarray(theta, float)
+    return -np.sin(th) * f[:, 0] + np.cos(th) * f[:, 2]
+
+
+def floor_force_of_contacts(snapshot, wall, position_tub, force_lab, theta, n_samples: int,
+                            radius: float, u_wall: int = 0) -> np.ndarray:
+    """(n_samples,) the floor force F_z (N) at each sample from sampled ball-wall contacts
+    (dem.h5 /wall_contacts: the sample index, the wall (u_wall = the U), the contact point in
+    the tub frame (n, 3) m, the wall's force on the ball (n, 3) N in lab axes), theta (rad)
+    the tub's angle at each sample; 0 at a sample with no floor contact."""
+    snap = np.asarray(snapshot, np.int64)
+    pos = np.asarray(position_tub, float).reshape(-1, 3)
+    th = np.asarray(theta, float)
+    keep = (np.asarray(wall) == u_wall) & (snap >= 0) & (snap < n_samples)
+    keep &= on_floor(pos[:, 0], pos[:, 2], radius)
+    fz = tub_z(np.asarray(force_lab, float).reshape(-1, 3)[keep], th[snap[keep]])
+    return np.bincount(snap[keep], fz, n_samples)
+
+
+@dataclass
+class FloorCycle:
+    """The floor force over the cycle (module docstring): at the sampled phases k / P, its
+    mean over the bed's weight and batch-means standard error and the samples behind each;
+    the take-off phase (cycle fraction; NaN: none) of the mean and of each batch; the cycle
+    mean over the weight; the weight (N)."""
+
+    phase: np.ndarray
+    force_over_weight: np.ndarray
+    stderr: np.ndarray
+    samples: np.ndarray
+    take_off: float
+    take_off_batches: list = field(default_factory=list)
+    cycle_mean: float = math.nan
+    cycle_mean_stderr: float = math.nan
+    weight_N: float = math.nan
+
+    def as_dict(self) -> dict:
+        """The summary's "floor" block (JSON-ready apart from NaN: json_safe)."""
+        return {
+            "take_off_phase": self.take_off,
+            "take_off_phase_batches": list(self.take_off_batches),
+            "force_over_weight": self.force_over_weight.tolist(),
+            "force_over_weight_stderr": self.stderr.tolist(),
+            "phases": self.phase.tolist(),
+            "cycle_mean_over_weight": self.cycle_mean,
+            "cycle_mean_over_weight_stderr": self.cycle_mean_stderr,
+            "weight_N": self.weight_N, "csv": FLOOR_CSV_NAME,
+            "definition": (f"z component, tub axes, of the U wall's force on the bed within "
+                           f"{FLOOR_DEG:g} degrees of its bottom, over the bed's weight, by "
+                           "phase t f mod 1; take-off: where it first falls to "
+                           f"{TAKE_OFF_LEVEL:g} of the weight after its maximum (cycle "
+                           "fraction; null: never)"),
+        }
+
+
+def sampled_take_off(force_over_weight, per: int) -> float:
+    """take_off_phase of a force sampled at the phases k / per (module docstring)."""
+    return float(np.mod(take_off_phase(force_over_weight) - 0.5 / per, 1.0))
+
+
+def floor_cycle(force_N, times, t_start: float, t_end: float, frequency: float, per: int,
+                n_batches: int, weight_N: float) -> FloorCycle:
+    """The FloorCycle of floor forces force_N (S,) (N) sampled at times (S,) (s, the tub's
+    clock) over the window [t_start, t_end) of whole cycles at `frequency` (Hz), binned to the
+    `per` phases k / per, n_batches batches of whole cycles, over the weight weight_N (N).
+    Samples with a non-finite force are left out."""
+    f = np.asarray(force_N, float) / float(weight_N)
+    t = np.asarray(times, float)
+    batch = batches_of_whole_cycles(t, t_start, t_end, frequency, n_batches)
+    k = phase_bins(t, frequency, per)
+    use = (batch >= 0) & np.isfinite(f)
+    key = batch[use] * per + k[use]
+    sums = np.bincount(key, f[use], n_batches * per).reshape(n_batches, per)
+    cnt = np.bincount(key, minlength=n_batches * per).reshape(n_batches, per)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        by_batch = sums / cnt                       # (batch, phase)
+        mean = sums.sum(0) / cnt.sum(0)
+        whole = sums.sum(1) / cnt.sum(1)            # each batch's cycle mean
+    full = np.all(cnt > 0, axis=0)
+    se = np.full(per, np.nan)
+    if n_batches >= 2:
+        se[full] = by_batch[:, full].std(axis=0, ddof=1) / math.sqrt(n_batches)
+    cycle_se = (float(whole.std(ddof=1) / math.sqrt(n_batches))
+                if n_batches >= 2 and np.all(np.isfinite(whole)) else math.nan)
+    total = cnt.sum()
+    return FloorCycle(
+        phase=np.arange(per) / per, force_over_weight=mean, stderr=se, samples=cnt.sum(0),
+        take_off=sampled_take_off(mean, per),
+        take_off_batches=[sampled_take_off(b, per) for b in by_batch],
+        cycle_mean=float(f[use].sum() / total) if total else math.nan,
+        cycle_mean_stderr=cycle_se, weight_N=float(weight_N))
+
+
+def write_floor_csv(path, cycle: FloorCycle) -> None:
+    """floor.csv, atomically (FLOOR_COLUMNS): each sampled phase (cycle fraction t f mod 1),
+    the floor force over the bed's weight there, its batch-means standard error and the
+    samples behind it (empty where not measured)."""
+    def num(v):
+        return repr(float(v)) if np.isfinite(v) else ""
+
+    lines = [",".join(FLOOR_COLUMNS)]
+    for p, m, e, n in zip(cycle.phase, cycle.force_over_weight, cycle.stderr, cycle.samples):
+        lines.append(f"{num(p)},{num(m)},{num(e)},{int(n)}")
+    write_text_atomic(path, "\n".join(lines) + "\n")
+
+
+def read_floor_csv(path) -> dict[str, np.ndarray]:
+    """floor.csv's columns (FLOOR_COLUMNS) as arrays (NaN where empty)."""
+    rows = [line.split(",") for line in open(path).read().splitlines()[1:] if line]
+    cols = list(FLOOR_COLUMNS)
+    return {c: np.array([float(r[i]) if r[i] else math.nan for r in rows])
+            for i, c in enumerate(cols)}
+
+
+def dem_floor_cycle(src, scenario, weight_N: float) -> FloorCycle | None:
+    """The FloorCycle of a DEM run's dem.h5 (an open h5py File or a dict keyed like it:
+    /snapshots/time, tub_pose, /wall_contacts with force_lab) over the scenario's averaging
+    window and batches; None where the file holds no contacts' forces."""
+    w = src.get("wall_contacts") if hasattr(src, "get") else None
+    if w is None or "force_lab" not in w:
+        return None
+    times = np.asarray(src["snapshots/time"][()], float)
+    theta = np.asarray(src["snapshots/tub_pose"][()], float)[:, 2]
+    geo_radius = float(scenario.tub.radius)
+    force = floor_force_of_contacts(w["snapshot"][()], w["wall"][()], w["position_tub"][()],
+                                    w["force_lab"][()], theta, times.size, geo_radius)
+    run = scenario.run
+    return floor_cycle(force, times, run.duration - run.average_last, run.duration,
+                       scenario.motion.frequency, int(run.phases_per_cycle), int(run.batches),
+                       weight_N)
+
+
+def weight_of(gravity, mass_kg: float) -> float:
+    """The weight (N) of mass_kg (kg) under the gravity vector (m/s^2)."""
+    return float(np.linalg.norm(np.asarray(gravity, float))) * float(mass_kg)
