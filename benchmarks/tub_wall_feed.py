@@ -25,10 +25,11 @@ The DEM: the U wall's fluctuation flux F . (v - V) by arc bin and phase, the cal
 [kinetic.wall_flux] in RUN/calibration.toml (vibroflow.calibration.wall_energy), summed into the
 same regions (arc-length weighted; the bins' batch errors combined in quadrature); and the
 bed's floor force: the sampled ball-wall contacts in RUN/dem.h5 within 30 degrees of the
-bottom, their force's z component in the tub's axes, by phase over the bed's weight.  The
+bottom, their force's z component in the tub's axes, by phase over the bed's weight
+(vibroflow.measure.floor_force.dem_floor_cycle: every run's floor.csv).  The
 continuum's floor force: the U wall's force on the points or wall-layer cells there, the same
 component.  The take-off phase: where that force first falls to a twentieth of the weight after
-its maximum (measure.layer_profiles.take_off_phase, section 23's definition), resolved to the
+its maximum (measure.floor_force.sampled_take_off, section 23's definition), resolved to the
 eighths the samples give.  Every mean carries its batch-means standard error over --batches
 batches of whole cycles.
 """
@@ -47,27 +48,15 @@ from vibroflow.continuum.temperature_field import point_cells
 from vibroflow.continuum.wall_energy_flux import (cell_wall_terms, contact_terms,
                                                   normal_of_force)
 from vibroflow.io.calibration_file import read_calibration
-from vibroflow.measure.layer_profiles import take_off_phase
+from vibroflow.measure.floor_force import (REGIONS, dem_floor_cycle, region_lengths, region_of,
+                                           sampled_take_off, weight_of)
 from vibroflow.measure.stats import stderr_of_batches
 from vibroflow.tub.geometry import geometry_of, point_to_arc
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_CALIBRATION = ROOT / "tests/data/tub47-quick-dem/calibration.toml"
-REGIONS = ("floor", "arcs", "side walls")
-FLOOR_DEG = 30.0
-
-
-def region_of(s, radius):
-    """Region index (REGIONS) of arc positions s (m) on a U of `radius` (m)."""
-    a = np.abs(np.asarray(s, float))
-    return np.where(a <= radius * math.radians(FLOOR_DEG), 0,
-                    np.where(a <= 0.5 * math.pi * radius, 1, 2))
-
-
-def region_lengths(radius, wall_height):
-    """Arc length (m) of each region on both sides of the U."""
-    floor = 2 * radius * math.radians(FLOOR_DEG)
-    return np.array([floor, math.pi * radius - floor, 2 * (wall_height - radius)])
+#: a force sampled at the phases k / P (not at the bins' centres (k + 1/2) / P)
+take_off = sampled_take_off
 
 
 def cell_feed_W_m(phi, T, sums, h, model):
@@ -196,33 +185,6 @@ def continuum(method, scenario, calibration, options, per, skip, cycles, batches
     return feed, floor, count, weight
 
 
-def dem_floor(dem_dir: Path, per: int, batches: int, radius: float, weight_N: float):
-    """The DEM's floor force's z component over the bed's weight by (batch, phase): its sampled
-    U-wall contacts within FLOOR_DEG of the bottom, batches of whole cycles."""
-    import h5py
-
-    from vibroflow.dem.walls import WALL_U
-
-    with h5py.File(dem_dir / "dem.h5", "r") as hf:
-        phase = hf["snapshots/phase"][:]
-        theta = hf["snapshots/tub_pose"][:, 2]
-        w = hf["wall_contacts"]
-        snap = w["snapshot"][:]
-        wall = w["wall"][:]
-        pos = w["position_tub"][:].astype(float)
-        f_lab = w["force_lab"][:].astype(float)
-    n_snap = phase.size
-    k_snap = np.rint(phase * per).astype(np.int64) % per
-    b_snap = np.minimum(np.arange(n_snap) * batches // n_snap, batches - 1)
-    th = theta[snap]
-    fz = -np.sin(th) * f_lab[:, 0] + np.cos(th) * f_lab[:, 2]
-    on = (wall == WALL_U) & (region_of(point_to_arc(pos[:, 0], pos[:, 2], radius), radius) == 0)
-    key = b_snap[snap[on]] * per + k_snap[snap[on]]
-    tot = np.bincount(key, fz[on], batches * per).reshape(batches, per)
-    cnt = np.bincount(b_snap * per + k_snap, minlength=batches * per).reshape(batches, per)
-    return tot / np.maximum(cnt, 1) / weight_N
-
-
 def dem_regions(table, radius):
     """The DEM's U fluctuation flux (W/m^2) by region and by phase x region, with errors."""
     edges = np.asarray(table.arc_edges_m, float)
@@ -242,12 +204,6 @@ def dem_regions(table, radius):
         by_phase.append(((pa[:, m] * dl[m]).sum(1) / L,
                          np.sqrt(((pa_se[:, m] * dl[m]) ** 2).sum(1)) / L))
     return np.array(out), np.array(out_se), by_phase
-
-
-def take_off(force_over_weight, per: int) -> float:
-    """measure.layer_profiles.take_off_phase of a force sampled at the phases k / per (not at
-    the bins' centres (k + 1/2) / per, which take_off_phase assumes)."""
-    return float(np.mod(take_off_phase(force_over_weight) - 0.5 / per, 1.0))
 
 
 def _mean_se(per_batch):
@@ -308,15 +264,16 @@ def main(argv=None) -> int:
                                                 table.u_fluctuation_flux_by_phase_stderr_W_m2)))
     for r, (x, e) in zip(REGIONS, dph):
         print(f"DEM: {r} by eighth W/m^2: " + ", ".join(f"{u:.3g}" for u in x))
+    import h5py
+
     fill = scenario.fill
-    ball_mass = scenario.materials[fill.material].density * math.pi * fill.diameter ** 3 / 6
-    weight = float(np.hypot(scenario.gravity[0], scenario.gravity[2])) * fill.count * ball_mass
-    fl = dem_floor(a.dem_dir, per, a.batches, geo.radius, weight)
-    fm, fse = _mean_se(fl)
+    mass = fill.count * scenario.materials[fill.material].density * math.pi * fill.diameter ** 3 / 6
+    with h5py.File(a.dem_dir / "dem.h5", "r") as hf:
+        fl = dem_floor_cycle(hf, scenario, weight_of(scenario.gravity, mass))
     print("DEM: floor force / weight by eighth: "
-          + ", ".join(f"{x:.3g} +- {e:.2g}" for x, e in zip(fm, fse)))
-    print(f"DEM: take-off t f {take_off(fm, per):.3f} (batches "
-          f"{np.round([take_off(b, per) for b in fl], 3).tolist()}, resolution 1/{per})")
+          + ", ".join(f"{x:.3g} +- {e:.2g}" for x, e in zip(fl.force_over_weight, fl.stderr)))
+    print(f"DEM: take-off t f {fl.take_off:.3f} (batches "
+          f"{np.round(fl.take_off_batches, 3).tolist()}, resolution 1/{per})")
     cal = read_calibration(a.calibration)
     for method in a.methods.split(","):
         landing = a.landing if method == "eulerian" else "pairs"

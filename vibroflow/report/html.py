@@ -45,6 +45,7 @@ SECTIONS = {
     "impacts": "Impact speeds",
     "impact_distributions": "Impact speed distributions",
     "wall": "Wall friction",
+    "floor": "The floor over the cycle",
     "rheology": "mu(I) fit",
     "rheology_bins": "mu(I) binned",
     "animation": "DEM animation",
@@ -302,6 +303,23 @@ def _wall(data: StudyData) -> dict:
     return out
 
 
+def _floor(data: StudyData) -> dict:
+    """The floor's force over the cycle and the take-off of every method
+    (measure.floor_force), the DEM first; `missing`: the methods whose run has none."""
+    floors = {name: data.floor(name) for name in data.methods}
+    have = {n: b for n, b in floors.items() if b}
+    rows = [[_text(n, "l"), _num(b.get("take_off_phase"), ".3f"),
+             _text(", ".join("n/a" if t is None else f"{t:.3f}"
+                             for t in b.get("take_off_phase_batches") or []), "l"),
+             _pm(b.get("cycle_mean_over_weight"), b.get("cycle_mean_over_weight_stderr"),
+                 ".3f"),
+             _num(min((v for v in b.get("force_over_weight") or [] if v is not None),
+                      default=None), ".3f")]
+            for n, b in have.items()]
+    return {"img": _img(figures.floor_cycle(have), "floor force over the cycle")
+            if have else None, "rows": rows, "missing": [n for n in floors if not floors[n]]}
+
+
 def _rheology(data: StudyData) -> dict:
     def v(r, k):
         x, se = getattr(r, k), getattr(r, k + "_stderr")
@@ -436,6 +454,7 @@ def render(data: StudyData, gif: Path | None = None, gif_note: str | None = None
         "impacts": _impacts(data),
         "impact_distributions": _impact_distributions(data),
         "wall": _wall(data),
+        "floor": _floor(data),
         "rheology": _rheology(data),
         "rheology_bins": eng.rheology_bins(),
         "animation": _animation(data, gif, gif_note),
