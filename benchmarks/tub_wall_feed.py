@@ -31,7 +31,7 @@ continuum's floor force: the U wall's force on the points or wall-layer cells th
 component.  The take-off phase: where that force first falls to a twentieth of the weight after
 its maximum (measure.floor_force.sampled_take_off, section 23's definition), resolved to the
 eighths the samples give.  Every mean carries its batch-means standard error over --batches
-batches of whole cycles.
+batches of whole cycles (the DEM's floor force over its run's run.batches, as its floor.csv).
 """
 from __future__ import annotations
 
