@@ -41,15 +41,11 @@ from pathlib import Path
 
 import numpy as np
 
-from vibroflow.continuum.boundary import UWall
-from vibroflow.continuum.kinetic_stress import KINETIC_COLUMNS
-from vibroflow.continuum.temperature_balance import kinetic_stress_of, temperature_step
-from vibroflow.continuum.temperature_field import point_cells
-from vibroflow.continuum.wall_energy_flux import (cell_wall_terms, contact_terms,
-                                                  normal_of_force)
+from vibroflow.continuum.wall_feed import LagrangianWallFeed
 from vibroflow.io.calibration_file import read_calibration
-from vibroflow.measure.floor_force import (REGIONS, dem_floor_cycle, region_lengths, region_of,
-                                           sampled_take_off, weight_of)
+from vibroflow.measure.floor_force import (REGIONS, dem_floor_cycle, dem_wall_feed,
+                                           region_lengths, region_of, sampled_take_off,
+                                           weight_of)
 from vibroflow.measure.stats import stderr_of_batches
 from vibroflow.tub.geometry import geometry_of, point_to_arc
 
@@ -59,97 +55,40 @@ DEFAULT_CALIBRATION = ROOT / "tests/data/tub47-quick-dem/calibration.toml"
 take_off = sampled_take_off
 
 
-def cell_feed_W_m(phi, T, sums, h, model):
-    """The U wall's net feed (W/m) of cells of side h (m) with solid fraction phi, T (m^2/s^2)
-    (both (nx, nz)) and wall sums (nx, nz, 4): wall_energy_flux.cell_wall_terms' heating less
-    the loss (3/2) rho_s phi a_w T^(3/2), times the cell's area."""
-    w = model.walls
-    heat, cool = cell_wall_terms(phi, T, sums, float(h), float(w.restitution),
-                                 float(w.specularity), bool(w.landing),
-                                 model.grid.void_solid_fraction, model.params)
-    loss = 1.5 * model.params.density_kg_m3 * phi * cool * np.clip(T, 0, None) ** 1.5
-    return (heat - loss) * h * h
-
-
 def eulerian_sampler(system, state):
-    """advance(n) and sample() of an Eulerian run: the wall-layer cells' arc positions (m),
-    their U-wall feed (W/m), their floor force's z component (N/m, tub axes)."""
+    """step_and_sample() of an Eulerian run: one step, then the wall-layer cells' positions
+    (m), their U-wall feed (W/m, vibroflow.continuum.eulerian.wall_feed over that step), their
+    floor force's z component (N/m, tub axes)."""
     from vibroflow.continuum.eulerian import solver as eulerian
-    from vibroflow.continuum.eulerian import temperature_loop
+    from vibroflow.continuum.eulerian.wall_feed import EulerianWallFeed
 
-    model = system.temperature
-    mesh = system.mesh
-    ts = temperature_step(model, system.material.critical_density
-                          / system.material.solid_density, system.dt,
-                          system.material.p_wave_speed())
-    p_kin = np.zeros((state.n, KINETIC_COLUMNS))
+    feed = EulerianWallFeed(system, state)
     cells = system.wall_cells
-    n = mesh.normal
-    rho_s = model.params.density_kg_m3
-    h = mesh.h
+    n = system.mesh.normal
 
     def step_and_sample():
-        kinetic_stress_of(state.density, state.temperature, state.L, state.stress,
-                          state.gamma_dot, state.phase, ts, p_kin)
-        start = (state.mass.copy(), state.v.copy(), state.density.copy(),
-                 state.stress + p_kin[:, :4])
+        feed.before_last_step()
         eulerian.advance(system, state, 1)
-        sums = np.zeros((state.n, 4))
-        # the U wall's contacts alone: the partitions off (fused.MeshBoundaries)
-        bnd = eulerian._boundaries(system, state)._replace(partitions_on=False)
-        temperature_loop.cell_wall_sums(
-            bnd, system.mesh_record, system.grid_spec, system.work, system.frame.as_array(),
-            state.t - 0.5 * system.dt, state.mass, state.v, state.volume, state.stress,
-            state.fext, float(system.material.critical_density), float(system.dt),
-            *(np.ascontiguousarray(a, dtype=float) for a in start), True,
-            bool(model.walls.columns), sums)
-        only = np.zeros_like(sums)
-        only[cells] = sums[cells]
-        shape = (mesh.ncx, mesh.ncz)
-        phi = (state.mass / (rho_s * h * h)).reshape(shape)
-        feed = cell_feed_W_m(phi, state.temperature.reshape(shape),
-                             only.reshape(shape + (4,)), h, model).ravel()
+        x, q = feed.feed()
         fn, ft = state.wall["fn"], state.wall["ft"]
         fz = fn * n[cells, 1] - ft * n[cells, 0] if fn.size == cells.size else \
             (fn * n[:, 1] - ft * n[:, 0])[cells]
-        x = system.x[cells]
-        return x, feed[cells], fz
+        return x, q, fz
 
     return step_and_sample
 
 
 def lagrangian_sampler(system, state):
-    """As eulerian_sampler, of a Lagrangian run: the points' U-wall sums binned to the
-    balance's cells, each cell's feed shared among its points by contact length."""
+    """As eulerian_sampler, of a Lagrangian run (vibroflow.continuum.wall_feed)."""
     from vibroflow.continuum.mpm import solver as mpm
 
-    model = system.temperature
-    g = system.grid
-    h = model.spacing_m
-    nx, nz = g.nx, g.nz   # the balance's cells: temperature_field.point_step's
-    wall = next(b for b in system.boundaries if isinstance(b, UWall))
-    rho_s = model.params.density_kg_m3
+    feed = LagrangianWallFeed(system, state)
 
     def step_and_sample():
         mpm.advance(system, state, 1)
-        hist = state.history[wall.slot]
-        sums = np.zeros((state.n, 4))
-        contact_terms(hist["fn"], hist["ft"], normal_of_force(hist["f"], hist["fn"], hist["ft"]),
-                      state.v, state.mass, np.sqrt(state.volume), float(wall.stiffness),
-                      float(wall.damping_ratio), system.dt, sums)
-        idx = point_cells(state.x, g.x0, g.z0, h, (nx, nz))
-        ncell = nx * nz
-        M = np.bincount(idx, state.mass, ncell)
-        E = np.bincount(idx, state.mass * state.temperature, ncell)
-        T = np.divide(E, M, out=np.zeros(ncell), where=M > 0)
-        phi = M / (rho_s * h * h)
-        cs = np.stack([np.bincount(idx, sums[:, j], ncell) for j in range(4)], axis=1)
-        feed = cell_feed_W_m(phi.reshape(nx, nz), T.reshape(nx, nz),
-                             cs.reshape(nx, nz, 4), h, model).ravel()
-        touch = hist["fn"] > 0
-        share = np.divide(sums[:, 0], cs[idx, 0], out=np.zeros(state.n), where=cs[idx, 0] > 0)
-        point_feed = feed[idx] * share
-        return state.x[touch], point_feed[touch], hist["f"][touch, 1]
+        x, q = feed.feed()
+        hist = state.history[feed.wall.slot]
+        return x, q, hist["f"][hist["fn"] > 0, 1]
 
     return step_and_sample
 
@@ -186,24 +125,12 @@ def continuum(method, scenario, calibration, options, per, skip, cycles, batches
 
 
 def dem_regions(table, radius):
-    """The DEM's U fluctuation flux (W/m^2) by region and by phase x region, with errors."""
-    edges = np.asarray(table.arc_edges_m, float)
-    centre = 0.5 * (edges[1:] + edges[:-1])
-    dl = np.diff(edges)
-    reg = region_of(centre, radius)
-    arc = np.asarray(table.u_fluctuation_flux_by_arc_W_m2, float)
-    arc_se = np.asarray(table.u_fluctuation_flux_by_arc_stderr_W_m2, float)
-    pa = np.asarray(table.u_fluctuation_flux_by_phase_arc_W_m2, float)
-    pa_se = np.asarray(table.u_fluctuation_flux_by_phase_arc_stderr_W_m2, float)
-    out, out_se, by_phase = [], [], []
-    for r in range(len(REGIONS)):
-        m = reg == r
-        L = dl[m].sum()
-        out.append((arc[m] * dl[m]).sum() / L)
-        out_se.append(math.sqrt(((arc_se[m] * dl[m]) ** 2).sum()) / L)
-        by_phase.append(((pa[:, m] * dl[m]).sum(1) / L,
-                         np.sqrt(((pa_se[:, m] * dl[m]) ** 2).sum(1)) / L))
-    return np.array(out), np.array(out_se), by_phase
+    """The DEM's U fluctuation flux (W/m^2) by region and by phase x region, with errors
+    (vibroflow.measure.floor_force.dem_wall_feed)."""
+    d = dem_wall_feed(table, radius)
+    by_phase = [(d["by_phase_W_m2"][:, r], d["by_phase_W_m2_stderr"][:, r])
+                for r in range(len(REGIONS))]
+    return d["by_region_W_m2"], d["by_region_W_m2_stderr"], by_phase
 
 
 def _mean_se(per_batch):

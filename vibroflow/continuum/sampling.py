@@ -83,6 +83,9 @@ class Samples:
         self.temperature = bool(temperature)
         if self.temperature:
             self.temperature_all = np.full(n_samples, np.nan)
+            # per sample the U wall's feed of fluctuation energy over the step ending there
+            # (W/m, summed by region of the U: continuum/wall_feed.py; NaN: not measured)
+            self.wall_feed = np.full((n_samples, 3), np.nan)
             if cell_grid is not None:
                 h, nxh, nz = cell_grid
                 self.temperature_cell_sum = np.zeros((nz, 2 * nxh + 1))
@@ -123,6 +126,7 @@ class Samples:
             out["rate_cell_sum"], out["rate_cell_n"] = self.rate_cell_sum, self.rate_cell_n
         if self.temperature:
             out["temperature_all"] = self.temperature_all
+            out["wall_feed"] = self.wall_feed
             if self.cell_grid is not None:
                 out["temperature_cell_sum"] = self.temperature_cell_sum
                 out["temperature_cell_n"] = self.temperature_cell_n
@@ -147,6 +151,8 @@ class Samples:
             s.rate_cell_sum[:], s.rate_cell_n[:] = a["rate_cell_sum"], a["rate_cell_n"]
         if s.temperature and "temperature_all" in a:
             s.temperature_all[:] = a["temperature_all"]
+            if "wall_feed" in a:
+                s.wall_feed[:] = a["wall_feed"]
             if cell_grid is not None:
                 s.temperature_cell_sum[:] = a["temperature_cell_sum"]
                 s.temperature_cell_n[:] = a["temperature_cell_n"]

@@ -200,3 +200,140 @@ def dem_floor_cycle(src, scenario, weight_N: float) -> FloorCycle | None:
 def weight_of(gravity, mass_kg: float) -> float:
     """The weight (N) of mass_kg (kg) under the gravity vector (m/s^2)."""
     return float(np.linalg.norm(np.asarray(gravity, float))) * float(mass_kg)
+
+
+WALL_FEED_CSV_NAME = "wall_feed.csv"
+
+
+def _region_key(name: str) -> str:
+    return name.replace(" ", "_")
+
+
+@dataclass
+class WallFeedCycle:
+    """The U wall's feed of fluctuation energy (W/m^2 of wall) by region (REGIONS) and over the
+    whole U, its cycle mean and at each sampled phase k / P, each with its batch-means standard
+    error (NaN where it cannot be estimated)."""
+
+    phase: np.ndarray
+    by_phase: np.ndarray          # (P, 3)
+    by_phase_stderr: np.ndarray   # (P, 3)
+    u_by_phase: np.ndarray        # (P,)
+    u_by_phase_stderr: np.ndarray
+    by_region: np.ndarray         # (3,)
+    by_region_stderr: np.ndarray
+    u_wall: float
+    u_wall_stderr: float
+    samples: np.ndarray           # (P,)
+
+    def as_dict(self) -> dict:
+        """The summary's "wall_feed" block (json_safe for NaN)."""
+        return {
+            "u_wall_W_m2": self.u_wall, "u_wall_W_m2_stderr": self.u_wall_stderr,
+            "by_region_W_m2": {r: float(v) for r, v in zip(REGIONS, self.by_region)},
+            "by_region_W_m2_stderr": {r: float(v) for r, v in
+                                      zip(REGIONS, self.by_region_stderr)},
+            "u_wall_by_phase_W_m2": self.u_by_phase.tolist(),
+            "u_wall_by_phase_W_m2_stderr": self.u_by_phase_stderr.tolist(),
+            "phases": self.phase.tolist(), "csv": WALL_FEED_CSV_NAME,
+            "definition": ("the U wall's feed of fluctuation energy into the granular "
+                           "temperature over the step ending at each sample (slip production "
+                           "capped by the wall friction's power, plus the landing, less the "
+                           "collision loss), by region of the U (floor: within "
+                           f"{FLOOR_DEG:g} degrees of the bottom; arcs: to 90 degrees; side "
+                           "walls) over the region's arc length, W/m^2 of wall"),
+        }
+
+
+def _se(by_batch, axis=0):
+    """Batch-means standard error over `axis`, NaN unless every batch is finite (>= 2)."""
+    a = np.asarray(by_batch, float)
+    n = a.shape[axis]
+    if n < 2:
+        return np.full(np.delete(a.shape, axis), np.nan)
+    se = a.std(axis=axis, ddof=1) / math.sqrt(n)
+    return np.where(np.all(np.isfinite(a), axis=axis), se, np.nan)
+
+
+def wall_feed_cycle(feed_W_m, times, t_start: float, t_end: float, frequency: float, per: int,
+                    n_batches: int, lengths) -> WallFeedCycle:
+    """The WallFeedCycle of per-sample feeds feed_W_m (S, 3) (W per metre of thickness, summed
+    over each region of the U) sampled at times (S,) (s) over the window [t_start, t_end) at
+    `frequency` (Hz), binned to the `per` phases k / per, n_batches batches of whole cycles,
+    over the regions' arc lengths `lengths` (3,) m (region_lengths).  Samples with a
+    non-finite feed are left out."""
+    q = np.asarray(feed_W_m, float).reshape(-1, len(REGIONS))
+    L = np.asarray(lengths, float)
+    t = np.asarray(times, float)
+    batch = batches_of_whole_cycles(t, t_start, t_end, frequency, n_batches)
+    k = phase_bins(t, frequency, per)
+    use = (batch >= 0) & np.all(np.isfinite(q), axis=1)
+    key = batch[use] * per + k[use]
+    cnt = np.bincount(key, minlength=n_batches * per).reshape(n_batches, per)
+    sums = np.stack([np.bincount(key, q[use, r], n_batches * per) for r in range(len(REGIONS))],
+                    axis=1).reshape(n_batches, per, len(REGIONS))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        pb = sums / cnt[:, :, None] / L                           # (batch, phase, region)
+        ub = sums.sum(2) / cnt / L.sum()                          # (batch, phase)
+        rb = sums.sum(1) / cnt.sum(1)[:, None] / L                # (batch, region)
+        wb = sums.sum((1, 2)) / cnt.sum(1) / L.sum()              # (batch,)
+        n_all = cnt.sum(0)
+        by_phase = sums.sum(0) / n_all[:, None] / L
+        u_phase = sums.sum((0, 2)) / n_all / L.sum()
+        by_region = sums.sum((0, 1)) / cnt.sum() / L
+        u_wall = float(sums.sum() / cnt.sum() / L.sum())
+    return WallFeedCycle(
+        phase=np.arange(per) / per, by_phase=by_phase, by_phase_stderr=_se(pb),
+        u_by_phase=u_phase, u_by_phase_stderr=_se(ub), by_region=by_region,
+        by_region_stderr=_se(rb), u_wall=u_wall, u_wall_stderr=float(_se(wb)),
+        samples=n_all)
+
+
+def write_wall_feed_csv(path, cycle: WallFeedCycle) -> None:
+    """wall_feed.csv, atomically: each sampled phase (cycle fraction t f mod 1), the feed of
+    each region of the U and of the whole U (W/m^2 of wall) with their batch-means standard
+    errors, and the samples behind them (empty where not measured)."""
+    def num(v):
+        return repr(float(v)) if np.isfinite(v) else ""
+
+    head = ["phase"]
+    for r in REGIONS:
+        head += [f"{_region_key(r)}_W_m2", f"{_region_key(r)}_W_m2_stderr"]
+    head += ["u_wall_W_m2", "u_wall_W_m2_stderr", "samples"]
+    lines = [",".join(head)]
+    for i, p in enumerate(cycle.phase):
+        row = [num(p)]
+        for r in range(len(REGIONS)):
+            row += [num(cycle.by_phase[i, r]), num(cycle.by_phase_stderr[i, r])]
+        row += [num(cycle.u_by_phase[i]), num(cycle.u_by_phase_stderr[i]),
+                str(int(cycle.samples[i]))]
+        lines.append(",".join(row))
+    write_text_atomic(path, "\n".join(lines) + "\n")
+
+
+def dem_wall_feed(table, radius: float) -> dict:
+    """The DEM's U wall fluctuation flux F . (v - V) (W/m^2) by region (REGIONS) from a
+    calibration's [kinetic.wall_flux] table (io.calibration_file; its arc bins summed into the
+    regions by arc length, the bins' errors in quadrature): "by_region_W_m2" and its
+    "_stderr", and "by_phase_W_m2" (P, 3) with its "_stderr", the U's "u_wall_W_m2" (with
+    "_stderr") and "u_wall_by_phase_W_m2"."""
+    edges = np.asarray(table.arc_edges_m, float)
+    dl = np.diff(edges)
+    reg = region_of(0.5 * (edges[1:] + edges[:-1]), radius)
+    arc = np.asarray(table.u_fluctuation_flux_by_arc_W_m2, float)
+    arc_se = np.asarray(table.u_fluctuation_flux_by_arc_stderr_W_m2, float)
+    pa = np.asarray(table.u_fluctuation_flux_by_phase_arc_W_m2, float)
+    pa_se = np.asarray(table.u_fluctuation_flux_by_phase_arc_stderr_W_m2, float)
+    out, out_se, ph, ph_se = [], [], [], []
+    for r in range(len(REGIONS)):
+        m = reg == r
+        L = dl[m].sum()
+        out.append((arc[m] * dl[m]).sum() / L)
+        out_se.append(math.sqrt(((arc_se[m] * dl[m]) ** 2).sum()) / L)
+        ph.append((pa[:, m] * dl[m]).sum(1) / L)
+        ph_se.append(np.sqrt(((pa_se[:, m] * dl[m]) ** 2).sum(1)) / L)
+    return {"by_region_W_m2": np.array(out), "by_region_W_m2_stderr": np.array(out_se),
+            "by_phase_W_m2": np.array(ph).T, "by_phase_W_m2_stderr": np.array(ph_se).T,
+            "u_wall_W_m2": float(table.u_fluctuation_flux_W_m2),
+            "u_wall_W_m2_stderr": float(table.u_fluctuation_flux_stderr_W_m2),
+            "u_wall_by_phase_W_m2": np.asarray(table.u_fluctuation_flux_by_phase_W_m2, float)}
