@@ -68,3 +68,28 @@ def test_the_feed_is_summed_by_region_and_phase_over_the_regions_wall(tmp_path):
     lines = (tmp_path / "wall_feed.csv").read_text().splitlines()
     assert lines[0].startswith("phase,floor_W_m2,floor_W_m2_stderr,arcs_W_m2")
     assert float(lines[3].split(",")[1]) == pytest.approx(3.0 / L[0])
+
+
+def test_the_dems_wall_flux_is_summed_into_the_regions_by_arc_length():
+    from types import SimpleNamespace
+
+    from vibroflow.measure.floor_force import dem_wall_feed
+
+    # R 0.15 m: the floor to 0.0785 m of arc, the arcs to 0.2356 m. Bins centred at -0.275
+    # (side wall), -0.175 (arc), -0.05, 0.05 (floor) and 0.2 m (arc)
+    t = SimpleNamespace(
+        arc_edges_m=[-0.3, -0.25, -0.1, 0.0, 0.1, 0.3],
+        u_fluctuation_flux_by_arc_W_m2=[7.0, 10.0, 100.0, 200.0, 30.0],
+        u_fluctuation_flux_by_arc_stderr_W_m2=[1.0, 3.0, 4.0, 4.0, 3.0],
+        u_fluctuation_flux_by_phase_arc_W_m2=[[7.0, 10.0, 100.0, 200.0, 30.0],
+                                              [0.0, 0.0, 0.0, 0.0, 0.0]],
+        u_fluctuation_flux_by_phase_arc_stderr_W_m2=[[1.0] * 5, [0.0] * 5],
+        u_fluctuation_flux_W_m2=50.0, u_fluctuation_flux_stderr_W_m2=2.0,
+        u_fluctuation_flux_by_phase_W_m2=[100.0, 0.0])
+    d = dem_wall_feed(t, 0.15)
+    # floor (100 x 0.1 + 200 x 0.1) / 0.2 = 150; arcs (10 x 0.15 + 30 x 0.2) / 0.35 = 21.43;
+    # side wall 7; errors in quadrature: floor sqrt(0.4^2 + 0.4^2) / 0.2 = 2.828
+    np.testing.assert_allclose(d["by_region_W_m2"], [150.0, 7.5 / 0.35, 7.0])
+    np.testing.assert_allclose(d["by_region_W_m2_stderr"][0], math.sqrt(0.32) / 0.2)
+    np.testing.assert_allclose(d["by_phase_W_m2"][1], 0.0)
+    assert d["u_wall_W_m2"] == 50.0

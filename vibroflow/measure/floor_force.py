@@ -327,7 +327,7 @@ def dem_wall_feed(table, radius: float) -> dict:
     out, out_se, ph, ph_se = [], [], [], []
     for r in range(len(REGIONS)):
         m = reg == r
-        L = dl[m].sum()
+        L = dl[m].sum() if m.any() else math.nan   # a region no bin covers: NaN
         out.append((arc[m] * dl[m]).sum() / L)
         out_se.append(math.sqrt(((arc_se[m] * dl[m]) ** 2).sum()) / L)
         ph.append((pa[:, m] * dl[m]).sum(1) / L)
