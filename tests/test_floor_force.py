@@ -122,3 +122,29 @@ def test_floor_csv_holds_the_phases_force_and_error(tmp_path):
                                (np.array([2.0, 1, 0, 0, 0, 1, 2, 3]) + 0.05) / 2.0)
     np.testing.assert_allclose(back["force_over_weight_stderr"],
                                np.full(per, 0.1 / math.sqrt(3) / 2 / 2.0), rtol=1e-12)
+
+
+@pytest.mark.slow
+def test_an_eulerian_run_with_t_measures_its_wall_feed_the_same_when_resumed(tmp_path):
+    """The Eulerian's wall feed makes each sample's step on its own (Sampler.
+    splits_sample_step): a run with T stopped twice inside its window and resumed writes the
+    same floor.csv, wall_feed.csv, bulk_velocity.csv and temperature.csv, bit for bit, as the
+    run never stopped."""
+    from continuum_helpers import THREE_CYCLES
+
+    from vibroflow.continuum.formulation import formulation
+    from vibroflow.continuum.tub_run import run_continuum
+    from vibroflow.scenario.io import load_scenario
+
+    opt = formulation("eulerian").options(temperature=True, initial_temperature=0.01, cfl=0.1)
+    s = load_scenario("tub47-quick", THREE_CYCLES)
+    full = run_continuum(s, tmp_path / "full", "eulerian", options=opt)
+    split = tmp_path / "split"
+    assert run_continuum(s, split, "eulerian", options=opt,
+                         stop_after_steps=full["steps"] // 2 + 7) is None
+    assert run_continuum(s, split, "eulerian", options=opt, resume=True,
+                         stop_after_steps=60) is None
+    run_continuum(s, split, "eulerian", options=opt, resume=True)
+    for name in ("floor.csv", "wall_feed.csv", "bulk_velocity.csv", "temperature.csv"):
+        assert (split / name).read_bytes() == (tmp_path / "full" / name).read_bytes(), name
+    assert np.isfinite(full["wall_feed"]["u_wall_W_m2"])
