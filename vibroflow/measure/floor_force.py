@@ -292,7 +292,7 @@ def wall_feed_cycle(feed_W_m, times, t_start: float, t_end: float, frequency: fl
 def write_wall_feed_csv(path, cycle: WallFeedCycle) -> None:
     """wall_feed.csv, atomically: each sampled phase (cycle fraction t f mod 1), the feed of
     each region of the U and of the whole U (W/m^2 of wall) with their batch-means standard
-    errors, and the samples behind them (empty where not measured)."""
+    errors, and the samples behind them (empty where not measured or not known)."""
     def num(v):
         return repr(float(v)) if np.isfinite(v) else ""
 
@@ -305,8 +305,9 @@ def write_wall_feed_csv(path, cycle: WallFeedCycle) -> None:
         row = [num(p)]
         for r in range(len(REGIONS)):
             row += [num(cycle.by_phase[i, r]), num(cycle.by_phase_stderr[i, r])]
+        n = cycle.samples[i]
         row += [num(cycle.u_by_phase[i]), num(cycle.u_by_phase_stderr[i]),
-                str(int(cycle.samples[i]))]
+                str(int(n)) if np.isfinite(n) else ""]
         lines.append(",".join(row))
     write_text_atomic(path, "\n".join(lines) + "\n")
 
@@ -337,3 +338,23 @@ def dem_wall_feed(table, radius: float) -> dict:
             "u_wall_W_m2": float(table.u_fluctuation_flux_W_m2),
             "u_wall_W_m2_stderr": float(table.u_fluctuation_flux_stderr_W_m2),
             "u_wall_by_phase_W_m2": np.asarray(table.u_fluctuation_flux_by_phase_W_m2, float)}
+
+
+def dem_wall_feed_cycle(table, radius: float) -> WallFeedCycle:
+    """The WallFeedCycle of a DEM run's calibration [kinetic.wall_flux] table (dem_wall_feed:
+    the U's fluctuation flux F . (v - V) summed into the regions), at its phase bins
+    (phase_rad / 2 pi; k / P where the table gives none); its samples not known (NaN)."""
+    d = dem_wall_feed(table, radius)
+    per = d["by_phase_W_m2"].shape[0]
+    ph = getattr(table, "phase_rad", None)
+    phase = (np.mod(np.asarray(ph, float) / (2 * math.pi), 1.0) if ph is not None
+             and len(ph) == per else np.arange(per) / per)
+    u_se = getattr(table, "u_fluctuation_flux_by_phase_stderr_W_m2", None)
+    return WallFeedCycle(
+        phase=phase, by_phase=d["by_phase_W_m2"], by_phase_stderr=d["by_phase_W_m2_stderr"],
+        u_by_phase=d["u_wall_by_phase_W_m2"],
+        u_by_phase_stderr=(np.asarray(u_se, float) if u_se is not None
+                           else np.full(per, np.nan)),
+        by_region=d["by_region_W_m2"], by_region_stderr=d["by_region_W_m2_stderr"],
+        u_wall=d["u_wall_W_m2"], u_wall_stderr=d["u_wall_W_m2_stderr"],
+        samples=np.full(per, np.nan))
