@@ -1,8 +1,8 @@
 """What a continuum tub run samples, as the DEM samples its balls: the sample instants (the
 DEM's phases), the sampled points or cells as the DEM's snapshots in the lab frame, their wall
-contacts, floor force and shear rates, the ParaView frames written (`Samples`, carried through a checkpoint
-unchanged), and the samples
-as the dem.h5 layout that vibroflow.measure.summary.tub_summary reads (`samples_source`)."""
+contacts, floor force and shear rates, the ParaView frames written (`Samples`, carried through
+a checkpoint unchanged), and the samples as the dem.h5 layout that
+vibroflow.measure.summary.tub_summary reads (`samples_source`)."""
 from __future__ import annotations
 
 import math
