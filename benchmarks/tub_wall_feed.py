@@ -25,12 +25,13 @@ The DEM: the U wall's fluctuation flux F . (v - V) by arc bin and phase, the cal
 [kinetic.wall_flux] in RUN/calibration.toml (vibroflow.calibration.wall_energy), summed into the
 same regions (arc-length weighted; the bins' batch errors combined in quadrature); and the
 bed's floor force: the sampled ball-wall contacts in RUN/dem.h5 within 30 degrees of the
-bottom, their force's z component in the tub's axes, by phase over the bed's weight.  The
+bottom, their force's z component in the tub's axes, by phase over the bed's weight
+(vibroflow.measure.floor_force.dem_floor_cycle: every run's floor.csv).  The
 continuum's floor force: the U wall's force on the points or wall-layer cells there, the same
 component.  The take-off phase: where that force first falls to a twentieth of the weight after
-its maximum (measure.layer_profiles.take_off_phase, section 23's definition), resolved to the
+its maximum (measure.floor_force.sampled_take_off, section 23's definition), resolved to the
 eighths the samples give.  Every mean carries its batch-means standard error over --batches
-batches of whole cycles.
+batches of whole cycles (the DEM's floor force over its run's run.batches, as its floor.csv).
 """
 from __future__ import annotations
 
@@ -40,127 +41,54 @@ from pathlib import Path
 
 import numpy as np
 
-from vibroflow.continuum.boundary import UWall
-from vibroflow.continuum.kinetic_stress import KINETIC_COLUMNS
-from vibroflow.continuum.temperature_balance import kinetic_stress_of, temperature_step
-from vibroflow.continuum.temperature_field import point_cells
-from vibroflow.continuum.wall_energy_flux import (cell_wall_terms, contact_terms,
-                                                  normal_of_force)
+from vibroflow.continuum.wall_feed import LagrangianWallFeed
 from vibroflow.io.calibration_file import read_calibration
-from vibroflow.measure.layer_profiles import take_off_phase
+from vibroflow.measure.floor_force import (REGIONS, dem_floor_cycle, dem_wall_feed,
+                                           region_lengths, region_of, sampled_take_off,
+                                           weight_of)
 from vibroflow.measure.stats import stderr_of_batches
 from vibroflow.tub.geometry import geometry_of, point_to_arc
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_CALIBRATION = ROOT / "tests/data/tub47-quick-dem/calibration.toml"
-REGIONS = ("floor", "arcs", "side walls")
-FLOOR_DEG = 30.0
-
-
-def region_of(s, radius):
-    """Region index (REGIONS) of arc positions s (m) on a U of `radius` (m)."""
-    a = np.abs(np.asarray(s, float))
-    return np.where(a <= radius * math.radians(FLOOR_DEG), 0,
-                    np.where(a <= 0.5 * math.pi * radius, 1, 2))
-
-
-def region_lengths(radius, wall_height):
-    """Arc length (m) of each region on both sides of the U."""
-    floor = 2 * radius * math.radians(FLOOR_DEG)
-    return np.array([floor, math.pi * radius - floor, 2 * (wall_height - radius)])
-
-
-def cell_feed_W_m(phi, T, sums, h, model):
-    """The U wall's net feed (W/m) of cells of side h (m) with solid fraction phi, T (m^2/s^2)
-    (both (nx, nz)) and wall sums (nx, nz, 4): wall_energy_flux.cell_wall_terms' heating less
-    the loss (3/2) rho_s phi a_w T^(3/2), times the cell's area."""
-    w = model.walls
-    heat, cool = cell_wall_terms(phi, T, sums, float(h), float(w.restitution),
-                                 float(w.specularity), bool(w.landing),
-                                 model.grid.void_solid_fraction, model.params)
-    loss = 1.5 * model.params.density_kg_m3 * phi * cool * np.clip(T, 0, None) ** 1.5
-    return (heat - loss) * h * h
+#: a force sampled at the phases k / P (not at the bins' centres (k + 1/2) / P)
+take_off = sampled_take_off
 
 
 def eulerian_sampler(system, state):
-    """advance(n) and sample() of an Eulerian run: the wall-layer cells' arc positions (m),
-    their U-wall feed (W/m), their floor force's z component (N/m, tub axes)."""
+    """step_and_sample() of an Eulerian run: one step, then the wall-layer cells' positions
+    (m), their U-wall feed (W/m, vibroflow.continuum.eulerian.wall_feed over that step), their
+    floor force's z component (N/m, tub axes)."""
     from vibroflow.continuum.eulerian import solver as eulerian
-    from vibroflow.continuum.eulerian import temperature_loop
+    from vibroflow.continuum.eulerian.wall_feed import EulerianWallFeed
 
-    model = system.temperature
-    mesh = system.mesh
-    ts = temperature_step(model, system.material.critical_density
-                          / system.material.solid_density, system.dt,
-                          system.material.p_wave_speed())
-    p_kin = np.zeros((state.n, KINETIC_COLUMNS))
+    feed = EulerianWallFeed(system, state)
     cells = system.wall_cells
-    n = mesh.normal
-    rho_s = model.params.density_kg_m3
-    h = mesh.h
+    n = system.mesh.normal
 
     def step_and_sample():
-        kinetic_stress_of(state.density, state.temperature, state.L, state.stress,
-                          state.gamma_dot, state.phase, ts, p_kin)
-        start = (state.mass.copy(), state.v.copy(), state.density.copy(),
-                 state.stress + p_kin[:, :4])
+        feed.before_last_step()
         eulerian.advance(system, state, 1)
-        sums = np.zeros((state.n, 4))
-        # the U wall's contacts alone: the partitions off (fused.MeshBoundaries)
-        bnd = eulerian._boundaries(system, state)._replace(partitions_on=False)
-        temperature_loop.cell_wall_sums(
-            bnd, system.mesh_record, system.grid_spec, system.work, system.frame.as_array(),
-            state.t - 0.5 * system.dt, state.mass, state.v, state.volume, state.stress,
-            state.fext, float(system.material.critical_density), float(system.dt),
-            *(np.ascontiguousarray(a, dtype=float) for a in start), True,
-            bool(model.walls.columns), sums)
-        only = np.zeros_like(sums)
-        only[cells] = sums[cells]
-        shape = (mesh.ncx, mesh.ncz)
-        phi = (state.mass / (rho_s * h * h)).reshape(shape)
-        feed = cell_feed_W_m(phi, state.temperature.reshape(shape),
-                             only.reshape(shape + (4,)), h, model).ravel()
+        x, q = feed.feed()
         fn, ft = state.wall["fn"], state.wall["ft"]
         fz = fn * n[cells, 1] - ft * n[cells, 0] if fn.size == cells.size else \
             (fn * n[:, 1] - ft * n[:, 0])[cells]
-        x = system.x[cells]
-        return x, feed[cells], fz
+        return x, q, fz
 
     return step_and_sample
 
 
 def lagrangian_sampler(system, state):
-    """As eulerian_sampler, of a Lagrangian run: the points' U-wall sums binned to the
-    balance's cells, each cell's feed shared among its points by contact length."""
+    """As eulerian_sampler, of a Lagrangian run (vibroflow.continuum.wall_feed)."""
     from vibroflow.continuum.mpm import solver as mpm
 
-    model = system.temperature
-    g = system.grid
-    h = model.spacing_m
-    nx, nz = g.nx, g.nz   # the balance's cells: temperature_field.point_step's
-    wall = next(b for b in system.boundaries if isinstance(b, UWall))
-    rho_s = model.params.density_kg_m3
+    feed = LagrangianWallFeed(system, state)
 
     def step_and_sample():
         mpm.advance(system, state, 1)
-        hist = state.history[wall.slot]
-        sums = np.zeros((state.n, 4))
-        contact_terms(hist["fn"], hist["ft"], normal_of_force(hist["f"], hist["fn"], hist["ft"]),
-                      state.v, state.mass, np.sqrt(state.volume), float(wall.stiffness),
-                      float(wall.damping_ratio), system.dt, sums)
-        idx = point_cells(state.x, g.x0, g.z0, h, (nx, nz))
-        ncell = nx * nz
-        M = np.bincount(idx, state.mass, ncell)
-        E = np.bincount(idx, state.mass * state.temperature, ncell)
-        T = np.divide(E, M, out=np.zeros(ncell), where=M > 0)
-        phi = M / (rho_s * h * h)
-        cs = np.stack([np.bincount(idx, sums[:, j], ncell) for j in range(4)], axis=1)
-        feed = cell_feed_W_m(phi.reshape(nx, nz), T.reshape(nx, nz),
-                             cs.reshape(nx, nz, 4), h, model).ravel()
-        touch = hist["fn"] > 0
-        share = np.divide(sums[:, 0], cs[idx, 0], out=np.zeros(state.n), where=cs[idx, 0] > 0)
-        point_feed = feed[idx] * share
-        return state.x[touch], point_feed[touch], hist["f"][touch, 1]
+        x, q = feed.feed()
+        hist = state.history[feed.wall.slot]
+        return x, q, hist["f"][hist["fn"] > 0, 1]
 
     return step_and_sample
 
@@ -196,58 +124,13 @@ def continuum(method, scenario, calibration, options, per, skip, cycles, batches
     return feed, floor, count, weight
 
 
-def dem_floor(dem_dir: Path, per: int, batches: int, radius: float, weight_N: float):
-    """The DEM's floor force's z component over the bed's weight by (batch, phase): its sampled
-    U-wall contacts within FLOOR_DEG of the bottom, batches of whole cycles."""
-    import h5py
-
-    from vibroflow.dem.walls import WALL_U
-
-    with h5py.File(dem_dir / "dem.h5", "r") as hf:
-        phase = hf["snapshots/phase"][:]
-        theta = hf["snapshots/tub_pose"][:, 2]
-        w = hf["wall_contacts"]
-        snap = w["snapshot"][:]
-        wall = w["wall"][:]
-        pos = w["position_tub"][:].astype(float)
-        f_lab = w["force_lab"][:].astype(float)
-    n_snap = phase.size
-    k_snap = np.rint(phase * per).astype(np.int64) % per
-    b_snap = np.minimum(np.arange(n_snap) * batches // n_snap, batches - 1)
-    th = theta[snap]
-    fz = -np.sin(th) * f_lab[:, 0] + np.cos(th) * f_lab[:, 2]
-    on = (wall == WALL_U) & (region_of(point_to_arc(pos[:, 0], pos[:, 2], radius), radius) == 0)
-    key = b_snap[snap[on]] * per + k_snap[snap[on]]
-    tot = np.bincount(key, fz[on], batches * per).reshape(batches, per)
-    cnt = np.bincount(b_snap * per + k_snap, minlength=batches * per).reshape(batches, per)
-    return tot / np.maximum(cnt, 1) / weight_N
-
-
 def dem_regions(table, radius):
-    """The DEM's U fluctuation flux (W/m^2) by region and by phase x region, with errors."""
-    edges = np.asarray(table.arc_edges_m, float)
-    centre = 0.5 * (edges[1:] + edges[:-1])
-    dl = np.diff(edges)
-    reg = region_of(centre, radius)
-    arc = np.asarray(table.u_fluctuation_flux_by_arc_W_m2, float)
-    arc_se = np.asarray(table.u_fluctuation_flux_by_arc_stderr_W_m2, float)
-    pa = np.asarray(table.u_fluctuation_flux_by_phase_arc_W_m2, float)
-    pa_se = np.asarray(table.u_fluctuation_flux_by_phase_arc_stderr_W_m2, float)
-    out, out_se, by_phase = [], [], []
-    for r in range(len(REGIONS)):
-        m = reg == r
-        L = dl[m].sum()
-        out.append((arc[m] * dl[m]).sum() / L)
-        out_se.append(math.sqrt(((arc_se[m] * dl[m]) ** 2).sum()) / L)
-        by_phase.append(((pa[:, m] * dl[m]).sum(1) / L,
-                         np.sqrt(((pa_se[:, m] * dl[m]) ** 2).sum(1)) / L))
-    return np.array(out), np.array(out_se), by_phase
-
-
-def take_off(force_over_weight, per: int) -> float:
-    """measure.layer_profiles.take_off_phase of a force sampled at the phases k / per (not at
-    the bins' centres (k + 1/2) / per, which take_off_phase assumes)."""
-    return float(np.mod(take_off_phase(force_over_weight) - 0.5 / per, 1.0))
+    """The DEM's U fluctuation flux (W/m^2) by region and by phase x region, with errors
+    (vibroflow.measure.floor_force.dem_wall_feed)."""
+    d = dem_wall_feed(table, radius)
+    by_phase = [(d["by_phase_W_m2"][:, r], d["by_phase_W_m2_stderr"][:, r])
+                for r in range(len(REGIONS))]
+    return d["by_region_W_m2"], d["by_region_W_m2_stderr"], by_phase
 
 
 def _mean_se(per_batch):
@@ -308,15 +191,16 @@ def main(argv=None) -> int:
                                                 table.u_fluctuation_flux_by_phase_stderr_W_m2)))
     for r, (x, e) in zip(REGIONS, dph):
         print(f"DEM: {r} by eighth W/m^2: " + ", ".join(f"{u:.3g}" for u in x))
+    import h5py
+
     fill = scenario.fill
-    ball_mass = scenario.materials[fill.material].density * math.pi * fill.diameter ** 3 / 6
-    weight = float(np.hypot(scenario.gravity[0], scenario.gravity[2])) * fill.count * ball_mass
-    fl = dem_floor(a.dem_dir, per, a.batches, geo.radius, weight)
-    fm, fse = _mean_se(fl)
+    mass = fill.count * scenario.materials[fill.material].density * math.pi * fill.diameter ** 3 / 6
+    with h5py.File(a.dem_dir / "dem.h5", "r") as hf:
+        fl = dem_floor_cycle(hf, scenario, weight_of(scenario.gravity, mass))
     print("DEM: floor force / weight by eighth: "
-          + ", ".join(f"{x:.3g} +- {e:.2g}" for x, e in zip(fm, fse)))
-    print(f"DEM: take-off t f {take_off(fm, per):.3f} (batches "
-          f"{np.round([take_off(b, per) for b in fl], 3).tolist()}, resolution 1/{per})")
+          + ", ".join(f"{x:.3g} +- {e:.2g}" for x, e in zip(fl.force_over_weight, fl.stderr)))
+    print(f"DEM: take-off t f {fl.take_off:.3f} (batches "
+          f"{np.round(fl.take_off_batches, 3).tolist()}, resolution 1/{per})")
     cal = read_calibration(a.calibration)
     for method in a.methods.split(","):
         landing = a.landing if method == "eulerian" else "pairs"

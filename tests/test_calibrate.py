@@ -201,6 +201,22 @@ def test_the_vibrating_walls_drive_the_bed_and_its_restitution_is_the_contact_la
     # the fluxes by arc average to the whole U's (equal arc bins)
     assert np.mean(w.u_fluctuation_flux_by_arc_W_m2) == pytest.approx(
         w.u_fluctuation_flux_W_m2, rel=1e-9)
+    # wall_feed.csv: the U's by phase, and the regions' fluxes (measure.floor_force) weighted
+    # by their bins' arc length make the whole U's again
+    from vibroflow.measure.floor_force import dem_wall_feed, region_of
+    from vibroflow.scenario.io import load_scenario
+    from vibroflow.tub.geometry import geometry_of
+
+    R = geometry_of(load_scenario("tub47-quick")).radius
+    rows = np.genfromtxt(out / "wall_feed.csv", delimiter=",", names=True)
+    np.testing.assert_allclose(rows["u_wall_W_m2"], w.u_fluctuation_flux_by_phase_W_m2)
+    edges = np.asarray(w.arc_edges_m)
+    reg = region_of(0.5 * (edges[1:] + edges[:-1]), R)
+    lengths = np.array([np.diff(edges)[reg == r].sum() for r in range(3)])
+    by_region = dem_wall_feed(w, R)["by_region_W_m2"]
+    held = lengths > 0
+    assert np.sum(by_region[held] * lengths[held]) / lengths.sum() == pytest.approx(
+        w.u_fluctuation_flux_W_m2, rel=1e-9)
 
 
 def test_calibrated_wall_friction_obeys_coulomb(calibrated_run):

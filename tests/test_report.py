@@ -475,3 +475,50 @@ def test_report_has_a_section_per_part_with_its_name_escaped(study, tmp_path):
         assert len(imgs[1]) == 2 and all(c and w > 0 for c, w in imgs[1])
     finally:
         driver.quit()
+
+
+def _floor_cells(html: str) -> dict:
+    """The floor section's take-off cells: method -> data-value."""
+    sec = re.search(r'<section id="floor">.*?</section>', html, re.S).group(0)
+    table = re.search(r'<table class="floor">.*?</table>', sec, re.S).group(0)
+    rows = re.findall(r"<tr>(.*?)</tr>", table, re.S)[1:]
+    out = {}
+    for row in rows:
+        cells = re.findall(r"<td([^>]*)>(.*?)</td>", row, re.S)
+        out[cells[0][1]] = re.search(r'data-value="([^"]*)"', cells[1][0]).group(1)
+    return out
+
+
+def test_the_floor_section_shows_each_runs_take_off(study):
+    """The section "The floor over the cycle": a plot and each method's take-off, the value of
+    its own summary.json's "floor" block (measure.floor_force) and floor.csv beside it."""
+    _, out, summary, _ = study
+    html = (out / "report.html").read_text(encoding="utf-8")
+    cells = _floor_cells(html)
+    assert set(cells) == set(summary["methods"])
+    for name, value in cells.items():
+        floor = json.loads((out / name / "summary.json").read_text())["floor"]
+        want = floor["take_off_phase"]
+        assert (value == "nan") if want is None else float(value) == want
+        assert (out / name / "floor.csv").is_file()
+    assert 'alt="floor force over the cycle"' in html
+
+
+@pytest.mark.slow
+def test_the_floor_section_escapes_the_method_names(study):
+    """A method named with HTML's special characters appears escaped in the floor section."""
+    import dataclasses
+
+    from vibroflow.report.data import StudyData
+    from vibroflow.report.html import render
+
+    _, out, _, _ = study
+    data = StudyData.read(out)
+    methods = dict(data.summary["methods"])
+    methods["lag<&>"] = methods["lagrangian"]
+    fields = dict(data.fields, **{"lag<&>": data.fields["lagrangian"]})
+    data = dataclasses.replace(data, summary=dict(data.summary, methods=methods), fields=fields)
+    html = render(data)
+    cells = _floor_cells(html)
+    assert "lag&lt;&amp;&gt;" in cells and cells["lag&lt;&amp;&gt;"] == cells["lagrangian"]
+    assert "lag<&>" not in html

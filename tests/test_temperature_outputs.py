@@ -77,6 +77,11 @@ def test_continuum_command_with_temperature_writes_its_map(method, args, run_cli
     assert block["map_units"]["granular_temperature_m2_s2"] == "m2 s-2"
     # the run's temperature options, as given (the landing at its default)
     assert block["initial_m2_s2"] == 0.001 and block["landing"] == "pairs"
+    # the U wall's feed by region and phase (continuum/wall_feed.py), every sample measured
+    feed = json.loads((out / "summary.json").read_text())["wall_feed"]
+    assert set(feed["by_region_W_m2"]) == {"floor", "arcs", "side walls"}
+    rows = np.genfromtxt(out / "wall_feed.csv", delimiter=",", names=True)
+    assert np.isfinite(rows["u_wall_W_m2"]).all() and (rows["samples"] > 0).all()
 
 
 def test_a_bad_initial_temperature_is_one_line(run_cli, tmp_path):

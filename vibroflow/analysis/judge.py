@@ -40,8 +40,10 @@ from vibroflow.io.atomic import json_safe, write_json_atomic
 class RunResult:
     """One finished run: its folder, case, method (a vibroflow DEM's 'dem', an imported one's
     'dem (liggghts)'), averaging window (t_start,
-    t_end s), circulation (summary.json's: strength m^2/s, strength_stderr, sense) and cell
-    table (bulk_velocity.csv)."""
+    t_end s), circulation (summary.json's: strength m^2/s, strength_stderr, sense), cell
+    table (bulk_velocity.csv) and the bed's take-off from the floor (summary.json's "floor":
+    vibroflow.measure.floor_force; a cycle fraction, NaN where the bed never leaves the floor,
+    None where the run has no floor force)."""
 
     folder: Path
     case: str
@@ -49,6 +51,7 @@ class RunResult:
     window: tuple[float, float]
     circulation: dict
     table: CellTable
+    take_off: float | None = None
 
 
 def _natural_key(path: Path) -> list:
@@ -117,7 +120,17 @@ def result_from_summary(summary: dict, folder, table: CellTable) -> RunResult:
     w = summary["window"]
     return RunResult(folder=Path(folder), case=str(summary.get("case")), method=str(method),
                      window=(float(w["t_start"]), float(w["t_end"])),
-                     circulation=summary["circulation"], table=table)
+                     circulation=summary["circulation"], table=table,
+                     take_off=_take_off_of(summary.get("floor")))
+
+
+def _take_off_of(floor) -> float | None:
+    """The take-off phase of a summary's "floor" block: NaN where the bed never leaves the
+    floor, None where there is no block."""
+    if not isinstance(floor, dict):
+        return None
+    t = floor.get("take_off_phase")
+    return math.nan if t is None else float(t)
 
 
 def _se(x) -> float:
@@ -162,7 +175,8 @@ def judge(results: list[RunResult], references: list[RunResult],
         "references": [{"folder": str(r.folder), "method": r.method,
                         "strength": float(r.circulation["strength"]),
                         "strength_stderr": r.circulation.get("strength_stderr"),
-                        "sense": r.circulation.get("sense")} for r in references],
+                        "sense": r.circulation.get("sense"), **_take_off_entry(r)}
+                       for r in references],
         "reference_strength": ref_strength, "reference_strength_stderr": ref_strength_se,
         "case": references[0].case, "window_s": list(references[0].window),
     }
@@ -191,6 +205,7 @@ def judge(results: list[RunResult], references: list[RunResult],
         d = difference_to_seeds(r.table, tables)
         entry = {"folder": str(r.folder), "method": r.method, "strength": s,
                  "strength_stderr": c.get("strength_stderr"), "sense": c.get("sense"),
+                 **_take_off_entry(r),
                  "strength_ratio": s / ref_strength if ref_strength else None,
                  "strengths_agree": strengths_agree(s, se, ref_strength, ref_strength_se,
                                                     c.get("sense"), ref_sense),
@@ -201,6 +216,21 @@ def judge(results: list[RunResult], references: list[RunResult],
         entry["E_over_limit"] = d.mean / out["limit"] if out["limit"] else None
         out["results"].append(entry)
     return out
+
+
+def _take_off_entry(r: RunResult) -> dict:
+    return {} if r.take_off is None else {"take_off_phase": r.take_off}
+
+
+def _take_off(r: dict) -> str:
+    """', take-off t f X' of a run's judgement entry (measure.floor_force), or ', never
+    leaves the floor'; '' where its run has no floor force (a run of another version)."""
+    if "take_off_phase" not in r:
+        return ""
+    t = r["take_off_phase"]
+    if t is None or not math.isfinite(float(t)):
+        return ", never leaves the floor"
+    return f", leaves the floor at t f {float(t):.3f}"
 
 
 def _pm(v, se, fmt="{:.3f}") -> str:
@@ -214,7 +244,8 @@ def format_judgement(j: dict) -> str:
              f"{len(refs)} reference run(s):"]
     for k, r in enumerate(refs):
         lines.append(f"  [{k}] {r['folder']} ({r['method']}): circulation {r['sense']} "
-                     f"{_pm(r['strength'], r['strength_stderr'], '{:.4e}')} m^2/s")
+                     f"{_pm(r['strength'], r['strength_stderr'], '{:.4e}')} m^2/s"
+                     f"{_take_off(r)}")
     f = j["floor"]
     if f is None:
         lines.append("seed-to-seed E: unknown (one reference and no --e-seed): the fields "
@@ -249,6 +280,8 @@ def format_judgement(j: dict) -> str:
         verdict = {True: "yes", False: "no", None: "cannot say"}[r["fields_agree"]]
         ratio = f" ({r['E_over_limit']:.2f} of the limit)" if r["E_over_limit"] else ""
         lines.append(f"  fields agree: {verdict}{ratio}")
+        if "take_off_phase" in r:
+            lines.append(f"  bed{_take_off(r)[1:]}")
     return "\n".join(lines)
 
 

@@ -34,7 +34,9 @@ Stages:
    last the [scenario] it was measured on, which the continuum checks its own against; its
    tables built by calibration_tables, checked and written as the record
    vibroflow.io.calibration_file.Calibration, which the continuum solvers read with
-   `read_calibration`), RUN_DIR/calibration/ pictures (plots).
+   `read_calibration`), with the walls' flux RUN_DIR/wall_feed.csv (the U's feed by region
+   and phase, measure.floor_force, as a continuum run with T writes its own),
+   RUN_DIR/calibration/ pictures (plots).
 
 Where the files go: by default into RUN_DIR beside the DEM's own (`vibroflow calibrate
 RUN_DIR`), the pictures in RUN_DIR/calibration/; given a folder of its own (`out`, a study's
@@ -53,6 +55,8 @@ from vibroflow.errors import InputError, Interrupted
 from vibroflow.io.calibration_file import CALIBRATION_FILE, Calibration, write_calibration
 from vibroflow.io.calibration_source import scenario_source
 from vibroflow.io.folder_lock import folder_lock
+from vibroflow.measure.floor_force import (WALL_FEED_CSV_NAME, dem_wall_feed_cycle,
+                                           write_wall_feed_csv)
 from vibroflow.progress import RunProgress
 from vibroflow.tub.geometry import geometry_of
 
@@ -257,6 +261,12 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
         cal["scenario"] = scenario_source(sc)  # last: the tables before keep their place
         record = Calibration.from_dict(cal, where=str(out_dir / CALIBRATION_FILE))
         write_calibration(out_dir / CALIBRATION_FILE, record)
+        wall = record.kinetic.wall_flux if record.kinetic is not None else None
+        if wall is not None and wall.arc_edges_m:
+            # the DEM's U wall feed by region and phase (measure.floor_force), as a continuum
+            # run with the granular temperature writes its own
+            write_wall_feed_csv(out_dir / WALL_FEED_CSV_NAME,
+                                dem_wall_feed_cycle(wall, geometry_of(sc).radius))
         if pictures:
             from . import plots  # matplotlib, loaded only when pictures are drawn
             pic = out_dir / PICTURES_DIR if out is None else out_dir

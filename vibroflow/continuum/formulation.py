@@ -55,6 +55,12 @@ class Sampler(ABC):
     n_points: int
     #: the kinds of ParaView collection its vtk samples fill ("points", "grid")
     vtk_kinds: tuple[str, ...]
+    #: whether the run makes each sample's last step on its own, `before_sample_step` called
+    #: before it (a measure over that step: continuum/wall_feed.py); the same steps either way
+    splits_sample_step: bool = False
+
+    def before_sample_step(self) -> None:
+        """Called before the step that ends at a sample (splits_sample_step)."""
 
     @abstractmethod
     def record(self, j: int, samples) -> None:

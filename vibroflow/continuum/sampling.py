@@ -1,8 +1,8 @@
 """What a continuum tub run samples, as the DEM samples its balls: the sample instants (the
 DEM's phases), the sampled points or cells as the DEM's snapshots in the lab frame, their wall
-contacts and shear rates, the ParaView frames written (`Samples`, carried through a checkpoint
-unchanged), and the samples
-as the dem.h5 layout that vibroflow.measure.summary.tub_summary reads (`samples_source`)."""
+contacts, floor force and shear rates, the ParaView frames written (`Samples`, carried through
+a checkpoint unchanged), and the samples as the dem.h5 layout that
+vibroflow.measure.summary.tub_summary reads (`samples_source`)."""
 from __future__ import annotations
 
 import math
@@ -10,6 +10,7 @@ import math
 import numba as nb
 import numpy as np
 
+from vibroflow.measure.floor_force import on_floor
 from vibroflow.measure.phase_shear import PhaseShear, node_grid, phase_shear_of_snapshots
 from vibroflow.tub.motion import rigid_velocity, tub_to_lab
 
@@ -82,6 +83,9 @@ class Samples:
         self.temperature = bool(temperature)
         if self.temperature:
             self.temperature_all = np.full(n_samples, np.nan)
+            # per sample the U wall's feed of fluctuation energy over the step ending there
+            # (W/m, summed by region of the U: continuum/wall_feed.py; NaN: not measured)
+            self.wall_feed = np.full((n_samples, 3), np.nan)
             if cell_grid is not None:
                 h, nxh, nz = cell_grid
                 self.temperature_cell_sum = np.zeros((nz, 2 * nxh + 1))
@@ -94,6 +98,9 @@ class Samples:
             h, nxh, nz = cell_grid
             self.rate_cell_sum = np.zeros((nz, 2 * nxh + 1))
             self.rate_cell_n = np.zeros((nz, 2 * nxh + 1))
+        # per sample the floor force (N over the slice): the z component, tub axes, of the U
+        # wall's force on the material within measure.floor_force.FLOOR_DEG of its bottom
+        self.floor_force = np.full(n_samples, np.nan)
         self.pos = np.zeros((n_samples, n_points, 3), np.float32)
         self.vel = np.zeros((n_samples, n_points, 3), np.float32)
         self.poses = np.zeros((n_samples, 6))
@@ -113,12 +120,13 @@ class Samples:
         j = self.j
         out = {"pos": self.pos[:j], "vel": self.vel[:j], "poses": self.poses[:j],
                "rate_all": self.rate_all, "rate_wall": self.rate_wall,
-               "rate_probe": self.rate_probe}
+               "rate_probe": self.rate_probe, "floor_force": self.floor_force}
         out.update({"contact_" + k: v for k, v in self.contact_arrays().items()})
         if self.cell_grid is not None:
             out["rate_cell_sum"], out["rate_cell_n"] = self.rate_cell_sum, self.rate_cell_n
         if self.temperature:
             out["temperature_all"] = self.temperature_all
+            out["wall_feed"] = self.wall_feed
             if self.cell_grid is not None:
                 out["temperature_cell_sum"] = self.temperature_cell_sum
                 out["temperature_cell_n"] = self.temperature_cell_n
@@ -143,9 +151,13 @@ class Samples:
             s.rate_cell_sum[:], s.rate_cell_n[:] = a["rate_cell_sum"], a["rate_cell_n"]
         if s.temperature and "temperature_all" in a:
             s.temperature_all[:] = a["temperature_all"]
+            if "wall_feed" in a:
+                s.wall_feed[:] = a["wall_feed"]
             if cell_grid is not None:
                 s.temperature_cell_sum[:] = a["temperature_cell_sum"]
                 s.temperature_cell_n[:] = a["temperature_cell_n"]
+        if "floor_force" in a:
+            s.floor_force[:] = a["floor_force"]
         j = s.j = int(a["pos"].shape[0])
         s.pos[:j], s.vel[:j], s.poses[:j] = a["pos"], a["vel"], a["poses"]
         s.rate_all[:], s.rate_wall[:], s.rate_probe[:] = (a["rate_all"], a["rate_wall"],
@@ -173,6 +185,15 @@ class Samples:
         c["arc"].append(np.array(arc, dtype=np.float64))
         c["position_tub"].append(np.stack(
             [x[:, 0], np.full(particle.size, 0.5 * length), x[:, 1]], axis=1))
+
+    def add_floor_force(self, j: int, fz: np.ndarray, x: np.ndarray, radius: float,
+                        length: float) -> None:
+        """Sample j's floor force: the sum of the U wall's forces' z components fz (N/m, tub
+        axes) on the points (or cells) at tub-frame positions x (n, 2) (m) nearest the floor
+        of a U of `radius` (m) (measure.floor_force.on_floor), over the slice's `length` (m)."""
+        x = np.asarray(x, float).reshape(-1, 2)
+        floor = on_floor(x[:, 0], x[:, 1], radius)
+        self.floor_force[j] = float(np.sum(np.asarray(fz, float)[floor])) * length
 
     def add_part_forces(self, j: int, force_on_material: np.ndarray, torque_on_part: np.ndarray,
                         length: float) -> None:

@@ -19,7 +19,11 @@ Timeline (tub47.md "Procedure", the DEM's clock: t = 0 when the vibration starts
    measure.bulk_batches; from the samples, which the checkpoint carries, so a resumed run
    writes the same files) and summary.json with the
    DEM's keys (probes, circulation, wall_contacts from the points or cells touching the U,
-   impacts: none, window, cells), plus a "continuum" block: the method, numerics, material,
+   impacts: none, window, cells), the floor's force over the cycle and the bed's take-off
+   (floor.csv and the summary's "floor": measure.floor_force, as the DEM's); with the
+   temperature, the U wall's feed of fluctuation energy by region and phase (wall_feed.csv,
+   the summary's "wall_feed": wall_feed.py), plus a
+   "continuum" block: the method, numerics, material,
    and the shear rate with the impact speed and granular temperature it implies through the
    calibrated relations (calibration.toml [impacts]), when a calibration is given
    (shear_outputs.py); with the granular temperature (ContinuumOptions.temperature), its map
@@ -56,6 +60,9 @@ from vibroflow.io.folder_lock import folder_lock
 from vibroflow.io.parts_file import PARTS_NC_NAME, write_parts
 from vibroflow.io.vtk_frame import extra_frame_steps, vtk_options, write_vtk_record
 from vibroflow.measure.bulk_batches import BATCHES_CSV_NAME, STDERR_CSV_NAME
+from vibroflow.measure.floor_force import (FLOOR_CSV_NAME, WALL_FEED_CSV_NAME, floor_cycle,
+                                           region_lengths, wall_feed_cycle, weight_of,
+                                           write_floor_csv, write_wall_feed_csv)
 from vibroflow.measure.stats import batch_means, batches_of_whole_cycles
 from vibroflow.measure.summary import json_safe, tub_summary
 from vibroflow.progress import RunProgress
@@ -218,7 +225,7 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
                     prog.log(f"no checkpoint in {out}: starting afresh")
                 for name in (SUMMARY_NAME, BULK_CSV_NAME, BATCHES_CSV_NAME, STDERR_CSV_NAME,
                              CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME, TEMPERATURE_CSV_NAME,
-                             PARTS_NC_NAME):
+                             PARTS_NC_NAME, FLOOR_CSV_NAME, WALL_FEED_CSV_NAME):
                     (out / name).unlink(missing_ok=True)
                 shutil.rmtree(out / VTK_DIR, ignore_errors=True)  # another run's frames
                 with interrupted_while_settling():
@@ -236,13 +243,26 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
 
             run = scenario.run
             sample_step = np.rint(times / system.dt).astype(np.int64)
+
+            def advance(m: int) -> None:
+                # a sampler that measures over a sample's step sees its start (Sampler.
+                # splits_sample_step): the same steps, made in two calls
+                if (sampler.splits_sample_step and samples.j < S
+                        and state.step + m == sample_step[samples.j]):
+                    if m > 1:
+                        form.advance(system, state, m - 1)
+                    sampler.before_sample_step()
+                    form.advance(system, state, 1)
+                else:
+                    form.advance(system, state, m)
+
             frame_step = extra_frame_steps(vtk, system.dt, window_start)
             n_steps = int(round(run.duration / system.dt))
             prog.stage(f"continuum ({form.name})", run.duration)
             try:
                 done = vibration_timeline(
                     state, n_steps, sample_step, samples, lambda j: sampler.record(j, samples),
-                    lambda m: form.advance(system, state, m), checkpoint, prog,
+                    advance, checkpoint, prog,
                     sampler.n_points, run.checkpoint_every, stop_after_steps, frame_step,
                     lambda i: sampler.early_frame(i, samples))
             except ContinuumBlowUp:
@@ -306,6 +326,20 @@ def _results(form: Formulation, scenario, out: Path, calibration, options, vtk, 
             initial_m2_s2=options.initial_temperature, landing=options.landing)
     summary["continuum"].update(impacts_from_temperature(
         calibration, samples, phase, geo.radius, batch, run.batches, summary["impacts"]))
+    if times.size:
+        floor = floor_cycle(samples.floor_force[:times.size], times,
+                            run.duration - run.average_last, run.duration,
+                            scenario.motion.frequency, run.phases_per_cycle, run.batches,
+                            weight_of(scenario.gravity, state.mass.sum() * geo.length))
+        write_floor_csv(out / FLOOR_CSV_NAME, floor)
+        summary["floor"] = floor.as_dict()
+    if samples.temperature and np.isfinite(samples.wall_feed[:times.size]).all(axis=1).any():
+        feed = wall_feed_cycle(samples.wall_feed[:times.size], times,
+                               run.duration - run.average_last, run.duration,
+                               scenario.motion.frequency, run.phases_per_cycle, run.batches,
+                               region_lengths(geo.radius, geo.rim_height))
+        write_wall_feed_csv(out / WALL_FEED_CSV_NAME, feed)
+        summary["wall_feed"] = feed.as_dict()
     parts = continuum_parts(scenario)
     if parts:
         window = sample_times(scenario)[1:]

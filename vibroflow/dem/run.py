@@ -65,7 +65,7 @@ SMALL_RUN = 1500  # below this many balls one thread is faster than two (thread 
 
 # what a fresh run removes before it writes: the previous run's results and checkpoint
 _PREVIOUS = (CHECKPOINT_NAME, SUMMARY_NAME, "bulk_velocity.csv", "dem.h5", "dem.h5.partial",
-             "parts.nc")
+             "parts.nc", "floor.csv")
 
 
 def run_dem(scenario, out_dir: Path, vtk: VtkOptions | bool | None = None,

@@ -1,5 +1,6 @@
 """The summary of a DEM run (DIR/summary.json): the run's figures, its overlaps and, in tub mode,
-the measures of vibroflow.measure.summary (with bulk_velocity.csv).
+the measures of vibroflow.measure.summary (with bulk_velocity.csv) and the floor's force over
+the cycle with the bed's take-off (vibroflow.measure.floor_force: floor.csv, "floor").
 """
 from __future__ import annotations
 
@@ -8,6 +9,8 @@ from pathlib import Path
 import h5py
 import numba
 
+from ..io.atomic import json_safe
+from ..measure.floor_force import FLOOR_CSV_NAME, dem_floor_cycle, weight_of, write_floor_csv
 from ..measure.summary import tub_summary
 from .simulate import DEMState, DEMSystem
 from .step import ASSEMBLY
@@ -57,5 +60,11 @@ def run_summary(scenario, system: DEMSystem, state: DEMState, h5path: Path, out_
              "angular_velocity": state.omg[i].tolist()} for i in range(state.n)]
         return summary
     summary.update(tub_summary(h5path, scenario, bulk_csv=out_dir / "bulk_velocity.csv"))
+    # the floor over the cycle (measure/floor_force.py): floor.csv and the take-off
+    with h5py.File(h5path, "r") as f:
+        floor = dem_floor_cycle(f, scenario, weight_of(scenario.gravity, state.mass.sum()))
+    if floor is not None:
+        write_floor_csv(out_dir / FLOOR_CSV_NAME, floor)
+        summary["floor"] = json_safe(floor.as_dict())
     return summary
 

@@ -15,6 +15,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
+import h5py
 import numpy as np
 
 from vibroflow.dem.output import ResultWriter
@@ -34,6 +35,8 @@ from vibroflow.liggghts.part_contacts import (PartGeometry, check_outside, deck_
                                               part_impacts, part_load_rows, part_rolling)
 from vibroflow.liggghts.part_deck import PART_DUMP
 from vibroflow.liggghts.template import _short
+from vibroflow.measure.floor_force import (FLOOR_CSV_NAME, dem_floor_cycle, weight_of,
+                                           write_floor_csv)
 from vibroflow.measure.summary import tub_summary
 from vibroflow.scenario.io import load_scenario
 from vibroflow.tub.geometry import geometry_of
@@ -85,6 +88,9 @@ def import_run(dump_dir, scenario=None, out_dir=None) -> dict:
                 write_json_atomic(tmp_dir / "summary.json", json_safe(summary))
                 names = IMPORT_FILES if not scenario.parts else (*IMPORT_FILES[:-1], PARTS_NC,
                                                                  IMPORT_FILES[-1])
+                (out_dir / FLOOR_CSV_NAME).unlink(missing_ok=True)  # another import's
+                if (tmp_dir / FLOOR_CSV_NAME).is_file():
+                    names = (FLOOR_CSV_NAME, *names)
                 for name in names:  # summary.json last: it says the import is done
                     os.replace(tmp_dir / name, out_dir / name)
             finally:
@@ -281,6 +287,13 @@ def _import(post: Path, scenario, n0: int, tmp_dir: Path) -> dict:
         write_parts(tmp_dir / PARTS_NC, ds)
         summary["parts"] = json_safe(summary_lines(ds, parts))
     summary.update(tub_summary(h5, scenario, bulk_csv=tmp_dir / BULK_CSV))
+    # the floor over the cycle (measure.floor_force), from the wall contacts' forces
+    mass = float(np.sum(4.0 / 3.0 * np.pi * np.asarray(radius, float) ** 3 * rho))
+    with h5py.File(h5, "r") as hf:
+        floor = dem_floor_cycle(hf, scenario, weight_of(scenario.gravity, mass))
+    if floor is not None:
+        write_floor_csv(tmp_dir / FLOOR_CSV_NAME, floor)
+        summary["floor"] = floor.as_dict()
     return summary
 
 

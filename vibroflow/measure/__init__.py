@@ -9,6 +9,8 @@ they sit below the solvers; the comparisons of runs with each other are `vibrofl
 * contacts    -- wall-contact friction ratios, impact speeds
 * phase_shear -- the shear rate of the phase-resolved velocity on the analysis cells
 * column      -- the run-out and height of a collapsed column
+* floor_force -- the U floor's force over the cycle, the bed's take-off, the U wall's feed by
+                 region and phase (floor.csv, wall_feed.csv)
 * summary     -- tub_summary(dem.h5, scenario): the run's summary dict and bulk_velocity.csv
 """
 from vibroflow.measure.bulk import (

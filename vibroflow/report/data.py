@@ -229,6 +229,18 @@ class StudyData:
         block = s.get("continuum") if isinstance(s, dict) else None
         return block if isinstance(block, dict) else {}
 
+    def floor(self, name: str) -> dict:
+        """The "floor" block (measure.floor_force: the floor's force over the cycle and the
+        take-off) of a method's own summary.json ({} if none)."""
+        entry = self.summary["methods"].get(name, {})
+        rel = entry.get("bulk_velocity_csv", f"{name}/bulk_velocity.csv")
+        try:
+            s = json.loads((self.out / Path(rel).parent / "summary.json").read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+            return {}
+        block = s.get("floor") if isinstance(s, dict) else None
+        return block if isinstance(block, dict) else {}
+
     def continuum_shear_map(self, name: str, column: str = "shear_rate"):
         """A continuum method's map on the analysis cells from its shear_rate.csv (continuum
         run.write_shear_rate_csv): (x (m), z (m), values (z, x) with NaN where no material),

@@ -383,3 +383,32 @@ def temperature_maps(data: StudyData, maps: TemperatureMaps) -> bytes:
                          extend="both")
     fig.suptitle("granular temperature (cycle means) and solid fraction")
     return png_bytes(fig)
+
+
+def floor_cycle(floors: dict) -> bytes:
+    """The floor's force over the bed's weight against the phase of the cycle (t f mod 1) of
+    each method (name -> its summary's "floor" block, measure.floor_force), with its
+    batch-means standard errors as bars, the cycle closed at phase 1, and the take-off
+    level."""
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(7.5, 4.2), layout="constrained")
+    level = None
+    for name, b in floors.items():
+        ph = np.asarray(b.get("phases") or [], float)
+        f = np.array([np.nan if v is None else v for v in b.get("force_over_weight") or []],
+                     float)
+        se = np.array([np.nan if v is None else v
+                       for v in b.get("force_over_weight_stderr") or []], float)
+        if ph.size == 0 or ph.size != f.size or f.size != se.size:
+            continue
+        ax.errorbar(np.append(ph, 1.0), np.append(f, f[0]), yerr=np.append(se, se[0]),
+                    marker="o", ms=4, capsize=3, label=name)
+        level = 0.05
+    if level is not None:
+        ax.axhline(level, color="0.5", lw=0.8, ls="--", label="take-off level")
+        ax.legend(fontsize="small")
+    ax.axhline(0.0, color="k", lw=0.6)
+    ax.set_xlim(0.0, 1.0)
+    ax.set_xlabel("phase of the cycle, t f mod 1")
+    ax.set_ylabel("floor force / bed weight")
+    return png_bytes(fig)

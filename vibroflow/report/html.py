@@ -26,7 +26,8 @@ from markupsafe import Markup
 
 from vibroflow import __version__
 from vibroflow.report import figures
-from vibroflow.report.data import StudyData
+from vibroflow.measure.floor_force import REGIONS, dem_wall_feed
+from vibroflow.report.data import DEM, StudyData
 from vibroflow.report.impact_figures import impact_distribution_section
 from vibroflow.report.engineer import Engineer
 from vibroflow.report.part_sections import part_sections
@@ -45,6 +46,7 @@ SECTIONS = {
     "impacts": "Impact speeds",
     "impact_distributions": "Impact speed distributions",
     "wall": "Wall friction",
+    "floor": "The floor over the cycle",
     "rheology": "mu(I) fit",
     "rheology_bins": "mu(I) binned",
     "animation": "DEM animation",
@@ -302,6 +304,59 @@ def _wall(data: StudyData) -> dict:
     return out
 
 
+def _floor(data: StudyData) -> dict:
+    """The floor's force over the cycle and the take-off of every method
+    (measure.floor_force), the DEM first; `missing`: the methods whose run has none."""
+    floors = {name: data.floor(name) for name in data.methods}
+    have = {n: b for n, b in floors.items() if b}
+    rows = [[_text(n, "l"), _num(b.get("take_off_phase"), ".3f"),
+             _text(", ".join("n/a" if t is None else f"{t:.3f}"
+                             for t in b.get("take_off_phase_batches") or []), "l"),
+             _pm(b.get("cycle_mean_over_weight"), b.get("cycle_mean_over_weight_stderr"),
+                 ".3f"),
+             _num(min((v for v in b.get("force_over_weight") or [] if v is not None),
+                      default=None), ".3f")]
+            for n, b in have.items()]
+    return {"img": _img(figures.floor_cycle(have), "floor force over the cycle")
+            if have else None, "rows": rows, "missing": [n for n in floors if not floors[n]],
+            "feed_head": ["method"] + [f"{r} (W/m²)" for r in REGIONS] + ["whole U (W/m²)"],
+            "feed_rows": _wall_feed_rows(data)}
+
+
+def _wall_feed_rows(data: StudyData) -> list:
+    """The U wall's feed of fluctuation energy by region: the DEM's from the calibration's
+    [kinetic.wall_flux] (measure.floor_force.dem_wall_feed), each continuum's with the
+    granular temperature from its summary's "wall_feed" (continuum/wall_feed.py)."""
+    rows = []
+    kin = data.calibration.kinetic if data.calibration is not None else None
+    table = getattr(kin, "wall_flux", None) if kin is not None else None
+    if table is not None:
+        d = dem_wall_feed(table, data.geometry.radius)
+        rows.append([_text(DEM, "l")]
+                    + [_pm(float(m), float(e)) for m, e in zip(d["by_region_W_m2"],
+                                                               d["by_region_W_m2_stderr"])]
+                    + [_pm(d["u_wall_W_m2"], d["u_wall_W_m2_stderr"])])
+    for name in data.continuum_methods:
+        b = _summary_of(data, name).get("wall_feed")
+        if not isinstance(b, dict):
+            continue
+        m, e = b.get("by_region_W_m2") or {}, b.get("by_region_W_m2_stderr") or {}
+        rows.append([_text(name, "l")] + [_pm(m.get(r), e.get(r)) for r in REGIONS]
+                    + [_pm(b.get("u_wall_W_m2"), b.get("u_wall_W_m2_stderr"))])
+    return rows
+
+
+def _summary_of(data: StudyData, name: str) -> dict:
+    """A method's own summary.json ({} if unreadable)."""
+    entry = data.summary["methods"].get(name, {})
+    rel = entry.get("bulk_velocity_csv", f"{name}/bulk_velocity.csv")
+    try:
+        s = json.loads((data.out / Path(rel).parent / "summary.json").read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return {}
+    return s if isinstance(s, dict) else {}
+
+
 def _rheology(data: StudyData) -> dict:
     def v(r, k):
         x, se = getattr(r, k), getattr(r, k + "_stderr")
@@ -436,6 +491,7 @@ def render(data: StudyData, gif: Path | None = None, gif_note: str | None = None
         "impacts": _impacts(data),
         "impact_distributions": _impact_distributions(data),
         "wall": _wall(data),
+        "floor": _floor(data),
         "rheology": _rheology(data),
         "rheology_bins": eng.rheology_bins(),
         "animation": _animation(data, gif, gif_note),

@@ -53,9 +53,11 @@ from ..part_obstacle import continuum_parts, packed_section, torque_on_part
 from ..sampling import shear_rate, to_lab
 from ..temperature_field import temperature_model
 from ..timestep import stable_dt
+from ..wall_feed import feed_by_region
 from . import column
 from .mesh import EulerianMesh
 from .solver import EulerianState, EulerianSystem, advance, init_state, state_from_checkpoint
+from .wall_feed import EulerianWallFeed
 from .wall import MeshWall, wall_force_on_material, wall_forces_by_cell
 
 #: the pseudo-ball's mass in full cells at the critical density (module docstring, 2)
@@ -153,6 +155,12 @@ class CellSampler(Sampler):
         self.part_cells = [] if mesh.part_of is None else \
             [np.nonzero(mesh.part_of == k)[0] for k in range(len(scenario.parts or []))]
         self.part_packed = packed_section(continuum_parts(scenario)) if self.part_cells else None
+        # with the granular temperature and its walls: the U wall's feed over each sample's
+        # step, whose start it keeps (wall_feed.py)
+        model = getattr(system, "temperature", None)
+        self.feed = EulerianWallFeed(system, state, self.wall_cells) \
+            if model is not None and model.walls is not None else None
+        self.splits_sample_step = self.feed is not None
         self.buf_p, self.buf_v = np.zeros((n, 3)), np.zeros((n, 3))
         self.far = np.array([0.0, 0.5 * self.geo.length, 1.0e3])  # outside every analysis cell
         self.dither = np.zeros(n)
@@ -187,6 +195,9 @@ class CellSampler(Sampler):
         tc = wall_cells[touching]
         samples.add_contacts(j, np.searchsorted(cells, tc), hist["fn"][tc], hist["ft"][tc],
                              hist["state"][tc], mesh.arc[tc], system.x[tc], geo.length)
+        # the wall layer's penalty force (not the share its closed faces carry)
+        samples.add_floor_force(j, wall_forces_by_cell(wall_cells, mesh.normal, hist)[:, 1],
+                                system.x[wall_cells], geo.radius, geo.length)
         if samples.n_parts:
             samples.add_part_forces(j, self._part_forces(), self._part_torques(), geo.length)
         rate_all = shear_rate(state.L)
@@ -201,11 +212,16 @@ class CellSampler(Sampler):
             # the cells that hold material as the shear rates count them
             samples.add_temperatures(j, system.x[cells][held], state.mass[cells][held],
                                      state.temperature[cells][held])
+        if self.feed is not None and self.feed.start is not None and samples.temperature:
+            samples.wall_feed[j] = feed_by_region(*self.feed.feed(), geo.radius)
         if (held & self.near_wall).any():
             samples.rate_wall[j] = rate[held & self.near_wall].mean()
         for q, inside in enumerate(self.in_probe):
             if (inside & held).any():
                 samples.rate_probe[j, q] = rate[inside & held].mean()
+
+    def before_sample_step(self) -> None:
+        self.feed.before_last_step()
 
     def _part_forces(self) -> np.ndarray:
         """(n_parts, 2) the wall law's force (N/m) on the material from each part's wall

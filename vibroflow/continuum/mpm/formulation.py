@@ -41,6 +41,7 @@ from ..part_obstacle import (bed_height_around, continuum_parts, packed_section,
 from ..sampling import shear_rate, to_lab
 from ..temperature_field import temperature_model
 from ..timestep import stable_dt
+from ..wall_feed import LagrangianWallFeed, feed_by_region
 from . import column
 from .solver import MPMState, MPMSystem, advance, init_state
 
@@ -129,6 +130,10 @@ class PointSampler(Sampler):
                             for pr in scenario.analysis.probes.values()]
         self.buf_p, self.buf_v = np.zeros((n, 3)), np.zeros((n, 3))
         self.arc, self.gap = np.zeros(n), np.zeros(n)
+        # with the granular temperature and its walls: the U wall's feed (wall_feed.py)
+        model = system.temperature
+        self.feed = LagrangianWallFeed(system, state) \
+            if model is not None and model.walls is not None else None
         self.vtk = None
         if vtk:
             from ..paraview import ContinuumVtk  # noqa: PLC0415  (only with vtk: pyevtk)
@@ -150,6 +155,8 @@ class PointSampler(Sampler):
         samples.add_contacts(j, touching, wall_hist["fn"][touching], wall_hist["ft"][touching],
                              wall_hist["state"][touching], self.arc[touching],
                              state.x[touching], geo.length)
+        samples.add_floor_force(j, wall_hist["f"][touching, 1], state.x[touching], geo.radius,
+                                geo.length)
         if samples.n_parts:
             walls = [b for b in system.boundaries if isinstance(b, PartWall)]
             samples.add_part_forces(j, np.array([state.history[b.slot]["f"].sum(axis=0)
@@ -163,6 +170,8 @@ class PointSampler(Sampler):
         samples.add_cell_rates(state.x, rate)
         if state.temperature is not None:
             samples.add_temperatures(j, state.x, state.mass, state.temperature)
+        if self.feed is not None and samples.temperature:
+            samples.wall_feed[j] = feed_by_region(*self.feed.feed(), geo.radius)
         near = self.gap < 0.5 * self.cell
         if near.any():
             samples.rate_wall[j] = rate[near].mean()
