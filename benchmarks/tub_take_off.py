@@ -12,6 +12,8 @@ Cases (combine with '+', e.g. no-partitions+vertical):
   no-partitions     the partitions' friction body force off (mu_p = 0)
   no-wall-friction  the U wall's Coulomb friction off (mu_w = 0)
   vertical          the tub's motion its vertical stroke alone (A_x = 0, Theta = 0)
+  along-flow        the partitions' friction along the mean flow (`vibroflow continuum
+                    --partition-friction along-flow`: [partitions] friction_along_flow)
   uncalibrated      no calibration: the material's defaults (ContinuumMaterial: K 4.5 MPa,
                     G 1.3 MPa) and the scenario's contact friction (mu_w 0.4, mu_p 0.15)
 
@@ -38,7 +40,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_CALIBRATION = ROOT / "tests/data/tub47-quick-dem/calibration.toml"
 DEM_FLOOR = (0.52, 0.037, 0.0, 0.0006, 0.11, 0.83, 1.82, 1.78)
 CELL_M = 0.015   # the mean flow's cells (tub47.md's bulk velocity cells)
-CASES = ("base", "no-partitions", "no-wall-friction", "vertical", "uncalibrated")
+CASES = ("base", "no-partitions", "no-wall-friction", "vertical", "uncalibrated", "along-flow")
 
 
 def _feed_module():
@@ -159,8 +161,8 @@ def run_case(method: str, case: str, skip: int, cycles: int, batches: int,
     cal = None if "uncalibrated" in parts else read_calibration(DEFAULT_CALIBRATION)
     original = material_mod.boundary_friction
 
-    def friction(sc, c):
-        pair, mu_w, mu_p = original(sc, c)
+    def friction(sc, c, partitions="contacts"):
+        pair, mu_w, mu_p = original(sc, c, partitions)
         if "no-wall-friction" in parts:
             mu_w = 0.0
         if "no-partitions" in parts and mu_p is not None:
@@ -168,6 +170,8 @@ def run_case(method: str, case: str, skip: int, cycles: int, batches: int,
         return pair, mu_w, mu_p
 
     settings = {"temperature": True, "initial_temperature": 0.01} if temperature else {}
+    if "along-flow" in parts:
+        settings["partition_friction"] = "along_flow"
     options = formulation(method).options(**settings)
     mpm_form.boundary_friction = eul_form.boundary_friction = friction
     try:

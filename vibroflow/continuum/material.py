@@ -89,8 +89,9 @@ def boundary_friction(scenario, calibration: Calibration | None, partitions: str
             calibration.partitions.friction_along_flow
         if mu is None or not (math.isfinite(mu) and mu >= 0):
             raise InputError(f"partition_friction = 'along_flow': the calibration's [partitions] "
-                             f"friction_along_flow is {mu!r}; it must be a friction >= 0 "
-                             "(vibroflow calibrate on a DEM run with wall forces and velocities)")
+                             f"friction_along_flow = {'missing' if mu is None else repr(mu)}; "
+                             "it must be a friction >= 0 (vibroflow calibrate measures it on a "
+                             "DEM run with its wall forces)")
         return wall_pair, mu_w, float(mu)
     mu_p = float(calibration.partitions.friction
                  if calibration is not None and calibration.partitions is not None
