@@ -70,7 +70,7 @@ DEFAULT_DAMPING = "the default grid's spacing"
 LANDINGS = ("pairs", "columns")
 #: the partitions' friction mu_p of the body force -2 mu_p p / L_y (material.boundary_friction):
 #: the calibration's [partitions] friction (the contacts' ratio of sums, the default) or its
-#: friction_along_flow (the part of it along the mean flow; docs/decisions/partition-friction.md)
+#: friction_along_flow (the part of it along the mean flow; docs/decisions/wall-friction.md)
 PARTITION_FRICTIONS = ("contacts", "along_flow")
 
 
