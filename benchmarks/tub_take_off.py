@@ -4,7 +4,7 @@ section 22, "Why the tub's bed stays on the floor").
 
     python benchmarks/tub_take_off.py [--methods lagrangian,eulerian]
         [--cases base,no-partitions,no-wall-friction,vertical,...] [--skip-cycles 10]
-        [--cycles 20] [--batches 4] [--temperature]
+        [--cycles 20] [--batches 4] [--temperature] [--dem-dir RUN]
 
 Cases (combine with '+', e.g. no-partitions+vertical):
   base              the run as `vibroflow continuum tub47-quick` makes it (the stored
@@ -21,8 +21,12 @@ The measure, sampled at the DEM's eight phases a cycle (t f, the tub's phase) ov
 cycles after --skip-cycles: the z component (tub axes) of the U wall's force within 30 degrees of
 the bottom over the bed's weight (the Lagrangian's penalty force on the points, the Eulerian's on
 its wall-layer cells); beside it the partitions' friction's z component and the rest of the U's
-(arcs and side walls), over the weight; the take-off t f where the floor force first falls to a
-twentieth of the weight after its maximum (tub_wall_feed.take_off).  The DEM (tub47-quick, fill
+(arcs and side walls) and the partitions' normal force 2 p V / L_y summed over the compressed
+material, over the weight; the take-off t f where the floor force first falls to a twentieth of
+the weight after its maximum (tub_wall_feed.take_off).  --dem-dir RUN (--methods '' for it
+alone): the same forces of a DEM run from its sampled wall contacts, and its partitions'
+friction over their normal force, the magnitudes' and along the mean flow of each ball's 15 mm
+cell (calibration.wall_friction.friction_along_flow's measure).  The DEM (tub47-quick, fill
 seed 1): floor force / weight 0.52, 0.037, 0, 0.0006, 0.11, 0.83, 1.82, 1.78; take-off 0.122.
 """
 from __future__ import annotations
