@@ -138,6 +138,11 @@ def test_calibrate_writes_its_files_and_reads_back(calibrated_run):
         assert getattr(cal, table) is not None, table
     assert cal.source.case == "tub47-quick"
     assert cal.media.diameter_m == pytest.approx(D_STEEL)
+    # the partitions' friction along the mean flow is a projection of the tangential forces,
+    # |F_t . u / |u|| <= |F_t|: never above their ratio of sums
+    p = cal.partitions
+    assert 0.0 < p.friction_along_flow <= p.friction
+    assert p.friction_along_flow_stderr >= 0.0
     # the record written and read back is the same file
     write_calibration(out / "again.toml", cal)
     assert (out / "again.toml").read_bytes() == (out / "calibration.toml").read_bytes()

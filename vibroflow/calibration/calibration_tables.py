@@ -115,7 +115,8 @@ def calibration_tables(res, cg_info, wf, rel, rheo, elastic, dp, p_bed, phi_bed,
     pw = wf["partitions"]
     if pw is not None:
         cal["partitions"] = {
-            **_friction_keys(pw, ("contact_friction", "mean_ft_over_fn", "sliding_fraction")),
+            **_friction_keys(pw, ("contact_friction", "mean_ft_over_fn", "sliding_fraction",
+                                  "friction_along_flow", "friction_along_flow_stderr")),
             "body_force": "-2 friction p / L_y along the velocity (Jop, Forterre & Pouliquen "
                           "2005)",
             "spacing_m": toml_float(sc.tub.length)}

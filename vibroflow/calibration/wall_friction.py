@@ -29,6 +29,12 @@ bound to which a continuum wall should be expected to converge if the DEM bed sl
 
 The partitions (glass) are reduced the same way; the 2D continuum takes their friction as a
 depth-averaged body force -2 mu_p p / L_y along the velocity (Jop, Forterre & Pouliquen 2005).
+That body force acts along the mean flow, where each ball's tangential force opposes its own
+slip, mean flow plus fluctuation and spin: the partitions' friction *along the mean flow*,
+sum(-F_t . u / |u|) / sum F_n with u the mean velocity (relative to the tub, tub axes) of the
+15 mm analysis cell holding the ball at that snapshot (`friction_along_flow`), is the part of
+the ratio of sums the mean flow feels (tub47-quick: 0.10 against 0.14; docs/validation.md
+section 22).  The continuum takes it with `--partition-friction along-flow`.
 """
 from __future__ import annotations
 
@@ -173,10 +179,64 @@ def _wall_friction(res: DEMResult, arc_bins, histogram_bins) -> dict:
         stats_p = wall_contact_stats(fn[on_p], ft[on_p], sliding[on_p], batch=batch[on_p],
                                      n_batches=nb, histogram_edges=hist_edges)
         partitions = _reduce(stats_p, _pair_friction(sc, mats[0], mats[2]))
+        partitions["friction_along_flow"], partitions["friction_along_flow_stderr"] = \
+            partition_friction_along_flow(res, snap, wall, fn, batch, nb)
         hist_p = stats_p.histogram_counts
     return {"tub_wall": out_u, "partitions": partitions, "profile": profile,
             "histogram": {"edges": hist_edges, "counts_wall": stats_u.histogram_counts,
                           "counts_partitions": hist_p}}
+
+
+def along_flow(ft_x, ft_z, u_x, u_z):
+    """The tangential force (ft_x, ft_z) (N) against the mean flow (u_x, u_z) (m/s):
+    -F_t . u / |u| (N), zero where the flow is at rest."""
+    ft_x, ft_z, u_x, u_z = (np.asarray(a, float) for a in (ft_x, ft_z, u_x, u_z))
+    speed = np.hypot(u_x, u_z)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(speed > 0, -(ft_x * u_x + ft_z * u_z) / speed, 0.0)
+
+
+def cell_mean_velocity(x, z, vx, vz, cell: float):
+    """Each ball's cell's mean velocity (m/s): the balls at (x, z) (m) binned on square cells
+    of side `cell` (m) centred on multiples of it (tub47.md's bulk velocity cells)."""
+    ix = np.floor(np.asarray(x, float) / cell + 0.5).astype(np.int64)
+    iz = np.floor(np.asarray(z, float) / cell + 0.5).astype(np.int64)
+    _, inv = np.unique(np.stack([ix, iz], axis=1), axis=0, return_inverse=True)
+    inv = inv.ravel()
+    n = np.bincount(inv)
+    return (np.bincount(inv, np.asarray(vx, float)) / n)[inv], \
+        (np.bincount(inv, np.asarray(vz, float)) / n)[inv]
+
+
+def partition_friction_along_flow(res: DEMResult, snap, wall, fn, batch, nb: int):
+    """(mean, standard error) of the partitions' friction along the mean flow, sum(-F_t . u /
+    |u|) / sum F_n over the partition contacts (module docstring); NaN without the contacts'
+    force vectors or the snapshots' velocities."""
+    f = res.file
+    on_p = ((wall == WALL_PARTITION_LO) | (wall == WALL_PARTITION_HI)) & (fn > 0) & (batch >= 0)
+    if not (res.has_wall_forces and res.has("snapshots/velocity") and on_p.any()):
+        return float("nan"), float("nan")
+    from vibroflow.tub.motion import lab_to_tub_np, relative_velocity_tub_axes_np
+
+    cell = float(res.scenario.analysis.cell_size)
+    pose = f["snapshots/tub_pose"][()]
+    ball = f["wall_contacts/particle"][()].astype(np.int64)
+    F = f["wall_contacts/force_lab"][()].astype(float)
+    along = np.zeros(snap.size)
+    rows_p = np.nonzero(on_p)[0]
+    for i in np.unique(snap[rows_p]):
+        X, Z, th, Xd, Zd, thd = pose[i]
+        pos, vel = f["snapshots/position"][i], f["snapshots/velocity"][i]
+        x = lab_to_tub_np(pos, X, Z, th)
+        v = relative_velocity_tub_axes_np(pos, vel, X, Z, th, Xd, Zd, thd)
+        ux, uz = cell_mean_velocity(x[:, 0], x[:, 2], v[:, 0], v[:, 2], cell)
+        rows = rows_p[snap[rows_p] == i]
+        b = ball[rows]
+        c, si = np.cos(th), np.sin(th)
+        along[rows] = along_flow(c * F[rows, 0] + si * F[rows, 2],
+                                 -si * F[rows, 0] + c * F[rows, 2], ux[b], uz[b])
+    mean, se = batch_means(along[rows_p] / fn[rows_p], batch[rows_p], nb, weights=fn[rows_p])
+    return float(mean), float(se)
 
 
 def _reduce(stats, contact_mu: float) -> dict:

@@ -98,6 +98,12 @@ def continuum(
                           "z face, compaction_landing.py) or columns (along each column by the "
                           "impulse through its z faces, column_landing.py); default "
                           "pairs.")] = "pairs",
+    partition_friction: Annotated[str, typer.Option(
+        "--partition-friction", help="The partitions' friction of their body force: contacts "
+                                     "(the calibration's [partitions] friction, the contacts' "
+                                     "ratio of sums; default) or along-flow (its "
+                                     "friction_along_flow, the part along the mean "
+                                     "flow).")] = "contacts",
     set_: SetOption = None,
     vtk: Annotated[bool, typer.Option("--vtk", help="Also write ParaView files of the material "
                                                     "points and the grid fields over the last "
@@ -119,6 +125,9 @@ def continuum(
 
     paraview = cli_vtk_options(vtk, vtk_frame, vtk_every, vtk_from)
     check_landing(landing, method, temperature)
+    if partition_friction not in ("contacts", "along-flow"):
+        raise InputError(f"--partition-friction = {partition_friction!r}: must be contacts or "
+                         "along-flow")
     if stop_after_steps is not None and stop_after_steps < 0:
         raise InputError(f"--stop-after-steps = {stop_after_steps}: must be >= 0")
     if scenario is not None and like is not None:
@@ -137,7 +146,7 @@ def continuum(
     else:
         s = load(scenario, set_)
     from vibroflow.continuum.formulation import formulation
-    from vibroflow.continuum.material import material_for
+    from vibroflow.continuum.material import boundary_friction, material_for
     from vibroflow.continuum.mpm.solver import ContinuumBlowUp
     from vibroflow.continuum.tub_run import run_continuum
 
@@ -164,8 +173,10 @@ def continuum(
                            stiffness_factor=stiffness_factor, compaction=compaction, flip=flip,
                            bed_viscosity=bed_viscosity, damping_length=damping_length,
                            temperature=temperature, initial_temperature=initial_temperature,
-                           landing=landing, **step)
+                           landing=landing, partition_friction=partition_friction.replace("-", "_"),
+                           **step)
     material_for(s, cal, options)  # validates the parameters before --out is made
+    boundary_friction(s, cal, options.partition_friction)
     try:
         summary = run_continuum(s, out, method, calibration=cal, options=options,
                                 progress=True, vtk=paraview, resume=resume,

@@ -71,16 +71,28 @@ def material_for(scenario, calibration: Calibration | None, options: ContinuumOp
     return mat
 
 
-def boundary_friction(scenario, calibration: Calibration | None):
+def boundary_friction(scenario, calibration: Calibration | None, partitions: str = "contacts"):
     """(wall contact law, wall friction, partition friction) of a tub run: the calibration's
     [wall] and [partitions] friction (the media's effective Coulomb friction measured on the
     DEM), else the scenario's contact laws' friction of the fill on the wall and partition
-    materials; the partition friction is None for a periodic tub (no partitions)."""
+    materials; the partition friction is None for a periodic tub (no partitions).
+    partitions="along_flow" (ContinuumOptions.partition_friction) takes [partitions]
+    friction_along_flow instead, the part of the contacts' friction along the mean flow
+    (calibration.wall_friction); InputError where the calibration has none."""
     wall_pair = find_contact(scenario, scenario.fill.material, scenario.tub.wall_material)
     mu_w = float(calibration.wall.friction if calibration is not None else wall_pair.friction)
     if scenario.tub.periodic:
         return wall_pair, mu_w, None
     part_pair = find_contact(scenario, scenario.fill.material, scenario.tub.partition_material)
+    if partitions == "along_flow":
+        mu = None if calibration is None or calibration.partitions is None else \
+            calibration.partitions.friction_along_flow
+        if mu is None or not (math.isfinite(mu) and mu >= 0):
+            raise InputError(f"partition_friction = 'along_flow': the calibration's [partitions] "
+                             f"friction_along_flow = {'missing' if mu is None else repr(mu)}; "
+                             "it must be a friction >= 0 (vibroflow calibrate measures it on a "
+                             "DEM run with its wall forces)")
+        return wall_pair, mu_w, float(mu)
     mu_p = float(calibration.partitions.friction
                  if calibration is not None and calibration.partitions is not None
                  else part_pair.friction)

@@ -65,6 +65,10 @@ DEFAULT_DX_DIAMETERS = 3.0
 DEFAULT_CFL = 0.3
 DEFAULT_GRID = f"{DEFAULT_DX_DIAMETERS:g} ball diameters"
 DEFAULT_DAMPING = "the default grid's spacing"
+#: the partitions' friction mu_p of the body force -2 mu_p p / L_y (material.boundary_friction):
+#: the calibration's [partitions] friction (the contacts' ratio of sums, the default) or its
+#: friction_along_flow (the part of it along the mean flow; docs/decisions/wall-friction.md)
+PARTITION_FRICTIONS = ("contacts", "along_flow")
 
 
 def damping_transfer_cfl(transfer_cfl: float | None, dx: float, damping_length: float
@@ -111,7 +115,9 @@ class ContinuumOptions:
     initial_temperature (m^2/s^2, >= 0): T of the material at the start (default 0);
     landing (LANDINGS): how the Eulerian formulation counts the landing above the wall row
     (wall_energy_flux.WallEnergy.columns; default "pairs"; "columns" only with the
-    temperature, and the Eulerian formulation's check refuses it elsewhere).
+    temperature, and the Eulerian formulation's check refuses it elsewhere);
+    partition_friction (PARTITION_FRICTIONS): which of the calibration's partition frictions
+    the partitions' body force takes (material.boundary_friction; default "contacts").
 
     stiffness_factor s < 1 is the continuum's counterpart of the DEM's reduced Young's modulus:
     the elastic moduli K and G (and with them the default wall stiffness) are multiplied by s,
@@ -129,7 +135,8 @@ class ContinuumOptions:
     #: stages hashed without them stay up to date (vibroflow.study.stages)
     LATER_OPTIONS: ClassVar[tuple[str, ...]] = ("dilatancy", "stiffness_factor", "compaction",
                                                 "flip", "bed_viscosity", "damping_length",
-                                                "temperature", "initial_temperature", "landing")
+                                                "temperature", "initial_temperature", "landing",
+                                                "partition_friction")
 
     transfer_cfl: float | None
     dx: float | None = None
@@ -146,6 +153,7 @@ class ContinuumOptions:
     temperature: bool = False
     initial_temperature: float = 0.0
     landing: str = "pairs"
+    partition_friction: str = "contacts"
 
     def __post_init__(self):
         if not (isinstance(self.flip, (int, float)) and 0.0 <= self.flip <= 1.0):
@@ -185,6 +193,9 @@ class ContinuumOptions:
             raise InputError(f"landing = {self.landing!r}: only with the temperature "
                              "(--temperature, in a study METHOD.temperature=true); without it "
                              "only pairs")
+        if self.partition_friction not in PARTITION_FRICTIONS:
+            raise InputError(f"partition_friction = {self.partition_friction!r}: must be "
+                             f"{' or '.join(PARTITION_FRICTIONS)}")
 
     def transfers(self, dx: float | None = None, default_length: float | None = None) -> int:
         """The APIC transfers a step makes on a grid of spacing dx (m): timestep.
@@ -214,14 +225,17 @@ class ContinuumOptions:
 def options_record(options: ContinuumOptions) -> dict:
     """The options as a plain dict for a fingerprint or a study's inputs, an unset dx spelled
     out as the rule that sets it (DEFAULT_GRID).  The temperature's options are left out while
-    the field is not carried, and the landing at its default (pairs), so that the record (and a
-    run's fingerprint) is the one of a run made without them."""
+    the field is not carried, the landing at its default (pairs) and the partition friction at
+    its default (contacts), so that the record (and a run's fingerprint) is the one of a run made
+    without them."""
     record = dataclasses.asdict(options)
     if not record.get("temperature", False):
         record.pop("temperature", None)
         record.pop("initial_temperature", None)
     if record.get("landing") == "pairs" or not record.get("temperature", False):
         record.pop("landing", None)
+    if record.get("partition_friction") == "contacts":
+        record.pop("partition_friction", None)
     if record.get("dx") is None:
         record["dx"] = DEFAULT_GRID
     elif record.get("damping_length") is None:

@@ -132,6 +132,9 @@ class Partitions(Table):
     contacts: Count | None = None
     body_force: Text | None = None
     spacing_m: Number | None = None
+    #: the friction along the mean flow, sum(-F_t . u / |u|) / sum F_n (calibration.wall_friction)
+    friction_along_flow: Number | None = None
+    friction_along_flow_stderr: Number | None = None
 
 
 class ImpactRelation(Table):

@@ -291,7 +291,8 @@ class FixedMesh(Formulation):
         dx = self.grid(options, scenario)
         parts = continuum_parts(scenario)
         mesh = EulerianMesh.tub(geo, dx, parts, packed_section(parts))
-        wall_pair, mu_w, mu_p = boundary_friction(scenario, calibration)
+        wall_pair, mu_w, mu_p = boundary_friction(scenario, calibration,
+                                                   options.partition_friction)
         M = material.bulk_modulus + 4.0 * material.shear_modulus / 3.0
         k_wall = options.wall_stiffness if options.wall_stiffness is not None else M / mesh.h
         wall = MeshWall(stiffness=k_wall, friction=mu_w,

@@ -227,7 +227,8 @@ class MaterialPointMethod(Formulation):
         dx = self.grid(options, scenario)
         spacing = 0.5 * dx
         grid = Grid.covering(-geo.radius, geo.radius, 0.0, geo.rim_height, dx)
-        wall_pair, mu_w, mu_p = boundary_friction(scenario, calibration)
+        wall_pair, mu_w, mu_p = boundary_friction(scenario, calibration,
+                                                   options.partition_friction)
         M = material.bulk_modulus + 4.0 * material.shear_modulus / 3.0
         k_wall = options.wall_stiffness if options.wall_stiffness is not None else M / spacing
         zeta = damping_ratio(wall_pair.restitution)
