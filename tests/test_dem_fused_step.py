@@ -145,9 +145,16 @@ def test_no_block_records_more_rows_a_step_than_its_bound(one_thread, monkeypatc
         return out
 
     monkeypatch.setattr(K, "advance", one_step)
-    system, state = _bed(speed=3.0)
-    S.run_steps(system, state, 400, record_impacts=True, on_impacts=lambda rows: None)
-    assert len(seen) == 400 and max(seen) >= 10  # many contacts start at one step
+    # the fill lattice (gaps of 0.1 mm) squeezed towards its centre, then every contact
+    # forgotten: all of them start again at the next step
+    system, state = _bed(count=600)
+    state.vel[:] = -200.0 * (state.pos - state.pos.mean(axis=0))
+    S.run_steps(system, state, 60, record_impacts=True, on_impacts=lambda rows: None)
+    touching = int(state.nl.flag.sum() + state.wall_flag.sum())
+    for flags in (state.nl.flag, state.nl.rflag, state.wall_flag):
+        flags[:] = 0
+    S.run_steps(system, state, 1, record_impacts=True, on_impacts=lambda rows: None)
+    assert len(seen) == 61 and touching > 600 and max(seen) >= 20
 
 
 def _flushes(capacity: int, monkeypatch) -> tuple[list, int]:
