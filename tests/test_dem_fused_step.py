@@ -9,8 +9,14 @@ velocity-Verlet step:
   partition touches or that has left the tub: on points on both sides of the surfaces, at
   distances of a few ulp to millimetres, the cleared ones have no overlap by u_wall's and the
   partitions' own tests;
-- a block of balls that records more impact rows than its buffer holds stops the run with
-  ImpactsLost, which names the block, instead of losing rows; run_dem leaves no result.
+- no block of balls records more impact rows in one step than the bound of
+  vibroflow.dem.impact_order (its list entries plus its balls x wall slots; its balls x parts),
+  on a bed thrown into itself; the bound of a hand-made list is its hand value;
+- buffers of one row a block grow to the flush threshold plus that bound and give the rows of
+  the large buffers, flush by flush, in the same order: no row is lost, and a run whose
+  default buffers hold one row gives the dem.h5 impacts of the default run.  (A one-row
+  buffer does not make ImpactsLost fire: the buffers are sized from the bound, so
+  that guard cannot fire.)
 """
 from __future__ import annotations
 
@@ -21,10 +27,11 @@ import pytest
 from vibroflow.dem import fill as F
 from vibroflow.dem import simulate as S
 from vibroflow.dem import step as K
-from vibroflow.dem.impact_order import ImpactsLost
+from vibroflow.dem import parts as P
+from vibroflow.dem.impact_order import impact_bound
 from vibroflow.dem.run import run_dem
 from vibroflow.dem.wall_pass import clear_of_walls
-from vibroflow.dem.walls import TUB_LENGTH, TUB_RADIUS, TUB_RIM, u_wall
+from vibroflow.dem.walls import TUB_LENGTH, TUB_RADIUS, TUB_RIM, WALL_PLANE0, u_wall
 from vibroflow.scenario.io import load_scenario
 
 ARRAYS = ("pos", "vel", "omg", "force", "torque", "ref_tub", "wall_hist", "wall_flag",
@@ -110,26 +117,99 @@ def test_the_wall_cull_clears_no_ball_that_touches_a_wall():
     assert not clear_of_walls(0.0, np.nan, tub[TUB_RADIUS], r, tub, pose, 1.0, 0.0, True)
 
 
-def test_a_block_past_its_impact_buffer_stops_the_run(one_thread, monkeypatch):
-    # one row a block: the thrown bed's first block to start two contacts at one step
-    monkeypatch.setattr(S, "IMPACT_CAPACITY", 1)
-    system, state = _bed(speed=1.0)
-    with pytest.raises(ImpactsLost, match=r"impact rows lost at step \d+: block \d+ of stored "
-                                          r"balls recorded [2-9]\d* ball-ball and wall rows, "
-                                          r"its buffer holds 1"):
-        S.run_steps(system, state, 3000, record_impacts=True, on_impacts=lambda rows: None)
+def test_the_bound_of_a_hand_made_list():
+    # 6 balls owning 3, 0, 4, 1, 0, 2 entries in blocks {0, 1}, {2, 3, 4}, {5}; 4 wall slots,
+    # 2 parts: B = entries + balls x 4, Q = balls x 2
+    start = np.array([0, 3, 3, 7, 8, 8, 10])
+    bounds = np.array([0, 2, 5, 6])
+    rows, part_rows = impact_bound(start, bounds, 4, 2)
+    assert rows.tolist() == [3 + 2 * 4, 5 + 3 * 4, 2 + 1 * 4]
+    assert part_rows.tolist() == [4, 6, 2]
 
+
+def test_no_block_records_more_rows_a_step_than_its_bound(one_thread, monkeypatch):
+    # one step a call, each block's new rows against the bound of the step's list
+    advance = K.advance
+    seen = []
+
+    def one_step(step0, nsteps, origin, motion, record, balls, pairs, slots, walls, params,
+                 work, prt):
+        before = work.imp_count.copy(), prt.imp_count.copy()
+        out = advance(step0, 1, origin, motion, record, balls, pairs, slots, walls, params,
+                      work, prt)
+        bound = impact_bound(pairs.start, pairs.bounds, WALL_PLANE0 + params.planes.shape[0],
+                             prt.shape.shape[0])
+        for new, old, most in zip((work.imp_count, prt.imp_count), before, bound):
+            assert np.all(new - old <= most), (new - old, most)
+        seen.append(np.max(work.imp_count - before[0]))
+        return out
+
+    monkeypatch.setattr(K, "advance", one_step)
+    # the fill lattice (gaps of 0.1 mm) squeezed towards its centre, then every contact
+    # forgotten: all of them start again at the next step
+    system, state = _bed(count=600)
+    state.vel[:] = -200.0 * (state.pos - state.pos.mean(axis=0))
+    S.run_steps(system, state, 60, record_impacts=True, on_impacts=lambda rows: None)
+    touching = int(state.nl.flag.sum() + state.wall_flag.sum())
+    for flags in (state.nl.flag, state.nl.rflag, state.wall_flag):
+        flags[:] = 0
+    S.run_steps(system, state, 1, record_impacts=True, on_impacts=lambda rows: None)
+    assert len(seen) == 61 and touching > 600 and max(seen) >= 20
+
+
+def _flushes(capacity: int, monkeypatch) -> tuple[list, int]:
+    """The thrown bed's impact flushes over 3 000 steps with flushes past 4 rows of a block,
+    buffers of `capacity` rows a block at first; and the buffers' rows at the end."""
+    monkeypatch.setattr(S, "IMPACT_FLUSH", 4)
+    monkeypatch.setattr(S, "IMPACT_CAPACITY", capacity)
+    system, state = _bed(speed=1.0)
+    out = []
+    for _ in range(3):
+        S.run_steps(system, state, 1000, record_impacts=True, on_impacts=out.append)
+    b = state.scratch
+    bound = impact_bound(state.nl.start, state.nl.chunk_bounds(K.NBLOCK), system.n_walls, 0)[0]
+    assert b.work.imp_buf.shape[1] >= 4 + bound.max()
+    return out, b.work.imp_buf.shape[1]
+
+
+def test_buffers_of_one_row_grow_and_give_the_rows_of_large_ones(one_thread, monkeypatch):
+    large, rows = _flushes(1 << 11, monkeypatch)
+    small, grown = _flushes(1, monkeypatch)
+    assert rows == 1 << 11 and 4 < grown < 100  # grown to the bound, not to the default
+    assert len(large) > 10  # flushes within the calls
+    assert len(small) == len(large)
+    for a, b in zip(large, small):
+        assert np.array_equal(a, b)
+
+
+def test_the_flush_thresholds_are_1024_and_512_rows():
+    # they fix the flushes, hence the order of the rows in dem.h5: not the buffers' size
+    system, state = _bed(count=50)
+    S.run_steps(system, state, 1)
+    assert state.scratch.work.imp_flush.tolist() == [1024, 512]
+    assert state.scratch.impacts.half.tolist() == [1024, 512]
+    assert S.IMPACT_FLUSH == 1024 and P.IMPACT_FLUSH == 512
 
 
 @pytest.mark.slow
-def test_a_run_short_of_impact_rows_stops_and_leaves_no_result(tmp_path, monkeypatch):
-    # a 400-ball tub recording its impacts from 10 ms into the vibration, one row a block
+def test_a_run_with_one_row_buffers_gives_the_impacts_of_the_default_run(tmp_path,
+                                                                         monkeypatch):
+    # a 400-ball tub recording its impacts from 10 ms into the vibration
+    import h5py
     from tests.test_calibrate import SMALL
 
     monkeypatch.setenv("VIBROFLOW_CACHE", str(tmp_path / "cache"))
-    monkeypatch.setattr(S, "IMPACT_CAPACITY", 1)
     sc = load_scenario("tub47-quick", SMALL + ["run.duration=0.1", "run.average_last=0.09"])
-    out = tmp_path / "out"
-    with pytest.raises(ImpactsLost, match=r"^impact rows lost at step \d+: block \d+ "):
-        run_dem(sc, out, progress=False)
-    assert not (out / "summary.json").exists()
+    run_dem(sc, tmp_path / "default", progress=False)
+    monkeypatch.setattr(S, "IMPACT_CAPACITY", 1)
+    monkeypatch.setattr(P, "IMPACT_CAPACITY", 1)
+    run_dem(sc, tmp_path / "one", progress=False)
+    assert (tmp_path / "one" / "summary.json").exists()
+    with h5py.File(tmp_path / "default" / "dem.h5") as a, h5py.File(tmp_path / "one" /
+                                                                   "dem.h5") as b:
+        names = [n for n in ("impacts", "part_impacts") if n in a]
+        assert "impacts" in names
+        for name in names:
+            for key in a[name]:
+                assert np.array_equal(a[name][key][()], b[name][key][()]), (name, key)
+        assert a["impacts"][next(iter(a["impacts"]))].shape[0] > 100

@@ -114,7 +114,10 @@ def _bar_run(sort: bool, threads: int):
 
 def test_a_bed_on_a_part_sorted_gives_the_rows_and_loads_of_the_unsorted_one(
         sort_at_every_rebuild, monkeypatch):
-    # buffers of 8 rows a block: a flush after 4 rows of one block, some within a call
+    # a flush after 4 rows of one block, some within a call; buffers of 8 rows a block at
+    # first, grown to the bound (impact_order)
+    monkeypatch.setattr(S, "IMPACT_FLUSH", 4)
+    monkeypatch.setattr(P, "IMPACT_FLUSH", 4)
     monkeypatch.setattr(S, "IMPACT_CAPACITY", 8)
     monkeypatch.setattr(P, "IMPACT_CAPACITY", 8)
     imp, part_imp, loads, plain = _bar_run(False, 1)

@@ -19,8 +19,9 @@ N_IMP_BUF = 9
 
 @nb.njit(cache=True, inline="always")
 def record_impact(imp_buf, imp_count, c, t, kind, x, y, z, speed, i):
-    """Row k of block c's impact buffer (its count, k = imp_count[c], then one more); a row
-    past the buffer is counted, not written (step.advance stops the run on it)."""
+    """Row k of block c's impact buffer (its count, k = imp_count[c], then one more).  A row
+    past the buffer would be counted, not written (step.IMPACTS_LOST); the buffers are sized
+    from a proven bound so that none is (vibroflow.dem.impact_order)."""
     k = imp_count[c]
     if k < imp_buf.shape[1]:
         imp_buf[c, k, 0] = t

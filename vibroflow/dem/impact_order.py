@@ -11,18 +11,39 @@ stored by id, in the same order and the same flushes:
   the ball-ball rows before the wall rows (the pair pass comes first), ball by id, each
   ball's rows in the order recorded (its list entries, its wall slots, its parts): the order
   in which the blocks' buffers fill;
-- a flush after each step at which some block's rows since the last flush pass half a block's
-  buffer (ball-ball and wall rows, or ball-part rows), or, when the list is rebuilt at that
-  step, after the next step that is not a rebuild; and at the end of a run_steps call (the
+- a flush after each step at which some block's rows since the last flush pass the flush
+  threshold (1 024 ball-ball and wall rows, or 512 ball-part rows), or, when the list is
+  rebuilt at that step, after the next step that is not a rebuild; and at the end of a run_steps call (the
   ball-ball and wall rows only when the call has a callback for them, else they wait).
 
 After each `advance` call the new rows are tagged (`ImpactOrder.tag`): their ball's id, its
 block and the step written into the columns after the row's own.  The rows wait in the
-buffers, then in a pool (`settle`), until their flush is known; the buffers' own limit (half a
-block's buffer, step.advance) only makes `settle` drain them sooner.  A block whose rows pass
-its whole buffer (it would have to record more than half of it, 1 024 ball-ball and wall rows
-or 512 ball-part rows, within two steps) loses the rows past it: `advance` stops at that step
-(step.IMPACTS_LOST) and `run_steps` raises ImpactsLost, naming the block and its rows.
+buffers, then in a pool (`settle`), until their flush is known; the flush threshold of
+`advance` (simulate.IMPACT_FLUSH, 1 024 ball-ball and wall rows; parts.IMPACT_FLUSH, 512
+ball-part rows: `Work.imp_flush`, `ImpactOrder.half`) only makes `settle` drain them sooner.  The
+thresholds fix the flushes, so they do not depend on the buffers' capacity.
+
+No buffer overflows, by construction.  In one step block c of stored balls (`Pairs.bounds`)
+records at most
+
+    B_c = E_c + n_c W  ball-ball and wall rows,   Q_c = n_c P  ball-part rows,
+
+with n_c its balls, E_c = start[bounds[c + 1]] - start[bounds[c]] the list entries they own,
+W the wall slots a ball has (system.n_walls) and P the parts (`impact_bound`).  Proof, from
+the kernels' calls of the recorders: the pair pass (step._pair_block) runs once a step and
+visits each entry k of block c's balls once, and records a row for k only where flag[k] goes
+from 0 to 1, which it does at most once in the pass; the wall pass (wall_pass.ball_walls)
+runs once a step, visits each wall slot w of each of block c's balls once, and records only
+where wall_flag[i, w] goes from 0 to 1; the parts' kernel (parts.ball_parts) records, for
+each ball and part, only the first contact it gives a slot while the ball had no slot of the
+part at the step's start (`first` is cleared after that row): at most one row a ball and
+part, below the SLOTS rows a ball and part that its slots would allow.  `advance` stops after
+the first step at which some block's rows pass the threshold F, and every call starts with
+each block at most F (`run_steps` drains a block past it before the next call), so a block
+holds at most F + B_c (F + Q_c) rows, B_c of the list of that call.  `run_steps` grows the
+buffers to F + max_c B_c (F + max_c Q_c) rows at the start of each call and after each list
+rebuild (`simulate._Buffers.fit`; never below their IMPACT_CAPACITY).  step.IMPACTS_LOST, and ImpactsLost
+here, remain only as a guard that cannot fire.
 """
 from __future__ import annotations
 
@@ -59,7 +80,21 @@ def _tag(buf, count, tagged, col, ids, block, origin, dt, per_block):
 
 
 class ImpactsLost(RuntimeError):
-    """A block of balls recorded more impact rows than its buffer holds (module docstring)."""
+    """A block of balls recorded more impact rows than its buffer holds: a guard that the
+    buffers' bound (module docstring) keeps from firing."""
+
+
+def impact_bound(start: np.ndarray, bounds: np.ndarray, n_walls: int,
+                 n_parts: int) -> tuple[np.ndarray, np.ndarray]:
+    """(B, Q) (nblock,): the most ball-ball and wall rows, and ball-part rows, that each block
+    of stored balls (ids bounds[c] to bounds[c + 1] of the list's `start`) records in one
+    step: B_c = its list entries + its balls x n_walls, Q_c = its balls x n_parts (module
+    docstring)."""
+    start = np.asarray(start, np.int64)
+    bounds = np.asarray(bounds, np.int64)
+    balls = np.diff(bounds)
+    entries = start[bounds[1:]] - start[bounds[:-1]]
+    return entries + balls * int(n_walls), balls * int(n_parts)
 
 
 def lost_message(buffers, counts, step: int) -> str:
@@ -78,10 +113,12 @@ class ImpactOrder:
     rows (`work.imp_buf`, vibroflow.dem.records.Work), kind 1 the ball-part rows (`prt.imp`,
     vibroflow.dem.parts.PartsRec)."""
 
-    def __init__(self, nblock: int, buffers: tuple[np.ndarray, np.ndarray]):
+    def __init__(self, nblock: int, buffers: tuple[np.ndarray, np.ndarray],
+                 flush: np.ndarray):
         self.nblock = nblock
-        #: half a block's buffer: more rows of one block since the last flush flush them
-        self.half = np.array([b.shape[1] // 2 for b in buffers], np.int64)
+        #: the flush thresholds (Work.imp_flush): more rows of one block since the last
+        #: flush flush them
+        self.half = np.array(flush, np.int64)
         #: rows of each buffer block already tagged
         self.tagged = np.zeros((2, nblock), np.int64)
         #: rows since the last flush, by block of the balls by id
@@ -107,7 +144,7 @@ class ImpactOrder:
                  block, origin, dt, self.count[kind])
 
     def exceeded(self) -> bool:
-        """Whether some block's rows since the last flush pass half a buffer."""
+        """Whether some block's rows since the last flush pass the flush threshold."""
         return bool(np.any(self.count > self.half[:, None]))
 
     def settle(self, buffers, counts, step: int, on_rows) -> None:

@@ -54,7 +54,8 @@ DONE = -3.0          # a candidate that has its slot (scratch marker)
  IMP_BALL) = range(10)
 N_IMP = 10
 N_IMP_BUF = N_IMP + 2  # a buffered row: the IMP_* columns, the ball's block, the step
-IMPACT_CAPACITY = 1 << 10  # per block of balls (step.NBLOCK), between flushes
+IMPACT_CAPACITY = 1 << 10  # rows per block of balls (step.NBLOCK), at least
+IMPACT_FLUSH = 1 << 9  # a block's rows past which they are flushed (impact_order)
 # columns of a load: force (N) and torque about the part's centre (N m), part frame axes
 N_LOAD = 6
 
@@ -64,7 +65,8 @@ class PartsRec(NamedTuple):
     material index mat (P,) and bounding reach (P,) (m, from the centre; a cylinder's in x-z),
     the per-ball contact slots hist (N, P, SLOTS, 6) and key (N, P, SLOTS), each ball's
     loads on each part at the step, one row a contact, contrib (N, P, SLOTS, N_LOAD) with
-    their counts ncontrib (N, P), impact rows imp (nblock, IMPACT_CAPACITY, N_IMP_BUF) with
+    their counts ncontrib (N, P), impact rows imp (nblock, IMPACT_CAPACITY, N_IMP_BUF; grown by
+    vibroflow.dem.simulate to the bound of vibroflow.dem.impact_order) with
     their counts imp_count (nblock,), and scratch (nblock, SLOTS, 9) for an STL's candidates
     (nblock: step.NBLOCK, the blocks of balls)."""
 

@@ -66,12 +66,14 @@ class Work(NamedTuple):
     """Scratch arrays of the tub step, one row a block of balls (vibroflow.dem.step.NBLOCK),
     and one a ball for `save` (SI units)."""
 
-    imp_buf: np.ndarray    # (nblock, capacity, 6) impacts
+    imp_buf: np.ndarray    # (nblock, capacity, N_IMP_BUF) impacts
     imp_count: np.ndarray  # (nblock,) impacts recorded
     diag: np.ndarray       # (nblock, step.N_DIAG) diagnostics
     pose: np.ndarray       # (8,) tub pose (step._pose_array)
     moved: np.ndarray      # (nblock,) largest squared move since the list build (m^2)
     save: np.ndarray       # (N, 9) each ball's position, velocity, spin before a drift
+    imp_flush: np.ndarray  # (2,) a block's rows past which advance stops: ball-ball and wall,
+    #                        ball-part (vibroflow.dem.impact_order)
 
 
 class Params(NamedTuple):

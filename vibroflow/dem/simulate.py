@@ -25,14 +25,18 @@ from .blowup import (BlowUp, blowup_message, check_finite_start, check_overlaps_
                      coincident_message, coincident_pair)
 from .laws import material_index, pair_table
 from . import memory_order as M
-from .impact_order import ImpactOrder, ImpactsLost, lost_message
+from .impact_order import ImpactOrder, ImpactsLost, impact_bound, lost_message
 from .memory_order import by_id, space_order, store
 from .neighbours import NeighbourList
+from . import parts as PT
 from .parts import EMPTY, N_LOAD, SLOTS, parts_record, sum_loads
 from .records import Params, Work, balls_of, pairs_of, slots_of, walls_of
 from .walls import N_PLANE, WALL_PLANE0, wall_kind
 
-IMPACT_CAPACITY = 1 << 11  # per block of balls (step.NBLOCK), between flushes
+IMPACT_CAPACITY = 1 << 11  # rows per block of balls (step.NBLOCK), at least
+# a block's rows past which they are flushed: fixes the flushes, hence the rows' order in
+# dem.h5 (impact_order; ball-part rows: parts.IMPACT_FLUSH)
+IMPACT_FLUSH = 1 << 10
 
 
 @dataclass
@@ -216,7 +220,8 @@ class _Buffers:
         self.n = state.n
         self.work = Work(imp_buf=np.zeros((nblock, IMPACT_CAPACITY, K.N_IMP_BUF)),
                          imp_count=np.zeros(nblock, np.int64), diag=np.empty((nblock, K.N_DIAG)),
-                         pose=np.zeros(8), moved=np.zeros(nblock), save=np.zeros((state.n, 9)))
+                         pose=np.zeros(8), moved=np.zeros(nblock), save=np.zeros((state.n, 9)),
+                         imp_flush=np.array([IMPACT_FLUSH, PT.IMPACT_FLUSH], np.int64))
         #: the storage order of the last space sort (memory_order), taken up again by the
         #: next run_steps call
         self.order: np.ndarray | None = None
@@ -226,8 +231,25 @@ class _Buffers:
         self.parts = parts_record(system.packed, system.part_mat, state.part_hist,
                                   state.part_key, nblock)
         #: the impact rows' flushes, in the order of the balls by id (impact_order)
-        self.impacts = ImpactOrder(nblock, self.buffers)
+        self.impacts = ImpactOrder(nblock, self.buffers, self.work.imp_flush)
         self.reset_diag()
+
+    def fit(self, system: DEMSystem, nl: NeighbourList) -> None:
+        """Grow the impact buffers, keeping their rows, to the flush threshold plus the most
+        rows a block records in one step on list `nl` (impact_order.impact_bound), where they
+        hold fewer: no block's rows can pass its buffer (impact_order)."""
+        bound = impact_bound(nl.start, nl.chunk_bounds(K.NBLOCK), system.n_walls,
+                             system.n_parts)
+        need = [int(f) + int(b.max(initial=0)) for f, b in zip(self.work.imp_flush, bound)]
+        old = self.buffers
+        if need[0] > old[0].shape[1]:
+            self.work = self.work._replace(imp_buf=_grown(old[0], need[0]))
+        if need[1] > old[1].shape[1]:
+            self.parts = self.parts._replace(imp=_grown(old[1], need[1]))
+
+    def over_flush(self) -> bool:
+        """Whether some block's rows in the buffers pass the flush threshold."""
+        return any(bool(np.any(n > f)) for n, f in zip(self.counts, self.work.imp_flush))
 
     @property
     def buffers(self) -> tuple[np.ndarray, np.ndarray]:
@@ -244,6 +266,13 @@ class _Buffers:
         diag[:] = -1.0
         diag[:, K.D_BALL_OVERLAP] = 0.0
         diag[:, K.D_WALL_OVERLAP] = 0.0
+
+
+def _grown(buf: np.ndarray, rows: int) -> np.ndarray:
+    """buf (nblock, capacity, width) with `rows` rows a block, its rows kept."""
+    out = np.zeros((buf.shape[0], rows, buf.shape[2]))
+    out[:, :buf.shape[1]] = buf
+    return out
 
 
 def _buf(system: DEMSystem, state: DEMState) -> _Buffers:
@@ -371,6 +400,7 @@ def _run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: 
     motion = system.motion_array(state.vibrating)
     b.work.pose[6], b.work.pose[7] = system.motion.pivot_x, system.motion.pivot_z
     left = nsteps
+    b.fit(system, state.nl)
     while left > 0:
         try:
             done, status = K.advance(state.step, left, state.time_origin_step, motion,
@@ -399,7 +429,9 @@ def _run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: 
         if status == K.REBUILD:
             order.rebuilds.append(state.step)
             rebuild(system, state, sort=memory_order and state.nl.builds % M.SORT_EVERY == 0)
-        if status == K.IMPACTS_FULL or left == 0 or order.exceeded():
+            b.fit(system, state.nl)
+        # a block past the threshold is drained before the next call (impact_order's bound)
+        if status == K.IMPACTS_FULL or left == 0 or order.exceeded() or b.over_flush():
             order.settle(b.buffers, b.counts, state.step, (on_impacts, on_part_impacts))
         if left == 0:
             order.finish((on_impacts, on_part_impacts), on_impacts is not None)

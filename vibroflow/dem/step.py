@@ -312,6 +312,7 @@ def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pair
     hs2 = half_skin * half_skin
     cap = work.imp_buf.shape[1]
     part_cap = prt.imp.shape[1]
+    flush, part_flush = work.imp_flush[0], work.imp_flush[1]
     tub = params.tub
     periodic_length = tub[TUB_LENGTH] if (tub[TUB_PRESENT] > 0.0 and
                                           tub[TUB_PERIODIC] > 0.0) else 0.0
@@ -335,7 +336,7 @@ def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pair
                 blown = True
             if moved[c] > hs2:
                 rebuild = True
-            if imp_count[c] > cap // 2 or prt.imp_count[c] > part_cap // 2:
+            if imp_count[c] > flush or prt.imp_count[c] > part_flush:
                 full = True
             if imp_count[c] > cap or prt.imp_count[c] > part_cap:
                 lost = True
