@@ -238,7 +238,7 @@ def test_the_template_run_imports(run):
     assert summary["n_particles"] == 3 and summary["snapshots"] == len(steps)
     assert summary["bulk_velocity_csv"] == os.fspath(out / "bulk_velocity.csv")
     assert sorted(p.name for p in out.iterdir()) == ["bulk_velocity.csv", "dem.h5",
-                                                     "summary.json"]
+                                                     "floor.csv", "summary.json"]
 
 
 def _lines_of(post: Path) -> list[str]:
