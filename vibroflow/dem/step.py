@@ -50,7 +50,7 @@ from ..tub.motion import pose as tub_pose
 from .block_record import (D_BALL_I, D_BALL_J, D_BALL_OVERLAP, D_LOST, D_NAN,  # noqa: F401
                            D_WALL_I, D_WALL_OVERLAP, D_WALL_W, IMP_COLUMNS, N_DIAG, N_IMP_BUF,
                            ROW_BALL, record_impact)
-from .contact import (branch_vector, contact_force, forget, pair_contact_velocity, put3,
+from .contact import (contact_force, forget, pair_contact_velocity, put3,
                       unit_normal)
 from .wall_pass import ball_walls
 from .walls import KIND_BALL_BALL, TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT
@@ -64,6 +64,14 @@ DONE, REBUILD, IMPACTS_FULL, BLOWUP, IMPACTS_LOST = 0, 1, 2, 3, 4
 NBLOCK = 64
 # what fixes a run's numbers beyond its scenario (checkpoints and the fill cache record it)
 ASSEMBLY = f"pair slots, gathered per ball; {NBLOCK} blocks"
+
+
+@nb.njit(cache=True)
+def _part(hist, flag, rflag, rpos, k):
+    """Entry k's balls have just parted: its history forgotten, its reverse flag cleared (a
+    call of its own, out of the pair loop's hot path)."""
+    forget(hist, flag, k)
+    rflag[rpos[k]] = 0
 
 
 @nb.njit(cache=True)
@@ -81,9 +89,15 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
     imp_buf, imp_count, diag = work.imp_buf, work.imp_count, work.diag
     force, torque, gravity = balls.force, balls.torque, params.gravity
     lo, hi = bounds[c], bounds[c + 1]
+    # beyond a quarter of the length apart along y, the minimum image may differ from the
+    # stored branch; nearer, np.rint(dy / L) is 0 and the image is the branch itself
+    wrap = 0.25 * periodic_length if periodic_length > 0.0 else np.inf
     for i in range(lo, hi):
         ri = radius[i]
         mi = mass[i]
+        xi = pos[i, 0]
+        yi = pos[i, 1]
+        zi = pos[i, 2]
         # ball i's weight and its own entries' forces, summed as they come
         sfx = mi * gravity[0]
         sfy = mi * gravity[1]
@@ -92,14 +106,18 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
         sty = 0.0
         stz = 0.0
         for k in range(nbr_start[i], nbr_start[i + 1]):
+            # the untouched entry's rejection first: three loads of j, no call, no division
             j = nbr[k]
-            dx, dy, dz = branch_vector(pos, i, j, periodic_length)
+            dx = xi - pos[j, 0]
+            dy = yi - pos[j, 1]
+            dz = zi - pos[j, 2]
+            if abs(dy) > wrap:
+                dy -= periodic_length * np.rint(dy / periodic_length)
             rsum = ri + radius[j]
             d2 = dx * dx + dy * dy + dz * dz
             if d2 >= rsum * rsum:
                 if flag[k]:
-                    forget(hist, flag, k)
-                    rflag[rpos[k]] = 0
+                    _part(hist, flag, rflag, rpos, k)
                 continue
             delta, nx, ny, nz = unit_normal(dx, dy, dz, d2, rsum)
             rj = radius[j]
@@ -164,6 +182,9 @@ def _gather_block(c, balls, pairs, slots):
     rout, rstart, rflag = slots.out, slots.rstart, slots.rflag
     for i in range(bounds[c], bounds[c + 1]):
         r0, r1 = rstart[i], rstart[i + 1]
+        # most balls are no pair's touching second ball: only their flags are read
+        while r0 < r1 and not rflag[r0]:
+            r0 += 1
         if r0 == r1:
             continue
         fx, fy, fz = force[i, 0], force[i, 1], force[i, 2]
