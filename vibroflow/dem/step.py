@@ -49,9 +49,9 @@ from ..tub.motion import pose as tub_pose
 # the blocks' records' columns, read by the callers as step.D_*, step.IMP_COLUMNS, ...
 from .block_record import (D_BALL_I, D_BALL_J, D_BALL_OVERLAP, D_LOST, D_NAN,  # noqa: F401
                            D_WALL_I, D_WALL_OVERLAP, D_WALL_W, IMP_COLUMNS, N_DIAG, N_IMP_BUF,
-                           ROW_BALL, record_impact)
-from .contact import (contact_force, forget, pair_contact_velocity, put3,
-                      unit_normal)
+                           ROW_BALL, keep_largest, record_impact)
+from .contact import (add_force_torque, contact_force_with, forget, normal_constants, pair_contact_velocity,
+                      put3, unit_normal)
 from .wall_pass import ball_walls
 from .walls import KIND_BALL_BALL, TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT
 
@@ -92,12 +92,22 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
     # beyond a quarter of the length apart along y, the minimum image may differ from the
     # stored branch; nearer, np.rint(dy / L) is 0 and the image is the branch itself
     wrap = 0.25 * periodic_length if periodic_length > 0.0 else np.inf
+    # the pair constants of the last contact (materials, radii, masses -> m_eff, R_eff, the
+    # law's row and normal constants): the same inputs give the same bits, so a contact of
+    # the same kind of balls reuses them (a monodisperse bed: two divisions and a square root
+    # fewer a contact)
+    key_ri = key_mi = key_rj = key_mj = np.nan
+    key_mat_i = key_mat_j = -1
+    m_eff = r_eff = kn = damp = 0.0
+    par = table[0, 0]
     for i in range(lo, hi):
         ri = radius[i]
         mi = mass[i]
+        mat_i = mat[i]
         xi = pos[i, 0]
         yi = pos[i, 1]
         zi = pos[i, 2]
+        same_i = ri == key_ri and mi == key_mi and mat_i == key_mat_i
         # ball i's weight and its own entries' forces, summed as they come
         sfx = mi * gravity[0]
         sfy = mi * gravity[1]
@@ -132,29 +142,28 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
                                   pos[i, 0] - ri * nx, pos[i, 1] - ri * ny,
                                   pos[i, 2] - ri * nz, -vn, i)
             mj = mass[j]
-            m_eff = mi * mj / (mi + mj)
-            r_eff = ri * rj / (ri + rj)
-            par = table[mat[i], mat[j]]
-            fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz, fn, ft, sl = contact_force(
+            mat_j = mat[j]
+            if not (same_i and rj == key_rj and mj == key_mj and mat_j == key_mat_j):
+                m_eff = mi * mj / (mi + mj)
+                r_eff = ri * rj / (ri + rj)
+                par = table[mat_i, mat_j]
+                kn, damp = normal_constants(par, r_eff, m_eff)
+                key_ri, key_mi, key_mat_i = ri, mi, mat_i
+                key_rj, key_mj, key_mat_j = rj, mj, mat_j
+                same_i = True
+            fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz, fn, ft, sl = contact_force_with(
                 delta, nx, ny, nz, vx, vy, vz,
                 omg[i, 0] - omg[j, 0], omg[i, 1] - omg[j, 1], omg[i, 2] - omg[j, 2],
-                ri, rj, r_eff, m_eff, par, hist[k], dt_hist)
+                ri, rj, r_eff, par, kn, damp, hist[k], dt_hist)
             rout[q, 0] = -fx
             rout[q, 1] = -fy
             rout[q, 2] = -fz
             rout[q, 3] = tjx
             rout[q, 4] = tjy
             rout[q, 5] = tjz
-            sfx += fx
-            sfy += fy
-            sfz += fz
-            stx += tix
-            sty += tiy
-            stz += tiz
-            if delta > diag[c, D_BALL_OVERLAP]:
-                diag[c, D_BALL_OVERLAP] = delta
-                diag[c, D_BALL_I] = i
-                diag[c, D_BALL_J] = j
+            sfx, sfy, sfz, stx, sty, stz = add_force_torque(sfx, sfy, sfz, stx, sty, stz,
+                                                            fx, fy, fz, tix, tiy, tiz)
+            keep_largest(diag, c, D_BALL_OVERLAP, delta, i, j)
         put3(force, i, sfx, sfy, sfz)
         put3(torque, i, stx, sty, stz)
 
