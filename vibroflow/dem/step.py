@@ -28,7 +28,10 @@ Force assembly whose numbers do not depend on the thread count (DEVELOPERS.md, "
    once, by the thread that has ball i, its contact history advanced once; the force and the
    torque on i are summed into i's force and torque (from its weight) as the entries come, and
    the force and torque on j are written to the entry's own slot, kept in the list's reverse
-   order (vibroflow.dem.neighbours: no two entries share a slot, no races, no atomics);
+   order (vibroflow.dem.neighbours: no two entries share a slot, no races, no atomics).  An
+   entry apart costs three loads of j's position and its radius, a squared distance and one
+   comparison; a contact reuses m_eff, R_eff and the law's constants of the contact before
+   when its balls are of the same kind (the same inputs, the same bits);
 2. gather (`_gather_block`): each ball j adds the slots of the entries where it is the second
    ball, in ascending entry order, reading them in sequence;
 3. walls (`wall_pass.ball_walls`): each ball's wall contacts, added one after the other;
