@@ -53,8 +53,8 @@ from ..tub.motion import pose as tub_pose
 from .block_record import (D_BALL_I, D_BALL_J, D_BALL_OVERLAP, D_LOST, D_NAN,  # noqa: F401
                            D_WALL_I, D_WALL_OVERLAP, D_WALL_W, IMP_COLUMNS, N_DIAG, N_IMP_BUF,
                            ROW_BALL, keep_largest, record_impact)
-from .contact import (add_force_torque, contact_force_with, forget, normal_constants, pair_contact_velocity,
-                      put3, unit_normal)
+from .contact import (add_force_torque, contact_force_with, forget, normal_constants,
+                      pair_contact_velocity, put3, unit_normal)
 from .wall_pass import ball_walls
 from .walls import KIND_BALL_BALL, TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT
 
@@ -97,8 +97,8 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
     wrap = 0.25 * periodic_length if periodic_length > 0.0 else np.inf
     # the pair constants of the last contact (materials, radii, masses -> m_eff, R_eff, the
     # law's row and normal constants): the same inputs give the same bits, so a contact of
-    # the same kind of balls reuses them (a monodisperse bed: two divisions and a square root
-    # fewer a contact)
+    # the same kind of balls reuses them (a monodisperse bed: two divisions and one or two
+    # square roots fewer a contact)
     key_ri = key_mi = key_rj = key_mj = np.nan
     key_mat_i = key_mat_j = -1
     m_eff = r_eff = kn = damp = 0.0
