@@ -3,17 +3,22 @@
 - every touching pair enters both of its balls with opposite forces, exactly once: the pair
   forces of all balls sum to zero (Newton's third law) to rounding;
 - the numbers do not depend on the thread count: a falling bed, whose contacts and impacts
-  start and end at every step, comes out bit for bit the same on one thread and on two.
+  start and end at every step, comes out bit for bit the same on one thread and on two;
+- each pair gets its own law's constants, whatever kind of partner the entry before had.
 """
 from __future__ import annotations
+
+import math
 
 import numba
 import numpy as np
 import pytest
 
+from dem_helpers import R_STEEL, RHO_STEEL, Sim, ball, contact, scenario, zeta_of
 from vibroflow.dem import fill as F
 from vibroflow.dem import simulate as S
 from vibroflow.scenario.io import load_scenario
+from vibroflow.scenario.model import Material
 
 
 def _falling_bed(steps: int, threads: int):
@@ -54,3 +59,35 @@ def test_same_numbers_on_one_thread_and_on_two_in_process():
         assert np.array_equal(getattr(a, name), getattr(b, name)), name
     assert np.array_equal(a.nl.hist, b.nl.hist) and np.array_equal(a.nl.flag, b.nl.flag)
     assert np.array_equal(imp_a, imp_b)
+
+
+def test_each_partner_of_a_ball_gets_its_own_pair_law():
+    """Ball 0 touches four balls of three kinds (steel of its size, glass, steel of half its
+    size, steel again), each approaching at its own speed: the pair loop reuses a contact's
+    constants only for the same kind of partner, so each partner's force is its own linear
+    law, F_n = k_n delta + 2 zeta sqrt(m_eff k_n) u (models.md; tangential 0 at the set-up
+    evaluation), along the line of centres."""
+    mats = {"steel": Material(density=RHO_STEEL), "glass": Material(density=2500.0)}
+    laws = {("steel", "steel"): (1.0e5, 0.85), ("glass", "steel"): (2.0e5, 0.6),
+            ("glass", "glass"): (3.0e5, 0.5)}
+    r0 = R_STEEL
+    # (material, radius, unit vector from ball 0, overlap, approach speed)
+    partners = [("steel", r0, (1.0, 0.0, 0.0), 1.0e-5, 0.10),
+                ("glass", r0, (-1.0, 0.0, 0.0), 2.0e-5, 0.20),
+                ("steel", 0.5 * r0, (0.0, 1.0, 0.0), 1.5e-5, 0.30),
+                ("steel", r0, (0.0, -1.0, 0.0), 0.5e-5, 0.05)]
+    balls = [ball((0.0, 0.0, 0.0))]
+    for mat, r, e, delta, u in partners:
+        dist = r0 + r - delta
+        balls.append(ball(tuple(dist * x for x in e), vel=tuple(-u * x for x in e), d=2.0 * r,
+                          material=mat))
+    sim = Sim(scenario(balls, [contact(a, b, k_n=k, e=ee) for (a, b), (k, ee) in laws.items()],
+                       materials=mats))
+    m0 = 4.0 / 3.0 * math.pi * r0**3 * RHO_STEEL
+    for p, (mat, r, e, delta, u) in enumerate(partners, start=1):
+        k_n, rest = laws[tuple(sorted((mat, "steel")))]
+        mj = 4.0 / 3.0 * math.pi * r**3 * mats[mat].density
+        m_eff = m0 * mj / (m0 + mj)
+        fn = k_n * delta + 2.0 * zeta_of(rest) * math.sqrt(m_eff * k_n) * u
+        np.testing.assert_allclose(sim.state.force[p], fn * np.array(e), rtol=1e-12,
+                                   atol=1e-12 * fn)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numba as nb
 
 # columns of the per-block diagnostics
+# (keep_largest: an overlap's ball and other ball or wall in the two columns after it)
 D_BALL_OVERLAP, D_BALL_I, D_BALL_J, D_WALL_OVERLAP, D_WALL_I, D_WALL_W, D_NAN, D_LOST = range(8)
 N_DIAG = 8
 # an impact row: time (s), kind (walls.KIND_*), contact point x, y, z (m, lab), normal speed
@@ -32,3 +33,14 @@ def record_impact(imp_buf, imp_count, c, t, kind, x, y, z, speed, i):
         imp_buf[c, k, 5] = speed
         imp_buf[c, k, ROW_BALL] = i
     imp_count[c] = k + 1
+
+
+@nb.njit(cache=True, inline="always")
+def keep_largest(diag, c, col, delta, a, b):
+    """Block c's largest overlap of a kind: columns col (overlap, m), col + 1 and col + 2
+    (its ball and its other ball or wall: D_BALL_OVERLAP, D_BALL_I, D_BALL_J or D_WALL_*),
+    replaced when `delta` is larger."""
+    if delta > diag[c, col]:
+        diag[c, col] = delta
+        diag[c, col + 1] = a
+        diag[c, col + 2] = b

@@ -88,11 +88,30 @@ def add_pair(fbuf, tbuf, c, i, j, fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz):
 
 
 @nb.njit(cache=True, inline="always")
+def add_force_torque(fx, fy, fz, tx, ty, tz, afx, afy, afz, atx, aty, atz):
+    """A contact's force (afx, afy, afz) and torque (atx, aty, atz) added to a ball's sums."""
+    return fx + afx, fy + afy, fz + afz, tx + atx, ty + aty, tz + atz
+
+
+@nb.njit(cache=True, inline="always")
 def put3(a, i, x, y, z):
     """Row i of an (N, 3) array set to (x, y, z)."""
     a[i, 0] = x
     a[i, 1] = y
     a[i, 2] = z
+
+
+@nb.njit(cache=True, inline="always")
+def normal_constants(par, r_eff, m_eff):
+    """The normal law's constants of a contact (models.md): linear, (k_n, gamma_n =
+    2 zeta sqrt(m_eff k_n)); Hertz, (k = k_n sqrt(R_eff), c = zeta sqrt(m_eff k)).  A
+    function of the pair's materials, R_eff and m_eff alone: a pair loop reuses them from the
+    entry before when those are the same (step._pair_block)."""
+    if par[P_MODEL] == MODEL_LINEAR:
+        kn = par[P_KN]
+        return kn, 2.0 * par[P_DAMP] * np.sqrt(m_eff * kn)
+    k = par[P_KN] * np.sqrt(r_eff)
+    return k, par[P_DAMP] * np.sqrt(m_eff * k)
 
 
 @nb.njit(cache=True, inline="always", fastmath=False)
@@ -104,18 +123,26 @@ def contact_force(delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, r_i, r_j, r_eff, m_
     force on i (N), torque on i and on j (N m), the normal force |F_n| (N, signed: the
     damping may make it negative during the rebound), |F_t| (N), and 1 if at the Coulomb limit.
     """
+    kn, damp = normal_constants(par, r_eff, m_eff)
+    return contact_force_with(delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, r_i, r_j, r_eff,
+                              par, kn, damp, hist, dt)
+
+
+@nb.njit(cache=True, inline="always", fastmath=False)
+def contact_force_with(delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, r_i, r_j, r_eff, par, kn,
+                       damp, hist, dt):
+    """`contact_force` with the normal law's constants (kn, damp) of `normal_constants`."""
     vn = vx * nx + vy * ny + vz * nz  # > 0 separating
     if par[P_MODEL] == MODEL_LINEAR:
-        kn = par[P_KN]
-        gamma = 2.0 * par[P_DAMP] * np.sqrt(m_eff * kn)
+        gamma = damp
         f_elastic = kn * delta
         fn = f_elastic - gamma * vn
         kt = par[P_KT] * kn
         kn_tangent = kn
     else:
-        k = par[P_KN] * np.sqrt(r_eff)
+        k = kn
         sd = np.sqrt(delta)
-        c = par[P_DAMP] * np.sqrt(m_eff * k)
+        c = damp
         f_elastic = k * delta * sd
         fn = f_elastic - c * np.sqrt(sd) * vn
         kt = par[P_KT] * np.sqrt(r_eff * delta)

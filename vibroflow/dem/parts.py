@@ -39,7 +39,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from ..tub.motion import rigid_velocity, tub_to_lab
+from ..tub.motion import rigid_velocity, tub_to_lab_cs
 from ..tub.parts import (FRAME_TUB, P_CX, P_CY, P_CZ, P_FRAME, P_HX, P_HY, P_HZ, P_RADIUS,
                          SHAPE_BOX, SHAPE_CYLINDER, SHAPE_SPHERE, SHAPE_STL, PackedParts,
                          closest_on_triangle, part_nearest, patch_of)
@@ -205,7 +205,7 @@ def _one_contact(i, k, slot, c, t, dt_hist, first, r, m, vel, omg, mat_i, table,
     if tub_fixed:
         lnx = cth * nx - sth * nz
         lnz = sth * nx + cth * nz
-        clx, clz = tub_to_lab(cx, cz, pose[0], pose[1], pose[2], pose[6], pose[7])
+        clx, clz = tub_to_lab_cs(cx, cz, pose[0], pose[1], cth, sth, pose[6], pose[7])
         vwx, vwz = rigid_velocity(clx, clz, pose[0], pose[1], pose[3], pose[4], pose[5],
                                   pose[6], pose[7])
         wwy = -pose[5]

@@ -28,7 +28,10 @@ Force assembly whose numbers do not depend on the thread count (DEVELOPERS.md, "
    once, by the thread that has ball i, its contact history advanced once; the force and the
    torque on i are summed into i's force and torque (from its weight) as the entries come, and
    the force and torque on j are written to the entry's own slot, kept in the list's reverse
-   order (vibroflow.dem.neighbours: no two entries share a slot, no races, no atomics);
+   order (vibroflow.dem.neighbours: no two entries share a slot, no races, no atomics).  An
+   entry apart costs three loads of j's position and its radius, a squared distance and one
+   comparison; a contact reuses m_eff, R_eff and the law's constants of the contact before
+   when its balls are of the same kind (the same inputs, the same bits);
 2. gather (`_gather_block`): each ball j adds the slots of the entries where it is the second
    ball, in ascending entry order, reading them in sequence;
 3. walls (`wall_pass.ball_walls`): each ball's wall contacts, added one after the other;
@@ -49,9 +52,9 @@ from ..tub.motion import pose as tub_pose
 # the blocks' records' columns, read by the callers as step.D_*, step.IMP_COLUMNS, ...
 from .block_record import (D_BALL_I, D_BALL_J, D_BALL_OVERLAP, D_LOST, D_NAN,  # noqa: F401
                            D_WALL_I, D_WALL_OVERLAP, D_WALL_W, IMP_COLUMNS, N_DIAG, N_IMP_BUF,
-                           ROW_BALL, record_impact)
-from .contact import (branch_vector, contact_force, forget, pair_contact_velocity, put3,
-                      unit_normal)
+                           ROW_BALL, keep_largest, record_impact)
+from .contact import (add_force_torque, contact_force_with, forget, normal_constants,
+                      pair_contact_velocity, put3, unit_normal)
 from .wall_pass import ball_walls
 from .walls import KIND_BALL_BALL, TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT
 
@@ -64,6 +67,14 @@ DONE, REBUILD, IMPACTS_FULL, BLOWUP, IMPACTS_LOST = 0, 1, 2, 3, 4
 NBLOCK = 64
 # what fixes a run's numbers beyond its scenario (checkpoints and the fill cache record it)
 ASSEMBLY = f"pair slots, gathered per ball; {NBLOCK} blocks"
+
+
+@nb.njit(cache=True)
+def _part(hist, flag, rflag, rpos, k):
+    """Entry k's balls have just parted: its history forgotten, its reverse flag cleared (a
+    call of its own, out of the pair loop's hot path)."""
+    forget(hist, flag, k)
+    rflag[rpos[k]] = 0
 
 
 @nb.njit(cache=True)
@@ -81,9 +92,25 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
     imp_buf, imp_count, diag = work.imp_buf, work.imp_count, work.diag
     force, torque, gravity = balls.force, balls.torque, params.gravity
     lo, hi = bounds[c], bounds[c + 1]
+    # beyond a quarter of the length apart along y, the minimum image may differ from the
+    # stored branch; nearer, np.rint(dy / L) is 0 and the image is the branch itself
+    wrap = 0.25 * periodic_length if periodic_length > 0.0 else np.inf
+    # the pair constants of the last contact (materials, radii, masses -> m_eff, R_eff, the
+    # law's row and normal constants): the same inputs give the same bits, so a contact of
+    # the same kind of balls reuses them (a monodisperse bed: two divisions and one or two
+    # square roots fewer a contact)
+    key_ri = key_mi = key_rj = key_mj = np.nan
+    key_mat_i = key_mat_j = -1
+    m_eff = r_eff = kn = damp = 0.0
+    par = table[0, 0]
     for i in range(lo, hi):
         ri = radius[i]
         mi = mass[i]
+        mat_i = mat[i]
+        xi = pos[i, 0]
+        yi = pos[i, 1]
+        zi = pos[i, 2]
+        same_i = ri == key_ri and mi == key_mi and mat_i == key_mat_i
         # ball i's weight and its own entries' forces, summed as they come
         sfx = mi * gravity[0]
         sfy = mi * gravity[1]
@@ -92,14 +119,18 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
         sty = 0.0
         stz = 0.0
         for k in range(nbr_start[i], nbr_start[i + 1]):
+            # the untouched entry's rejection first: three loads of j, no call, no division
             j = nbr[k]
-            dx, dy, dz = branch_vector(pos, i, j, periodic_length)
+            dx = xi - pos[j, 0]
+            dy = yi - pos[j, 1]
+            dz = zi - pos[j, 2]
+            if abs(dy) > wrap:
+                dy -= periodic_length * np.rint(dy / periodic_length)
             rsum = ri + radius[j]
             d2 = dx * dx + dy * dy + dz * dz
             if d2 >= rsum * rsum:
                 if flag[k]:
-                    forget(hist, flag, k)
-                    rflag[rpos[k]] = 0
+                    _part(hist, flag, rflag, rpos, k)
                 continue
             delta, nx, ny, nz = unit_normal(dx, dy, dz, d2, rsum)
             rj = radius[j]
@@ -114,29 +145,28 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
                                   pos[i, 0] - ri * nx, pos[i, 1] - ri * ny,
                                   pos[i, 2] - ri * nz, -vn, i)
             mj = mass[j]
-            m_eff = mi * mj / (mi + mj)
-            r_eff = ri * rj / (ri + rj)
-            par = table[mat[i], mat[j]]
-            fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz, fn, ft, sl = contact_force(
+            mat_j = mat[j]
+            if not (same_i and rj == key_rj and mj == key_mj and mat_j == key_mat_j):
+                m_eff = mi * mj / (mi + mj)
+                r_eff = ri * rj / (ri + rj)
+                par = table[mat_i, mat_j]
+                kn, damp = normal_constants(par, r_eff, m_eff)
+                key_ri, key_mi, key_mat_i = ri, mi, mat_i
+                key_rj, key_mj, key_mat_j = rj, mj, mat_j
+                same_i = True
+            fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz, fn, ft, sl = contact_force_with(
                 delta, nx, ny, nz, vx, vy, vz,
                 omg[i, 0] - omg[j, 0], omg[i, 1] - omg[j, 1], omg[i, 2] - omg[j, 2],
-                ri, rj, r_eff, m_eff, par, hist[k], dt_hist)
+                ri, rj, r_eff, par, kn, damp, hist[k], dt_hist)
             rout[q, 0] = -fx
             rout[q, 1] = -fy
             rout[q, 2] = -fz
             rout[q, 3] = tjx
             rout[q, 4] = tjy
             rout[q, 5] = tjz
-            sfx += fx
-            sfy += fy
-            sfz += fz
-            stx += tix
-            sty += tiy
-            stz += tiz
-            if delta > diag[c, D_BALL_OVERLAP]:
-                diag[c, D_BALL_OVERLAP] = delta
-                diag[c, D_BALL_I] = i
-                diag[c, D_BALL_J] = j
+            sfx, sfy, sfz, stx, sty, stz = add_force_torque(sfx, sfy, sfz, stx, sty, stz,
+                                                            fx, fy, fz, tix, tiy, tiz)
+            keep_largest(diag, c, D_BALL_OVERLAP, delta, i, j)
         put3(force, i, sfx, sfy, sfz)
         put3(torque, i, stx, sty, stz)
 
@@ -164,6 +194,9 @@ def _gather_block(c, balls, pairs, slots):
     rout, rstart, rflag = slots.out, slots.rstart, slots.rflag
     for i in range(bounds[c], bounds[c + 1]):
         r0, r1 = rstart[i], rstart[i + 1]
+        # most balls are no pair's touching second ball: only their flags are read
+        while r0 < r1 and not rflag[r0]:
+            r0 += 1
         if r0 == r1:
             continue
         fx, fy, fz = force[i, 0], force[i, 1], force[i, 2]

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .block_record import D_LOST, D_WALL_I, D_WALL_OVERLAP, D_WALL_W, record_impact
-from .contact import contact_force, put3
+from .block_record import D_LOST, D_WALL_OVERLAP, keep_largest, record_impact
+from .contact import add_force_torque, contact_force, put3
 from .parts import ball_parts
 from .walls import (KIND_BALL_PARTITION, KIND_BALL_PLANE, KIND_BALL_TUB, TUB_LENGTH,
                     TUB_PERIODIC, TUB_PRESENT, TUB_RADIUS, TUB_RIM, WALL_PLANE0, WALL_U,
@@ -163,12 +163,8 @@ def ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work,
             wfx, wfy, wfz, tix, tiy, tiz, _tjx, _tjy, _tjz, fn, ft, sl = contact_force(
                 delta, nx, ny, nz, vx, vy, vz, omg[i, 0], omg[i, 1] - wwy, omg[i, 2],
                 r, 0.0, r, m, table[mat_i, wall_mat[w]], wall_hist[i, w], dt_hist)
-            fx += wfx
-            fy += wfy
-            fz += wfz
-            tx += tix
-            ty += tiy
-            tz += tiz
+            fx, fy, fz, tx, ty, tz = add_force_torque(fx, fy, fz, tx, ty, tz,
+                                                      wfx, wfy, wfz, tix, tiy, tiz)
             wall_fn[i, w] = fn
             wall_ft[i, w] = ft
             wall_slide[i, w] = sl
@@ -178,23 +174,14 @@ def ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work,
             wall_force[i, w, 0] = wfx
             wall_force[i, w, 1] = wfy
             wall_force[i, w, 2] = wfz
-            if delta > diag[c, D_WALL_OVERLAP]:
-                diag[c, D_WALL_OVERLAP] = delta
-                diag[c, D_WALL_I] = i
-                diag[c, D_WALL_W] = w
+            keep_largest(diag, c, D_WALL_OVERLAP, delta, i, w)
         if n_parts > 0:
             pfx, pfy, pfz, ptx, pty, ptz, pdelta, pk = ball_parts(
                 i, c, t, dt_hist, record_impacts, pos[i, 0], pos[i, 1], pos[i, 2], r, mass[i],
                 vel, omg, mat[i], table, pose, cth, sth, periodic_length, prt)
-            fx += pfx
-            fy += pfy
-            fz += pfz
-            tx += ptx
-            ty += pty
-            tz += ptz
-            if pdelta > diag[c, D_WALL_OVERLAP]:
-                diag[c, D_WALL_OVERLAP] = pdelta
-                diag[c, D_WALL_I] = i
-                diag[c, D_WALL_W] = n_walls + pk  # a part: after the wall slots
+            fx, fy, fz, tx, ty, tz = add_force_torque(fx, fy, fz, tx, ty, tz,
+                                                      pfx, pfy, pfz, ptx, pty, ptz)
+            # a part's slot: after the wall slots
+            keep_largest(diag, c, D_WALL_OVERLAP, pdelta, i, n_walls + pk)
         put3(force, i, fx, fy, fz)
         put3(torque, i, tx, ty, tz)

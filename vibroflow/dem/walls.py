@@ -16,7 +16,7 @@ import numba as nb
 import numpy as np
 
 from ..tub.geometry import u_wall_nearest
-from ..tub.motion import rigid_velocity, tub_to_lab
+from ..tub.motion import rigid_velocity, tub_to_lab_cs
 
 # tub parameters packed for the kernels: [radius, rim_height, length, periodic, has_tub]
 TUB_RADIUS, TUB_RIM, TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT = range(5)
@@ -66,7 +66,7 @@ def u_wall(px, pz, r, tub, pose, cos_th, sin_th):
     gap, ntx, ntz, cxt, czt, s = u_wall_nearest(tx, tz, R)
     nx = cos_th * ntx - sin_th * ntz
     nz = sin_th * ntx + cos_th * ntz
-    clx, clz = tub_to_lab(cxt, czt, X, Z, pose[2], pvx, pvz)
+    clx, clz = tub_to_lab_cs(cxt, czt, X, Z, cos_th, sin_th, pvx, pvz)
     vwx, vwz = rigid_velocity(clx, clz, X, Z, Xd, Zd, thd, pvx, pvz)
     return r - gap, nx, nz, vwx, vwz, cxt, czt, s, gap < 0.0
 

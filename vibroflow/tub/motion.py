@@ -97,8 +97,12 @@ def pose(params, t):
 @nb.njit(cache=True, inline="always")
 def tub_to_lab(px, pz, X, Z, theta, pivot_x, pivot_z):
     """Lab (x, z) of a tub-frame point (px, pz) at pose (X, Z, theta)."""
-    c = np.cos(theta)
-    s = np.sin(theta)
+    return tub_to_lab_cs(px, pz, X, Z, np.cos(theta), np.sin(theta), pivot_x, pivot_z)
+
+
+@nb.njit(cache=True, inline="always")
+def tub_to_lab_cs(px, pz, X, Z, c, s, pivot_x, pivot_z):
+    """`tub_to_lab` with the angle's cosine c and sine s given (a pass that has them)."""
     rx = px - pivot_x
     rz = pz - pivot_z
     return pivot_x + c * rx - s * rz + X, pivot_z + s * rx + c * rz + Z
