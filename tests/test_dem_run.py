@@ -330,6 +330,7 @@ def test_tub47_quick_ball_overlap_against_liggghts(tub47_quick_summary):
     assert tub47_quick_summary["max_overlap_over_d"] <= 1.25 * LIGGGHTS_MAX_OVERLAP[seed]
 
 
+@pytest.mark.slow
 def test_every_dataset_of_dem_h5_says_its_si_units(tmp_path):
     """dem.h5 is read by other programs: every dataset carries "units" (SI) and "long_name"."""
     from vibroflow.dem.output import UNITS

@@ -212,6 +212,7 @@ def test_remap_gives_the_face_by_face_numbers(periodic):
     assert np.abs(m_got - m).max() > 1e-3 * m.max()  # the material moved
 
 
+@pytest.mark.slow
 def test_parallel_loop_gives_the_serial_loops_numbers_on_one_thread_and_on_two():
     """The compiled loop with numba's parallel loops (forced on tub47-quick's small mesh,
     serial_below = 0) against the serial loop that small meshes use (solver.SERIAL_BELOW)."""
