@@ -217,29 +217,28 @@ class StudyData:
             return None
         return {"c0": c0, "c1": c1, "which": which}
 
-    def continuum_block(self, name: str) -> dict:
-        """The `continuum` block of a continuum method's own summary.json ({} if none)."""
-        entry = self.summary["methods"].get(name, {})
-        rel = entry.get("bulk_velocity_csv", f"{name}/bulk_velocity.csv")
-        path = self.out / Path(rel).parent / "summary.json"
-        try:
-            s = json.loads(path.read_text())
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError):
-            return {}
-        block = s.get("continuum") if isinstance(s, dict) else None
-        return block if isinstance(block, dict) else {}
-
-    def floor(self, name: str) -> dict:
-        """The "floor" block (measure.floor_force: the floor's force over the cycle and the
-        take-off) of a method's own summary.json ({} if none)."""
+    def method_summary(self, name: str) -> dict:
+        """A method's own summary.json, beside its bulk_velocity.csv ({} if unreadable)."""
         entry = self.summary["methods"].get(name, {})
         rel = entry.get("bulk_velocity_csv", f"{name}/bulk_velocity.csv")
         try:
             s = json.loads((self.out / Path(rel).parent / "summary.json").read_text())
         except (OSError, UnicodeDecodeError, json.JSONDecodeError):
             return {}
-        block = s.get("floor") if isinstance(s, dict) else None
+        return s if isinstance(s, dict) else {}
+
+    def _summary_block(self, name: str, key: str) -> dict:
+        block = self.method_summary(name).get(key)
         return block if isinstance(block, dict) else {}
+
+    def continuum_block(self, name: str) -> dict:
+        """The `continuum` block of a continuum method's own summary.json ({} if none)."""
+        return self._summary_block(name, "continuum")
+
+    def floor(self, name: str) -> dict:
+        """The "floor" block (measure.floor_force: the floor's force over the cycle and the
+        take-off) of a method's own summary.json ({} if none)."""
+        return self._summary_block(name, "floor")
 
     def continuum_shear_map(self, name: str, column: str = "shear_rate"):
         """A continuum method's map on the analysis cells from its shear_rate.csv (continuum

@@ -337,24 +337,13 @@ def _wall_feed_rows(data: StudyData) -> list:
                                                                d["by_region_W_m2_stderr"])]
                     + [_pm(d["u_wall_W_m2"], d["u_wall_W_m2_stderr"])])
     for name in data.continuum_methods:
-        b = _summary_of(data, name).get("wall_feed")
+        b = data.method_summary(name).get("wall_feed")
         if not isinstance(b, dict):
             continue
         m, e = b.get("by_region_W_m2") or {}, b.get("by_region_W_m2_stderr") or {}
         rows.append([_text(name, "l")] + [_pm(m.get(r), e.get(r)) for r in REGIONS]
                     + [_pm(b.get("u_wall_W_m2"), b.get("u_wall_W_m2_stderr"))])
     return rows
-
-
-def _summary_of(data: StudyData, name: str) -> dict:
-    """A method's own summary.json ({} if unreadable)."""
-    entry = data.summary["methods"].get(name, {})
-    rel = entry.get("bulk_velocity_csv", f"{name}/bulk_velocity.csv")
-    try:
-        s = json.loads((data.out / Path(rel).parent / "summary.json").read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
-        return {}
-    return s if isinstance(s, dict) else {}
 
 
 def _rheology(data: StudyData) -> dict:
