@@ -1,5 +1,5 @@
 """Set-ups the continuum's tests share: point lattices, the spinning disc, the Eulerian block
-on a floor, the short tub47-quick runs."""
+on a floor, the MPM layer shaken on a floor, the short tub47-quick runs."""
 from __future__ import annotations
 
 import math
@@ -11,12 +11,14 @@ from vibroflow.continuum.eulerian import solver as eulerian
 from vibroflow.continuum.eulerian.mesh import EulerianMesh
 from vibroflow.continuum.eulerian.wall import MeshWall
 from vibroflow.continuum.grid import Grid
-from vibroflow.continuum.grid_update import LabFrame
+from vibroflow.continuum.boundary import Plane
+from vibroflow.continuum.grid_update import LabFrame, TubFrame
 from vibroflow.continuum.kinetic_theory import KineticParameters
-from vibroflow.continuum.mpm.solver import MPMSystem, init_state
+from vibroflow.continuum.mpm.solver import MPMSystem, advance, init_state
 from vibroflow.continuum.temperature_field import TemperatureModel
 from vibroflow.continuum.timestep import stable_dt
 from vibroflow.continuum.wall_energy_flux import WallEnergy
+from vibroflow.tub.motion import TubMotion
 
 G_ACC = 9.81
 
@@ -89,3 +91,34 @@ def eulerian_block(v, height, looseness=1.0, settled=False, mu_w=0.0, box_height
     state = eulerian.init_state(system, np.where(fill, rho * h * h, 0.0), rho, stress=stress)
     state.v[fill] = v
     return system, state
+
+
+def shaken_mpm_layer(gamma, walls=(), temperature=None, cycles=1, frequency=47.0, dx=0.01):
+    """A 3 cm MPM layer of the default media at its critical density, 4 cm wide (x-periodic),
+    settled 20 ms on a floor (friction 0.4) beside the boundaries `walls`, then shaken
+    vertically from t = 0 in the floor's frame, z_w = A sin(omega t), A omega^2 = gamma g, with
+    the TemperatureModel `temperature` or none. Yields (phase, state, floor) after every step
+    of the last of `cycles` cycles (phase = t f mod 1); the floor's normal forces (N/m) are
+    state.history[floor.slot]["fn"]."""
+    mat = ContinuumMaterial()
+    omega = 2.0 * math.pi * frequency
+    motion = TubMotion(frequency=frequency, amplitude_x=0.0, amplitude_z=gamma * G_ACC / omega**2,
+                       phase_z=0.0, amplitude_theta=0.0)
+    sp = dx / 2
+    floor = Plane((0.0, 0.0), (0.0, 1.0), (mat.bulk_modulus + 4 * mat.shear_modulus / 3) / sp,
+                  friction=0.4)
+    bounds = [floor, *walls]
+    grid = Grid.periodic_strip(0.04, 0.0, 0.12, dx)
+    dt = stable_dt(mat, dx, sp, bounds)
+    rest = MPMSystem(grid, mat, dt, frame=LabFrame((0.0, -G_ACC)), boundaries=bounds,
+                     temperature=temperature)
+    state = init_state(rest, lattice(0.0, 0.04, 0.0, 0.03, sp), sp * sp, mat.critical_density)
+    advance(rest, state, int(round(0.02 / dt)))
+    state.t = 0.0
+    system = MPMSystem(grid, mat, dt, frame=TubFrame(motion), boundaries=bounds,
+                       temperature=temperature)
+    per_cycle = int(round(1.0 / (frequency * dt)))
+    advance(system, state, per_cycle * (cycles - 1))
+    for _ in range(per_cycle):
+        advance(system, state, 1)
+        yield (state.t * frequency) % 1.0, state, floor

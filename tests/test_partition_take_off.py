@@ -9,52 +9,27 @@ import math
 import numpy as np
 import pytest
 
-from continuum_helpers import lattice
+from continuum_helpers import shaken_mpm_layer
 
 from vibroflow.calibration.wall_friction import along_flow, cell_mean_velocity
-from vibroflow.continuum.boundary import PartitionFriction, Plane
-from vibroflow.continuum.constitutive import ContinuumMaterial
-from vibroflow.continuum.grid import Grid
-from vibroflow.continuum.grid_update import LabFrame, TubFrame
+from vibroflow.continuum.boundary import PartitionFriction
 from vibroflow.continuum.material import boundary_friction
-from vibroflow.continuum.mpm import solver as mpm
 from vibroflow.continuum.options import ContinuumOptions, options_record
-from vibroflow.continuum.timestep import stable_dt
 from vibroflow.errors import InputError
 from vibroflow.io.calibration_file import read_calibration
 from vibroflow.scenario.io import load_scenario
-from vibroflow.tub.motion import TubMotion
 
-MAT = ContinuumMaterial()
-DX = 0.01
 CALIBRATION = "tests/data/tub47-quick-dem/calibration.toml"
 
 
-def _shaken_slot(gamma, mu_p, spacing=0.01905, frequency=47.0):
-    """A 3 cm layer at the critical density, 4 cm wide (x-periodic), in a slot of width
-    `spacing` (m) whose partitions' friction is mu_p, settled 20 ms on a floor, then shaken
-    vertically z_w = A sin(omega t), A omega^2 = gamma g: the phases, the floor's normal force
-    (N/m) and the partitions' compressed volume sum(p V) (N) at every step of the first cycle,
-    and the layer's weight (N/m)."""
-    omega = 2.0 * math.pi * frequency
-    motion = TubMotion(frequency=frequency, amplitude_x=0.0, amplitude_z=gamma * 9.81 / omega**2,
-                       phase_z=0.0, amplitude_theta=0.0)
-    sp = DX / 2
-    kn = (MAT.bulk_modulus + 4 * MAT.shear_modulus / 3) / sp
-    floor = Plane((0.0, 0.0), (0.0, 1.0), kn, friction=0.4)
-    walls = [floor, PartitionFriction(mu_p, spacing)]
-    grid = Grid.periodic_strip(0.04, 0.0, 0.12, DX)
-    dt = stable_dt(MAT, DX, sp, walls)
-    rest = mpm.MPMSystem(grid, MAT, dt, frame=LabFrame((0.0, -9.81)), boundaries=walls)
-    state = mpm.init_state(rest, lattice(0.0, 0.04, 0.0, 0.03, sp), sp * sp,
-                           MAT.critical_density)
-    mpm.advance(rest, state, int(round(0.02 / dt)))
-    state.t = 0.0
-    system = mpm.MPMSystem(grid, MAT, dt, frame=TubFrame(motion), boundaries=walls)
+def _shaken_slot(gamma, mu_p, spacing=0.01905):
+    """continuum_helpers.shaken_mpm_layer in a slot of width `spacing` (m) whose partitions'
+    friction is mu_p: the phases, the floor's normal force (N/m) and the partitions'
+    compressed volume sum(p V) (N) at every step of the first cycle, and the layer's weight
+    (N/m)."""
     phase, force, pv = [], [], []
-    for _ in range(int(round(1.0 / (frequency * dt)))):
-        mpm.advance(system, state, 1)
-        phase.append((state.t * frequency) % 1.0)
+    for ph, state, floor in shaken_mpm_layer(gamma, walls=[PartitionFriction(mu_p, spacing)]):
+        phase.append(ph)
         force.append(state.history[floor.slot]["fn"].sum())
         p = -(state.stress[:, 0] + state.stress[:, 1] + state.stress[:, 3]) / 3.0
         pv.append((np.maximum(p, 0.0) * state.volume).sum())

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from continuum_helpers import lattice
+from continuum_helpers import lattice, shaken_mpm_layer
 
 from vibroflow.continuum.boundary import Plane
 from vibroflow.continuum.constitutive import ContinuumMaterial
@@ -16,7 +16,7 @@ from vibroflow.continuum.eulerian import solver as eulerian
 from vibroflow.continuum.eulerian.mesh import EulerianMesh
 from vibroflow.continuum.eulerian.wall import MeshWall
 from vibroflow.continuum.grid import Grid
-from vibroflow.continuum.grid_update import LabFrame, TubFrame
+from vibroflow.continuum.grid_update import LabFrame
 from vibroflow.continuum.kinetic_theory import (LUN_SAVAGE, KineticParameters,
                                                 conductivity_kg_m_s, dissipation_W_m3)
 from vibroflow.continuum.mpm import solver as mpm
@@ -24,7 +24,6 @@ from vibroflow.continuum.temperature_field import TemperatureModel, fluctuation_
 from vibroflow.continuum.temperature_step import (TemperatureGrid, edge_heating_W_m3,
                                                   step_temperature_walls)
 from vibroflow.continuum.timestep import stable_dt
-from vibroflow.tub.motion import TubMotion
 from vibroflow.continuum.wall_energy_flux import (FRICTION_RULE, WallEnergy, cell_wall_terms,
                                                   collision_loss_W_m2, contact_terms,
                                                   johnson_jackson_flux_W_m2, partition_terms,
@@ -258,36 +257,15 @@ def test_a_block_sliding_on_a_floor_is_heated_and_one_moving_with_it_is_not(meth
         assert energies[2] == pytest.approx(energies[1], rel=1e-9)
 
 
-def _shaken_layer(gamma, coupled, cycles=1, frequency=47.0):
-    """A 3 cm layer of the critical density, 4 cm wide (x-periodic), settled for 20 ms on a
-    frictional floor, then shaken vertically from t = 0, z_w = A sin(omega t), A omega^2 =
-    gamma g, in the floor's frame, its T carried (coupled: with the kinetic pressure): the
-    phases (-) and the floor's total normal force (N/m) of every step of the last of `cycles`
-    cycles, and the layer's weight (N/m)."""
-    omega = 2.0 * math.pi * frequency
-    motion = TubMotion(frequency=frequency, amplitude_x=0.0, amplitude_z=gamma * 9.81 / omega**2,
-                       phase_z=0.0, amplitude_theta=0.0)
-    sp = DX / 2
-    kn = (MAT.bulk_modulus + 4 * MAT.shear_modulus / 3) / sp
-    floor = Plane((0.0, 0.0), (0.0, 1.0), kn, friction=0.4)
+def _shaken_layer(gamma, coupled, cycles=1):
+    """continuum_helpers.shaken_mpm_layer with its T carried (coupled: with the kinetic
+    pressure): the phases (-) and the floor's total normal force (N/m) of every step of the
+    last of `cycles` cycles, and the layer's weight (N/m)."""
     prm = KineticParameters(diameter_m=MAT.diameter, density_kg_m3=MAT.solid_density)
     model = TemperatureModel(prm, DX, 1e-4, coupled, WallEnergy(restitution=0.8))
-    grid = Grid.periodic_strip(0.04, 0.0, 0.12, DX)
-    dt = stable_dt(MAT, DX, sp, [floor])
-    rest = mpm.MPMSystem(grid, MAT, dt, frame=LabFrame((0.0, -9.81)), boundaries=[floor],
-                         temperature=model)
-    state = mpm.init_state(rest, lattice(0.0, 0.04, 0.0, 0.03, sp), sp * sp,
-                           MAT.critical_density)
-    mpm.advance(rest, state, int(round(0.02 / dt)))
-    state.t = 0.0
-    system = mpm.MPMSystem(grid, MAT, dt, frame=TubFrame(motion), boundaries=[floor],
-                           temperature=model)
-    per_cycle = int(round(1.0 / (frequency * dt)))
-    mpm.advance(system, state, per_cycle * (cycles - 1))
     phase, force = [], []
-    for _ in range(per_cycle):
-        mpm.advance(system, state, 1)
-        phase.append((state.t * frequency) % 1.0)
+    for ph, state, floor in shaken_mpm_layer(gamma, temperature=model, cycles=cycles):
+        phase.append(ph)
         force.append(state.history[floor.slot]["fn"].sum())
     return np.array(phase), np.array(force), 9.81 * state.mass.sum()
 
