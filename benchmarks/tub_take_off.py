@@ -22,17 +22,17 @@ cycles after --skip-cycles: the z component (tub axes) of the U wall's force wit
 the bottom over the bed's weight (the Lagrangian's penalty force on the points, the Eulerian's on
 its wall-layer cells); beside it the partitions' friction's z component and the rest of the U's
 (arcs and side walls) and the partitions' normal force 2 p V / L_y summed over the compressed
-material, over the weight; the take-off t f where the floor force first falls to a twentieth of
-the weight after its maximum (tub_wall_feed.take_off).  --dem-dir RUN (--methods '' for it
-alone): the same forces of a DEM run from its sampled wall contacts, and its partitions'
-friction over their normal force, the magnitudes' and along the mean flow of each ball's 15 mm
-cell (calibration.wall_friction.friction_along_flow's measure).  The DEM (tub47-quick, fill
-seed 1): floor force / weight 0.52, 0.037, 0, 0.0006, 0.11, 0.83, 1.82, 1.78; take-off 0.122.
+material, over the weight; the take-off t f where the floor force first falls to a twentieth
+of the weight after its maximum (vibroflow.measure.floor_force.sampled_take_off).  --dem-dir RUN
+(--methods '' for it alone): the same forces of a DEM run from its sampled wall contacts, and
+its partitions' friction over their normal force, the magnitudes' and along the mean flow of
+each ball's 15 mm cell (calibration.wall_friction's cell_mean_velocity and along_flow, the
+measure of [partitions] friction_along_flow).  The DEM (tub47-quick, fill seed 1): floor
+force / weight 0.52, 0.037, 0, 0.0006, 0.11, 0.83, 1.82, 1.78; take-off 0.122.
 """
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import math
 import sys
 import time
@@ -40,20 +40,13 @@ from pathlib import Path
 
 import numpy as np
 
+from vibroflow.measure.floor_force import region_of, sampled_take_off
+
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_CALIBRATION = ROOT / "tests/data/tub47-quick-dem/calibration.toml"
 DEM_FLOOR = (0.52, 0.037, 0.0, 0.0006, 0.11, 0.83, 1.82, 1.78)
 CELL_M = 0.015   # the mean flow's cells (tub47.md's bulk velocity cells)
 CASES = ("base", "no-partitions", "no-wall-friction", "vertical", "uncalibrated", "along-flow")
-
-
-def _feed_module():
-    spec = importlib.util.spec_from_file_location("tub_wall_feed",
-                                                  ROOT / "benchmarks/tub_wall_feed.py")
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["tub_wall_feed"] = mod
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def partition_z(v, mass, volume, stress, mu_p, length, dt):
@@ -74,11 +67,11 @@ def dem_forces(dem_dir: Path, per: int, batches: int, radius: float):
     and the partitions' normal force."""
     import h5py
 
+    from vibroflow.calibration.wall_friction import along_flow, cell_mean_velocity
     from vibroflow.dem.walls import WALL_PARTITION_HI, WALL_PARTITION_LO, WALL_U
     from vibroflow.tub.geometry import point_to_arc
     from vibroflow.tub.motion import lab_to_tub_np, relative_velocity_tub_axes_np
 
-    feed = _feed_module()
     with h5py.File(dem_dir / "dem.h5", "r") as hf:
         phase = hf["snapshots/phase"][:]
         theta = hf["snapshots/tub_pose"][:, 2]
@@ -98,21 +91,12 @@ def dem_forces(dem_dir: Path, per: int, batches: int, radius: float):
             X, Z, th_i, Xd, Zd, thd = pose[i]
             x = lab_to_tub_np(pos_all[i], X, Z, th_i)
             v = relative_velocity_tub_axes_np(pos_all[i], vel_all[i], X, Z, th_i, Xd, Zd, thd)
-            ix = np.floor(x[:, 0] / CELL_M).astype(np.int64)
-            iz = np.floor(x[:, 2] / CELL_M).astype(np.int64)
-            key_c = (ix + 1000) * 10000 + iz
-            uniq, inv = np.unique(key_c, return_inverse=True)
-            cnt_c = np.bincount(inv)
-            ux = np.bincount(inv, v[:, 0]) / cnt_c
-            uz = np.bincount(inv, v[:, 2]) / cnt_c
+            ux, uz = cell_mean_velocity(x[:, 0], x[:, 2], v[:, 0], v[:, 2], CELL_M)
             rows = part_rows[snap[part_rows] == i]
-            c = inv[ball[rows]]
-            sp = np.hypot(ux[c], uz[c])
+            b = ball[rows]
             c_, s_ = np.cos(th_i), np.sin(th_i)
-            ftx = c_ * f_lab[rows, 0] + s_ * f_lab[rows, 2]
-            ftz = -s_ * f_lab[rows, 0] + c_ * f_lab[rows, 2]
-            along[rows] = np.where(sp > 0, -(ftx * ux[c] + ftz * uz[c]) / np.maximum(sp, 1e-30),
-                                   0.0)
+            along[rows] = along_flow(c_ * f_lab[rows, 0] + s_ * f_lab[rows, 2],
+                                     -s_ * f_lab[rows, 0] + c_ * f_lab[rows, 2], ux[b], uz[b])
         mass = float(hf["particles/mass"][:].sum()) if "particles/mass" in hf else None
         if mass is None:
             r = hf["particles/radius"][:]
@@ -124,7 +108,7 @@ def dem_forces(dem_dir: Path, per: int, batches: int, radius: float):
     th = theta[snap]
     fz = -np.sin(th) * f_lab[:, 0] + np.cos(th) * f_lab[:, 2]
     u = wall == WALL_U
-    floor = u & (feed.region_of(point_to_arc(pos[:, 0], pos[:, 2], radius), radius) == 0)
+    floor = u & (region_of(point_to_arc(pos[:, 0], pos[:, 2], radius), radius) == 0)
     part = (wall == WALL_PARTITION_LO) | (wall == WALL_PARTITION_HI)
     key = b_snap[snap] * per + k_snap[snap]
     cnt = np.bincount(b_snap * per + k_snap, minlength=batches * per).reshape(batches, per)
@@ -154,7 +138,6 @@ def run_case(method: str, case: str, skip: int, cycles: int, batches: int,
     from vibroflow.scenario.io import load_scenario
     from vibroflow.tub.geometry import geometry_of, point_to_arc
 
-    feed = _feed_module()
     parts = set(case.split("+"))
     unknown = parts - set(CASES)
     if unknown:
@@ -193,7 +176,7 @@ def run_case(method: str, case: str, skip: int, cycles: int, batches: int,
         n = system.mesh.normal
         part = system.partitions
         x_wall = system.x[cells]
-        reg_wall = feed.region_of(point_to_arc(x_wall[:, 0], x_wall[:, 1], geo.radius),
+        reg_wall = region_of(point_to_arc(x_wall[:, 0], x_wall[:, 1], geo.radius),
                                   geo.radius)
 
         def forces():
@@ -213,7 +196,7 @@ def run_case(method: str, case: str, skip: int, cycles: int, batches: int,
             hist = state.history[wall.slot]
             touch = hist["fn"] > 0
             x = state.x[touch]
-            reg = feed.region_of(point_to_arc(x[:, 0], x[:, 1], geo.radius), geo.radius)
+            reg = region_of(point_to_arc(x[:, 0], x[:, 1], geo.radius), geo.radius)
             fz = hist["f"][touch, 1]
             pz = (0.0, 0.0) if part is None else partition_z(
                 state.v, state.mass, state.volume, state.stress, part.friction, part.length,
@@ -233,7 +216,7 @@ def run_case(method: str, case: str, skip: int, cycles: int, batches: int,
         count[b, k] += 1
     out = out / np.maximum(count, 1) / weight
     return {"floor": out[0], "rest": out[1], "partitions": out[2], "partition_normal": out[3],
-            "wall_s": time.perf_counter() - t0, "take_off": feed.take_off(out[0].mean(0), per)}
+            "wall_s": time.perf_counter() - t0, "take_off": sampled_take_off(out[0].mean(0), per)}
 
 
 def _row(name, per_batch):
