@@ -182,15 +182,6 @@ def test_buffers_of_one_row_grow_and_give_the_rows_of_large_ones(one_thread, mon
         assert np.array_equal(a, b)
 
 
-def test_the_flush_thresholds_are_1024_and_512_rows():
-    # they fix the flushes, hence the order of the rows in dem.h5: not the buffers' size
-    system, state = _bed(count=50)
-    S.run_steps(system, state, 1)
-    assert state.scratch.work.imp_flush.tolist() == [1024, 512]
-    assert state.scratch.impacts.half.tolist() == [1024, 512]
-    assert S.IMPACT_FLUSH == 1024 and P.IMPACT_FLUSH == 512
-
-
 @pytest.mark.slow
 def test_a_run_with_one_row_buffers_gives_the_impacts_of_the_default_run(tmp_path,
                                                                          monkeypatch):
