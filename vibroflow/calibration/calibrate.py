@@ -243,8 +243,9 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
             prog.log(f"elastic: the bed's unloading bulk modulus K = "
                      f"{unload['bulk_modulus']:.4g} +- {unload['bulk_modulus_stderr']:.2g} Pa "
                      f"(t f {unload['branch_start']:.3f} - {unload['branch_end']:.3f}, p "
-                     f"{unload['peak_pressure']:.4g} -> {unload['release_pressure']:.4g} Pa, "
-                     f"{unload['cells']} cells, R^2 {unload['r2']:.3f})")
+                     f"{unload['start_pressure']:.4g} -> {unload['release_pressure']:.4g} Pa, "
+                     f"{unload['cells']} cells; from the divergence "
+                     f"{unload['divergence']:.4g} Pa)")
         except InputError as err:
             prog.log(f"elastic: the unloading bulk modulus not measured: {err}")
             unload = None
