@@ -134,6 +134,8 @@ def continuum(
     if partition_friction not in ("contacts", "along-flow"):
         raise InputError(f"--partition-friction = {partition_friction!r}: must be contacts or "
                          "along-flow")
+    if moduli not in ("calibrated", "unloading"):
+        raise InputError(f"--moduli = {moduli!r}: must be calibrated or unloading")
     if stop_after_steps is not None and stop_after_steps < 0:
         raise InputError(f"--stop-after-steps = {stop_after_steps}: must be >= 0")
     if scenario is not None and like is not None:
