@@ -235,9 +235,9 @@ class ContinuumOptions:
 def options_record(options: ContinuumOptions) -> dict:
     """The options as a plain dict for a fingerprint or a study's inputs, an unset dx spelled
     out as the rule that sets it (DEFAULT_GRID).  The temperature's options are left out while
-    the field is not carried, the landing at its default (pairs) and the partition friction at
-    its default (contacts) and the moduli at theirs (calibrated), so that the record (and a run's fingerprint) is the one of a run made
-    without them."""
+    the field is not carried, the landing at its default (pairs), the partition friction at its
+    default (contacts) and the moduli at theirs (calibrated), so that the record (and a run's
+    fingerprint) is the one of a run made without them."""
     record = dataclasses.asdict(options)
     if not record.get("temperature", False):
         record.pop("temperature", None)
