@@ -187,6 +187,24 @@ def test_continuum_gets_the_cyclic_secant_modulus_at_the_tubs_strain(calibrated_
     assert "cyclic secant" in r.stdout
 
 
+def test_the_unloading_modulus_reads_the_same_strain_from_the_packing_and_the_divergence(
+        calibrated_run):
+    """Mass conservation, d ln phi / dt = -div v following the solid: the unloading modulus with
+    the strain from the solid fraction's material change and with the strain from the
+    coarse-grained velocity's divergence are one quantity measured twice (within 15%; 7% on
+    tub47-quick's 1.5 s run); the pressure falls along the branch."""
+    from vibroflow.io.calibration_file import read_calibration
+
+    out, r = calibrated_run
+    e = read_calibration(out).elastic
+    K = e.unloading_bulk_modulus_Pa
+    assert K > 0 and e.unloading_bulk_modulus_stderr_Pa > 0
+    assert e.unloading_bulk_modulus_divergence_Pa == pytest.approx(K, rel=0.15)
+    assert (e.unloading_release_pressure_Pa < e.unloading_start_pressure_Pa
+            <= e.unloading_peak_pressure_Pa)
+    assert "unloading bulk modulus" in r.stdout + r.stderr
+
+
 def test_the_vibrating_walls_drive_the_bed_and_its_restitution_is_the_contact_laws(
         calibrated_run):
     """[kinetic]: over steady cycles the walls' lab-frame work on the balls is what the bed

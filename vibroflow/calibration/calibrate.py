@@ -18,7 +18,9 @@ Stages:
    shear at the tub's frequency and at the strain amplitude the DEM's bed sees
    (media_tests.cyclic_modulus: cyclic_shear; the amplitude from the bed's cycle-mean shear
    rate), not the small-strain modulus of step 4, which [elastic] keeps as
-   shear_modulus_small_strain_Pa (cyclic=False: the small-strain one);
+   shear_modulus_small_strain_Pa (cyclic=False: the small-strain one); and the bed's bulk
+   modulus on its unloading branch after each landing, from the phase-resolved fields of step
+   1 (unloading) -> [elastic] unloading_bulk_modulus_Pa, the continuum's `--moduli unloading`;
 6. the equivalent Drucker-Prager with viscosity; with dilatancy=True (opt-in, ~1 minute), the
    dilatancy constant K_dil of the continuum's peak-friction option, measured on dense
    sheared packings of the balls at the bed's pressure and the tub's I (dilatancy.py) ->
@@ -74,6 +76,7 @@ from .media_tests import cyclic_modulus, dem_tests, dilatancy_table
 from .shear_temperature import sliding_table
 from .rheology_fit import drucker_prager_equivalent
 from .run_fields import coarse_grain_run, write_fields
+from .unloading import unloading_of_run
 from .tub_rheology import (bed_pressure, check_tub_cells, fit_tub_cells, median_dense,
                            tub_mu_i_scatter)
 from .wall_energy import wall_flux
@@ -234,8 +237,21 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
         dp = drucker_prager_equivalent(rheo["mu_s"], rheo["mu_2"], rheo["I_0"],
                                        rheo["phi_max"], rheo["phi_min"], p_bed, d, rho_s,
                                        gam_ref)
+        try:
+            unload = unloading_of_run(phases, cg_info.get("phase_batches"),
+                                      float(sc.motion.frequency))
+            prog.log(f"elastic: the bed's unloading bulk modulus K = "
+                     f"{unload['bulk_modulus']:.4g} +- {unload['bulk_modulus_stderr']:.2g} Pa "
+                     f"(t f {unload['branch_start']:.3f} - {unload['branch_end']:.3f}, p "
+                     f"{unload['start_pressure']:.4g} -> {unload['release_pressure']:.4g} Pa, "
+                     f"{unload['cells']} cells; from the divergence "
+                     f"{unload['divergence']:.4g} Pa)")
+        except InputError as err:
+            prog.log(f"elastic: the unloading bulk modulus not measured: {err}")
+            unload = None
         cal = calibration_tables(res, cg_info, wf, rel, rheo, elastic, dp, p_bed, phi_bed, z,
-                                 d, rho_s, gam_ref, shear_cell, kernel, width, avg)
+                                 d, rho_s, gam_ref, shear_cell, kernel, width, avg,
+                                 unloading=unload)
         if cyclic_rec is not None:
             cal["cyclic_shear"] = cyclic_rec
         if dilatancy:

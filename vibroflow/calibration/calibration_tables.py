@@ -52,11 +52,35 @@ def _speed_fit_keys(g: dict, tag: str, points_key: str) -> dict:
             points_key: int(g["points"])}
 
 
+def unloading_keys(u: dict | None) -> dict:
+    """The [elastic] unloading_* keys of the bed's unloading bulk modulus (unloading.py's
+    unloading_bulk_modulus u; None: none measured, no keys)."""
+    if u is None:
+        return {}
+    return {
+        "unloading_bulk_modulus_Pa": toml_float(u["bulk_modulus"]),
+        "unloading_bulk_modulus_stderr_Pa": toml_float(u["bulk_modulus_stderr"]),
+        "unloading_bulk_modulus_divergence_Pa": toml_float(u["divergence"]),
+        "unloading_bulk_modulus_fixed_cells_Pa": toml_float(u["eulerian"]),
+        "unloading_tangent_start_Pa": toml_float(u["tangent_start"]),
+        "unloading_tangent_end_Pa": toml_float(u["tangent_end"]),
+        "unloading_cells": int(u["cells"]),
+        "unloading_branch_start_cycles": toml_float(u["branch_start"]),
+        "unloading_branch_end_cycles": toml_float(u["branch_end"]),
+        "unloading_peak_pressure_Pa": toml_float(u["peak_pressure"]),
+        "unloading_start_pressure_Pa": toml_float(u["start_pressure"]),
+        "unloading_release_pressure_Pa": toml_float(u["release_pressure"]),
+        "unloading_volumetric_strain": toml_float(u["volumetric_strain"]),
+        "unloading_strain_rate_1_s": toml_float(u["strain_rate"]),
+    }
+
+
 def calibration_tables(res, cg_info, wf, rel, rheo, elastic, dp, p_bed, phi_bed, z, d, rho_s,
-                       gam_ref, shear_cell, kernel, width, avg) -> dict:
+                       gam_ref, shear_cell, kernel, width, avg, unloading=None) -> dict:
     """The tables of calibration.toml (what `Calibration.from_dict` takes) from the stages'
     results: [source], [media], [rheology], [elastic], [drucker_prager], [wall], [impacts] and,
-    when measured, [partitions] and [impacts.ball_ball], [impacts.ball_wall]."""
+    when measured, [partitions] and [impacts.ball_ball], [impacts.ball_wall]; `unloading`:
+    the bed's unloading bulk modulus (unloading.py), its keys last in [elastic]."""
     sc = res.scenario
     t0, t1 = res.window()
     tw = wf["tub_wall"]
@@ -99,6 +123,7 @@ def calibration_tables(res, cg_info, wf, rel, rheo, elastic, dp, p_bed, phi_bed,
             "solid_fraction": toml_float(elastic.get("solid_fraction", phi_bed)),
             "coordination_number": toml_float(elastic.get("coordination_number")),
             "source": str(elastic.get("source", "")),
+            **unloading_keys(unloading),
         },
         "drucker_prager": {k: (v if isinstance(v, str) else toml_float(v)) for k, v in dp.items()},
         "wall": {

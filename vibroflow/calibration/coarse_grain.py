@@ -267,6 +267,16 @@ class CoarseGrainer:
         return self._fields_of(self._ball.sum(axis=(0, 1)), self._cont.sum(axis=(0, 1)),
                                self._weight.sum(), gradient)
 
+    def batch_phase_arrays(self, names, gradient: str = "kernel") -> dict:
+        """Each batch's phase-resolved fields `names` as plain arrays (n_batches, n_phases, nx,
+        nz, ...), the derivation `fields(phase_resolved=True)` does per batch for its standard
+        errors; NaN where a batch has no snapshot of that phase."""
+        if self.n_phases is None:
+            raise InputError("batch_phase_arrays(): this CoarseGrainer has no phase bins (give "
+                             "n_phases)")
+        per_batch = self._fields_of(self._ball, self._cont, self._weight, gradient)
+        return {name: per_batch[name] for name in names}
+
     # ------------------------------------------------------------------------------------------
     @property
     def n_snapshots(self) -> int:

@@ -54,7 +54,9 @@ def coarse_grain_run(run, kernel: str = "gaussian", width: float | None = None,
         phase-resolved Dataset, thermal_temperature_cycle_mean (+ _stderr) in the time averages.
 
     Returns (time_averaged, phase_resolved, info): two xarray Datasets (coarse_grain.fields) and
-    a dict {snapshots, wall_time_s, contact_stress: "ball and wall" | "wall only" | "none"}.
+    a dict {snapshots, wall_time_s, contact_stress: "ball and wall" | "wall only" | "none",
+    phase_batches: {"pressure", "solid_fraction", "velocity"}: each batch's phase-resolved
+    field as an array (n_batches, n_phases, nx, nz[, 3])}.
     """
     own = not isinstance(run, DEMResult)
     res = DEMResult.open(run) if own else run
@@ -114,6 +116,9 @@ def _coarse_grain(res: DEMResult, kernel, width, cutoff, cell_size, n_phases, pr
         ds.attrs["source"] = res.source
     if energy_flux:
         info["energy_flux"] = cg.energy_flux_fields(phase_resolved=True)
+    # each batch's phase-resolved pressure, solid fraction and velocity: the unloading
+    # modulus's batch means (unloading.unloading_bulk_modulus)
+    info["phase_batches"] = cg.batch_phase_arrays(("pressure", "solid_fraction", "velocity"))
     info["wall_time_s"] = time.perf_counter() - t_wall
     return avg, phases, info
 

@@ -104,6 +104,12 @@ def continuum(
                                      "ratio of sums; default) or along-flow (its "
                                      "friction_along_flow, the part along the mean "
                                      "flow).")] = "contacts",
+    moduli: Annotated[str, typer.Option(
+        "--moduli", help="The bed's elastic moduli: calibrated (the calibration's "
+                         "bulk_modulus_Pa and shear_modulus_Pa; default) or unloading (its "
+                         "unloading_bulk_modulus_Pa, the bed's stiffness as it unloads after a "
+                         "landing in the DEM, and shear_modulus_small_strain_Pa).")
+    ] = "calibrated",
     set_: SetOption = None,
     vtk: Annotated[bool, typer.Option("--vtk", help="Also write ParaView files of the material "
                                                     "points and the grid fields over the last "
@@ -128,6 +134,8 @@ def continuum(
     if partition_friction not in ("contacts", "along-flow"):
         raise InputError(f"--partition-friction = {partition_friction!r}: must be contacts or "
                          "along-flow")
+    if moduli not in ("calibrated", "unloading"):
+        raise InputError(f"--moduli = {moduli!r}: must be calibrated or unloading")
     if stop_after_steps is not None and stop_after_steps < 0:
         raise InputError(f"--stop-after-steps = {stop_after_steps}: must be >= 0")
     if scenario is not None and like is not None:
@@ -174,6 +182,7 @@ def continuum(
                            bed_viscosity=bed_viscosity, damping_length=damping_length,
                            temperature=temperature, initial_temperature=initial_temperature,
                            landing=landing, partition_friction=partition_friction.replace("-", "_"),
+                           moduli=moduli,
                            **step)
     material_for(s, cal, options)  # validates the parameters before --out is made
     boundary_friction(s, cal, options.partition_friction)

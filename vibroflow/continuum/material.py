@@ -16,19 +16,27 @@ from .options import ContinuumOptions
 
 def material_of(scenario, calibration: Calibration | None, model: str = "mu_i",
                 dilatancy: bool = False, stiffness_factor: float = 1.0,
-                compaction: bool = False) -> ContinuumMaterial:
+                compaction: bool = False, moduli: str = "calibrated") -> ContinuumMaterial:
     """The continuum material: the calibration's, else tub47's defaults with the scenario's
     ball diameter and density; its elastic moduli times stiffness_factor (ContinuumOptions);
     with `dilatancy`, the calibration's [dilatancy] K_dil (measured on DEM,
     vibroflow.calibration.dilatancy) switches the peak-friction option on; with `compaction`,
     the calibration's [compaction] compaction_strain and excess_solid_fraction (measured on DEM,
-    vibroflow.calibration.compaction) switch the cyclic compaction option on."""
+    vibroflow.calibration.compaction) switch the cyclic compaction option on; moduli
+    "unloading" takes the calibration's [elastic] unloading_bulk_modulus_Pa (the bed's
+    unloading branch in the DEM, vibroflow.calibration.unloading) and
+    shear_modulus_small_strain_Pa (docs/decisions/unloading-stiffness.md)."""
     if calibration is not None:
         mat = ContinuumMaterial.from_calibration(calibration, model=model)
+    elif moduli != "calibrated":
+        raise InputError(f"moduli = {moduli!r}: needs a calibration (--calibration) with "
+                         "[elastic] unloading_bulk_modulus_Pa")
     else:
         rho_s = scenario.materials[scenario.fill.material].density
         mat = ContinuumMaterial(model=model, diameter=scenario.fill.diameter,
                                 solid_density=rho_s)
+    if moduli == "unloading":
+        mat = dataclasses.replace(mat, **unloading_moduli(calibration))
     if stiffness_factor != 1.0:
         mat = dataclasses.replace(mat, bulk_modulus=mat.bulk_modulus * stiffness_factor,
                                   shear_modulus=mat.shear_modulus * stiffness_factor)
@@ -58,14 +66,31 @@ def material_of(scenario, calibration: Calibration | None, model: str = "mu_i",
         mat.critical_solid_fraction + float(excess)) if excess > 0 else None)
 
 
+def unloading_moduli(calibration: Calibration) -> dict:
+    """{bulk_modulus, shear_modulus} (Pa) of moduli = "unloading": the calibration's [elastic]
+    unloading_bulk_modulus_Pa and shear_modulus_small_strain_Pa; InputError where either is
+    missing or not > 0."""
+    e = calibration.elastic
+    k = getattr(e, "unloading_bulk_modulus_Pa", None)
+    g = getattr(e, "shear_modulus_small_strain_Pa", None)
+    for name, v, how in (("unloading_bulk_modulus_Pa", k, "vibroflow calibrate measures it on "
+                                                           "the DEM run's unloading branch"),
+                         ("shear_modulus_small_strain_Pa", g, "vibroflow calibrate with the "
+                                                              "cyclic shear test")):
+        if v is None or not (math.isfinite(v) and v > 0):
+            raise InputError(f"moduli = 'unloading': the calibration's [elastic] {name} = "
+                             f"{'missing' if v is None else repr(v)}; it must be a modulus > 0 "
+                             f"Pa ({how})")
+    return {"bulk_modulus": float(k), "shear_modulus": float(g)}
+
 
 def material_for(scenario, calibration: Calibration | None, options: ContinuumOptions
                  ) -> ContinuumMaterial:
     """The material a run with these options uses (`material_of` with the options' model,
-    dilatancy, compaction and stiffness factor); input errors name the setting."""
+    dilatancy, compaction, stiffness factor and moduli); input errors name the setting."""
     mat = material_of(scenario, calibration, options.model, dilatancy=options.dilatancy,
                       stiffness_factor=options.stiffness_factor,
-                      compaction=options.compaction)
+                      compaction=options.compaction, moduli=options.moduli)
     if options.bed_viscosity > 0:
         mat = dataclasses.replace(mat, bed_viscosity=float(options.bed_viscosity))
     return mat

@@ -69,6 +69,10 @@ DEFAULT_DAMPING = "the default grid's spacing"
 #: the calibration's [partitions] friction (the contacts' ratio of sums, the default) or its
 #: friction_along_flow (the part of it along the mean flow; docs/decisions/wall-friction.md)
 PARTITION_FRICTIONS = ("contacts", "along_flow")
+#: the elastic moduli (material.material_of): the calibration's bulk_modulus_Pa and
+#: shear_modulus_Pa (the default), or the bed's unloading bulk modulus with the small-strain
+#: shear modulus (docs/decisions/unloading-stiffness.md)
+MODULI = ("calibrated", "unloading")
 
 
 def damping_transfer_cfl(transfer_cfl: float | None, dx: float, damping_length: float
@@ -117,7 +121,10 @@ class ContinuumOptions:
     (wall_energy_flux.WallEnergy.columns; default "pairs"; "columns" only with the
     temperature, and the Eulerian formulation's check refuses it elsewhere);
     partition_friction (PARTITION_FRICTIONS): which of the calibration's partition frictions
-    the partitions' body force takes (material.boundary_friction; default "contacts").
+    the partitions' body force takes (material.boundary_friction; default "contacts");
+    moduli (MODULI): the elastic moduli, the calibration's K and G ("calibrated", default) or
+    its [elastic] unloading_bulk_modulus_Pa and shear_modulus_small_strain_Pa ("unloading":
+    the bed's stiffness as it unloads after a landing, material.material_of).
 
     stiffness_factor s < 1 is the continuum's counterpart of the DEM's reduced Young's modulus:
     the elastic moduli K and G (and with them the default wall stiffness) are multiplied by s,
@@ -136,7 +143,7 @@ class ContinuumOptions:
     LATER_OPTIONS: ClassVar[tuple[str, ...]] = ("dilatancy", "stiffness_factor", "compaction",
                                                 "flip", "bed_viscosity", "damping_length",
                                                 "temperature", "initial_temperature", "landing",
-                                                "partition_friction")
+                                                "partition_friction", "moduli")
 
     transfer_cfl: float | None
     dx: float | None = None
@@ -154,6 +161,7 @@ class ContinuumOptions:
     initial_temperature: float = 0.0
     landing: str = "pairs"
     partition_friction: str = "contacts"
+    moduli: str = "calibrated"
 
     def __post_init__(self):
         if not (isinstance(self.flip, (int, float)) and 0.0 <= self.flip <= 1.0):
@@ -196,6 +204,8 @@ class ContinuumOptions:
         if self.partition_friction not in PARTITION_FRICTIONS:
             raise InputError(f"partition_friction = {self.partition_friction!r}: must be "
                              f"{' or '.join(PARTITION_FRICTIONS)}")
+        if self.moduli not in MODULI:
+            raise InputError(f"moduli = {self.moduli!r}: must be {' or '.join(MODULI)}")
 
     def transfers(self, dx: float | None = None, default_length: float | None = None) -> int:
         """The APIC transfers a step makes on a grid of spacing dx (m): timestep.
@@ -225,9 +235,9 @@ class ContinuumOptions:
 def options_record(options: ContinuumOptions) -> dict:
     """The options as a plain dict for a fingerprint or a study's inputs, an unset dx spelled
     out as the rule that sets it (DEFAULT_GRID).  The temperature's options are left out while
-    the field is not carried, the landing at its default (pairs) and the partition friction at
-    its default (contacts), so that the record (and a run's fingerprint) is the one of a run made
-    without them."""
+    the field is not carried, the landing at its default (pairs), the partition friction at its
+    default (contacts) and the moduli at theirs (calibrated), so that the record (and a run's
+    fingerprint) is the one of a run made without them."""
     record = dataclasses.asdict(options)
     if not record.get("temperature", False):
         record.pop("temperature", None)
@@ -236,6 +246,8 @@ def options_record(options: ContinuumOptions) -> dict:
         record.pop("landing", None)
     if record.get("partition_friction") == "contacts":
         record.pop("partition_friction", None)
+    if record.get("moduli") == "calibrated":
+        record.pop("moduli", None)
     if record.get("dx") is None:
         record["dx"] = DEFAULT_GRID
     elif record.get("damping_length") is None:

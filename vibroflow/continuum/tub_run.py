@@ -312,6 +312,8 @@ def _results(form: Formulation, scenario, out: Path, calibration, options, vtk, 
         "dt_s": system.dt, "steps": n_steps, "transfers_per_step": system.transfers,
         "transfer_cfl": options.transfer_cfl, "wall_time_s": wall_time,
         "stiffness_factor": options.stiffness_factor,
+        # the moduli's choice where it is not the default (the material holds the values)
+        **({"moduli": options.moduli} if options.moduli != "calibrated" else {}),
         **form.continuum_block(system, state, h)}
     phase = phase_shear_of_samples(scenario, samples, times, radius)
     summary["continuum"].update(shear_rate_outputs(

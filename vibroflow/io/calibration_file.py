@@ -93,6 +93,10 @@ class Elastic(Table):
     solid_fraction: Number | None = None
     coordination_number: Number | None = None
     source: Text | None = None
+    #: the bed's bulk modulus on the unloading branch after each landing, measured in the DEM
+    #: tub run (vibroflow.calibration.unloading); the continuum's --moduli unloading
+    unloading_bulk_modulus_Pa: Number | None = None
+    unloading_bulk_modulus_stderr_Pa: Number | None = None
 
 
 class DruckerPrager(Table):
