@@ -77,5 +77,5 @@ def test_with_its_histories_forgotten_a_held_ball_moves_until_the_springs_carry_
     assert np.max(s) > 1.5 * S_EQ     # it moves, overshooting the new rest
     assert np.min(s) > -0.02 * S_EQ   # only downhill
     late = s[len(s) // 6:]            # ~40 cycles of the slowest mode
-    assert math.isclose(late.mean(), S_EQ, rel_tol=0.03)
+    assert math.isclose(late.mean(), S_EQ, rel_tol=0.01)  # measured 1.001
     assert not sim.state.wall_slide.any()
