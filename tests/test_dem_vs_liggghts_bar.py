@@ -15,8 +15,8 @@ seed-to-seed E.  The rate maps and the speed maps agree (seed 1: E_rate 0.512, E
 against 0.828 and 0.360); the cycle-mean force on the bar agrees between the codes within
 twice their batch-means errors combined.
 LIGGGHTS' inserted bed is benchmarks/bar_maps.py's comparison (docs/validation.md section 27).
-About 12 minutes on a shared 2-core machine (the DEM 2 - 3; LIGGGHTS on 2 ranks 9, 27 000 steps,
-its fine moving meshes 19 ms a step).
+2 - 12 minutes on the shared 2-core machine, by its load (the DEM 1 - 3; LIGGGHTS on 2 ranks
+27 000 steps, its fine meshes moving every step).
 """
 from __future__ import annotations
 
