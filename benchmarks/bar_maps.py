@@ -2,7 +2,7 @@
 an STL mesh) on a short tub47-bar, each code with several fill seeds.
 
     python benchmarks/bar_maps.py [--seeds 1 2] [--codes dem liggghts] [--out DIR]
-                                  [--from-dem-fill] [--judge]
+                                  [--from-dem-fill] [--forget-histories [--relax S]] [--judge]
 
 The short case (SHORT_SETS; tests/test_dem_vs_liggghts_bar.py runs the same): tub47-bar 19.05 mm
 long (three ball diameters) with 1500 balls, the bar lowered to z = 0.045 m so that it lies
@@ -13,7 +13,11 @@ DIR/<code>-seed<N>.csv (the bar's map, vibroflow.analysis.impact_maps.write_map_
 the map differences E_rate and E_speed between the seeds of each code and between the codes.
 Default DIR: runs/bar_maps (git-ignored).  --from-dem-fill: LIGGGHTS starts from the DEM run's
 settled bed of the same seed (vibroflow.liggghts.dem_fill; its maps liggghts-fromdem-seed<N>).
---judge: runs nothing; judges the finished runs already in DIR (dem-seed<N>,
+--forget-histories: the DEM vibrates its settled bed with every tangential spring and rolling
+history set to zero, as LIGGGHTS from that bed starts (run_dem(forget_histories=True); its runs
+and maps dem-forget-seed<N>); with --relax S the bed then rests S seconds with the tub at rest
+first, as LIGGGHTS' --fill-from settling does (0.1 s here; dem-relax-seed<N>).
+--judge: runs nothing; judges the finished runs already in DIR (dem[-forget|-relax]-seed<N>,
 liggghts[-fromdem]-seed<N>-result; a LIGGGHTS deck whose import is missing is imported first),
 and prints per run the impacts per second on the bar, their mean normal speed and the energy
 delivered (summary.json's part line, over the window's whole cycles), the cycle-mean force on
@@ -47,14 +51,17 @@ def short_case(seed: int):
     return load_scenario("tub47-bar", [*SHORT_SETS, f"run.seed={seed}"])
 
 
-def run_code(code: str, seed: int, root: Path, from_dem_fill: bool = False) -> Path:
+def run_code(code: str, seed: int, root: Path, from_dem_fill: bool = False,
+             forget_histories: bool = False, relax_s: float = 0.0) -> Path:
     """Run one code on the short case; returns the folder holding its parts.nc.  from_dem_fill:
     LIGGGHTS starts from the settled bed of the DEM run root/dem-seed<N> (made first if
-    missing) instead of inserting its own."""
+    missing) instead of inserting its own.  forget_histories: the DEM starts the vibration
+    with its contact histories at zero, in root/dem-forget-seed<N> (relax_s > 0: after
+    relax_s at rest, in root/dem-relax-seed<N>)."""
     s = short_case(seed)
     if code == "dem":
-        out = root / f"dem-seed{seed}"
-        run_dem(s, out, progress=False)
+        out = root / f"{dem_tag(forget_histories, relax_s)}-seed{seed}"
+        run_dem(s, out, progress=False, forget_histories=forget_histories, relax_s=relax_s)
         return out
     tag = "liggghts-fromdem" if from_dem_fill else "liggghts"
     deck = root / f"{tag}-seed{seed}"
@@ -70,6 +77,13 @@ def run_code(code: str, seed: int, root: Path, from_dem_fill: bool = False) -> P
     return out
 
 
+def dem_tag(forget_histories: bool, relax_s: float) -> str:
+    """The DEM run's name: dem, dem-forget or dem-relax."""
+    if not forget_histories:
+        return "dem"
+    return "dem-relax" if relax_s > 0 else "dem-forget"
+
+
 def mean_force(run_dir: Path, part: str = "bar") -> tuple[np.ndarray, np.ndarray]:
     """The cycle-mean force on the part (N, part axes) and its batch-means error (parts.nc)."""
     sel = read_parts(run_dir / "parts.nc").sel(part=part)
@@ -79,11 +93,12 @@ def mean_force(run_dir: Path, part: str = "bar") -> tuple[np.ndarray, np.ndarray
 def judge(root: Path, seeds: list[int]) -> dict:
     """Print what the module docstring says of the finished runs in root; returns the maps."""
     maps = {}
-    for name in ("dem", "liggghts", "liggghts-fromdem"):
+    for name in ("dem", "dem-forget", "dem-relax", "liggghts", "liggghts-fromdem"):
         for seed in seeds:
-            folder = root / (f"dem-seed{seed}" if name == "dem" else f"{name}-seed{seed}-result")
+            folder = root / (f"{name}-seed{seed}" if name.startswith("dem")
+                             else f"{name}-seed{seed}-result")
             deck = root / f"{name}-seed{seed}"
-            if name != "dem" and not (folder / "summary.json").is_file() and (
+            if name.startswith("liggghts") and not (folder / "summary.json").is_file() and (
                     deck / "post" / LG.BALL_DUMP).is_file():
                 LG.import_run(deck / "post", short_case(seed), folder)
             if not (folder / "parts.nc").is_file():
@@ -106,6 +121,10 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("runs/bar_maps"))
     ap.add_argument("--from-dem-fill", action="store_true",
                     help="LIGGGHTS starts from the DEM run's settled bed of the same seed")
+    ap.add_argument("--forget-histories", action="store_true",
+                    help="the DEM starts the vibration with its contact histories at zero")
+    ap.add_argument("--relax", type=float, default=0.0, metavar="S",
+                    help="with --forget-histories: S seconds at rest first (s)")
     ap.add_argument("--judge", action="store_true",
                     help="run nothing: judge the finished runs already in --out")
     args = ap.parse_args()
@@ -114,8 +133,10 @@ def main() -> None:
     for code in [] if args.judge else args.codes:
         for seed in args.seeds:
             t0 = time.perf_counter()
-            folder = run_code(code, seed, args.out, args.from_dem_fill)
-            name = "liggghts-fromdem" if code == "liggghts" and args.from_dem_fill else code
+            folder = run_code(code, seed, args.out, args.from_dem_fill, args.forget_histories,
+                              args.relax)
+            name = ("liggghts-fromdem" if code == "liggghts" and args.from_dem_fill else
+                    dem_tag(args.forget_histories, args.relax) if code == "dem" else code)
             maps[name, seed] = part_map(folder / "parts.nc", "bar")
             write_map_csv(args.out / f"{name}-seed{seed}.csv", maps[name, seed])
             print(f"{code} seed {seed}: {time.perf_counter() - t0:.0f} s", flush=True)

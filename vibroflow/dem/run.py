@@ -57,8 +57,8 @@ from .paraview import VTK_DIR, EarlyFrames, write_vtk
 from .part_output import write_parts_nc
 from .sampling import impact_rows, part_impact_rows, sample_steps, write_snapshot
 from .impact_order import ImpactsLost
-from .simulate import (BlowUp, DEMState, DEMSystem, init_state, make_system, run_steps,
-                       store_by_id, take_max_overlaps)
+from .simulate import (BlowUp, DEMState, DEMSystem, forget_histories, init_state, make_system,
+                       run_steps, store_by_id, take_max_overlaps)
 from .summary import run_summary
 
 SMALL_RUN = 1500  # below this many balls one thread is faster than two (thread wake-ups)
@@ -69,7 +69,8 @@ _PREVIOUS = (CHECKPOINT_NAME, SUMMARY_NAME, "bulk_velocity.csv", "dem.h5", "dem.
 
 
 def run_dem(scenario, out_dir: Path, vtk: VtkOptions | bool | None = None,
-            resume: bool = False, progress: bool = True) -> dict:
+            resume: bool = False, progress: bool = True,
+            forget_histories: bool = False, relax_s: float = 0.0) -> dict:
     """Run the scenario's DEM and write DIR/dem.h5, DIR/summary.json (and bulk_velocity.csv in
     tub mode).  Returns the summary.
 
@@ -85,7 +86,15 @@ def run_dem(scenario, out_dir: Path, vtk: VtkOptions | bool | None = None,
     Fault injection for tests (environment): VIBROFLOW_FAULT_KILL_AFTER_CHECKPOINT=1
     (_fault_after_checkpoint), VIBROFLOW_FAULT_KILL_AT=<phase of the end> (output.fault_kill_at),
     VIBROFLOW_FAULT_SIGINT_AFTER_STEPS=N (a SIGINT to itself once N vibration steps are done),
-    VIBROFLOW_FAULT_SIGINT_SETTLING=1 (a SIGINT after the first settling chunk)."""
+    VIBROFLOW_FAULT_SIGINT_SETTLING=1 (a SIGINT after the first settling chunk).
+
+    forget_histories: a tub run's settled bed starts the vibration with every tangential spring
+    and rolling history at zero (simulate.forget_histories; summary.json's "settle" says
+    "histories_forgotten"), as LIGGGHTS started from the bed's positions alone does
+    (benchmarks/bar_maps.py --forget-histories, docs/validation.md section 27); with relax_s > 0
+    the bed then rests relax_s seconds with the tub at rest before the vibration, as LIGGGHTS'
+    --fill-from deck's settling does (its "settle" records "relaxed_s", the kinetic energy per
+    ball and the fastest ball's speed then)."""
     out_dir = Path(out_dir)
     vtk = vtk_options(vtk)
     with folder_lock(out_dir, "vibroflow dem"):
@@ -97,13 +106,15 @@ def run_dem(scenario, out_dir: Path, vtk: VtkOptions | bool | None = None,
         try:
             # the solver's time, numba's compilation apart (vibroflow.run_clock)
             with RunProgress(progress) as prog, RunClock() as clock:
-                return _run(scenario, out_dir, system, vtk, resume, prog, clock)
+                return _run(scenario, out_dir, system, vtk, resume, prog, clock,
+                            forget_histories, relax_s)
         finally:
             numba.set_num_threads(threads_before)
 
 
 def _run(scenario, out_dir: Path, system: DEMSystem, vtk: VtkOptions | None, resume: bool,
-         prog: RunProgress, clock: RunClock) -> dict:
+         prog: RunProgress, clock: RunClock, forget: bool = False,
+         relax_s: float = 0.0) -> dict:
     dt = system.dt
     ckpt = out_dir / CHECKPOINT_NAME
     explicit = scenario.explicit
@@ -131,7 +142,7 @@ def _run(scenario, out_dir: Path, system: DEMSystem, vtk: VtkOptions | None, res
             prog.log(f"no checkpoint in {out_dir}: starting afresh")
         try:
             settle_s0 = clock.solver_s()
-            state, settle_info = _start(scenario, system, prog)
+            state, settle_info = _start(scenario, system, prog, forget, relax_s)
             if settle_info:  # the settling's own solver time: the summary reports both phases
                 settle_info["wall_time_s"] = clock.solver_s() - settle_s0
         except KeyboardInterrupt:
@@ -183,9 +194,11 @@ def _run(scenario, out_dir: Path, system: DEMSystem, vtk: VtkOptions | None, res
     return summary
 
 
-def _start(scenario, system: DEMSystem, prog: RunProgress) -> tuple[DEMState, dict]:
+def _start(scenario, system: DEMSystem, prog: RunProgress,
+           forget: bool = False, relax_s: float = 0.0) -> tuple[DEMState, dict]:
     """The state at the start of the vibration (explicit: the given balls; tub: the settled
-    bed) and the settling's record."""
+    bed, its contact histories zeroed when forget, then relax_s at rest) and the settling's
+    record."""
     if scenario.explicit:
         index = system.material_names
         ps = scenario.particles
@@ -196,6 +209,16 @@ def _start(scenario, system: DEMSystem, prog: RunProgress) -> tuple[DEMState, di
         settle_info = {}
     else:
         state, settle_info = settled_bed(system, scenario, prog)
+        if forget:
+            forget_histories(state)
+            settle_info["histories_forgotten"] = True
+            if relax_s > 0.0:
+                state.vibrating = False
+                run_steps(system, state, int(round(relax_s / system.dt)))
+                settle_info.update(
+                    relaxed_s=relax_s,
+                    relaxed_kinetic_energy_per_ball_J=state.kinetic_energy() / state.n,
+                    relaxed_fastest_ball_m_s=float(np.sqrt((state.vel ** 2).sum(1).max())))
         state.time_origin_step = state.step
         take_max_overlaps(system, state)  # the series starts with the vibration
     state.vibrating = True

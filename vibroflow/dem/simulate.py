@@ -365,6 +365,17 @@ def store_by_id(system: DEMSystem, state: DEMState) -> None:
         store(state, _buf(system, state).work.diag, rows)
 
 
+def forget_histories(state: DEMState) -> None:
+    """Every contact's tangential spring xi_t and elastic rolling torque set to zero (ball-ball,
+    ball-wall, ball-part; contact.py's hist), the contacts themselves kept: the start of a code
+    that reads the bed from positions and velocities alone, as LIGGGHTS' read_data does
+    (docs/validation.md section 27)."""
+    state.nl.hist[:] = 0.0
+    state.wall_hist[:] = 0.0
+    if state.part_hist is not None:
+        state.part_hist[:] = 0.0
+
+
 def run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: bool = False,
               on_impacts: Callable[[np.ndarray], None] | None = None,
               on_part_impacts: Callable[[np.ndarray], None] | None = None,

@@ -4,9 +4,12 @@ motion and the per-step dump of the balls near it (docs/liggghts.md, "Parts in t
 * Mesh: one STL file per part, part_<name>.stl (vibroflow.liggghts.part_meshes), read by its
   own `fix mesh/surface` (id pmesh<k>, k = 1, 2, ...) with the part's own atom type (4, 5, ...:
   its material and its contact law with the balls in the per-type-pair tables,
-  vibroflow.liggghts.parameters).  A faceted cylinder's creases are joined into one smooth
-  surface by `curvature` (twice the crease angle, as the U's), so a contact's tangential
-  history crosses them.
+  vibroflow.liggghts.parameters), with LIGGGHTS' default `curvature`: every part is convex
+  seen from the balls, and LIGGGHTS computes no contact at an edge it treats as smooth
+  (TriMesh's inactive edges), so a `curvature` above the crease angle (the U's, which is
+  concave) would leave the ball whose nearest point is a crease without a contact: around a
+  faceted cylinder of radius R the fraction r / (R + r) of the angles, 20 % for the bar of
+  tub47-bar, whatever the facet count (docs/validation.md section 27).
 * Wall fix: the part meshes follow the U and the partitions in the one `fix wall/gran` (LIGGGHTS
   3.8 allows one mesh wall fix), so `compute wall/gran/local` dumps their contacts with the
   others at the snapshots, the mesh index telling them apart (0 the U, 1 the partitions, then
@@ -28,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from vibroflow.errors import InputError
-from vibroflow.liggghts.part_meshes import crease_angle_deg, part_triangles
+from vibroflow.liggghts.part_meshes import part_triangles
 from vibroflow.liggghts.stl import write_stl
 from vibroflow.liggghts.template import _SLOT, _Deck, _fmt, safe_name
 
@@ -37,11 +40,6 @@ PART_DUMP = "part_contacts.dump"
 #: the part dump's columns
 PART_DUMP_COLUMNS = ("id", "x", "y", "z", "vx", "vy", "vz", "omegax", "omegay", "omegaz",
                      "radius")
-#: a round part's `curvature`: this times its crease angle, below LIGGGHTS' limit of 60 degrees
-CREASE_FACTOR = 2.0
-MAX_CURVATURE_DEG = 45.0
-
-
 def part_file(name: str) -> str:
     """The STL file name of the part `name` (a safe name: vibroflow.liggghts.template)."""
     return f"part_{name}.stl"
@@ -67,12 +65,7 @@ def add_part_meshes(deck: _Deck, parts, max_sagitta: float) -> None:
     """Each part's `fix mesh/surface` with its own type (4 and up), module docstring."""
     for k, part in enumerate(parts, 1):
         mesh = part_file(safe_name(f"parts.{k - 1}.name", part.name))
-        if part.shape == "cylinder":
-            crease = crease_angle_deg(part, max_sagitta)
-            deck.add(f"fix pmesh{k} all mesh/surface file {_SLOT} type {k + 3} curvature {_SLOT}",
-                     mesh, _fmt(min(MAX_CURVATURE_DEG, CREASE_FACTOR * crease)))
-        else:
-            deck.add(f"fix pmesh{k} all mesh/surface file {_SLOT} type {k + 3}", mesh)
+        deck.add(f"fix pmesh{k} all mesh/surface file {_SLOT} type {k + 3}", mesh)
 
 
 def moving_meshes(parts) -> list[str]:
