@@ -127,10 +127,3 @@ def part_triangles(part: Part, length: float,
         return sphere_triangles(part, max_sagitta)
     return np.asarray(part.triangles, dtype=float)
 
-
-def crease_angle_deg(part: Part, max_sagitta: float = DEFAULT_MAX_SAGITTA) -> float:
-    """The angle (degrees) between neighbouring facets of a faceted round part (cylinder,
-    sphere's equator), 0 for a box or an STL (their edges are the part's own)."""
-    if part.shape in ("cylinder", "sphere"):
-        return 360.0 / circle_chords(part.radius, max_sagitta)
-    return 0.0
