@@ -1,14 +1,21 @@
 """The bar's impact map in vibroflow's DEM and in LIGGGHTS 3.8 (the exported deck with the bar as
-an STL mesh) on a short tub47-bar, each code with several fill seeds.
+an STL mesh) on a short or the full tub47-bar, each code with several fill seeds.
 
-    python benchmarks/bar_maps.py [--seeds 1 2] [--codes dem liggghts] [--out DIR]
-                                  [--from-dem-fill] [--forget-histories [--relax S]] [--judge]
+    python benchmarks/bar_maps.py [--case short|full] [--seeds 1 2] [--codes dem liggghts]
+                                  [--out DIR] [--from-dem-fill] [--forget-histories [--relax S]]
+                                  [--judge]
 
 The short case (SHORT_SETS; tests/test_dem_vs_liggghts_bar.py runs the same): tub47-bar 19.05 mm
 long (three ball diameters) with 1500 balls, the bar lowered to z = 0.045 m so that it lies
 under about 4 cm of media, 0.5 s of settling (at most 0.6 s: LIGGGHTS' balls, inserted at
 random up to the rim, need it to land and come to rest), 0.25 s of
-vibration averaged over its last 0.2 s (9 cycles).  Writes DIR/<code>-seed<N>/ (the runs),
+vibration averaged over its last 0.2 s (9 cycles).  --case full (FULL_SETS): the tub47-bar
+preset itself, 14 000 balls in the 63.5 mm slice, the bar at (0.05, 0.10) m under some 10 cm of
+media, settled as the preset settles (0.5 s, at most 2 s), with the short case's vibration,
+0.25 s averaged over its last 0.2 s (9 whole cycles, 4 batches): the preset's 3 s do not fit a
+seed in minutes, LIGGGHTS from the DEM's bed taking 17 ms a step on 2 cores (its 1 um meshes
+move every step: 300 000 steps, some 90 minutes) and the DEM 2.9 ms (14 minutes); with 0.25 s
+a seed takes the DEM 1.2 min (plus 2 min of settling, cached) and LIGGGHTS 8 min.  Writes DIR/<code>-seed<N>/ (the runs),
 DIR/<code>-seed<N>.csv (the bar's map, vibroflow.analysis.impact_maps.write_map_csv) and prints
 the map differences E_rate and E_speed between the seeds of each code and between the codes.
 Default DIR: runs/bar_maps (git-ignored).  --from-dem-fill: LIGGGHTS starts from the DEM run's
@@ -47,28 +54,42 @@ SHORT_SETS = ["tub.length=0.01905", "fill.count=1500", "parts.0.center=[0.05, 0.
               "run.average_last=0.2"]
 
 
+#: the full tub47-bar (14 000 balls, 63.5 mm long, the bar at z = 0.10 m) with the short case's
+#: vibration, 0.25 s averaged over its last 0.2 s (9 whole cycles, 4 batches): the preset's 3 s
+#: take LIGGGHTS from the DEM's bed (its 1 um meshes move every step) some hours on 2 cores
+FULL_SETS = ["run.duration=0.25", "run.average_last=0.2"]
+
+CASES = {"short": SHORT_SETS, "full": FULL_SETS}
+
+
+def make_case(seed: int, case: str = "short"):
+    """The scenario of the named case (CASES) with fill seed `seed`."""
+    return load_scenario("tub47-bar", [*CASES[case], f"run.seed={seed}"])
+
+
 def short_case(seed: int):
-    return load_scenario("tub47-bar", [*SHORT_SETS, f"run.seed={seed}"])
+    return make_case(seed, "short")
 
 
 def run_code(code: str, seed: int, root: Path, from_dem_fill: bool = False,
-             forget_histories: bool = False, relax_s: float = 0.0) -> Path:
-    """Run one code on the short case; returns the folder holding its parts.nc.  from_dem_fill:
+             forget_histories: bool = False, relax_s: float = 0.0,
+             case: str = "short") -> Path:
+    """Run one code on the case (CASES); returns the folder holding its parts.nc.  from_dem_fill:
     LIGGGHTS starts from the settled bed of the DEM run root/dem-seed<N> (made first if
     missing) instead of inserting its own.  forget_histories: the DEM starts the vibration
     with its contact histories at zero, in root/dem-forget-seed<N> (relax_s > 0: after
     relax_s at rest, in root/dem-relax-seed<N>)."""
-    s = short_case(seed)
+    s = make_case(seed, case)
     if code == "dem":
         out = root / f"{dem_tag(forget_histories, relax_s)}-seed{seed}"
-        run_dem(s, out, progress=False, forget_histories=forget_histories, relax_s=relax_s)
+        run_dem(s, out, progress=case == "full", forget_histories=forget_histories, relax_s=relax_s)
         return out
     tag = "liggghts-fromdem" if from_dem_fill else "liggghts"
     deck = root / f"{tag}-seed{seed}"
     bed = None
     if from_dem_fill:
         if not (root / f"dem-seed{seed}" / "summary.json").is_file():
-            run_code("dem", seed, root)
+            run_code("dem", seed, root, case=case)
         bed = LG.dem_fill(root / f"dem-seed{seed}", s)
     LG.export_deck(s, deck, fill_from=bed)
     LG.run_deck(deck, nprocs=2, timeout=7200)
@@ -90,7 +111,7 @@ def mean_force(run_dir: Path, part: str = "bar") -> tuple[np.ndarray, np.ndarray
     return cycle_mean(sel["force"].values, sel["force_stderr"].values)
 
 
-def judge(root: Path, seeds: list[int]) -> dict:
+def judge(root: Path, seeds: list[int], case: str = "short") -> dict:
     """Print what the module docstring says of the finished runs in root; returns the maps."""
     maps = {}
     for name in ("dem", "dem-forget", "dem-relax", "liggghts", "liggghts-fromdem"):
@@ -100,7 +121,7 @@ def judge(root: Path, seeds: list[int]) -> dict:
             deck = root / f"{name}-seed{seed}"
             if name.startswith("liggghts") and not (folder / "summary.json").is_file() and (
                     deck / "post" / LG.BALL_DUMP).is_file():
-                LG.import_run(deck / "post", short_case(seed), folder)
+                LG.import_run(deck / "post", make_case(seed, case), folder)
             if not (folder / "parts.nc").is_file():
                 continue
             maps[name, seed] = part_map(folder / "parts.nc", "bar")
@@ -125,16 +146,18 @@ def main() -> None:
                     help="the DEM starts the vibration with its contact histories at zero")
     ap.add_argument("--relax", type=float, default=0.0, metavar="S",
                     help="with --forget-histories: S seconds at rest first (s)")
+    ap.add_argument("--case", choices=sorted(CASES), default="short",
+                    help="short: SHORT_SETS (default); full: the tub47-bar preset")
     ap.add_argument("--judge", action="store_true",
                     help="run nothing: judge the finished runs already in --out")
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    maps = judge(args.out, args.seeds) if args.judge else {}
+    maps = judge(args.out, args.seeds, args.case) if args.judge else {}
     for code in [] if args.judge else args.codes:
         for seed in args.seeds:
             t0 = time.perf_counter()
             folder = run_code(code, seed, args.out, args.from_dem_fill, args.forget_histories,
-                              args.relax)
+                              args.relax, args.case)
             name = ("liggghts-fromdem" if code == "liggghts" and args.from_dem_fill else
                     dem_tag(args.forget_histories, args.relax) if code == "dem" else code)
             maps[name, seed] = part_map(folder / "parts.nc", "bar")
