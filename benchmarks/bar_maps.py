@@ -14,8 +14,9 @@ preset itself, 14 000 balls in the 63.5 mm slice, the bar at (0.05, 0.10) m unde
 media, settled as the preset settles (0.5 s, at most 2 s), with the short case's vibration,
 0.25 s averaged over its last 0.2 s (9 whole cycles, 4 batches): the preset's 3 s do not fit a
 seed in minutes, LIGGGHTS from the DEM's bed taking 17 ms a step on 2 cores (its 1 um meshes
-move every step: 300 000 steps, some 90 minutes) and the DEM 2.9 ms (14 minutes); with 0.25 s
-a seed takes the DEM 1.2 min (plus 2 min of settling, cached) and LIGGGHTS 8 min.  Writes DIR/<code>-seed<N>/ (the runs),
+move every step: 300 000 steps, some 90 minutes) and the DEM 2 - 3 ms (10 - 14 minutes); with
+0.25 s a seed takes the DEM 1 min (plus 1.5 - 3.5 min of settling, which the fill cache keeps)
+and LIGGGHTS 8 min (docs/validation.md section 27, "The full tub47-bar").  Writes DIR/<code>-seed<N>/ (the runs),
 DIR/<code>-seed<N>.csv (the bar's map, vibroflow.analysis.impact_maps.write_map_csv) and prints
 the map differences E_rate and E_speed between the seeds of each code and between the codes.
 Default DIR: runs/bar_maps (git-ignored).  --from-dem-fill: LIGGGHTS starts from the DEM run's
