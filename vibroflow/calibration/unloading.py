@@ -39,8 +39,9 @@ import numpy as np
 from vibroflow.errors import InputError
 from vibroflow.measure.stats import stderr_of_batches
 
-#: a dense cell: its time-averaged solid fraction at least this (tub_rheology's dense cells)
-DENSE_SOLID_FRACTION = 0.5
+# a dense cell: its time-averaged solid fraction at least the tub's mu(I) cells' threshold
+from .tub_rheology import DENSE_SOLID_FRACTION
+
 #: the release: the branch ends at the first phase whose bed-mean pressure is at most this
 #: fraction of the landing's peak
 RELEASE_FRACTION = 0.1

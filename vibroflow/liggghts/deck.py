@@ -280,7 +280,7 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     if not periodic:
         add("fix parts all mesh/surface file {} type 3",
             safe_name("partition mesh file", PARTITION_MESH_FILE))
-    add_part_meshes(deck, parts, max_sagitta)
+    add_part_meshes(deck, parts)
     meshes = ["tub"] + ([] if periodic else ["parts"]) + part_mesh_ids(parts)
     add(f"fix walls all wall/gran {model_args} mesh n_meshes {len(meshes)} meshes "
         + " ".join(meshes) + " " + model_kw)

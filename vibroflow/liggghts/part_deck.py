@@ -40,6 +40,8 @@ PART_DUMP = "part_contacts.dump"
 #: the part dump's columns
 PART_DUMP_COLUMNS = ("id", "x", "y", "z", "vx", "vy", "vz", "omegax", "omegay", "omegaz",
                      "radius")
+
+
 def part_file(name: str) -> str:
     """The STL file name of the part `name` (a safe name: vibroflow.liggghts.template)."""
     return f"part_{name}.stl"
@@ -61,7 +63,7 @@ def part_mesh_ids(parts) -> list[str]:
     return [f"pmesh{k}" for k in range(1, len(parts) + 1)]
 
 
-def add_part_meshes(deck: _Deck, parts, max_sagitta: float) -> None:
+def add_part_meshes(deck: _Deck, parts) -> None:
     """Each part's `fix mesh/surface` with its own type (4 and up), module docstring."""
     for k, part in enumerate(parts, 1):
         mesh = part_file(safe_name(f"parts.{k - 1}.name", part.name))

@@ -126,4 +126,3 @@ def part_triangles(part: Part, length: float,
     if part.shape == "sphere":
         return sphere_triangles(part, max_sagitta)
     return np.asarray(part.triangles, dtype=float)
-
