@@ -12,22 +12,19 @@ normal speed (m/s) per phase bin, then per sector the count and mean speed over 
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
-import h5py
 import numpy as np
+
+from vibroflow.calibration.dem_result import DEMResult
 
 
 def impacts(run_dir: Path):
     """(time s, sector, normal speed m/s) of the run's part impacts and its frequency (Hz)."""
-    with h5py.File(run_dir / "dem.h5", "r") as f:
-        g = f["part_impacts"]
+    with DEMResult.open(run_dir) as res:
+        g = res.file["part_impacts"]
         t, patch, vn = g["time"][:], g["patch"][:].astype(int), g["normal_speed"][:].astype(float)
-        scen = json.loads(f.attrs["scenario_json"]) if "scenario_json" in f.attrs else None
-        freq = float(f.attrs["frequency"]) if "frequency" in f.attrs else \
-            float(scen["motion"]["frequency"])
-    return t, patch, vn, freq
+        return t, patch, vn, float(res.scenario.motion.frequency)
 
 
 def main() -> None:
