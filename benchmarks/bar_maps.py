@@ -60,7 +60,10 @@ SHORT_SETS = ["tub.length=0.01905", "fill.count=1500", "parts.0.center=[0.05, 0.
 #: take LIGGGHTS from the DEM's bed (its 1 um meshes move every step) some hours on 2 cores
 FULL_SETS = ["run.duration=0.25", "run.average_last=0.2"]
 
-CASES = {"short": SHORT_SETS, "full": FULL_SETS}
+#: the tub47-bar preset as it stands: 3 s of vibration averaged over the last 2 s (94 cycles)
+PRESET_SETS: list[str] = []
+
+CASES = {"short": SHORT_SETS, "full": FULL_SETS, "preset": PRESET_SETS}
 
 
 def make_case(seed: int, case: str = "short"):
@@ -83,7 +86,7 @@ def run_code(code: str, seed: int, root: Path, from_dem_fill: bool = False,
     s = make_case(seed, case)
     if code == "dem":
         out = root / f"{dem_tag(forget_histories, relax_s)}-seed{seed}"
-        run_dem(s, out, progress=case == "full", forget_histories=forget_histories, relax_s=relax_s)
+        run_dem(s, out, progress=case != "short", forget_histories=forget_histories, relax_s=relax_s)
         return out
     tag = "liggghts-fromdem" if from_dem_fill else "liggghts"
     deck = root / f"{tag}-seed{seed}"
