@@ -205,6 +205,9 @@ def unloading_of_run(phases, batches: dict | None, frequency: float) -> dict:
 #: pressures over the branch (the continuum clamps p to it: the law is measured there only)
 LAW_PRESSURE_PERCENTILES = (5.0, 95.0)
 
+#: the fit gives up (NaN) where the exponent leaves (-N_LIMIT, N_LIMIT): no law of the branch
+N_LIMIT = 50.0
+
 
 def _q_law(P, n: float):
     """q_n(P) = (P^(1-n) - 1) / (1 - n) (ln P at n = 1) and its derivative in n, P > 0."""
@@ -257,12 +260,16 @@ def fit_tangent_law(step_changes, n0: float = 0.0):
             break
         dn = -float(rc @ Jc) / float(Jc @ Jc)
         n += dn
+        if not abs(n) < N_LIMIT:
+            return nan
         if abs(dn) < 1e-14 * max(1.0, abs(n)):
             break
     g = groups(n)
     if len(g) < 2 or not all(Q / S > 0 for Q, _, S in g):
         return nan
     r = np.array([math.log(Q / S) for Q, _, S in g])
+    if not abs(r.mean()) < 700.0:
+        return nan
     return math.exp(float(r.mean())), n, float(np.sqrt(np.mean((r - r.mean()) ** 2))), len(g)
 
 
