@@ -38,6 +38,18 @@ given stress to the scattered one and reads one number in its return map:
 
 The work of these stresses on the step's deformation, sigma_k : D, is the temperature's
 production besides the plastic work (temperature_field.production_W_m3).
+
+Eulerian cells (`kinetic_stress_cells`).  A cell holds material at its density rho filling a
+fraction f = min(1, m / (rho h^2)) of it; material that opens a void stays a hair below rho_c
+(eulerian/lagrangian_step.void_first), so rho / rho_s is phi_c in every partly filled cell.
+The pressure and the gas's viscosity read the cell's solid fraction phi = f rho / rho_s, the
+one its balance reads (capacity, dissipation, conduction), and act through the material's
+volume f h^2 as the cell's whole, p(phi) h^2: the stress is theirs over f, so the work the
+step takes from T, f sigma_k : D per cell area, is the work the stress does on the grid.  Read
+at rho / rho_s, tub47's surface cells (phi 0.005 - 0.37) carry the pressure of a gas at phi_c
+and the limit T, 41 kPa, four times the bed's weight on the floor, and throw the bed to the
+rim (docs/validation.md section 22).  The return map's rate ratio reads the connected
+material's own packing, its plastic work being per volume of material.
 """
 from __future__ import annotations
 
