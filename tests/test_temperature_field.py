@@ -242,8 +242,8 @@ def test_a_dilute_eulerian_gas_rests_in_the_isothermal_atmosphere():
     rest in that profile.  Its mean height is H - L e^(-L/H) / (1 - e^(-L/H)) = 24.39 mm
     (Enskog's correction at phi_0 = 0.002: 0.4 %); the cells' discrete balance holds it 9.6 %
     higher on 5 mm cells and 4.6 % on 2.5 mm (first order; docs/validation.md section 22).
-    Read at the material's packing, every cell's pressure is the same and the gas falls,
-    heats tenfold and rebounds at metres a second."""
+    Read at the material's packing, every cell reads the pressure at phi_c: the gas heats
+    tenfold and rises to a mean height of 60 mm at metres a second."""
     g, T0, L, phi0 = 9.81, 0.25, 0.12, 0.002
     H = T0 / g
     prm = KineticParameters(diameter_m=MAT.diameter, density_kg_m3=MAT.solid_density,
