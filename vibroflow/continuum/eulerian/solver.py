@@ -330,7 +330,7 @@ def advance_stepwise(system: EulerianSystem, state: EulerianState, n: int) -> No
     advance_with_temperature(state, n, model,
                              lambda k, p_kin: _advance(system, state, k, p_kin), balance, start,
                              phi_cap=phi_cap_of(system.material), dt=system.dt,
-                             wave_speed=system.material.p_wave_speed())
+                             wave_speed=system.material.p_wave_speed(), cells=h)
 
 
 def cell_wall_sums(system: EulerianSystem, state: EulerianState, start=None) -> np.ndarray:

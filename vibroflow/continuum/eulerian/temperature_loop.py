@@ -21,7 +21,7 @@ import numpy as np
 
 from ..column_landing import column_terms
 from ..compaction_landing import compaction_terms, x_face_terms
-from ..temperature_balance import balance_cells, kinetic_stress_of
+from ..temperature_balance import balance_cells, kinetic_stress_of_cells
 from ..temperature_field import pressure_Pa, production_W_m3
 from ..wall_energy_flux import contact_terms, landing_terms, partition_terms
 from . import fused
@@ -133,8 +133,8 @@ def _make_kernel(parallel: bool):
         rho_s = ts.prm.density_kg_m3
         landing = ts.walls and ts.landing
         for s in range(nsteps):
-            kinetic_stress_of(cells.density, T, cells.L, cells.stress, cells.gamma_dot,
-                              cells.phase, ts, p_kin)
+            kinetic_stress_of_cells(cells.density, mass, h, T, cells.L, cells.stress,
+                                    cells.gamma_dot, cells.phase, ts, p_kin)
             m_start = mass.copy()
             v_start = v.copy()
             rho_start = cells.density.copy() if landing else cells.density

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..kinetic_stress import KINETIC_COLUMNS
-from ..temperature_balance import kinetic_stress_of, temperature_step
+from ..temperature_balance import kinetic_stress_of_cells, temperature_step
 from ..wall_feed import cell_feed_W_m
 from . import solver as eulerian
 from . import temperature_loop
@@ -29,8 +29,8 @@ class EulerianWallFeed:
     def before_last_step(self) -> None:
         """Keep the step's start (the landing's reference) before the sample's step."""
         s = self.state
-        kinetic_stress_of(s.density, s.temperature, s.L, s.stress, s.gamma_dot, s.phase,
-                          self.ts, self.p_kin)
+        kinetic_stress_of_cells(s.density, s.mass, self.system.mesh.h, s.temperature, s.L, s.stress, s.gamma_dot,
+                                s.phase, self.ts, self.p_kin)
         self.start = (s.mass.copy(), s.v.copy(), s.density.copy(), s.stress + self.p_kin[:, :4])
 
     def feed(self):
