@@ -284,8 +284,10 @@ class CoarseGrainer:
         """Each batch's phase-resolved fields, derived once per gradient until the next snapshot:
         `fields(phase_resolved=True)`'s standard errors and batch_phase_arrays share them."""
         if gradient not in self._batch_phase_cache:
-            self._batch_phase_cache[gradient] = self._fields_of(self._ball, self._cont,
-                                                                self._weight, gradient)
+            derived = self._fields_of(self._ball, self._cont, self._weight, gradient)
+            for arr in derived.values():
+                arr.setflags(write=False)  # shared by every caller until the next snapshot
+            self._batch_phase_cache[gradient] = derived
         return self._batch_phase_cache[gradient]
 
     # ------------------------------------------------------------------------------------------
