@@ -4,11 +4,14 @@
         [--cases base wall_friction=0.4 ...] [--settle-times 0.04,0.05,0.06,0.07]
         [--method lagrangian|eulerian] [--jobs 2] [--out DIR]
     python benchmarks/continuum_sensitivity.py --dem-dir tests/data/tub47-dem --case tub47 \
-        --dem-strength 2.4418e-3 ...
+        --dem-strength 2.4418e-3 [--seeds tests/data/tub47-dem-seeds] ...
 
 The second form compares with a reference folder that holds only the DEM's bulk_velocity.csv
 and calibration.toml (tests/data/tub47-dem): the scenario is then --case (a preset or a TOML
-file) and the DEM's circulation strength --dem-strength (m^2/s; its README gives it).
+file) and the DEM's circulation strength --dem-strength (m^2/s; its README gives it).  With
+--seeds DIR (a folder of seed*/bulk_velocity.csv, tests/data/tub47-dem-seeds) a run's E is its
+mean E against every seed, as `vibroflow compare RUN -r DIR/seed*` judges it
+(analysis.compare.difference_to_seeds), instead of E against DEM_DIR/bulk_velocity.csv.
 
 Ensembles.  A single run's E is not a measure: the settling time alone moves a run's E by up to
 half its value (docs/validation.md).  Each case is therefore run once per settling
@@ -32,6 +35,10 @@ NAME one of
   wall_stiffness (Pa/m), cfl, dx (m), model,
   transfer_cfl (0: one APIC transfer a step),
   bed_viscosity (Pa s), flip                    (ContinuumOptions)
+  partition_law (contacts | along_flow),
+  moduli (calibrated | unloading)               (ContinuumOptions partition_friction, moduli:
+                                                 `vibroflow continuum --partition-friction`,
+                                                 `--moduli`)
 The default list is the one whose figures benchmarks/README.md records.  Wall times are printed
 but say little unless the machine is quiet.  Results also go to --out/sensitivity.json.
 """
@@ -53,6 +60,8 @@ DEFAULT_CASES = ["base", "wall_friction=0.10", "wall_friction=0.40", "partition_
                  "wall_stiffness=5.9e7", "model=drucker_prager", "cfl=0.6", "dx=0.010",
                  "dx=0.015"]
 OPTION_NAMES = ("wall_stiffness", "cfl", "dx", "model", "transfer_cfl", "bed_viscosity", "flip")
+#: cases whose value is a word: the case's name -> ContinuumOptions' field
+TEXT_OPTIONS = {"model": "model", "partition_law": "partition_friction", "moduli": "moduli"}
 DEFAULT_SETTLE_TIMES = "0.04,0.05,0.06,0.07"
 
 
@@ -72,8 +81,8 @@ def apply_case(case: str, calibration: dict) -> tuple[dict, dict]:
     name, sep, text = case.partition("=")
     if not sep:
         raise SystemExit(f"--cases: {case!r}: must be base or NAME=VALUE")
-    if name == "model":
-        return cal, {"model": text}
+    if name in TEXT_OPTIONS:
+        return cal, {TEXT_OPTIONS[name]: text}
     value = float(text)
     if name in OPTION_NAMES:
         return cal, {name: value}
@@ -105,11 +114,12 @@ def _worker_init() -> None:
 
 def run_member(job: tuple) -> dict:
     """One run of the ensemble: job = (method, scenario, calibration, options keywords,
-    settling time s, output folder, reference csv, cell size m, min solid fraction).
-    Returns {strength, E, wall_time_s}."""
-    (method, scenario, cal, opts, settle, out, ref_csv, h, phi_min) = job
+    settling time s, output folder, reference csvs, cell size m, min solid fraction).
+    Returns {strength, E, wall_time_s}; E is the mean over the reference csvs (one: the DEM
+    run's; several: the seeds', analysis.compare.difference_to_seeds)."""
+    (method, scenario, cal, opts, settle, out, ref_csvs, h, phi_min) = job
     from vibroflow.measure.bulk import read_csv
-    from vibroflow.analysis.compare import field_difference
+    from vibroflow.analysis.compare import difference_to_seeds
 
     t0 = time.perf_counter()
     from vibroflow.continuum.formulation import formulation
@@ -118,8 +128,8 @@ def run_member(job: tuple) -> dict:
     s = run_continuum(scenario, out, method, calibration=cal,
                       options=formulation(method).options(settle_time=settle, **opts))
     wall = time.perf_counter() - t0
-    E = field_difference(read_csv(Path(out) / "bulk_velocity.csv", cell_size=h),
-                         read_csv(ref_csv, cell_size=h), phi_min)
+    E = difference_to_seeds(read_csv(Path(out) / "bulk_velocity.csv", cell_size=h),
+                            [read_csv(c, cell_size=h) for c in ref_csvs], phi_min).mean
     return {"strength": s["circulation"]["strength"], "E": E, "wall_time_s": wall}
 
 
@@ -141,6 +151,8 @@ def main(argv=None) -> int:
                     help="the DEM's circulation strength (m^2/s) when --dem-dir has no "
                          "summary.json")
     ap.add_argument("--calibration", type=Path, help="default DEM_DIR/calibration.toml")
+    ap.add_argument("--seeds", type=Path,
+                    help="a folder of seed*/bulk_velocity.csv: E is the mean against them")
     ap.add_argument("--cases", nargs="+", default=DEFAULT_CASES)
     ap.add_argument("--method", choices=("lagrangian", "eulerian"), default="lagrangian")
     ap.add_argument("--settle-times", default=DEFAULT_SETTLE_TIMES,
@@ -176,10 +188,16 @@ def main(argv=None) -> int:
     else:
         raise SystemExit(f"{summary} is missing: give --dem-strength")
     h = scenario.analysis.cell_size
-    ref_csv = args.dem_dir / "bulk_velocity.csv"
+    if args.seeds is not None:
+        ref_csvs = sorted(str(c) for c in args.seeds.glob("seed*/bulk_velocity.csv"))
+        if not ref_csvs:
+            raise SystemExit(f"--seeds {args.seeds}: holds no seed*/bulk_velocity.csv")
+    else:
+        ref_csvs = [str(args.dem_dir / "bulk_velocity.csv")]
     base = read_calibration(args.calibration or args.dem_dir / "calibration.toml").to_toml_dict()
     print(f"{scenario.case}, {args.method}: DEM strength {dc['strength']:.3e} m^2/s; "
-          f"{len(settle_times)} settling times {args.settle_times} s each")
+          f"{len(settle_times)} settling times {args.settle_times} s each; E against "
+          f"{len(ref_csvs)} DEM field(s)")
     print(f"{'case':<30} {'E(cont, DEM)':>16} {'strength / DEM':>16}  members (E / ratio)")
     jobs, keys = [], []
     for case in args.cases:
@@ -187,7 +205,7 @@ def main(argv=None) -> int:
         cal = Calibration.from_dict(tables, where=f"--cases {case}")
         for st in settle_times:
             out = args.out / f"{args.method}-{case.replace('=', '_')}-{st:g}"
-            jobs.append((args.method, scenario, cal, opts, st, str(out), str(ref_csv), h,
+            jobs.append((args.method, scenario, cal, opts, st, str(out), ref_csvs, h,
                          scenario.analysis.min_solid_fraction))
             keys.append(case)
     with ProcessPoolExecutor(args.jobs, mp_context=get_context("spawn"),
@@ -206,7 +224,8 @@ def main(argv=None) -> int:
                      "ratio_stderr": R_se, "settle_times_s": settle_times,
                      "members": members})
     bench.write_json(args.out / "sensitivity.json", {"case": scenario.case, "method": args.method,
-                                                      "dem": dc, "rows": rows})
+                                                      "dem": dc, "references": ref_csvs,
+                                                      "rows": rows})
     return 0
 
 

@@ -42,7 +42,7 @@ from vibroflow.continuum.grid_update import TubFrame
 from vibroflow.continuum.kinetic_stress import KINETIC_COLUMNS
 from vibroflow.continuum.kinetic_theory import KineticParameters
 from vibroflow.continuum.mpm import solver as mpm
-from vibroflow.continuum.temperature_balance import kinetic_stress_of, temperature_step
+from vibroflow.continuum.temperature_balance import kinetic_stress_of_cells, temperature_step
 from vibroflow.continuum.temperature_field import TemperatureModel
 from vibroflow.continuum.timestep import stable_dt
 from vibroflow.continuum.wall_energy_flux import (WallEnergy, collision_loss_W_m2,
@@ -117,8 +117,8 @@ def run_eulerian(depth, cycles, mat, kn, motion, prm, columns=False):
     rows = []
     for _ in range(cycles * int(round(1.0 / (FREQUENCY * system.dt)))):
         # the stress the step scatters, the kinetic one as the run's loop computes it
-        kinetic_stress_of(state.density, state.temperature, state.L, state.stress,
-                          state.gamma_dot, state.phase, ts, p_kin)
+        kinetic_stress_of_cells(state.density, state.mass, mesh.h, state.temperature,
+                                state.L, state.stress, state.gamma_dot, state.phase, ts, p_kin)
         start = (state.mass.copy(), state.v.copy(), state.density.copy(),
                  state.stress + p_kin[:, :4])
         p0 = float(state.mass @ state.v[:, 1])

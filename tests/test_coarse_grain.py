@@ -302,3 +302,39 @@ def test_snapshot_from_a_vibrating_tub_state_is_in_tub_frame_and_axes():
     assert list(snap["contacts_i"]) == [0] and list(snap["contacts_j"]) == [1]
     np.testing.assert_allclose(snap["contact_branch"][0], pos[0] - pos[1], atol=1e-12)
     assert snap["contact_force"][0] @ snap["contact_branch"][0] > 0   # repulsive
+
+
+def test_each_batch_keeps_its_own_phase_fields_and_follows_every_snapshot_added():
+    """batch_phase_arrays: batch b, phase k holds the velocity its snapshots carry (here
+    (1 + b) v_k), and a snapshot added afterwards shows in the next call and in the standard
+    errors of fields(phase_resolved=True)."""
+    rng = np.random.default_rng(5)
+    geo = TubGeometry(radius=0.05, rim_height=0.1, length=0.02)
+    v = np.array([[0.2, 0, 0.1], [0.0, 0, -0.3]])
+    cg = CoarseGrainer(geo, 0.01, n_phases=2, n_batches=2)
+    pos = random_bed(rng, 2000, ((-0.045, 0.0, 0.005), (0.045, geo.length, 0.09)))
+    for b in range(2):
+        for k in range(2):
+            cg.add_snapshot(pos, np.broadcast_to((1 + b) * v[k], pos.shape), R_STEEL, M_STEEL,
+                            phase_bin=k, batch=b)
+    full = cg.fields().density.values > 0.05 * cg.fields().density.values.max()
+    first = cg.batch_phase_arrays(("velocity",))["velocity"]
+    for b in range(2):
+        for k in range(2):
+            np.testing.assert_allclose(first[b, k][full], np.broadcast_to((1 + b) * v[k],
+                                                                          (full.sum(), 3)),
+                                       atol=1e-12)
+    se = cg.fields(phase_resolved=True).velocity_stderr.values
+    # two batches a and b: the batch-means error is |a - b| / 2
+    np.testing.assert_allclose(se[0][full], np.broadcast_to(np.abs(v[0]) / 2, (full.sum(), 3)),
+                               atol=1e-12)
+    # batch 1, phase 0 gets an equal-weight snapshot at 5 v_0: its mean becomes (2 + 5) / 2 v_0
+    cg.add_snapshot(pos, np.broadcast_to(5 * v[0], pos.shape), R_STEEL, M_STEEL, phase_bin=0,
+                    batch=1)
+    after = cg.batch_phase_arrays(("velocity",))["velocity"]
+    np.testing.assert_allclose(after[1, 0][full], np.broadcast_to(3.5 * v[0], (full.sum(), 3)),
+                               atol=1e-12)
+    se = cg.fields(phase_resolved=True).velocity_stderr.values
+    np.testing.assert_allclose(se[0][full],
+                               np.broadcast_to(np.abs(2.5 * v[0]) / 2, (full.sum(), 3)),
+                               atol=1e-12)

@@ -126,8 +126,9 @@ def test_floor_csv_holds_the_phases_force_and_error(tmp_path):
 
 @pytest.mark.slow
 def test_an_eulerian_run_with_t_measures_its_wall_feed_the_same_when_resumed(tmp_path):
-    """The Eulerian's wall feed makes each sample's step on its own (Sampler.
-    splits_sample_step): a run with T stopped twice inside its window and resumed writes the
+    """The Eulerian's wall feed measures from the start of each sample's step, which the
+    compiled loop keeps (Sampler.keeps_sample_step_start): a run with T stopped twice inside
+    its window and resumed writes the
     same floor.csv, wall_feed.csv, bulk_velocity.csv and temperature.csv, bit for bit, as the
     run never stopped."""
     from continuum_helpers import THREE_CYCLES

@@ -12,7 +12,7 @@ import pytest
 
 from vibroflow.continuum.constitutive import ContinuumMaterial
 from vibroflow.continuum.kinetic_stress import (RATE_RATIO, balance_temperature,
-                                                kinetic_stress)
+                                                kinetic_stress, kinetic_stress_cells)
 from vibroflow.continuum.kinetic_theory import (KineticParameters, dissipation_W_m3,
                                                 frictional_pressure_Pa, pressure_Pa,
                                                 shear_viscosity_Pa_s)
@@ -48,6 +48,38 @@ def _one(density, T, L, stress=(0.0, 0.0, 0.0, 0.0), gamma_dot=0.0, phase=0, prm
                    np.array([stress], float), np.array([gamma_dot]),
                    np.array([phase], np.int8), prm, phi_cap, T_cap, eta_factor, out)
     return out[0]
+
+
+def test_a_partly_filled_eulerian_cell_reads_its_own_solid_fraction():
+    # a 1 cm cell half filled with material at phi 0.6 (rho 4680 kg/m^3, m 0.234 kg/m): the
+    # cell's solid fraction is 0.3, where Lun's pressure at T = 0.01 m^2/s^2, e = 0.9 is
+    # 7800 0.3 0.01 (1 + 2 1.9 0.3 3.004554) = 103.5495 Pa and Gidaspow's viscosity 2.048411
+    # Pa s (above); acting through the material's half of the cell, the stress is twice
+    # those, so that the cell's force is the cell's pressure on its whole area
+    rate, h, f = 20.0, 0.01, 0.5
+    rho = 0.6 * 7800.0
+    out = np.empty((1, 5))
+    kinetic_stress_cells(np.array([rho]), np.array([f * rho * h * h]), h, np.array([0.01]),
+                         np.array([[0.0, rate, 0.0, 0.0]]), np.zeros((1, 4)), np.zeros(1),
+                         np.zeros(1, np.int8), PRM, 0.6, np.inf, np.inf, out)
+    assert out[0, 0] == pytest.approx(-103.5495 / f, rel=1e-6)
+    assert out[0, 1] == pytest.approx(-103.5495 / f, rel=1e-6)
+    assert out[0, 2] == pytest.approx(2.048411 * rate / f, rel=1e-6)
+
+
+def test_a_full_eulerian_cell_is_a_points_kinetic_stress():
+    # f = 1: the cell's solid fraction is its material's, to round-off (m / (rho h^2) is 1
+    # within an ulp), gas and connected
+    rho = np.array([0.55, 0.59, 0.3]) * 7800.0
+    h = 0.01
+    args = (np.array([0.02, 0.005, 0.01]), np.array([[1.0, 2.0, -3.0, 0.5]] * 3),
+            np.array([[-50.0, -80.0, 10.0, -60.0]] * 3), np.array([0.0, 3.0, 0.0]),
+            np.array([0, 1, 0], np.int8), PRM, 0.6, 0.05, 1e-3)
+    a = np.empty((3, 5))
+    b = np.empty((3, 5))
+    kinetic_stress(rho, *args, a)
+    kinetic_stress_cells(rho, rho * h * h, h, *args, b)
+    np.testing.assert_allclose(b, a, rtol=1e-14, atol=0.0)
 
 
 def test_a_sheared_gas_carries_the_kinetic_viscosity_and_both_pressures():

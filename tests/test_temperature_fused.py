@@ -138,3 +138,29 @@ def test_the_compiled_balance_gives_the_same_numbers_on_one_thread_and_on_two(me
     one, two = _on_threads(method, 1), _on_threads(method, 2)
     for name in ("temperature", "v", "stress", "mass"):
         assert np.array_equal(getattr(one, name), getattr(two, name)), f"{name} differs"
+
+
+def test_the_eulerian_loop_keeps_its_last_steps_start_as_the_feed_does():
+    """The compiled loop's keep (temperature_loop.StepStart) holds the start of its call's last
+    step: what EulerianWallFeed.before_last_step keeps before that step made in a call of its
+    own (masses, velocities, densities, the scattered stress with the kinetic stress added),
+    bit for bit, the same steps either way, and the feed measured from it the same."""
+    from vibroflow.continuum.eulerian.wall_feed import EulerianWallFeed
+
+    (system, kept), (_, split) = _layer("eulerian"), _layer("eulerian")
+    # a third of a cycle: the layer in flight off its floor, then 7 steps as it lands
+    n = int(round(0.6 / (FREQUENCY * system.dt)))
+    eulerian.advance(system, kept, n)
+    eulerian.advance(system, split, n)
+    kept_feed, split_feed = EulerianWallFeed(system, kept), EulerianWallFeed(system, split)
+    eulerian.advance(system, kept, 7, kept_feed.last_step_start())
+    eulerian.advance(system, split, 6)
+    split_feed.before_last_step()
+    eulerian.advance(system, split, 1)
+    assert kept.step == split.step == n + 7
+    for a, b in zip(kept_feed.start, split_feed.start):
+        assert np.array_equal(a, b)
+    for name in ("temperature", "v", "stress", "mass", "density"):
+        assert np.array_equal(getattr(kept, name), getattr(split, name)), name
+    (_, q_k), (_, q_s) = kept_feed.feed(), split_feed.feed()
+    assert np.array_equal(q_k, q_s) and np.abs(q_s).max() > 0.0

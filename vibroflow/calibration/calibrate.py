@@ -246,6 +246,11 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
                      f"{unload['start_pressure']:.4g} -> {unload['release_pressure']:.4g} Pa, "
                      f"{unload['cells']} cells; from the divergence "
                      f"{unload['divergence']:.4g} Pa)")
+            prog.log(f"elastic: the unloading law K_t = K_ref (p / p_ref)^n: K_ref = "
+                     f"{unload['law_K_ref']:.4g} +- {unload['law_K_ref_stderr']:.2g} Pa at "
+                     f"p_ref = {unload['law_p_ref']:.4g} Pa, n = {unload['law_exponent']:.3f} "
+                     f"+- {unload['law_exponent_stderr']:.2g}, on p {unload['law_p_min']:.4g} "
+                     f"- {unload['law_p_max']:.4g} Pa ({unload['law_steps']} steps)")
         except InputError as err:
             prog.log(f"elastic: the unloading bulk modulus not measured: {err}")
             unload = None

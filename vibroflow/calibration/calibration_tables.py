@@ -72,6 +72,14 @@ def unloading_keys(u: dict | None) -> dict:
         "unloading_release_pressure_Pa": toml_float(u["release_pressure"]),
         "unloading_volumetric_strain": toml_float(u["volumetric_strain"]),
         "unloading_strain_rate_1_s": toml_float(u["strain_rate"]),
+        # the tangent law K_t = K_ref (p / p_ref)^n (unloading.unloading_law)
+        "unloading_law_modulus_Pa": toml_float(u["law_K_ref"]),
+        "unloading_law_modulus_stderr_Pa": toml_float(u["law_K_ref_stderr"]),
+        "unloading_law_reference_pressure_Pa": toml_float(u["law_p_ref"]),
+        "unloading_law_exponent": toml_float(u["law_exponent"]),
+        "unloading_law_exponent_stderr": toml_float(u["law_exponent_stderr"]),
+        "unloading_law_min_pressure_Pa": toml_float(u["law_p_min"]),
+        "unloading_law_max_pressure_Pa": toml_float(u["law_p_max"]),
     }
 
 

@@ -165,6 +165,7 @@ class CoarseGrainer:
         self._snapshots = 0
         self._mass = 0.0
         self._volume = 0.0
+        self._batch_phase_cache: dict[str, dict] = {}  # gradient -> per-batch phase fields
         nodes, weights = np.polynomial.legendre.leggauss(int(quadrature))
         self._s_nodes = 0.5 * (nodes + 1.0)
         self._s_weights = 0.5 * weights
@@ -246,6 +247,7 @@ class CoarseGrainer:
                              self._cont[batch, ph])
         self._weight[batch, ph] += weight
         self._snapshots += 1
+        self._batch_phase_cache.clear()
         self._mass += float(m.sum())
         self._volume += float(vol.sum())
 
@@ -258,6 +260,7 @@ class CoarseGrainer:
         self._snapshots = 0
         self._mass = 0.0
         self._volume = 0.0
+        self._batch_phase_cache.clear()
 
     def averaged_arrays(self, gradient: str = "kernel") -> dict:
         """The time-averaged fields over every snapshot added as plain arrays (nx, nz, ...)
@@ -274,8 +277,18 @@ class CoarseGrainer:
         if self.n_phases is None:
             raise InputError("batch_phase_arrays(): this CoarseGrainer has no phase bins (give "
                              "n_phases)")
-        per_batch = self._fields_of(self._ball, self._cont, self._weight, gradient)
+        per_batch = self._batch_phase_fields(gradient)
         return {name: per_batch[name] for name in names}
+
+    def _batch_phase_fields(self, gradient: str) -> dict:
+        """Each batch's phase-resolved fields, derived once per gradient until the next snapshot:
+        `fields(phase_resolved=True)`'s standard errors and batch_phase_arrays share them."""
+        if gradient not in self._batch_phase_cache:
+            derived = self._fields_of(self._ball, self._cont, self._weight, gradient)
+            for arr in derived.values():
+                arr.setflags(write=False)  # shared by every caller until the next snapshot
+            self._batch_phase_cache[gradient] = derived
+        return self._batch_phase_cache[gradient]
 
     # ------------------------------------------------------------------------------------------
     @property
@@ -324,8 +337,7 @@ class CoarseGrainer:
         if phase_resolved:
             main = self._fields_of(self._ball.sum(axis=0), self._cont.sum(axis=0),
                                    self._weight.sum(axis=0), gradient)
-            per_batch = self._fields_of(self._ball, self._cont, self._weight, gradient) \
-                if stderr else None
+            per_batch = self._batch_phase_fields(gradient) if stderr else None
             lead = ("phase",)
         else:
             main = self._fields_of(self._ball.sum(axis=(0, 1)), self._cont.sum(axis=(0, 1)),

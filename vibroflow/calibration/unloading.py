@@ -108,7 +108,8 @@ def unloading_bulk_modulus(pressure, solid_fraction, velocity, cell_size: float,
     eulerian (Pa, the cross-checks), tangent_start and tangent_end (Pa), cells, branch_phases
     (bins), branch_start and branch_end (t f of the bins), peak_pressure (the cycle's largest
     bed-mean, Pa), start_pressure and release_pressure (bed-mean, Pa), volumetric_strain (the
-    material's bed-mean eps_v across the branch), strain_rate (1/s), batch_moduli.
+    material's bed-mean eps_v across the branch), strain_rate (1/s), batch_moduli; and the
+    tangent law's keys (`unloading_law`).
     """
     p = np.asarray(pressure, float)
     phi = np.asarray(solid_fraction, float)
@@ -164,6 +165,8 @@ def unloading_bulk_modulus(pressure, solid_fraction, velocity, cell_size: float,
     eul = _pooled((p[branch[-1]] - p[branch[0]])[dense], (eps[branch[-1]] - eps[branch[0]])[dense])
     ok = np.isfinite(sum(de))
     d_eps = -float(np.mean(sum(de)[ok]))
+    law = unloading_law(p, phi, v, steps, dense, dt, cell_size, bed[branch[0]],
+                        bed[branch[-1]], batches)
     duration = (len(branch) - 1) * dt
     return {
         "bulk_modulus": K, "bulk_modulus_stderr": se, "divergence": div, "eulerian": eul,
@@ -175,6 +178,7 @@ def unloading_bulk_modulus(pressure, solid_fraction, velocity, cell_size: float,
         "release_pressure": float(bed[branch[-1]]),
         "volumetric_strain": d_eps, "strain_rate": d_eps / duration,
         "batch_moduli": [float(x) for x in batch_moduli],
+        **law,
     }
 
 
@@ -185,3 +189,141 @@ def unloading_of_run(phases, batches: dict | None, frequency: float) -> dict:
     return unloading_bulk_modulus(phases["pressure"].values, phases["solid_fraction"].values,
                                   phases["velocity"].values, float(phases.attrs["cell_size_m"]),
                                   frequency, batches, phases["strain_rate"].values)
+
+
+# ---- the non-linear unloading law (docs/decisions/unloading-stiffness.md, models.md 4.3) ----
+#
+# The tangent bulk modulus a power of the pressure, K_t = dp/d eps_v = K_ref (p / p_ref)^n.
+# With P = p / p_ref and q_n(P) = (P^(1-n) - 1) / (1 - n) (ln P at n = 1), dq_n = P^-n dP, so
+# along the law q_n(P) = (K_ref / p_ref) eps_v + const: over any step of any cell
+# Delta q_n = A Delta eps_v with A = K_ref / p_ref.  Pooled over the dense cells by step g of
+# the branch, Q_g(n) = sum_c Delta q_n and S_g = sum_c Delta eps_v (material changes, as for
+# the secant), the law holds where ln(Q_g / S_g) = ln A for every step; n and ln A are the
+# least squares of r_g = ln(Q_g / S_g) - ln A (Gauss-Newton; exact for two steps).
+
+#: the pressure range of the law's cells: these percentiles of the dense cells' positive
+#: pressures over the branch (the continuum clamps p to it: the law is measured there only)
+LAW_PRESSURE_PERCENTILES = (5.0, 95.0)
+
+#: the fit gives up (NaN) where the exponent leaves (-N_LIMIT, N_LIMIT): no law of the branch
+N_LIMIT = 50.0
+
+
+def _q_law(P, n: float):
+    """q_n(P) = (P^(1-n) - 1) / (1 - n) (ln P at n = 1) and its derivative in n, P > 0."""
+    lnP = np.log(P)
+    x = (1.0 - n) * lnP
+    small = np.abs(x) < 1e-4
+    xs = np.where(small, 1.0, x)
+    f = np.where(small, 1.0 + x / 2.0 + x * x / 6.0, np.expm1(xs) / xs)
+    df = np.where(small, 0.5 + x / 3.0 + x * x / 8.0, (xs * np.exp(xs) - np.expm1(xs)) / xs ** 2)
+    return lnP * f, -lnP * lnP * df
+
+
+def law_pressure(eps, p0: float, K_ref: float, p_ref: float, n: float):
+    """p(eps_v) (Pa) along the tangent law K_t = K_ref (p / p_ref)^n from p(0) = p0 > 0:
+    q_n(p / p_ref) = q_n(p0 / p_ref) + (K_ref / p_ref) eps_v, solved for p (NaN past p = 0)."""
+    q0 = _q_law(np.asarray(p0 / p_ref, float), n)[0]
+    q = q0 + K_ref / p_ref * np.asarray(eps, float)
+    if abs(1.0 - n) < 1e-12:
+        return p_ref * np.exp(q)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        base = 1.0 + (1.0 - n) * q
+        return p_ref * np.where(base > 0, base, np.nan) ** (1.0 / (1.0 - n))
+
+
+def fit_tangent_law(step_changes, n0: float = 0.0):
+    """K_ref / p_ref (1/...: A, Pa/Pa) and n of K_t = K_ref (p / p_ref)^n (module notes) from
+    the branch's steps: step_changes(n) returns, one a step, (Delta q_n, d Delta q_n / dn,
+    Delta eps_v), arrays over the cells (NaN: left out).  Returns (A, n, rms of r_g, steps);
+    NaN where fewer than two steps unload (S_g < 0)."""
+    def groups(n):
+        out = []
+        for dq, ddq, de in step_changes(n):
+            dq, ddq, de = (np.asarray(a, float).ravel() for a in (dq, ddq, de))
+            ok = np.isfinite(dq) & np.isfinite(ddq) & np.isfinite(de)
+            if ok.any() and de[ok].sum() < 0:
+                out.append((float(dq[ok].sum()), float(ddq[ok].sum()), float(de[ok].sum())))
+        return out
+
+    nan = (math.nan, math.nan, math.nan, 0)
+    n = float(n0)
+    for _ in range(100):
+        g = groups(n)
+        if len(g) < 2 or not all(Q / S > 0 for Q, _, S in g):
+            return nan
+        r = np.array([math.log(Q / S) for Q, _, S in g])
+        J = np.array([dQ / Q for Q, dQ, _ in g])
+        # ln A = mean r at each n: the residual r - mean r, its Jacobian J - mean J
+        rc, Jc = r - r.mean(), J - J.mean()
+        if not (Jc @ Jc) > 0:
+            break
+        dn = -float(rc @ Jc) / float(Jc @ Jc)
+        n += dn
+        if not abs(n) < N_LIMIT:
+            return nan
+        if abs(dn) < 1e-14 * max(1.0, abs(n)):
+            break
+    g = groups(n)
+    if len(g) < 2 or not all(Q / S > 0 for Q, _, S in g):
+        return nan
+    r = np.array([math.log(Q / S) for Q, _, S in g])
+    if not abs(r.mean()) < 700.0:
+        return nan
+    return math.exp(float(r.mean())), n, float(np.sqrt(np.mean((r - r.mean()) ** 2))), len(g)
+
+
+def tangent_law_of_fields(p, phi, v, steps, dense, dt: float, h: float, p_ref: float):
+    """fit_tangent_law on phase fields p (Pa), phi, v (n_phases, nx, nz[, 3]) over the phase
+    steps `steps` (pairs of bins), the cells `dense` (nx, nz bool), grid spacing h (m), phase
+    step dt (s): the material changes of q_n(p / p_ref) and of eps_v = ln phi (module notes).
+    Returns (K_ref (Pa), n, rms, steps)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        P = np.where(p > 0, p / p_ref, np.nan)
+        eps = np.log(np.where(phi > 0, phi, np.nan))
+    de = [a[dense] for a in material_changes(eps, v, steps, dt, h)]
+
+    def changes(n):
+        with np.errstate(invalid="ignore", divide="ignore"):
+            q, dq = _q_law(P, n)
+        a = material_changes(q, v, steps, dt, h)
+        b = material_changes(dq, v, steps, dt, h)
+        return [(x[dense], y[dense], e) for x, y, e in zip(a, b, de)]
+
+    A, n, rms, k = fit_tangent_law(changes)
+    return A * p_ref, n, rms, k
+
+
+def unloading_law(p, phi, v, steps, dense, dt: float, h: float, start_pressure: float,
+                  release_pressure: float, batches: dict | None = None) -> dict:
+    """The tangent law K_t = K_ref (p / p_ref)^n fitted on the branch's steps (module notes):
+    p_ref the geometric mean of the branch's start and release bed-mean pressures (the
+    middle of the range on a log scale, where K_ref and n are least correlated); the batch
+    means' standard errors from each batch's fit; p_min, p_max the LAW_PRESSURE_PERCENTILES of
+    the dense cells' positive pressures over the branch.  Returns a dict: law_K_ref,
+    law_K_ref_stderr, law_p_ref, law_exponent, law_exponent_stderr, law_rms (rms of the steps'
+    ln residuals, 0 for two steps), law_steps, law_p_min, law_p_max (Pa or -)."""
+    nan = math.nan
+    p_ref = math.sqrt(start_pressure * release_pressure) if (
+        start_pressure > 0 and release_pressure > 0) else nan
+    out = {"law_K_ref": nan, "law_K_ref_stderr": nan, "law_p_ref": p_ref, "law_exponent": nan,
+           "law_exponent_stderr": nan, "law_rms": nan, "law_steps": 0, "law_p_min": nan,
+           "law_p_max": nan}
+    if not math.isfinite(p_ref):
+        return out
+    K, n, rms, k = tangent_law_of_fields(p, phi, v, steps, dense, dt, h, p_ref)
+    bins = sorted({b for s in steps for b in s})
+    cells = np.concatenate([p[b][dense] for b in bins])
+    cells = cells[np.isfinite(cells) & (cells > 0)]
+    lo, hi = (np.percentile(cells, LAW_PRESSURE_PERCENTILES) if cells.size else (nan, nan))
+    out.update(law_K_ref=K, law_exponent=n, law_rms=rms, law_steps=k, law_p_min=float(lo),
+               law_p_max=float(hi))
+    if batches is not None:
+        bp, bphi, bv = (np.asarray(batches[x], float)
+                        for x in ("pressure", "solid_fraction", "velocity"))
+        fits = [tangent_law_of_fields(bp[b], bphi[b], bv[b], steps, dense, dt, h, p_ref)
+                for b in range(bp.shape[0])]
+        if len(fits) >= 2:
+            out["law_K_ref_stderr"] = float(stderr_of_batches(np.array([f[0] for f in fits])))
+            out["law_exponent_stderr"] = float(stderr_of_batches(np.array([f[1] for f in fits])))
+    return out

@@ -108,7 +108,9 @@ def continuum(
         "--moduli", help="The bed's elastic moduli: calibrated (the calibration's "
                          "bulk_modulus_Pa and shear_modulus_Pa; default) or unloading (its "
                          "unloading_bulk_modulus_Pa, the bed's stiffness as it unloads after a "
-                         "landing in the DEM, and shear_modulus_small_strain_Pa).")
+                         "landing in the DEM, and shear_modulus_small_strain_Pa) or "
+                         "unloading-law (the tangent law K_t = K_ref (p / p_ref)^n of that "
+                         "branch, its unloading_law_* keys, with the same G).")
     ] = "calibrated",
     set_: SetOption = None,
     vtk: Annotated[bool, typer.Option("--vtk", help="Also write ParaView files of the material "
@@ -134,8 +136,9 @@ def continuum(
     if partition_friction not in ("contacts", "along-flow"):
         raise InputError(f"--partition-friction = {partition_friction!r}: must be contacts or "
                          "along-flow")
-    if moduli not in ("calibrated", "unloading"):
-        raise InputError(f"--moduli = {moduli!r}: must be calibrated or unloading")
+    if moduli not in ("calibrated", "unloading", "unloading-law"):
+        raise InputError(f"--moduli = {moduli!r}: must be calibrated, unloading or "
+                         "unloading-law")
     if stop_after_steps is not None and stop_after_steps < 0:
         raise InputError(f"--stop-after-steps = {stop_after_steps}: must be >= 0")
     if scenario is not None and like is not None:
@@ -182,7 +185,7 @@ def continuum(
                            bed_viscosity=bed_viscosity, damping_length=damping_length,
                            temperature=temperature, initial_temperature=initial_temperature,
                            landing=landing, partition_friction=partition_friction.replace("-", "_"),
-                           moduli=moduli,
+                           moduli=moduli.replace("-", "_"),
                            **step)
     material_for(s, cal, options)  # validates the parameters before --out is made
     boundary_friction(s, cal, options.partition_friction)

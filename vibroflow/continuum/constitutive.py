@@ -23,8 +23,9 @@ MODELS = {"mu_i": MU_I, "drucker_prager": DRUCKER_PRAGER}
 
 # packed parameter layout of `ContinuumMaterial.as_array()`
 (P_MODEL, P_K, P_G, P_MU_S, P_MU_2, P_I0, P_D, P_RHO_S, P_RHO_C, P_MU_DP, P_ETA, P_KDIL,
- P_PHI_SLOPE, P_GAMMA_C, P_DPHI_CYC, P_ETA_BED) = range(16)
-N_PARAMS = 16
+ P_PHI_SLOPE, P_GAMMA_C, P_DPHI_CYC, P_ETA_BED, P_KLAW_REF, P_KLAW_P_REF, P_KLAW_N, P_KLAW_P_MIN,
+ P_KLAW_P_MAX) = range(21)
+N_PARAMS = 21
 
 # tub47 defaults (documented in ContinuumMaterial)
 _MU_S = math.tan(math.radians(20.9))
@@ -38,6 +39,28 @@ def check_bed_viscosity(value) -> None:
                                        and value >= 0):
         raise InputError(f"bed_viscosity = {value!r}: must be a finite number >= 0 Pa s "
                          "(0 = off)")
+
+
+def bulk_law_tangent(p: float, bulk_law) -> float:
+    """K_t = K_ref (p / p_ref)^n (Pa) at pressure p (Pa) clamped to [p_min, p_max]; bulk_law =
+    (K_ref, p_ref, n, p_min, p_max) (ContinuumMaterial.bulk_law; stress_update.bulk_tangent
+    compiled)."""
+    k_ref, p_ref, n, lo, hi = (float(x) for x in bulk_law)
+    return k_ref * (min(max(p, lo), hi) / p_ref) ** n
+
+
+def check_bulk_law(bulk_law) -> None:
+    """(K_ref, p_ref, n, p_min, p_max): K_ref, p_ref > 0 Pa, n finite, 0 < p_min < p_max Pa;
+    else a one-line InputError naming it."""
+    try:
+        k_ref, p_ref, n, lo, hi = (float(x) for x in bulk_law)
+    except (TypeError, ValueError):
+        raise InputError(f"bulk_law = {bulk_law!r}: must be (K_ref, p_ref, n, p_min, p_max)") \
+            from None
+    if not (all(math.isfinite(x) for x in (k_ref, p_ref, n, lo, hi)) and k_ref > 0
+            and p_ref > 0 and 0 < lo < hi):
+        raise InputError(f"bulk_law = {bulk_law!r}: must be (K_ref, p_ref, n, p_min, p_max) "
+                         "with K_ref, p_ref > 0 Pa, n finite and 0 < p_min < p_max Pa")
 
 
 def drucker_prager_mu(mu_s: float) -> float:
@@ -76,6 +99,11 @@ class ContinuumMaterial:
     * bed_viscosity = eta_b (Pa s): the bed's Kelvin-Voigt damping
       (stress_update.damped_stress), 0 = off (default); measured on DEM by
       benchmarks/strip_damping.py.
+    * bulk_law = (K_ref, p_ref, n, p_min, p_max) (Pa, Pa, -, Pa, Pa): the bulk part's tangent
+      K_t = K_ref (p / p_ref)^n with p clamped to [p_min, p_max] (stress_update.py, "Option:
+      the unloading law"; models.md 4.3), None = off (default: K = bulk_modulus); measured on
+      DEM by vibroflow.calibration.unloading (calibration.toml [elastic] unloading_law_*).
+      bulk_modulus is then the law's largest tangent, K_t(p_max), which sets the time step.
     """
 
     model: str = "mu_i"
@@ -95,6 +123,7 @@ class ContinuumMaterial:
     compaction_excess: float = 0.0
     initial_solid_fraction: float | None = None
     bed_viscosity: float = 0.0
+    bulk_law: tuple | None = None
 
     def __post_init__(self):
         if self.model not in MODELS:
@@ -133,6 +162,8 @@ class ContinuumMaterial:
             raise InputError(f"phi_min = {self.phi_min!r}: must be below phi_max = "
                              f"{self.phi_max!r}")
         check_bed_viscosity(self.bed_viscosity)
+        if self.bulk_law is not None:
+            check_bulk_law(self.bulk_law)
 
     @property
     def critical_density(self) -> float:
@@ -183,6 +214,9 @@ class ContinuumMaterial:
         a[P_GAMMA_C] = self.compaction_strain
         a[P_DPHI_CYC] = self.compaction_excess
         a[P_ETA_BED] = self.bed_viscosity
+        if self.bulk_law is not None:
+            (a[P_KLAW_REF], a[P_KLAW_P_REF], a[P_KLAW_N], a[P_KLAW_P_MIN],
+             a[P_KLAW_P_MAX]) = self.bulk_law
         return a
 
     def to_dict(self) -> dict:
@@ -190,6 +224,11 @@ class ContinuumMaterial:
         d["critical_density"] = self.critical_density
         d["mu_dp"] = self.mu_dp
         d["eta"] = self.eta
+        if self.bulk_law is None:
+            del d["bulk_law"]
+        else:
+            d["bulk_law"] = dict(zip(("K_ref_Pa", "p_ref_Pa", "n", "p_min_Pa", "p_max_Pa"),
+                                     (float(x) for x in self.bulk_law)))
         return d
 
     @classmethod

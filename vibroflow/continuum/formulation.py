@@ -55,12 +55,14 @@ class Sampler(ABC):
     n_points: int
     #: the kinds of ParaView collection its vtk samples fill ("points", "grid")
     vtk_kinds: tuple[str, ...]
-    #: whether the run makes each sample's last step on its own, `before_sample_step` called
-    #: before it (a measure over that step: continuum/wall_feed.py); the same steps either way
-    splits_sample_step: bool = False
+    #: whether the run keeps the start of each sample's last step (a measure over that step:
+    #: continuum/wall_feed.py): the call that makes it is given `sample_step_start()` as the
+    #: formulation's advance's keep; the same steps either way
+    keeps_sample_step_start: bool = False
 
-    def before_sample_step(self) -> None:
-        """Called before the step that ends at a sample (splits_sample_step)."""
+    def sample_step_start(self):
+        """What the call whose last step ends at a sample fills with that step's start
+        (keeps_sample_step_start; the formulation's advance's keep)."""
 
     @abstractmethod
     def record(self, j: int, samples) -> None:
@@ -123,8 +125,9 @@ class Formulation(ABC):
         """(state, bed height m) of the settled bed at rest on the system (bed.py)."""
 
     @abstractmethod
-    def advance(self, system, state, steps: int) -> None:
-        """Advance the state by `steps` steps."""
+    def advance(self, system, state, steps: int, keep=None) -> None:
+        """Advance the state by `steps` steps; keep (a Sampler's sample_step_start) receives
+        the start of the last of them."""
 
     @abstractmethod
     def restore(self, system, saved, meta: dict):

@@ -38,6 +38,18 @@ given stress to the scattered one and reads one number in its return map:
 
 The work of these stresses on the step's deformation, sigma_k : D, is the temperature's
 production besides the plastic work (temperature_field.production_W_m3).
+
+Eulerian cells (`kinetic_stress_cells`).  A cell holds material at its density rho filling a
+fraction f = min(1, m / (rho h^2)) of it; material that opens a void stays a hair below rho_c
+(eulerian/lagrangian_step.void_first), so rho / rho_s is phi_c in every partly filled cell.
+The pressure and the gas's viscosity read the cell's solid fraction phi = f rho / rho_s, the
+one its balance reads (capacity, dissipation, conduction), and act through the material's
+volume f h^2 as the cell's whole, p(phi) h^2: the stress is theirs over f, so the work the
+step takes from T, f sigma_k : D per cell area, is the work the stress does on the grid.  Read
+at rho / rho_s, tub47's surface cells (phi 0.005 - 0.37) carry the pressure of a gas at phi_c
+and the limit T, 41 kPa, four times the bed's weight on the floor, and throw the bed to the
+rim (docs/validation.md section 22).  The return map's rate ratio reads the connected
+material's own packing, its plastic work being per volume of material.
 """
 from __future__ import annotations
 
@@ -94,6 +106,27 @@ def kinetic_stress(density, T, L, stress, gamma_dot, phase, prm, phi_cap, T_cap,
     phi_cap (-) the connection packing rho_c / rho_s; T_cap (m^2/s^2) the highest T the
     kinetic pressure reads (timestep.kinetic_temperature_limit); eta_max_factor (m^2/s)
     dx^2 / dt, the viscosity cap being VISCOSITY_CAP rho eta_max_factor."""
+    _kinetic_stress(density, density, False, 1.0, T, L, stress, gamma_dot, phase, prm, phi_cap,
+                    T_cap, eta_max_factor, out)
+
+
+@nb.njit(cache=True)
+def kinetic_stress_cells(density, mass, h, T, L, stress, gamma_dot, phase, prm, phi_cap, T_cap,
+                         eta_max_factor, out):
+    """`kinetic_stress` of Eulerian cells of side h (m) holding mass (N,) kg/m of material at
+    density (N,) kg/m^3, a fraction f = min(1, m / (rho h^2)) of the cell (module docstring,
+    "Eulerian cells"): the pressure and the gas's viscosity at the cell's solid fraction
+    phi = f rho / rho_s, the one its balance reads, and acting through the material's volume
+    f h^2 as the cell's whole (stress over f); a full cell's is `kinetic_stress`'s."""
+    _kinetic_stress(density, mass, True, h * h, T, L, stress, gamma_dot, phase, prm, phi_cap,
+                    T_cap, eta_max_factor, out)
+
+
+@nb.njit(cache=True)
+def _kinetic_stress(density, mass, cells, area, T, L, stress, gamma_dot, phase, prm, phi_cap,
+                    T_cap, eta_max_factor, out):
+    """`kinetic_stress`, or with `cells` `kinetic_stress_cells` (mass (N,) kg/m, area the cell's
+    h^2 m^2; mass is not read without `cells`)."""
     hoop = L.shape[1] > 4
     rho_s = prm.density_kg_m3
     for p in range(T.shape[0]):
@@ -104,11 +137,17 @@ def kinetic_stress(density, T, L, stress, gamma_dot, phase, prm, phi_cap, T_cap,
         rho = density[p]
         if not (t > 0.0 and rho > 0.0):
             continue
-        phi = rho / rho_s
-        pk = pressure_Pa(min(phi, phi_cap), min(t, T_cap), prm)
+        f = 1.0
+        if cells:
+            f = min(1.0, mass[p] / (rho * area))
+            if not f > 0.0:
+                continue
+        phi = f * rho / rho_s
+        pk = pressure_Pa(min(phi, phi_cap), min(t, T_cap), prm) / f
         if phase[p] == 0:
-            pk += frictional_pressure_Pa(min(phi, phi_cap), prm)
-            eta = min(shear_viscosity_Pa_s(phi, t, prm), VISCOSITY_CAP * rho * eta_max_factor)
+            pk += frictional_pressure_Pa(min(phi, phi_cap), prm) / f
+            eta = min(shear_viscosity_Pa_s(phi, t, prm) / f,
+                      VISCOSITY_CAP * rho * eta_max_factor)
             dxx = L[p, 0]
             dzz = L[p, 3]
             dxz = 0.5 * (L[p, 1] + L[p, 2])
@@ -119,7 +158,10 @@ def kinetic_stress(density, T, L, stress, gamma_dot, phase, prm, phi_cap, T_cap,
             out[p, 2] = 2.0 * eta * dxz
             out[p, 3] = 2.0 * eta * (dyy - third)
         else:
-            tb = balance_temperature(min(phi, phi_cap), _tau(stress[p]), gamma_dot[p], prm)
+            # the connected material's own packing: its return map's plastic work is per
+            # volume of material
+            tb = balance_temperature(min(rho / rho_s, phi_cap), _tau(stress[p]), gamma_dot[p],
+                                     prm)
             out[p, RATE_RATIO] = math.sqrt(tb / t)
         out[p, 0] -= pk
         out[p, 1] -= pk

@@ -10,7 +10,7 @@ from vibroflow.errors import InputError
 from vibroflow.io.calibration_file import Calibration
 from vibroflow.scenario.checks import find_contact
 
-from .constitutive import ContinuumMaterial
+from .constitutive import ContinuumMaterial, bulk_law_tangent, check_bulk_law
 from .options import ContinuumOptions
 
 
@@ -25,21 +25,29 @@ def material_of(scenario, calibration: Calibration | None, model: str = "mu_i",
     vibroflow.calibration.compaction) switch the cyclic compaction option on; moduli
     "unloading" takes the calibration's [elastic] unloading_bulk_modulus_Pa (the bed's
     unloading branch in the DEM, vibroflow.calibration.unloading) and
-    shear_modulus_small_strain_Pa (docs/decisions/unloading-stiffness.md)."""
+    shear_modulus_small_strain_Pa (docs/decisions/unloading-stiffness.md); "unloading_law" the
+    tangent law of the same branch (unloading_law_moduli)."""
     if calibration is not None:
         mat = ContinuumMaterial.from_calibration(calibration, model=model)
     elif moduli != "calibrated":
         raise InputError(f"moduli = {moduli!r}: needs a calibration (--calibration) with "
-                         "[elastic] unloading_bulk_modulus_Pa")
+                         "[elastic] unloading_bulk_modulus_Pa (unloading) or unloading_law_* "
+                         "(unloading_law)")
     else:
         rho_s = scenario.materials[scenario.fill.material].density
         mat = ContinuumMaterial(model=model, diameter=scenario.fill.diameter,
                                 solid_density=rho_s)
     if moduli == "unloading":
         mat = dataclasses.replace(mat, **unloading_moduli(calibration))
+    elif moduli == "unloading_law":
+        mat = dataclasses.replace(mat, **unloading_law_moduli(calibration))
     if stiffness_factor != 1.0:
+        law = mat.bulk_law
+        if law is not None:
+            law = (law[0] * stiffness_factor,) + tuple(law[1:])
         mat = dataclasses.replace(mat, bulk_modulus=mat.bulk_modulus * stiffness_factor,
-                                  shear_modulus=mat.shear_modulus * stiffness_factor)
+                                  shear_modulus=mat.shear_modulus * stiffness_factor,
+                                  bulk_law=law)
     if compaction:
         c = calibration.compaction if calibration is not None else None
         gc, ex = (None, None) if c is None else (c.compaction_strain, c.excess_solid_fraction)
@@ -82,6 +90,48 @@ def unloading_moduli(calibration: Calibration) -> dict:
                              f"{'missing' if v is None else repr(v)}; it must be a modulus > 0 "
                              f"Pa ({how})")
     return {"bulk_modulus": float(k), "shear_modulus": float(g)}
+
+
+#: the unloading law's [elastic] keys: K_ref, p_ref, n, p_min, p_max (ContinuumMaterial.bulk_law)
+UNLOADING_LAW_KEYS = ("unloading_law_modulus_Pa", "unloading_law_reference_pressure_Pa",
+                      "unloading_law_exponent", "unloading_law_min_pressure_Pa",
+                      "unloading_law_max_pressure_Pa")
+
+
+def unloading_law_moduli(calibration: Calibration) -> dict:
+    """{bulk_law, bulk_modulus, shear_modulus} of moduli = "unloading_law": the calibration's
+    [elastic] UNLOADING_LAW_KEYS (K_t = K_ref (p / p_ref)^n on [p_min, p_max], measured on the
+    DEM run's unloading branch, vibroflow.calibration.unloading.unloading_law), bulk_modulus
+    its largest tangent K_t(p_max) (the time step's), shear_modulus_small_strain_Pa as
+    "unloading" takes it; InputError naming the first key missing or out of range."""
+    e = calibration.elastic
+    vals = []
+    for name in UNLOADING_LAW_KEYS:
+        v = getattr(e, name, None)
+        ok = v is not None and math.isfinite(v) and (name == "unloading_law_exponent" or v > 0)
+        if not ok:
+            raise InputError(f"moduli = 'unloading_law': the calibration's [elastic] {name} = "
+                             f"{'missing' if v is None else repr(v)}; it must be "
+                             f"{'finite' if name == 'unloading_law_exponent' else '> 0'} "
+                             "(vibroflow calibrate measures it on the DEM run's unloading "
+                             "branch)")
+        vals.append(float(v))
+    check_bulk_law(vals)
+    g = unloading_moduli_shear(calibration)
+    return {"bulk_law": tuple(vals), "bulk_modulus": bulk_law_tangent(vals[4], vals),
+            "shear_modulus": g}
+
+
+def unloading_moduli_shear(calibration: Calibration) -> float:
+    """shear_modulus_small_strain_Pa (Pa) of the calibration; InputError where missing or not
+    > 0."""
+    g = getattr(calibration.elastic, "shear_modulus_small_strain_Pa", None)
+    if g is None or not (math.isfinite(g) and g > 0):
+        raise InputError(f"moduli = 'unloading_law': the calibration's [elastic] "
+                         f"shear_modulus_small_strain_Pa = {'missing' if g is None else repr(g)}"
+                         "; it must be a modulus > 0 Pa (vibroflow calibrate with the cyclic "
+                         "shear test)")
+    return float(g)
 
 
 def material_for(scenario, calibration: Calibration | None, options: ContinuumOptions

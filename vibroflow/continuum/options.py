@@ -71,8 +71,9 @@ DEFAULT_DAMPING = "the default grid's spacing"
 PARTITION_FRICTIONS = ("contacts", "along_flow")
 #: the elastic moduli (material.material_of): the calibration's bulk_modulus_Pa and
 #: shear_modulus_Pa (the default), or the bed's unloading bulk modulus with the small-strain
-#: shear modulus (docs/decisions/unloading-stiffness.md)
-MODULI = ("calibrated", "unloading")
+#: shear modulus, or that branch's tangent law K_t(p) with it
+#: (docs/decisions/unloading-stiffness.md)
+MODULI = ("calibrated", "unloading", "unloading_law")
 
 
 def damping_transfer_cfl(transfer_cfl: float | None, dx: float, damping_length: float
@@ -124,7 +125,9 @@ class ContinuumOptions:
     the partitions' body force takes (material.boundary_friction; default "contacts");
     moduli (MODULI): the elastic moduli, the calibration's K and G ("calibrated", default) or
     its [elastic] unloading_bulk_modulus_Pa and shear_modulus_small_strain_Pa ("unloading":
-    the bed's stiffness as it unloads after a landing, material.material_of).
+    the bed's stiffness as it unloads after a landing, material.material_of), or the tangent
+    law K_t = K_ref (p / p_ref)^n of that branch with the same G ("unloading_law": its
+    [elastic] unloading_law_* keys, material.unloading_law_moduli).
 
     stiffness_factor s < 1 is the continuum's counterpart of the DEM's reduced Young's modulus:
     the elastic moduli K and G (and with them the default wall stiffness) are multiplied by s,

@@ -85,6 +85,15 @@ cyclic packing's excess over the same balls' steady-shear packing phi_ss (the di
 both referred to I = 0, so that the continuum's phi_c (the tub cells' phi(I -> 0)) carries it.
 gamma_c = 0 (default) is the law without compaction, bit for bit.
 
+Option: the unloading law (`bulk_law`, K_ref > 0; any model).  The bulk part of the elastic
+predictor takes the tangent of the bed's measured unloading branch, K_t = K_ref (p / p_ref)^n
+with p the point's pressure at the step's start, clamped to [p_min, p_max], the range the law is
+measured over (vibroflow.calibration.unloading, models.md 4.3): a pressure-dependent bulk
+modulus as in the swelling line of critical-state soil mechanics (K = v p / kappa, Schofield &
+Wroth 1968: n = 1) or Hertzian contacts (n = 1/3, Goddard 1990).  The shear part keeps G; the
+options that read K (dilatancy, compaction, the unloaded packing) keep bulk_modulus, the law's
+largest tangent.  K_ref = 0 (default) is the linear law, bit for bit.
+
 The mu(I) law is ill-posed at very small and very large I (Barker et al. 2015); nothing here
 regularises it, so results must be checked for grid convergence.
 """
@@ -94,8 +103,9 @@ import numba as nb
 import numpy as np
 
 from .constitutive import (DRUCKER_PRAGER, P_D, P_DPHI_CYC, P_ETA, P_ETA_BED, P_G, P_GAMMA_C,
-                           P_I0, P_K, P_KDIL, P_MODEL, P_MU_2, P_MU_DP, P_MU_S, P_PHI_SLOPE,
-                           P_RHO_C, P_RHO_S)
+                           P_I0, P_K, P_KDIL, P_KLAW_N, P_KLAW_P_MAX, P_KLAW_P_MIN,
+                           P_KLAW_P_REF, P_KLAW_REF, P_MODEL, P_MU_2, P_MU_DP, P_MU_S,
+                           P_PHI_SLOPE, P_RHO_C, P_RHO_S)
 
 
 @nb.njit(cache=True, inline="always")
@@ -115,6 +125,16 @@ def elastic_predictor(sxx, szz, sxz, syy, lxx, lxz, lzx, lzz, lyy, dt, K, G):
     nxz = sxz + dt * (2.0 * G * dxz + w * (szz - sxx))
     nyy = syy + dt * (lam * tr + 2.0 * G * lyy)
     return nxx, nzz, nxz, nyy
+
+
+@nb.njit(cache=True, inline="always")
+def bulk_tangent(p, params):
+    """K_t = K_ref (p / p_ref)^n (Pa) of the unloading law at pressure p (Pa) clamped to
+    [p_min, p_max] (module docstring, "Option: the unloading law")."""
+    lo = params[P_KLAW_P_MIN]
+    hi = params[P_KLAW_P_MAX]
+    pc = lo if p < lo else (hi if p > hi else p)
+    return params[P_KLAW_REF] * (pc / params[P_KLAW_P_REF]) ** params[P_KLAW_N]
 
 
 @nb.njit(cache=True, inline="always")
@@ -288,13 +308,17 @@ def update_stress_points_rated(stress, L, density, dt, params, gamma_dot, state,
     K = params[P_K]
     G = params[P_G]
     compaction = params[P_GAMMA_C] > 0.0
+    law = params[P_KLAW_REF] > 0.0
     hoop = L.shape[1] > 4
     rated = rate_ratio.shape[0] > 0
     for p in range(stress.shape[0]):
         lyy = L[p, 4] if hoop else 0.0
+        Kp = K
+        if law:
+            Kp = bulk_tangent(-(stress[p, 0] + stress[p, 1] + stress[p, 3]) / 3.0, params)
         txx, tzz, txz, tyy = elastic_predictor(stress[p, 0], stress[p, 1], stress[p, 2],
                                                stress[p, 3], L[p, 0], L[p, 1], L[p, 2], L[p, 3],
-                                               lyy, dt, K, G)
+                                               lyy, dt, Kp, G)
         sxx, szz, sxz, syy, gp, st = return_map(txx, tzz, txz, tyy, density[p], dt, params,
                                                 rate_ratio[p] if rated else 1.0)
         if compaction and st != 0:

@@ -21,7 +21,7 @@ from collections import namedtuple
 import numba as nb
 import numpy as np
 
-from .kinetic_stress import KINETIC_COLUMNS, RATE_RATIO, kinetic_stress
+from .kinetic_stress import KINETIC_COLUMNS, RATE_RATIO, kinetic_stress, kinetic_stress_cells
 from .temperature_step import TemperatureGrid, step_temperature_pressed
 from .timestep import kinetic_temperature_limit
 from .wall_energy_flux import cell_wall_terms
@@ -78,6 +78,23 @@ def kinetic_stress_of(density, T, L, stress, gamma_dot, phase, ts, out):
         kinetic_stress(density, T, L, stress, gamma_dot, phase, ts.prm, ts.phi_cap, ts.T_cap,
                        ts.eta_factor, out)
         return
+    _passive(out)
+
+
+@nb.njit(cache=True)
+def kinetic_stress_of_cells(density, mass, h, T, L, stress, gamma_dot, phase, ts, out):
+    """`kinetic_stress_of` for Eulerian cells of side h (m) holding mass (N,) kg/m
+    (kinetic_stress.kinetic_stress_cells: at the cell's solid fraction)."""
+    if ts.coupled:
+        kinetic_stress_cells(density, mass, h, T, L, stress, gamma_dot, phase,
+                             ts.prm, ts.phi_cap, ts.T_cap, ts.eta_factor, out)
+        return
+    _passive(out)
+
+
+@nb.njit(cache=True)
+def _passive(out):
+    """out (N, 5): no kinetic stress and the rate ratio 1 (T passive)."""
     for p in range(out.shape[0]):
         for c in range(4):
             out[p, c] = 0.0

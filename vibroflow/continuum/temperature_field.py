@@ -37,7 +37,7 @@ import numpy as np
 
 from vibroflow.scenario.checks import find_contact
 
-from .kinetic_stress import KINETIC_COLUMNS, kinetic_stress
+from .kinetic_stress import KINETIC_COLUMNS, kinetic_stress, kinetic_stress_cells
 from .kinetic_theory import G0_FORMS, KineticParameters
 from .temperature_step import TemperatureGrid, step_temperature_pressed
 from .timestep import kinetic_temperature_limit
@@ -208,7 +208,8 @@ def point_step(T, x, mass, volume, power, origin, shape, dt: float, model: Tempe
 
 def advance_with_temperature(state, n, model: TemperatureModel | None, compiled, balance,
                              start=lambda s_kin: None, *, phi_cap: float = 1.0,
-                             dt: float = 0.0, wave_speed: float = math.inf) -> None:
+                             dt: float = 0.0, wave_speed: float = math.inf,
+                             cells: float = 0.0) -> None:
     """n steps of a formulation, the step-by-step path (the solvers' advance_stepwise; their
     advance runs the same balance inside the compiled loops, temperature_balance.py): without
     the temperature (model None), one compiled call of n steps (compiled(n, s_kin) with an
@@ -216,7 +217,9 @@ def advance_with_temperature(state, n, model: TemperatureModel | None, compiled,
     granular temperature's stress and rate ratio (kinetic_stress.kinetic_stress, phi_cap the
     material's connection packing rho_c / rho_s, dt (s) the step, which with the cells' side
     caps the gas's viscosity, wave_speed (m/s) the elastic wave the step is set for, which caps
-    the T of the kinetic pressure: timestep.kinetic_temperature_limit) scattered by that step,
+    the T of the kinetic pressure: timestep.kinetic_temperature_limit; with cells > 0 (m) the
+    side of Eulerian cells, kinetic_stress_cells, at their solid fraction) scattered by that
+    step,
     its production (W/m^3), then the formulation's balance of T (balance(power, start(s_kin)),
     start taken before the step, given the stress s_kin the step scatters)."""
     n = int(n)
@@ -230,7 +233,12 @@ def advance_with_temperature(state, n, model: TemperatureModel | None, compiled,
     eta_factor = model.spacing_m ** 2 / dt if dt > 0 else np.inf
     T_cap = kinetic_temperature_limit(wave_speed, phi_cap, model.params)
     for _ in range(n):
-        if model.coupled:
+        if model.coupled and cells > 0:
+            kinetic_stress_cells(state.density, state.mass, float(cells),
+                                 state.temperature, state.L, state.stress, state.gamma_dot,
+                                 state.phase, model.params, float(phi_cap), float(T_cap),
+                                 float(eta_factor), s_kin)
+        elif model.coupled:
             kinetic_stress(state.density, state.temperature, state.L, state.stress,
                            state.gamma_dot, state.phase, model.params, float(phi_cap),
                            float(T_cap), float(eta_factor), s_kin)

@@ -245,14 +245,11 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
             sample_step = np.rint(times / system.dt).astype(np.int64)
 
             def advance(m: int) -> None:
-                # a sampler that measures over a sample's step sees its start (Sampler.
-                # splits_sample_step): the same steps, made in two calls
-                if (sampler.splits_sample_step and samples.j < S
+                # a sampler that measures over a sample's step keeps its start (Sampler.
+                # keeps_sample_step_start): the call's last step ends at the sample
+                if (sampler.keeps_sample_step_start and samples.j < S
                         and state.step + m == sample_step[samples.j]):
-                    if m > 1:
-                        form.advance(system, state, m - 1)
-                    sampler.before_sample_step()
-                    form.advance(system, state, 1)
+                    form.advance(system, state, m, keep=sampler.sample_step_start())
                 else:
                     form.advance(system, state, m)
 

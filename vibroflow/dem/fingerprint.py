@@ -34,10 +34,25 @@ def scenario_record(scenario) -> dict:
     return record
 
 
+def run_record(scenario, forget_histories: bool = False, relax_s: float = 0.0) -> dict:
+    """scenario_record, plus "dem_start" where the settled bed starts the vibration otherwise
+    than the scenario says (run_dem's forget_histories and relax_s): a checkpoint of one start
+    resumes only that start, and a run of the scenario's own start keeps its fingerprint."""
+    record = scenario_record(scenario)
+    if forget_histories and not scenario.explicit:  # given balls have no settled histories
+        record["dem_start"] = {"forget_histories": True, "relax_s": float(relax_s)}
+    return record
+
+
+def record_fingerprint(record: dict) -> str:
+    """sha256 of a run record (run_record, scenario_record)."""
+    text = json.dumps(record, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
 def scenario_fingerprint(scenario) -> str:
     """sha256 of scenario_record: a checkpoint resumes only the scenario that wrote it."""
-    text = json.dumps(scenario_record(scenario), sort_keys=True, default=str)
-    return hashlib.sha256(text.encode()).hexdigest()
+    return record_fingerprint(scenario_record(scenario))
 
 
 def _flatten(value, prefix: str = "") -> Iterator[tuple[str, object]]:

@@ -21,9 +21,9 @@ The folder (DIR) as a run leaves it at any instant, and what `--resume` does wit
 A run's end keeps this true at every instant: a checkpoint of the final state, dem.h5
 assembled from the parts (kept), summary.json, the checkpoint removed, the parts removed last.
 A fresh run removes the previous results first, so a summary.json is always its own run's.
-The checkpoint records a fingerprint of the scenario (scenario_fingerprint), the sha256 of its
-own contents and of every result part it counts on: a resume of another scenario or from a
-damaged file is refused in one line (InputError).  Ctrl-C (SIGINT) during the vibration writes a
+The checkpoint records a fingerprint of the scenario and its start (fingerprint.run_record),
+the sha256 of its own contents and of every result part it counts on: a resume of another
+scenario or from a damaged file is refused in one line (InputError).  Ctrl-C (SIGINT) during the vibration writes a
 checkpoint of the current state and raises errors.Interrupted; during the fill it raises
 Interrupted with nothing written.
 """
@@ -50,7 +50,7 @@ from ..threads import requested_threads
 from .checkpoint import (CHECKPOINT_NAME, SUMMARY_NAME, finished_summary, resume_checkpoint,
                          write_checkpoint)
 from .fill import settled_bed
-from .fingerprint import scenario_fingerprint, scenario_record, scenario_toml
+from .fingerprint import record_fingerprint, run_record, scenario_toml
 from .interrupts import fault_sigint_after_steps
 from .output import ResultWriter, fault_kill_at
 from .paraview import VTK_DIR, EarlyFrames, write_vtk
@@ -94,7 +94,8 @@ def run_dem(scenario, out_dir: Path, vtk: VtkOptions | bool | None = None,
     (benchmarks/bar_maps.py --forget-histories, docs/validation.md section 27); with relax_s > 0
     the bed then rests relax_s seconds with the tub at rest before the vibration, as LIGGGHTS'
     --fill-from deck's settling does (its "settle" records "relaxed_s", the kinetic energy per
-    ball and the fastest ball's speed then)."""
+    ball and the fastest ball's speed then).  Both enter the checkpoint's fingerprint
+    (fingerprint.run_record): a resume with the other start is refused."""
     out_dir = Path(out_dir)
     vtk = vtk_options(vtk)
     with folder_lock(out_dir, "vibroflow dem"):
@@ -118,8 +119,8 @@ def _run(scenario, out_dir: Path, system: DEMSystem, vtk: VtkOptions | None, res
     dt = system.dt
     ckpt = out_dir / CHECKPOINT_NAME
     explicit = scenario.explicit
-    record = scenario_record(scenario)
-    fingerprint = scenario_fingerprint(scenario)
+    record = run_record(scenario, forget, relax_s)
+    fingerprint = record_fingerprint(record)
     if resume:
         summary = finished_summary(out_dir, fingerprint, record)
         if summary is not None:

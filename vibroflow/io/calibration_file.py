@@ -97,6 +97,15 @@ class Elastic(Table):
     #: tub run (vibroflow.calibration.unloading); the continuum's --moduli unloading
     unloading_bulk_modulus_Pa: Number | None = None
     unloading_bulk_modulus_stderr_Pa: Number | None = None
+    #: the tangent law of the same branch, K_t = K_ref (p / p_ref)^n on [p_min, p_max]
+    #: (vibroflow.calibration.unloading.unloading_law); the continuum's --moduli unloading-law
+    unloading_law_modulus_Pa: Number | None = None
+    unloading_law_modulus_stderr_Pa: Number | None = None
+    unloading_law_reference_pressure_Pa: Number | None = None
+    unloading_law_exponent: Number | None = None
+    unloading_law_exponent_stderr: Number | None = None
+    unloading_law_min_pressure_Pa: Number | None = None
+    unloading_law_max_pressure_Pa: Number | None = None
 
 
 class DruckerPrager(Table):

@@ -160,7 +160,7 @@ class CellSampler(Sampler):
         model = getattr(system, "temperature", None)
         self.feed = EulerianWallFeed(system, state, self.wall_cells) \
             if model is not None and model.walls is not None else None
-        self.splits_sample_step = self.feed is not None
+        self.keeps_sample_step_start = self.feed is not None
         self.buf_p, self.buf_v = np.zeros((n, 3)), np.zeros((n, 3))
         self.far = np.array([0.0, 0.5 * self.geo.length, 1.0e3])  # outside every analysis cell
         self.dither = np.zeros(n)
@@ -220,8 +220,8 @@ class CellSampler(Sampler):
             if (inside & held).any():
                 samples.rate_probe[j, q] = rate[inside & held].mean()
 
-    def before_sample_step(self) -> None:
-        self.feed.before_last_step()
+    def sample_step_start(self):
+        return self.feed.last_step_start()
 
     def _part_forces(self) -> np.ndarray:
         """(n_parts, 2) the wall law's force (N/m) on the material from each part's wall
@@ -315,8 +315,8 @@ class FixedMesh(Formulation):
         mass, density, stress, top = bed_masses(system, bed_area(scenario, system.material), g)
         return init_state(system, mass, density, stress=stress), top
 
-    def advance(self, system, state, steps: int) -> None:
-        advance(system, state, steps)
+    def advance(self, system, state, steps: int, keep=None) -> None:
+        advance(system, state, steps, keep)
 
     def restore(self, system, saved, meta: dict) -> EulerianState:
         return state_from_checkpoint(system, saved, meta)

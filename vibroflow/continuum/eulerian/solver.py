@@ -74,6 +74,8 @@ NQ = 11
 #: with another process busy, a barrier waited for the scheduler: the whole run took 17.0 s
 #: on two threads against 10.7 s on one, and single steps up to 40 ms
 SERIAL_BELOW = 10_000
+#: the loop with T keeping no step's start (temperature_loop.StepStart of 0 cells)
+NO_STEP_START = temperature_loop.step_start(0)
 
 
 @dataclass
@@ -274,16 +276,20 @@ def _blowup(system, state, ids, what):
         "the stiffness or the speeds reached (lower cfl), or the wall stiffness too low")
 
 
-def advance(system: EulerianSystem, state: EulerianState, n: int) -> None:
+def advance(system: EulerianSystem, state: EulerianState, n: int, keep=None) -> None:
     """n steps of system.dt (the Lagrangian step, then the remap: module docstring) in one
     compiled call (fused.py); raises mpm.ContinuumBlowUp when a cell's mass goes negative or
     its velocity non-finite.  With the temperature (EulerianSystem.temperature), the same call
     carries T: each step followed by the temperature's remap with the step's mass fluxes and
-    its balance on the cells (temperature_loop.py)."""
+    its balance on the cells (temperature_loop.py), and `keep` (temperature_loop.StepStart of
+    the state's cells) receives the start of the call's last step."""
     n = int(n)
     if n <= 0:
         return
-    _advance(system, state, n, *loop_arguments(system, state.n))
+    args = loop_arguments(system, state.n)
+    if keep is not None and len(args) < 2:
+        raise ValueError("keep: the start of a step is kept by the loop with the temperature")
+    _advance(system, state, n, *args, keep=keep)
 
 
 
@@ -330,7 +336,7 @@ def advance_stepwise(system: EulerianSystem, state: EulerianState, n: int) -> No
     advance_with_temperature(state, n, model,
                              lambda k, p_kin: _advance(system, state, k, p_kin), balance, start,
                              phi_cap=phi_cap_of(system.material), dt=system.dt,
-                             wave_speed=system.material.p_wave_speed())
+                             wave_speed=system.material.p_wave_speed(), cells=h)
 
 
 def cell_wall_sums(system: EulerianSystem, state: EulerianState, start=None) -> np.ndarray:
@@ -378,11 +384,13 @@ def _boundaries(system: EulerianSystem, state: EulerianState):
                           else (0.0, 1.0)))
 
 
-def _advance(system: EulerianSystem, state: EulerianState, n: int, p_kin, ts=None) -> None:
+def _advance(system: EulerianSystem, state: EulerianState, n: int, p_kin, ts=None,
+             keep=None) -> None:
     """`advance`'s compiled call: n steps, the granular temperature's stress p_kin (N, 5)
     (kinetic_stress.py: Pa added to the scattered stress, then the return map's rate ratio;
     (0, 5): none); with ts (temperature_balance.TemperatureStep) the loop that computes p_kin
-    and makes the balance of state.temperature after every step (temperature_loop.py)."""
+    and makes the balance of state.temperature after every step (temperature_loop.py), keep
+    (temperature_loop.StepStart) receiving its last step's start."""
     mesh = system.mesh
     mat = system.material
     # the loop without numba's parallel loops on one thread (their launches cost time even
@@ -403,8 +411,9 @@ def _advance(system: EulerianSystem, state: EulerianState, n: int, p_kin, ts=Non
     else:
         t_kernel = temperature_loop.advance_temperature_kernel if parallel else \
             temperature_loop.advance_temperature_kernel_serial
-        done, t, status, lowest, err_max = t_kernel(*args, state.temperature, ts,
-                                                    system.temperature_work)
+        done, t, status, lowest, err_max = t_kernel(
+            *args, state.temperature, ts, system.temperature_work,
+            NO_STEP_START if keep is None else keep)
     state.t = t
     state.step += done
     state.mass_error_max = err_max

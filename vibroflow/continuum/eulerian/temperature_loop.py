@@ -12,21 +12,42 @@ balance on the cells (temperature_balance.balance_cells).  T is state carried th
 loop as the mechanical fields are.
 
 The balance's part runs serially after the step: its numbers depend on nothing but the state
-(the mechanical step's on the cell chunks, never on the threads).
+(the mechanical step's on the cell chunks, never on the threads).  A `StepStart` of n cells
+keeps the start of the call's last step (its masses, velocities, densities and the stress it
+scatters, the kinetic stress added): what eulerian/wall_feed.py measures that step's landing
+from.
 """
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
 
 from ..column_landing import column_terms
 from ..compaction_landing import compaction_terms, x_face_terms
-from ..temperature_balance import balance_cells, kinetic_stress_of
+from ..temperature_balance import balance_cells, kinetic_stress_of_cells
 from ..temperature_field import pressure_Pa, production_W_m3
 from ..wall_energy_flux import contact_terms, landing_terms, partition_terms
 from . import fused
 from .advection import remap_serial
 from .face_impulse import cell_impulse_z
+
+
+class StepStart(NamedTuple):
+    """The start of a compiled call's last step, filled by the loop: mass (n,) kg/m, v (n, 2)
+    m/s, density (n,) kg/m^3, stress (n, 4) Pa with the kinetic stress added; of 0 cells: none
+    kept."""
+
+    mass: np.ndarray
+    v: np.ndarray
+    density: np.ndarray
+    stress: np.ndarray
+
+
+def step_start(n: int) -> StepStart:
+    """A StepStart of n cells to be filled (0: the loop keeps none)."""
+    return StepStart(np.zeros(n), np.zeros((n, 2)), np.zeros(n), np.zeros((n, 4)))
 
 
 @nb.njit(cache=True)
@@ -108,11 +129,12 @@ def _make_kernel(parallel: bool):
 
     @nb.njit(cache=True)
     def advance_temperature_kernel(nsteps, t, mass_error_max, cells, step, mesh, boundaries,
-                                   grid, work, cell_work, T, ts, t_work):
+                                   grid, work, cell_work, T, ts, t_work, keep):
         """Up to nsteps Eulerian steps with the granular temperature T (N,) m^2/s^2 of the
         cells, in place (module docstring); the arguments to t_work as fused.advance_kernel's,
         cells.p_kin (N, 5) the kinetic stress's array; ts a temperature_balance.TemperatureStep;
-        t_work the temperature's remap work (advection.remap_work with one field).
+        t_work the temperature's remap work (advection.remap_work with one field); keep a
+        StepStart the last step's start is copied into (of 0 cells: none).
 
         Returns fused.advance_kernel's (steps done, t, status, lowest cell mass, largest
         |M - M0| / M0): on a status other than OK the step that found it had no balance."""
@@ -133,8 +155,15 @@ def _make_kernel(parallel: bool):
         rho_s = ts.prm.density_kg_m3
         landing = ts.walls and ts.landing
         for s in range(nsteps):
-            kinetic_stress_of(cells.density, T, cells.L, cells.stress, cells.gamma_dot,
-                              cells.phase, ts, p_kin)
+            kinetic_stress_of_cells(cells.density, mass, h, T, cells.L, cells.stress,
+                                    cells.gamma_dot, cells.phase, ts, p_kin)
+            if s == nsteps - 1 and keep.mass.shape[0] == n:
+                keep.mass[:] = mass
+                keep.v[:, :] = v
+                keep.density[:] = cells.density
+                for p in range(n):
+                    for c in range(4):
+                        keep.stress[p, c] = cells.stress[p, c] + p_kin[p, c]
             m_start = mass.copy()
             v_start = v.copy()
             rho_start = cells.density.copy() if landing else cells.density

@@ -1,13 +1,14 @@
 """The U wall's feed of fluctuation energy into an Eulerian run with the granular temperature,
 over the step that ends at a sample (continuum/wall_feed.py; docs/validation.md section 22):
-the step's start kept before it (`before_last_step`), the wall layer's contact terms of the U
-alone (the partitions off) from the run's own cell_wall_sums after it."""
+the step's start kept before it (`before_last_step`) or by the compiled loop that makes it
+(`last_step_start`, solver.advance's keep), the wall layer's contact terms of the U alone (the
+partitions off) from the run's own cell_wall_sums after it."""
 from __future__ import annotations
 
 import numpy as np
 
 from ..kinetic_stress import KINETIC_COLUMNS
-from ..temperature_balance import kinetic_stress_of, temperature_step
+from ..temperature_balance import kinetic_stress_of_cells, temperature_step
 from ..wall_feed import cell_feed_W_m
 from . import solver as eulerian
 from . import temperature_loop
@@ -29,9 +30,16 @@ class EulerianWallFeed:
     def before_last_step(self) -> None:
         """Keep the step's start (the landing's reference) before the sample's step."""
         s = self.state
-        kinetic_stress_of(s.density, s.temperature, s.L, s.stress, s.gamma_dot, s.phase,
-                          self.ts, self.p_kin)
+        kinetic_stress_of_cells(s.density, s.mass, self.system.mesh.h, s.temperature, s.L, s.stress, s.gamma_dot,
+                                s.phase, self.ts, self.p_kin)
         self.start = (s.mass.copy(), s.v.copy(), s.density.copy(), s.stress + self.p_kin[:, :4])
+
+    def last_step_start(self) -> temperature_loop.StepStart:
+        """Buffers for solver.advance's keep: the compiled loop fills them with the start of
+        its call's last step, the landing's reference (what `before_last_step` keeps)."""
+        keep = temperature_loop.step_start(self.state.n)
+        self.start = tuple(keep)
+        return keep
 
     def feed(self):
         """(x (n, 2) m, feed (n,) W/m) of the wall layer's cells over the step just made."""

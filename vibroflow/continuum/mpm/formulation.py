@@ -258,8 +258,8 @@ class MaterialPointMethod(Formulation):
                                                     0.5 * system.grid.dx)
         return init_state(system, x, volume, density, stress=stress), h
 
-    def advance(self, system, state, steps: int) -> None:
-        advance(system, state, steps)
+    def advance(self, system, state, steps: int, keep=None) -> None:
+        advance(system, state, steps)  # its samplers keep no step's start
 
     def restore(self, system, saved, meta: dict) -> MPMState:
         # a run without the temperature stores none
