@@ -1,7 +1,7 @@
 """The bar's impact map in vibroflow's DEM and in LIGGGHTS 3.8 (the exported deck with the bar as
 an STL mesh) on a short or the full tub47-bar, each code with several fill seeds.
 
-    python benchmarks/bar_maps.py [--case short|full] [--seeds 1 2] [--codes dem liggghts]
+    python benchmarks/bar_maps.py [--case short|full|preset] [--seeds 1 2] [--codes dem liggghts]
                                   [--out DIR] [--from-dem-fill] [--forget-histories [--relax S]]
                                   [--judge]
 
@@ -16,7 +16,11 @@ media, settled as the preset settles (0.5 s, at most 2 s), with the short case's
 seed in minutes, LIGGGHTS from the DEM's bed taking 17 ms a step on 2 cores (its 1 um meshes
 move every step: 300 000 steps, some 90 minutes) and the DEM 2 - 3 ms (10 - 14 minutes); with
 0.25 s a seed takes the DEM 1 min (plus 1.5 - 3.5 min of settling, which the fill cache keeps)
-and LIGGGHTS 8 min (docs/validation.md section 27, "The full tub47-bar").  Writes DIR/<code>-seed<N>/ (the runs),
+and LIGGGHTS 8 min (docs/validation.md section 27, "The full tub47-bar").  --case preset
+(PRESET_SETS): the tub47-bar preset as it stands, 3 s of vibration averaged over the last 2 s
+(94 cycles, 4 batches); with LIGGGHTS inserting its own bed (2.5 ms a step on 2 cores, 13 - 40
+min a seed) and the DEM (13 - 17 min a seed), without --from-dem-fill (its 1 um meshes: 90 min
+a seed) (section 27, "The preset's own window").  Writes DIR/<code>-seed<N>/ (the runs),
 DIR/<code>-seed<N>.csv (the bar's map, vibroflow.analysis.impact_maps.write_map_csv) and prints
 the map differences E_rate and E_speed between the seeds of each code and between the codes.
 Default DIR: runs/bar_maps (git-ignored).  --from-dem-fill: LIGGGHTS starts from the DEM run's
