@@ -78,18 +78,30 @@ def unloading_moduli(calibration: Calibration) -> dict:
     """{bulk_modulus, shear_modulus} (Pa) of moduli = "unloading": the calibration's [elastic]
     unloading_bulk_modulus_Pa and shear_modulus_small_strain_Pa; InputError where either is
     missing or not > 0."""
-    e = calibration.elastic
-    k = getattr(e, "unloading_bulk_modulus_Pa", None)
-    g = getattr(e, "shear_modulus_small_strain_Pa", None)
-    for name, v, how in (("unloading_bulk_modulus_Pa", k, "vibroflow calibrate measures it on "
-                                                           "the DEM run's unloading branch"),
-                         ("shear_modulus_small_strain_Pa", g, "vibroflow calibrate with the "
-                                                              "cyclic shear test")):
-        if v is None or not (math.isfinite(v) and v > 0):
-            raise InputError(f"moduli = 'unloading': the calibration's [elastic] {name} = "
-                             f"{'missing' if v is None else repr(v)}; it must be a modulus > 0 "
-                             f"Pa ({how})")
-    return {"bulk_modulus": float(k), "shear_modulus": float(g)}
+    k = _elastic_key(calibration, "unloading", "unloading_bulk_modulus_Pa", "a modulus > 0 Pa",
+                     _BRANCH)
+    return {"bulk_modulus": k, "shear_modulus": _small_strain_shear(calibration, "unloading")}
+
+
+_BRANCH = "vibroflow calibrate measures it on the DEM run's unloading branch"
+
+
+def _elastic_key(calibration: Calibration, moduli: str, name: str, must: str, how: str,
+                 positive: bool = True) -> float:
+    """The calibration's [elastic] `name` (finite, and > 0 when positive) for --moduli
+    `moduli`; else a one-line InputError saying what it must be (`must`) and what measures it
+    (`how`)."""
+    v = getattr(calibration.elastic, name, None)
+    if v is None or not (math.isfinite(v) and (v > 0 or not positive)):
+        raise InputError(f"moduli = {moduli!r}: the calibration's [elastic] {name} = "
+                         f"{'missing' if v is None else repr(v)}; it must be {must} ({how})")
+    return float(v)
+
+
+def _small_strain_shear(calibration: Calibration, moduli: str) -> float:
+    """shear_modulus_small_strain_Pa (Pa), what both unloading moduli take for G."""
+    return _elastic_key(calibration, moduli, "shear_modulus_small_strain_Pa", "a modulus > 0 Pa",
+                        "vibroflow calibrate with the cyclic shear test")
 
 
 #: the unloading law's [elastic] keys: K_ref, p_ref, n, p_min, p_max (ContinuumMaterial.bulk_law)
@@ -104,34 +116,13 @@ def unloading_law_moduli(calibration: Calibration) -> dict:
     DEM run's unloading branch, vibroflow.calibration.unloading.unloading_law), bulk_modulus
     its largest tangent K_t(p_max) (the time step's), shear_modulus_small_strain_Pa as
     "unloading" takes it; InputError naming the first key missing or out of range."""
-    e = calibration.elastic
-    vals = []
-    for name in UNLOADING_LAW_KEYS:
-        v = getattr(e, name, None)
-        ok = v is not None and math.isfinite(v) and (name == "unloading_law_exponent" or v > 0)
-        if not ok:
-            raise InputError(f"moduli = 'unloading_law': the calibration's [elastic] {name} = "
-                             f"{'missing' if v is None else repr(v)}; it must be "
-                             f"{'finite' if name == 'unloading_law_exponent' else '> 0'} "
-                             "(vibroflow calibrate measures it on the DEM run's unloading "
-                             "branch)")
-        vals.append(float(v))
+    vals = [_elastic_key(calibration, "unloading_law", name,
+                         "finite" if name == "unloading_law_exponent" else "> 0", _BRANCH,
+                         positive=name != "unloading_law_exponent")
+            for name in UNLOADING_LAW_KEYS]
     check_bulk_law(vals)
-    g = unloading_moduli_shear(calibration)
     return {"bulk_law": tuple(vals), "bulk_modulus": bulk_law_tangent(vals[4], vals),
-            "shear_modulus": g}
-
-
-def unloading_moduli_shear(calibration: Calibration) -> float:
-    """shear_modulus_small_strain_Pa (Pa) of the calibration; InputError where missing or not
-    > 0."""
-    g = getattr(calibration.elastic, "shear_modulus_small_strain_Pa", None)
-    if g is None or not (math.isfinite(g) and g > 0):
-        raise InputError(f"moduli = 'unloading_law': the calibration's [elastic] "
-                         f"shear_modulus_small_strain_Pa = {'missing' if g is None else repr(g)}"
-                         "; it must be a modulus > 0 Pa (vibroflow calibrate with the cyclic "
-                         "shear test)")
-    return float(g)
+            "shear_modulus": _small_strain_shear(calibration, "unloading_law")}
 
 
 def material_for(scenario, calibration: Calibration | None, options: ContinuumOptions
