@@ -111,8 +111,9 @@ def test_connected_material_gets_only_the_capped_kinetic_pressure():
 def test_a_gas_compressed_past_the_connection_packing_reads_both_pressures_there():
     # a disconnected cell may be compressed past phi_cap in a step (the Eulerian's remap): both
     # pressures are read at phi_cap, so the frictional one's (phi_rcp - phi)^-5 stays bounded
-    # (tub47-quick's calibrated Fr 10.6 Pa, phi_min 0.573, phi_rcp 0.635: at phi_cap 0.6,
-    # 10.6 0.027^2 / 0.035^5 = 147.2 Pa; at 0.6349 it would be 1.2e17 Pa)
+    # (Fr 10.6 Pa, phi_min 0.573, phi_rcp 0.635, the joint fit on the DEM draw of
+    # tests/data/tub47-quick-dem, validation.md 24: at phi_cap 0.6, 10.6 0.027^2 / 0.035^5 =
+    # 147.2 Pa; at 0.6349 it would be 1.2e17 Pa)
     prm = PRM._replace(phi_rcp=0.635, frictional_Pa=10.6, frictional_phi_min=0.573)
     T = 0.01
     s = _one(0.6349 * 7800.0, T, (0.0, 0.0, 0.0, 0.0), prm=prm)
