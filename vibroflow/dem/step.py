@@ -208,6 +208,12 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
     if lo >= hi:
         return
     T = TILE
+    # the rolling histories travel through the tiles only where a law keeps them (EPSD)
+    nh = 3
+    for a in range(table.shape[0]):
+        for bb in range(table.shape[1]):
+            if table[a, bb, P_ROLL] == ROLL_EPSD:
+                nh = 6
     # beyond a quarter of the length apart along y, the minimum image may differ from the
     # stored branch; nearer, np.rint(dy / L) is 0 and the image is the branch itself
     wrap = 0.25 * periodic_length if periodic_length > 0.0 else np.inf
@@ -229,18 +235,15 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
     i = lo
     k = nbr_start[lo]
     while i < hi:
-        # (1) the next tile's touching entries
+        # (1a) the next tile's touching entries, listed without a branch on the test (a
+        # third of the entries touch, in no order a branch predictor learns): each entry is
+        # written at place n, and n moves on when it touches
         n = 0
-        mat0_i = mat0_j = -1
-        mixed = False
         while i < hi and n < T:
-            ri = radius[i]
-            mi = mass[i]
-            mat_i = mat[i]
             xi = pos[i, 0]
             yi = pos[i, 1]
             zi = pos[i, 2]
-            same_i = ri == key_ri and mi == key_mi and mat_i == key_mat_i
+            ri = radius[i]
             kend = nbr_start[i + 1]
             while k < kend and n < T:
                 # the untouched entry's rejection first: three loads of j, no call, no division
@@ -252,25 +255,9 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
                     dy -= periodic_length * np.rint(dy / periodic_length)
                 rsum = ri + radius[j]
                 d2 = dx * dx + dy * dy + dz * dz
-                if d2 >= rsum * rsum:
-                    if flag[k]:
-                        _part(hist, flag, rflag, rpos, k)
-                    k += 1
-                    continue
-                rj = radius[j]
-                mj = mass[j]
-                mat_j = mat[j]
-                if not (same_i and rj == key_rj and mj == key_mj and mat_j == key_mat_j):
-                    m_eff = mi * mj / (mi + mj)
-                    r_eff = ri * rj / (ri + rj)
-                    kn, damp = normal_constants(table[mat_i, mat_j], r_eff, m_eff)
-                    key_ri, key_mi, key_mat_i = ri, mi, mat_i
-                    key_rj, key_mj, key_mat_j = rj, mj, mat_j
-                    same_i = True
-                if n == 0:
-                    mat0_i, mat0_j = mat_i, mat_j
-                elif mat_i != mat0_i or mat_j != mat0_j:
-                    mixed = True
+                touch = np.int64(d2 < rsum * rsum)
+                if flag[k] > touch:  # parted since the last step
+                    _part(hist, flag, rflag, rpos, k)
                 bi[I_K * T + n] = k
                 bi[I_I * T + n] = i
                 bi[I_J * T + n] = j
@@ -279,30 +266,55 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
                 b[T_DZ * T + n] = dz
                 b[T_D2 * T + n] = d2
                 b[T_RSUM * T + n] = rsum
-                b[T_RI * T + n] = ri
-                b[T_RJ * T + n] = rj
-                b[T_DVX * T + n] = vel[i, 0] - vel[j, 0]
-                b[T_DVY * T + n] = vel[i, 1] - vel[j, 1]
-                b[T_DVZ * T + n] = vel[i, 2] - vel[j, 2]
-                b[T_WIX * T + n] = omg[i, 0]
-                b[T_WIY * T + n] = omg[i, 1]
-                b[T_WIZ * T + n] = omg[i, 2]
-                b[T_WJX * T + n] = omg[j, 0]
-                b[T_WJY * T + n] = omg[j, 1]
-                b[T_WJZ * T + n] = omg[j, 2]
-                b[T_REFF * T + n] = r_eff
-                b[T_KN * T + n] = kn
-                b[T_DAMP * T + n] = damp
-                b[T_H0 * T + n] = hist[k, 0]
-                b[T_H1 * T + n] = hist[k, 1]
-                b[T_H2 * T + n] = hist[k, 2]
-                b[T_H3 * T + n] = hist[k, 3]
-                b[T_H4 * T + n] = hist[k, 4]
-                b[T_H5 * T + n] = hist[k, 5]
-                n += 1
+                n += touch
                 k += 1
             if k == kend:
                 i += 1
+        # (1b) their balls' velocities, spins, pair constants and histories
+        mat0_i = mat0_j = -1
+        mixed = False
+        for m in range(n):
+            kk = bi[I_K * T + m]
+            ii = bi[I_I * T + m]
+            jj = bi[I_J * T + m]
+            ri = radius[ii]
+            mi = mass[ii]
+            mat_i = mat[ii]
+            rj = radius[jj]
+            mj = mass[jj]
+            mat_j = mat[jj]
+            if not (ri == key_ri and mi == key_mi and mat_i == key_mat_i and rj == key_rj
+                    and mj == key_mj and mat_j == key_mat_j):
+                m_eff = mi * mj / (mi + mj)
+                r_eff = ri * rj / (ri + rj)
+                kn, damp = normal_constants(table[mat_i, mat_j], r_eff, m_eff)
+                key_ri, key_mi, key_mat_i = ri, mi, mat_i
+                key_rj, key_mj, key_mat_j = rj, mj, mat_j
+            if m == 0:
+                mat0_i, mat0_j = mat_i, mat_j
+            elif mat_i != mat0_i or mat_j != mat0_j:
+                mixed = True
+            b[T_RI * T + m] = ri
+            b[T_RJ * T + m] = rj
+            b[T_DVX * T + m] = vel[ii, 0] - vel[jj, 0]
+            b[T_DVY * T + m] = vel[ii, 1] - vel[jj, 1]
+            b[T_DVZ * T + m] = vel[ii, 2] - vel[jj, 2]
+            b[T_WIX * T + m] = omg[ii, 0]
+            b[T_WIY * T + m] = omg[ii, 1]
+            b[T_WIZ * T + m] = omg[ii, 2]
+            b[T_WJX * T + m] = omg[jj, 0]
+            b[T_WJY * T + m] = omg[jj, 1]
+            b[T_WJZ * T + m] = omg[jj, 2]
+            b[T_REFF * T + m] = r_eff
+            b[T_KN * T + m] = kn
+            b[T_DAMP * T + m] = damp
+            b[T_H0 * T + m] = hist[kk, 0]
+            b[T_H1 * T + m] = hist[kk, 1]
+            b[T_H2 * T + m] = hist[kk, 2]
+            if nh == 6:
+                b[T_H3 * T + m] = hist[kk, 3]
+                b[T_H4 * T + m] = hist[kk, 4]
+                b[T_H5 * T + m] = hist[kk, 5]
         # (2) the law over the tile
         if n == 0:
             continue
@@ -336,7 +348,7 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
                                   pos[ii, 0] - ri * b[T_NX * T + m],
                                   pos[ii, 1] - ri * b[T_NY * T + m],
                                   pos[ii, 2] - ri * b[T_NZ * T + m], -b[T_VN * T + m], ii)
-            for a in range(6):
+            for a in range(nh):
                 hist[kk, a] = b[(T_H0 + a) * T + m]
             fx = b[T_FX * T + m]
             fy = b[T_FY * T + m]
