@@ -318,9 +318,9 @@ def contact_velocity(dvx, dvy, dvz, wix, wiy, wiz, wjx, wjy, wjz, ri, rj, nx, ny
 @nb.njit(cache=True, inline="always")
 def ball_pair(i, j, q, dx, dy, dz, dvx, dvy, dvz, balls, pairs, par, dt_hist, fbuf, tbuf, c):
     """One listed pair of balls (i, j), entry q of a neighbour list: the pair kernel of the
-    Lees-Edwards box (vibroflow.dem.periodic_step).  The tub's step (vibroflow.dem.step) writes
-    the same operations out in its chunk loop: through this function it costs about a quarter
-    more (benchmarks/dem_step_cost.py, one thread, tub47-quick).
+    Lees-Edwards box (vibroflow.dem.periodic_step).  The tub's step (vibroflow.dem.step) makes
+    the same operations over tiles of contacts (`contact_law` in a loop vectorised across
+    them), with the same bits.
 
     (dx, dy, dz) = r_i - r_j (m) is the branch vector to the image of j the caller chose;
     (dvx, dvy, dvz) (m/s) is added to the material relative velocity: the velocity of i's frame

@@ -28,10 +28,17 @@ Force assembly whose numbers do not depend on the thread count (DEVELOPERS.md, "
    once, by the thread that has ball i, its contact history advanced once; the force and the
    torque on i are summed into i's force and torque (from its weight) as the entries come, and
    the force and torque on j are written to the entry's own slot, kept in the list's reverse
-   order (vibroflow.dem.neighbours: no two entries share a slot, no races, no atomics).  An
-   entry apart costs three loads of j's position and its radius, a squared distance and one
-   comparison; a contact reuses m_eff, R_eff and the law's constants of the contact before
-   when its balls are of the same kind (the same inputs, the same bits);
+   order (vibroflow.dem.neighbours: no two entries share a slot, no races, no atomics).  The
+   block's entries go in tiles of up to TILE touching ones: (1a) the distance tests, each
+   entry written at the tile's next place and that place kept when it touches (no branch on
+   the test); (1b) the touching entries' velocities, spins, pair constants (m_eff, R_eff and
+   the law's constants reused from the contact before when its balls are of the same kind:
+   the same inputs, the same bits) and histories gathered into the tile's columns; (2) the
+   unit normal, contact velocity and law over the tile (`_law_tile`), a loop LLVM vectorises
+   across contacts (4 doubles a ymm register on AVX-512 machines: packed vsqrtpd, vdivpd,
+   vmulpd, no FMA), which makes the scalar law's IEEE operations in the scalar law's order for
+   each contact, so the same bits (tests/test_contact_tile.py); (3) the tile's contacts in
+   entry order: flags, impact rows, slots, histories, each ball's sums, the largest overlap;
 2. gather (`_gather_block`): each ball j adds the slots of the entries where it is the second
    ball, in ascending entry order, reading them in sequence;
 3. walls (`wall_pass.ball_walls`): each ball's wall contacts, added one after the other;
