@@ -132,12 +132,41 @@ def contact_force(delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, r_i, r_j, r_eff, m_
 def contact_force_with(delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, r_i, r_j, r_eff, par, kn,
                        damp, hist, dt):
     """`contact_force` with the normal law's constants (kn, damp) of `normal_constants`."""
+    roll = par[P_ROLL]
+    (fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz, fn, ft, sliding,
+     hx, hy, hz, mx, my, mz) = contact_law(
+        delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, r_i, r_j, r_eff, par[P_MODEL], roll,
+        par[P_KT], par[P_MU], par[P_MUR], kn, damp,
+        hist[0], hist[1], hist[2], hist[3], hist[4], hist[5], dt)
+    hist[0] = hx
+    hist[1] = hy
+    hist[2] = hz
+    if roll == ROLL_EPSD:
+        hist[3] = mx
+        hist[4] = my
+        hist[5] = mz
+    return fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz, fn, ft, sliding
+
+
+@nb.njit(cache=True, inline="always", fastmath=False)
+def contact_law(delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, r_i, r_j, r_eff, model, roll,
+                kt_ratio, mu, mu_r, kn, damp, h0, h1, h2_, h3, h4, h5, dt):
+    """The contact law's arithmetic, on numbers alone: the one source of `contact_force_with`
+    (which reads the parameters from a table row and the history from its array) and of the
+    tub step's law over a tile of contacts (step._law_loop, vectorised across contacts: each
+    branch below is free of side effects, so LLVM turns it into a select of both sides, the
+    same IEEE operations a contact).
+
+    model, roll: the row's P_MODEL and P_ROLL; kt_ratio, mu, mu_r its P_KT, P_MU, P_MUR;
+    (h0, h1, h2_) the tangential history and (h3, h4, h5) the EPSD rolling torque.  Returns
+    `contact_force`'s 12 numbers, then the tangential history and the rolling history after
+    the step (the latter as given unless roll is EPSD)."""
     vn = vx * nx + vy * ny + vz * nz  # > 0 separating
-    if par[P_MODEL] == MODEL_LINEAR:
+    if model == MODEL_LINEAR:
         gamma = damp
         f_elastic = kn * delta
         fn = f_elastic - gamma * vn
-        kt = par[P_KT] * kn
+        kt = kt_ratio * kn
         kn_tangent = kn
     else:
         k = kn
@@ -145,7 +174,7 @@ def contact_force_with(delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, r_i, r_j, r_ef
         c = damp
         f_elastic = k * delta * sd
         fn = f_elastic - c * np.sqrt(sd) * vn
-        kt = par[P_KT] * np.sqrt(r_eff * delta)
+        kt = kt_ratio * np.sqrt(r_eff * delta)
         kn_tangent = 1.5 * k * sd
 
     # tangential relative velocity
@@ -154,9 +183,9 @@ def contact_force_with(delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, r_i, r_j, r_ef
     vtz = vz - vn * nz
 
     # turn the history into the current tangent plane, keeping its length
-    hx = hist[0]
-    hy = hist[1]
-    hz = hist[2]
+    hx = h0
+    hy = h1
+    hz = h2_
     h2 = hx * hx + hy * hy + hz * hz
     if h2 > 0.0:
         hx, hy, hz = into_plane(hx, hy, hz, nx, ny, nz, h2)
@@ -167,7 +196,7 @@ def contact_force_with(delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, r_i, r_j, r_ef
     fty = -kt * hy
     ftz = -kt * hz
     ft = np.sqrt(ftx * ftx + fty * fty + ftz * ftz)
-    limit = par[P_MU] * abs(fn)
+    limit = mu * abs(fn)
     sliding = 0
     if ft > limit:
         sliding = 1
@@ -181,9 +210,6 @@ def contact_force_with(delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, r_i, r_j, r_ef
             hx = -ftx / kt
             hy = -fty / kt
             hz = -ftz / kt
-    hist[0] = hx
-    hist[1] = hy
-    hist[2] = hz
 
     fx = fn * nx + ftx
     fy = fn * ny + fty
@@ -200,13 +226,15 @@ def contact_force_with(delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, r_i, r_j, r_ef
     tjy = -r_j * cy
     tjz = -r_j * cz
 
-    roll = par[P_ROLL]
+    hmx = h3
+    hmy = h4
+    hmz = h5
     if roll != 0.0:
         wn = wx * nx + wy * ny + wz * nz
         wrx = wx - wn * nx
         wry = wy - wn * ny
         wrz = wz - wn * nz
-        mlimit = par[P_MUR] * r_eff * abs(fn)
+        mlimit = mu_r * r_eff * abs(fn)
         mx = 0.0
         my = 0.0
         mz = 0.0
@@ -223,15 +251,15 @@ def contact_force_with(delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, r_i, r_j, r_ef
             # |omega_rolling| / |omega| (docs/liggghts.md "Differences that remain")
             w = np.sqrt(wx * wx + wy * wy + wz * wz)
             if w > 1e-12:
-                m = par[P_MUR] * r_eff * f_elastic / w
+                m = mu_r * r_eff * f_elastic / w
                 mx = -m * wrx
                 my = -m * wry
                 mz = -m * wrz
         elif roll == ROLL_EPSD:
-            kr = 2.25 * kn_tangent * par[P_MUR] * par[P_MUR] * r_eff * r_eff
-            mx = hist[3]
-            my = hist[4]
-            mz = hist[5]
+            kr = 2.25 * kn_tangent * mu_r * mu_r * r_eff * r_eff
+            mx = h3
+            my = h4
+            mz = h5
             mx, my, mz = into_plane(mx, my, mz, nx, ny, nz, mx * mx + my * my + mz * mz)
             mx -= kr * wrx * dt
             my -= kr * wry * dt
@@ -242,16 +270,17 @@ def contact_force_with(delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, r_i, r_j, r_ef
                 mx *= s
                 my *= s
                 mz *= s
-            hist[3] = mx
-            hist[4] = my
-            hist[5] = mz
+            hmx = mx
+            hmy = my
+            hmz = mz
         tix += mx
         tiy += my
         tiz += mz
         tjx -= mx
         tjy -= my
         tjz -= mz
-    return fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz, fn, ft, sliding
+    return (fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz, fn, ft, sliding,
+            hx, hy, hz, hmx, hmy, hmz)
 
 
 @nb.njit(cache=True, inline="always")
@@ -269,20 +298,29 @@ def branch_vector(pos, i, j, periodic_length):
 def pair_contact_velocity(vel, omg, i, j, ri, rj, nx, ny, nz):
     """Velocity of i's material relative to j's at their contact point (normal n from j to i):
     v_i - v_j - (r_i w_i + r_j w_j) x n."""
-    wsx = ri * omg[i, 0] + rj * omg[j, 0]
-    wsy = ri * omg[i, 1] + rj * omg[j, 1]
-    wsz = ri * omg[i, 2] + rj * omg[j, 2]
-    return (vel[i, 0] - vel[j, 0] - (wsy * nz - wsz * ny),
-            vel[i, 1] - vel[j, 1] - (wsz * nx - wsx * nz),
-            vel[i, 2] - vel[j, 2] - (wsx * ny - wsy * nx))
+    return contact_velocity(vel[i, 0] - vel[j, 0], vel[i, 1] - vel[j, 1], vel[i, 2] - vel[j, 2],
+                            omg[i, 0], omg[i, 1], omg[i, 2], omg[j, 0], omg[j, 1], omg[j, 2],
+                            ri, rj, nx, ny, nz)
+
+
+@nb.njit(cache=True, inline="always")
+def contact_velocity(dvx, dvy, dvz, wix, wiy, wiz, wjx, wjy, wjz, ri, rj, nx, ny, nz):
+    """`pair_contact_velocity` on numbers: (dvx, dvy, dvz) = v_i - v_j (m/s), w_i and w_j the
+    spins (rad/s)."""
+    wsx = ri * wix + rj * wjx
+    wsy = ri * wiy + rj * wjy
+    wsz = ri * wiz + rj * wjz
+    return (dvx - (wsy * nz - wsz * ny),
+            dvy - (wsz * nx - wsx * nz),
+            dvz - (wsx * ny - wsy * nx))
 
 
 @nb.njit(cache=True, inline="always")
 def ball_pair(i, j, q, dx, dy, dz, dvx, dvy, dvz, balls, pairs, par, dt_hist, fbuf, tbuf, c):
     """One listed pair of balls (i, j), entry q of a neighbour list: the pair kernel of the
-    Lees-Edwards box (vibroflow.dem.periodic_step).  The tub's step (vibroflow.dem.step) writes
-    the same operations out in its chunk loop: through this function it costs about a quarter
-    more (benchmarks/dem_step_cost.py, one thread, tub47-quick).
+    Lees-Edwards box (vibroflow.dem.periodic_step).  The tub's step (vibroflow.dem.step) makes
+    the same operations over tiles of contacts (`contact_law` in a loop vectorised across
+    them), with the same bits.
 
     (dx, dy, dz) = r_i - r_j (m) is the branch vector to the image of j the caller chose;
     (dvx, dvy, dvz) (m/s) is added to the material relative velocity: the velocity of i's frame

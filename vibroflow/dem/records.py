@@ -74,6 +74,8 @@ class Work(NamedTuple):
     save: np.ndarray       # (N, 9) each ball's position, velocity, spin before a drift
     imp_flush: np.ndarray  # (2,) a block's rows past which advance stops: ball-ball and wall,
     #                        ball-part (vibroflow.dem.impact_order)
+    tile: np.ndarray       # (nblock, step.N_TILE * step.TILE) a tile of contacts' columns
+    tile_idx: np.ndarray   # (nblock, step.N_TILE_IDX * step.TILE) int64 their entry, i, j
 
 
 class Params(NamedTuple):

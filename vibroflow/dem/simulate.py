@@ -221,7 +221,9 @@ class _Buffers:
         self.work = Work(imp_buf=np.zeros((nblock, IMPACT_CAPACITY, K.N_IMP_BUF)),
                          imp_count=np.zeros(nblock, np.int64), diag=np.empty((nblock, K.N_DIAG)),
                          pose=np.zeros(8), moved=np.zeros(nblock), save=np.zeros((state.n, 9)),
-                         imp_flush=np.array([IMPACT_FLUSH, PT.IMPACT_FLUSH], np.int64))
+                         imp_flush=np.array([IMPACT_FLUSH, PT.IMPACT_FLUSH], np.int64),
+                         tile=np.zeros((nblock, K.N_TILE * K.TILE)),
+                         tile_idx=np.zeros((nblock, K.N_TILE_IDX * K.TILE), np.int64))
         #: the storage order of the last space sort (memory_order), taken up again by the
         #: next run_steps call
         self.order: np.ndarray | None = None

@@ -28,10 +28,17 @@ Force assembly whose numbers do not depend on the thread count (DEVELOPERS.md, "
    once, by the thread that has ball i, its contact history advanced once; the force and the
    torque on i are summed into i's force and torque (from its weight) as the entries come, and
    the force and torque on j are written to the entry's own slot, kept in the list's reverse
-   order (vibroflow.dem.neighbours: no two entries share a slot, no races, no atomics).  An
-   entry apart costs three loads of j's position and its radius, a squared distance and one
-   comparison; a contact reuses m_eff, R_eff and the law's constants of the contact before
-   when its balls are of the same kind (the same inputs, the same bits);
+   order (vibroflow.dem.neighbours: no two entries share a slot, no races, no atomics).  The
+   block's entries go in tiles of up to TILE touching ones: (1a) the distance tests, each
+   entry written at the tile's next place and that place kept when it touches (no branch on
+   the test); (1b) the touching entries' velocities, spins, pair constants (m_eff, R_eff and
+   the law's constants reused from the contact before when its balls are of the same kind:
+   the same inputs, the same bits) and histories gathered into the tile's columns; (2) the
+   unit normal, contact velocity and law over the tile (`_law_tile`), a loop LLVM vectorises
+   across contacts (4 doubles a ymm register on AVX-512 machines: packed vsqrtpd, vdivpd,
+   vmulpd, no FMA), which makes the scalar law's IEEE operations in the scalar law's order for
+   each contact, so the same bits (tests/test_contact_tile.py); (3) the tile's contacts in
+   entry order: flags, impact rows, slots, histories, each ball's sums, the largest overlap;
 2. gather (`_gather_block`): each ball j adds the slots of the entries where it is the second
    ball, in ascending entry order, reading them in sequence;
 3. walls (`wall_pass.ball_walls`): each ball's wall contacts, added one after the other;
@@ -53,8 +60,10 @@ from ..tub.motion import pose as tub_pose
 from .block_record import (D_BALL_I, D_BALL_J, D_BALL_OVERLAP, D_LOST, D_NAN,  # noqa: F401
                            D_WALL_I, D_WALL_OVERLAP, D_WALL_W, IMP_COLUMNS, N_DIAG, N_IMP_BUF,
                            ROW_BALL, keep_largest, record_impact)
-from .contact import (add_force_torque, contact_force_with, forget, normal_constants,
-                      pair_contact_velocity, put3, unit_normal)
+from .contact import (add_force_torque, contact_law, contact_velocity, forget,
+                      normal_constants, put3, unit_normal)
+from .laws import (MODEL_HERTZ, MODEL_LINEAR, P_KT, P_MODEL, P_MU, P_MUR, P_ROLL, ROLL_CDT,
+                   ROLL_CDT_LIGGGHTS, ROLL_EPSD, ROLL_NONE)
 from .wall_pass import ball_walls
 from .walls import KIND_BALL_BALL, TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT
 
@@ -77,12 +86,121 @@ def _part(hist, flag, rflag, rpos, k):
     rflag[rpos[k]] = 0
 
 
+# A tile: up to TILE touching entries of a block, one column of TILE numbers a quantity in
+# the block's row of work.tile (T_* * TILE + m) and work.tile_idx (I_* * TILE + m).  Offsets
+# that are constants of one array let LLVM prove that the law's loop (_law_loop) reads and
+# writes no column twice, and vectorise it without run-time alias checks.
+TILE = 128
+(T_DX, T_DY, T_DZ, T_D2, T_RSUM, T_RI, T_RJ, T_DVX, T_DVY, T_DVZ, T_WIX, T_WIY, T_WIZ,
+ T_WJX, T_WJY, T_WJZ, T_REFF, T_KN, T_DAMP, T_H0, T_H1, T_H2, T_H3, T_H4, T_H5,
+ T_FX, T_FY, T_FZ, T_TIX, T_TIY, T_TIZ, T_TJX, T_TJY, T_TJZ,
+ T_DELTA, T_NX, T_NY, T_NZ, T_VN) = range(39)
+N_TILE = 39
+I_K, I_I, I_J = range(3)
+N_TILE_IDX = 3
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _law_one(b, m, model, roll, kt_ratio, mu, mu_r, dt):
+    """Contact m of tile b: its unit normal, contact velocity and law (contact.unit_normal,
+    contact.contact_velocity, contact.contact_law), read from and written to the columns."""
+    T = TILE
+    delta, nx, ny, nz = unit_normal(b[T_DX * T + m], b[T_DY * T + m], b[T_DZ * T + m],
+                                    b[T_D2 * T + m], b[T_RSUM * T + m])
+    ri = b[T_RI * T + m]
+    rj = b[T_RJ * T + m]
+    wix = b[T_WIX * T + m]
+    wiy = b[T_WIY * T + m]
+    wiz = b[T_WIZ * T + m]
+    wjx = b[T_WJX * T + m]
+    wjy = b[T_WJY * T + m]
+    wjz = b[T_WJZ * T + m]
+    vx, vy, vz = contact_velocity(b[T_DVX * T + m], b[T_DVY * T + m], b[T_DVZ * T + m],
+                                  wix, wiy, wiz, wjx, wjy, wjz, ri, rj, nx, ny, nz)
+    (fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz, _fn, _ft, _sl,
+     hx, hy, hz, mx, my, mz) = contact_law(
+        delta, nx, ny, nz, vx, vy, vz, wix - wjx, wiy - wjy, wiz - wjz, ri, rj,
+        b[T_REFF * T + m], model, roll, kt_ratio, mu, mu_r, b[T_KN * T + m],
+        b[T_DAMP * T + m], b[T_H0 * T + m], b[T_H1 * T + m], b[T_H2 * T + m],
+        b[T_H3 * T + m], b[T_H4 * T + m], b[T_H5 * T + m], dt)
+    b[T_FX * T + m] = fx
+    b[T_FY * T + m] = fy
+    b[T_FZ * T + m] = fz
+    b[T_TIX * T + m] = tix
+    b[T_TIY * T + m] = tiy
+    b[T_TIZ * T + m] = tiz
+    b[T_TJX * T + m] = tjx
+    b[T_TJY * T + m] = tjy
+    b[T_TJZ * T + m] = tjz
+    b[T_H0 * T + m] = hx
+    b[T_H1 * T + m] = hy
+    b[T_H2 * T + m] = hz
+    b[T_H3 * T + m] = mx
+    b[T_H4 * T + m] = my
+    b[T_H5 * T + m] = mz
+    b[T_DELTA * T + m] = delta
+    b[T_NX * T + m] = nx
+    b[T_NY * T + m] = ny
+    b[T_NZ * T + m] = nz
+    b[T_VN * T + m] = vx * nx + vy * ny + vz * nz
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _law_loop(n, b, model, roll, kt_ratio, mu, mu_r, dt):
+    """The first n contacts of tile b, of one law (model and roll constants at each call
+    site, so that the loop is straight-line code LLVM vectorises across contacts)."""
+    for m in range(n):
+        _law_one(b, m, model, roll, kt_ratio, mu, mu_r, dt)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _law_tile(n, b, par, dt):
+    """The law of the first n contacts of tile b, all of the parameter row `par`: one loop a
+    kind of law (the same bits as `contact.contact_force_with` contact by contact)."""
+    model = int(par[P_MODEL])
+    roll = int(par[P_ROLL])
+    ktr, mu, mur = par[P_KT], par[P_MU], par[P_MUR]
+    if model == MODEL_LINEAR:
+        if roll == ROLL_NONE:
+            _law_loop(n, b, MODEL_LINEAR, ROLL_NONE, ktr, mu, mur, dt)
+        elif roll == ROLL_CDT:
+            _law_loop(n, b, MODEL_LINEAR, ROLL_CDT, ktr, mu, mur, dt)
+        elif roll == ROLL_EPSD:
+            _law_loop(n, b, MODEL_LINEAR, ROLL_EPSD, ktr, mu, mur, dt)
+        else:
+            _law_loop(n, b, MODEL_LINEAR, ROLL_CDT_LIGGGHTS, ktr, mu, mur, dt)
+    else:
+        if roll == ROLL_NONE:
+            _law_loop(n, b, MODEL_HERTZ, ROLL_NONE, ktr, mu, mur, dt)
+        elif roll == ROLL_CDT:
+            _law_loop(n, b, MODEL_HERTZ, ROLL_CDT, ktr, mu, mur, dt)
+        elif roll == ROLL_EPSD:
+            _law_loop(n, b, MODEL_HERTZ, ROLL_EPSD, ktr, mu, mur, dt)
+        else:
+            _law_loop(n, b, MODEL_HERTZ, ROLL_CDT_LIGGGHTS, ktr, mu, mur, dt)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _law_tile_mixed(n, b, bi, mat, table, dt):
+    """`_law_tile` for a tile whose contacts are of several material pairs: each contact's
+    row of the table, its law's kind resolved contact by contact (not vectorised)."""
+    for m in range(n):
+        par = table[mat[bi[I_I * TILE + m]], mat[bi[I_J * TILE + m]]]
+        _law_one(b, m, par[P_MODEL], par[P_ROLL], par[P_KT], par[P_MU], par[P_MUR], dt)
+
+
 @nb.njit(cache=True)
 def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, slots, params,
                 work):
     """The list entries of the balls of block c (step 1 of the module docstring): each
     touching pair's force and torques into its slot, and each ball's force set to its weight
-    plus its own entries' forces (torque: their torques on it)."""
+    plus its own entries' forces (torque: their torques on it).
+
+    Tile by tile of up to TILE touching entries: (1) the entries in order, each apart one
+    rejected (its history forgotten when it has just parted), each touching one's geometry,
+    velocities, spins, pair constants and history copied into the tile's columns; (2) the
+    law over the tile (_law_tile, vectorised); (3) the tile's contacts in entry order: flags,
+    impact rows, slots, histories, each ball's sums, the largest overlap."""
     pos, vel, omg = balls.pos, balls.vel, balls.omg
     radius, mass, mat = balls.radius, balls.mass, balls.mat
     nbr_start, nbr, hist, flag = pairs.start, pairs.nbr, pairs.hist, pairs.flag
@@ -90,85 +208,181 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
     rout, rpos, rflag = slots.out, slots.rpos, slots.rflag
     table = params.table
     imp_buf, imp_count, diag = work.imp_buf, work.imp_count, work.diag
+    b = work.tile[c]
+    bi = work.tile_idx[c]
     force, torque, gravity = balls.force, balls.torque, params.gravity
     lo, hi = bounds[c], bounds[c + 1]
+    if lo >= hi:
+        return
+    T = TILE
+    # the rolling histories travel through the tiles only where a law keeps them (EPSD)
+    nh = 3
+    for a in range(table.shape[0]):
+        for bb in range(table.shape[1]):
+            if table[a, bb, P_ROLL] == ROLL_EPSD:
+                nh = 6
     # beyond a quarter of the length apart along y, the minimum image may differ from the
     # stored branch; nearer, np.rint(dy / L) is 0 and the image is the branch itself
     wrap = 0.25 * periodic_length if periodic_length > 0.0 else np.inf
     # the pair constants of the last contact (materials, radii, masses -> m_eff, R_eff, the
-    # law's row and normal constants): the same inputs give the same bits, so a contact of
-    # the same kind of balls reuses them (a monodisperse bed: two divisions and one or two
-    # square roots fewer a contact)
+    # law's normal constants): the same inputs give the same bits, so a contact of the same
+    # kind of balls reuses them (a monodisperse bed: two divisions and one or two square
+    # roots fewer a contact)
     key_ri = key_mi = key_rj = key_mj = np.nan
     key_mat_i = key_mat_j = -1
     m_eff = r_eff = kn = damp = 0.0
-    par = table[0, 0]
-    for i in range(lo, hi):
-        ri = radius[i]
-        mi = mass[i]
-        mat_i = mat[i]
-        xi = pos[i, 0]
-        yi = pos[i, 1]
-        zi = pos[i, 2]
-        same_i = ri == key_ri and mi == key_mi and mat_i == key_mat_i
-        # ball i's weight and its own entries' forces, summed as they come
-        sfx = mi * gravity[0]
-        sfy = mi * gravity[1]
-        sfz = mi * gravity[2]
-        stx = 0.0
-        sty = 0.0
-        stz = 0.0
-        for k in range(nbr_start[i], nbr_start[i + 1]):
-            # the untouched entry's rejection first: three loads of j, no call, no division
-            j = nbr[k]
-            dx = xi - pos[j, 0]
-            dy = yi - pos[j, 1]
-            dz = zi - pos[j, 2]
-            if abs(dy) > wrap:
-                dy -= periodic_length * np.rint(dy / periodic_length)
-            rsum = ri + radius[j]
-            d2 = dx * dx + dy * dy + dz * dz
-            if d2 >= rsum * rsum:
-                if flag[k]:
+    # the ball whose sums are open (its weight, then its entries' forces as they come)
+    cur = lo
+    sfx = mass[lo] * gravity[0]
+    sfy = mass[lo] * gravity[1]
+    sfz = mass[lo] * gravity[2]
+    stx = 0.0
+    sty = 0.0
+    stz = 0.0
+    i = lo
+    k = nbr_start[lo]
+    while i < hi:
+        # (1a) the next tile's touching entries, listed without a branch on the test (a
+        # third of the entries touch, in no order a branch predictor learns): each entry is
+        # written at place n, and n moves on when it touches
+        n = 0
+        while i < hi and n < T:
+            xi = pos[i, 0]
+            yi = pos[i, 1]
+            zi = pos[i, 2]
+            ri = radius[i]
+            kend = nbr_start[i + 1]
+            while k < kend and n < T:
+                # the untouched entry's rejection first: three loads of j, no call, no division
+                j = nbr[k]
+                dx = xi - pos[j, 0]
+                dy = yi - pos[j, 1]
+                dz = zi - pos[j, 2]
+                if abs(dy) > wrap:
+                    dy -= periodic_length * np.rint(dy / periodic_length)
+                rsum = ri + radius[j]
+                d2 = dx * dx + dy * dy + dz * dz
+                touch = np.int64(d2 < rsum * rsum)
+                if flag[k] > touch:  # parted since the last step
                     _part(hist, flag, rflag, rpos, k)
-                continue
-            delta, nx, ny, nz = unit_normal(dx, dy, dz, d2, rsum)
-            rj = radius[j]
-            vx, vy, vz = pair_contact_velocity(vel, omg, i, j, ri, rj, nx, ny, nz)
-            q = rpos[k]
-            if not flag[k]:
-                flag[k] = 1
-                rflag[q] = 1
-                if record_impacts:
-                    vn = vx * nx + vy * ny + vz * nz
-                    record_impact(imp_buf, imp_count, c, t, KIND_BALL_BALL,
-                                  pos[i, 0] - ri * nx, pos[i, 1] - ri * ny,
-                                  pos[i, 2] - ri * nz, -vn, i)
-            mj = mass[j]
-            mat_j = mat[j]
-            if not (same_i and rj == key_rj and mj == key_mj and mat_j == key_mat_j):
+                bi[I_K * T + n] = k
+                bi[I_I * T + n] = i
+                bi[I_J * T + n] = j
+                b[T_DX * T + n] = dx
+                b[T_DY * T + n] = dy
+                b[T_DZ * T + n] = dz
+                b[T_D2 * T + n] = d2
+                b[T_RSUM * T + n] = rsum
+                n += touch
+                k += 1
+            if k == kend:
+                i += 1
+        # (1b) their balls' velocities, spins, pair constants and histories
+        mat0_i = mat0_j = -1
+        mixed = False
+        for m in range(n):
+            kk = bi[I_K * T + m]
+            ii = bi[I_I * T + m]
+            jj = bi[I_J * T + m]
+            ri = radius[ii]
+            mi = mass[ii]
+            mat_i = mat[ii]
+            rj = radius[jj]
+            mj = mass[jj]
+            mat_j = mat[jj]
+            if not (ri == key_ri and mi == key_mi and mat_i == key_mat_i and rj == key_rj
+                    and mj == key_mj and mat_j == key_mat_j):
                 m_eff = mi * mj / (mi + mj)
                 r_eff = ri * rj / (ri + rj)
-                par = table[mat_i, mat_j]
-                kn, damp = normal_constants(par, r_eff, m_eff)
+                kn, damp = normal_constants(table[mat_i, mat_j], r_eff, m_eff)
                 key_ri, key_mi, key_mat_i = ri, mi, mat_i
                 key_rj, key_mj, key_mat_j = rj, mj, mat_j
-                same_i = True
-            fx, fy, fz, tix, tiy, tiz, tjx, tjy, tjz, fn, ft, sl = contact_force_with(
-                delta, nx, ny, nz, vx, vy, vz,
-                omg[i, 0] - omg[j, 0], omg[i, 1] - omg[j, 1], omg[i, 2] - omg[j, 2],
-                ri, rj, r_eff, par, kn, damp, hist[k], dt_hist)
+            if m == 0:
+                mat0_i, mat0_j = mat_i, mat_j
+            elif mat_i != mat0_i or mat_j != mat0_j:
+                mixed = True
+            b[T_RI * T + m] = ri
+            b[T_RJ * T + m] = rj
+            b[T_DVX * T + m] = vel[ii, 0] - vel[jj, 0]
+            b[T_DVY * T + m] = vel[ii, 1] - vel[jj, 1]
+            b[T_DVZ * T + m] = vel[ii, 2] - vel[jj, 2]
+            b[T_WIX * T + m] = omg[ii, 0]
+            b[T_WIY * T + m] = omg[ii, 1]
+            b[T_WIZ * T + m] = omg[ii, 2]
+            b[T_WJX * T + m] = omg[jj, 0]
+            b[T_WJY * T + m] = omg[jj, 1]
+            b[T_WJZ * T + m] = omg[jj, 2]
+            b[T_REFF * T + m] = r_eff
+            b[T_KN * T + m] = kn
+            b[T_DAMP * T + m] = damp
+            b[T_H0 * T + m] = hist[kk, 0]
+            b[T_H1 * T + m] = hist[kk, 1]
+            b[T_H2 * T + m] = hist[kk, 2]
+            if nh == 6:
+                b[T_H3 * T + m] = hist[kk, 3]
+                b[T_H4 * T + m] = hist[kk, 4]
+                b[T_H5 * T + m] = hist[kk, 5]
+        # (2) the law over the tile
+        if n == 0:
+            continue
+        if mixed:
+            _law_tile_mixed(n, b, bi, mat, table, dt_hist)
+        else:
+            _law_tile(n, b, table[mat0_i, mat0_j], dt_hist)
+        # (3) the tile's contacts in entry order
+        for m in range(n):
+            kk = bi[I_K * T + m]
+            ii = bi[I_I * T + m]
+            jj = bi[I_J * T + m]
+            while cur < ii:
+                put3(force, cur, sfx, sfy, sfz)
+                put3(torque, cur, stx, sty, stz)
+                cur += 1
+                sfx = mass[cur] * gravity[0]
+                sfy = mass[cur] * gravity[1]
+                sfz = mass[cur] * gravity[2]
+                stx = 0.0
+                sty = 0.0
+                stz = 0.0
+            q = rpos[kk]
+            delta = b[T_DELTA * T + m]
+            if not flag[kk]:
+                flag[kk] = 1
+                rflag[q] = 1
+                if record_impacts:
+                    ri = radius[ii]
+                    record_impact(imp_buf, imp_count, c, t, KIND_BALL_BALL,
+                                  pos[ii, 0] - ri * b[T_NX * T + m],
+                                  pos[ii, 1] - ri * b[T_NY * T + m],
+                                  pos[ii, 2] - ri * b[T_NZ * T + m], -b[T_VN * T + m], ii)
+            for a in range(nh):
+                hist[kk, a] = b[(T_H0 + a) * T + m]
+            fx = b[T_FX * T + m]
+            fy = b[T_FY * T + m]
+            fz = b[T_FZ * T + m]
             rout[q, 0] = -fx
             rout[q, 1] = -fy
             rout[q, 2] = -fz
-            rout[q, 3] = tjx
-            rout[q, 4] = tjy
-            rout[q, 5] = tjz
-            sfx, sfy, sfz, stx, sty, stz = add_force_torque(sfx, sfy, sfz, stx, sty, stz,
-                                                            fx, fy, fz, tix, tiy, tiz)
-            keep_largest(diag, c, D_BALL_OVERLAP, delta, i, j)
-        put3(force, i, sfx, sfy, sfz)
-        put3(torque, i, stx, sty, stz)
+            rout[q, 3] = b[T_TJX * T + m]
+            rout[q, 4] = b[T_TJY * T + m]
+            rout[q, 5] = b[T_TJZ * T + m]
+            sfx, sfy, sfz, stx, sty, stz = add_force_torque(
+                sfx, sfy, sfz, stx, sty, stz, fx, fy, fz,
+                b[T_TIX * T + m], b[T_TIY * T + m], b[T_TIZ * T + m])
+            keep_largest(diag, c, D_BALL_OVERLAP, delta, ii, jj)
+    # the balls after the last contact
+    while True:
+        put3(force, cur, sfx, sfy, sfz)
+        put3(torque, cur, stx, sty, stz)
+        cur += 1
+        if cur >= hi:
+            break
+        sfx = mass[cur] * gravity[0]
+        sfy = mass[cur] * gravity[1]
+        sfz = mass[cur] * gravity[2]
+        stx = 0.0
+        sty = 0.0
+        stz = 0.0
 
 
 @nb.njit(cache=True)
