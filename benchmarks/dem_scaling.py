@@ -28,6 +28,7 @@ count).  On a shared machine compare the rows of one run, and repeat under load.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import resource
@@ -46,7 +47,7 @@ SIZES = {"quick": ("tub47-quick", DENSE), "tub47": ("tub47", DENSE),
 WARMUP = 2500
 
 
-def worker(size: str, steps: int, repeats: int) -> dict:
+def worker(size: str, steps: int, repeats: int, warmup: int = WARMUP) -> dict:
     """Time the steps in this process (NUMBA_NUM_THREADS set by the caller)."""
     import numba
     import numpy as np
@@ -62,7 +63,7 @@ def worker(size: str, steps: int, repeats: int) -> dict:
     system = S.make_system(scenario)
     state = F.fill_state(system, scenario)
     state.vibrating = True
-    S.run_steps(system, state, WARMUP)
+    S.run_steps(system, state, warmup)
     wall, cpu = [], []
     b0 = state.nl.builds
     for _ in range(repeats):
@@ -71,6 +72,9 @@ def worker(size: str, steps: int, repeats: int) -> dict:
         wall.append(time.perf_counter() - t0)
         cpu.append(time.process_time() - c0)
     builds = state.nl.builds - b0
+    # the state after the same steps at every thread count: bit for bit the same (by id)
+    digest = hashlib.sha256(b"".join(np.ascontiguousarray(getattr(state, k)).tobytes()
+                                     for k in ("pos", "vel", "omg"))).hexdigest()[:16]
 
     @numba.njit(parallel=True)
     def gather(balls, pairs, slots, nblock):
@@ -120,7 +124,9 @@ def worker(size: str, steps: int, repeats: int) -> dict:
     profile["rebuild_once"] = 1e6 * (time.perf_counter() - t0)
     profile["rebuild_per_step"] = profile["rebuild_once"] * builds / (repeats * steps)
     return {"size": size, "balls": state.n, "threads": numba.get_num_threads(),
-            "steps": steps, "wall_s": wall, "cpu_s": cpu, "builds": builds,
+            "threading_layer": numba.threading_layer(),
+            "gomp_spincount": os.environ.get("GOMP_SPINCOUNT"),
+            "steps": steps, "warmup": warmup, "state_sha256": digest, "wall_s": wall, "cpu_s": cpu, "builds": builds,
             "list_entries": int(state.nl.nbr.shape[0]),
             "contacts": int(np.count_nonzero(state.nl.flag)),
             "profile_us": profile,
@@ -134,10 +140,12 @@ def main(argv=None) -> None:
     p.add_argument("--steps", type=int, default=300)
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--json", type=Path, default=ROOT / "runs" / "dem_scaling.json")
+    p.add_argument("--warmup", type=int, default=WARMUP,
+                   help="untimed steps before the timing (the same at every thread count)")
     p.add_argument("--worker", help=argparse.SUPPRESS)
     a = p.parse_args(argv)
     if a.worker:
-        print(json.dumps(worker(a.worker, a.steps, a.repeats)))
+        print(json.dumps(worker(a.worker, a.steps, a.repeats, a.warmup)))
         return
     rows = []
     for size in a.sizes.split(","):
@@ -145,7 +153,8 @@ def main(argv=None) -> None:
             env = dict(os.environ, NUMBA_NUM_THREADS=str(threads))
             load0 = os.getloadavg()[0]
             out = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--worker",
-                                  size, "--steps", str(a.steps), "--repeats", str(a.repeats)],
+                                  size, "--steps", str(a.steps), "--repeats", str(a.repeats),
+                                  "--warmup", str(a.warmup)],
                                  env=env, capture_output=True, text=True)
             if out.returncode != 0:
                 raise SystemExit(f"{size} on {threads} threads failed:\n{out.stderr[-3000:]}")
@@ -159,11 +168,30 @@ def main(argv=None) -> None:
             print(f"{size:6s} {r['balls']:7d} balls, {threads} thread(s): {us:9.1f} us/step wall "
                   f"({cpu:9.1f} CPU), {r['ns_per_ball_step']:6.1f} ns/ball-step, "
                   f"{r['builds']} builds, {r['contacts']} contacts, max RSS "
-                  f"{r['max_rss_MB']:.0f} MB (load {r['load'][0]:.1f} -> {r['load'][1]:.1f})",
+                  f"{r['max_rss_MB']:.0f} MB, {r['threading_layer']} layer, GOMP_SPINCOUNT "
+                  f"{r['gomp_spincount']} (load {r['load'][0]:.1f} -> {r['load'][1]:.1f})",
                   flush=True)
             print("        passes (us): " + ", ".join(f"{k} {v:.1f}" for k, v in prof.items()),
                   flush=True)
+            print(f"        state after {r['warmup'] + a.repeats * a.steps} steps: sha256 "
+                  f"{r['state_sha256']}", flush=True)
             rows.append(r)
+            a.json.parent.mkdir(parents=True, exist_ok=True)
+            a.json.write_text(json.dumps(rows, indent=1))
+    for size in a.sizes.split(","):
+        mine = [r for r in rows if r["size"] == size]
+        same = len({r["state_sha256"] for r in mine}) == 1
+        print(f"{size:6s} state on {', '.join(str(r['threads']) for r in mine)} thread(s): "
+              + ("bit for bit the same" if same else "DIFFERS: " + ", ".join(
+                  f"{r['threads']}: {r['state_sha256']}" for r in mine)))
+        one = [r for r in mine if r["threads"] == 1]
+        for r in mine:
+            if one and r["threads"] > 1:
+                r["speedup_over_one_thread"] = (one[0]["median_us_per_step"]
+                                                / r["median_us_per_step"])
+                print(f"{size:6s} {r['threads']:2d} threads: {r['speedup_over_one_thread']:.2f} x "
+                      f"the one-thread throughput (efficiency "
+                      f"{r['speedup_over_one_thread'] / r['threads']:.2f})")
     smallest = {}
     for r in rows:
         base = smallest.setdefault(r["threads"], r)
