@@ -1,18 +1,21 @@
 """The DEM step's cost against the ball count and the thread count, its memory, and where a
 step's time goes.
 
-    python benchmarks/dem_scaling.py [--sizes quick,tub47,long] [--threads 1,2] [--steps 300]
-        [--repeats 3] [--json runs/dem_scaling.json]
+    python benchmarks/dem_scaling.py [--sizes quick,tub47,long] [--threads 1,2] [--steps 2128]
+        [--repeats 2] [--warmup 2128] [--pass-steps 200] [--json runs/dem_scaling.json]
 
 Sizes: `quick` is tub47-quick (4 200 balls in a 19.05 mm slice), `tub47` the reference case
 (14 000 balls, 63.5 mm), `long` tub47 ten times longer (`--set tub.length=0.635 --set
-fill.count=140000`).  Each (size, threads) runs in its own process with NUMBA_NUM_THREADS set:
-the balls are placed on the fill lattice closed up to 1.01 d from the floor
-(vibroflow.dem.fill.fill_state, no settling: the same start at every size) and fall into the
-vibrating tub for 2 500 untimed steps (numba's cache load or compilation, the first neighbour
-lists, the first contacts), then `--repeats` times `--steps` steps are timed
-(wall and CPU), neighbour rebuilds included.  Then the passes of one step are timed apart,
-each `--steps` times from the same saved state, each its own parallel loop over the blocks:
+fill.count=140000`).  Each (size, threads) runs in its own process with NUMBA_NUM_THREADS set,
+from the case's settled bed, the bed a run vibrates: `quick` and `tub47` from the fill cache
+(vibroflow.dem.fill.cache_dir; settled and cached there when absent, as `vibroflow dem CASE`
+does), `long` from tub47's settled bed laid ten times end to end along the tub (its contact
+histories zeroed: the copies touch at the nine seams where tub47's end walls stood, so the bed
+there settles a little in the first steps; settling 140 000 balls would take an hour here).
+The tub vibrates for `--warmup` untimed steps (numba's cache load or compilation, the first
+neighbour lists), then `--repeats` times `--steps` steps are timed (wall and CPU), neighbour
+rebuilds included.  Then the passes of one step are timed apart,
+each `--pass-steps` times from the same saved state, each its own parallel loop over the blocks:
 the pairs (step._pair_block, a step's first loop), the gather (_gather_block), the walls
 (wall_pass.ball_walls), the second half kick with the next step's first half kick and drift
 (step._kick_block, as the ball pass makes them), and the step's second loop whole less that
@@ -21,9 +24,12 @@ times under frozen forces would fling them against the walls); and one neighbour
 rebuild (simulate.rebuild: cell binning, list, history transfer, reverse order).
 
 Printed per process: balls, median wall and CPU microseconds a step, nanoseconds per ball-step,
-the passes' shares, and the process's peak resident memory (ru_maxrss); at the end the time per
-step against the ball count relative to the smallest size (1.0: the cost grows as the ball
-count).  On a shared machine compare the rows of one run, and repeat under load.
+the passes' shares, the process's peak resident memory (ru_maxrss), numba's threading layer
+and GOMP_SPINCOUNT, and the sha256 of the balls' positions, velocities and spins (by id) after
+the warm-up and the repeats; at the end, per size, whether that state is the same bits on every
+thread count run (the DEM's promise: it must be) and each thread count's throughput over one
+thread's, and the time per step against the ball count relative to the smallest size (1.0:
+the cost grows as the ball count).  On a shared machine compare the rows of one run, and repeat under load.
 """
 from __future__ import annotations
 
@@ -39,20 +45,62 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-# the fill lattice closed up (1.01 d) and at the floor, so that the bed is in contact after
-# the warm-up at every size
-DENSE = ["fill.lattice_spacing=1.01", "fill.insert_above=0.0"]
-SIZES = {"quick": ("tub47-quick", DENSE), "tub47": ("tub47", DENSE),
-         "long": ("tub47", DENSE + ["tub.length=0.635", "fill.count=140000"])}
-WARMUP = 2500
+SIZES = {"quick": ("tub47-quick", []), "tub47": ("tub47", []),
+         "long": ("tub47", ["tub.length=0.635", "fill.count=140000"])}
+#: copies of tub47's settled bed along the long tub
+COPIES = 10
+#: a whole cycle of tub47's vibration (47 Hz, dt 1e-5 s): the bed leaves the floor and lands
+#: within a cycle, and its contact count changes tenfold, so a step's cost is a cycle's mean
+CYCLE = 2128
+WARMUP = CYCLE
 
 
-def worker(size: str, steps: int, repeats: int, warmup: int = WARMUP) -> dict:
+def _settled(case: str, sets: list[str]):
+    """The case's settled bed (fill cache; settled and cached when absent)."""
+    from vibroflow.dem import fill as F
+    from vibroflow.dem import simulate as S
+    from vibroflow.dem.output import load_state_file, save_state_file
+    from vibroflow.scenario.io import load_scenario
+
+    scenario = load_scenario(case, sets)
+    path = F.cache_dir() / "fills" / f"{F.fill_cache_key(scenario)}.h5"
+    if not path.exists():
+        print(f"settling {case} into {path}", file=sys.stderr, flush=True)
+        system = S.make_system(scenario)
+        state = F.fill_state(system, scenario)
+        info = F.settle(system, state, scenario)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        save_state_file(path, state, {"settle_info": json.dumps(info)})
+    return load_state_file(path)[0]
+
+
+def _bed(size: str, scenario, system):
+    """The settled bed of a size (module docstring)."""
+    import numpy as np
+
+    from vibroflow.dem import simulate as S
+
+    if size != "long":
+        return _settled(*SIZES[size])
+    base = _settled("tub47", [])
+    if base.nl.ids is not None:  # tub47's 14 000 balls are stored by id (memory_order)
+        raise SystemExit("tub47's settled bed is not stored by id")
+    length = scenario.tub.length / COPIES
+    shift = np.zeros((COPIES, 1, 3))
+    shift[:, 0, 1] = np.arange(COPIES) * length
+    pos = (base.pos[None, :, :] + shift).reshape(-1, 3)
+    tile = lambda a: np.tile(a, (COPIES, 1) if a.ndim == 2 else COPIES)  # noqa: E731
+    rho = base.mass / (4.0 / 3.0 * np.pi * base.radius ** 3)
+    return S.init_state(system, pos, tile(base.vel), tile(base.omg), tile(base.radius), tile(rho),
+                        tile(base.mat))
+
+
+def worker(size: str, steps: int, repeats: int, warmup: int = WARMUP,
+           pass_steps: int = 200) -> dict:
     """Time the steps in this process (NUMBA_NUM_THREADS set by the caller)."""
     import numba
     import numpy as np
 
-    from vibroflow.dem import fill as F
     from vibroflow.dem import simulate as S
     from vibroflow.dem import step as K
     from vibroflow.dem.records import pairs_of, slots_of
@@ -61,7 +109,10 @@ def worker(size: str, steps: int, repeats: int, warmup: int = WARMUP) -> dict:
     case, sets = SIZES[size]
     scenario = load_scenario(case, sets)
     system = S.make_system(scenario)
-    state = F.fill_state(system, scenario)
+    state = _bed(size, scenario, system)
+    if state.n != scenario.fill.count:
+        raise SystemExit(f"{size}: {state.n} balls, the scenario has {scenario.fill.count}")
+    state.time_origin_step = state.step
     state.vibrating = True
     S.run_steps(system, state, warmup)
     wall, cpu = [], []
@@ -113,9 +164,9 @@ def worker(size: str, steps: int, repeats: int, warmup: int = WARMUP) -> dict:
         state.nl.hist[:], state.nl.flag[:], state.nl.rflag[:] = hist, flag, rflag
         fn()
         t0 = time.perf_counter()
-        for _ in range(steps):
+        for _ in range(pass_steps):
             fn()
-        profile[name] = 1e6 * (time.perf_counter() - t0) / steps
+        profile[name] = 1e6 * (time.perf_counter() - t0) / pass_steps
     state.pos[:], state.vel[:], state.omg[:] = saved["pos"], saved["vel"], saved["omg"]
     state.nl.hist[:], state.nl.flag[:], state.nl.rflag[:] = hist, flag, rflag
     S.rebuild(system, state)
@@ -137,15 +188,17 @@ def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--sizes", default="quick,tub47,long")
     p.add_argument("--threads", default="1,2")
-    p.add_argument("--steps", type=int, default=300)
-    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--steps", type=int, default=CYCLE, help="timed steps a repeat")
+    p.add_argument("--repeats", type=int, default=2)
+    p.add_argument("--pass-steps", type=int, default=200,
+                   help="calls of each pass in the profile, from the state after the repeats")
     p.add_argument("--json", type=Path, default=ROOT / "runs" / "dem_scaling.json")
     p.add_argument("--warmup", type=int, default=WARMUP,
                    help="untimed steps before the timing (the same at every thread count)")
     p.add_argument("--worker", help=argparse.SUPPRESS)
     a = p.parse_args(argv)
     if a.worker:
-        print(json.dumps(worker(a.worker, a.steps, a.repeats, a.warmup)))
+        print(json.dumps(worker(a.worker, a.steps, a.repeats, a.warmup, a.pass_steps)))
         return
     rows = []
     for size in a.sizes.split(","):
@@ -154,7 +207,7 @@ def main(argv=None) -> None:
             load0 = os.getloadavg()[0]
             out = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--worker",
                                   size, "--steps", str(a.steps), "--repeats", str(a.repeats),
-                                  "--warmup", str(a.warmup)],
+                                  "--warmup", str(a.warmup), "--pass-steps", str(a.pass_steps)],
                                  env=env, capture_output=True, text=True)
             if out.returncode != 0:
                 raise SystemExit(f"{size} on {threads} threads failed:\n{out.stderr[-3000:]}")
