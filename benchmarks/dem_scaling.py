@@ -96,12 +96,13 @@ def _bed(size: str, scenario, system):
 
 
 def worker(size: str, steps: int, repeats: int, warmup: int = WARMUP,
-           pass_steps: int = 200) -> dict:
+           pass_steps: int = 200, memory_order: bool | None = None) -> dict:
     """Time the steps in this process (NUMBA_NUM_THREADS set by the caller)."""
     import numba
     import numpy as np
 
     from vibroflow.dem import simulate as S
+    from vibroflow.dem import memory_order as M
     from vibroflow.dem import step as K
     from vibroflow.dem.records import pairs_of, slots_of
     from vibroflow.scenario.io import load_scenario
@@ -114,12 +115,12 @@ def worker(size: str, steps: int, repeats: int, warmup: int = WARMUP,
         raise SystemExit(f"{size}: {state.n} balls, the scenario has {scenario.fill.count}")
     state.time_origin_step = state.step
     state.vibrating = True
-    S.run_steps(system, state, warmup)
+    S.run_steps(system, state, warmup, memory_order=memory_order)
     wall, cpu = [], []
     b0 = state.nl.builds
     for _ in range(repeats):
         t0, c0 = time.perf_counter(), time.process_time()
-        S.run_steps(system, state, steps)
+        S.run_steps(system, state, steps, memory_order=memory_order)
         wall.append(time.perf_counter() - t0)
         cpu.append(time.process_time() - c0)
     builds = state.nl.builds - b0
@@ -176,6 +177,8 @@ def worker(size: str, steps: int, repeats: int, warmup: int = WARMUP,
     profile["rebuild_per_step"] = profile["rebuild_once"] * builds / (repeats * steps)
     return {"size": size, "balls": state.n, "threads": numba.get_num_threads(),
             "threading_layer": numba.threading_layer(),
+            "memory_order": bool(state.n >= M.MEMORY_ORDER_FROM if memory_order is None
+                                 else memory_order),
             "gomp_spincount": os.environ.get("GOMP_SPINCOUNT"),
             "steps": steps, "warmup": warmup, "state_sha256": digest, "wall_s": wall, "cpu_s": cpu, "builds": builds,
             "list_entries": int(state.nl.nbr.shape[0]),
@@ -195,10 +198,14 @@ def main(argv=None) -> None:
     p.add_argument("--json", type=Path, default=ROOT / "runs" / "dem_scaling.json")
     p.add_argument("--warmup", type=int, default=WARMUP,
                    help="untimed steps before the timing (the same at every thread count)")
+    p.add_argument("--memory-order", choices=("auto", "on", "off"), default="auto",
+                   help="the balls sorted in space at rebuilds (vibroflow.dem.memory_order): "
+                        "auto from MEMORY_ORDER_FROM balls on, as a run does")
     p.add_argument("--worker", help=argparse.SUPPRESS)
     a = p.parse_args(argv)
     if a.worker:
-        print(json.dumps(worker(a.worker, a.steps, a.repeats, a.warmup, a.pass_steps)))
+        order = {"auto": None, "on": True, "off": False}[a.memory_order]
+        print(json.dumps(worker(a.worker, a.steps, a.repeats, a.warmup, a.pass_steps, order)))
         return
     rows = []
     for size in a.sizes.split(","):
@@ -207,7 +214,8 @@ def main(argv=None) -> None:
             load0 = os.getloadavg()[0]
             out = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--worker",
                                   size, "--steps", str(a.steps), "--repeats", str(a.repeats),
-                                  "--warmup", str(a.warmup), "--pass-steps", str(a.pass_steps)],
+                                  "--warmup", str(a.warmup), "--pass-steps", str(a.pass_steps),
+                                  "--memory-order", a.memory_order],
                                  env=env, capture_output=True, text=True)
             if out.returncode != 0:
                 raise SystemExit(f"{size} on {threads} threads failed:\n{out.stderr[-3000:]}")
@@ -221,7 +229,8 @@ def main(argv=None) -> None:
             print(f"{size:6s} {r['balls']:7d} balls, {threads} thread(s): {us:9.1f} us/step wall "
                   f"({cpu:9.1f} CPU), {r['ns_per_ball_step']:6.1f} ns/ball-step, "
                   f"{r['builds']} builds, {r['contacts']} contacts, max RSS "
-                  f"{r['max_rss_MB']:.0f} MB, {r['threading_layer']} layer, GOMP_SPINCOUNT "
+                  f"{r['max_rss_MB']:.0f} MB, {'sorted' if r['memory_order'] else 'by id'}, "
+                  f"{r['threading_layer']} layer, GOMP_SPINCOUNT "
                   f"{r['gomp_spincount']} (load {r['load'][0]:.1f} -> {r['load'][1]:.1f})",
                   flush=True)
             print("        passes (us): " + ", ".join(f"{k} {v:.1f}" for k, v in prof.items()),
