@@ -39,6 +39,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -99,6 +100,7 @@ def vibroflow_speed(s, steps: int) -> dict:
     wall = time.perf_counter() - t0
     return {"code": "vibroflow", "n_particles": state.n, "steps": steps, "wall_time_s": wall,
             "threads": numba.get_num_threads(), "assembly": ASSEMBLY,
+            "gomp_spincount": os.environ.get("GOMP_SPINCOUNT"),
             "particle_steps_per_s": state.n * steps / wall if wall > 0 else math.nan}
 
 
@@ -117,8 +119,9 @@ def run_speed(args) -> dict:
     for code in ("liggghts", "vibroflow"):
         if code in res:
             r = res[code]
+            spin = f", GOMP_SPINCOUNT {r['gomp_spincount']}" if code == "vibroflow" else ""
             print(f"  {code:9s} {r['particle_steps_per_s']:12.4g} particle-steps/s "
-                  f"({r['n_particles']} x {r['steps']} steps in {r['wall_time_s']:.2f} s)")
+                  f"({r['n_particles']} x {r['steps']} steps in {r['wall_time_s']:.2f} s{spin})")
     if "liggghts" in res and "vibroflow" in res:
         res["ratio_vibroflow_over_liggghts"] = (res["vibroflow"]["particle_steps_per_s"]
                                                 / res["liggghts"]["particle_steps_per_s"])

@@ -30,19 +30,19 @@ if not {"NUMBA_THREADING_LAYER", "NUMBA_THREADING_LAYER_PRIORITY"} & set(_os.env
     if "numba" in _sys.modules:  # numba imported before us: set its config directly
         _sys.modules["numba"].config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
 
-# OpenMP threads that finish their share spin for ~300 000 iterations before sleeping (GNU
-# libgomp's default).  When anything else runs on the cores that spinning starves the thread
-# still working, and a 2-thread DEM step fell 20x (0.14 instead of 2.5-3.5 M particle-steps/s
-# with two other jobs on the 2-core machine).  A short spin keeps the hand-off quick on a quiet
-# machine and yields the core on a busy one.
-if not {"GOMP_SPINCOUNT", "OMP_WAIT_POLICY"} & set(_os.environ):
-    _os.environ["GOMP_SPINCOUNT"] = "1000"
-
 # numba's threads: every core the process may use (vibroflow/threads.py), unless
 # NUMBA_NUM_THREADS says otherwise
 from vibroflow import threads as _threads  # noqa: E402
 
 _threads.default_threads_env()
+
+# OpenMP threads that finish their share spin before they sleep (GNU libgomp's default: ~300 000
+# iterations).  While every thread has a core of its own a spin that spans a step's barrier
+# waits makes the DEM's two-thread step 0.74 x as long as a spin of 1 000; when anything else
+# runs on the cores, spinning starves the thread still working (a 2-thread DEM step 6 x slower
+# at the default spin with one other job on the 2-core machine).  So the spin is chosen from
+# what runs on the machine when vibroflow is imported (vibroflow/threads.py, spin_count).
+_threads.default_spin_env()
 
 # numba's cache keys a kernel on its own file only; kernels inline code from other files, so
 # after an edit the cache is dropped whole (vibroflow/_kernel_cache.py says why)

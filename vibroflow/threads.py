@@ -10,10 +10,17 @@ from __future__ import annotations
 
 import os
 import sys
+import time
 
 from .errors import InputError
 
 _requested: int | None = None
+
+#: libgomp's spin before a waiting thread sleeps (iterations, GOMP_SPINCOUNT): long enough to
+#: span a DEM step's barrier waits while every thread has a core to itself, short when other
+#: processes need the cores, where a spinning thread starves the one still working
+#: (docs/decisions/threads.md, "How long a waiting thread spins")
+SPIN_FREE, SPIN_BUSY = 10_000, 1_000
 
 
 def allowed_cores() -> int:
@@ -29,6 +36,68 @@ def default_threads_env() -> None:
     `import vibroflow`, before numba is imported)."""
     if "NUMBA_NUM_THREADS" not in os.environ and "numba" not in sys.modules:
         os.environ["NUMBA_NUM_THREADS"] = str(allowed_cores())
+
+
+def spin_count(others_running: int, cores: int, threads: int) -> int:
+    """GOMP_SPINCOUNT for `threads` threads on a machine of `cores` cores where
+    `others_running` other threads are running: SPIN_FREE when they all fit on the cores,
+    else SPIN_BUSY."""
+    return SPIN_FREE if others_running + threads <= cores else SPIN_BUSY
+
+
+def _own_running() -> int:
+    """This process's threads that are running now (their state R in /proc/self/task; at
+    least the one reading): a library's worker threads that spin after their start (a BLAS
+    pool's, say) are this process's, not another's."""
+    n = 0
+    try:
+        tasks = os.listdir("/proc/self/task")
+    except OSError:
+        return 1
+    for task in tasks:
+        try:
+            with open(f"/proc/self/task/{task}/stat", "rb") as f:
+                stat = f.read()
+        except OSError:
+            continue
+        end = stat.rfind(b")")
+        n += stat[end + 2:end + 3] == b"R"
+    return max(n, 1)
+
+
+def others_running(reads: int = 3, pause_s: float = 1e-3) -> int | None:
+    """Threads of other processes running or ready to run on the machine now: the least of
+    `reads` reads of /proc/stat's procs_running less this process's running threads,
+    `pause_s` apart, so that a process passing through does not count; None where /proc/stat
+    does not say."""
+    least = None
+    for k in range(reads):
+        try:
+            with open("/proc/stat", "rb") as f:
+                line = next(ln for ln in f if ln.startswith(b"procs_running"))
+            n = int(line.split()[1]) - _own_running()
+        except (OSError, StopIteration, ValueError, IndexError):
+            return None
+        least = n if least is None else min(least, n)
+        if k + 1 < reads:
+            time.sleep(pause_s)
+    return max(least, 0) if least is not None else None
+
+
+def default_spin_env() -> None:
+    """GOMP_SPINCOUNT from spin_count() unless the environment sets it or OMP_WAIT_POLICY
+    (called by `import vibroflow` after default_threads_env, so that the thread count is
+    known; libgomp reads it when numba first starts its threads).  Where the machine's load
+    is unknown, SPIN_BUSY."""
+    if {"GOMP_SPINCOUNT", "OMP_WAIT_POLICY"} & set(os.environ):
+        return
+    try:
+        threads = int(os.environ.get("NUMBA_NUM_THREADS", "")) or allowed_cores()
+    except ValueError:
+        threads = allowed_cores()
+    others = others_running()
+    os.environ["GOMP_SPINCOUNT"] = str(
+        SPIN_BUSY if others is None else spin_count(others, os.cpu_count() or 1, threads))
 
 
 def use_threads(n: int | None) -> None:
