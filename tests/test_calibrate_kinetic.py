@@ -281,3 +281,65 @@ def test_a_run_reads_the_calibrated_kinetic_constants():
                                  "kinetic": kinetic_table(lun, None, E, "contact law")})
     got = calibrated_kinetic_parameters(prm, rec)
     assert got.phi_rcp == lun["phi_rcp"] and got.frictional_Pa == 0.0
+
+
+# The delete-one-batch jackknife (kinetic.jackknife_errors, measure.stats.jackknife_stderr)
+
+def test_the_jackknife_of_the_batch_mean_is_the_batch_means_standard_error():
+    from vibroflow.measure.stats import jackknife_stderr, stderr_of_batches
+
+    b = np.random.default_rng(5).normal(3.0, 0.7, 9)
+    left_out = [(b.sum() - x) / (b.size - 1) for x in b]
+    assert jackknife_stderr(left_out) == pytest.approx(stderr_of_batches(b), rel=1e-12)
+    assert math.isnan(jackknife_stderr([1.0])) and math.isnan(jackknife_stderr([1.0, np.nan]))
+
+
+def _batched_cells(seed, n_batches=8, n=300, tilt=0.6, rel=0.02):
+    """Lun's cells (phi_rcp 0.60) seen through n_batches batches whose pressure shares a tilt
+    a_b (phi - 0.35) across every cell of batch b, a ~ N(0, tilt), plus each cell's own scatter
+    rel: the cells of one batch err together, as a chaotic bed's neighbouring cells do.  A
+    Dataset of the batches' mean fields with their batch-means errors, and the batches."""
+    import xarray as xr
+
+    rng = np.random.default_rng(seed)
+    phi = rng.uniform(0.1, 0.56, n)
+    T = np.exp(rng.uniform(np.log(1e-4), np.log(2e-2), n))
+    p0 = RHO_S * phi * T * pressure_ratio(phi, 0.60, E)
+    a = tilt * rng.standard_normal((n_batches, 1))
+    pb = p0 * np.exp(a * (phi - 0.35) + rel * rng.standard_normal((n_batches, n)))
+    Tb, phib = np.broadcast_to(T, pb.shape).copy(), np.broadcast_to(phi, pb.shape).copy()
+    se = lambda x: x.std(axis=0, ddof=1) / math.sqrt(n_batches)  # noqa: E731
+    ds = xr.Dataset({k: ("cell", v) for k, v in (
+        ("solid_fraction", phi), ("temperature", T), ("pressure", pb.mean(axis=0)),
+        ("solid_fraction_stderr", 1e-4 * phi), ("temperature_stderr", 1e-3 * T),
+        ("pressure_stderr", se(pb)))})
+    return ds, {"solid_fraction": phib, "temperature": Tb, "pressure": pb}
+
+
+def test_the_jackknife_error_is_the_spread_of_phi_rcp_over_draws_where_least_squares_is_not():
+    from vibroflow.calibration.kinetic import fit_cells
+
+    est, jack, lsq = [], [], []
+    for seed in range(30):
+        ds, batches = _batched_cells(seed)
+        full = fit_cells(ds, RHO_S, E)
+        fit = fit_cells(ds, RHO_S, E, batches=batches)
+        assert fit["phi_rcp"] == full["phi_rcp"]  # the value is the fit on every batch
+        assert fit["phi_rcp_stderr_least_squares"] == full["phi_rcp_stderr"]
+        assert fit["stderr_method"] == "delete-one-batch jackknife over 8 batches"
+        est.append(fit["phi_rcp"]), jack.append(fit["phi_rcp_stderr"])
+        lsq.append(full["phi_rcp_stderr"])
+    spread = np.std(est, ddof=1)
+    # the jackknife follows the draws' spread (30 draws: its sd known to about 13 %, each
+    # jackknife error to about a quarter), the per-cell covariance falls far short of it
+    assert np.sqrt(np.mean(np.square(jack))) == pytest.approx(spread, rel=0.35)
+    assert np.sqrt(np.mean(np.square(lsq))) < 0.5 * spread
+
+
+def test_a_constant_the_cells_do_not_resolve_keeps_its_nan_error():
+    from vibroflow.calibration.kinetic import fit_cells
+
+    ds, batches = _batched_cells(0, n_batches=4)
+    fit = fit_cells(ds, RHO_S, E, joint=True, batches=batches)
+    assert fit["frictional_Pa"] == 0.0 and math.isnan(fit["frictional_Pa_stderr"])
+    assert np.isfinite(fit["phi_rcp_stderr"]) and "jackknife over 4" in fit["stderr_method"]

@@ -122,17 +122,19 @@ def heat_flux_law_record(energy_flux, res, e, fit, prog) -> dict:
     return heat_flux_law_table(gd, cycle[True], cycle[False], unweighted)
 
 
-def kinetic_record(res, phases, prog, energy_flux=None) -> dict | None:
+def kinetic_record(res, phases, prog, energy_flux=None, batches=None) -> dict | None:
     """The [kinetic] table: phi_rcp fitted to the phase-resolved cells, the walls' energy flux,
     the conductivity's multiplier from the cells' energy flux (`energy_flux`, the
-    phase-resolved Dataset of energy_flux; None: not measured); None when the run has neither
-    phi_rcp nor wall forces."""
+    phase-resolved Dataset of energy_flux; None: not measured), the errors of the fitted
+    constants from the coarse-grainer's `batches` (run_fields' info["phase_batches"]: the
+    delete-one-batch jackknife, kinetic.jackknife_errors; None: the fit's own); None when the
+    run has neither phi_rcp nor wall forces."""
     sc = res.scenario
     e = contact_pair(sc, sc.fill.material, sc.fill.material).restitution
     fit = None
     if res.has_ball_contacts:  # the pressure holds the collisional (contact) part
         try:
-            fit = fit_cells(phases, res.solid_density, e, joint=True)
+            fit = fit_cells(phases, res.solid_density, e, joint=True, batches=batches)
             prog.log(f"kinetic: phi_rcp = {fit['phi_rcp']:.4f} +- {fit['phi_rcp_stderr']:.4f}, "
                      f"frictional Fr = {fit['frictional_Pa']:.3g} Pa, phi_min = "
                      f"{fit['frictional_phi_min']:.4f} ({fit['points']} cells, rms log "
@@ -268,7 +270,8 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
                              f", dphi_cyc = {cal['compaction']['excess_solid_fraction']:.4f}")
                 except InputError as e:
                     prog.log(f"compaction not measured: {e}")
-        kin = kinetic_record(res, phases, prog, cg_info.get("energy_flux"))
+        kin = kinetic_record(res, phases, prog, cg_info.get("energy_flux"),
+                             cg_info.get("phase_batches"))
         if kin is not None and cell_points:
             slide = sliding_table(cell_points, d, rho_s, kin["restitution"])
             if slide is not None:

@@ -32,10 +32,17 @@ by weighted least squares in ln(p / (rho_s phi T)) over the same cells (scipy's
 trust-region least_squares, from several starting phi_min, the best kept); standard errors
 from the weighted Jacobian, s^2 (J^T W J)^-1.  The frictional part does not scale with T, which
 is what lets it describe cold dense cells that Lun's pressure alone puts far below their p.
+
+Those least-squares errors count every cell as an independent point; the cells of one chaotic
+bed are not (neighbours share balls and the bed's collective motion), so with the coarse-grained
+batches (`fit_cells(..., batches=...)`, as `vibroflow calibrate` calls it) each constant's error
+is the delete-one-batch jackknife's instead (`jackknife_errors`; docs/decisions/
+batch-jackknife-errors.md).
 """
 from __future__ import annotations
 
 import math
+import warnings
 
 import numba as nb
 import numpy as np
@@ -44,6 +51,7 @@ from scipy.optimize import least_squares, minimize_scalar
 from vibroflow.continuum.kinetic_theory import (G0_FORMS, KineticParameters,
                                                 frictional_pressure_Pa, radial_distribution)
 from vibroflow.errors import InputError
+from vibroflow.measure.stats import jackknife_stderr
 
 PHI_RANGE = (0.1, 0.6)
 MAX_LOG_ERROR = 0.5
@@ -261,18 +269,70 @@ def fit_lun_frictional(phi, T, p, rho_s: float, restitution: float, phi_stderr=N
 
 
 def fit_cells(fields, rho_s: float, restitution: float, joint: bool = False,
-              **options) -> dict:
+              batches: dict | None = None, **options) -> dict:
     """fit_phi_rcp (joint: fit_lun_frictional) on a coarse-grained Dataset
     (run_fields.coarse_grain_run's phase-resolved one, or any with solid_fraction, temperature,
-    pressure and, optionally, their *_stderr)."""
+    pressure and, optionally, their *_stderr).
+
+    batches: each batch's phase-resolved solid_fraction, temperature and pressure (arrays
+    (n_batches, ...) of the Dataset's shape: coarse_grain.CoarseGrainer.batch_phase_arrays).
+    With two or more, the fitted constants' *_stderr are the delete-one-batch jackknife's
+    (`jackknife_errors`) instead of the least-squares covariance over the cells, which counts
+    the cells of one chaotic bed as independent; the values are the fit's on all batches."""
     for name in ("solid_fraction", "temperature", "pressure"):
         if name not in fields:
             raise InputError(f"fields: no {name!r}: not a coarse-grained field set")
     get = (lambda k: np.asarray(fields[k].values, float) if k in fields else None)
     fit = fit_lun_frictional if joint else fit_phi_rcp
-    return fit(get("solid_fraction"), get("temperature"), get("pressure"), rho_s,
-               restitution, get("solid_fraction_stderr"), get("temperature_stderr"),
-                       get("pressure_stderr"), **options)
+    errs = (get("solid_fraction_stderr"), get("temperature_stderr"), get("pressure_stderr"))
+    out = fit(get("solid_fraction"), get("temperature"), get("pressure"), rho_s,
+              restitution, *errs, **options)
+    if batches is None:
+        return out
+    shape = np.shape(fields["solid_fraction"].values)
+    return jackknife_errors(out, fit, batches, shape, rho_s, restitution, errs, options)
+
+
+#: the constants whose errors `jackknife_errors` gives (the frictional ones where resolved)
+JACKKNIFED = ("phi_rcp", "frictional_Pa", "frictional_phi_min")
+
+
+def jackknife_errors(out: dict, fit, batches: dict, shape, rho_s: float, restitution: float,
+                     errs, options: dict) -> dict:
+    """The fit `out` with its constants' *_stderr from the delete-one-batch jackknife
+    (measure.stats.jackknife_stderr): the fit repeated with each batch left out, on the cells'
+    mean over the other batches (each batch's fields as coarse_grain gives them; NaN where a
+    batch has no snapshot of a phase), with the same per-cell weights (the full fields'
+    *_stderr) and options.  The least-squares errors are kept as *_stderr_least_squares.  A
+    constant the full fit does not resolve (Fr = 0) keeps its NaN error; a left-out fit that
+    fails gives NaN.  Fewer than two batches: `out` unchanged."""
+    arrays = [np.asarray(batches[k], float) for k in ("solid_fraction", "temperature",
+                                                       "pressure")]
+    nb = arrays[0].shape[0]
+    if nb < 2:
+        return out
+    for a in arrays:
+        if a.shape[1:] != tuple(shape):
+            raise ValueError(f"batches: fields of shape {a.shape[1:]}, not the cells' {shape}")
+    keys = [k for k in JACKKNIFED if k in out and np.isfinite(out[k + "_stderr"])]
+    left_out = {k: [] for k in keys}
+    for b in range(nb):
+        keep = np.arange(nb) != b
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # a cell no kept batch sampled
+            mean = [np.nanmean(a[keep], axis=0) for a in arrays]
+        try:
+            r = fit(*mean, rho_s, restitution, *errs, **options)
+        except InputError:
+            r = {}
+        for k in keys:
+            left_out[k].append(r.get(k, float("nan")))
+    res = dict(out)
+    for k in keys:
+        res[k + "_stderr_least_squares"] = out[k + "_stderr"]
+        res[k + "_stderr"] = jackknife_stderr(left_out[k])
+    res["stderr_method"] = f"delete-one-batch jackknife over {nb} batches"
+    return res
 
 
 def _floats(a):

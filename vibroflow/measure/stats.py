@@ -128,6 +128,20 @@ def stderr_of_batches(batch_values, axis: int = 0):
     return float(se) if np.ndim(se) == 0 else se
 
 
+def jackknife_stderr(leave_one_out) -> float:
+    """Delete-one-batch jackknife standard error of a statistic from its values theta_k
+    computed with batch k left out (Quenouille 1956, Tukey 1958; Efron & Stein 1981):
+    sqrt((n - 1) / n sum_k (theta_k - mean theta)^2).  For the batch mean it is the batch-means
+    standard error exactly (stderr_of_batches); for a fitted constant it carries the
+    correlation between the cells of one batch that a per-cell least-squares covariance
+    ignores.  NaN when fewer than two values are given or any is not finite."""
+    a = np.asarray(leave_one_out, dtype=float).ravel()
+    n = a.size
+    if n < 2 or not np.all(np.isfinite(a)):
+        return float("nan")
+    return float(np.sqrt((n - 1) / n * np.sum((a - a.mean()) ** 2)))
+
+
 def phase_bins(times, frequency: float, n_phases: int) -> np.ndarray:
     """Phase bin k = 0 .. n_phases-1 of each time (s): the nearest of the phases k / n_phases of
     the cycle (phase 0 = t a multiple of 1/f, as dem.h5's /snapshots/phase)."""
