@@ -222,7 +222,7 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
         if shear_cell:
             rheo, elastic, cell_points = dem_tests(sc, p_bed, prog, shear_cell_options or {})
         else:
-            rheo = fit_tub_cells(scatter, sc, avg, run_dir)
+            rheo = fit_tub_cells(scatter, sc, avg, run_dir, cg_info.get("phase_batches"))
             cell_points = None
             K_aff, G_aff = affine_moduli_linear(phi_bed, z["z_all"], k_n, k_t, d)
             elastic = {"bulk_modulus": K_aff, "shear_modulus": G_aff}

@@ -55,8 +55,9 @@ def coarse_grain_run(run, kernel: str = "gaussian", width: float | None = None,
 
     Returns (time_averaged, phase_resolved, info): two xarray Datasets (coarse_grain.fields) and
     a dict {snapshots, wall_time_s, contact_stress: "ball and wall" | "wall only" | "none",
-    phase_batches: {"pressure", "solid_fraction", "velocity", "temperature"}: each batch's
-    phase-resolved field as an array (n_batches, n_phases, nx, nz[, 3])}.
+    phase_batches: {"pressure", "solid_fraction", "velocity", "temperature",
+    "inertial_number", "friction_coefficient"}: each batch's phase-resolved field as an array
+    (n_batches, n_phases, nx, nz[, 3])}.
     """
     own = not isinstance(run, DEMResult)
     res = DEMResult.open(run) if own else run
@@ -116,11 +117,12 @@ def _coarse_grain(res: DEMResult, kernel, width, cutoff, cell_size, n_phases, pr
         ds.attrs["source"] = res.source
     if energy_flux:
         info["energy_flux"] = cg.energy_flux_fields(phase_resolved=True)
-    # each batch's phase-resolved pressure, solid fraction, velocity and temperature: the
-    # unloading modulus's batch means (unloading.unloading_bulk_modulus) and the [kinetic]
-    # fit's jackknife (kinetic.jackknife_errors)
+    # each batch's phase-resolved fields: the unloading modulus's batch means
+    # (unloading.unloading_bulk_modulus), the [kinetic] fit's jackknife (kinetic.
+    # jackknife_errors) and the tub-cell [rheology] fit's (tub_rheology.jackknife_rheology)
     info["phase_batches"] = cg.batch_phase_arrays(("pressure", "solid_fraction", "velocity",
-                                                   "temperature"))
+                                                   "temperature", "inertial_number",
+                                                   "friction_coefficient"))
     info["wall_time_s"] = time.perf_counter() - t_wall
     return avg, phases, info
 

@@ -14,11 +14,13 @@ Without shear cells the calibration fits mu(I) and phi(I) to the dense points of
 """
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from vibroflow.errors import InputError
+from vibroflow.measure.stats import jackknife_stderr
 
 from .calibration_tables import mu_phi_keys
 from .rheology_fit import fit_mu_i, fit_phi_i
@@ -40,14 +42,23 @@ def tub_mu_i_scatter(time_averaged, phase_resolved=None,
     for name, ds in (("time", time_averaged), ("phase", phase_resolved)):
         if ds is None:
             continue
-        I = np.asarray(ds["inertial_number"].values, float).ravel()
-        mu = np.asarray(ds["friction_coefficient"].values, float).ravel()
-        phi = np.asarray(ds["solid_fraction"].values, float).ravel()
-        p = np.asarray(ds["pressure"].values, float).ravel()
-        ok = np.isfinite(I) & np.isfinite(mu) & (I > 0) & (p > 0) & (phi >= min_solid_fraction)
-        out[name] = {"I": I[ok], "mu": mu[ok], "phi": phi[ok], "pressure": p[ok],
-                     "dense": phi[ok] >= dense_solid_fraction}
+        out[name] = _scatter_of(*(ds[k].values for k in SCATTER_FIELDS),
+                                dense_solid_fraction, min_solid_fraction)
     return out
+
+
+#: the coarse-grained fields a scatter is made of
+SCATTER_FIELDS = ("inertial_number", "friction_coefficient", "solid_fraction", "pressure")
+
+
+def _scatter_of(I, mu, phi, p, dense_solid_fraction: float = DENSE_SOLID_FRACTION,
+                min_solid_fraction: float = MIN_SOLID_FRACTION) -> dict:
+    """tub_mu_i_scatter's points of one set of fields (arrays of any shape, flattened)."""
+    I, mu, phi, p = (np.asarray(a, float).ravel() for a in (I, mu, phi, p))
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(I) & np.isfinite(mu) & (I > 0) & (p > 0) & (phi >= min_solid_fraction)
+    return {"I": I[ok], "mu": mu[ok], "phi": phi[ok], "pressure": p[ok],
+            "dense": phi[ok] >= dense_solid_fraction}
 
 
 def bed_pressure(time_averaged, dense_solid_fraction: float = DENSE_SOLID_FRACTION) -> float:
@@ -106,11 +117,16 @@ def check_tub_cells(scatter: dict, scenario, avg, run_dir: Path) -> None:
             f"needs at least {MU_I_POINTS}"))
 
 
-def fit_tub_cells(scatter: dict, scenario=None, avg=None, run_dir: Path | None = None
-                   ) -> dict:
+def fit_tub_cells(scatter: dict, scenario=None, avg=None, run_dir: Path | None = None,
+                  batches: dict | None = None) -> dict:
     """mu(I), phi(I) fitted to the tub's dense phase-resolved cells (no shear cell); a fit
     that fails (too few points, no convergence) is an InputError (too_small): the run is too
-    small to calibrate on, and no number is invented for it."""
+    small to calibrate on, and no number is invented for it.
+
+    batches: each batch's phase-resolved SCATTER_FIELDS (arrays (n_batches, ...):
+    coarse_grain.CoarseGrainer.batch_phase_arrays).  With two or more, each constant's
+    *_stderr is the delete-one-batch jackknife's (`jackknife_rheology`) instead of the fit's
+    covariance over the points, which counts the cells and phases of one bed as independent."""
     pts = dense_points(scatter)
     out = {"source": "tub cells (dense phase-resolved coarse-grained cells; run --shear-cell "
                      "for the Lees-Edwards simple-shear fit)", "points": int(pts["I"].size)}
@@ -122,5 +138,43 @@ def fit_tub_cells(scatter: dict, scenario=None, avg=None, run_dir: Path | None =
             raise
         raise too_small(run_dir, scenario, avg, e.message.rstrip(".")) from None
     out.update(mu_phi_keys(mu, phi))
+    if batches is not None:
+        out.update(jackknife_rheology(out, batches))
     out["status"] = "measured"
+    return out
+
+
+#: the [rheology] constants whose errors jackknife_rheology gives
+RHEOLOGY_CONSTANTS = ("mu_s", "mu_2", "I_0", "phi_max", "phi_min")
+
+
+def jackknife_rheology(fit: dict, batches: dict) -> dict:
+    """The tub-cell fit's constants' *_stderr from the delete-one-batch jackknife
+    (measure.stats.jackknife_stderr): mu(I) and phi(I) fitted again to the dense points of
+    the cells' mean over the other batches, for each batch left out; the fit's own errors kept
+    as *_stderr_least_squares (not written to calibration.toml).  A left-out fit that fails
+    gives NaN.  Fewer than two batches: {}."""
+    arrays = [np.asarray(batches[k], float) for k in SCATTER_FIELDS]
+    nb = arrays[0].shape[0]
+    if nb < 2:
+        return {}
+    left_out = {k: [] for k in RHEOLOGY_CONSTANTS}
+    for b in range(nb):
+        keep = np.arange(nb) != b
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # a cell no kept batch sampled
+            mean = [np.nanmean(a[keep], axis=0) for a in arrays]
+        sc = _scatter_of(*mean)
+        d = sc["dense"]
+        try:
+            r = {**fit_mu_i(sc["I"][d], sc["mu"][d]), **fit_phi_i(sc["I"][d], sc["phi"][d])}
+        except InputError:
+            r = {}
+        for k in RHEOLOGY_CONSTANTS:
+            left_out[k].append(r.get(k, float("nan")))
+    out = {}
+    for k in RHEOLOGY_CONSTANTS:
+        out[k + "_stderr_least_squares"] = fit[k + "_stderr"]
+        out[k + "_stderr"] = jackknife_stderr(left_out[k])
+    out["stderr_method"] = f"delete-one-batch jackknife over {nb} batches"
     return out
