@@ -41,10 +41,8 @@ Force assembly whose numbers do not depend on the thread count (DEVELOPERS.md, "
    entry order: flags, impact rows, slots, histories, each ball's sums, the largest overlap;
 2. gather (`_gather_block`): each ball j adds the slots of the entries where it is the second
    ball, in ascending entry order, reading them in sequence;
-3. walls (`wall_pass.ball_walls`): each ball's wall contacts, added one after the other,
-   their law over tiles of wall contacts as the pairs' (the work.tile rows reused);
-4. kick (`_kick_block`): the step's second half kick (and the next step's first, and drift),
-   one straight line of arithmetic a ball (`_kick_loop`).
+3. walls (`wall_pass.ball_walls`): each ball's wall contacts, added one after the other;
+4. kick (`_kick_block`): the step's second half kick (and the next step's first, and drift).
 
 Each sum is over the same terms in the same order whatever the threads.  The balls are cut into
 NBLOCK contiguous blocks of about equal work (a function of the list alone); the threads share
@@ -66,7 +64,7 @@ from .contact import (add_force_torque, contact_law, contact_velocity, forget,
                       normal_constants, put3, unit_normal)
 from .laws import (MODEL_HERTZ, MODEL_LINEAR, P_KT, P_MODEL, P_MU, P_MUR, P_ROLL, ROLL_CDT,
                    ROLL_CDT_LIGGGHTS, ROLL_EPSD, ROLL_NONE)
-from .wall_pass import N_WALL_TILE, N_WALL_TILE_IDX, W_TILE, ball_walls
+from .wall_pass import ball_walls
 from .walls import KIND_BALL_BALL, TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT
 
 # status codes returned by advance
@@ -100,8 +98,6 @@ TILE = 128
 N_TILE = 39
 I_K, I_I, I_J = range(3)
 N_TILE_IDX = 3
-# the wall pass's tiles (wall_pass.W_TILE) use the same rows of work.tile and work.tile_idx
-assert N_WALL_TILE * W_TILE <= N_TILE * TILE and N_WALL_TILE_IDX * W_TILE <= N_TILE_IDX * TILE
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
