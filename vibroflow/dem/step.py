@@ -42,7 +42,8 @@ Force assembly whose numbers do not depend on the thread count (DEVELOPERS.md, "
 2. gather (`_gather_block`): each ball j adds the slots of the entries where it is the second
    ball, in ascending entry order, reading them in sequence;
 3. walls (`wall_pass.ball_walls`): each ball's wall contacts, added one after the other;
-4. kick (`_kick_block`): the step's second half kick (and the next step's first, and drift).
+4. kick (`_kick_block`): the step's second half kick (and the next step's first, and drift),
+   one straight line of arithmetic a ball (`_kick_loop`).
 
 Each sum is over the same terms in the same order whatever the threads.  The balls are cut into
 NBLOCK contiguous blocks of about equal work (a function of the list alone); the threads share
