@@ -42,7 +42,8 @@ Force assembly whose numbers do not depend on the thread count (DEVELOPERS.md, "
 2. gather (`_gather_block`): each ball j adds the slots of the entries where it is the second
    ball, in ascending entry order, reading them in sequence;
 3. walls (`wall_pass.ball_walls`): each ball's wall contacts, added one after the other;
-4. kick (`_kick_block`): the step's second half kick (and the next step's first, and drift).
+4. kick (`_kick_block`): the step's second half kick (and the next step's first, and drift),
+   one straight line of arithmetic a ball (`_kick_loop`).
 
 Each sum is over the same terms in the same order whatever the threads.  The balls are cut into
 NBLOCK contiguous blocks of about equal work (a function of the list alone); the threads share
@@ -427,47 +428,88 @@ def _gather_block(c, balls, pairs, slots):
         put3(torque, i, tx, ty, tz)
 
 
+@nb.njit(cache=True, inline="always")
+def _kick_loop(lo, hi, pos, vel, omg, force, torque, radius, mass, ref_tub, save, pose, dt,
+               drift):
+    """`_kick_block`'s balls lo to hi - 1, each one straight line of arithmetic (no branch:
+    `drift` is a constant at each call site, the tests are selects), so that LLVM pipelines
+    or vectorises it across balls.  Returns the largest squared move (m^2) of a finite one and
+    the first ball whose move is NaN or infinite (-1 when none)."""
+    half_dt = 0.5 * dt
+    cth = np.cos(pose[2])
+    sth = np.sin(pose[2])
+    m2 = 0.0
+    bad = -1
+    for i in range(lo, hi):
+        r = radius[i]
+        im = 1.0 / mass[i]
+        ii = 1.0 / (0.4 * mass[i] * r * r)
+        fx = force[i, 0]
+        fy = force[i, 1]
+        fz = force[i, 2]
+        tx = torque[i, 0]
+        ty = torque[i, 1]
+        tz = torque[i, 2]
+        vx = vel[i, 0] + half_dt * fx * im
+        vy = vel[i, 1] + half_dt * fy * im
+        vz = vel[i, 2] + half_dt * fz * im
+        wx = omg[i, 0] + half_dt * tx * ii
+        wy = omg[i, 1] + half_dt * ty * ii
+        wz = omg[i, 2] + half_dt * tz * ii
+        px = pos[i, 0]
+        py = pos[i, 1]
+        pz = pos[i, 2]
+        rx = px - pose[0] - pose[6]
+        rz = pz - pose[1] - pose[7]
+        dx = pose[6] + cth * rx + sth * rz - ref_tub[i, 0]
+        dy = py - ref_tub[i, 1]
+        dz = pose[7] - sth * rx + cth * rz - ref_tub[i, 2]
+        d2 = dx * dx + dy * dy + dz * dz
+        finite = d2 < 1e300  # False: NaN or infinite
+        m2 = d2 if finite & (d2 > m2) else m2
+        bad = i if (not finite) & (bad < 0) else bad
+        if drift:
+            save[i, 0] = px
+            save[i, 1] = py
+            save[i, 2] = pz
+            save[i, 3] = vx
+            save[i, 4] = vy
+            save[i, 5] = vz
+            save[i, 6] = wx
+            save[i, 7] = wy
+            save[i, 8] = wz
+            vx = vx + half_dt * fx * im
+            vy = vy + half_dt * fy * im
+            vz = vz + half_dt * fz * im
+            wx = wx + half_dt * tx * ii
+            wy = wy + half_dt * ty * ii
+            wz = wz + half_dt * tz * ii
+            put3(pos, i, px + dt * vx, py + dt * vy, pz + dt * vz)
+        put3(vel, i, vx, vy, vz)
+        put3(omg, i, wx, wy, wz)
+    return m2, bad
+
+
 @nb.njit(cache=True)
 def _kick_block(c, balls, pairs, params, work, drift):
     """The step's second half kick of the balls of block c, and the largest squared move of
     one of them since the last list build (tub frame) into moved[c]; with `drift`, then each
     ball's state saved into work.save and the next step's first half kick and drift (the
-    same operations, in the same order, as `_kick_drift`)."""
+    same operations, in the same order, as `_kick_drift`), one straight line a ball
+    (`_kick_loop`)."""
+    lo, hi = pairs.bounds[c], pairs.bounds[c + 1]
     pos, vel, omg, force, torque = balls.pos, balls.vel, balls.omg, balls.force, balls.torque
     radius, mass, ref_tub = balls.radius, balls.mass, balls.ref_tub
-    diag, pose, moved, save = work.diag, work.pose, work.moved, work.save
-    dt = params.dt
-    half_dt = 0.5 * dt
-    cth = np.cos(pose[2])
-    sth = np.sin(pose[2])
-    m2 = 0.0
-    for i in range(pairs.bounds[c], pairs.bounds[c + 1]):
-        r = radius[i]
-        im = 1.0 / mass[i]
-        ii = 1.0 / (0.4 * mass[i] * r * r)
-        for a in range(3):
-            vel[i, a] += half_dt * force[i, a] * im
-            omg[i, a] += half_dt * torque[i, a] * ii
-        rx = pos[i, 0] - pose[0] - pose[6]
-        rz = pos[i, 2] - pose[1] - pose[7]
-        dx = pose[6] + cth * rx + sth * rz - ref_tub[i, 0]
-        dy = pos[i, 1] - ref_tub[i, 1]
-        dz = pose[7] - sth * rx + cth * rz - ref_tub[i, 2]
-        d2 = dx * dx + dy * dy + dz * dz
-        if not (d2 < 1e300):  # NaN or infinite
-            if diag[c, D_NAN] < 0.0:
-                diag[c, D_NAN] = i
-        elif d2 > m2:
-            m2 = d2
-        if drift:
-            for a in range(3):
-                save[i, a] = pos[i, a]
-                save[i, 3 + a] = vel[i, a]
-                save[i, 6 + a] = omg[i, a]
-                vel[i, a] += half_dt * force[i, a] * im
-                omg[i, a] += half_dt * torque[i, a] * ii
-                pos[i, a] += dt * vel[i, a]
-    moved[c] = m2
+    save, pose = work.save, work.pose
+    if drift:
+        m2, bad = _kick_loop(lo, hi, pos, vel, omg, force, torque, radius, mass, ref_tub, save,
+                             pose, params.dt, True)
+    else:
+        m2, bad = _kick_loop(lo, hi, pos, vel, omg, force, torque, radius, mass, ref_tub, save,
+                             pose, params.dt, False)
+    if bad >= 0 and work.diag[c, D_NAN] < 0.0:
+        work.diag[c, D_NAN] = bad
+    work.moved[c] = m2
 
 
 @nb.njit(cache=True, parallel=True)
