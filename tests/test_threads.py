@@ -62,6 +62,7 @@ def _spin(env_extra: dict[str, str]) -> str:
     return out.stdout.strip()
 
 
+@pytest.mark.skipif(not os.path.exists("/proc/stat"), reason="no /proc/stat here")
 def test_other_processes_on_every_core_get_the_short_spin():
     from vibroflow.threads import SPIN_BUSY, others_running
 
