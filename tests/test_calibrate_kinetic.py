@@ -286,11 +286,19 @@ def test_a_run_reads_the_calibrated_kinetic_constants():
 # The delete-one-batch jackknife (kinetic.jackknife_errors, measure.stats.jackknife_stderr)
 
 def test_the_jackknife_of_the_batch_mean_is_the_batch_means_standard_error():
-    from vibroflow.measure.stats import jackknife_stderr, stderr_of_batches
+    from vibroflow.measure.stats import (jackknife_of_batches, jackknife_stderr,
+                                         stderr_of_batches)
 
     b = np.random.default_rng(5).normal(3.0, 0.7, 9)
     left_out = [(b.sum() - x) / (b.size - 1) for x in b]
     assert jackknife_stderr(left_out) == pytest.approx(stderr_of_batches(b), rel=1e-12)
+    # the same through the batches' left-out means, cell by cell; a key the statistic does not
+    # return is a failed left-out value: NaN
+    cells = np.stack([b, 2.0 * b], axis=1)
+    se = jackknife_of_batches(lambda m: {"a": m[0], "b": m[1]}, [cells], ["a", "b", "c"])
+    assert se["a"] == pytest.approx(stderr_of_batches(b), rel=1e-12)
+    assert se["b"] == pytest.approx(2.0 * stderr_of_batches(b), rel=1e-12)
+    assert math.isnan(se["c"])
     assert math.isnan(jackknife_stderr([1.0])) and math.isnan(jackknife_stderr([1.0, np.nan]))
 
 

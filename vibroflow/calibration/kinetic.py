@@ -42,7 +42,6 @@ batch-jackknife-errors.md).
 from __future__ import annotations
 
 import math
-import warnings
 
 import numba as nb
 import numpy as np
@@ -51,7 +50,7 @@ from scipy.optimize import least_squares, minimize_scalar
 from vibroflow.continuum.kinetic_theory import (G0_FORMS, KineticParameters,
                                                 frictional_pressure_Pa, radial_distribution)
 from vibroflow.errors import InputError
-from vibroflow.measure.stats import jackknife_stderr
+from vibroflow.measure.stats import jackknife_of_batches
 
 PHI_RANGE = (0.1, 0.6)
 MAX_LOG_ERROR = 0.5
@@ -300,7 +299,7 @@ JACKKNIFED = ("phi_rcp", "frictional_Pa", "frictional_phi_min")
 def jackknife_errors(out: dict, fit, batches: dict, shape, rho_s: float, restitution: float,
                      errs, options: dict) -> dict:
     """The fit `out` with its constants' *_stderr from the delete-one-batch jackknife
-    (measure.stats.jackknife_stderr): the fit repeated with each batch left out, on the cells'
+    (measure.stats.jackknife_of_batches): the fit repeated with each batch left out, on the cells'
     mean over the other batches (each batch's fields as coarse_grain gives them; NaN where a
     batch has no snapshot of a phase), with the same per-cell weights (the full fields'
     *_stderr) and options.  The least-squares errors are kept as *_stderr_least_squares.  A
@@ -315,22 +314,18 @@ def jackknife_errors(out: dict, fit, batches: dict, shape, rho_s: float, restitu
         if a.shape[1:] != tuple(shape):
             raise ValueError(f"batches: fields of shape {a.shape[1:]}, not the cells' {shape}")
     keys = [k for k in JACKKNIFED if k in out and np.isfinite(out[k + "_stderr"])]
-    left_out = {k: [] for k in keys}
-    for b in range(nb):
-        keep = np.arange(nb) != b
-        with np.errstate(invalid="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # a cell no kept batch sampled
-            mean = [np.nanmean(a[keep], axis=0) for a in arrays]
+
+    def refit(*means):
         try:
-            r = fit(*mean, rho_s, restitution, *errs, **options)
+            return fit(*means, rho_s, restitution, *errs, **options)
         except InputError:
-            r = {}
-        for k in keys:
-            left_out[k].append(r.get(k, float("nan")))
+            return {}
+
+    se = jackknife_of_batches(refit, arrays, keys)
     res = dict(out)
     for k in keys:
         res[k + "_stderr_least_squares"] = out[k + "_stderr"]
-        res[k + "_stderr"] = jackknife_stderr(left_out[k])
+        res[k + "_stderr"] = se[k]
     res["stderr_method"] = f"delete-one-batch jackknife over {nb} batches"
     return res
 

@@ -14,13 +14,12 @@ Without shear cells the calibration fits mu(I) and phi(I) to the dense points of
 """
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 
 import numpy as np
 
 from vibroflow.errors import InputError
-from vibroflow.measure.stats import jackknife_stderr
+from vibroflow.measure.stats import jackknife_of_batches
 
 from .calibration_tables import mu_phi_keys
 from .rheology_fit import fit_mu_i, fit_phi_i
@@ -150,31 +149,27 @@ RHEOLOGY_CONSTANTS = ("mu_s", "mu_2", "I_0", "phi_max", "phi_min")
 
 def jackknife_rheology(fit: dict, batches: dict) -> dict:
     """The tub-cell fit's constants' *_stderr from the delete-one-batch jackknife
-    (measure.stats.jackknife_stderr): mu(I) and phi(I) fitted again to the dense points of
-    the cells' mean over the other batches, for each batch left out; the fit's own errors kept
-    as *_stderr_least_squares (not written to calibration.toml).  A left-out fit that fails
-    gives NaN.  Fewer than two batches: {}."""
+    (measure.stats.jackknife_of_batches): mu(I) and phi(I) fitted again to the dense points
+    of the cells' mean over the other batches, for each batch left out; the fit's own errors
+    kept as *_stderr_least_squares (written to calibration.toml's [rheology] beside them).  A
+    left-out fit that fails gives NaN.  Fewer than two batches: {}."""
     arrays = [np.asarray(batches[k], float) for k in SCATTER_FIELDS]
     nb = arrays[0].shape[0]
     if nb < 2:
         return {}
-    left_out = {k: [] for k in RHEOLOGY_CONSTANTS}
-    for b in range(nb):
-        keep = np.arange(nb) != b
-        with np.errstate(invalid="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # a cell no kept batch sampled
-            mean = [np.nanmean(a[keep], axis=0) for a in arrays]
-        sc = _scatter_of(*mean)
+
+    def refit(*means):
+        sc = _scatter_of(*means)
         d = sc["dense"]
         try:
-            r = {**fit_mu_i(sc["I"][d], sc["mu"][d]), **fit_phi_i(sc["I"][d], sc["phi"][d])}
+            return {**fit_mu_i(sc["I"][d], sc["mu"][d]), **fit_phi_i(sc["I"][d], sc["phi"][d])}
         except InputError:
-            r = {}
-        for k in RHEOLOGY_CONSTANTS:
-            left_out[k].append(r.get(k, float("nan")))
+            return {}
+
+    se = jackknife_of_batches(refit, arrays, RHEOLOGY_CONSTANTS)
     out = {}
     for k in RHEOLOGY_CONSTANTS:
         out[k + "_stderr_least_squares"] = fit[k + "_stderr"]
-        out[k + "_stderr"] = jackknife_stderr(left_out[k])
+        out[k + "_stderr"] = se[k]
     out["stderr_method"] = f"delete-one-batch jackknife over {nb} batches"
     return out

@@ -21,6 +21,8 @@ Choices made here (tub47's window is 2.0 s x 47 Hz = 94 cycles, not divisible by
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 #: tolerance (in cycles) when placing a sample on a cycle boundary: a snapshot written at
@@ -140,6 +142,28 @@ def jackknife_stderr(leave_one_out) -> float:
     if n < 2 or not np.all(np.isfinite(a)):
         return float("nan")
     return float(np.sqrt((n - 1) / n * np.sum((a - a.mean()) ** 2)))
+
+
+def jackknife_of_batches(statistic, batches, keys) -> dict:
+    """Delete-one-batch jackknife errors {key: se} of the numbers `statistic(*means)` returns
+    (a dict; {} or a missing key: that left-out value failed, so its error is NaN), where
+    `means` are the arrays of `batches` (each (n_batches, ...)) averaged over every batch but
+    one, NaN batches of a cell skipped (a cell no kept batch sampled stays NaN).  {} with
+    fewer than two batches."""
+    arrays = [np.asarray(a, dtype=float) for a in batches]
+    nb = arrays[0].shape[0]
+    if nb < 2:
+        return {}
+    left_out = {k: [] for k in keys}
+    for b in range(nb):
+        keep = np.arange(nb) != b
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN cells: NaN, said above
+            means = [np.nanmean(a[keep], axis=0) for a in arrays]
+        values = statistic(*means)
+        for k in keys:
+            left_out[k].append(values.get(k, float("nan")))
+    return {k: jackknife_stderr(v) for k, v in left_out.items()}
 
 
 def phase_bins(times, frequency: float, n_phases: int) -> np.ndarray:
