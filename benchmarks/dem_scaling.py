@@ -56,22 +56,15 @@ WARMUP = CYCLE
 
 
 def _settled(case: str, sets: list[str]):
-    """The case's settled bed (fill cache; settled and cached when absent)."""
-    from vibroflow.dem import fill as F
+    """The case's settled bed (dem_step_cost.settled_state: the fill cache, settled and cached
+    when absent)."""
+    from dem_step_cost import settled_state
+
     from vibroflow.dem import simulate as S
-    from vibroflow.dem.output import load_state_file, save_state_file
     from vibroflow.scenario.io import load_scenario
 
     scenario = load_scenario(case, sets)
-    path = F.cache_dir() / "fills" / f"{F.fill_cache_key(scenario)}.h5"
-    if not path.exists():
-        print(f"settling {case} into {path}", file=sys.stderr, flush=True)
-        system = S.make_system(scenario)
-        state = F.fill_state(system, scenario)
-        info = F.settle(system, state, scenario)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        save_state_file(path, state, {"settle_info": json.dumps(info)})
-    return load_state_file(path)[0]
+    return settled_state(scenario, S.make_system(scenario))
 
 
 def _bed(size: str, scenario, system):

@@ -39,8 +39,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def _settled(scenario, system):
-    """The case's settled bed at the start of its vibration, as vibroflow.dem.run starts it."""
+def settled_state(scenario, system):
+    """The case's settled bed at the start of its vibration, as vibroflow.dem.run starts it (the
+    fill cache; settled and cached there when absent).  benchmarks/dem_scaling.py uses it too."""
     # vibroflow is imported in the worker only: each checkout's own package (PYTHONPATH)
     from vibroflow.dem import fill as F
     from vibroflow.dem.output import load_state_file, save_state_file
@@ -73,13 +74,13 @@ def worker(case: str, steps: int, repeats: int, sets: list[str]) -> dict:
 
     scenario = load_scenario(case, sets)
     system = make_system(scenario)
-    state = _settled(scenario, system)
+    state = settled_state(scenario, system)
     t0 = time.perf_counter()
     run_steps(system, state, 2)
     first_call = time.perf_counter() - t0
     times, cpu, builds = [], [], []
     for _ in range(repeats):
-        state = _settled(scenario, system)
+        state = settled_state(scenario, system)
         b0 = state.nl.builds
         t0, c0 = time.perf_counter(), time.process_time()
         run_steps(system, state, steps)
