@@ -80,3 +80,48 @@ def test_other_processes_on_every_core_get_the_short_spin():
 
 def test_the_environments_spin_wins():
     assert _spin({"GOMP_SPINCOUNT": "77"}) == "77"
+
+
+# The Eulerian loop's choice (continuum/eulerian/solver.py, parallel_loop): numba's parallel
+# loops on a large mesh always, on a small one only while the threads fit on the free cores
+
+def _reading(monkeypatch, others):
+    import vibroflow.threads as T
+
+    monkeypatch.setattr(T, "_free_read", None)
+    monkeypatch.setattr(T, "others_running", lambda: others)
+    monkeypatch.setattr(T.os, "cpu_count", lambda: 4)
+
+
+def test_the_free_cores_are_those_other_processes_leave(monkeypatch):
+    from vibroflow import threads as T
+
+    _reading(monkeypatch, 1)
+    assert T.cores_free(3)
+    assert not T.cores_free(4)
+    _reading(monkeypatch, None)  # the load unknown: not free
+    assert not T.cores_free(1)
+
+
+def test_a_reading_of_the_load_serves_its_age_then_is_read_again(monkeypatch):
+    from vibroflow import threads as T
+
+    _reading(monkeypatch, 0)
+    assert T.cores_free(4)
+    monkeypatch.setattr(T, "others_running", lambda: 3)
+    assert T.cores_free(4)  # the first reading still serves
+    assert not T.cores_free(4, max_age_s=0.0)
+
+
+def test_the_eulerian_loop_is_parallel_on_a_small_mesh_only_on_free_cores(monkeypatch):
+    from vibroflow.continuum.eulerian.solver import (FREE_PARALLEL_FROM, SERIAL_BELOW,
+                                                     parallel_loop)
+
+    _reading(monkeypatch, 0)
+    assert parallel_loop(FREE_PARALLEL_FROM, 2)
+    assert not parallel_loop(FREE_PARALLEL_FROM - 1, 2)
+    assert not parallel_loop(SERIAL_BELOW, 1)  # one thread: the serial loop always
+    _reading(monkeypatch, 3)  # another process on three of the four cores
+    assert not parallel_loop(FREE_PARALLEL_FROM, 2)
+    assert parallel_loop(SERIAL_BELOW, 2)
+    assert parallel_loop(10, 2, serial_below=0)  # forced, as the tests of the loops do

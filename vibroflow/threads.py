@@ -84,6 +84,24 @@ def others_running(reads: int = 3, pause_s: float = 1e-3) -> int | None:
     return max(least, 0) if least is not None else None
 
 
+#: how long a reading of the machine's load (others_running) serves `cores_free` (s)
+FREE_READ_S = 10.0
+_free_read: tuple[float, int | None] | None = None
+
+
+def cores_free(threads: int, max_age_s: float = FREE_READ_S) -> bool:
+    """Whether `threads` threads fit on the cores that other processes leave free now
+    (others_running and spin_count's test); False where the load is unknown.  The reading is
+    kept max_age_s seconds, so that a caller may ask before every batch of steps (a reading
+    costs about 2 ms)."""
+    global _free_read
+    now = time.monotonic()
+    if _free_read is None or now - _free_read[0] > max_age_s:
+        _free_read = (now, others_running())
+    others = _free_read[1]
+    return others is not None and others + threads <= (os.cpu_count() or 1)
+
+
 def default_spin_env() -> None:
     """GOMP_SPINCOUNT from spin_count() unless the environment sets it or OMP_WAIT_POLICY
     (called by `import vibroflow` after default_threads_env, so that the thread count is

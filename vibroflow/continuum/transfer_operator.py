@@ -85,15 +85,18 @@ def sum_operator_rows(i0, i1, cb, B):
     """Grid rows i0:i1 of B: the sums of the per-chunk operators cb (nchunk, nx, nz, 5, 5) in
     the fixed order chunk 0, 1, ... (module docstring)."""
     nchunk = cb.shape[0]
-    nz = B.shape[1]
+    m = B.shape[1] * 25
     for i in range(i0, i1):
-        for k in range(nz):
-            for a in range(5):
-                for b in range(5):
-                    s = cb[0, i, k, a, b]
-                    for c in range(1, nchunk):
-                        s += cb[c, i, k, a, b]
-                    B[i, k, a, b] = s
+        # each entry's sum cb[0] + cb[1] + ... in that order, made chunk after chunk over the
+        # row's flat entries: a long loop the compiler vectorises, with the same roundings
+        out = B[i].reshape(m)
+        first = cb[0, i].reshape(m)
+        for e in range(m):
+            out[e] = first[e]
+        for c in range(1, nchunk):
+            part = cb[c, i].reshape(m)
+            for e in range(m):
+                out[e] += part[e]
 
 
 @nb.njit(cache=True)

@@ -98,32 +98,41 @@ def match_divergence(L, ux, uz, h, periodic, v, normal, mass, open_x, open_z, in
     / (h r) + (w_T - w_B) / h, is the plane one plus (u_L + u_R) / (2 r) exactly (r_R, r_L =
     r +- h/2), which is the hoop rate given to L[:, 4]: the volume change the stress update
     sees is again the one the mass transport (remap_work's radii) makes."""
-    ncx, ncz = uz.shape[0], ux.shape[1]
+    match_divergence_cells(0, L.shape[0], L, ux, uz, h, v, normal, mass, open_x, open_z,
+                           inv_r)
+
+
+@nb.njit(cache=True)
+def match_divergence_cells(a, b, L, ux, uz, h, v, normal, mass, open_x, open_z, inv_r):
+    """`match_divergence` on the cells a:b alone (p = i * ncz + k; the other arguments as
+    there): each cell's arithmetic is that one's, so the fused step's chunks of cells give its
+    numbers."""
+    ncz = ux.shape[1]
     hoop = L.shape[1] > 4
-    for i in range(ncx):
+    for p in range(a, b):
+        i = p // ncz
+        k = p - i * ncz
         ir = i + 1
-        for k in range(ncz):
-            p = i * ncz + k
-            uxl = ux[i, k]
-            uxr = ux[ir, k]
-            uzb = uz[i, k]
-            uzt = uz[i, k + 1]
-            if mass[p] > 0.0:
-                nx = normal[p, 0]
-                nz = normal[p, 1]
-                s = v[p, 0] * nx + v[p, 1] * nz
-                if s > 0.0:
-                    if not open_x[i, k]:
-                        uxl = s * nx
-                    if not open_x[ir, k]:
-                        uxr = s * nx
-                    if not open_z[i, k]:
-                        uzb = s * nz
-                    if not open_z[i, k + 1]:
-                        uzt = s * nz
-            div = (uxr - uxl + uzt - uzb) / h
-            d = 0.5 * (div - L[p, 0] - L[p, 3])
-            L[p, 0] += d
-            L[p, 3] += d
-            if hoop:
-                L[p, 4] = 0.5 * (uxl + uxr) * inv_r[p]
+        uxl = ux[i, k]
+        uxr = ux[ir, k]
+        uzb = uz[i, k]
+        uzt = uz[i, k + 1]
+        if mass[p] > 0.0:
+            nx = normal[p, 0]
+            nz = normal[p, 1]
+            s = v[p, 0] * nx + v[p, 1] * nz
+            if s > 0.0:
+                if not open_x[i, k]:
+                    uxl = s * nx
+                if not open_x[ir, k]:
+                    uxr = s * nx
+                if not open_z[i, k]:
+                    uzb = s * nz
+                if not open_z[i, k + 1]:
+                    uzt = s * nz
+        div = (uxr - uxl + uzt - uzb) / h
+        d = 0.5 * (div - L[p, 0] - L[p, 3])
+        L[p, 0] += d
+        L[p, 3] += d
+        if hoop:
+            L[p, 4] = 0.5 * (uxl + uxr) * inv_r[p]

@@ -11,9 +11,10 @@ numbers whatever the threads; the cells holding material are scattered to the no
 fixed chunks of per-chunk buffers summed in a fixed order (the grid's part of the step is the
 Lagrangian loop's: grid_step.grid_phase), so the run depends on the number of chunks, never on
 the number of threads (one chunk: the serial p2g's numbers).  On one thread,
-and on a small mesh (solver.SERIAL_BELOW), the loop is compiled without numba's parallel loops
-(`advance_kernel_serial`, the same code): on tub47's ~1000 cells a parallel loop's launch,
-even with one thread, cost ~1.5 us, and a step has seven of them.
+and on a small mesh while other processes hold the cores (solver.parallel_loop), the loop is
+compiled without numba's parallel loops (`advance_kernel_serial`, the same code): a parallel
+loop's launch, even with one thread, costs ~1.5 us, a step has seven of them, and a barrier
+on a busy machine waits for the scheduler.
 
 The cells' B-spline weights on the grid are the mesh's constant tables (transfer.py), and the
 cells holding material are scattered and gathered in place through their indices (no compact
@@ -40,7 +41,7 @@ from ..stress_update import damped_stress
 from ..kinetic_stress import RATE_RATIO
 from ..temperature_field import add_stress
 from .advection import remap, remap_serial
-from .face_velocity import face_velocity_rows, match_divergence
+from .face_velocity import face_velocity_rows, match_divergence_cells
 from .lagrangian_step import (end_density, fill_limit, material_fraction,
                               update_stress_cells, void_first)
 from .transfer import g2p_cells, operator_of_cells, p2g_cells
@@ -118,6 +119,7 @@ def _make_advance_kernel(parallel: bool):
         damped = params[P_ETA_BED] > 0.0
         kinetic = p_kin.shape[0] > 0
         scattered = stress_work if damped or kinetic else stress
+        chunk_finite = np.ones(nchunk, np.bool_)
         for s in range(nsteps):
             # lagrangian_step.lagrangian_step: forces, the cells holding material to the nodes
             material_fraction(mass, density, h, weight, frac, volume)
@@ -173,36 +175,49 @@ def _make_advance_kernel(parallel: bool):
                 # the same parallel loop, one launch fewer
                 face_velocity_rows((c * (ncx + 1)) // nchunk, ((c + 1) * (ncx + 1)) // nchunk,
                                    gv, tables, periodic, open_x, open_z, m2, ux, uz)
-            match_divergence(L, ux, uz, h, periodic, v, normal, mass, open_x, open_z, inv_r)
-            void_first(L, frac, density, rho_c, dt)
-            end_density(density, L, dt, end_rho)
+            # each cell's divergence, void, end density and stress, then the fields the remap
+            # carries (solver.py, step 2) packed: cell by cell, in chunks of cells (the face
+            # velocities above are every chunk's, so this loop comes after that one)
             for c in nb.prange(nchunk):
-                update_stress_cells((c * n) // nchunk, ((c + 1) * n) // nchunk, stress, L,
-                                    end_rho, dt, params, gamma_dot, phase,
+                a = (c * n) // nchunk
+                b = ((c + 1) * n) // nchunk
+                match_divergence_cells(a, b, L, ux, uz, h, v, normal, mass, open_x, open_z,
+                                       inv_r)
+                void_first(L[a:b], frac[a:b], density[a:b], rho_c, dt)
+                end_density(density[a:b], L[a:b], dt, end_rho[a:b])
+                update_stress_cells(a, b, stress, L, end_rho, dt, params, gamma_dot, phase,
                                     p_kin[:, RATE_RATIO])
-            # the remap of mass and of the fields it carries (solver.py, step 2)
-            for p in range(n):
-                q[0, p] = v[p, 0]
-                q[1, p] = v[p, 1]
-                for c in range(4):
-                    q[2 + c, p] = C[p, c]
-                    q[6 + c, p] = stress[p, c]
-                q[10, p] = end_rho[p]
+                for p in range(a, b):
+                    q[0, p] = v[p, 0]
+                    q[1, p] = v[p, 1]
+                    for j in range(4):
+                        q[2 + j, p] = C[p, j]
+                        q[6 + j, p] = stress[p, j]
+                    q[10, p] = end_rho[p]
             if parallel:
                 lowest = remap(m2, q3, ux, uz, h, dt, periodic, rwork)
             else:
                 lowest = remap_serial(m2, q3, ux, uz, h, dt, periodic, rwork)
+            # the remapped fields unpacked and each cell filled no further than full, in
+            # chunks of cells
+            for c in nb.prange(nchunk):
+                a = (c * n) // nchunk
+                b = ((c + 1) * n) // nchunk
+                ok = True
+                for p in range(a, b):
+                    v[p, 0] = q[0, p]
+                    v[p, 1] = q[1, p]
+                    for j in range(4):
+                        C[p, j] = q[2 + j, p]
+                        stress[p, j] = q[6 + j, p]
+                    density[p] = q[10, p]
+                    if not (np.isfinite(v[p, 0]) and np.isfinite(v[p, 1])):
+                        ok = False
+                fill_limit(mass[a:b], density[a:b], h, weight[a:b])
+                chunk_finite[c] = ok
             finite = True
-            for p in range(n):
-                v[p, 0] = q[0, p]
-                v[p, 1] = q[1, p]
-                for c in range(4):
-                    C[p, c] = q[2 + c, p]
-                    stress[p, c] = q[6 + c, p]
-                density[p] = q[10, p]
-                if not (np.isfinite(v[p, 0]) and np.isfinite(v[p, 1])):
-                    finite = False
-            fill_limit(mass, density, h, weight)
+            for c in range(nchunk):
+                finite = finite and chunk_finite[c]
             t += dt
             if lowest < mtol or not np.isfinite(lowest):
                 return s + 1, t, NEGATIVE_MASS, lowest, mass_error_max

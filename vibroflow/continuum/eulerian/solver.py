@@ -48,6 +48,7 @@ import numba as nb
 import numpy as np
 
 from vibroflow.errors import InputError
+from vibroflow.threads import cores_free
 
 from .. import steps
 from ..constitutive import ContinuumMaterial
@@ -67,13 +68,17 @@ from .wall import MeshWall, empty_history
 #: number of intensive fields transported with the mass: v (2), C (4), stress (4), density
 NQ = 11
 
-#: meshes of fewer cells step on one thread whatever numba's thread count (the serial loop,
-#: fused.advance_kernel_serial, whose numbers are the parallel loop's).  Measured on tub47
-#: (1376 cells, ~150 us a step): a step holds seven parallel loops, each a launch and a
-#: barrier; two threads gained ~10 % on a quiet machine, and on the shared two-core machine,
-#: with another process busy, a barrier waited for the scheduler: the whole run took 17.0 s
-#: on two threads against 10.7 s on one, and single steps up to 40 ms
+#: meshes of fewer cells step on one thread (the serial loop, fused.advance_kernel_serial,
+#: whose numbers are the parallel loop's) unless numba's threads fit on the cores that other
+#: processes leave free (vibroflow.threads.cores_free) and the mesh has FREE_PARALLEL_FROM
+#: cells or more.  A step holds seven parallel loops, each a launch and a barrier: on the
+#: shared two-core machine, with another process busy, a barrier waited for the scheduler
+#: (tub47's whole run took 17.0 s on two threads against 10.7 s on one, and single steps up to
+#: 40 ms); with the cores free, and the threads spinning at their barriers (threads.SPIN_FREE),
+#: tub47's 1 270 cells step 1.45 x faster on two threads than on one (docs/validation.md,
+#: section 18)
 SERIAL_BELOW = 10_000
+FREE_PARALLEL_FROM = 1_000
 #: the loop with T keeping no step's start (temperature_loop.StepStart of 0 cells)
 NO_STEP_START = temperature_loop.step_start(0)
 
@@ -91,8 +96,9 @@ class EulerianSystem:
     still make the cells next to the floor stick to it, where the wall's Coulomb friction acts
     only on the row of cells touching it.
 
-    serial_below: a mesh of fewer cells steps on one thread (SERIAL_BELOW); chunks: the
-    cells' scatter chunks (fused.py), which alone fix the numbers.
+    serial_below: a mesh of fewer cells steps on one thread, unless the cores are free for
+    numba's threads (`parallel_loop`, SERIAL_BELOW); chunks: the cells' scatter chunks
+    (fused.py), which alone fix the numbers.
 
     transfers (integer >= 1): the APIC transfers a step makes, as the Lagrangian formulation's
     (mpm.MPMSystem.transfers, vibroflow.continuum.transfer_operator).  Default 1.
@@ -384,6 +390,16 @@ def _boundaries(system: EulerianSystem, state: EulerianState):
                           else (0.0, 1.0)))
 
 
+def parallel_loop(cells: int, threads: int, serial_below: int = SERIAL_BELOW) -> bool:
+    """Whether a mesh of `cells` cells steps in numba's parallel loops on `threads` threads
+    (SERIAL_BELOW, FREE_PARALLEL_FROM); either loop gives the same numbers."""
+    if threads <= 1:
+        return False
+    if cells >= serial_below:
+        return True
+    return cells >= FREE_PARALLEL_FROM and cores_free(threads)
+
+
 def _advance(system: EulerianSystem, state: EulerianState, n: int, p_kin, ts=None,
              keep=None) -> None:
     """`advance`'s compiled call: n steps, the granular temperature's stress p_kin (N, 5)
@@ -394,8 +410,8 @@ def _advance(system: EulerianSystem, state: EulerianState, n: int, p_kin, ts=Non
     mesh = system.mesh
     mat = system.material
     # the loop without numba's parallel loops on one thread (their launches cost time even
-    # then) and on a small mesh (SERIAL_BELOW)
-    parallel = nb.get_num_threads() > 1 and mesh.n >= system.serial_below
+    # then) and on a small mesh on a busy machine (SERIAL_BELOW)
+    parallel = parallel_loop(mesh.n, nb.get_num_threads(), system.serial_below)
     kernel = fused.advance_kernel if parallel else fused.advance_kernel_serial
     cells = fused.Cells(state.mass, state.v, state.C, state.L, state.stress, state.gamma_dot,
                         state.phase, state.frac, state.volume, state.density, state.fext,
