@@ -331,20 +331,38 @@ def remap_work(open_x, open_z, nq: int, radius=None):
             (np.zeros((nq, nf)), np.zeros((nq, n + 1))), np.zeros((nq, n)), weights)
 
 
-def _make_remap(parallel: bool):
-    """remap, parallel over the carried fields or serial (fused.py's loop on one thread)."""
+@nb.njit(cache=True)
+def renew_cells(a, b, qf, dq, mf, dm, mode, inv):
+    """The end of a transport step on the cells a:b: every carried field qf (nq, n) renewed
+    from its inflow dq (`_renew`'s arithmetic), then the masses mf (n,) given their inflow dm.
+    Returns the smallest new mass among them (kg/m; inf for none).  fused.py calls it on
+    chunks of cells, after `remap_fluxes`."""
+    nq = qf.shape[0]
+    lowest = np.inf
+    for p in range(a, b):
+        mk = mode[p]
+        mo = mf[p]
+        ip = inv[p]
+        for j in range(nq):
+            qa = (mo * qf[j, p] + dq[j, p]) * ip
+            qb = dq[j, p] * ip
+            qf[j, p] = _pick(mk == 1, qa, _pick(mk == 2, qb, 0.0))
+        mn = mo + dm[p]
+        if mn < lowest:
+            lowest = mn
+        mf[p] = mn
+    return lowest
+
+
+def _make_remap_fluxes(parallel: bool):
+    """remap_fluxes, parallel over the carried fields or serial."""
 
     @nb.njit(cache=True, parallel=parallel)
-    def remap(m, q, ux, uz, h, dt, periodic, work):
-        """One transport step (module docstring), in place.  m (ncx, ncz) cell masses (kg/m);
-        q (nq, ncx, ncz) intensive fields carried with the mass, field after field (the flat
-        layout above); ux, uz face velocities (m/s) of face_velocity.face_velocities; h cell
-        side (m); dt (s); work: remap_work's arrays (the mesh's open faces with them).  Returns the
-        smallest cell mass after the step (kg/m; negative means the Courant number was too
-        large).
-
-        Parallel over the fields: each field's fluxes and new values are one thread's, so the
-        numbers are the serial loop's, bit for bit, whatever the threads."""
+    def remap_fluxes(m, q, ux, uz, h, dt, periodic, work):
+        """A transport step's fluxes (`remap`, the same arguments): every cell's inflow of mass
+        (work's cells[3]) and of each field (work's dq), and how each cell's fields are renewed
+        (work's mode and cells[4]), nothing changed yet: `renew_cells` ends the step.
+        Parallel over the fields, each field's fluxes one thread's."""
         _ = parallel
         cells, masks, xf, xb, zf, zb, mode, (sx, sz), (gx, gz), dq, weights = work
         ncx, ncz = m.shape
@@ -362,6 +380,39 @@ def _make_remap(parallel: bool):
                 _field_fluxes(qf[j], ncx, ncz, periodic, masks, xf, xb, zf, zb, sx[j], sz[j],
                               gx[j], gz[j], dq[j])
         _modes(mf, dm, m_empty, mode, inv)
+
+    return remap_fluxes
+
+
+remap_fluxes = _make_remap_fluxes(True)
+remap_fluxes_serial = _make_remap_fluxes(False)
+
+
+def _make_remap(parallel: bool):
+    """remap, parallel over the carried fields or serial (fused.py's loop on one thread)."""
+
+    @nb.njit(cache=True, parallel=parallel)
+    def remap(m, q, ux, uz, h, dt, periodic, work):
+        """One transport step (module docstring), in place.  m (ncx, ncz) cell masses (kg/m);
+        q (nq, ncx, ncz) intensive fields carried with the mass, field after field (the flat
+        layout above); ux, uz face velocities (m/s) of face_velocity.face_velocities; h cell
+        side (m); dt (s); work: remap_work's arrays (the mesh's open faces with them).  Returns the
+        smallest cell mass after the step (kg/m; negative means the Courant number was too
+        large).
+
+        Parallel over the fields: each field's fluxes and new values are one thread's, so the
+        numbers are the serial loop's, bit for bit, whatever the threads."""
+        if parallel:
+            remap_fluxes(m, q, ux, uz, h, dt, periodic, work)
+        else:
+            remap_fluxes_serial(m, q, ux, uz, h, dt, periodic, work)
+        cells, mode, dq = work[0], work[6], work[9]
+        ncx, ncz = m.shape
+        nq = q.shape[0]
+        n = ncx * ncz
+        mf = m.reshape(n)
+        qf = q.reshape((nq, n))
+        dm, inv = cells[3], cells[4]
         for j in nb.prange(nq):
             _renew(qf[j], dq[j], mf, mode, inv)
         lowest = np.inf

@@ -40,7 +40,7 @@ from ..grid_step import grid_phase, grid_phase_serial
 from ..stress_update import damped_stress
 from ..kinetic_stress import RATE_RATIO
 from ..temperature_field import add_stress
-from .advection import remap, remap_serial
+from .advection import remap_fluxes, remap_fluxes_serial, renew_cells
 from .face_velocity import face_velocity_rows, match_divergence_cells
 from .lagrangian_step import (end_density, fill_limit, material_fraction,
                               update_stress_cells, void_first)
@@ -120,32 +120,36 @@ def _make_advance_kernel(parallel: bool):
         kinetic = p_kin.shape[0] > 0
         scattered = stress_work if damped or kinetic else stress
         chunk_finite = np.ones(nchunk, np.bool_)
+        chunk_lowest = np.empty(nchunk)
+        # the remap's inflows and renewal modes (advection.remap_work), named here: a parallel
+        # loop takes arrays, not the tuples that hold them
+        r_dm, r_inv, r_mode, r_dq = rwork[0][3], rwork[0][4], rwork[6], rwork[9]
         for s in range(nsteps):
             # lagrangian_step.lagrangian_step: forces, the cells holding material to the nodes
-            material_fraction(mass, density, h, weight, frac, volume)
             fext[:] = 0.0
             if wall_on:
                 wall_forces(wall_cells, normal, v, mass, rho_c, h, weight, delta, xi, fext, wfn,
                             wft, wst, kn, kt, zeta, mu_w, dt)
-            if part_on:
-                partition_forces(v, mass, volume, stress, fext, mu_p, length, dt)
             na = 0
             for p in range(n):
                 if mass[p] > 0.0:
                     act[na] = p
                     na += 1
-            if damped:
-                # the bed's Kelvin-Voigt damping on the rate of the last step, scattered with
-                # the stress but not stored in it (the Lagrangian loop's)
-                for c in nb.prange(nchunk):
-                    a = (c * n) // nchunk
-                    b = ((c + 1) * n) // nchunk
+            # cell by cell, in chunks of cells: the volume fractions, the partitions' friction
+            # (after the wall's force, as in the step by step path), the bed's Kelvin-Voigt
+            # damping on the rate of the last step and the kinetic pressure
+            # (temperature_field.py), both scattered with the stress but not stored in it
+            for c in nb.prange(nchunk):
+                a = (c * n) // nchunk
+                b = ((c + 1) * n) // nchunk
+                material_fraction(mass[a:b], density[a:b], h, weight[a:b], frac[a:b],
+                                  volume[a:b])
+                if part_on:
+                    partition_forces(v[a:b], mass[a:b], volume[a:b], stress[a:b], fext[a:b],
+                                     mu_p, length, dt)
+                if damped:
                     damped_stress(stress[a:b], L[a:b], phase[a:b], params, stress_work[a:b])
-            if kinetic:
-                # the kinetic pressure (temperature_field.py), scattered but not stored
-                for c in nb.prange(nchunk):
-                    a = (c * n) // nchunk
-                    b = ((c + 1) * n) // nchunk
+                if kinetic:
                     if not damped:
                         stress_work[a:b] = stress[a:b]
                     add_stress(stress_work, p_kin, a, b)
@@ -195,14 +199,15 @@ def _make_advance_kernel(parallel: bool):
                         q[6 + j, p] = stress[p, j]
                     q[10, p] = end_rho[p]
             if parallel:
-                lowest = remap(m2, q3, ux, uz, h, dt, periodic, rwork)
+                remap_fluxes(m2, q3, ux, uz, h, dt, periodic, rwork)
             else:
-                lowest = remap_serial(m2, q3, ux, uz, h, dt, periodic, rwork)
-            # the remapped fields unpacked and each cell filled no further than full, in
-            # chunks of cells
+                remap_fluxes_serial(m2, q3, ux, uz, h, dt, periodic, rwork)
+            # the remap's end (its fields renewed, the masses moved), the fields unpacked and
+            # each cell filled no further than full, in chunks of cells
             for c in nb.prange(nchunk):
                 a = (c * n) // nchunk
                 b = ((c + 1) * n) // nchunk
+                chunk_lowest[c] = renew_cells(a, b, q, r_dq, mass, r_dm, r_mode, r_inv)
                 ok = True
                 for p in range(a, b):
                     v[p, 0] = q[0, p]
@@ -216,8 +221,11 @@ def _make_advance_kernel(parallel: bool):
                 fill_limit(mass[a:b], density[a:b], h, weight[a:b])
                 chunk_finite[c] = ok
             finite = True
+            lowest = np.inf
             for c in range(nchunk):
                 finite = finite and chunk_finite[c]
+                if chunk_lowest[c] < lowest:
+                    lowest = chunk_lowest[c]
             t += dt
             if lowest < mtol or not np.isfinite(lowest):
                 return s + 1, t, NEGATIVE_MASS, lowest, mass_error_max
