@@ -276,7 +276,7 @@ def _field_fluxes(qj, ncx, ncz, periodic, masks, xf, xb, zf, zb, sx, sz, gx, gz,
 
 @nb.njit(cache=True)
 def _modes(m, dm, m_empty, mode, inv):
-    """How each cell's fields are renewed (`_renew`): mode 1, a cell that held material and
+    """How each cell's fields are renewed (`renew_cells`): mode 1, a cell that held material and
     still does, q = (m q + dq) / m_new; 2, an empty cell filling, q = dq / dm (what it holds is
     what came in: its round-off mass carried no properties); 0, a cell left empty, q = 0; inv
     the reciprocal used (1/kg)."""
@@ -292,16 +292,6 @@ def _modes(m, dm, m_empty, mode, inv):
         else:
             mode[p] = 0
             inv[p] = 0.0
-
-
-@nb.njit(cache=True)
-def _renew(qj, dqj, m, mode, inv):
-    """Field qj (n,) after the step from its inflow dqj and the cells' modes (`_modes`)."""
-    for p in range(qj.shape[0]):
-        mk = mode[p]
-        a = (m[p] * qj[p] + dqj[p]) * inv[p]
-        b = dqj[p] * inv[p]
-        qj[p] = _pick(mk == 1, a, _pick(mk == 2, b, 0.0))
 
 
 def remap_work(open_x, open_z, nq: int, radius=None):
@@ -334,9 +324,10 @@ def remap_work(open_x, open_z, nq: int, radius=None):
 @nb.njit(cache=True)
 def renew_cells(a, b, qf, dq, mf, dm, mode, inv):
     """The end of a transport step on the cells a:b: every carried field qf (nq, n) renewed
-    from its inflow dq (`_renew`'s arithmetic), then the masses mf (n,) given their inflow dm.
-    Returns the smallest new mass among them (kg/m; inf for none).  fused.py calls it on
-    chunks of cells, after `remap_fluxes`."""
+    from its inflow dq by the cell's mode (`_modes`: (m q + dq) / m_new, dq / dm or 0), then
+    the masses mf (n,) given their inflow dm.  Returns the smallest new mass among them (kg/m;
+    inf for none).  `remap` calls it on every cell, fused.py on chunks of cells, after
+    `remap_fluxes`."""
     nq = qf.shape[0]
     lowest = np.inf
     for p in range(a, b):
@@ -388,6 +379,10 @@ remap_fluxes = _make_remap_fluxes(True)
 remap_fluxes_serial = _make_remap_fluxes(False)
 
 
+#: `remap`'s chunks of cells for the renewal (the smallest mass is the same in any number)
+RENEW_CHUNKS = 4
+
+
 def _make_remap(parallel: bool):
     """remap, parallel over the carried fields or serial (fused.py's loop on one thread)."""
 
@@ -400,28 +395,23 @@ def _make_remap(parallel: bool):
         smallest cell mass after the step (kg/m; negative means the Courant number was too
         large).
 
-        Parallel over the fields: each field's fluxes and new values are one thread's, so the
-        numbers are the serial loop's, bit for bit, whatever the threads."""
+        Parallel over the fields for their fluxes (`remap_fluxes`), each field's one
+        thread's, then over chunks of cells for their renewal (`renew_cells`), each cell's one
+        thread's: the numbers are the serial loop's, bit for bit, whatever the threads."""
         if parallel:
             remap_fluxes(m, q, ux, uz, h, dt, periodic, work)
         else:
             remap_fluxes_serial(m, q, ux, uz, h, dt, periodic, work)
-        cells, mode, dq = work[0], work[6], work[9]
         ncx, ncz = m.shape
         nq = q.shape[0]
         n = ncx * ncz
-        mf = m.reshape(n)
-        qf = q.reshape((nq, n))
-        dm, inv = cells[3], cells[4]
-        for j in nb.prange(nq):
-            _renew(qf[j], dq[j], mf, mode, inv)
-        lowest = np.inf
-        for p in range(n):
-            mn = mf[p] + dm[p]
-            if mn < lowest:
-                lowest = mn
-            mf[p] = mn
-        return lowest
+        qf, mf = q.reshape((nq, n)), m.reshape(n)
+        dm, inv, mode, dq = work[0][3], work[0][4], work[6], work[9]
+        lows = np.empty(RENEW_CHUNKS)
+        for c in nb.prange(RENEW_CHUNKS):
+            lows[c] = renew_cells((c * n) // RENEW_CHUNKS, ((c + 1) * n) // RENEW_CHUNKS, qf,
+                                  dq, mf, dm, mode, inv)
+        return lows.min()
 
     return remap
 

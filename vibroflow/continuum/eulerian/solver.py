@@ -75,9 +75,11 @@ NQ = 11
 #: shared two-core machine, with another process busy, a barrier waited for the scheduler
 #: (tub47's whole run took 17.0 s on two threads against 10.7 s on one, and single steps up to
 #: 40 ms); with the cores free, and the threads spinning at their barriers (threads.SPIN_FREE),
-#: tub47's 1 270 cells step 1.45 x faster on two threads than on one (docs/validation.md,
-#: section 18)
+#: tub47's mesh (1 376 cells) steps 1.4 - 1.5 x faster on two threads than on one
+#: (docs/validation.md, section 18)
 SERIAL_BELOW = 10_000
+#: the smallest mesh that takes the parallel loop on free cores: the gain is measured on
+#: tub47's 1 376 cells, and smaller meshes (the tests' columns) keep the serial loop
 FREE_PARALLEL_FROM = 1_000
 #: the loop with T keeping no step's start (temperature_loop.StepStart of 0 cells)
 NO_STEP_START = temperature_loop.step_start(0)
