@@ -384,7 +384,8 @@ RENEW_CHUNKS = 4
 
 
 def _make_remap(parallel: bool):
-    """remap, parallel over the carried fields or serial (fused.py's loop on one thread)."""
+    """remap, parallel (its fluxes over the carried fields, its renewal over chunks of cells)
+    or serial."""
 
     @nb.njit(cache=True, parallel=parallel)
     def remap(m, q, ux, uz, h, dt, periodic, work):

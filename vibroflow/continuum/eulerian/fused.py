@@ -6,8 +6,9 @@ third of its time in its own bookkeeping (gathering the cells that hold material
 indexing, packing the remap's fields, dispatching a dozen kernels, the frame's pose).
 
 Threads, as the Lagrangian step's (vibroflow.continuum.fused): the per-cell kernels write only
-their own cells and the remap works field by field (advection.remap), so they give the serial
-numbers whatever the threads; the cells holding material are scattered to the nodes in `nchunk`
+their own cells, the remap's fluxes are made field by field (advection.remap_fluxes) and its
+renewal cell by cell (advection.renew_cells), so they give the serial numbers whatever the
+threads; the cells holding material are scattered to the nodes in `nchunk`
 fixed chunks of per-chunk buffers summed in a fixed order (the grid's part of the step is the
 Lagrangian loop's: grid_step.grid_phase), so the run depends on the number of chunks, never on
 the number of threads (one chunk: the serial p2g's numbers).  On one thread,
