@@ -38,11 +38,17 @@ def default_threads_env() -> None:
         os.environ["NUMBA_NUM_THREADS"] = str(allowed_cores())
 
 
+def threads_fit(others_running: int, cores: int, threads: int) -> bool:
+    """Whether `threads` threads and the `others_running` threads of other processes all fit
+    on a machine of `cores` cores (the test of spin_count and cores_free)."""
+    return others_running + threads <= cores
+
+
 def spin_count(others_running: int, cores: int, threads: int) -> int:
     """GOMP_SPINCOUNT for `threads` threads on a machine of `cores` cores where
-    `others_running` other threads are running: SPIN_FREE when they all fit on the cores,
-    else SPIN_BUSY."""
-    return SPIN_FREE if others_running + threads <= cores else SPIN_BUSY
+    `others_running` other threads are running: SPIN_FREE when they all fit on the cores
+    (threads_fit), else SPIN_BUSY."""
+    return SPIN_FREE if threads_fit(others_running, cores, threads) else SPIN_BUSY
 
 
 def _own_running() -> int:
@@ -91,7 +97,7 @@ _free_read: tuple[float, int | None] | None = None
 
 def cores_free(threads: int, max_age_s: float = FREE_READ_S) -> bool:
     """Whether `threads` threads fit on the cores that other processes leave free now
-    (others_running and spin_count's test); False where the load is unknown.  The reading is
+    (others_running, threads_fit); False where the load is unknown.  The reading is
     kept max_age_s seconds, so that a caller may ask before every batch of steps (a reading
     costs about 2 ms)."""
     global _free_read
@@ -99,7 +105,7 @@ def cores_free(threads: int, max_age_s: float = FREE_READ_S) -> bool:
     if _free_read is None or now - _free_read[0] > max_age_s:
         _free_read = (now, others_running())
     others = _free_read[1]
-    return others is not None and others + threads <= (os.cpu_count() or 1)
+    return others is not None and threads_fit(others, os.cpu_count() or 1, threads)
 
 
 def default_spin_env() -> None:
