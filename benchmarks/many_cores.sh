@@ -5,7 +5,9 @@
 #      balls' state the same bits on each (benchmarks/dem_scaling.py);
 #   2. `vibroflow dem tub47-quick` on the default thread count (every core), whose
 #      bulk_velocity.csv must be the stored seed 1's (sha256 5354927ff6be389c...);
-#   3. the long tub (140 000 balls) on every core.
+#   3. the long tub (140 000 balls) on every core;
+#   4. the blocks' share of tub47's work, block by block on one thread
+#      (benchmarks/dem_block_balance.py), to set beside 1.
 #
 #     bash benchmarks/many_cores.sh OUT_DIR
 #
@@ -36,3 +38,6 @@ echo "   (the stored seed 1's: 5354927ff6be389c...)"
 echo "== the long tub on $CORES threads"
 $PY "$HERE/dem_scaling.py" --sizes long --threads "$CORES" --repeats 1 --warmup 200 \
     --pass-steps 20 --json "$OUT/long.json" 2>&1 | tee "$OUT/long.log"
+echo "== the blocks' share of tub47's work, block by block on one thread"
+$PY "$HERE/dem_block_balance.py" --size tub47 --json "$OUT/balance.json" 2>&1 \
+    | tee "$OUT/balance.log"
