@@ -14,9 +14,9 @@ cycle of tub47's vibration after `--warmup` steps, and prints for T = 2, 4, 8, 1
 
 - the static bound: sum of the blocks' times / (T x the slowest thread's sum), the parallel
   efficiency that the cut alone allows (memory bandwidth and the loops' wake-up come on top);
-- the dynamic bound: the same for blocks handed out one at a time to whichever thread is free
-  first (greedy list scheduling in block order), the balance that scheduling the blocks
-  dynamically would give with the same cut.
+- the lanes' bound: the same for the step's schedule (vibroflow.dem.block_queue): each thread
+  its own static share first, in order, then the blocks left in the next threads' shares,
+  whenever it comes free.
 
 and, per loop, a least-squares fit of a block's time on its balls, list entries, touching
 entries (the law's work) and balls not clear of the tub's walls (the wall pass's work), across
@@ -48,13 +48,27 @@ def static_bound(times: np.ndarray, threads: int) -> float:
     return float(times.sum() / (threads * max(sums)))
 
 
-def dynamic_bound(times: np.ndarray, threads: int) -> float:
-    """Efficiency of greedy list scheduling in block order (each block to the first free
-    thread)."""
-    free = np.zeros(threads)
-    for x in times:
-        k = int(np.argmin(free))
-        free[k] += x
+def lanes_bound(times: np.ndarray, threads: int) -> float:
+    """Efficiency of the step's schedule (vibroflow.dem.block_queue): each thread takes the
+    blocks of its own static share in order, then those left in the next lanes in turn (each
+    from its lane's front), whenever it comes free."""
+    n = times.shape[0]
+    lanes = min(threads, n)
+    head = [(t * n) // lanes for t in range(lanes)]
+    end = [((t + 1) * n) // lanes for t in range(lanes)]
+    free = np.zeros(lanes)
+    done = np.zeros(lanes, bool)
+    offset = [0] * lanes
+    while not done.all():
+        t = int(np.argmin(np.where(done, np.inf, free)))  # the thread that comes free first
+        while offset[t] < lanes and head[(t + offset[t]) % lanes] >= end[(t + offset[t]) % lanes]:
+            offset[t] += 1
+        if offset[t] == lanes:
+            done[t] = True
+            continue
+        r = (t + offset[t]) % lanes
+        free[t] += times[head[r]]
+        head[r] += 1
     return float(times.sum() / (threads * free.max()))
 
 
@@ -152,18 +166,18 @@ def report(r: dict) -> None:
     print(f"{r['size']}: {r['balls']} balls, {r['nblock']} blocks, {len(rows)} phases of a cycle")
     header = "".join(f"{t:>9d}" for t in THREADS)
     for loop in ("pair", "ball"):
-        print(f"  {loop} loop: efficiency bound on T threads (static cut | dynamic), "
+        print(f"  {loop} loop: efficiency bound on T threads (static share | lanes), "
               f"cycle mean\n      T:  {header}")
         st = np.array([[static_bound(np.array(ph[f'{loop}_us']), t) for t in THREADS]
                        for ph in rows])
-        dy = np.array([[dynamic_bound(np.array(ph[f'{loop}_us']), t) for t in THREADS]
+        dy = np.array([[lanes_bound(np.array(ph[f'{loop}_us']), t) for t in THREADS]
                        for ph in rows])
         # the cycle's loop time: each phase's slowest thread, summed over the phases
         tot = np.array([sum(ph[f"{loop}_us"]) for ph in rows])
         cyc_st = np.array([tot.sum() / (tot / st[:, k]).sum() for k in range(len(THREADS))])
         cyc_dy = np.array([tot.sum() / (tot / dy[:, k]).sum() for k in range(len(THREADS))])
         print("  static:  " + "".join(f"{x:9.2f}" for x in cyc_st))
-        print("  dynamic: " + "".join(f"{x:9.2f}" for x in cyc_dy))
+        print("  lanes:   " + "".join(f"{x:9.2f}" for x in cyc_dy))
         print(f"      one-thread loop time: {tot.mean():.0f} us (phases "
               f"{tot.min():.0f} - {tot.max():.0f})")
         X = np.concatenate([np.column_stack([ph["balls"], ph["entries"], ph["touching"],

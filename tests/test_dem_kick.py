@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from vibroflow.dem import step as K
+from vibroflow.dem.block_queue import queue_array
 from vibroflow.dem.records import Balls, Pairs, Params, Work
 
 
@@ -35,7 +36,8 @@ def _records(balls, bounds):
     pose = np.array([1e-3, -2e-3, 0.03, 0.1, -0.2, 1.5, 0.05, 0.2])
     work = Work(np.zeros((nblock, 1, K.N_IMP_BUF)), np.zeros(nblock, np.int64),
                 np.full((nblock, K.N_DIAG), -1.0), pose, np.zeros(nblock), np.zeros((n, 9)),
-                np.zeros(2, np.int64), np.zeros((nblock, 1)), np.zeros((nblock, 1), np.int64))
+                np.zeros(2, np.int64), np.zeros((nblock, 1)), np.zeros((nblock, 1), np.int64),
+                queue_array(nblock))
     return pairs, params, work
 
 

@@ -15,12 +15,14 @@ import math
 from dataclasses import dataclass, field
 from typing import Callable
 
+import numba
 import numpy as np
 
 from ..scenario.checks import contact_times
 from ..tub.motion import TubMotion, lab_to_tub_np, pose_np
 from ..tub.parts import Part, PackedParts, pack, parts_of
 from . import step as K
+from .block_queue import queue_array, set_lanes
 from .blowup import (BlowUp, blowup_message, check_finite_start, check_overlaps_at_start,
                      coincident_message, coincident_pair)
 from .laws import material_index, pair_table
@@ -223,7 +225,8 @@ class _Buffers:
                          pose=np.zeros(8), moved=np.zeros(nblock), save=np.zeros((state.n, 9)),
                          imp_flush=np.array([IMPACT_FLUSH, PT.IMPACT_FLUSH], np.int64),
                          tile=np.zeros((nblock, K.N_TILE * K.TILE)),
-                         tile_idx=np.zeros((nblock, K.N_TILE_IDX * K.TILE), np.int64))
+                         tile_idx=np.zeros((nblock, K.N_TILE_IDX * K.TILE), np.int64),
+                         queue=queue_array(nblock))
         #: the storage order of the last space sort (memory_order), taken up again by the
         #: next run_steps call
         self.order: np.ndarray | None = None
@@ -311,6 +314,7 @@ def rebuild(system: DEMSystem, state: DEMState, sort: bool = False) -> None:
 def _forces_now(system: DEMSystem, state: DEMState) -> None:
     b = _buf(system, state)
     b.work.pose[:] = _tub_pose(system, state)
+    set_lanes(b.work.queue, numba.get_num_threads())
     K.compute_forces(state.time(system.dt), False, False, False, b.balls,
                      pairs_of(state.nl, K.NBLOCK), slots_of(state.nl), b.walls, system.params,
                      b.work, b.parts)
@@ -414,6 +418,7 @@ def _run_steps(system: DEMSystem, state: DEMState, nsteps: int, record_impacts: 
     b.work.pose[6], b.work.pose[7] = system.motion.pivot_x, system.motion.pivot_z
     left = nsteps
     b.fit(system, state.nl)
+    set_lanes(b.work.queue, numba.get_num_threads())
     while left > 0:
         try:
             done, status = K.advance(state.step, left, state.time_origin_step, motion,

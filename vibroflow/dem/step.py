@@ -47,8 +47,8 @@ Force assembly whose numbers do not depend on the thread count (DEVELOPERS.md, "
 
 Each sum is over the same terms in the same order whatever the threads.  The balls are cut into
 NBLOCK contiguous blocks of about equal work (a function of the list alone); each thread takes
-the next block as it comes free (vibroflow.dem.block_queue: the bed's work moves between the
-blocks over a cycle), and each block keeps its own impact buffer and diagnostics.  An impact
+the blocks of its own lane, then the others' as it comes free (vibroflow.dem.block_queue: the
+bed's work moves between the blocks over a cycle), and each block keeps its own impact buffer and diagnostics.  An impact
 row also holds the stored place of its ball (IMP_COLUMNS on), from which
 vibroflow.dem.impact_order puts the rows in an order that does not depend on the threads or on
 the storage order.
@@ -67,7 +67,7 @@ from .contact import (add_force_torque, contact_law, contact_velocity, forget,
                       normal_constants, put3, unit_normal)
 from .laws import (MODEL_HERTZ, MODEL_LINEAR, P_KT, P_MODEL, P_MU, P_MUR, P_ROLL, ROLL_CDT,
                    ROLL_CDT_LIGGGHTS, ROLL_EPSD, ROLL_NONE)
-from .block_queue import next_block
+from .block_queue import open_lanes, take
 from .wall_pass import ball_walls
 from .walls import KIND_BALL_BALL, TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT
 
@@ -544,36 +544,36 @@ def _undo_drift(balls, save):
 
 @nb.njit(cache=True, parallel=True)
 def _pair_pass(t, dt_hist, periodic_length, record_impacts, balls, pairs, slots, params, work):
-    """Step 1 for every block, in parallel, each thread taking the next block as it comes
-    free (vibroflow.dem.block_queue)."""
-    nblock = work.diag.shape[0]
-    queue = np.zeros(1, np.int64)
-    for _w in nb.prange(nblock):  # each thread's first turn drains the queue
-        c = next_block(queue)
-        while c < nblock:
+    """Step 1 for every block, in parallel: each thread its own lane of blocks first, then
+    the others' as it comes free (vibroflow.dem.block_queue)."""
+    queue = work.queue
+    lanes = open_lanes(queue, work.diag.shape[0])
+    for lane in nb.prange(lanes):
+        c, s = take(queue, lane, lanes, 0)
+        while c >= 0:
             _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, slots,
                         params, work)
-            c = next_block(queue)
+            c, s = take(queue, lane, lanes, s)
 
 
 @nb.njit(cache=True, parallel=True)
 def _ball_pass(t, dt_hist, kick, drift, record_impacts, balls, pairs, slots, walls, params,
                work, prt):
     """Steps 2 to 4 for every block, in parallel; with `drift`, also the next step's first
-    half kick and drift (_kick_block).  The blocks go to the threads as they come free
-    (vibroflow.dem.block_queue)."""
-    nblock = work.diag.shape[0]
-    queue = np.zeros(1, np.int64)
-    for _w in nb.prange(nblock):  # each thread's first turn drains the queue
-        c = next_block(queue)
-        while c < nblock:
+    half kick and drift (_kick_block).  Each thread takes its own lane of blocks first, then
+    the others' as it comes free (vibroflow.dem.block_queue)."""
+    queue = work.queue
+    lanes = open_lanes(queue, work.diag.shape[0])
+    for lane in nb.prange(lanes):
+        c, s = take(queue, lane, lanes, 0)
+        while c >= 0:
             _gather_block(c, balls, pairs, slots)
             ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work, prt)
             if kick:
                 _kick_block(c, balls, pairs, params, work, drift)
             else:
                 work.moved[c] = 0.0
-            c = next_block(queue)
+            c, s = take(queue, lane, lanes, s)
 
 
 @nb.njit(cache=True)
