@@ -27,7 +27,7 @@ import numpy as np
 
 from vibroflow.dem.walls import KIND_BALL_BALL, KIND_BALL_TUB
 from vibroflow.measure.phase_shear import near_wall_nodes, phase_shear_of_snapshots
-from vibroflow.measure.stats import batches_of_whole_cycles, phase_bins
+from vibroflow.measure.stats import batches_of_whole_cycles, jackknife_stderr, phase_bins
 from vibroflow.tub.geometry import geometry_of
 
 from .dem_result import DEMResult
@@ -108,10 +108,11 @@ def impact_relations(run, phase_fields, time_fields=None,
             res.close()
 
 
-def window_impacts(res: DEMResult, n_phases: int, chunk: int = 2_000_000):
+def window_impacts(res: DEMResult, n_phases: int, chunk: int = 2_000_000,
+                   with_batch: bool = False):
     """Yield (kind, normal speed m/s, contact point (tub frame, m), phase bin) arrays of the
     impacts of the averaging window's whole cycles, `chunk` impacts read at a time (a tub47
-    run holds ~25 million)."""
+    run holds ~25 million); with `with_batch`, also each impact's batch of whole cycles."""
     if not res.has("impacts/kind"):
         return
     f = res.file
@@ -122,12 +123,14 @@ def window_impacts(res: DEMResult, n_phases: int, chunk: int = 2_000_000):
     for a0 in range(0, m, chunk):
         a1 = min(m, a0 + chunk)
         it = f["impacts/time"][a0:a1]
-        use = batches_of_whole_cycles(it, t0, t1, freq, int(sc.run.batches)) >= 0
+        batch = batches_of_whole_cycles(it, t0, t1, freq, int(sc.run.batches))
+        use = batch >= 0
         if not use.any():
             continue
-        yield (f["impacts/kind"][a0:a1][use],
+        out = (f["impacts/kind"][a0:a1][use],
                f["impacts/normal_speed"][a0:a1].astype(float)[use],
                f["impacts/position_tub"][a0:a1][use], phase_bins(it[use], freq, n_phases))
+        yield (*out, batch[use]) if with_batch else out
 
 
 def _relations(res: DEMResult, pf, min_impacts, min_sf, histogram_bins, chunk) -> dict:
@@ -198,6 +201,33 @@ def impact_speed_from_shear_rate(shear_rate, fit: dict, diameter: float):
     return fit["c0"] + fit["c1"] * diameter * np.asarray(shear_rate, float)
 
 
+def jackknife_of_batches_fit(fit: dict, c, total, c_b, sum_b, shear, d: float, min_impacts: int,
+                          min_sf: float) -> dict:
+    """c0_stderr and c1_stderr of impact_relations_on_cells' fit as the delete-one-batch
+    jackknife: the fit made again without batch b's impacts (counts c - c_b[b], speed sums
+    total - sum_b[b], each (n_phases, nz, nx)) on the phase fields without batch b
+    (PhaseShear.loo_*); the points' own errors kept as c0_stderr_points, c1_stderr_points.
+    Without two batches (or when a fit without one fails) the jackknife errors are NaN."""
+    out = {"c0_stderr_points": fit["c0_stderr"], "c1_stderr_points": fit["c1_stderr"]}
+    nan = float("nan")
+    if shear.loo_phase_shear_rate is None or c_b.shape[0] < 2:
+        out.update(c0_stderr=nan, c1_stderr=nan, stderr_batches=0)
+        return out
+    c0s, c1s = [], []
+    for b in range(c_b.shape[0]):
+        ck = c - c_b[b]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = np.where(ck > 0, (total - sum_b[b]) / ck, np.nan)
+        rate = shear.loo_phase_shear_rate[b]
+        ok = (ck >= min_impacts) & np.isfinite(rate) & (shear.loo_phase_solid_fraction[b] >= min_sf)
+        f = weighted_linear_fit(d * rate[ok], mean[ok], ck[ok])
+        c0s.append(f["c0"])
+        c1s.append(f["c1"])
+    out.update(c0_stderr=jackknife_stderr(c0s), c1_stderr=jackknife_stderr(c1s),
+               stderr_batches=int(c_b.shape[0]))
+    return out
+
+
 def impact_relations_on_cells(run, cell_size: float | None = None,
                               min_impacts: int = MIN_IMPACTS_PER_CELL,
                               min_solid_fraction: float = 0.1, chunk: int = 2_000_000) -> dict:
@@ -215,7 +245,12 @@ def impact_relations_on_cells(run, cell_size: float | None = None,
 
     Impacts of the averaging window are binned by phase bin and by the node nearest their
     contact point; a (phase, node) point enters the fit with at least `min_impacts` impacts and
-    solid fraction at least `min_solid_fraction`, weighted by its count.  Returns {kind: fit
+    solid fraction at least `min_solid_fraction`, weighted by its count.  The points are not
+    independent: one batch's cycles move the shear rate and the impact speeds of many points
+    together.  So c0_stderr and c1_stderr are the delete-one-batch jackknife (measure.stats.
+    jackknife_stderr) of the fit made again on every batch of whole cycles but one, the
+    impacts and the phase fields alike; c0_stderr_points and c1_stderr_points keep
+    weighted_linear_fit's, which treats the points as independent.  Returns {kind: fit
     (weighted_linear_fit's keys, c0 in m/s, with the measured mean_normal_speed and the
     mean_normal_speed_solid_weighted that a continuum's bed or near-wall mean stands for),
     "cell_size_m", "bed_mean_shear_rate_1_s",
@@ -229,7 +264,8 @@ def impact_relations_on_cells(run, cell_size: float | None = None,
         f = res.file
         shear = phase_shear_of_snapshots(
             sc, f["snapshots/position"], f["snapshots/velocity"], f["snapshots/tub_pose"][()],
-            4.0 / 3.0 * math.pi * res.radius**3, res.times, cell_size, min_solid_fraction)
+            4.0 / 3.0 * math.pi * res.radius**3, res.times, cell_size, min_solid_fraction,
+            leave_one_out=True)
         h, n_ph = shear.h, shear.phase_shear_rate.shape[0]
         nz, nx = shear.shear_rate.shape
         nxh = (nx - 1) // 2
@@ -242,9 +278,14 @@ def impact_relations_on_cells(run, cell_size: float | None = None,
                    bed_roll_shear_rate_1_s=shear.roll_mean(),
                    near_wall_shear_rate_1_s=mw, near_wall_shear_rate_1_s_stderr=sew)
         ncell = n_ph * nz * nx
+        loo = shear.loo_phase_shear_rate
+        nb = 0 if loo is None else loo.shape[0]
         cnt = {name: np.zeros(ncell) for name in KINDS}
         sm = {name: np.zeros(ncell) for name in KINDS}
-        for kind, speed, pos, ph in window_impacts(res, n_ph, chunk):
+        # each batch's own counts and sums, for the fits without it
+        cnt_b = {name: np.zeros(nb * ncell) for name in KINDS}
+        sm_b = {name: np.zeros(nb * ncell) for name in KINDS}
+        for kind, speed, pos, ph, batch in window_impacts(res, n_ph, chunk, with_batch=True):
             i = np.floor(pos[:, 0] / h + 0.5).astype(np.int64) + nxh
             k = np.floor(pos[:, 2] / h + 0.5).astype(np.int64)
             inside = (i >= 0) & (i < nx) & (k >= 0) & (k < nz)
@@ -253,6 +294,10 @@ def impact_relations_on_cells(run, cell_size: float | None = None,
                 sel = (kind == code) & inside
                 cnt[name] += np.bincount(flat[sel], minlength=ncell)
                 sm[name] += np.bincount(flat[sel], weights=speed[sel], minlength=ncell)
+                if nb:
+                    fb = batch[sel] * ncell + flat[sel]
+                    cnt_b[name] += np.bincount(fb, minlength=nb * ncell)
+                    sm_b[name] += np.bincount(fb, weights=speed[sel], minlength=nb * ncell)
         for name in KINDS:
             c = cnt[name].reshape(n_ph, nz, nx)
             if c.sum() == 0:
@@ -264,6 +309,10 @@ def impact_relations_on_cells(run, cell_size: float | None = None,
             ok = (c >= min_impacts) & np.isfinite(shear.phase_shear_rate) & (
                 phi >= min_solid_fraction)
             fit = weighted_linear_fit(d * shear.phase_shear_rate[ok], mean[ok], c[ok])
+            fit.update(jackknife_of_batches_fit(fit, c, sm[name].reshape(c.shape),
+                                             cnt_b[name].reshape((nb,) + c.shape),
+                                             sm_b[name].reshape((nb,) + c.shape), shear, d,
+                                             min_impacts, min_solid_fraction))
             fit["count"] = int(c.sum())
             fit["mean_normal_speed"] = float(sm[name].sum() / c.sum())
             # the mean a continuum's inference stands for: each node's mean impact speed,

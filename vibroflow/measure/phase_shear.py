@@ -54,7 +54,11 @@ class PhaseShear:
     own phase-resolved field's cycle mean (for standard errors of the means built on it);
     roll_shear_rate (nz, nx) the shear rate of the time-averaged field (the slow roll alone: the
     velocity averaged over every phase, then differentiated). The difference between
-    shear_rate and roll_shear_rate is the bed's deformation within each cycle."""
+    shear_rate and roll_shear_rate is the bed's deformation within each cycle.
+    loo_phase_shear_rate, loo_phase_solid_fraction (n_batches, n_phases, nz, nx) or None: the
+    phase-resolved fields of every batch but one, batch by batch (asked for with
+    `leave_one_out`: the delete-one-batch jackknife of a quantity built on the phase fields,
+    vibroflow.calibration.impacts)."""
     x: np.ndarray
     z: np.ndarray
     h: float
@@ -65,6 +69,8 @@ class PhaseShear:
     batch_shear_rate: np.ndarray
     batch_solid_fraction: np.ndarray
     roll_shear_rate: np.ndarray
+    loo_phase_shear_rate: np.ndarray | None = None
+    loo_phase_solid_fraction: np.ndarray | None = None
 
     def node_of(self, x: float, z: float) -> tuple[int, int]:
         """(k, i) of the node nearest to tub-frame point (x, z) (m)."""
@@ -233,8 +239,10 @@ class PhaseShearAccumulator:
         self.mom_z[batch, phase] += acc_z.reshape(self.nz, self.nx)
         self.samples[batch, phase] += 1
 
-    def result(self, min_solid_fraction: float = MIN_NODE_SOLID_FRACTION) -> PhaseShear:
-        """The cycle-mean shear-rate field of everything added, and of each batch alone."""
+    def result(self, min_solid_fraction: float = MIN_NODE_SOLID_FRACTION,
+               leave_one_out: bool = False) -> PhaseShear:
+        """The cycle-mean shear-rate field of everything added, and of each batch alone; with
+        `leave_one_out`, also the phase fields of every batch but one, batch by batch."""
         node = self.h * self.h * self.length
         n_all = self.samples.sum(axis=0)
         rate, phase_phi, cycle, phi = phase_field_shear_rate(
@@ -252,22 +260,38 @@ class PhaseShearAccumulator:
         _, _, roll, _ = phase_field_shear_rate(
             total, self.mom_x.sum(axis=(0, 1))[None], self.mom_z.sum(axis=(0, 1))[None],
             np.array([node * max(int(n_all.sum()), 1)]), self.h, min_solid_fraction)
+        loo_rate = loo_phi = None
+        if leave_one_out and self.n_batches >= 2:
+            loo_rate = np.full((self.n_batches,) + rate.shape, np.nan)
+            loo_phi = np.zeros((self.n_batches,) + rate.shape)
+            for b in range(self.n_batches):
+                keep = np.arange(self.n_batches) != b
+                n_keep = self.samples[keep].sum(axis=0)
+                if n_keep.sum() == 0:
+                    continue
+                loo_rate[b], loo_phi[b], _, _ = phase_field_shear_rate(
+                    self.vol[keep].sum(axis=0), self.mom_x[keep].sum(axis=0),
+                    self.mom_z[keep].sum(axis=0), node * np.maximum(n_keep, 1), self.h,
+                    min_solid_fraction)
         x = (np.arange(self.nx) - self.nxh) * self.h
         z = np.arange(self.nz) * self.h
         return PhaseShear(x=x, z=z, h=self.h, solid_fraction=phi, shear_rate=cycle,
                           phase_shear_rate=rate, phase_solid_fraction=phase_phi,
                           batch_shear_rate=b_rate,
-                          batch_solid_fraction=b_phi, roll_shear_rate=roll)
+                          batch_solid_fraction=b_phi, roll_shear_rate=roll,
+                          loo_phase_shear_rate=loo_rate, loo_phase_solid_fraction=loo_phi)
 
 
 def phase_shear_of_snapshots(scenario, positions, velocities, poses, volume, times,
                              cell_size: float | None = None,
-                             min_solid_fraction: float = MIN_NODE_SOLID_FRACTION) -> PhaseShear:
+                             min_solid_fraction: float = MIN_NODE_SOLID_FRACTION,
+                             leave_one_out: bool = False) -> PhaseShear:
     """The PhaseShear of a run's snapshots in its averaging window, on the nodes of node_grid
     (the analysis cells' centres by default): positions, velocities (S, N, 3) lab frame (arrays
     or h5py datasets, read a snapshot at a time), poses (S, 6), volume (N,) the solid volume
     (m^3) each body stands for, times (S,) s.  Binned by the scenario's sampling phases and by
-    its batches of whole cycles.  The DEM calibration and both continuum drivers call this."""
+    its batches of whole cycles (`leave_one_out`: PhaseShear.loo_*).  The DEM calibration and
+    both continuum drivers call this."""
     geo = geometry_of(scenario)
     h, nxh, nz = node_grid(geo, cell_size or float(scenario.analysis.cell_size))
     run, motion = scenario.run, scenario.motion
@@ -280,4 +304,4 @@ def phase_shear_of_snapshots(scenario, positions, velocities, poses, volume, tim
     poses = np.asarray(poses, float)
     for j in np.nonzero(batch >= 0)[0]:
         acc.add(positions[j], velocities[j], poses[j], volume, int(phase[j]), int(batch[j]))
-    return acc.result(min_solid_fraction)
+    return acc.result(min_solid_fraction, leave_one_out)
