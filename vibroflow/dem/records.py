@@ -76,7 +76,7 @@ class Work(NamedTuple):
     #                        ball-part (vibroflow.dem.impact_order)
     tile: np.ndarray       # (nblock, step.N_TILE * step.TILE) a tile of contacts' columns
     tile_idx: np.ndarray   # (nblock, step.N_TILE_IDX * step.TILE) int64 their entry, i, j
-    queue: np.ndarray      # int64 the blocks' lanes and the lane count (vibroflow.dem.block_queue)
+    queue: np.ndarray      # int64 the blocks' lanes, the lane count (vibroflow.dem.block_queue)
 
 
 class Params(NamedTuple):

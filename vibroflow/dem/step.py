@@ -48,10 +48,10 @@ Force assembly whose numbers do not depend on the thread count (DEVELOPERS.md, "
 Each sum is over the same terms in the same order whatever the threads.  The balls are cut into
 NBLOCK contiguous blocks of about equal work (a function of the list alone); each thread takes
 the blocks of its own lane, then the others' as it comes free (vibroflow.dem.block_queue: the
-bed's work moves between the blocks over a cycle), and each block keeps its own impact buffer and diagnostics.  An impact
-row also holds the stored place of its ball (IMP_COLUMNS on), from which
-vibroflow.dem.impact_order puts the rows in an order that does not depend on the threads or on
-the storage order.
+bed's work moves between the blocks over a cycle), and each block keeps its own impact buffer
+and diagnostics.  An impact row also holds the stored place of its ball (IMP_COLUMNS on), from
+which vibroflow.dem.impact_order puts the rows in an order that does not depend on the threads
+or on the storage order.
 """
 from __future__ import annotations
 
@@ -63,11 +63,11 @@ from ..tub.motion import pose as tub_pose
 from .block_record import (D_BALL_I, D_BALL_J, D_BALL_OVERLAP, D_LOST, D_NAN,  # noqa: F401
                            D_WALL_I, D_WALL_OVERLAP, D_WALL_W, IMP_COLUMNS, N_DIAG, N_IMP_BUF,
                            ROW_BALL, keep_largest, record_impact)
+from .block_queue import open_lanes, take
 from .contact import (add_force_torque, contact_law, contact_velocity, forget,
                       normal_constants, put3, unit_normal)
 from .laws import (MODEL_HERTZ, MODEL_LINEAR, P_KT, P_MODEL, P_MU, P_MUR, P_ROLL, ROLL_CDT,
                    ROLL_CDT_LIGGGHTS, ROLL_EPSD, ROLL_NONE)
-from .block_queue import open_lanes, take
 from .wall_pass import ball_walls
 from .walls import KIND_BALL_BALL, TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT
 
