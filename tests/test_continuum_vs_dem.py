@@ -12,6 +12,9 @@ What is true today, said by the tests:
 - tub47: the circulations agree with the DEM's in both formulations (a target met);
 - tub47: the fields miss the limit (Lagrangian E 1.25 of it, Eulerian 1.42): tub47.md's target,
   asserted under a strict xfail that states the miss;
+- tub47 at amplitude factor 1.5 (tub47-f1.5-dem-seeds, seven seeds, limit 0.233), the continua
+  with the factor-1.0 calibration: the Lagrangian's circulation agrees, the Eulerian's is 1.13
+  x; both fields miss the limit (1.45 and 2.27 of it): strict xfails;
 - tub47-quick: both rolls are too weak (0.58 and 0.45 of the DEM's) and the fields miss the
   limit (E 0.48 and 0.67 against 0.249): the targets under strict xfails;
 - regression guards (named so) hold the state reached, so that a change that makes it worse
@@ -164,3 +167,68 @@ def test_regression_guard_on_tub47_quick(runs, method, E_max, s_range):
     assert r["sense"] == "counterclockwise"
     assert r["E"] < E_max
     assert s_range[0] < r["strength_ratio"] < s_range[1]
+
+
+#: tub47 at amplitude factor 1.5 (tests/data/tub47-f1.5-dem-seeds: the DEM on fill seeds
+#: 1 - N, the table's README gives N and the commands), the continua with the factor-1.0
+#: calibration, as `vibroflow sweep` runs them
+SEEDS_15 = DATA / "tub47-f1.5-dem-seeds"
+
+
+@pytest.fixture(scope="module")
+def at_15(tmp_path_factory):
+    """Each method at factor 1.5, judged against the factor's DEM seeds, once for the module."""
+    from vibroflow.analysis.judge import judge, read_result, run_folders
+
+    done: dict[str, dict] = {}
+
+    def get(method: str) -> dict:
+        if method not in done:
+            out = tmp_path_factory.mktemp(f"{method}-f1.5")
+            scenario = load_scenario("tub47", ["motion.amplitude_factor=1.5"])
+            cal = read_calibration(DIRS["tub47"] / "calibration.toml")
+            run_continuum(scenario, out, method, calibration=cal,
+                          options=formulation(method).options())
+            refs = [read_result(p) for p in run_folders([SEEDS_15])]
+            j = judge([read_result(out)], refs)
+            r = j["results"][0]
+            print(f"\n{method} at factor 1.5 against {len(refs)} seeds: strength "
+                  f"x{r['strength_ratio']:.2f}, E {r['E_mean']:.3f} against the limit "
+                  f"{j['limit']:.3f} ({r['E_over_limit']:.2f} of it)")
+            done[method] = {**r, "limit": j["limit"], "seeds": len(refs)}
+        return done[method]
+
+    return get
+
+
+@pytest.mark.parametrize("method", [
+    pytest.param("lagrangian", marks=pytest.mark.xfail(
+        strict=True, reason=f"E is 1.45 x the limit at factor 1.5 (0.337 +- 0.015 against 0.233): {MISS}")),
+    pytest.param("eulerian", marks=pytest.mark.xfail(
+        strict=True, reason=f"E is 2.27 x the limit at factor 1.5 (0.527 +- 0.016 against 0.233): {MISS}")),
+])
+def test_field_at_factor_1_5_meets_the_fields_agree_limit(at_15, method):
+    """tub47.md's target in the amplitude sweep: at factor 1.5, E against the factor's DEM
+    seeds at most 1.5 x their own seed-to-seed E."""
+    assert at_15(method)["E_over_limit"] <= 1.0
+
+
+@pytest.mark.parametrize("method, guard", [("lagrangian", 1.6), ("eulerian", 2.5)])
+def test_regression_guard_at_factor_1_5(at_15, method, guard):
+    """Regression guard, not a target: at factor 1.5 the circulation keeps the DEM's sense and
+    E against the factor's seeds stays below `guard` x their limit (measured 1.45 and 2.27)."""
+    r = at_15(method)
+    assert r["sense"] == "counterclockwise"
+    assert r["E_over_limit"] < guard
+
+
+@pytest.mark.parametrize("method", [
+    "lagrangian",
+    pytest.param("eulerian", marks=pytest.mark.xfail(
+        strict=True, reason="strength 1.13 x the seeds' mean, beyond max(10 %, 2 combined "
+                            "standard errors)")),
+])
+def test_circulation_at_factor_1_5_agrees_with_the_dem_seeds(at_15, method):
+    """tub47.md: at factor 1.5 the continuum's strength within 10 % or twice the combined
+    standard error of the seeds' mean (Lagrangian 1.10: agrees)."""
+    assert at_15(method)["strengths_agree"]
