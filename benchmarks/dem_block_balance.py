@@ -72,6 +72,18 @@ def lanes_bound(times: np.ndarray, threads: int) -> float:
     return float(times.sum() / (threads * free.max()))
 
 
+def _best_time(kernel, c: int, reps: int, t: float, *records) -> float:
+    """Seconds a call of block c's pass: one call untimed, then the best of three means of
+    `reps` calls."""
+    kernel(c, 1, t, *records)
+    best = np.inf
+    for _ in range(3):
+        t0 = time.perf_counter()
+        kernel(c, reps, t, *records)
+        best = min(best, (time.perf_counter() - t0) / reps)
+    return best
+
+
 def measure(size: str, phases: int, reps: int, warmup: int) -> dict:
     import numba
 
@@ -135,22 +147,10 @@ def measure(size: str, phases: int, reps: int, warmup: int) -> dict:
         pair_t = np.empty(nblock)
         ball_t = np.empty(nblock)
         for c in range(nblock):
-            args = (buf.balls, pairs, slots, system.params, buf.work)
-            pair_reps(c, 1, t, *args)
-            best = np.inf
-            for _ in range(3):
-                t0 = time.perf_counter()
-                pair_reps(c, reps, t, *args)
-                best = min(best, (time.perf_counter() - t0) / reps)
-            pair_t[c] = best
-            args = (buf.balls, pairs, slots, buf.walls, system.params, buf.work, buf.parts)
-            ball_reps(c, 1, t, *args)
-            best = np.inf
-            for _ in range(3):
-                t0 = time.perf_counter()
-                ball_reps(c, reps, t, *args)
-                best = min(best, (time.perf_counter() - t0) / reps)
-            ball_t[c] = best
+            pair_t[c] = _best_time(pair_reps, c, reps, t, buf.balls, pairs, slots,
+                                   system.params, buf.work)
+            ball_t[c] = _best_time(ball_reps, c, reps, t, buf.balls, pairs, slots, buf.walls,
+                                   system.params, buf.work, buf.parts)
         for k, v in saved.items():
             getattr(state, k)[:] = v
         state.nl.hist[:], state.nl.flag[:] = hist, flag
