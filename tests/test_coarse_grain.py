@@ -338,3 +338,30 @@ def test_each_batch_keeps_its_own_phase_fields_and_follows_every_snapshot_added(
     np.testing.assert_allclose(se[0][full],
                                np.broadcast_to(np.abs(2.5 * v[0]) / 2, (full.sum(), 3)),
                                atol=1e-12)
+
+
+def test_the_fields_without_one_batch_are_the_other_batches_pooled():
+    """leave_one_out_phase_arrays: three batches whose balls all move at (1 + b) v_k in phase
+    k. Without batch b the velocity is the mean of the other two's, and the temperature is the
+    spread between them, |u_a - u_c|^2 / 12 (T = tr(sigma_k) / (3 rho) of two equal halves at
+    u_a and u_c), where each batch alone has none."""
+    rng = np.random.default_rng(11)
+    geo = TubGeometry(radius=0.05, rim_height=0.1, length=0.02)
+    v = np.array([[0.2, 0, 0.1], [0.0, 0, -0.3]])
+    cg = CoarseGrainer(geo, 0.01, n_phases=2, n_batches=3)
+    pos = random_bed(rng, 2000, ((-0.045, 0.0, 0.005), (0.045, geo.length, 0.09)))
+    for b in range(3):
+        for k in range(2):
+            cg.add_snapshot(pos, np.broadcast_to((1 + b) * v[k], pos.shape), R_STEEL, M_STEEL,
+                            phase_bin=k, batch=b)
+    full = cg.fields().density.values > 0.05 * cg.fields().density.values.max()
+    loo = cg.leave_one_out_phase_arrays(("velocity", "temperature"))
+    assert loo["velocity"].shape == (3, 2) + full.shape + (3,)
+    for b in range(3):
+        a, c = [1 + o for o in range(3) if o != b]
+        for k in range(2):
+            np.testing.assert_allclose(loo["velocity"][b, k][full],
+                                       np.broadcast_to(0.5 * (a + c) * v[k], (full.sum(), 3)),
+                                       atol=1e-12)
+            T = (c - a) ** 2 * float(v[k] @ v[k]) / 12.0
+            np.testing.assert_allclose(loo["temperature"][b, k][full], T, rtol=1e-9)

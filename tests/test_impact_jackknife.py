@@ -50,3 +50,82 @@ def test_without_batches_the_error_is_unknown():
     out = jackknife_of_batches_fit(fit, c, total, c_b, sum_b, shear, d, 50, 0.1)
     assert np.isnan(out["c0_stderr"]) and np.isnan(out["c1_stderr"])
     assert out["c0_stderr_points"] == fit["c0_stderr"]
+
+
+def _temperature_draw(rng, nb=8, sigma=0.02, noise=0.01, b0=0.03, b1=1.5):
+    """Impacts on 4 phases x 6 x 5 points in `nb` batches: mean speed b0 + b1 sqrt(T), plus an
+    offset of batch b (N(0, sigma), all its impacts alike) and each point's own noise; the
+    fields without each batch as run_fields.leave_one_out_dataset gives them."""
+    import xarray as xr
+
+    from vibroflow.calibration.impacts import BatchCounts
+
+    shape = (4, 6, 5)
+    T = rng.uniform(1e-4, 1e-2, shape)
+    rate = rng.uniform(0.5, 10.0, shape)
+    c_b = rng.integers(60, 120, (nb,) + shape).astype(float)
+    v_b = (b0 + b1 * np.sqrt(T))[None] + rng.normal(0.0, sigma, nb)[:, None, None, None] \
+        + rng.normal(0.0, noise, (nb,) + shape)
+    counts = BatchCounts(int(np.prod(shape)), nb)
+    counts.count_b = c_b.ravel()
+    counts.total_b = (c_b * v_b).ravel()
+    counts.count = c_b.sum(axis=0).ravel()
+    counts.total = (c_b * v_b).sum(axis=0).ravel()
+    dims = ("batch", "phase", "x", "z")
+    loo = xr.Dataset({"temperature": (dims, np.repeat(T[None], nb, axis=0)),
+                      "shear_rate": (dims, np.repeat(rate[None], nb, axis=0)),
+                      "solid_fraction": (dims, np.full((nb,) + shape, 0.5))})
+    return counts, loo, T, rate
+
+
+def test_the_temperature_relations_errors_carry_the_batches_scatter():
+    """compare_impact_relations' affine fit v = b0 + b1 sqrt(T) with the jackknife refits
+    (impact_temperature._refit): over 300 draws the rms jackknife error of b0 matches the
+    sd of the fitted b0 (sigma / sqrt(nb), the batches' offsets) within 15 %, where the points'
+    own error is under half of it."""
+    from vibroflow.calibration.impact_temperature import _refit, relations_of_points
+    from vibroflow.calibration.impacts import jackknife_of_refits
+
+    rng = np.random.default_rng(3)
+    d = 0.00635
+    b0, jk, pts = [], [], []
+    for _ in range(300):
+        counts, loo, T, rate = _temperature_draw(rng)
+        mean = counts.total / counts.count
+        rec = relations_of_points(mean, mean, T.ravel(), rate.ravel(), counts.count, d)
+        jackknife_of_refits(rec["mean"], _refit(counts, loo, 50, 0.1, d), 8)
+        ta = rec["mean"]["temperature_affine"]
+        assert ta["stderr_batches"] == 8
+        b0.append(ta["c0"])
+        jk.append(ta["c0_stderr"])
+        pts.append(ta["c0_stderr_points"])
+    sd = np.std(b0, ddof=1)
+    assert abs(sd / (0.02 / np.sqrt(8)) - 1.0) < 0.15
+    assert abs(np.sqrt(np.mean(np.square(jk))) / sd - 1.0) < 0.15
+    assert np.sqrt(np.mean(np.square(pts))) < 0.5 * sd
+
+
+def test_the_fine_relations_refit_without_each_batch():
+    """impact_relations' two fits (impacts._fine_refit): without batch b the fit of v on
+    sqrt(T) is made on the other batches' impacts alone; with the batches' offsets the
+    jackknife's error of a exceeds the points' own."""
+    from vibroflow.calibration.impacts import _fine_refit, jackknife_of_refits
+
+    rng = np.random.default_rng(4)
+    counts, loo, T, rate = _temperature_draw(rng, b0=0.0)
+    shape = T.shape
+    c, mean = counts.without(2, shape)
+    cb = counts.count_b.reshape((8,) + shape)
+    vb = counts.total_b.reshape((8,) + shape) / cb
+    keep = [b for b in range(8) if b != 2]
+    np.testing.assert_allclose(mean, (cb[keep] * vb[keep]).sum(0) / cb[keep].sum(0), rtol=1e-12)
+    refit = _fine_refit(counts, loo, shape, 0.00635, 50, 0.1)
+    direct = weighted_linear_fit(np.sqrt(T).ravel(), mean.ravel(), c.ravel(), intercept=False)
+    assert refit(2)["t"]["c1"] == direct["c1"]
+    m = (counts.total / counts.count).reshape(shape)
+    fits = {"t": weighted_linear_fit(np.sqrt(T).ravel(), m.ravel(), counts.count,
+                                     intercept=False),
+            "g": weighted_linear_fit(0.00635 * rate.ravel(), m.ravel(), counts.count)}
+    jackknife_of_refits(fits, refit, 8)
+    assert fits["t"]["c1_stderr"] > fits["t"]["c1_stderr_points"]
+    assert fits["g"]["stderr_batches"] == 8

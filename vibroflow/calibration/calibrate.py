@@ -200,11 +200,15 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
                  f"{cg_info['wall_time_s']:.1f} s (contact stress: {cg_info['contact_stress']})"
                  f" -> {fields_path}")
         wf = wall_friction(res)
-        rel = impact_relations(res, phases, avg)
+        # every fit's errors the delete-one-batch jackknife: refit on the fields without a batch
+        loo = cg_info["phase_leave_one_out"]
+        rel = impact_relations(res, phases, avg, leave_one_out=loo)
         rel["cells"] = impact_relations_on_cells(res)
-        rel["temperature"] = compare_impact_relations(res, phases)
+        rel["temperature"] = compare_impact_relations(res, phases, leave_one_out=loo)
+        cells = float(sc.analysis.cell_size)
         rel["temperature_cells"] = compare_impact_relations(
-            res, on_nodes(phases, float(sc.analysis.cell_size)))
+            res, on_nodes(phases, cells),
+            leave_one_out=None if loo is None else on_nodes(loo, cells))
         for name in ("ball_ball", "ball_wall"):
             r = rel["temperature_cells"].get(name)
             if r is not None:

@@ -280,6 +280,21 @@ class CoarseGrainer:
         per_batch = self._batch_phase_fields(gradient)
         return {name: per_batch[name] for name in names}
 
+    def leave_one_out_phase_arrays(self, names, gradient: str = "kernel") -> dict:
+        """The phase-resolved fields `names` of every batch but one, as plain arrays
+        (n_batches, n_phases, nx, nz, ...): row b derived from the sums of the other batches,
+        as `fields(phase_resolved=True)` derives the pooled fields from all of them (so row b
+        is the field the delete-one-batch jackknife refits on; measure.stats.jackknife_stderr).
+        NaN where the other batches hold no snapshot of that phase."""
+        if self.n_phases is None:
+            raise InputError("leave_one_out_phase_arrays(): this CoarseGrainer has no phase "
+                             "bins (give n_phases)")
+        ball = self._ball.sum(axis=0, keepdims=True) - self._ball
+        cont = self._cont.sum(axis=0, keepdims=True) - self._cont
+        weight = self._weight.sum(axis=0, keepdims=True) - self._weight
+        derived = self._fields_of(ball, cont, weight, gradient)
+        return {name: derived[name] for name in names}
+
     def _batch_phase_fields(self, gradient: str) -> dict:
         """Each batch's phase-resolved fields, derived once per gradient until the next snapshot:
         `fields(phase_resolved=True)`'s standard errors and batch_phase_arrays share them."""

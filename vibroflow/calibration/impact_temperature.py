@@ -29,7 +29,8 @@ import math
 import numpy as np
 
 from .dem_result import DEMResult
-from .impacts import KINDS, MIN_IMPACTS_PER_CELL, weighted_linear_fit, window_impacts
+from .impacts import (KINDS, MIN_IMPACTS_PER_CELL, BatchCounts, jackknife_of_refits,
+                      weighted_linear_fit, window_impacts)
 
 #: mean and p95 of the normal impact speed over sqrt(T) for Maxwellian balls (module notes)
 MAXWELL_MEAN = {"ball_ball": math.sqrt(math.pi), "ball_wall": math.sqrt(math.pi / 2.0)}
@@ -83,10 +84,14 @@ def _fits(y, sqrtT, dg, w):
 
 
 def compare_impact_relations(run, phase_fields, min_impacts: int = MIN_IMPACTS_PER_CELL,
-                             min_solid_fraction: float = 0.1, chunk: int = 2_000_000) -> dict:
+                             min_solid_fraction: float = 0.1, chunk: int = 2_000_000,
+                             leave_one_out=None) -> dict:
     """The mean and p95 impact speeds of each (phase, point) against sqrt(T) and d gamma_dot
     (module notes).  run: DEMResult, run directory or dem.h5; phase_fields: the phase-resolved
-    Dataset of run_fields.coarse_grain_run.
+    Dataset of run_fields.coarse_grain_run; leave_one_out: the same fields of every batch but
+    one (run_fields.leave_one_out_dataset, on the same points: on_nodes applies to it too), with
+    which the mean's fits carry the delete-one-batch jackknife's c0_stderr and c1_stderr
+    (impacts.jackknife_of_refits; the points' own errors as c0_stderr_points, c1_stderr_points).
 
     Returns {kind: None (no impacts) or {points, count, maxwell_mean, maxwell_p95, cells
     {sqrt_T, d_gamma_dot, mean, p95, count: one value a (phase, point)},
@@ -97,7 +102,8 @@ def compare_impact_relations(run, phase_fields, min_impacts: int = MIN_IMPACTS_P
     own = not isinstance(run, DEMResult)
     res = DEMResult.open(run) if own else run
     try:
-        return _compare(res, phase_fields, min_impacts, min_solid_fraction, chunk)
+        return _compare(res, phase_fields, min_impacts, min_solid_fraction, chunk,
+                        leave_one_out)
     finally:
         if own:
             res.close()
@@ -115,7 +121,7 @@ def on_nodes(phase_fields, cell_size: float):
     return phase_fields.sel(x=at(phase_fields["x"].values), z=at(phase_fields["z"].values))
 
 
-def _compare(res, pf, min_impacts, min_sf, chunk):
+def _compare(res, pf, min_impacts, min_sf, chunk, loo=None):
     d = res.diameter
     x = np.asarray(pf["x"].values, float)
     z = np.asarray(pf["z"].values, float)
@@ -126,11 +132,11 @@ def _compare(res, pf, min_impacts, min_sf, chunk):
     phi = np.asarray(pf["solid_fraction"].values, float).ravel()
     ncell = n_ph * x.size * z.size
     out: dict = {"diameter": d}
-    cnt = {k: np.zeros(ncell) for k in KINDS}
-    sm = {k: np.zeros(ncell) for k in KINDS}
+    nb = 0 if loo is None else int(loo.sizes["batch"])
+    counts = {k: BatchCounts(ncell, nb) for k in KINDS}
     hist: dict = {k: {} for k in KINDS}
     edges = None
-    for kind, speed, pos, ph in window_impacts(res, n_ph, chunk):
+    for kind, speed, pos, ph, batch in window_impacts(res, n_ph, chunk, with_batch=True):
         if edges is None:
             top = 2.0 * float(np.percentile(speed, 99.9)) if speed.size else 1.0
             edges = np.concatenate([[0.0], np.geomspace(SPEED_FLOOR, max(top, 2 * SPEED_FLOOR),
@@ -142,8 +148,7 @@ def _compare(res, pf, min_impacts, min_sf, chunk):
         sb = np.clip(np.searchsorted(edges, speed, side="right") - 1, 0, N_SPEED_BINS - 1)
         for name, code in KINDS.items():
             sel = (kind == code) & inside
-            cnt[name] += np.bincount(flat[sel], minlength=ncell)
-            sm[name] += np.bincount(flat[sel], weights=speed[sel], minlength=ncell)
+            counts[name].add(flat[sel], speed[sel], batch[sel])
             # histograms per (phase, point), kept only where impacts fall (sparse rows)
             cells, inv = np.unique(flat[sel], return_inverse=True)
             hc = np.zeros((cells.size, N_SPEED_BINS), np.float32)
@@ -155,19 +160,34 @@ def _compare(res, pf, min_impacts, min_sf, chunk):
                 else:
                     store[c] = row
     for name in KINDS:
-        c = cnt[name]
+        c = counts[name].count
         ok = (c >= min_impacts) & np.isfinite(gam) & np.isfinite(T) & (T > 0) & (phi >= min_sf)
         idx = np.nonzero(ok)[0]
         if idx.size < 3:
             out[name] = None
             continue
-        mean = sm[name][idx] / c[idx]
+        mean = counts[name].total[idx] / c[idx]
         p95 = _quantile_of_histograms(np.stack([hist[name][int(i)] for i in idx]).astype(float),
                                       edges, 0.95)
         rec = relations_of_points(mean, p95, T[idx], gam[idx], c[idx], d, name)
+        if loo is not None:
+            jackknife_of_refits(rec["mean"], _refit(counts[name], loo, min_impacts, min_sf, d),
+                                nb)
         rec["count"] = int(c.sum())
         out[name] = rec
     return out
+
+
+def _refit(counts: BatchCounts, loo, min_impacts: int, min_sf: float, d: float):
+    """refit(b): the mean's three fits (_fits) without batch b, on the fields without it."""
+    def refit(b):
+        c, mean = counts.without(b, (counts.ncell,))
+        gam = np.asarray(loo["shear_rate"].values[b], float).ravel()
+        T = np.asarray(loo["temperature"].values[b], float).ravel()
+        phi = np.asarray(loo["solid_fraction"].values[b], float).ravel()
+        ok = (c >= min_impacts) & np.isfinite(gam) & np.isfinite(T) & (T > 0) & (phi >= min_sf)
+        return _fits(mean[ok], np.sqrt(T[ok]), d * gam[ok], c[ok])
+    return refit
 
 
 def relations_of_points(mean, p95, T, shear_rate, count, diameter: float,

@@ -16,8 +16,10 @@ Fits, weighted by the number of impacts in each bin (a bin's mean is that many s
 * against the temperature: v = a sqrt(T), compared with the Maxwellian values a = sqrt(pi) for
   two balls and sqrt(pi / 2) for a ball and a wall (models.md);
 * the Bagnold relation between the two fields: sqrt(T) = b d gamma_dot.
-Each fit comes with the standard errors of its coefficients, R^2 (weighted) and the relative
-RMS error of the predicted cell means, so a user can judge how far to trust it.
+Each fit comes with the standard errors of its coefficients (the delete-one-batch jackknife
+where the fields of every batch but one are given, since one batch's cycles move many points
+together), R^2 (weighted) and the relative RMS error of the predicted cell means, so a user can
+judge how far to trust it.
 """
 from __future__ import annotations
 
@@ -75,9 +77,57 @@ def weighted_linear_fit(x, y, w, intercept: bool = True) -> dict:
             "relative_rms_error": rel, "points": int(x.size)}
 
 
+class BatchCounts:
+    """Impact counts and speed sums binned on `ncell` (phase, point) bins, in total and per
+    batch of whole cycles: the pooled means and the means without one batch that the
+    delete-one-batch jackknife refits on."""
+
+    def __init__(self, ncell: int, n_batches: int):
+        self.ncell, self.nb = int(ncell), int(n_batches)
+        self.count = np.zeros(self.ncell)
+        self.total = np.zeros(self.ncell)
+        self.count_b = np.zeros(self.nb * self.ncell)
+        self.total_b = np.zeros(self.nb * self.ncell)
+
+    def add(self, flat, speed, batch) -> None:
+        """Impacts of normal speed `speed` (m/s) in bins `flat`, of batches `batch`."""
+        self.count += np.bincount(flat, minlength=self.ncell)
+        self.total += np.bincount(flat, weights=speed, minlength=self.ncell)
+        if self.nb:
+            fb = batch * self.ncell + flat
+            self.count_b += np.bincount(fb, minlength=self.nb * self.ncell)
+            self.total_b += np.bincount(fb, weights=speed, minlength=self.nb * self.ncell)
+
+    def without(self, b: int, shape) -> tuple[np.ndarray, np.ndarray]:
+        """The counts and mean speeds (m/s; NaN where none) of every batch but b, in `shape`."""
+        lo = b * self.ncell
+        c = self.count - self.count_b[lo:lo + self.ncell]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = np.where(c > 0, (self.total - self.total_b[lo:lo + self.ncell]) / c, np.nan)
+        return c.reshape(shape), mean.reshape(shape)
+
+
+def jackknife_of_refits(fits: dict, refit, n_batches: int) -> None:
+    """In place: each fit of `fits` ({tag: weighted_linear_fit's dict}) gets c0_stderr and
+    c1_stderr as the delete-one-batch jackknife (measure.stats.jackknife_stderr) of refit(b),
+    the same tags' fits made again without batch b; its own (the points taken as independent)
+    kept as c0_stderr_points and c1_stderr_points, and stderr_batches the batches used.
+
+    Why: one batch's cycles move the fields and the impact speeds of many points together, so
+    the points are not independent and the least-squares errors understate the scatter.
+    Without two batches, or where a refit fails, the jackknife errors are NaN."""
+    refits = [refit(b) for b in range(n_batches)] if n_batches >= 2 else []
+    for tag, fit in fits.items():
+        fit["c0_stderr_points"], fit["c1_stderr_points"] = fit["c0_stderr"], fit["c1_stderr"]
+        fit["c0_stderr"] = jackknife_stderr([r[tag]["c0"] for r in refits])
+        fit["c1_stderr"] = jackknife_stderr([r[tag]["c1"] for r in refits])
+        fit["stderr_batches"] = len(refits)
+
+
 def impact_relations(run, phase_fields, time_fields=None,
                      min_impacts: int = MIN_IMPACTS_PER_CELL, min_solid_fraction: float = 0.1,
-                     histogram_bins: int = 60, chunk: int = 2_000_000) -> dict:
+                     histogram_bins: int = 60, chunk: int = 2_000_000,
+                     leave_one_out=None) -> dict:
     """Impacts of a DEM run against its coarse-grained phase-resolved fields.
 
     The bed does not move rigidly with the tub: relative to it every ball oscillates at the
@@ -92,6 +142,10 @@ def impact_relations(run, phase_fields, time_fields=None,
     run_fields.coarse_grain_run (dims phase, x, z); time_fields : the time-averaged one (for the
     per-cell maps; optional).  A (phase, cell) point enters the fits when it holds at least
     `min_impacts` impacts of the kind and its solid fraction is at least `min_solid_fraction`.
+    leave_one_out : run_fields.leave_one_out_dataset's fields of every batch but one; with it
+    the fits' c0_stderr and c1_stderr are the delete-one-batch jackknife (jackknife_of_refits:
+    each fit made again without one batch's impacts, on the fields without it), without it the
+    points' own least-squares errors.
 
     Returns {kind: {count, mean_normal_speed, histogram {edges, counts}, map {count, mean_speed}
     (x, z), points {x, z, phase, count, mean_speed, shear_rate, temperature, solid_fraction},
@@ -102,7 +156,7 @@ def impact_relations(run, phase_fields, time_fields=None,
     res = DEMResult.open(run) if own else run
     try:
         return _relations(res, phase_fields, min_impacts, min_solid_fraction, histogram_bins,
-                          chunk)
+                          chunk, leave_one_out)
     finally:
         if own:
             res.close()
@@ -133,7 +187,8 @@ def window_impacts(res: DEMResult, n_phases: int, chunk: int = 2_000_000,
         yield (*out, batch[use]) if with_batch else out
 
 
-def _relations(res: DEMResult, pf, min_impacts, min_sf, histogram_bins, chunk) -> dict:
+def _relations(res: DEMResult, pf, min_impacts, min_sf, histogram_bins, chunk,
+               loo=None) -> dict:
     sc = res.scenario
     d = res.diameter
     x = np.asarray(pf["x"].values, float)
@@ -150,11 +205,11 @@ def _relations(res: DEMResult, pf, min_impacts, min_sf, histogram_bins, chunk) -
         out["bagnold"] = None
         return out
     ncell = n_ph * x.size * z.size
-    cnt = {name: np.zeros(ncell) for name in KINDS}
-    sm = {name: np.zeros(ncell) for name in KINDS}
+    nb = 0 if loo is None else int(loo.sizes["batch"])
+    counts = {name: BatchCounts(ncell, nb) for name in KINDS}
     hist = {name: None for name in KINDS}
     edges = None
-    for kind, speed, pos, ph in window_impacts(res, n_ph, chunk):
+    for kind, speed, pos, ph, batch in window_impacts(res, n_ph, chunk, with_batch=True):
         if edges is None:
             top = 2.0 * float(np.percentile(speed, 99.9)) if speed.size else 1.0
             edges = np.linspace(0.0, max(top, 1e-6), histogram_bins + 1)
@@ -164,13 +219,13 @@ def _relations(res: DEMResult, pf, min_impacts, min_sf, histogram_bins, chunk) -
         flat = (ph * x.size + ia) * z.size + ib
         for name, k in KINDS.items():
             sel = (kind == k) & inside
-            cnt[name] += np.bincount(flat[sel], minlength=ncell)
-            sm[name] += np.bincount(flat[sel], weights=speed[sel], minlength=ncell)
+            counts[name].add(flat[sel], speed[sel], batch[sel])
             hk, _ = np.histogram(np.minimum(speed[sel], edges[-1]), bins=edges)
             hist[name] = hk if hist[name] is None else hist[name] + hk
+    shape = (n_ph, x.size, z.size)
     for name in KINDS:
-        c = cnt[name].reshape(n_ph, x.size, z.size)
-        s = sm[name].reshape(n_ph, x.size, z.size)
+        c = counts[name].count.reshape(shape)
+        s = counts[name].total.reshape(shape)
         if c.sum() == 0:
             out[name] = None
             continue
@@ -185,6 +240,10 @@ def _relations(res: DEMResult, pf, min_impacts, min_sf, histogram_bins, chunk) -
                   "temperature": T[ok], "solid_fraction": phi[ok]}
         fit_g = weighted_linear_fit(d * gam[ok], mean[ok], c[ok])
         fit_t = weighted_linear_fit(np.sqrt(T[ok]), mean[ok], c[ok], intercept=False)
+        if loo is not None:
+            jackknife_of_refits({"g": fit_g, "t": fit_t},
+                                _fine_refit(counts[name], loo, shape, d, min_impacts, min_sf),
+                                nb)
         fit_t["maxwell"] = MAXWELL[name]
         out[name] = {"count": int(c.sum()), "mean_normal_speed": float(s.sum() / c.sum()),
                      "histogram": {"edges": edges, "counts": hist[name]},
@@ -196,36 +255,45 @@ def _relations(res: DEMResult, pf, min_impacts, min_sf, histogram_bins, chunk) -
     return out
 
 
+def _fine_refit(counts: BatchCounts, loo, shape, d: float, min_impacts: int, min_sf: float):
+    """refit(b) of _relations' two fits without batch b (jackknife_of_refits)."""
+    def refit(b):
+        c, mean = counts.without(b, shape)
+        gam = np.asarray(loo["shear_rate"].values[b], float)
+        T = np.asarray(loo["temperature"].values[b], float)
+        phi = np.asarray(loo["solid_fraction"].values[b], float)
+        ok = (c >= min_impacts) & np.isfinite(gam) & np.isfinite(T) & (phi >= min_sf)
+        return {"g": weighted_linear_fit(d * gam[ok], mean[ok], c[ok]),
+                "t": weighted_linear_fit(np.sqrt(T[ok]), mean[ok], c[ok], intercept=False)}
+    return refit
+
+
 def impact_speed_from_shear_rate(shear_rate, fit: dict, diameter: float):
     """The calibrated inference: v = c0 + c1 d gamma_dot (m/s) at shear rates (1/s)."""
     return fit["c0"] + fit["c1"] * diameter * np.asarray(shear_rate, float)
 
 
 def jackknife_of_batches_fit(fit: dict, c, total, c_b, sum_b, shear, d: float, min_impacts: int,
-                          min_sf: float) -> dict:
+                             min_sf: float) -> dict:
     """c0_stderr and c1_stderr of impact_relations_on_cells' fit as the delete-one-batch
     jackknife: the fit made again without batch b's impacts (counts c - c_b[b], speed sums
     total - sum_b[b], each (n_phases, nz, nx)) on the phase fields without batch b
     (PhaseShear.loo_*); the points' own errors kept as c0_stderr_points, c1_stderr_points.
     Without two batches (or when a fit without one fails) the jackknife errors are NaN."""
-    out = {"c0_stderr_points": fit["c0_stderr"], "c1_stderr_points": fit["c1_stderr"]}
-    nan = float("nan")
-    if shear.loo_phase_shear_rate is None or c_b.shape[0] < 2:
-        out.update(c0_stderr=nan, c1_stderr=nan, stderr_batches=0)
-        return out
-    c0s, c1s = [], []
-    for b in range(c_b.shape[0]):
+    nb = 0 if shear.loo_phase_shear_rate is None else c_b.shape[0]
+
+    def refit(b):
         ck = c - c_b[b]
         with np.errstate(invalid="ignore", divide="ignore"):
             mean = np.where(ck > 0, (total - sum_b[b]) / ck, np.nan)
         rate = shear.loo_phase_shear_rate[b]
         ok = (ck >= min_impacts) & np.isfinite(rate) & (shear.loo_phase_solid_fraction[b] >= min_sf)
-        f = weighted_linear_fit(d * rate[ok], mean[ok], ck[ok])
-        c0s.append(f["c0"])
-        c1s.append(f["c1"])
-    out.update(c0_stderr=jackknife_stderr(c0s), c1_stderr=jackknife_stderr(c1s),
-               stderr_batches=int(c_b.shape[0]))
-    return out
+        return {"fit": weighted_linear_fit(d * rate[ok], mean[ok], ck[ok])}
+
+    fits = {"fit": dict(fit)}
+    jackknife_of_refits(fits, refit, nb)
+    return {key: fits["fit"][key] for key in ("c0_stderr", "c1_stderr", "c0_stderr_points",
+                                              "c1_stderr_points", "stderr_batches")}
 
 
 def impact_relations_on_cells(run, cell_size: float | None = None,

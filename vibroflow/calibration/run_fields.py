@@ -57,7 +57,8 @@ def coarse_grain_run(run, kernel: str = "gaussian", width: float | None = None,
     a dict {snapshots, wall_time_s, contact_stress: "ball and wall" | "wall only" | "none",
     phase_batches: {"pressure", "solid_fraction", "velocity", "temperature",
     "inertial_number", "friction_coefficient"}: each batch's phase-resolved field as an array
-    (n_batches, n_phases, nx, nz[, 3])}.
+    (n_batches, n_phases, nx, nz[, 3]), phase_leave_one_out: leave_one_out_dataset's (None with
+    fewer than two batches)}.
     """
     own = not isinstance(run, DEMResult)
     res = DEMResult.open(run) if own else run
@@ -123,8 +124,30 @@ def _coarse_grain(res: DEMResult, kernel, width, cutoff, cell_size, n_phases, pr
     info["phase_batches"] = cg.batch_phase_arrays(("pressure", "solid_fraction", "velocity",
                                                    "temperature", "inertial_number",
                                                    "friction_coefficient"))
+    info["phase_leave_one_out"] = leave_one_out_dataset(cg, phases)
     info["wall_time_s"] = time.perf_counter() - t_wall
     return avg, phases, info
+
+
+#: the fields the impact relations refit without one batch (impacts, impact_temperature)
+LEAVE_ONE_OUT_FIELDS = ("shear_rate", "temperature", "solid_fraction")
+
+
+def leave_one_out_dataset(cg, phases: xr.Dataset) -> xr.Dataset | None:
+    """The phase-resolved shear rate (1/s), temperature (m^2/s^2) and solid fraction of every
+    batch but one (CoarseGrainer.leave_one_out_phase_arrays), dims (batch, phase, x, z) on the
+    phase-resolved Dataset's coordinates: what the impact relations' delete-one-batch
+    jackknife refits on.  None with fewer than two batches."""
+    if cg.n_batches < 2:
+        return None
+    arrays = cg.leave_one_out_phase_arrays(LEAVE_ONE_OUT_FIELDS)
+    dims = ("batch", "phase", "x", "z")
+    ds = xr.Dataset({name: (dims, arrays[name], dict(phases[name].attrs))
+                     for name in LEAVE_ONE_OUT_FIELDS},
+                    coords={"batch": np.arange(cg.n_batches), "phase": phases["phase"].values,
+                            "x": phases["x"].values, "z": phases["z"].values})
+    ds.attrs["description"] = "batch b: the fields derived from every batch but b"
+    return ds
 
 
 def add_cycle_means(time_averaged: xr.Dataset, phase_resolved: xr.Dataset) -> None:

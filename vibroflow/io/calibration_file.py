@@ -156,8 +156,11 @@ class ImpactRelation(Table):
     (c0_cells_m_s, c1_cells), v = a sqrt(T), v = b0 + b1 sqrt(T) on the coarse-grained points
     (b0_temperature_m_s, b1_temperature) and on the analysis cells' centres
     (b0_temperature_cells_m_s, b1_temperature_cells), and which of the shear rate and the
-    temperature the DEM supports better on the cells (preferred_relation); further keys (the p95 relations, the shares within 0.8 - 1.25) are
-    kept as they are written."""
+    temperature the DEM supports better on the cells (preferred_relation); further keys (the
+    p95 relations, the shares within 0.8 - 1.25) are kept as they are written.  The *_stderr
+    keys are the delete-one-batch jackknife's (calibration.impacts.jackknife_of_refits): one
+    batch's cycles move many points together, so the points' own least-squares errors would
+    understate them."""
     count: Count | None = None
     mean_normal_speed_m_s: Number | None = None
     c0_m_s: Number | None = None
