@@ -348,11 +348,7 @@ def impact_relations_on_cells(run, cell_size: float | None = None,
         ncell = n_ph * nz * nx
         loo = shear.loo_phase_shear_rate
         nb = 0 if loo is None else loo.shape[0]
-        cnt = {name: np.zeros(ncell) for name in KINDS}
-        sm = {name: np.zeros(ncell) for name in KINDS}
-        # each batch's own counts and sums, for the fits without it
-        cnt_b = {name: np.zeros(nb * ncell) for name in KINDS}
-        sm_b = {name: np.zeros(nb * ncell) for name in KINDS}
+        counts = {name: BatchCounts(ncell, nb) for name in KINDS}
         for kind, speed, pos, ph, batch in window_impacts(res, n_ph, chunk, with_batch=True):
             i = np.floor(pos[:, 0] / h + 0.5).astype(np.int64) + nxh
             k = np.floor(pos[:, 2] / h + 0.5).astype(np.int64)
@@ -360,35 +356,31 @@ def impact_relations_on_cells(run, cell_size: float | None = None,
             flat = (ph * nz + k) * nx + i
             for name, code in KINDS.items():
                 sel = (kind == code) & inside
-                cnt[name] += np.bincount(flat[sel], minlength=ncell)
-                sm[name] += np.bincount(flat[sel], weights=speed[sel], minlength=ncell)
-                if nb:
-                    fb = batch[sel] * ncell + flat[sel]
-                    cnt_b[name] += np.bincount(fb, minlength=nb * ncell)
-                    sm_b[name] += np.bincount(fb, weights=speed[sel], minlength=nb * ncell)
+                counts[name].add(flat[sel], speed[sel], batch[sel])
         for name in KINDS:
-            c = cnt[name].reshape(n_ph, nz, nx)
+            cs = counts[name]
+            c = cs.count.reshape(n_ph, nz, nx)
             if c.sum() == 0:
                 out[name] = None
                 continue
+            total = cs.total.reshape(c.shape)
             with np.errstate(invalid="ignore", divide="ignore"):
-                mean = np.where(c > 0, sm[name].reshape(c.shape) / c, np.nan)
+                mean = np.where(c > 0, total / c, np.nan)
             phi = shear.phase_solid_fraction
             ok = (c >= min_impacts) & np.isfinite(shear.phase_shear_rate) & (
                 phi >= min_solid_fraction)
             fit = weighted_linear_fit(d * shear.phase_shear_rate[ok], mean[ok], c[ok])
-            fit.update(jackknife_of_batches_fit(fit, c, sm[name].reshape(c.shape),
-                                             cnt_b[name].reshape((nb,) + c.shape),
-                                             sm_b[name].reshape((nb,) + c.shape), shear, d,
-                                             min_impacts, min_solid_fraction))
+            fit.update(jackknife_of_batches_fit(fit, c, total, cs.count_b.reshape((nb,) + c.shape),
+                                                cs.total_b.reshape((nb,) + c.shape), shear, d,
+                                                min_impacts, min_solid_fraction))
             fit["count"] = int(c.sum())
-            fit["mean_normal_speed"] = float(sm[name].sum() / c.sum())
+            fit["mean_normal_speed"] = float(total.sum() / c.sum())
             # the mean a continuum's inference stands for: each node's mean impact speed,
             # weighted by its solid fraction over the bed (ball-ball) or the near-wall nodes
             # (ball-wall), where the measured mean weights every impact alike
             c_node = c.sum(axis=0)
             with np.errstate(invalid="ignore", divide="ignore"):
-                v_node = sm[name].reshape(c.shape).sum(axis=0) / c_node
+                v_node = total.sum(axis=0) / c_node
             region = (near if name == "ball_wall" else np.ones_like(near)) & (
                 c_node >= min_impacts) & (shear.solid_fraction > 0)
             w = shear.solid_fraction[region]
