@@ -257,8 +257,10 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
             ri = radius[i]
             kend = nbr_start[i + 1]
             while k < kend and n < T:
-                # the untouched entry's rejection first: three loads of j, no call, no division
-                j = nbr[k]
+                # the untouched entry's rejection first: three loads of j, no call, no division;
+                # unsigned indices, which numba does not wrap around (no sign test an index)
+                ku = np.uint64(k)
+                j = np.uint64(nbr[ku])
                 dx = xi - pos[j, 0]
                 dy = yi - pos[j, 1]
                 dz = zi - pos[j, 2]
@@ -267,33 +269,41 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
                 rsum = ri + radius[j]
                 d2 = dx * dx + dy * dy + dz * dz
                 touch = np.int64(d2 < rsum * rsum)
-                if flag[k] > touch:  # parted since the last step
+                if flag[ku] > touch:  # parted since the last step
                     _part(hist, flag, rflag, rpos, k)
-                bi[I_K * T + n] = k
-                bi[I_I * T + n] = i
-                bi[I_J * T + n] = j
-                b[T_DX * T + n] = dx
-                b[T_DY * T + n] = dy
-                b[T_DZ * T + n] = dz
-                b[T_D2 * T + n] = d2
-                b[T_RSUM * T + n] = rsum
+                nu = np.uint64(n)
+                bi[np.uint64(I_K * T) + nu] = k
+                bi[np.uint64(I_I * T) + nu] = i
                 n += touch
                 k += 1
             if k == kend:
                 i += 1
-        # (1b) their balls' velocities, spins, pair constants and histories
+        # (1b) their geometry again (the same operations, the same bits: two stores an entry
+        # in (1a) instead of eight), balls' velocities, spins, pair constants and histories
         mat0_i = mat0_j = -1
         mixed = False
         for m in range(n):
-            kk = bi[I_K * T + m]
-            ii = bi[I_I * T + m]
-            jj = bi[I_J * T + m]
-            ri = radius[ii]
-            mi = mass[ii]
-            mat_i = mat[ii]
-            rj = radius[jj]
-            mj = mass[jj]
-            mat_j = mat[jj]
+            ku = np.uint64(bi[I_K * T + m])
+            iu = np.uint64(bi[I_I * T + m])
+            ju = np.uint64(nbr[ku])
+            bi[I_J * T + m] = np.int64(ju)
+            dx = pos[iu, 0] - pos[ju, 0]
+            dy = pos[iu, 1] - pos[ju, 1]
+            dz = pos[iu, 2] - pos[ju, 2]
+            if abs(dy) > wrap:
+                dy -= periodic_length * np.rint(dy / periodic_length)
+            rsum = radius[iu] + radius[ju]
+            b[T_DX * T + m] = dx
+            b[T_DY * T + m] = dy
+            b[T_DZ * T + m] = dz
+            b[T_D2 * T + m] = dx * dx + dy * dy + dz * dz
+            b[T_RSUM * T + m] = rsum
+            ri = radius[iu]
+            mi = mass[iu]
+            mat_i = mat[iu]
+            rj = radius[ju]
+            mj = mass[ju]
+            mat_j = mat[ju]
             if not (ri == key_ri and mi == key_mi and mat_i == key_mat_i and rj == key_rj
                     and mj == key_mj and mat_j == key_mat_j):
                 m_eff = mi * mj / (mi + mj)
@@ -307,25 +317,25 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
                 mixed = True
             b[T_RI * T + m] = ri
             b[T_RJ * T + m] = rj
-            b[T_DVX * T + m] = vel[ii, 0] - vel[jj, 0]
-            b[T_DVY * T + m] = vel[ii, 1] - vel[jj, 1]
-            b[T_DVZ * T + m] = vel[ii, 2] - vel[jj, 2]
-            b[T_WIX * T + m] = omg[ii, 0]
-            b[T_WIY * T + m] = omg[ii, 1]
-            b[T_WIZ * T + m] = omg[ii, 2]
-            b[T_WJX * T + m] = omg[jj, 0]
-            b[T_WJY * T + m] = omg[jj, 1]
-            b[T_WJZ * T + m] = omg[jj, 2]
+            b[T_DVX * T + m] = vel[iu, 0] - vel[ju, 0]
+            b[T_DVY * T + m] = vel[iu, 1] - vel[ju, 1]
+            b[T_DVZ * T + m] = vel[iu, 2] - vel[ju, 2]
+            b[T_WIX * T + m] = omg[iu, 0]
+            b[T_WIY * T + m] = omg[iu, 1]
+            b[T_WIZ * T + m] = omg[iu, 2]
+            b[T_WJX * T + m] = omg[ju, 0]
+            b[T_WJY * T + m] = omg[ju, 1]
+            b[T_WJZ * T + m] = omg[ju, 2]
             b[T_REFF * T + m] = r_eff
             b[T_KN * T + m] = kn
             b[T_DAMP * T + m] = damp
-            b[T_H0 * T + m] = hist[kk, 0]
-            b[T_H1 * T + m] = hist[kk, 1]
-            b[T_H2 * T + m] = hist[kk, 2]
+            b[T_H0 * T + m] = hist[ku, 0]
+            b[T_H1 * T + m] = hist[ku, 1]
+            b[T_H2 * T + m] = hist[ku, 2]
             if nh == 6:
-                b[T_H3 * T + m] = hist[kk, 3]
-                b[T_H4 * T + m] = hist[kk, 4]
-                b[T_H5 * T + m] = hist[kk, 5]
+                b[T_H3 * T + m] = hist[ku, 3]
+                b[T_H4 * T + m] = hist[ku, 4]
+                b[T_H5 * T + m] = hist[ku, 5]
         # (2) the law over the tile
         if n == 0:
             continue
@@ -335,7 +345,7 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
             _law_tile(n, b, table[mat0_i, mat0_j], dt_hist)
         # (3) the tile's contacts in entry order
         for m in range(n):
-            kk = bi[I_K * T + m]
+            ku = np.uint64(bi[I_K * T + m])
             ii = bi[I_I * T + m]
             jj = bi[I_J * T + m]
             while cur < ii:
@@ -348,10 +358,10 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
                 stx = 0.0
                 sty = 0.0
                 stz = 0.0
-            q = rpos[kk]
+            q = np.uint64(rpos[ku])
             delta = b[T_DELTA * T + m]
-            if not flag[kk]:
-                flag[kk] = 1
+            if not flag[ku]:
+                flag[ku] = 1
                 rflag[q] = 1
                 if record_impacts:
                     ri = radius[ii]
@@ -360,7 +370,7 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
                                   pos[ii, 1] - ri * b[T_NY * T + m],
                                   pos[ii, 2] - ri * b[T_NZ * T + m], -b[T_VN * T + m], ii)
             for a in range(nh):
-                hist[kk, a] = b[(T_H0 + a) * T + m]
+                hist[ku, a] = b[(T_H0 + a) * T + m]
             fx = b[T_FX * T + m]
             fy = b[T_FY * T + m]
             fz = b[T_FZ * T + m]
