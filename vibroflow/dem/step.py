@@ -200,11 +200,14 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
     touching pair's force and torques into its slot, and each ball's force set to its weight
     plus its own entries' forces (torque: their torques on it).
 
-    Tile by tile of up to TILE touching entries: (1) the entries in order, each apart one
-    rejected (its history forgotten when it has just parted), each touching one's geometry,
-    velocities, spins, pair constants and history copied into the tile's columns; (2) the
-    law over the tile (_law_tile, vectorised); (3) the tile's contacts in entry order: flags,
-    impact rows, slots, histories, each ball's sums, the largest overlap."""
+    Tile by tile of up to TILE touching entries: (1a) the entries in order, each apart one
+    rejected (its history forgotten when it has just parted), each touching one's entry and
+    ball listed; (1b) their geometry (recomputed: the same bits), velocities, spins, pair
+    constants and histories copied into the tile's columns; (2) the law over the tile
+    (_law_tile, vectorised); (3) the tile's contacts in entry order: flags, impact rows, slots,
+    histories, each ball's sums, the largest overlap.  The walk and the copy index with
+    unsigned integers: numba wraps a signed index around (a sign test and an add a load), an
+    unsigned one not (docs/decisions/threads.md)."""
     pos, vel, omg = balls.pos, balls.vel, balls.omg
     radius, mass, mat = balls.radius, balls.mass, balls.mat
     nbr_start, nbr, hist, flag = pairs.start, pairs.nbr, pairs.hist, pairs.flag
