@@ -12,9 +12,10 @@ What is true today, said by the tests:
 - tub47: the circulations agree with the DEM's in both formulations (a target met);
 - tub47: the fields miss the limit (Lagrangian E 1.25 of it, Eulerian 1.42): tub47.md's target,
   asserted under a strict xfail that states the miss;
-- tub47 at amplitude factor 1.5 (tub47-f1.5-dem-seeds, seven seeds, limit 0.233), the continua
-  with the factor-1.0 calibration: the Lagrangian's circulation agrees, the Eulerian's is 1.13
-  x; both fields miss the limit (1.45 and 2.27 of it): strict xfails;
+- tub47 at amplitude factor 1.5 (tub47-f1.5-dem-seeds, ten seeds, limit 0.241), the continua
+  with the factor-1.0 calibration (slow suite): the circulations are 1.11 and 1.14 x the
+  seeds', beyond the tolerance; both fields miss the limit (1.44 and 2.22 of it): strict
+  xfails;
 - tub47-quick: both rolls are too weak (0.58 and 0.45 of the DEM's) and the fields miss the
   limit (E 0.48 and 0.67 against 0.249): the targets under strict xfails;
 - regression guards (named so) hold the state reached, so that a change that makes it worse
@@ -210,9 +211,9 @@ def _miss(text: str):
 @pytest.mark.slow
 @pytest.mark.parametrize("factor, method", [
     pytest.param(1.5, "lagrangian", marks=_miss(
-        "E is 1.45 x the limit at factor 1.5 (0.337 +- 0.015 against 0.233)")),
+        "E is 1.44 x the limit at factor 1.5 (0.347 +- 0.011 against 0.241)")),
     pytest.param(1.5, "eulerian", marks=_miss(
-        "E is 2.27 x the limit at factor 1.5 (0.527 +- 0.016 against 0.233)")),
+        "E is 2.22 x the limit at factor 1.5 (0.533 +- 0.018 against 0.241)")),
 ])
 def test_field_in_the_amplitude_sweep_meets_the_fields_agree_limit(in_sweep, factor, method):
     """tub47.md's target in the amplitude sweep: E against the factor's DEM seeds at most
@@ -233,10 +234,12 @@ def test_regression_guard_in_the_amplitude_sweep(in_sweep, factor, method, guard
 
 @pytest.mark.slow
 @pytest.mark.parametrize("factor, method", [
-    (1.5, "lagrangian"),
+    pytest.param(1.5, "lagrangian", marks=pytest.mark.xfail(
+        strict=True, reason="strength 1.11 x the ten seeds' mean at factor 1.5, beyond max(10 "
+                            "%, 2 combined standard errors)")),
     pytest.param(1.5, "eulerian", marks=pytest.mark.xfail(
-        strict=True, reason="strength 1.13 x the seeds' mean at factor 1.5, beyond max(10 %, "
-                            "2 combined standard errors)")),
+        strict=True, reason="strength 1.14 x the ten seeds' mean at factor 1.5, beyond max(10 "
+                            "%, 2 combined standard errors)")),
 ])
 def test_circulation_in_the_amplitude_sweep_agrees_with_the_dem_seeds(in_sweep, factor, method):
     """tub47.md: the continuum's strength within 10 % or twice the combined standard error of
