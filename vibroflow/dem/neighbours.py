@@ -90,13 +90,17 @@ def bin_particles(pos, lo, cell_size, dims, periodic_length, rows):
 
 
 @nb.njit(cache=True, inline="always")
-def _scan(i, pos, radius, cells, out, offset, write):
-    """Visit the neighbour cells of i; count (write=False) or store (write=True) its partners
-    of higher id."""
+def _scan(i, pos, radius, cells, out, offset, cap, write):
+    """Visit the neighbour cells of i; count (write=False) or store (write=True; `cap` of
+    them, the count) its partners of higher id.  The distance test is no branch: a candidate
+    passes it in no order a predictor learns, so the count adds the test's outcome and the
+    write pass stores every candidate at the next place, kept when it passes (the place
+    `cap` and beyond is the next ball's, never written)."""
     cell_start, cell_members, cell_of, dims = cells.start, cells.members, cells.cell_of, cells.dims
     skin, periodic_length, ids = cells.skin, cells.periodic_length, cells.ids
     nx, ny, nz = dims[0], dims[1], dims[2]
     cx, cy, cz = cell_of[i, 0], cell_of[i, 1], cell_of[i, 2]
+    xi, yi, zi, ri, id_i = pos[i, 0], pos[i, 1], pos[i, 2], radius[i], ids[i]
     count = 0
     if periodic_length > 0.0 and ny < 3:
         ylo, yhi = 0, 0  # one cell across the periodic length: it holds every y
@@ -118,19 +122,21 @@ def _scan(i, pos, radius, cells, out, offset, write):
                     continue
                 f = (ax * ny + ay) * nz + az
                 for m in range(cell_start[f], cell_start[f + 1]):
-                    j = cell_members[m]
-                    if ids[j] <= ids[i]:
+                    # unsigned indices: numba wraps no unsigned index around (no sign test a
+                    # load); i's position, radius and id held in locals (the same operations)
+                    j = np.uint64(cell_members[np.uint64(m)])
+                    if ids[j] <= id_i:
                         continue
-                    ddx = pos[i, 0] - pos[j, 0]
-                    ddy = pos[i, 1] - pos[j, 1]
-                    ddz = pos[i, 2] - pos[j, 2]
+                    ddx = xi - pos[j, 0]
+                    ddy = yi - pos[j, 1]
+                    ddz = zi - pos[j, 2]
                     if periodic_length > 0.0:
                         ddy -= periodic_length * np.rint(ddy / periodic_length)
-                    cut = radius[i] + radius[j] + skin
-                    if ddx * ddx + ddy * ddy + ddz * ddz < cut * cut:
-                        if write:
-                            out[offset + count] = j
-                        count += 1
+                    cut = ri + radius[j] + skin
+                    near = np.int64(ddx * ddx + ddy * ddy + ddz * ddz < cut * cut)
+                    if write and count < cap:
+                        out[offset + count] = np.int64(j)
+                    count += near
     return count
 
 
@@ -141,13 +147,13 @@ def build_half_list(pos, radius, cells):
     counts = np.zeros(n + 1, np.int64)
     dummy = np.empty(0, np.int64)
     for i in nb.prange(n):
-        counts[i + 1] = _scan(i, pos, radius, cells, dummy, 0, False)
+        counts[i + 1] = _scan(i, pos, radius, cells, dummy, 0, 0, False)
     for i in range(n):
         counts[i + 1] += counts[i]
     nbr = np.empty(counts[n], np.int64)
     for i in nb.prange(n):
         # within a cell, members are in id order, so each i's list is reproducible
-        _scan(i, pos, radius, cells, nbr, counts[i], True)
+        _scan(i, pos, radius, cells, nbr, counts[i], counts[i + 1] - counts[i], True)
     return counts, nbr
 
 
