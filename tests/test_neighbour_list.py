@@ -1,6 +1,6 @@
 """The half neighbour list (vibroflow.dem.neighbours.build_half_list) against the brute-force
 answer: every pair closer than r_i + r_j + skin, once, under the partner of higher id, in a
-bounded box and across a periodic length; the same list on one thread and on two."""
+bounded box and across a periodic length; the same list on one thread and on all of them."""
 from __future__ import annotations
 
 import numpy as np
