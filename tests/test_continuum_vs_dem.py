@@ -12,9 +12,11 @@ What is true today, said by the tests:
 - tub47: the circulations agree with the DEM's in both formulations (a target met);
 - tub47: the fields miss the limit (Lagrangian E 1.25 of it, Eulerian 1.42): tub47.md's target,
   asserted under a strict xfail that states the miss;
-- tub47 at amplitude factor 1.5 (tub47-f1.5-dem-seeds, ten seeds, limit 0.241), the continua
-  with the factor-1.0 calibration (slow suite): the circulations are 1.11 and 1.14 x the
-  seeds', beyond the tolerance; both fields miss the limit (1.44 and 2.22 of it): strict
+- the amplitude sweep, ten DEM seeds a factor, the continua with the factor-1.0 calibration
+  (slow suite): at factor 0.5 (tub47-f0.5-dem-seeds, limit 0.219) the Lagrangian's
+  circulation agrees (0.98) and the Eulerian's does not (0.72), the fields miss the limit (2.00
+  and 2.17 of it); at factor 1.5 (tub47-f1.5-dem-seeds, limit 0.241) the circulations are 1.11
+  and 1.14 x the seeds', beyond the tolerance, and the fields miss it (1.44 and 2.22): strict
   xfails;
 - tub47-quick: both rolls are too weak (0.58 and 0.45 of the DEM's) and the fields miss the
   limit (E 0.48 and 0.67 against 0.249): the targets under strict xfails;
@@ -174,7 +176,7 @@ def test_regression_guard_on_tub47_quick(runs, method, E_max, s_range):
 #: 1 - N, the table's README gives N and the commands), the continua with the factor-1.0
 #: calibration, as `vibroflow sweep` runs them
 #: the amplitude sweep's DEM ensembles (tests/data): fill seeds of tub47 at each factor
-SWEEP = {1.5: DATA / "tub47-f1.5-dem-seeds"}
+SWEEP = {0.5: DATA / "tub47-f0.5-dem-seeds", 1.5: DATA / "tub47-f1.5-dem-seeds"}
 
 
 @pytest.fixture(scope="module")
@@ -210,6 +212,10 @@ def _miss(text: str):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("factor, method", [
+    pytest.param(0.5, "lagrangian", marks=_miss(
+        "E is 2.00 x the limit at factor 0.5 (0.439 +- 0.007 against 0.219)")),
+    pytest.param(0.5, "eulerian", marks=_miss(
+        "E is 2.17 x the limit at factor 0.5 (0.476 +- 0.006 against 0.219)")),
     pytest.param(1.5, "lagrangian", marks=_miss(
         "E is 1.44 x the limit at factor 1.5 (0.347 +- 0.011 against 0.241)")),
     pytest.param(1.5, "eulerian", marks=_miss(
@@ -222,7 +228,9 @@ def test_field_in_the_amplitude_sweep_meets_the_fields_agree_limit(in_sweep, fac
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("factor, method, guard", [(1.5, "lagrangian", 1.6),
+@pytest.mark.parametrize("factor, method, guard", [(0.5, "lagrangian", 2.4),
+                                                   (0.5, "eulerian", 2.5),
+                                                   (1.5, "lagrangian", 1.6),
                                                    (1.5, "eulerian", 2.5)])
 def test_regression_guard_in_the_amplitude_sweep(in_sweep, factor, method, guard):
     """Regression guard, not a target: the circulation keeps the DEM's sense and E against the
@@ -234,6 +242,10 @@ def test_regression_guard_in_the_amplitude_sweep(in_sweep, factor, method, guard
 
 @pytest.mark.slow
 @pytest.mark.parametrize("factor, method", [
+    (0.5, "lagrangian"),
+    pytest.param(0.5, "eulerian", marks=pytest.mark.xfail(
+        strict=True, reason="strength 0.72 x the ten seeds' mean at factor 0.5, beyond max(10 %, 2 "
+                            "combined standard errors)")),
     pytest.param(1.5, "lagrangian", marks=pytest.mark.xfail(
         strict=True, reason="strength 1.11 x the ten seeds' mean at factor 1.5, beyond max(10 "
                             "%, 2 combined standard errors)")),
