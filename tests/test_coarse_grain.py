@@ -304,20 +304,26 @@ def test_snapshot_from_a_vibrating_tub_state_is_in_tub_frame_and_axes():
     assert snap["contact_force"][0] @ snap["contact_branch"][0] > 0   # repulsive
 
 
-def test_each_batch_keeps_its_own_phase_fields_and_follows_every_snapshot_added():
-    """batch_phase_arrays: batch b, phase k holds the velocity its snapshots carry (here
-    (1 + b) v_k), and a snapshot added afterwards shows in the next call and in the standard
-    errors of fields(phase_resolved=True)."""
-    rng = np.random.default_rng(5)
+def _batched_bed(rng, n_batches):
+    """A grainer of 2 phase bins fed one snapshot a (batch, phase): 2 000 balls all moving at
+    (1 + b) v_k; returns it, v, the positions and the cells well inside the bed."""
     geo = TubGeometry(radius=0.05, rim_height=0.1, length=0.02)
     v = np.array([[0.2, 0, 0.1], [0.0, 0, -0.3]])
-    cg = CoarseGrainer(geo, 0.01, n_phases=2, n_batches=2)
+    cg = CoarseGrainer(geo, 0.01, n_phases=2, n_batches=n_batches)
     pos = random_bed(rng, 2000, ((-0.045, 0.0, 0.005), (0.045, geo.length, 0.09)))
-    for b in range(2):
+    for b in range(n_batches):
         for k in range(2):
             cg.add_snapshot(pos, np.broadcast_to((1 + b) * v[k], pos.shape), R_STEEL, M_STEEL,
                             phase_bin=k, batch=b)
     full = cg.fields().density.values > 0.05 * cg.fields().density.values.max()
+    return cg, v, pos, full
+
+
+def test_each_batch_keeps_its_own_phase_fields_and_follows_every_snapshot_added():
+    """batch_phase_arrays: batch b, phase k holds the velocity its snapshots carry (here
+    (1 + b) v_k), and a snapshot added afterwards shows in the next call and in the standard
+    errors of fields(phase_resolved=True)."""
+    cg, v, pos, full = _batched_bed(np.random.default_rng(5), 2)
     first = cg.batch_phase_arrays(("velocity",))["velocity"]
     for b in range(2):
         for k in range(2):
@@ -345,16 +351,7 @@ def test_the_fields_without_one_batch_are_the_other_batches_pooled():
     k. Without batch b the velocity is the mean of the other two's, and the temperature is the
     spread between them, |u_a - u_c|^2 / 12 (T = tr(sigma_k) / (3 rho) of two equal halves at
     u_a and u_c), where each batch alone has none."""
-    rng = np.random.default_rng(11)
-    geo = TubGeometry(radius=0.05, rim_height=0.1, length=0.02)
-    v = np.array([[0.2, 0, 0.1], [0.0, 0, -0.3]])
-    cg = CoarseGrainer(geo, 0.01, n_phases=2, n_batches=3)
-    pos = random_bed(rng, 2000, ((-0.045, 0.0, 0.005), (0.045, geo.length, 0.09)))
-    for b in range(3):
-        for k in range(2):
-            cg.add_snapshot(pos, np.broadcast_to((1 + b) * v[k], pos.shape), R_STEEL, M_STEEL,
-                            phase_bin=k, batch=b)
-    full = cg.fields().density.values > 0.05 * cg.fields().density.values.max()
+    cg, v, pos, full = _batched_bed(np.random.default_rng(11), 3)
     loo = cg.leave_one_out_phase_arrays(("velocity", "temperature"))
     assert loo["velocity"].shape == (3, 2) + full.shape + (3,)
     for b in range(3):
