@@ -24,12 +24,13 @@ times under frozen forces would fling them against the walls); and one neighbour
 rebuild (simulate.rebuild: cell binning, list, history transfer, reverse order).
 
 Printed per process: balls, median wall and CPU microseconds a step, nanoseconds per ball-step,
-the passes' shares, the process's peak resident memory (ru_maxrss), numba's threading layer
+the mean ball-ball contact count over the timed steps (counted CONTACT_SAMPLES times a repeat)
+with the nanoseconds per contact-step, the passes' shares, the process's peak resident memory (ru_maxrss), numba's threading layer
 and GOMP_SPINCOUNT, and the sha256 of the balls' positions, velocities and spins (by id) after
 the warm-up and the repeats; at the end, per size, whether that state is the same bits on every
 thread count run (the DEM's promise: it must be) and each thread count's throughput over one
-thread's, and the time per step against the ball count relative to the smallest size (1.0:
-the cost grows as the ball count).  On a shared machine compare the rows of one run, and repeat under load.
+thread's, and the time per step against the ball count and against the mean contact count
+relative to the smallest size (1.0: the cost grows as the count).  On a shared machine compare the rows of one run, and repeat under load.
 """
 from __future__ import annotations
 
@@ -53,6 +54,10 @@ COPIES = 10
 #: within a cycle, and its contact count changes tenfold, so a step's cost is a cycle's mean
 CYCLE = 2128
 WARMUP = CYCLE
+#: the timed steps of a repeat go in this many calls, the ball-ball contacts counted after each:
+#: their mean over the repeats is the work a step does (a longer tub's bed, its end walls
+#: further apart, holds more of its weight on the floor and more contacts a ball)
+CONTACT_SAMPLES = 16
 
 
 def _settled(case: str, sets: list[str]):
@@ -109,11 +114,14 @@ def worker(size: str, steps: int, repeats: int, warmup: int = WARMUP,
     state.time_origin_step = state.step
     state.vibrating = True
     S.run_steps(system, state, warmup, memory_order=memory_order)
-    wall, cpu = [], []
+    wall, cpu, counted = [], [], []
     b0 = state.nl.builds
+    cuts = np.linspace(0, steps, CONTACT_SAMPLES + 1).astype(np.int64)
     for _ in range(repeats):
         t0, c0 = time.perf_counter(), time.process_time()
-        S.run_steps(system, state, steps, memory_order=memory_order)
+        for n in np.diff(cuts):
+            S.run_steps(system, state, int(n), memory_order=memory_order)
+            counted.append(np.count_nonzero(state.nl.flag))
         wall.append(time.perf_counter() - t0)
         cpu.append(time.process_time() - c0)
     builds = state.nl.builds - b0
@@ -176,6 +184,7 @@ def worker(size: str, steps: int, repeats: int, warmup: int = WARMUP,
             "steps": steps, "warmup": warmup, "state_sha256": digest, "wall_s": wall, "cpu_s": cpu, "builds": builds,
             "list_entries": int(state.nl.nbr.shape[0]),
             "contacts": int(np.count_nonzero(state.nl.flag)),
+            "mean_contacts": float(np.mean(counted)),
             "profile_us": profile,
             "max_rss_MB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
 
@@ -217,11 +226,14 @@ def main(argv=None) -> None:
             us = 1e6 * statistics.median(r["wall_s"]) / a.steps
             cpu = 1e6 * statistics.median(r["cpu_s"]) / a.steps
             r.update(median_us_per_step=us, median_cpu_us_per_step=cpu,
-                     ns_per_ball_step=1e3 * us / r["balls"])
+                     ns_per_ball_step=1e3 * us / r["balls"],
+                     ns_per_contact_step=1e3 * us / r["mean_contacts"])
             prof = r["profile_us"]
             print(f"{size:6s} {r['balls']:7d} balls, {threads} thread(s): {us:9.1f} us/step wall "
                   f"({cpu:9.1f} CPU), {r['ns_per_ball_step']:6.1f} ns/ball-step, "
-                  f"{r['builds']} builds, {r['contacts']} contacts, max RSS "
+                  f"{r['builds']} builds, {r['mean_contacts']:.0f} contacts (mean; "
+                  f"{r['mean_contacts'] / r['balls']:.2f} a ball, "
+                  f"{r['ns_per_contact_step']:.1f} ns/contact-step), max RSS "
                   f"{r['max_rss_MB']:.0f} MB, {'sorted' if r['memory_order'] else 'by id'}, "
                   f"{r['threading_layer']} layer, GOMP_SPINCOUNT "
                   f"{r['gomp_spincount']} (load {r['load'][0]:.1f} -> {r['load'][1]:.1f})",
@@ -250,10 +262,13 @@ def main(argv=None) -> None:
     smallest = {}
     for r in rows:
         base = smallest.setdefault(r["threads"], r)
-        r["cost_growth_over_ball_growth"] = ((r["median_us_per_step"] / base["median_us_per_step"])
-                                             / (r["balls"] / base["balls"]))
+        growth = r["median_us_per_step"] / base["median_us_per_step"]
+        r["cost_growth_over_ball_growth"] = growth / (r["balls"] / base["balls"])
+        r["cost_growth_over_contact_growth"] = growth / (r["mean_contacts"]
+                                                         / base["mean_contacts"])
         print(f"{r['size']:6s} {r['threads']} thread(s): time per step grows "
-              f"{r['cost_growth_over_ball_growth']:.2f} x the ball count's growth from "
+              f"{r['cost_growth_over_ball_growth']:.2f} x the ball count's growth and "
+              f"{r['cost_growth_over_contact_growth']:.2f} x the mean contact count's from "
               f"{base['size']}")
     a.json.parent.mkdir(parents=True, exist_ok=True)
     a.json.write_text(json.dumps(rows, indent=1))
