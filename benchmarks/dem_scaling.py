@@ -25,12 +25,13 @@ rebuild (simulate.rebuild: cell binning, list, history transfer, reverse order).
 
 Printed per process: balls, median wall and CPU microseconds a step, nanoseconds per ball-step,
 the mean ball-ball contact count over the timed steps (counted CONTACT_SAMPLES times a repeat)
-with the nanoseconds per contact-step, the passes' shares, the process's peak resident memory (ru_maxrss), numba's threading layer
-and GOMP_SPINCOUNT, and the sha256 of the balls' positions, velocities and spins (by id) after
-the warm-up and the repeats; at the end, per size, whether that state is the same bits on every
-thread count run (the DEM's promise: it must be) and each thread count's throughput over one
-thread's, and the time per step against the ball count and against the mean contact count
-relative to the smallest size (1.0: the cost grows as the count).  On a shared machine compare the rows of one run, and repeat under load.
+with the nanoseconds per contact-step, the passes' shares, the process's peak resident memory
+(ru_maxrss), numba's threading layer and GOMP_SPINCOUNT, and the sha256 of the balls'
+positions, velocities and spins (by id) after the warm-up and the repeats; at the end, per
+size, whether that state is the same bits on every thread count run (the DEM's promise: it
+must be) and each thread count's throughput over one thread's, and the time per step against
+the ball count and against the mean contact count relative to the smallest size (1.0: the cost
+grows as the count).  On a shared machine compare the rows of one run, and repeat under load.
 """
 from __future__ import annotations
 
@@ -55,8 +56,8 @@ COPIES = 10
 CYCLE = 2128
 WARMUP = CYCLE
 #: the timed steps of a repeat go in this many calls, the ball-ball contacts counted after each:
-#: their mean over the repeats is the work a step does (a longer tub's bed, its end walls
-#: further apart, holds more of its weight on the floor and more contacts a ball)
+#: their mean is the work a step does, which an instant's count misreads (it changes tenfold
+#: within a cycle, and its phase differs between beds of different sizes)
 CONTACT_SAMPLES = 16
 
 
@@ -181,7 +182,8 @@ def worker(size: str, steps: int, repeats: int, warmup: int = WARMUP,
             "memory_order": bool(state.n >= M.MEMORY_ORDER_FROM if memory_order is None
                                  else memory_order),
             "gomp_spincount": os.environ.get("GOMP_SPINCOUNT"),
-            "steps": steps, "warmup": warmup, "state_sha256": digest, "wall_s": wall, "cpu_s": cpu, "builds": builds,
+            "steps": steps, "warmup": warmup, "state_sha256": digest, "wall_s": wall,
+            "cpu_s": cpu, "builds": builds,
             "list_entries": int(state.nl.nbr.shape[0]),
             "contacts": int(np.count_nonzero(state.nl.flag)),
             "mean_contacts": float(np.mean(counted)),
