@@ -185,7 +185,7 @@ def worker(size: str, steps: int, repeats: int, warmup: int = WARMUP,
             "steps": steps, "warmup": warmup, "state_sha256": digest, "wall_s": wall,
             "cpu_s": cpu, "builds": builds,
             "list_entries": int(state.nl.nbr.shape[0]),
-            "contacts": int(np.count_nonzero(state.nl.flag)),
+            "contacts_at_end": int(np.count_nonzero(state.nl.flag)),
             "mean_contacts": float(np.mean(counted)),
             "profile_us": profile,
             "max_rss_MB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
