@@ -143,7 +143,8 @@ def kernels(a) -> dict:
     import numpy as np
 
     from vibroflow.continuum.eulerian.transfer import operator_of_cells
-    from vibroflow.continuum.transfer_operator import operator_of_points, transfer_rows
+    from vibroflow.continuum.transfer_operator import (HALF, expand, operator_of_points,
+                                                       transfer_rows)
 
     numba.set_num_threads(1)
     scenario, cal = _inputs(a)
@@ -185,7 +186,7 @@ def kernels(a) -> dict:
                 update_volume(L, state.mass, vol.copy(), rho, 0.0, 0.0),
                 update_stress_points(stress.copy(), L, rho, system.dt, system.params,
                                      state.gamma_dot.copy(), state.phase.copy())), 200)
-            B = np.zeros((g.nx, g.nz, 5, 5))
+            B = np.zeros((g.nx, g.nz, HALF))
             gtmp = np.zeros_like(gv)
 
             def build():
@@ -193,7 +194,7 @@ def kernels(a) -> dict:
                 operator_of_points(x, state.mass, g.x0, g.z0, g.dx, g.periodic, B)
 
             t["transfer operator (build)"] = _per_call(build, 200)
-            mass = B.sum(axis=(2, 3))  # the nodes' masses: the operator's row sums
+            mass = expand(B).sum(axis=(2, 3))  # the nodes' masses: the operator's row sums
             t[f"one transfer (x {system.transfers - 1} a step)"] = _per_call(
                 lambda: transfer_rows(0, g.nx, B, mass, gv, gtmp, g.periodic, 0, 0), 200)
         else:
@@ -258,7 +259,7 @@ def kernels(a) -> dict:
             t["remap"] = _per_call(lambda: remap(
                 m2.copy(), q.copy().reshape((NQ,) + s2), system.ux, system.uz, mesh.h,
                 system.dt, mesh.periodic, system.remap_work), 200)
-            B = np.zeros((g.nx, g.nz, 5, 5))
+            B = np.zeros((g.nx, g.nz, HALF))
             gtmp = np.zeros_like(gv)
 
             def build():
@@ -266,7 +267,7 @@ def kernels(a) -> dict:
                 operator_of_cells(act, mesh.ncz, tcx, tcz, state.mass, g.dx, g.periodic, B)
 
             t["transfer operator (build)"] = _per_call(build, 200)
-            mass = B.sum(axis=(2, 3))  # the nodes' masses: the operator's row sums
+            mass = expand(B).sum(axis=(2, 3))  # the nodes' masses: the operator's row sums
             t[f"one transfer (x {system.transfers - 1} a step)"] = _per_call(
                 lambda: transfer_rows(0, g.nx, B, mass, gv, gtmp, g.periodic, 0, 0), 200)
         t["whole step (compiled loop, 20 steps a call)"] = _per_call(

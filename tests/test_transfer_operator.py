@@ -23,7 +23,8 @@ from vibroflow.continuum.grid_update import MASS_EPS, LabFrame
 from vibroflow.continuum.mpm.solver import MPMSystem, init_state, run_steps
 from vibroflow.continuum.p2g import p2g
 from vibroflow.continuum.timestep import stable_dt, transfers_per_step
-from vibroflow.continuum.transfer_operator import operator_of_points, transfer_rows
+from vibroflow.continuum.transfer_operator import (HALF, expand, operator_of_points,
+                                                   transfer_rows)
 from vibroflow.errors import InputError
 
 DX = 0.01
@@ -42,7 +43,7 @@ def cloud(seed=3, n=400):
 
 
 def operator(grid, x, mass):
-    B = np.zeros((grid.nx, grid.nz, 5, 5))
+    B = np.zeros((grid.nx, grid.nz, HALF))
     operator_of_points(x, mass, grid.x0, grid.z0, grid.dx, grid.periodic, B)
     return B
 
@@ -74,6 +75,45 @@ def test_operator_is_the_apic_transfer_pair():
     assert held.sum() > 100
     assert np.allclose(out[held], expected[held], rtol=1e-12, atol=1e-12)
     assert np.all(out[~held] == 0.0)
+
+
+def _full_operator(grid, x, mass):
+    """B_ij = sum_p m_p w_ip w_jp (1 + 4/dx^2 r_ip . r_jp) as (nx, nz, 5, 5), straight from its
+    definition (module docstring of transfer_operator), in numpy."""
+    B = np.zeros((grid.nx, grid.nz, 5, 5))
+    for xp, mp in zip(x, mass):
+        nodes = []
+        for gi in range(grid.nx):
+            for gk in range(grid.nz):
+                r = np.array([grid.x0 + gi * grid.dx, grid.z0 + gk * grid.dx]) - xp
+                q = np.abs(r) / grid.dx
+                w = np.where(q < 0.5, 0.75 - q**2, np.where(q < 1.5, 0.5 * (1.5 - q) ** 2, 0.0))
+                if w[0] * w[1] > 0.0:
+                    nodes.append((gi, gk, w[0] * w[1], r))
+        for i, k, wi, ri in nodes:
+            for j, l, wj, rj in nodes:
+                B[i, k, j - i + 2, l - k + 2] += mp * wi * wj * (
+                    1.0 + 4.0 / grid.dx**2 * (ri @ rj))
+    return B
+
+
+def test_stored_half_is_the_whole_symmetric_operator():
+    """The stored half, expanded, is the operator of its definition built in numpy (to
+    round-off), symmetric bit for bit, and its rows sum to the nodes' masses (sum_j w_jp = 1,
+    sum_j w_jp r_jp = 0)."""
+    grid, x, mass = cloud(seed=13, n=60)
+    full = expand(operator(grid, x, mass))
+    reference = _full_operator(grid, x, mass)
+    assert np.abs(reference).max() > 0.1
+    np.testing.assert_allclose(full, reference, rtol=1e-12, atol=1e-14)
+    nx, nz = grid.nx, grid.nz
+    for i in range(2, nx - 2):
+        for k in range(2, nz - 2):
+            for a in range(5):
+                for b in range(5):
+                    assert full[i, k, a, b] == full[i + a - 2, k + b - 2, 4 - a, 4 - b]
+    gm, _ = explicit_pair(grid, x, mass, np.zeros((nx, nz, 2)))
+    np.testing.assert_allclose(full.sum(axis=(2, 3)), gm, rtol=1e-12, atol=1e-14)
 
 
 def test_operator_keeps_affine_fields_and_momentum():

@@ -20,8 +20,9 @@ Records (numba named tuples, unpacked into locals at the top of each kernel):
   conditions no_slip_rows and axis_cols (0 for none);
 * `GridWork`: the per-chunk scatter buffers cm (nchunk, nx, nz), cmv, cf (nchunk, nx, nz, 2),
   the node mass gm (nx, nz) kg/m, momentum gmv, force gf and velocity gv (nx, nz, 2), the
-  transfers a step makes, the transfer operator's per-chunk parts cb (nchunk, nx, nz, 5, 5),
-  their sum B (nx, nz, 5, 5) and a work grid gtmp (nx, nz, 2) (empty for one transfer).
+  transfers a step makes, the transfer operator's per-chunk parts cb (nchunk, nx, nz, HALF),
+  their sum B (nx, nz, HALF) (transfer_operator.py: the stored half) and a work grid gtmp
+  (nx, nz, 2) (empty for one transfer).
 """
 from __future__ import annotations
 
@@ -31,7 +32,7 @@ import numba as nb
 import numpy as np
 
 from .grid_update import frame_body, grid_update
-from .transfer_operator import sum_operator_rows, transfer_rows
+from .transfer_operator import HALF, sum_operator_rows, transfer_rows
 
 GridSpec = namedtuple("GridSpec", ["x0", "z0", "dx", "periodic", "no_slip_rows", "axis_cols"])
 GridWork = namedtuple("GridWork", ["cm", "cmv", "cf", "gm", "gmv", "gf", "gv", "transfers", "cb",
@@ -52,7 +53,7 @@ def grid_work(grid, chunks: int, transfers: int) -> GridWork:
     return GridWork(np.zeros((chunks, nx, nz)), np.zeros((chunks, nx, nz, 2)),
                     np.zeros((chunks, nx, nz, 2)), np.zeros((nx, nz)), np.zeros((nx, nz, 2)),
                     np.zeros((nx, nz, 2)), np.zeros((nx, nz, 2)), int(transfers),
-                    np.zeros((chunks, *t, 5, 5)), np.zeros((*t, 5, 5)), np.zeros((*t, 2)))
+                    np.zeros((chunks, *t, HALF)), np.zeros((*t, HALF)), np.zeros((*t, 2)))
 
 
 def chunk_bounds(n: int, nchunk: int) -> np.ndarray:

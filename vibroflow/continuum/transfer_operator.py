@@ -24,12 +24,18 @@ and no motion in between).  Each velocity component is transferred alone.  B is 
 its rows sum to m_i (sum_j w_jp = 1 and sum_j w_jp r_jp = 0 for the quadratic B-spline), so a
 transfer keeps a uniform velocity; it keeps every affine velocity field exactly (APIC's
 property), and the grid's momentum sum_i m_i v_i exactly (sum_i w_ip r_ip = 0).  The points'
-neighbourhoods span 5 x 5 nodes, so B is stored as (nx, nz, 5, 5): B[i, k, a, b] couples node
-(i, k) with node (i + a - 2, k + b - 2).
+neighbourhoods span 5 x 5 nodes.  B is symmetric, so each node stores the half of its 5 x 5
+couplings that points forward (`HALF` = 13 of them: offsets (0, 0..2), then (1..2, -2..2);
+`half_slot`), as (nx, nz, HALF): the coupling of node (i, k) with node (i + da, k + db) is
+B[i, k, half_slot(da, db)] when the offset points forward, else the neighbour's
+B[i + da, k + db, half_slot(-da, -db)].  A point adds each unordered pair of its 3 x 3
+stencil's nodes once (45 products, not 81), the per-chunk buffers and their sums are half as
+large, and the matrix is symmetric bit for bit (`expand` gives the full 5 x 5 form, for
+checks).
 
 Built once a step from the points' positions before they move (the positions p2g used), it is
 applied n - 1 times to the updated grid velocities before the gather: the step then makes n
-transfers, the last one g2p's own.  Building costs about one p2g; an application, a few
+transfers, the last one g2p's own.  Building costs less than one p2g; an application, a few
 microseconds on a tub grid, against a whole p2g and g2p for a transfer made with the points.
 The operator is built per chunk of points into per-chunk buffers summed in a fixed order (as
 p2g's scatter, fused.py), so the numbers do not depend on the number of threads.
@@ -37,43 +43,57 @@ p2g's scatter, fused.py), so the numbers do not depend on the number of threads.
 from __future__ import annotations
 
 import numba as nb
+import numpy as np
 
 from .grid_update import idle_node
 from .stencil import bspline_weights
+
+#: couplings stored per node: the forward half of the 5 x 5 neighbourhood (module docstring)
+HALF = 13
+
+
+@nb.njit(cache=True, inline="always")
+def half_slot(da, db):
+    """The slot of the forward offset (da, db) (da = 0 and db = 0..2, or da = 1, 2 and
+    db = -2..2) in a node's HALF stored couplings."""
+    if da == 0:
+        return db
+    return 3 + (da - 1) * 5 + db + 2
 
 
 @nb.njit(cache=True)
 def add_point(B, m, bx, fx, wx0, wx1, wx2, bz, fz, wz0, wz1, wz2, dx, periodic):
     """Add one point's part m w_ip w_jp (1 + 4/dx^2 r_ip . r_jp) to the operator B
-    (nx, nz, 5, 5) (module docstring): mass m (kg/m), its base nodes bx, bz, offsets fx, fz and
-    three weights per axis as stencil.bspline_weights returns them, spacing dx (m)."""
+    (nx, nz, HALF) (module docstring), each unordered pair of its stencil's nodes once: mass m
+    (kg/m), its base nodes bx, bz, offsets fx, fz and three weights per axis as
+    stencil.bspline_weights returns them, spacing dx (m).  The product splits by axis,
+    w_ip w_jp (1 + 4/dx^2 r_ip . r_jp) = X_ac Z_bd (1 + x_ac + z_bd) with X_ac = w_a w_c and
+    x_ac = 4/dx^2 r_a r_c along x (nodes a, c) and the same along z (nodes b, d)."""
     nxg = B.shape[0]
     inv = 4.0 / (dx * dx)
+    wx = (wx0, wx1, wx2)
+    wz = (wz0, wz1, wz2)
+    rx = ((0.0 - fx) * dx, (1.0 - fx) * dx, (2.0 - fx) * dx)
+    rz = ((0.0 - fz) * dx, (1.0 - fz) * dx, (2.0 - fz) * dx)
     for a in range(3):
-        wa = wx0 if a == 0 else (wx1 if a == 1 else wx2)
-        rax = (a - fx) * dx
         i = bx + a
         if periodic:
             i = i % nxg
         for b in range(3):
-            wb = wz0 if b == 0 else (wz1 if b == 1 else wz2)
-            raz = (b - fz) * dx
-            mw = m * wa * wb
             k = bz + b
-            for c in range(3):
-                wc = wx0 if c == 0 else (wx1 if c == 1 else wx2)
-                rcx = (c - fx) * dx
-                for d in range(3):
-                    wd = wz0 if d == 0 else (wz1 if d == 1 else wz2)
-                    rdz = (d - fz) * dx
-                    B[i, k, c - a + 2, d - b + 2] += mw * wc * wd * (
-                        1.0 + inv * (rax * rcx + raz * rdz))
+            for c in range(a, 3):
+                mx = m * (wx[a] * wx[c])
+                ex = 1.0 + inv * (rx[a] * rx[c])
+                d0 = b if c == a else 0
+                for d in range(d0, 3):
+                    B[i, k, half_slot(c - a, d - b)] += mx * (wz[b] * wz[d]) * (
+                        ex + inv * (rz[b] * rz[d]))
 
 
 @nb.njit(cache=True)
 def operator_of_points(x, mass, x0, z0, dx, periodic, B):
     """Accumulate the transfer operator of the points x (N, 2) (m) of masses mass (N,) (kg/m)
-    into B (nx, nz, 5, 5) (zero it first), on the grid of origin (x0, z0) and spacing dx (m)."""
+    into B (nx, nz, HALF) (zero it first), on the grid of origin (x0, z0) and spacing dx (m)."""
     for p in range(x.shape[0]):
         bx, fx, wx0, wx1, wx2, _, _, _ = bspline_weights(x[p, 0], x0, dx)
         bz, fz, wz0, wz1, wz2, _, _, _ = bspline_weights(x[p, 1], z0, dx)
@@ -82,10 +102,10 @@ def operator_of_points(x, mass, x0, z0, dx, periodic, B):
 
 @nb.njit(cache=True)
 def sum_operator_rows(i0, i1, cb, B):
-    """Grid rows i0:i1 of B: the sums of the per-chunk operators cb (nchunk, nx, nz, 5, 5) in
+    """Grid rows i0:i1 of B: the sums of the per-chunk operators cb (nchunk, nx, nz, HALF) in
     the fixed order chunk 0, 1, ... (module docstring)."""
     nchunk = cb.shape[0]
-    m = B.shape[1] * 25
+    m = B.shape[1] * B.shape[2]
     for i in range(i0, i1):
         # each entry's sum cb[0] + cb[1] + ... in that order, made chunk after chunk over the
         # row's flat entries: a long loop the compiler vectorises, with the same roundings
@@ -100,12 +120,42 @@ def sum_operator_rows(i0, i1, cb, B):
 
 
 @nb.njit(cache=True)
+def coupling(B, i, k, da, db, nx):
+    """B's coupling of node (i, k) with node (i + da, k + db) (|da|, |db| <= 2; the neighbour
+    wrapped along x when it lies off a periodic grid of nx node rows, `nx` > 0; 0: not
+    wrapped): its own stored half when the offset points forward, else the neighbour's."""
+    if da > 0 or (da == 0 and db >= 0):
+        return B[i, k, half_slot(da, db)]
+    j = i + da
+    if nx > 0:
+        j = j % nx
+    return B[j, k + db, half_slot(-da, -db)]
+
+
+def expand(B):
+    """The full operator (nx, nz, 5, 5) of a stored half B (nx, nz, HALF), element [i, k, a, b]
+    coupling node (i, k) with node (i + a - 2, k + b - 2) (0 where that node is off the grid;
+    not wrapped): for checks."""
+    nx, nz = B.shape[:2]
+    out = np.zeros((nx, nz, 5, 5))
+    for i in range(nx):
+        for k in range(nz):
+            for a in range(5):
+                for b in range(5):
+                    j, l = i + a - 2, k + b - 2
+                    if 0 <= j < nx and 0 <= l < nz:
+                        out[i, k, a, b] = coupling(B, i, k, a - 2, b - 2, 0)
+    return out
+
+
+@nb.njit(cache=True)
 def transfer_rows(i0, i1, B, gm, gv, out, periodic, no_slip_rows, axis_cols):
     """One transfer of the grid velocities gv (nx, nz, 2) (m/s) for the node rows i0:i1, into
     out: v_i' = sum_j B_ij v_j / m_i at nodes holding mass (gm > MASS_EPS, kg/m) and off the
     grid's edge, 0 elsewhere (as grid_update leaves them); then the grid's conditions as after
     the update: the lowest no_slip_rows node rows held still (a rough floor), the radial
-    velocity of the first axis_cols columns 0 (an axisymmetric section's axis).
+    velocity of the first axis_cols columns 0 (an axisymmetric section's axis).  B is the
+    stored half (nx, nz, HALF): a backward coupling is read from the neighbour's half.
 
     The sums are in the written order (no fastmath).  Reassociated (fastmath reassoc, a third
     less time here), their compiled order depends on how this kernel is compiled into its
@@ -122,12 +172,26 @@ def transfer_rows(i0, i1, B, gm, gv, out, periodic, no_slip_rows, axis_cols):
             sx = 0.0
             sz = 0.0
             if 2 <= i < nx - 2 and 2 <= k < nz - 2:
-                # the whole 5 x 5 neighbourhood on the grid: no index checks (most nodes)
-                for a in range(5):
-                    for b in range(5):
-                        bij = B[i, k, a, b]
-                        sx += bij * gv[i + a - 2, k + b - 2, 0]
-                        sz += bij * gv[i + a - 2, k + b - 2, 1]
+                # the whole 5 x 5 neighbourhood on the grid: no index checks (most nodes);
+                # the forward half from this node's slots, the backward from the neighbours'
+                for db in range(3):
+                    bij = B[i, k, db]
+                    sx += bij * gv[i, k + db, 0]
+                    sz += bij * gv[i, k + db, 1]
+                for da in range(1, 3):
+                    for db in range(-2, 3):
+                        bij = B[i, k, 3 + (da - 1) * 5 + db + 2]
+                        sx += bij * gv[i + da, k + db, 0]
+                        sz += bij * gv[i + da, k + db, 1]
+                for db in range(1, 3):
+                    bij = B[i, k - db, db]
+                    sx += bij * gv[i, k - db, 0]
+                    sz += bij * gv[i, k - db, 1]
+                for da in range(1, 3):
+                    for db in range(-2, 3):
+                        bij = B[i - da, k - db, 3 + (da - 1) * 5 + db + 2]
+                        sx += bij * gv[i - da, k - db, 0]
+                        sz += bij * gv[i - da, k - db, 1]
             else:
                 for a in range(5):
                     j = i + a - 2
@@ -139,7 +203,7 @@ def transfer_rows(i0, i1, B, gm, gv, out, periodic, no_slip_rows, axis_cols):
                         l = k + b - 2
                         if l < 0 or l >= nz:
                             continue
-                        bij = B[i, k, a, b]
+                        bij = coupling(B, i, k, a - 2, b - 2, nx if periodic else 0)
                         sx += bij * gv[j, l, 0]
                         sz += bij * gv[j, l, 1]
             out[i, k, 0] = sx / m

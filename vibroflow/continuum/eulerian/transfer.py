@@ -125,8 +125,8 @@ def g2p_cells(cells, ncz, tx, tz, v, C, L, gv, dx, periodic):
 @nb.njit(cache=True)
 def operator_of_cells(cells, ncz, tx, tz, mass, dx, periodic, B):
     """Accumulate the transfer operator (vibroflow.continuum.transfer_operator) of the cells
-    `cells` (indices p = i * ncz + k) of masses mass (N,) (kg/m) into B (nx, nz, 5, 5) (zero it
-    first), with the weights of rows tx[i] and tz[k]."""
+    `cells` (indices p = i * ncz + k) of masses mass (N,) (kg/m) into B (nx, nz, HALF) (zero
+    it first), with the weights of rows tx[i] and tz[k]."""
     for j in range(cells.shape[0]):
         p = cells[j]
         ic = p // ncz
