@@ -264,7 +264,8 @@ def kernels(a) -> dict:
 
             def build():
                 B[:] = 0.0
-                operator_of_cells(act, mesh.ncz, tcx, tcz, state.mass, g.dx, g.periodic, B)
+                operator_of_cells(act, mesh.ncz, tcx, tcz, system.mesh_record.factors,
+                                  state.mass, g.periodic, B)
 
             t["transfer operator (build)"] = _per_call(build, 200)
             mass = expand(B).sum(axis=(2, 3))  # the nodes' masses: the operator's row sums

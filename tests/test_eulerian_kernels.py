@@ -24,12 +24,14 @@ from vibroflow.continuum.eulerian.advection import remap, remap_work
 from vibroflow.continuum.eulerian.face_velocity import face_velocities
 from vibroflow.continuum.eulerian.formulation import bed_masses
 from vibroflow.continuum.eulerian.mesh import EulerianMesh
-from vibroflow.continuum.eulerian.transfer import WeightTables, g2p_cells, p2g_cells
+from vibroflow.continuum.eulerian.transfer import (WeightTables, g2p_cells, operator_factors,
+                                                   operator_of_cells, p2g_cells)
 from vibroflow.continuum.formulation import formulation
 from vibroflow.continuum.g2p import g2p
 from vibroflow.continuum.grid_update import TubFrame
 from vibroflow.continuum.material import material_of
 from vibroflow.continuum.p2g import p2g
+from vibroflow.continuum.transfer_operator import HALF, operator_of_points
 from vibroflow.scenario.io import load_scenario
 from vibroflow.tub.motion import TubMotion
 
@@ -83,6 +85,25 @@ def test_cells_to_nodes_and_back_as_the_generic_transfers(periodic):
     _close(vg[cells], vw)
     _close(Cg[cells], Cw)
     _close(Lg[cells], Lw)
+
+
+@pytest.mark.parametrize("periodic", [False, True])
+def test_transfer_operator_of_the_cells_is_that_of_points_at_their_centres(periodic):
+    """The cells' transfer operator, their masses times the pair factors made once a run
+    (transfer.operator_factors), is transfer_operator.operator_of_points of points at the
+    cell centres, bit for bit."""
+    mesh = _mesh(periodic)
+    g = mesh.grid
+    x = mesh.centres()
+    mass = _fields(mesh, 4)[0]
+    cells = np.flatnonzero(mass > 0)
+    tx, tz = _tables(mesh)[:2]
+    got, want = np.zeros((g.nx, g.nz, HALF)), np.zeros((g.nx, g.nz, HALF))
+    operator_of_cells(cells, mesh.ncz, tx, tz, operator_factors(mesh.ncx, mesh.ncz, tx, tz, g.dx),
+                      mass, g.periodic, got)
+    operator_of_points(x[cells], mass[cells], g.x0, g.z0, g.dx, g.periodic, want)
+    assert np.abs(want).max() > 0.1 * mass.max()  # the check is not vacuous
+    np.testing.assert_array_equal(got, want)
 
 
 @pytest.mark.parametrize("periodic", [False, True])

@@ -61,20 +61,38 @@ def half_slot(da, db):
     return 3 + (da - 1) * 5 + db + 2
 
 
+#: products a point adds: the unordered pairs of its 3 x 3 stencil's nodes
+PAIRS = 45
+
+
+@nb.njit(cache=True, inline="always")
+def pair_factor(a, b, c, d, wx, wz, rx, rz, inv):
+    """w_ip w_jp (1 + 4/dx^2 r_ip . r_jp) of the stencil's nodes (a, b) and (c, d) of a point,
+    from its weights wx, wz and offsets rx, rz (m) (3-tuples along x and z) and inv = 4/dx^2:
+    split by axis, (w_a w_c)(w_b w_d)((1 + inv r_a r_c) + inv r_b r_d), the same operations
+    wherever it is made (`add_point`, `point_factors`), so the two give the same bits."""
+    return ((wx[a] * wx[c]) * (wz[b] * wz[d])) * (
+        (1.0 + inv * (rx[a] * rx[c])) + inv * (rz[b] * rz[d]))
+
+
+@nb.njit(cache=True, inline="always")
+def stencil_tuples(fx, wx0, wx1, wx2, fz, wz0, wz1, wz2, dx):
+    """A point's weights and node offsets (m) along x and z as 3-tuples (`pair_factor`)."""
+    return ((wx0, wx1, wx2), (wz0, wz1, wz2),
+            ((0.0 - fx) * dx, (1.0 - fx) * dx, (2.0 - fx) * dx),
+            ((0.0 - fz) * dx, (1.0 - fz) * dx, (2.0 - fz) * dx))
+
+
 @nb.njit(cache=True)
 def add_point(B, m, bx, fx, wx0, wx1, wx2, bz, fz, wz0, wz1, wz2, dx, periodic):
     """Add one point's part m w_ip w_jp (1 + 4/dx^2 r_ip . r_jp) to the operator B
-    (nx, nz, HALF) (module docstring), each unordered pair of its stencil's nodes once: mass m
-    (kg/m), its base nodes bx, bz, offsets fx, fz and three weights per axis as
-    stencil.bspline_weights returns them, spacing dx (m).  The product splits by axis,
-    w_ip w_jp (1 + 4/dx^2 r_ip . r_jp) = X_ac Z_bd (1 + x_ac + z_bd) with X_ac = w_a w_c and
-    x_ac = 4/dx^2 r_a r_c along x (nodes a, c) and the same along z (nodes b, d)."""
+    (nx, nz, HALF) (module docstring), each unordered pair of its stencil's nodes once, in the
+    order (a, b) <= (c, d) lexicographic (`pair_factor`): mass m (kg/m), its base nodes bx, bz,
+    offsets fx, fz and three weights per axis as stencil.bspline_weights returns them,
+    spacing dx (m)."""
     nxg = B.shape[0]
     inv = 4.0 / (dx * dx)
-    wx = (wx0, wx1, wx2)
-    wz = (wz0, wz1, wz2)
-    rx = ((0.0 - fx) * dx, (1.0 - fx) * dx, (2.0 - fx) * dx)
-    rz = ((0.0 - fz) * dx, (1.0 - fz) * dx, (2.0 - fz) * dx)
+    wx, wz, rx, rz = stencil_tuples(fx, wx0, wx1, wx2, fz, wz0, wz1, wz2, dx)
     for a in range(3):
         i = bx + a
         if periodic:
@@ -82,12 +100,43 @@ def add_point(B, m, bx, fx, wx0, wx1, wx2, bz, fz, wz0, wz1, wz2, dx, periodic):
         for b in range(3):
             k = bz + b
             for c in range(a, 3):
-                mx = m * (wx[a] * wx[c])
-                ex = 1.0 + inv * (rx[a] * rx[c])
-                d0 = b if c == a else 0
-                for d in range(d0, 3):
-                    B[i, k, half_slot(c - a, d - b)] += mx * (wz[b] * wz[d]) * (
-                        ex + inv * (rz[b] * rz[d]))
+                for d in range(b if c == a else 0, 3):
+                    B[i, k, half_slot(c - a, d - b)] += m * pair_factor(a, b, c, d, wx, wz, rx,
+                                                                        rz, inv)
+
+
+@nb.njit(cache=True)
+def point_factors(fx, wx0, wx1, wx2, fz, wz0, wz1, wz2, dx, out):
+    """A point's PAIRS pair factors (`pair_factor`) into out (PAIRS,), in `add_point`'s order:
+    a point that never moves (the Eulerian mesh's cells) adds m out[e] with `add_factors`, the
+    same numbers as `add_point`'s."""
+    inv = 4.0 / (dx * dx)
+    wx, wz, rx, rz = stencil_tuples(fx, wx0, wx1, wx2, fz, wz0, wz1, wz2, dx)
+    e = 0
+    for a in range(3):
+        for b in range(3):
+            for c in range(a, 3):
+                for d in range(b if c == a else 0, 3):
+                    out[e] = pair_factor(a, b, c, d, wx, wz, rx, rz, inv)
+                    e += 1
+
+
+@nb.njit(cache=True)
+def add_factors(B, m, bx, bz, factors, periodic):
+    """Add m factors[e] (`point_factors` of a point of base nodes bx, bz; mass m, kg/m) to the
+    operator B (nx, nz, HALF): `add_point` with the pair factors made beforehand."""
+    nxg = B.shape[0]
+    e = 0
+    for a in range(3):
+        i = bx + a
+        if periodic:
+            i = i % nxg
+        for b in range(3):
+            k = bz + b
+            for c in range(a, 3):
+                for d in range(b if c == a else 0, 3):
+                    B[i, k, half_slot(c - a, d - b)] += m * factors[e]
+                    e += 1
 
 
 @nb.njit(cache=True)

@@ -64,11 +64,12 @@ Cells = namedtuple("Cells", ["mass", "v", "C", "L", "stress", "gamma_dot", "phas
 CellStep = namedtuple("CellStep", ["dt", "params", "frame", "rho_c", "mass0"])
 #: the mesh (mesh.EulerianMesh): cell side h (m), open faces open_x (ncx + 1, ncz) and open_z
 #: (ncx, ncz + 1), the wall cells' inward normals normal (N, 2), the weight tables
-#: (transfer.WeightTables as a tuple (cx, cz, fx, fz)), and weight, inv_r (N,) an
+#: (transfer.WeightTables as a tuple (cx, cz, fx, fz)), weight, inv_r (N,) an
 #: axisymmetric section's cell radii and their reciprocals (1 and 0 in plane strain;
-#: solver.EulerianSystem.axisymmetric)
+#: solver.EulerianSystem.axisymmetric), and the cells' transfer operator factors
+#: (transfer.operator_factors; (0, PAIRS) with one transfer a step)
 MeshRecord = namedtuple("MeshRecord", ["h", "open_x", "open_z", "normal", "tables", "weight",
-                                       "inv_r"])
+                                       "inv_r", "factors"])
 #: the mesh's wall (wall.MeshWall; wall_on False without): its cells (int64 indices), its
 #: history (wall.empty_history: delta, xi, fn, ft, state), stiffnesses kn, kt (Pa/m), damping
 #: ratio zeta and friction mu; the partitions' friction (boundary.PartitionFriction;
@@ -102,7 +103,7 @@ def _make_advance_kernel(parallel: bool):
         (mass, v, C, L, stress, gamma_dot, phase, frac, volume, density, fext, stress_work,
          p_kin) = cells
         dt, params, frame, rho_c, mass0 = step
-        h, open_x, open_z, normal, tables, weight, inv_r = mesh
+        h, open_x, open_z, normal, tables, weight, inv_r, factors = mesh
         (wall_on, wall_cells, delta, xi, wfn, wft, wst, kn, kt, zeta, mu_w, part_on, mu_p,
          length) = boundaries
         x0, z0, dx, periodic, no_slip_rows, axis_cols = grid
@@ -164,7 +165,8 @@ def _make_advance_kernel(parallel: bool):
                           periodic, inv_r, cm[c], cmv[c], cf[c])
                 if transfers > 1:
                     cb[c] = 0.0
-                    operator_of_cells(act[a:b], ncz, tcx, tcz, mass, dx, periodic, cb[c])
+                    operator_of_cells(act[a:b], ncz, tcx, tcz, factors, mass, periodic,
+                                      cb[c])
             # the grid's part (grid_step.py): the chunks' sums, the update with the frame's
             # acceleration at mid-step, the grid's conditions and the further transfers
             # (the gather below reads the returned grid velocity, so it stays after the call)

@@ -54,6 +54,7 @@ from .. import steps
 from ..constitutive import ContinuumMaterial
 from ..grid_step import grid_spec, grid_work
 from ..grid_update import LabFrame
+from ..transfer_operator import PAIRS
 from ..mpm.solver import ContinuumBlowUp
 from ..state import ContinuumState
 from ..temperature_balance import loop_arguments, phi_cap_of
@@ -62,7 +63,7 @@ from . import fused, temperature_loop
 from .advection import remap_serial, remap_work
 from .lagrangian_step import fill_limit, material_fraction
 from .mesh import EulerianMesh
-from .transfer import WeightTables
+from .transfer import WeightTables, operator_factors
 from .wall import MeshWall, empty_history
 
 #: number of intensive fields transported with the mass: v (2), C (4), stress (4), density
@@ -183,11 +184,14 @@ class EulerianSystem:
         # the tuple the compiled loop takes
         t = WeightTables.of_mesh(m, self.x)
         self.tables = (t.cx, t.cz, t.fx, t.fz)
+        # and, with more than one transfer a step, the cells' transfer operator factors
+        factors = operator_factors(m.ncx, m.ncz, t.cx, t.cz, m.grid.dx) if self.transfers > 1 \
+            else np.zeros((0, PAIRS))
         # fused.py's records of the mesh and of its work arrays (the end-of-step density, the
         # cells holding material), and the grid's (grid_step.py: its conditions, the
         # per-chunk scatter buffers, the node fields, the transfer operator's buffers)
         self.mesh_record = fused.MeshRecord(float(m.h), m.open_x, m.open_z, m.normal,
-                                            self.tables, self.cell_weight, self.inv_r)
+                                            self.tables, self.cell_weight, self.inv_r, factors)
         self.cell_work = fused.CellWork(self.ux, self.uz, self.remap_work, self.q,
                                         np.zeros(m.n), np.zeros(m.n, np.int64))
         self.grid_spec = grid_spec(m.grid, self.no_slip_rows, self.axis_cols)

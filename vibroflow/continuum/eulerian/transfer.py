@@ -23,7 +23,7 @@ import numpy as np
 
 from ..g2p import store_gather
 from ..stencil import bspline_weights, gather_point, scatter_point
-from ..transfer_operator import add_point
+from ..transfer_operator import PAIRS, add_factors, point_factors
 
 #: columns of a weight table's row: the base node (an integer stored as a float), fx, the
 #: three weights and their three derivatives (1/m), as stencil.bspline_weights returns them
@@ -123,14 +123,28 @@ def g2p_cells(cells, ncz, tx, tz, v, C, L, gv, dx, periodic):
 
 
 @nb.njit(cache=True)
-def operator_of_cells(cells, ncz, tx, tz, mass, dx, periodic, B):
+def operator_factors(ncx, ncz, tx, tz, dx):
+    """(ncx ncz, PAIRS) the transfer operator's pair factors of every cell p = i * ncz + k
+    (transfer_operator.point_factors) with the weights of rows tx[i] and tz[k]: constants of
+    the run, as the weights are, so that a step's operator is only the masses times them."""
+    out = np.empty((ncx * ncz, PAIRS))
+    for ic in range(ncx):
+        _, fx, wx0, wx1, wx2, _, _, _ = table_row(tx, ic)
+        for kc in range(ncz):
+            _, fz, wz0, wz1, wz2, _, _, _ = table_row(tz, kc)
+            point_factors(fx, wx0, wx1, wx2, fz, wz0, wz1, wz2, dx, out[ic * ncz + kc])
+    return out
+
+
+@nb.njit(cache=True)
+def operator_of_cells(cells, ncz, tx, tz, factors, mass, periodic, B):
     """Accumulate the transfer operator (vibroflow.continuum.transfer_operator) of the cells
     `cells` (indices p = i * ncz + k) of masses mass (N,) (kg/m) into B (nx, nz, HALF) (zero
-    it first), with the weights of rows tx[i] and tz[k]."""
+    it first), with the base nodes of rows tx[i] and tz[k] and the cells' pair factors
+    (`operator_factors`): transfer_operator.operator_of_points of the cell centres, bit for
+    bit."""
     for j in range(cells.shape[0]):
         p = cells[j]
         ic = p // ncz
         kc = p - ic * ncz
-        bx, fx, wx0, wx1, wx2, _, _, _ = table_row(tx, ic)
-        bz, fz, wz0, wz1, wz2, _, _, _ = table_row(tz, kc)
-        add_point(B, mass[p], bx, fx, wx0, wx1, wx2, bz, fz, wz0, wz1, wz2, dx, periodic)
+        add_factors(B, mass[p], int(tx[ic, T_BASE]), int(tz[kc, T_BASE]), factors[p], periodic)
