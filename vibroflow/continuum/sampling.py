@@ -29,6 +29,22 @@ def sample_times(scenario) -> tuple[np.ndarray, float, float]:
     return (m0 + np.arange(n_cycles * per)) / (f * per), t0, t0 + n_cycles / f
 
 
+@nb.njit(cache=True, inline="always")
+def _point_to_lab(xp, zp, vx, vz, X, Z, th, Xd, Zd, thd, c, s, pivx, pivz, y, pos_out,
+                  vel_out, p):
+    """Row p of pos_out, vel_out: the lab position and velocity (3D, at y) of the tub-frame
+    point (xp, zp) moving at (vx, vz) (m, m/s), the tub at pose (X, Z, th, Xd, Zd, thd) with
+    c, s = cos th, sin th, through vibroflow.tub.motion."""
+    lx, lz = tub_to_lab(xp, zp, X, Z, th, pivx, pivz)
+    rvx, rvz = rigid_velocity(lx, lz, X, Z, Xd, Zd, thd, pivx, pivz)
+    pos_out[p, 0] = lx
+    pos_out[p, 1] = y
+    pos_out[p, 2] = lz
+    vel_out[p, 0] = rvx + c * vx - s * vz
+    vel_out[p, 1] = 0.0
+    vel_out[p, 2] = rvz + s * vx + c * vz
+
+
 @nb.njit(cache=True)
 def to_lab(x, v, pose6, pivx, pivz, pos_out, vel_out, y):
     """Lab positions and velocities (3D, y = the slice's middle) of tub-frame points (x, v) at
@@ -37,16 +53,33 @@ def to_lab(x, v, pose6, pivx, pivz, pos_out, vel_out, y):
     c = np.cos(th)
     s = np.sin(th)
     for p in range(x.shape[0]):
-        lx, lz = tub_to_lab(x[p, 0], x[p, 1], X, Z, th, pivx, pivz)
-        rvx, rvz = rigid_velocity(lx, lz, X, Z, Xd, Zd, thd, pivx, pivz)
-        pos_out[p, 0] = lx
-        pos_out[p, 1] = y
-        pos_out[p, 2] = lz
-        vel_out[p, 0] = rvx + c * v[p, 0] - s * v[p, 1]
-        vel_out[p, 1] = 0.0
-        vel_out[p, 2] = rvz + s * v[p, 0] + c * v[p, 1]
+        _point_to_lab(x[p, 0], x[p, 1], v[p, 0], v[p, 1], X, Z, th, Xd, Zd, thd, c, s, pivx,
+                      pivz, y, pos_out, vel_out, p)
 
 
+@nb.njit(cache=True)
+def dithered_cells_to_lab(xc, dx, dz, cells, v, mass, unit, dither, pose6, pivx, pivz, y, far,
+                          pos_out, vel_out):
+    """The Eulerian cells `cells` as pseudo-balls in the lab frame (eulerian/formulation.py):
+    row p of pos_out, vel_out is `to_lab` of the cell's centre xc[p] (N, 2) (m) moved by
+    (dx, dz) (m, the sample's offset) at the cell's velocity v[cells[p]] (m/s); each cell's
+    dither[p] gains its mass in units (mass[cells[p]] / unit) and a cell whose dither reaches
+    1/2 gives one unit and is placed there, any other is parked at `far` (3,) (m), outside
+    every analysis cell."""
+    X, Z, th, Xd, Zd, thd = pose6[0], pose6[1], pose6[2], pose6[3], pose6[4], pose6[5]
+    c = np.cos(th)
+    s = np.sin(th)
+    for p in range(xc.shape[0]):
+        q = cells[p]
+        _point_to_lab(xc[p, 0] + dx, xc[p, 1] + dz, v[q, 0], v[q, 1], X, Z, th, Xd, Zd, thd,
+                      c, s, pivx, pivz, y, pos_out, vel_out, p)
+        dither[p] += mass[q] / unit
+        if dither[p] >= 0.5:
+            dither[p] -= 1.0
+        else:
+            pos_out[p, 0] = far[0]
+            pos_out[p, 1] = far[1]
+            pos_out[p, 2] = far[2]
 
 
 def shear_rate(L: np.ndarray) -> np.ndarray:
@@ -54,7 +87,6 @@ def shear_rate(L: np.ndarray) -> np.ndarray:
     strain (D_yy = 0) (models.md)."""
     L = np.ascontiguousarray(L, dtype=np.float64)
     return equivalent_shear_rate(L[:, 0], L[:, 1], L[:, 2], L[:, 3])
-
 
 
 class Samples:
@@ -169,7 +201,6 @@ class Samples:
                            zip(a[f"vtk_{kind}_t"], a[f"vtk_{kind}_name"])]
         return s
 
-
     def add_contacts(self, j: int, particle: np.ndarray, fn: np.ndarray, ft: np.ndarray,
                      state: np.ndarray, arc: np.ndarray, x: np.ndarray, length: float) -> None:
         """Add sample j's wall contacts: the touching points' (or cells') indices, their normal
@@ -192,8 +223,14 @@ class Samples:
         axes) on the points (or cells) at tub-frame positions x (n, 2) (m) nearest the floor
         of a U of `radius` (m) (measure.floor_force.on_floor), over the slice's `length` (m)."""
         x = np.asarray(x, float).reshape(-1, 2)
-        floor = on_floor(x[:, 0], x[:, 1], radius)
-        self.floor_force[j] = float(np.sum(np.asarray(fz, float)[floor])) * length
+        self.add_floor_force_of(j, np.asarray(fz, float)[on_floor(x[:, 0], x[:, 1], radius)],
+                                length)
+
+    def add_floor_force_of(self, j: int, fz_floor: np.ndarray, length: float) -> None:
+        """Sample j's floor force from the z components fz_floor (N/m, tub axes) of the
+        forces on the points (or cells) nearest the floor (`add_floor_force`), in their order,
+        over the slice's `length` (m)."""
+        self.floor_force[j] = float(np.sum(fz_floor)) * length
 
     def add_part_forces(self, j: int, force_on_material: np.ndarray, torque_on_part: np.ndarray,
                         length: float) -> None:
@@ -208,23 +245,36 @@ class Samples:
         self.part_torque[j, :, 1] = torque_on_part * length
         self.part_torque[j, :, 2] = 0.0
 
+    def cell_index(self, x: np.ndarray) -> np.ndarray:
+        """The analysis cell (flat index iz (2 nxh + 1) + ix) of each tub-frame position x
+        (N, 2) (m); -1 outside the map (int64)."""
+        h, nxh, nz = self.cell_grid
+        ix = np.floor(x[:, 0] / h + 0.5).astype(np.int64) + nxh
+        iz = np.floor(x[:, 1] / h + 0.5).astype(np.int64)
+        inside = (ix >= 0) & (ix <= 2 * nxh) & (iz >= 0) & (iz < nz)
+        return np.where(inside, iz * (2 * nxh + 1) + ix, -1)
+
     def add_cell_rates(self, x: np.ndarray, rate: np.ndarray) -> None:
         """Add one sample's shear rates (1/s) at tub-frame positions x (N, 2) m to the map: the
         mean over the points (or cells) in each analysis cell."""
         if self.cell_grid is None:
             return
+        self.add_cell_rates_at(self.cell_index(x), rate)
+
+    def add_cell_rates_at(self, index: np.ndarray, rate: np.ndarray) -> None:
+        """`add_cell_rates` of points (or cells) whose analysis cells are `index` (N,)
+        (`cell_index`: a fixed mesh's, made once)."""
+        if self.cell_grid is None:
+            return
         h, nxh, nz = self.cell_grid
-        ix = np.floor(x[:, 0] / h + 0.5).astype(np.int64) + nxh
-        iz = np.floor(x[:, 1] / h + 0.5).astype(np.int64)
-        ok = (ix >= 0) & (ix <= 2 * nxh) & (iz >= 0) & (iz < nz) & np.isfinite(rate)
-        flat = iz[ok] * (2 * nxh + 1) + ix[ok]
+        ok = (index >= 0) & np.isfinite(rate)
+        flat = index[ok]
         size = nz * (2 * nxh + 1)
         total = np.bincount(flat, weights=rate[ok], minlength=size).reshape(nz, -1)
         count = np.bincount(flat, minlength=size).reshape(nz, -1)
         held = count > 0
         self.rate_cell_sum[held] += total[held] / count[held]
         self.rate_cell_n[held] += 1
-
 
     def add_temperatures(self, j: int, x: np.ndarray, mass: np.ndarray, T: np.ndarray) -> None:
         """Add sample j's granular temperatures T (m^2/s^2) of points (or cells) of masses
@@ -260,7 +310,6 @@ def cell_grid_of(geo, cell_size: float) -> tuple[float, int, int]:
     return node_grid(geo, cell_size)
 
 
-
 def samples_source(scenario, samples: Samples, times: np.ndarray, radius: np.ndarray) -> dict:
     """The samples as the dem.h5 layout that analysis.summary.tub_summary reads: snapshots of
     "balls" of the given radii (m), the wall contacts on the tub's U."""
@@ -272,7 +321,6 @@ def samples_source(scenario, samples: Samples, times: np.ndarray, radius: np.nda
         source.update({"wall_contacts/" + k: v for k, v in samples.contact_arrays().items()})
         source["wall_contacts/wall"] = np.zeros(source["wall_contacts/fn"].size, np.int8)
     return source
-
 
 
 def phase_shear_of_samples(scenario, samples: Samples, times: np.ndarray,

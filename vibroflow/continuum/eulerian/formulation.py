@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from vibroflow.errors import InputError
+from vibroflow.measure.floor_force import on_floor
 from vibroflow.scenario.laws import damping_ratio
 from vibroflow.tub.geometry import geometry_of
 
@@ -50,7 +51,7 @@ from ..formulation import Formulation, Sampler
 from ..material import boundary_friction
 from ..options import ContinuumOptions, default_dx
 from ..part_obstacle import continuum_parts, packed_section, torque_on_part
-from ..sampling import shear_rate, to_lab
+from ..sampling import dithered_cells_to_lab, shear_rate
 from ..temperature_field import temperature_model
 from ..timestep import stable_dt
 from ..wall_feed import feed_by_region
@@ -147,11 +148,18 @@ class CellSampler(Sampler):
                        for pr in scenario.analysis.probes.values()]
         ci = np.floor(xc[:, 0] / cell + 0.5)
         ck = np.floor(xc[:, 1] / cell + 0.5)
-        self.in_probe = [(ci == pi) & (ck == pk) for pi, pk in probe_cells]
+        # each probe's cells (ascending, as a mask would pick them)
+        self.probe_cells = [np.nonzero((ci == pi) & (ck == pk))[0] for pi, pk in probe_cells]
         # the U's wall layer (a part's is its own: part_of)
         self.near_wall = mesh.wall[cells] if mesh.part_of is None else \
             (mesh.wall & (mesh.part_of < 0))[cells]
         self.wall_cells = cells[self.near_wall]
+        # the cells do not move in the tub: those of the wall layer nearest the floor
+        # (measure.floor_force.on_floor) and the analysis cells of all (Samples.cell_index)
+        # are constants of the run
+        xw = system.x[self.wall_cells]
+        self.floor_cells = self.wall_cells[on_floor(xw[:, 0], xw[:, 1], self.geo.radius)]
+        self.rate_index = None
         self.part_cells = [] if mesh.part_of is None else \
             [np.nonzero(mesh.part_of == k)[0] for k in range(len(scenario.parts or []))]
         self.part_packed = packed_section(continuum_parts(scenario)) if self.part_cells else None
@@ -178,15 +186,10 @@ class CellSampler(Sampler):
         S = samples.pos.shape[0]
         hist = state.wall
         pose6 = np.array(system.frame.pose(state.t))
-        v = np.ascontiguousarray(state.v[cells])
         ox, oz = cell_offset(j)
-        x_ball = self.xc + np.array([ox * mesh.h, oz * mesh.h])
-        to_lab(x_ball, v, pose6, self.pv[0], self.pv[1], self.buf_p, self.buf_v,
-               0.5 * geo.length)
-        dither[:] += state.mass[cells] / self.unit  # in place: the checkpoint's array
-        take = dither >= 0.5
-        dither[take] -= 1.0
-        self.buf_p[~take] = self.far
+        dithered_cells_to_lab(self.xc, ox * mesh.h, oz * mesh.h, cells, state.v, state.mass,
+                              self.unit, dither, pose6, self.pv[0], self.pv[1],
+                              0.5 * geo.length, self.far, self.buf_p, self.buf_v)
         samples.pos[j], samples.vel[j], samples.poses[j] = self.buf_p, self.buf_v, pose6
         # contacts as the material point method counts them: cells holding at least half a
         # cell of material (a material point's size), pressing on the U
@@ -196,8 +199,8 @@ class CellSampler(Sampler):
         samples.add_contacts(j, np.searchsorted(cells, tc), hist["fn"][tc], hist["ft"][tc],
                              hist["state"][tc], mesh.arc[tc], system.x[tc], geo.length)
         # the wall layer's penalty force (not the share its closed faces carry)
-        samples.add_floor_force(j, wall_forces_by_cell(wall_cells, mesh.normal, hist)[:, 1],
-                                system.x[wall_cells], geo.radius, geo.length)
+        samples.add_floor_force_of(j, wall_forces_by_cell(self.floor_cells, mesh.normal,
+                                                          hist)[:, 1], geo.length)
         if samples.n_parts:
             samples.add_part_forces(j, self._part_forces(), self._part_torques(), geo.length)
         rate_all = shear_rate(state.L)
@@ -207,7 +210,10 @@ class CellSampler(Sampler):
         held = state.mass[cells] >= 0.5 * self.full
         if held.any():
             samples.rate_all[j] = rate[held].mean()
-            samples.add_cell_rates(system.x[cells][held], rate[held])
+            if self.rate_index is None and samples.cell_grid is not None:
+                self.rate_index = samples.cell_index(self.xc)
+            if self.rate_index is not None:
+                samples.add_cell_rates_at(self.rate_index[held], rate[held])
         if getattr(state, "temperature", None) is not None:
             # the cells that hold material as the shear rates count them
             samples.add_temperatures(j, system.x[cells][held], state.mass[cells][held],
@@ -216,9 +222,10 @@ class CellSampler(Sampler):
             samples.wall_feed[j] = feed_by_region(*self.feed.feed(), geo.radius)
         if (held & self.near_wall).any():
             samples.rate_wall[j] = rate[held & self.near_wall].mean()
-        for q, inside in enumerate(self.in_probe):
-            if (inside & held).any():
-                samples.rate_probe[j, q] = rate[inside & held].mean()
+        for q, members in enumerate(self.probe_cells):
+            inside = held[members]
+            if inside.any():
+                samples.rate_probe[j, q] = rate[members][inside].mean()
 
     def sample_step_start(self):
         return self.feed.last_step_start()
