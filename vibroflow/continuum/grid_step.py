@@ -126,8 +126,12 @@ def _make_grid_phase(parallel: bool):
                     transfer_rows(i, i + 1, B, gm, gtmp, gv, periodic, no_slip_rows,
                                   axis_cols)
         if transfers % 2 == 0:
-            for i in nb.prange(nx):
-                gv[i] = gtmp[i]
+            # a copy of a few thousand numbers: serial, a parallel loop's launch costs more
+            nz = gv.shape[1]
+            for i in range(nx):
+                for k in range(nz):
+                    gv[i, k, 0] = gtmp[i, k, 0]
+                    gv[i, k, 1] = gtmp[i, k, 1]
         return gv
 
     return grid_phase

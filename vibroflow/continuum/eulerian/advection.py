@@ -321,24 +321,40 @@ def remap_work(open_x, open_z, nq: int, radius=None):
             (np.zeros((nq, nf)), np.zeros((nq, n + 1))), np.zeros((nq, n)), weights)
 
 
+@nb.njit(cache=True, inline="always")
+def renewed(mk, mo, ip, qv, dqv):
+    """A carried field's value after the transport step in a cell of mode mk (`_modes`), old
+    mass mo (kg/m) and reciprocal ip: (mo q + dq) ip, dq ip or 0, q its value before and dq
+    its inflow."""
+    qa = (mo * qv + dqv) * ip
+    qb = dqv * ip
+    return _pick(mk == 1, qa, _pick(mk == 2, qb, 0.0))
+
+
 @nb.njit(cache=True)
 def renew_cells(a, b, qf, dq, mf, dm, mode, inv):
     """The end of a transport step on the cells a:b: every carried field qf (nq, n) renewed
-    from its inflow dq by the cell's mode (`_modes`: (m q + dq) / m_new, dq / dm or 0), then
-    the masses mf (n,) given their inflow dm.  Returns the smallest new mass among them (kg/m;
-    inf for none).  `remap` calls it on every cell, fused.py on chunks of cells, after
-    `remap_fluxes`."""
+    from its inflow dq by the cell's mode (`renewed`), then the masses mf (n,) given their
+    inflow dm.  Returns the smallest new mass among them (kg/m; inf for none).  `remap` calls
+    it on every cell, after `remap_fluxes` (fused.py renews its fields straight into the
+    cells' arrays with `renewed`, and the masses with `renew_masses`)."""
     nq = qf.shape[0]
-    lowest = np.inf
     for p in range(a, b):
         mk = mode[p]
         mo = mf[p]
         ip = inv[p]
         for j in range(nq):
-            qa = (mo * qf[j, p] + dq[j, p]) * ip
-            qb = dq[j, p] * ip
-            qf[j, p] = _pick(mk == 1, qa, _pick(mk == 2, qb, 0.0))
-        mn = mo + dm[p]
+            qf[j, p] = renewed(mk, mo, ip, qf[j, p], dq[j, p])
+    return renew_masses(a, b, mf, dm)
+
+
+@nb.njit(cache=True)
+def renew_masses(a, b, mf, dm):
+    """The masses mf (n,) of the cells a:b given their inflow dm (after their fields are
+    renewed, which read the old masses).  Returns the smallest new mass (kg/m; inf for none)."""
+    lowest = np.inf
+    for p in range(a, b):
+        mn = mf[p] + dm[p]
         if mn < lowest:
             lowest = mn
         mf[p] = mn

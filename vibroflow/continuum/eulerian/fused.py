@@ -7,15 +7,15 @@ indexing, packing the remap's fields, dispatching a dozen kernels, the frame's p
 
 Threads, as the Lagrangian step's (vibroflow.continuum.fused): the per-cell kernels write only
 their own cells, the remap's fluxes are made field by field (advection.remap_fluxes) and its
-renewal cell by cell (advection.renew_cells), so they give the serial numbers whatever the
-threads; the cells holding material are scattered to the nodes in `nchunk`
-fixed chunks of per-chunk buffers summed in a fixed order (the grid's part of the step is the
-Lagrangian loop's: grid_step.grid_phase), so the run depends on the number of chunks, never on
-the number of threads (one chunk: the serial p2g's numbers).  On one thread,
-and on a small mesh while other processes hold the cores (solver.parallel_loop), the loop is
-compiled without numba's parallel loops (`advance_kernel_serial`, the same code): a parallel
-loop's launch, even with one thread, costs ~1.5 us, a step has seven of them, and a barrier
-on a busy machine waits for the scheduler.
+renewal cell by cell (advection.renewed, straight into the cells' arrays), so they give the
+serial numbers whatever the threads; the cells holding material are scattered to the nodes in
+`nchunk` fixed chunks of per-chunk buffers summed in a fixed order (the grid's part of the step
+is the Lagrangian loop's: grid_step.grid_phase), so the run depends on the number of chunks,
+never on the number of threads (one chunk: the serial p2g's numbers).  On one thread, and on a
+small mesh while other processes hold the cores (solver.parallel_loop), the loop is compiled
+without numba's parallel loops (`advance_kernel_serial`, the same code): a parallel loop's
+launch, even with one thread, costs ~1.5 us, a step has seven of them, and a barrier on a busy
+machine waits for the scheduler.
 
 The cells' B-spline weights on the grid are the mesh's constant tables (transfer.py), and the
 cells holding material are scattered and gathered in place through their indices (no compact
@@ -41,7 +41,7 @@ from ..grid_step import grid_phase, grid_phase_serial
 from ..stress_update import damped_stress
 from ..kinetic_stress import RATE_RATIO
 from ..temperature_field import add_stress
-from .advection import remap_fluxes, remap_fluxes_serial, renew_cells
+from .advection import remap_fluxes, remap_fluxes_serial, renew_masses, renewed
 from .face_velocity import face_velocity_rows, match_divergence_cells
 from .lagrangian_step import (end_density, fill_limit, material_fraction,
                               update_stress_cells, void_first)
@@ -210,17 +210,20 @@ def _make_advance_kernel(parallel: bool):
             for c in nb.prange(nchunk):
                 a = (c * n) // nchunk
                 b = ((c + 1) * n) // nchunk
-                chunk_lowest[c] = renew_cells(a, b, q, r_dq, mass, r_dm, r_mode, r_inv)
                 ok = True
                 for p in range(a, b):
-                    v[p, 0] = q[0, p]
-                    v[p, 1] = q[1, p]
+                    # advection.renew_cells with the renewed fields written straight back
+                    # into the cells' arrays, not into q
+                    mk, mo, ip = r_mode[p], mass[p], r_inv[p]
+                    v[p, 0] = renewed(mk, mo, ip, q[0, p], r_dq[0, p])
+                    v[p, 1] = renewed(mk, mo, ip, q[1, p], r_dq[1, p])
                     for j in range(4):
-                        C[p, j] = q[2 + j, p]
-                        stress[p, j] = q[6 + j, p]
-                    density[p] = q[10, p]
+                        C[p, j] = renewed(mk, mo, ip, q[2 + j, p], r_dq[2 + j, p])
+                        stress[p, j] = renewed(mk, mo, ip, q[6 + j, p], r_dq[6 + j, p])
+                    density[p] = renewed(mk, mo, ip, q[10, p], r_dq[10, p])
                     if not (np.isfinite(v[p, 0]) and np.isfinite(v[p, 1])):
                         ok = False
+                chunk_lowest[c] = renew_masses(a, b, mass, r_dm)
                 fill_limit(mass[a:b], density[a:b], h, weight[a:b])
                 chunk_finite[c] = ok
             finite = True
