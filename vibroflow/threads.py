@@ -92,7 +92,7 @@ def others_running(reads: int = 3, pause_s: float = 1e-3) -> int | None:
 
 #: how long a reading of the machine's load (others_running) serves `cores_free` (s)
 FREE_READ_S = 10.0
-_free_read: tuple[float, int | None] | None = None
+_free_read: tuple[float, int | None, int] | None = None
 
 
 def cores_free(threads: int, max_age_s: float = FREE_READ_S) -> bool:
@@ -103,9 +103,10 @@ def cores_free(threads: int, max_age_s: float = FREE_READ_S) -> bool:
     global _free_read
     now = time.monotonic()
     if _free_read is None or now - _free_read[0] > max_age_s:
-        _free_read = (now, others_running())
+        # the machine's core count kept with the reading: os.cpu_count reads /sys (~20 us)
+        _free_read = (now, others_running(), os.cpu_count() or 1)
     others = _free_read[1]
-    return others is not None and threads_fit(others, os.cpu_count() or 1, threads)
+    return others is not None and threads_fit(others, _free_read[2], threads)
 
 
 def default_spin_env() -> None:

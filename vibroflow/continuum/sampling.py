@@ -202,11 +202,13 @@ class Samples:
         return s
 
     def add_contacts(self, j: int, particle: np.ndarray, fn: np.ndarray, ft: np.ndarray,
-                     state: np.ndarray, arc: np.ndarray, x: np.ndarray, length: float) -> None:
+                     state: np.ndarray, arc: np.ndarray, x: np.ndarray | None, length: float,
+                     position_tub: np.ndarray | None = None) -> None:
         """Add sample j's wall contacts: the touching points' (or cells') indices, their normal
         and tangential forces per metre of thickness (N/m; times `length`, the slice L_y in m,
         they are over the slice, the DEM's unit), state (1 stick, 2 slide), arc-length
-        coordinate (m) and tub-frame positions x (n, 2) (m, set at the slice's middle in y)."""
+        coordinate (m) and tub-frame positions x (n, 2) (m, set at the slice's middle in y),
+        or those 3D positions themselves, position_tub (n, 3) (m)."""
         c = self.contacts
         c["snapshot"].append(np.full(particle.size, j, np.int32))
         c["particle"].append(particle.astype(np.int32))
@@ -214,8 +216,10 @@ class Samples:
         c["ft"].append(np.abs(ft) * length)
         c["sliding"].append(state == 2)
         c["arc"].append(np.array(arc, dtype=np.float64))
-        c["position_tub"].append(np.stack(
-            [x[:, 0], np.full(particle.size, 0.5 * length), x[:, 1]], axis=1))
+        if position_tub is None:
+            position_tub = np.stack([x[:, 0], np.full(particle.size, 0.5 * length), x[:, 1]],
+                                    axis=1)
+        c["position_tub"].append(position_tub)
 
     def add_floor_force(self, j: int, fz: np.ndarray, x: np.ndarray, radius: float,
                         length: float) -> None:

@@ -157,9 +157,17 @@ class CellSampler(Sampler):
         # the cells do not move in the tub: those of the wall layer nearest the floor
         # (measure.floor_force.on_floor) and the analysis cells of all (Samples.cell_index)
         # are constants of the run
-        xw = system.x[self.wall_cells]
-        self.floor_cells = self.wall_cells[on_floor(xw[:, 0], xw[:, 1], self.geo.radius)]
+        wc = self.wall_cells
+        xw = system.x[wc]
+        floor = wc[on_floor(xw[:, 0], xw[:, 1], self.geo.radius)]
+        self.floor_cells, self.floor_normal = floor, mesh.normal[floor]
         self.rate_index = None
+        # and the wall cells as contacts: their pseudo-balls, arcs and tub positions (m, at
+        # the slice's middle in y)
+        self.wall_point = np.searchsorted(cells, wc)
+        self.wall_arc = np.array(mesh.arc[wc], dtype=np.float64)
+        self.wall_position = np.stack([xw[:, 0], np.full(wc.size, 0.5 * self.geo.length),
+                                       xw[:, 1]], axis=1)
         self.part_cells = [] if mesh.part_of is None else \
             [np.nonzero(mesh.part_of == k)[0] for k in range(len(scenario.parts or []))]
         self.part_packed = packed_section(continuum_parts(scenario)) if self.part_cells else None
@@ -196,11 +204,14 @@ class CellSampler(Sampler):
         touching = np.nonzero((hist["state"][wall_cells] > 0)
                               & (state.mass[wall_cells] >= 0.5 * self.full))[0]
         tc = wall_cells[touching]
-        samples.add_contacts(j, np.searchsorted(cells, tc), hist["fn"][tc], hist["ft"][tc],
-                             hist["state"][tc], mesh.arc[tc], system.x[tc], geo.length)
-        # the wall layer's penalty force (not the share its closed faces carry)
-        samples.add_floor_force_of(j, wall_forces_by_cell(self.floor_cells, mesh.normal,
-                                                          hist)[:, 1], geo.length)
+        samples.add_contacts(j, self.wall_point[touching], hist["fn"][tc], hist["ft"][tc],
+                             hist["state"][tc], self.wall_arc[touching], None, geo.length,
+                             position_tub=self.wall_position[touching])
+        # the wall layer's penalty force (not the share its closed faces carry): its z
+        # component on the floor's cells (wall.wall_forces_by_cell's)
+        fc, fnorm = self.floor_cells, self.floor_normal
+        samples.add_floor_force_of(j, hist["fn"][fc] * fnorm[:, 1] - hist["ft"][fc] * fnorm[:, 0],
+                                   geo.length)
         if samples.n_parts:
             samples.add_part_forces(j, self._part_forces(), self._part_torques(), geo.length)
         rate_all = shear_rate(state.L)
