@@ -35,7 +35,7 @@ checks).
 
 Built once a step from the points' positions before they move (the positions p2g used), it is
 applied n - 1 times to the updated grid velocities before the gather: the step then makes n
-transfers, the last one g2p's own.  Building costs less than one p2g; an application, a few
+transfers, the last one g2p's own.  Building costs about one p2g; an application, a few
 microseconds on a tub grid, against a whole p2g and g2p for a transfer made with the points.
 The operator is built per chunk of points into per-chunk buffers summed in a fixed order (as
 p2g's scatter, fused.py), so the numbers do not depend on the number of threads.
