@@ -125,3 +125,56 @@ def test_the_eulerian_loop_is_parallel_on_a_small_mesh_only_on_free_cores(monkey
     assert not parallel_loop(FREE_PARALLEL_FROM, 2)
     assert parallel_loop(SERIAL_BELOW, 2)
     assert parallel_loop(10, 2, serial_below=0)  # forced, as the tests of the loops do
+
+
+# numba's threading layer: OpenMP first (vibroflow/__init__.py); where numba's threads already
+# run on TBB when vibroflow is imported, a one-line warning (threads.warn_if_tbb_launched)
+
+def test_a_launched_tbb_layer_is_warned_of_and_no_other():
+    from types import SimpleNamespace
+
+    import vibroflow.threads as T
+
+    def layer(name):
+        def threading_layer():
+            if name is None:
+                raise ValueError("not initialized")  # numba's answer before any launch
+            return name
+        return SimpleNamespace(threading_layer=threading_layer)
+
+    with pytest.warns(RuntimeWarning, match="NUMBA_THREADING_LAYER=omp"):
+        assert T.warn_if_tbb_launched(layer("tbb"))
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for name in ("omp", "workqueue", None):
+            assert not T.warn_if_tbb_launched(layer(name))
+
+
+LAYER_PROBE = ("import warnings, numba; numba.set_num_threads(1)\n"
+               "with warnings.catch_warnings(record=True) as w:\n"
+               "    warnings.simplefilter('always'); import vibroflow\n"
+               "print(numba.threading_layer(), any('TBB' in str(x.message) for x in w))")
+
+
+CLEAN_PROBE = ("import vibroflow, numba, numpy as np\n"
+               "@numba.njit(parallel=True)\n"
+               "def f(a):\n"
+               "    for i in numba.prange(a.size):\n"
+               "        a[i] += 1.0\n"
+               "f(np.zeros(4)); print(numba.threading_layer())")
+
+
+def test_numba_threads_started_before_the_import_warn_exactly_when_they_run_on_tbb():
+    """numba's threads started before `import vibroflow` keep the layer numba chose (TBB where
+    a libtbb is installed): the import warns then, and only then; imported first, vibroflow
+    puts OpenMP (or numba's workqueue) first, with no warning."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_THREADING_LAYER")}
+    out = subprocess.run([sys.executable, "-c", LAYER_PROBE], env=env, capture_output=True,
+                         text=True, check=True).stdout.split()
+    assert out[1] == str(out[0] == "tbb")
+    clean = subprocess.run([sys.executable, "-c", CLEAN_PROBE], env=env, capture_output=True,
+                           text=True, check=True)
+    assert clean.stdout.strip() in ("omp", "workqueue")
+    assert "TBB" not in clean.stderr

@@ -29,6 +29,10 @@ if not {"NUMBA_THREADING_LAYER", "NUMBA_THREADING_LAYER_PRIORITY"} & set(_os.env
     _os.environ["NUMBA_THREADING_LAYER_PRIORITY"] = "omp workqueue tbb"
     if "numba" in _sys.modules:  # numba imported before us: set its config directly
         _sys.modules["numba"].config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
+        # too late where its threads already run, on TBB: say so (vibroflow/threads.py)
+        from vibroflow.threads import warn_if_tbb_launched
+
+        warn_if_tbb_launched(_sys.modules["numba"])
 
 # numba's threads: every core the process may use (vibroflow/threads.py), unless
 # NUMBA_NUM_THREADS says otherwise

@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import sys
 import time
+import warnings
 
 from .errors import InputError
 
@@ -36,6 +37,26 @@ def default_threads_env() -> None:
     `import vibroflow`, before numba is imported)."""
     if "NUMBA_NUM_THREADS" not in os.environ and "numba" not in sys.modules:
         os.environ["NUMBA_NUM_THREADS"] = str(allowed_cores())
+
+
+def warn_if_tbb_launched(numba_module) -> bool:
+    """Warn (RuntimeWarning, one line) when numba's parallel loops already run on TBB: numba was
+    imported and its threads launched (numba.set_num_threads, a parallel function) before
+    `import vibroflow` could put OpenMP first (vibroflow/__init__.py), and a launched layer is
+    kept for the process, whose runs are then many times slower (tub47's Eulerian step 1.4 -
+    5.9 ms against 0.2 ms, growing with every call).  numba_module: numba (or a stand-in with
+    its `threading_layer`).  Returns whether it warned."""
+    try:
+        layer = numba_module.threading_layer()
+    except ValueError:  # no parallel loop has run yet: the priority set at import applies
+        return False
+    if layer != "tbb":
+        return False
+    warnings.warn("numba's parallel loops already run on TBB (numba's threads were started "
+                  "before `import vibroflow`): vibroflow's runs are many times slower on it; "
+                  "import vibroflow first, or set NUMBA_THREADING_LAYER=omp",
+                  RuntimeWarning, stacklevel=3)
+    return True
 
 
 def threads_fit(others_running: int, cores: int, threads: int) -> bool:
