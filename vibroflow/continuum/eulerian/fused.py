@@ -14,8 +14,9 @@ is the Lagrangian loop's: grid_step.grid_phase), so the run depends on the numbe
 never on the number of threads (one chunk: the serial p2g's numbers).  On one thread, and on a
 small mesh while other processes hold the cores (solver.parallel_loop), the loop is compiled
 without numba's parallel loops (`advance_kernel_serial`, the same code): a parallel loop's
-launch, even with one thread, costs ~1.5 us, a step has seven of them, and a barrier on a busy
-machine waits for the scheduler.
+launch, even with one thread, costs ~1.5 us, a step has six of its own and the grid's part one
+more and one a further transfer (fifteen with tub47's eight transfers), and a barrier on a
+busy machine waits for the scheduler.
 
 The cells' B-spline weights on the grid are the mesh's constant tables (transfer.py), and the
 cells holding material are scattered and gathered in place through their indices (no compact

@@ -54,11 +54,11 @@ from .. import steps
 from ..constitutive import ContinuumMaterial
 from ..grid_step import grid_spec, grid_work
 from ..grid_update import LabFrame
-from ..transfer_operator import PAIRS
 from ..mpm.solver import ContinuumBlowUp
 from ..state import ContinuumState
 from ..temperature_balance import loop_arguments, phi_cap_of
 from ..temperature_field import advance_with_temperature, cell_step, pressure_Pa
+from ..transfer_operator import PAIRS
 from . import fused, temperature_loop
 from .advection import remap_serial, remap_work
 from .lagrangian_step import fill_limit, material_fraction

@@ -12,7 +12,10 @@ the tables instead of computed and the stencil the same (stencil.scatter_point, 
 so they give the generic kernels' numbers bit for bit (tests/test_eulerian_kernels.py); they
 read and write the per-cell arrays through the cells' indices, so the cells' fields need not be
 copied into compact arrays first.  The cells stay put: no point advection, no FLIP blend (the
-Eulerian's g2p is APIC), plane strain.
+Eulerian's g2p is APIC), plane strain.  For the same reason the transfer operator's pair
+factors of every cell (vibroflow.continuum.transfer_operator) are made once a run
+(`operator_factors`), and a step's operator is the cells' masses times them
+(`operator_of_cells`), operator_of_points' numbers bit for bit.
 """
 from __future__ import annotations
 
