@@ -70,7 +70,7 @@ def pair_factor(a, b, c, d, wx, wz, rx, rz, inv):
     """w_ip w_jp (1 + 4/dx^2 r_ip . r_jp) of the stencil's nodes (a, b) and (c, d) of a point,
     from its weights wx, wz and offsets rx, rz (m) (3-tuples along x and z) and inv = 4/dx^2:
     split by axis, (w_a w_c)(w_b w_d)((1 + inv r_a r_c) + inv r_b r_d), the same operations
-    wherever it is made (`add_point`, `point_factors`), so the two give the same bits."""
+    made in one place (`point_factors`), so points and fixed cells give the same bits."""
     return ((wx[a] * wx[c]) * (wz[b] * wz[d])) * (
         (1.0 + inv * (rx[a] * rx[c])) + inv * (rz[b] * rz[d]))
 
@@ -84,32 +84,12 @@ def stencil_tuples(fx, wx0, wx1, wx2, fz, wz0, wz1, wz2, dx):
 
 
 @nb.njit(cache=True)
-def add_point(B, m, bx, fx, wx0, wx1, wx2, bz, fz, wz0, wz1, wz2, dx, periodic):
-    """Add one point's part m w_ip w_jp (1 + 4/dx^2 r_ip . r_jp) to the operator B
-    (nx, nz, HALF) (module docstring), each unordered pair of its stencil's nodes once, in the
-    order (a, b) <= (c, d) lexicographic (`pair_factor`): mass m (kg/m), its base nodes bx, bz,
-    offsets fx, fz and three weights per axis as stencil.bspline_weights returns them,
-    spacing dx (m)."""
-    nxg = B.shape[0]
-    inv = 4.0 / (dx * dx)
-    wx, wz, rx, rz = stencil_tuples(fx, wx0, wx1, wx2, fz, wz0, wz1, wz2, dx)
-    for a in range(3):
-        i = bx + a
-        if periodic:
-            i = i % nxg
-        for b in range(3):
-            k = bz + b
-            for c in range(a, 3):
-                for d in range(b if c == a else 0, 3):
-                    B[i, k, half_slot(c - a, d - b)] += m * pair_factor(a, b, c, d, wx, wz, rx,
-                                                                        rz, inv)
-
-
-@nb.njit(cache=True)
 def point_factors(fx, wx0, wx1, wx2, fz, wz0, wz1, wz2, dx, out):
-    """A point's PAIRS pair factors (`pair_factor`) into out (PAIRS,), in `add_point`'s order:
-    a point that never moves (the Eulerian mesh's cells) adds m out[e] with `add_factors`, the
-    same numbers as `add_point`'s."""
+    """A point's PAIRS pair factors w_ip w_jp (1 + 4/dx^2 r_ip . r_jp) (`pair_factor`) into out
+    (PAIRS,), each unordered pair of its stencil's nodes once, in the order (a, b) <= (c, d)
+    lexicographic (`add_factors`' order): its offsets fx, fz and three weights per axis as
+    stencil.bspline_weights returns them, spacing dx (m).  A point that never moves (the
+    Eulerian mesh's cells) keeps them for the run."""
     inv = 4.0 / (dx * dx)
     wx, wz, rx, rz = stencil_tuples(fx, wx0, wx1, wx2, fz, wz0, wz1, wz2, dx)
     e = 0
@@ -123,8 +103,9 @@ def point_factors(fx, wx0, wx1, wx2, fz, wz0, wz1, wz2, dx, out):
 
 @nb.njit(cache=True)
 def add_factors(B, m, bx, bz, factors, periodic):
-    """Add m factors[e] (`point_factors` of a point of base nodes bx, bz; mass m, kg/m) to the
-    operator B (nx, nz, HALF): `add_point` with the pair factors made beforehand."""
+    """Add a point's part m w_ip w_jp (1 + 4/dx^2 r_ip . r_jp) to the operator B
+    (nx, nz, HALF) (module docstring): m factors[e] (`point_factors`) into the entry of each
+    pair of its stencil's nodes, mass m (kg/m), base nodes bx, bz."""
     nxg = B.shape[0]
     e = 0
     for a in range(3):
@@ -143,10 +124,12 @@ def add_factors(B, m, bx, bz, factors, periodic):
 def operator_of_points(x, mass, x0, z0, dx, periodic, B):
     """Accumulate the transfer operator of the points x (N, 2) (m) of masses mass (N,) (kg/m)
     into B (nx, nz, HALF) (zero it first), on the grid of origin (x0, z0) and spacing dx (m)."""
+    factors = np.empty(PAIRS)
     for p in range(x.shape[0]):
         bx, fx, wx0, wx1, wx2, _, _, _ = bspline_weights(x[p, 0], x0, dx)
         bz, fz, wz0, wz1, wz2, _, _, _ = bspline_weights(x[p, 1], z0, dx)
-        add_point(B, mass[p], bx, fx, wx0, wx1, wx2, bz, fz, wz0, wz1, wz2, dx, periodic)
+        point_factors(fx, wx0, wx1, wx2, fz, wz0, wz1, wz2, dx, factors)
+        add_factors(B, mass[p], bx, bz, factors, periodic)
 
 
 @nb.njit(cache=True)
