@@ -14,7 +14,8 @@ histories zeroed: the copies touch at the nine seams where tub47's end walls sto
 there settles a little in the first steps; settling 140 000 balls would take an hour here).
 The tub vibrates for `--warmup` untimed steps (numba's cache load or compilation, the first
 neighbour lists), then `--repeats` times `--steps` steps are timed (wall and CPU), neighbour
-rebuilds included.  Then the passes of one step are timed apart,
+rebuilds included, in calls that leave the balls stored as the steps left them (in space
+order from MEMORY_ORDER_FROM balls on), as `vibroflow dem` does between its rows.  Then the passes of one step are timed apart,
 each `--pass-steps` times from the same saved state, each its own parallel loop over the blocks:
 the pairs (step._pair_block, a step's first loop), the gather (_gather_block), the walls
 (wall_pass.ball_walls), the second half kick with the next step's first half kick and drift
@@ -114,21 +115,25 @@ def worker(size: str, steps: int, repeats: int, warmup: int = WARMUP,
         raise SystemExit(f"{size}: {state.n} balls, the scenario has {scenario.fill.count}")
     state.time_origin_step = state.step
     state.vibrating = True
-    S.run_steps(system, state, warmup, memory_order=memory_order)
+    # the balls stay in the storage the steps leave, as `vibroflow dem` keeps them between its
+    # calls (vibroflow.dem.run: keep_order), so that a call is not timed storing them by id
+    S.run_steps(system, state, warmup, memory_order=memory_order, keep_order=True)
     wall, cpu, counted = [], [], []
     b0 = state.nl.builds
     cuts = np.linspace(0, steps, CONTACT_SAMPLES + 1).astype(np.int64)
     for _ in range(repeats):
         t0, c0 = time.perf_counter(), time.process_time()
         for n in np.diff(cuts):
-            S.run_steps(system, state, int(n), memory_order=memory_order)
+            S.run_steps(system, state, int(n), memory_order=memory_order, keep_order=True)
             counted.append(np.count_nonzero(state.nl.flag))
         wall.append(time.perf_counter() - t0)
         cpu.append(time.process_time() - c0)
     builds = state.nl.builds - b0
     # the state after the same steps at every thread count: bit for bit the same (by id)
-    digest = hashlib.sha256(b"".join(np.ascontiguousarray(getattr(state, k)).tobytes()
-                                     for k in ("pos", "vel", "omg"))).hexdigest()[:16]
+    by_id = M.by_id(state)
+    digest = hashlib.sha256(b"".join(
+        np.ascontiguousarray(getattr(state, k) if by_id is None else getattr(state, k)[by_id])
+        .tobytes() for k in ("pos", "vel", "omg"))).hexdigest()[:16]
 
     @numba.njit(parallel=True)
     def gather(balls, pairs, slots, nblock):
