@@ -14,15 +14,16 @@ histories zeroed: the copies touch at the nine seams where tub47's end walls sto
 there settles a little in the first steps; settling 140 000 balls would take an hour here).
 The tub vibrates for `--warmup` untimed steps (numba's cache load or compilation, the first
 neighbour lists), then `--repeats` times `--steps` steps are timed (wall and CPU), neighbour
-rebuilds included, in calls that leave the balls stored as the steps left them (in space
-order from MEMORY_ORDER_FROM balls on), as `vibroflow dem` does between its rows.  Then the passes of one step are timed apart,
-each `--pass-steps` times from the same saved state, each its own parallel loop over the blocks:
-the pairs (step._pair_block, a step's first loop), the gather (_gather_block), the walls
-(wall_pass.ball_walls), the second half kick with the next step's first half kick and drift
-(step._kick_block, as the ball pass makes them), and the step's second loop whole less that
-drift (step._ball_pass: gather, walls, second half kick; a pass that drifted the balls 2 000
-times under frozen forces would fling them against the walls); and one neighbour-list
-rebuild (simulate.rebuild: cell binning, list, history transfer, reverse order).
+rebuilds included, in calls that leave the balls stored as the steps left them (in space order
+from MEMORY_ORDER_FROM balls on), as `vibroflow dem` does between its rows.  Then the passes of
+one step are timed apart, each `--pass-steps` times from the same saved state, each its own
+parallel loop over the blocks: the pairs (step._pair_block, a step's first loop), the gather
+(_gather_block), the walls (wall_pass.ball_walls), the second half kick with the next step's
+first half kick and drift (step._kick_block, as the ball pass makes them), and the step's
+second loop whole less that drift (step._ball_pass: gather, walls, second half kick; a pass
+that drifted the balls 2 000 times under frozen forces would fling them against the walls);
+and one neighbour-list rebuild (simulate.rebuild: cell binning, list, history transfer, reverse
+order).
 
 Printed per process: balls, median wall and CPU microseconds a step, nanoseconds per ball-step,
 the mean ball-ball contact count over the timed steps (counted CONTACT_SAMPLES times a repeat)
