@@ -68,6 +68,7 @@ from .contact import (add_force_torque, contact_law, contact_velocity, forget,
                       normal_constants, put3, unit_normal)
 from .laws import (MODEL_HERTZ, MODEL_LINEAR, P_KT, P_MODEL, P_MU, P_MUR, P_ROLL, ROLL_CDT,
                    ROLL_CDT_LIGGGHTS, ROLL_EPSD, ROLL_NONE)
+from .prefetch import prefetch_read, prefetch_write
 from .wall_pass import ball_walls
 from .walls import KIND_BALL_BALL, TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT
 
@@ -202,8 +203,10 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
 
     Tile by tile of up to TILE touching entries: (1a) the entries in order, each apart one
     rejected (its history forgotten when it has just parted), each touching one's entry and
-    ball listed; (1b) their geometry (recomputed: the same bits), velocities, spins, pair
-    constants and histories copied into the tile's columns; (2) the law over the tile
+    ball listed; (1b) their history rows, reverse places and slots hinted to the processor
+    (prefetch.py: on a bed whose list outgrows the caches their loads overlap), then their
+    geometry (recomputed: the same bits), velocities, spins, pair constants and histories
+    copied into the tile's columns; (2) the law over the tile
     (_law_tile, vectorised); (3) the tile's contacts in entry order: flags, impact rows, slots,
     histories, each ball's sums, the largest overlap.  The walk and the copy index with
     unsigned integers: numba wraps a signed index around (a sign test and an add a load), an
@@ -281,14 +284,22 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
                 k += 1
             if k == kend:
                 i += 1
-        # (1b) their geometry again (the same operations, the same bits: two stores an entry
-        # in (1a) instead of eight), balls' velocities, spins, pair constants and histories
+        # (1b) the tile's scattered rows (history, reverse place; then each slot, for its
+        # write in (3)) hinted first, so that their loads from memory overlap (prefetch.py;
+        # the same numbers); then their geometry again (the same operations, the same bits:
+        # two stores an entry in (1a) instead of eight), balls' velocities, spins, pair
+        # constants and histories
+        for m in range(n):
+            ku = np.uint64(bi[I_K * T + m])
+            prefetch_read(hist, ku)
+            prefetch_read(rpos, ku)
         mat0_i = mat0_j = -1
         mixed = False
         for m in range(n):
             ku = np.uint64(bi[I_K * T + m])
             iu = np.uint64(bi[I_I * T + m])
             ju = np.uint64(nbr[ku])
+            prefetch_write(rout, rpos[ku])
             bi[I_J * T + m] = np.int64(ju)
             dx = pos[iu, 0] - pos[ju, 0]
             dy = pos[iu, 1] - pos[ju, 1]
