@@ -36,11 +36,9 @@ def _hint(write: int):
             ary = context.make_array(aryty)(context, builder, value=a)
             r = context.cast(builder, r, rowty, types.intp)
             idx = [r] if aryty.ndim == 1 else [r, context.get_constant(types.intp, 0)]
-            # the row's address, computed without a bounds check or a load
-            ptr = cgutils.get_item_pointer2(context, builder, ary.data,
-                                            cgutils.unpack_tuple(builder, ary.shape),
-                                            cgutils.unpack_tuple(builder, ary.strides),
-                                            aryty.layout, idx, wraparound=False)
+            # the row's address, computed without a bounds check or a load (as
+            # block_queue._fetch_add finds its counter's)
+            ptr = cgutils.get_item_pointer(context, builder, aryty, ary, idx)
             fn = cgutils.get_or_insert_function(builder.module, _FNTY, "llvm.prefetch.p0i8")
             builder.call(fn, [builder.bitcast(ptr, _I8P), _I32(write), _I32(3), _I32(1)])
             return context.get_dummy_value()
