@@ -14,8 +14,8 @@ def _scale_rows(a, rows, hinted):
     if hinted:
         for r in rows:
             prefetch_read(a, r)
-            prefetch_write(a, r)
-        prefetch_read(a, a.shape[0] + 10_000_000)
+            prefetch_write(a, r, a.shape[1])
+        prefetch_read(a, a.shape[0] + 10_000_000, a.shape[1])
         prefetch_write(a, -1)
     for r in rows:
         for c in range(a.shape[1]):
@@ -55,3 +55,17 @@ def test_hints_are_prefetch_instructions():
     _scale_rows(a, np.arange(3), True)
     asm = _scale_rows.inspect_asm(_scale_rows.signatures[0])
     assert "prefetch" in asm.lower() or "prfm" in asm.lower()  # x86, AArch64
+
+
+@numba.njit
+def _hint_row(a, r, width):
+    prefetch_read(a, r, width)
+
+
+def test_a_row_over_two_lines_is_hinted_at_both_ends():
+    """A row of six float64 spans two 64-byte lines when it starts past a line's first 16
+    bytes: the hint of its six elements is two prefetch instructions, of its first one."""
+    a = np.zeros((4, 6))
+    _hint_row(a, 1, 6)
+    asm = _hint_row.inspect_asm(_hint_row.signatures[0]).lower()
+    assert asm.count("prefetcht0") == 2 or asm.count("prfm") == 2
