@@ -25,6 +25,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from .neighbours import INDEX
+
 # box array: lengths (m) and the Lees-Edwards offset (m)
 B_LX, B_LY, B_LZ, B_OFFSET = range(4)
 
@@ -101,7 +103,7 @@ def build_le_list(pos, radius, box, skin, dims):
         fill[flat[i]] += 1
     start = np.zeros(n + 1, np.int64)
     cap = 16 * n + 64
-    nbr = np.empty(cap, np.int64)
+    nbr = np.empty(cap, INDEX)
     m = 0
     for i in range(n):
         cy = _cell_index(pos[i, 1], ly, ny)
@@ -131,7 +133,7 @@ def build_le_list(pos, radius, box, skin, dims):
                         cut = radius[i] + radius[j] + skin
                         if dx * dx + dy * dy + dz * dz < cut * cut:
                             if m == cap:
-                                grown = np.empty(2 * cap, np.int64)
+                                grown = np.empty(2 * cap, INDEX)
                                 grown[:m] = nbr[:m]
                                 nbr = grown
                                 cap *= 2

@@ -34,6 +34,14 @@ import numba as nb
 import numpy as np
 
 
+#: the dtype of the list's ball indices (nbr) and reverse places (rpos): 32 bits, half the
+#: bytes a step streams of them on a bed whose list outgrows the caches (docs/decisions/
+#: threads.md); `build_half_list` refuses a bed of more balls or entries than it numbers
+#: (2^31 - 1 entries are over 100 GB of list)
+INDEX = np.int32
+INDEX_MAX = 2**31 - 1
+
+
 class Cells(NamedTuple):
     """The balls sorted into a grid of cells (`bin_particles`), and the search's settings."""
 
@@ -135,14 +143,14 @@ def _scan(i, pos, radius, cells, out, offset, cap, write):
                     cut = ri + radius[j] + skin
                     near = np.int64(ddx * ddx + ddy * ddy + ddz * ddz < cut * cut)
                     if write and count < cap:
-                        out[offset + count] = np.int64(j)
+                        out[offset + count] = np.int32(j)
                     count += near
     return count
 
 
 @nb.njit(cache=True, parallel=True)
 def build_half_list(pos, radius, cells):
-    """Half neighbour list in CSR form: (start (N+1,), nbr (M,))."""
+    """Half neighbour list in CSR form: (start (N+1,), nbr (M,) INDEX)."""
     n = pos.shape[0]
     counts = np.zeros(n + 1, np.int64)
     dummy = np.empty(0, np.int64)
@@ -150,7 +158,10 @@ def build_half_list(pos, radius, cells):
         counts[i + 1] = _scan(i, pos, radius, cells, dummy, 0, 0, False)
     for i in range(n):
         counts[i + 1] += counts[i]
-    nbr = np.empty(counts[n], np.int64)
+    if n > INDEX_MAX or counts[n] > INDEX_MAX:
+        raise ValueError("neighbour list: more than 2^31 - 1 balls or entries, beyond its "
+                         "32-bit indices")
+    nbr = np.empty(counts[n], INDEX)
     for i in nb.prange(n):
         # within a cell, members are in id order, so each i's list is reproducible
         _scan(i, pos, radius, cells, nbr, counts[i], counts[i + 1] - counts[i], True)
@@ -199,7 +210,7 @@ def reverse_index(start, nbr, rows):
     for j in range(n):
         rstart[j + 1] += rstart[j]
     fill = rstart[:-1].copy()
-    rslot = np.empty(m, np.int64)
+    rslot = np.empty(m, INDEX)
     for d in range(n):
         i = rows[d]
         for k in range(start[i], start[i + 1]):
@@ -241,7 +252,7 @@ class NeighbourList:
         self.skin = float(skin)
         self.periodic_length = float(periodic_length)
         self.start = np.zeros(1, np.int64)
-        self.nbr = np.zeros(0, np.int64)
+        self.nbr = np.zeros(0, INDEX)
         self.hist = np.zeros((0, hist_width))
         self.flag = np.zeros(0, np.uint8)
         self.builds = 0
@@ -316,7 +327,7 @@ class NeighbourList:
             return
         self.rstart, rslot = reverse_index(self.start, self.nbr,
                                            self.id_arrays(self.start.shape[0] - 1)[1])
-        self.rpos = np.empty_like(rslot)
+        self.rpos = np.empty(rslot.shape[0], INDEX)
         self.rpos[rslot] = np.arange(rslot.shape[0])
         self.rflag = np.ascontiguousarray(self.flag[rslot])
         self.rout = np.zeros((self.nbr.shape[0], 6))

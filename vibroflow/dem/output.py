@@ -44,7 +44,7 @@ import h5py
 import numpy as np
 
 from ..io.atomic import atomic_path
-from .neighbours import NeighbourList
+from .neighbours import INDEX, NeighbourList
 from .simulate import DEMState
 
 _SCHEMA = {
@@ -388,8 +388,8 @@ def read_state(group: h5py.Group) -> DEMState:
     arrays.update({name: group[name][()] for name in _PART_ARRAYS if name in group})
     g = group["neighbours"]
     nl = NeighbourList(float(g.attrs["skin"]), float(g.attrs["periodic_length"]))
-    nl.start, nl.nbr, nl.hist, nl.flag = (g["start"][()], g["nbr"][()], g["hist"][()],
-                                          g["flag"][()])
+    nl.start, nl.nbr, nl.hist, nl.flag = (g["start"][()], g["nbr"][()].astype(INDEX),
+                                          g["hist"][()], g["flag"][()])
     nl.builds = int(g.attrs["builds"])
     return DEMState(step=int(group.attrs["step"]),
                     time_origin_step=int(group.attrs["time_origin_step"]), nl=nl,

@@ -10,7 +10,7 @@ import math
 import numpy as np
 
 from .lees_edwards import B_LZ, build_le_list, wrap
-from .neighbours import transfer_history
+from .neighbours import INDEX, transfer_history
 from .periodic_step import (BLOWUP, C_CUT, C_DAMPING, C_GAIN, C_MAX_OVERLAP, C_MODE, C_PRESSURE,
                             C_RATE_MAX, C_SKIN, MODE_FIXED, MODE_Z, N_CTRL, N_Q, N_STATE,
                             R_EX, R_EY, R_EZ, R_GAMMA, REBUILD, S_BUILD_STRAIN, S_BLOCK,
@@ -71,7 +71,7 @@ class PeriodicBox:
         self.cut = 2.0 * float(self.radius.max()) + self.skin
         self.max_overlap = float(max_overlap)
         self.start = np.zeros(n + 1, np.int64)
-        self.nbr = np.zeros(0, np.int64)
+        self.nbr = np.zeros(0, INDEX)
         self.hist = np.zeros((0, 6))
         self.flag = np.zeros(0, np.uint8)
         self.builds = 0

@@ -31,7 +31,7 @@ class Pairs(NamedTuple):
     """The half neighbour list (vibroflow.dem.neighbours) and its blocks of balls."""
 
     start: np.ndarray      # (N + 1,) first list entry of each ball
-    nbr: np.ndarray        # (M,) the other ball of each entry
+    nbr: np.ndarray        # (M,) int32: the other ball of each entry
     hist: np.ndarray       # (M, 6) contact histories (vibroflow.dem.contact)
     flag: np.ndarray       # (M,) uint8, 1 while in contact
     bounds: np.ndarray     # (nblock + 1,) first ball of each block
@@ -44,7 +44,7 @@ class PairSlots(NamedTuple):
 
     out: np.ndarray        # (M, 6) force (N) and torque (N m) on j, in reverse order
     rstart: np.ndarray     # (N + 1,) first reverse position of each ball
-    rpos: np.ndarray       # (M,) reverse position of each list entry
+    rpos: np.ndarray       # (M,) int32: reverse position of each list entry
     rflag: np.ndarray      # (M,) uint8 the list's contact flags in reverse order
 
 
