@@ -57,3 +57,45 @@ def test_the_list_is_the_same_on_one_thread_and_on_all():
         numba.set_num_threads(threads)
     np.testing.assert_array_equal(lists[0][0], lists[1][0])
     np.testing.assert_array_equal(lists[0][1], lists[1][1])
+
+
+def test_a_state_file_with_64_bit_indices_reads_as_the_32_bit_list(tmp_path):
+    """The list's indices are int32 (neighbours.INDEX); a state file written with int64 ones
+    reads back as the same list in int32, and a file written now keeps the same entries."""
+    import h5py
+
+    from vibroflow.dem.neighbours import INDEX
+    from vibroflow.dem.output import load_state_file, save_state_file, state_checksum
+    from vibroflow.dem.simulate import init_state, make_system
+    from vibroflow.scenario.io import load_scenario
+
+    scenario = load_scenario("tub47-quick", ["fill.count=40"])
+    system = make_system(scenario)
+    n = 40
+    d = 0.00635
+    # a lattice 1.02 d apart: every neighbour within the skin, none touching
+    lattice = np.stack(np.meshgrid(np.arange(4), np.arange(2), np.arange(5), indexing="ij"),
+                       axis=-1).reshape(-1, 3)
+    pos = 1.02 * d * lattice + np.array([-0.01, 0.005, 0.03])
+    radius = np.full(n, 0.5 * d)
+    state = init_state(system, pos, np.zeros((n, 3)), np.zeros((n, 3)), radius,
+                       np.full(n, 7800.0), np.zeros(n, np.int64))
+    state.nl.build(state.pos, radius)
+    assert state.nl.nbr.dtype == INDEX and state.nl.rpos.dtype == INDEX
+    assert state.nl.nbr.shape[0] > 0
+    path = tmp_path / "state.h5"
+    save_state_file(path, state)
+    back, _ = load_state_file(path)
+    assert back.nl.nbr.dtype == INDEX
+    np.testing.assert_array_equal(back.nl.nbr, state.nl.nbr)
+    # the same file with the indices widened to int64, its checksum made anew
+    with h5py.File(path, "r+") as f:
+        g = f["state/neighbours"]
+        wide = g["nbr"][()].astype(np.int64)
+        del g["nbr"]
+        g["nbr"] = wide
+    with h5py.File(path, "r+") as f:
+        f.attrs["checksum"] = state_checksum(f)
+    back, _ = load_state_file(path)
+    assert back.nl.nbr.dtype == INDEX
+    np.testing.assert_array_equal(back.nl.nbr, state.nl.nbr)
