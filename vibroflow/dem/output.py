@@ -388,7 +388,7 @@ def read_state(group: h5py.Group) -> DEMState:
     arrays.update({name: group[name][()] for name in _PART_ARRAYS if name in group})
     g = group["neighbours"]
     nl = NeighbourList(float(g.attrs["skin"]), float(g.attrs["periodic_length"]))
-    nl.start, nl.nbr, nl.hist, nl.flag = (g["start"][()], g["nbr"][()].astype(INDEX),
+    nl.start, nl.nbr, nl.hist, nl.flag = (g["start"][()], np.asarray(g["nbr"][()], INDEX),
                                           g["hist"][()], g["flag"][()])
     nl.builds = int(g.attrs["builds"])
     return DEMState(step=int(group.attrs["step"]),

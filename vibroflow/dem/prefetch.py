@@ -3,7 +3,7 @@ llvm.prefetch: x86 PREFETCHT0 / PREFETCHW), from compiled code.
 
 The pair pass touches a contact's history, its reverse place and its reverse slot at a few
 scattered rows of arrays that, on a large bed, live in main memory, not in the caches (about
-90 MB of list arrays for 140 000 balls).  Loaded one contact after the other, each waits a
+80 MB of list arrays for 140 000 balls).  Loaded one contact after the other, each waits a
 memory latency; hinted for a whole tile of contacts first, the loads overlap
 (vibroflow.dem.step._pair_block).  A hint changes no number: it moves no data the program
 sees, and a hint for a row out of range faults nothing (the processor drops it).
