@@ -286,9 +286,9 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
                 i += 1
         # (1b) the tile's scattered rows (history, reverse place; then each slot, for its
         # write in (3)) hinted first, every line of each, so that their loads from memory
-        # overlap (prefetch.py; the same numbers); then their geometry again (the same operations, the same bits:
-        # two stores an entry in (1a) instead of eight), balls' velocities, spins, pair
-        # constants and histories
+        # overlap (prefetch.py; the same numbers); then their geometry again (the same
+        # operations, the same bits: two stores an entry in (1a) instead of eight), balls'
+        # velocities, spins, pair constants and histories
         for m in range(n):
             ku = np.uint64(bi[I_K * T + m])
             prefetch_read(hist, ku, nh)
@@ -299,7 +299,7 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
             ku = np.uint64(bi[I_K * T + m])
             iu = np.uint64(bi[I_I * T + m])
             ju = np.uint64(nbr[ku])
-            prefetch_write(rout, rpos[ku], 6)
+            prefetch_write(rout, rpos[ku], rout.shape[1])
             bi[I_J * T + m] = np.int64(ju)
             dx = pos[iu, 0] - pos[ju, 0]
             dy = pos[iu, 1] - pos[ju, 1]
