@@ -91,3 +91,45 @@ def test_each_partner_of_a_ball_gets_its_own_pair_law():
         fn = k_n * delta + 2.0 * zeta_of(rest) * math.sqrt(m_eff * k_n) * u
         np.testing.assert_allclose(sim.state.force[p], fn * np.array(e), rtol=1e-12,
                                    atol=1e-12 * fn)
+
+
+def test_a_bed_keeps_the_histories_its_laws_need():
+    """tub47's laws (CDT rolling) keep the tangential spring alone: a list of three history
+    columns (laws.history_width).  The same bed stepped from a six-column list (a state file
+    of the wider layout) takes the same steps bit for bit, its spare columns staying zero.
+    With the EPSD law the list keeps six, and the rolling torque of the touching contacts is
+    held in the last three."""
+    base = _falling_bed(0, 1)[0]
+    assert base.history_width == 3
+    sc = load_scenario("tub47-quick", ["fill.count=300"])
+    runs = []
+    for width in (3, 6):
+        system = S.make_system(sc)
+        state = F.fill_state(system, sc)
+        assert state.nl.hist.shape[1] == 3
+        state.nl.widen_history(width)
+        with_threads = numba.get_num_threads()
+        numba.set_num_threads(1)
+        try:
+            S.run_steps(system, state, 6000)
+        finally:
+            numba.set_num_threads(with_threads)
+        runs.append(state)
+    narrow, wide = runs
+    assert np.count_nonzero(narrow.nl.flag) > 20  # balls touch one another
+    for name in ("pos", "vel", "omg", "force", "torque"):
+        assert np.array_equal(getattr(narrow, name), getattr(wide, name)), name
+    assert np.array_equal(narrow.nl.hist, wide.nl.hist[:, :3])
+    assert not wide.nl.hist[:, 3:].any()
+
+    sets = [f"contacts.{k}.rolling_model=epsd" for k in range(len(sc.contacts))]
+    epsd = load_scenario("tub47-quick", ["fill.count=300", *sets])
+    system = S.make_system(epsd)
+    assert system.history_width == 6
+    state = F.fill_state(system, epsd)
+    S.run_steps(system, state, 6000)
+    touching = state.nl.flag.astype(bool)
+    assert np.count_nonzero(touching) > 20
+    torque = np.linalg.norm(state.nl.hist[:, 3:6], axis=1)
+    assert np.count_nonzero(torque[touching]) > 0.9 * np.count_nonzero(touching)
+    assert not torque[~touching].any()

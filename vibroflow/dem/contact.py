@@ -7,7 +7,8 @@ i (j receives its opposite), the torque on i and the torque on j, and updates th
 history in place:
 
     hist[0:3]  accumulated tangential spring displacement xi_t (m)
-    hist[3:6]  elastic rolling torque of the EPSD model (N m)
+    hist[3:6]  elastic rolling torque of the EPSD model (N m); the ball-pair list has these
+               columns only where some pair's law is EPSD (laws.history_width)
 
 Tangential: xi_t is first turned into the current tangent plane keeping its length (the contact
 plane rotates with the balls), then incremented by v_t dt; F_t = -k_t xi_t truncated at the
@@ -57,7 +58,7 @@ def forget(hist, flag, q):
     """Entry q of a neighbour list is apart: its contact flag and history are cleared."""
     if flag[q]:
         flag[q] = 0
-        for a in range(6):
+        for a in range(hist.shape[1]):
             hist[q, a] = 0.0
 
 

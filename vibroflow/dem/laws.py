@@ -62,3 +62,11 @@ def pair_table(scenario) -> np.ndarray:
         table[a, b] = row
         table[b, a] = row
     return table
+
+
+def history_width(table: np.ndarray) -> int:
+    """The columns of a ball pair's contact history that the table's laws keep: the tangential
+    spring xi_t (3), and the EPSD rolling torque (3 more) only where some pair's law has one.
+    A list of the narrow rows is half the bytes that the pair pass streams a step on a bed
+    larger than the caches (docs/decisions/threads.md)."""
+    return 6 if bool(np.any(table[:, :, P_ROLL] == ROLL_EPSD)) else 3

@@ -6,9 +6,10 @@ The list is built every time some ball has moved more than half the skin since t
 vibration itself does not force rebuilds).  It holds, for each ball i, the balls j > i whose
 surfaces are closer than the skin, in CSR form (start[i] .. start[i+1] into `nbr`).
 
-Each list entry carries its contact's history (tangential spring and rolling torque) and a flag
-saying whether the pair was touching at the last step; on a rebuild, `transfer_history` copies
-them from the old list to the new one, so a contact keeps its history for its whole life.
+Each list entry carries its contact's history (tangential spring, and the EPSD law's rolling
+torque where a pair has it: laws.history_width) and a flag saying whether the pair was
+touching at the last step; on a rebuild, `transfer_history` copies them from the old list to
+the new one, so a contact keeps its history for its whole life.
 
 For the tub step's force assembly (vibroflow.dem.step) the list also carries, made at each
 build (`index_pairs`), its reverse order: for each ball j, the entries (i, j) where it is the
@@ -307,6 +308,15 @@ class NeighbourList:
         self.rout = None
         self.index_pairs()
         self.builds += 1
+
+    def widen_history(self, width: int) -> None:
+        """Histories of at least `width` columns (laws.history_width): a state whose laws
+        kept fewer (a file written by a run of other laws) gains zero columns, an untouched
+        spring's value."""
+        if self.hist.shape[1] < width:
+            hist = np.zeros((self.hist.shape[0], width))
+            hist[:, :self.hist.shape[1]] = self.hist
+            self.hist = hist
 
     def store(self, order: np.ndarray, place: np.ndarray) -> None:
         """The list of the balls stored anew: place r holds the ball of old place order[r]

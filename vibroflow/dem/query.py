@@ -30,7 +30,7 @@ def _ball_ball(balls, pairs, table, periodic_length):
     jj = np.empty(count, np.int64)
     force = np.empty((count, 3))
     branch = np.empty((count, 3))
-    h = np.empty(6)
+    h = np.zeros(6)
     m = 0
     for i in range(n):
         for k in range(nbr_start[i], nbr_start[i + 1]):
@@ -46,7 +46,7 @@ def _ball_ball(balls, pairs, table, periodic_length):
             ny = dy / d
             nz = dz / d
             vx, vy, vz = pair_contact_velocity(vel, omg, i, j, ri, rj, nx, ny, nz)
-            for q in range(6):
+            for q in range(hist.shape[1]):
                 h[q] = hist[k, q]
             mi = mass[i]
             mj = mass[j]

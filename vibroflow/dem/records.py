@@ -32,7 +32,7 @@ class Pairs(NamedTuple):
 
     start: np.ndarray      # (N + 1,) first list entry of each ball
     nbr: np.ndarray        # (M,) int32: the other ball of each entry
-    hist: np.ndarray       # (M, 6) contact histories (vibroflow.dem.contact)
+    hist: np.ndarray       # (M, 3 or 6) contact histories (laws.history_width)
     flag: np.ndarray       # (M,) uint8, 1 while in contact
     bounds: np.ndarray     # (nblock + 1,) first ball of each block
 

@@ -25,7 +25,7 @@ from . import step as K
 from .block_queue import queue_array, set_lanes
 from .blowup import (BlowUp, blowup_message, check_finite_start, check_overlaps_at_start,
                      coincident_message, coincident_pair)
-from .laws import material_index, pair_table
+from .laws import history_width, material_index, pair_table
 from . import memory_order as M
 from .impact_order import ImpactOrder, ImpactsLost, impact_bound, lost_message
 from .memory_order import by_id, space_order, store
@@ -73,6 +73,11 @@ class DEMSystem:
     @property
     def n_walls(self) -> int:
         return WALL_PLANE0 + self.planes.shape[0]
+
+    @property
+    def history_width(self) -> int:
+        """The columns of a ball pair's contact history (laws.history_width)."""
+        return history_width(self.table)
 
     @property
     def periodic_length(self) -> float:
@@ -184,7 +189,8 @@ def init_state(system: DEMSystem, pos, vel, omg, radius, density, mat) -> DEMSta
         omg=np.array(omg, dtype=np.float64).reshape(n, 3),
         force=np.zeros((n, 3)), torque=np.zeros((n, 3)), radius=radius,
         mass=np.ascontiguousarray(mass), mat=np.ascontiguousarray(mat, dtype=np.int64),
-        nl=NeighbourList(system.skin, system.periodic_length), ref_tub=np.zeros((n, 3)),
+        nl=NeighbourList(system.skin, system.periodic_length, system.history_width),
+        ref_tub=np.zeros((n, 3)),
         wall_hist=np.zeros((n, w, 6)), wall_flag=np.zeros((n, w), np.uint8),
         wall_fn=np.zeros((n, w)), wall_ft=np.zeros((n, w)),
         wall_slide=np.zeros((n, w), np.uint8), wall_point=np.zeros((n, w, 3)),
@@ -281,6 +287,7 @@ def _grown(buf: np.ndarray, rows: int) -> np.ndarray:
 
 
 def _buf(system: DEMSystem, state: DEMState) -> _Buffers:
+    state.nl.widen_history(system.history_width)
     b = state.scratch
     if b is None or b.n != state.n:
         b = state.scratch = _Buffers(system, state)
