@@ -90,6 +90,7 @@ def measure(size: str, phases: int, reps: int, warmup: int) -> dict:
     from dem_scaling import CYCLE, SIZES, _bed
     from vibroflow.dem import simulate as S
     from vibroflow.dem import step as K
+    from vibroflow.dem.contact_rows import pack, unpack
     from vibroflow.dem.records import pairs_of, slots_of
     from vibroflow.dem.wall_pass import clear_of_walls
     from vibroflow.scenario.io import load_scenario
@@ -146,11 +147,13 @@ def measure(size: str, phases: int, reps: int, warmup: int) -> dict:
         near_walls(state.pos, state.radius, b, system.params.tub, buf.work.pose, near)
         pair_t = np.empty(nblock)
         ball_t = np.empty(nblock)
+        pack(pairs, slots, buf.work)  # the contact rows, as step.advance makes them
         for c in range(nblock):
             pair_t[c] = _best_time(pair_reps, c, reps, t, buf.balls, pairs, slots,
                                    system.params, buf.work)
             ball_t[c] = _best_time(ball_reps, c, reps, t, buf.balls, pairs, slots, buf.walls,
                                    system.params, buf.work, buf.parts)
+        unpack(pairs, slots)
         for k, v in saved.items():
             getattr(state, k)[:] = v
         state.nl.hist[:], state.nl.flag[:] = hist, flag

@@ -33,6 +33,7 @@ def main(argv=None) -> None:
     from vibroflow.dem import fill as F
     from vibroflow.dem import simulate as S
     from vibroflow.dem import step as K
+    from vibroflow.dem.contact_rows import pack, unpack
     from vibroflow.dem.walls import TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT
     from vibroflow.scenario.io import load_scenario
 
@@ -45,6 +46,7 @@ def main(argv=None) -> None:
         tub = params.tub
         periodic_length = tub[TUB_LENGTH] if (tub[TUB_PRESENT] > 0.0 and
                                               tub[TUB_PERIODIC] > 0.0) else 0.0
+        pack(pairs, slots, work)
         for k in range(nsteps):
             K._kick_drift(balls, params)
             t = (step0 + k + 1 - time_origin_step) * dt
@@ -55,9 +57,12 @@ def main(argv=None) -> None:
                          params, work, prt)
             for c in range(diag.shape[0]):
                 if diag[c, K.D_NAN] >= 0.0 or diag[c, K.D_LOST] >= 0.0:
+                    unpack(pairs, slots)
                     return k + 1, K.BLOWUP
                 if moved[c] > hs2:
+                    unpack(pairs, slots)
                     return k + 1, K.REBUILD
+        unpack(pairs, slots)
         return nsteps, K.DONE
 
     sc = load_scenario("tub47-quick", ["fill.lattice_spacing=1.01", "fill.insert_above=0.0"])

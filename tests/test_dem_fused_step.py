@@ -4,7 +4,10 @@ velocity-Verlet step:
 - one `advance` call of many steps (each later step's first half kick and drift made in the
   ball pass of the step before, undone where the call stops at a rebuild) ends on the state of
   the same steps made one call a step (no step made in the pass before: the plain order of
-  kick, drift, forces, kick), bit for bit, with the same impact rows;
+  kick, drift, forces, kick), bit for bit, with the same impact rows and contact histories
+  (each call packs the touching entries into contact rows and gives their histories back to
+  the list when it ends: vibroflow.dem.contact_rows; a contact that parts and touches again
+  within the long call keeps its row);
 - the wall pass's cull (`wall_pass.clear_of_walls`) passes over no ball that the U wall or a
   partition touches or that has left the tub: on points on both sides of the surfaces, at
   distances of a few ulp to millimetres, the cleared ones have no overlap by u_wall's and the

@@ -37,7 +37,7 @@ def _records(balls, bounds):
     work = Work(np.zeros((nblock, 1, K.N_IMP_BUF)), np.zeros(nblock, np.int64),
                 np.full((nblock, K.N_DIAG), -1.0), pose, np.zeros(nblock), np.zeros((n, 9)),
                 np.zeros(2, np.int64), np.zeros((nblock, 1)), np.zeros((nblock, 1), np.int64),
-                queue_array(nblock))
+                queue_array(nblock), np.zeros(nblock, np.int64))
     return pairs, params, work
 
 

@@ -14,9 +14,9 @@ the new one, so a contact keeps its history for its whole life.
 For the tub step's force assembly (vibroflow.dem.step) the list also carries, made at each
 build (`index_pairs`), its reverse order: for each ball j, the entries (i, j) where it is the
 second ball, in ascending order (rstart, and rpos: each entry's place in that order), with a
-slot of six numbers for the pair's force and torque on j and a copy of the contact flags in
-that order (rflag), so that each ball gathers its pairs' forces in a fixed order, reading
-memory in sequence.
+copy of the contact flags in that order (rflag), so that each ball gathers its pairs' forces
+in a fixed order; and the arrays of the touching entries' contact rows (row, rrow, chist and
+`rout`, the force and torque on j: vibroflow.dem.contact_rows).
 
 The balls may be stored in any order (vibroflow.dem.memory_order keeps them in space order
 during a run): `ids` gives each stored ball's id and the list is the same as that of the balls
@@ -265,6 +265,9 @@ class NeighbourList:
         self.rstart = None
         self.rpos = None
         self.rflag = None
+        self.row = None
+        self.rrow = None
+        self.chist = None
 
     def id_arrays(self, n: int) -> tuple[np.ndarray, np.ndarray]:
         """(ids, rows): the id of each stored ball and the stored place of each id."""
@@ -333,14 +336,21 @@ class NeighbourList:
     def index_pairs(self) -> None:
         """The reverse order of the current list (see the module doc), made when missing
         (after a build, or a list read from a file); its flags are the list's."""
-        if self.rout is not None and self.rout.shape[0] == self.nbr.shape[0]:
+        if (self.rout is not None and self.rout.shape[0] == self.nbr.shape[0]
+                and self.chist.shape[1] == self.hist.shape[1]):
             return
         self.rstart, rslot = reverse_index(self.start, self.nbr,
                                            self.id_arrays(self.start.shape[0] - 1)[1])
         self.rpos = np.empty(rslot.shape[0], INDEX)
         self.rpos[rslot] = np.arange(rslot.shape[0])
         self.rflag = np.ascontiguousarray(self.flag[rslot])
-        self.rout = np.zeros((self.nbr.shape[0], 6))
+        # the contact rows of the tub step (vibroflow.dem.contact_rows; pages that no
+        # contact touches are never given memory)
+        m = self.nbr.shape[0]
+        self.rout = np.zeros((m, 6))
+        self.row = np.full(m, -1, INDEX)
+        self.rrow = np.zeros(m, INDEX)
+        self.chist = np.zeros((m, self.hist.shape[1]))
 
     def chunk_bounds(self, nchunk: int) -> np.ndarray:
         """Split the balls into `nchunk` contiguous chunks of about equal work (list entries,

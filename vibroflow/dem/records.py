@@ -39,13 +39,17 @@ class Pairs(NamedTuple):
 
 class PairSlots(NamedTuple):
     """The half list's entries in reverse order, ball j by ball j (the entries (i, j) where j
-    is the second ball, ascending), with each touching entry's force and torque on j: the tub
-    step's force assembly (vibroflow.dem.step, vibroflow.dem.neighbours)."""
+    is the second ball, ascending), and the touching entries' contact rows with their
+    histories and their force and torque on j: the tub step's force assembly
+    (vibroflow.dem.step, vibroflow.dem.neighbours, vibroflow.dem.contact_rows)."""
 
-    out: np.ndarray        # (M, 6) force (N) and torque (N m) on j, in reverse order
+    out: np.ndarray        # (M, 6) force (N) and torque (N m) on j, a contact row each
     rstart: np.ndarray     # (N + 1,) first reverse position of each ball
     rpos: np.ndarray       # (M,) int32: reverse position of each list entry
     rflag: np.ndarray      # (M,) uint8 the list's contact flags in reverse order
+    row: np.ndarray        # (M,) int32: each list entry's contact row (-1: none)
+    rrow: np.ndarray       # (M,) int32: the contact row of each touching reverse position
+    chist: np.ndarray      # (M, hist width) the contact rows' histories
 
 
 class Walls(NamedTuple):
@@ -77,6 +81,7 @@ class Work(NamedTuple):
     tile: np.ndarray       # (nblock, step.N_TILE * step.TILE) a tile of contacts' columns
     tile_idx: np.ndarray   # (nblock, step.N_TILE_IDX * step.TILE) int64 their entry, i, j
     queue: np.ndarray      # int64 the blocks' lanes, the lane count (vibroflow.dem.block_queue)
+    row_next: np.ndarray   # (nblock,) int64 each block's next free contact row (contact_rows)
 
 
 class Params(NamedTuple):
@@ -116,7 +121,7 @@ def pairs_of(nl, nblock: int = 1) -> Pairs:
 def slots_of(nl) -> PairSlots:
     """The PairSlots record of a vibroflow.dem.neighbours.NeighbourList's current arrays."""
     nl.index_pairs()
-    return PairSlots(nl.rout, nl.rstart, nl.rpos, nl.rflag)
+    return PairSlots(nl.rout, nl.rstart, nl.rpos, nl.rflag, nl.row, nl.rrow, nl.chist)
 
 class BoxBalls(NamedTuple):
     """The balls of the Lees-Edwards box (vibroflow.dem.periodic_step), one row a ball (SI)."""

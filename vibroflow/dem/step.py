@@ -27,20 +27,21 @@ Force assembly whose numbers do not depend on the thread count (DEVELOPERS.md, "
 1. pairs (`_pair_block`): every entry k of the half neighbour list (i, j > i) is evaluated
    once, by the thread that has ball i, its contact history advanced once; the force and the
    torque on i are summed into i's force and torque (from its weight) as the entries come, and
-   the force and torque on j are written to the entry's own slot, kept in the list's reverse
-   order (vibroflow.dem.neighbours: no two entries share a slot, no races, no atomics).  The
-   block's entries go in tiles of up to TILE touching ones: (1a) the distance tests, each
-   entry written at the tile's next place and that place kept when it touches (no branch on
-   the test); (1b) the touching entries' velocities, spins, pair constants (m_eff, R_eff and
-   the law's constants reused from the contact before when its balls are of the same kind:
-   the same inputs, the same bits) and histories gathered into the tile's columns; (2) the
-   unit normal, contact velocity and law over the tile (`_law_tile`), a loop LLVM vectorises
-   across contacts (4 doubles a ymm register on AVX-512 machines: packed vsqrtpd, vdivpd,
-   vmulpd, no FMA), which makes the scalar law's IEEE operations in the scalar law's order for
-   each contact, so the same bits (tests/test_contact_tile.py); (3) the tile's contacts in
-   entry order: flags, impact rows, slots, histories, each ball's sums, the largest overlap;
-2. gather (`_gather_block`): each ball j adds the slots of the entries where it is the second
-   ball, in ascending entry order, reading them in sequence;
+   the force and torque on j are written to the contact's own row (vibroflow.dem.contact_rows:
+   a block's contacts in consecutive rows, packed at the start of each call of `advance`; no
+   two contacts share a row, no races, no atomics).  The block's entries go in tiles of up to
+   TILE touching ones: (1a) the distance tests, each entry written at the tile's next place
+   and that place kept when it touches (no branch on the test); (1b) the touching entries'
+   velocities, spins, pair constants (m_eff, R_eff and the law's constants reused from the
+   contact before when its balls are of the same kind: the same inputs, the same bits) and
+   histories gathered into the tile's columns; (2) the unit normal, contact velocity and law
+   over the tile (`_law_tile`), a loop LLVM vectorises across contacts (4 doubles a ymm
+   register on AVX-512 machines: packed vsqrtpd, vdivpd, vmulpd, no FMA), which makes the
+   scalar law's IEEE operations in the scalar law's order for each contact, so the same bits
+   (tests/test_contact_tile.py); (3) the tile's contacts in entry order: flags, impact rows,
+   contact rows, each ball's sums, the largest overlap;
+2. gather (`_gather_block`): each ball j adds the rows of the touching entries where it is
+   the second ball, in ascending entry order (the list's reverse order);
 3. walls (`wall_pass.ball_walls`): each ball's wall contacts, added one after the other;
 4. kick (`_kick_block`): the step's second half kick (and the next step's first, and drift),
    one straight line of arithmetic a ball (`_kick_loop`).
@@ -64,11 +65,11 @@ from .block_record import (D_BALL_I, D_BALL_J, D_BALL_OVERLAP, D_LOST, D_NAN,  #
                            D_WALL_I, D_WALL_OVERLAP, D_WALL_W, IMP_COLUMNS, N_DIAG, N_IMP_BUF,
                            ROW_BALL, keep_largest, record_impact)
 from .block_queue import open_lanes, take
-from .contact import (add_force_torque, contact_law, contact_velocity, forget,
+from .contact_rows import pack, unpack
+from .contact import (add_force_torque, contact_law, contact_velocity,
                       normal_constants, put3, unit_normal)
 from .laws import (MODEL_HERTZ, MODEL_LINEAR, P_KT, P_MODEL, P_MU, P_MUR, P_ROLL, ROLL_CDT,
                    ROLL_CDT_LIGGGHTS, ROLL_EPSD, ROLL_NONE)
-from .prefetch import prefetch_read, prefetch_write
 from .wall_pass import ball_walls
 from .walls import KIND_BALL_BALL, TUB_LENGTH, TUB_PERIODIC, TUB_PRESENT
 
@@ -84,10 +85,10 @@ ASSEMBLY = f"pair slots, gathered per ball; {NBLOCK} blocks"
 
 
 @nb.njit(cache=True)
-def _part(hist, flag, rflag, rpos, k):
-    """Entry k's balls have just parted: its history forgotten, its reverse flag cleared (a
-    call of its own, out of the pair loop's hot path)."""
-    forget(hist, flag, k)
+def _part(flag, rflag, rpos, k):
+    """Entry k's balls have just parted: its flags cleared (a call of its own, out of the pair
+    loop's hot path); its contact row is forgotten (contact_rows.unpack zeroes its history)."""
+    flag[k] = 0
     rflag[rpos[k]] = 0
 
 
@@ -198,24 +199,25 @@ def _law_tile_mixed(n, b, bi, mat, table, dt):
 def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, slots, params,
                 work):
     """The list entries of the balls of block c (step 1 of the module docstring): each
-    touching pair's force and torques into its slot, and each ball's force set to its weight
-    plus its own entries' forces (torque: their torques on it).
+    touching pair's force and torques into its contact row, and each ball's force set to its
+    weight plus its own entries' forces (torque: their torques on it).
 
     Tile by tile of up to TILE touching entries: (1a) the entries in order, each apart one
-    rejected (its history forgotten when it has just parted), each touching one's entry and
-    ball listed; (1b) their history rows, reverse places and slots hinted to the processor
-    (prefetch.py: on a bed whose list outgrows the caches their loads overlap), then their
-    geometry (recomputed: the same bits), velocities, spins, pair constants and histories
-    copied into the tile's columns; (2) the law over the tile
-    (_law_tile, vectorised); (3) the tile's contacts in entry order: flags, impact rows, slots,
-    histories, each ball's sums, the largest overlap.  The walk and the copy index with
-    unsigned integers: numba wraps a signed index around (a sign test and an add a load), an
-    unsigned one not (docs/decisions/threads.md)."""
+    rejected (its flags cleared when it has just parted), each touching one's entry and ball
+    listed; (1b) their geometry (recomputed: the same bits), velocities, spins, pair constants
+    and histories (their contact rows', read in sequence: contact_rows.py) copied into the
+    tile's columns; (2) the law over the tile (_law_tile, vectorised); (3) the tile's contacts
+    in entry order: flags and a row for each contact that begins, impact rows, histories and
+    forces on j into the contact rows, each ball's sums, the largest overlap.  The walk and
+    the copy index with unsigned integers: numba wraps a signed index around (a sign test and
+    an add a load), an unsigned one not (docs/decisions/threads.md)."""
     pos, vel, omg = balls.pos, balls.vel, balls.omg
     radius, mass, mat = balls.radius, balls.mass, balls.mat
-    nbr_start, nbr, hist, flag = pairs.start, pairs.nbr, pairs.hist, pairs.flag
+    nbr_start, nbr, flag = pairs.start, pairs.nbr, pairs.flag
     bounds = pairs.bounds
-    rout, rpos, rflag = slots.out, slots.rpos, slots.rflag
+    out, rpos, rflag = slots.out, slots.rpos, slots.rflag
+    row, rrow, chist = slots.row, slots.rrow, slots.chist
+    width = chist.shape[1]
     table = params.table
     imp_buf, imp_count, diag = work.imp_buf, work.imp_count, work.diag
     b = work.tile[c]
@@ -224,6 +226,8 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
     lo, hi = bounds[c], bounds[c + 1]
     if lo >= hi:
         return
+    # the block's next free contact row, in a local: the blocks' counters share cache lines
+    nxt = work.row_next[c]
     T = TILE
     # the rolling histories travel through the tiles only where a law keeps them (EPSD)
     nh = 3
@@ -276,7 +280,7 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
                 d2 = dx * dx + dy * dy + dz * dz
                 touch = np.int64(d2 < rsum * rsum)
                 if flag[ku] > touch:  # parted since the last step
-                    _part(hist, flag, rflag, rpos, k)
+                    _part(flag, rflag, rpos, k)
                 nu = np.uint64(n)
                 bi[np.uint64(I_K * T) + nu] = k
                 bi[np.uint64(I_I * T) + nu] = i
@@ -284,22 +288,15 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
                 k += 1
             if k == kend:
                 i += 1
-        # (1b) the tile's scattered rows (history, reverse place; then each slot, for its
-        # write in (3)) hinted first, every line of each, so that their loads from memory
-        # overlap (prefetch.py; the same numbers); then their geometry again (the same
-        # operations, the same bits: two stores an entry in (1a) instead of eight), balls'
-        # velocities, spins, pair constants and histories
-        for m in range(n):
-            ku = np.uint64(bi[I_K * T + m])
-            prefetch_read(hist, ku, nh)
-            prefetch_read(rpos, ku)
+        # (1b) the tile's geometry again (the same operations, the same bits: two stores an
+        # entry in (1a) instead of eight), balls' velocities, spins, pair constants and
+        # histories (the contact rows', contact_rows.py; zero for a contact that begins)
         mat0_i = mat0_j = -1
         mixed = False
         for m in range(n):
             ku = np.uint64(bi[I_K * T + m])
             iu = np.uint64(bi[I_I * T + m])
             ju = np.uint64(nbr[ku])
-            prefetch_write(rout, rpos[ku], rout.shape[1])
             bi[I_J * T + m] = np.int64(ju)
             dx = pos[iu, 0] - pos[ju, 0]
             dy = pos[iu, 1] - pos[ju, 1]
@@ -343,13 +340,18 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
             b[T_REFF * T + m] = r_eff
             b[T_KN * T + m] = kn
             b[T_DAMP * T + m] = damp
-            b[T_H0 * T + m] = hist[ku, 0]
-            b[T_H1 * T + m] = hist[ku, 1]
-            b[T_H2 * T + m] = hist[ku, 2]
-            if nh == 6:
-                b[T_H3 * T + m] = hist[ku, 3]
-                b[T_H4 * T + m] = hist[ku, 4]
-                b[T_H5 * T + m] = hist[ku, 5]
+            if flag[ku]:
+                ru = np.uint64(row[ku])
+                b[T_H0 * T + m] = chist[ru, 0]
+                b[T_H1 * T + m] = chist[ru, 1]
+                b[T_H2 * T + m] = chist[ru, 2]
+                if nh == 6:
+                    b[T_H3 * T + m] = chist[ru, 3]
+                    b[T_H4 * T + m] = chist[ru, 4]
+                    b[T_H5 * T + m] = chist[ru, 5]
+            else:
+                for a in range(nh):
+                    b[(T_H0 + a) * T + m] = 0.0
         # (2) the law over the tile
         if n == 0:
             continue
@@ -372,32 +374,41 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
                 stx = 0.0
                 sty = 0.0
                 stz = 0.0
-            q = np.uint64(rpos[ku])
             delta = b[T_DELTA * T + m]
             if not flag[ku]:
+                # a contact begins: its entry's row of this call, or the block's next one
+                if row[ku] < 0:
+                    row[ku] = nxt
+                    nxt += 1
+                q = np.uint64(rpos[ku])
                 flag[ku] = 1
                 rflag[q] = 1
+                rrow[q] = row[ku]
                 if record_impacts:
                     ri = radius[ii]
                     record_impact(imp_buf, imp_count, c, t, KIND_BALL_BALL,
                                   pos[ii, 0] - ri * b[T_NX * T + m],
                                   pos[ii, 1] - ri * b[T_NY * T + m],
                                   pos[ii, 2] - ri * b[T_NZ * T + m], -b[T_VN * T + m], ii)
+            ru = np.uint64(row[ku])
             for a in range(nh):
-                hist[ku, a] = b[(T_H0 + a) * T + m]
+                chist[ru, a] = b[(T_H0 + a) * T + m]
+            for a in range(nh, width):  # columns no law of the bed keeps (a wider file's)
+                chist[ru, a] = 0.0
             fx = b[T_FX * T + m]
             fy = b[T_FY * T + m]
             fz = b[T_FZ * T + m]
-            rout[q, 0] = -fx
-            rout[q, 1] = -fy
-            rout[q, 2] = -fz
-            rout[q, 3] = b[T_TJX * T + m]
-            rout[q, 4] = b[T_TJY * T + m]
-            rout[q, 5] = b[T_TJZ * T + m]
+            out[ru, 0] = -fx
+            out[ru, 1] = -fy
+            out[ru, 2] = -fz
+            out[ru, 3] = b[T_TJX * T + m]
+            out[ru, 4] = b[T_TJY * T + m]
+            out[ru, 5] = b[T_TJZ * T + m]
             sfx, sfy, sfz, stx, sty, stz = add_force_torque(
                 sfx, sfy, sfz, stx, sty, stz, fx, fy, fz,
                 b[T_TIX * T + m], b[T_TIY * T + m], b[T_TIZ * T + m])
             keep_largest(diag, c, D_BALL_OVERLAP, delta, ii, jj)
+    work.row_next[c] = nxt
     # the balls after the last contact
     while True:
         put3(force, cur, sfx, sfy, sfz)
@@ -429,11 +440,11 @@ def _pose_array(motion, pivot_x, pivot_z, t, out):
 @nb.njit(cache=True)
 def _gather_block(c, balls, pairs, slots):
     """Step 2 of the module docstring for the balls of block c: to each ball's force and
-    torque (weight and own entries, from _pair_block) add the slots where it is the second
-    ball, force reversed and the torque on j, in ascending entry order."""
+    torque (weight and own entries, from _pair_block) add the contact rows where it is the
+    second ball, force reversed and the torque on j, in ascending entry order."""
     force, torque = balls.force, balls.torque
     bounds = pairs.bounds
-    rout, rstart, rflag = slots.out, slots.rstart, slots.rflag
+    out, rstart, rflag, rrow = slots.out, slots.rstart, slots.rflag, slots.rrow
     for i in range(bounds[c], bounds[c + 1]):
         r0, r1 = rstart[i], rstart[i + 1]
         # most balls are no pair's touching second ball: only their flags are read
@@ -445,12 +456,13 @@ def _gather_block(c, balls, pairs, slots):
         tx, ty, tz = torque[i, 0], torque[i, 1], torque[i, 2]
         for r in range(r0, r1):
             if rflag[r]:
-                fx += rout[r, 0]
-                fy += rout[r, 1]
-                fz += rout[r, 2]
-                tx += rout[r, 3]
-                ty += rout[r, 4]
-                tz += rout[r, 5]
+                q = np.uint64(rrow[r])
+                fx += out[q, 0]
+                fy += out[q, 1]
+                fz += out[q, 2]
+                tx += out[q, 3]
+                ty += out[q, 4]
+                tz += out[q, 5]
         put3(force, i, fx, fy, fz)
         put3(torque, i, tx, ty, tz)
 
@@ -617,9 +629,11 @@ def compute_forces(t, kick, drift, record_impacts, balls, pairs, slots, walls, p
     periodic_length = tub[TUB_LENGTH] if (tub[TUB_PRESENT] > 0.0 and
                                           tub[TUB_PERIODIC] > 0.0) else 0.0
     dt_hist = params.dt if kick else 0.0  # the set-up evaluation does not advance histories
+    pack(pairs, slots, work)
     _pair_pass(t, dt_hist, periodic_length, record_impacts, balls, pairs, slots, params, work)
     _ball_pass(t, dt_hist, kick, drift, record_impacts, balls, pairs, slots, walls, params, work,
                prt)
+    unpack(pairs, slots)
 
 
 @nb.njit(cache=True)
@@ -644,6 +658,7 @@ def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pair
     tub = params.tub
     periodic_length = tub[TUB_LENGTH] if (tub[TUB_PRESENT] > 0.0 and
                                           tub[TUB_PERIODIC] > 0.0) else 0.0
+    pack(pairs, slots, work)
     _kick_drift(balls, params)
     for k in range(nsteps):
         step = step0 + k + 1
@@ -673,5 +688,7 @@ def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pair
         if status != DONE:
             if drift:
                 _undo_drift(balls, work.save)
+            unpack(pairs, slots)
             return k + 1, status
+    unpack(pairs, slots)
     return nsteps, DONE
