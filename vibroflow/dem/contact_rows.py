@@ -19,7 +19,8 @@ The pair pass writes each contact's force and torque on j to slots.out at the co
 the gather reads them through rrow.  `unpack` copies the histories back to the list's entries,
 zero for the contacts that parted during the call, so that between calls (files, rebuilds,
 queries) the list holds them as always.  The same operations on the same numbers: the same
-bits (tests/test_dem_assembly.py).
+bits (tests/test_dem_fused_step.py, one call against one step a call; tests/test_contact_rows.py,
+a contact that parts and touches again within one call).
 """
 from __future__ import annotations
 
@@ -61,7 +62,7 @@ def _unpack_block(c, pairs, slots):
                 hist[k, a] = 0.0
 
 
-# Each block's loop is a function of its own: inlined in the parallel loop's body, numba took
+# Each block's loop is a function of its own: inlined in the parallel loop's body, numba takes
 # the row counter for a reduction over the blocks.
 @nb.njit(cache=True, parallel=True)
 def pack(pairs, slots, work):
