@@ -50,6 +50,8 @@ def test_a_rattling_contact_keeps_its_energy_and_the_numbers_of_one_step_a_call(
                     on_impacts=impacts.append)
     rows = np.concatenate(impacts)
     assert whole.state.nl.builds == builds          # one list, one call
+    # the one entry's row is its block's first: it took the row once, not at every contact
+    assert whole.state.nl.row.tolist() == [0]
     assert np.count_nonzero(rows[:, 1] == KIND_BALL_BALL) >= 12
     single = _rattle()
     for _ in range(steps):
@@ -57,7 +59,7 @@ def test_a_rattling_contact_keeps_its_energy_and_the_numbers_of_one_step_a_call(
     for name in ("pos", "vel", "omg", "force", "torque"):
         assert np.array_equal(getattr(whole.state, name), getattr(single.state, name)), name
     assert np.array_equal(whole.state.nl.hist, single.state.nl.hist)
-    # the energy and momentum between contacts
+    # between contacts: the energy of the start, no motion off the walls' normal
     while not _free(whole):
         whole.run(1)
     e0 = 0.5 * M_STEEL * V0 ** 2

@@ -99,12 +99,11 @@ def test_a_bed_keeps_the_histories_its_laws_need():
     of the wider layout) takes the same steps bit for bit, its spare columns staying zero.
     With the EPSD law the list keeps six, and the rolling torque of the touching contacts is
     held in the last three."""
-    base = _falling_bed(0, 1)[0]
-    assert base.history_width == 3
     sc = load_scenario("tub47-quick", ["fill.count=300"])
     runs = []
     for width in (3, 6):
         system = S.make_system(sc)
+        assert system.history_width == 3
         state = F.fill_state(system, sc)
         assert state.nl.hist.shape[1] == 3
         state.nl.widen_history(width)

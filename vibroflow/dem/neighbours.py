@@ -320,6 +320,7 @@ class NeighbourList:
             hist = np.zeros((self.hist.shape[0], width))
             hist[:, :self.hist.shape[1]] = self.hist
             self.hist = hist
+            self.rout = None  # the contact rows made anew, as wide
 
     def store(self, order: np.ndarray, place: np.ndarray) -> None:
         """The list of the balls stored anew: place r holds the ball of old place order[r]
@@ -336,8 +337,7 @@ class NeighbourList:
     def index_pairs(self) -> None:
         """The reverse order of the current list (see the module doc), made when missing
         (after a build, or a list read from a file); its flags are the list's."""
-        if (self.rout is not None and self.rout.shape[0] == self.nbr.shape[0]
-                and self.chist.shape[1] == self.hist.shape[1]):
+        if self.rout is not None and self.rout.shape[0] == self.nbr.shape[0]:
             return
         self.rstart, rslot = reverse_index(self.start, self.nbr,
                                            self.id_arrays(self.start.shape[0] - 1)[1])

@@ -384,6 +384,10 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
                 flag[ku] = 1
                 rflag[q] = 1
                 rrow[q] = row[ku]
+                # the columns no law of the bed keeps (a wider file's): zero in a row that an
+                # earlier call may have left (a kept contact's are zero already)
+                for a in range(nh, width):
+                    chist[np.uint64(row[ku]), a] = 0.0
                 if record_impacts:
                     ri = radius[ii]
                     record_impact(imp_buf, imp_count, c, t, KIND_BALL_BALL,
@@ -393,8 +397,6 @@ def _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, sl
             ru = np.uint64(row[ku])
             for a in range(nh):
                 chist[ru, a] = b[(T_H0 + a) * T + m]
-            for a in range(nh, width):  # columns no law of the bed keeps (a wider file's)
-                chist[ru, a] = 0.0
             fx = b[T_FX * T + m]
             fy = b[T_FY * T + m]
             fz = b[T_FZ * T + m]
