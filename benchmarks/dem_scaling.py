@@ -4,7 +4,7 @@ step's time goes.
     python benchmarks/dem_scaling.py [--sizes quick,tub47,long] [--threads 1,2] [--steps 2128]
         [--repeats 2] [--warmup 2128] [--pass-steps 200] [--json runs/dem_scaling.json]
 
-Sizes: `quick` is tub47-quick (4 200 balls in a 19.05 mm slice), `tub47` the reference case
+Sizes (also `tub47-periodic`, `long-periodic`, below): `quick` is tub47-quick (4 200 balls in a 19.05 mm slice), `tub47` the reference case
 (14 000 balls, 63.5 mm), `long` tub47 ten times longer (`--set tub.length=0.635 --set
 fill.count=140000`).  Each (size, threads) runs in its own process with NUMBA_NUM_THREADS set,
 from the case's settled bed, the bed a run vibrates: `quick` and `tub47` from the fill cache
@@ -12,6 +12,11 @@ from the case's settled bed, the bed a run vibrates: `quick` and `tub47` from th
 does), `long` from tub47's settled bed laid ten times end to end along the tub (its contact
 histories zeroed: the copies touch at the nine seams where tub47's end walls stood, so the bed
 there settles a little in the first steps; settling 140 000 balls would take an hour here).
+`tub47-periodic` and `long-periodic` are the same two tubs with periodic ends instead of end
+walls (`--set tub.periodic=true`), the long one tub47-periodic's settled bed laid ten times
+along it: a periodic bed laid end to end has no seams, and without end walls the two beds
+have the same physics a unit of length (the same contacts a ball over a cycle), so their
+step times compare the code's cost alone; the long tubs' growth is read from their own tub47.
 The tub vibrates for `--warmup` untimed steps (numba's cache load or compilation, the first
 neighbour lists), then `--repeats` times `--steps` steps are timed (wall and CPU), neighbour
 rebuilds included, in calls that leave the balls stored as the steps left them (in space order
@@ -50,7 +55,10 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 SIZES = {"quick": ("tub47-quick", []), "tub47": ("tub47", []),
-         "long": ("tub47", ["tub.length=0.635", "fill.count=140000"])}
+         "long": ("tub47", ["tub.length=0.635", "fill.count=140000"]),
+         "tub47-periodic": ("tub47", ["tub.periodic=true"]),
+         "long-periodic": ("tub47", ["tub.periodic=true", "tub.length=0.635",
+                                     "fill.count=140000"])}
 #: copies of tub47's settled bed along the long tub
 COPIES = 10
 #: a whole cycle of tub47's vibration (47 Hz, dt 1e-5 s): the bed leaves the floor and lands
@@ -81,9 +89,9 @@ def _bed(size: str, scenario, system):
 
     from vibroflow.dem import simulate as S
 
-    if size != "long":
+    if not size.startswith("long"):
         return _settled(*SIZES[size])
-    base = _settled("tub47", [])
+    base = _settled(*SIZES["tub47" + size[len("long"):]])
     if base.nl.ids is not None:  # tub47's 14 000 balls are stored by id (memory_order)
         raise SystemExit("tub47's settled bed is not stored by id")
     length = scenario.tub.length / COPIES
@@ -94,6 +102,13 @@ def _bed(size: str, scenario, system):
     rho = base.mass / (4.0 / 3.0 * np.pi * base.radius ** 3)
     return S.init_state(system, pos, tile(base.vel), tile(base.omg), tile(base.radius), tile(rho),
                         tile(base.mat))
+
+
+def _base_size(size: str, sizes: list[str]) -> str:
+    """The size a size's growth is read from: a long tub's own tub47 (periodic or not) when
+    the run has it, else the run's first size."""
+    own = "tub47" + size[len("long"):]
+    return own if size.startswith("long") and own in sizes else sizes[0]
 
 
 def worker(size: str, steps: int, repeats: int, warmup: int = WARMUP,
@@ -270,9 +285,10 @@ def main(argv=None) -> None:
                 print(f"{size:6s} {r['threads']:2d} threads: {r['speedup_over_one_thread']:.2f} x "
                       f"the one-thread throughput (efficiency "
                       f"{r['speedup_over_one_thread'] / r['threads']:.2f})")
-    smallest = {}
+    sizes = a.sizes.split(",")
     for r in rows:
-        base = smallest.setdefault(r["threads"], r)
+        base = next(b for b in rows if b["threads"] == r["threads"]
+                    and b["size"] == _base_size(r["size"], sizes))
         growth = r["median_us_per_step"] / base["median_us_per_step"]
         r["cost_growth_over_ball_growth"] = growth / (r["balls"] / base["balls"])
         r["cost_growth_over_contact_growth"] = growth / (r["mean_contacts"]
