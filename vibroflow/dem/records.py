@@ -82,10 +82,6 @@ class Work(NamedTuple):
     tile_idx: np.ndarray   # (nblock, step.N_TILE_IDX * step.TILE) int64 their entry, i, j
     queue: np.ndarray      # int64 the blocks' lanes, the lane count (vibroflow.dem.block_queue)
     row_next: np.ndarray   # (nblock,) int64 each block's next free contact row (contact_rows)
-    reach: np.ndarray      # (nblock, nblock) uint8 whether block a has entries into block b
-    owner_lo: np.ndarray   # (nblock,) int64 the lowest and highest block whose pairs each
-    owner_hi: np.ndarray   # (nblock,) int64   block's ball pass waits for (block_reach)
-    pending: np.ndarray    # (nblock,) uint8 the blocks whose pairs are made, ball pass not yet
 
 
 class Params(NamedTuple):

@@ -232,11 +232,7 @@ class _Buffers:
                          imp_flush=np.array([IMPACT_FLUSH, PT.IMPACT_FLUSH], np.int64),
                          tile=np.zeros((nblock, K.N_TILE * K.TILE)),
                          tile_idx=np.zeros((nblock, K.N_TILE_IDX * K.TILE), np.int64),
-                         queue=queue_array(nblock), row_next=np.zeros(nblock, np.int64),
-                         reach=np.zeros((nblock, nblock), np.uint8),
-                         owner_lo=np.zeros(nblock, np.int64),
-                         owner_hi=np.zeros(nblock, np.int64),
-                         pending=np.zeros(nblock, np.uint8))
+                         queue=queue_array(nblock), row_next=np.zeros(nblock, np.int64))
         #: the storage order of the last space sort (memory_order), taken up again by the
         #: next run_steps call
         self.order: np.ndarray | None = None

@@ -10,20 +10,17 @@ the caller (dem/simulate.py) rebuilds and calls again.  All loops over balls are
 The kernels take the records of vibroflow.dem.records and read their fields into local
 variables first.
 
-A step is one parallel loop over the blocks of balls, the sweep, and a short second one.  The
-sweep: each thread makes the pairs of its blocks in order, and after the pairs of block c the
-ball pass (gather, walls, the second half kick and, when another step of the call follows, that
-step's first half kick and drift: the same operations in the same order as a loop of their
-own) of every block of its run whose own pairs and whose owners' pairs (the blocks with list
-entries into it, vibroflow.dem.block_reach) the run has made, while the block's balls are
-still in the cache; the blocks left pending (a lane's first blocks, whose owners are the lane
-before's) have their ball pass in the second loop (`_pending_pass`).  Each loop is a wake-up
-and a barrier of numba's threads, 20 - 85 us on the 2-core machine: a loop of their own
+A step is two parallel loops over the blocks of balls: the pairs, then the ball pass (gather,
+walls, the second half kick and, when another step of the call follows, that step's first half
+kick and drift: the same operations in the same order as a loop of their own).  Each loop is a
+wake-up and a barrier of numba's threads, 20 - 85 us on the 2-core machine: a loop of their own
 for the first half kick and drift would cost more in its wake-up than in its work.  A step
 after which `advance` stops (rebuild, impacts, blow-up) has drifted its balls already;
 `_kick_block` saves each ball's position, velocity and spin before that in work.save, and
 `_undo_drift` gives them back, so that the caller sees the step's state bit for bit.  The wall
-pass skips a ball clear of the tub's walls (vibroflow.dem.wall_pass).
+pass skips a ball clear of the tub's walls (vibroflow.dem.wall_pass).  Measured on tub47-quick
+under load (docs/validation.md section 6): the step costs 0.67 x the CPU time of the three-loop
+step with every ball through the wall pass on one thread, 0.77 x on two.
 
 Force assembly whose numbers do not depend on the thread count (DEVELOPERS.md, "Threads"):
 
@@ -68,7 +65,6 @@ from .block_record import (D_BALL_I, D_BALL_J, D_BALL_OVERLAP, D_LOST, D_NAN,  #
                            D_WALL_I, D_WALL_OVERLAP, D_WALL_W, IMP_COLUMNS, N_DIAG, N_IMP_BUF,
                            ROW_BALL, keep_largest, record_impact)
 from .block_queue import open_lanes, take
-from .block_reach import block_reach
 from .contact_rows import pack, unpack
 from .contact import (add_force_torque, contact_law, contact_velocity,
                       normal_constants, put3, unit_normal)
@@ -598,19 +594,6 @@ def _pair_pass(t, dt_hist, periodic_length, record_impacts, balls, pairs, slots,
             c, s = take(queue, lane, lanes, s)
 
 
-@nb.njit(cache=True)
-def _ball_block(c, t, dt_hist, kick, drift, record_impacts, balls, pairs, slots, walls, params,
-                work, prt):
-    """Steps 2 to 4 for the balls of block c; with `drift`, also the next step's first half
-    kick and drift (_kick_block)."""
-    _gather_block(c, balls, pairs, slots)
-    ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work, prt)
-    if kick:
-        _kick_block(c, balls, pairs, params, work, drift)
-    else:
-        work.moved[c] = 0.0
-
-
 @nb.njit(cache=True, parallel=True)
 def _ball_pass(t, dt_hist, kick, drift, record_impacts, balls, pairs, slots, walls, params,
                work, prt):
@@ -622,61 +605,12 @@ def _ball_pass(t, dt_hist, kick, drift, record_impacts, balls, pairs, slots, wal
     for lane in nb.prange(lanes):
         c, s = take(queue, lane, lanes, 0)
         while c >= 0:
-            _ball_block(c, t, dt_hist, kick, drift, record_impacts, balls, pairs, slots, walls,
-                        params, work, prt)
-            c, s = take(queue, lane, lanes, s)
-
-
-@nb.njit(cache=True, parallel=True)
-def _sweep_pass(t, dt_hist, drift, periodic_length, record_impacts, balls, pairs, slots, walls,
-                params, work, prt):
-    """A whole step's pairs, and every block's ball pass that can follow them at once (module
-    docstring), in parallel: each thread takes its own lane of blocks first,
-    then the others' as it comes free (vibroflow.dem.block_queue).  The blocks a thread takes
-    in a row are its run; after the pairs of block c, the ball pass runs for each block of the
-    run whose pairs and whose owners' pairs (vibroflow.dem.block_reach) the run has made.  A
-    block left pending is `_pending_pass`'s."""
-    queue = work.queue
-    lanes = open_lanes(queue, work.diag.shape[0])
-    owner_lo, owner_hi, pending = work.owner_lo, work.owner_hi, work.pending
-    for lane in nb.prange(lanes):
-        c, s = take(queue, lane, lanes, 0)
-        run = c
-        first = c  # the run's first block that may still be pending
-        last = c - 1
-        while c >= 0:
-            if c != last + 1:
-                run = c
-                first = c
-            _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, slots,
-                        params, work)
-            pending[c] = 1
-            for b in range(first, c + 1):
-                if pending[b] and owner_lo[b] >= run and owner_hi[b] <= c:
-                    _ball_block(b, t, dt_hist, True, drift, record_impacts, balls, pairs,
-                                slots, walls, params, work, prt)
-                    pending[b] = 0
-            # a block done, or one with an owner before the run, is never scanned again
-            while first <= c and (pending[first] == 0 or owner_lo[first] < run):
-                first += 1
-            last = c
-            c, s = take(queue, lane, lanes, s)
-
-
-@nb.njit(cache=True, parallel=True)
-def _pending_pass(t, dt_hist, drift, record_impacts, balls, pairs, slots, walls, params, work,
-                  prt):
-    """The ball pass of the blocks `_sweep_pass` left pending, in parallel."""
-    queue = work.queue
-    lanes = open_lanes(queue, work.diag.shape[0])
-    pending = work.pending
-    for lane in nb.prange(lanes):
-        c, s = take(queue, lane, lanes, 0)
-        while c >= 0:
-            if pending[c]:
-                _ball_block(c, t, dt_hist, True, drift, record_impacts, balls, pairs, slots,
-                            walls, params, work, prt)
-                pending[c] = 0
+            _gather_block(c, balls, pairs, slots)
+            ball_walls(c, t, dt_hist, record_impacts, balls, pairs, walls, params, work, prt)
+            if kick:
+                _kick_block(c, balls, pairs, params, work, drift)
+            else:
+                work.moved[c] = 0.0
             c, s = take(queue, lane, lanes, s)
 
 
@@ -727,22 +661,15 @@ def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pair
     periodic_length = tub[TUB_LENGTH] if (tub[TUB_PRESENT] > 0.0 and
                                           tub[TUB_PERIODIC] > 0.0) else 0.0
     pack(pairs, slots, work)
-    block_reach(pairs, work)
     _kick_drift(balls, params)
     for k in range(nsteps):
         step = step0 + k + 1
         t = (step - time_origin_step) * dt
         _pose_array(motion, pose[6], pose[7], t, pose)
         drift = k + 1 < nsteps
-        _sweep_pass(t, dt, drift, periodic_length, record_impacts, balls, pairs, slots, walls,
-                    params, work, prt)
-        left = False
-        for c in range(nblock):
-            if work.pending[c]:
-                left = True
-        if left:
-            _pending_pass(t, dt, drift, record_impacts, balls, pairs, slots, walls, params,
-                          work, prt)
+        _pair_pass(t, dt, periodic_length, record_impacts, balls, pairs, slots, params, work)
+        _ball_pass(t, dt, True, drift, record_impacts, balls, pairs, slots, walls, params, work,
+                   prt)
         blown = False
         rebuild = False
         full = False
