@@ -4,31 +4,31 @@ step's time goes.
     python benchmarks/dem_scaling.py [--sizes quick,tub47,long] [--threads 1,2] [--steps 2128]
         [--repeats 2] [--warmup 2128] [--pass-steps 200] [--json runs/dem_scaling.json]
 
-Sizes (also `tub47-periodic`, `long-periodic`, below): `quick` is tub47-quick (4 200 balls in a 19.05 mm slice), `tub47` the reference case
-(14 000 balls, 63.5 mm), `long` tub47 ten times longer (`--set tub.length=0.635 --set
-fill.count=140000`).  Each (size, threads) runs in its own process with NUMBA_NUM_THREADS set,
-from the case's settled bed, the bed a run vibrates: `quick` and `tub47` from the fill cache
-(vibroflow.dem.fill.cache_dir; settled and cached there when absent, as `vibroflow dem CASE`
-does), `long` from tub47's settled bed laid ten times end to end along the tub (its contact
-histories zeroed: the copies touch at the nine seams where tub47's end walls stood, so the bed
-there settles a little in the first steps; settling 140 000 balls would take an hour here).
-`tub47-periodic` and `long-periodic` are the same two tubs with periodic ends instead of end
-walls (`--set tub.periodic=true`), the long one tub47-periodic's settled bed laid ten times
-along it: a periodic bed laid end to end has no seams, and without end walls the two beds
-have the same physics a unit of length (the same contacts a ball over a cycle), so their
-step times compare the code's cost alone; the long tubs' growth is read from their own tub47.
-The tub vibrates for `--warmup` untimed steps (numba's cache load or compilation, the first
-neighbour lists), then `--repeats` times `--steps` steps are timed (wall and CPU), neighbour
-rebuilds included, in calls that leave the balls stored as the steps left them (in space order
-from MEMORY_ORDER_FROM balls on), as `vibroflow dem` does between its rows.  Then the passes of
-one step are timed apart, each `--pass-steps` times from the same saved state, each its own
-parallel loop over the blocks: the pairs (step._pair_block, a step's first loop), the gather
-(_gather_block), the walls (wall_pass.ball_walls), the second half kick with the next step's
-first half kick and drift (step._kick_block, as the ball pass makes them), and the step's
-second loop whole less that drift (step._ball_pass: gather, walls, second half kick; a pass
-that drifted the balls 2 000 times under frozen forces would fling them against the walls);
-and one neighbour-list rebuild (simulate.rebuild: cell binning, list, history transfer, reverse
-order).
+Sizes (and `tub47-periodic`, `long-periodic`, below): `quick` is tub47-quick (4 200 balls in a
+19.05 mm slice), `tub47` the reference case (14 000 balls, 63.5 mm), `long` tub47 ten times
+longer (`--set tub.length=0.635 --set fill.count=140000`).  Each (size, threads) runs in its own
+process with NUMBA_NUM_THREADS set, from the case's settled bed, the bed a run vibrates: `quick`
+and `tub47` from the fill cache (vibroflow.dem.fill.cache_dir; settled and cached there when
+absent, as `vibroflow dem CASE` does), `long` from tub47's settled bed laid ten times end to end
+along the tub (its contact histories zeroed: the copies touch at the nine seams where tub47's
+end walls stood, so the bed there settles a little in the first steps; settling 140 000 balls
+would take an hour here). `tub47-periodic` and `long-periodic` are the same two tubs with
+periodic ends instead of end walls (`--set tub.periodic=true`), the long one tub47-periodic's
+settled bed laid ten times along it: a periodic bed laid end to end has no seams, and without
+end walls the two beds have the same physics a unit of length (the same contacts a ball over a
+cycle), so their step times compare the code's cost alone; the long tubs' growth is read from
+their own tub47. The tub vibrates for `--warmup` untimed steps (numba's cache load or
+compilation, the first neighbour lists), then `--repeats` times `--steps` steps are timed (wall
+and CPU), neighbour rebuilds included, in calls that leave the balls stored as the steps left
+them (in space order from MEMORY_ORDER_FROM balls on), as `vibroflow dem` does between its rows.
+Then the passes of one step are timed apart, each `--pass-steps` times from the same saved
+state, each its own parallel loop over the blocks: the pairs (step._pair_block, a step's first
+loop), the gather (_gather_block), the walls (wall_pass.ball_walls), the second half kick with
+the next step's first half kick and drift (step._kick_block, as the ball pass makes them), and
+the step's second loop whole less that drift (step._ball_pass: gather, walls, second half kick;
+a pass that drifted the balls 2 000 times under frozen forces would fling them against the
+walls); and one neighbour-list rebuild (simulate.rebuild: cell binning, list, history transfer,
+reverse order).
 
 Printed per process: balls, median wall and CPU microseconds a step, nanoseconds per ball-step,
 the mean ball-ball contact count over the timed steps (counted CONTACT_SAMPLES times a repeat)
@@ -37,8 +37,9 @@ with the nanoseconds per contact-step, the passes' shares, the process's peak re
 positions, velocities and spins (by id) after the warm-up and the repeats; at the end, per
 size, whether that state is the same bits on every thread count run (the DEM's promise: it
 must be) and each thread count's throughput over one thread's, and the time per step against
-the ball count and against the mean contact count relative to the smallest size (1.0: the cost
-grows as the count).  On a shared machine compare the rows of one run, and repeat under load.
+the ball count and against the mean contact count relative to the run's first size, or for a
+long tub to its own tub47 (1.0: the cost grows as the count).  On a shared machine compare the
+rows of one run, and repeat under load.
 """
 from __future__ import annotations
 
@@ -235,6 +236,9 @@ def main(argv=None) -> None:
         order = {"auto": None, "on": True, "off": False}[a.memory_order]
         print(json.dumps(worker(a.worker, a.steps, a.repeats, a.warmup, a.pass_steps, order)))
         return
+    unknown = [s for s in a.sizes.split(",") if s not in SIZES]
+    if unknown:
+        p.exit(2, f"--sizes {unknown[0]!r}: not one of {', '.join(SIZES)}\n")
     rows = []
     for size in a.sizes.split(","):
         for threads in (int(x) for x in a.threads.split(",")):
