@@ -60,7 +60,9 @@ SIZES = {"quick": ("tub47-quick", []), "tub47": ("tub47", []),
          "tub47-periodic": ("tub47", ["tub.periodic=true"]),
          "long-periodic": ("tub47", ["tub.periodic=true", "tub.length=0.635",
                                      "fill.count=140000"])}
-#: copies of tub47's settled bed along the long tub
+#: the long tubs, each laid from the settled bed of the size named here
+LAID_FROM = {"long": "tub47", "long-periodic": "tub47-periodic"}
+#: copies of that settled bed along the long tub
 COPIES = 10
 #: a whole cycle of tub47's vibration (47 Hz, dt 1e-5 s): the bed leaves the floor and lands
 #: within a cycle, and its contact count changes tenfold, so a step's cost is a cycle's mean
@@ -90,11 +92,11 @@ def _bed(size: str, scenario, system):
 
     from vibroflow.dem import simulate as S
 
-    if not size.startswith("long"):
+    if size not in LAID_FROM:
         return _settled(*SIZES[size])
-    base = _settled(*SIZES["tub47" + size[len("long"):]])
+    base = _settled(*SIZES[LAID_FROM[size]])
     if base.nl.ids is not None:  # tub47's 14 000 balls are stored by id (memory_order)
-        raise SystemExit("tub47's settled bed is not stored by id")
+        raise SystemExit(f"{LAID_FROM[size]}'s settled bed is not stored by id")
     length = scenario.tub.length / COPIES
     shift = np.zeros((COPIES, 1, 3))
     shift[:, 0, 1] = np.arange(COPIES) * length
@@ -106,10 +108,10 @@ def _bed(size: str, scenario, system):
 
 
 def _base_size(size: str, sizes: list[str]) -> str:
-    """The size a size's growth is read from: a long tub's own tub47 (periodic or not) when
-    the run has it, else the run's first size."""
-    own = "tub47" + size[len("long"):]
-    return own if size.startswith("long") and own in sizes else sizes[0]
+    """The size a size's growth is read from: the size a long tub is laid from when the run
+    has it, else the run's first size."""
+    own = LAID_FROM.get(size)
+    return own if own in sizes else sizes[0]
 
 
 def worker(size: str, steps: int, repeats: int, warmup: int = WARMUP,
@@ -236,11 +238,12 @@ def main(argv=None) -> None:
         order = {"auto": None, "on": True, "off": False}[a.memory_order]
         print(json.dumps(worker(a.worker, a.steps, a.repeats, a.warmup, a.pass_steps, order)))
         return
-    unknown = [s for s in a.sizes.split(",") if s not in SIZES]
+    sizes = a.sizes.split(",")
+    unknown = [s for s in sizes if s not in SIZES]
     if unknown:
         p.exit(2, f"--sizes {unknown[0]!r}: not one of {', '.join(SIZES)}\n")
     rows = []
-    for size in a.sizes.split(","):
+    for size in sizes:
         for threads in (int(x) for x in a.threads.split(",")):
             env = dict(os.environ, NUMBA_NUM_THREADS=str(threads))
             load0 = os.getloadavg()[0]
@@ -275,7 +278,7 @@ def main(argv=None) -> None:
             rows.append(r)
             a.json.parent.mkdir(parents=True, exist_ok=True)
             a.json.write_text(json.dumps(rows, indent=1))
-    for size in a.sizes.split(","):
+    for size in sizes:
         mine = [r for r in rows if r["size"] == size]
         same = len({r["state_sha256"] for r in mine}) == 1
         print(f"{size:6s} state on {', '.join(str(r['threads']) for r in mine)} thread(s): "
@@ -289,7 +292,6 @@ def main(argv=None) -> None:
                 print(f"{size:6s} {r['threads']:2d} threads: {r['speedup_over_one_thread']:.2f} x "
                       f"the one-thread throughput (efficiency "
                       f"{r['speedup_over_one_thread'] / r['threads']:.2f})")
-    sizes = a.sizes.split(",")
     for r in rows:
         base = next(b for b in rows if b["threads"] == r["threads"]
                     and b["size"] == _base_size(r["size"], sizes))
