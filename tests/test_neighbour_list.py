@@ -99,3 +99,48 @@ def test_a_state_file_with_64_bit_indices_reads_as_the_32_bit_list(tmp_path):
     back, _ = load_state_file(path)
     assert back.nl.nbr.dtype == INDEX
     np.testing.assert_array_equal(back.nl.nbr, state.nl.nbr)
+
+
+def test_the_reverse_order_lists_each_balls_entries_by_first_ball():
+    """The reverse order (NeighbourList.index_pairs) against its definition made by brute
+    force: for each ball j, the entries (i, j) by ascending i, each entry's place in that
+    order (rpos), the contact flags in that order (rflag), and no contact row yet (row -1)."""
+    rng = np.random.default_rng(5)
+    n = 2000
+    pos = rng.uniform(0.0, 1.0, (n, 3)) * np.array([0.12, 0.05, 0.08])
+    radius = rng.uniform(0.002, 0.0035, n)
+    nl = NeighbourList(0.3 * 0.00635)
+    nl.build(pos.copy(), radius)
+    nl.flag[:] = rng.integers(0, 2, nl.flag.shape[0], dtype=np.uint8)
+    nl.rout = None
+    nl.index_pairs()
+    first = np.repeat(np.arange(n), np.diff(nl.start))
+    want = sorted(range(nl.nbr.shape[0]), key=lambda k: (int(nl.nbr[k]), int(first[k]), k))
+    place = np.empty(len(want), np.int64)
+    place[want] = np.arange(len(want))
+    np.testing.assert_array_equal(nl.rpos, place)
+    np.testing.assert_array_equal(nl.rflag[nl.rpos], nl.flag)
+    np.testing.assert_array_equal(nl.rstart, np.concatenate(
+        [[0], np.cumsum(np.bincount(nl.nbr, minlength=n))]))
+    assert (nl.row == -1).all()
+
+
+@pytest.mark.parametrize("n", [1, 5, 700])
+def test_the_bounding_box_is_numpys_least_and_largest_coordinate(n):
+    """The rebuild's box (neighbours.bounding_box, fixed chunks on the threads) is exactly
+    numpy's min and max along each axis, on one thread and on all, for fewer balls than chunks
+    too."""
+    import numba
+
+    from vibroflow.dem.neighbours import bounding_box
+
+    pos = np.random.default_rng(n).normal(0.0, 0.1, (n, 3))
+    threads = numba.get_num_threads()
+    try:
+        for t in (1, threads):
+            numba.set_num_threads(t)
+            lo, hi = bounding_box(pos)
+            np.testing.assert_array_equal(lo, pos.min(axis=0))
+            np.testing.assert_array_equal(hi, pos.max(axis=0))
+    finally:
+        numba.set_num_threads(threads)

@@ -25,6 +25,7 @@ import numba as nb
 import numpy as np
 
 from . import step as K
+from .neighbours import bounding_box
 
 #: ball count from which run_steps stores the balls in space order, a matter of speed alone
 #: (the output is the same either way): the sort every 8th rebuild took 1.04 x the unsorted CPU
@@ -62,7 +63,7 @@ def space_order(pos: np.ndarray, radius: np.ndarray, skin: float,
     """The stored places in Morton order of their neighbour cells (2 r_max + skin, m), each
     cell's balls by id: place r of the new storage holds the ball of place order[r]."""
     cell = 2.0 * float(radius.max()) + skin
-    c = np.floor((pos - pos.min(axis=0)) / cell).astype(np.int64)
+    c = np.floor((pos - bounding_box(pos)[0]) / cell).astype(np.int64)
     np.clip(c, 0, (1 << _BITS) - 1, out=c)
     key = _spread(c[:, 0]) | (_spread(c[:, 1]) << np.uint64(1)) | (_spread(c[:, 2])
                                                                    << np.uint64(2))
