@@ -10,7 +10,9 @@ the balls stored by id, bit for bit:
   the middle of the calls and at steps where the list is rebuilt);
 - a run saved to a state file while its balls are in space order, read back and stepped on,
   ends where the uninterrupted one does;
-- the ball-part impacts name the ids of the balls that hit the part.
+- the ball-part impacts name the ids of the balls that hit the part;
+- the slab order keeps every pair of a long bed within the three slabs about its first ball in
+  memory, the locality it is chosen for.
 """
 from __future__ import annotations
 
@@ -196,3 +198,32 @@ def test_a_run_sorted_from_the_first_ball_writes_the_rows_of_the_unsorted_run(tm
         for name in fa["impacts"]:
             assert fa["impacts"][name].shape[0] > 0
             assert np.array_equal(fa["impacts"][name][()], fb["impacts"][name][()]), name
+
+
+def test_the_slab_order_keeps_every_pair_within_three_slabs_in_memory():
+    """Stored in slab order (memory_order.space_order), a long bed's neighbour pairs, which are
+    at most one cell apart along the slab axis (a cell is the list's cut-off), lie fewer places
+    apart in memory than the balls of three slabs: the working set of the pair pass.  The
+    random ids stored by id spread them over the whole bed."""
+    from vibroflow.dem.neighbours import NeighbourList
+
+    rng = np.random.default_rng(11)
+    n, r, skin = 6000, 0.003, 0.002
+    pos = rng.uniform(0.0, 1.0, (n, 3)) * np.array([0.06, 0.6, 0.04])
+    radius = np.full(n, r)
+    ids = rng.permutation(n)
+    order = M.space_order(pos, radius, skin, ids)
+    cell = 2.0 * r + skin
+    slab = np.floor((pos[order, 1] - pos[:, 1].min()) / cell).astype(np.int64)
+    assert (np.diff(slab) >= 0).all()  # the longest axis, y, is the slowest
+    per_slab = np.bincount(slab)
+    three = max(per_slab[k:k + 3].sum() for k in range(per_slab.shape[0]))
+    nl = NeighbourList(skin)
+    nl.build(pos[order].copy(), radius)
+    first = np.repeat(np.arange(n), np.diff(nl.start))
+    apart = np.abs(first - nl.nbr).max()
+    assert 0 < apart < three < n / 10
+    unsorted = NeighbourList(skin)
+    unsorted.build(pos[ids].copy(), radius)
+    first = np.repeat(np.arange(n), np.diff(unsorted.start))
+    assert np.abs(first - unsorted.nbr).max() > n / 2

@@ -3,7 +3,7 @@
 A bed that has mixed holds neighbours far apart in memory: every pair's read of its second
 ball, and each ball's gather of its reverse slots, misses the cache.  At neighbour-list
 rebuilds (every SORT_EVERY-th) `run_steps` (vibroflow.dem.simulate) stores the balls anew in
-the Morton (Z-order) order of their neighbour cells, each cell's balls by id; it keeps the id
+slab order (`space_order`), each cell's balls by id; it keeps the id
 of each stored ball in the list (`NeighbourList.ids`) and stores them back by id before it
 returns, so that everything outside a `run_steps` call (dem.h5, checkpoints, sampling,
 ParaView files, blow-up messages) sees the balls by id, as always.
@@ -15,6 +15,13 @@ impact rows come in the order and the flushes of the balls stored by id
 (vibroflow.dem.impact_order); the part loads are summed by block of the balls by id, each
 block's balls by id (vibroflow.dem.parts.sum_loads).  So dem.h5 and parts.nc are the same
 bytes of data with the sort and without it, on any thread count.
+
+Slab order: the neighbour cells slab by slab along the bed's longest axis, each slab's cells
+row by row, so that a ball's partners lie within the three slabs about it in memory (on the
+140 000-ball tub about 5 000 balls, 160 kB of positions and radii, which the core's L2 holds
+through the pair pass); a Morton (Z-order) curve sends the partners across its large blocks a
+fraction of the time, and made the long tub's step 1.03 - 1.05 times as long (docs/decisions/
+threads.md, "Slab order").
 
 MEMORY_ORDER_FROM and SORT_EVERY are chosen by benchmarks/dem_memory_order.py on the 2-core
 development machine (docs/decisions/threads.md).
@@ -44,29 +51,26 @@ PER_BALL = ("pos", "vel", "omg", "force", "torque", "radius", "mass", "mat", "re
             "wall_force", "wall_arc", "part_hist", "part_key")
 #: the diagnostics' columns that hold a stored ball's place (vibroflow.dem.step)
 BALL_COLUMNS = (K.D_BALL_I, K.D_BALL_J, K.D_WALL_I, K.D_NAN, K.D_LOST)
-_BITS = 21  # Morton key: 21 bits a cell coordinate, 63 bits in all
-
-
-def _spread(v: np.ndarray) -> np.ndarray:
-    """The bits of v (< 2^21) two zero bits apart (the Morton interleave)."""
-    v = v.astype(np.uint64) & np.uint64(0x1FFFFF)
-    v = (v | (v << np.uint64(32))) & np.uint64(0x1F00000000FFFF)
-    v = (v | (v << np.uint64(16))) & np.uint64(0x1F0000FF0000FF)
-    v = (v | (v << np.uint64(8))) & np.uint64(0x100F00F00F00F00F)
-    v = (v | (v << np.uint64(4))) & np.uint64(0x10C30C30C30C30C3)
-    v = (v | (v << np.uint64(2))) & np.uint64(0x1249249249249249)
-    return v
+#: bits of a cell coordinate in the sort key (three in 63 bits)
+_BITS = 21
 
 
 def space_order(pos: np.ndarray, radius: np.ndarray, skin: float,
                 ids: np.ndarray) -> np.ndarray:
-    """The stored places in Morton order of their neighbour cells (2 r_max + skin, m), each
-    cell's balls by id: place r of the new storage holds the ball of place order[r]."""
+    """The stored places in slab order (module docstring) of the neighbour cells (2 r_max +
+    skin, m): by cell along the bed's longest axis (the most cells; the first of z, x, y on a
+    tie), then along the first of the other two in the order z, x, y, then the last, each
+    cell's balls by id.  Place r of the new storage holds the ball of place order[r]."""
     cell = 2.0 * float(radius.max()) + skin
     c = np.floor((pos - bounding_box(pos)[0]) / cell).astype(np.int64)
     np.clip(c, 0, (1 << _BITS) - 1, out=c)
-    key = _spread(c[:, 0]) | (_spread(c[:, 1]) << np.uint64(1)) | (_spread(c[:, 2])
-                                                                   << np.uint64(2))
+    c = c.astype(np.uint64)
+    extent = c.max(axis=0)
+    axes = sorted((2, 0, 1), key=lambda a: -int(extent[a]))
+    slab = axes[0]
+    row, col = [a for a in (2, 0, 1) if a != slab]
+    b = np.uint64(_BITS)
+    key = (c[:, slab] << (b + b)) | (c[:, row] << b) | c[:, col]
     return np.lexsort((ids, key)).astype(np.int64)
 
 
