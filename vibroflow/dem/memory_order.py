@@ -19,9 +19,9 @@ bytes of data with the sort and without it, on any thread count.
 Slab order: the neighbour cells slab by slab along the bed's longest axis, each slab's cells
 row by row, so that a ball's partners lie within the three slabs about it in memory (on the
 140 000-ball tub about 5 000 balls, 160 kB of positions and radii, which the core's L2 holds
-through the pair pass); a Morton (Z-order) curve sends the partners across its large blocks a
-fraction of the time, and made the long tub's step 1.03 - 1.05 times as long (docs/decisions/
-threads.md, "Slab order").
+through the pair pass); a Morton (Z-order) curve of the cells sends the partners across its
+large blocks a fraction of the time, and its step on that tub is 1.03 - 1.05 times as long
+(docs/decisions/threads.md, "Slab order").
 
 MEMORY_ORDER_FROM and SORT_EVERY are chosen by benchmarks/dem_memory_order.py on the 2-core
 development machine (docs/decisions/threads.md).

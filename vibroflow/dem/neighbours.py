@@ -271,7 +271,7 @@ def reverse_arrays(rslot, flag):
             k = rslot[r]
             rpos[k] = r
             rflag[r] = flag[k]
-            row[r] = -1
+            row[k] = -1
     return rpos, rflag, row
 
 
