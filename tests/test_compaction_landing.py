@@ -224,6 +224,7 @@ def _loose_landing():
     return mass, 0.5 * mass * speed ** 2, _landing_steps(system, state, 200)
 
 
+@pytest.mark.slow
 def test_a_loose_block_landing_feeds_the_exchange_no_stress_carries():
     mass, impact, r = _loose_landing()
     assert np.all(r[:, 3] == 0.0)                # elastic: no plastic work
