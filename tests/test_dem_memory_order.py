@@ -227,3 +227,24 @@ def test_the_slab_order_keeps_every_pair_within_three_slabs_in_memory():
     unsorted.build(pos[ids].copy(), radius)
     first = np.repeat(np.arange(n), np.diff(unsorted.start))
     assert np.abs(first - unsorted.nbr).max() > n / 2
+
+
+@pytest.mark.parametrize("shape", [(0.06, 0.6, 0.04), (0.5, 0.05, 0.05), (0.05, 0.05, 0.5),
+                                   (0.1, 0.1, 0.1), (0.2, 0.2, 0.0)])
+def test_the_slab_order_is_its_definition_from_the_balls_own_cells(shape):
+    """space_order takes the cells' extent from the bounding box; its order is the definition:
+    the balls' cells, the axis with the most of them (z, x, y on a tie) slowest, then the first
+    of the other two in the order z, x, y, then the last, each cell's balls by id, with the
+    extent read off the balls' own cells (a flat bed, all of its balls at one height, too)."""
+    rng = np.random.default_rng(int(1000 * sum(shape)))
+    n, r, skin = 3000, 0.003, 0.002
+    pos = rng.uniform(0.0, 1.0, (n, 3)) * np.array(shape) + 0.1
+    radius = rng.uniform(0.5 * r, r, n)
+    ids = rng.permutation(n)
+    cell = 2.0 * radius.max() + skin
+    c = np.floor((pos - pos.min(axis=0)) / cell).astype(np.int64)
+    extent = c.max(axis=0)
+    order_axes = sorted((2, 0, 1), key=lambda a: -extent[a])
+    rest = [a for a in (2, 0, 1) if a != order_axes[0]]
+    expected = np.lexsort((ids, c[:, rest[1]], c[:, rest[0]], c[:, order_axes[0]]))
+    assert np.array_equal(M.space_order(pos, radius, skin, ids), expected)

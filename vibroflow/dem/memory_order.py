@@ -62,10 +62,15 @@ def space_order(pos: np.ndarray, radius: np.ndarray, skin: float,
     tie), then along the first of the other two in the order z, x, y, then the last, each
     cell's balls by id.  Place r of the new storage holds the ball of place order[r]."""
     cell = 2.0 * float(radius.max()) + skin
-    c = np.floor((pos - bounding_box(pos)[0]) / cell).astype(np.int64)
-    np.clip(c, 0, (1 << _BITS) - 1, out=c)
+    lo, hi = bounding_box(pos)
+    top = (1 << _BITS) - 1
+    c = np.floor((pos - lo) / cell).astype(np.int64)
+    np.clip(c, 0, top, out=c)
     c = c.astype(np.uint64)
-    extent = c.max(axis=0)
+    # the largest cell index along each axis is the box's top corner's: a difference, a
+    # quotient by a positive cell and floor are each monotone in rounding, so no second
+    # reduction over the balls is needed
+    extent = np.minimum(np.floor((hi - lo) / cell).astype(np.int64), top)
     axes = sorted((2, 0, 1), key=lambda a: -int(extent[a]))
     slab = axes[0]
     row, col = [a for a in (2, 0, 1) if a != slab]
