@@ -10,9 +10,10 @@ thermal temperature and the measured dissipation per cell and phase.  CALIBRATIO
 run's calibration ([kinetic]: e, phi_rcp, g0's form; [rheology]: the calibrated mu(I)).
 
 Printed: the dense cells' spread (percentiles of mu, I, T, Theta, r), each abscissa's best
-curve and rms log residual (and the calibrated mu(I)'s at that abscissa), and the binned
-medians of mu with their batch-means errors and quartiles, and the scatter within each phase bin
-of the cycle.
+curve and rms log residual (and the calibrated mu(I)'s at that abscissa), Pailha & Pouliquen's
+dilatancy and Zhang & Kamrin's fluidity fitted to the same cells, the best mu(I)'s residual by
+height, and the binned medians of mu with their batch-means errors and quartiles, and the
+scatter within each phase bin of the cycle.
 """
 from __future__ import annotations
 
@@ -28,6 +29,7 @@ from vibroflow.calibration import mu_temperature as mt
 from vibroflow.calibration.run_fields import read_fields
 from vibroflow.calibration.thermal_balance import thermal_balance_run
 from vibroflow.continuum.kinetic_theory import G0_FORMS, KineticParameters
+from vibroflow.continuum.rheology import mu_of_I
 from vibroflow.errors import InputError
 from vibroflow.scenario import load_scenario
 
@@ -89,8 +91,50 @@ def main(argv=None) -> int:
               f"{1 - f['rms_log_residual'] / base:.1%} | {excess(f['rms_log_residual']):.3f} "
               f"({1 - excess(f['rms_log_residual']) / excess(base):.1%}) | "
               + (f"{cal_r:.3f}" if cal_r is not None else "-") + " |")
+    for key, label in (("dilatancy", "(d) F(I) + tan psi (Pailha & Pouliquen)"),
+                       ("dilatancy_b", "(d') F(I) + b tan psi, b fitted")):
+        if key in tab:
+            f = tab[key]
+            print(f"| {label} | {f['points']} | mu_s {f['mu_s']:.3f}, mu_2 {f['mu_2']:.3f}, "
+                  f"I_0 {f['x_0']:.3g}, b {f['b']:.3f} (at the floor {mt.MU_FLOOR:g}: "
+                  f"{f['floored']:.1%}) | {f['rms_log_residual']:.3f} | "
+                  f"{1 - f['rms_log_residual'] / base:.1%} | {excess(f['rms_log_residual']):.3f} "
+                  f"({1 - excess(f['rms_log_residual']) / excess(base):.1%}) | - |")
+    for key, label in (("fluidity", "(e) x / F(phi) (Zhang & Kamrin)"),
+                       ("fluidity_a", "(e') x^a / F(phi), a fitted")):
+        f = tab[key]
+        print(f"| {label} | {f['points']} | a {f['a']:.3f}, ln F = "
+              + " + ".join(f"{c:.3g} phi^{k}" for k, c in enumerate(f["c"]))
+              + f" | {f['rms_log_residual']:.3f} | {1 - f['rms_log_residual'] / base:.1%} | "
+              f"{excess(f['rms_log_residual']):.3f} "
+              f"({1 - excess(f['rms_log_residual']) / excess(base):.1%}) | - |")
+    q = np.percentile(pts["tan_psi"][np.isfinite(pts["tan_psi"])], [5, 25, 50, 75, 95]) \
+        if np.isfinite(pts["tan_psi"]).any() else []
+    print("  tan psi = tr D / gamma_dot: 5/25/50/75/95 % " + " / ".join(f"{v:.3g}" for v in q))
+    print("  fluidity number gamma_dot d / sqrt(T): 5/25/50/75/95 % " + " / ".join(
+        f"{v:.3g}" for v in np.percentile(pts["fluidity_number"], [5, 25, 50, 75, 95])))
+    fi = tab["I"]
+    res = np.log(pts["mu"] / mu_of_I(pts["I"], fi["mu_s"], fi["mu_2"], fi["x_0"]))
+    if np.isfinite(pts["z_m"]).any():
+        z = pts["z_m"]
+        edges = np.arange(np.floor(z.min() / 0.04) * 0.04, z.max() + 0.04, 0.04)
+        print("\nthe best mu(I)'s log residual by height band (z, m, tub axes): cells, median "
+              "(+- its batch-means error as a log), quartiles")
+        for lo, hi in zip(edges[:-1], edges[1:]):
+            s = (z >= lo) & (z < hi)
+            if s.sum():
+                err = mt.MEDIAN_ERROR * np.sqrt(np.nansum((pts["mu_stderr"][s]
+                                                           / pts["mu"][s]) ** 2)) / s.sum()
+                q1, med, q3 = np.percentile(res[s], [25, 50, 75])
+                print(f"  {lo:.2f} - {hi:.2f}: {int(s.sum())}, {med:+.3f} +- {err:.3f} "
+                      f"[{q1:+.3f}, {q3:+.3f}]")
     print("\nby phase bin (each abscissa's curve fitted within the bin): cells, median mu, "
-          "rms log about the median, about the best mu(I), about the best mu(r I)")
+          "rms log about the median, about the best mu(I), about the best mu(r I); the best "
+          "mu(I)'s (over all bins) median log residual in the lowest and the highest third of "
+          "the cells' heights, and its correlation with height")
+    z = pts["z_m"]
+    has_z = bool(np.isfinite(z).all())
+    z1, z2 = np.percentile(z, [100 / 3, 200 / 3]) if has_z else (np.nan, np.nan)
     pooled = np.zeros(3)
     for k in np.unique(pts["phase"]):
         s = pts["phase"] == k
@@ -98,9 +142,11 @@ def main(argv=None) -> int:
         base = np.sqrt(np.mean(np.log(mu / np.median(mu)) ** 2))
         fi, fr = mt.fit_collapse(pts["I"][s], mu), mt.fit_collapse(pts["rI"][s], mu)
         pooled += s.sum() * np.array([base, fi["rms_log_residual"], fr["rms_log_residual"]]) ** 2
+        by_z = (f"; {np.median(res[s & (z < z1)]):+.3f} / {np.median(res[s & (z >= z2)]):+.3f}, "
+                f"{np.corrcoef(res[s], z[s])[0, 1]:+.2f}") if has_z else ""
         print(f"  phase {k}/{int(ph.phase.size)} of the cycle: {int(s.sum())}, "
               f"{np.median(mu):.3f}, "
-              f"{base:.3f}, {fi['rms_log_residual']:.3f}, {fr['rms_log_residual']:.3f}")
+              f"{base:.3f}, {fi['rms_log_residual']:.3f}, {fr['rms_log_residual']:.3f}" + by_z)
     b, i, r = np.sqrt(pooled / pts["mu"].size)
     print(f"  pooled over the bins: about the bins' medians {b:.3f}, about a mu(I) per bin "
           f"{i:.3f}, about a mu(r I) per bin {r:.3f}")

@@ -93,3 +93,59 @@ def test_cell_selection_and_binned_errors():
         mt.fit_collapse(I[:3], mu[:3])
     with pytest.raises(InputError, match="dissipation: 3 values"):
         mt.cell_points(ds, np.full((1, 1, 4), 1e-3), PRM, np.ones(3))
+
+
+def test_pailha_pouliquen_dilatancy_comes_back_with_b_one():
+    """Cells from mu = F(I) + tan psi (a dilating cell shears at more than mu(I), a compacting
+    one at less): b = 1 fits them exactly and the fitted b is 1; cells from mu(I) alone, their
+    tan psi unrelated, fit b = 0, and the law with b = 1 misses them."""
+    I, p, phi, gd = _cells(seed=6)
+    tp = np.random.default_rng(7).uniform(-0.15, 0.15, I.size)
+    mu = mu_of_I(I, LAW["mu_s"], LAW["mu_2"], LAW["I_0"]) + tp
+    fixed = mt.fit_dilatancy(I, mu, tp, b=1.0)
+    assert fixed["rms_log_residual"] < 1e-6
+    assert fixed["mu_s"] == pytest.approx(LAW["mu_s"], rel=1e-5)
+    assert fixed["floored"] == 0.0
+    assert mt.fit_dilatancy(I, mu, tp)["b"] == pytest.approx(1.0, abs=1e-5)
+    plain = mu_of_I(I, LAW["mu_s"], LAW["mu_2"], LAW["I_0"])
+    assert mt.fit_dilatancy(I, plain, tp)["b"] == pytest.approx(0.0, abs=1e-5)
+    assert mt.fit_dilatancy(I, plain, tp, b=1.0)["rms_log_residual"] > 0.1
+
+
+def test_a_law_that_makes_the_friction_negative_counts_it_at_the_floor():
+    """tan psi = -1 with F(I) about 0.3 predicts a negative friction: the residual is
+    ln(mu / MU_FLOOR), by hand."""
+    I = np.full(5, 0.01)
+    mu = np.full(5, 0.3)
+    fit = mt.fit_dilatancy(I, mu, np.full(5, -1.0), b=1.0)
+    assert fit["floored"] == 1.0
+    assert fit["rms_log_residual"] == pytest.approx(np.log(0.3 / mt.MU_FLOOR), rel=1e-9)
+
+
+def test_zhang_kamrin_fluidity_comes_back():
+    """Cells whose fluidity gamma_dot / mu is (sqrt(T) / d) F(phi), ln F quadratic in phi, give
+    a = 1 and F back exactly; built through cell_points, whose fluidity number is gamma_dot d /
+    sqrt(T) and whose tan psi is the velocity gradient's trace over the shear rate."""
+    I, p, phi, gd = _cells(seed=8)
+    T = np.exp(np.random.default_rng(9).uniform(np.log(1e-4), np.log(1e-2), I.size))
+    c = (2.0, -3.0, 1.5)
+    F = np.exp(c[0] + c[1] * phi + c[2] * phi ** 2)
+    mu = gd * PRM.diameter_m / np.sqrt(T) / F
+    ds = _dataset(mu, I, p, phi, gd)
+    L = np.zeros((1, 1, I.size, 3, 3))
+    L[..., 0, 0], L[..., 2, 2], L[..., 0, 2] = 0.3 * gd, -0.1 * gd, gd
+    ds["velocity_gradient"] = (("phase", "x", "z", "i", "j"), L)
+    ds = ds.assign_coords(z=np.arange(I.size) * 0.005)
+    pts = mt.cell_points(ds, T[None, None, :], PRM)
+    assert pts["fluidity_number"] == pytest.approx(gd * PRM.diameter_m / np.sqrt(T), rel=1e-12)
+    assert pts["tan_psi"] == pytest.approx(np.full(I.size, 0.2), rel=1e-12)
+    assert pts["z_m"] == pytest.approx(np.arange(I.size) * 0.005)
+    assert np.isnan(pts["x_m"]).all()
+    fit = mt.fit_fluidity(pts["fluidity_number"], pts["phi"], pts["mu"], a=1.0)
+    assert fit["rms_log_residual"] < 1e-9
+    assert fit["c"] == pytest.approx(list(c), rel=1e-6)
+    assert mt.fit_fluidity(pts["fluidity_number"], pts["phi"], pts["mu"])["a"] == \
+        pytest.approx(1.0, abs=1e-9)
+    tab = mt.collapse_table(pts)
+    assert tab["fluidity"]["rms_log_residual"] < 1e-9
+    assert tab["dilatancy_b"]["points"] == I.size

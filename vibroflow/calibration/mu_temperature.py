@@ -9,7 +9,15 @@ cells' friction mu = tau / p against three abscissae (docs/validation.md section
     thermal_balance.py) in Lun's place: Gamma scales as T^(3/2), so T_bal / T =
     (tau gamma_dot / D)^(2/3) and r_D = (tau gamma_dot / D)^(1/3);
 (c) Kim & Kamrin's (2020, Phys. Rev. Lett. 125, 088002) form mu = Theta^a F(I), Theta =
-    rho_s T / p the dimensionless temperature, the exponent a fitted.
+    rho_s T / p the dimensionless temperature, the exponent a fitted;
+(d) Pailha & Pouliquen's (2009, J. Fluid Mech. 633, 115) dilatancy, mu = F(I) + tan psi, with
+    the cell's own dilatancy angle tan psi = tr D / gamma_dot (tr D the coarse-grained
+    velocity field's divergence, 1/s, dilation positive): the law with b = 1 in
+    mu = F(I) + b tan psi, and b fitted;
+(e) Zhang & Kamrin's (2017, Phys. Rev. Lett. 118, 058001) fluidity, g = gamma_dot / mu =
+    (sqrt(T) / d) F(phi): mu = x^a / F(phi), x = gamma_dot d / sqrt(T) the fluidity number,
+    ln F a quadratic in phi, a = 1 (their law) and a fitted.  Kinetic theory's ratio of shear
+    viscosity to pressure has this form (both scale with sqrt(T) and T at one phi).
 
 F is Jop's mu_s + (mu_2 - mu_s) / (1 + X_0 / X) throughout, fitted to log mu (the scatter is a
 factor, 0.1 - 1), so each abscissa's rms log residual says how far the best curve of that family
@@ -33,6 +41,9 @@ from vibroflow.continuum.rheology import mu_of_I
 from vibroflow.errors import InputError
 
 DENSE_SOLID_FRACTION = 0.5
+#: (d)'s predicted friction is counted at no less than this where F(I) + b tan psi falls below
+#: it (a friction the law makes zero or negative is a miss of at least ln(mu / MU_FLOOR))
+MU_FLOOR = 0.01
 #: a shear rate is resolved when it exceeds this many batch-means standard errors
 RESOLVED = 2.0
 #: a median's standard error over that of a mean of normal values (Kenney & Keeping 1962)
@@ -54,7 +65,9 @@ def cell_points(phase_fields, thermal_temperature, prm, dissipation=None,
     kinetic_theory.KineticParameters; dissipation: the DEM's dissipation (W/m^3) on the same
     grid, or None.  Returns {mu, mu_stderr, I, T, Theta, phi, pressure, shear_rate, phase (the
     cell's phase bin), rI, rI_median_T (the control: r at the cells' median T), rI_dem (NaN
-    without dissipation)}."""
+    without dissipation), tan_psi (tr D / gamma_dot; NaN without a velocity_gradient),
+    fluidity_number (gamma_dot d / sqrt(T)), x_m, z_m (the cell's centre; NaN without the
+    grid's coordinates)}."""
     mu = _flat(phase_fields, "friction_coefficient")
     I = _flat(phase_fields, "inertial_number")
     p = _flat(phase_fields, "pressure")
@@ -71,9 +84,24 @@ def cell_points(phase_fields, thermal_temperature, prm, dissipation=None,
         ok = (np.isfinite(mu) & (mu > 0) & np.isfinite(I) & (I > 0) & (p > 0) & (T > 0)
               & np.isfinite(T) & (phi >= dense_solid_fraction) & (phi < prm.phi_rcp)
               & (gd > resolved * np.nan_to_num(gd_se)))
+    shape = phase_fields["friction_coefficient"].shape
     out = {"mu": mu[ok], "mu_stderr": se[ok], "I": I[ok], "T": T[ok], "phi": phi[ok],
            "pressure": p[ok], "shear_rate": gd[ok],
-           "phase": np.indices(phase_fields["friction_coefficient"].shape)[0].ravel()[ok]}
+           "phase": np.indices(shape)[0].ravel()[ok]}
+    if "velocity_gradient" in phase_fields:
+        L = np.asarray(phase_fields["velocity_gradient"].values, float)
+        div = np.trace(L, axis1=-2, axis2=-1).ravel()
+        out["tan_psi"] = div[ok] / out["shear_rate"]
+    else:
+        out["tan_psi"] = np.full(out["mu"].size, np.nan)
+    out["fluidity_number"] = out["shear_rate"] * prm.diameter_m / np.sqrt(out["T"])
+    for axis, name in ((1, "x"), (2, "z")):
+        if name in phase_fields.coords:
+            c = np.broadcast_to(np.expand_dims(np.asarray(phase_fields[name].values, float),
+                                               tuple(a for a in range(3) if a != axis)), shape)
+            out[f"{name}_m"] = c.ravel()[ok]
+        else:
+            out[f"{name}_m"] = np.full(out["mu"].size, np.nan)
     out["Theta"] = prm.density_kg_m3 * out["T"] / out["pressure"]
     tau = out["mu"] * out["pressure"]
     t_bal = np.array([balance_temperature(float(f), float(t), float(g), prm)
@@ -133,6 +161,64 @@ def fit_collapse(x, mu, theta=None) -> dict:
             "rms_log_residual": float(np.sqrt(np.mean(r.fun ** 2))), "points": int(x.size)}
 
 
+def fit_dilatancy(I, mu, tan_psi, b=None) -> dict:
+    """(d): the best mu = F(I) + b tan psi (Jop's F, mu_s, mu_2 >= mu_s, I_0), b fixed (1:
+    Pailha & Pouliquen) or fitted when None, fitted to log mu with the prediction counted at
+    no less than MU_FLOOR.  Returns {mu_s, mu_2, x_0, b, rms_log_residual, points, floored: the
+    share of cells where the prediction is at the floor}; InputError with too few cells."""
+    I, mu, tp = (np.asarray(a, float) for a in (I, mu, tan_psi))
+    ok = np.isfinite(I) & (I > 0) & np.isfinite(mu) & (mu > 0) & np.isfinite(tp)
+    n_par = 3 if b is not None else 4
+    if ok.sum() <= n_par:
+        raise InputError(f"dilatancy fit: {int(ok.sum())} usable cells, needs more than {n_par}")
+    I, y, tp = I[ok], np.log(mu[ok]), tp[ok]
+
+    def predicted(q):
+        bb = q[3] if b is None else b
+        return np.maximum(mu_of_I(I, q[0], q[0] + q[1], math.exp(q[2])) + bb * tp, MU_FLOOR)
+
+    def residual(q):
+        return np.log(predicted(q)) - y
+
+    m = float(np.median(mu[ok]))
+    starts = [[0.5 * m, m, lx] + ([bs] if b is None else [])
+              for lx in np.log(np.geomspace(I.min(), I.max(), 5))
+              for bs in ((0.0, 1.0) if b is None else (None,))]
+    lo = [1e-6, 0.0, math.log(I.min()) - 10.0] + ([-10.0] if b is None else [])
+    hi = [10.0, 10.0, math.log(I.max()) + 10.0] + ([10.0] if b is None else [])
+    r = _log_fit(residual, starts, lo, hi)
+    q = r.x
+    return {"mu_s": float(q[0]), "mu_2": float(q[0] + q[1]), "x_0": float(math.exp(q[2])),
+            "b": float(q[3]) if b is None else float(b),
+            "rms_log_residual": float(np.sqrt(np.mean(r.fun ** 2))), "points": int(I.size),
+            "floored": float(np.mean(predicted(q) <= MU_FLOOR))}
+
+
+def fit_fluidity(x, phi, mu, a=None) -> dict:
+    """(e): the best ln mu = a ln x - ln F(phi), ln F = c0 + c1 phi + c2 phi^2, x the fluidity
+    number gamma_dot d / sqrt(T): a fixed (1: Zhang & Kamrin) or fitted when None, by linear
+    least squares in ln mu.  Returns {a, c (c0, c1, c2), rms_log_residual, points}."""
+    x, phi, mu = (np.asarray(v, float) for v in (x, phi, mu))
+    ok = np.isfinite(x) & (x > 0) & np.isfinite(phi) & np.isfinite(mu) & (mu > 0)
+    n_par = 3 if a is not None else 4
+    if ok.sum() <= n_par:
+        raise InputError(f"fluidity fit: {int(ok.sum())} usable cells, needs more than {n_par}")
+    lx, f, y = np.log(x[ok]), phi[ok], np.log(mu[ok])
+    cols = [-np.ones_like(f), -f, -f * f]
+    if a is None:
+        A = np.column_stack([lx] + cols)
+        q = np.linalg.lstsq(A, y, rcond=None)[0]
+        aa, c = float(q[0]), q[1:]
+        res = A @ q - y
+    else:
+        A = np.column_stack(cols)
+        c = np.linalg.lstsq(A, y - a * lx, rcond=None)[0]
+        aa = float(a)
+        res = A @ c + a * lx - y
+    return {"a": aa, "c": [float(v) for v in c],
+            "rms_log_residual": float(np.sqrt(np.mean(res ** 2))), "points": int(f.size)}
+
+
 def binned_medians(x, mu, mu_stderr, edges) -> list[dict]:
     """Per bin of x (edges): the cells' count, median x and mu, mu's quartiles, and the median's
     batch-means standard error: the cells' errors combined as independent, MEDIAN_ERROR times
@@ -155,8 +241,9 @@ def collapse_table(points: dict, calibrated=None) -> dict:
     """Each abscissa's collapse: {"baseline": rms log of mu about its median, "noise": the
     cells' batch-means error as an rms log (module docstring), name: fit_collapse
     (+ "calibrated_rms_log_residual" of the calibrated mu(x) {mu_s, mu_2, I_0} where given)}
-    for name in I, rI, rI_median_T, rI_dem (where measured), and Theta (Kim & Kamrin's
-    mu = Theta^a F(I))."""
+    for name in I, rI, rI_median_T, rI_dem (where measured), Theta (Kim & Kamrin's
+    mu = Theta^a F(I)), dilatancy and dilatancy_b (fit_dilatancy, b = 1 and fitted; where the
+    velocity gradient is measured), fluidity and fluidity_a (fit_fluidity, a = 1 and fitted)."""
     mu = points["mu"]
     out = {"baseline": float(np.sqrt(np.mean(np.log(mu / np.median(mu)) ** 2))),
            "points": int(mu.size),
@@ -172,4 +259,9 @@ def collapse_table(points: dict, calibrated=None) -> dict:
             fit["calibrated_rms_log_residual"] = float(np.sqrt(np.mean(np.log(mu[ok] / c) ** 2)))
         out[name] = fit
     out["Theta"] = fit_collapse(points["I"], mu, points["Theta"])
+    if np.isfinite(points["tan_psi"]).any():
+        out["dilatancy"] = fit_dilatancy(points["I"], mu, points["tan_psi"], b=1.0)
+        out["dilatancy_b"] = fit_dilatancy(points["I"], mu, points["tan_psi"])
+    out["fluidity"] = fit_fluidity(points["fluidity_number"], points["phi"], mu, a=1.0)
+    out["fluidity_a"] = fit_fluidity(points["fluidity_number"], points["phi"], mu)
     return out
