@@ -122,6 +122,21 @@ def test_continuum_command_writes_dem_comparable_results(method, run_cli, tmp_pa
     else:
         _check_lab_grid(vdir, load_scenario("tub47-quick", THREE_CYCLES), 0.015)
     assert not (out / "checkpoint.npz").exists()
+    # the stress map: the shear-rate map's cells, at the phases sampled, nowhere in tension
+    # (disconnected material carries none) and within the yield cone: tau_eq <= mu_2 p at
+    # every point after its return map, so at their volume-weighted and sample means too,
+    # tau_eq being a norm (the Eulerian remap mixes neighbouring cells' stresses after it,
+    # which leaves a nearly unloaded cell a little outside until its next step: its cells
+    # under a thousandth of the largest pressure are left out)
+    st = np.genfromtxt(out / "stress.csv", delimiter=",", names=True)
+    rates = np.genfromtxt(out / "shear_rate.csv", delimiter=",", names=True)
+    assert set(zip(st["x"], st["z"])) <= set(zip(rates["x"], rates["z"]))
+    assert set(st["phase"].astype(int)) == set(range(8))
+    p_max = st["pressure"].max()
+    assert p_max > 0.0 and st["pressure"].min() >= -1e-9 * p_max
+    loaded = st["pressure"] > (1e-3 * p_max if method == "eulerian" else 0.0)
+    assert loaded.sum() > 20
+    assert st["friction_coefficient"][loaded].max() <= cont["material"]["mu_2"] * (1.0 + 1e-9)
     if method == "lagrangian":
         assert (cont["material"]["mu_s"], cont["material"]["bulk_modulus"]) == (0.35, 4.0e6)
         assert (cont["wall_friction"], cont["partition_friction"]) == (0.3, 0.1)
@@ -207,7 +222,7 @@ RESUMES = {
 def test_continuum_resume_gives_the_uninterrupted_numbers_bit_for_bit(method, tmp_path):
     """A run stopped twice (checkpoint, then resume) inside its averaging window, with
     checkpoints at every step in between, writes the same bulk_velocity.csv with its batches
-    (bulk_velocity_stderr.csv, bulk_velocity_batches.csv), summary (wall times aside) and
+    (bulk_velocity_stderr.csv, bulk_velocity_batches.csv), stress map, summary (wall times aside) and
     ParaView files as the run never interrupted; a stopped run leaves no
     summary.json; a checkpoint of other options is refused."""
     from vibroflow.continuum.files import CHECKPOINT_NAME
@@ -241,7 +256,7 @@ def test_continuum_resume_gives_the_uninterrupted_numbers_bit_for_bit(method, tm
         summary["continuum"].pop("wall_time_s")
     assert json.dumps(resumed, sort_keys=True) == json.dumps(full, sort_keys=True)
     for name in ("bulk_velocity.csv", "bulk_velocity_stderr.csv",
-                 "bulk_velocity_batches.csv") + vtk_files:
+                 "bulk_velocity_batches.csv", "stress.csv") + vtk_files:
         assert (split / name).read_bytes() == (tmp_path / "full" / name).read_bytes(), name
 
 

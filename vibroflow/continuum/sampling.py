@@ -130,6 +130,10 @@ class Samples:
             h, nxh, nz = cell_grid
             self.rate_cell_sum = np.zeros((nz, 2 * nxh + 1))
             self.rate_cell_n = np.zeros((nz, 2 * nxh + 1))
+            # per sample the material's stress in each analysis cell (Pa, [xx, zz, xz, yy],
+            # tension positive: the states' layout), its points' (or cells') volume-weighted
+            # mean; NaN where the cell holds none (stress_outputs.py)
+            self.stress_cell = np.full((n_samples, nz, 2 * nxh + 1, 4), np.nan)
         # per sample the floor force (N over the slice): the z component, tub axes, of the U
         # wall's force on the material within measure.floor_force.FLOOR_DEG of its bottom
         self.floor_force = np.full(n_samples, np.nan)
@@ -156,6 +160,7 @@ class Samples:
         out.update({"contact_" + k: v for k, v in self.contact_arrays().items()})
         if self.cell_grid is not None:
             out["rate_cell_sum"], out["rate_cell_n"] = self.rate_cell_sum, self.rate_cell_n
+            out["stress_cell"] = self.stress_cell
         if self.temperature:
             out["temperature_all"] = self.temperature_all
             out["wall_feed"] = self.wall_feed
@@ -181,6 +186,8 @@ class Samples:
             s.part_torque[:] = a["part_torque"]
         if cell_grid is not None and "rate_cell_sum" in a:
             s.rate_cell_sum[:], s.rate_cell_n[:] = a["rate_cell_sum"], a["rate_cell_n"]
+        if cell_grid is not None and "stress_cell" in a:
+            s.stress_cell[:] = a["stress_cell"]
         if s.temperature and "temperature_all" in a:
             s.temperature_all[:] = a["temperature_all"]
             if "wall_feed" in a:
@@ -279,6 +286,34 @@ class Samples:
         held = count > 0
         self.rate_cell_sum[held] += total[held] / count[held]
         self.rate_cell_n[held] += 1
+
+    def add_cell_stresses(self, j: int, x: np.ndarray, volume: np.ndarray,
+                          stress: np.ndarray) -> None:
+        """Sample j's stresses (N, 4) Pa of points (or cells) of material volumes `volume` (N,)
+        m^2 at tub-frame positions x (N, 2) m on the analysis cells (`add_cell_stresses_at`)."""
+        if self.cell_grid is None:
+            return
+        self.add_cell_stresses_at(j, self.cell_index(x), volume, stress)
+
+    def add_cell_stresses_at(self, j: int, index: np.ndarray, volume: np.ndarray,
+                             stress: np.ndarray) -> None:
+        """Sample j's stress map: in each analysis cell (`cell_index`, -1 outside) the mean of
+        the stresses (N, 4) of the points (or cells) in it weighted by their volumes (N,) m^2,
+        the stress of the material it holds (nothing where it holds none)."""
+        if self.cell_grid is None:
+            return
+        h, nxh, nz = self.cell_grid
+        V = np.asarray(volume, dtype=np.float64)
+        sig = np.asarray(stress, dtype=np.float64).reshape(-1, 4)
+        ok = (index >= 0) & (V > 0) & np.isfinite(sig).all(axis=1)
+        flat = index[ok]
+        size = nz * (2 * nxh + 1)
+        vol = np.bincount(flat, weights=V[ok], minlength=size)
+        held = vol > 0
+        out = self.stress_cell[j].reshape(size, 4)
+        for c in range(4):
+            total = np.bincount(flat, weights=V[ok] * sig[ok, c], minlength=size)
+            out[held, c] = total[held] / vol[held]
 
     def add_temperatures(self, j: int, x: np.ndarray, mass: np.ndarray, T: np.ndarray) -> None:
         """Add sample j's granular temperatures T (m^2/s^2) of points (or cells) of masses

@@ -168,6 +168,7 @@ class PointSampler(Sampler):
             self._frame(sample_tag(j), pose6, rate, samples)
         samples.rate_all[j] = rate.mean()
         samples.add_cell_rates(state.x, rate)
+        samples.add_cell_stresses(j, state.x, state.volume, state.stress)
         if state.temperature is not None:
             samples.add_temperatures(j, state.x, state.mass, state.temperature)
         if self.feed is not None and samples.temperature:

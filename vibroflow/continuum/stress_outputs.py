@@ -1,0 +1,151 @@
+"""The continuum's phase-resolved stress on the analysis cells, as the DEM's calibration measures
+its own (stress.csv, `phase_stress`, `write_stress_csv`): at each sampling phase of the cycle
+the material's stress averaged over the window's cycles, then the pressure, the equivalent
+shear stress and the friction coefficient of that mean (calibration/coarse_grain_fields.
+rheology: average first, then derive), and the inertial number from the phase-resolved shear
+rate of the same cells (measure.phase_shear, the shear_rate.csv field's phases).  It lets the
+continua's mu(I) be read in the same cells and phases as the DEM's (docs/validation.md
+section 30).
+
+The stress is the elastic-plastic stress the states carry (Pa, [xx, zz, xz, yy], tension
+positive), the volume-weighted mean over the points (or cells) in each analysis cell at each
+sample (sampling.Samples.add_cell_stresses); the kinetic pressure of a run with the granular
+temperature is not in it.  Units: m, Pa, 1/s, and numbers ("1")."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from vibroflow.io.atomic import write_text_atomic
+from vibroflow.measure.phase_shear import PhaseShear
+from vibroflow.measure.stats import batches_of_whole_cycles, phase_bins
+
+from .sampling import Samples
+
+STRESS_CSV_NAME = "stress.csv"
+
+#: the map's columns and their units (SI; "1": a number)
+STRESS_COLUMNS = {"x": "m", "z": "m", "phase": "1", "solid_fraction": "1",
+                  "shear_rate": "s-1", "pressure": "Pa", "shear_stress": "Pa",
+                  "friction_coefficient": "1", "friction_coefficient_stderr": "1",
+                  "inertial_number": "1", "samples": "1"}
+
+
+def invariants(stress: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(p, tau_eq) (Pa) of plane-strain stresses (..., 4) [xx, zz, xz, yy], tension positive:
+    p = -tr(sigma) / 3 (compression positive) and tau_eq = sqrt(tau:tau / 2), tau the
+    deviator (the DEM's coarse_grain_fields.rheology, whose xy and yz parts are 0 here)."""
+    s = np.asarray(stress, float)
+    p = -(s[..., 0] + s[..., 1] + s[..., 3]) / 3.0
+    dxx, dzz, dyy = s[..., 0] + p, s[..., 1] + p, s[..., 3] + p
+    tau = np.sqrt(0.5 * (dxx ** 2 + dzz ** 2 + dyy ** 2 + 2.0 * s[..., 2] ** 2))
+    return p, tau
+
+
+@dataclass
+class PhaseStress:
+    """The phase-resolved stress on the analysis cells: x (nx,), z (nz,) cell centres (m);
+    stress (n_phases, nz, nx, 4) Pa the mean over the window's samples at each phase (NaN where
+    no sample held material); pressure, shear_stress (Pa), friction (1), its batch-means
+    standard error friction_stderr (from each batch's own phase mean), inertial_number (1, from
+    the phase shear rate), shear_rate (1/s), solid_fraction (1), samples (the samples that held
+    material), each (n_phases, nz, nx)."""
+    x: np.ndarray
+    z: np.ndarray
+    stress: np.ndarray
+    pressure: np.ndarray
+    shear_stress: np.ndarray
+    friction: np.ndarray
+    friction_stderr: np.ndarray
+    inertial_number: np.ndarray
+    shear_rate: np.ndarray
+    solid_fraction: np.ndarray
+    samples: np.ndarray
+
+
+def _mean_over(stack: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean over axis 0 of (S, ..., 4) ignoring NaN rows, and the count of held rows."""
+    held = np.isfinite(stack).all(axis=-1)
+    n = held.sum(axis=0)
+    total = np.where(held[..., None], stack, 0.0).sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(n[..., None] > 0, total / n[..., None], np.nan), n
+
+
+def _friction(stress: np.ndarray) -> np.ndarray:
+    p, tau = invariants(stress)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(p > 0, tau / np.where(p > 0, p, 1.0), np.nan)
+
+
+def phase_stress(samples: Samples, times: np.ndarray, frequency: float, n_phases: int,
+                 window: tuple[float, float], n_batches: int, phase: PhaseShear,
+                 solid_density: float, diameter: float) -> PhaseStress | None:
+    """The PhaseStress of a run's samples at times (S,) s in the averaging window (t0, t1) s of
+    a vibration of `frequency` Hz with n_phases sampling phases and n_batches batches of whole
+    cycles; `phase` the run's PhaseShear on the same cells (its phase_shear_rate and
+    phase_solid_fraction), solid_density (kg/m^3) and the ball diameter d (m) for I =
+    gamma_dot d / sqrt(p / rho_s).  None without the analysis cells or samples."""
+    if samples.cell_grid is None or times.size == 0:
+        return None
+    S = times.size
+    stack = samples.stress_cell[:S]
+    bins = phase_bins(times, frequency, n_phases)
+    batch = batches_of_whole_cycles(times, window[0], window[1], frequency, n_batches)
+    shape = stack.shape[1:]
+    mean = np.full((n_phases,) + shape, np.nan)
+    count = np.zeros((n_phases,) + shape[:-1], np.int64)
+    per_batch = np.full((n_batches, n_phases) + shape[:-1], np.nan)
+    for k in range(n_phases):
+        use = (bins == k) & (batch >= 0)
+        mean[k], count[k] = _mean_over(stack[use])
+        for b in range(n_batches):
+            sel = use & (batch == b)
+            if sel.any():
+                per_batch[b, k] = _friction(_mean_over(stack[sel])[0])
+    p, tau = invariants(mean)
+    mu = _friction(mean)
+    with np.errstate(invalid="ignore"):
+        held = np.isfinite(per_batch).all(axis=0)
+        se = np.where(held, np.nanstd(np.where(held, per_batch, 0.0), axis=0, ddof=1)
+                      / math.sqrt(n_batches), np.nan) if n_batches > 1 \
+            else np.full(mu.shape, np.nan)
+    gd = np.asarray(phase.phase_shear_rate, float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        I = np.where(p > 0, gd * diameter / np.sqrt(np.where(p > 0, p, 1.0) / solid_density),
+                     np.nan)
+    return PhaseStress(x=np.asarray(phase.x, float), z=np.asarray(phase.z, float),
+                       stress=mean, pressure=p, shear_stress=tau, friction=mu,
+                       friction_stderr=se, inertial_number=I, shear_rate=gd,
+                       solid_fraction=np.asarray(phase.phase_solid_fraction, float),
+                       samples=count)
+
+
+def write_stress_csv(path: Path, ps: PhaseStress | None) -> bool:
+    """Write the phase-resolved stress map atomically (STRESS_COLUMNS, SI): a row for each
+    analysis cell and phase at which the cell held material in some sample.  False (nothing
+    written) without it."""
+    if ps is None:
+        return False
+
+    def num(v):
+        return repr(float(v)) if np.isfinite(v) else ""
+
+    lines = [",".join(STRESS_COLUMNS)]
+    n_phases, nz, nx = ps.friction.shape
+    for k in range(n_phases):
+        for iz in range(nz):
+            for ix in range(nx):
+                if ps.samples[k, iz, ix] == 0:
+                    continue
+                lines.append(",".join([
+                    repr(float(ps.x[ix])), repr(float(ps.z[iz])), str(k),
+                    num(ps.solid_fraction[k, iz, ix]), num(ps.shear_rate[k, iz, ix]),
+                    num(ps.pressure[k, iz, ix]), num(ps.shear_stress[k, iz, ix]),
+                    num(ps.friction[k, iz, ix]), num(ps.friction_stderr[k, iz, ix]),
+                    num(ps.inertial_number[k, iz, ix]), str(int(ps.samples[k, iz, ix]))]))
+    write_text_atomic(path, "\n".join(lines) + "\n")
+    return True
