@@ -504,6 +504,49 @@ def test_the_floor_section_shows_each_runs_take_off(study):
     assert 'alt="floor force over the cycle"' in html
 
 
+def test_the_stress_section_shows_where_each_bed_sits_against_its_yield(study):
+    """The section "Stress by height and phase": a row for the DEM (the calibration's
+    phase-resolved fields.nc) and each continuum (its stress.csv), whose share of dense cells
+    at or above the calibrated mu_s and lowest / highest thirds by phase are
+    analysis.stress_state's of those files; every continuum's friction is that of a stress
+    within its law's yield cone (mu <= mu_2 where its points were return-mapped)."""
+    import math
+
+    from vibroflow.analysis.stress_state import (continuum_points, dem_points,
+                                                 height_phase_table, share_at_yield)
+    from vibroflow.calibration.run_fields import read_fields
+    from vibroflow.io.calibration_file import read_calibration
+
+    scenario, out, summary, _ = study
+    html = (out / "report.html").read_text(encoding="utf-8")
+    sec = re.search(r'<section id="stress">.*?</section>', html, re.S).group(0)
+    table = re.search(r'<table class="stress">.*?</table>', sec, re.S).group(0)
+    rows = {}
+    for row in re.findall(r"<tr>(.*?)</tr>", table, re.S)[1:]:
+        cells = re.findall(r"<td([^>]*)>(.*?)</td>", row, re.S)
+        rows[cells[0][1]] = cells
+    assert set(rows) == set(summary["methods"])
+    mu_s = read_calibration(out / "calibration" / "calibration.toml").rheology.mu_s
+    for name, cells in rows.items():
+        pts = dem_points(read_fields(out / "calibration" / "fields.nc", phase_resolved=True)) \
+            if name == "dem" else continuum_points(out / name / "stress.csv")
+        share = float(re.search(r'data-value="([^"]*)"', cells[4][0]).group(1))
+        assert share == share_at_yield(pts, mu_s)
+        assert float(re.search(r'data-value="([^"]*)"', cells[1][0]).group(1)) == pts["mu"].size
+        by_phase = {r["phase"]: r for r in height_phase_table(pts)["rows"]}
+        for k in range(scenario.run.phases_per_cycle):
+            r = by_phase.get(k)
+            want = "n/a" if r is None else f"{r['mu_low']:.3f} / {r['mu_high']:.3f}"
+            assert cells[5 + k][1] == want
+    for name in summary["methods"]:
+        if name != "dem":
+            mat = json.loads((out / name / "summary.json").read_text())["continuum"]["material"]
+            mu = continuum_points(out / name / "stress.csv")["mu"]
+            assert math.isfinite(mat["mu_2"]) and mu.size > 0
+            if name == "lagrangian":
+                assert mu.max() <= mat["mu_2"] * (1.0 + 1e-9)
+
+
 @pytest.mark.slow
 def test_the_floor_section_escapes_the_method_names(study):
     """A method named with HTML's special characters appears escaped in the floor section."""

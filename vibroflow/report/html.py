@@ -31,6 +31,7 @@ from vibroflow.report.data import DEM, StudyData
 from vibroflow.report.impact_figures import impact_distribution_section
 from vibroflow.report.engineer import Engineer
 from vibroflow.report.part_sections import part_sections
+from vibroflow.report.stress_section import stress_rows
 from vibroflow.report.temperature_maps import temperature_maps
 
 #: section id -> heading, in page order (tests check the headings)
@@ -49,6 +50,7 @@ SECTIONS = {
     "floor": "The floor over the cycle",
     "rheology": "mu(I) fit",
     "rheology_bins": "mu(I) binned",
+    "stress": "Stress by height and phase",
     "animation": "DEM animation",
     "sweep": "Sweep",
     "cost": "Cost",
@@ -323,6 +325,18 @@ def _floor(data: StudyData) -> dict:
             "feed_rows": _wall_feed_rows(data)}
 
 
+def _stress(data: StudyData) -> dict:
+    """Where each method's bed sits against its yield, by height and phase
+    (report.stress_section)."""
+    t = stress_rows(data)
+    rows = [[_text(name, "l"), _num(n, "d"), _num(mu, ".3f"), _num(p, ".0f"),
+             _num(share, ".1%")]
+            + [_text("n/a" if lh is None else f"{lh[0]:.3f} / {lh[1]:.3f}") for lh in thirds]
+            for name, n, mu, p, share, thirds in t.rows]
+    return {"head": t.head, "rows": rows, "mu_s": _num(t.mu_s, ".3f").text,
+            "missing": t.missing}
+
+
 def _wall_feed_rows(data: StudyData) -> list:
     """The U wall's feed of fluctuation energy by region: the DEM's from the calibration's
     [kinetic.wall_flux] (measure.floor_force.dem_wall_feed), each continuum's with the
@@ -483,6 +497,7 @@ def render(data: StudyData, gif: Path | None = None, gif_note: str | None = None
         "floor": _floor(data),
         "rheology": _rheology(data),
         "rheology_bins": eng.rheology_bins(),
+        "stress": _stress(data),
         "animation": _animation(data, gif, gif_note),
         "sweep": _sweep(data),
         "cost": _cost(data),
