@@ -16,7 +16,7 @@ from vibroflow.analysis.stress_state import (continuum_points, dem_points, heigh
                                              share_at_yield)
 from vibroflow.calibration.run_fields import read_fields
 from vibroflow.errors import InputError
-from vibroflow.report.data import DEM, StudyData
+from vibroflow.report.data import CALIBRATION, DEM, StudyData
 
 
 @dataclass(frozen=True)
@@ -34,7 +34,7 @@ class StressRows:
 
 def _points(data: StudyData, name: str) -> dict:
     if name == DEM:
-        return dem_points(read_fields(data.out / "calibration" / "fields.nc",
+        return dem_points(read_fields(data.out / CALIBRATION / "fields.nc",
                                       phase_resolved=True))
     entry = data.summary["methods"].get(name, {})
     rel = Path(entry.get("bulk_velocity_csv", f"{name}/bulk_velocity.csv"))
