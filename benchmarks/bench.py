@@ -10,8 +10,10 @@ from __future__ import annotations
 import json
 import os
 import platform
+import sys
 from pathlib import Path
 
+from vibroflow.errors import InputError
 from vibroflow.io.atomic import json_safe, write_text_atomic
 from vibroflow.scenario.io import load_scenario
 
@@ -59,3 +61,13 @@ def write_json(path, data) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     return write_text_atomic(path, json.dumps(json_safe(data), indent=2, default=str) + "\n")
+
+
+def run(main) -> None:
+    """Exit with main()'s status; bad input (InputError) is its one line on stderr and exit 2,
+    as the vibroflow commands give it."""
+    try:
+        sys.exit(main())
+    except InputError as e:
+        print(e.message, file=sys.stderr)
+        sys.exit(2)

@@ -17,15 +17,15 @@ on the verdict.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
 
+import bench
+
 from vibroflow.analysis.judge import judge, read_result, run_folders
 from vibroflow.continuum.formulation import formulation
 from vibroflow.continuum.tub_run import run_continuum
-from vibroflow.errors import InputError
 from vibroflow.io.calibration_file import read_calibration
 from vibroflow.scenario import load_scenario
 
@@ -69,8 +69,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main())
-    except InputError as e:
-        print(e.message, file=sys.stderr)
-        sys.exit(2)
+    bench.run(main)

@@ -25,12 +25,13 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
+import bench
+
 from vibroflow.calibration import mu_temperature as mt
 from vibroflow.calibration.run_fields import read_fields
 from vibroflow.calibration.thermal_balance import thermal_balance_run
 from vibroflow.continuum.kinetic_theory import G0_FORMS, KineticParameters
 from vibroflow.continuum.rheology import mu_of_I
-from vibroflow.errors import InputError
 from vibroflow.scenario import load_scenario
 
 LABELS = {"I": "(a) I", "rI": "(b) r I, T_bal from Lun's Gamma",
@@ -161,8 +162,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main())
-    except InputError as e:
-        print(e.message, file=sys.stderr)
-        sys.exit(2)
+    bench.run(main)

@@ -16,16 +16,16 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import tomllib
 from pathlib import Path
 
 import numpy as np
 
+import bench
+
 from vibroflow.analysis.stress_state import (continuum_points, dem_points, height_phase_table,
                                              share_at_yield)
 from vibroflow.calibration.run_fields import read_fields
-from vibroflow.errors import InputError
 
 
 def _name(run: Path) -> str:
@@ -64,8 +64,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main())
-    except InputError as e:
-        print(e.message, file=sys.stderr)
-        sys.exit(2)
+    bench.run(main)
