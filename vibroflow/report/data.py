@@ -217,12 +217,16 @@ class StudyData:
             return None
         return {"c0": c0, "c1": c1, "which": which}
 
+    def method_dir(self, name: str) -> Path:
+        """The folder of a method's run: that of its bulk_velocity.csv as the study's summary
+        names it (NAME/ by default)."""
+        entry = self.summary["methods"].get(name, {})
+        return self.out / Path(entry.get("bulk_velocity_csv", f"{name}/bulk_velocity.csv")).parent
+
     def method_summary(self, name: str) -> dict:
         """A method's own summary.json, beside its bulk_velocity.csv ({} if unreadable)."""
-        entry = self.summary["methods"].get(name, {})
-        rel = entry.get("bulk_velocity_csv", f"{name}/bulk_velocity.csv")
         try:
-            s = json.loads((self.out / Path(rel).parent / "summary.json").read_text())
+            s = json.loads((self.method_dir(name) / "summary.json").read_text())
         except (OSError, UnicodeDecodeError, json.JSONDecodeError):
             return {}
         return s if isinstance(s, dict) else {}
@@ -245,9 +249,7 @@ class StudyData:
         run.write_shear_rate_csv): (x (m), z (m), values (z, x) with NaN where no material),
         column "shear_rate" (1/s, cycle mean) or "impact_ball_ball" (m/s, inferred); None when
         the run wrote no map or the column is empty."""
-        entry = self.summary["methods"].get(name, {})
-        rel = entry.get("bulk_velocity_csv", f"{name}/bulk_velocity.csv")
-        path = self.out / Path(rel).parent / "shear_rate.csv"
+        path = self.method_dir(name) / "shear_rate.csv"
         try:
             lines = path.read_text().splitlines()
         except (OSError, UnicodeDecodeError):

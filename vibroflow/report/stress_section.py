@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from vibroflow.analysis.stress_state import (continuum_points, dem_points, height_phase_table,
                                              share_at_yield)
 from vibroflow.calibration.run_fields import read_fields
+from vibroflow.continuum.stress_outputs import STRESS_CSV_NAME
 from vibroflow.errors import InputError
 from vibroflow.report.data import CALIBRATION, DEM, StudyData
 
@@ -36,9 +36,7 @@ def _points(data: StudyData, name: str) -> dict:
     if name == DEM:
         return dem_points(read_fields(data.out / CALIBRATION / "fields.nc",
                                       phase_resolved=True))
-    entry = data.summary["methods"].get(name, {})
-    rel = Path(entry.get("bulk_velocity_csv", f"{name}/bulk_velocity.csv"))
-    return continuum_points(data.out / rel.parent / "stress.csv")
+    return continuum_points(data.method_dir(name) / STRESS_CSV_NAME)
 
 
 def stress_rows(data: StudyData) -> StressRows:
