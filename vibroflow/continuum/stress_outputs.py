@@ -66,13 +66,16 @@ class PhaseStress:
     samples: np.ndarray
 
 
-def _mean_over(stack: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Mean over axis 0 of (S, ..., 4) ignoring NaN rows, and the count of held rows."""
+def _sums(stack: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Over axis 0 of (S, ..., 4): the sum of the rows that hold a stress (no NaN) and their
+    count."""
     held = np.isfinite(stack).all(axis=-1)
-    n = held.sum(axis=0)
-    total = np.where(held[..., None], stack, 0.0).sum(axis=0)
+    return np.where(held[..., None], stack, 0.0).sum(axis=0), held.sum(axis=0)
+
+
+def _mean(total: np.ndarray, n: np.ndarray) -> np.ndarray:
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(n[..., None] > 0, total / n[..., None], np.nan), n
+        return np.where(n[..., None] > 0, total / n[..., None], np.nan)
 
 
 def _friction(stress: np.ndarray) -> np.ndarray:
@@ -96,22 +99,20 @@ def phase_stress(samples: Samples, times: np.ndarray, frequency: float, n_phases
     bins = phase_bins(times, frequency, n_phases)
     batch = batches_of_whole_cycles(times, window[0], window[1], frequency, n_batches)
     shape = stack.shape[1:]
-    mean = np.full((n_phases,) + shape, np.nan)
-    count = np.zeros((n_phases,) + shape[:-1], np.int64)
-    per_batch = np.full((n_batches, n_phases) + shape[:-1], np.nan)
-    for k in range(n_phases):
-        use = (bins == k) & (batch >= 0)
-        mean[k], count[k] = _mean_over(stack[use])
-        for b in range(n_batches):
-            sel = use & (batch == b)
-            if sel.any():
-                per_batch[b, k] = _friction(_mean_over(stack[sel])[0])
+    total = np.zeros((n_batches, n_phases) + shape)
+    count = np.zeros((n_batches, n_phases) + shape[:-1], np.int64)
+    for b in range(n_batches):
+        for k in range(n_phases):
+            total[b, k], count[b, k] = _sums(stack[(bins == k) & (batch == b)])
+    # each batch's own phase mean gives its friction; a cell a batch never held makes the
+    # error NaN (the standard deviation of a NaN)
+    per_batch = _friction(_mean(total, count))
+    held = count.sum(axis=0)
+    mean = _mean(total.sum(axis=0), held)
     p, tau = invariants(mean)
     mu = _friction(mean)
     with np.errstate(invalid="ignore"):
-        held = np.isfinite(per_batch).all(axis=0)
-        se = np.where(held, np.nanstd(np.where(held, per_batch, 0.0), axis=0, ddof=1)
-                      / math.sqrt(n_batches), np.nan) if n_batches > 1 \
+        se = per_batch.std(axis=0, ddof=1) / math.sqrt(n_batches) if n_batches > 1 \
             else np.full(mu.shape, np.nan)
     gd = np.asarray(phase.phase_shear_rate, float)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -121,7 +122,7 @@ def phase_stress(samples: Samples, times: np.ndarray, frequency: float, n_phases
                        stress=mean, pressure=p, shear_stress=tau, friction=mu,
                        friction_stderr=se, inertial_number=I, shear_rate=gd,
                        solid_fraction=np.asarray(phase.phase_solid_fraction, float),
-                       samples=count)
+                       samples=held)
 
 
 def write_stress_csv(path: Path, ps: PhaseStress | None) -> bool:
