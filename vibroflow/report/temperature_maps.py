@@ -147,7 +147,10 @@ def temperature_maps(data) -> TemperatureMaps:
                                                   thermal[PHI_KEY])
     target = thermal if thermal is not None else dem
     for name in data.continuum_methods:
-        cont = read_temperature_csv(data.method_dir(name) / TEMPERATURE_CSV_NAME, h, nxh, nz)
+        entry = data.summary["methods"].get(name, {})
+        rel = entry.get("bulk_velocity_csv", f"{name}/bulk_velocity.csv")
+        cont = read_temperature_csv(data.out / Path(rel).parent / TEMPERATURE_CSV_NAME,
+                                    h, nxh, nz)
         if cont is None:
             maps.without.append(name)
             continue
