@@ -18,8 +18,9 @@ the branch vector, the relative velocity and the normal change sign exactly (a -
 negative of the force from i's, the torque on i from j's side is the torque on j from i's, and
 each side's history is the exact negative of the other's after every step.  Each ball sums its
 weight, then its entries' forces in the order above: the terms and the order of the step's
-pairs and gather, so the same bits.  The benchmark checks it at every state it times: forces,
-torques and histories against the step's, bit for bit.
+pairs and gather, so the same bits.  The benchmark checks it at every state it times: forces
+and torques against the step's bit for bit, histories as numbers (a zero history may be +0 on
+one side and -0 on the other; tests/test_contact_antisymmetry.py).
 
 **Measured**: the step's two loops over the blocks as a run makes them, against the full
 list's: (A) the pair pass, then the ball pass (gather, walls, second half kick); (B) the full
