@@ -2,7 +2,8 @@
 step's time goes.
 
     python benchmarks/dem_scaling.py [--sizes quick,tub47,long] [--threads 1,2] [--steps 2128]
-        [--repeats 2] [--warmup 2128] [--pass-steps 200] [--json runs/dem_scaling.json]
+        [--repeats 2] [--warmup 2128] [--pass-steps 200] [--impacts]
+        [--json runs/dem_scaling.json]
 
 Sizes (and `tub47-periodic`, `long-periodic`, below): `quick` is tub47-quick (4 200 balls in a
 19.05 mm slice), `tub47` the reference case (14 000 balls, 63.5 mm), `long` tub47 ten times
@@ -20,7 +21,8 @@ cycle), so their step times compare the code's cost alone; the long tubs' growth
 their own tub47. The tub vibrates for `--warmup` untimed steps (numba's cache load or
 compilation, the first neighbour lists), then `--repeats` times `--steps` steps are timed (wall
 and CPU), neighbour rebuilds included, in calls that leave the balls stored as the steps left
-them (in space order from MEMORY_ORDER_FROM balls on), as `vibroflow dem` does between its rows.
+them (in space order from MEMORY_ORDER_FROM balls on), as `vibroflow dem` does between its rows;
+with `--impacts`, recording and flushing every impact as `vibroflow dem` does (the rows dropped).
 Then the passes of one step are timed apart, each `--pass-steps` times from the same saved
 state, each its own parallel loop over the blocks: the pairs (step._pair_block, a step's first
 loop), the gather (_gather_block), the walls (wall_pass.ball_walls), the second half kick with
@@ -107,6 +109,10 @@ def _bed(size: str, scenario, system):
                         tile(base.mat))
 
 
+def _drop(rows) -> None:
+    """An impact sink that keeps nothing."""
+
+
 def _base_size(size: str, sizes: list[str]) -> str:
     """The size a size's growth is read from: the size a long tub is laid from when the run
     has it, else the run's first size."""
@@ -115,7 +121,8 @@ def _base_size(size: str, sizes: list[str]) -> str:
 
 
 def worker(size: str, steps: int, repeats: int, warmup: int = WARMUP,
-           pass_steps: int = 200, memory_order: bool | None = None) -> dict:
+           pass_steps: int = 200, memory_order: bool | None = None,
+           impacts: bool = False) -> dict:
     """Time the steps in this process (NUMBA_NUM_THREADS set by the caller)."""
     import numba
     import numpy as np
@@ -137,14 +144,19 @@ def worker(size: str, steps: int, repeats: int, warmup: int = WARMUP,
     state.vibrating = True
     # the balls stay in the storage the steps leave, as `vibroflow dem` keeps them between its
     # calls (vibroflow.dem.run: keep_order), so that a call is not timed storing them by id
-    S.run_steps(system, state, warmup, memory_order=memory_order, keep_order=True)
+    # with `impacts`, every impact recorded and flushed as `vibroflow dem` records them, the
+    # rows dropped (their writing is the output's, not the step's)
+    record = dict(record_impacts=True, on_impacts=_drop, on_part_impacts=_drop) if impacts \
+        else {}
+    S.run_steps(system, state, warmup, memory_order=memory_order, keep_order=True, **record)
     wall, cpu, counted = [], [], []
     b0 = state.nl.builds
     cuts = np.linspace(0, steps, CONTACT_SAMPLES + 1).astype(np.int64)
     for _ in range(repeats):
         t0, c0 = time.perf_counter(), time.process_time()
         for n in np.diff(cuts):
-            S.run_steps(system, state, int(n), memory_order=memory_order, keep_order=True)
+            S.run_steps(system, state, int(n), memory_order=memory_order, keep_order=True,
+                        **record)
             counted.append(np.count_nonzero(state.nl.flag))
         wall.append(time.perf_counter() - t0)
         cpu.append(time.process_time() - c0)
@@ -208,7 +220,7 @@ def worker(size: str, steps: int, repeats: int, warmup: int = WARMUP,
             "threading_layer": numba.threading_layer(),
             "memory_order": bool(state.n >= M.MEMORY_ORDER_FROM if memory_order is None
                                  else memory_order),
-            "gomp_spincount": os.environ.get("GOMP_SPINCOUNT"),
+            "gomp_spincount": os.environ.get("GOMP_SPINCOUNT"), "impacts": impacts,
             "steps": steps, "warmup": warmup, "state_sha256": digest, "wall_s": wall,
             "cpu_s": cpu, "builds": builds,
             "list_entries": int(state.nl.nbr.shape[0]),
@@ -232,11 +244,14 @@ def main(argv=None) -> None:
     p.add_argument("--memory-order", choices=("auto", "on", "off"), default="auto",
                    help="the balls sorted in space at rebuilds (vibroflow.dem.memory_order): "
                         "auto from MEMORY_ORDER_FROM balls on, as a run does")
+    p.add_argument("--impacts", action="store_true",
+                   help="record the impacts during the steps, as `vibroflow dem` does")
     p.add_argument("--worker", help=argparse.SUPPRESS)
     a = p.parse_args(argv)
     if a.worker:
         order = {"auto": None, "on": True, "off": False}[a.memory_order]
-        print(json.dumps(worker(a.worker, a.steps, a.repeats, a.warmup, a.pass_steps, order)))
+        print(json.dumps(worker(a.worker, a.steps, a.repeats, a.warmup, a.pass_steps, order,
+                                a.impacts)))
         return
     sizes = a.sizes.split(",")
     unknown = [s for s in sizes if s not in SIZES]
@@ -250,7 +265,8 @@ def main(argv=None) -> None:
             out = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--worker",
                                   size, "--steps", str(a.steps), "--repeats", str(a.repeats),
                                   "--warmup", str(a.warmup), "--pass-steps", str(a.pass_steps),
-                                  "--memory-order", a.memory_order],
+                                  "--memory-order", a.memory_order]
+                                 + (["--impacts"] if a.impacts else []),
                                  env=env, capture_output=True, text=True)
             if out.returncode != 0:
                 raise SystemExit(f"{size} on {threads} threads failed:\n{out.stderr[-3000:]}")
