@@ -1,7 +1,10 @@
 """Checks of the calibration from a DEM run: the impact statistics
 against kinetic theory, the wall-friction reduction against Coulomb's law and geometry, and the
 `vibroflow calibrate` command end to end on a small tub run (its files, their units and
-conservation of what the coarse-graining deposits).
+conservation of what the coarse-graining deposits).  The command's checks share one calibration
+of the session's tiny study, which compiles the calibration's kernels on a fresh clone (about
+two and a half minutes, against 40 s once numba's cache holds them): they are `slow`, so the
+default suite stays under ten minutes there.
 """
 from __future__ import annotations
 
@@ -126,6 +129,7 @@ def calibrated_run(study_run, tmp_path_factory):
     return out, r
 
 
+@pytest.mark.slow
 def test_calibrate_writes_its_files_and_reads_back(calibrated_run):
     from vibroflow.calibration.run_fields import read_fields
     from vibroflow.io.calibration_file import read_calibration, write_calibration
@@ -162,6 +166,7 @@ def test_calibrate_writes_its_files_and_reads_back(calibrated_run):
     assert not list(out.glob("*.tmp*"))
 
 
+@pytest.mark.slow
 def test_continuum_gets_the_cyclic_secant_modulus_at_the_tubs_strain(calibrated_run):
     """The continuum's shear modulus is the cyclic shear cell's secant modulus at the strain
     amplitude the bed's measured cycle-mean shear rate implies (gamma_0 = pi gamma_dot / (2
@@ -187,6 +192,7 @@ def test_continuum_gets_the_cyclic_secant_modulus_at_the_tubs_strain(calibrated_
     assert "cyclic secant" in r.stdout
 
 
+@pytest.mark.slow
 def test_the_unloading_modulus_reads_the_same_strain_from_the_packing_and_the_divergence(
         calibrated_run):
     """Mass conservation, d ln phi / dt = -div v following the solid: the unloading modulus with
@@ -205,6 +211,7 @@ def test_the_unloading_modulus_reads_the_same_strain_from_the_packing_and_the_di
     assert "unloading bulk modulus" in r.stdout + r.stderr
 
 
+@pytest.mark.slow
 def test_the_vibrating_walls_drive_the_bed_and_its_restitution_is_the_contact_laws(
         calibrated_run):
     """[kinetic]: over steady cycles the walls' lab-frame work on the balls is what the bed
@@ -242,6 +249,7 @@ def test_the_vibrating_walls_drive_the_bed_and_its_restitution_is_the_contact_la
         w.u_fluctuation_flux_W_m2, rel=1e-9)
 
 
+@pytest.mark.slow
 def test_calibrated_wall_friction_obeys_coulomb(calibrated_run):
     """Every contact has |F_t| <= mu F_n, so the ratio of sums and the coherent friction of
     slipping patches cannot exceed the contact's mu; sliding contacts sit exactly at mu (to the
@@ -269,6 +277,7 @@ def test_calibrated_wall_friction_obeys_coulomb(calibrated_run):
     assert np.allclose(ft[slide] / fn[slide], mu, rtol=1e-4)
 
 
+@pytest.mark.slow
 def test_coarse_grained_fields_of_the_run_conserve_mass_and_momentum(calibrated_run):
     """The fields integrate back to what was deposited: the integral of rho over the x-z plane
     times L_y is the balls' mass, and the integral of the momentum density the balls' momentum
@@ -304,6 +313,7 @@ def test_coarse_grained_fields_of_the_run_conserve_mass_and_momentum(calibrated_
     assert np.all(np.abs(P - ref) <= 3e-3 * scale + 1e-12)
 
 
+@pytest.mark.slow
 def test_the_calibration_records_the_runs_scenario_and_continuum_like_takes_both(
         calibrated_run, tmp_path):
     """[scenario] holds the run's media and tub (set on the command line of `vibroflow dem`);
