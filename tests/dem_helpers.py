@@ -14,6 +14,7 @@ from contextlib import contextmanager
 import numba
 import numpy as np
 
+from vibroflow.dem import laws as L
 from vibroflow.dem import simulate as S
 from vibroflow.dem.walls import WALL_PLANE0
 from vibroflow.scenario.model import ContactPair, Material, ParticleSpec, Run, Scenario, WallSpec
@@ -51,6 +52,19 @@ def linear_contact_time(k_n: float, m_eff: float, e: float) -> float:
 
 def linear_dt(k_n: float, m_eff: float, steps_per_contact: float) -> float:
     return linear_contact_time(k_n, m_eff, 1.0) / steps_per_contact
+
+
+def law_row(model: int, roll: int) -> np.ndarray:
+    """A steel-like row of contact-law parameters (vibroflow.dem.laws.pair_table's layout):
+    linear or Hertz `model`, rolling model `roll`."""
+    row = np.zeros(L.N_PARAMS)
+    row[L.P_MODEL] = model
+    if model == L.MODEL_LINEAR:
+        row[L.P_KN], row[L.P_KT], row[L.P_DAMP] = 2.0e5, 2.0 / 7.0, 0.05
+    else:
+        row[L.P_KN], row[L.P_KT], row[L.P_DAMP] = 1.5e11, 6.4e10, 0.3
+    row[L.P_MU], row[L.P_MUR], row[L.P_ROLL] = 0.3, 0.05, roll
+    return row
 
 
 def contact(a="steel", b="steel", model="linear", k_n=1.0e5, e=0.85, mu=0.2, mu_r=0.0,

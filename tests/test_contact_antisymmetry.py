@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.dem_helpers import law_row
 from vibroflow.dem import laws as L
 from vibroflow.dem.contact import (branch_vector, contact_force_with, normal_constants,
                                    pair_contact_velocity, unit_normal)
@@ -24,18 +25,6 @@ from vibroflow.dem.contact import (branch_vector, contact_force_with, normal_con
 N = 400
 STEPS = 12
 DT = 2e-6
-
-
-def _par(model, roll):
-    """A steel-like parameter row (vibroflow.dem.laws.pair_table's layout)."""
-    row = np.zeros(L.N_PARAMS)
-    row[L.P_MODEL] = model
-    if model == L.MODEL_LINEAR:
-        row[L.P_KN], row[L.P_KT], row[L.P_DAMP] = 2.0e5, 2.0 / 7.0, 0.05
-    else:
-        row[L.P_KN], row[L.P_KT], row[L.P_DAMP] = 1.5e11, 6.4e10, 0.3
-    row[L.P_MU], row[L.P_MUR], row[L.P_ROLL] = 0.3, 0.05, roll
-    return row
 
 
 def _side(par, branch, vel, omg, a, b, ra, rb, ma, mb, hist, dt):
@@ -61,7 +50,7 @@ def _bits(x):
 @pytest.mark.parametrize("roll", [L.ROLL_NONE, L.ROLL_CDT, L.ROLL_EPSD, L.ROLL_CDT_LIGGGHTS])
 def test_either_side_of_a_pair_gives_the_same_contact_to_the_bit(model, roll):
     rng = np.random.default_rng(7 + 10 * model + roll)
-    par = _par(model, roll)
+    par = law_row(model, roll)
     top = 2e-4 if model == L.MODEL_LINEAR else 2e-5
     slid = 0
     for _ in range(N):

@@ -17,6 +17,7 @@ import numba as nb
 import numpy as np
 import pytest
 
+from tests.dem_helpers import law_row
 from vibroflow.dem import laws as L
 from vibroflow.dem import step as S
 from vibroflow.dem.contact import contact_force_with, normal_constants, pair_contact_velocity
@@ -24,18 +25,6 @@ from vibroflow.dem.contact import unit_normal
 
 N = 300
 DT = 2e-6
-
-
-def _par(model, roll):
-    """A steel-like parameter row (vibroflow.dem.laws.pair_table's layout)."""
-    row = np.zeros(L.N_PARAMS)
-    row[L.P_MODEL] = model
-    if model == L.MODEL_LINEAR:
-        row[L.P_KN], row[L.P_KT], row[L.P_DAMP] = 2.0e5, 2.0 / 7.0, 0.05
-    else:
-        row[L.P_KN], row[L.P_KT], row[L.P_DAMP] = 1.5e11, 6.4e10, 0.3
-    row[L.P_MU], row[L.P_MUR], row[L.P_ROLL] = 0.3, 0.05, roll
-    return row
 
 
 def _contacts(model, seed):
@@ -134,7 +123,7 @@ def _tiled(ri, rj, branch, vel, omg, hist, mass, par, mixed):
 @pytest.mark.parametrize("model", [L.MODEL_LINEAR, L.MODEL_HERTZ])
 def test_the_tiled_law_gives_the_scalar_laws_bits(model):
     for roll in (L.ROLL_NONE, L.ROLL_CDT, L.ROLL_EPSD, L.ROLL_CDT_LIGGGHTS):
-        par = _par(model, roll)
+        par = law_row(model, roll)
         ri, rj, branch, vel, omg, hist, mass = _contacts(model, 31 + roll)
         ref = np.empty((N, 9))
         sliding = np.zeros(N, np.int64)
