@@ -15,11 +15,12 @@ from vibroflow.continuum.kinetic_stress import (RATE_RATIO, balance_temperature,
                                                 kinetic_stress, kinetic_stress_cells)
 from vibroflow.continuum.kinetic_theory import (KineticParameters, dissipation_W_m3,
                                                 frictional_pressure_Pa, pressure_Pa,
-                                                shear_viscosity_Pa_s)
+                                                shear_viscosity_Pa_s, sliding_dissipation_W_m3)
 from vibroflow.continuum.rheology import mu_of_I
 from vibroflow.continuum.stress_update import update_stress_points_rated
 from vibroflow.continuum.temperature_field import production_W_m3
-from vibroflow.continuum.temperature_step import TemperatureGrid, step_temperature
+from vibroflow.continuum.temperature_step import (TemperatureGrid, step_temperature,
+                                                  step_temperature_pressed)
 from vibroflow.continuum.timestep import kinetic_temperature_limit, kinetic_wave_speed
 
 PRM = KineticParameters(diameter_m=0.00635, density_kg_m3=7800.0, restitution=0.9,
@@ -121,19 +122,32 @@ def test_a_gas_compressed_past_the_connection_packing_reads_both_pressures_there
     assert s[0] == s[1] == s[3] == pytest.approx(-p, rel=1e-9)
 
 
+@pytest.mark.parametrize("k_f", [0.0, 0.36])
 @pytest.mark.parametrize("c_L", [0.0, 2.0])
-def test_the_balance_temperature_balances_the_plastic_work(c_L):
-    prm = PRM._replace(correlation_coefficient=c_L)
-    for phi, tau, rate in ((0.58, 400.0, 10.0), (0.5, 50.0, 0.1), (0.6, 1e4, 50.0)):
-        T = balance_temperature(phi, tau, rate, prm)
-        assert dissipation_W_m3(phi, T, rate, prm) == pytest.approx(tau * rate, rel=1e-10)
-    assert balance_temperature(0.58, 400.0, 0.0, prm) == 0.0
+def test_the_balance_temperature_balances_the_plastic_work(c_L, k_f):
+    prm = PRM._replace(correlation_coefficient=c_L, sliding_coefficient=k_f)
+    for phi, tau, rate, p in ((0.58, 400.0, 10.0, 1e3), (0.5, 50.0, 0.1, 2e2),
+                              (0.6, 1e4, 50.0, 2e4), (0.58, 400.0, 10.0, 1e6)):
+        T = balance_temperature(phi, tau, rate, prm, p)
+        loss = dissipation_W_m3(phi, T, rate, prm) + sliding_dissipation_W_m3(p, T, prm)
+        assert loss == pytest.approx(tau * rate, rel=1e-10)
+        if k_f == 0.0:   # no sliding loss: the pressure is not read
+            assert T == balance_temperature(phi, tau, rate, prm)
+    assert balance_temperature(0.58, 400.0, 0.0, prm, 1e3) == 0.0
 
 
-def _steady_shear(rate, T_fixed=None, steps=6000, dt=1e-5, p0=1e3):
+def test_the_sliding_balance_tends_to_its_own_root_where_lun_s_loss_vanishes():
+    # e -> 1: Gamma -> 0 and tau gamma_dot = k_f p sqrt(T) / d, T = (tau gamma_dot d / (k_f p))^2
+    prm = PRM._replace(restitution=1.0 - 1e-9, sliding_coefficient=0.36)
+    T = balance_temperature(0.58, 400.0, 10.0, prm, 1e3)
+    assert T == pytest.approx((400.0 * 10.0 * 0.00635 / (0.36 * 1e3)) ** 2, rel=1e-6)
+
+
+def _steady_shear(rate, T_fixed=None, steps=6000, dt=1e-5, p0=1e3, prm=PRM):
     """One connected point in simple shear (L_xz = rate) from the isotropic stress -p0, its
     return map's rate ratio from kinetic_stress and its T from the balance on one cell
-    (T_fixed: T held there); returns (tau / p, I, T, T_bal, r)."""
+    (T_fixed: T held there; with prm's dense sliding loss the balance reads the point's
+    pressure); returns (tau / p, I, T, T_bal, r)."""
     mat = ContinuumMaterial(critical_solid_fraction=0.6)
     params = mat.as_array()
     rho = np.array([mat.critical_density * 1.01])
@@ -148,25 +162,41 @@ def _steady_shear(rate, T_fixed=None, steps=6000, dt=1e-5, p0=1e3):
     grid = TemperatureGrid(spacing_m=0.01)
     zero = np.zeros((1, 1))
     for _ in range(steps):
-        kinetic_stress(rho, T, L, stress, gd, st, PRM, 0.6 * 1.01, np.inf, np.inf, s_kin)
+        kinetic_stress(rho, T, L, stress, gd, st, prm, 0.6 * 1.01, np.inf, np.inf, s_kin)
         update_stress_points_rated(stress, L, rho, dt, params, gd, st,
                                    s_kin[:, RATE_RATIO].copy())
         production_W_m3(stress, L, gd, s_kin, power)
-        if T_fixed is None:
+        if T_fixed is None and prm.sliding_coefficient > 0.0:
+            pm = np.full((1, 1), -(stress[0, 0] + stress[0, 1] + stress[0, 3]) / 3)
+            T = step_temperature_pressed(T.reshape(1, 1), phi, power.reshape(1, 1), zero, zero,
+                                         zero, pm, dt, grid, prm).ravel()
+        elif T_fixed is None:
             T = step_temperature(T.reshape(1, 1), phi, power.reshape(1, 1), zero, zero, dt,
-                                 grid, PRM).ravel()
+                                 grid, prm).ravel()
     s = stress[0]
     p = -(s[0] + s[1] + s[3]) / 3
     d = np.array([s[0] + p, s[1] + p, s[3] + p])
     tau = math.sqrt(0.5 * (d @ d) + s[2] ** 2)
     I = rate * mat.diameter / math.sqrt(p / mat.solid_density)
-    tb = balance_temperature(phi[0, 0], tau, gd[0], PRM)
+    tb = balance_temperature(phi[0, 0], tau, gd[0], prm, p)
     return tau / p, I, mat, T[0], tb, s_kin[0, RATE_RATIO]
 
 
 def test_steady_simple_shear_keeps_the_calibrated_mu_of_I_at_the_balance_temperature():
     ratio, I, mat, T, tb, r = _steady_shear(10.0)
     assert T == pytest.approx(tb, rel=1e-3)            # the balance reached its algebraic T
+    assert ratio == pytest.approx(float(mu_of_I(I, mat.mu_s, mat.mu_2, mat.I_0)), rel=1e-4)
+
+
+def test_with_the_sliding_loss_steady_shear_keeps_the_calibrated_mu_of_I_at_its_own_balance():
+    # the balance that carries T loses k_f p sqrt(T) / d as well as Lun's Gamma; the stress's
+    # T_bal is where that same balance rests, so steady shear is again r = 1, mu(I) exactly
+    prm = PRM._replace(sliding_coefficient=0.36)
+    ratio, I, mat, T, tb, r = _steady_shear(10.0, prm=prm)
+    lun_only = _steady_shear(10.0)[3]
+    assert T < 0.75 * lun_only                         # the sliding loss takes its share
+    assert T == pytest.approx(tb, rel=1e-3)
+    assert r == pytest.approx(1.0, rel=1e-3)
     assert ratio == pytest.approx(float(mu_of_I(I, mat.mu_s, mat.mu_2, mat.I_0)), rel=1e-4)
 
 

@@ -21,7 +21,8 @@ import pytest
 from vibroflow.calibration.shear_cell import run_shear_cell
 from vibroflow.calibration.shear_temperature import (closure_temperature,
                                                      fit_correlation_coefficient,
-                                                     kinetic_parameters, profile_shear_rate)
+                                                     kinetic_parameters, profile_shear_rate,
+                                                     sliding_table)
 from vibroflow.continuum.kinetic_stress import balance_temperature
 from vibroflow.dem.periodic_box import PeriodicBox
 from vibroflow.scenario.model import Scenario
@@ -141,4 +142,28 @@ def test_plastic_work_balance_matches_the_sheared_temperature_within_ten_percent
     prm = kinetic_parameters(D, RHO, 0.85)
     for I, (r, _) in sheared.items():
         T_bal = balance_temperature(r["phi"], r["mu"] * r["pressure"], r["shear_rate"], prm)
+        assert T_bal == pytest.approx(r["granular_temperature"], rel=0.10), I
+
+
+@pytest.fixture(scope="module")
+def sliding_coefficient():
+    """k_f of the dense sliding loss as `vibroflow calibrate --shear-cell` measures it
+    (shear_temperature.sliding_table), from one steady point, I = 0.1, of a cell filled with
+    another seed: none of the points it predicts below."""
+    recs = run_shear_cell(Scenario(), inertial_numbers=(0.1,), n_balls=300, seed=2,
+                          strain=4.0, transient_strain=1.0, batches=8)
+    return sliding_table(recs, D, RHO, 0.85)["sliding_coefficient"]
+
+
+@pytest.mark.slow
+def test_the_dense_balance_with_the_sliding_loss_gives_the_sheared_temperature(
+        sheared, sliding_coefficient):
+    # the continuum's dense balance, tau gamma_dot = Gamma_Lun + k_f p sqrt(T) / d at the
+    # cell's own equivalent shear stress and mean pressure (the invariants the continuum's
+    # stress gives balance_temperature), with one k_f from another draw at one I, gives T
+    # over a decade of I
+    prm = kinetic_parameters(D, RHO, 0.85)._replace(sliding_coefficient=sliding_coefficient)
+    for I, (r, _) in sheared.items():
+        p = r["mean_pressure"]
+        T_bal = balance_temperature(r["phi"], r["mu_eq"] * p, r["shear_rate"], prm, p)
         assert T_bal == pytest.approx(r["granular_temperature"], rel=0.10), I

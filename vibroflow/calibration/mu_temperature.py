@@ -104,8 +104,8 @@ def cell_points(phase_fields, thermal_temperature, prm, dissipation=None,
             out[f"{name}_m"] = np.full(out["mu"].size, np.nan)
     out["Theta"] = prm.density_kg_m3 * out["T"] / out["pressure"]
     tau = out["mu"] * out["pressure"]
-    t_bal = np.array([balance_temperature(float(f), float(t), float(g), prm)
-                      for f, t, g in zip(out["phi"], tau, out["shear_rate"])])
+    t_bal = np.array([balance_temperature(float(f), float(t), float(g), prm, float(q))
+                      for f, t, g, q in zip(out["phi"], tau, out["shear_rate"], out["pressure"])])
     out["rI"] = np.sqrt(t_bal / out["T"]) * out["I"]
     out["rI_median_T"] = np.sqrt(t_bal / np.median(out["T"])) * out["I"]
     if dissipation is None:

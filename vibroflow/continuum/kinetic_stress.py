@@ -29,7 +29,10 @@ given stress to the scattered one and reads one number in its return map:
    Phys. Rev. Lett. 125, 088002: the velocity fluctuation, not the pressure alone, sets the
    inertial time).  The return map uses mu(r I), r = sqrt(T_bal / T), with T_bal the
    temperature at which the plastic work balances the dissipation at the point's stress and
-   last plastic rate, tau gamma_dot_p = Gamma(phi, T_bal, gamma_dot_p) (`balance_temperature`).
+   last plastic rate, tau gamma_dot_p = Gamma(phi, T_bal, gamma_dot_p) + Gamma_f(p, T_bal)
+   (`balance_temperature`): the dissipation of the balance that carries T, the dense sliding
+   loss Gamma_f at the point's pressure p included where it is on, so that T_bal is where
+   that balance would rest.
    Where T = T_bal (steady shear) r = 1 and the law is the calibrated mu(I) exactly; where
    the material is hotter than its shear keeps it (vibrated) r < 1 and it flows at a lower
    friction, down to mu_s (Irmer, Brodsky & Clark 2024, arXiv 2405.13236: fluctuations
@@ -71,10 +74,13 @@ KINETIC_COLUMNS = 5
 
 
 @nb.njit(cache=True)
-def balance_temperature(phi, tau, gamma_dot, prm):
-    """T_bal (m^2/s^2) at which the plastic work tau gamma_dot (Pa, 1/s) equals Lun's
-    dissipation over Jenkins' L/d: tau gamma_dot = (3/2) rho_s phi a0 T^(3/2) min(1, sqrt(T) /
-    (c_L d gamma_dot)), a0 = 8 (1 - e^2) phi g0 / (d sqrt(pi)).  0 where no work is done or
+def balance_temperature(phi, tau, gamma_dot, prm, pressure=0.0):
+    """T_bal (m^2/s^2) at which the plastic work tau gamma_dot (Pa, 1/s) equals the
+    dissipation of the temperature's own balance: Lun's over Jenkins' L/d, (3/2) rho_s phi a0
+    T^(3/2) min(1, sqrt(T) / (c_L d gamma_dot)), a0 = 8 (1 - e^2) phi g0 / (d sqrt(pi)), plus
+    the dense sliding loss k_f p sqrt(T) / d at the compressive mean stress `pressure` (Pa)
+    where prm.sliding_coefficient = k_f > 0 (kinetic_theory.sliding_dissipation_W_m3), so that
+    T_bal is where the balance that carries T comes to rest.  0 where no work is done or
     nothing dissipates."""
     work = tau * gamma_dot
     e = prm.restitution
@@ -82,11 +88,42 @@ def balance_temperature(phi, tau, gamma_dot, prm):
     cap = 1.5 * prm.density_kg_m3 * phi * a0
     if work <= 0.0 or cap <= 0.0:
         return 0.0
+    sliding = prm.sliding_coefficient * max(pressure, 0.0) / prm.diameter_m
+    if sliding > 0.0:
+        return _balance_with_sliding(work, cap, sliding, gamma_dot, prm)
     T1 = (work / cap) ** (2.0 / 3.0)
     if correlation_length_ratio(T1, gamma_dot, prm) <= 1.0:
         return T1
     # L/d = c_L d gamma_dot / sqrt(T) > 1: Gamma = cap T^2 / (c_L d gamma_dot)
     return math.sqrt(work * prm.correlation_coefficient * prm.diameter_m * gamma_dot / cap)
+
+
+@nb.njit(cache=True)
+def _convex_root(a, n, b, w, x):
+    """The positive root of a x^n + b x = w (a, b, w > 0, n > 1) by Newton's method from x,
+    an upper bound: the left side is convex and increasing, so the iterates fall to the root
+    monotonically (quadratically near it)."""
+    for _ in range(200):
+        xn = x ** (n - 1)
+        step = (a * xn * x + b * x - w) / (n * a * xn + b)
+        if not step > 1e-15 * x:
+            break
+        x -= step
+    return x
+
+
+@nb.njit(cache=True)
+def _balance_with_sliding(work, cap, sliding, gamma_dot, prm):
+    """`balance_temperature` with the sliding loss: in s = sqrt(T), cap s^3 min(1, s / s_c) +
+    sliding s = work, s_c = c_L d gamma_dot Jenkins' crossover (none without c_L).  The left side
+    increases with s, so the root is unique: first on the uncorrelated branch, cap s^3; if it
+    falls below s_c, on the correlated one, (cap / s_c) s^4, between it and s_c."""
+    s = _convex_root(cap, 3.0, sliding, work, min((work / cap) ** (1.0 / 3.0), work / sliding))
+    s_c = prm.correlation_coefficient * prm.diameter_m * abs(gamma_dot)
+    if s >= s_c:
+        return s * s
+    s = _convex_root(cap / s_c, 4.0, sliding, work, s_c)
+    return s * s
 
 
 @nb.njit(cache=True, inline="always")
@@ -160,8 +197,9 @@ def _kinetic_stress(density, mass, cells, area, T, L, stress, gamma_dot, phase, 
         else:
             # the connected material's own packing: its return map's plastic work is per
             # volume of material
-            tb = balance_temperature(min(rho / rho_s, phi_cap), _tau(stress[p]), gamma_dot[p],
-                                     prm)
+            sp = stress[p]
+            tb = balance_temperature(min(rho / rho_s, phi_cap), _tau(sp), gamma_dot[p], prm,
+                                     -(sp[0] + sp[1] + sp[3]) / 3.0)
             out[p, RATE_RATIO] = math.sqrt(tb / t)
         out[p, 0] -= pk
         out[p, 1] -= pk
