@@ -55,8 +55,11 @@ def test_samples_average_the_temperature_mass_weighted_in_each_cell(tmp_path):
 
 
 # the Eulerian carrying the temperature loses mass at tub47-quick's rim at the default Courant
-# number (the step's limit, not its outputs'): it runs here at cfl 0.1
-@pytest.mark.parametrize("method, args", [("lagrangian", []), ("eulerian", ["--cfl", "0.1"])])
+# number (the step's limit, not its outputs'): it runs here at cfl 0.1, in the slow suite (its
+# command compiles the Eulerian's fused loop with T, 30 s on a fresh clone; the outputs are the
+# Lagrangian's code)
+@pytest.mark.parametrize("method, args", [
+    ("lagrangian", []), pytest.param("eulerian", ["--cfl", "0.1"], marks=pytest.mark.slow)])
 def test_continuum_command_with_temperature_writes_its_map(method, args, run_cli, tmp_path):
     """`vibroflow continuum --temperature` on a short tub47-quick: temperature.csv on every
     analysis cell, T > 0 in the cells that held material and 0 in the others, and the summary's
