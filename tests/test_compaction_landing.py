@@ -243,7 +243,6 @@ def test_a_loose_block_landing_feeds_the_exchange_no_stress_carries():
     assert r[:, 5].sum() < 0.1 * lost
 
 
-@pytest.mark.slow  # 34 s on a fresh clone, most of it compiling the block's landing steps
 def test_a_settled_block_resting_or_sliding_compacts_nothing():
     # Galilean: a settled block sliding at 0.5 m/s along a smooth floor feeds what it feeds at
     # rest (its surface's residual ringing), and that is nothing beside a landing at the same
