@@ -22,7 +22,8 @@ from vibroflow.continuum.mpm.solver import MPMSystem, init_state, run_steps
 from vibroflow.continuum.timestep import stable_dt
 from vibroflow.errors import InputError
 
-CALIBRATION = ("[rheology]\nmu_s = 0.35\nmu_2 = 0.60\nI_0 = 0.3\nphi_max = 0.61\n"
+CALIBRATION = ("[source]\nrun = \"runs/seed3/dem\"\ncase = \"tub47-quick\"\n"
+               "[rheology]\nmu_s = 0.35\nmu_2 = 0.60\nI_0 = 0.3\nphi_max = 0.61\n"
                "phi_min = 0.45\ncritical_solid_fraction = 0.61\n"
                "[elastic]\nbulk_modulus_Pa = 4.0e6\nshear_modulus_Pa = 1.5e6\n"
                "[wall]\nfriction = 0.3\n[partitions]\nfriction = 0.1\n"
@@ -98,6 +99,12 @@ def test_continuum_command_writes_dem_comparable_results(method, run_cli, tmp_pa
     assert set(summary["probes"]) == {"P1", "P2", "P3", "P4", "P5"}
     assert set(cont["probes"]) == {"P1", "P2", "P3", "P4", "P5"}
     assert cont["shear_rate"]["mean_1_s"] > 0
+    # the DEM run its calibration was measured on, for `vibroflow compare`'s ensembles
+    if method == "lagrangian":
+        assert cont["calibration"] == {"source_run": "runs/seed3/dem",
+                                       "source_case": "tub47-quick", "created": None}
+    else:
+        assert "calibration" not in cont
     assert summary["window"]["snapshots"] == snapshots
     table = read_csv(out / "bulk_velocity.csv", cell_size=0.015)
     assert len(table) == summary["cells"]

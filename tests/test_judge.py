@@ -25,7 +25,7 @@ V = U * (1 + SIGMA**2 / (2 * U**2))   # the mean speed of a noisy field (2D Rici
 
 
 def _write_run(folder, vx, vz, x, z, phi, strength, stderr, case="tub47", window=(1.0, 3.0),
-               method=None, sense="counterclockwise"):
+               method=None, sense="counterclockwise", calibrated_on=None):
     folder.mkdir(parents=True)
     write_csv(CellTable(x=x, z=z, solid_fraction=phi, vx=vx, vz=vz,
                         samples=np.full(x.size, 100, np.int64), cell_size=H),
@@ -35,6 +35,8 @@ def _write_run(folder, vx, vz, x, z, phi, strength, stderr, case="tub47", window
                "window": {"t_start": window[0], "t_end": window[1]}}
     if method:
         summary["method"] = method
+    if calibrated_on:   # a continuum's summary names its calibration's DEM run (tub_run.py)
+        summary["continuum"] = {"calibration": {"source_run": calibrated_on}}
     (folder / "summary.json").write_text(json.dumps(summary))
     return folder
 
@@ -161,3 +163,42 @@ def test_the_judgement_says_each_runs_take_off():
     assert runs[2].take_off is None
     said = [_take_off(_take_off_entry(r)) for r in runs]
     assert said == [", leaves the floor at t f 0.123", ", never leaves the floor", ""]
+
+
+def test_runs_of_one_method_are_judged_as_an_ensemble_of_calibrations(run_cli, ensemble,
+                                                                      tmp_path):
+    """Three runs of one method, as if calibrated on three DEM seeds: the noise-free field with
+    a systematic error of b sigma on vx, b = 0, 2, 4, so that E against each seed is
+    sqrt(b^2 + 2) sigma / V: 1.41, 2.45 and 4.24 sigma / V against the limit 3 sigma / V (two
+    of three agree); strengths 2.50, 2.60 and 3.20 e-3 against the seeds' 2.45 e-3 (two of
+    three within 10 %).  The ensemble's E is those three's mean and spread."""
+    refs, _, _, (x, z, phi, vx, vz) = ensemble
+    draws = [_write_run(tmp_path / f"lag{k}", vx + b * SIGMA, vz, x, z, phi, s, 0.04e-3,
+                        method="lagrangian", calibrated_on=f"runs/seed{k}/dem")
+             for k, (b, s) in enumerate(((0, 2.50e-3), (2, 2.60e-3), (4, 3.20e-3)), start=1)]
+    out = tmp_path / "j.json"
+    args = [*draws]
+    for r in refs:
+        args += ["-r", r]
+    res = run_cli("compare", *args, "--json", out)
+    assert res.returncode == 0, res.stderr
+    j = json.loads(out.read_text())
+    want = np.sqrt([2.0, 6.0, 18.0]) * SIGMA / V
+    assert [r["E_mean"] for r in j["results"]] == pytest.approx(want, rel=0.03)
+    assert [r["calibration_source_run"] for r in j["results"]] == [
+        "runs/seed1/dem", "runs/seed2/dem", "runs/seed3/dem"]
+    (g,) = j["ensembles"]
+    assert g["method"] == "lagrangian" and g["n"] == 3
+    assert g["E_mean"] == pytest.approx(want.mean(), rel=0.03)
+    assert g["E_sd"] == pytest.approx(want.std(ddof=1), rel=0.05)
+    assert (g["E_min"], g["E_max"]) == (min(r["E_mean"] for r in j["results"]),
+                                        max(r["E_mean"] for r in j["results"]))
+    assert g["E_mean_over_limit"] == pytest.approx(want.mean() / (3 * SIGMA / V), rel=0.04)
+    assert g["strength_ratio_min"] == pytest.approx(2.50 / 2.45, rel=1e-9)
+    assert g["strength_ratio_max"] == pytest.approx(3.20 / 2.45, rel=1e-9)
+    assert (g["strengths_agree"], g["fields_agree"]) == (2, 2)
+    assert "lagrangian over its 3 runs, each calibrated on another DEM run:" in res.stdout
+    assert "strengths agree in 2 of 3" in res.stdout and "fields agree in 2 of 3" in res.stdout
+    # one run of a method is no ensemble
+    res = run_cli("compare", draws[0], *args[3:], "--json", out)
+    assert json.loads(out.read_text())["ensembles"] == [] and " over its " not in res.stdout

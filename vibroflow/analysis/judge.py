@@ -17,6 +17,14 @@ else the reference's batch-means error), agreeing when within max(10 %, 2 combin
 errors) and of the same sense; E against each reference, their mean +- standard error, and E
 against the references' pooled mean field (compare.ensemble_mean, their noise averaged down:
 nearer the systematic part); fields agree when the mean E is no more than 1.5 times the floor.
+
+Several results of one method (the continuum run with the calibrations of several DEM fill
+seeds, say) are also judged as one ensemble: their E's mean, standard deviation and range, and
+in how many of them the strengths and the fields agree.  Why: a calibration's draw moves E by
+about as much as the DEM's seeds do (docs/validation.md section 30), so with one calibration a
+verdict near the limit is not a result; over several it is a count.  Each result names the DEM
+run its calibration was measured on (summary.json's continuum.calibration, from the
+calibration's [source]) where it has one.
 """
 from __future__ import annotations
 
@@ -43,7 +51,8 @@ class RunResult:
     t_end s), circulation (summary.json's: strength m^2/s, strength_stderr, sense), cell
     table (bulk_velocity.csv) and the bed's take-off from the floor (summary.json's "floor":
     vibroflow.measure.floor_force; a cycle fraction, NaN where the bed never leaves the floor,
-    None where the run has no floor force)."""
+    None where the run has no floor force) and, for a continuum run, the DEM run its calibration
+    was measured on (None without one)."""
 
     folder: Path
     case: str
@@ -52,6 +61,7 @@ class RunResult:
     circulation: dict
     table: CellTable
     take_off: float | None = None
+    calibration: str | None = None
 
 
 def _natural_key(path: Path) -> list:
@@ -121,7 +131,15 @@ def result_from_summary(summary: dict, folder, table: CellTable) -> RunResult:
     return RunResult(folder=Path(folder), case=str(summary.get("case")), method=str(method),
                      window=(float(w["t_start"]), float(w["t_end"])),
                      circulation=summary["circulation"], table=table,
-                     take_off=_take_off_of(summary.get("floor")))
+                     take_off=_take_off_of(summary.get("floor")),
+                     calibration=_calibration_of(summary.get("continuum")))
+
+
+def _calibration_of(continuum) -> str | None:
+    """The DEM run a continuum summary's calibration was measured on, or None."""
+    cal = continuum.get("calibration") if isinstance(continuum, dict) else None
+    run = cal.get("source_run") if isinstance(cal, dict) else None
+    return str(run) if run is not None else None
 
 
 def _take_off_of(floor) -> float | None:
@@ -214,7 +232,39 @@ def judge(results: list[RunResult], references: list[RunResult],
                                   if mean_field is not None else None)}
         entry["fields_agree"] = fields_agree(d.mean, floor) if floor is not None else None
         entry["E_over_limit"] = d.mean / out["limit"] if out["limit"] else None
+        if r.calibration is not None:
+            entry["calibration_source_run"] = r.calibration
         out["results"].append(entry)
+    out["ensembles"] = ensembles(out["results"], out["limit"])
+    return out
+
+
+def ensembles(entries: list[dict], limit: float | None) -> list[dict]:
+    """Each method with two or more of the judged `entries` (judge's "results"), as one
+    ensemble: n; E_mean, E_sd (the runs' mean E: their mean and standard deviation, ddof 1),
+    E_min, E_max; E_mean_over_limit; the strength ratios' range; strengths_agree and
+    fields_agree, how many of the n agree (fields None without a floor); the runs' folders and
+    calibrations' DEM runs (None where a run names none)."""
+    out = []
+    methods = list(dict.fromkeys(e["method"] for e in entries))
+    for m in methods:
+        group = [e for e in entries if e["method"] == m]
+        if len(group) < 2:
+            continue
+        E = np.array([e["E_mean"] for e in group])
+        ratios = [e["strength_ratio"] for e in group if e["strength_ratio"] is not None]
+        fields = [e["fields_agree"] for e in group]
+        out.append({
+            "method": m, "n": len(group),
+            "folders": [e["folder"] for e in group],
+            "calibration_source_runs": [e.get("calibration_source_run") for e in group],
+            "E_mean": float(E.mean()), "E_sd": float(E.std(ddof=1)),
+            "E_min": float(E.min()), "E_max": float(E.max()),
+            "E_mean_over_limit": float(E.mean()) / limit if limit else None,
+            "strength_ratio_min": min(ratios) if ratios else None,
+            "strength_ratio_max": max(ratios) if ratios else None,
+            "strengths_agree": sum(bool(e["strengths_agree"]) for e in group),
+            "fields_agree": None if any(f is None for f in fields) else sum(fields)})
     return out
 
 
@@ -282,7 +332,35 @@ def format_judgement(j: dict) -> str:
         lines.append(f"  fields agree: {verdict}{ratio}")
         if "take_off_phase" in r:
             lines.append(f"  bed{_take_off(r)[1:]}")
+        if "calibration_source_run" in r:
+            lines.append(f"  calibrated on {r['calibration_source_run']}")
+    for g in j.get("ensembles", []):
+        lines.extend(_ensemble_lines(g))
     return "\n".join(lines)
+
+
+def _ensemble_lines(g: dict) -> list[str]:
+    """The lines of one method's ensemble (`ensembles`)."""
+    n = g["n"]
+    cals = [c for c in g["calibration_source_runs"] if c is not None]
+    if not cals:
+        over = f"its {n} runs"
+    elif len(set(cals)) == len(cals) == n:
+        over = f"its {n} runs, each calibrated on another DEM run"
+    else:
+        over = f"its {n} runs, on {len(set(cals))} calibration(s) named"
+    lines = [f"{g['method']} over {over}:"]
+    line = (f"  E {g['E_mean']:.3f} (sd {g['E_sd']:.3f}, {g['E_min']:.3f} - {g['E_max']:.3f})")
+    if g["E_mean_over_limit"] is not None:
+        line += f", {g['E_mean_over_limit']:.2f} of the limit"
+    lines.append(line)
+    if g["strength_ratio_min"] is not None:
+        lines.append(f"  strength {g['strength_ratio_min']:.3f} - {g['strength_ratio_max']:.3f}"
+                     f" of the references'; strengths agree in {g['strengths_agree']} of {n}")
+    fa = g["fields_agree"]
+    lines.append(f"  fields agree in {fa} of {n}" if fa is not None
+                 else "  fields agree: cannot say (no seed-to-seed E)")
+    return lines
 
 
 def write_judgement(j: dict, path) -> None:

@@ -279,6 +279,17 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
         return summary
 
 
+def _calibration_block(calibration: Calibration | None) -> dict:
+    """{"calibration": the DEM run it was measured on, its case and when} where the calibration
+    names its source (calibration.toml's [source]): `vibroflow compare` sets each run beside the
+    draw it was calibrated on.  Empty without a calibration or a source."""
+    src = getattr(calibration, "source", None) if calibration is not None else None
+    if src is None or src.run is None:
+        return {}
+    return {"calibration": {"source_run": str(src.run), "source_case": src.case,
+                            "created": src.created}}
+
+
 def _results(form: Formulation, scenario, out: Path, calibration, options, vtk, system,
              material, h, times, state, samples: Samples, sampler, clock: RunClock) -> dict:
     """Write a finished run's results into out (summary.json last); the summary."""
@@ -312,6 +323,7 @@ def _results(form: Formulation, scenario, out: Path, calibration, options, vtk, 
         "stiffness_factor": options.stiffness_factor,
         # the moduli's choice where it is not the default (the material holds the values)
         **({"moduli": options.moduli} if options.moduli != "calibrated" else {}),
+        **_calibration_block(calibration),
         **form.continuum_block(system, state, h)}
     phase = phase_shear_of_samples(scenario, samples, times, radius)
     summary["continuum"].update(shear_rate_outputs(
