@@ -33,6 +33,8 @@ walls); and one neighbour-list rebuild (simulate.rebuild: cell binning, list, hi
 reverse order).
 
 Printed per process: balls, median wall and CPU microseconds a step, nanoseconds per ball-step,
+the megabytes the step's arrays hold (the balls', the neighbour list's, the contact rows', the
+walls', the work arrays') beside the machine's last-level cache,
 the mean ball-ball contact count over the timed steps (counted CONTACT_SAMPLES times a repeat)
 with the nanoseconds per contact-step, the passes' shares, the process's peak resident memory
 (ru_maxrss), numba's threading layer and GOMP_SPINCOUNT, and the sha256 of the balls'
@@ -113,6 +115,39 @@ def _drop(rows) -> None:
     """An impact sink that keeps nothing."""
 
 
+def _megabytes(rec) -> float:
+    """The MB (1e6 bytes) of the distinct arrays in a record (a NamedTuple of arrays and
+    tuples of them)."""
+    import numpy as np
+
+    seen: dict = {}
+
+    def walk(x):
+        if isinstance(x, np.ndarray):
+            seen[(x.__array_interface__["data"][0], x.nbytes)] = x.nbytes
+        elif isinstance(x, tuple):
+            for y in x:
+                walk(y)
+
+    walk(rec)
+    return sum(seen.values()) / 1e6
+
+
+def _l3_megabytes() -> float | None:
+    """This machine's level-3 cache (MB; Linux's sysfs), or None where the system does not
+    say."""
+    for index in sorted(Path("/sys/devices/system/cpu/cpu0/cache").glob("index*")):
+        try:
+            if (index / "level").read_text().strip() != "3":
+                continue
+            size = (index / "size").read_text().strip()
+        except OSError:
+            continue
+        unit = {"K": 1024, "M": 1024 ** 2}.get(size[-1:], 1)
+        return int(size.rstrip("KM")) * unit / 1e6
+    return None
+
+
 def _base_size(size: str, sizes: list[str]) -> str:
     """The size a size's growth is read from: the size a long tub is laid from when the run
     has it, else the run's first size."""
@@ -184,6 +219,12 @@ def worker(size: str, steps: int, repeats: int, warmup: int = WARMUP,
 
     buf = S._buf(system, state)
     pairs, slots = pairs_of(state.nl, K.NBLOCK), slots_of(state.nl)
+    # what the step's passes hold, beside the last-level cache: the balls' arrays are swept by
+    # every pass, the list by the pairs, the contact rows where there are contacts, the walls'
+    # arrays where a ball is near a wall; the work's impact buffer only when impacts are made
+    footprint = {"balls": _megabytes(buf.balls), "list": _megabytes(pairs),
+                 "contact_rows": _megabytes(slots), "walls": _megabytes(buf.walls),
+                 "work": _megabytes(buf.work)}
     t = state.time(system.dt)
     saved = {name: getattr(state, name).copy() for name in ("pos", "vel", "omg")}
     hist, flag, rflag = state.nl.hist.copy(), state.nl.flag.copy(), state.nl.rflag.copy()
@@ -226,7 +267,7 @@ def worker(size: str, steps: int, repeats: int, warmup: int = WARMUP,
             "list_entries": int(state.nl.nbr.shape[0]),
             "contacts_at_end": int(np.count_nonzero(state.nl.flag)),
             "mean_contacts": float(np.mean(counted)),
-            "profile_us": profile,
+            "profile_us": profile, "footprint_MB": footprint, "l3_MB": _l3_megabytes(),
             "max_rss_MB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
 
 
@@ -289,6 +330,9 @@ def main(argv=None) -> None:
                   flush=True)
             print("        passes (us): " + ", ".join(f"{k} {v:.1f}" for k, v in prof.items()),
                   flush=True)
+            l3 = f", L3 {r['l3_MB']:.0f}" if r["l3_MB"] else ""
+            print("        arrays held (MB): " + ", ".join(
+                f"{k} {v:.1f}" for k, v in r["footprint_MB"].items()) + l3, flush=True)
             print(f"        state after {r['warmup'] + a.repeats * a.steps} steps: sha256 "
                   f"{r['state_sha256']}", flush=True)
             rows.append(r)
