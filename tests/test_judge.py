@@ -141,6 +141,7 @@ def test_compare_bad_input_is_one_line(run_cli, ensemble, tmp_path):
         ((other, "-r", refs[0]), "case"),
         ((late, "-r", refs[0]), "window"),
         ((exact, "-r", refs[0], "--e-seed", "0"), "--e-seed"),
+        ((exact, "-r", refs[0], "-r", exact), "a lagrangian run among dem (test) runs"),
     ]:
         res = run_cli("compare", *args, "--json", out)
         assert res.returncode == 2, (args, res.stdout, res.stderr)

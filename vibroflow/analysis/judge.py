@@ -179,6 +179,12 @@ def judge(results: list[RunResult], references: list[RunResult],
     if e_seed is not None and not (math.isfinite(e_seed) and e_seed > 0):
         raise InputError(f"--e-seed = {e_seed!r}: must be a seed-to-seed E > 0")
     _check_alike(references + results)
+    for r in references[1:]:
+        if r.method != references[0].method:
+            raise InputError(f"--reference {r.folder}: a {r.method} run among "
+                             f"{references[0].method} runs ({references[0].folder}); the "
+                             "references are runs of one method that differ only in their "
+                             "fill seed")
     tables = [r.table for r in references]
     n = len(references)
     strengths = np.array([float(r.circulation["strength"]) for r in references])
