@@ -668,8 +668,9 @@ def advance(step0, nsteps, time_origin_step, motion, record_impacts, balls, pair
         _pose_array(motion, pose[6], pose[7], t, pose)
         drift = k + 1 < nsteps
         _pair_pass(t, dt, periodic_length, record_impacts, balls, pairs, slots, params, work)
-        _ball_pass(t, dt, True, drift, record_impacts, balls, pairs, slots, walls, params, work,
-                   prt)
+        # np.bool_(True), not the literal: the pass compiled for compute_forces serves
+        _ball_pass(t, dt, np.bool_(True), drift, record_impacts, balls, pairs, slots, walls,
+                   params, work, prt)
         blown = False
         rebuild = False
         full = False

@@ -175,12 +175,15 @@ def _make_kernel(parallel: bool):
                         sigma_start[p, c] += p_kin[p, c]
             else:
                 sigma_start = cells.stress
+            # np.int64(1), not the literal 1: the kernel compiled for the solver's calls serves
             if parallel:
                 done, t, status, lowest, mass_error_max = fused.advance_kernel(
-                    1, t, mass_error_max, cells, step, mesh, boundaries, grid, work, cell_work)
+                    np.int64(1), t, mass_error_max, cells, step, mesh, boundaries, grid, work,
+                    cell_work)
             else:
                 done, t, status, lowest, mass_error_max = fused.advance_kernel_serial(
-                    1, t, mass_error_max, cells, step, mesh, boundaries, grid, work, cell_work)
+                    np.int64(1), t, mass_error_max, cells, step, mesh, boundaries, grid, work,
+                    cell_work)
             if status != fused.OK:
                 return s + done, t, status, lowest, mass_error_max
             production_W_m3(cells.stress, cells.L, cells.gamma_dot, p_kin, power)

@@ -91,7 +91,9 @@ def advance_temperature_kernel(nsteps, t, points, step, boundaries, grid, work, 
     for s in range(nsteps):
         kinetic_stress_of(points.density, T, points.L, points.stress, points.gamma_dot,
                           points.phase, ts, p_kin)
-        done, t, status, which = advance_kernel(1, t, points, step, boundaries, grid, work)
+        # np.int64(1), not the literal 1: the kernel compiled for the solver's calls serves
+        done, t, status, which = advance_kernel(np.int64(1), t, points, step, boundaries, grid,
+                                                work)
         if status != OK:
             return s + done, t, status, which
         production_W_m3(points.stress, points.L, points.gamma_dot, p_kin, power)
