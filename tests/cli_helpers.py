@@ -4,12 +4,13 @@ from __future__ import annotations
 import re
 import subprocess
 
-from vibroflow.progress import COMPILING
+from vibroflow.progress import COMPILED, COMPILING
 
 # The compile display's plain lines (vibroflow/progress.py): a command that finds its input bad
 # only after some kernels ran (a bed too small to calibrate on, a blow-up) may have compiled
 # them first, on a fresh install, and said so; that is progress, not a second error line.
-_COMPILE_LINE = re.compile(rf"^({re.escape(COMPILING)} \d+ s|kernels compiled \(\d+ s\))$")
+_COMPILE_LINE = re.compile(
+    rf"^({re.escape(COMPILING)} \d+ s|{re.escape(COMPILED)} \(\d+ s\))$")
 
 
 def one_line_error(r: subprocess.CompletedProcess, code: int = 2) -> str:

@@ -15,7 +15,7 @@ END = "<!-- scenario-reference:end -->"
 MAIN_JOB = ("python3 -m venv .venv && .venv/bin/pip install -e . && .venv/bin/vibroflow run "
             "--out runs/tub47-quick")
 TESTS = ("python3 -m venv .venv && .venv/bin/pip install -e '.[test]' && .venv/bin/python -m "
-         "pytest -q")
+         "pytest -q -n auto")
 
 
 def test_the_user_guide_holds_the_scenario_reference_the_model_generates():

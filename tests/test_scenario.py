@@ -423,6 +423,6 @@ def test_documented_scenario_examples_are_valid(tmp_path):
 def test_ci_runs_the_readme_test_command():
     readme = (REPO / "README.md").read_text()
     command = ("python3 -m venv .venv && .venv/bin/pip install -e '.[test]' && "
-               ".venv/bin/python -m pytest -q")
+               ".venv/bin/python -m pytest -q -n auto")
     assert command in readme
     assert command in (REPO / ".ci" / "run").read_text().splitlines()

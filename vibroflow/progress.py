@@ -19,6 +19,8 @@ from rich.progress import BarColumn, Progress, ProgressColumn, TaskProgressColum
 from rich.text import Text
 
 COMPILING = "compiling the kernels (once per install) ..."
+#: the line that ends it, before its seconds: "kernels compiled (N s)"
+COMPILED = "kernels compiled"
 #: seconds of steps outside compilation before a time left is shown
 MEASURE_S = 1.0
 #: seconds a compilation runs before it is announced (numba compiles small things in passing)
@@ -182,7 +184,7 @@ class RunProgress:
                 self._line(f"{COMPILING} {now - self._compile_from:.0f} s")
                 self._compile_said = now
         elif self._compile_said:
-            self._line(f"kernels compiled ({now - self._compile_from:.0f} s)")
+            self._line(f"{COMPILED} ({now - self._compile_from:.0f} s)")
             self._compile_said = 0.0
 
     # -- stages ---------------------------------------------------------------------------------
