@@ -105,6 +105,9 @@ def test_continuum_command_writes_dem_comparable_results(method, run_cli, tmp_pa
                                        "source_case": "tub47-quick", "created": None}
     else:
         assert "calibration" not in cont
+    # the options as run, the command line's among them, for the ensembles' grouping
+    assert cont["options"]["dx"] == (0.015 if method == "eulerian" else None)
+    assert cont["options"]["temperature"] is False and cont["options"]["cfl"] > 0
     assert summary["window"]["snapshots"] == snapshots
     table = read_csv(out / "bulk_velocity.csv", cell_size=0.015)
     assert len(table) == summary["cells"]

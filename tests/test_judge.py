@@ -25,7 +25,7 @@ V = U * (1 + SIGMA**2 / (2 * U**2))   # the mean speed of a noisy field (2D Rici
 
 
 def _write_run(folder, vx, vz, x, z, phi, strength, stderr, case="tub47", window=(1.0, 3.0),
-               method=None, sense="counterclockwise", calibrated_on=None):
+               method=None, sense="counterclockwise", calibrated_on=None, options=None):
     folder.mkdir(parents=True)
     write_csv(CellTable(x=x, z=z, solid_fraction=phi, vx=vx, vz=vz,
                         samples=np.full(x.size, 100, np.int64), cell_size=H),
@@ -37,6 +37,8 @@ def _write_run(folder, vx, vz, x, z, phi, strength, stderr, case="tub47", window
         summary["method"] = method
     if calibrated_on:   # a continuum's summary names its calibration's DEM run (tub_run.py)
         summary["continuum"] = {"calibration": {"source_run": calibrated_on}}
+    if options is not None:   # and the options it ran with
+        summary.setdefault("continuum", {})["options"] = options
     (folder / "summary.json").write_text(json.dumps(summary))
     return folder
 
@@ -203,3 +205,30 @@ def test_runs_of_one_method_are_judged_as_an_ensemble_of_calibrations(run_cli, e
     # one run of a method is no ensemble
     res = run_cli("compare", draws[0], *args[3:], "--json", out)
     assert json.loads(out.read_text())["ensembles"] == [] and " over its " not in res.stdout
+
+
+def test_an_ensemble_pools_only_runs_of_the_same_options(run_cli, ensemble, tmp_path):
+    """Four runs of one method, two with the granular temperature off and two with it on (the
+    same fields as the calibrations' test above, b = 0, 4 and 0, 4): two ensembles of two, each
+    with its own mean E, sqrt(2) and sqrt(18) sigma / V averaged, labelled by the options away
+    from their defaults."""
+    refs, _, _, (x, z, phi, vx, vz) = ensemble
+    base = {"transfer_cfl": 0.5, "temperature": False, "cfl": 0.3}
+    runs = []
+    for k, (b, temp) in enumerate(((0, False), (4, False), (0, True), (4, True)), start=1):
+        runs.append(_write_run(tmp_path / f"lag{k}", vx + b * SIGMA, vz, x, z, phi, 2.5e-3,
+                               0.04e-3, method="lagrangian", calibrated_on=f"runs/seed{k}/dem",
+                               options={**base, "temperature": temp}))
+    out = tmp_path / "j.json"
+    res = run_cli("compare", *runs, *(a for r in refs for a in ("-r", r)), "--json", out)
+    assert res.returncode == 0, res.stderr
+    j = json.loads(out.read_text())
+    assert [g["n"] for g in j["ensembles"]] == [2, 2]
+    off, on = j["ensembles"]
+    assert off["options"] == "transfer_cfl=0.5" and off["folders"] == [str(r) for r in runs[:2]]
+    assert on["options"] == "temperature=True, transfer_cfl=0.5"
+    want = np.sqrt([2.0, 18.0]).mean() * SIGMA / V
+    assert off["E_mean"] == pytest.approx(want, rel=0.03)
+    assert on["E_mean"] == pytest.approx(want, rel=0.03)
+    assert "lagrangian (temperature=True, transfer_cfl=0.5) over its 2 runs" in res.stdout
+    assert "  options: transfer_cfl=0.5" in res.stdout

@@ -24,18 +24,21 @@ in how many of them the strengths and the fields agree.  Why: a calibration's dr
 about as much as the DEM's seeds do (docs/validation.md section 30), so with one calibration a
 verdict near the limit is not a result; over several it is a count.  Each result names the DEM
 run its calibration was measured on (summary.json's continuum.calibration, from the
-calibration's [source]) where it has one.
+calibration's [source]) where it has one.  An ensemble holds the runs of one method with the
+same options (summary.json's continuum.options: `options_label`), so that runs with the
+granular temperature on, say, are not pooled with runs without it.
 """
 from __future__ import annotations
 
 import json
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import MISSING, dataclass, fields as dataclass_fields
 from pathlib import Path
 
 import numpy as np
 
+from vibroflow.continuum.options import ContinuumOptions
 from vibroflow.measure.bulk import CellTable, read_csv
 from vibroflow.analysis.compare import (FIELD_FACTOR, difference_to_seeds, ensemble_mean,
                                         field_difference, fields_agree, seed_scatter,
@@ -52,7 +55,7 @@ class RunResult:
     table (bulk_velocity.csv) and the bed's take-off from the floor (summary.json's "floor":
     vibroflow.measure.floor_force; a cycle fraction, NaN where the bed never leaves the floor,
     None where the run has no floor force) and, for a continuum run, the DEM run its calibration
-    was measured on (None without one)."""
+    was measured on (None without one) and its model options (`options_label`)."""
 
     folder: Path
     case: str
@@ -62,6 +65,7 @@ class RunResult:
     table: CellTable
     take_off: float | None = None
     calibration: str | None = None
+    options: str | None = None
 
 
 def _natural_key(path: Path) -> list:
@@ -132,7 +136,22 @@ def result_from_summary(summary: dict, folder, table: CellTable) -> RunResult:
                      window=(float(w["t_start"]), float(w["t_end"])),
                      circulation=summary["circulation"], table=table,
                      take_off=_take_off_of(summary.get("floor")),
-                     calibration=_calibration_of(summary.get("continuum")))
+                     calibration=_calibration_of(summary.get("continuum")),
+                     options=options_label(summary.get("continuum")))
+
+
+def options_label(continuum) -> str | None:
+    """A continuum summary's options (its "options" block: vibroflow.continuum.tub_run writes
+    the run's ContinuumOptions) as one label, those away from their defaults and those without
+    one, e.g. "transfer_cfl=0.5, temperature=True"; None for a run with no such block (a DEM
+    run).  The calibration is no option: an ensemble's runs differ in it."""
+    opts = continuum.get("options") if isinstance(continuum, dict) else None
+    if not isinstance(opts, dict):
+        return None
+    defaults = {f.name: f.default for f in dataclass_fields(ContinuumOptions)}
+    shown = [f"{k}={v}" for k, v in sorted(opts.items())
+             if k not in defaults or defaults[k] is MISSING or v != defaults[k]]
+    return ", ".join(shown) or "defaults"
 
 
 def _calibration_of(continuum) -> str | None:
@@ -240,28 +259,31 @@ def judge(results: list[RunResult], references: list[RunResult],
         entry["E_over_limit"] = d.mean / out["limit"] if out["limit"] else None
         if r.calibration is not None:
             entry["calibration_source_run"] = r.calibration
+        if r.options is not None:
+            entry["options"] = r.options
         out["results"].append(entry)
     out["ensembles"] = ensembles(out["results"], out["limit"])
     return out
 
 
 def ensembles(entries: list[dict], limit: float | None) -> list[dict]:
-    """Each method with two or more of the judged `entries` (judge's "results"), as one
-    ensemble: n; E_mean, E_sd (the runs' mean E: their mean and standard deviation, ddof 1),
-    E_min, E_max; E_mean_over_limit; the strength ratios' range; strengths_agree and
-    fields_agree, how many of the n agree (fields None without a floor); the runs' folders and
-    calibrations' DEM runs (None where a run names none)."""
+    """Each method and options (the entries' "options") with two or more of the judged
+    `entries` (judge's "results"), as one ensemble: method, options (None for a DEM's), n;
+    E_mean, E_sd (the runs' mean E: their mean and standard deviation, ddof 1), E_min, E_max;
+    E_mean_over_limit; the strength ratios' range; strengths_agree and fields_agree, how many
+    of the n agree (fields None without a floor); the runs' folders and calibrations' DEM runs
+    (None where a run names none)."""
     out = []
-    methods = list(dict.fromkeys(e["method"] for e in entries))
-    for m in methods:
-        group = [e for e in entries if e["method"] == m]
+    keys = list(dict.fromkeys((e["method"], e.get("options")) for e in entries))
+    for m, options in keys:
+        group = [e for e in entries if (e["method"], e.get("options")) == (m, options)]
         if len(group) < 2:
             continue
         E = np.array([e["E_mean"] for e in group])
         ratios = [e["strength_ratio"] for e in group if e["strength_ratio"] is not None]
         fields = [e["fields_agree"] for e in group]
         out.append({
-            "method": m, "n": len(group),
+            "method": m, "options": options, "n": len(group),
             "folders": [e["folder"] for e in group],
             "calibration_source_runs": [e.get("calibration_source_run") for e in group],
             "E_mean": float(E.mean()), "E_sd": float(E.std(ddof=1)),
@@ -338,6 +360,8 @@ def format_judgement(j: dict) -> str:
         lines.append(f"  fields agree: {verdict}{ratio}")
         if "take_off_phase" in r:
             lines.append(f"  bed{_take_off(r)[1:]}")
+        if "options" in r:
+            lines.append(f"  options: {r['options']}")
         if "calibration_source_run" in r:
             lines.append(f"  calibrated on {r['calibration_source_run']}")
     for g in j.get("ensembles", []):
@@ -355,7 +379,8 @@ def _ensemble_lines(g: dict) -> list[str]:
         over = f"its {n} runs, each calibrated on another DEM run"
     else:
         over = f"its {n} runs, on {len(set(cals))} calibration(s) named"
-    lines = [f"{g['method']} over {over}:"]
+    options = f" ({g['options']})" if g.get("options") else ""
+    lines = [f"{g['method']}{options} over {over}:"]
     line = (f"  E {g['E_mean']:.3f} (sd {g['E_sd']:.3f}, {g['E_min']:.3f} - {g['E_max']:.3f})")
     if g["E_mean_over_limit"] is not None:
         line += f", {g['E_mean_over_limit']:.2f} of the limit"

@@ -46,6 +46,7 @@ through the wall) ends the run with the ids and the likely cause, and removes th
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import shutil
@@ -324,6 +325,8 @@ def _results(form: Formulation, scenario, out: Path, calibration, options, vtk, 
         # the moduli's choice where it is not the default (the material holds the values)
         **({"moduli": options.moduli} if options.moduli != "calibrated" else {}),
         **_calibration_block(calibration),
+        # every option as run, so that `vibroflow compare` pools only runs of the same options
+        "options": dataclasses.asdict(options),
         **form.continuum_block(system, state, h)}
     phase = phase_shear_of_samples(scenario, samples, times, radius)
     summary["continuum"].update(shear_rate_outputs(
