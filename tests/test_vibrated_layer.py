@@ -31,7 +31,10 @@ def dem():
 
 
 def _cycle_means(r, key):
-    return np.nanmean(np.array(r[key], float), axis=0)
+    # NaN for a band that no phase filled (above the layer), without numpy's warning
+    a = np.array(r[key], float)
+    n = np.isfinite(a).sum(axis=0)
+    return np.where(n > 0, np.nansum(a, axis=0) / np.maximum(n, 1), np.nan)
 
 
 def dem_targets(dem):

@@ -114,14 +114,18 @@ class LayerProfiles:
 
     def result(self) -> dict:
         """Means and batch-means standard errors (SI), phases psi / (2 pi) and band centres."""
+        # NaN where a band held no mass or a phase bin no floor-force sample (a layer that
+        # records no floor force has none at all)
         with np.errstate(invalid="ignore", divide="ignore"):
             T_b = self.mass_T / self.mass
             phi_b = self.volume / (self.samples[..., None] * self.cross_section * self.band_m)
             f_b = self.force / self.force_samples
+            f = self.force.sum(0) / self.force_samples.sum(0)
+            f_cycle = self.force.sum() / self.force_samples.sum()
+            f_cycle_b = self.force.sum(1) / self.force_samples.sum(1)
         T = self.mass_T.sum(0) / np.where(self.mass.sum(0) > 0, self.mass.sum(0), np.nan)
         phi = self.volume.sum(0) / (self.samples.sum(0)[:, None] * self.cross_section
                                     * self.band_m)
-        f = self.force.sum(0) / self.force_samples.sum(0)
         off_b = np.array([take_off_phase(fb) for fb in f_b])
         off = take_off_phase(f)
         return {"phase": (np.arange(self.n_phases) / self.n_phases).tolist(),
@@ -134,10 +138,8 @@ class LayerProfiles:
                 "solid_fraction_stderr": stderr_of_batches(phi_b).tolist(),
                 "floor_force_over_weight": f.tolist(),
                 "floor_force_over_weight_stderr": stderr_of_batches(f_b).tolist(),
-                "floor_force_cycle_mean_over_weight": float(self.force.sum()
-                                                            / self.force_samples.sum()),
-                "floor_force_cycle_mean_stderr": stderr_of_batches(
-                    self.force.sum(1) / self.force_samples.sum(1)),
+                "floor_force_cycle_mean_over_weight": float(f_cycle),
+                "floor_force_cycle_mean_stderr": stderr_of_batches(f_cycle_b),
                 "take_off_phase": off,
                 "take_off_phase_stderr": _circular_stderr(off_b, off)}
 
