@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -31,10 +32,10 @@ def dem():
 
 
 def _cycle_means(r, key):
-    # NaN for a band that no phase filled (above the layer), without numpy's warning
-    a = np.array(r[key], float)
-    n = np.isfinite(a).sum(axis=0)
-    return np.where(n > 0, np.nansum(a, axis=0) / np.maximum(n, 1), np.nan)
+    # NaN for a band that no phase filled (above the layer), without numpy's warning for it
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmean(np.array(r[key], float), axis=0)
 
 
 def dem_targets(dem):

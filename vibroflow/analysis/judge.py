@@ -143,8 +143,8 @@ def result_from_summary(summary: dict, folder, table: CellTable) -> RunResult:
 def options_label(continuum) -> str | None:
     """A continuum summary's options (its "options" block: vibroflow.continuum.tub_run writes
     the run's ContinuumOptions) as one label, those away from their defaults and those without
-    one, e.g. "transfer_cfl=0.5, temperature=True"; None for a run with no such block (a DEM
-    run).  The calibration is no option: an ensemble's runs differ in it."""
+    one, sorted by name, e.g. "temperature=True, transfer_cfl=0.5"; None for a run with no
+    such block (a DEM run).  The calibration is no option: an ensemble's runs differ in it."""
     opts = continuum.get("options") if isinstance(continuum, dict) else None
     if not isinstance(opts, dict):
         return None
