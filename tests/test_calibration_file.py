@@ -100,6 +100,9 @@ def test_a_bad_calibration_is_one_line_naming_file_field_value(tmp_path, edit, m
 def test_a_missing_or_malformed_file_is_one_line(tmp_path):
     with pytest.raises(InputError, match=r"^calibration = '.*nothere': no such file"):
         read_calibration(tmp_path / "nothere")
+    with pytest.raises(InputError, match=r"^calibration = '.*': a folder with no "
+                                         r"calibration.toml \(give the file"):
+        read_calibration(tmp_path)
     (tmp_path / "calibration.toml").write_text("[rheology\n")
     with pytest.raises(InputError, match=r"calibration.toml: malformed TOML"):
         read_calibration(tmp_path)

@@ -439,6 +439,9 @@ def read_calibration(path) -> Calibration:
     p = Path(path)
     if p.is_dir():
         p = p / CALIBRATION_FILE
+        if not p.is_file():
+            raise InputError(f"calibration = {str(path)!r}: a folder with no {CALIBRATION_FILE} "
+                             "(give the file, or run `vibroflow calibrate` on a DEM run)")
     if not p.is_file():
         raise InputError(f"calibration = {str(path)!r}: no such file (run `vibroflow calibrate`)")
     try:
