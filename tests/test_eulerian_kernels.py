@@ -24,8 +24,9 @@ from vibroflow.continuum.eulerian.advection import remap, remap_work
 from vibroflow.continuum.eulerian.face_velocity import face_velocities
 from vibroflow.continuum.eulerian.formulation import bed_masses
 from vibroflow.continuum.eulerian.mesh import EulerianMesh
-from vibroflow.continuum.eulerian.transfer import (WeightTables, g2p_cells, operator_factors,
-                                                   operator_of_cells, p2g_cells)
+from vibroflow.continuum.eulerian.transfer import (T_BASE, WeightTables, g2p_cells,
+                                                   operator_factors, operator_of_cells,
+                                                   p2g_cells)
 from vibroflow.continuum.formulation import formulation
 from vibroflow.continuum.g2p import g2p
 from vibroflow.continuum.grid_update import TubFrame
@@ -91,13 +92,19 @@ def test_cells_to_nodes_and_back_as_the_generic_transfers(periodic):
 def test_transfer_operator_of_the_cells_is_that_of_points_at_their_centres(periodic):
     """The cells' transfer operator, their masses times the pair factors made once a run
     (transfer.operator_factors), is transfer_operator.operator_of_points of points at the
-    cell centres, bit for bit."""
+    cell centres, bit for bit: the cells added alone and those added two at a time (next to
+    each other in a column, on the same base nodes: add_factors_pair)."""
     mesh = _mesh(periodic)
     g = mesh.grid
     x = mesh.centres()
     mass = _fields(mesh, 4)[0]
     cells = np.flatnonzero(mass > 0)
     tx, tz = _tables(mesh)[:2]
+    k = cells % mesh.ncz
+    base = tz[:, T_BASE]
+    paired = (np.diff(cells) == 1) & (k[:-1] + 1 < mesh.ncz)
+    paired[paired] &= base[k[:-1][paired] + 1] == base[k[:-1][paired]]
+    assert 10 < paired.sum() < cells.size - 10  # both ways of adding are exercised
     got, want = np.zeros((g.nx, g.nz, HALF)), np.zeros((g.nx, g.nz, HALF))
     operator_of_cells(cells, mesh.ncz, tx, tz, operator_factors(mesh.ncx, mesh.ncz, tx, tz, g.dx),
                       mass, g.periodic, got)

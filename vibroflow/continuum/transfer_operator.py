@@ -121,6 +121,27 @@ def add_factors(B, m, bx, bz, factors, periodic):
 
 
 @nb.njit(cache=True)
+def add_factors_pair(B, m1, factors1, m2, factors2, bx, bz, periodic):
+    """`add_factors` of two points of the same base nodes bx, bz, one after the other: each
+    entry gets the first's term, then the second's, as two calls would add them (the same
+    bits), but is read and written once.  A fixed mesh's cells pair so (eulerian/transfer.py:
+    two cells of a column in one grid cell share their stencil)."""
+    nxg = B.shape[0]
+    e = 0
+    for a in range(3):
+        i = bx + a
+        if periodic:
+            i = i % nxg
+        for b in range(3):
+            k = bz + b
+            for c in range(a, 3):
+                for d in range(b if c == a else 0, 3):
+                    s = half_slot(c - a, d - b)
+                    B[i, k, s] = (B[i, k, s] + m1 * factors1[e]) + m2 * factors2[e]
+                    e += 1
+
+
+@nb.njit(cache=True)
 def operator_of_points(x, mass, x0, z0, dx, periodic, B):
     """Accumulate the transfer operator of the points x (N, 2) (m) of masses mass (N,) (kg/m)
     into B (nx, nz, HALF) (zero it first), on the grid of origin (x0, z0) and spacing dx (m)."""

@@ -7,8 +7,9 @@ indexing, packing the remap's fields, dispatching a dozen kernels, the frame's p
 
 Threads, as the Lagrangian step's (vibroflow.continuum.fused): the per-cell kernels write only
 their own cells, the remap's fluxes are made field by field (advection.remap_fluxes) and its
-renewal cell by cell (advection.renewed, straight into the cells' arrays), so they give the
-serial numbers whatever the threads; the cells holding material are scattered to the nodes in
+renewal cell by cell in chunks of cells (advection.renewed, field by field in the packed
+fields, which are then unpacked into the cells' arrays), so they give the serial numbers
+whatever the threads; the cells holding material are scattered to the nodes in
 `nchunk` fixed chunks of per-chunk buffers summed in a fixed order (the grid's part of the step
 is the Lagrangian loop's: grid_step.grid_phase), so the run depends on the number of chunks,
 never on the number of threads (one chunk: the serial p2g's numbers).  On one thread, and on a
@@ -82,6 +83,70 @@ MeshBoundaries = namedtuple("MeshBoundaries", [
 #: advection.remap_work's arrays, the carried fields q (NQ, N), the end-of-step density
 #: end_rho (N,), active (N,) int64 the cells holding material
 CellWork = namedtuple("CellWork", ["ux", "uz", "remap", "q", "end_rho", "active"])
+
+
+@nb.njit(cache=True)
+def pack_fields(a, b, v, C, stress, rho, q):
+    """The fields the remap carries, q (NQ, N) (solver.NQ: v, C, stress, density; units as
+    the cells' arrays), of the cells a:b from the cells' arrays v (N, 2), C (N, 4), stress
+    (N, 4) and rho (N,): one loop an array, over views from the cell a."""
+    n = b - a
+    vv, q0, q1 = v[a:b], q[0, a:b], q[1, a:b]
+    for p in range(n):
+        q0[p] = vv[p, 0]
+        q1[p] = vv[p, 1]
+    cc, q2, q3, q4, q5 = C[a:b], q[2, a:b], q[3, a:b], q[4, a:b], q[5, a:b]
+    for p in range(n):
+        q2[p] = cc[p, 0]
+        q3[p] = cc[p, 1]
+        q4[p] = cc[p, 2]
+        q5[p] = cc[p, 3]
+    ss, q6, q7, q8, q9 = stress[a:b], q[6, a:b], q[7, a:b], q[8, a:b], q[9, a:b]
+    for p in range(n):
+        q6[p] = ss[p, 0]
+        q7[p] = ss[p, 1]
+        q8[p] = ss[p, 2]
+        q9[p] = ss[p, 3]
+    rr, q10 = rho[a:b], q[10, a:b]
+    for p in range(n):
+        q10[p] = rr[p]
+
+
+@nb.njit(cache=True)
+def unpack_fields(a, b, q, v, C, stress, rho):
+    """`pack_fields` backwards, after the remap.  Returns whether every velocity is finite."""
+    n = b - a
+    vv, q0, q1 = v[a:b], q[0, a:b], q[1, a:b]
+    bad = 0
+    for p in range(n):
+        vv[p, 0] = q0[p]
+        vv[p, 1] = q1[p]
+        bad += not (np.isfinite(q0[p]) and np.isfinite(q1[p]))
+    cc, q2, q3, q4, q5 = C[a:b], q[2, a:b], q[3, a:b], q[4, a:b], q[5, a:b]
+    for p in range(n):
+        cc[p, 0] = q2[p]
+        cc[p, 1] = q3[p]
+        cc[p, 2] = q4[p]
+        cc[p, 3] = q5[p]
+    ss, q6, q7, q8, q9 = stress[a:b], q[6, a:b], q[7, a:b], q[8, a:b], q[9, a:b]
+    for p in range(n):
+        ss[p, 0] = q6[p]
+        ss[p, 1] = q7[p]
+        ss[p, 2] = q8[p]
+        ss[p, 3] = q9[p]
+    rr, q10 = rho[a:b], q[10, a:b]
+    for p in range(n):
+        rr[p] = q10[p]
+    return bad == 0
+
+
+@nb.njit(cache=True)
+def renew_field(qj, dqj, mode, mass, inv):
+    """One carried field qj (n,) renewed in place from its inflow dqj by the cells' modes,
+    old masses and reciprocals (advection.renewed): a loop that vectorises, where renewing a
+    cell's eleven fields at once, each written into its array, does not."""
+    for p in range(qj.shape[0]):
+        qj[p] = renewed(mode[p], mass[p], inv[p], qj[p], dqj[p])
 
 
 def _make_advance_kernel(parallel: bool):
@@ -195,13 +260,7 @@ def _make_advance_kernel(parallel: bool):
                 end_density(density[a:b], L[a:b], dt, end_rho[a:b])
                 update_stress_cells(a, b, stress, L, end_rho, dt, params, gamma_dot, phase,
                                     p_kin[:, RATE_RATIO])
-                for p in range(a, b):
-                    q[0, p] = v[p, 0]
-                    q[1, p] = v[p, 1]
-                    for j in range(4):
-                        q[2 + j, p] = C[p, j]
-                        q[6 + j, p] = stress[p, j]
-                    q[10, p] = end_rho[p]
+                pack_fields(a, b, v, C, stress, end_rho, q)
             if parallel:
                 remap_fluxes(m2, q3, ux, uz, h, dt, periodic, rwork)
             else:
@@ -211,19 +270,11 @@ def _make_advance_kernel(parallel: bool):
             for c in nb.prange(nchunk):
                 a = (c * n) // nchunk
                 b = ((c + 1) * n) // nchunk
-                ok = True
-                for p in range(a, b):
-                    # advection.renew_cells with the renewed fields written straight back
-                    # into the cells' arrays, not into q
-                    mk, mo, ip = r_mode[p], mass[p], r_inv[p]
-                    v[p, 0] = renewed(mk, mo, ip, q[0, p], r_dq[0, p])
-                    v[p, 1] = renewed(mk, mo, ip, q[1, p], r_dq[1, p])
-                    for j in range(4):
-                        C[p, j] = renewed(mk, mo, ip, q[2 + j, p], r_dq[2 + j, p])
-                        stress[p, j] = renewed(mk, mo, ip, q[6 + j, p], r_dq[6 + j, p])
-                    density[p] = renewed(mk, mo, ip, q[10, p], r_dq[10, p])
-                    if not (np.isfinite(v[p, 0]) and np.isfinite(v[p, 1])):
-                        ok = False
+                # advection.renew_cells field by field in q, then the fields unpacked into
+                # the cells' arrays
+                for j in range(nq):
+                    renew_field(q[j, a:b], r_dq[j, a:b], r_mode[a:b], mass[a:b], r_inv[a:b])
+                ok = unpack_fields(a, b, q, v, C, stress, density)
                 chunk_lowest[c] = renew_masses(a, b, mass, r_dm)
                 fill_limit(mass[a:b], density[a:b], h, weight[a:b])
                 chunk_finite[c] = ok
