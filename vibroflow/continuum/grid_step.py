@@ -103,10 +103,16 @@ def _make_grid_phase(parallel: bool):
         x0, z0, dx, periodic, no_slip_rows, axis_cols = grid
         cm, cmv, cf, gm, gmv, gf, gv, transfers, cb, B, gtmp = work
         nx = gm.shape[0]
-        for i in nb.prange(nx):
-            sum_chunk_rows(i, i + 1, cm, cmv, cf, gm, gmv, gf)
+        # (the serial loop makes each pass in one call over all rows, not one call a row)
+        if parallel:
+            for i in nb.prange(nx):
+                sum_chunk_rows(i, i + 1, cm, cmv, cf, gm, gmv, gf)
+                if transfers > 1:
+                    sum_operator_rows(i, i + 1, cb, B)
+        else:
+            sum_chunk_rows(0, nx, cm, cmv, cf, gm, gmv, gf)
             if transfers > 1:
-                sum_operator_rows(i, i + 1, cb, B)
+                sum_operator_rows(0, nx, cb, B)
         a0x, a0z, om, al, pvx, pvz = frame_body(frame, t + 0.5 * dt)
         grid_update(gm, gmv, gf, gv, x0, z0, dx, dt, a0x, a0z, om, al, pvx, pvz, periodic)
         if no_slip_rows > 0:
@@ -117,7 +123,10 @@ def _make_grid_phase(parallel: bool):
         # last copied back; the conditions inside transfer_rows (numba's parallel build
         # dropped slice assignments to the alternating buffer)
         for j in range(transfers - 1):
-            if j % 2 == 0:
+            if not parallel:
+                src, dst = (gv, gtmp) if j % 2 == 0 else (gtmp, gv)
+                transfer_rows(0, nx, B, gm, src, dst, periodic, no_slip_rows, axis_cols)
+            elif j % 2 == 0:
                 for i in nb.prange(nx):
                     transfer_rows(i, i + 1, B, gm, gv, gtmp, periodic, no_slip_rows,
                                   axis_cols)
