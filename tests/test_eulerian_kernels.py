@@ -93,7 +93,7 @@ def test_transfer_operator_of_the_cells_is_that_of_points_at_their_centres(perio
     """The cells' transfer operator, their masses times the pair factors made once a run
     (transfer.operator_factors), is transfer_operator.operator_of_points of points at the
     cell centres, bit for bit: the cells added alone and those added two at a time (next to
-    each other in a column, on the same base nodes: add_factors_pair)."""
+    each other in a column, on the same base nodes: transfer_operator.add_factors)."""
     mesh = _mesh(periodic)
     g = mesh.grid
     x = mesh.centres()

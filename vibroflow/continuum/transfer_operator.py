@@ -103,30 +103,14 @@ def point_factors(fx, wx0, wx1, wx2, fz, wz0, wz1, wz2, dx, out):
 
 
 @nb.njit(cache=True)
-def add_factors(B, m, bx, bz, factors, periodic):
+def add_factors(B, bx, bz, periodic, m1, factors1, m2, factors2, two):
     """Add a point's part m w_ip w_jp (1 + 4/dx^2 r_ip . r_jp) to the operator B
-    (nx, nz, HALF) (module docstring): m factors[e] (`point_factors`) into the entry of each
-    pair of its stencil's nodes, mass m (kg/m), base nodes bx, bz."""
-    nxg = B.shape[0]
-    e = 0
-    for a in range(3):
-        i = bx + a
-        if periodic:
-            i = i % nxg
-        for b in range(3):
-            k = bz + b
-            for c in range(a, 3):
-                for d in range(b if c == a else 0, 3):
-                    B[i, k, half_slot(c - a, d - b)] += m * factors[e]
-                    e += 1
-
-
-@nb.njit(cache=True)
-def add_factors_pair(B, m1, factors1, m2, factors2, bx, bz, periodic):
-    """`add_factors` of two points of the same base nodes bx, bz, one after the other: each
-    entry gets the first's term, then the second's, as two calls would add them (the same
-    bits), but is read and written once.  A fixed mesh's cells pair so (eulerian/transfer.py:
-    two cells of a column in one grid cell share their stencil)."""
+    (nx, nz, HALF) (module docstring): m1 factors1[e] (`point_factors`; mass m1, kg/m) into
+    the entry of each pair of its stencil's nodes, base nodes bx, bz.  With `two`, then a
+    second point's m2 factors2[e] on the same base nodes: each entry gets the first's term,
+    then the second's, as two calls would add them (the same bits), but is read and written
+    once (a fixed mesh's cells pair so: eulerian/transfer.py, two cells of a column in one grid
+    cell share their stencil)."""
     nxg = B.shape[0]
     e = 0
     for a in range(3):
@@ -138,7 +122,10 @@ def add_factors_pair(B, m1, factors1, m2, factors2, bx, bz, periodic):
             for c in range(a, 3):
                 for d in range(b if c == a else 0, 3):
                     s = half_slot(c - a, d - b)
-                    B[i, k, s] = (B[i, k, s] + m1 * factors1[e]) + m2 * factors2[e]
+                    t = B[i, k, s] + m1 * factors1[e]
+                    if two:
+                        t = t + m2 * factors2[e]
+                    B[i, k, s] = t
                     e += 1
 
 

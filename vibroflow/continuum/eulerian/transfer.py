@@ -26,7 +26,7 @@ import numpy as np
 
 from ..g2p import store_gather
 from ..stencil import bspline_weights, gather_point, scatter_point
-from ..transfer_operator import PAIRS, add_factors, add_factors_pair, point_factors
+from ..transfer_operator import PAIRS, add_factors, point_factors
 
 #: columns of a weight table's row: the base node (an integer stored as a float), fx, the
 #: three weights and their three derivatives (1/m), as stencil.bspline_weights returns them
@@ -146,7 +146,7 @@ def operator_of_cells(cells, ncz, tx, tz, factors, mass, periodic, B):
     it first), with the base nodes of rows tx[i] and tz[k] and the cells' pair factors
     (`operator_factors`): transfer_operator.operator_of_points of the cell centres, bit for
     bit.  Two cells next to each other in a column whose stencils share their base nodes (two
-    of a grid cell's, the cells being half its size) are added in one pass (add_factors_pair:
+    of a grid cell's, the cells being half its size) are added in one pass (add_factors:
     the same terms in the same order, each entry read and written once instead of twice)."""
     n = cells.shape[0]
     j = 0
@@ -158,9 +158,9 @@ def operator_of_cells(cells, ncz, tx, tz, factors, mass, periodic, B):
         bz = int(tz[kc, T_BASE])
         if j + 1 < n and cells[j + 1] == p + 1 and kc + 1 < ncz and \
                 int(tz[kc + 1, T_BASE]) == bz:
-            add_factors_pair(B, mass[p], factors[p], mass[p + 1], factors[p + 1], bx, bz,
-                             periodic)
+            add_factors(B, bx, bz, periodic, mass[p], factors[p], mass[p + 1], factors[p + 1],
+                        True)
             j += 2
         else:
-            add_factors(B, mass[p], bx, bz, factors[p], periodic)
+            add_factors(B, bx, bz, periodic, mass[p], factors[p], 0.0, factors[p], False)
             j += 1
