@@ -86,61 +86,6 @@ CellWork = namedtuple("CellWork", ["ux", "uz", "remap", "q", "end_rho", "active"
 
 
 @nb.njit(cache=True)
-def pack_fields(a, b, v, C, stress, rho, q):
-    """The fields the remap carries, q (NQ, N) (solver.NQ: v, C, stress, density; units as
-    the cells' arrays), of the cells a:b from the cells' arrays v (N, 2), C (N, 4), stress
-    (N, 4) and rho (N,): one loop an array, over views from the cell a."""
-    n = b - a
-    vv, q0, q1 = v[a:b], q[0, a:b], q[1, a:b]
-    for p in range(n):
-        q0[p] = vv[p, 0]
-        q1[p] = vv[p, 1]
-    cc, q2, q3, q4, q5 = C[a:b], q[2, a:b], q[3, a:b], q[4, a:b], q[5, a:b]
-    for p in range(n):
-        q2[p] = cc[p, 0]
-        q3[p] = cc[p, 1]
-        q4[p] = cc[p, 2]
-        q5[p] = cc[p, 3]
-    ss, q6, q7, q8, q9 = stress[a:b], q[6, a:b], q[7, a:b], q[8, a:b], q[9, a:b]
-    for p in range(n):
-        q6[p] = ss[p, 0]
-        q7[p] = ss[p, 1]
-        q8[p] = ss[p, 2]
-        q9[p] = ss[p, 3]
-    rr, q10 = rho[a:b], q[10, a:b]
-    for p in range(n):
-        q10[p] = rr[p]
-
-
-@nb.njit(cache=True)
-def unpack_fields(a, b, q, v, C, stress, rho):
-    """`pack_fields` backwards, after the remap.  Returns whether every velocity is finite."""
-    n = b - a
-    vv, q0, q1 = v[a:b], q[0, a:b], q[1, a:b]
-    bad = 0
-    for p in range(n):
-        vv[p, 0] = q0[p]
-        vv[p, 1] = q1[p]
-        bad += not (np.isfinite(q0[p]) and np.isfinite(q1[p]))
-    cc, q2, q3, q4, q5 = C[a:b], q[2, a:b], q[3, a:b], q[4, a:b], q[5, a:b]
-    for p in range(n):
-        cc[p, 0] = q2[p]
-        cc[p, 1] = q3[p]
-        cc[p, 2] = q4[p]
-        cc[p, 3] = q5[p]
-    ss, q6, q7, q8, q9 = stress[a:b], q[6, a:b], q[7, a:b], q[8, a:b], q[9, a:b]
-    for p in range(n):
-        ss[p, 0] = q6[p]
-        ss[p, 1] = q7[p]
-        ss[p, 2] = q8[p]
-        ss[p, 3] = q9[p]
-    rr, q10 = rho[a:b], q[10, a:b]
-    for p in range(n):
-        rr[p] = q10[p]
-    return bad == 0
-
-
-@nb.njit(cache=True)
 def renew_field(qj, dqj, mode, mass, inv):
     """One carried field qj (n,) renewed in place from its inflow dqj by the cells' modes,
     old masses and reciprocals (advection.renewed): a loop that vectorises, where renewing a
@@ -260,7 +205,13 @@ def _make_advance_kernel(parallel: bool):
                 end_density(density[a:b], L[a:b], dt, end_rho[a:b])
                 update_stress_cells(a, b, stress, L, end_rho, dt, params, gamma_dot, phase,
                                     p_kin[:, RATE_RATIO])
-                pack_fields(a, b, v, C, stress, end_rho, q)
+                for p in range(a, b):
+                    q[0, p] = v[p, 0]
+                    q[1, p] = v[p, 1]
+                    for j in range(4):
+                        q[2 + j, p] = C[p, j]
+                        q[6 + j, p] = stress[p, j]
+                    q[10, p] = end_rho[p]
             if parallel:
                 remap_fluxes(m2, q3, ux, uz, h, dt, periodic, rwork)
             else:
@@ -274,7 +225,16 @@ def _make_advance_kernel(parallel: bool):
                 # the cells' arrays
                 for j in range(nq):
                     renew_field(q[j, a:b], r_dq[j, a:b], r_mode[a:b], mass[a:b], r_inv[a:b])
-                ok = unpack_fields(a, b, q, v, C, stress, density)
+                ok = True
+                for p in range(a, b):
+                    v[p, 0] = q[0, p]
+                    v[p, 1] = q[1, p]
+                    for j in range(4):
+                        C[p, j] = q[2 + j, p]
+                        stress[p, j] = q[6 + j, p]
+                    density[p] = q[10, p]
+                    if not (np.isfinite(v[p, 0]) and np.isfinite(v[p, 1])):
+                        ok = False
                 chunk_lowest[c] = renew_masses(a, b, mass, r_dm)
                 fill_limit(mass[a:b], density[a:b], h, weight[a:b])
                 chunk_finite[c] = ok

@@ -156,11 +156,8 @@ def operator_of_cells(cells, ncz, tx, tz, factors, mass, periodic, B):
         kc = p - ic * ncz
         bx = int(tx[ic, T_BASE])
         bz = int(tz[kc, T_BASE])
-        if j + 1 < n and cells[j + 1] == p + 1 and kc + 1 < ncz and \
-                int(tz[kc + 1, T_BASE]) == bz:
-            add_factors(B, bx, bz, periodic, mass[p], factors[p], mass[p + 1], factors[p + 1],
-                        True)
-            j += 2
-        else:
-            add_factors(B, bx, bz, periodic, mass[p], factors[p], 0.0, factors[p], False)
-            j += 1
+        two = j + 1 < n and cells[j + 1] == p + 1 and kc + 1 < ncz and \
+            int(tz[kc + 1, T_BASE]) == bz
+        q = p + 1 if two else p
+        add_factors(B, bx, bz, periodic, mass[p], factors[p], mass[q], factors[q], two)
+        j += 2 if two else 1
