@@ -142,7 +142,7 @@ def kernels(a) -> dict:
     import numba
     import numpy as np
 
-    from vibroflow.continuum.eulerian.transfer import operator_of_cells
+    from vibroflow.continuum.eulerian.operator_build import operator_columns, operator_rows
     from vibroflow.continuum.transfer_operator import (HALF, expand, operator_of_points,
                                                        transfer_rows)
 
@@ -205,9 +205,9 @@ def kernels(a) -> dict:
             from vibroflow.continuum.eulerian.lagrangian_step import (end_density,
                                                                       material_fraction)
             from vibroflow.continuum.eulerian.solver import NQ
-            from vibroflow.continuum.eulerian.transfer import g2p_cells, p2g_cells
+            from vibroflow.continuum.eulerian.column_gather import gather
+            from vibroflow.continuum.eulerian.column_scatter import scatter
             from vibroflow.continuum.eulerian.wall import wall_forces
-            from vibroflow.continuum.grid_step import sum_chunk_rows
             from vibroflow.continuum.grid_update import grid_update
 
             mesh = system.mesh
@@ -215,8 +215,9 @@ def kernels(a) -> dict:
             n = mesh.n
             gw = system.work
             gm, gmv, gf, gv = gw.gm, gw.gmv, gw.gf, gw.gv
-            cm, cmv, cf = gw.cm, gw.cmv, gw.cf
-            act = np.flatnonzero(state.mass > 0)
+            rows = np.flatnonzero((state.mass.reshape(mesh.ncx, mesh.ncz) > 0).any(axis=0))
+            ktop = int(rows[-1]) + 1
+            cw = system.cell_work
             tcx, tcz = system.tables[0], system.tables[1]
             w, pf, hist = system.wall, system.partitions, state.wall
             frac, vol, fext = state.frac.copy(), state.volume.copy(), state.fext.copy()
@@ -232,16 +233,16 @@ def kernels(a) -> dict:
             t["partitions"] = _per_call(lambda: partition_forces(
                 state.v, state.mass, state.volume, state.stress, fext, pf.friction, pf.length,
                 system.dt), 200)
-            t["p2g (cells holding material)"] = _per_call(lambda: p2g_cells(
-                act, mesh.ncz, tcx, tcz, state.v, state.C, state.mass, state.volume,
-                state.stress, state.fext, g.dx, g.periodic, system.inv_r, gm, gmv, gf), 200)
-            t["chunk sums and grid update"] = _per_call(lambda: (
-                sum_chunk_rows(0, g.nx, cm, cmv, cf, gm, gmv, gf),
-                grid_update(gm, gmv, gf, gv, g.x0, g.z0, g.dx, system.dt, 0.0, -9.81, 0.0, 0.0,
-                            0.0, 0.0, g.periodic)), 200)
+            t["p2g (cells holding material, both passes)"] = _per_call(lambda: scatter(
+                ktop, tcx, tcz, g.dx, system.mesh_record.columns, state.mass, state.volume,
+                state.v, state.C, state.stress, state.fext, system.inv_r, cw.zscat, gm, gmv,
+                gf), 200)
+            t["grid update"] = _per_call(lambda: grid_update(
+                gm, gmv, gf, gv, g.x0, g.z0, g.dx, system.dt, 0.0, -9.81, 0.0, 0.0, 0.0, 0.0,
+                g.periodic), 200)
             v, C, L = state.v.copy(), state.C.copy(), state.L.copy()
-            t["g2p (cells holding material)"] = _per_call(lambda: g2p_cells(
-                act, mesh.ncz, tcx, tcz, v, C, L, gv, g.dx, g.periodic), 200)
+            t["g2p (cells holding material, both passes)"] = _per_call(lambda: gather(
+                ktop, tcx, tcz, g.dx, g.periodic, gv, cw.zgath, state.mass, v, C, L), 200)
             m2 = state.mass.reshape(mesh.ncx, mesh.ncz)
             t["face_velocities"] = _per_call(lambda: face_velocities(
                 gv, system.tables, g.periodic, mesh.open_x, mesh.open_z, m2, system.ux,
@@ -262,10 +263,12 @@ def kernels(a) -> dict:
             B = np.zeros((g.nx, g.nz, HALF))
             gtmp = np.zeros_like(gv)
 
+            op, rc = system.mesh_record.operator, system.mesh_record.columns
+            m2 = state.mass.reshape(mesh.ncx, mesh.ncz)
+
             def build():
-                B[:] = 0.0
-                operator_of_cells(act, mesh.ncz, tcx, tcz, system.mesh_record.factors,
-                                  state.mass, g.periodic, B)
+                operator_columns(0, mesh.ncx, m2, tcz, op.zf, cw.S, cw.ext)
+                operator_rows(0, g.nx, cw.S, cw.ext, op.xf, *rc, cw.rows, B)
 
             t["transfer operator (build)"] = _per_call(build, 200)
             mass = expand(B).sum(axis=(2, 3))  # the nodes' masses: the operator's row sums

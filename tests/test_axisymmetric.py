@@ -73,10 +73,11 @@ def _points_ring_scatter(p0):
 
 
 def _cells_ring_scatter(p0):
-    """The same of the Eulerian cells filled over [0.2, 0.6] x [0, 0.3] m (transfer.p2g_cells
-    with inv_r = 1/r; the plane scatter with inv_r = 0), 2 x 2 cells an element, as the points
-    are."""
-    from vibroflow.continuum.eulerian.transfer import WeightTables, p2g_cells
+    """The same of the Eulerian cells filled over [0.2, 0.6] x [0, 0.3] m (column_scatter.
+    scatter with inv_r = 1/r; the plane scatter with inv_r = 0), 2 x 2 cells an element, as the
+    points are."""
+    from vibroflow.continuum.eulerian.column_scatter import scatter, scatter_work
+    from vibroflow.continuum.eulerian.transfer import WeightTables, node_row_columns
 
     system = _axi_system()
     mesh, g = system.mesh, system.mesh.grid
@@ -96,9 +97,9 @@ def _cells_ring_scatter(p0):
     out = {}
     for name, inv_r in (("axi", system.inv_r), ("plane", np.zeros(n))):
         gm, gmv, gf, _ = g.zeros()
-        p2g_cells(np.flatnonzero(filled), mesh.ncz, t.cx, t.cz, np.zeros((n, 2)),
-                  np.zeros((n, 4)), 4680.0 * vol, vol, stress, np.zeros((n, 2)), g.dx,
-                  g.periodic, inv_r, gm, gmv, gf)
+        scatter(mesh.ncz, t.cx, t.cz, g.dx, node_row_columns(t.cx, g.nx, g.periodic),
+                4680.0 * vol, vol, np.zeros((n, 2)), np.zeros((n, 4)), stress, np.zeros((n, 2)),
+                inv_r, scatter_work(mesh.ncx, g.nz), gm, gmv, gf)
         out[name] = gf[inner]
     return out["axi"], out["plane"], R[inner]
 

@@ -1,8 +1,10 @@
 """The Eulerian formulation's own kernels against the generic ones they stand in for.
 
-transfer.py's p2g_cells and g2p_cells read the B-spline weights of the fixed cell centres from
-tables made once a run; on any field they must give what the material point method's p2g and
-g2p (vibroflow.continuum.p2g, g2p) give for points at those centres.  The face velocities are
+The cells' scatter and gather (column_scatter.py, column_gather.py) and transfer operator
+(operator_build.py) are each a pass along one axis and one along the other, with the B-spline
+weights of the fixed cell centres read from tables made once a run; on any field they must give
+what the material point method's p2g, g2p and operator_of_points give for points at those
+centres, to roundoff (the sums are made in another order).  The face velocities are
 the nodal field interpolated at the face midpoints, which g2p's velocity of a point there is.
 The remap (advection.remap, flat and field by field) must give the numbers of the scheme's
 face-by-face loop, written out plainly here (the module docstring of advection.py).  Random
@@ -24,15 +26,17 @@ from vibroflow.continuum.eulerian.advection import remap, remap_work
 from vibroflow.continuum.eulerian.face_velocity import face_velocities
 from vibroflow.continuum.eulerian.formulation import bed_masses
 from vibroflow.continuum.eulerian.mesh import EulerianMesh
-from vibroflow.continuum.eulerian.transfer import (T_BASE, WeightTables, g2p_cells,
-                                                   operator_factors, operator_of_cells,
-                                                   p2g_cells)
+from vibroflow.continuum.eulerian.operator_build import (operator_columns, operator_rows,
+                                                         operator_tables, operator_work)
+from vibroflow.continuum.eulerian.column_gather import gather, gather_work
+from vibroflow.continuum.eulerian.column_scatter import scatter, scatter_work
+from vibroflow.continuum.eulerian.transfer import WeightTables, node_row_columns
 from vibroflow.continuum.formulation import formulation
 from vibroflow.continuum.g2p import g2p
 from vibroflow.continuum.grid_update import TubFrame
 from vibroflow.continuum.material import material_of
 from vibroflow.continuum.p2g import p2g
-from vibroflow.continuum.transfer_operator import HALF, operator_of_points
+from vibroflow.continuum.transfer_operator import HALF, expand, operator_of_points
 from vibroflow.scenario.io import load_scenario
 from vibroflow.tub.motion import TubMotion
 
@@ -57,6 +61,12 @@ def _tables(mesh):
     return (t.cx, t.cz, t.fx, t.fz)
 
 
+def _ktop(mesh, mass):
+    """The cell rows up to the highest cell holding material."""
+    rows = np.flatnonzero((mass.reshape(mesh.ncx, mesh.ncz) > 0).any(axis=0))
+    return int(rows[-1]) + 1 if rows.size else 0
+
+
 def _close(a, b):
     scale = max(np.abs(b).max(), 1e-300)
     assert np.abs(a - b).max() <= 1e-14 * scale
@@ -70,9 +80,10 @@ def test_cells_to_nodes_and_back_as_the_generic_transfers(periodic):
     mass, v, C, volume, stress, fext = _fields(mesh, 1)
     cells = np.flatnonzero(mass > 0)
     tx, tz = _tables(mesh)[:2]
-    got, want = g.zeros()[:3], g.zeros()[:3]
-    p2g_cells(cells, mesh.ncz, tx, tz, v, C, mass, volume, stress, fext, g.dx, g.periodic,
-              np.zeros(mesh.n), *got)
+    got, want = [np.full_like(a, np.nan) for a in g.zeros()[:3]], g.zeros()[:3]
+    ktop = _ktop(mesh, mass)
+    scatter(ktop, tx, tz, g.dx, node_row_columns(tx, g.nx, g.periodic), mass, volume, v, C,
+            stress, fext, np.zeros(mesh.n), scatter_work(mesh.ncx, g.nz), *got)
     p2g(x[cells], v[cells], C[cells], mass[cells], volume[cells], stress[cells], fext[cells],
         g.x0, g.z0, g.dx, g.periodic, *want)
     for a, b in zip(got, want):
@@ -80,37 +91,45 @@ def test_cells_to_nodes_and_back_as_the_generic_transfers(periodic):
     assert want[0].sum() == pytest.approx(mass.sum())  # the check is not vacuous
     gv = np.random.default_rng(2).normal(size=(g.nx, g.nz, 2))
     vg, Cg, Lg = np.zeros((mesh.n, 2)), np.zeros((mesh.n, 4)), np.zeros((mesh.n, 4))
-    g2p_cells(cells, mesh.ncz, tx, tz, vg, Cg, Lg, gv, g.dx, g.periodic)
+    gather(ktop, tx, tz, g.dx, g.periodic, gv, gather_work(g.nx, mesh.ncz), mass, vg, Cg, Lg)
     xw, vw, Cw, Lw = x[cells].copy(), v[cells].copy(), C[cells].copy(), np.zeros((cells.size, 4))
     g2p(xw, vw, Cw, Lw, gv, g.x0, g.z0, g.dx, 0.0, g.periodic, want[0], want[1], 0.0)
     _close(vg[cells], vw)
     _close(Cg[cells], Cw)
     _close(Lg[cells], Lw)
+    empty = mass == 0
+    assert not vg[empty].any() and not Cg[empty].any() and not Lg[empty].any()
 
 
 @pytest.mark.parametrize("periodic", [False, True])
 def test_transfer_operator_of_the_cells_is_that_of_points_at_their_centres(periodic):
-    """The cells' transfer operator, their masses times the pair factors made once a run
-    (transfer.operator_factors), is transfer_operator.operator_of_points of points at the
-    cell centres, bit for bit: the cells added alone and those added two at a time (next to
-    each other in a column, on the same base nodes: transfer_operator.add_factors)."""
+    """The cells' transfer operator, built as a pass along the mesh's columns and one across
+    them (operator_build.py), is transfer_operator.operator_of_points of points at the cell
+    centres to roundoff, on a bed whose top cells are empty (the build stops at each column's
+    top); and on the closed grid its rows sum to the node masses of the cells' scatter (the
+    operator keeps a uniform velocity)."""
     mesh = _mesh(periodic)
     g = mesh.grid
     x = mesh.centres()
     mass = _fields(mesh, 4)[0]
+    mass.reshape(mesh.ncx, mesh.ncz)[:, -3:] = 0.0
     cells = np.flatnonzero(mass > 0)
     tx, tz = _tables(mesh)[:2]
-    k = cells % mesh.ncz
-    base = tz[:, T_BASE]
-    paired = (np.diff(cells) == 1) & (k[:-1] + 1 < mesh.ncz)
-    paired[paired] &= base[k[:-1][paired] + 1] == base[k[:-1][paired]]
-    assert 10 < paired.sum() < cells.size - 10  # both ways of adding are exercised
-    got, want = np.zeros((g.nx, g.nz, HALF)), np.zeros((g.nx, g.nz, HALF))
-    operator_of_cells(cells, mesh.ncz, tx, tz, operator_factors(mesh.ncx, mesh.ncz, tx, tz, g.dx),
-                      mass, g.periodic, got)
+    op = operator_tables(tx, tz, g.dx)
+    S, ext, rows = operator_work(mesh.ncx, g.nx, g.nz)
+    got, want = np.full((g.nx, g.nz, HALF), np.nan), np.zeros((g.nx, g.nz, HALF))
+    operator_columns(0, mesh.ncx, mass.reshape(mesh.ncx, mesh.ncz), tz, op.zf, S, ext)
+    operator_rows(0, g.nx, S, ext, op.xf, *node_row_columns(tx, g.nx, g.periodic), rows, got)
     operator_of_points(x[cells], mass[cells], g.x0, g.z0, g.dx, g.periodic, want)
     assert np.abs(want).max() > 0.1 * mass.max()  # the check is not vacuous
-    np.testing.assert_array_equal(got, want)
+    _close(got, want)
+    gm = g.zeros()[:3]
+    scatter(_ktop(mesh, mass), tx, tz, g.dx, node_row_columns(tx, g.nx, g.periodic), mass,
+            np.zeros(mesh.n), np.zeros((mesh.n, 2)), np.zeros((mesh.n, 4)),
+            np.zeros((mesh.n, 4)), np.zeros((mesh.n, 2)), np.zeros(mesh.n),
+            scatter_work(mesh.ncx, g.nz), *gm)
+    if not periodic:  # (expand does not wrap the couplings across a periodic grid's ends)
+        _close(expand(got).sum(axis=(2, 3)), gm[0])
 
 
 @pytest.mark.parametrize("periodic", [False, True])

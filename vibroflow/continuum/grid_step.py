@@ -1,13 +1,16 @@
 """The grid's part of a continuum step, shared by both formulations' compiled loops.
 
 Both formulations (the material points, fused.py; the Eulerian cells, eulerian/fused.py) scatter
-their material to the nodes of the same background grid (grid.py) in fixed chunks, each chunk
-into its own buffers; then the grid's part of the step is the same for both (`grid_phase`):
+their material to the nodes of the same background grid (grid.py); then the grid's part of the
+step is the same for both (`grid_phase`):
 
-1. the per-chunk buffers are summed node by node in the fixed order chunk 0, 1, ...
-   (`sum_chunk_rows`), so the grid sums depend on the number of chunks and never on the number
-   of threads (as the DEM's run.force_chunks: vibroflow.dem.step); with them the transfer
-   operator's per-chunk parts when a step makes more than one transfer (transfer_operator.py);
+1. the material points are scattered in fixed chunks, each chunk into its own buffers, which
+   are summed node by node in the fixed order chunk 0, 1, ... (`sum_chunk_rows`), so the grid
+   sums depend on the number of chunks and never on the number of threads (as the DEM's
+   run.force_chunks: vibroflow.dem.step); with them the transfer operator's per-chunk parts
+   when a step makes more than one transfer (transfer_operator.py).  The Eulerian cells, which
+   do not move, write the node sums and the operator whole, node row by node row (eulerian/
+   column_scatter.py, operator_build.py): their GridWork has no chunks, and step 1 is theirs;
 2. the grid velocity update with the frame's body forces at mid-step (grid_update.py);
 3. the grid's conditions: the lowest `no_slip_rows` node rows held still (a rough floor), the
    radial velocity of the first `axis_cols` node columns held at 0 (an axisymmetric section's
@@ -18,7 +21,8 @@ Records (numba named tuples, unpacked into locals at the top of each kernel):
 
 * `GridSpec`: the grid's origin x0, z0 (m), spacing dx (m), periodic (wraps along x), and its
   conditions no_slip_rows and axis_cols (0 for none);
-* `GridWork`: the per-chunk scatter buffers cm (nchunk, nx, nz), cmv, cf (nchunk, nx, nz, 2),
+* `GridWork`: the per-chunk scatter buffers cm (nchunk, nx, nz), cmv, cf (nchunk, nx, nz, 2;
+  nchunk 0 where the caller writes the sums whole),
   the node mass gm (nx, nz) kg/m, momentum gmv, force gf and velocity gv (nx, nz, 2), the
   transfers a step makes, the transfer operator's per-chunk parts cb (nchunk, nx, nz, HALF),
   their sum B (nx, nz, HALF) (transfer_operator.py: the stored half) and a work grid gtmp
@@ -46,8 +50,9 @@ def grid_spec(grid, no_slip_rows: int, axis_cols: int) -> GridSpec:
 
 
 def grid_work(grid, chunks: int, transfers: int) -> GridWork:
-    """Fresh GridWork arrays of a grid.Grid for `chunks` scatter chunks and `transfers` APIC
-    transfers a step (the operator's buffers empty for one)."""
+    """Fresh GridWork arrays of a grid.Grid for `chunks` scatter chunks (0: the caller writes
+    the node sums and the operator whole) and `transfers` APIC transfers a step (the
+    operator's buffers empty for one)."""
     nx, nz = grid.nx, grid.nz
     t = (nx, nz) if transfers > 1 else (0, 0)
     return GridWork(np.zeros((chunks, nx, nz)), np.zeros((chunks, nx, nz, 2)),
@@ -103,15 +108,17 @@ def _make_grid_phase(parallel: bool):
         x0, z0, dx, periodic, no_slip_rows, axis_cols = grid
         cm, cmv, cf, gm, gmv, gf, gv, transfers, cb, B, gtmp = work
         nx = gm.shape[0]
+        chunked = cm.shape[0] > 0
+        summed = transfers > 1 and chunked
         # (the serial loop makes each pass in one call over all rows, not one call a row)
         if parallel:
-            for i in nb.prange(nx):
+            for i in nb.prange(nx if chunked else 0):
                 sum_chunk_rows(i, i + 1, cm, cmv, cf, gm, gmv, gf)
-                if transfers > 1:
+                if summed:
                     sum_operator_rows(i, i + 1, cb, B)
-        else:
+        elif chunked:
             sum_chunk_rows(0, nx, cm, cmv, cf, gm, gmv, gf)
-            if transfers > 1:
+            if summed:
                 sum_operator_rows(0, nx, cb, B)
         a0x, a0z, om, al, pvx, pvz = frame_body(frame, t + 0.5 * dt)
         grid_update(gm, gmv, gf, gv, x0, z0, dx, dt, a0x, a0z, om, al, pvx, pvz, periodic)

@@ -61,17 +61,12 @@ def half_slot(da, db):
     return 3 + (da - 1) * 5 + db + 2
 
 
-#: products a point adds: the unordered pairs of its 3 x 3 stencil's nodes
-PAIRS = 45
-
-
 @nb.njit(cache=True, inline="always")
 def pair_factor(a, b, c, d, wx, wz, rx, rz, inv):
     """w_ip w_jp (1 + 4/dx^2 r_ip . r_jp) of the stencil's nodes (a, b) and (c, d) of a point,
     from its weights wx, wz and offsets rx, rz (m) (3-tuples along x and z) and inv = 4/dx^2:
-    split by axis, (w_a w_c)(w_b w_d)((1 + inv r_a r_c) + inv r_b r_d): the same operations in
-    one function for both places that make them (`add_point`, `point_factors`), so points and
-    fixed cells give the same bits."""
+    split by axis, (w_a w_c)(w_b w_d)((1 + inv r_a r_c) + inv r_b r_d) (the split that the
+    fixed Eulerian cells' build makes in two passes: eulerian/operator_build.py)."""
     return ((wx[a] * wx[c]) * (wz[b] * wz[d])) * (
         (1.0 + inv * (rx[a] * rx[c])) + inv * (rz[b] * rz[d]))
 
@@ -85,59 +80,13 @@ def stencil_tuples(fx, wx0, wx1, wx2, fz, wz0, wz1, wz2, dx):
 
 
 @nb.njit(cache=True)
-def point_factors(fx, wx0, wx1, wx2, fz, wz0, wz1, wz2, dx, out):
-    """A point's PAIRS pair factors w_ip w_jp (1 + 4/dx^2 r_ip . r_jp) (`pair_factor`) into out
-    (PAIRS,), each unordered pair of its stencil's nodes once, in the order (a, b) <= (c, d)
-    lexicographic (`add_factors`' order): its offsets fx, fz and three weights per axis as
-    stencil.bspline_weights returns them, spacing dx (m).  A point that never moves (the
-    Eulerian mesh's cells) keeps them for the run."""
-    inv = 4.0 / (dx * dx)
-    wx, wz, rx, rz = stencil_tuples(fx, wx0, wx1, wx2, fz, wz0, wz1, wz2, dx)
-    e = 0
-    for a in range(3):
-        for b in range(3):
-            for c in range(a, 3):
-                for d in range(b if c == a else 0, 3):
-                    out[e] = pair_factor(a, b, c, d, wx, wz, rx, rz, inv)
-                    e += 1
-
-
-@nb.njit(cache=True)
-def add_factors(B, bx, bz, periodic, m1, factors1, m2, factors2, two):
-    """Add a point's part m w_ip w_jp (1 + 4/dx^2 r_ip . r_jp) to the operator B
-    (nx, nz, HALF) (module docstring): m1 factors1[e] (`point_factors`; mass m1, kg/m) into
-    the entry of each pair of its stencil's nodes, base nodes bx, bz.  With `two`, then a
-    second point's m2 factors2[e] on the same base nodes: each entry gets the first's term,
-    then the second's, as two calls would add them (the same bits), but is read and written
-    once (a fixed mesh's cells pair so: eulerian/transfer.py, two cells of a column in one grid
-    cell share their stencil)."""
-    nxg = B.shape[0]
-    e = 0
-    for a in range(3):
-        i = bx + a
-        if periodic:
-            i = i % nxg
-        for b in range(3):
-            k = bz + b
-            for c in range(a, 3):
-                for d in range(b if c == a else 0, 3):
-                    s = half_slot(c - a, d - b)
-                    t = B[i, k, s] + m1 * factors1[e]
-                    if two:
-                        t = t + m2 * factors2[e]
-                    B[i, k, s] = t
-                    e += 1
-
-
-@nb.njit(cache=True)
 def add_point(B, m, bx, fx, wx0, wx1, wx2, bz, fz, wz0, wz1, wz2, dx, periodic):
-    """`add_factors` of a point whose pair factors (`point_factors`, the same operations:
-    `pair_factor`) are made here, in registers, as they are added: mass m (kg/m), base nodes
-    bx, bz, offsets fx, fz and three weights per axis as stencil.bspline_weights returns them,
-    spacing dx (m).  A moving point's factors are used once, and written to memory first
-    (point_factors, then add_factors) they cost the Lagrangian step 11 % more (tub47, 207
-    against 186 us); the fixed cells keep theirs for the run.  tests/test_eulerian_kernels.py
-    holds the two ways to the same bits."""
+    """Add a point's part m w_ip w_jp (1 + 4/dx^2 r_ip . r_jp) to the operator B (nx, nz,
+    HALF) (module docstring), each unordered pair of its stencil's nodes once, the factors
+    (`pair_factor`) made in registers as they are added (made into a work array first, they
+    cost the Lagrangian step 11 %: tub47, 207 against 186 us): mass m (kg/m), base nodes bx,
+    bz, offsets fx, fz and three weights per axis as stencil.bspline_weights returns them,
+    spacing dx (m)."""
     nxg = B.shape[0]
     inv = 4.0 / (dx * dx)
     wx, wz, rx, rz = stencil_tuples(fx, wx0, wx1, wx2, fz, wz0, wz1, wz2, dx)

@@ -5,23 +5,22 @@ the same kernels, but run as one compiled loop over `nsteps` steps: a Python ste
 third of its time in its own bookkeeping (gathering the cells that hold material with fancy
 indexing, packing the remap's fields, dispatching a dozen kernels, the frame's pose).
 
-Threads, as the Lagrangian step's (vibroflow.continuum.fused): the per-cell kernels write only
-their own cells, the remap's fluxes are made field by field (advection.remap_fluxes) and its
-renewal cell by cell in chunks of cells (advection.renewed, field by field in the packed
-fields, which are then unpacked into the cells' arrays), so they give the serial numbers
-whatever the threads; the cells holding material are scattered to the nodes in
-`nchunk` fixed chunks of per-chunk buffers summed in a fixed order (the grid's part of the step
-is the Lagrangian loop's: grid_step.grid_phase), so the run depends on the number of chunks,
-never on the number of threads (one chunk: the serial p2g's numbers).  On one thread, and on a
-small mesh while other processes hold the cores (solver.parallel_loop), the loop is compiled
-without numba's parallel loops (`advance_kernel_serial`, the same code): a parallel loop's
-launch, even with one thread, costs ~1.5 us, a step has six of its own and the grid's part one
-more and one a further transfer (fifteen with tub47's eight transfers), and a barrier on a
-busy machine waits for the scheduler.
+Threads: every loop writes only what is its own, so the numbers are the serial loop's whatever
+the threads.  The per-cell kernels write their own cells in fixed chunks of cells; the scatter,
+the gather and the transfer operator (column_scatter.py, column_gather.py, operator_build.py)
+are a pass along the cell columns in fixed chunks of columns and one across them, each node row
+summed by one thread in a fixed order, so no per-chunk buffers are summed (the grid's part of
+the step, grid_step.grid_phase, then has no chunks to add); the remap's fluxes are made field
+by field (advection.remap_fluxes) and its renewal cell by cell in chunks of cells
+(advection.renewed, field by field in the packed fields, which are then unpacked into the
+cells' arrays).  On one thread, and on a small mesh while other processes hold the cores
+(solver.parallel_loop), the loop is compiled without numba's parallel loops
+(`advance_kernel_serial`, the same code): a parallel loop's launch, even with one thread, costs
+~1.5 us, a step has eight of its own and one a further transfer (fifteen with tub47's eight
+transfers), and a barrier on a busy machine waits for the scheduler.
 
 The cells' B-spline weights on the grid are the mesh's constant tables (transfer.py), and the
-cells holding material are scattered and gathered in place through their indices (no compact
-copies of their fields).
+cells' fields are read and written in place (no compact copies of the cells holding material).
 
 Records (numba named tuples): `Cells` the state's arrays (solver.EulerianState), `CellStep` the
 step's constants, `MeshRecord` the mesh's, `MeshBoundaries` the wall and the partitions,
@@ -44,10 +43,12 @@ from ..stress_update import damped_stress
 from ..kinetic_stress import RATE_RATIO
 from ..temperature_field import add_stress
 from .advection import remap_fluxes, remap_fluxes_serial, renew_masses, renewed
+from .column_gather import gather_columns, gather_rows
+from .column_scatter import scatter_columns, scatter_rows
 from .face_velocity import face_velocity_rows, match_divergence_cells
 from .lagrangian_step import (end_density, fill_limit, material_fraction,
                               update_stress_cells, void_first)
-from .transfer import g2p_cells, operator_of_cells, p2g_cells
+from .operator_build import operator_columns, operator_rows
 from .wall import wall_forces
 
 #: status of `advance_kernel`
@@ -62,16 +63,18 @@ Cells = namedtuple("Cells", ["mass", "v", "C", "L", "stress", "gamma_dot", "phas
                              "volume", "density", "fext", "stress_work", "p_kin"])
 #: the step's constants: dt (s), the material's params (constitutive.ContinuumMaterial.
 #: as_array), the frame (grid_update.FRAME_FIELDS), the critical density rho_c (kg/m^3) and
-#: the initial total mass mass0 (kg/m; 0: not tracked)
-CellStep = namedtuple("CellStep", ["dt", "params", "frame", "rho_c", "mass0"])
+#: the initial total mass mass0 (kg/m; 0: not tracked), and the cells' chunks (the
+#: per-cell loops' fixed chunks of cells and of columns: the numbers do not depend on them)
+CellStep = namedtuple("CellStep", ["dt", "params", "frame", "rho_c", "mass0", "chunks"])
 #: the mesh (mesh.EulerianMesh): cell side h (m), open faces open_x (ncx + 1, ncz) and open_z
 #: (ncx, ncz + 1), the wall cells' inward normals normal (N, 2), the weight tables
 #: (transfer.WeightTables as a tuple (cx, cz, fx, fz)), weight, inv_r (N,) an
 #: axisymmetric section's cell radii and their reciprocals (1 and 0 in plane strain;
-#: solver.EulerianSystem.axisymmetric), and the cells' transfer operator factors
-#: (transfer.operator_factors; (0, PAIRS) with one transfer a step)
+#: solver.EulerianSystem.axisymmetric), the node rows' cell columns (transfer.NodeRowColumns)
+#: and the tables of the cells' transfer operator (operator_build.OperatorTables; empty with
+#: one transfer a step)
 MeshRecord = namedtuple("MeshRecord", ["h", "open_x", "open_z", "normal", "tables", "weight",
-                                       "inv_r", "factors"])
+                                       "inv_r", "columns", "operator"])
 #: the mesh's wall (wall.MeshWall; wall_on False without): its cells (int64 indices), its
 #: history (wall.empty_history: delta, xi, fn, ft, state), stiffnesses kn, kt (Pa/m), damping
 #: ratio zeta and friction mu; the partitions' friction (boundary.PartitionFriction;
@@ -81,8 +84,12 @@ MeshBoundaries = namedtuple("MeshBoundaries", [
     "partitions_on", "mu_p", "length"])
 #: the remap's work arrays: face velocities ux (ncx + 1, ncz), uz (ncx, ncz + 1) (m/s),
 #: advection.remap_work's arrays, the carried fields q (NQ, N), the end-of-step density
-#: end_rho (N,), active (N,) int64 the cells holding material
-CellWork = namedtuple("CellWork", ["ux", "uz", "remap", "q", "end_rho", "active"])
+#: end_rho (N,), the scatter's column sums zscat (column_scatter.scatter_work), the gather's
+#: node row sums zgath (column_gather.gather_work) and the transfer operator's build arrays
+#: (operator_build.operator_work: the columns' sums S, their extents ext, the node rows' sums
+#: rows; empty with one transfer a step)
+CellWork = namedtuple("CellWork", ["ux", "uz", "remap", "q", "end_rho", "zscat", "zgath", "S",
+                                   "ext", "rows"])
 
 
 @nb.njit(cache=True)
@@ -113,19 +120,21 @@ def _make_advance_kernel(parallel: bool):
         _ = parallel
         (mass, v, C, L, stress, gamma_dot, phase, frac, volume, density, fext, stress_work,
          p_kin) = cells
-        dt, params, frame, rho_c, mass0 = step
-        h, open_x, open_z, normal, tables, weight, inv_r, factors = mesh
+        dt, params, frame, rho_c, mass0, nchunk = step
+        h, open_x, open_z, normal, tables, weight, inv_r, row_columns, op_tables = mesh
         (wall_on, wall_cells, delta, xi, wfn, wft, wst, kn, kt, zeta, mu_w, part_on, mu_p,
          length) = boundaries
         x0, z0, dx, periodic, no_slip_rows, axis_cols = grid
         cm, cmv, cf, gm, gmv, gf, gv, transfers, cb, B, gtmp = work
-        ux, uz, rwork, q, end_rho, act = cell_work
+        ux, uz, rwork, q, end_rho, zscat, zsums, col_S, col_ext, op_rows = cell_work
         n = mass.shape[0]
         tcx, tcz = tables[0], tables[1]
         ncx = open_z.shape[0]
         ncz = open_x.shape[1]
         nq = q.shape[0]
-        nchunk = cm.shape[0]
+        nxg = gm.shape[0]
+        rcols, rcol_a, rncols = row_columns
+        op_xf, op_zf = op_tables
         mtol = -1e-9 * rho_c * h * h
         m2 = mass.reshape((ncx, ncz))
         q3 = q.reshape((nq, ncx, ncz))
@@ -143,11 +152,13 @@ def _make_advance_kernel(parallel: bool):
             if wall_on:
                 wall_forces(wall_cells, normal, v, mass, rho_c, h, weight, delta, xi, fext, wfn,
                             wft, wst, kn, kt, zeta, mu_w, dt)
-            na = 0
-            for p in range(n):
-                if mass[p] > 0.0:
-                    act[na] = p
-                    na += 1
+            # the cell rows up to the highest cell holding material
+            ktop = 0
+            for ic in range(ncx):
+                for kc in range(ncz - 1, ktop - 1, -1):
+                    if mass[ic * ncz + kc] > 0.0:
+                        ktop = kc + 1
+                        break
             # cell by cell, in chunks of cells: the volume fractions, the partitions' friction
             # (after the wall's force, as in the step by step path), the bed's Kelvin-Voigt
             # damping on the rate of the last step and the kinetic pressure
@@ -166,18 +177,29 @@ def _make_advance_kernel(parallel: bool):
                     if not damped:
                         stress_work[a:b] = stress[a:b]
                     add_stress(stress_work, p_kin, a, b)
+            # the cells to the nodes (column_scatter.py) and, with further transfers, the
+            # transfer operator (operator_build.py): each a pass along the cell columns, in
+            # chunks of columns, then one across them, node row by node row
             for c in nb.prange(nchunk):
-                a = (c * na) // nchunk
-                b = ((c + 1) * na) // nchunk
-                cm[c] = 0.0
-                cmv[c] = 0.0
-                cf[c] = 0.0
-                p2g_cells(act[a:b], ncz, tcx, tcz, v, C, mass, volume, scattered, fext, dx,
-                          periodic, inv_r, cm[c], cmv[c], cf[c])
+                c0 = (c * ncx) // nchunk
+                c1 = ((c + 1) * ncx) // nchunk
+                scatter_columns(c0, c1, ktop, tcz, dx, mass, volume, v, C, scattered, fext,
+                                inv_r, zscat)
                 if transfers > 1:
-                    cb[c] = 0.0
-                    operator_of_cells(act[a:b], ncz, tcx, tcz, factors, mass, periodic,
-                                      cb[c])
+                    operator_columns(c0, c1, m2, tcz, op_zf, col_S, col_ext)
+            if parallel:
+                for i in nb.prange(nxg):
+                    scatter_rows(i, i + 1, ktop, tcx, tcz, dx, rcols, rcol_a, rncols, zscat,
+                                 gm, gmv, gf)
+                    if transfers > 1:
+                        operator_rows(i, i + 1, col_S, col_ext, op_xf, rcols, rcol_a, rncols,
+                                      op_rows, B)
+            else:
+                scatter_rows(0, nxg, ktop, tcx, tcz, dx, rcols, rcol_a, rncols, zscat, gm, gmv,
+                             gf)
+                if transfers > 1:
+                    operator_rows(0, nxg, col_S, col_ext, op_xf, rcols, rcol_a, rncols, op_rows,
+                                  B)
             # the grid's part (grid_step.py): the chunks' sums, the update with the frame's
             # acceleration at mid-step, the grid's conditions and the further transfers
             # (the gather below reads the returned grid velocity, so it stays after the call)
@@ -185,10 +207,16 @@ def _make_advance_kernel(parallel: bool):
                 gv = grid_phase(grid, work, frame, t, dt)
             else:
                 gv = grid_phase_serial(grid, work, frame, t, dt)
+            # the gather (column_gather.py): the node rows' sums along z, then across the
+            # columns
+            if parallel:
+                for i in nb.prange(nxg):
+                    gather_rows(i, i + 1, ktop, tcz, dx, gv, zsums)
+            else:
+                gather_rows(0, nxg, ktop, tcz, dx, gv, zsums)
             for c in nb.prange(nchunk):
-                a = (c * na) // nchunk
-                b = ((c + 1) * na) // nchunk
-                g2p_cells(act[a:b], ncz, tcx, tcz, v, C, L, gv, dx, periodic)
+                gather_columns((c * ncx) // nchunk, ((c + 1) * ncx) // nchunk, ktop, ncz, tcx,
+                               dx, periodic, zsums, mass, v, C, L)
                 # and the remap's face velocities, which need only the grid's velocities: in
                 # the same parallel loop, one launch fewer
                 face_velocity_rows((c * (ncx + 1)) // nchunk, ((c + 1) * (ncx + 1)) // nchunk,

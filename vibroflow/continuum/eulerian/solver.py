@@ -58,12 +58,14 @@ from ..mpm.solver import ContinuumBlowUp
 from ..state import ContinuumState
 from ..temperature_balance import loop_arguments, phi_cap_of
 from ..temperature_field import advance_with_temperature, cell_step, pressure_Pa
-from ..transfer_operator import PAIRS
 from . import fused, temperature_loop
 from .advection import remap_serial, remap_work
 from .lagrangian_step import fill_limit, material_fraction
 from .mesh import EulerianMesh
-from .transfer import WeightTables, operator_factors
+from .column_gather import gather_work
+from .column_scatter import scatter_work
+from .operator_build import empty_tables, operator_tables, operator_work
+from .transfer import WeightTables, node_row_columns
 from .wall import MeshWall, empty_history
 
 #: number of intensive fields transported with the mass: v (2), C (4), stress (4), density
@@ -114,7 +116,7 @@ class EulerianSystem:
     area.  Masses, volumes and forces are per radian: a cell of side h holds h^2 r
     (cell_weight, r its centre's radius), a face sweeps h r (the remap's weights,
     advection.remap_work), the wall's contact scales with r (wall.wall_forces), the stress
-    divergence gains the hoop term -V sigma_theta w / r (transfer.p2g_cells) and the
+    divergence gains the hoop term -V sigma_theta w / r (column_scatter.scatter_columns) and the
     velocity gradient the hoop rate (face_velocity.match_divergence; L (N, 5)).
 
     temperature (temperature_field.TemperatureModel, optional): the cells carry the granular
@@ -184,18 +186,23 @@ class EulerianSystem:
         # the tuple the compiled loop takes
         t = WeightTables.of_mesh(m, self.x)
         self.tables = (t.cx, t.cz, t.fx, t.fz)
-        # and, with more than one transfer a step, the cells' transfer operator factors
-        factors = operator_factors(m.ncx, m.ncz, t.cx, t.cz, m.grid.dx) if self.transfers > 1 \
-            else np.zeros((0, PAIRS))
+        # and, with more than one transfer a step, the tables of the cells' transfer operator
+        # and its work arrays (operator_build.py)
+        g = m.grid
+        many = self.transfers > 1
+        op = operator_tables(t.cx, t.cz, g.dx) if many else empty_tables()
+        op_work = operator_work(m.ncx, g.nx, g.nz) if many else operator_work(0, 0, 0)
         # fused.py's records of the mesh and of its work arrays (the end-of-step density, the
         # cells holding material), and the grid's (grid_step.py: its conditions, the
         # per-chunk scatter buffers, the node fields, the transfer operator's buffers)
         self.mesh_record = fused.MeshRecord(float(m.h), m.open_x, m.open_z, m.normal,
-                                            self.tables, self.cell_weight, self.inv_r, factors)
+                                            self.tables, self.cell_weight, self.inv_r,
+                                            node_row_columns(t.cx, g.nx, g.periodic), op)
         self.cell_work = fused.CellWork(self.ux, self.uz, self.remap_work, self.q,
-                                        np.zeros(m.n), np.zeros(m.n, np.int64))
+                                        np.zeros(m.n), scatter_work(m.ncx, g.nz),
+                                        gather_work(g.nx, m.ncz), *op_work)
         self.grid_spec = grid_spec(m.grid, self.no_slip_rows, self.axis_cols)
-        self.work = grid_work(m.grid, self.chunks, self.transfers)
+        self.work = grid_work(m.grid, 0, self.transfers)
         # the temperature's own remap (one field, after the step's: `advance`)
         self.temperature_work = None if self.temperature is None else \
             remap_work(m.open_x, m.open_z, 1, radius)
@@ -424,7 +431,7 @@ def _advance(system: EulerianSystem, state: EulerianState, n: int, p_kin, ts=Non
                         np.empty((state.n, 4)) if mat.bed_viscosity > 0 or p_kin.shape[0] > 0
                         else np.empty((0, 4)), p_kin)
     step = fused.CellStep(float(system.dt), system.params, system.frame.as_array(),
-                          float(mat.critical_density), float(state.mass0))
+                          float(mat.critical_density), float(state.mass0), int(system.chunks))
     boundaries = _boundaries(system, state)
     args = (n, float(state.t), float(state.mass_error_max), cells, step, system.mesh_record,
             boundaries, system.grid_spec, system.work, system.cell_work)

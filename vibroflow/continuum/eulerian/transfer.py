@@ -7,26 +7,21 @@ third of their time.  A cell (i, k) is centred at (xc_i, zc_k), so its weights a
 of a weight of row i and one of column k: four one-dimensional tables (`WeightTables`: cell
 centres and face midpoints along x and along z, a few hundred numbers) hold them all.
 
-The kernels here are p2g.p2g and g2p.g2p on the cells holding material, the weights read from
-the tables instead of computed and the stencil the same (stencil.scatter_point, gather_point),
-so they give the generic kernels' numbers bit for bit (tests/test_eulerian_kernels.py); they
-read and write the per-cell arrays through the cells' indices, so the cells' fields need not be
-copied into compact arrays first.  The cells stay put: no point advection, no FLIP blend (the
-Eulerian's g2p is APIC), plane strain.  For the same reason the transfer operator's pair
-factors of every cell (vibroflow.continuum.transfer_operator) are made once a run
-(`operator_factors`), and a step's operator is the cells' masses times them
-(`operator_of_cells`), operator_of_points' numbers bit for bit.
+Because a cell's weight is its column's times its row's, the cells' scatter, gather and
+transfer operator each split into a pass along one axis and one along the other
+(column_scatter.py, column_gather.py, operator_build.py): the tables here, and the cell columns
+whose stencils hold each node row (`node_row_columns`), which fix the order in which the
+passes across the columns sum a node's terms.
 """
 from __future__ import annotations
 
+from collections import namedtuple
 from dataclasses import dataclass
 
 import numba as nb
 import numpy as np
 
-from ..g2p import store_gather
-from ..stencil import bspline_weights, gather_point, scatter_point
-from ..transfer_operator import PAIRS, add_factors, point_factors
+from ..stencil import bspline_weights
 
 #: columns of a weight table's row: the base node (an integer stored as a float), fx, the
 #: three weights and their three derivatives (1/m), as stencil.bspline_weights returns them
@@ -92,72 +87,33 @@ def table_row(table, j):
             table[j, T_W2], table[j, T_G0], table[j, T_G1], table[j, T_G2])
 
 
-@nb.njit(cache=True)
-def p2g_cells(cells, ncz, tx, tz, v, C, mass, volume, stress, fext, dx, periodic, inv_r, gm,
-              gmv, gf):
-    """p2g.p2g of the cells `cells` (indices p = i * ncz + k, in the order given) with the
-    weights of rows tx[i] and tz[k] (WeightTables.cx, cz): accumulates into gm, gmv, gf (zero
-    them first).  v (N, 2), C (N, 4), mass, volume (N,), stress (N, 4), fext (N, 2) the
-    per-cell arrays (units as p2g.p2g); inv_r (N,): 0 in plane strain, 1 / r of the cells'
-    centres in an axisymmetric section (masses and volumes per radian), whose radial force
-    gains p2g.p2g's hoop term -V sigma_theta w / r (sigma_theta the stress's yy slot)."""
-    for j in range(cells.shape[0]):
-        p = cells[j]
-        ic = p // ncz
-        kc = p - ic * ncz
-        # (+ 0.0: a plane section's -0.0 made +0.0, so that fex + hoop is fex bit for bit)
-        hoop = -volume[p] * stress[p, 3] * inv_r[p] + 0.0
-        scatter_point(table_row(tx, ic), table_row(tz, kc), dx, periodic, mass[p], volume[p],
-                      stress[p, 0], stress[p, 1], stress[p, 2], v[p, 0], v[p, 1], C[p, 0],
-                      C[p, 1], C[p, 2], C[p, 3], fext[p, 0] + hoop, fext[p, 1], gm, gmv, gf)
+#: the node rows' cell columns (`node_row_columns`): cols (nx, w) the cell columns whose
+#: stencil holds the node row, in increasing order (-1 beyond ncols), col_a (nx, w) the node
+#: row's offset in their stencil, ncols (nx,) how many
+NodeRowColumns = namedtuple("NodeRowColumns", ["cols", "col_a", "ncols"])
 
 
-@nb.njit(cache=True)
-def g2p_cells(cells, ncz, tx, tz, v, C, L, gv, dx, periodic):
-    """g2p.g2p (APIC, no FLIP blend, the points not moved) of the cells `cells` (indices) with
-    the weights of rows tx[i] and tz[k]: their v (N, 2) m/s, C and L (N, 4) 1/s written in
-    place from the grid velocity gv (nx, nz, 2) (m/s)."""
-    for j in range(cells.shape[0]):
-        p = cells[j]
-        ic = p // ncz
-        kc = p - ic * ncz
-        g = gather_point(table_row(tx, ic), table_row(tz, kc), dx, periodic, gv)
-        store_gather(p, g[0], g[1], g, v, C, L)
-
-
-@nb.njit(cache=True)
-def operator_factors(ncx, ncz, tx, tz, dx):
-    """(ncx ncz, PAIRS) the transfer operator's pair factors of every cell p = i * ncz + k
-    (transfer_operator.point_factors) with the weights of rows tx[i] and tz[k]: constants of
-    the run, as the weights are, so that a step's operator is only the masses times them."""
-    out = np.empty((ncx * ncz, PAIRS))
-    for ic in range(ncx):
-        _, fx, wx0, wx1, wx2, _, _, _ = table_row(tx, ic)
-        for kc in range(ncz):
-            _, fz, wz0, wz1, wz2, _, _, _ = table_row(tz, kc)
-            point_factors(fx, wx0, wx1, wx2, fz, wz0, wz1, wz2, dx, out[ic * ncz + kc])
-    return out
-
-
-@nb.njit(cache=True)
-def operator_of_cells(cells, ncz, tx, tz, factors, mass, periodic, B):
-    """Accumulate the transfer operator (vibroflow.continuum.transfer_operator) of the cells
-    `cells` (indices p = i * ncz + k) of masses mass (N,) (kg/m) into B (nx, nz, HALF) (zero
-    it first), with the base nodes of rows tx[i] and tz[k] and the cells' pair factors
-    (`operator_factors`): transfer_operator.operator_of_points of the cell centres, bit for
-    bit.  Two cells next to each other in a column whose stencils share their base nodes (two
-    of a grid cell's, the cells being half its size) are added in one pass (add_factors:
-    the same terms in the same order, each entry read and written once instead of twice)."""
-    n = cells.shape[0]
-    j = 0
-    while j < n:
-        p = cells[j]
-        ic = p // ncz
-        kc = p - ic * ncz
-        bx = int(tx[ic, T_BASE])
-        bz = int(tz[kc, T_BASE])
-        two = j + 1 < n and cells[j + 1] == p + 1 and kc + 1 < ncz and \
-            int(tz[kc + 1, T_BASE]) == bz
-        q = p + 1 if two else p
-        add_factors(B, bx, bz, periodic, mass[p], factors[p], mass[q], factors[q], two)
-        j += 2 if two else 1
+def node_row_columns(tx, nx: int, periodic: bool) -> NodeRowColumns:
+    """The NodeRowColumns of the cell columns' weight table tx (ncx, 8) (WeightTables.cx) on a
+    grid of nx node rows, wrapped along x when periodic: the passes across the columns
+    (column_scatter.py, operator_build.py) sum each node row's columns in this order."""
+    base = tx[:, T_BASE].astype(np.int64)
+    lists: list[list[tuple[int, int]]] = [[] for _ in range(nx)]
+    for ic, b in enumerate(base):
+        for a in range(3):
+            i = b + a
+            if periodic:
+                i %= nx
+            elif not 0 <= i < nx:
+                raise ValueError(f"cell column {ic}'s stencil leaves the grid's {nx} node rows")
+            lists[i].append((ic, a))
+    width = max(1, max(len(x) for x in lists))
+    cols = np.full((nx, width), -1, np.int64)
+    col_a = np.zeros((nx, width), np.int64)
+    ncols = np.zeros(nx, np.int64)
+    for i, entries in enumerate(sorted(e) for e in lists):
+        ncols[i] = len(entries)
+        for j, (ic, a) in enumerate(entries):
+            cols[i, j] = ic
+            col_a[i, j] = a
+    return NodeRowColumns(cols, col_a, ncols)
