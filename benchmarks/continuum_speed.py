@@ -242,10 +242,11 @@ def kernels(a) -> dict:
                 g.periodic), 200)
             v, C, L = state.v.copy(), state.C.copy(), state.L.copy()
             t["g2p (cells holding material, both passes)"] = _per_call(lambda: gather(
-                ktop, tcx, tcz, g.dx, g.periodic, gv, cw.zgath, state.mass, v, C, L), 200)
+                ktop, tcx, tcz, system.tables[3], g.dx, g.periodic, gv, cw.zgath, state.mass, v,
+                C, L), 200)
             m2 = state.mass.reshape(mesh.ncx, mesh.ncz)
-            t["face_velocities"] = _per_call(lambda: face_velocities(
-                gv, system.tables, g.periodic, mesh.open_x, mesh.open_z, m2, system.ux,
+            t["face_velocities (both passes)"] = _per_call(lambda: face_velocities(
+                gv, system.tables, g.dx, g.periodic, mesh.open_x, mesh.open_z, m2, system.ux,
                 system.uz), 200)
             rho = np.zeros(n)
             end_density(state.density, state.L, system.dt, rho)

@@ -91,7 +91,8 @@ def test_cells_to_nodes_and_back_as_the_generic_transfers(periodic):
     assert want[0].sum() == pytest.approx(mass.sum())  # the check is not vacuous
     gv = np.random.default_rng(2).normal(size=(g.nx, g.nz, 2))
     vg, Cg, Lg = np.zeros((mesh.n, 2)), np.zeros((mesh.n, 4)), np.zeros((mesh.n, 4))
-    gather(ktop, tx, tz, g.dx, g.periodic, gv, gather_work(g.nx, mesh.ncz), mass, vg, Cg, Lg)
+    gather(ktop, tx, tz, _tables(mesh)[3], g.dx, g.periodic, gv, gather_work(g.nx, mesh.ncz),
+           mass, vg, Cg, Lg)
     xw, vw, Cw, Lw = x[cells].copy(), v[cells].copy(), C[cells].copy(), np.zeros((cells.size, 4))
     g2p(xw, vw, Cw, Lw, gv, g.x0, g.z0, g.dx, 0.0, g.periodic, want[0], want[1], 0.0)
     _close(vg[cells], vw)
@@ -139,7 +140,7 @@ def test_face_velocities_are_the_nodal_field_at_the_face_midpoints(periodic):
     gv = np.random.default_rng(3).normal(size=(g.nx, g.nz, 2))
     m = np.ones((mesh.ncx, mesh.ncz))  # every cell holds material: every open face counts
     ux, uz = np.zeros(mesh.open_x.shape), np.zeros(mesh.open_z.shape)
-    face_velocities(gv, _tables(mesh), g.periodic, mesh.open_x, mesh.open_z, m, ux, uz)
+    face_velocities(gv, _tables(mesh), g.dx, g.periodic, mesh.open_x, mesh.open_z, m, ux, uz)
 
     def at(xs, zs, comp):
         pts = np.stack(np.broadcast_arrays(xs, zs), axis=-1).reshape(-1, 2).copy()

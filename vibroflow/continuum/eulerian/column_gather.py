@@ -25,20 +25,25 @@ import numpy as np
 
 from .transfer import T_BASE, T_FX, T_G0, T_W0
 
-#: the row sums a node row holds for each cell row: Zu, Zr, Zg of each velocity component
-ZU_X, ZU_Z, ZR_X, ZR_Z, ZG_X, ZG_Z = range(6)
+#: the row sums a node row holds for each cell row: Zu, Zr, Zg of each velocity component;
+#: and for each z-face row, the vertical velocity's sum with the face row's weights (the face
+#: velocities' pass along z: face_velocity.py)
+ZU_X, ZU_Z, ZR_X, ZR_Z, ZG_X, ZG_Z, ZF_Z = range(7)
 
 
 def gather_work(nx: int, ncz: int) -> np.ndarray:
-    """The node rows' sums (nx, 6, ncz) (`gather_rows`, m/s, m^2/s and 1/s)."""
-    return np.zeros((nx, 6, ncz))
+    """The node rows' sums (nx, 7, ncz + 1) (`gather_rows`, m/s, m^2/s and 1/s)."""
+    return np.zeros((nx, 7, ncz + 1))
 
 
 @nb.njit(cache=True)
-def gather_rows(i0, i1, ktop, tz, dx, gv, Z):
+def gather_rows(i0, i1, ktop, tz, tfz, dx, gv, Z):
     """The sums along z (module docstring) of node rows i0:i1 of the grid velocity gv (nx, nz,
     2) (m/s) for the cell rows below ktop, with their weight table tz (transfer.WeightTables.
-    cz) on a grid of spacing dx (m), into Z (nx, 6, ncz)."""
+    cz) on a grid of spacing dx (m), into Z (nx, 7, ncz + 1); and Z[:, ZF_Z] of the z-face
+    rows up to ktop (the top face of the highest cell holding material) with theirs, tfz
+    (WeightTables.fz)."""
+    nf = min(ktop + 1, tfz.shape[0])
     for i in range(i0, i1):
         zi = Z[i]
         gi = gv[i]
@@ -69,6 +74,12 @@ def gather_rows(i0, i1, ktop, tz, dx, gv, Z):
             zi[ZR_Z, kc] = rz
             zi[ZG_X, kc] = gx
             zi[ZG_Z, kc] = gz
+        for kf in range(nf):
+            bz = int(tfz[kf, T_BASE])
+            s = 0.0
+            for b in range(3):
+                s += tfz[kf, T_W0 + b] * gi[bz + b, 1]
+            zi[ZF_Z, kf] = s
 
 
 @nb.njit(cache=True)
@@ -108,8 +119,8 @@ def gather_columns(c0, c1, ktop, ncz, tx, dx, periodic, Z, mass, v, C, L):
             L[p, 3] = w0 * za[ZG_Z, kc] + w1 * zb[ZG_Z, kc] + w2 * zc[ZG_Z, kc]
 
 
-def gather(ktop, tx, tz, dx, periodic, gv, Z, mass, v, C, L):
+def gather(ktop, tx, tz, tfz, dx, periodic, gv, Z, mass, v, C, L):
     """The whole gather on one thread: `gather_rows` over every node row, then
     `gather_columns` over every column; arguments as theirs."""
-    gather_rows(0, Z.shape[0], ktop, tz, dx, gv, Z)
+    gather_rows(0, Z.shape[0], ktop, tz, tfz, dx, gv, Z)
     gather_columns(0, tx.shape[0], ktop, tz.shape[0], tx, dx, periodic, Z, mass, v, C, L)

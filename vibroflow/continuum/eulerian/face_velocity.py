@@ -2,7 +2,8 @@
 
 The remap (advection.py) moves the material through the fixed mesh's faces at the face-normal
 velocities u_f: the nodal velocity field of the Lagrangian step interpolated at each face's
-midpoint with the mesh's constant B-spline weight tables (transfer.py; `face_velocity_rows`).
+midpoint with the mesh's constant B-spline weight tables (transfer.py; `face_velocity_rows`,
+its pass along z the gather's: column_gather.py).
 The stress update must see the volume change that this transport makes, so each cell's
 velocity gradient gets the finite-volume divergence of its faces' velocities as its trace
 (`match_divergence`; Benson 1992, Comput. Methods Appl. Mech. Eng. 99, 235, section 5).
@@ -10,64 +11,70 @@ velocity gradient gets the finite-volume divergence of its faces' velocities as 
 from __future__ import annotations
 
 import numba as nb
+import numpy as np
 
-from ..stencil import axis_node
-from .transfer import table_row
-
-
-@nb.njit(cache=True, inline="always")
-def _interp(gv, tx, ix, tz, kz, periodic, comp):
-    """Component comp of the node velocities gv (nx, nz, 2) at the point whose B-spline
-    weights are rows tx[ix] and tz[kz] of transfer.weight_table tables."""
-    nxg = gv.shape[0]
-    wx = table_row(tx, ix)
-    wz = table_row(tz, kz)
-    s = 0.0
-    for a in range(3):
-        i, _, wa, _ = axis_node(wx, a, 0.0, periodic, nxg)
-        for b in range(3):
-            k, _, wb, _ = axis_node(wz, b, 0.0, False, 0)
-            s += wa * wb * gv[i, k, comp]
-    return s
+from .column_gather import ZF_Z, ZU_X, gather_rows, gather_work
+from .transfer import T_BASE, T_W0
 
 
 @nb.njit(cache=True)
-def face_velocity_rows(i0, i1, gv, tables, periodic, open_x, open_z, m, ux, uz):
+def face_velocity_rows(i0, i1, Z, tables, periodic, open_x, open_z, m, ux, uz):
     """Face-normal velocities (m/s) of rows i0:i1: ux (ncx + 1, ncz) on the x-faces
-    (x = xmin + i h), uz (ncx, ncz + 1) on the z-faces, the node velocities gv (nx, nz, 2)
-    interpolated at the face midpoints with the mesh's weight tables (transfer.WeightTables as
-    a tuple (cx, cz, fx, fz)), on the open faces of a cell holding material (mass m (ncx, ncz)
-    kg/m > 0); 0 elsewhere.  A face between two empty cells carries no flux (advection.remap
-    takes nothing from an empty upwind cell), and its divergence would only reach the velocity
-    gradient of empty cells, which carry no stress (density 0: disconnected) and no weight in
-    any output: skipping it spares about half the interpolations (the tub above the bed is
-    empty).  Each face on its own, so rows may be shared out among threads (fused.py)."""
-    tcx, tcz, tfx, tfz = tables
+    (x = xmin + i h), uz (ncx, ncz + 1) on the z-faces, the node velocities interpolated at
+    the face midpoints with the mesh's weight tables (transfer.WeightTables as a tuple (cx, cz,
+    fx, fz)), on the open faces of a cell holding material (mass m (ncx, ncz) kg/m > 0); 0
+    elsewhere.  The interpolation's pass along z is the gather's (column_gather.gather_rows:
+    an x-face's midpoint is at its cells' height, so its sum along z is theirs; a z-face's is
+    Z[:, ZF_Z]), and here only the pass along x, from the node rows' sums Z.  A face between
+    two empty cells carries no flux (advection.remap takes nothing from an empty upwind cell),
+    and its divergence would only reach the velocity gradient of empty cells, which carry no
+    stress (density 0: disconnected) and no weight in any output: skipping it spares about
+    half the faces (the tub above the bed is empty).  Each face on its own, so rows may be
+    shared out among threads (fused.py)."""
+    tcx, _, tfx, _ = tables
     ncx1, ncz = ux.shape
     ncx = ncx1 - 1
+    nxg = Z.shape[0]
     for i in range(i0, i1):
         # the cells left and right of face i (wrapped on a periodic mesh; a closed face's
         # neighbours are never read)
         il = (i + ncx - 1) % ncx
         ir = i % ncx
+        bx = int(tfx[i, T_BASE])
+        w0, w1, w2 = tfx[i, T_W0], tfx[i, T_W0 + 1], tfx[i, T_W0 + 2]
+        n0, n1, n2 = bx, bx + 1, bx + 2
+        if periodic:
+            n0, n1, n2 = n0 % nxg, n1 % nxg, n2 % nxg
+        z0, z1, z2 = Z[n0, ZU_X], Z[n1, ZU_X], Z[n2, ZU_X]
         for k in range(ncz):
             if open_x[i, k] and (m[il, k] > 0.0 or m[ir, k] > 0.0):
-                ux[i, k] = _interp(gv, tfx, i, tcz, k, periodic, 0)
+                ux[i, k] = w0 * z0[k] + w1 * z1[k] + w2 * z2[k]
             else:
                 ux[i, k] = 0.0
         if i == ncx:
             continue
+        bx = int(tcx[i, T_BASE])
+        w0, w1, w2 = tcx[i, T_W0], tcx[i, T_W0 + 1], tcx[i, T_W0 + 2]
+        n0, n1, n2 = bx, bx + 1, bx + 2
+        if periodic:
+            n0, n1, n2 = n0 % nxg, n1 % nxg, n2 % nxg
+        z0, z1, z2 = Z[n0, ZF_Z], Z[n1, ZF_Z], Z[n2, ZF_Z]
         for k in range(ncz + 1):
             if open_z[i, k] and (m[i, k - 1] > 0.0 or m[i, k] > 0.0):
-                uz[i, k] = _interp(gv, tcx, i, tfz, k, periodic, 1)
+                uz[i, k] = w0 * z0[k] + w1 * z1[k] + w2 * z2[k]
             else:
                 uz[i, k] = 0.0
 
 
-@nb.njit(cache=True)
-def face_velocities(gv, tables, periodic, open_x, open_z, m, ux, uz):
-    """Every face's velocity (`face_velocity_rows`, the same arguments)."""
-    face_velocity_rows(0, ux.shape[0], gv, tables, periodic, open_x, open_z, m, ux, uz)
+def face_velocities(gv, tables, dx, periodic, open_x, open_z, m, ux, uz):
+    """Every face's velocity (`face_velocity_rows`) from the node velocities gv (nx, nz, 2)
+    (m/s) on a grid of spacing dx (m): the gather's pass along z first (column_gather.
+    gather_rows), then the faces'."""
+    rows = np.flatnonzero((m > 0.0).any(axis=0))
+    ktop = int(rows[-1]) + 1 if rows.size else 0
+    Z = gather_work(gv.shape[0], m.shape[1])
+    gather_rows(0, gv.shape[0], ktop, tables[1], tables[3], dx, gv, Z)
+    face_velocity_rows(0, ux.shape[0], Z, tables, periodic, open_x, open_z, m, ux, uz)
 
 
 @nb.njit(cache=True)

@@ -128,7 +128,7 @@ def _make_advance_kernel(parallel: bool):
         cm, cmv, cf, gm, gmv, gf, gv, transfers, cb, B, gtmp = work
         ux, uz, rwork, q, end_rho, zscat, zsums, col_S, col_ext, op_rows = cell_work
         n = mass.shape[0]
-        tcx, tcz = tables[0], tables[1]
+        tcx, tcz, tcfz = tables[0], tables[1], tables[3]
         ncx = open_z.shape[0]
         ncz = open_x.shape[1]
         nq = q.shape[0]
@@ -211,16 +211,16 @@ def _make_advance_kernel(parallel: bool):
             # columns
             if parallel:
                 for i in nb.prange(nxg):
-                    gather_rows(i, i + 1, ktop, tcz, dx, gv, zsums)
+                    gather_rows(i, i + 1, ktop, tcz, tcfz, dx, gv, zsums)
             else:
-                gather_rows(0, nxg, ktop, tcz, dx, gv, zsums)
+                gather_rows(0, nxg, ktop, tcz, tcfz, dx, gv, zsums)
             for c in nb.prange(nchunk):
                 gather_columns((c * ncx) // nchunk, ((c + 1) * ncx) // nchunk, ktop, ncz, tcx,
                                dx, periodic, zsums, mass, v, C, L)
-                # and the remap's face velocities, which need only the grid's velocities: in
+                # and the remap's face velocities, which need only the node rows' sums: in
                 # the same parallel loop, one launch fewer
                 face_velocity_rows((c * (ncx + 1)) // nchunk, ((c + 1) * (ncx + 1)) // nchunk,
-                                   gv, tables, periodic, open_x, open_z, m2, ux, uz)
+                                   zsums, tables, periodic, open_x, open_z, m2, ux, uz)
             # each cell's divergence, void, end density and stress, then the fields the remap
             # carries (solver.py, step 2) packed: cell by cell, in chunks of cells (the face
             # velocities above are every chunk's, so this loop comes after that one)
