@@ -82,6 +82,50 @@ def dithered_cells_to_lab(xc, dx, dz, cells, v, mass, unit, dither, pose6, pivx,
             pos_out[p, 2] = far[2]
 
 
+@nb.njit(cache=True)
+def _add_cell_rates(index, rate, rate_sum, rate_n):
+    """Samples.add_cell_rates_at's sums: each analysis cell's finite rates (1/s) summed in the
+    points' order (np.bincount's), their mean added to rate_sum and 1 to rate_n (flat) where
+    the cell holds any."""
+    size = rate_sum.shape[0]
+    total = np.zeros(size)
+    count = np.zeros(size, np.int64)
+    for p in range(index.shape[0]):
+        c = index[p]
+        if c >= 0 and np.isfinite(rate[p]):
+            total[c] += rate[p]
+            count[c] += 1
+    for c in range(size):
+        if count[c] > 0:
+            rate_sum[c] += total[c] / count[c]
+            rate_n[c] += 1
+
+
+@nb.njit(cache=True)
+def _add_cell_stresses(index, volume, stress, out):
+    """Samples.add_cell_stresses_at's map: in each analysis cell the volume-weighted mean of the
+    stresses (N, 4) Pa of its points of volume > 0 (m^2) and finite stress, summed in the
+    points' order (np.bincount's), into out (cells, 4); cells holding none untouched."""
+    size = out.shape[0]
+    vol = np.zeros(size)
+    total = np.zeros((size, 4))
+    for p in range(index.shape[0]):
+        c = index[p]
+        V = volume[p]
+        if c < 0 or not V > 0.0:
+            continue
+        if not (np.isfinite(stress[p, 0]) and np.isfinite(stress[p, 1])
+                and np.isfinite(stress[p, 2]) and np.isfinite(stress[p, 3])):
+            continue
+        vol[c] += V
+        for q in range(4):
+            total[c, q] += V * stress[p, q]
+    for c in range(size):
+        if vol[c] > 0.0:
+            for q in range(4):
+                out[c, q] = total[c, q] / vol[c]
+
+
 def shear_rate(L: np.ndarray) -> np.ndarray:
     """gamma_dot = sqrt(2 D':D') (1/s) of velocity gradients L (N, 4) [xx, xz, zx, zz], plane
     strain (D_yy = 0) (models.md)."""
@@ -277,15 +321,8 @@ class Samples:
         (`cell_index`: a fixed mesh's, made once)."""
         if self.cell_grid is None:
             return
-        h, nxh, nz = self.cell_grid
-        ok = (index >= 0) & np.isfinite(rate)
-        flat = index[ok]
-        size = nz * (2 * nxh + 1)
-        total = np.bincount(flat, weights=rate[ok], minlength=size).reshape(nz, -1)
-        count = np.bincount(flat, minlength=size).reshape(nz, -1)
-        held = count > 0
-        self.rate_cell_sum[held] += total[held] / count[held]
-        self.rate_cell_n[held] += 1
+        _add_cell_rates(np.asarray(index, dtype=np.int64), np.asarray(rate, dtype=np.float64),
+                        self.rate_cell_sum.reshape(-1), self.rate_cell_n.reshape(-1))
 
     def add_cell_stresses(self, j: int, x: np.ndarray, volume: np.ndarray,
                           stress: np.ndarray) -> None:
@@ -302,18 +339,11 @@ class Samples:
         the stress of the material it holds (nothing where it holds none)."""
         if self.cell_grid is None:
             return
-        h, nxh, nz = self.cell_grid
-        V = np.asarray(volume, dtype=np.float64)
-        sig = np.asarray(stress, dtype=np.float64).reshape(-1, 4)
-        ok = (index >= 0) & (V > 0) & np.isfinite(sig).all(axis=1)
-        flat = index[ok]
-        size = nz * (2 * nxh + 1)
-        vol = np.bincount(flat, weights=V[ok], minlength=size)
-        held = vol > 0
-        out = self.stress_cell[j].reshape(size, 4)
-        for c in range(4):
-            total = np.bincount(flat, weights=V[ok] * sig[ok, c], minlength=size)
-            out[held, c] = total[held] / vol[held]
+        size = self.rate_cell_sum.size
+        _add_cell_stresses(np.asarray(index, dtype=np.int64),
+                           np.asarray(volume, dtype=np.float64),
+                           np.ascontiguousarray(stress, dtype=np.float64).reshape(-1, 4),
+                           self.stress_cell[j].reshape(size, 4))
 
     def add_temperatures(self, j: int, x: np.ndarray, mass: np.ndarray, T: np.ndarray) -> None:
         """Add sample j's granular temperatures T (m^2/s^2) of points (or cells) of masses

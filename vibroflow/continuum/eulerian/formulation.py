@@ -225,8 +225,9 @@ class CellSampler(Sampler):
                 self.rate_index = samples.cell_index(self.xc)
             if self.rate_index is not None:
                 samples.add_cell_rates_at(self.rate_index[held], rate[held])
-                samples.add_cell_stresses_at(j, self.rate_index[held],
-                                             state.volume[cells][held], state.stress[cells][held])
+                hc = cells[held]
+                samples.add_cell_stresses_at(j, self.rate_index[held], state.volume[hc],
+                                             state.stress[hc])
         if getattr(state, "temperature", None) is not None:
             # the cells that hold material as the shear rates count them
             samples.add_temperatures(j, system.x[cells][held], state.mass[cells][held],
