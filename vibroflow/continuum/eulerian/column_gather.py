@@ -23,7 +23,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .transfer import T_BASE, T_FX, T_G0, T_W0
+from .transfer import T_BASE, T_FX, T_G0, T_W0, stencil_rows
 
 #: the row sums a node row holds for each cell row: Zu, Zr, Zg of each velocity component;
 #: and for each z-face row, the vertical velocity's sum with the face row's weights (the face
@@ -91,12 +91,8 @@ def gather_columns(c0, c1, ktop, ncz, tx, dx, periodic, Z, mass, v, C, L):
     nxg = Z.shape[0]
     inv = 4.0 / (dx * dx)
     for ic in range(c0, c1):
-        bx = int(tx[ic, T_BASE])
+        i0, i1, i2, w0, w1, w2 = stencil_rows(tx, ic, nxg, periodic)
         fx = tx[ic, T_FX]
-        i0, i1, i2 = bx, bx + 1, bx + 2
-        if periodic:
-            i0, i1, i2 = i0 % nxg, i1 % nxg, i2 % nxg
-        w0, w1, w2 = tx[ic, T_W0], tx[ic, T_W0 + 1], tx[ic, T_W0 + 2]
         g0, g1, g2 = tx[ic, T_G0], tx[ic, T_G0 + 1], tx[ic, T_G0 + 2]
         r0, r1, r2 = w0 * ((0.0 - fx) * dx), w1 * ((1.0 - fx) * dx), w2 * ((2.0 - fx) * dx)
         za, zb, zc = Z[i0], Z[i1], Z[i2]

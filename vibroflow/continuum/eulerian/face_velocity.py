@@ -14,7 +14,7 @@ import numba as nb
 import numpy as np
 
 from .column_gather import ZF_Z, ZU_X, gather_rows, gather_work
-from .transfer import T_BASE, T_W0
+from .transfer import stencil_rows
 
 
 @nb.njit(cache=True)
@@ -40,11 +40,7 @@ def face_velocity_rows(i0, i1, Z, tables, periodic, open_x, open_z, m, ux, uz):
         # neighbours are never read)
         il = (i + ncx - 1) % ncx
         ir = i % ncx
-        bx = int(tfx[i, T_BASE])
-        w0, w1, w2 = tfx[i, T_W0], tfx[i, T_W0 + 1], tfx[i, T_W0 + 2]
-        n0, n1, n2 = bx, bx + 1, bx + 2
-        if periodic:
-            n0, n1, n2 = n0 % nxg, n1 % nxg, n2 % nxg
+        n0, n1, n2, w0, w1, w2 = stencil_rows(tfx, i, nxg, periodic)
         z0, z1, z2 = Z[n0, ZU_X], Z[n1, ZU_X], Z[n2, ZU_X]
         for k in range(ncz):
             if open_x[i, k] and (m[il, k] > 0.0 or m[ir, k] > 0.0):
@@ -53,11 +49,7 @@ def face_velocity_rows(i0, i1, Z, tables, periodic, open_x, open_z, m, ux, uz):
                 ux[i, k] = 0.0
         if i == ncx:
             continue
-        bx = int(tcx[i, T_BASE])
-        w0, w1, w2 = tcx[i, T_W0], tcx[i, T_W0 + 1], tcx[i, T_W0 + 2]
-        n0, n1, n2 = bx, bx + 1, bx + 2
-        if periodic:
-            n0, n1, n2 = n0 % nxg, n1 % nxg, n2 % nxg
+        n0, n1, n2, w0, w1, w2 = stencil_rows(tcx, i, nxg, periodic)
         z0, z1, z2 = Z[n0, ZF_Z], Z[n1, ZF_Z], Z[n2, ZF_Z]
         for k in range(ncz + 1):
             if open_z[i, k] and (m[i, k - 1] > 0.0 or m[i, k] > 0.0):

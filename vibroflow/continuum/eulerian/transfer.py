@@ -56,6 +56,17 @@ def _face_coords(lo, h, n):
     return out
 
 
+@nb.njit(cache=True, inline="always")
+def stencil_rows(table, j, nxg, periodic):
+    """Row j of a weight table along x (`weight_table`): the three node rows of its stencil
+    (wrapped on a periodic grid of nxg node rows) and their weights."""
+    b = int(table[j, T_BASE])
+    n0, n1, n2 = b, b + 1, b + 2
+    if periodic:
+        n0, n1, n2 = n0 % nxg, n1 % nxg, n2 % nxg
+    return n0, n1, n2, table[j, T_W0], table[j, T_W0 + 1], table[j, T_W0 + 2]
+
+
 @dataclass
 class WeightTables:
     """B-spline weight tables (weight_table rows) of a mesh on its grid: cx (ncx, 8) of the
