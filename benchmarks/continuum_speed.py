@@ -268,8 +268,8 @@ def kernels(a) -> dict:
             m2 = state.mass.reshape(mesh.ncx, mesh.ncz)
 
             def build():
-                operator_columns(0, mesh.ncx, m2, tcz, op.zf, cw.S, cw.ext)
-                operator_rows(0, g.nx, cw.S, cw.ext, op.xf, *rc, cw.rows, B)
+                operator_columns(0, mesh.ncx, ktop, m2, tcz, op.zf, cw.S)
+                operator_rows(0, g.nx, ktop, tcz, cw.S, op.xf, *rc, cw.rows, B)
 
             t["transfer operator (build)"] = _per_call(build, 200)
             mass = expand(B).sum(axis=(2, 3))  # the nodes' masses: the operator's row sums

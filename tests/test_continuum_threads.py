@@ -7,8 +7,9 @@ system (a tub run: the scenario's run.force_chunks), not by the threads; the chu
 serial sum to round-off (two chunks against one).  The Eulerian cells' scatter, gather and
 transfer operator sum each node's terms on one thread in a fixed order (eulerian/
 column_scatter.py, operator_build.py): its numbers depend on neither the threads nor the
-chunks, bit for bit.  The tub47-quick bed in the vibrating tub (TubFrame) with the U wall, the partitions'
-friction and, for the Lagrangian, a frictional lid (boundary.Plane) moving down onto the bed.
+chunks, bit for bit.  The tub47-quick bed in the vibrating tub (TubFrame) with the U wall, the
+partitions' friction and, for the Lagrangian, a frictional lid (boundary.Plane) moving down
+onto the bed.
 """
 from __future__ import annotations
 

@@ -83,10 +83,12 @@ def dithered_cells_to_lab(xc, dx, dz, cells, v, mass, unit, dither, pose6, pivx,
 
 
 @nb.njit(cache=True)
-def _add_cell_rates(index, rate, rate_sum, rate_n):
+def _add_cell_rates(index, rate, rate_sum2, rate_n2):
     """Samples.add_cell_rates_at's sums: each analysis cell's finite rates (1/s) summed in the
-    points' order (np.bincount's), their mean added to rate_sum and 1 to rate_n (flat) where
-    the cell holds any."""
+    points' order (np.bincount's), their mean added to rate_sum2 and 1 to rate_n2 (the maps,
+    index the flat cell) where the cell holds any."""
+    rate_sum = rate_sum2.reshape(rate_sum2.size)
+    rate_n = rate_n2.reshape(rate_n2.size)
     size = rate_sum.shape[0]
     total = np.zeros(size)
     count = np.zeros(size, np.int64)
@@ -102,11 +104,13 @@ def _add_cell_rates(index, rate, rate_sum, rate_n):
 
 
 @nb.njit(cache=True)
-def _add_cell_stresses(index, volume, stress, out):
+def _add_cell_stresses(index, volume, stress, out3):
     """Samples.add_cell_stresses_at's map: in each analysis cell the volume-weighted mean of the
     stresses (N, 4) Pa of its points of volume > 0 (m^2) and finite stress, summed in the
-    points' order (np.bincount's), into out (cells, 4); cells holding none untouched."""
-    size = out.shape[0]
+    points' order (np.bincount's), into out3 (nz, nx, 4; index the flat cell); cells holding
+    none untouched."""
+    size = out3.shape[0] * out3.shape[1]
+    out = out3.reshape((size, 4))
     vol = np.zeros(size)
     total = np.zeros((size, 4))
     for p in range(index.shape[0]):
@@ -322,7 +326,7 @@ class Samples:
         if self.cell_grid is None:
             return
         _add_cell_rates(np.asarray(index, dtype=np.int64), np.asarray(rate, dtype=np.float64),
-                        self.rate_cell_sum.reshape(-1), self.rate_cell_n.reshape(-1))
+                        self.rate_cell_sum, self.rate_cell_n)
 
     def add_cell_stresses(self, j: int, x: np.ndarray, volume: np.ndarray,
                           stress: np.ndarray) -> None:
@@ -339,11 +343,10 @@ class Samples:
         the stress of the material it holds (nothing where it holds none)."""
         if self.cell_grid is None:
             return
-        size = self.rate_cell_sum.size
         _add_cell_stresses(np.asarray(index, dtype=np.int64),
                            np.asarray(volume, dtype=np.float64),
                            np.ascontiguousarray(stress, dtype=np.float64).reshape(-1, 4),
-                           self.stress_cell[j].reshape(size, 4))
+                           self.stress_cell[j])
 
     def add_temperatures(self, j: int, x: np.ndarray, mass: np.ndarray, T: np.ndarray) -> None:
         """Add sample j's granular temperatures T (m^2/s^2) of points (or cells) of masses

@@ -27,7 +27,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .transfer import T_BASE, T_FX, T_G0, T_W0
+from .transfer import T_BASE, T_FX, T_G0, T_W0, node_top
 
 #: the sums a column holds for each node row (module docstring)
 Z_M, Z1_X, Z2_X, Z1_Z, Z2_Z, Z3_X, Z4_X, Z3_Z, Z4_Z = range(9)
@@ -36,12 +36,6 @@ Z_M, Z1_X, Z2_X, Z1_Z, Z2_Z, Z3_X, Z4_X, Z3_Z, Z4_Z = range(9)
 def scatter_work(ncx: int, nz: int) -> np.ndarray:
     """The columns' sums (ncx, 9, nz) (`scatter_columns`; kg/m, kg/s, N/m)."""
     return np.zeros((ncx, 9, nz))
-
-
-@nb.njit(cache=True)
-def node_top(ktop, tz):
-    """The node rows below the top of the cell rows below ktop (their stencils' highest + 1)."""
-    return int(tz[ktop - 1, T_BASE]) + 3 if ktop > 0 else 0
 
 
 @nb.njit(cache=True)

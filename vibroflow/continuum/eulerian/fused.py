@@ -86,10 +86,10 @@ MeshBoundaries = namedtuple("MeshBoundaries", [
 #: advection.remap_work's arrays, the carried fields q (NQ, N), the end-of-step density
 #: end_rho (N,), the scatter's column sums zscat (column_scatter.scatter_work), the gather's
 #: node row sums zgath (column_gather.gather_work) and the transfer operator's build arrays
-#: (operator_build.operator_work: the columns' sums S, their extents ext, the node rows' sums
-#: rows; empty with one transfer a step)
+#: (operator_build.operator_work: the columns' sums S, the node rows' sums rows; empty with
+#: one transfer a step)
 CellWork = namedtuple("CellWork", ["ux", "uz", "remap", "q", "end_rho", "zscat", "zgath", "S",
-                                   "ext", "rows"])
+                                   "rows"])
 
 
 @nb.njit(cache=True)
@@ -126,7 +126,7 @@ def _make_advance_kernel(parallel: bool):
          length) = boundaries
         x0, z0, dx, periodic, no_slip_rows, axis_cols = grid
         cm, cmv, cf, gm, gmv, gf, gv, transfers, cb, B, gtmp = work
-        ux, uz, rwork, q, end_rho, zscat, zsums, col_S, col_ext, op_rows = cell_work
+        ux, uz, rwork, q, end_rho, zscat, zsums, col_S, op_rows = cell_work
         n = mass.shape[0]
         tcx, tcz, tcfz = tables[0], tables[1], tables[3]
         ncx = open_z.shape[0]
@@ -186,20 +186,20 @@ def _make_advance_kernel(parallel: bool):
                 scatter_columns(c0, c1, ktop, tcz, dx, mass, volume, v, C, scattered, fext,
                                 inv_r, zscat)
                 if transfers > 1:
-                    operator_columns(c0, c1, m2, tcz, op_zf, col_S, col_ext)
+                    operator_columns(c0, c1, ktop, m2, tcz, op_zf, col_S)
             if parallel:
                 for i in nb.prange(nxg):
                     scatter_rows(i, i + 1, ktop, tcx, tcz, dx, rcols, rcol_a, rncols, zscat,
                                  gm, gmv, gf)
                     if transfers > 1:
-                        operator_rows(i, i + 1, col_S, col_ext, op_xf, rcols, rcol_a, rncols,
-                                      op_rows, B)
+                        operator_rows(i, i + 1, ktop, tcz, col_S, op_xf, rcols, rcol_a,
+                                      rncols, op_rows, B)
             else:
                 scatter_rows(0, nxg, ktop, tcx, tcz, dx, rcols, rcol_a, rncols, zscat, gm, gmv,
                              gf)
                 if transfers > 1:
-                    operator_rows(0, nxg, col_S, col_ext, op_xf, rcols, rcol_a, rncols, op_rows,
-                                  B)
+                    operator_rows(0, nxg, ktop, tcz, col_S, op_xf, rcols, rcol_a, rncols,
+                                  op_rows, B)
             # the grid's part (grid_step.py): the chunks' sums, the update with the frame's
             # acceleration at mid-step, the grid's conditions and the further transfers
             # (the gather below reads the returned grid velocity, so it stays after the call)

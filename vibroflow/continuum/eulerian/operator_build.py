@@ -31,7 +31,7 @@ import numba as nb
 import numpy as np
 
 from ..transfer_operator import HALF
-from .transfer import T_BASE, T_FX, T_W0
+from .transfer import T_BASE, T_FX, T_W0, node_top
 
 OperatorTables = namedtuple("OperatorTables", ["xf", "zf"])
 
@@ -76,35 +76,33 @@ def empty_tables() -> OperatorTables:
 
 
 def operator_work(ncx: int, nx: int, nz: int):
-    """The build's work arrays (`operator_columns`, `operator_rows`): S (ncx, 2, 5 nz), the
-    columns' node row extents ext (ncx,) int64 and the node rows' sums rows (nx, 3, 5 nz)
-    (flat along k and db: numba's reshape of a view costs a call)."""
-    return np.zeros((ncx, 2, 5 * nz)), np.zeros(ncx, np.int64), np.zeros((nx, 3, 5 * nz))
+    """The build's work arrays (`operator_columns`, `operator_rows`): S (ncx, 2, 5 nz) and the
+    node rows' sums rows (nx, 3, 5 nz) (flat along k and db: numba's reshape of a view costs a
+    call)."""
+    return np.zeros((ncx, 2, 5 * nz)), np.zeros((nx, 3, 5 * nz))
 
 
 @nb.njit(cache=True)
-def operator_columns(c0, c1, mass2, tz, zf, S, ext):
-    """S (ncx, 2, 5 nz) of the cell columns c0:c1: each column's cells of mass mass2 (ncx,
-    ncz) (kg/m; those holding none left out) times their (Z0, Z1) summed onto the node rows
-    of their stencil, S[ic, q, 5 k + db + 2] the sum for node row k and its partner k + db; and
-    ext[ic] the node rows the column reaches (S is zero from there up).  A cell adds its
-    three node rows' 15 factors (zero off its stencil) in one run, two cells of a grid cell
-    (the same base node row) together."""
-    ncz = mass2.shape[1]
-    ns = S.shape[2]
+def operator_columns(c0, c1, ktop, mass2, tz, zf, S):
+    """S (ncx, 2, 5 nz) of the cell columns c0:c1: each column's cells below row ktop of mass
+    mass2 (ncx, ncz) (kg/m; those holding none left out) times their (Z0, Z1) summed onto the
+    node rows of their stencil, S[ic, q, 5 k + db + 2] the sum for node row k and its partner
+    k + db, up to the cells' stencils' top (transfer.node_top).  A cell adds its three node
+    rows' 15 factors (zero off its stencil) in one run, two cells of a grid cell (the same
+    base node row) together."""
+    ne = 5 * node_top(ktop, tz)
     for ic in range(c0, c1):
-        top = 0
         s0 = S[ic, 0]
         s1 = S[ic, 1]
         # (flat loops: numba's slice assignment is several times slower)
-        for e in range(ns):
+        for e in range(ne):
             s0[e] = 0.0
             s1[e] = 0.0
         kc = 0
-        while kc < ncz:
+        while kc < ktop:
             m = mass2[ic, kc]
             bz = int(tz[kc, T_BASE])
-            two = kc + 1 < ncz and int(tz[kc + 1, T_BASE]) == bz
+            two = kc + 1 < ktop and int(tz[kc + 1, T_BASE]) == bz
             m2 = mass2[ic, kc + 1] if two else 0.0
             m = m if m > 0.0 else 0.0
             m2 = m2 if m2 > 0.0 else 0.0
@@ -120,25 +118,21 @@ def operator_columns(c0, c1, mass2, tz, zf, S, ext):
                     for e in range(15):
                         s0[e0 + e] += m * z0a[e]
                         s1[e0 + e] += m * z1a[e]
-                top = bz + 3
             kc += 2 if two else 1
-        ext[ic] = top
 
 
 @nb.njit(cache=True)
-def operator_rows(i0, i1, S, ext, xf, cols, col_a, ncols, rows, B):
+def operator_rows(i0, i1, ktop, tz, S, xf, cols, col_a, ncols, rows, B):
     """Node rows i0:i1 of the operator B (nx, nz, HALF) (the stored forward half, transfer_
     operator.half_slot: slots db of da = 0, then 3 + 5 (da - 1) + db + 2) from the columns'
-    sums S and extents ext (`operator_columns`), each entry summed over the node row's columns in
-    increasing order; rows (nx, 3, 5 nz) a work array, row i's sums by da and 5 k + db + 2;
-    xf the OperatorTables', cols, col_a, ncols the node rows' columns (transfer.
-    node_row_columns)."""
+    sums S (`operator_columns`, cell rows below ktop, weight table tz), each entry summed over
+    the node row's columns in increasing order, zero above the cells' stencils; rows (nx, 3,
+    5 nz) a work array, row i's sums by da and 5 k + db + 2; xf the OperatorTables', cols,
+    col_a, ncols the node rows' columns (transfer.node_row_columns)."""
     nz = B.shape[1]
+    kk = node_top(ktop, tz)
+    ne = kk * 5
     for i in range(i0, i1):
-        kk = 0
-        for j in range(ncols[i]):
-            kk = max(kk, ext[cols[i, j]])
-        ne = kk * 5
         t = rows[i]
         for da in range(3):
             td = t[da]

@@ -67,6 +67,13 @@ def stencil_rows(table, j, nxg, periodic):
     return n0, n1, n2, table[j, T_W0], table[j, T_W0 + 1], table[j, T_W0 + 2]
 
 
+@nb.njit(cache=True)
+def node_top(ktop, tz):
+    """The node rows up to the top of the stencils of the cell rows below ktop (their highest
+    node row + 1), tz the cell rows' weight table (WeightTables.cz)."""
+    return int(tz[ktop - 1, T_BASE]) + 3 if ktop > 0 else 0
+
+
 @dataclass
 class WeightTables:
     """B-spline weight tables (weight_table rows) of a mesh on its grid: cx (ncx, 8) of the
