@@ -11,16 +11,16 @@ the gather and the transfer operator (column_scatter.py, column_gather.py, opera
 are a pass along the cell columns in fixed chunks of columns and one across them, each node row
 summed by one thread in a fixed order, so no per-chunk buffers are summed (the grid's part of
 the step, grid_step.grid_phase, then has no chunks to add); the remap's fluxes are made field
-by field (advection.remap_fluxes) and its renewal cell by cell in chunks of cells
-(advection.renewed, field by field in the packed fields, which are then unpacked into the
-cells' arrays).  On one thread, and on a small mesh while other processes hold the cores
-(solver.parallel_loop), the loop is compiled without numba's parallel loops
-(`advance_kernel_serial`, the same code): a parallel loop's launch, even with one thread, costs
-~1.5 us, a step has eight of its own and one a further transfer (fifteen with tub47's eight
-transfers), and a barrier on a busy machine waits for the scheduler.
+by field (advection.remap_fluxes) over the rows that can hold material (remap_rows.py) and
+its renewal cell by cell in chunks of columns (advection.renewed, field by field in the packed
+fields, which are then unpacked into the cells' arrays).  On one thread, and on a small mesh
+while other processes hold the cores (solver.parallel_loop), the loop is compiled without
+numba's parallel loops (`advance_kernel_serial`, the same code): a parallel loop's launch, even
+with one thread, costs ~1.5 us, a step has eight of its own and one a further transfer (fifteen
+with tub47's eight transfers), and a barrier on a busy machine waits for the scheduler.
 
 The cells' B-spline weights on the grid are the mesh's constant tables (transfer.py), and the
-cells' fields are read and written in place (no compact copies of the cells holding material).
+cells' fields are read and written in place; only the remap packs its fields, on its own rows.
 
 Records (numba named tuples): `Cells` the state's arrays (solver.EulerianState), `CellStep` the
 step's constants, `MeshRecord` the mesh's, `MeshBoundaries` the wall and the partitions,
@@ -42,13 +42,14 @@ from ..grid_step import grid_phase, grid_phase_serial
 from ..stress_update import damped_stress
 from ..kinetic_stress import RATE_RATIO
 from ..temperature_field import add_stress
-from .advection import remap_fluxes, remap_fluxes_serial, renew_masses, renewed
+from .advection import remap_fluxes, remap_fluxes_serial
 from .column_gather import gather_columns, gather_rows
 from .column_scatter import scatter_columns, scatter_rows
 from .face_velocity import face_velocity_rows, match_divergence_cells
 from .lagrangian_step import (end_density, fill_limit, material_fraction,
                               update_stress_cells, void_first)
 from .operator_build import operator_columns, operator_rows
+from .remap_rows import fit_rows, pack_cells, pack_faces, renew_columns
 from .wall import wall_forces
 
 #: status of `advance_kernel`
@@ -83,22 +84,13 @@ MeshBoundaries = namedtuple("MeshBoundaries", [
     "wall_on", "wall_cells", "delta", "xi", "fn", "ft", "state", "kn", "kt", "zeta", "mu",
     "partitions_on", "mu_p", "length"])
 #: the remap's work arrays: face velocities ux (ncx + 1, ncz), uz (ncx, ncz + 1) (m/s),
-#: advection.remap_work's arrays, the carried fields q (NQ, N), the end-of-step density
-#: end_rho (N,), the scatter's column sums zscat (column_scatter.scatter_work), the gather's
-#: node row sums zgath (column_gather.gather_work) and the transfer operator's build arrays
-#: (operator_build.operator_work: the columns' sums S, the node rows' sums rows; empty with
-#: one transfer a step)
-CellWork = namedtuple("CellWork", ["ux", "uz", "remap", "q", "end_rho", "zscat", "zgath", "S",
+#: the remap's on the rows that can hold material (remap_rows.RowsWork), the end-of-step
+#: density end_rho (N,), the scatter's column sums zscat (column_scatter.scatter_work), the
+#: gather's node row sums zgath (column_gather.gather_work) and the transfer operator's build
+#: arrays (operator_build.operator_work: the columns' sums S, the node rows' sums rows; empty
+#: with one transfer a step)
+CellWork = namedtuple("CellWork", ["ux", "uz", "remap", "end_rho", "zscat", "zgath", "S",
                                    "rows"])
-
-
-@nb.njit(cache=True)
-def renew_field(qj, dqj, mode, mass, inv):
-    """One carried field qj (n,) renewed in place from its inflow dqj by the cells' modes,
-    old masses and reciprocals (advection.renewed): a loop that vectorises, where renewing a
-    cell's eleven fields at once, each written into its array, does not."""
-    for p in range(qj.shape[0]):
-        qj[p] = renewed(mode[p], mass[p], inv[p], qj[p], dqj[p])
 
 
 def _make_advance_kernel(parallel: bool):
@@ -126,26 +118,26 @@ def _make_advance_kernel(parallel: bool):
          length) = boundaries
         x0, z0, dx, periodic, no_slip_rows, axis_cols = grid
         cm, cmv, cf, gm, gmv, gf, gv, transfers, cb, B, gtmp = work
-        ux, uz, rwork, q, end_rho, zscat, zsums, col_S, op_rows = cell_work
+        ux, uz, rw, end_rho, zscat, zsums, col_S, op_rows = cell_work
         n = mass.shape[0]
         tcx, tcz, tcfz = tables[0], tables[1], tables[3]
         ncx = open_z.shape[0]
         ncz = open_x.shape[1]
-        nq = q.shape[0]
+        rwork = rw.work
+        nq = rwork[9].shape[0]
+        # the remap's inflows and renewal modes (advection.remap_work), named here: a parallel
+        # loop takes arrays, not the tuples that hold them
+        r_dm, r_inv, r_mode, r_dq = rwork[0][3], rwork[0][4], rwork[6], rwork[9]
         nxg = gm.shape[0]
         rcols, rcol_a, rncols = row_columns
         op_xf, op_zf = op_tables
         mtol = -1e-9 * rho_c * h * h
         m2 = mass.reshape((ncx, ncz))
-        q3 = q.reshape((nq, ncx, ncz))
         damped = params[P_ETA_BED] > 0.0
         kinetic = p_kin.shape[0] > 0
         scattered = stress_work if damped or kinetic else stress
         chunk_finite = np.ones(nchunk, np.bool_)
         chunk_lowest = np.empty(nchunk)
-        # the remap's inflows and renewal modes (advection.remap_work), named here: a parallel
-        # loop takes arrays, not the tuples that hold them
-        r_dm, r_inv, r_mode, r_dq = rwork[0][3], rwork[0][4], rwork[6], rwork[9]
         for s in range(nsteps):
             # lagrangian_step.lagrangian_step: forces, the cells holding material to the nodes
             fext[:] = 0.0
@@ -159,6 +151,12 @@ def _make_advance_kernel(parallel: bool):
                     if mass[ic * ncz + kc] > 0.0:
                         ktop = kc + 1
                         break
+            # the remap's rows (remap_rows.py): up to one above the bed's, on their own layout
+            kr = min(ktop + 1, ncz)
+            nr = ncx * kr
+            fit_rows(rw, kr, ncx, ncz)
+            mr = rw.mass[:nr]
+            qr = rw.q[:nq * nr].reshape((nq, nr))
             # cell by cell, in chunks of cells: the volume fractions, the partitions' friction
             # (after the wall's force, as in the step by step path), the bed's Kelvin-Voigt
             # damping on the rate of the last step and the kinetic pressure
@@ -222,50 +220,40 @@ def _make_advance_kernel(parallel: bool):
                 face_velocity_rows((c * (ncx + 1)) // nchunk, ((c + 1) * (ncx + 1)) // nchunk,
                                    zsums, tables, periodic, open_x, open_z, m2, ux, uz)
             # each cell's divergence, void, end density and stress, then the fields the remap
-            # carries (solver.py, step 2) packed: cell by cell, in chunks of cells (the face
-            # velocities above are every chunk's, so this loop comes after that one)
+            # carries (solver.py, step 2) and the masses packed on the remap's rows: cell by
+            # cell, in chunks of cells (the face velocities above are every chunk's, so this
+            # loop comes after that one)
             for c in nb.prange(nchunk):
                 a = (c * n) // nchunk
                 b = ((c + 1) * n) // nchunk
+                pack_faces((c * (ncx + 1)) // nchunk, ((c + 1) * (ncx + 1)) // nchunk, ux, kr,
+                           rw.ux)
                 match_divergence_cells(a, b, L, ux, uz, h, v, normal, mass, open_x, open_z,
                                        inv_r)
                 void_first(L[a:b], frac[a:b], density[a:b], rho_c, dt)
                 end_density(density[a:b], L[a:b], dt, end_rho[a:b])
                 update_stress_cells(a, b, stress, L, end_rho, dt, params, gamma_dot, phase,
                                     p_kin[:, RATE_RATIO])
-                for p in range(a, b):
-                    q[0, p] = v[p, 0]
-                    q[1, p] = v[p, 1]
-                    for j in range(4):
-                        q[2 + j, p] = C[p, j]
-                        q[6 + j, p] = stress[p, j]
-                    q[10, p] = end_rho[p]
+                pack_cells(a, b, kr, ncz, v, C, stress, end_rho, mass, qr, mr)
             if parallel:
-                remap_fluxes(m2, q3, ux, uz, h, dt, periodic, rwork)
+                remap_fluxes(mr.reshape((ncx, kr)), qr.reshape((nq, ncx, kr)),
+                             rw.ux[:(ncx + 1) * kr].reshape((ncx + 1, kr)), uz, h, dt,
+                             periodic, rwork)
             else:
-                remap_fluxes_serial(m2, q3, ux, uz, h, dt, periodic, rwork)
+                remap_fluxes_serial(mr.reshape((ncx, kr)), qr.reshape((nq, ncx, kr)),
+                                    rw.ux[:(ncx + 1) * kr].reshape((ncx + 1, kr)), uz, h,
+                                    dt, periodic, rwork)
             # the remap's end (its fields renewed, the masses moved), the fields unpacked and
-            # each cell filled no further than full, in chunks of cells
+            # each cell filled no further than full, in chunks of columns
             for c in nb.prange(nchunk):
-                a = (c * n) // nchunk
-                b = ((c + 1) * n) // nchunk
-                # advection.renew_cells field by field in q, then the fields unpacked into
-                # the cells' arrays
-                for j in range(nq):
-                    renew_field(q[j, a:b], r_dq[j, a:b], r_mode[a:b], mass[a:b], r_inv[a:b])
-                ok = True
-                for p in range(a, b):
-                    v[p, 0] = q[0, p]
-                    v[p, 1] = q[1, p]
-                    for j in range(4):
-                        C[p, j] = q[2 + j, p]
-                        stress[p, j] = q[6 + j, p]
-                    density[p] = q[10, p]
-                    if not (np.isfinite(v[p, 0]) and np.isfinite(v[p, 1])):
-                        ok = False
-                chunk_lowest[c] = renew_masses(a, b, mass, r_dm)
-                fill_limit(mass[a:b], density[a:b], h, weight[a:b])
-                chunk_finite[c] = ok
+                c0 = (c * ncx) // nchunk
+                c1 = ((c + 1) * ncx) // nchunk
+                # advection.renew_cells on the remap's rows, the fields unpacked
+                chunk_lowest[c], chunk_finite[c] = renew_columns(
+                    c0, c1, kr, ncz, qr, mr, r_dq, r_mode, r_inv, r_dm, v, C, stress, density,
+                    mass)
+                fill_limit(mass[c0 * ncz:c1 * ncz], density[c0 * ncz:c1 * ncz], h,
+                           weight[c0 * ncz:c1 * ncz])
             finite = True
             lowest = np.inf
             for c in range(nchunk):

@@ -60,6 +60,7 @@ from ..temperature_balance import loop_arguments, phi_cap_of
 from ..temperature_field import advance_with_temperature, cell_step, pressure_Pa
 from . import fused, temperature_loop
 from .advection import remap_serial, remap_work
+from .remap_rows import rows_work
 from .lagrangian_step import fill_limit, material_fraction
 from .mesh import EulerianMesh
 from .column_gather import gather_work
@@ -179,9 +180,9 @@ class EulerianSystem:
         self.wall_cells = np.nonzero(m.wall)[0].astype(np.int64)
         self.ux = np.zeros((m.ncx + 1, m.ncz))
         self.uz = np.zeros((m.ncx, m.ncz + 1))
-        # the remap's work arrays and its fields, one after the other (advection.remap)
+        # the whole mesh's remap work (advection.remap; the compiled loop's remap runs on the
+        # rows that can hold material, remap_rows.py, with its own)
         self.remap_work = remap_work(m.open_x, m.open_z, NQ, radius)
-        self.q = np.zeros((NQ, m.n))
         # the B-spline weights of the fixed cell centres and face midpoints (transfer.py), as
         # the tuple the compiled loop takes
         t = WeightTables.of_mesh(m, self.x)
@@ -198,7 +199,8 @@ class EulerianSystem:
         self.mesh_record = fused.MeshRecord(float(m.h), m.open_x, m.open_z, m.normal,
                                             self.tables, self.cell_weight, self.inv_r,
                                             node_row_columns(t.cx, g.nx, g.periodic), op)
-        self.cell_work = fused.CellWork(self.ux, self.uz, self.remap_work, self.q,
+        self.cell_work = fused.CellWork(self.ux, self.uz,
+                                        rows_work(m.open_x, m.open_z, NQ, radius),
                                         np.zeros(m.n), scatter_work(m.ncx, g.nz),
                                         gather_work(g.nx, m.ncz), *op_work)
         self.grid_spec = grid_spec(m.grid, self.no_slip_rows, self.axis_cols)
