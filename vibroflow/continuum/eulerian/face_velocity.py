@@ -108,9 +108,14 @@ def match_divergence_cells(a, b, L, ux, uz, h, v, normal, mass, open_x, open_z, 
     numbers."""
     ncz = ux.shape[1]
     hoop = L.shape[1] > 4
+    # the cell's column and row counted along, not divided out of p (remap_rows.pack_cells)
+    i = a // ncz
+    k = a - i * ncz - 1
     for p in range(a, b):
-        i = p // ncz
-        k = p - i * ncz
+        k += 1
+        if k == ncz:
+            k = 0
+            i += 1
         ir = i + 1
         uxl = ux[i, k]
         uxr = ux[ir, k]

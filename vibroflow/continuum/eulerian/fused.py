@@ -127,7 +127,7 @@ def _make_advance_kernel(parallel: bool):
         nq = rwork[9].shape[0]
         # the remap's inflows and renewal modes (advection.remap_work), named here: a parallel
         # loop takes arrays, not the tuples that hold them
-        r_dm, r_inv, r_mode, r_dq = rwork[0][3], rwork[0][4], rwork[6], rwork[9]
+        r_dm, r_inv, r_mode, r_dq, r_ux = rwork[0][3], rwork[0][4], rwork[6], rwork[9], rw.ux
         nxg = gm.shape[0]
         rcols, rcol_a, rncols = row_columns
         op_xf, op_zf = op_tables
@@ -227,7 +227,7 @@ def _make_advance_kernel(parallel: bool):
                 a = (c * n) // nchunk
                 b = ((c + 1) * n) // nchunk
                 pack_faces((c * (ncx + 1)) // nchunk, ((c + 1) * (ncx + 1)) // nchunk, ux, kr,
-                           rw.ux)
+                           r_ux)
                 match_divergence_cells(a, b, L, ux, uz, h, v, normal, mass, open_x, open_z,
                                        inv_r)
                 void_first(L[a:b], frac[a:b], density[a:b], rho_c, dt)
@@ -237,11 +237,11 @@ def _make_advance_kernel(parallel: bool):
                 pack_cells(a, b, kr, ncz, v, C, stress, end_rho, mass, qr, mr)
             if parallel:
                 remap_fluxes(mr.reshape((ncx, kr)), qr.reshape((nq, ncx, kr)),
-                             rw.ux[:(ncx + 1) * kr].reshape((ncx + 1, kr)), uz, h, dt,
+                             r_ux[:(ncx + 1) * kr].reshape((ncx + 1, kr)), uz, h, dt,
                              periodic, rwork)
             else:
                 remap_fluxes_serial(mr.reshape((ncx, kr)), qr.reshape((nq, ncx, kr)),
-                                    rw.ux[:(ncx + 1) * kr].reshape((ncx + 1, kr)), uz, h,
+                                    r_ux[:(ncx + 1) * kr].reshape((ncx + 1, kr)), uz, h,
                                     dt, periodic, rwork)
             # the remap's end (its fields renewed, the masses moved), the fields unpacked and
             # each cell filled no further than full, in chunks of columns
@@ -249,9 +249,10 @@ def _make_advance_kernel(parallel: bool):
                 c0 = (c * ncx) // nchunk
                 c1 = ((c + 1) * ncx) // nchunk
                 # advection.renew_cells on the remap's rows, the fields unpacked
-                chunk_lowest[c], chunk_finite[c] = renew_columns(
-                    c0, c1, kr, ncz, qr, mr, r_dq, r_mode, r_inv, r_dm, v, C, stress, density,
-                    mass)
+                low, finite_c = renew_columns(c0, c1, kr, ncz, qr, mr, r_dq, r_mode, r_inv,
+                                              r_dm, v, C, stress, density, mass)
+                chunk_lowest[c] = low
+                chunk_finite[c] = finite_c
                 fill_limit(mass[c0 * ncz:c1 * ncz], density[c0 * ncz:c1 * ncz], h,
                            weight[c0 * ncz:c1 * ncz])
             finite = True

@@ -89,9 +89,11 @@ def pack_cells(a, b, kc, ncz, v, C, stress, rho, mass, q, mr):
     """The cells a:b's carried fields packed on the rows 0:kc (module docstring): q (NQ, ncx
     kc) the velocity v (N, 2) (m/s), the APIC matrix C (N, 4) (1/s), the stress (N, 4) (Pa)
     and the density rho (N,) (kg/m^3) (solver.NQ = 11 fields), mr (ncx kc,) the masses (kg/m)."""
+    # the cell's row k counted along, not divided out of p (a division per cell costs as
+    # much as the copy)
+    i = a // ncz
+    k = a - i * ncz
     for p in range(a, b):
-        i = p // ncz
-        k = p - i * ncz
         if k < kc:
             r = i * kc + k
             q[0, r] = v[p, 0]
@@ -101,6 +103,10 @@ def pack_cells(a, b, kc, ncz, v, C, stress, rho, mass, q, mr):
                 q[6 + j, r] = stress[p, j]
             q[10, r] = rho[p]
             mr[r] = mass[p]
+        k += 1
+        if k == ncz:
+            k = 0
+            i += 1
 
 
 @nb.njit(cache=True)
