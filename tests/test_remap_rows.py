@@ -4,9 +4,9 @@ The compiled loop transports the material over the rows up to one above the bed'
 layout of their own; the cells above receive nothing in a step whose Courant numbers are below
 one, so the numbers must be the whole mesh's remap's (advection.remap, itself checked against
 the scheme's face-by-face loop in test_eulerian_kernels.py) bit for bit: on a closed box, a
-mesh periodic along x and an axisymmetric section, for beds of several heights up to the lid,
-with the rows' layout refitted from one height to the next, in one chunk of columns and in
-three.
+mesh periodic along x and an axisymmetric section, for beds of several heights up to the lid
+under round-off masses (empty cells, which give nothing), with the rows' layout refitted from
+one height to the next, in one chunk of columns and in three.
 """
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ import pytest
 
 from vibroflow.continuum.eulerian.advection import remap, remap_fluxes_serial, remap_work
 from vibroflow.continuum.eulerian.mesh import EulerianMesh
-from vibroflow.continuum.eulerian.remap_rows import (fit_rows, pack_cells, pack_faces,
-                                                     renew_columns, rows_work)
+from vibroflow.continuum.eulerian.remap_rows import (bed_top, fit_rows, pack_cells,
+                                                     pack_faces, renew_columns, rows_work)
 
 NQ = 11
 
@@ -74,11 +74,16 @@ def test_the_rows_remap_gives_the_whole_meshs_numbers(kind):
     dt = 2e-3
     for top in (5, ncz - 3, 2, ncz - 1, ncz, 7):
         # a bed whose highest row holding material is top - 1, some cells empty inside it,
-        # and round-off negative masses above it (the remap allows -1e-9 of a full cell)
+        # and above it round-off masses: negative ones (the remap allows -1e-9 of a full cell)
+        # and positive ones below EMPTY (1e-12) of a full cell, which count as empty
         m = np.where(rng.random((ncx, ncz)) > 0.2, rng.random((ncx, ncz)) * 2000 * h * h, 0.0)
         m[:, top - 1] = rng.random(ncx) * 2000 * h * h + 1e-3
-        m[:, top:] = np.where(rng.random((ncx, ncz - top)) > 0.5, -1e-12, 0.0)
+        u = rng.random((ncx, ncz))
+        m[u < 0.1] *= 1e-14
+        m[:, top:] = np.where(u[:, top:] > 0.6, -1e-12, np.where(u[:, top:] > 0.3, 1e-16, 0.0))
         m = m.ravel()
+        wc = np.repeat(radius[0], ncz) if radius is not None else np.ones(mesh.n)
+        assert bed_top(m, ncx, ncz, h, wc) == top
         live = m > 0.0
         fields = (rng.normal(size=(mesh.n, 2)) * live[:, None] * 0.3,
                   rng.normal(size=(mesh.n, 4)) * live[:, None],

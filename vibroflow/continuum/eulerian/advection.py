@@ -19,7 +19,12 @@ corner-transport terms are needed):
   extrema of stress or velocity): this is the stress advection that the rate form of the
   elasto-plastic law needs in a fixed mesh;
 * closed faces (mesh.py: the wall) carry no flux, and a slope is not taken across them or
-  across an empty neighbour.
+  across an empty neighbour;
+* an empty cell (at most EMPTY of the fullest cell's mass per volume) gives nothing: its fields
+  are 0 (the renewal's mode 0) and its round-off mass stays, so the donor-cell scheme's
+  numerical diffusion stops one row above the material instead of filling the mesh with masses
+  of 1e-24 of a full cell (what lies above the material's top row is then the same at every
+  step: remap_rows.py leaves it out).
 
 Each face flux is added to one cell and taken from the other, so the total mass is conserved to
 round-off; nothing is clipped (the Courant numbers keep every cell's mass >= 0; a negative one
@@ -138,11 +143,12 @@ def _combine(ncx, ncz, periodic, ax, gx, az, gz, d):
 
 
 @nb.njit(cache=True)
-def _faces(u, r_lo, s_lo, r_hi, s_hi, h, dt, wf, on, pos, fac, flux):
+def _faces(u, r_lo, s_lo, r_hi, s_hi, h, dt, wf, r_empty, on, pos, fac, flux):
     """Faces j (m,) between cells lo and hi (mass per volume r (kg/m^3), limited slope s) with
     normal velocity u (m/s, from lo to hi): on, whether it carries a flux (u != 0 and its
-    upwind cell is not empty: nothing to carry from an empty cell, whose limited slope is 0
-    too); pos, whether its upwind cell is lo; fac = sgn (1 - c) / 2, its upwind
+    upwind cell is not empty, r > r_empty: nothing to carry from an empty cell, whose fields
+    the renewal has set to 0 (`_modes`), so that its round-off mass stays where it is and the
+    bed keeps a top above which no cell exchanges anything (remap_rows.py)); pos, whether its upwind cell is lo; fac = sgn (1 - c) / 2, its upwind
     reconstruction's factor (c = |u| dt / h); flux F = u dt h w (r + fac s)_upwind (kg/m, or
     kg per radian), w (m,) the face's weight (1 in plane strain; its radius in an
     axisymmetric section, whose face of side h sweeps h r per radian)."""
@@ -155,7 +161,7 @@ def _faces(u, r_lo, s_lo, r_hi, s_hi, h, dt, wf, on, pos, fac, flux):
         sgn = _pick(p, 1.0, -1.0)
         f = sgn * 0.5 * (1.0 - c)
         pos[j] = p
-        on[j] = uj != 0.0 and ru > 0.0
+        on[j] = uj != 0.0 and ru > r_empty
         fac[j] = f
         flux[j] = uj * dt * h * wf[j] * (ru + f * su)
 
@@ -221,14 +227,14 @@ def _prepare(m, ux, uz, h, dt, ncx, ncz, periodic, cells, masks, xf, xb, zf, zb,
         fx[f] = 0.0
     if periodic:
         _faces(ux[:ncz], rho[n - ncz:], srx[n - ncz:], rho[:ncz], srx[:ncz], h, dt, wx[:ncz],
-               ax[:ncz], px[:ncz], cx[:ncz], fx[:ncz])
+               rho_empty, ax[:ncz], px[:ncz], cx[:ncz], fx[:ncz])
     else:
         for f in range(ncz):
             ax[f] = False
             fx[f] = 0.0
     w = n - ncz
-    _faces(ux[ncz:n], rho[:w], srx[:w], rho[ncz:], srx[ncz:], h, dt, wx[ncz:n], ax[ncz:n],
-           px[ncz:n], cx[ncz:n], fx[ncz:n])
+    _faces(ux[ncz:n], rho[:w], srx[:w], rho[ncz:], srx[ncz:], h, dt, wx[ncz:n], rho_empty,
+           ax[ncz:n], px[ncz:n], cx[ncz:n], fx[ncz:n])
     # z-faces: below cell p, between cells p - 1 and p, their velocities copied to that
     # layout first (one flat pass, not one per column); the floor of a column is shut (u = 0)
     for i in range(ncx):
@@ -239,8 +245,8 @@ def _prepare(m, ux, uz, h, dt, ncx, ncz, periodic, cells, masks, xf, xb, zf, zb,
     az[n] = False
     fz[n] = 0.0
     w = n - 1
-    _faces(uzc[1:], rho[:w], srz[:w], rho[1:], srz[1:], h, dt, wz[1:n], az[1:n], pz[1:n],
-           cz[1:n], fz[1:n])
+    _faces(uzc[1:n], rho[:w], srz[:w], rho[1:], srz[1:], h, dt, wz[1:n], rho_empty, az[1:n],
+           pz[1:n], cz[1:n], fz[1:n])
     return rho_empty * area
 
 

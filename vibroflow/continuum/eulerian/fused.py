@@ -49,7 +49,7 @@ from .face_velocity import face_velocity_rows, match_divergence_cells
 from .lagrangian_step import (end_density, fill_limit, material_fraction,
                               update_stress_cells, void_first)
 from .operator_build import operator_columns, operator_rows
-from .remap_rows import fit_rows, pack_cells, pack_faces, renew_columns
+from .remap_rows import bed_top, fit_rows, pack_cells, pack_faces, renew_columns
 from .wall import wall_forces
 
 #: status of `advance_kernel`
@@ -144,15 +144,17 @@ def _make_advance_kernel(parallel: bool):
             if wall_on:
                 wall_forces(wall_cells, normal, v, mass, rho_c, h, weight, delta, xi, fext, wfn,
                             wft, wst, kn, kt, zeta, mu_w, dt)
-            # the cell rows up to the highest cell holding material
+            # the cell rows up to the highest cell with any mass (every such cell gathered, so
+            # that no cell the temperature's conduction reaches keeps an old rate)
             ktop = 0
             for ic in range(ncx):
                 for kc in range(ncz - 1, ktop - 1, -1):
                     if mass[ic * ncz + kc] > 0.0:
                         ktop = kc + 1
                         break
-            # the remap's rows (remap_rows.py): up to one above the bed's, on their own layout
-            kr = min(ktop + 1, ncz)
+            # the remap's rows (remap_rows.py): up to one above the highest that is not empty,
+            # on their own layout
+            kr = min(bed_top(mass, ncx, ncz, h, rw.weights[0]) + 1, ncz)
             nr = ncx * kr
             fit_rows(rw, kr, ncx, ncz)
             mr = rw.mass[:nr]

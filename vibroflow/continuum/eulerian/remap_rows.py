@@ -2,17 +2,18 @@
 on a compact layout of their own.
 
 The remap (advection.py) runs over flat arrays of the mesh's cells, p = i * ncz + k, and a
-fifth of tub47's rows lie above the bed (room for its flight).  A cell above the highest row
-holding material, ktop - 1, holds none, and in one step only row ktop can receive some: a
-face's flux comes from its upwind cell, which must hold material (advection._faces), and the
-Courant number is below 1.  So the transport over the rows 0:kc, kc = min(ktop + 1, ncz), laid
-out as p = i * kc + k, gives every cell the whole mesh's numbers, bit for bit:
+third of tub47's rows lie above the bed (room for its flight).  A cell above the highest row
+holding material, ktop - 1 (`bed_top`: a cell is empty at EMPTY of the fullest one, and gives
+nothing, advection._faces), holds none, and in one step only row ktop can receive some: a
+face's flux comes from its upwind cell, which must hold material, and the Courant number is
+below 1.  So the transport over the rows 0:kc, kc = min(ktop + 1, ncz), laid out as
+p = i * kc + k, gives every cell the whole mesh's numbers, bit for bit:
 
 * the mass's reconstruction, the slopes' masks and the fluxes of rows 0:kc read no cell
   above them (row kc - 1 holds nothing, so its slopes are never used and its upper neighbour,
   shut here, is masked off there as empty);
 * a cell above row kc - 1 receives nothing and is renewed as advection._modes' mode 0 makes it:
-  its fields 0 and its mass given a zero inflow (`renew_columns`).
+  its fields 0 and its round-off mass given a zero inflow (`renew_columns`).
 
 `fit_rows` lays the mesh's open faces and weights out for kc (once a change of kc),
 `pack_faces` and `pack_cells` the x-faces' velocities, the carried fields and the masses; the
@@ -26,7 +27,7 @@ from collections import namedtuple
 import numba as nb
 import numpy as np
 
-from .advection import remap_work, renew_masses, renewed
+from .advection import EMPTY, remap_work, renew_masses, renewed
 
 #: the compact remap's arrays: work, advection.remap_work's arrays (their open faces and
 #: weights laid out for `rows` by `fit_rows`); masks (left, right, down, up open faces) and
@@ -45,6 +46,30 @@ def rows_work(open_x, open_z, nq: int, radius=None) -> RowsWork:
     return RowsWork(work, tuple(m.copy() for m in work[1][:4]),
                     tuple(w.copy() for w in work[10]), np.zeros(n),
                     np.zeros((ncx + 1) * ncz), np.zeros(nq * n), np.full(1, -1, np.int64))
+
+
+@nb.njit(cache=True)
+def bed_top(mass, ncx, ncz, h, wc):
+    """ktop: one above the highest row with a cell that is not empty (advection.py: more than
+    EMPTY of the fullest cell's mass per volume, or than that times h^2 in mass, the renewal's
+    test), from the masses (N,) (kg/m, or kg per radian) and the cells' weights wc (N,) (1, or
+    an axisymmetric section's radii, m) with advection._prepare's arithmetic."""
+    area = h * h
+    full = 0.0
+    for p in range(ncx * ncz):
+        r = mass[p] / (area * wc[p])
+        if r > full:
+            full = r
+    rho_empty = EMPTY * full
+    m_empty = rho_empty * area
+    ktop = 0
+    for i in range(ncx):
+        for k in range(ncz - 1, ktop - 1, -1):
+            p = i * ncz + k
+            if mass[p] / (area * wc[p]) > rho_empty or mass[p] > m_empty:
+                ktop = k + 1
+                break
+    return ktop
 
 
 @nb.njit(cache=True)
