@@ -57,6 +57,7 @@ from ..timestep import stable_dt
 from ..wall_feed import feed_by_region
 from . import column
 from .mesh import EulerianMesh
+from .sample_rates import held_rates, held_rates_work
 from .solver import EulerianState, EulerianSystem, advance, init_state, state_from_checkpoint
 from .wall_feed import EulerianWallFeed
 from .wall import MeshWall, wall_force_on_material, wall_forces_by_cell
@@ -154,6 +155,12 @@ class CellSampler(Sampler):
         self.near_wall = mesh.wall[cells] if mesh.part_of is None else \
             (mesh.wall & (mesh.part_of < 0))[cells]
         self.wall_cells = cells[self.near_wall]
+        # the shear rates' selections of a sample, made in one compiled pass (sample_rates.py)
+        self.probe_members = np.concatenate(
+            [np.zeros(0, np.int64)] + [np.asarray(m, np.int64) for m in self.probe_cells])
+        self.probe_ptr = np.cumsum([0] + [len(m) for m in self.probe_cells]).astype(np.int64)
+        self.held = held_rates_work(cells.size, self.probe_cells)
+        self.rates = np.zeros(cells.size)
         # the cells do not move in the tub: those of the wall layer nearest the floor
         # (measure.floor_force.on_floor) and the analysis cells of all (Samples.cell_index)
         # are constants of the run
@@ -214,32 +221,37 @@ class CellSampler(Sampler):
                                    geo.length)
         if samples.n_parts:
             samples.add_part_forces(j, self._part_forces(), self._part_torques(), geo.length)
-        rate_all = shear_rate(state.L)
         if self.vtk and j >= S - run.phases_per_cycle:
-            self._frame(sample_tag(j), pose6, rate_all, samples)
-        rate = rate_all[cells]
-        held = state.mass[cells] >= 0.5 * self.full
-        if held.any():
-            samples.rate_all[j] = rate[held].mean()
-            if self.rate_index is None and samples.cell_grid is not None:
-                self.rate_index = samples.cell_index(self.xc)
-            if self.rate_index is not None:
-                samples.add_cell_rates_at(self.rate_index[held], rate[held])
-                hc = cells[held]
-                samples.add_cell_stresses_at(j, self.rate_index[held], state.volume[hc],
-                                             state.stress[hc])
+            self._frame(sample_tag(j), pose6, shear_rate(state.L), samples)
+        if self.rate_index is None:
+            self.rate_index = samples.cell_index(self.xc) if samples.cell_grid is not None \
+                else np.full(cells.size, -1, np.int64)
+        # the cells holding material (at least half a cell), their rates and what the maps
+        # take of them, in the cells' order (sample_rates.py)
+        sel = self.held
+        n_held, n_wall = held_rates(state.L, state.mass, 0.5 * self.full, cells,
+                                    self.rate_index, state.volume, state.stress,
+                                    self.near_wall, self.probe_members, self.probe_ptr,
+                                    self.rates, sel)
+        held = sel.held
+        if n_held:
+            samples.rate_all[j] = sel.rate[:n_held].mean()
+            samples.add_cell_rates_at(sel.index[:n_held], sel.rate[:n_held])
+            samples.add_cell_stresses_at(j, sel.index[:n_held], sel.volume[:n_held],
+                                         sel.stress[:n_held])
         if getattr(state, "temperature", None) is not None:
             # the cells that hold material as the shear rates count them
             samples.add_temperatures(j, system.x[cells][held], state.mass[cells][held],
                                      state.temperature[cells][held])
         if self.feed is not None and self.feed.start is not None and samples.temperature:
             samples.wall_feed[j] = feed_by_region(*self.feed.feed(), geo.radius)
-        if (held & self.near_wall).any():
-            samples.rate_wall[j] = rate[held & self.near_wall].mean()
-        for q, members in enumerate(self.probe_cells):
-            inside = held[members]
-            if inside.any():
-                samples.rate_probe[j, q] = rate[members][inside].mean()
+        if n_wall:
+            samples.rate_wall[j] = sel.wall[:n_wall].mean()
+        k = 0
+        for q, count in enumerate(sel.probe_n):
+            if count:
+                samples.rate_probe[j, q] = sel.probe[k:k + count].mean()
+            k += count
 
     def sample_step_start(self):
         return self.feed.last_step_start()
