@@ -201,7 +201,7 @@ def kernels(a) -> dict:
             from vibroflow.continuum.boundary import partition_forces
             from vibroflow.continuum.stress_update import update_stress_points
             from vibroflow.continuum.eulerian.advection import remap, remap_fluxes_serial
-            from vibroflow.continuum.eulerian.remap_rows import (fit_rows, pack_cells,
+            from vibroflow.continuum.eulerian.remap_rows import (bed_top, fit_rows, pack_cells,
                                                                  pack_faces, renew_columns)
             from vibroflow.continuum.eulerian.face_velocity import face_velocities
             from vibroflow.continuum.eulerian.lagrangian_step import (end_density,
@@ -265,7 +265,8 @@ def kernels(a) -> dict:
                 system.dt, mesh.periodic, system.remap_work), 200)
             # the compiled loop's: on the rows up to one above the bed's top (remap_rows.py)
             rw = cw.remap
-            kr = min(ktop + 1, mesh.ncz)
+            kr = min(bed_top(state.mass, mesh.ncx, mesh.ncz, mesh.h, rw.weights[0]) + 1,
+                     mesh.ncz)
             nr = mesh.ncx * kr
             fit_rows(rw, kr, mesh.ncx, mesh.ncz)
             qr, mr = rw.q[:NQ * nr].reshape(NQ, nr), rw.mass[:nr]

@@ -10,8 +10,8 @@ below 1.  So the transport over the rows 0:kc, kc = min(ktop + 1, ncz), laid out
 p = i * kc + k, gives every cell the whole mesh's numbers, bit for bit:
 
 * the mass's reconstruction, the slopes' masks and the fluxes of rows 0:kc read no cell
-  above them (row kc - 1 holds nothing, so its slopes are never used and its upper neighbour,
-  shut here, is masked off there as empty);
+  above them (row kc - 1 is empty, so its slopes are never used and its upper neighbour, shut
+  here, is masked off there as empty);
 * a cell above row kc - 1 receives nothing and is renewed as advection._modes' mode 0 makes it:
   its fields 0 and its round-off mass given a zero inflow (`renew_columns`).
 
