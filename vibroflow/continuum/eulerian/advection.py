@@ -149,9 +149,10 @@ def _faces(u, r_lo, s_lo, r_hi, s_hi, h, dt, wf, r_empty, on, pos, fac, flux):
     upwind cell is not empty, r > r_empty: nothing to carry from an empty cell, whose fields
     the renewal has set to 0 (`_modes`), so that its round-off mass stays where it is and the
     bed keeps a top above which no cell exchanges anything (remap_rows.py)); pos, whether its
-    upwind cell is lo; fac = sgn (1 - c) / 2, its upwind reconstruction's factor (c = |u| dt / h); flux F = u dt h w (r + fac s)_upwind (kg/m, or
-    kg per radian), w (m,) the face's weight (1 in plane strain; its radius in an
-    axisymmetric section, whose face of side h sweeps h r per radian)."""
+    upwind cell is lo; fac = sgn (1 - c) / 2, its upwind reconstruction's factor
+    (c = |u| dt / h); flux F = u dt h w (r + fac s)_upwind (kg/m, or kg per radian), w (m,) the
+    face's weight (1 in plane strain; its radius in an axisymmetric section, whose face of side
+    h sweeps h r per radian)."""
     for j in range(u.shape[0]):
         uj = u[j]
         p = uj > 0.0
