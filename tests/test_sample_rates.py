@@ -1,5 +1,5 @@
 """A sample's shear-rate selections in one compiled pass (eulerian/sample_rates.py) against
-numpy's masks: the same cells in the same order, so the same means bit for bit; the rates
+numpy's masks: the same cells in the same order and the same means bit for bit; the rates
 against gamma_dot = sqrt(2 D':D') of simple shear (L = [[0, g], [0, 0]]: gamma_dot = g)."""
 from __future__ import annotations
 
@@ -37,11 +37,18 @@ def test_selections_are_numpys_masks():
     np.testing.assert_array_equal(out.stress[:n_held], stress[cells[held]])
     np.testing.assert_array_equal(out.wall[:n_wall], rate[held & near_wall])
     assert out.rate[:n_held].mean() == rate[held].mean()
+    # the means, taken in numpy's order, are numpy's of the masks' selections
+    assert out.means[0] == rate[held].mean()
+    assert out.means[1] == rate[held & near_wall].mean()
     k = 0
     for q, m in enumerate(probes):
         want = rate[m][held[m]]
         assert out.probe_n[q] == want.size
         np.testing.assert_array_equal(out.probe[k:k + want.size], want)
+        if want.size:
+            assert out.means[2 + q] == want.mean()
+        else:
+            assert np.isnan(out.means[2 + q])
         k += want.size
 
 

@@ -276,6 +276,21 @@ class Samples:
                                     axis=1)
         c["position_tub"].append(position_tub)
 
+    def add_contact_rows(self, j: int, count: int, particle: np.ndarray, fn: np.ndarray,
+                         ft: np.ndarray, sliding: np.ndarray, arc: np.ndarray,
+                         position_tub: np.ndarray) -> None:
+        """Add sample j's wall contacts given as the first `count` rows of arrays already in
+        the contacts' units (`add_contacts`' after it has taken them over the slice: fn and
+        |ft| in N, sliding bool, position_tub (n, 3) m); the rows are copied."""
+        c = self.contacts
+        c["snapshot"].append(np.full(count, j, np.int32))
+        c["particle"].append(np.array(particle[:count], dtype=np.int32))
+        c["fn"].append(np.array(fn[:count], dtype=np.float64))
+        c["ft"].append(np.array(ft[:count], dtype=np.float64))
+        c["sliding"].append(np.array(sliding[:count], dtype=np.bool_))
+        c["arc"].append(np.array(arc[:count], dtype=np.float64))
+        c["position_tub"].append(np.array(position_tub[:count], dtype=np.float64))
+
     def add_floor_force(self, j: int, fz: np.ndarray, x: np.ndarray, radius: float,
                         length: float) -> None:
         """Sample j's floor force: the sum of the U wall's forces' z components fz (N/m, tub

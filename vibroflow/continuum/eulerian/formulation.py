@@ -58,6 +58,7 @@ from ..wall_feed import feed_by_region
 from . import column
 from .mesh import EulerianMesh
 from .sample_rates import held_rates, held_rates_work
+from .sample_wall import wall_contacts_work, wall_sample
 from .solver import EulerianState, EulerianSystem, advance, init_state, state_from_checkpoint
 from .wall_feed import EulerianWallFeed
 from .wall import MeshWall, wall_force_on_material, wall_forces_by_cell
@@ -175,6 +176,7 @@ class CellSampler(Sampler):
         self.wall_arc = np.array(mesh.arc[wc], dtype=np.float64)
         self.wall_position = np.stack([xw[:, 0], np.full(wc.size, 0.5 * self.geo.length),
                                        xw[:, 1]], axis=1)
+        self.wall_contacts = wall_contacts_work(wc.size, floor.size)
         self.part_cells = [] if mesh.part_of is None else \
             [np.nonzero(mesh.part_of == k)[0] for k in range(len(scenario.parts or []))]
         self.part_packed = packed_section(continuum_parts(scenario)) if self.part_cells else None
@@ -206,19 +208,16 @@ class CellSampler(Sampler):
                               self.unit, dither, pose6, self.pv[0], self.pv[1],
                               0.5 * geo.length, self.far, self.buf_p, self.buf_v)
         samples.pos[j], samples.vel[j], samples.poses[j] = self.buf_p, self.buf_v, pose6
-        # contacts as the material point method counts them: cells holding at least half a
-        # cell of material (a material point's size), pressing on the U
-        touching = np.nonzero((hist["state"][wall_cells] > 0)
-                              & (state.mass[wall_cells] >= 0.5 * self.full))[0]
-        tc = wall_cells[touching]
-        samples.add_contacts(j, self.wall_point[touching], hist["fn"][tc], hist["ft"][tc],
-                             hist["state"][tc], self.wall_arc[touching], None, geo.length,
-                             position_tub=self.wall_position[touching])
-        # the wall layer's penalty force (not the share its closed faces carry): its z
-        # component on the floor's cells (wall.wall_forces_by_cell's)
-        fc, fnorm = self.floor_cells, self.floor_normal
-        samples.add_floor_force_of(j, hist["fn"][fc] * fnorm[:, 1] - hist["ft"][fc] * fnorm[:, 0],
-                                   geo.length)
+        # the wall contacts (the wall layer's cells holding at least half a cell, pressing on
+        # the U) and the floor force: the wall layer's penalty force (not the share its closed
+        # faces carry), its z component on the floor's cells (sample_wall.py)
+        wc = self.wall_contacts
+        n_touch, samples.floor_force[j] = wall_sample(
+            hist["state"], hist["fn"], hist["ft"], state.mass, 0.5 * self.full, wall_cells,
+            self.wall_point, self.wall_arc, self.wall_position, self.floor_cells,
+            self.floor_normal, geo.length, wc)
+        samples.add_contact_rows(j, n_touch, wc.particle, wc.fn, wc.ft, wc.sliding, wc.arc,
+                                 wc.position)
         if samples.n_parts:
             samples.add_part_forces(j, self._part_forces(), self._part_torques(), geo.length)
         if self.vtk and j >= S - run.phases_per_cycle:
@@ -229,13 +228,14 @@ class CellSampler(Sampler):
         # the cells holding material (at least half a cell), their rates and what the maps
         # take of them, in the cells' order (sample_rates.py)
         sel = self.held
-        n_held, n_wall = held_rates(state.L, state.mass, 0.5 * self.full, cells,
-                                    self.rate_index, state.volume, state.stress,
-                                    self.near_wall, self.probe_members, self.probe_ptr,
-                                    self.rates, sel)
+        n_held, _ = held_rates(state.L, state.mass, 0.5 * self.full, cells,
+                               self.rate_index, state.volume, state.stress,
+                               self.near_wall, self.probe_members, self.probe_ptr,
+                               self.rates, sel)
         held = sel.held
+        samples.rate_all[j], samples.rate_wall[j] = sel.means[0], sel.means[1]
+        samples.rate_probe[j] = sel.means[2:]
         if n_held:
-            samples.rate_all[j] = sel.rate[:n_held].mean()
             samples.add_cell_rates_at(sel.index[:n_held], sel.rate[:n_held])
             samples.add_cell_stresses_at(j, sel.index[:n_held], sel.volume[:n_held],
                                          sel.stress[:n_held])
@@ -245,13 +245,6 @@ class CellSampler(Sampler):
                                      state.temperature[cells][held])
         if self.feed is not None and self.feed.start is not None and samples.temperature:
             samples.wall_feed[j] = feed_by_region(*self.feed.feed(), geo.radius)
-        if n_wall:
-            samples.rate_wall[j] = sel.wall[:n_wall].mean()
-        k = 0
-        for q, count in enumerate(sel.probe_n):
-            if count:
-                samples.rate_probe[j, q] = sel.probe[k:k + count].mean()
-            k += count
 
     def sample_step_start(self):
         return self.feed.last_step_start()

@@ -4,9 +4,9 @@ A sample (formulation.CellSampler.record) reads, of the mesh's cells inside the 
 at least half a cell of material: their shear rates gamma_dot = sqrt(2 D':D') (1/s;
 stress_update.equivalent_shear_rate), all of them, those of the U's wall layer and those in
 each probe's analysis cell, and for the analysis cells' maps their analysis cells, volumes and
-stresses.  Picked with numpy's masks this was some thirty calls a sample; here one loop packs
-each selection in the cells' order, so the means numpy then takes of them are those of the
-masks' selections, bit for bit.
+stresses, and the means of the rates.  One loop packs each selection in the cells' order and
+takes its mean in numpy's summation order (numpy_sum.py), so the means are those numpy takes
+of its masks' selections, bit for bit, at one call a sample instead of some forty.
 """
 from __future__ import annotations
 
@@ -15,14 +15,17 @@ from collections import namedtuple
 import numba as nb
 import numpy as np
 
+from ..numpy_sum import pairwise_mean
 from ..stress_update import equivalent_shear_rate
 
 #: a sample's selections (`held_rates`): held (M,) whether each of the M cells holds material;
 #: rate (M,) 1/s, index (M,), volume (M,) m^2 and stress (M, 4) Pa of those that do, packed
 #: first; wall (M,) the rates of those in the wall layer, packed; probe (P,) the rates of those
-#: in each probe, probe after probe (P the probes' cell count), probe_n (Q,) how many each
+#: in each probe, probe after probe (P the probes' cell count), probe_n (Q,) how many each;
+#: means (2 + Q,) 1/s the mean rate of all of them, of the wall layer's and of each probe's
+#: (NaN where none)
 HeldRates = namedtuple("HeldRates", ["held", "rate", "index", "volume", "stress", "wall",
-                                     "probe", "probe_n"])
+                                     "probe", "probe_n", "means"])
 
 
 def held_rates_work(n_cells: int, probe_members: list) -> HeldRates:
@@ -30,7 +33,8 @@ def held_rates_work(n_cells: int, probe_members: list) -> HeldRates:
     total = sum(len(m) for m in probe_members)
     return HeldRates(np.zeros(n_cells, np.bool_), np.zeros(n_cells), np.zeros(n_cells, np.int64),
                      np.zeros(n_cells), np.zeros((n_cells, 4)), np.zeros(n_cells),
-                     np.zeros(total), np.zeros(len(probe_members), np.int64))
+                     np.zeros(total), np.zeros(len(probe_members), np.int64),
+                     np.zeros(2 + len(probe_members)))
 
 
 @nb.njit(cache=True)
@@ -59,6 +63,8 @@ def held_rates(L, mass, half, cells, index, volume, stress, near_wall, members, 
             if near_wall[j]:
                 out.wall[w] = r
                 w += 1
+    out.means[0] = pairwise_mean(out.rate, 0, m)
+    out.means[1] = pairwise_mean(out.wall, 0, w)
     k = 0
     for q in range(member_ptr.shape[0] - 1):
         c = 0
@@ -69,4 +75,5 @@ def held_rates(L, mass, half, cells, index, volume, stress, near_wall, members, 
                 k += 1
                 c += 1
         out.probe_n[q] = c
+        out.means[2 + q] = pairwise_mean(out.probe, k - c, c)
     return m, w
