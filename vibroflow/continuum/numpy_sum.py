@@ -46,6 +46,7 @@ def _block(a, lo, n):
     return res
 
 
+@nb.njit(cache=True, inline="always")
 def _half(n):
     """Where numpy splits a run of n > BLOCK terms: half of it, rounded down to a multiple
     of 8."""
@@ -53,14 +54,11 @@ def _half(n):
     return n2 - n2 % 8
 
 
-_half = nb.njit(cache=True, inline="always")(_half)
-
-
 @nb.njit(cache=True)
 def pairwise_sum(a, lo, n):
     """The sum of a[lo:lo + n] in numpy's order (module docstring); 0.0 for n = 0.  numpy's
-    recursion is walked with a stack of its own (a recursive compiled function does not
-    survive numba's on-disk cache): each run over BLOCK is split at `_half`, its left half
+    recursion is walked with a stack of its own (a recursive compiled function, loaded from
+    numba's on-disk cache, crashes the process): each run over BLOCK is split at `_half`, its left half
     summed, then its right, then the two added, as numpy adds them."""
     if n <= BLOCK:
         return _block(a, lo, n)

@@ -6,7 +6,7 @@ stress_update.equivalent_shear_rate), all of them, those of the U's wall layer a
 each probe's analysis cell, and for the analysis cells' maps their analysis cells, volumes and
 stresses, and the means of the rates.  One loop packs each selection in the cells' order and
 takes its mean in numpy's summation order (numpy_sum.py), so the means are those numpy takes
-of its masks' selections, bit for bit, at one call a sample instead of some forty.
+of its masks' selections, bit for bit.
 """
 from __future__ import annotations
 
