@@ -25,7 +25,7 @@ def test_selections_are_numpys_masks():
     ptr = np.cumsum([0] + [len(m) for m in probes]).astype(np.int64)
     out = held_rates_work(cells.size, probes)
     n_held, n_wall = held_rates(L, mass, half, cells, index, volume, stress, near_wall,
-                                members, ptr, np.zeros(cells.size), out)
+                                members, ptr, out)
 
     rate = shear_rate(L[:, :4])[cells]
     held = mass[cells] >= half
@@ -58,5 +58,5 @@ def test_simple_shear_rate():
     out = held_rates_work(1, [])
     n_held, _ = held_rates(L, np.ones(1), 0.5, np.zeros(1, np.int64), np.zeros(1, np.int64),
                            np.ones(1), np.zeros((1, 4)), np.zeros(1, np.bool_),
-                           np.zeros(0, np.int64), np.zeros(1, np.int64), np.zeros(1), out)
+                           np.zeros(0, np.int64), np.zeros(1, np.int64), out)
     assert n_held == 1 and abs(out.rate[0] - g) < 1e-12 * g

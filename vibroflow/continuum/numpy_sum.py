@@ -58,8 +58,8 @@ def _half(n):
 def pairwise_sum(a, lo, n):
     """The sum of a[lo:lo + n] in numpy's order (module docstring); 0.0 for n = 0.  numpy's
     recursion is walked with a stack of its own (a recursive compiled function, loaded from
-    numba's on-disk cache, crashes the process): each run over BLOCK is split at `_half`, its left half
-    summed, then its right, then the two added, as numpy adds them."""
+    numba's on-disk cache, crashes the process): each run over BLOCK is split at `_half`, its
+    left half summed, then its right, then the two added, as numpy adds them."""
     if n <= BLOCK:
         return _block(a, lo, n)
     # the runs being split (start, length, halves done) and the sums waiting to be added;

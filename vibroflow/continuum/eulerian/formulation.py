@@ -161,7 +161,6 @@ class CellSampler(Sampler):
             [np.zeros(0, np.int64)] + [np.asarray(m, np.int64) for m in self.probe_cells])
         self.probe_ptr = np.cumsum([0] + [len(m) for m in self.probe_cells]).astype(np.int64)
         self.held = held_rates_work(cells.size, self.probe_cells)
-        self.rates = np.zeros(cells.size)
         # the cells do not move in the tub: those of the wall layer nearest the floor
         # (measure.floor_force.on_floor) and the analysis cells of all (Samples.cell_index)
         # are constants of the run
@@ -230,8 +229,7 @@ class CellSampler(Sampler):
         sel = self.held
         n_held, _ = held_rates(state.L, state.mass, 0.5 * self.full, cells,
                                self.rate_index, state.volume, state.stress,
-                               self.near_wall, self.probe_members, self.probe_ptr,
-                               self.rates, sel)
+                               self.near_wall, self.probe_members, self.probe_ptr, sel)
         held = sel.held
         samples.rate_all[j], samples.rate_wall[j] = sel.means[0], sel.means[1]
         samples.rate_probe[j] = sel.means[2:]
