@@ -327,7 +327,7 @@ def part_load_rows(snap, snap_index: int, ids, pos_lab, pose, geom: PartGeometry
     if data.shape[0]:
         mesh = _whole_column(path, snap, 0)
         pid = _whole_column(path, snap, 2)
-        X, Z, th = pose[0], pose[1], pose[2]
+        th = pose[2]  # rad; frame_points reads the pose's translation
         c, s = math.cos(th), math.sin(th)
         for k in range(n_parts):
             sel = mesh == first_mesh + k
