@@ -1,28 +1,20 @@
 """vibroflow.dem.block_queue: every block handed out once, whatever the lanes and the threads;
-each thread's own lane first, in order (`take`) or from its last block down (`take_down`)."""
+each thread's own lane first, in order."""
 import numba
 import numpy as np
 import pytest
 
-from vibroflow.dem.block_queue import open_lanes, queue_array, set_lanes, take, take_down
-
-
-@numba.njit
-def _next(queue, lane, lanes, s, nblock, down):
-    if down:
-        return take_down(queue, lane, lanes, s, nblock)
-    return take(queue, lane, lanes, s)
+from vibroflow.dem.block_queue import open_lanes, queue_array, set_lanes, take
 
 
 @numba.njit(parallel=True)
-def _take_all(nblock, queue, cost, taken, lane_of, order, down=False):
-    """A loop over the blocks as the step makes it (step._ball_pass; with `down`, as
-    step._pair_pass); block c costs cost[c] units of arithmetic, so that the threads come free
-    at different times and steal."""
+def _take_all(nblock, queue, cost, taken, lane_of, order):
+    """A loop over the blocks as the step makes it (step._pair_pass); block c costs cost[c]
+    units of arithmetic, so that the threads come free at different times and steal."""
     lanes = open_lanes(queue, nblock)
     for lane in numba.prange(lanes):
         k = 0
-        c, s = _next(queue, lane, lanes, 0, nblock, down)
+        c, s = take(queue, lane, lanes, 0)
         while c >= 0:
             x = 0.0
             for m in range(cost[c]):
@@ -31,14 +23,13 @@ def _take_all(nblock, queue, cost, taken, lane_of, order, down=False):
             lane_of[c] = lane if x >= 0.0 else -1
             order[c] = k
             k += 1
-            c, s = _next(queue, lane, lanes, s, nblock, down)
+            c, s = take(queue, lane, lanes, s)
     return lanes
 
 
-@pytest.mark.parametrize("down", [False, True])
 @pytest.mark.parametrize("threads", [1, 2])
 @pytest.mark.parametrize("lanes", [1, 2, 3, 16, 64, 100])
-def test_every_block_is_taken_exactly_once(threads, lanes, down):
+def test_every_block_is_taken_exactly_once(threads, lanes):
     """Any lane count, even one that is not the thread count or exceeds the blocks, on one
     thread and on two: each block once; uneven block costs make the threads steal."""
     before = numba.get_num_threads()
@@ -53,7 +44,7 @@ def test_every_block_is_taken_exactly_once(threads, lanes, down):
             taken = np.zeros(nblock, np.int64)
             lane_of = np.full(nblock, -2, np.int64)
             order = np.zeros(nblock, np.int64)
-            used = _take_all(nblock, queue, cost, taken, lane_of, order, down)
+            used = _take_all(nblock, queue, cost, taken, lane_of, order)
             assert used == min(lanes, nblock)
             assert (taken == 1).all()
             assert (lane_of >= 0).all() and (lane_of < used).all()
@@ -89,40 +80,3 @@ def test_a_thread_takes_its_own_lane_first_in_order():
         assert (lane_of == 0).all() and (order == np.arange(64)).all()
     finally:
         numba.set_num_threads(before)
-
-
-def test_down_one_lane_takes_the_blocks_from_the_last():
-    """One lane, down: blocks 63 to 0, the reverse of the loop before it."""
-    queue = queue_array(64)
-    set_lanes(queue, 1)
-    taken = np.zeros(64, np.int64)
-    lane_of = np.full(64, -2, np.int64)
-    order = np.zeros(64, np.int64)
-    _take_all(64, queue, np.full(64, 10, np.int64), taken, lane_of, order, True)
-    assert (taken == 1).all() and (lane_of == 0).all()
-    assert (order == np.arange(64)[::-1]).all()
-
-
-@pytest.mark.parametrize("nblock, lanes", [(64, 2), (64, 3), (7, 3)])
-def test_down_a_thread_takes_its_own_lane_first_from_its_last_block(nblock, lanes):
-    """Lanes on one thread, down: lane 0 takes its static share from its last block to its
-    first, then steals each other lane's share in turn, each from its last block down; so
-    every lane's blocks come in the reverse of `take`'s order, and its share is OpenMP's."""
-    before = numba.get_num_threads()
-    numba.set_num_threads(1)
-    try:
-        queue = queue_array(nblock)
-        set_lanes(queue, lanes)
-        taken = np.zeros(nblock, np.int64)
-        lane_of = np.full(nblock, -2, np.int64)
-        order = np.zeros(nblock, np.int64)
-        _take_all(nblock, queue, np.full(nblock, 10, np.int64), taken, lane_of, order, True)
-        assert (taken == 1).all() and (lane_of == 0).all()
-        expect = []
-        for t in range(lanes):
-            expect += list(range((t + 1) * nblock // lanes - 1, t * nblock // lanes - 1, -1))
-        sequence = np.argsort(order)
-        assert sequence.tolist() == expect
-    finally:
-        numba.set_num_threads(before)
-

@@ -16,8 +16,7 @@ balls' arrays with it from one core's cache to another's: on tub47-quick, whose 
 two cores' caches hold, that made the step 1.5 - 2 times slower on two threads.  So each
 thread has a lane, the blocks of its static share, and takes them first, in order, from its
 lane's counter; a thread whose lane is empty takes from the next lanes in turn (work stealing
-over the lanes, OpenMP's `schedule(static)` with stealing).  `take_down` hands each lane's
-blocks out from its last to its first, the same blocks in the reverse order.  A lane's counter is one atomic
+over the lanes, OpenMP's `schedule(static)` with stealing).  A lane's counter is one atomic
 fetch-and-add a block, on a cache line of its own.  A loop over the blocks:
 
     lanes = open_lanes(work.queue, nblock)
@@ -97,21 +96,5 @@ def take(queue, lane, lanes, s):
         c = _fetch_add(queue, r * PAD, 1)
         if c < queue[r * PAD + 1]:
             return c, s
-        s += 1
-    return -1, s
-
-
-@nb.njit(cache=True, inline="always")
-def take_down(queue, lane, lanes, s, nblock):
-    """As `take`, each lane's blocks from its last down to its first (the DEM step's pair
-    pass: docs/decisions/threads.md, "Pairs down, balls up")."""
-    while s < lanes:
-        r = lane + s
-        if r >= lanes:
-            r -= lanes
-        c = _fetch_add(queue, r * PAD, 1)
-        hi = queue[r * PAD + 1]
-        if c < hi:
-            return (r * nblock) // lanes + hi - 1 - c, s
         s += 1
     return -1, s

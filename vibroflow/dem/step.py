@@ -49,9 +49,8 @@ Force assembly whose numbers do not depend on the thread count (DEVELOPERS.md, "
 Each sum is over the same terms in the same order whatever the threads.  The balls are cut into
 NBLOCK contiguous blocks of about equal work (a function of the list alone); each thread takes
 the blocks of its own lane, then the others' as it comes free (vibroflow.dem.block_queue: the
-bed's work moves between the blocks over a cycle; the pairs take a lane's blocks from its last
-down, the ball pass from its first up, so that each loop starts on the blocks the one before
-left in the caches), and each block keeps its own impact buffer and diagnostics.  An impact row also holds the stored place of its ball (IMP_COLUMNS on), from
+bed's work moves between the blocks over a cycle), and each block keeps its own impact buffer
+and diagnostics.  An impact row also holds the stored place of its ball (IMP_COLUMNS on), from
 which vibroflow.dem.impact_order puts the rows in an order that does not depend on the threads
 or on the storage order.
 """
@@ -65,7 +64,7 @@ from ..tub.motion import pose as tub_pose
 from .block_record import (D_BALL_I, D_BALL_J, D_BALL_OVERLAP, D_LOST, D_NAN,  # noqa: F401
                            D_WALL_I, D_WALL_OVERLAP, D_WALL_W, IMP_COLUMNS, N_DIAG, N_IMP_BUF,
                            ROW_BALL, keep_largest, record_impact)
-from .block_queue import open_lanes, take, take_down
+from .block_queue import open_lanes, take
 from .contact_rows import pack, unpack
 from .contact import (add_force_torque, contact_law, contact_velocity,
                       normal_constants, put3, unit_normal)
@@ -584,19 +583,15 @@ def _undo_drift(balls, save):
 @nb.njit(cache=True, parallel=True)
 def _pair_pass(t, dt_hist, periodic_length, record_impacts, balls, pairs, slots, params, work):
     """Step 1 for every block, in parallel: each thread its own lane of blocks first, then
-    the others' as it comes free (vibroflow.dem.block_queue), each lane from its last block
-    down, so that a block's partners, stored after it, are the ones the block before touched,
-    and the ball pass, walking up, starts on the blocks the pairs left in the caches
-    (docs/decisions/threads.md, "Pairs down, balls up")."""
+    the others' as it comes free (vibroflow.dem.block_queue)."""
     queue = work.queue
-    nblock = work.diag.shape[0]
-    lanes = open_lanes(queue, nblock)
+    lanes = open_lanes(queue, work.diag.shape[0])
     for lane in nb.prange(lanes):
-        c, s = take_down(queue, lane, lanes, 0, nblock)
+        c, s = take(queue, lane, lanes, 0)
         while c >= 0:
             _pair_block(c, t, dt_hist, periodic_length, record_impacts, balls, pairs, slots,
                         params, work)
-            c, s = take_down(queue, lane, lanes, s, nblock)
+            c, s = take(queue, lane, lanes, s)
 
 
 @nb.njit(cache=True, parallel=True)
