@@ -312,6 +312,12 @@ def _rolling_moments(rolling: PartRolling, k: int, tri, t, pts, omg, rad) -> np.
     return out
 
 
+def _lab_to_tub(v, c: float, s: float):
+    """Rows of lab-axis vectors in the tub's axes, the tub turned by theta about y (c, s its
+    cosine and sine)."""
+    return np.stack([c * v[:, 0] + s * v[:, 2], v[:, 1], -s * v[:, 0] + c * v[:, 2]], axis=1)
+
+
 def part_load_rows(snap, snap_index: int, ids, pos_lab, pose, geom: PartGeometry,
                    first_mesh: int, path, omg_lab=None, radius=None,
                    rolling: PartRolling | None = None) -> dict:
@@ -338,16 +344,14 @@ def part_load_rows(snap, snap_index: int, ids, pos_lab, pose, geom: PartGeometry
             g = -(data[sel][ok, 3:6] + data[sel][ok, 6:9])  # on the part, lab axes
             pts = geom.frame_points(k, pos_lab[j[ok]], pose)
             if geom.exact.prm[k, P_FRAME] == FRAME_TUB:
-                g = np.stack([c * g[:, 0] + s * g[:, 2], g[:, 1], -s * g[:, 0] + c * g[:, 2]],
-                             axis=1)
+                g = _lab_to_tub(g, c, s)
             arm = geom.exact_nearest(k, pts)[:, 4:7] - geom.exact.prm[k, [P_CX, P_CY, P_CZ]]
             force[k] = g.sum(axis=0)
             torque[k] = np.cross(arm, g).sum(axis=0)
             if rolling is not None and rolling.cdt and omg_lab is not None:
                 w = omg_lab[j[ok]]
                 if geom.exact.prm[k, P_FRAME] == FRAME_TUB:
-                    w = np.stack([c * w[:, 0] + s * w[:, 2], w[:, 1],
-                                  -s * w[:, 0] + c * w[:, 2]], axis=1)
+                    w = _lab_to_tub(w, c, s)
                 tri = _whole_column(path, snap, 1)[sel][ok]
                 torque[k] += _rolling_moments(rolling, k, geom.meshes[k], tri, pts, w,
                                               radius[j[ok]]).sum(axis=0)
