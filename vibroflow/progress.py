@@ -29,16 +29,21 @@ ANNOUNCE_S = 0.5
 PLAIN_EVERY_S = 10.0
 
 
+def format_duration(seconds: float) -> str:
+    """A wall time for the progress lines: s, min or h."""
+    seconds = max(0.0, seconds)
+    if seconds < 60:
+        return f"{seconds:.0f} s"
+    if seconds < 3600:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
 def left_text(left: float | None) -> str:
     """The time left of a progress line: 'estimating ...' without a measured rate."""
     if left is None:
         return "estimating ..."
-    left = max(0.0, left)
-    if left < 60:
-        return f"{left:.0f} s left"
-    if left < 3600:
-        return f"{left / 60:.1f} min left"
-    return f"{left / 3600:.1f} h left"
+    return f"{format_duration(left)} left"
 
 
 class CompileWatch(numba_event.Listener):

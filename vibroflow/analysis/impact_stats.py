@@ -28,8 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vibroflow.measure.contacts import IMPACT_KINDS
-from vibroflow.measure.stats import batches_of_whole_cycles, cycles_in_window, stderr_of_batches
+from vibroflow.measure.contacts import IMPACT_KINDS, impact_chunks
+from vibroflow.measure.stats import cycles_in_window, stderr_of_batches
 from vibroflow.tub.geometry import TubGeometry, cross_section_area, point_to_arc
 
 #: speed bin edges (m/s): 0, then 500 log-spaced bins a decade from 1e-6 to 100 m/s
@@ -211,13 +211,8 @@ def impact_distributions(time, kind, position_tub, normal_speed, *, t_start: flo
     u = _WallBins("arc length along the U, s (m)", *u_arc_bins(geometry, bin_width), n_batches)
     part = _WallBins("height on the partitions, z (m)",
                      *partition_height_bins(geometry, bin_width), n_batches)
-    m = int(time.shape[0])
-    for a in range(0, m, chunk):
-        b = min(m, a + chunk)
-        bt = batches_of_whole_cycles(np.asarray(time[a:b], dtype=float), t_start, t_end,
-                                     frequency, n_batches)
-        kd = np.asarray(kind[a:b], dtype=np.int64)
-        v = np.asarray(normal_speed[a:b], dtype=float)
+    for rows, bt, kd, v in impact_chunks(time, kind, normal_speed, t_start, t_end, frequency,
+                                         n_batches, chunk):
         sb = speed_bin(v)
         ok = (bt >= 0) & (sb >= 0) & (kd >= 0) & (kd < nk)
         flat = (kd[ok] * n_batches + bt[ok]) * ns + sb[ok]
@@ -226,7 +221,7 @@ def impact_distributions(time, kind, position_tub, normal_speed, *, t_start: flo
                             minlength=nk * n_batches).reshape(nk, n_batches)
         on_u, on_p = ok & (kd == KIND_U), ok & (kd == KIND_PARTITION)
         if on_u.any() or on_p.any():
-            pos = np.asarray(position_tub[a:b], dtype=float)
+            pos = np.asarray(position_tub[rows], dtype=float)
             u.add(point_to_arc(pos[on_u, 0], pos[on_u, 2], geometry.radius), v[on_u],
                   bt[on_u])
             part.add(pos[on_p, 2], v[on_p], bt[on_p])

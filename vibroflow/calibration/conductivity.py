@@ -39,6 +39,27 @@ MIN_R2 = 0.3
 MODEL = "q = -C kappa(phi, T) grad T, kappa Gidaspow's (1994) conductivity"
 
 
+#: the energy-flux Dataset's fields (`measure.heat_flux`) that the conductivity's fit reads
+FLUX_FIELDS = ("solid_fraction", "temperature", "temperature_gradient", "energy_flux")
+
+
+def check_flux_inputs(flux, phi_range, rho_s, diameter, fields, what="") -> tuple[float, float]:
+    """(lo, hi) of phi_range after checking a fit's inputs: 0 < lo < hi < 1, rho_s and the
+    diameter > 0, and each of `fields` and its batches in the energy-flux Dataset `flux`
+    (`what`: what else the Dataset must hold).  InputError naming the first bad one."""
+    lo, hi = (float(v) for v in phi_range)
+    if not (0.0 < lo < hi < 1.0):
+        raise InputError(f"phi_range = {tuple(phi_range)!r}: must be (lo, hi) with "
+                         "0 < lo < hi < 1")
+    if not (rho_s > 0 and diameter > 0):
+        raise InputError(f"rho_s = {rho_s!r}, diameter = {diameter!r}: must both be > 0")
+    for name in fields:
+        if name not in flux or name + "_batches" not in flux:
+            raise InputError(f"flux: no {name!r} (or its batches): not an energy-flux Dataset"
+                             + what)
+    return lo, hi
+
+
 @nb.njit(cache=True)
 def _factor(phi, prm):
     out = np.empty(phi.size)
@@ -114,15 +135,7 @@ def fit_conductivity(flux, rho_s: float, diameter: float, restitution: float, ph
     T|), solid_fraction_range, by_solid_fraction {edges, multiplier, multiplier_stderr, cells,
     r2}, kinetic_share (the kinetic part of q . g over the total), status ("measured", and
     what R^2 below MIN_R2 means)}.  InputError when fewer than `min_cells` cells qualify."""
-    lo, hi = (float(v) for v in phi_range)
-    if not (0.0 < lo < hi < 1.0):
-        raise InputError(f"phi_range = {tuple(phi_range)!r}: must be (lo, hi) with "
-                         "0 < lo < hi < 1")
-    if not (rho_s > 0 and diameter > 0):
-        raise InputError(f"rho_s = {rho_s!r}, diameter = {diameter!r}: must both be > 0")
-    for name in ("solid_fraction", "temperature", "temperature_gradient", "energy_flux"):
-        if name not in flux or name + "_batches" not in flux:
-            raise InputError(f"flux: no {name!r} (or its batches): not an energy-flux Dataset")
+    lo, hi = check_flux_inputs(flux, phi_range, rho_s, diameter, FLUX_FIELDS)
 
     def arr(name):
         return np.asarray(flux[name].values, float)

@@ -19,7 +19,7 @@ import h5py
 import numpy as np
 
 from vibroflow.errors import InputError
-from vibroflow.measure.stats import batches_of_whole_cycles
+from vibroflow.measure.stats import batches_of_whole_cycles, phase_bins
 from vibroflow.scenario.io import parse_scenario
 from vibroflow.tub.motion import lab_to_tub_np, relative_velocity_tub_axes_np
 
@@ -157,6 +157,17 @@ class DEMResult:
         n = int(self.scenario.run.batches if n_batches is None else n_batches)
         return batches_of_whole_cycles(self.times, t0, t1, float(self.scenario.motion.frequency),
                                        n)
+
+    def window_snapshots(self, n_batches: int | None = None, n_phases: int = 8):
+        """(batch, used, phase) of the averaging window: each snapshot's batch (`batches`), the
+        indices of the snapshots in the window, and each snapshot's phase bin of n_phases a
+        cycle.  InputError when the window holds no snapshot."""
+        batch = self.batches(n_batches)
+        used = np.nonzero(batch >= 0)[0]
+        if used.size == 0:
+            t0, t1 = self.window()
+            raise InputError(f"{self.path}: no snapshot in the averaging window [{t0}, {t1}) s")
+        return batch, used, phase_bins(self.times, float(self.scenario.motion.frequency), n_phases)
 
     def has(self, key: str) -> bool:
         return key in self.file and self.file[key].shape[0] > 0

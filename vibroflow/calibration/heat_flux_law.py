@@ -35,7 +35,8 @@ from vibroflow.continuum.kinetic_theory import KineticParameters
 from vibroflow.errors import InputError
 from vibroflow.measure.stats import stderr_of_batches
 
-from .conductivity import MIN_GRADIENT_SNR, MIN_R2, PHI_BIN_EDGES, PHI_RANGE, resolved_cells
+from .conductivity import (MIN_GRADIENT_SNR, MIN_R2, PHI_BIN_EDGES, PHI_RANGE, check_flux_inputs,
+                           resolved_cells)
 from .kinetic import G0_FORMS
 
 MODEL = ("q = -A kappa(phi, T) grad T - B mu(phi, T) grad phi, kappa and mu Garzo & Dufty's "
@@ -98,18 +99,10 @@ def _fit(q, g, h, w, qb, gb, hb):
 
 
 def _check(flux, phi_range, rho_s, diameter):
-    lo, hi = (float(v) for v in phi_range)
-    if not (0.0 < lo < hi < 1.0):
-        raise InputError(f"phi_range = {tuple(phi_range)!r}: must be (lo, hi) with "
-                         "0 < lo < hi < 1")
-    if not (rho_s > 0 and diameter > 0):
-        raise InputError(f"rho_s = {rho_s!r}, diameter = {diameter!r}: must both be > 0")
-    for name in ("solid_fraction", "solid_fraction_gradient", "temperature",
-                 "temperature_gradient", "energy_flux"):
-        if name not in flux or name + "_batches" not in flux:
-            raise InputError(f"flux: no {name!r} (or its batches): not an energy-flux Dataset "
-                             "with the solid fraction's gradient")
-    return lo, hi
+    return check_flux_inputs(flux, phi_range, rho_s, diameter,
+                             ("solid_fraction", "solid_fraction_gradient", "temperature",
+                              "temperature_gradient", "energy_flux"),
+                             " with the solid fraction's gradient")
 
 
 def _fields(flux):

@@ -268,11 +268,6 @@ def _fine_refit(counts: BatchCounts, loo, shape, d: float, min_impacts: int, min
     return refit
 
 
-def impact_speed_from_shear_rate(shear_rate, fit: dict, diameter: float):
-    """The calibrated inference: v = c0 + c1 d gamma_dot (m/s) at shear rates (1/s)."""
-    return fit["c0"] + fit["c1"] * diameter * np.asarray(shear_rate, float)
-
-
 def jackknife_of_batches_fit(fit: dict, c, total, c_b, sum_b, shear, d: float, min_impacts: int,
                              min_sf: float) -> dict:
     """c0_stderr and c1_stderr of impact_relations_on_cells' fit as the delete-one-batch

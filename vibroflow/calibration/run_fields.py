@@ -20,7 +20,6 @@ import xarray as xr
 from vibroflow.tub.geometry import geometry_of
 from vibroflow.errors import InputError
 from vibroflow.io.atomic import atomic_path
-from vibroflow.measure.stats import phase_bins
 
 from .coarse_grain import CoarseGrainer
 from .dem_result import DEMResult
@@ -85,12 +84,7 @@ def _coarse_grain(res: DEMResult, kernel, width, cutoff, cell_size, n_phases, pr
                   diameter=d, n_phases=n_phases, n_batches=int(sc.run.batches))
     cg = grainer(geometry, **params)
     th = ThermalTemperatureGrainer(geometry, **params) if thermal else None
-    batch = res.batches()
-    used = np.nonzero(batch >= 0)[0]
-    if used.size == 0:
-        t0, t1 = res.window()
-        raise InputError(f"{res.path}: no snapshot in the averaging window [{t0}, {t1}) s")
-    ph = phase_bins(res.times, float(sc.motion.frequency), n_phases)
+    batch, used, ph = res.window_snapshots(None, n_phases)
     for k, (s, snap) in enumerate(res.iter_snapshots(used)):
         cg.add_snapshot(**{key: snap[key] for key in _CG_KEYS if key in snap},
                         phase_bin=int(ph[s]), batch=int(batch[s]))

@@ -41,7 +41,7 @@ import xarray as xr
 from scipy.interpolate import RegularGridInterpolator
 
 from vibroflow.errors import InputError
-from vibroflow.measure.stats import phase_bins, stderr_of_batches
+from vibroflow.measure.stats import stderr_of_batches
 from vibroflow.tub.geometry import geometry_of
 
 from .coarse_grain import CoarseGrainer
@@ -267,11 +267,7 @@ def thermal_balance_run(run, n_batches: int | None = None, thermal: bool = True)
                                     **common)
         th = ThermalTemperatureGrainer(geometry, **common) if thermal else None
         springs = _springs(sc)
-        batch = res.batches(nb)
-        used = np.nonzero(batch >= 0)[0]
-        if used.size == 0:
-            raise InputError(f"{res.path}: no snapshot in the averaging window")
-        ph = phase_bins(res.times, float(sc.motion.frequency), n_ph)
+        batch, used, ph = res.window_snapshots(nb, n_ph)
         spins = res.file["snapshots/angular_velocity"]
         energy = np.full(used.size, np.nan)
         power = np.full(used.size, np.nan)

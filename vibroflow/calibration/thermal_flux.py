@@ -22,7 +22,6 @@ import numpy as np
 from scipy.interpolate import RegularGridInterpolator
 
 from vibroflow.errors import InputError
-from vibroflow.measure.stats import phase_bins
 from vibroflow.tub.geometry import geometry_of
 
 from .coarse_grain import CoarseGrainer
@@ -118,11 +117,7 @@ def thermal_energy_flux(run, width_factor: float = MEAN_WIDTH_D, n_phases: int |
                                 depth=float(sc.tub.length), rho_s=res.solid_density,
                                 diameter=d, n_phases=n_phases, n_batches=nb,
                                 mean_width_d=width_factor)
-        batch = res.batches(nb)
-        used = np.nonzero(batch >= 0)[0]
-        if used.size == 0:
-            raise InputError(f"{res.path}: no snapshot in the averaging window")
-        ph = phase_bins(res.times, float(sc.motion.frequency), n_phases)
+        batch, used, ph = res.window_snapshots(nb, n_phases)
         for s, snap in res.iter_snapshots(used):
             cg.add_snapshot(**{k: snap[k] for k in _KEYS if k in snap}, phase_bin=int(ph[s]),
                             batch=int(batch[s]))

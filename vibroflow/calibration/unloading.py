@@ -220,18 +220,6 @@ def _q_law(P, n: float):
     return lnP * f, -lnP * lnP * df
 
 
-def law_pressure(eps, p0: float, K_ref: float, p_ref: float, n: float):
-    """p(eps_v) (Pa) along the tangent law K_t = K_ref (p / p_ref)^n from p(0) = p0 > 0:
-    q_n(p / p_ref) = q_n(p0 / p_ref) + (K_ref / p_ref) eps_v, solved for p (NaN past p = 0)."""
-    q0 = _q_law(np.asarray(p0 / p_ref, float), n)[0]
-    q = q0 + K_ref / p_ref * np.asarray(eps, float)
-    if abs(1.0 - n) < 1e-12:
-        return p_ref * np.exp(q)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        base = 1.0 + (1.0 - n) * q
-        return p_ref * np.where(base > 0, base, np.nan) ** (1.0 / (1.0 - n))
-
-
 def fit_tangent_law(step_changes, n0: float = 0.0):
     """K_ref / p_ref (1/...: A, Pa/Pa) and n of K_t = K_ref (p / p_ref)^n (module notes) from
     the branch's steps: step_changes(n) returns, one a step, (Delta q_n, d Delta q_n / dn,

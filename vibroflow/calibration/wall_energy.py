@@ -32,8 +32,6 @@ from vibroflow.tub.motion import rigid_velocity, tub_to_lab
 
 from .dem_result import DEMResult
 
-POWERS = ("power", "fluctuation_power", "drive_power")
-
 
 def _flux(power, snap, sel_contact, bins, n_bins, snap_phase, snap_batch, n_phases, n_batches):
     """Sums of `power` by (batch, phase, bin) over the contacts `sel_contact`, and the

@@ -51,6 +51,7 @@ from vibroflow.errors import InputError
 from vibroflow.tub.geometry import distance_to_wall_np, u_wall_nearest
 from vibroflow.tub.parts import part_nearest
 
+#: a penalty contact's state: none, sticking, sliding at the Coulomb limit
 NO_CONTACT, STICK, SLIDE = 0, 1, 2
 
 #: kinds of boundary (BOUNDARY_DTYPE's `kind`): the tub's U wall, a moving plane wall, the
@@ -83,7 +84,7 @@ def _penalty(gap, nx, nz, vrx, vrz, mass, volume, xi, kn, kt, zeta, mu, dt):
     l = np.sqrt(volume)
     delta = 0.5 * l - gap
     if delta <= 0.0:
-        return 0.0, 0.0, 0.0, 0.0, 0.0, 0
+        return 0.0, 0.0, 0.0, 0.0, 0.0, NO_CONTACT
     kk = kn * l
     vn = vrx * nx + vrz * nz
     fn = kk * delta - 2.0 * zeta * np.sqrt(mass * kk) * vn
@@ -96,11 +97,11 @@ def _penalty(gap, nx, nz, vrx, vrz, mass, volume, xi, kn, kt, zeta, mu, dt):
     xi = xi + vt * dt
     ft = -kkt * xi - 2.0 * zeta * np.sqrt(mass * kkt) * vt
     lim = mu * fn
-    state = 1
+    state = STICK
     if abs(ft) > lim:
         ft = lim if ft > 0.0 else -lim
         xi = -ft / kkt if kkt > 0.0 else 0.0
-        state = 2
+        state = SLIDE
     return fn * nx + ft * tx, fn * nz + ft * tz, fn, ft, xi, state
 
 

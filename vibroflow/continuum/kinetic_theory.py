@@ -142,14 +142,6 @@ def shear_viscosity_Pa_s(phi, T, prm):
 
 
 @nb.njit(cache=True)
-def bulk_viscosity_Pa_s(phi, T, prm):
-    """Bulk viscosity lambda (Pa s), Lun et al. (1984): (4/3) phi^2 rho_s d g0 (1 + e) sqrt(T/pi)."""
-    g0 = radial_distribution(phi, prm)
-    return (4.0 / 3.0 * phi * phi * prm.density_kg_m3 * prm.diameter_m * g0
-            * (1.0 + prm.restitution) * math.sqrt(max(T, 0.0)) / _SQRT_PI)
-
-
-@nb.njit(cache=True)
 def conductivity_kg_m_s(phi, T, prm):
     """Conductivity kappa (kg/(m s)) of the fluctuation energy, Gidaspow (1994)."""
     e = prm.restitution

@@ -34,7 +34,6 @@ a traceback.
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 import shutil
 import signal
@@ -470,9 +469,3 @@ def load_state_file(path: Path) -> tuple[DEMState, dict]:
     except (OSError, KeyError, ValueError, TypeError, RuntimeError) as exc:
         raise DamagedFile(path, _damage(path, exc)) from None
     return state, attrs
-
-
-def read_json_attr(attrs: dict, key: str, default=None):
-    """A JSON-valued attribute of a state file (None when absent)."""
-    value = attrs.get(key)
-    return default if value is None else json.loads(value)

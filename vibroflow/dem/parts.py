@@ -53,7 +53,7 @@ DONE = -3.0          # a candidate that has its slot (scratch marker)
 (IMP_TIME, IMP_PART, IMP_PATCH, IMP_X, IMP_Y, IMP_Z, IMP_VN, IMP_VT, IMP_ENERGY,
  IMP_BALL) = range(10)
 N_IMP = 10
-N_IMP_BUF = N_IMP + 2  # a buffered row: the IMP_* columns, the ball's block, the step
+N_PART_IMP_BUF = N_IMP + 2  # a buffered row: the IMP_* columns, the ball's block, the step
 IMPACT_CAPACITY = 1 << 10  # rows per block of balls (step.NBLOCK), at least
 IMPACT_FLUSH = 1 << 9  # a block's rows past which they are flushed (impact_order)
 # columns of a load: force (N) and torque about the part's centre (N m), part frame axes
@@ -65,8 +65,8 @@ class PartsRec(NamedTuple):
     material index mat (P,) and bounding reach (P,) (m, from the centre; a cylinder's in x-z),
     the per-ball contact slots hist (N, P, SLOTS, 6) and key (N, P, SLOTS), each ball's
     loads on each part at the step, one row a contact, contrib (N, P, SLOTS, N_LOAD) with
-    their counts ncontrib (N, P), impact rows imp (nblock, IMPACT_CAPACITY, N_IMP_BUF; grown by
-    vibroflow.dem.simulate to the bound of vibroflow.dem.impact_order) with
+    their counts ncontrib (N, P), impact rows imp (nblock, IMPACT_CAPACITY, N_PART_IMP_BUF;
+    grown by vibroflow.dem.simulate to the bound of vibroflow.dem.impact_order) with
     their counts imp_count (nblock,), and scratch (nblock, SLOTS, 9) for an STL's candidates
     (nblock: step.NBLOCK, the blocks of balls)."""
 
@@ -112,7 +112,8 @@ def parts_record(packed: PackedParts, mat: np.ndarray, hist: np.ndarray, key: np
     return PartsRec(packed.shape, packed.prm, packed.tri, packed.tri_normal, packed.tri_group,
                     packed.tri_start, np.ascontiguousarray(mat, dtype=np.int64), reach_of(packed),
                     hist, key, np.zeros((n, p, SLOTS, N_LOAD)), np.zeros((n, p), np.int64),
-                    np.zeros((nblock, IMPACT_CAPACITY, N_IMP_BUF)), np.zeros(nblock, np.int64),
+                    np.zeros((nblock, IMPACT_CAPACITY, N_PART_IMP_BUF)),
+                    np.zeros(nblock, np.int64),
                     np.zeros((nblock, SLOTS, 9)))
 
 

@@ -14,7 +14,7 @@ from .neighbours import INDEX, transfer_history
 from .periodic_step import (BLOWUP, C_CUT, C_DAMPING, C_GAIN, C_MAX_OVERLAP, C_MODE, C_PRESSURE,
                             C_RATE_MAX, C_SKIN, MODE_FIXED, MODE_Z, N_CTRL, N_Q, N_STATE,
                             R_EX, R_EY, R_EZ, R_GAMMA, REBUILD, S_BUILD_STRAIN, S_BLOCK,
-                            S_MAX_OVERLAP, S_NSAMPLE, S_TIME, advance, pair_forces, stress)
+                            S_MAX_OVERLAP, S_NSAMPLE, S_TIME, advance, pair_forces)
 from .records import Box, BoxBalls, Pairs
 
 
@@ -120,12 +120,6 @@ class PeriodicBox:
         """Forces, torques and virial at the current state without advancing contact histories
         (LAMMPS' setup).  Returns (contacts, largest overlap)."""
         return pair_forces(self._balls(), self._pairs(), self._cell(np.zeros(N_CTRL)), 0.0)
-
-    def stress_tensor(self) -> np.ndarray:
-        """Instantaneous stress (3x3, Pa, compression positive) from the last evaluation."""
-        out = np.zeros(9)
-        stress(self._balls(), self._cell(np.zeros(N_CTRL)), self.rates[R_GAMMA], out)
-        return out.reshape(3, 3)
 
     # -- velocities of the mean flow -------------------------------------------------------------
     def set_shear_rate(self, gamma_dot: float) -> None:

@@ -1,7 +1,7 @@
 """What the parts of a LIGGGHTS run receive, as dem.h5's /part_impacts and /part_loads (the DEM's
 own layout, vibroflow.dem.output), from the deck's dumps (vibroflow.liggghts.part_deck).
 
-Impacts (`PartImpacts`): post/part_contacts.dump holds, every step from one step before the
+Impacts (`part_impacts`): post/part_contacts.dump holds, every step from one step before the
 averaging window, the balls near the parts.  A ball touches part k at a step when its centre
 is closer than its radius to the part's mesh, the triangles LIGGGHTS itself used: the deck's
 part_<name>.stl (`deck_meshes`; 0.05 mm chords by default, 1 um with --fill-from), LIGGGHTS'

@@ -142,9 +142,6 @@ LAJEUNESSE_2004 = ScalingLaw(
     "axisymmetric", lam=math.nan, a_lin=0.0, lam_pow=math.nan, alpha=math.nan,
     a_pow=math.inf, a_h=0.74, kappa=0.74, beta=0.0)
 
-#: the planar laws, the reference first (module docstring: which law, and why)
-PLANAR_LAWS = (LUBE_2005, LAJEUNESSE_2005)
-
 
 def quasistatic_runout(a: float, deposit_slope: float) -> float:
     """(L_inf - L0)/L0 of a low column (top untouched) whose collapse leaves a plane slope of

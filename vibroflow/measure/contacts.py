@@ -217,14 +217,23 @@ def impact_stats_chunked(kind, normal_speed, time, t_start: float, t_end: float,
     """
     nk = max(IMPACT_KINDS) + 1
     sums, counts = np.zeros((nk, n_batches)), np.zeros((nk, n_batches))
+    for _rows, bt, kd, v in impact_chunks(time, kind, normal_speed, t_start, t_end, frequency,
+                                          n_batches, chunk):
+        _accumulate_impacts(sums, counts, kd, v, bt)
+    return _impact_stats_of(sums, counts)
+
+
+def impact_chunks(time, kind, normal_speed, t_start: float, t_end: float, frequency: float,
+                  n_batches: int, chunk: int):
+    """The impacts (arrays or h5py datasets of M rows) read chunk rows at a time: for each
+    chunk (its rows as a slice, each impact's batch of whole cycles of the window [t_start,
+    t_end) or -1 outside it, its kind (int64) and its normal speed (m/s))."""
     m = int(kind.shape[0])
     for a in range(0, m, chunk):
-        b = min(m, a + chunk)
-        bt = batches_of_whole_cycles(np.asarray(time[a:b], dtype=float), t_start, t_end,
-                                     frequency, n_batches)
-        _accumulate_impacts(sums, counts, np.asarray(kind[a:b], dtype=np.int64),
-                            np.asarray(normal_speed[a:b], dtype=float), bt)
-    return _impact_stats_of(sums, counts)
+        rows = slice(a, min(m, a + chunk))
+        yield (rows, batches_of_whole_cycles(np.asarray(time[rows], dtype=float), t_start, t_end,
+                                             frequency, n_batches),
+               np.asarray(kind[rows], dtype=np.int64), np.asarray(normal_speed[rows], dtype=float))
 
 
 def mean_by_region(position_tub, values, cell_size: float):

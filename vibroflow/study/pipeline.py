@@ -20,6 +20,7 @@ from typing import Any
 from vibroflow import __version__
 from vibroflow.errors import CheckpointRefused, InputError, Interrupted
 from vibroflow.io.folder_lock import folder_lock
+from vibroflow.progress import format_duration
 from vibroflow.io.vtk_frame import VtkOptions
 from vibroflow.study.folder import KIND, STUDY_FILE, check_study_dir, read_json
 from vibroflow.study.methods import METHODS, method
@@ -122,16 +123,6 @@ def _stage_interrupted(study: Study, stage: Stage, where: str) -> Interrupted:
     at = f" {where}" if where else ""
     return Interrupted(f"interrupted in the study's {stage.name} stage{at}; run the same "
                        f"command again to go on from there (out: {study.out})")
-
-
-def format_duration(seconds: float) -> str:
-    """A wall time for the progress lines: s, min or h."""
-    seconds = max(0.0, seconds)
-    if seconds < 60:
-        return f"{seconds:.0f} s"
-    if seconds < 3600:
-        return f"{seconds / 60:.1f} min"
-    return f"{seconds / 3600:.1f} h"
 
 
 def _about(estimate: float | None) -> str:

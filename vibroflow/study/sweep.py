@@ -32,7 +32,7 @@ from rich.console import Console
 
 from vibroflow import __version__
 from vibroflow.errors import InputError
-from vibroflow.study.pipeline import format_duration
+from vibroflow.progress import format_duration
 from vibroflow.study.sweep_folder import (KIND, PLOTS, POINT_LOCK, TABLE_FILE, check_same_sweep,
                                           dir_lock, is_locked, point_dir, read_record, write_record)
 from vibroflow.study.sweep_plots import write_plots

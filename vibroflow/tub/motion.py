@@ -65,10 +65,6 @@ class TubMotion:
     def still() -> "TubMotion":
         return TubMotion(amplitude_x=0.0, amplitude_z=0.0, amplitude_theta=0.0)
 
-    def peak_vertical_acceleration(self) -> float:
-        """Largest |Z''| (m/s^2), not counting the rotation's contribution."""
-        return self.amplitude_z * self.omega**2
-
 
 @nb.njit(cache=True, inline="always")
 def _harmonic(a, phase, omega, t):
