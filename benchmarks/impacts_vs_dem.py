@@ -15,8 +15,8 @@ For the DEM run in DIR (its dem.h5 and, by default, its calibration.toml) this p
   (calibration.impacts.impact_relations_on_cells) beside the calibration's relation fitted on
   the 5 mm coarse-grained field;
 * for each continuum method, run on the same scenario with its default options: its shear
-  rate on both definitions (the phase-resolved field's, which the runs now report, and the mean
-  of its points' instantaneous rates, which they reported before), and the mean ball-ball and
+  rate on both definitions (the phase-resolved field's, which the runs report, and the mean
+  of its points' instantaneous rates), and the mean ball-ball and
   ball-wall impact speeds inferred from each, against the DEM's measured means;
 * the shear rate of the time-averaged field (the slow roll alone), DEM and continua: the rest
   of the phase field's is the bed's deformation within each cycle;
@@ -117,8 +117,8 @@ def main(argv=None) -> int:
     print("(ratios to the DEM's measured means; in brackets, to its solid-weighted node means)")
     print("| method | bed shear rate, phase field (DEM) | the roll's (DEM) | instantaneous | "
           "near-wall, phase field "
-          "(DEM) | instantaneous | ball-ball inferred / DEM measured: now, before | ball-wall "
-          "now, before |")
+          "(DEM) | instantaneous | ball-ball inferred / DEM measured: phase field, "
+          "instantaneous | ball-wall phase field, instantaneous |")
     print("|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['method']} | {r['bed']:.2f} +- {r['bed_se']:.2f} "
