@@ -53,7 +53,7 @@ def test_flags_are_plain_and_bracketed_words_stay(path):
 
 
 def test_dilatancy_and_compaction_tables_are_named_in_the_help():
-    """The words rich markup used to take for style tags."""
+    """Bracketed words print as written, not read as rich's style tags."""
     out = _flat(_help(("continuum",)))
     assert "from the calibration's [dilatancy] (vibroflow calibrate --dilatancy)" in out
     assert "from the calibration's [compaction] (vibroflow calibrate --dilatancy)" in out

@@ -8,7 +8,7 @@ calibration (tub47-quick-dem: 3.57e-3 m^2/s; limit 1.5 x 0.166 = 0.249, tub47.md
 continuum runs the same scenario with that calibration at the package's defaults, once per
 module (`runs`).
 
-What is true today, said by the tests:
+What is true, said by the tests:
 - tub47: the circulations agree with the DEM's in both formulations (a target met);
 - tub47: the fields miss the limit (Lagrangian E 1.25 of it, Eulerian 1.42): tub47.md's target,
   asserted under a strict xfail that states the miss;
@@ -139,10 +139,10 @@ def test_regression_guard_lagrangian_transfers_beat_one_transfer_a_step(runs, tm
     """Regression guard of a model choice (continuum/mpm/formulation.py DEFAULT_TRANSFER_CFL): the
     transfers' rate set apart from the step gives a field closer to the DEM's than one APIC
     transfer a step at cfl 0.075 (E 0.46 against seed 1)."""
-    new = runs("lagrangian", "tub47")
-    old = _run("lagrangian", "tub47", tmp_path / "old", cfl=0.075, transfer_cfl=None)
-    assert new["E"] < 0.40
-    assert new["E"] < old["E"] - 0.05
+    default = runs("lagrangian", "tub47")
+    one = _run("lagrangian", "tub47", tmp_path / "one-transfer", cfl=0.075, transfer_cfl=None)
+    assert default["E"] < 0.40
+    assert default["E"] < one["E"] - 0.05
 
 
 def test_eulerian_conserves_mass_on_tub47(runs):

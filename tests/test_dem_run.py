@@ -85,7 +85,7 @@ def test_small_tub_run_outputs_and_bounds(tmp_path):
         assert not (out / "dem.h5.partial").exists()
     header = (out / "bulk_velocity.csv").read_text().splitlines()[0]
     assert header.replace(" ", "") == "x,z,solid_fraction,vx,vz,samples"
-    # the same scenario and seed give the same numbers (the bed comes from the cache now)
+    # the same scenario and seed give the same numbers (the second run's bed comes from the cache)
     out2 = tmp_path / "run2"
     r = _cli("dem", "tub47-quick", "--out", str(out2), *_sets(SMALL), env=env)
     assert r.returncode == 0, r.stderr
@@ -267,12 +267,12 @@ STORED_QUICK_SEEDS = Path(__file__).parent / "data" / "tub47-quick-dem-seeds"
 
 @pytest.mark.slow
 def test_tub47_quick_agrees_with_the_stored_dem_table(tub47_quick_run, tub47_quick_summary):
-    """Today's DEM and the stored tub47-quick table (tests/data/tub47-quick-dem, the continuum
+    """This code's DEM and the stored tub47-quick table (tests/data/tub47-quick-dem, the continuum
     checks' reference, made with another summation order of the pair forces) are draws of one
     chaotic ensemble, judged by the DEM's own scatter over five fill seeds
     (tests/data/tub47-quick-dem-seeds): both strengths lie in the seeds' 95 % prediction
     interval (Student's t, 4 degrees of freedom), and the fields differ by less than tub47.md's
-    limit, 1.5 times the seeds' mean pairwise E.  On the machine that made the seeds, today's
+    limit, 1.5 times the seeds' mean pairwise E.  On the machine that made the seeds, this
     run is seed 1's table byte for byte (printed)."""
     from vibroflow.analysis.compare import field_difference, seed_scatter
     from vibroflow.measure.bulk import read_csv

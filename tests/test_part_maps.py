@@ -3,7 +3,7 @@ tub47-bar-dem-map; docs/validation.md section 25): each continuum runs the same 
 DEM's calibration, and its inferred impact-speed map and its force on the bar are judged
 against the DEM's, within the DEM's own errors.
 
-What is true today, said by the tests:
+What is true, said by the tests:
 - a known field gives the hand-computed map: a uniform shear rate below the bar's centre and no
   material above it give every wetted sector the relation's c0 + c1 d gamma_dot with its
   batches' error, and the sectors more than two node spacings above the material none (fast);

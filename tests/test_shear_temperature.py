@@ -78,8 +78,8 @@ def test_profile_shear_rate_is_the_slope_of_a_linear_profile():
 
 # the DEM shear cell against the closure
 INERTIAL_NUMBERS = (0.03, 0.1, 0.3)
-#: the closure's T over the DEM's at each I today (regression guard, see docs/validation.md)
-TODAY = {0.03: 0.69, 0.1: 1.06, 0.3: 1.74}
+#: the closure's T over the DEM's at each I as measured (regression guard, docs/validation.md)
+MEASURED = {0.03: 0.69, 0.1: 1.06, 0.3: 1.74}
 MISSES = {
     0.03: "measured miss: -31 % at I = 0.03 (phi = 0.598): in dense flow the grains' velocities "
           "are correlated and collisions dissipate less than Lun's uncorrelated estimate "
@@ -124,10 +124,10 @@ def test_sheared_temperature_matches_the_closure_within_ten_percent(sheared, I):
 
 @pytest.mark.slow
 def test_regression_guard_closure_over_dem_temperature(sheared):
-    """Regression guard (not physics): the closure's T over the DEM's stays at today's figures
+    """Regression guard (not physics): the closure's T over the DEM's stays at the measured figures
     (docs/validation.md), within 10 %."""
     for I, (r, T_closure) in sheared.items():
-        assert T_closure / r["granular_temperature"] == pytest.approx(TODAY[I], rel=0.10)
+        assert T_closure / r["granular_temperature"] == pytest.approx(MEASURED[I], rel=0.10)
 
 
 @pytest.mark.slow

@@ -321,14 +321,15 @@ def test_the_damping_is_the_same_on_every_grid_at_a_fixed_damping_length():
     assert (coarse_n, fine_n) == (16, 128)
     coarse = _shear_wave_energy(0.4, coarse_n, dx=0.005, wavelength=0.08)
     fine = _shear_wave_energy(0.4, fine_n, dx=0.0025, wavelength=0.08)
-    old_n = mpm_options(cfl=0.4, transfer_cfl=0.025, damping_length=0.0025).transfers(
+    per_dx_n = mpm_options(cfl=0.4, transfer_cfl=0.025, damping_length=0.0025).transfers(
         0.0025)
-    assert old_n == 16
-    old = _shear_wave_energy(0.4, old_n, dx=0.0025, wavelength=0.08)
-    print(f"\nenergy left: 5 mm {coarse:.3f}, 2.5 mm {fine:.3f} (former rule {old:.3f})")
+    assert per_dx_n == 16
+    per_dx = _shear_wave_energy(0.4, per_dx_n, dx=0.0025, wavelength=0.08)
+    print(f"\nenergy left: 5 mm {coarse:.3f}, 2.5 mm {fine:.3f} "
+          f"(the rate held per cell, damping_length = dx: {per_dx:.3f})")
     assert fine == pytest.approx(coarse, rel=0.08)
     assert coarse < 0.5
-    assert old > 1.5 * coarse
+    assert per_dx > 1.5 * coarse
 
 
 def test_the_transfers_follow_the_grid_from_the_default_one():

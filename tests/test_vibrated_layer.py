@@ -7,7 +7,7 @@ the bands hold the layer's mass at every phase).  The continua are judged as iss
 within the DEM's seed scatter: the cycle-mean temperature and solid-fraction profiles in the
 bands the DEM's bed fills (cycle-mean solid fraction above FILLED) within 2 seed standard
 deviations, and the take-off phase within 2 seed standard deviations plus the force's bin.
-Targets still missed are strict xfails, each with a guard on today's miss
+Targets still missed are strict xfails, each with a guard on its measured miss
 (docs/validation.md, "The vibrated layer").
 """
 from __future__ import annotations
@@ -128,17 +128,17 @@ _COLD = ("the walls' feed heats the floor band, but the core stays 4.5 - 32 (Lag
          "collisional and phase-locked to the landing (validation 23)")
 _DENSE = ("the core packs at up to 0.59 - 0.60 (Lagrangian) and 0.62 (Eulerian) against the "
           "DEM's 0.53 - 0.56: the kinetic pressure of a core that cold cannot hold it open")
-#: today's misses (docs/validation.md section 23): (formulation, measure) -> why
+#: the measured misses (docs/validation.md section 23): (formulation, measure) -> why
 MISSED = {("lagrangian", "temperature_m2_s2"): _COLD,
           ("eulerian", "temperature_m2_s2"): _COLD,
           ("lagrangian", "solid_fraction"): _DENSE,
           ("eulerian", "solid_fraction"): _DENSE}
 
-#: the guards on today's misses: the largest |difference| / allowance each may reach (today
-#: T 11.1 and 12.2, solid fraction 6.7 and 7.7)
+#: the guards on the measured misses: the largest |difference| / allowance each may reach
+#: (measured: T 11.1 and 12.2, solid fraction 6.7 and 7.7)
 GUARD = {("lagrangian", "temperature_m2_s2"): 12.0, ("eulerian", "temperature_m2_s2"): 13.0,
          ("lagrangian", "solid_fraction"): 7.5, ("eulerian", "solid_fraction"): 8.5}
-#: the floor force's lowest value over the cycle / weight may reach (today 0.01 and -0.003)
+#: the floor force's lowest value over the cycle / weight may reach (measured: 0.01 and -0.003)
 FLOOR_GUARD = 0.1
 
 CASES = [pytest.param(m, k, marks=[pytest.mark.slow]
@@ -156,7 +156,7 @@ def test_the_continuum_layer_is_the_dems_within_its_seed_scatter(dem, method, me
 
 @pytest.mark.slow
 @pytest.mark.parametrize("method", ["lagrangian", "eulerian"])
-def test_the_continuum_layers_misses_are_no_larger_than_today(dem, method):
+def test_the_continuum_layers_misses_stay_within_their_guards(dem, method):
     c, miss = continuum(method, dem)
     assert np.all(np.isfinite(np.array(c["floor_force_over_weight"])))
     # the continuum's momentum balance: over whole cycles the floor carries the weight (the
