@@ -30,6 +30,7 @@ from vibroflow.measure.floor_force import REGIONS, dem_wall_feed
 from vibroflow.report.data import DEM, StudyData
 from vibroflow.report.impact_figures import impact_distribution_section
 from vibroflow.report.engineer import Engineer
+from vibroflow.report.page_style import page_css
 from vibroflow.report.part_sections import part_sections
 from vibroflow.report.stress_section import stress_rows
 from vibroflow.report.temperature_maps import temperature_maps
@@ -59,22 +60,14 @@ SECTIONS = {
 
 TEMPLATE = "report.html.j2"
 
-CSS = """
-body { font-family: system-ui, sans-serif; margin: 1.5em auto; max-width: 1400px; color: #222;
-       padding: 0 1em; }
-h1 { font-size: 1.6em; margin-bottom: 0.2em; }
-h2 { border-bottom: 1px solid #ccc; padding-bottom: 0.2em; margin-top: 1.6em; }
+CSS = page_css(1400) + """
 .meta { color: #555; }
-nav a { margin-right: 0.9em; }
 table { border-collapse: collapse; margin: 0.6em 0; font-size: 0.9em; }
 th, td { border: 1px solid #ccc; padding: 0.25em 0.6em; text-align: right; }
 th { background: #f2f2f2; }
 td.l, th.l { text-align: left; }
-img { max-width: 100%; height: auto; display: block; margin: 0.5em 0; }
 pre { background: #f7f7f7; border: 1px solid #ddd; padding: 0.8em; overflow-x: auto;
       font-size: 0.85em; }
-.note { color: #8a5a00; }
-.ok { color: #1a7f37; } .bad { color: #b42318; }
 """
 
 

@@ -25,6 +25,7 @@ from markupsafe import Markup
 from vibroflow import __version__
 from vibroflow.io.atomic import write_text_atomic
 from vibroflow.report.html import data_uri, environment
+from vibroflow.report.page_style import page_css
 from vibroflow.report.sweep_data import ELimit, SweepData, created, describe, point_report
 from vibroflow.report.sweep_figures import e_figure, sense_figure, strength_figure
 from vibroflow.study.sweep_folder import PLOTS
@@ -44,13 +45,8 @@ SECTIONS = {
     "plots": "Probes, impacts and cost",
 }
 
-CSS = """
-body { font-family: system-ui, sans-serif; margin: 1.5em auto; max-width: 1200px; color: #222;
-       padding: 0 1em; }
-h1 { font-size: 1.6em; margin-bottom: 0.2em; }
-h2 { border-bottom: 1px solid #ccc; padding-bottom: 0.2em; margin-top: 1.6em; }
+CSS = page_css(1200) + """
 .meta { color: #555; overflow-wrap: anywhere; }
-nav a { margin-right: 0.9em; }
 table.sweep { border-collapse: collapse; margin: 0.6em 0; font-size: 0.82em; width: 100%;
               table-layout: fixed; }
 table.sweep th, table.sweep td { border: 1px solid #ccc; padding: 0.2em 0.35em;
@@ -61,9 +57,6 @@ table.sweep th .u { display: block; font-weight: normal; color: #555; font-size:
 table.sweep td.l, table.sweep th.l { text-align: left; }
 table.sweep td.why { text-align: left; color: #b42318; }
 tr.unfinished td { background: #fdf1f0; }
-img { max-width: 100%; height: auto; display: block; margin: 0.5em 0; }
-.note { color: #8a5a00; }
-.ok { color: #1a7f37; } .bad { color: #b42318; }
 """
 
 #: the table's columns after the varied values: (heading, unit line, share of the width)
