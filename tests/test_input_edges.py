@@ -333,3 +333,92 @@ def test_compare_refuses_a_bulk_table_with_no_measurement_in_it(tmp_path, cell, 
     r = _cli("compare", str(run), "-r", str(SEEDS / "seed2"), "--e-seed", "0.2")
     line = _one_line_error(r)
     assert line.startswith(f"error: {run / 'bulk_velocity.csv'}: ") and words in line, line
+
+
+# ---------------------------------------------------------------------------------------------
+# A fresh run replaces only its own command's files (vibroflow/io/run_folder.py)
+
+def _files(folder: Path) -> dict[str, str]:
+    return {p.name: p.read_text() for p in folder.iterdir() if p.is_file()}
+
+
+@pytest.mark.parametrize("command, holds, named", [
+    ("dem", {"summary.json": '{"source": "vibroflow continuum"}', "stress.csv": "x\n"},
+     "a `vibroflow continuum` run"),
+    ("dem", {"checkpoint.npz": "x"}, "a `vibroflow continuum` run"),
+    ("dem", {"study.json": '{"kind": "vibroflow study"}'}, "a study"),
+    ("dem", {"sweep.json": '{"kind": "vibroflow sweep"}'}, "a sweep"),
+    ("continuum", {"summary.json": '{"source": "vibroflow"}', "floor.csv": "x\n"},
+     "a `vibroflow dem` run"),
+    ("continuum", {"summary.json": '{"source": "liggghts"}'}, "a LIGGGHTS import"),
+    ("continuum", {"summary.json": "my notes\n", "notes.txt": "keep\n"},
+     "a summary.json that no vibroflow run wrote"),
+    ("continuum", {"floor.csv": "mine\n"}, "files that no vibroflow continuum run wrote"),
+])
+def test_a_folder_of_another_commands_results_is_refused_and_kept(drop, tmp_path, command,
+                                                                   holds, named):
+    out = tmp_path / "out"
+    out.mkdir()
+    for name, text in holds.items():
+        (out / name).write_text(text)
+    before = _files(out)
+    args = [str(drop)] if command == "dem" else ["tub47-quick", "--stop-after-steps", "1"]
+    line = _one_line_error(_cli(command, *args, "--out", str(out)))
+    assert named in line and "replaces only its own runs' files" in line, line
+    assert _files(out) == before
+
+
+def test_a_folder_of_the_same_command_or_of_other_files_is_the_runs_to_write(tmp_path):
+    from vibroflow.io.run_folder import claim_for_fresh_run
+
+    replaces = ("summary.json", "floor.csv", "vtk")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "notes.txt").write_text("keep\n")
+    claim_for_fresh_run(out, "continuum", replaces)          # other files only
+    (out / "vtk").mkdir()
+    (out / "vtk" / "points_0001.vtu").write_text("x")
+    claim_for_fresh_run(out, "continuum", replaces)          # a stopped run's frames
+    (out / "vtk" / "mine.png").write_text("x")
+    with pytest.raises(InputError, match=r"files that no vibroflow continuum run wrote there "
+                                         r"\(vtk\)"):
+        claim_for_fresh_run(out, "continuum", replaces)
+    (out / "summary.json").write_text('{"source": "vibroflow continuum"}')
+    claim_for_fresh_run(out, "continuum", replaces)          # an earlier continuum run's
+    with pytest.raises(InputError, match="a `vibroflow continuum` run"):
+        claim_for_fresh_run(out, "dem", replaces)
+
+
+# ---------------------------------------------------------------------------------------------
+# The parser's own errors, the thread counts and an empty folder name: one line, exit 2
+
+@pytest.mark.parametrize("args, words", [
+    (["dem", "DROP", "--threads", "abc", "--out", "OUT"], ["'--threads'", "'abc'"]),
+    (["dem", "DROP"], ["Missing option '--out'"]),
+    (["dem", "DROP", "--out", "OUT", "--bogus"], ["No such option: --bogus"]),
+    (["continuum", "tub47-quick", "--dx", "abc", "--out", "OUT"], ["'--dx'", "'abc'"]),
+    (["bogus"], ["No such command 'bogus'"]),
+    (["scenario", "check", "tub47-quick", "extra"], ["unexpected extra argument"]),
+    (["dem", "DROP", "--threads", "100000", "--out", "OUT"], ["--threads = 100000: at most"]),
+    (["dem", "DROP", "--out", ""], ["'--out'", "an empty path"]),
+    (["export", "liggghts", "tub47-quick", ""], ["'DIR'", "an empty path"]),
+])
+def test_the_parsers_errors_are_one_line_and_write_nothing(drop, tmp_path, args, words):
+    out = tmp_path / "out"
+    args = [str(drop) if a == "DROP" else str(out) if a == "OUT" else a for a in args]
+    work = tmp_path / "cwd"
+    work.mkdir()
+    line = _one_line_error(_cli(*args, cwd=work))
+    for w in words:
+        assert w in line, line
+    assert not out.exists() and not any(work.iterdir())
+
+
+@pytest.mark.parametrize("value", ["abc", "0", "-3"])
+def test_a_bad_numba_num_threads_is_one_line(drop, tmp_path, value):
+    r = subprocess.run([sys.executable, "-m", "vibroflow.cli", "dem", str(drop), "--out",
+                        str(tmp_path / "out")], capture_output=True, text=True, timeout=120,
+                       env={**os.environ, "NUMBA_NUM_THREADS": value})
+    line = _one_line_error(r)
+    assert line.startswith(f"error: NUMBA_NUM_THREADS = '{value}': a whole number of threads")
+    assert not (tmp_path / "out").exists()

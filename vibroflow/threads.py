@@ -146,6 +146,26 @@ def default_spin_env() -> None:
         SPIN_BUSY if others is None else spin_count(others, os.cpu_count() or 1, threads))
 
 
+#: the most threads a run takes per core it may use: beyond, threads only wait for each other
+#: (a 2-core machine's tests run 1, 2 and 4)
+THREADS_PER_CORE_MAX = 8
+
+
+def check_threads_env() -> None:
+    """InputError (one line) when NUMBA_NUM_THREADS is set to anything but a whole number >= 1
+    (numba would stop with a traceback, or warn and use every core)."""
+    raw = os.environ.get("NUMBA_NUM_THREADS")
+    if raw is None:
+        return
+    try:
+        n = int(raw)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise InputError(f"NUMBA_NUM_THREADS = {raw!r}: a whole number of threads, at least 1 "
+                         "(or unset: every core the process may use)")
+
+
 def use_threads(n: int | None) -> None:
     """Run numba's parallel loops on n threads from now on (None: leave the default).  Before
     numba is imported this sets NUMBA_NUM_THREADS; after, numba.set_num_threads, up to numba's
@@ -155,6 +175,10 @@ def use_threads(n: int | None) -> None:
         return
     if n < 1:
         raise InputError(f"--threads = {n}: a whole number of threads, at least 1")
+    most = THREADS_PER_CORE_MAX * allowed_cores()
+    if n > most:
+        raise InputError(f"--threads = {n}: at most {most} here ({THREADS_PER_CORE_MAX} a core "
+                         f"of the {allowed_cores()} this process may use)")
     if "numba" not in sys.modules:
         os.environ["NUMBA_NUM_THREADS"] = str(n)
     else:

@@ -11,14 +11,15 @@ from vibroflow.errors import InputError
 
 from .apps import export_app, import_app
 from .failures import input_errors
-from .options import OutOption, ScenarioArg, SetOption, load
+from .options import OutOption, ScenarioArg, SetOption, folder_path, load
 
 
 @export_app.command("liggghts")
 @input_errors
 def export_liggghts(
     scenario: ScenarioArg,
-    directory: Annotated[Path, typer.Argument(metavar="DIR", help="Folder for the deck.")],
+    directory: Annotated[Path, typer.Argument(metavar="DIR", help="Folder for the deck.",
+                                              parser=folder_path)],
     set_: SetOption = None,
     fill_from: Annotated[Optional[Path], typer.Option(
         "--fill-from", metavar="DEM_RUN_DIR",

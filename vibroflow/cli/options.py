@@ -9,9 +9,17 @@ import typer
 SCENARIO_HELP = "A preset (tub47, tub47-quick) or a TOML file."
 
 
+def folder_path(raw: str) -> Path:
+    """A folder a command writes, as typed: an empty one (an unset shell variable) is refused,
+    where Path('') would be the current folder."""
+    if not raw.strip():
+        raise typer.BadParameter("an empty path; give a folder (`.` for the current one)")
+    return Path(raw)
+
+
 def out_option(help: str) -> Any:
     """--out/-o, the folder a command writes."""
-    return typer.Option("--out", "-o", help=help)
+    return typer.Option("--out", "-o", metavar="DIR", help=help, parser=folder_path)
 
 
 def set_option(help: str) -> Any:

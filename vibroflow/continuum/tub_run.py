@@ -59,6 +59,7 @@ from vibroflow.io.atomic import write_json_atomic
 from vibroflow.io.calibration_file import Calibration
 from vibroflow.io.folder_lock import folder_lock
 from vibroflow.io.parts_file import PARTS_NC_NAME, write_parts
+from vibroflow.io.run_folder import claim_for_fresh_run
 from vibroflow.io.vtk_frame import extra_frame_steps, vtk_options, write_vtk_record
 from vibroflow.measure.bulk_batches import BATCHES_CSV_NAME, STDERR_CSV_NAME
 from vibroflow.measure.floor_force import (FLOOR_CSV_NAME, WALL_FEED_CSV_NAME, floor_cycle,
@@ -87,6 +88,11 @@ from .temperature_impacts import impacts_from_temperature
 from .temperature_outputs import TEMPERATURE_CSV_NAME, temperature_outputs, write_temperature_csv
 from .timeline import (REPORT_EVERY, VibrationInterrupted, interrupted,
                        interrupted_while_settling, interrupted_while_writing, vibration_timeline)
+
+#: an earlier continuum run's files in its folder, which a fresh run removes first
+_PREVIOUS = (SUMMARY_NAME, BULK_CSV_NAME, BATCHES_CSV_NAME, STDERR_CSV_NAME, CHECKPOINT_NAME,
+             SHEAR_RATE_CSV_NAME, TEMPERATURE_CSV_NAME, PARTS_NC_NAME, FLOOR_CSV_NAME,
+             WALL_FEED_CSV_NAME, STRESS_CSV_NAME)
 
 
 def _gravity(scenario) -> tuple[float, float]:
@@ -217,6 +223,9 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
                 clock.resume_from(float(meta["wall_time_s"]))
                 prog.log(f"resuming from {ckpt} at t = {state.t:.4f} s")
             else:
+                # a folder of another command's results, or of the user's own files of those
+                # names, is refused: the fresh run replaces only a continuum run's files
+                claim_for_fresh_run(out, "continuum", (*_PREVIOUS, VTK_DIR))
                 if resume:
                     done = _finished(out, scenario, form.name)
                     if done is not None:
@@ -225,9 +234,7 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
                                  "again")
                         return done
                     prog.log(f"no checkpoint in {out}: starting afresh")
-                for name in (SUMMARY_NAME, BULK_CSV_NAME, BATCHES_CSV_NAME, STDERR_CSV_NAME,
-                             CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME, TEMPERATURE_CSV_NAME,
-                             PARTS_NC_NAME, FLOOR_CSV_NAME, WALL_FEED_CSV_NAME, STRESS_CSV_NAME):
+                for name in _PREVIOUS:
                     (out / name).unlink(missing_ok=True)
                 shutil.rmtree(out / VTK_DIR, ignore_errors=True)  # another run's frames
                 with interrupted_while_settling():

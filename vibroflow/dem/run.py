@@ -43,6 +43,7 @@ from ..errors import Interrupted
 from ..interrupts import deferred_sigint
 from ..io.atomic import write_json_atomic
 from ..io.folder_lock import folder_lock
+from ..io.run_folder import claim_for_fresh_run
 from ..io.vtk_frame import VtkOptions, vtk_options
 from ..progress import RunProgress
 from ..run_clock import RunClock
@@ -139,6 +140,9 @@ def _run(scenario, out_dir: Path, system: DEMSystem, vtk: VtkOptions | None, res
                               "again") from None
         prog.log(f"resuming from {ckpt} at t = {state.time(dt):.4f} s")
     else:
+        # a folder of another command's results, or of the user's own files of those names, is
+        # refused before the fill: the fresh run replaces only a DEM run's files
+        claim_for_fresh_run(out_dir, "dem", (*_PREVIOUS, VTK_DIR))
         if resume:
             prog.log(f"no checkpoint in {out_dir}: starting afresh")
         try:

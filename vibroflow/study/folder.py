@@ -11,10 +11,10 @@ from pathlib import Path
 from vibroflow.errors import InputError
 from vibroflow.io.atomic import TMP_PREFIX
 from vibroflow.io.folder_lock import LOCK_NAME
+from vibroflow.io.run_folder import STUDY_FILE
 
 POINT_LOCK = ".lock"  # a sweep point's own lock (vibroflow.study.sweep_folder)
 
-STUDY_FILE = "study.json"
 KIND = "vibroflow study"
 
 

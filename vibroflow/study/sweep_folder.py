@@ -25,11 +25,11 @@ from pathlib import Path
 from typing import Any
 
 from vibroflow.errors import InputError
+from vibroflow.io.run_folder import SWEEP_FILE
 from vibroflow.study.folder import POINT_LOCK  # noqa: F401 -- the study folder's check knows it
 from vibroflow.study.stages import write_json_atomic
 
 KIND = "vibroflow sweep"
-SWEEP_FILE = "sweep.json"
 TABLE_FILE = "sweep.csv"
 POINTS = "points"
 PLOTS = "plots"
