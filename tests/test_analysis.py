@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from tests.vtk_reader import read_vtk
+from vibroflow.errors import InputError
 from vibroflow.analysis import field_difference, fields_agree, strengths_agree
 from vibroflow.analysis.impact_maps import cycle_mean, speed_difference, speed_noise
 from vibroflow.io import vtk
@@ -303,7 +304,7 @@ def test_field_difference_known_answers():
     a2 = table_from_cells(x[::-1], z[::-1], loose[::-1], (b.vx + 10 * (loose < 0.3))[::-1],
                           b.vz[::-1], h)
     assert field_difference(a2, b) == pytest.approx(0.0, abs=1e-15)
-    with pytest.raises(ValueError):
+    with pytest.raises(InputError, match="same grid"):
         field_difference(b, table_from_cells(x, z, phi, b.vx, b.vz, 0.01))
 
 

@@ -166,7 +166,8 @@ def test_checkpoint_carries_its_checksum_and_another_scenario_is_still_refused(s
     with np.load(out / CHECKPOINT_NAME) as f:
         assert CHECKSUM_KEY in f.files and len(str(f[CHECKSUM_KEY])) == 64
     other = load_scenario("tub47-quick", SHORT + ["fill.count=380"])
-    with pytest.raises(InputError, match="is the checkpoint of another scenario"):
+    with pytest.raises(InputError, match=r"is the checkpoint of another run \(scenario\.fill\."
+                                         r"count = \d+ there, 380 now\)"):
         run_continuum(other, out, resume=True)
 
 

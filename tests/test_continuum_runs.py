@@ -252,7 +252,8 @@ def test_continuum_resume_gives_the_uninterrupted_numbers_bit_for_bit(method, tm
     assert run_continuum(s, split, method, options=opt, vtk=vtk,
                          stop_after_steps=n_steps // 2 + 7) is None
     assert (split / CHECKPOINT_NAME).is_file() and not (split / "summary.json").exists()
-    with pytest.raises(InputError, match="another scenario, calibration, method or options"):
+    with pytest.raises(InputError, match=r"the checkpoint of another run \(options\.cfl = "
+                                         r"0\.3 there, 0\.25 now\)"):
         run_continuum(s, split, method, options=formulation(method).options(**kw, cfl=0.25),
                       resume=True)
     assert run_continuum(busy, split, method, options=opt, vtk=vtk, resume=True,

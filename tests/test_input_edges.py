@@ -151,7 +151,8 @@ def test_a_tub_too_small_for_one_ball_is_refused():
 
 
 def test_the_analysis_grid_must_be_of_a_size_that_fits():
-    with pytest.raises(InputError, match=r"^analysis\.cell_size = 1e-05: .* cells"):
+    with pytest.raises(InputError,
+                       match=r"^analysis\.cell_size = 1e-05 with tub\.radius .* cells"):
         load_scenario("tub47-quick", ["analysis.cell_size=1e-5"])
 
 

@@ -127,6 +127,22 @@ def test_a_bad_part_is_one_line_naming_the_field(part, message):
     assert message in str(e.value) and "\n" not in str(e.value)
 
 
+@pytest.mark.parametrize("damage, words", [
+    ("truncated", "neither a binary STL (84 + 50 x its 256 triangles = 12884 bytes"),
+    ("garbage", "neither a binary STL"),
+    ("empty", "0 bytes, neither a binary STL"),
+])
+def test_a_damaged_stl_file_is_one_line_saying_why(stl_cylinder, tmp_path, damage, words):
+    data = stl_cylinder.read_bytes()
+    bad = tmp_path / "bad.stl"
+    bad.write_bytes({"truncated": data[:len(data) // 2], "garbage": b"\x00\x01 not a mesh " * 9,
+                     "empty": b""}[damage])
+    part = dict(name="s", shape="stl", center=[0.0, 0.03, 0.1], file=str(bad))
+    with pytest.raises(InputError) as e:
+        parse_scenario({"parts": [part]})
+    assert words in str(e.value) and "\n" not in str(e.value), str(e.value)
+
+
 def test_overlapping_parts_and_a_part_without_a_contact_law_are_refused():
     box = dict(name="b", shape="box", center=[0.06, 0.03, 0.10], size=[0.02, 0.02, 0.02])
     with pytest.raises(InputError, match='parts.1.center .* overlaps parts.0 \\("bar"\\)'):

@@ -205,6 +205,8 @@ class RunProgress:
             self._task = self._progress.add_task(description, total=sim_end, sim_time=0.0,
                                                  sim_end=sim_end, rate=None, unit=unit,
                                                  left=None)
+        elif self.enabled:  # a log or a pipe: the stage's first line at once, then every 10 s
+            self._plain_line(0.0, None, None)
 
     def _measure(self, now: float, sim_time: float, steps: int) -> tuple[float | None,
                                                                           float | None]:
@@ -236,13 +238,16 @@ class RunProgress:
             return
         if now - self._plain_last >= PLAIN_EVERY_S:
             self._plain_last = now
-            if self._unit != "s":
-                self._line(f"{self._desc}: {sim_time:.0f} / {self._end:.0f} {self._unit}, "
-                           f"{left_text(left)}")
-                return
-            speed = f"{rate / 1e6:.2f} M particle-steps/s, " if rate else ""
-            self._line(f"{self._desc}: t = {sim_time:.4f} / {self._end:.4f} s, {speed}"
+            self._plain_line(sim_time, left, rate)
+
+    def _plain_line(self, sim_time: float, left: float | None, rate: float | None) -> None:
+        if self._unit != "s":
+            self._line(f"{self._desc}: {sim_time:.0f} / {self._end:.0f} {self._unit}, "
                        f"{left_text(left)}")
+            return
+        speed = f"{rate / 1e6:.2f} M particle-steps/s, " if rate else ""
+        self._line(f"{self._desc}: t = {sim_time:.4f} / {self._end:.4f} s, {speed}"
+                   f"{left_text(left)}")
 
     def log(self, message: str) -> None:
         if not self.enabled:

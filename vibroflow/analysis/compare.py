@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from vibroflow.errors import InputError
 from vibroflow.measure.bulk import CellTable
 
 #: tub47.md "Judging a comparison"
@@ -41,8 +42,8 @@ def matched_cells(a: CellTable, b: CellTable, min_solid_fraction: float = 0.3):
     """Indices (ja, jb) of the cells present in both tables (same centre) where both solid
     fractions are >= min_solid_fraction.  The tables must have the same cell size."""
     if not np.isclose(a.cell_size, b.cell_size, rtol=1e-6, atol=0.0):
-        raise ValueError(f"cell sizes differ: {a.cell_size} m and {b.cell_size} m; the tables "
-                         "must be on the same grid")
+        raise InputError(f"analysis.cell_size = {a.cell_size} m and {b.cell_size} m: the bulk "
+                         "tables compared must be on the same grid")
     ka = {(int(i), int(k)): j for j, (i, k) in enumerate(zip(a.ix, a.iz))}
     ja, jb = [], []
     for j, (i, k) in enumerate(zip(b.ix, b.iz)):
@@ -58,22 +59,24 @@ def matched_cells(a: CellTable, b: CellTable, min_solid_fraction: float = 0.3):
 
 def _differences(a: CellTable, b: CellTable, min_solid_fraction: float):
     """(ja, jb, w, dvx, dvz) of the compared cells (matched_cells): the weights phi_b and the
-    differences v_a - v_b (m/s); a ValueError when there is no compared cell."""
+    differences v_a - v_b (m/s); an InputError when there is no compared cell."""
     ja, jb = matched_cells(a, b, min_solid_fraction)
     if ja.size == 0:
-        raise ValueError(f"no common cell with solid fraction >= {min_solid_fraction} in both "
-                         "tables")
+        raise InputError(f"bulk_velocity.csv: no common cell with solid fraction >= "
+                         f"{min_solid_fraction} in both tables compared; they must be of the "
+                         "same tub, each holding a bed")
     return ja, jb, b.solid_fraction[jb], a.vx[ja] - b.vx[jb], a.vz[ja] - b.vz[jb]
 
 
 def field_difference(a: CellTable, b: CellTable, min_solid_fraction: float = 0.3) -> float:
-    """E(a, b) of tub47.md (dimensionless), b the reference.  Raises ValueError when no cell has
+    """E(a, b) of tub47.md (dimensionless), b the reference.  Raises InputError when no cell has
     solid fraction >= min_solid_fraction in both, or b does not move there."""
     ja, jb, w, dvx, dvz = _differences(a, b, min_solid_fraction)
     rms = np.sqrt(np.sum(w * (dvx**2 + dvz**2)) / np.sum(w))
     V_b = np.sum(w * np.hypot(b.vx[jb], b.vz[jb])) / np.sum(w)
     if V_b <= 0:
-        raise ValueError("the reference field b is at rest in the compared cells (V_b = 0)")
+        raise InputError("bulk_velocity.csv: the reference field is at rest in the compared "
+                         "cells (V_b = 0); E is measured against a moving bed")
     return float(rms / V_b)
 
 
@@ -102,7 +105,8 @@ def bed_thirds(b: CellTable, half_width: float, min_solid_fraction: float = 0.3)
     right."""
     dense = b.solid_fraction >= min_solid_fraction
     if not dense.any():
-        raise ValueError(f"no cell of the reference has solid fraction >= {min_solid_fraction}")
+        raise InputError(f"bulk_velocity.csv: no cell of the reference has solid fraction >= "
+                         f"{min_solid_fraction}; it holds no bed")
     lo = float(b.z[dense].min()) - 0.5 * b.cell_size
     hi = float(b.z[dense].max()) + 0.5 * b.cell_size
     return (np.linspace(-half_width, half_width, 4), np.linspace(lo, hi, 4))
@@ -240,7 +244,8 @@ def ensemble_mean(tables) -> CellTable:
     h = tables[0].cell_size
     for t in tables[1:]:
         if not np.isclose(t.cell_size, h, rtol=1e-6, atol=0.0):
-            raise ValueError(f"cell sizes differ: {t.cell_size} m and {h} m")
+            raise InputError(f"analysis.cell_size = {t.cell_size} m and {h} m: the bulk tables "
+                             "averaged must be on the same grid")
     keys = [{(int(i), int(k)): j for j, (i, k) in enumerate(zip(t.ix, t.iz))} for t in tables]
     common = sorted(set.intersection(*(set(k) for k in keys)))
     idx = np.array([[k[c] for c in common] for k in keys], dtype=np.int64).reshape(

@@ -61,6 +61,9 @@ from .coarse_grain_kernel import (KERNELS, LUCY_CUTOFF_PER_WIDTH, N_BALL_Q, N_CO
 
 
 D_TUB47 = 0.00635          # m, tub47's ball diameter (default kernel width d/2)
+#: the most memory the fields of one coarse-graining take (bytes): tub47's calibration takes
+#: tens of MB; beyond this a setting, a kernel far wider than the tub, is out of range
+MAX_FIELD_BYTES = 4 * 2**30
 
 
 class CoarseGrainer:
@@ -159,6 +162,13 @@ class CoarseGrainer:
         self.n_phases = None if n_phases is None else int(n_phases)
         self.n_batches = int(n_batches)
         nph = self.n_phases or 1
+        size = 8.0 * self.n_batches * nph * (N_BALL_Q + N_CONTACT_Q) * self.nx * self.nz
+        if size > MAX_FIELD_BYTES:
+            raise InputError(f"width = {self.width!r} m, cell_size = {self.h!r} m: the "
+                             f"coarse-grained fields over {self.nx} x {self.nz} cells (the "
+                             f"kernel's reach included) take {size / 2**30:.3g} GiB; at most "
+                             f"{MAX_FIELD_BYTES / 2**30:g} GiB (a narrower kernel or larger "
+                             "cells)")
         self._ball = np.zeros((self.n_batches, nph, N_BALL_Q, self.nx, self.nz))
         self._cont = np.zeros((self.n_batches, nph, N_CONTACT_Q, self.nx, self.nz))
         self._weight = np.zeros((self.n_batches, nph))

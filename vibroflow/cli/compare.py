@@ -54,7 +54,10 @@ def compare(
     is measured on them and every run is compared with each (vibroflow.analysis.judge)."""
     from vibroflow.analysis.judge import (format_judgement, judge, read_result, run_folders,
                                           write_judgement)
+    from vibroflow.io.folder_lock import check_writable_file
 
+    if json_out is not None:
+        check_writable_file(json_out, "--json")
     refs = [read_result(f) for f in run_folders(reference or [])]
     runs = [read_result(f) for f in run_folders(results or [])]
     j = judge(runs, refs, e_seed)

@@ -129,7 +129,7 @@ def continuum(
     if method not in FORMULATIONS:
         *rest, last = FORMULATIONS
         raise InputError(f"--method = {method!r}: must be {', '.join(rest)} or {last}")
-    from vibroflow.io.vtk_frame import cli_vtk_options
+    from vibroflow.io.vtk_frame import check_vtk_window, cli_vtk_options
 
     paraview = cli_vtk_options(vtk, vtk_frame, vtk_every, vtk_from)
     check_landing(landing, method, temperature)
@@ -156,6 +156,7 @@ def continuum(
             calibration = calibration_of_run(like)
     else:
         s = load(scenario, set_)
+    check_vtk_window(paraview, s)
     from vibroflow.continuum.formulation import formulation
     from vibroflow.continuum.material import boundary_friction, material_for
     from vibroflow.continuum.mpm.solver import ContinuumBlowUp

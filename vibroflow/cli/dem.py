@@ -31,9 +31,10 @@ def dem(
     """Run the DEM of a scenario (fill, settle, vibrate, average) into --out."""
     s = load(scenario, set_)  # before anything is written: bad input leaves --out untouched
     use_threads(threads)
-    from vibroflow.io.vtk_frame import cli_vtk_options
+    from vibroflow.io.vtk_frame import check_vtk_window, cli_vtk_options
 
     paraview = cli_vtk_options(vtk, vtk_frame, vtk_every, vtk_from)
+    check_vtk_window(paraview, s)
     from vibroflow.dem.impact_order import ImpactsLost
     from vibroflow.dem.run import run_dem
     from vibroflow.dem.simulate import BlowUp

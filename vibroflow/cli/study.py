@@ -43,9 +43,10 @@ def run(
     scenario_sets, method_sets = split_settings(set_)
     s = load(scenario, scenario_sets)  # before anything is written
     use_threads(threads)
-    from vibroflow.io.vtk_frame import cli_vtk_options
+    from vibroflow.io.vtk_frame import check_vtk_window, cli_vtk_options
 
     paraview = cli_vtk_options(vtk, vtk_frame, vtk_every, vtk_from)
+    check_vtk_window(paraview, s)
     check_study_dir(out)
     from vibroflow.continuum.mpm.solver import ContinuumBlowUp
     from vibroflow.dem.impact_order import ImpactsLost

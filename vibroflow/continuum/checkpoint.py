@@ -35,6 +35,7 @@ import numpy as np
 from vibroflow.errors import CheckpointRefused
 from vibroflow.io.atomic import atomic_path
 from vibroflow.io.calibration_file import Calibration
+from vibroflow.io.record_diff import first_difference
 
 from .options import ContinuumOptions, options_record
 
@@ -143,24 +144,37 @@ def load_checkpoint(path) -> tuple[SimpleNamespace, dict[str, np.ndarray], dict]
     return saved, samples, meta
 
 
-def run_fingerprint(scenario, calibration: Calibration | None, options: ContinuumOptions,
-                    vtk) -> str:
-    """A hash of everything that fixes a run's numbers (the scenario but for
-    run.checkpoint_every, the calibration, the options, vtk: io.vtk_frame.VtkOptions or None):
-    a checkpoint resumes only the run that wrote it (with its formulation, `check_resumable`)."""
+def run_record(scenario, calibration: Calibration | None, options: ContinuumOptions,
+               vtk) -> dict:
+    """Everything that fixes a run's numbers, as plain JSON tables: the scenario but for
+    run.checkpoint_every, the calibration, the options, vtk (io.vtk_frame.VtkOptions or
+    None)."""
     s = scenario.model_dump(mode="json")
     s.get("run", {}).pop("checkpoint_every", None)
     cal = calibration.to_toml_dict() if calibration is not None else None
-    text = json.dumps({"scenario": s, "calibration": cal,
-                       "options": options_record(options), "vtk": bool(vtk),
-                       **({"vtk_options": vtk.record()} if vtk else {})},
-                      sort_keys=True, default=str)
+    record = {"scenario": s, "calibration": cal, "options": options_record(options),
+              "vtk": bool(vtk), **({"vtk_options": vtk.record()} if vtk else {})}
+    return json.loads(json.dumps(record, sort_keys=True, default=str))
+
+
+def run_fingerprint(scenario, calibration: Calibration | None, options: ContinuumOptions,
+                    vtk) -> str:
+    """A hash of run_record: a checkpoint resumes only the run that wrote it (with its
+    formulation, `check_resumable`)."""
+    text = json.dumps(run_record(scenario, calibration, options, vtk), sort_keys=True,
+                      default=str)
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def check_resumable(path, meta: dict, fingerprint: str, method: str) -> None:
+def check_resumable(path, meta: dict, fingerprint: str, method: str,
+                    record: dict | None = None) -> None:
     """CheckpointRefused (one line) unless the checkpoint at path, of record `meta`, was written
-    by a run of this fingerprint (run_fingerprint) and formulation `method`."""
-    if meta.get("fingerprint") != fingerprint or meta.get("method") != method:
-        raise CheckpointRefused(f"--resume: {path} is the checkpoint of another scenario, "
-                                "calibration, method or options")
+    by a run of this fingerprint (run_fingerprint) and formulation `method`; the line names the
+    method, or the first field of the run's record (run_record) that differs."""
+    if meta.get("method") != method:
+        raise CheckpointRefused(f"--resume: {path} is the checkpoint of another method "
+                                f"(method = {meta.get('method')} there, {method} now)")
+    if meta.get("fingerprint") != fingerprint:
+        diff = first_difference(meta.get("record"), record) if record is not None else \
+            "another scenario, calibration or options"
+        raise CheckpointRefused(f"--resume: {path} is the checkpoint of another run ({diff})")

@@ -132,8 +132,10 @@ class ContinuumMaterial:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise InputError(f"{name} = {v!r}: must be a finite number > 0")
-        if not 0 <= self.mu_s <= self.mu_2:
-            raise InputError(f"mu_2 = {self.mu_2!r}: must be at least mu_s = {self.mu_s!r} >= 0")
+        if not 0 <= self.mu_s:
+            raise InputError(f"mu_s = {self.mu_s!r}: must be a friction coefficient >= 0")
+        if not self.mu_s <= self.mu_2:
+            raise InputError(f"mu_2 = {self.mu_2!r}: must be at least mu_s = {self.mu_s!r}")
         if not 0 < self.critical_solid_fraction < 1:
             raise InputError(f"critical_solid_fraction = {self.critical_solid_fraction!r}: "
                              "must be in (0, 1)")
@@ -158,6 +160,10 @@ class ContinuumMaterial:
             raise InputError(f"initial_solid_fraction = {self.initial_solid_fraction!r}: must "
                              f"be in [critical_solid_fraction = {self.critical_solid_fraction!r}"
                              ", 1)")
+        for name in ("phi_max", "phi_min"):
+            v = getattr(self, name)
+            if not 0 < v < 1:
+                raise InputError(f"{name} = {v!r}: must be a solid fraction in (0, 1)")
         if not self.phi_max > self.phi_min:
             raise InputError(f"phi_min = {self.phi_min!r}: must be below phi_max = "
                              f"{self.phi_max!r}")

@@ -25,11 +25,15 @@ formulation's own files.
 from __future__ import annotations
 
 import importlib
+import math
 from abc import ABC, abstractmethod
 from pathlib import Path
 
 from vibroflow.errors import InputError
 from vibroflow.io.calibration_file import Calibration
+
+#: the most grid cells over a tub's cross-section (tub47's default grid has about 1 400)
+MAX_GRID_CELLS = 1.0e7
 
 #: name -> module holding the formulation's FORMULATION; imported when the formulation is used
 #: (`formulation`), so that `import vibroflow.study` and the CLI's import stay free of numba
@@ -106,8 +110,16 @@ class Formulation(ABC):
         """The default grid spacing (m) of a tub run of this scenario."""
 
     def grid(self, options, scenario) -> float:
-        """The grid spacing (m) a run of this scenario uses: options.dx, or the default's."""
-        return options.dx if options.dx is not None else self.default_grid(scenario)
+        """The grid spacing (m) a run of this scenario uses: options.dx, or the default's;
+        InputError where the tub's cross-section would hold more than MAX_GRID_CELLS of it."""
+        dx = options.dx if options.dx is not None else self.default_grid(scenario)
+        tub = scenario.tub
+        cells = (2.0 * tub.radius / dx) * (tub.rim_height / dx)
+        if cells > MAX_GRID_CELLS:
+            least = math.sqrt(2.0 * tub.radius * tub.rim_height / MAX_GRID_CELLS)
+            raise InputError(f"dx = {dx!r}: {cells:.3g} grid cells over the tub's cross-section; "
+                             f"at most {MAX_GRID_CELLS:g} (dx at least {least:.3g} m)")
+        return dx
 
     def transfers_on(self, options, scenario) -> int:
         """The APIC transfers a step of a run of this scenario makes (options.transfers on its

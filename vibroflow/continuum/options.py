@@ -57,12 +57,15 @@ from typing import ClassVar
 
 from vibroflow.errors import InputError
 
-from .constitutive import check_bed_viscosity
+from .constitutive import MODELS, check_bed_viscosity
 from .landing_choices import LANDINGS
 from .timestep import transfers_per_step
 
 DEFAULT_DX_DIAMETERS = 3.0
 DEFAULT_CFL = 0.3
+#: the smallest Courant number a run takes: below it the step, a hundredth of the default
+#: stability bound or less, only multiplies the cost
+MIN_CFL = 1.0e-3
 DEFAULT_GRID = f"{DEFAULT_DX_DIAMETERS:g} ball diameters"
 DEFAULT_DAMPING = "the default grid's spacing"
 #: the partitions' friction mu_p of the body force -2 mu_p p / L_y (material.boundary_friction):
@@ -167,12 +170,19 @@ class ContinuumOptions:
     moduli: str = "calibrated"
 
     def __post_init__(self):
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if "float" in str(f.type) and value is not None and (
+                    isinstance(value, bool) or not isinstance(value, (int, float))):
+                raise InputError(f"{f.name} = {value!r}: must be a number")
         if not (isinstance(self.flip, (int, float)) and 0.0 <= self.flip <= 1.0):
             raise InputError(f"flip = {self.flip!r}: must be in [0, 1] (0: APIC, 1: FLIP)")
         if self.dx is not None and not self.dx > 0:
             raise InputError(f"dx = {self.dx!r}: must be a length > 0 m")
-        if not 0 < self.cfl <= 1:
-            raise InputError(f"cfl = {self.cfl!r}: must be in (0, 1]")
+        if not MIN_CFL <= self.cfl <= 1:
+            raise InputError(f"cfl = {self.cfl!r}: must be in [{MIN_CFL:g}, 1]")
+        if self.model not in MODELS:
+            raise InputError(f"model = {self.model!r}: must be one of {', '.join(MODELS)}")
         transfers_per_step(self.cfl, self.transfer_cfl)  # its checks
         if not self.settle_time >= 0:
             raise InputError(f"settle_time = {self.settle_time!r}: must be >= 0 s")
@@ -198,6 +208,10 @@ class ContinuumOptions:
                 and math.isfinite(self.initial_temperature) and self.initial_temperature >= 0):
             raise InputError(f"initial_temperature = {self.initial_temperature!r}: must be a "
                              "temperature >= 0 m^2/s^2")
+        if self.initial_temperature > 0 and not self.temperature:
+            raise InputError(f"initial_temperature = {self.initial_temperature!r}: only with "
+                             "the temperature (--temperature, in a study "
+                             "METHOD.temperature=true)")
         if self.landing not in LANDINGS:
             raise InputError(f"landing = {self.landing!r}: must be {' or '.join(LANDINGS)}")
         if self.landing != "pairs" and not self.temperature:

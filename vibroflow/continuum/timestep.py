@@ -82,6 +82,25 @@ def stable_dt(material, dx: float, point_size: float, boundaries=(), v_max: floa
     return dt
 
 
+#: the most time steps a continuum run takes (tub47 takes 11 468; at ~0.2 ms a step the
+#: bound is about six hours): beyond it a setting, not the physics, sets the step
+MAX_STEPS = 1.0e8
+#: the most APIC transfers a step makes (the defaults make 8 and 20)
+MAX_TRANSFERS = 1000
+
+
+def check_step_count(dt: float, duration_s: float, options) -> None:
+    """InputError (one line) when a run of duration_s (s) takes more than MAX_STEPS steps of
+    dt (s): the step is set by the options (cfl, dx, wall_stiffness, bed_viscosity)."""
+    steps = duration_s / dt
+    if not steps <= MAX_STEPS:
+        raise InputError(f"cfl = {options.cfl!r}, dx = {options.dx!r}, wall_stiffness = "
+                         f"{options.wall_stiffness!r}, bed_viscosity = {options.bed_viscosity!r}"
+                         f": a stable step of {dt:.3g} s makes {steps:.3g} steps of the "
+                         f"{duration_s:g} s run; at most {MAX_STEPS:g} (raise cfl or dx, or "
+                         "lower wall_stiffness or bed_viscosity)")
+
+
 def transfers_per_step(cfl: float, transfer_cfl: float | None) -> int:
     """The APIC transfers a step of Courant number cfl makes (mpm.MPMSystem.transfers,
     transfer_operator.py) so that they damp as a one-transfer APIC step of Courant number
@@ -97,7 +116,12 @@ def transfers_per_step(cfl: float, transfer_cfl: float | None) -> int:
                          "(or none) for one transfer a step")
     if transfer_cfl == 0:
         return 1
-    return max(1, int(round(cfl / transfer_cfl)))
+    n = cfl / transfer_cfl
+    if not n <= MAX_TRANSFERS + 0.5:
+        raise InputError(f"transfer_cfl = {transfer_cfl:.3g} (on this grid): {n:.3g} APIC "
+                         f"transfers a step of cfl = {cfl!r}; at most {MAX_TRANSFERS} (raise "
+                         "transfer_cfl, or lower damping_length)")
+    return max(1, int(round(n)))
 
 
 def kinetic_wave_speed(phi: float, T: float, prm) -> float:

@@ -73,7 +73,8 @@ from vibroflow.tub.geometry import geometry_of
 from vibroflow.tub.motion import TubMotion
 from vibroflow.tub.parts import pack
 
-from .checkpoint import check_resumable, load_checkpoint, run_fingerprint, save_checkpoint
+from .checkpoint import (check_resumable, load_checkpoint, run_fingerprint, run_record,
+                         save_checkpoint)
 from .files import BULK_CSV_NAME, CHECKPOINT_NAME, SHEAR_RATE_CSV_NAME, SUMMARY_NAME, VTK_DIR
 from .formulation import Formulation, formulation
 from .grid_update import LabFrame, TubFrame
@@ -205,6 +206,7 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
     cell_grid = cell_grid_of(geo, scenario.analysis.cell_size)
     out = Path(out_dir)
     ckpt = out / CHECKPOINT_NAME
+    record = run_record(scenario, calibration, options, vtk)
     fingerprint = run_fingerprint(scenario, calibration, options, vtk)
     # the folder's lock first: nothing is written into a folder another run is writing, and a
     # --out that is a file or read-only is a one-line error before anything is made
@@ -213,7 +215,7 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
         with clock, RunProgress(progress) as prog:
             if resume and ckpt.exists():
                 saved, arrays, meta = load_checkpoint(ckpt)
-                check_resumable(ckpt, meta, fingerprint, form.name)
+                check_resumable(ckpt, meta, fingerprint, form.name, record)
                 state = form.restore(system, saved, meta)
                 h = float(meta["bed_height_m"])
                 sampler = form.sampler(scenario, system, state, out, vtk)
@@ -247,7 +249,8 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
 
             def checkpoint():
                 save_checkpoint(ckpt, state, {**samples.arrays(), **sampler.arrays()}, {
-                    "fingerprint": fingerprint, "method": form.name, "bed_height_m": h,
+                    "fingerprint": fingerprint, "record": record, "method": form.name,
+                    "bed_height_m": h,
                     **form.checkpoint_meta(state), "wall_time_s": clock.solver_s()})
 
             run = scenario.run

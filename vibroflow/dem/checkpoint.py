@@ -13,7 +13,7 @@ import numpy as np
 
 from ..errors import START_AFRESH, CheckpointRefused, InputError
 from ..run_clock import RunClock
-from .fingerprint import first_difference
+from ..io.record_diff import first_difference
 from .interrupts import fault_after_checkpoint
 from .output import DamagedFile, ResultWriter, load_state_file, save_state_file
 from .simulate import DEMState, DEMSystem, overlap_maxima, set_overlap_maxima

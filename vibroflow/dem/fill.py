@@ -84,14 +84,20 @@ def lattice_fill(scenario, rng: np.random.Generator) -> np.ndarray:
     return sites
 
 
+#: how far above the rim (m) the insertion lattice may reach (its balls fall in while settling)
+INSERT_ABOVE_RIM_MAX = 10.0
+
+
 def _add_row(rows: list, xs: np.ndarray, z: float, s: float, margin: float, tub) -> float:
     """Append the lattice row at height z (the sites at least `margin` from the U wall);
     returns the next row's height."""
     dist = distance_to_wall_np(xs, np.full_like(xs, z), tub.radius)
     ok = xs[(dist >= margin) & (np.abs(xs) <= tub.radius - margin)]
     rows.append([(x, z) for x in ok])
-    if z + s > tub.rim_height + 10.0:
-        raise ValueError("fill.count too large to insert")
+    if z + s > tub.rim_height + INSERT_ABOVE_RIM_MAX:
+        raise InputError(f"fill.count: the insertion lattice reaches {INSERT_ABOVE_RIM_MAX:g} m "
+                         f"above tub.rim_height = {tub.rim_height!r} m before it holds the "
+                         "balls; give fewer balls, a lower fill.insert_above or a larger tub")
     return z + s
 
 

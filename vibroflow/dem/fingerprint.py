@@ -1,12 +1,11 @@
 """A scenario's identity on disk: the record and fingerprint that a DEM checkpoint and dem.h5
-carry, so that a resume goes on only with the scenario that wrote them, and the first field that
-differs when it is another.
+carry, so that a resume goes on only with the scenario that wrote them (io.record_diff names
+the first field that differs when it is another).
 """
 from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Iterator
 
 from ..scenario.io import dump_scenario
 
@@ -53,28 +52,3 @@ def record_fingerprint(record: dict) -> str:
 def scenario_fingerprint(scenario) -> str:
     """sha256 of scenario_record: a checkpoint resumes only the scenario that wrote it."""
     return record_fingerprint(scenario_record(scenario))
-
-
-def _flatten(value, prefix: str = "") -> Iterator[tuple[str, object]]:
-    if isinstance(value, dict):
-        for k in value:
-            yield from _flatten(value[k], f"{prefix}.{k}" if prefix else str(k))
-    elif isinstance(value, list) and any(isinstance(v, (dict, list)) for v in value):
-        for k, v in enumerate(value):
-            yield from _flatten(v, f"{prefix}.{k}")
-        yield f"{prefix}.__len__", len(value)
-    else:
-        yield prefix, value
-
-
-def first_difference(there: dict | None, now: dict) -> str:
-    """"KEY = A there, B now" for the first field that differs between two scenario records
-    (in the scenario's own order), or a plain remark when the record there is unknown."""
-    if there is None:
-        return "it records no scenario"
-    a, b = dict(_flatten(there)), dict(_flatten(now))
-    for key in [*b, *(k for k in a if k not in b)]:
-        if a.get(key, "(none)") != b.get(key, "(none)"):
-            name = key.replace(".__len__", " (count)")
-            return f"{name} = {a.get(key, '(none)')} there, {b.get(key, '(none)')} now"
-    return "another vibroflow's fingerprint"

@@ -60,6 +60,16 @@ def check_writable_dir(path: Path, field: str = "--out") -> Path:
     return path
 
 
+def check_writable_file(path: Path, field: str) -> Path:
+    """`path` as an output file: one-line InputError when it is a folder, or its folder is a
+    file or cannot be made or written."""
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{field} = {str(path)!r}: is a folder, not a file; give a file")
+    check_writable_dir(path.parent if str(path.parent) else Path("."), field=f"{field}'s folder")
+    return path
+
+
 def _holder(fd: int) -> str:
     try:
         os.lseek(fd, 0, os.SEEK_SET)

@@ -92,6 +92,19 @@ def cli_vtk_options(vtk: bool, frame: str | None, every: float | None,
     return VtkOptions(frame=frame or "tub", every=every, start=start or 0.0)
 
 
+def check_vtk_window(options: VtkOptions | None, scenario) -> None:
+    """InputError (one line) when --vtk-from asks for frames from a time at or after the
+    averaging window's start (run.duration - run.average_last of the vibration), where the
+    frames `every` gives end: the run would write none of them."""
+    if options is None or options.every is None:
+        return
+    window = float(scenario.run.duration - scenario.run.average_last)
+    if options.start >= window:
+        raise InputError(f"--vtk-from = {options.start!r}: the frames of --vtk-every run up to "
+                         f"the averaging window, which starts at t = {window:g} s "
+                         "(run.duration - run.average_last); give an earlier time")
+
+
 def extra_frame_steps(options: VtkOptions | None, dt: float, window_start: float) -> np.ndarray:
     """Vibration steps of the frames before the averaging window: t = start + k every < the
     window's start (s), rounded to the nearest step; empty unless `every` is given."""

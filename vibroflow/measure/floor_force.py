@@ -130,8 +130,10 @@ def floor_cycle(force_N, times, t_start: float, t_end: float, frequency: float, 
     """The FloorCycle of floor forces force_N (S,) (N) sampled at times (S,) (s, the tub's
     clock) over the window [t_start, t_end) of whole cycles at `frequency` (Hz), binned to the
     `per` phases k / per, n_batches batches of whole cycles, over the weight weight_N (N).
-    Samples with a non-finite force are left out."""
-    f = np.asarray(force_N, float) / float(weight_N)
+    Samples with a non-finite force are left out; without weight (no gravity) there is no
+    ratio, and every phase is NaN."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        f = np.asarray(force_N, float) / float(weight_N)
     t = np.asarray(times, float)
     batch = batches_of_whole_cycles(t, t_start, t_end, frequency, n_batches)
     k = phase_bins(t, frequency, per)

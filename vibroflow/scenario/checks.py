@@ -27,6 +27,7 @@ def check_consistent(s: Scenario) -> None:
     """Every cross-field check of a scenario, in the order its errors are reported."""
     _check_mode(s)
     _check_materials(s)
+    _check_ball_masses(s)
     _check_contacts(s)
     if s.run.average_last > s.run.duration:
         fail(f"run.average_last = {s.run.average_last!r}: must be at most run.duration "
@@ -113,6 +114,23 @@ def wall_materials(s: Scenario) -> list[tuple[str, str, str]]:
 
 def _ball_mass(s: Scenario, material: str, diameter: float) -> float:
     return s.materials[material].density * math.pi * diameter**3 / 6.0
+
+
+#: the lightest and the heaviest ball a run takes (kg): far beyond any medium (a 10 um steel
+#: ball is 4e-12 kg, a 0.5 m one 500 kg), far inside the doubles, where a contact's time and
+#: damping divide by the mass and multiply by it
+MIN_BALL_MASS, MAX_BALL_MASS = 1.0e-20, 1.0e6
+
+
+def _check_ball_masses(s: Scenario) -> None:
+    for name, (d, _d2, _n, field) in ball_materials(s).items():
+        mass = _ball_mass(s, name, d)
+        if not MIN_BALL_MASS <= mass <= MAX_BALL_MASS:
+            where = "fill.diameter" if field == "fill.material" else field.replace(
+                ".material", ".diameter")
+            fail(f"{where} = {d!r} m with materials.{name}.density = "
+                 f"{s.materials[name].density!r} kg/m^3: a ball weighs {mass:.3g} kg; must "
+                 f"weigh {MIN_BALL_MASS:g} - {MAX_BALL_MASS:g} kg")
 
 
 def touching_pairs(s: Scenario) -> list[TouchingPair]:
@@ -232,6 +250,8 @@ MAX_SERIES_ROWS = 1e8
 MAX_SNAPSHOT_BYTES = 256 * 2**30
 #: cells of the analysis grid over the tub's cross-section
 MAX_ANALYSIS_CELLS = 1e7
+#: cubes of a ball's diameter in the tub's box (the long tub of 140 000 balls: 3e5)
+MAX_TUB_BALL_BOXES = 1e8
 #: the vibration period must hold this many steps at least
 STEPS_PER_CYCLE = 20
 #: solid fraction of a loose random packing of spheres (Onoda & Liniger 1990: 0.555): the
@@ -276,12 +296,19 @@ def _check_size(s: Scenario) -> None:
                   f"{MAX_SNAPSHOT_BYTES / 2**30:.0f} GiB (shorten run.average_last or lower "
                   "run.phases_per_cycle)")
         tub = s.tub
+        d = s.fill.diameter
+        boxes = (2.0 * tub.radius / d) * (tub.rim_height / d) * (tub.length / d)
+        if boxes > MAX_TUB_BALL_BOXES:
+            fail(f"tub.radius = {tub.radius!r}, tub.rim_height = {tub.rim_height!r}, tub.length "
+                 f"= {tub.length!r}: the tub spans {boxes:.3g} cubes of fill.diameter = {d!r} m "
+                 f"(the neighbour search's cells); must span at most {MAX_TUB_BALL_BOXES:.0e}")
         area = 2.0 * tub.radius * tub.rim_height
         cells = area / s.analysis.cell_size**2
         if cells > MAX_ANALYSIS_CELLS:
-            fail(f"analysis.cell_size = {s.analysis.cell_size!r}: {cells:.3g} cells over the "
-                  f"tub's cross-section; must give at most {MAX_ANALYSIS_CELLS:.0e} (at least "
-                  f"{math.sqrt(area / MAX_ANALYSIS_CELLS):.2g} m)")
+            fail(f"analysis.cell_size = {s.analysis.cell_size!r} with tub.radius = "
+                 f"{tub.radius!r}, tub.rim_height = {tub.rim_height!r}: {cells:.3g} cells over "
+                 f"the tub's cross-section; must give at most {MAX_ANALYSIS_CELLS:.0e} (cells of "
+                 f"at least {math.sqrt(area / MAX_ANALYSIS_CELLS):.2g} m, or a smaller tub)")
 
 
 def tub_volume(tub: Tub) -> float:
@@ -303,6 +330,9 @@ def _check_tub_fill(s: Scenario) -> None:
     if tub.length < need:
         fail(f"tub.length = {tub.length!r}: shorter than one insertion lattice layer of "
               f"balls (fill.diameter x fill.lattice_spacing); must be at least {need:.4g} m")
+    if fill.insert_above >= tub.rim_height:
+        fail(f"fill.insert_above = {fill.insert_above!r}: the balls are inserted inside the "
+             f"tub; must be below tub.rim_height = {tub.rim_height!r} m")
     bed = fill.count * math.pi * d**3 / 6.0 / LOOSE_PACKING
     room = tub_volume(tub) - (parts_volume_m3(s) if s.parts else 0.0)
     if bed > room:

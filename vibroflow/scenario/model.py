@@ -29,6 +29,17 @@ class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True,
                               allow_inf_nan=False)
 
+    @field_validator("*", mode="before")
+    @classmethod
+    def _no_bool_for_a_number(cls, value: Any, info) -> Any:
+        # pydantic's lax mode reads true as 1 and false as 0: a count or a size typed as a
+        # boolean is a slip, not a number
+        if isinstance(value, bool):
+            annotation = cls.model_fields[info.field_name].annotation
+            if annotation in (int, float, "int", "float"):
+                raise ValueError("must be a number, not true or false")
+        return value
+
 
 #: names that reach file names, a LIGGGHTS deck, HTML and shells: a letter or digit, then
 #: letters, digits and _ . + -, at most 64 characters (no space, quote, newline or separator)

@@ -35,11 +35,27 @@ def read_stl_triangles(path: str | Path) -> np.ndarray:
     return _parsed_stl(str(p.resolve()), st.st_mtime_ns, st.st_size).copy()
 
 
+def _check_stl_layout(p: Path, size: int) -> None:
+    """ShapeError unless the file is laid out as an STL: binary, an 80-byte header, a triangle
+    count n and 50 bytes a triangle (84 + 50 n bytes), or ASCII, starting with "solid"."""
+    with open(p, "rb") as f:
+        head = f.read(84)
+    if len(head) == 84 and 84 + 50 * int.from_bytes(head[80:84], "little") == size:
+        return
+    if head.lstrip().startswith(b"solid"):
+        return
+    n = int.from_bytes(head[80:84], "little") if len(head) == 84 else 0
+    raise ShapeError(f"not a readable STL file: {size} bytes, neither a binary STL (84 + 50 x "
+                     f"its {n} triangles = {84 + 50 * n} bytes: truncated or padded) nor an "
+                     "ASCII one (starting with 'solid')")
+
+
 @lru_cache(maxsize=32)
 def _parsed_stl(path: str, mtime_ns: int, size: int) -> np.ndarray:
     import trimesh  # lazy: only STL parts need it
 
     p = Path(path)
+    _check_stl_layout(p, size)
     try:
         mesh = trimesh.load(str(p), file_type="stl", force="mesh", process=True)
     except Exception as e:  # trimesh raises many types for a damaged file

@@ -48,6 +48,12 @@ def read_record(out: Path) -> dict | None:
     file, a foreign folder or a corrupt marker."""
     out = Path(out)
     if not out.exists():
+        for parent in out.parents:
+            if parent.exists():
+                if not parent.is_dir():
+                    raise InputError(f"DIR = {str(out)!r}: {str(parent)!r} is a file, not a "
+                                     "folder")
+                break
         return None
     if not out.is_dir():
         raise InputError(f"DIR = {str(out)!r}: not a folder")

@@ -40,7 +40,7 @@ from ..part_obstacle import (bed_height_around, continuum_parts, packed_section,
                              torque_on_part)
 from ..sampling import shear_rate, to_lab
 from ..temperature_field import temperature_model
-from ..timestep import stable_dt
+from ..timestep import check_step_count, stable_dt
 from ..wall_feed import LagrangianWallFeed, feed_by_region
 from . import column
 from .solver import MPMState, MPMSystem, advance, init_state
@@ -92,8 +92,8 @@ def settled_bed(scenario, material, spacing: float):
     x = np.stack([X[keep], Z[keep]], axis=1)
     n = x.shape[0]
     if n == 0:
-        raise InputError(f"fill.count = {scenario.fill.count}: the bed is thinner than one point "
-                         f"({spacing:.3g} m); refine dx")
+        raise InputError(f"dx = {2.0 * spacing!r}: the bed ({h:.3g} m deep) is thinner than one "
+                         f"point ({spacing:.3g} m); refine dx")
     g = math.hypot(scenario.gravity[0], scenario.gravity[2])
     rho_c = material.initial_density  # rho_c unless the bed starts denser (dilatancy)
     stress, density = lithostatic(rho_c, g, np.clip(h - x[:, 1], 0.0, None), material.mu_s,
@@ -249,6 +249,7 @@ class MaterialPointMethod(Formulation):
         f, per = scenario.motion.frequency, scenario.run.phases_per_cycle
         interval = 1.0 / (f * per)
         dt = interval / math.ceil(interval / dt)
+        check_step_count(dt, scenario.run.duration + options.settle_time, options)
         return MPMSystem(grid, material, dt, frame=frame, boundaries=boundaries,
                          chunks=scenario.run.force_chunks, flip=float(options.flip),
                          transfers=self.transfers_on(options, scenario),
