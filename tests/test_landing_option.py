@@ -52,7 +52,7 @@ def test_the_options_and_a_study_carry_the_landing_and_refuse_it_elsewhere():
     _, settings = split_settings(["eulerian.temperature=true", "eulerian.landing='columns'",
                                   "lagrangian.temperature=true", "lagrangian.landing='columns'"])
     assert method("eulerian").make_options(settings["eulerian"]).landing == "columns"
-    with pytest.raises(InputError, match=r"^landing = 'columns'"):
+    with pytest.raises(InputError, match=r"^lagrangian\.landing = 'columns'"):
         method("lagrangian").make_options(settings["lagrangian"])
 
 

@@ -56,10 +56,10 @@ def main() -> None:
 
     import typer  # noqa: PLC0415
 
-    from .failures import EXIT_INPUT, EXIT_INTERRUPTED  # noqa: PLC0415
-
     from vibroflow.errors import InputError  # noqa: PLC0415
     from vibroflow.threads import check_threads_env  # noqa: PLC0415
+
+    from .failures import EXIT_INPUT, EXIT_INTERRUPTED  # noqa: PLC0415
 
     try:
         check_threads_env()

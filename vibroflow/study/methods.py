@@ -49,6 +49,8 @@ class ContinuumMethod:
                                  f"method; allowed: {', '.join(allowed)}")
         try:
             return self.make(**settings)
+        except InputError as exc:  # "FIELD = VALUE: ...", the field one of the settings'
+            raise InputError(f"{self.name}.{exc.message}") from None
         except TypeError as exc:
             raise InputError(f"--set {self.name}: {exc}") from None
 
