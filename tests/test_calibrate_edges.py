@@ -55,11 +55,11 @@ def _written(run) -> set[str]:
 def test_too_small_a_bed_is_one_line_naming_the_measurement_and_the_remedies(run):
     line = _one_line(_cli("calibrate", run))
     assert line == (
-        f"error: RUN_DIR = '{run}': the bed is too small to calibrate on: the mu(I) fit to the "
-        "tub's cells has 0 dense cell value(s) (coarse-grained cells x phases with solid "
-        "fraction >= 0.5 and I > 0) and needs at least 3; give the DEM more balls (fill.count "
-        "= 150) or a longer averaging window (run.average_last = 0.1 s), coarse-grain with a "
-        "wider kernel (--width, now 3.18 mm), or measure mu(I) in shear cells (--shear-cell)")
+        f"error: RUN_DIR = '{run}': the bed is too small to calibrate on: no cell of the "
+        "time-averaged field has solid fraction >= 0.5, where the bed's pressure, packing and "
+        "moduli are measured; give the DEM more balls (fill.count = 150) or a longer averaging "
+        "window (run.average_last = 0.1 s), or coarse-grain with a wider kernel (--width, now "
+        "3.18 mm)")
     assert "nan" not in line
     assert _written(run) == set()  # no fields.nc, no calibration.toml
 

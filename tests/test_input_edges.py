@@ -423,3 +423,34 @@ def test_a_bad_numba_num_threads_is_one_line(drop, tmp_path, value):
     line = _one_line_error(r)
     assert line.startswith(f"error: NUMBA_NUM_THREADS = '{value}': a whole number of threads")
     assert not (tmp_path / "out").exists()
+
+
+# ---------------------------------------------------------------------------------------------
+# What a run cannot take, known before it starts (vibroflow/scenario/checks.py)
+
+@pytest.mark.parametrize("setting, words", [
+    ("materials.steel.density=1e-300", r"^fill\.diameter = 0\.00635 m with materials\.steel\."
+                                       r"density = 1e-300 kg/m\^3: a ball weighs"),
+    ("fill.diameter=1e-300", r"^fill\.diameter = 1e-300 m with .* must weigh 1e-20 - 1e\+06 kg"),
+    ("fill.insert_above=1e6", r"^fill\.insert_above = 1000000\.0: .* below tub\.rim_height"),
+    ("tub.length=1e6", r"^tub\.radius = .*tub\.length = 1000000\.0: the tub spans .* cubes"),
+    ("motion.amplitude_x=1e3", r"^motion\.amplitude_x, amplitude_z, amplitude_theta = 1000\.0, "
+                               r".* ball diameters a step"),
+    ("motion.pivot=[1e9, 0.0]", r"pivot \(1000000000\.0, 0\.0\) m.* ball diameters a step"),
+    ("motion.amplitude_factor=1e9", r"amplitude_factor 1000000000\.0.* ball diameters a step"),
+    ("gravity=[0.0, 0.0, 9.81]", r"^gravity = \[0, 0, 9\.81\]: in a tub run it must pull down"),
+    ("gravity=[0.0, 0.0, -1e300]", r"^gravity = .*: 1e\+300 m/s\^2; must be at most 10000"),
+    ("analysis.probes.P1.x=1e9", r"^analysis\.probes\.P1 = \(1000000000\.0, 0\.15\) m: outside "
+                                 r"the tub's cross-section"),
+    ("fill.count=true", r"^fill\.count = true: must be a number, not true or false"),
+    ("run.duration=false", r"^run\.duration = false: must be a number"),
+])
+def test_what_a_run_cannot_take_is_refused_before_it(setting, words):
+    with pytest.raises(InputError, match=words):
+        load_scenario("tub47-quick", [setting])
+
+
+def test_the_reference_case_and_its_amplitude_sweep_pass_the_checks():
+    for factor in ("0.5", "1.0", "1.5", "3.0"):
+        load_scenario("tub47", [f"motion.amplitude_factor={factor}"])
+    load_scenario("tub47-quick", [])

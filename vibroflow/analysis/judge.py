@@ -190,13 +190,16 @@ def _check_alike(runs: list[RunResult]) -> None:
 def judge(results: list[RunResult], references: list[RunResult],
           e_seed: float | None = None) -> dict:
     """Every result against the references (module docstring).  e_seed: the seed-to-seed E to
-    judge with when there is one reference (ignored, and said so, with several)."""
+    judge with when there is one reference (an input error with several, whose E is measured)."""
     if not results:
         raise InputError("RESULT: give at least one run folder to judge")
     if not references:
         raise InputError("--reference: give at least one run folder of the reference method")
     if e_seed is not None and not (math.isfinite(e_seed) and e_seed > 0):
         raise InputError(f"--e-seed = {e_seed!r}: must be a seed-to-seed E > 0")
+    if e_seed is not None and len(references) > 1:
+        raise InputError(f"--e-seed = {e_seed!r}: only with one reference run; with "
+                         f"{len(references)} the seed-to-seed E is measured on them")
     _check_alike(references + results)
     for r in references[1:]:
         if r.method != references[0].method:
@@ -232,8 +235,6 @@ def judge(results: list[RunResult], references: list[RunResult],
                         "each_against_mean_of_others": [
                             field_difference(t, ensemble_mean(tables[:k] + tables[k + 1:]))
                             for k, t in enumerate(tables)]}
-        if e_seed is not None:
-            out["floor"]["note"] = f"--e-seed {e_seed!r} ignored: measured on the references"
     elif e_seed is not None:
         out["floor"] = {"E_seed": float(e_seed), "stderr": None, "source": "given (--e-seed)"}
     else:
@@ -392,6 +393,16 @@ def _ensemble_lines(g: dict) -> list[str]:
     lines.append(f"  fields agree in {fa} of {n}" if fa is not None
                  else "  fields agree: cannot say (no seed-to-seed E)")
     return lines
+
+
+def is_judgement(path) -> bool:
+    """Whether the file at path is a judgement that write_judgement wrote (its references and
+    its floor), so that --json replaces only one of those."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return False
+    return isinstance(data, dict) and "references" in data and "floor" in data
 
 
 def write_judgement(j: dict, path) -> None:

@@ -77,8 +77,8 @@ from .shear_temperature import sliding_table
 from .rheology_fit import drucker_prager_equivalent
 from .run_fields import coarse_grain_run, write_fields
 from .unloading import unloading_of_run
-from .tub_rheology import (bed_pressure, check_tub_cells, fit_tub_cells, median_dense,
-                           tub_mu_i_scatter)
+from .tub_rheology import (bed_pressure, check_dense_bed, check_tub_cells, fit_tub_cells,
+                           median_dense, tub_mu_i_scatter)
 from .wall_energy import wall_flux
 from .wall_friction import wall_friction
 
@@ -192,7 +192,9 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
                                                 energy_flux=res.has_ball_contacts,
                                                 thermal=True)
         scatter = tub_mu_i_scatter(avg, phases)
-        if not shear_cell:  # before anything is written: a bed too small is the input's fault
+        # before anything is written: a bed too small is the input's fault
+        check_dense_bed(sc, avg, run_dir)
+        if not shear_cell:
             check_tub_cells(scatter, sc, avg, run_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
         fields_path = write_fields(out_dir / FIELDS_FILE, avg, phases)

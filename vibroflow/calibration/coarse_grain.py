@@ -157,18 +157,19 @@ class CoarseGrainer:
         self.k_min, self.k_max = k0 - margin, k1 + margin
         self.nx = self.i_max - self.i_min + 1
         self.nz = self.k_max - self.k_min + 1
-        self.x = np.arange(self.i_min, self.i_max + 1) * self.h
-        self.z = np.arange(self.k_min, self.k_max + 1) * self.h
-        self.n_phases = None if n_phases is None else int(n_phases)
-        self.n_batches = int(n_batches)
-        nph = self.n_phases or 1
-        size = 8.0 * self.n_batches * nph * (N_BALL_Q + N_CONTACT_Q) * self.nx * self.nz
+        nph = 1 if n_phases is None else int(n_phases)
+        size = 8.0 * int(n_batches) * nph * (N_BALL_Q + N_CONTACT_Q) * self.nx * self.nz
         if size > MAX_FIELD_BYTES:
             raise InputError(f"width = {self.width!r} m, cell_size = {self.h!r} m: the "
                              f"coarse-grained fields over {self.nx} x {self.nz} cells (the "
                              f"kernel's reach included) take {size / 2**30:.3g} GiB; at most "
                              f"{MAX_FIELD_BYTES / 2**30:g} GiB (a narrower kernel or larger "
                              "cells)")
+        self.x = np.arange(self.i_min, self.i_max + 1) * self.h
+        self.z = np.arange(self.k_min, self.k_max + 1) * self.h
+        self.n_phases = None if n_phases is None else int(n_phases)
+        self.n_batches = int(n_batches)
+        nph = self.n_phases or 1
         self._ball = np.zeros((self.n_batches, nph, N_BALL_Q, self.nx, self.nz))
         self._cont = np.zeros((self.n_batches, nph, N_CONTACT_Q, self.nx, self.nz))
         self._weight = np.zeros((self.n_batches, nph))

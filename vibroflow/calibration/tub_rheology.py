@@ -92,15 +92,26 @@ def dense_points(scatter: dict) -> dict:
     return {k: ph[k][d] for k in ("I", "mu", "phi")}
 
 
-def too_small(run_dir: Path, scenario, avg, what: str) -> InputError:
+def too_small(run_dir: Path, scenario, avg, what: str, shear_cell: bool = True) -> InputError:
     """The one-line InputError of a DEM run too small for the tub-cell calibration: `what`
-    failed, and what to change."""
+    failed, and what to change (the shear cells among it where they would serve)."""
+    cell = ", or measure mu(I) in shear cells (--shear-cell)" if shear_cell else ""
     return InputError(
         f"RUN_DIR = {str(run_dir)!r}: the bed is too small to calibrate on: {what}; give the "
         f"DEM more balls (fill.count = {scenario.fill.count}) or a longer averaging window "
-        f"(run.average_last = {scenario.run.average_last:g} s), coarse-grain with a wider "
-        f"kernel (--width, now {float(avg.attrs['width_m']) * 1e3:.3g} mm), or measure mu(I) "
-        "in shear cells (--shear-cell)")
+        f"(run.average_last = {scenario.run.average_last:g} s), or coarse-grain with a wider "
+        f"kernel (--width, now {float(avg.attrs['width_m']) * 1e3:.3g} mm){cell}")
+
+
+def check_dense_bed(scenario, avg, run_dir: Path) -> None:
+    """InputError (too_small) when no cell of the time-averaged field is dense (solid fraction
+    >= DENSE_SOLID_FRACTION): the bed's pressure, solid fraction and moduli are measured there,
+    with or without the shear cells."""
+    if not np.isfinite(median_dense(avg, "solid_fraction")):
+        raise too_small(run_dir, scenario, avg, (
+            f"no cell of the time-averaged field has solid fraction >= "
+            f"{DENSE_SOLID_FRACTION:g}, where the bed's pressure, packing and moduli are "
+            "measured"), shear_cell=False)
 
 
 def check_tub_cells(scatter: dict, scenario, avg, run_dir: Path) -> None:

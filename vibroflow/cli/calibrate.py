@@ -2,6 +2,7 @@
 inside the command, so that `--help` stays quick."""
 from __future__ import annotations
 
+import math
 import sys
 from pathlib import Path
 from typing import Annotated, Optional
@@ -42,8 +43,8 @@ def calibrate(
         raise InputError(f"RUN_DIR = {str(run_dir)!r}: no such folder")
     if kernel not in ("gaussian", "lucy"):
         raise InputError(f"--kernel = {kernel!r}: must be gaussian or lucy")
-    if width is not None and not width > 0:
-        raise InputError(f"--width = {width!r}: must be a length > 0 m")
+    if width is not None and not (math.isfinite(width) and width > 0):
+        raise InputError(f"--width = {width!r}: must be a finite length > 0 m")
     from vibroflow.calibration.calibrate import calibrate as run_calibration
 
     cal = run_calibration(run_dir, shear_cell=shear_cell, kernel=kernel, width=width,

@@ -8,6 +8,8 @@ from typing import Annotated, Optional
 
 import typer
 
+from vibroflow.errors import InputError
+
 from .apps import app
 from .failures import input_errors
 
@@ -52,12 +54,15 @@ def compare(
     """Judge runs against a reference method's runs as tub47.md does (circulation strengths,
     the field difference E against the seed-to-seed floor): with several references, the floor
     is measured on them and every run is compared with each (vibroflow.analysis.judge)."""
-    from vibroflow.analysis.judge import (format_judgement, judge, read_result, run_folders,
-                                          write_judgement)
+    from vibroflow.analysis.judge import (format_judgement, is_judgement, judge, read_result,
+                                          run_folders, write_judgement)
     from vibroflow.io.folder_lock import check_writable_file
 
     if json_out is not None:
         check_writable_file(json_out, "--json")
+        if json_out.exists() and not is_judgement(json_out):
+            raise InputError(f"--json = {str(json_out)!r}: exists and is not a judgement of "
+                             "`vibroflow compare` (a run's own file?); give a new file")
     refs = [read_result(f) for f in run_folders(reference or [])]
     runs = [read_result(f) for f in run_folders(results or [])]
     j = judge(runs, refs, e_seed)

@@ -53,6 +53,12 @@ def sweep(
 
     if workers is not None and workers < 1:
         raise InputError(f"--workers = {workers}: must be at least 1")
+    from vibroflow.threads import THREADS_PER_CORE_MAX, allowed_cores
+
+    if workers is not None and workers > THREADS_PER_CORE_MAX * allowed_cores():
+        raise InputError(f"--workers = {workers}: at most {THREADS_PER_CORE_MAX * allowed_cores()} "
+                         f"here ({THREADS_PER_CORE_MAX} a core of the {allowed_cores()} this "
+                         "process may use; a cluster of more machines: --scheduler)")
     if workers is not None and scheduler:
         raise InputError("--workers: only for the local cluster, not with --scheduler")
     plan = plan_sweep(scenario, parse_factors(factors), parse_vary(vary), set_, shear_cell)

@@ -61,12 +61,16 @@ def check_writable_dir(path: Path, field: str = "--out") -> Path:
 
 
 def check_writable_file(path: Path, field: str) -> Path:
-    """`path` as an output file: one-line InputError when it is a folder, or its folder is a
-    file or cannot be made or written."""
+    """`path` as an output file: one-line InputError when it is a folder, or its folder is
+    missing, a file, or cannot be written."""
     path = Path(path)
     if path.is_dir():
         raise InputError(f"{field} = {str(path)!r}: is a folder, not a file; give a file")
-    check_writable_dir(path.parent if str(path.parent) else Path("."), field=f"{field}'s folder")
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.exists():
+        raise InputError(f"{field} = {str(path)!r}: no folder {str(folder)!r}; give a file in "
+                         "an existing folder")
+    check_writable_dir(folder, field=f"{field}'s folder")
     return path
 
 

@@ -48,6 +48,8 @@ def check_consistent(s: Scenario) -> None:
         _check_particles(s)
     else:
         _check_tub_fill(s)
+        _check_tub_motion(s)
+        _check_probes(s)
 
 
 def fail(message: str):
@@ -316,6 +318,53 @@ def tub_volume(tub: Tub) -> float:
     above it, times the length."""
     area = 0.5 * math.pi * tub.radius**2 + 2.0 * tub.radius * (tub.rim_height - tub.radius)
     return area * tub.length
+
+
+#: the farthest the tub's wall may move in one step, in ball diameters: a contact is resolved
+#: over tens of steps (STEPS_PER_CONTACT) within a few per cent of a diameter of overlap
+MAX_WALL_STEP_D = 0.02
+#: the strongest gravity a tub run takes (m/s^2): a thousand times the Earth's
+MAX_GRAVITY = 1.0e4
+
+
+def _check_tub_motion(s: Scenario) -> None:
+    """The tub's wall moves less than MAX_WALL_STEP_D ball diameters a step at its fastest (its
+    translations' and its rotation's peak speeds, the rotation at the tub's point farthest from
+    the pivot), and gravity pulls the fill down into the tub."""
+    m, tub, d = s.motion, s.tub, s.fill.diameter
+    w = 2.0 * math.pi * m.frequency
+    f = m.amplitude_factor
+    px, pz = m.pivot
+    reach = max(math.hypot(x - px, z - pz) for x in (-tub.radius, tub.radius)
+                for z in (0.0, tub.rim_height))
+    speed = f * w * (math.hypot(m.amplitude_x, m.amplitude_z) + m.amplitude_theta * reach)
+    if speed * s.run.dt > MAX_WALL_STEP_D * d:
+        fail(f"motion.amplitude_x, amplitude_z, amplitude_theta = {m.amplitude_x!r}, "
+             f"{m.amplitude_z!r}, {m.amplitude_theta!r} (x amplitude_factor {f!r}, pivot "
+             f"{tuple(m.pivot)!r} m, {m.frequency!r} Hz): the wall moves at up to "
+             f"{speed:.3g} m/s, {speed * s.run.dt / d:.3g} ball diameters a step of run.dt = "
+             f"{s.run.dt!r} s; must be at most {MAX_WALL_STEP_D} (smaller amplitudes or "
+             "run.dt)")
+    g, gz = math.hypot(*s.gravity), s.gravity[2]
+    if g > MAX_GRAVITY:
+        fail(f"gravity = {_fmt_vec(s.gravity)}: {g:.3g} m/s^2; must be at most "
+             f"{MAX_GRAVITY:g} m/s^2")
+    if not gz < 0:
+        fail(f"gravity = {_fmt_vec(s.gravity)}: in a tub run it must pull down (its z "
+             "component < 0), so that the fill settles into the tub")
+
+
+def _check_probes(s: Scenario) -> None:
+    """Each probe lies inside the tub's cross-section, below its rim."""
+    tub = s.tub
+    for name, p in s.analysis.probes.items():
+        below = p.z - tub.radius  # height above the half circle's centre
+        inside = (abs(p.x) <= tub.radius and 0.0 <= p.z <= tub.rim_height
+                  and (below >= 0.0 or math.hypot(p.x, below) <= tub.radius))
+        if not inside:
+            fail(f"analysis.probes.{name} = ({p.x!r}, {p.z!r}) m: outside the tub's "
+                 f"cross-section (|x| <= tub.radius = {tub.radius!r} m inside the U, "
+                 f"0 <= z <= tub.rim_height = {tub.rim_height!r} m)")
 
 
 def _check_tub_fill(s: Scenario) -> None:
