@@ -454,3 +454,25 @@ def test_the_reference_case_and_its_amplitude_sweep_pass_the_checks():
     for factor in ("0.5", "1.0", "1.5", "3.0"):
         load_scenario("tub47", [f"motion.amplitude_factor={factor}"])
     load_scenario("tub47-quick", [])
+
+
+def test_an_export_replaces_only_an_earlier_exports_deck(tmp_path):
+    from vibroflow.liggghts import export_deck
+
+    s = load_scenario("tub47-quick", [])
+    deck = tmp_path / "deck"
+    export_deck(s, deck)
+    export_deck(s, deck)                                     # an earlier export's: replaced
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "scenario.toml").write_text("# my notes\n")
+    with pytest.raises(InputError, match=r"holds scenario\.toml, which no `vibroflow export "
+                                         r"liggghts` wrote there"):
+        export_deck(s, mine)
+    assert (mine / "scenario.toml").read_text() == "# my notes\n"
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "summary.json").write_text('{"source": "vibroflow"}')
+    with pytest.raises(InputError, match=r"holds the results of a `vibroflow dem` run"):
+        export_deck(s, run)
+    assert sorted(p.name for p in run.iterdir()) == ["summary.json"]

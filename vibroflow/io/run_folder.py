@@ -1,12 +1,14 @@
 """Whose results a folder holds, so that a fresh run replaces only its own command's.
 
-A fresh `vibroflow dem` or `vibroflow continuum` removes the files of an earlier run of the same
-command in its --out folder before it writes its own (so that no summary.json outlives the run
+A fresh `vibroflow dem`, `vibroflow continuum` or `vibroflow import liggghts` removes the files
+of an earlier run of the same command in its --out folder before it writes its own (so that no summary.json outlives the run
 it belongs to).  Those are plain names (summary.json, floor.csv, vtk/): in a folder that holds
 another command's results, a study, a sweep or the user's own files, removing them would
 destroy what the command did not write.  `claim_for_fresh_run` refuses such a folder in one
 line before anything is removed; a new or empty folder, a folder of the same command's run and
-a folder of other files that the run does not replace are the run's to write.
+a folder of other files that the run does not replace are the run's to write.  `folder_owner`
+says whose results a folder holds (`vibroflow export liggghts` writes its deck only where it
+names none).
 
 What says whose a folder is: a study's or a sweep's record (study.json, sweep.json), the
 "source" of its summary.json (the DEM's "vibroflow", the continuum's "vibroflow continuum", a
@@ -31,13 +33,14 @@ SUMMARY = "summary.json"
 COMMANDS = {
     "dem": ("vibroflow", ("dem.h5", "dem.h5.partial", "checkpoint.h5")),
     "continuum": ("vibroflow continuum", ("checkpoint.npz",)),
+    "import liggghts": ("liggghts", ()),
 }
 _SOURCES = {"vibroflow": "a `vibroflow dem` run",
             "vibroflow continuum": "a `vibroflow continuum` run",
             "liggghts": "a LIGGGHTS import (`vibroflow import liggghts`)"}
 
 
-def _owner(out: Path) -> str | None:
+def folder_owner(out: Path) -> str | None:
     """What the folder's results are, in words, or None where nothing says."""
     if (out / STUDY_FILE).exists():
         return f"a study ({STUDY_FILE}, `vibroflow run`)"
@@ -67,14 +70,14 @@ def _frames_only(path: Path) -> bool:
 
 
 def claim_for_fresh_run(out: Path, command: str, replaces, field: str = "--out") -> None:
-    """InputError (one line) unless a fresh run of `command` ("dem" or "continuum") may remove
+    """InputError (one line) unless a fresh run of `command` (a key of COMMANDS) may remove
     the files `replaces` (names in out) of an earlier run: out holds none of them, or they are
     a run of the same command's (module docstring).  Called before anything is removed."""
     out = Path(out)
     if not out.is_dir():
         return
     source, _own = COMMANDS[command]
-    owner = _owner(out)
+    owner = folder_owner(out)
     if owner == _SOURCES[source]:
         return
     present = sorted(name for name in replaces

@@ -50,6 +50,7 @@ import numpy as np
 from vibroflow.errors import InputError
 from vibroflow.io.atomic import write_text_atomic
 from vibroflow.io.folder_lock import check_writable_dir, folder_lock
+from vibroflow.io.run_folder import folder_owner
 from vibroflow.liggghts.dem_fill import (DATA_NAME, FROM_FILL_MAX_SAGITTA,
                                          FROM_FILL_MAX_SETTLE_TIME, FROM_FILL_SETTLE_TIME,
                                          DemFill, data_file_text)
@@ -60,7 +61,8 @@ from vibroflow.liggghts.deck_files import (BALL_DUMP, DECK_NAME, FILL_FILE, PAIR
 from vibroflow.liggghts.fill_deck import add_fill_from_data, add_insertion
 from vibroflow.liggghts.motion_deck import add_tub_motion
 from vibroflow.liggghts.part_deck import (add_part_dump, add_part_meshes, check_part_names,
-                                          moving_meshes, part_mesh_ids, write_part_meshes)
+                                          moving_meshes, part_file, part_mesh_ids,
+                                          write_part_meshes)
 from vibroflow.liggghts.parameters import (PairTables, _check_exportable, _contact_law_deck,
                                            dump_vibration_steps, model_arguments, pair_tables,
                                            seed_primes, type_materials)
@@ -234,7 +236,7 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
 
     deck = _Deck()
     add = deck.add
-    add("# LIGGGHTS 3.8 deck written by vibroflow.liggghts for case '{}'", scenario.case)
+    add(DECK_MARK + " for case '{}'", scenario.case)
     add("# Run in this folder:  mpirun -np 2 liggghts -in in.tub   (see README.txt)")
     add("# SI units.  Atom types: 1 = balls ({}), 2 = tub wall ({}), 3 = partitions ({}).",
         *mats[:3])
@@ -372,6 +374,9 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
     toml_text = _scenario_toml(scenario)
 
     with folder_lock(out_dir, "vibroflow export liggghts", field="DIR"):
+        _claim_deck_folder(out_dir, [U_MESH_FILE, PARTITION_MESH_FILE, DECK_NAME, DATA_NAME,
+                                     "scenario.toml", "README.txt",
+                                     *(part_file(p.name) for p in parts)])
         check_writable_dir(out_dir / POST_DIR, field="DIR")
         meshes = write_tub_meshes(geom, out_dir, max_sagitta)
         names = {k: p.name for k, p in meshes.items()}
@@ -388,6 +393,28 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
         write_text_atomic(out_dir / "README.txt", readme_text)
     return DeckInfo(out_dir, deck_path, count, dt, vib_steps, dsteps, n_arc,
                     sagitta(R, n_arc), seeds, per_event, event_steps, settle_steps, tables)
+
+
+#: the first line of every deck export_deck writes: an earlier export's folder is the next's
+DECK_MARK = "# LIGGGHTS 3.8 deck written by vibroflow.liggghts"
+
+
+def _claim_deck_folder(out_dir: Path, names) -> None:
+    """InputError (one line) unless the deck's files may be written into out_dir: it holds no
+    run's results (a study, a sweep, a summary.json: an import's included, whose results belong
+    to the deck there) and none of `names`, or they are an earlier export's (its in.tub
+    starts with DECK_MARK)."""
+    owner = folder_owner(out_dir) if out_dir.is_dir() else None
+    if owner is not None:
+        raise InputError(f"DIR = {str(out_dir)!r}: holds the results of {owner}; a deck goes "
+                         "into a folder of its own: give another DIR")
+    present = sorted(n for n in names if (out_dir / n).exists())
+    deck = out_dir / DECK_NAME
+    ours = deck.is_file() and deck.read_text(errors="replace").startswith(DECK_MARK)
+    if present and not ours:
+        raise InputError(f"DIR = {str(out_dir)!r}: holds {', '.join(present)}, which no "
+                         "`vibroflow export liggghts` wrote there and the deck would replace; "
+                         "give another DIR")
 
 
 def _shrunk_u_area(R: float, margin: float, z_lo: float, z_hi: float) -> float:

@@ -23,6 +23,7 @@ from vibroflow.dem.part_output import PARTS_NC, part_dataset, summary_lines
 from vibroflow.errors import InputError
 from vibroflow.io.atomic import TMP_PREFIX, json_safe, write_json_atomic
 from vibroflow.io.folder_lock import folder_lock
+from vibroflow.io.run_folder import claim_for_fresh_run
 from vibroflow.io.parts_file import write_parts
 from vibroflow.liggghts.contacts import PairCheck, _pair_rows, _wall_rows
 from vibroflow.liggghts.deck import _scenario_toml
@@ -80,6 +81,9 @@ def import_run(dump_dir, scenario=None, out_dir=None) -> dict:
     made = not out_dir.exists()
     try:
         with folder_lock(out_dir, "vibroflow import liggghts"):
+            # a DEM run's or a study's folder is not the import's to replace
+            claim_for_fresh_run(out_dir, "import liggghts",
+                                (*IMPORT_FILES, PARTS_NC, FLOOR_CSV_NAME))
             tmp_dir = Path(tempfile.mkdtemp(prefix=f"{TMP_PREFIX}liggghts-import-",
                                             dir=out_dir))
             try:

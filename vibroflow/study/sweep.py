@@ -32,7 +32,7 @@ from rich.console import Console
 
 from vibroflow import __version__
 from vibroflow.errors import InputError
-from vibroflow.progress import format_duration
+from vibroflow.progress import PLAIN_EVERY_S, format_duration
 from vibroflow.study.sweep_folder import (KIND, PLOTS, POINT_LOCK, TABLE_FILE, check_same_sweep,
                                           dir_lock, is_locked, point_dir, read_record, write_record)
 from vibroflow.study.sweep_plots import write_plots
@@ -234,6 +234,7 @@ def run_sweep(plan: SweepPlan, out: Path, scheduler: str | None = None,
         finished = 0
         computed: list[float] = []
         t_start = time.perf_counter()
+        said = t_start  # the last progress line: one at least every PLAIN_EVERY_S
         while pending or waiting:
             done = []
             if pending:
@@ -273,6 +274,12 @@ def run_sweep(plan: SweepPlan, out: Path, scheduler: str | None = None,
                     left_n = n - finished
                     left = per * -(-left_n // concurrency) if left_n else 0.0
                     echo(f"[{finished}/{n}] {name}: {what}; time left ~ {format_duration(left)}")
+                    said = time.perf_counter()
+            now = time.perf_counter()
+            if echo is not None and now - said >= PLAIN_EVERY_S:
+                echo(f"        {finished} of {n} finished, {len(pending)} running, "
+                     f"{len(waiting)} waiting; {format_duration(now - t_start)} so far")
+                said = now
             for name in list(waiting):
                 if not is_locked(point_dir(out, name) / POINT_LOCK):
                     del waiting[name]
