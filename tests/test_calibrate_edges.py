@@ -88,7 +88,10 @@ def test_a_run_folder_that_cannot_be_written_is_one_line(run):
         f = run.parent / "afile"
         f.write_text("x")
         line = _one_line(_cli("calibrate", f / "run"))
-        assert line == f"error: RUN_DIR = '{f / 'run'}': no such folder"
+        assert line == (f"error: RUN_DIR = '{f / 'run'}': no such folder; give the folder of "
+                        "a DEM run")
+        line = _one_line(_cli("calibrate", f))
+        assert line == f"error: RUN_DIR = '{f}': a file, not a folder; give the folder of a DEM run"
         return
     run.chmod(0o500)
     try:

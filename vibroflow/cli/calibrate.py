@@ -40,7 +40,8 @@ def calibrate(
 ) -> None:
     """Calibrate the continuum on a DEM run: RUN_DIR/calibration.toml, fields.nc, pictures."""
     if not run_dir.is_dir():
-        raise InputError(f"RUN_DIR = {str(run_dir)!r}: no such folder")
+        what = "a file, not a folder" if run_dir.exists() else "no such folder"
+        raise InputError(f"RUN_DIR = {str(run_dir)!r}: {what}; give the folder of a DEM run")
     if kernel not in ("gaussian", "lucy"):
         raise InputError(f"--kernel = {kernel!r}: must be gaussian or lucy")
     if width is not None and not (math.isfinite(width) and width > 0):

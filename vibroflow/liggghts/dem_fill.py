@@ -75,8 +75,8 @@ def _field(run_dir: Path, what: str) -> InputError:
 def _run_scenario(run_dir: Path):
     """The scenario of a finished vibroflow DEM run folder and its dem.h5 attributes."""
     if not run_dir.is_dir():
-        raise _field(run_dir, "no such folder; give the folder of a finished `vibroflow dem` "
-                              "run")
+        what = "a file, not a folder" if run_dir.exists() else "no such folder"
+        raise _field(run_dir, f"{what}; give the folder of a finished `vibroflow dem` run")
     h5 = run_dir / "dem.h5"
     if not h5.is_file() or not (run_dir / "summary.json").is_file():
         raise _field(run_dir, "not a finished vibroflow DEM run (no dem.h5 and summary.json)")

@@ -303,6 +303,9 @@ def _import(post: Path, scenario, n0: int, tmp_dir: Path) -> dict:
 
 def _resolve_dump_dir(dump_dir: Path) -> Path:
     dump_dir = Path(dump_dir)
+    if dump_dir.exists() and not dump_dir.is_dir():
+        raise InputError(f"DUMPDIR = {str(dump_dir)!r}: a file, not a folder; give the post/ "
+                         "folder (or the deck folder) of a LIGGGHTS run of an exported deck")
     for cand in (dump_dir, dump_dir / POST_DIR):
         if (cand / BALL_DUMP).is_file():
             return cand

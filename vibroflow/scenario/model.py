@@ -117,7 +117,7 @@ class Run(_Strict):
     duration: float = Field(3.0, gt=0, description="vibration time after settling (s); in "
                             "explicit mode the whole simulated time")
     average_last: float = Field(2.0, ge=0, description="averaging window at the end (s)")
-    seed: int = Field(1, ge=0, description="random seed of the fill")
+    seed: int = Field(1, ge=0, lt=2**63, description="random seed of the fill")
     phases_per_cycle: int = Field(8, ge=1, description="snapshots per vibration cycle in the "
                                   "averaging window")
     batches: int = Field(4, ge=2, description="batch-means batches for standard errors")
