@@ -1,14 +1,14 @@
 """Whose results a folder holds, so that a fresh run replaces only its own command's.
 
 A fresh `vibroflow dem`, `vibroflow continuum` or `vibroflow import liggghts` removes the files
-of an earlier run of the same command in its --out folder before it writes its own (so that no summary.json outlives the run
-it belongs to).  Those are plain names (summary.json, floor.csv, vtk/): in a folder that holds
-another command's results, a study, a sweep or the user's own files, removing them would
-destroy what the command did not write.  `claim_for_fresh_run` refuses such a folder in one
-line before anything is removed; a new or empty folder, a folder of the same command's run and
-a folder of other files that the run does not replace are the run's to write.  `folder_owner`
-says whose results a folder holds (`vibroflow export liggghts` writes its deck only where it
-names none).
+of an earlier run of the same command in its --out folder before it writes its own (so that no
+summary.json outlives the run it belongs to).  Those are plain names (summary.json, floor.csv,
+vtk/): in a folder that holds another command's results, a study, a sweep or the user's own
+files, removing them would destroy what the command did not write.  `claim_for_fresh_run`
+refuses such a folder in one line before anything is removed; a new or empty folder, a folder
+of the same command's run and a folder of other files that the run does not replace are the
+run's to write.  `folder_owner` says whose results a folder holds (`vibroflow export liggghts`
+writes its deck only where it names none).
 
 What says whose a folder is: a study's or a sweep's record (study.json, sweep.json), the
 "source" of its summary.json (the DEM's "vibroflow", the continuum's "vibroflow continuum", a
