@@ -247,7 +247,7 @@ def test_a_killed_holder_leaves_no_lock(tmp_path):
         pass
 
 
-@pytest.mark.parametrize("command", ["dem", "run"])
+@pytest.mark.parametrize("command", ["dem", "run", "sweep"])
 def test_an_output_path_that_is_a_file_is_refused(drop, tmp_path, command):
     a_file = tmp_path / "a_file"
     a_file.write_text("precious\n")

@@ -37,18 +37,23 @@ _held: dict[str, list[int]] = {}  # realpath -> [fd, depth] held by this process
 _guard = threading.Lock()
 
 
+def check_not_under_a_file(path: Path, field: str) -> None:
+    """One-line InputError when the nearest existing folder above `path` is a file."""
+    for parent in Path(path).parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise InputError(f"{field} = {str(path)!r}: {str(parent)!r} is a file, not a "
+                                 "folder")
+            return
+
+
 def check_writable_dir(path: Path, field: str = "--out") -> Path:
     """`path` as an output folder, made if missing: one-line InputError when it is a file, sits
     under a file, or cannot be made or written (read-only, permissions)."""
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise InputError(f"{field} = {str(path)!r}: is a file, not a folder; give a folder")
-    for parent in path.parents:
-        if parent.exists():
-            if not parent.is_dir():
-                raise InputError(f"{field} = {str(path)!r}: {str(parent)!r} is a file, not a "
-                                 "folder")
-            break
+    check_not_under_a_file(path, field)
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from vibroflow.errors import InputError
+from vibroflow.io.folder_lock import check_not_under_a_file
 from vibroflow.io.run_folder import SWEEP_FILE
 from vibroflow.study.folder import POINT_LOCK  # noqa: F401 -- the study folder's check knows it
 from vibroflow.study.stages import write_json_atomic
@@ -48,12 +49,7 @@ def read_record(out: Path) -> dict | None:
     file, a foreign folder or a corrupt marker."""
     out = Path(out)
     if not out.exists():
-        for parent in out.parents:
-            if parent.exists():
-                if not parent.is_dir():
-                    raise InputError(f"DIR = {str(out)!r}: {str(parent)!r} is a file, not a "
-                                     "folder")
-                break
+        check_not_under_a_file(out, "DIR")
         return None
     if not out.is_dir():
         raise InputError(f"DIR = {str(out)!r}: not a folder")
