@@ -3,6 +3,7 @@ checkpoint, a Ctrl-C.  Each is one line (InputError: exit 2; Interrupted: exit 1
 traceback, and an interrupted run resumes to the uninterrupted numbers bit for bit."""
 from __future__ import annotations
 
+import math
 import os
 import shutil
 import zipfile
@@ -15,6 +16,7 @@ from tests.cli_helpers import one_line_error as _one_line
 from vibroflow.continuum.checkpoint import CHECKSUM_KEY
 from vibroflow.continuum.files import CHECKPOINT_NAME
 from vibroflow.continuum.formulation import formulation
+from vibroflow.continuum.options import ContinuumOptions
 from vibroflow.continuum.mpm import formulation as mpm_formulation
 from vibroflow.continuum.tub_run import run_continuum
 from vibroflow.errors import InputError, Interrupted
@@ -30,6 +32,19 @@ CLI_SETS = ["--set", "run.duration=0.05", "--set", "run.average_last=0.043", "--
             "run.batches=2"]
 
 
+# ----------------------------------------------------------------------------------------------
+# options
+
+@pytest.mark.parametrize("field", ["dx", "cfl", "settle_time", "wall_stiffness",
+                                   "stiffness_factor", "flip", "bed_viscosity",
+                                   "damping_length", "initial_temperature", "transfer_cfl"])
+@pytest.mark.parametrize("value", [math.inf, -math.inf, math.nan, True, "0.1"])
+def test_a_number_option_that_is_not_a_finite_number_is_one_line(field, value):
+    """An infinite wall stiffness would make a zero step, a division by zero: every number option
+    refuses what is not a finite number, naming the field."""
+    kw = {"transfer_cfl": None, field: value}
+    with pytest.raises(InputError, match=rf"^{field} = .*must be"):
+        ContinuumOptions(**kw)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import typing
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -170,11 +171,14 @@ class ContinuumOptions:
     moduli: str = "calibrated"
 
     def __post_init__(self):
+        hints = typing.get_type_hints(type(self))
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
-            if "float" in str(f.type) and value is not None and (
-                    isinstance(value, bool) or not isinstance(value, (int, float))):
-                raise InputError(f"{f.name} = {value!r}: must be a number")
+            hint = hints[f.name]
+            if value is not None and (hint is float or float in typing.get_args(hint)) and (
+                    isinstance(value, bool) or not isinstance(value, (int, float))
+                    or not math.isfinite(value)):
+                raise InputError(f"{f.name} = {value!r}: must be a finite number")
         if not (isinstance(self.flip, (int, float)) and 0.0 <= self.flip <= 1.0):
             raise InputError(f"flip = {self.flip!r}: must be in [0, 1] (0: APIC, 1: FLIP)")
         if self.dx is not None and not self.dx > 0:

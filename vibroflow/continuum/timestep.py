@@ -89,6 +89,17 @@ MAX_STEPS = 1.0e8
 MAX_TRANSFERS = 1000
 
 
+def run_step(material, dx: float, point_size: float, boundaries, scenario, options) -> float:
+    """The step (s) of a tub run: `stable_dt` at material speeds up to 2 m/s and the options'
+    cfl, rounded down to a whole number of steps between samples (so that every sample falls
+    on a step), its step count checked (`check_step_count`) over the settling and the run."""
+    dt = stable_dt(material, dx, point_size, boundaries, v_max=2.0, cfl=options.cfl)
+    interval = 1.0 / (scenario.motion.frequency * scenario.run.phases_per_cycle)
+    dt = interval / math.ceil(interval / dt)
+    check_step_count(dt, scenario.run.duration + options.settle_time, options)
+    return dt
+
+
 def check_step_count(dt: float, duration_s: float, options) -> None:
     """InputError (one line) when a run of duration_s (s) takes more than MAX_STEPS steps of
     dt (s): the step is set by the options (cfl, dx, wall_stiffness, bed_viscosity)."""

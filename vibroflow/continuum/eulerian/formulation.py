@@ -53,7 +53,7 @@ from ..options import ContinuumOptions, default_dx
 from ..part_obstacle import continuum_parts, packed_section, torque_on_part
 from ..sampling import dithered_cells_to_lab, shear_rate
 from ..temperature_field import temperature_model
-from ..timestep import check_step_count, stable_dt
+from ..timestep import run_step
 from ..wall_feed import feed_by_region
 from . import column
 from .mesh import EulerianMesh
@@ -324,11 +324,7 @@ class FixedMesh(Formulation):
         partitions = None
         if mu_p is not None:
             partitions = PartitionFriction(friction=mu_p, length=geo.length)
-        dt = stable_dt(material, dx, mesh.h, [wall], v_max=2.0, cfl=options.cfl)
-        f, per = scenario.motion.frequency, scenario.run.phases_per_cycle
-        interval = 1.0 / (f * per)
-        dt = interval / math.ceil(interval / dt)
-        check_step_count(dt, scenario.run.duration + options.settle_time, options)
+        dt = run_step(material, dx, mesh.h, [wall], scenario, options)
         return EulerianSystem(mesh, material, dt, frame=frame, wall=wall, partitions=partitions,
                               chunks=scenario.run.force_chunks,
                               transfers=self.transfers_on(options, scenario),

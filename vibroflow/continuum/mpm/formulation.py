@@ -40,7 +40,7 @@ from ..part_obstacle import (bed_height_around, continuum_parts, packed_section,
                              torque_on_part)
 from ..sampling import shear_rate, to_lab
 from ..temperature_field import temperature_model
-from ..timestep import check_step_count, stable_dt
+from ..timestep import run_step
 from ..wall_feed import LagrangianWallFeed, feed_by_region
 from . import column
 from .solver import MPMState, MPMSystem, advance, init_state
@@ -244,12 +244,7 @@ class MaterialPointMethod(Formulation):
                        for k, p in enumerate(parts)]
         if mu_p is not None:
             boundaries.append(PartitionFriction(friction=mu_p, length=geo.length))
-        dt = stable_dt(material, dx, spacing, boundaries, v_max=2.0, cfl=options.cfl)
-        # a whole number of steps between samples, so every sample falls on a step
-        f, per = scenario.motion.frequency, scenario.run.phases_per_cycle
-        interval = 1.0 / (f * per)
-        dt = interval / math.ceil(interval / dt)
-        check_step_count(dt, scenario.run.duration + options.settle_time, options)
+        dt = run_step(material, dx, spacing, boundaries, scenario, options)
         return MPMSystem(grid, material, dt, frame=frame, boundaries=boundaries,
                          chunks=scenario.run.force_chunks, flip=float(options.flip),
                          transfers=self.transfers_on(options, scenario),
