@@ -210,6 +210,16 @@ def test_scenario_check_says_it_in_one_line_and_dem_writes_nothing(drop, tmp_pat
     assert not out.exists()
 
 
+@pytest.mark.parametrize("command", ["continuum", "run", "sweep"])
+def test_an_explicit_scenario_is_refused_by_the_tub_commands_in_one_line(drop, tmp_path,
+                                                                        command):
+    out = tmp_path / "out"
+    line = _one_line_error(_cli(command, str(drop), "--out", str(out)))
+    assert line.endswith("needs a tub-mode scenario (with [tub] and [fill]), not explicit "
+                         "particles"), line
+    assert not out.exists()
+
+
 # ---------------------------------------------------------------------------------------------
 # Output folders: one writer at a time; a file or a read-only folder is bad input
 

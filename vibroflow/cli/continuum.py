@@ -130,6 +130,7 @@ def continuum(
         *rest, last = FORMULATIONS
         raise InputError(f"--method = {method!r}: must be {', '.join(rest)} or {last}")
     from vibroflow.io.vtk_frame import check_vtk_window, cli_vtk_options
+    from vibroflow.scenario.checks import require_tub_mode
 
     paraview = cli_vtk_options(vtk, vtk_frame, vtk_every, vtk_from)
     check_landing(landing, method, temperature)
@@ -156,6 +157,7 @@ def continuum(
             calibration = calibration_of_run(like)
     else:
         s = load(scenario, set_)
+    require_tub_mode(s, "the continuum", where=str(like or scenario))
     check_vtk_window(paraview, s)
     from vibroflow.continuum.formulation import formulation
     from vibroflow.continuum.material import boundary_friction, material_for

@@ -55,6 +55,7 @@ from pathlib import Path
 import numpy as np
 
 from vibroflow.errors import InputError
+from vibroflow.scenario.checks import require_tub_mode
 from vibroflow.io.atomic import write_json_atomic
 from vibroflow.io.calibration_file import Calibration
 from vibroflow.io.folder_lock import folder_lock
@@ -188,9 +189,7 @@ def run_continuum(scenario, out_dir, method: str = "lagrangian",
     """
     form = formulation(method)
     vtk = vtk_options(vtk)
-    if scenario.tub is None or scenario.fill is None:
-        raise InputError("scenario: the continuum needs a tub-mode scenario (with [tub] and "
-                         "[fill]), not explicit particles")
+    require_tub_mode(scenario, "the continuum")
     if sample_times(scenario)[0].size == 0:
         raise InputError(f"run.average_last = {scenario.run.average_last!r}: must hold at least "
                          "one whole vibration cycle to average over")

@@ -15,6 +15,7 @@ from typing import Any
 
 from pydantic_core import PydanticCustomError
 
+from vibroflow.errors import InputError
 from vibroflow.scenario.part_checks import check_parts, parts_volume_m3
 
 #: a vibroflow.scenario.model.Scenario (and its Tub, ContactPair): read here, not imported
@@ -49,6 +50,14 @@ def check_consistent(s: Scenario) -> None:
     else:
         _check_tub_fill(s)
         _check_tub_motion(s)
+
+
+def require_tub_mode(s: Scenario, who: str, where: str = "scenario") -> None:
+    """InputError (one line) when `who` (a command or a method, "the continuum") needs a
+    tub-mode scenario and `s` (read from `where`) is in explicit mode."""
+    if s.tub is None or s.fill is None:
+        raise InputError(f"{where}: {who} needs a tub-mode scenario (with [tub] and [fill]), "
+                         "not explicit particles")
 
 
 def fail(message: str):

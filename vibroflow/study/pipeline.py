@@ -19,6 +19,7 @@ from typing import Any
 
 from vibroflow import __version__
 from vibroflow.errors import CheckpointRefused, InputError, Interrupted
+from vibroflow.scenario.checks import require_tub_mode
 from vibroflow.io.folder_lock import folder_lock
 from vibroflow.progress import format_duration
 from vibroflow.io.vtk_frame import VtkOptions
@@ -163,9 +164,7 @@ def run_study(scenario, out: Path, settings: dict[str, dict[str, Any]] | None = 
     for name in METHODS:
         m = method(name)
         methods.append((m, m.make_options(settings.get(name, {}))))
-    if scenario.tub is None or scenario.fill is None:
-        raise InputError("scenario: a study needs a tub-mode scenario (with [tub] and [fill]), "
-                         "not explicit particles")
+    require_tub_mode(scenario, "a study")
     for m, _ in methods:
         m.check(scenario)
     with folder_lock(out, "vibroflow run", field="DIR"):

@@ -22,6 +22,7 @@ from typing import Any
 
 from vibroflow.errors import InputError
 from vibroflow.scenario.io import load_scenario
+from vibroflow.scenario.checks import require_tub_mode
 from vibroflow.study.methods import METHODS, method
 from vibroflow.study.pipeline import split_settings
 from vibroflow.study.stages import Study, stages_of
@@ -206,9 +207,7 @@ def plan_sweep(source: str, factors: list[float], vary: dict[str, list[tuple[str
         overrides = [f"{k}={text}" for k, (text, _) in zip(keys, combo)]
         scenario_sets, settings = split_settings([*sets, *overrides])
         s = load_scenario(source, scenario_sets)
-        if s.tub is None or s.fill is None:
-            raise InputError(f"{source}: a sweep needs a tub-mode scenario (with [tub] and "
-                             "[fill]), not explicit particles")
+        require_tub_mode(s, "a sweep", where=str(source))
         if base is None:
             base = s  # the first point stands for the base; its varied keys go below
         data = s.model_dump(mode="json")
