@@ -54,3 +54,55 @@ def test_the_cache_folders_follow_numba_cache_dir(tmp_path):
     (expected / "step.advance-1.py311.nbi").write_text("machine code")
     assert kc.refresh(folders, stamp, kc.sources_digest(pkg)) == 1
     assert not list(expected.glob("*.nbi"))
+
+
+def test_a_second_process_saving_a_cache_entry_waits_for_the_first(tmp_path):
+    """numba's cache file names a new entry's data file after the index it read, unlocked: two
+    writers that both read the empty index both write `.1.nbc`, and the index of one points at
+    the other's machine code (a segfault when loaded).  Locked, a second save waits until the
+    first has written its index and data, and each entry loads its own data."""
+    import threading
+
+    import numba.core.caching as caching
+
+    assert caching.IndexDataCacheFile._vibroflow_locked  # vibroflow's import locked it
+    folder = str(tmp_path)
+    a = caching.IndexDataCacheFile(folder, "f-1.py311", source_stamp=("stamp", 1))
+    b = caching.IndexDataCacheFile(folder, "f-1.py311", source_stamp=("stamp", 1))
+    inside, go_on = threading.Event(), threading.Event()
+    read_index = a._load_index
+
+    def paused_load_index():  # a has read the index and not yet written it
+        index = read_index()
+        inside.set()
+        assert go_on.wait(10)
+        return index
+
+    a._load_index = paused_load_index
+    ta = threading.Thread(target=a.save, args=("key a", "data a"))
+    tb = threading.Thread(target=b.save, args=("key b", "data b"))
+    ta.start()
+    assert inside.wait(10)
+    tb.start()
+    tb.join(0.5)
+    assert tb.is_alive()  # b waits on a's lock (unlocked, b would write `.1.nbc` here)
+    go_on.set()
+    ta.join(10)
+    tb.join(10)
+    assert not ta.is_alive() and not tb.is_alive()
+    reader = caching.IndexDataCacheFile(folder, "f-1.py311", source_stamp=("stamp", 1))
+    assert reader.load("key a") == "data a"
+    assert reader.load("key b") == "data b"
+    assert sorted(p.name for p in tmp_path.glob("*.nbc")) == ["f-1.py311.1.nbc",
+                                                              "f-1.py311.2.nbc"]
+
+
+def test_numba_imported_after_vibroflow_has_its_cache_files_locked():
+    import subprocess
+    import sys
+
+    code = ("import sys, vibroflow; assert 'numba' not in sys.modules; "
+            "import numba.core.caching as c; print(c.IndexDataCacheFile._vibroflow_locked)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "True"

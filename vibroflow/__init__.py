@@ -52,6 +52,7 @@ _threads.default_spin_env()
 # after an edit the cache is dropped whole (vibroflow/_kernel_cache.py says why)
 from vibroflow import _kernel_cache  # noqa: E402
 
+_kernel_cache.install()  # numba's cache files locked between processes (why: there)
 _kernel_cache.ensure_fresh()
 
 if TYPE_CHECKING:

@@ -16,15 +16,41 @@ nothing heavy.  Where the cache lives follows numba's locators (numba.core.cachi
 folder's __pycache__, or, when NUMBA_CACHE_DIR is set, NUMBA_CACHE_DIR/<folder name>_<SHA-1 of
 the folder's absolute path> (and the same under the user-wide cache, ~/.cache/numba, where numba
 goes when a __pycache__ is not writable).  Any file-system error leaves the cache as it is.
+
+Processes that compile at once: numba's cache file (numba.core.caching.IndexDataCacheFile)
+reads a function's index, names a data file for a new entry after the entries it read, writes
+the index, then the data, with no lock.  Two processes compiling the same function (two
+signatures, or the parallel and the one-thread loops of one closure) on a cold cache can both
+name their entry `.1.nbc`; one's index then points at the other's machine code, and every later
+run that loads it crashes (a segfault, exit -11; numba issues 4807 and 10128).  Two vibroflow
+processes on a fresh install do that: `pytest -n 2`, a sweep's workers, a run beside a test.  So
+each cache folder holds a lock file (LOCK_NAME): numba's save and flush of a cache file hold it
+exclusively and its load shared (`lock_cache_files`, made when numba's caching module is
+imported: `install`), so an index and its data are written together and read whole, and the
+removal of a stale cache holds it too.  `tests/test_kernel_cache.py` shows a second save wait
+for the first.
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import importlib.abc
+import importlib.util
 import os
+import sys
 from pathlib import Path
+
+try:
+    import fcntl
+except ImportError:  # not POSIX: numba's cache without the lock
+    fcntl = None
 
 PACKAGE = Path(__file__).resolve().parent
 STAMP_NAME = "vibroflow-kernel-sources.sha256"
+#: the lock file in each numba cache folder (module docstring)
+LOCK_NAME = "vibroflow-numba-cache.lock"
+#: numba's module that holds the cache file class
+CACHING_MODULE = "numba.core.caching"
 
 
 def sources_digest(package: Path = PACKAGE) -> str:
@@ -73,12 +99,13 @@ def refresh(folders: list[Path], stamp: Path, digest: str) -> int:
     for folder in folders:
         if not folder.is_dir():
             continue
-        for path in list(folder.glob("*.nbi")) + list(folder.glob("*.nbc")):
-            try:
-                path.unlink()
-                removed += 1
-            except FileNotFoundError:
-                pass
+        with folder_lock(str(folder), exclusive=True):
+            for path in list(folder.glob("*.nbi")) + list(folder.glob("*.nbc")):
+                try:
+                    path.unlink()
+                    removed += 1
+                except FileNotFoundError:
+                    pass
     from vibroflow.io.atomic import write_text_atomic  # only when stale: the import stays light
 
     write_text_atomic(stamp, digest + "\n")
@@ -92,3 +119,80 @@ def ensure_fresh() -> None:
         refresh(folders, stamp, sources_digest())
     except OSError:
         pass
+
+
+@contextlib.contextmanager
+def folder_lock(folder: str, exclusive: bool):
+    """Hold the lock file of a numba cache folder, exclusive or shared, for the `with` block;
+    without fcntl, or where the lock file cannot be opened, the block runs unlocked."""
+    fd = None
+    if fcntl is not None:
+        try:
+            fd = os.open(os.path.join(folder, LOCK_NAME), os.O_RDWR | os.O_CREAT, 0o666)
+        except OSError:
+            fd = None
+    try:
+        if fd is not None:
+            fcntl.flock(fd, fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
+        yield
+    finally:
+        if fd is not None:
+            os.close(fd)  # releases the lock
+
+
+def lock_cache_files(cache_file_class) -> None:
+    """Make numba's cache file class (IndexDataCacheFile) save and flush under its folder's
+    exclusive lock and load under a shared one (module docstring); idempotent."""
+    if getattr(cache_file_class, "_vibroflow_locked", False):
+        return
+    save, load, flush = cache_file_class.save, cache_file_class.load, cache_file_class.flush
+
+    def locked_save(self, key, data):
+        with folder_lock(self._cache_path, exclusive=True):
+            save(self, key, data)
+
+    def locked_load(self, key):
+        with folder_lock(self._cache_path, exclusive=False):
+            return load(self, key)
+
+    def locked_flush(self):
+        with folder_lock(self._cache_path, exclusive=True):
+            flush(self)
+
+    cache_file_class.save = locked_save
+    cache_file_class.load = locked_load
+    cache_file_class.flush = locked_flush
+    cache_file_class._vibroflow_locked = True
+
+
+class _LockOnImport(importlib.abc.MetaPathFinder):
+    """Finds numba's caching module as the other finders do, and locks its cache file class
+    once the module has run (`install`): `import vibroflow` itself does not import numba."""
+
+    def find_spec(self, name, path, target=None):
+        if name != CACHING_MODULE:
+            return None
+        sys.meta_path.remove(self)
+        spec = importlib.util.find_spec(name)
+        if spec is None or spec.loader is None or not hasattr(spec.loader, "exec_module"):
+            return spec
+        exec_module = spec.loader.exec_module
+
+        def exec_and_lock(module):
+            exec_module(module)
+            lock_cache_files(module.IndexDataCacheFile)
+
+        spec.loader.exec_module = exec_and_lock
+        return spec
+
+
+def install() -> None:
+    """Lock numba's cache files (module docstring): now if numba's caching module is loaded,
+    else when it is imported."""
+    if fcntl is None:
+        return
+    module = sys.modules.get(CACHING_MODULE)
+    if module is not None:
+        lock_cache_files(module.IndexDataCacheFile)
+    elif not any(isinstance(f, _LockOnImport) for f in sys.meta_path):
+        sys.meta_path.insert(0, _LockOnImport())
