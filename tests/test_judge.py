@@ -232,3 +232,18 @@ def test_an_ensemble_pools_only_runs_of_the_same_options(run_cli, ensemble, tmp_
     assert on["E_mean"] == pytest.approx(want, rel=0.03)
     assert "lagrangian (temperature=True, transfer_cfl=0.5) over its 2 runs" in res.stdout
     assert "  options: transfer_cfl=0.5" in res.stdout
+
+
+def test_a_run_at_its_formulations_defaults_is_labelled_defaults():
+    """transfer_cfl's default is the formulation's own (0.015 Lagrangian, 0.0375 Eulerian)."""
+    from dataclasses import asdict
+
+    from vibroflow.analysis.judge import options_label
+    from vibroflow.continuum.formulation import formulation
+
+    # the summary's block (continuum/tub_run.py): the options as a dict
+    for method in ("lagrangian", "eulerian"):
+        record = asdict(formulation(method).options())
+        assert options_label({"options": record}, method) == "defaults"
+    eul = asdict(formulation("eulerian").options())
+    assert options_label({"options": eul}, "lagrangian") == "transfer_cfl=0.0375"

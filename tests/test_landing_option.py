@@ -52,6 +52,8 @@ def test_the_options_and_a_study_carry_the_landing_and_refuse_it_elsewhere():
     _, settings = split_settings(["eulerian.temperature=true", "eulerian.landing='columns'",
                                   "lagrangian.temperature=true", "lagrangian.landing='columns'"])
     assert method("eulerian").make_options(settings["eulerian"]).landing == "columns"
+    # a bare word reads as a scenario field's does (the shell eats unescaped quotes)
+    assert split_settings(["eulerian.landing=columns"])[1]["eulerian"] == {"landing": "columns"}
     with pytest.raises(InputError, match=r"^lagrangian\.landing = 'columns'"):
         method("lagrangian").make_options(settings["lagrangian"])
 

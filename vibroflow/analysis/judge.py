@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from vibroflow.continuum.formulation import FORMULATIONS, formulation
 from vibroflow.continuum.options import ContinuumOptions
 from vibroflow.measure.bulk import CellTable, read_csv
 from vibroflow.analysis.compare import (FIELD_FACTOR, difference_to_seeds, ensemble_mean,
@@ -137,18 +138,23 @@ def result_from_summary(summary: dict, folder, table: CellTable) -> RunResult:
                      circulation=summary["circulation"], table=table,
                      take_off=_take_off_of(summary.get("floor")),
                      calibration=_calibration_of(summary.get("continuum")),
-                     options=options_label(summary.get("continuum")))
+                     options=options_label(summary.get("continuum"), str(method)))
 
 
-def options_label(continuum) -> str | None:
+def options_label(continuum, method: str | None = None) -> str | None:
     """A continuum summary's options (its "options" block: vibroflow.continuum.tub_run writes
-    the run's ContinuumOptions) as one label, those away from their defaults and those without
-    one, sorted by name, e.g. "temperature=True, transfer_cfl=0.5"; None for a run with no
-    such block (a DEM run).  The calibration is no option: an ensemble's runs differ in it."""
+    the run's ContinuumOptions) as one label, those away from the defaults of the run's
+    formulation `method` (Formulation.options: transfer_cfl's is the formulation's own) and
+    those without one, sorted by name, e.g. "temperature=True, transfer_cfl=0.5"; None for a
+    run with no such block (a DEM run).  The calibration is no option: an ensemble's runs
+    differ in it."""
     opts = continuum.get("options") if isinstance(continuum, dict) else None
     if not isinstance(opts, dict):
         return None
-    defaults = {f.name: f.default for f in dataclass_fields(ContinuumOptions)}
+    if method in FORMULATIONS:
+        defaults = vars(formulation(method).options())
+    else:
+        defaults = {f.name: f.default for f in dataclass_fields(ContinuumOptions)}
     shown = [f"{k}={v}" for k, v in sorted(opts.items())
              if k not in defaults or defaults[k] is MISSING or v != defaults[k]]
     return ", ".join(shown) or "defaults"

@@ -55,7 +55,7 @@ def continuum(
         "--dx", help="Grid spacing (m); default 3 ball diameters (why: continuum/options.py, "
                     "DEFAULT_DX_DIAMETERS).")] = None,
     cfl: Annotated[Optional[float], typer.Option(
-        "--cfl", help="Courant number of the time step in (0, 1]; default 0.3 "
+        "--cfl", help="Courant number of the time step in [0.001, 1]; default 0.3 "
                       "(continuum/options.py DEFAULT_CFL).")] = None,
     transfer_cfl: Annotated[Optional[float], typer.Option(
         "--transfer-cfl", help="Courant number of the APIC transfers (> 0): each step makes "

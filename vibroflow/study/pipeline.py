@@ -12,17 +12,17 @@ import hashlib
 import json
 import shutil
 import time
-import tomllib
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from vibroflow import __version__
 from vibroflow.errors import CheckpointRefused, InputError, Interrupted
-from vibroflow.scenario.checks import require_tub_mode
 from vibroflow.io.folder_lock import folder_lock
-from vibroflow.progress import format_duration
 from vibroflow.io.vtk_frame import VtkOptions
+from vibroflow.progress import format_duration
+from vibroflow.scenario.checks import require_tub_mode
+from vibroflow.scenario.io import parse_value
 from vibroflow.study.folder import KIND, STUDY_FILE, check_study_dir, read_json
 from vibroflow.study.methods import METHODS, method
 from vibroflow.study.results import read_summary
@@ -43,11 +43,7 @@ def split_settings(settings: list[str] | None) -> tuple[list[str], dict[str, dic
         if head in METHODS and dot:
             if not sep or not rest:
                 raise InputError(f"--set {item!r}: must be {head}.OPTION=VALUE")
-            try:
-                options[head][rest] = tomllib.loads(f"v = {value.strip()}")["v"]
-            except tomllib.TOMLDecodeError:
-                raise InputError(f"--set {key} = {value!r}: not a TOML value (a number, "
-                                 "true/false or a quoted string)") from None
+            options[head][rest] = parse_value(value)  # as a scenario field's: bare text too
         else:
             scenario.append(item)
     return scenario, options
