@@ -471,6 +471,12 @@ def test_an_export_replaces_only_an_earlier_exports_deck(tmp_path):
     deck = tmp_path / "deck"
     export_deck(s, deck)
     export_deck(s, deck)                                     # an earlier export's: replaced
+    # an earlier deck's inputs that this one does not write go: no stale part beside it
+    export_deck(load_scenario("tub47-bar", []), deck)
+    assert (deck / "part_bar.stl").is_file()
+    export_deck(s, deck)
+    assert not (deck / "part_bar.stl").exists()
+    assert "part_bar" not in (deck / "in.tub").read_text()
     mine = tmp_path / "mine"
     mine.mkdir()
     (mine / "scenario.toml").write_text("# my notes\n")

@@ -233,8 +233,12 @@ def test_time_left_names_the_stages_it_cannot_estimate():
     kept = {"a": None, "b": None, "c": None, "d": {"hash": "x"}}
     est = {"a": 30.0, "b": None, "c": 60.0, "d": 1000.0}
     # the kept stage d counts nothing; b has no estimate and says so
-    assert _time_left(rest, kept, est, 0.5) == "time left ~ 45 s + the b stage (not estimated yet)"
-    assert _time_left(rest[:1], kept, est, 1.0) == "time left ~ 30 s"
+    assert (_time_left(rest, kept, est, set(), 0.5)
+            == "time left ~ 45 s + the b stage (not estimated yet)")
+    assert _time_left(rest[:1], kept, est, set(), 1.0) == "time left ~ 30 s"
+    # c's estimate is its own wall time of the folder's previous run: not scaled
+    assert (_time_left(rest, kept, est, {"c"}, 0.5)
+            == "time left ~ 1.2 min + the b stage (not estimated yet)")  # 15 + 60 s
     assert _about(None).startswith("no estimate yet") and _about(150.0) == "about 2.5 min"
 
 

@@ -68,6 +68,8 @@ def _residuals(pred, meas, w):
     with np.errstate(invalid="ignore", divide="ignore"):
         r = pred / meas
     ok = np.isfinite(r) & (r > 0)
+    if not np.sum(w[ok]) > 0:  # no cell to judge on (a short run): unknown, not 0/0
+        return {"within_0_8_1_25": math.nan, "median_abs_log_ratio": math.nan}
     inside = (r[ok] >= 0.8) & (r[ok] <= 1.25)
     return {"within_0_8_1_25": float(np.sum(w[ok] * inside) / np.sum(w[ok])),
             "median_abs_log_ratio": float(np.median(np.abs(np.log(r[ok]))))}

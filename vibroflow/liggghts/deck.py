@@ -373,10 +373,15 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
                           fill_from is not None).render("README.txt")
     toml_text = _scenario_toml(scenario)
 
+    written = [U_MESH_FILE, *([] if periodic else [PARTITION_MESH_FILE]),
+               *([] if data_text is None else [DATA_NAME]),
+               *(part_file(p.name) for p in parts)]
     with folder_lock(out_dir, "vibroflow export liggghts", field="DIR"):
-        _claim_deck_folder(out_dir, [U_MESH_FILE, PARTITION_MESH_FILE, DECK_NAME, DATA_NAME,
-                                     "scenario.toml", "README.txt",
-                                     *(part_file(p.name) for p in parts)])
+        earlier = _claim_deck_folder(out_dir, [U_MESH_FILE, PARTITION_MESH_FILE, DECK_NAME,
+                                               DATA_NAME, "scenario.toml", "README.txt",
+                                               *(part_file(p.name) for p in parts)])
+        if earlier:
+            _remove_earlier_inputs(out_dir, written)
         check_writable_dir(out_dir / POST_DIR, field="DIR")
         meshes = write_tub_meshes(geom, out_dir, max_sagitta)
         names = {k: p.name for k, p in meshes.items()}
@@ -399,11 +404,11 @@ def export_deck(scenario, out_dir, *, wall_contacts: bool = True, pair_contacts:
 DECK_MARK = "# LIGGGHTS 3.8 deck written by vibroflow.liggghts"
 
 
-def _claim_deck_folder(out_dir: Path, names) -> None:
+def _claim_deck_folder(out_dir: Path, names) -> bool:
     """InputError (one line) unless the deck's files may be written into out_dir: it holds no
     run's results (a study, a sweep, a summary.json: an import's included, whose results belong
     to the deck there) and none of `names`, or they are an earlier export's (its in.tub
-    starts with DECK_MARK)."""
+    starts with DECK_MARK).  Returns whether out_dir holds an earlier export."""
     owner = folder_owner(out_dir) if out_dir.is_dir() else None
     if owner is not None:
         raise InputError(f"DIR = {str(out_dir)!r}: holds the results of {owner}; a deck goes "
@@ -415,6 +420,17 @@ def _claim_deck_folder(out_dir: Path, names) -> None:
         raise InputError(f"DIR = {str(out_dir)!r}: holds {', '.join(present)}, which no "
                          "`vibroflow export liggghts` wrote there and the deck would replace; "
                          "give another DIR")
+    return ours
+
+
+def _remove_earlier_inputs(out_dir: Path, written) -> None:
+    """Remove the input files of an earlier export in out_dir that this deck does not write
+    (`written`: a part's STL, the partitions' mesh, the settled bed's data file), so that the
+    folder holds one deck's inputs only."""
+    earlier = [U_MESH_FILE, PARTITION_MESH_FILE, DATA_NAME,
+               *(p.name for p in out_dir.glob(part_file("*")))]
+    for name in sorted(set(earlier) - set(written)):
+        (out_dir / name).unlink(missing_ok=True)
 
 
 def _shrunk_u_area(R: float, margin: float, z_lo: float, z_hi: float) -> float:

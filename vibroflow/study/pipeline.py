@@ -128,11 +128,16 @@ def _about(estimate: float | None) -> str:
     return f"about {format_duration(estimate)}"
 
 
-def _time_left(rest: Sequence[Stage], kept: dict, estimates: dict, scale: float) -> str:
-    """The time left of the stages still to run: their estimates scaled by how the finished
-    ones compared with theirs; the stages without an estimate are named, not guessed."""
+def _time_left(rest: Sequence[Stage], kept: dict, estimates: dict, measured: set,
+               scale: float) -> str:
+    """The time left of the stages still to run: their estimates, the model's scaled by how
+    the finished stages the model estimated compared with it (`scale`), a stage's own wall
+    time on this folder's previous run (`measured`) as it is: a stage rerun with other options
+    says nothing of the machine's pace; the stages without an estimate are named, not
+    guessed."""
     to_run = [s.name for s in rest if kept[s.name] is None]
-    left = scale * sum(estimates[s] for s in to_run if estimates[s] is not None)
+    left = sum(estimates[s] * (1.0 if s in measured else scale)
+               for s in to_run if estimates[s] is not None)
     unknown = [s for s in to_run if estimates[s] is None]
     text = f"time left ~ {format_duration(left)}"
     if unknown:
@@ -182,7 +187,9 @@ def _run_study(scenario, out: Path, methods: list, shear_cell: bool, progress: b
     for s in stages:  # a hash depends on the upstream hashes only, not on their results
         hashes[s.name] = stage_hash(s, study, hashes)
     kept = {s.name: _kept(study, s, hashes[s.name]) for s in stages}
-    estimates = {s.name: (_previous_wall(study, s) or s.estimate(study)) for s in stages}
+    previous = {s.name: _previous_wall(study, s) for s in stages}
+    measured = {name for name, wall in previous.items() if wall}
+    estimates = {s.name: (previous[s.name] or s.estimate(study)) for s in stages}
     spent_est = spent_real = 0.0
     n = len(stages)
     for i, stage in enumerate(stages, 1):
@@ -199,13 +206,13 @@ def _run_study(scenario, out: Path, methods: list, shear_cell: bool, progress: b
             record = _run_stage(study, stage, h)
             spent = record["wall_time_s"]
             what = f"done in {format_duration(spent)}" + (" (resumed)" if record["resumed"] else "")
-            if estimates[stage.name] is not None:
+            if estimates[stage.name] is not None and stage.name not in measured:
                 spent_est += estimates[stage.name]
                 spent_real += spent
         study.records[stage.name] = record
         scale = min(5.0, max(0.2, spent_real / spent_est)) if spent_est > 0 else 1.0
         if echo is not None:
             echo(f"[{i}/{n}] {stage.name:<12} {what}; "
-                 f"{_time_left(stages[i:], kept, estimates, scale)}")
+                 f"{_time_left(stages[i:], kept, estimates, measured, scale)}")
 
     return read_summary(out)
