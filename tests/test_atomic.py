@@ -70,8 +70,8 @@ def test_call_sites_share_the_helper():
     assert stages.write_json_atomic is write_json_atomic
 
 
-def test_no_hand_rolled_atomic_writes_left():
-    """New code uses vibroflow.io.atomic; os.replace is left only where the rename is part of a
+def test_no_hand_rolled_atomic_writes():
+    """The package writes through vibroflow.io.atomic; os.replace stands only where the rename is part of a
     bigger protocol (the DEM's partial -> final dem.h5, the LIGGGHTS import's dem.h5, the
     continuum checkpoint's own fsync'ed write)."""
     allowed = {"io/atomic.py", "dem/output.py", "liggghts/importer.py", "continuum/checkpoint.py"}

@@ -117,7 +117,7 @@ def test_bed_at_phi_eq_flows_at_mu_of_I_without_volume_change():
 
 
 def test_off_is_the_plain_law_bit_for_bit():
-    """K_dil = 0 leaves the mu(I) return map as it was."""
+    """K_dil = 0 gives the plain mu(I) return map, bit for bit."""
     rng = np.random.default_rng(3)
     n = 50
     stress = -np.abs(rng.normal(3e3, 1e3, (n, 4)))

@@ -1,7 +1,7 @@
 """The dense sliding loss Gamma_f = k_f p sqrt(T) / d in the temperature's balance
 (kinetic_theory.sliding_dissipation_W_m3, temperature_step.exact_cooling_sliding): its exact
 cooling against an independent integration, the steady balance against its algebraic root, and
-off (k_f = 0) the balance as it was, bit for bit."""
+off (k_f = 0) the plain balance's numbers, bit for bit."""
 import math
 
 import numpy as np
@@ -61,7 +61,7 @@ def test_steady_balance_with_the_sliding_loss_reaches_its_algebraic_temperature(
     assert T_lun > 2.5 * T_root
 
 
-def test_off_the_balance_is_unchanged_bit_for_bit():
+def test_off_the_balance_is_the_plain_one_bit_for_bit():
     rng = np.random.default_rng(2)
     shape = (6, 5)
     T = rng.uniform(0, 3e-3, shape)

@@ -115,7 +115,7 @@ def test_non_finite_vectors_are_refused(drop, setting, field):
 
 
 def test_a_duration_that_no_machine_could_run_is_refused_before_it_allocates(drop):
-    # 1e14 s at dt = 1e-6 s: 1e20 steps, whose series alone once asked numpy for 6.94 EiB
+    # 1e14 s at dt = 1e-6 s: 1e20 steps, whose series alone would ask numpy for 6.94 EiB
     with pytest.raises(InputError, match=r"^run\.duration = 1e\+14: 1e\+20 steps of run\.dt = "
                                          r"1e-06 s; a run may have at most 1e\+11 steps"):
         load_scenario(drop, ["run.duration=1e14"])

@@ -63,7 +63,7 @@ def test_the_fingerprint_names_the_landing_only_off_its_default():
     eul = formulation("eulerian")
     plain = eul.options()
     # a run without the temperature, or with it and the default landing: the record of the
-    # options without the field (the fingerprints of runs made before it)
+    # options without the field, so that a run without the option keeps its fingerprint
     assert "landing" not in options_record(plain)
     pairs = eul.options(temperature=True, initial_temperature=0.01)
     assert "landing" not in options_record(pairs)

@@ -61,7 +61,7 @@ def test_the_list_is_the_same_on_one_thread_and_on_all():
 
 def test_a_state_file_with_64_bit_indices_reads_as_the_32_bit_list(tmp_path):
     """The list's indices are int32 (neighbours.INDEX); a state file written with int64 ones
-    reads back as the same list in int32, and a file written now keeps the same entries."""
+    reads back as the same list in int32, and a file this code writes keeps the same entries."""
     import h5py
 
     from vibroflow.dem.neighbours import INDEX

@@ -82,15 +82,6 @@ def test_each_ball_takes_its_cells_mean_velocity():
     assert uz.tolist() == [1.0, 1.0, -1.0]
 
 
-@pytest.mark.parametrize("case", ["tub47-quick", "tub47"])
-def test_the_stored_calibrations_friction_along_the_flow_is_part_of_the_ratio_of_sums(case):
-    # |F_t . u / |u|| <= |F_t| contact by contact, so the sum along the flow is at most the
-    # contacts' ratio of sums; the balls' slip across the flow makes it smaller
-    p = read_calibration(f"tests/data/{case}-dem/calibration.toml").partitions
-    assert 0.0 < p.friction_along_flow < p.friction
-    assert p.friction_along_flow_stderr > 0.0
-
-
 def test_the_partition_friction_option_takes_the_calibrations_friction_along_the_flow():
     s = load_scenario("tub47-quick")
     cal = read_calibration(CALIBRATION)

@@ -49,7 +49,7 @@ def test_warm_kernels_compile_nothing_and_a_resume_carries_the_time_before():
 
 
 def test_the_listener_goes_with_the_clock():
-    """After the clock's exit a compilation is no longer counted (no listener left behind)."""
+    """After the clock's exit a compilation is not counted (no listener left behind)."""
     with RunClock() as clock:
         pass
     _fresh_kernel()(np.ones(3))

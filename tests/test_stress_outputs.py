@@ -106,8 +106,9 @@ def test_the_stress_file_holds_a_row_for_each_cell_and_phase_with_material(tmp_p
 def test_height_phase_table_by_hand(tmp_path):
     """Cells on mu(I) times e^(+a) in the highest third of heights and e^(-a) in the lowest,
     the middle third on the curve: the table's residuals, about the curve fitted to them all,
-    are below 0 and above it and 2a apart, their correlation with height positive, and the medians of mu and p by hand; a continuum's
-    stress.csv read back gives the same cells; a missing file is one error."""
+    are below 0 and above it and 2a apart, their correlation with height positive, and the
+    medians of mu and p by hand; the share at yield by hand; a continuum's stress.csv read back
+    gives the same cells; a missing file is one error."""
     from vibroflow.analysis.stress_state import (continuum_points, height_phase_table,
                                                  share_at_yield)
     from vibroflow.continuum.rheology import mu_of_I
@@ -129,6 +130,8 @@ def test_height_phase_table_by_hand(tmp_path):
         assert r["corr"] > 0.5
         assert (r["p_low"], r["p_high"]) == (3000.0, 500.0)
     assert share_at_yield(pts, 10.0) == 0.0 and share_at_yield(pts, 0.0) == 1.0
+    # three of four cells at or above mu_s = 0.3, the one at it counted
+    assert share_at_yield({"mu": np.array([0.1, 0.3, 0.4, 0.5])}, 0.3) == 0.75
     lines = ["x,z,phase,solid_fraction,shear_rate,pressure,shear_stress,friction_coefficient,"
              "friction_coefficient_stderr,inertial_number,samples"]
     for k in range(n):

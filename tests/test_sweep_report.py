@@ -16,6 +16,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from vibroflow.scenario.io import load_scenario
@@ -106,7 +107,10 @@ def test_limit_verdicts_and_failed_point_against_known_answers(sweep):
 
 def test_limit_from_the_sweeps_own_seeds(tmp_path):
     """Three points differing only in run.seed, whose DEMs are tub47's seeds 1 - 3: the limit is
-    1.5 x their mean pairwise E, 0.106 (docs/decisions/e-limit-seeds.md)."""
+    1.5 x their mean E over the six ordered pairs (tub47.md; 0.106 for these three,
+    docs/decisions/e-limit-seeds.md), each pair's E the field difference of its two tables."""
+    from vibroflow.analysis.compare import field_difference
+    from vibroflow.measure.bulk import read_csv
     from vibroflow.report.sweep_data import SweepData
 
     dem = _method(5e-4, 2e-5, "counterclockwise")
@@ -118,7 +122,10 @@ def test_limit_from_the_sweeps_own_seeds(tmp_path):
         shutil.copy(SEEDS / f"seed{k}" / "bulk_velocity.csv", dem_dir)
     data = SweepData.read(out)
     (lim,) = data.limits.values()
-    assert lim.E_seed == pytest.approx(0.106, abs=6e-4)
+    tables = [read_csv(SEEDS / f"seed{k}" / "bulk_velocity.csv") for k in (1, 2, 3)]
+    pairs = [field_difference(a, b) for a in tables for b in tables if a is not b]
+    assert len(pairs) == 6
+    assert lim.E_seed == pytest.approx(np.mean(pairs), rel=1e-12)
     assert lim.limit == pytest.approx(1.5 * lim.E_seed)
     assert "6 ordered pairs of this sweep's 3 seeds" in lim.source
 

@@ -1,13 +1,13 @@
-"""The vibrated layer (issue 29): the DEM strip of tub47's balls on tub47's vertical stroke
+"""The vibrated layer: the DEM strip of tub47's balls on tub47's vertical stroke
 (Gamma 13.3), stored in tests/data/vibrated-layer-dem (its README says the command), against
 both continua's strip with the granular temperature on.
 
 The stored DEM is checked against known answers (the floor carries the weight over a cycle;
-the bands hold the layer's mass at every phase).  The continua are judged as issue 29 asks,
+the bands hold the layer's mass at every phase).  The continua are judged, as the project asks,
 within the DEM's seed scatter: the cycle-mean temperature and solid-fraction profiles in the
 bands the DEM's bed fills (cycle-mean solid fraction above FILLED) within 2 seed standard
 deviations, and the take-off phase within 2 seed standard deviations plus the force's bin.
-Targets still missed are strict xfails, each with a guard on its measured miss
+Targets missed are strict xfails, each with a guard on its measured miss
 (docs/validation.md, "The vibrated layer").
 """
 from __future__ import annotations
