@@ -296,9 +296,9 @@ def test_seeded_sweep_report_shows_pooled_rows_and_their_limit(seeded):
     assert set(done) == {("0.5", "dem"), ("0.5", "lagrangian"), ("1", "dem"),
                          ("1", "lagrangian")}
     assert done[("0.5", "dem")][1] == "3" and done[("1", "lagrangian")][1] == "2"
-    assert done[("0.5", "dem")][5].startswith("5 ± 0.58 (seeds ± 0.58, batch ± 0.12)")
+    assert done[("0.5", "dem")][5].startswith("5.00 ± 0.58 (seeds ± 0.58, batch ± 0.12)")
     assert done[("0.5", "lagrangian")][6] == "0.300 ± 0.058"
-    assert done[("1", "lagrangian")][6] == "0.250 ± 0.05"
+    assert done[("1", "lagrangian")][6] == "0.250 ± 0.050"
     ratio = 0.25 / lim.limit
     assert done[("1", "lagrangian")][7] == f"{ratio:.2f}"
     assert "circulation agrees" in done[("1", "lagrangian")][8]

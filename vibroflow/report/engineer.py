@@ -15,6 +15,7 @@ from markupsafe import Markup
 from vibroflow.calibration.tub_rheology import DENSE_SOLID_FRACTION
 from vibroflow.report import bed_state, flow_maps, mu_i_bins, profiles, verdict
 from vibroflow.report.cell_tables import method_tables
+from vibroflow.report.numbers import plus_minus
 from vibroflow.tub.motion import TubMotion
 
 
@@ -31,7 +32,7 @@ def cell(x, se=None, fmt: str = ".4g", cls: str = "", **attrs) -> dict:
     if not isinstance(x, (int, float)) or isinstance(x, bool) or not math.isfinite(x):
         return {"text": "n/a", "cls": cls, "value": "nan", "stderr": None, "attrs": tags}
     has_se = isinstance(se, (int, float)) and math.isfinite(se)
-    return {"text": format(x, fmt) + (f" ± {se:.2g}" if has_se else ""), "cls": cls,
+    return {"text": plus_minus(x, se, fmt) if has_se else format(x, fmt), "cls": cls,
             "value": repr(float(x)), "stderr": repr(float(se)) if has_se else None,
             "attrs": tags}
 

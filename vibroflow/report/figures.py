@@ -20,6 +20,7 @@ from matplotlib.patches import Rectangle
 
 from vibroflow.io.pictures import pyplot
 from vibroflow.report.data import MIN_IMPACTS_PER_CELL, StudyData, mean_flow_shear_rate
+from vibroflow.report.numbers import plus_minus
 from vibroflow.report.temperature_maps import PHI_KEY, T_KEY, TemperatureMaps
 
 DPI = 90
@@ -78,10 +79,7 @@ def _method_title(data: StudyData, name: str) -> str:
     s, se = c.get("strength"), c.get("strength_stderr")
     if s is None:
         return name
-    txt = f"{name}\n{c.get('sense', '?')}, strength {s:.3g}"
-    if se is not None and math.isfinite(se):
-        txt += f" ± {se:.2g}"
-    return txt + " m²/s"
+    return f"{name}\n{c.get('sense', '?')}, strength {plus_minus(s, se, '.3g')} m²/s"
 
 
 # ----------------------------------------------------------------------------------------------

@@ -30,6 +30,7 @@ from vibroflow.measure.floor_force import REGIONS, dem_wall_feed
 from vibroflow.report.data import DEM, StudyData
 from vibroflow.report.impact_figures import impact_distribution_section
 from vibroflow.report.engineer import Engineer
+from vibroflow.report.numbers import plus_minus
 from vibroflow.report.page_style import page_css
 from vibroflow.report.part_sections import part_sections
 from vibroflow.report.stress_section import stress_rows
@@ -129,7 +130,7 @@ def _pm(x, se, fmt: str = ".4g") -> Cell:
     if not isinstance(x, (int, float)) or not math.isfinite(x):
         return Cell(text="n/a", value="nan")
     if isinstance(se, (int, float)) and math.isfinite(se):
-        return Cell(text=f"{format(x, fmt)} ± {se:.2g}", value=repr(float(x)),
+        return Cell(text=plus_minus(x, se, fmt), value=repr(float(x)),
                     stderr=repr(float(se)))
     return Cell(text=format(x, fmt), value=repr(float(x)))
 
@@ -356,7 +357,7 @@ def _wall_feed_rows(data: StudyData) -> list:
 def _rheology(data: StudyData) -> dict:
     def v(r, k):
         x, se = getattr(r, k), getattr(r, k + "_stderr")
-        return f"{x:.4g}" + (f" ± {se:.2g}" if se is not None and math.isfinite(se) else "")
+        return plus_minus(x, se)
 
     fit = None
     if data.calibration is not None:

@@ -25,6 +25,7 @@ from markupsafe import Markup
 from vibroflow import __version__
 from vibroflow.io.atomic import write_text_atomic
 from vibroflow.report.html import data_uri, environment
+from vibroflow.report.numbers import plus_minus
 from vibroflow.report.page_style import page_css
 from vibroflow.report.sweep_data import ELimit, SweepData, created, describe, point_report
 from vibroflow.report.sweep_figures import e_figure, sense_figure, strength_figure
@@ -89,7 +90,7 @@ class Cell:
 def _num(x, fmt: str = ".3g", scale: float = 1.0, se=None) -> Cell:
     if x is None:
         return Cell("n/a", value="nan")
-    text = format(x * scale, fmt) + ("" if se is None else f" ± {format(se * scale, '.2g')}")
+    text = format(x * scale, fmt) if se is None else plus_minus(x * scale, se * scale, fmt)
     return Cell(text, value=repr(float(x)))
 
 
