@@ -39,8 +39,15 @@ def csv_table(data, name: str) -> CellTable:
         return table
     try:
         return with_batches(table, batches)
-    except (OSError, ValueError):
+    except (OSError, ValueError) as exc:  # listed under the page's "Missing pieces"
+        data.notes[batches_note(name)] = (f"{batches}: unreadable ({exc}); {name}'s profiles "
+                                          "and turnover time carry no error bars")
         return table
+
+
+def batches_note(name: str) -> str:
+    """The key of StudyData.notes saying why a method's batches are unreadable."""
+    return f"{name} batches"
 
 
 def dem_batch_table(data) -> CellTable | None:

@@ -1,12 +1,15 @@
 """What the report shows, read from a finished study folder (`vibroflow run --out DIR`).
 
-`StudyData.read(DIR)` validates the folder first (`vibroflow.study.results.read_summary`: a
-missing, foreign or corrupt DIR is a one-line InputError, and nothing is read further), then
+`StudyData.read(DIR)` validates the folder first (`vibroflow.study.results.read_summary` and
+check_summary: a missing, foreign, corrupt or unfinished DIR, a summary value of the wrong type
+or a verdict without the strengths it judges, is a one-line InputError naming the file and
+field, and nothing is read further), then
 gathers the pieces the page draws: the summary, the scenario, each method's bulk velocity field,
 the stage records (cost), the calibration and the DEM's coarse-grained fields, the DEM's measured
 impacts binned on the analysis cells, and any sweep results.  Optional pieces that are missing
-(no fields.nc, a calibration that could not fit impacts, no sweep) are None, with a line in
-`notes` saying why, so the page states them instead of failing.
+(no fields.nc, a calibration that could not fit impacts, no sweep) or unreadable are None, with
+a line in `notes` saying why, so the page states them under "Missing pieces" instead of
+failing.
 
 Units: SI (m, m/s, 1/s, s).
 """
@@ -30,11 +33,14 @@ from vibroflow.io.calibration_file import Calibration, read_calibration
 from vibroflow.measure.contacts import mean_by_region
 from vibroflow.measure.stats import batches_of_whole_cycles
 from vibroflow.scenario.io import dump_scenario, parse_scenario
-from vibroflow.study.results import load
+from vibroflow.study.results import load, read_summary
 from vibroflow.tub.geometry import geometry_of
 
 DEM = "dem"
 CALIBRATION = "calibration"
+#: the report's own stage: its pending.json is the page being written (vibroflow.report.stage)
+REPORT_STAGE = "report"
+PENDING_FILE = "pending.json"
 #: impacts a cell needs before its mean impact speed is drawn (a cell mean of fewer is mostly
 #: noise: the speeds' spread is about their mean, so 20 impacts give a ~ 20 % standard error)
 MIN_IMPACTS_PER_CELL = 20
@@ -169,15 +175,22 @@ class StudyData:
         """Read the study in `out` (InputError, one line, for a missing, foreign, corrupt or
         unfinished folder)."""
         out = Path(out)
+        # the summary's values before the tables: a corrupt one is named, not drawn
+        summary = read_summary(out)
+        check_finished(out)
+        check_summary(out / "summary.json", summary)
         loaded = load(out)  # validates DIR (study.folder.check_study_dir) and every method's
         # bulk velocity table
         fields = loaded.pop("fields")
         summary = loaded
-        for name, entry in summary["methods"].items():
-            for key in ("probes", "circulation"):
-                if not isinstance(entry, dict) or not isinstance(entry.get(key), dict):
-                    raise InputError(f"{out / 'summary.json'}: corrupt summary (method {name!r} "
-                                     f"has no {key} table)")
+        for name in summary["methods"]:
+            s = out / name / "summary.json"
+            if s.is_file():
+                try:
+                    own = json.loads(s.read_text())
+                except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+                    raise InputError(f"{s}: corrupt summary ({type(exc).__name__})") from None
+                check_method_summary(s, own)
         notes: dict[str, str] = {}
         scenario, text = _scenario(out)
         stages = {}
@@ -299,6 +312,116 @@ class StudyData:
         if not ok.any():
             return float("nan")
         return float(np.sum(g[ok] * w[ok]) / np.sum(w[ok]))
+
+
+# ----------------------------------------------------------------------------------------------
+# the folder's checks: what the page shows must be what the study computed
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _bad(path: Path, where: str, value, want: str) -> InputError:
+    return InputError(f"{path}: {where} is {json.dumps(value)}, not {want} (corrupt summary)")
+
+
+def _numbers(path: Path, block, where: str, keys, integer: bool = False) -> None:
+    """Each of `keys` in the dict `block` is a number or null (a NaN, written as null by
+    io.atomic.json_safe) when present."""
+    for k in keys:
+        v = block.get(k)
+        if v is not None and not (_is_number(v) and (not integer or float(v).is_integer())):
+            raise _bad(path, f"{where}.{k}", v, "an integer" if integer else "a number")
+
+
+def _table(path: Path, block, where: str, required: bool = False) -> dict:
+    if block is None and not required:
+        return {}
+    if not isinstance(block, dict):
+        raise _bad(path, where, block, "a table")
+    return block
+
+
+def check_summary(path: Path, summary: dict) -> None:
+    """The study summary's values the page shows have their types (numbers or null, a verdict
+    true, false or null), and every verdict has the strengths it judges: an InputError naming
+    the file and the field otherwise."""
+    methods = summary["methods"]
+    dem = methods.get(DEM) if isinstance(methods.get(DEM), dict) else {}
+    for name, m in methods.items():
+        w = f"methods.{name}"
+        m = _table(path, m, w, required=True)
+        for probe, q in _table(path, m.get("probes"), f"{w}.probes", required=True).items():
+            _numbers(path, _table(path, q, f"{w}.probes.{probe}", required=True),
+                     f"{w}.probes.{probe}", ("vx", "vz", "vx_stderr", "vz_stderr",
+                                             "solid_fraction"))
+        c = _table(path, m.get("circulation"), f"{w}.circulation", required=True)
+        _numbers(path, c, f"{w}.circulation", ("strength", "strength_stderr"))
+        if c.get("sense") is not None and not isinstance(c["sense"], str):
+            raise _bad(path, f"{w}.circulation.sense", c["sense"], "a word")
+        im = _table(path, m.get("impacts"), f"{w}.impacts")
+        _numbers(path, im, f"{w}.impacts", [f"{k}_mean_normal_speed{e}" for k in
+                                            ("ball_ball", "ball_wall") for e in ("", "_stderr")])
+        _numbers(path, im, f"{w}.impacts", ("count",), integer=True)
+        _numbers(path, m, w, ("wall_time_s",))
+        a = _table(path, m.get("against_dem"), f"{w}.against_dem")
+        _numbers(path, a, f"{w}.against_dem", ("field_difference_E", "circulation_strength",
+                                               "dem_circulation_strength", "cost_ratio"))
+        for probe, d in _table(path, a.get("probe_differences_m_s"),
+                               f"{w}.against_dem.probe_differences_m_s").items():
+            _numbers(path, _table(path, d, f"{w}.against_dem.probe_differences_m_s.{probe}",
+                                  required=True),
+                     f"{w}.against_dem.probe_differences_m_s.{probe}", ("dvx", "dvz"))
+        verdict = a.get("circulation_agrees")
+        if verdict is not None and not isinstance(verdict, bool):
+            raise _bad(path, f"{w}.against_dem.circulation_agrees", verdict, "true or false")
+        if isinstance(verdict, bool):  # a verdict stands on both strengths
+            for who, block in ((w, c), (f"methods.{DEM}", (dem or {}).get("circulation"))):
+                v = (block or {}).get("strength") if isinstance(block, dict) else None
+                if not (_is_number(v) and math.isfinite(v)):
+                    raise InputError(
+                        f"{path}: {w}.against_dem.circulation_agrees is "
+                        f"{json.dumps(verdict)} without a strength to judge "
+                        f"({who}.circulation.strength is {json.dumps(v)}) (corrupt summary)")
+
+
+def check_method_summary(path: Path, summary) -> None:
+    """A method's own summary.json: the blocks the page reads (floor, wall_contacts, the
+    continuum's probes, wall_feed) hold numbers or null where it reads numbers."""
+    if not isinstance(summary, dict):
+        raise _bad(path, "the summary", summary, "a table")
+    f = _table(path, summary.get("floor"), "floor")
+    _numbers(path, f, "floor", ("take_off_phase", "cycle_mean_over_weight",
+                                "cycle_mean_over_weight_stderr"))
+    for k in ("take_off_phase_batches", "force_over_weight"):
+        v = f.get(k)
+        if v is not None and not (isinstance(v, list) and all(
+                x is None or _is_number(x) for x in v)):
+            raise _bad(path, f"floor.{k}", v, "a list of numbers")
+    _numbers(path, _table(path, summary.get("wall_contacts"), "wall_contacts"),
+             "wall_contacts", [k + e for k in ("ratio_of_sums", "mean_ft_over_fn",
+                                              "sliding_fraction") for e in ("", "_stderr")])
+    c = _table(path, summary.get("continuum"), "continuum")
+    for probe, q in _table(path, c.get("probes"), "continuum.probes").items():
+        _numbers(path, _table(path, q, f"continuum.probes.{probe}", required=True),
+                 f"continuum.probes.{probe}", ("shear_rate_1_s", "shear_rate_1_s_stderr"))
+    wf = _table(path, summary.get("wall_feed"), "wall_feed")
+    _numbers(path, wf, "wall_feed", ("u_wall_W_m2", "u_wall_W_m2_stderr"))
+    for k in ("by_region_W_m2", "by_region_W_m2_stderr"):
+        _numbers(path, _table(path, wf.get(k), f"wall_feed.{k}"), f"wall_feed.{k}",
+                 list(_table(path, wf.get(k), f"wall_feed.{k}")))
+
+
+def check_finished(out: Path) -> None:
+    """No stage of the study is under way or was interrupted (DIR/<stage>/pending.json, the
+    study pipeline's mark until its stage.json is written): an InputError otherwise.  The
+    report's own stage is the page being written."""
+    for pending in sorted(out.glob(f"*/{PENDING_FILE}")):
+        stage = pending.parent.name
+        if stage != REPORT_STAGE:
+            raise InputError(f"{pending}: the study has not finished (its {stage} stage is "
+                             f"under way or was interrupted); run `vibroflow run ... --out "
+                             f"{out}` to finish it")
 
 
 def _optional(path: Path, read, notes: dict[str, str], key: str, missing: str):

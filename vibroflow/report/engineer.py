@@ -14,7 +14,7 @@ from markupsafe import Markup
 
 from vibroflow.calibration.tub_rheology import DENSE_SOLID_FRACTION
 from vibroflow.report import bed_state, flow_maps, mu_i_bins, profiles, verdict
-from vibroflow.report.cell_tables import method_tables
+from vibroflow.report.cell_tables import batches_note, method_tables
 from vibroflow.report.numbers import plus_minus
 from vibroflow.tub.motion import TubMotion
 
@@ -92,8 +92,13 @@ class Engineer:
                 "z_mid": f"{p.z_mid:.3f}",
                 "with_errors": [n for n, ln in p.lines.items()
                                 if np.isfinite(ln["vx_stderr"]).any()],
-                "without_errors": [n for n, ln in p.lines.items()
-                                   if not np.isfinite(ln["vx_stderr"]).any()]}
+                "without_errors": [
+                    {"name": n, "why": ("its bulk_velocity_batches.csv is unreadable: see "
+                                        "Missing pieces" if batches_note(n) in self.data.notes
+                                        else "no batches: no snapshots, or no "
+                                        "bulk_velocity_batches.csv beside its "
+                                        "bulk_velocity.csv")}
+                    for n, ln in p.lines.items() if not np.isfinite(ln["vx_stderr"]).any()]}
 
     def bed(self) -> dict:
         data = self.data

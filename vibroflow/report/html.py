@@ -27,7 +27,7 @@ from markupsafe import Markup
 from vibroflow import __version__
 from vibroflow.report import figures
 from vibroflow.measure.floor_force import REGIONS, dem_wall_feed
-from vibroflow.report.data import DEM, StudyData
+from vibroflow.report.data import DEM, REPORT_STAGE, StudyData
 from vibroflow.report.impact_figures import impact_distribution_section
 from vibroflow.report.engineer import Engineer
 from vibroflow.report.numbers import plus_minus
@@ -243,11 +243,19 @@ def _impacts(data: StudyData) -> dict:
             + [f"{n} inferred (m/s)" for n in data.continuum_methods],
             probe_rows=probe_rows)
     else:
-        why = [data.notes.get("impacts")] if data.impacts is None else []
-        if fit is None:
-            why.append("the calibration has no ball-ball impact relation")
-        out["why"] = [w for w in why if w]
+        out["why"] = no_impact_comparison(data, fit)
     return out
+
+
+def no_impact_comparison(data: StudyData, fit: dict | None) -> list[str]:
+    """Why the page has no per-probe comparison of impact speeds: no measured impacts, no
+    calibration at all, or a calibration without the ball-ball relation."""
+    why = [data.notes.get("impacts")] if data.impacts is None else []
+    if data.calibration is None:
+        why.append(data.notes.get("calibration", "no calibration in the study"))
+    elif fit is None:
+        why.append("the calibration has no ball-ball impact relation")
+    return [w for w in why if w]
 
 
 def _impact_distributions(data: StudyData) -> dict:
@@ -413,6 +421,10 @@ def _cost(data: StudyData) -> dict:
     for stage in order:
         rec = data.stages.get(stage)
         m = methods.get(stage) or {}
+        if stage == REPORT_STAGE:  # the page being written: an earlier report's record is stale
+            rows.append([_text(stage, "l"), _num(None), _num(None), _num(None),
+                         _text("being written", "l")])
+            continue
         if rec is None and not m:
             continue
         solver = m.get("wall_time_s")

@@ -1,0 +1,181 @@
+"""The report's checks of a study folder against hand-made folders: a summary value of the wrong
+type, a verdict without the strengths it judges and an unfinished stage are one-line errors
+(exit code 2, nothing written) naming the file and the field; an unreadable
+bulk_velocity_batches.csv is a missing piece saying what is wrong; the cost table's report row
+is the page being written, not an earlier report's record; a study without a calibration says
+so."""
+from __future__ import annotations
+
+import copy
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from vibroflow.errors import InputError
+from vibroflow.report.data import check_finished, check_method_summary, check_summary
+
+GOOD = {"methods": {
+    "dem": {"probes": {"P1": {"vx": 0.01, "vz": -0.02, "vx_stderr": 0.001, "vz_stderr": None}},
+            "circulation": {"sense": "counterclockwise", "strength": 0.003,
+                            "strength_stderr": 1e-4},
+            "impacts": {"ball_ball_mean_normal_speed": 0.1, "count": 12}, "wall_time_s": 10.0},
+    "eulerian": {"probes": {"P1": {"vx": 0.02, "vz": None}},
+                 "circulation": {"sense": "counterclockwise", "strength": 0.0017,
+                                 "strength_stderr": 8e-5},
+                 "against_dem": {"field_difference_E": 0.68, "circulation_agrees": False,
+                                 "probe_differences_m_s": {"P1": {"dvx": 0.01, "dvz": None}}},
+                 "wall_time_s": 0.3}}}
+
+
+def _with(path: tuple, value) -> dict:
+    s = copy.deepcopy(GOOD)
+    d = s
+    for k in path[:-1]:
+        d = d[k]
+    d[path[-1]] = value
+    return s
+
+
+def test_a_summary_of_numbers_and_nulls_passes():
+    check_summary(Path("summary.json"), copy.deepcopy(GOOD))
+    # a null strength with no verdict is a NaN the study wrote (io.atomic.json_safe)
+    s = _with(("methods", "eulerian", "circulation", "strength"), None)
+    s["methods"]["eulerian"]["against_dem"]["circulation_agrees"] = None
+    check_summary(Path("summary.json"), s)
+
+
+@pytest.mark.parametrize("path, value, field", [
+    (("methods", "eulerian", "probes", "P1", "vx"), "abc",
+     "methods.eulerian.probes.P1.vx is \"abc\", not a number"),
+    (("methods", "dem", "circulation", "strength_stderr"), [1],
+     "methods.dem.circulation.strength_stderr is [1], not a number"),
+    (("methods", "dem", "impacts", "count"), 2.5, "methods.dem.impacts.count is 2.5, not an"),
+    (("methods", "eulerian", "against_dem", "circulation_agrees"), "no",
+     "methods.eulerian.against_dem.circulation_agrees is \"no\", not true or false"),
+    (("methods", "eulerian", "against_dem", "field_difference_E"), True,
+     "methods.eulerian.against_dem.field_difference_E is true, not a number"),
+    (("methods", "eulerian", "circulation", "strength"), None,
+     "methods.eulerian.against_dem.circulation_agrees is false without a strength to judge "
+     "(methods.eulerian.circulation.strength is null)"),
+    (("methods", "dem", "circulation", "strength"), None,
+     "(methods.dem.circulation.strength is null)"),
+])
+def test_a_value_of_the_wrong_type_is_named(path, value, field):
+    with pytest.raises(InputError) as e:
+        check_summary(Path("/s/summary.json"), _with(path, value))
+    assert e.value.message.startswith("/s/summary.json: ") and field in e.value.message
+    assert "\n" not in e.value.message
+
+
+def test_a_method_summarys_blocks_are_checked():
+    check_method_summary(Path("m.json"), {"floor": {"take_off_phase": None,
+                                                    "take_off_phase_batches": [None, 0.1]},
+                                          "continuum": {"probes": {"P1": {
+                                              "shear_rate_1_s": 2.0}}}})
+    for bad, field in (({"floor": {"take_off_phase": "0.1"}}, "floor.take_off_phase"),
+                       ({"floor": {"force_over_weight": [1, "x"]}}, "floor.force_over_weight"),
+                       ({"continuum": {"probes": {"P1": {"shear_rate_1_s": {}}}}},
+                        "continuum.probes.P1.shear_rate_1_s"),
+                       ({"wall_contacts": {"ratio_of_sums": "n/a"}},
+                        "wall_contacts.ratio_of_sums")):
+        with pytest.raises(InputError, match=field.replace(".", r"\.")):
+            check_method_summary(Path("m.json"), bad)
+
+
+def test_a_stage_under_way_is_an_unfinished_study(tmp_path):
+    (tmp_path / "dem").mkdir()
+    (tmp_path / "dem" / "stage.json").write_text("{}")
+    (tmp_path / "report").mkdir()
+    (tmp_path / "report" / "pending.json").write_text("{}")  # the page being written
+    check_finished(tmp_path)
+    (tmp_path / "lagrangian").mkdir()
+    (tmp_path / "lagrangian" / "pending.json").write_text('{"stage": "lagrangian"}')
+    with pytest.raises(InputError, match="lagrangian/pending.json: the study has not finished"):
+        check_finished(tmp_path)
+
+
+def _cli(*args):
+    env = dict(os.environ, NO_COLOR="1")
+    return subprocess.run([sys.executable, "-m", "vibroflow.cli", *map(str, args)],
+                          capture_output=True, text=True, env=env, stdin=subprocess.DEVNULL)
+
+
+def test_vibroflow_report_of_a_corrupt_or_unfinished_study_is_one_line(tmp_path):
+    """Nothing is written: the checks come before the tables, the figures and the page."""
+    cases = {}
+    for name, summary, field in (
+            ("wrong-type", _with(("methods", "dem", "probes", "P1", "vx"), "abc"),
+             "methods.dem.probes.P1.vx"),
+            ("no-strength", _with(("methods", "eulerian", "circulation", "strength"), None),
+             "methods.eulerian.against_dem.circulation_agrees"),
+            ("unfinished", GOOD, "eulerian/pending.json")):
+        d = tmp_path / name
+        d.mkdir()
+        (d / "study.json").write_text(json.dumps({"kind": "vibroflow study"}))
+        (d / "summary.json").write_text(json.dumps(summary))
+        cases[d] = field
+    (tmp_path / "unfinished" / "eulerian").mkdir()
+    (tmp_path / "unfinished" / "eulerian" / "pending.json").write_text("{}")
+    for d, field in cases.items():
+        before = sorted(p.relative_to(d) for p in d.rglob("*"))
+        r = _cli("report", d)
+        assert r.returncode == 2, r.stderr
+        assert r.stderr.startswith("error: ") and r.stderr.count("\n") == 1, r.stderr
+        assert str(d) in r.stderr and field in r.stderr, r.stderr
+        assert sorted(p.relative_to(d) for p in d.rglob("*")) == before
+
+
+def test_an_unreadable_batches_file_is_a_missing_piece(tmp_path):
+    from vibroflow.report.cell_tables import batches_note, csv_table
+
+    run = tmp_path / "eulerian"
+    run.mkdir()
+    (run / "bulk_velocity.csv").write_text("x,z,solid_fraction,vx,vz,samples\n"
+                                           "0,0,0.5,0.01,0.02,10\n0.015,0,0.5,0.03,0.04,10\n")
+    data = SimpleNamespace(out=tmp_path, notes={},
+                           summary={"methods": {"eulerian": {
+                               "bulk_velocity_csv": "eulerian/bulk_velocity.csv"}}},
+                           scenario=SimpleNamespace(analysis=SimpleNamespace(cell_size=0.015)))
+    t = csv_table(data, "eulerian")
+    assert t.batch_vx is None and data.notes == {}  # no file: no batches, nothing wrong
+    (run / "bulk_velocity_batches.csv").write_text("garbage\n1,2\n")
+    t = csv_table(data, "eulerian")
+    assert t.batch_vx is None
+    note = data.notes[batches_note("eulerian")]
+    assert note.startswith(f"{run / 'bulk_velocity_batches.csv'}: unreadable (header garbage")
+    (run / "bulk_velocity_batches.csv").write_text(
+        "batch,x,z,solid_fraction,vx_m_s,vz_m_s,samples\n"
+        "0,0,0,0.5,0.01,0.02,5\n0,0.015,0,0.5,0.03,0.04,5\n"
+        "1,0,0,0.5,0.01,0.02,5\n1,0.015,0,0.5,0.03,0.04,5\n")
+    data.notes.clear()
+    t = csv_table(data, "eulerian")
+    assert t.batch_vx is not None and data.notes == {}
+
+
+def test_the_report_row_is_the_page_being_written():
+    from vibroflow.report.html import _cost
+
+    data = SimpleNamespace(
+        summary={"methods": {"dem": {"wall_time_s": 10.0}}}, continuum_methods=[],
+        stages={"dem": {"wall_time_s": 12.0, "finished": "2026-12-07T12:00:00+0000"},
+                "report": {"wall_time_s": 10.7, "finished": "2026-12-07T12:18:47+0000"}})
+    rows = {r[0].text: r for r in _cost(data)["rows"]}
+    assert [c.value for c in rows["dem"][1:3]] == ["12.0", "10.0"]
+    assert rows["report"][1].text == "n/a" and rows["report"][-1].text == "being written"
+    assert "10.7" not in " ".join(c.text for c in rows["report"])
+
+
+def test_no_calibration_is_said_as_such():
+    from vibroflow.report.html import no_impact_comparison
+
+    data = SimpleNamespace(impacts=object(), calibration=None,
+                           notes={"calibration": "no calibration/calibration.toml in the study"})
+    assert no_impact_comparison(data, None) == ["no calibration/calibration.toml in the study"]
+    data.calibration = object()
+    assert no_impact_comparison(data, None) == ["the calibration has no ball-ball impact "
+                                                "relation"]
