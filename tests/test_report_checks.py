@@ -179,3 +179,34 @@ def test_no_calibration_is_said_as_such():
     data.calibration = object()
     assert no_impact_comparison(data, None) == ["the calibration has no ball-ball impact "
                                                 "relation"]
+
+
+def test_an_impact_of_numerically_zero_speed_is_counted(tmp_path):
+    """Ten ball-ball impacts in the window, one at -1.15e-5 m/s (numerically zero, as a DEM
+    run's dem.h5 holds): all ten counted, that one in the lowest bin [0, 1e-6] m/s, the mean the
+    other nine's sum over ten; an impact outside the window is not counted."""
+    import h5py
+    import numpy as np
+
+    from vibroflow.report.impact_figures import read_distributions
+    from vibroflow.scenario.io import load_scenario
+    from vibroflow.tub.geometry import geometry_of
+
+    sc = load_scenario("tub47-quick")
+    t0 = sc.run.duration - sc.run.average_last
+    speeds = np.array([-1.15e-5, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 5.0])
+    times = np.concatenate([t0 + (np.arange(10) + 0.5) / 10 * sc.run.average_last * 0.9,
+                            [0.5 * t0]])
+    (tmp_path / "dem").mkdir()
+    with h5py.File(tmp_path / "dem" / "dem.h5", "w") as f:
+        f["impacts/time"] = times
+        f["impacts/kind"] = np.zeros(11, np.int64)
+        f["impacts/position_tub"] = np.zeros((11, 3))
+        f["impacts/normal_speed"] = speeds
+    data = SimpleNamespace(out=tmp_path, scenario=sc, geometry=geometry_of(sc))
+    dist, why = read_distributions(data)
+    assert why is None
+    st = dist.stats["ball_ball"]
+    assert st.count == 10
+    assert st.mean == pytest.approx(4.5 / 10, rel=1e-12)
+    assert int(dist.histograms["ball_ball"][:, 0].sum()) == 1

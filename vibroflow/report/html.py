@@ -279,7 +279,8 @@ def _impact_distributions(data: StudyData) -> dict:
             "histograms": s["histograms"] and _img(s["histograms"], "impact-speed histograms"),
             "wall_map": s["wall_map"] and _img(s["wall_map"], "ball-wall impacts along the U"),
             "seconds": f"{s.get('seconds', float('nan')):.3g}",
-            "n_batches": s.get("n_batches", 0)}
+            "n_batches": s.get("n_batches", 0), "below": s.get("below", 0),
+            "lowest_edge": f"{s.get('lowest_edge', float('nan')):.0e}"}
 
 
 def _wall(data: StudyData) -> dict:

@@ -29,6 +29,19 @@ DRAWN_BIN = 25
 COLOURS = {"ball_ball": "C0", "ball_wall": "C3", "ball_partition": "C2", "plane_wall": "C4"}
 
 
+class _AtLeastZero:
+    """dem.h5's normal speeds as impact_distributions reads them (rows by slice), a negative one
+    raised to 0 m/s: an impact whose approach speed is numerically zero (-1e-5 m/s) belongs in
+    the histogram's lowest bin [0, 1e-6] m/s, so that every kind's count is the summary's."""
+
+    def __init__(self, speeds):
+        self.speeds = speeds
+        self.shape = speeds.shape
+
+    def __getitem__(self, rows):
+        return np.maximum(np.asarray(self.speeds[rows], dtype=float), 0.0)
+
+
 def read_distributions(data: StudyData) -> tuple[ImpactDistributions | None, str | None]:
     """The DEM's impacts of the averaging window's whole cycles as distributions, or None and
     why (no dem.h5, no impacts, unreadable)."""
@@ -45,7 +58,7 @@ def read_distributions(data: StudyData) -> tuple[ImpactDistributions | None, str
                               "report them)")
             g = f["impacts"]
             return impact_distributions(
-                g["time"], g["kind"], g["position_tub"], g["normal_speed"],
+                g["time"], g["kind"], g["position_tub"], _AtLeastZero(g["normal_speed"]),
                 t_start=run.duration - run.average_last, t_end=run.duration,
                 frequency=float(data.scenario.motion.frequency), n_batches=int(run.batches),
                 geometry=data.geometry, bin_width=float(data.scenario.analysis.cell_size)), None
@@ -71,8 +84,10 @@ def speed_histograms(dist: ImpactDistributions) -> bytes:
         if keep.size == 0:
             continue
         lo, hi = keep.min(), keep.max() + 1
+        off = int(total[0])  # [0, 1e-6] m/s: counted, off the log axis
         ax.stairs(dens[lo:hi], edges[lo:hi + 1], color=COLOURS[name],
-                  label=f"{label} ({st.count} impacts)")
+                  label=f"{label} ({st.count} impacts"
+                  + (f", {off} of them below {edges[0]:.0e} m/s, not drawn)" if off else ")"))
         for q, ls in ((st.median, "--"), (st.p95, ":")):
             if q >= edges[0]:
                 ax.axvline(q, color=COLOURS[name], ls=ls, lw=1.1)
@@ -157,12 +172,15 @@ def speed_comparisons(data: StudyData) -> list[dict]:
 def impact_distribution_section(data: StudyData) -> dict:
     """What the section shows: the two figures (PNG bytes, None without measured impacts), the
     statistics by kind (SpeedStats, kinds with impacts only), the comparisons
-    (speed_comparisons) and why a piece is missing."""
+    (speed_comparisons), why a piece is missing, and `below`: the impacts in the lowest speed
+    bin [0, lowest_edge] m/s, counted in the statistics but off the histograms' log axis."""
     dist, why = read_distributions(data)
     out = {"why": why, "histograms": None, "wall_map": None, "stats": [],
            "comparisons": speed_comparisons(data)}
     if dist is not None:
         out.update(histograms=speed_histograms(dist), wall_map=wall_map(dist),
                    stats=[(KIND_LABELS[k], s) for k, s in dist.stats.items() if s.count > 0],
-                   seconds=dist.seconds, n_batches=dist.n_batches)
+                   seconds=dist.seconds, n_batches=dist.n_batches,
+                   below=int(sum(int(h[:, 0].sum()) for h in dist.histograms.values())),
+                   lowest_edge=float(SPEED_EDGES_M_S[1]))
     return out
