@@ -210,3 +210,23 @@ def test_an_impact_of_numerically_zero_speed_is_counted(tmp_path):
     assert st.count == 10
     assert st.mean == pytest.approx(4.5 / 10, rel=1e-12)
     assert int(dist.histograms["ball_ball"][:, 0].sum()) == 1
+
+
+def test_kinetic_energy_blocks_cover_every_whole_cycle_and_the_halves_their_own():
+    """47 Hz to 0.3 s: 14 whole cycles, blocks of 5 (about 0.1 s): 0-5, 5-10 and the 4 left,
+    each the mean of its own cycles' value (the cycle's index here); the window [0.1, 0.3) s
+    holds 9 whole cycles, its halves 4 from 0.1 s and 5 from 0.1 + 4/47 s."""
+    import numpy as np
+
+    from vibroflow.report import bed_state
+
+    f = 47.0
+    t = (np.arange(int(0.3 * f * 40)) + 0.5) / (40 * f)
+    e = np.floor(t * f)
+    ct, cm = bed_state.cycle_means(t, e, f)
+    np.testing.assert_allclose(ct, np.array([2.5, 7.5, 12.0]) / f)
+    np.testing.assert_allclose(cm, [2.0, 7.0, 11.5])
+    ke = bed_state.kinetic_energy(t, 0.07 + 0 * t, 0.1, 0.3, f, 4)
+    (a1, z1), (a2, z2) = ke.half_spans
+    assert (a1, z1, a2) == pytest.approx((0.1, 0.1 + 4 / f, 0.1 + 4 / f))
+    assert z2 == pytest.approx(0.1 + 9 / f)

@@ -168,6 +168,7 @@ def wall_friction_plot(path, wf: dict) -> Path:
     a2.plot(s, pr["sliding_fraction"], "k.--", label="sliding fraction")
     a2.axhline(0.0, color="gray", lw=0.5)
     a2.set_xlabel("arc position s along the U from the bottom, + towards +x (m)")
+    a2.set_ylabel("friction ratio F_t / F_n, sliding fraction (1)")
     a2.legend(fontsize=7)
     a2.grid(alpha=0.3)
     fig.suptitle("ball-tub wall contacts at the sampled instants")

@@ -35,7 +35,8 @@ import numpy as np
 from vibroflow.io.pictures import pyplot
 from vibroflow.measure.bulk import CellTable
 from vibroflow.measure.circulation import stream_function
-from vibroflow.measure.stats import batch_means, batches_of_whole_cycles, stderr_of_batches
+from vibroflow.measure.stats import (batch_means, batches_of_whole_cycles,
+                                     cycles_in_window, stderr_of_batches)
 from vibroflow.report.figures import png_bytes
 from vibroflow.tub.motion import TubMotion
 
@@ -132,8 +133,8 @@ def turnover_time(table: CellTable, min_solid_fraction: float) -> Turnover:
 class KineticEnergy:
     """The DEM's kinetic energy: the series (time s, energy J), its block means (cycle_time s
     at each block's middle, cycle_mean J; cycle_means), the window (t_start, t_end s), the
-    window's mean and batch-means standard error (J), the two halves' (mean, stderr) (J) and
-    whether the flow is steady."""
+    window's mean and batch-means standard error (J), the two halves' (mean, stderr) (J),
+    whether the flow is steady, and the halves' whole cycles (start, end s)."""
 
     time: np.ndarray
     energy: np.ndarray
@@ -144,21 +145,27 @@ class KineticEnergy:
     stderr: float
     halves: tuple[tuple[float, float], tuple[float, float]]
     steady: bool
+    half_spans: tuple[tuple[float, float], tuple[float, float]] = ((math.nan,) * 2,) * 2
 
 
 def cycle_means(time, values, frequency: float, block_s: float = BLOCK_S):
     """Means of a series over consecutive blocks of whole vibration cycles, each
-    max(1, round(block_s f)) cycles long, from t = 0: (middle times s, means).  Blocks of several
+    max(1, round(block_s f)) cycles long, from t = 0, the last one the whole cycles left (fewer
+    when they do not fill it): (middle times s, means).  Blocks of several
     cycles because the series is sampled on the solver's clock, not in step with the cycle: one
     cycle's mean aliases (its few samples catch the impacts' peaks or miss them)."""
     per = max(1, int(round(block_s * frequency)))
-    block = np.floor(np.asarray(time) * frequency + 1e-6).astype(np.int64) // per
-    n = int(np.floor(float(np.max(time)) * frequency + 1e-6)) // per
-    keep = (block >= 0) & (block < n)
+    cycle = np.floor(np.asarray(time) * frequency + 1e-6).astype(np.int64)
+    n_cycles = int(np.floor(float(np.max(time)) * frequency + 1e-6))
+    n = -(-n_cycles // per)  # the last block holds the whole cycles left, fewer than per
+    block = cycle // per
+    keep = (cycle >= 0) & (cycle < n_cycles)
     cnt = np.bincount(block[keep], minlength=n)
     tot = np.bincount(block[keep], np.asarray(values, dtype=float)[keep], minlength=n)
     ok = cnt > 0
-    return ((np.arange(n) + 0.5)[ok] * per / frequency, tot[ok] / cnt[ok])
+    start = np.arange(n) * per
+    end = np.minimum(start + per, n_cycles)
+    return (0.5 * (start + end)[ok] / frequency, tot[ok] / cnt[ok])
 
 
 def is_steady(halves) -> bool:
@@ -177,13 +184,14 @@ def kinetic_energy(time, energy, t_start: float, t_end: float, frequency: float,
     mean, se = batch_means(energy, b, n_batches)
     half = max(n_batches // 2, 2)
     mid = t_start + math.floor((t_end - t_start) * frequency / 2 + 1e-6) / frequency
-    halves = []
+    halves, spans = [], []
     for a, z in ((t_start, mid), (mid, t_end)):
         halves.append(batch_means(energy, batches_of_whole_cycles(time, a, z, frequency, half),
                                   half))
+        spans.append((a, a + cycles_in_window(a, z, frequency) / frequency))
     ct, cm = cycle_means(time, energy, frequency)
     return KineticEnergy(time, energy, ct, cm, (t_start, t_end), float(mean), float(se),
-                         tuple(halves), is_steady(halves))
+                         tuple(halves), is_steady(halves), tuple(spans))
 
 
 def dem_kinetic_energy(h5_path, scenario) -> KineticEnergy | None:
@@ -209,13 +217,15 @@ def kinetic_energy_figure(ke: KineticEnergy) -> bytes:
     fig, ax = plt.subplots(figsize=(11, 3.8), layout="constrained")
     ax.plot(ke.time, ke.energy, color="0.75", lw=0.5, label="kinetic energy (lab frame)")
     ax.plot(ke.cycle_time, ke.cycle_mean, "o-", ms=2.5, lw=1.0, color="C0",
-            label="mean over blocks of whole cycles, about 0.1 s")
+            label=f"mean over blocks of whole cycles, about {BLOCK_S:g} s (the last: the "
+            "cycles left)")
     ax.axvspan(*ke.window, color="C2", alpha=0.12, label="averaging window")
-    mid = 0.5 * (ke.window[0] + ke.window[1])
-    for (m, s), (a, z) in zip(ke.halves, ((ke.window[0], mid), (mid, ke.window[1]))):
-        ax.errorbar(0.5 * (a + z), m, yerr=np.nan_to_num(s), fmt="s", color="C3", capsize=4,
-                    ms=6)
-    ax.plot([], [], "s", color="C3", label="half-window means ± standard error")
+    for (m, s), (a, z) in zip(ke.halves, ke.half_spans):
+        # at the middle of the half's own whole cycles, the bar across them
+        ax.errorbar(0.5 * (a + z), m, xerr=0.5 * (z - a), yerr=np.nan_to_num(s), fmt="s",
+                    color="C3", capsize=4, ms=6)
+    ax.plot([], [], "s", color="C3", label="half-window means ± standard error, across "
+            "the half's whole cycles")
     ax.set_xlabel("time since the vibration started (s)")
     ax.set_ylabel("kinetic energy of the balls (J)")
     ax.set_ylim(bottom=0.0)

@@ -149,7 +149,7 @@ def _probes(data: StudyData) -> dict:
     for name in data.methods:
         head += [f"{name} vx (m/s)", f"{name} vz (m/s)"]
         if name != "dem":
-            head += [f"{name} - dem vx", f"{name} - dem vz"]
+            head += [f"{name} - dem vx (m/s)", f"{name} - dem vz (m/s)"]
     rows = []
     for probe, p in data.scenario.analysis.probes.items():
         cells = [_text(f"{probe} ({p.x:g}, {p.z:g})", "l")]
@@ -325,7 +325,23 @@ def _floor(data: StudyData) -> dict:
     return {"img": _img(figures.floor_cycle(have), "floor force over the cycle")
             if have else None, "rows": rows, "missing": [n for n in floors if not floors[n]],
             "feed_head": ["method"] + [f"{r} (W/m²)" for r in REGIONS] + ["whole U (W/m²)"],
-            "feed_rows": _wall_feed_rows(data)}
+            "feed_rows": _wall_feed_rows(data), "feed_without": _without_feed(data)}
+
+
+def _without_feed(data: StudyData) -> list[dict]:
+    """The continua with no wall-feed row, and why: a feed is the granular temperature's
+    balance, so a run without the temperature has none."""
+    out = []
+    for name in data.continuum_methods:
+        own = data.method_summary(name)
+        if isinstance(own.get("wall_feed"), dict):
+            continue
+        opts = (own.get("continuum") or {}).get("options") or {}
+        why = ("it ran without the granular temperature (its option temperature off), and the "
+               "feed is the temperature's balance" if opts.get("temperature") is False else
+               "its summary.json holds no wall_feed block")
+        out.append({"name": name, "why": why})
+    return out
 
 
 def _stress(data: StudyData) -> dict:

@@ -45,7 +45,7 @@ def stress_rows(data: StudyData) -> StressRows:
     mu_s = float(cal.rheology.mu_s) if cal is not None else float("nan")
     n_phases = int(data.scenario.run.phases_per_cycle) if data.scenario is not None else 8
     head = ["method", "dense cells x phases", "median mu", "median p (Pa)",
-            "share at or above mu_s"] + [f"{k}/{n_phases}" for k in range(n_phases)]
+            "share at or above mu_s"] + [f"phase {k}/{n_phases} (fraction of the cycle)" for k in range(n_phases)]
     rows, missing = [], []
     for name in data.methods:
         try:
