@@ -40,10 +40,12 @@ def _method(strength, se, sense, E=None, agrees=None):
     return m
 
 
-def make_sweep(out: Path, points: dict, varied=(FACTOR_KEY,), source="tub47") -> Path:
-    """A sweep folder: points = values -> summary's methods (dict) or an error (str)."""
-    base = load_scenario("tub47", []).model_dump(mode="json")
-    record = {"kind": KIND, "source": source, "varied": list(varied), "fixed_settings": [],
+def make_sweep(out: Path, points: dict, varied=(FACTOR_KEY,), source="tub47",
+               fixed=()) -> Path:
+    """A sweep folder: points = values -> summary's methods (dict), an error (str) or None
+    (not run yet); fixed: the sweep's --set items."""
+    base = load_scenario(source, list(fixed)).model_dump(mode="json")
+    record = {"kind": KIND, "source": source, "varied": list(varied), "fixed_settings": list(fixed),
               "base": {"scenario": base, "settings": {}, "shear_cell": False}, "points": {}}
     for values, what in points.items():
         vals = dict(zip(varied, values))
@@ -53,7 +55,7 @@ def make_sweep(out: Path, points: dict, varied=(FACTOR_KEY,), source="tub47") ->
         record["points"][name] = {"values": vals, "overrides": []}
         if isinstance(what, str):
             (folder / "failed.json").write_text(json.dumps({"error": what}))
-        else:
+        elif what is not None:
             (folder / "summary.json").write_text(json.dumps({"methods": what}))
     write_record(out, record)
     return out
@@ -85,13 +87,13 @@ def test_limit_verdicts_and_failed_point_against_known_answers(sweep):
     from vibroflow.report.sweep_report import write_sweep_report
 
     page = write_sweep_report(sweep).read_text(encoding="utf-8")
-    # tub47.md: 1.5 x the ten seeds' 0.206
-    limit = float(re.search(r'data-limit="([^"]+)"', page).group(1))
-    assert limit == pytest.approx(0.309, abs=1e-12)
+    # 1.5 x tub47's floor at each factor (verdict.ENSEMBLE_FLOORS): 0.130, 0.206, 0.149
+    limits = [float(v) for v in re.findall(r'data-limit="([^"]+)"', page)]
+    assert limits == pytest.approx([0.195, 0.309, 0.2235], abs=1e-12)
     rows = _rows(page)
     low, high = point_name({FACTOR_KEY: 0.5}), point_name({FACTOR_KEY: 1.0})
-    assert "within the DEM&#39;s own scatter; circulation agrees" in rows[(low, "lagrangian")]
-    assert "1.6 × the limit: the flow differs; circulation differs" in rows[(high, "lagrangian")]
+    assert "1.28 x the limit: the flow differs; circulation agrees" in rows[(low, "lagrangian")]
+    assert "1.62 x the limit: the flow differs; circulation differs" in rows[(high, "lagrangian")]
     ratio = re.findall(r'data-value="([^"]+)"', rows[(high, "lagrangian")])
     assert any(float(v) == pytest.approx(0.5 / 0.309) for v in ratio)
     assert ">3.27 ± 0.14<" in rows[(low, "dem")]  # 1e-4 m^2/s
@@ -99,7 +101,7 @@ def test_limit_verdicts_and_failed_point_against_known_answers(sweep):
     assert ">failed<" in failed and "BlowUp: balls &lt;12&gt; &amp; &#39;x&#39; overlap" in failed
     assert "<12>" not in page
     imgs = re.findall(r'src="data:image/png;base64,([^"]+)"', page)
-    assert len(imgs) == 3
+    assert len(imgs) == 6  # strength, sense, E; probes, impacts, wall time
     for b in imgs:
         assert Image.open(io.BytesIO(base64.b64decode(b))).size[0] > 100
     assert "http" not in page.replace("http-equiv", "")  # no external link
@@ -125,8 +127,8 @@ def test_limit_from_the_sweeps_own_seeds(tmp_path):
     tables = [read_csv(SEEDS / f"seed{k}" / "bulk_velocity.csv") for k in (1, 2, 3)]
     pairs = [field_difference(a, b) for a in tables for b in tables if a is not b]
     assert len(pairs) == 6
-    assert lim.E_seed == pytest.approx(np.mean(pairs), rel=1e-12)
-    assert lim.limit == pytest.approx(1.5 * lim.E_seed)
+    assert lim.e_seed == pytest.approx(np.mean(pairs), rel=1e-12)
+    assert lim.limit == pytest.approx(1.5 * lim.e_seed)
     assert "6 ordered pairs of this sweep's 3 seeds" in lim.source
 
 
@@ -136,8 +138,8 @@ def test_no_limit_for_a_changed_case_is_said(tmp_path):
 
     out = make_sweep(tmp_path / "s", {(1.0, 300): {"dem": _method(5e-4, 2e-5, "clockwise")}},
                      varied=(FACTOR_KEY, "fill.count"))
-    (line,) = limits_text(SweepData.read(out))
-    assert line.startswith("No limit on E:") and "changes fill.count" in line
+    ((line, value),) = limits_text(SweepData.read(out))
+    assert value is None and line.startswith("No limit on E at ") and "changes fill.count" in line
 
 
 def _cli(*args):
@@ -155,6 +157,7 @@ def test_report_command_on_a_sweep_and_on_a_corrupt_one(sweep, tmp_path):
     r = _cli("report", bad)
     assert r.returncode == 2 and r.stderr.startswith("error: ") and r.stderr.count("\n") == 1
     assert "corrupt sweep record" in r.stderr and not (bad / "report.html").exists()
+    assert "--out" not in r.stderr  # `vibroflow report` takes none
 
 
 @contextlib.contextmanager
@@ -214,7 +217,7 @@ def test_sweep_report_renders_in_headless_chromium(sweep):
     from vibroflow.report.sweep_report import write_sweep_report
 
     with chromium(write_sweep_report(sweep), width=900) as driver:
-        check_rendered(driver, 3, {point_name({FACTOR_KEY: 1.5}): ERROR})
+        check_rendered(driver, 6, {point_name({FACTOR_KEY: 1.5}): ERROR})
 
 
 def _cells(page: str) -> list[list[str]]:
@@ -302,7 +305,7 @@ def test_seeded_sweep_report_shows_pooled_rows_and_their_limit(seeded):
     ratio = 0.25 / lim.limit
     assert done[("1", "lagrangian")][7] == f"{ratio:.2f}"
     assert "circulation agrees" in done[("1", "lagrangian")][8]
-    assert "no limit to judge E by" in done[("0.5", "lagrangian")][8]
+    assert "no limit known for this case: not judged" in done[("0.5", "lagrangian")][8]
     (failed,) = [r for r in rows if len(r) <= 5]
     assert failed[1:4] == ["1", "-", "failed"] and failed[4].startswith("run.seed = 3: BlowUp")
     assert "<12>" not in page
@@ -313,4 +316,52 @@ def test_seeded_sweep_report_renders_in_headless_chromium(seeded):
 
     point = point_name({FACTOR_KEY: 1.0, "run.seed": 3})
     with chromium(write_sweep_report(seeded), width=900) as driver:
-        check_rendered(driver, 3, {point: ERROR})
+        check_rendered(driver, 6, {point: ERROR})
+
+
+def test_a_changed_case_is_judged_by_the_study_pages_rule(tmp_path):
+    """verdict.preset_limit on both pages: tub47-quick at factor 1.0 as it is has the limit
+    1.5 x 0.166 = 0.249 (docs/validation.md section 16); with run.duration changed it has none
+    and the reason names the setting; at 0.5 no figure is known."""
+    from vibroflow.report.sweep_data import SweepData
+
+    methods = {"dem": _method(5e-4, 2e-5, "counterclockwise"),
+               "lagrangian": _method(4e-4, 2e-5, "counterclockwise", 0.2, True)}
+    same = SweepData.read(make_sweep(tmp_path / "a", {(0.5,): methods, (1.0,): methods},
+                                     source="tub47-quick"))
+    assert same.limits[(1.0,)].limit == pytest.approx(0.249, abs=1e-12)
+    assert "no ensemble figure" in same.no_limit[(0.5,)]
+    changed = SweepData.read(make_sweep(tmp_path / "b", {(1.0,): methods},
+                                        source="tub47-quick",
+                                        fixed=["run.duration=1.2"]))
+    assert not changed.limits and "changes run.duration" in changed.no_limit[(1.0,)]
+
+
+def test_impacts_carry_their_errors_and_wall_times_three_figures(tmp_path):
+    from vibroflow.report.sweep_report import write_sweep_report
+
+    m = _method(5e-4, 2e-5, "counterclockwise")
+    m["impacts"].update(ball_ball_mean_normal_speed_stderr=0.0123,
+                        ball_wall_mean_normal_speed_stderr=0.004)
+    m["wall_time_s"] = 0.4644
+    lag = _method(4e-4, 2e-5, "counterclockwise", 0.2, True)
+    lag["wall_time_s"] = 12.34
+    page = write_sweep_report(make_sweep(tmp_path / "s", {(1.0,): {"dem": m,
+                                                                    "lagrangian": lag}}))
+    rows = {r[1]: r for r in _cells(page.read_text(encoding="utf-8"))}
+    assert rows["dem"][8] == "0.100 ± 0.012 / 0.2000 ± 0.0040"
+    assert rows["lagrangian"][8] == "0.100 / 0.200"  # no error in its summary
+    assert (rows["dem"][9], rows["lagrangian"][9]) == ("0.464", "12.3")
+
+
+def test_unfinished_points_are_explained_by_their_status(tmp_path):
+    """A pending point is 'not run yet' (it has no failed.json); a failed one names its
+    failed.json; a sweep without sweep.csv does not send the reader there."""
+    from vibroflow.report.sweep_report import write_sweep_report
+
+    out = make_sweep(tmp_path / "s", {(0.5,): ERROR, (1.0,): None})
+    page = " ".join(write_sweep_report(out).read_text(encoding="utf-8").split())
+    pending, failed = point_name({FACTOR_KEY: 1.0}), point_name({FACTOR_KEY: 0.5})
+    assert f"<b>{pending}</b>: pending: not run yet</li>" in page
+    assert f"(points/{failed}/failed.json holds the error)" in page
+    assert page.count("failed.json") == 1 and "sweep.csv" not in page

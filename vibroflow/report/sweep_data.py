@@ -8,9 +8,9 @@ The limit is 1.5 x the DEM's seed-to-seed E (tub47.md "Judging a comparison"), t
 - from the sweep's own seeds when it varies `run.seed`: at each amplitude (and other varied
   value) the mean E over every ordered pair of the DEM runs that differ only in their seed
   (vibroflow.analysis.compare.seed_scatter, with its jackknife error from three seeds on);
-- else from tub47.md's ensemble figure, when the sweep is of the preset that figure belongs to
-  with no scenario field of its own changed (only the amplitude factor and the continuum
-  options): ten seeds of tub47 at factor 1.0 (docs/decisions/e-limit-seeds.md);
+- else by the study page's own rule (vibroflow.report.verdict.preset_limit) on each point's
+  scenario: the ensemble figure of its case at its amplitude factor, when the point changes no
+  setting of the flow from that preset;
 - else it is unknown, and the page says why.
 """
 from __future__ import annotations
@@ -20,39 +20,23 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from vibroflow.analysis.compare import FIELD_FACTOR, seed_scatter
+import json
+
+from vibroflow.analysis.compare import seed_scatter
 from vibroflow.errors import InputError
 from vibroflow.measure.bulk import read_csv
 from vibroflow.report.sweep_pool import SEED_KEY, pool_seeds
+from vibroflow.report.verdict import ELimit, preset_limit
+from vibroflow.scenario.io import parse_scenario
 from vibroflow.study.methods import METHODS
-from vibroflow.study.pipeline import split_settings
 from vibroflow.study.sweep_folder import dir_lock, point_dir, read_record
-from vibroflow.study.sweep_points import FACTOR_KEY
 from vibroflow.study.sweep_table import sweep_rows
 
 
-@dataclass(frozen=True)
-class ELimit:
-    """The fields-agree limit on E (-): FIELD_FACTOR x the DEM's seed-to-seed E (E_seed, with
-    its standard error when known) and where that floor comes from."""
-
-    E_seed: float
-    stderr: float | None
-    source: str
-
-    @property
-    def limit(self) -> float:
-        return FIELD_FACTOR * self.E_seed
-
-
-#: tub47.md's ensemble floors by preset: the mean pairwise E of the DEM over fill seeds
-ENSEMBLE = {
-    "tub47": ELimit(0.206, 0.026, "tub47.md: mean E over the 90 ordered pairs of ten fill seeds "
-                                  "of tub47 at amplitude factor 1.0 "
-                                  "(docs/decisions/e-limit-seeds.md)"),
-    "tub47-quick": ELimit(0.166, None, "two fill seeds of tub47-quick at amplitude factor 1.0 "
-                                       "(docs/validation.md)"),
-}
+#: `vibroflow report`'s advice for a sweep.json it cannot read (it takes no --out)
+REPORT_ADVICE = ("no sweep report can be written from it; each point's folder is a study "
+                 "of its own (vibroflow report DIR/points/<point>)",
+                 "give a sweep folder (vibroflow sweep --out DIR)")
 
 
 @dataclass
@@ -62,15 +46,15 @@ class SweepData:
     rows: vibroflow.study.sweep_table's rows, sorted by the varied values; pooled: the rows
     pooled over run.seed (vibroflow.report.sweep_pool; the rows themselves, each with n_seeds
     1, when the sweep keeps one seed); limits: the key of a row's group (its varied values
-    without run.seed, `group_key`) -> ELimit, or one ELimit for every group under None;
-    no_limit: why there is none (when limits is empty)."""
+    without run.seed, `group_key`) -> ELimit; no_limit: the same keys -> why a group has
+    none."""
 
     out: Path
     record: dict[str, Any]
     varied: list[str]
     rows: list[dict[str, Any]]
-    limits: dict[tuple | None, ELimit]
-    no_limit: str | None
+    limits: dict[tuple, ELimit]
+    no_limit: dict[tuple, str]
     pooled: list[dict[str, Any]]
 
     @classmethod
@@ -84,7 +68,7 @@ class SweepData:
         if not (out / "sweep.json").is_file():
             raise InputError(f"DIR = {str(out)!r}: not a sweep folder (no sweep.json)")
         with dir_lock(out):
-            record = read_record(out)
+            record = read_record(out, REPORT_ADVICE)
             assert record is not None  # sweep.json exists, read_record raised otherwise
             varied = list(record["varied"])
             rows = sweep_rows(out, record["points"], varied)
@@ -93,8 +77,6 @@ class SweepData:
                    no_limit=why, pooled=pool_seeds(rows, varied))
 
     def limit_of(self, row: dict[str, Any]) -> ELimit | None:
-        if None in self.limits:
-            return self.limits[None]
         return self.limits.get(group_key(row, self.varied))
 
     @property
@@ -118,22 +100,33 @@ def group_key(row: dict[str, Any], varied: list[str]) -> tuple:
     return tuple(row.get(k) for k in varied if k != SEED_KEY)
 
 
-def e_limits(out: Path, record: dict, rows: list[dict]) -> tuple[dict, str | None]:
-    """(limits, why none): see the module's docstring."""
+def e_limits(out: Path, record: dict, rows: list[dict]) -> tuple[dict, dict]:
+    """(limits, why none) by group: see the module's docstring."""
     varied = list(record["varied"])
     if SEED_KEY in varied:
         return _measured(out, record, rows)
-    source = str(record.get("source", ""))
-    scenario_sets, _ = split_settings(record.get("fixed_settings") or [])
-    own = [k for k in varied if k != FACTOR_KEY and k.split(".")[0] not in METHODS]
-    if source not in ENSEMBLE:
-        return {}, (f"the DEM's seed-to-seed E of {source!r} is unknown: sweep run.seed "
-                    "(--vary run.seed=1,2,3) to measure it")
-    if scenario_sets or own:
-        changed = ", ".join([s.partition("=")[0] for s in scenario_sets] + own)
-        return {}, (f"tub47.md's seed-to-seed E belongs to {source} as it is, and this sweep "
-                    f"changes {changed}: sweep run.seed (--vary run.seed=1,2,3) to measure it")
-    return {None: ENSEMBLE[source]}, None
+    limits, why = {}, {}
+    for r in rows:
+        key = group_key(r, varied)
+        if key in limits or key in why:
+            continue
+        try:
+            lim, reason = preset_limit(point_scenario(record, r))
+        except InputError as exc:
+            lim, reason = None, f"its scenario does not load ({exc.message})"
+        if lim is None:
+            why[key] = str(reason)
+        else:
+            limits[key] = lim
+    return limits, why
+
+
+def point_scenario(record: dict, row: dict[str, Any]):
+    """A point's scenario: the sweep's base with the row's varied scenario fields (the base
+    holds the fixed settings and leaves the varied keys out)."""
+    sets = [f"{k}={json.dumps(row.get(k))}" for k in record["varied"]
+            if k.split(".")[0] not in METHODS]
+    return parse_scenario(record["base"]["scenario"], sets)
 
 
 def _measured(out: Path, record: dict, rows: list[dict]) -> tuple[dict, str | None]:
@@ -146,16 +139,18 @@ def _measured(out: Path, record: dict, rows: list[dict]) -> tuple[dict, str | No
             path = point_dir(out, r["point"]) / "dem" / "bulk_velocity.csv"
             if path.is_file():
                 tables[group_key(r, varied)].append(read_csv(path, cell_size=cell))
-    limits = {}
-    for key, ts in tables.items():
-        if len(ts) >= 2:
+    limits, why = {}, {}
+    for r in rows:
+        key = group_key(r, varied)
+        ts = tables.get(key, [])
+        if len(ts) >= 2 and key not in limits:
             sc = seed_scatter(ts, phi)
-            limits[key] = ELimit(sc.mean, sc.stderr,
+            limits[key] = ELimit(sc.mean, sc.stderr, len(ts),
                                  f"measured: mean E over the {len(sc.pairs)} ordered pairs of "
                                  f"this sweep's {len(ts)} seeds")
-    if not limits:
-        return {}, "fewer than two finished seeds at every point: no seed-to-seed E"
-    return limits, None
+        elif len(ts) < 2:
+            why[key] = f"fewer than two finished DEM seeds here ({len(ts)})"
+    return limits, why
 
 
 def point_report(out: Path, name: str) -> str | None:

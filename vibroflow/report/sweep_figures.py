@@ -17,6 +17,8 @@ from vibroflow.report.figures import png_bytes
 from vibroflow.report.sweep_data import SweepData, group_key
 from vibroflow.report.sweep_pool import SENSES
 from vibroflow.io.pictures import pyplot
+from vibroflow.study.sweep_plots import NAMES as PLOT_NAMES
+from vibroflow.study.sweep_plots import draw as draw_plots
 from vibroflow.study.sweep_points import FACTOR_KEY
 
 XLABEL = "amplitude factor (-)"
@@ -49,8 +51,9 @@ def _style(data: SweepData, key: tuple) -> dict[str, Any]:
                 marker=_MARKERS[ci % len(_MARKERS)], label=label)
 
 
-def _unfinished(ax, data: SweepData) -> None:
-    """A red cross on the x axis at the factor of every point that did not finish."""
+def _unfinished(ax, data: SweepData, legend: bool = True) -> None:
+    """A red cross on the x axis at the factor of every point that did not finish (in the
+    legend too, unless `legend` is False)."""
     others = [k for k in data.varied if k != FACTOR_KEY]
     seen: set[str] = set()
     for r in data.failed:
@@ -59,7 +62,7 @@ def _unfinished(ax, data: SweepData) -> None:
             " (see the table)"
         ax.plot([r[FACTOR_KEY]], [0.0], "x", color="#b42318", ms=11, mew=2.5, clip_on=False,
                 transform=ax.get_xaxis_transform(), zorder=5,
-                label=None if label in seen else label)
+                label=None if label in seen or not legend else label)
         seen.add(label)
 
 
@@ -102,11 +105,9 @@ def sense_figure(data: SweepData) -> bytes:
     plt = pyplot()
     fig, ax = _axes(plt, "circulation sense (tub frame, x right, z up)", "sense")
     series = _series(data)
-    factors = sorted({r[FACTOR_KEY] for r in data.rows})
-    step = min((b - a for a, b in zip(factors, factors[1:])), default=1.0)
-    n = max(len(series), 1)
-    for i, (key, rows) in enumerate(series.items()):
-        dx = (i - (n - 1) / 2) * 0.5 * step / n
+    shifts = sense_offsets(data)
+    for key, rows in series.items():
+        dx = shifts[_style(data, key)["label"]]
         ax.plot([r[FACTOR_KEY] + dx for r in rows],
                 [_sense_y(r) for r in rows], ms=7,
                 **{**_style(data, key), "ls": "none"})
@@ -116,10 +117,21 @@ def sense_figure(data: SweepData) -> bytes:
     return _finish(fig, ax)
 
 
+def sense_offsets(data: SweepData) -> dict[str, float]:
+    """Each line's shift off its amplitude factor in the sense figure, by its legend label:
+    the lines side by side within half the factors' spacing, the DEM's first."""
+    series = _series(data)
+    factors = sorted({r[FACTOR_KEY] for r in data.rows})
+    step = min((b - a for a, b in zip(factors, factors[1:])), default=1.0)
+    n = max(len(series), 1)
+    return {_style(data, key)["label"]: (i - (n - 1) / 2) * 0.5 * step / n
+            for i, key in enumerate(series)}
+
+
 def e_figure(data: SweepData) -> bytes:
     """Each continuum's E against the DEM (over seeds: the mean with its seed-to-seed standard
-    error); the fields-agree limit as a line (one value) or a step per group (measured on
-    seeds: its standard error as a band)."""
+    error); the fields-agree limit as a bar at each factor that has one (with its standard
+    error where known)."""
     plt = pyplot()
     fig, ax = _axes(plt, "field difference E against the DEM (tub47.md)" +
                     (", mean over seeds ± standard error" if data.seeds_pooled else ""), "E (-)")
@@ -129,23 +141,35 @@ def e_figure(data: SweepData) -> bytes:
                     [_scaled(r.get("E_against_dem"), 1.0) for r in rows],
                     yerr=[_scaled(r.get("E_against_dem_stderr"), 1.0, 0.0) for r in rows],
                     ms=5, capsize=3, **_style(data, key))
-    if None in data.limits:
-        lim = data.limits[None]
-        ax.axhline(lim.limit, color="k", ls="--", lw=1.2,
-                   label=f"fields-agree limit {lim.limit:.3f} (1.5 × seed-to-seed E)")
-    else:
-        done = False
-        for key, lim in sorted(data.limits.items(), key=lambda kv: str(kv[0])):
-            xs = sorted({r[FACTOR_KEY] for r in data.rows if group_key(r, data.varied) == key})
-            se = 1.5 * (lim.stderr or 0.0)
-            ax.errorbar(xs, [lim.limit] * len(xs), yerr=[se] * len(xs), color="k", ls="none",
-                        marker="_", ms=18, capsize=4,
-                        label=None if done else "fields-agree limit (1.5 × seed-to-seed E "
-                                                "of the sweep's seeds)")
-            done = True
+    done = False
+    for key, lim in sorted(data.limits.items(), key=lambda kv: str(kv[0])):
+        xs = sorted({r[FACTOR_KEY] for r in data.rows if group_key(r, data.varied) == key})
+        se = 1.5 * (lim.stderr or 0.0)
+        ax.errorbar(xs, [lim.limit] * len(xs), yerr=[se] * len(xs), color="k", ls="none",
+                    marker="_", ms=18, capsize=4,
+                    label=None if done else ("fields-agree limit (1.5 × seed-to-seed E"
+                                             + (" of the sweep's seeds)" if data.seeds_pooled
+                                                else ")")))
+        done = True
     ax.set_ylim(bottom=0.0)
     _unfinished(ax, data)
     return _finish(fig, ax)
+
+
+def table_plots(data: SweepData) -> dict[str, bytes]:
+    """The sweep's probes, impacts and wall-time figures (vibroflow.study.sweep_plots, the
+    files of plots/) drawn again from the rows of the page's table, with the red crosses of
+    the unfinished points: the page never shows a plot older than its table."""
+    figs = draw_plots(data.rows, data.varied)
+    out = {}
+    for name in PLOT_NAMES[0], PLOT_NAMES[2], PLOT_NAMES[3]:
+        fig = figs.pop(name)
+        for ax in fig.axes:
+            _unfinished(ax, data, legend=False)
+        out[name] = png_bytes(fig)
+    for fig in figs.values():
+        pyplot().close(fig)
+    return out
 
 
 def _sense_y(row: dict) -> float:

@@ -11,7 +11,8 @@ the mean over its seeds with standard errors:
   with its seed-to-seed standard error s / sqrt(n);
 - the sense: the seeds' common sense, or "mixed" with the count of each; `sense_mean` the mean
   of +1 (counterclockwise), 0, -1 (clockwise) over the seeds;
-- impact speeds and wall time: means over the seeds.
+- impact speeds: the mean over the seeds with the larger of the two errors, as the strength's;
+- wall time: the mean over the seeds.
 
 A row that did not finish stays as it is (one per point), so that each failed seed is seen.
 """
@@ -25,7 +26,7 @@ SEED_KEY = "run.seed"
 #: y of each circulation sense (tub frame, x right, z up)
 SENSES = {"counterclockwise": 1.0, "none": 0.0, "clockwise": -1.0}
 _SHORT = {"counterclockwise": "ccw", "clockwise": "cw", "none": "none"}
-_MEANS = ("impact_ball_ball", "impact_ball_wall", "wall_time_s")
+_IMPACTS = ("impact_ball_ball", "impact_ball_wall")
 
 
 def mean_stderr(values: list[float]) -> tuple[float | None, float | None]:
@@ -68,11 +69,7 @@ def _agrees(values: list[bool | None]) -> bool | None:
 def pool_group(rows: list[dict[str, Any]], keep: dict[str, Any]) -> dict[str, Any]:
     """One pooled row from the finished rows of one method at one group (`keep`: the row's
     varied values without the seed, its method)."""
-    strength = [r["circulation_strength"] for r in rows
-                if r.get("circulation_strength") is not None]
-    s_mean, s_seeds = mean_stderr(strength)
-    s_batch = combined_batch_stderr([r.get("circulation_strength_stderr") for r in rows
-                                     if r.get("circulation_strength") is not None])
+    s_mean, s_seeds, s_batch = _pooled(rows, "circulation_strength")
     shown = [e for e in (s_seeds, s_batch) if e is not None]
     E_mean, E_se = mean_stderr([r["E_against_dem"] for r in rows
                                 if r.get("E_against_dem") is not None])
@@ -90,9 +87,21 @@ def pool_group(rows: list[dict[str, Any]], keep: dict[str, Any]) -> dict[str, An
            "E_against_dem": E_mean, "E_against_dem_stderr": E_se,
            "n_E": sum(r.get("E_against_dem") is not None for r in rows),
            "circulation_agrees": _agrees([r.get("circulation_agrees") for r in rows])}
-    for k in _MEANS:
-        row[k] = mean_stderr([r[k] for r in rows if r.get(k) is not None])[0]
+    for k in _IMPACTS:
+        mean, se_seeds, se_batch = _pooled(rows, k)
+        errors = [e for e in (se_seeds, se_batch) if e is not None]
+        row[k], row[k + "_stderr"] = mean, max(errors) if errors else None
+    row["wall_time_s"] = mean_stderr([r["wall_time_s"] for r in rows
+                                      if r.get("wall_time_s") is not None])[0]
     return row
+
+
+def _pooled(rows: list[dict[str, Any]], key: str) -> tuple[float | None, ...]:
+    """(mean over the seeds, seed-to-seed error, the runs' batch-means errors combined) of a
+    column with its `_stderr` column."""
+    have = [r for r in rows if r.get(key) is not None]
+    mean, se_seeds = mean_stderr([r[key] for r in have])
+    return mean, se_seeds, combined_batch_stderr([r.get(key + "_stderr") for r in have])
 
 
 def pool_seeds(rows: list[dict[str, Any]], varied: list[str]) -> list[dict[str, Any]]:

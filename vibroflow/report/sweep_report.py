@@ -15,6 +15,7 @@ carries its full value in `data-value` (the text shows it rounded), like the stu
 """
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,10 +28,12 @@ from vibroflow.io.atomic import write_text_atomic
 from vibroflow.report.html import data_uri, environment
 from vibroflow.report.numbers import plus_minus
 from vibroflow.report.page_style import page_css
-from vibroflow.report.sweep_data import ELimit, SweepData, created, describe, point_report
-from vibroflow.report.sweep_figures import e_figure, sense_figure, strength_figure
-from vibroflow.study.sweep_folder import PLOTS
-from vibroflow.study.sweep_plots import NAMES as PLOT_NAMES
+from vibroflow.report.sweep_data import SweepData, created, describe, point_report
+from vibroflow.report.verdict import ELimit
+from vibroflow.report.verdict import verdict as e_verdict
+from vibroflow.report.sweep_figures import (e_figure, sense_figure, sense_offsets,
+                                            strength_figure, table_plots)
+from vibroflow.study.sweep_folder import TABLE_FILE
 from vibroflow.study.sweep_points import FACTOR_KEY
 
 REPORT_NAME = "report.html"
@@ -69,7 +72,7 @@ COLUMNS = (
     ("E vs DEM", "(-)", 6),
     ("E / limit", "(-)", 6),
     ("verdict", "", 22),
-    ("impact b-b / b-w", "(m/s)", 9),
+    ("impact b-b / b-w", "(m/s)", 12),
     ("wall time", "(s)", 6),
 )
 #: the share of the width of a varied value's column
@@ -103,7 +106,8 @@ def _header(key: str) -> tuple[str, str]:
 
 
 def verdict(row: dict[str, Any], lim: ELimit | None) -> tuple[str, str]:
-    """(words, class) for a continuum's row: E against the limit, then the circulation."""
+    """(words, class) for a continuum's row: E against the limit in the study page's words
+    (vibroflow.report.verdict.verdict), then the circulation."""
     if row["method"] == "dem":
         return "the reference", ""
     E = row.get("E_against_dem")
@@ -111,12 +115,10 @@ def verdict(row: dict[str, Any], lim: ELimit | None) -> tuple[str, str]:
     circ = {True: "circulation agrees", False: "circulation differs"}.get(agrees, "")
     if E is None:
         return ("E not computed" + (f"; {circ}" if circ else "")), "note"
-    if lim is None:
-        return ("no limit to judge E by" + (f"; {circ}" if circ else "")), "note"
-    ratio = E / lim.limit
-    words = ("within the DEM's own scatter" if ratio <= 1.0
-             else f"{ratio:.1f} × the limit: the flow differs")
-    ok = ratio <= 1.0 and agrees is not False
+    words, cls = e_verdict(E, lim.limit if lim is not None else None)
+    if not cls:
+        return words + (f"; {circ}" if circ else ""), "note"
+    ok = cls == "ok" and agrees is not False
     return words + (f"; {circ}" if circ else ""), "ok" if ok else "bad"
 
 
@@ -130,6 +132,22 @@ def _strength(r: dict[str, Any]) -> Cell:
              (("seeds", r.get("circulation_strength_stderr_seeds")),
               ("batch", r.get("circulation_strength_stderr_batch"))) if e is not None]
     return Cell(f"{cell.text} ({', '.join(parts)})", value=cell.value)
+
+
+def _impacts(r: dict[str, Any]) -> Cell:
+    """Ball-ball / ball-wall mean normal impact speeds (m/s), each ± its standard error."""
+    text = " / ".join(plus_minus(r[k], r.get(k + "_stderr"), ".3f") if r.get(k) is not None
+                      else "n/a" for k in ("impact_ball_ball", "impact_ball_wall"))
+    v = r.get("impact_ball_ball")
+    return Cell(text, value="nan" if v is None else repr(float(v)))
+
+
+def _wall_time(t) -> Cell:
+    """A wall time (s) to three significant figures (whole seconds from 1000 s on)."""
+    if t is None:
+        return Cell("n/a", value="nan")
+    decimals = max(0, 2 - math.floor(math.log10(abs(t)))) if t else 0
+    return Cell(f"{t:.{decimals}f}", value=repr(float(t)))
 
 
 def _E(r: dict[str, Any]) -> Cell:
@@ -172,16 +190,13 @@ def table_rows(data: SweepData) -> list[dict[str, Any]]:
         lim = data.limit_of(r)
         E = r.get("E_against_dem")
         words, vcls = verdict(r, lim)
-        bb, bw = r.get("impact_ball_ball"), r.get("impact_ball_wall")
         cells = [*vals, Cell(r["method"], "l"), Cell(r["status"], "l"),
                  Cell(str(r.get("circulation_sense") or "n/a"), "l"),
                  _strength(r), _E(r),
                  (_num(E / lim.limit, ".2f") if E is not None and lim is not None
                   else Cell("-" if r["method"] == "dem" else "n/a")),
                  Cell(words, f"l {vcls}".strip()),
-                 Cell(f"{'n/a' if bb is None else format(bb, '.3f')} / "
-                      f"{'n/a' if bw is None else format(bw, '.3f')}"),
-                 _num(r.get("wall_time_s"), ".1f")]
+                 _impacts(r), _wall_time(r.get("wall_time_s"))]
         out.append({"cells": cells, "cls": "", "point": r["point"], "status": "done",
                     "link": link})
     return out
@@ -191,18 +206,29 @@ def _img(payload: bytes) -> Markup:
     return Markup(data_uri(payload, "image/png"))
 
 
-def limits_text(data: SweepData) -> list[str]:
-    """One line per limit: its value, the floor it is 1.5 x and where that comes from."""
-    if not data.limits:
-        return [f"No limit on E: {data.no_limit}."]
+def limits_text(data: SweepData) -> list[tuple[str, float | None]]:
+    """(line, limit or None) per group of points (varied values without run.seed): its limit,
+    the floor it is 1.5 x and where that comes from, or why it has none."""
     lines = []
-    for key, lim in sorted(data.limits.items(), key=lambda kv: str(kv[0])):
-        at = ("" if key is None else
-              " at " + ", ".join(f"{k} = {v}" for k, v in zip(data.shown, key)))
+    keys = sorted({*data.limits, *data.no_limit}, key=_order)
+    for key in keys:
+        at = ", ".join(f"{k} = {v:g}" if isinstance(v, float) else f"{k} = {v}"
+                       for k, v in zip(data.shown, key))
+        lim = data.limits.get(key)
+        if lim is None:
+            lines.append((f"No limit on E at {at}: {data.no_limit[key]}.", None))
+            continue
         se = "" if lim.stderr is None else f" ± {lim.stderr:.3f}"
-        lines.append(f"Fields agree when E ≤ {lim.limit:.3f}{at}: 1.5 × the DEM's "
-                     f"seed-to-seed E {lim.E_seed:.3f}{se} ({lim.source}).")
+        caveat = f"; {lim.caveat}" if lim.caveat else ""
+        lines.append((f"Fields agree at {at} when E ≤ {lim.limit:.3f}: 1.5 × the DEM's "
+                      f"seed-to-seed E {lim.e_seed:.3f}{se} ({lim.source}{caveat}).",
+                      lim.limit))
     return lines
+
+
+def _order(key: tuple) -> tuple:
+    return tuple((0, v, "") if isinstance(v, (int, float)) and not isinstance(v, bool)
+                 else (1, 0, str(v)) for v in key)
 
 
 def point_links(data: SweepData) -> list[tuple[str, str]]:
@@ -217,10 +243,7 @@ def point_links(data: SweepData) -> list[tuple[str, str]]:
 
 def render(data: SweepData) -> str:
     """The page's HTML text."""
-    plots = []
-    for name in PLOT_NAMES[0], PLOT_NAMES[2], PLOT_NAMES[3]:
-        path = data.out / PLOTS / name
-        plots.append({"name": name, "src": _img(path.read_bytes()) if path.is_file() else None})
+    plots = [{"name": name, "src": _img(png)} for name, png in table_plots(data).items()]
     head = ([(*_header(k), VARIED_SHARE) for k in data.shown]
             + ([SEEDS_COLUMN] if data.seeds_pooled else [])
             + [(t, u, w) for t, u, w in COLUMNS])
@@ -234,10 +257,11 @@ def render(data: SweepData) -> str:
         written=time.strftime("%Y-%m-%d %H:%M:%S %z"), updated=created(data.record),
         describe=describe(data.record), counts=sorted(counts.items()),
         strength=_img(strength_figure(data)), sense=_img(sense_figure(data)),
-        E=_img(e_figure(data)), limits=limits_text(data), limit_values=sorted(
-            {lim.limit for lim in data.limits.values()}),
+        E=_img(e_figure(data)), limits=limits_text(data),
         head=head, n_varied=len(head) - len(COLUMNS), rows=table_rows(data),
         links=point_links(data), pooled=data.seeds_pooled,
+        sense_shifts=sorted(sense_offsets(data).items(), key=lambda kv: kv[1]),
+        csv=(data.out / TABLE_FILE).is_file(),
         unfinished=[r for r in data.rows if r["status"] != "done"], plots=plots)
 
 

@@ -8,6 +8,12 @@ ordered pair, jackknife error), and taken otherwise from the ensemble figure mea
 case (ENSEMBLE_FLOORS, the tables of docs/validation.md); the page says which.  With seeds, a
 continuum's E is its mean against every seed (compare.difference_to_seeds), so that E and its
 floor come from the same ensemble.
+
+An ensemble figure judges only the case it was measured on (preset_limit, the one rule of the
+study page and the sweep page): a scenario that changes a setting of the flow from its preset
+(the window, the bed, the tub) is not judged, because the seeds' E is set by how many of the
+roll's swings the window averages and by the bed (docs/decisions/e-limit-seeds.md "Why"), and
+a figure of another case would call a flow within its own scatter "differs".
 """
 from __future__ import annotations
 
@@ -42,14 +48,12 @@ SETTLED_SEEDS = 7
 @dataclass(frozen=True)
 class ELimit:
     """The DEM's seed-to-seed E (-), its standard error (None when unknown), the seeds it
-    rests on, where it comes from (words), and the scenario's settings that differ from the
-    case's preset the figure was measured on."""
+    rests on and where it comes from (words)."""
 
     e_seed: float
     stderr: float | None
     seeds: int
     source: str
-    differs: tuple[str, ...] = ()
 
     @property
     def limit(self) -> float:
@@ -57,14 +61,10 @@ class ELimit:
 
     @property
     def caveat(self) -> str:
-        out = []
         if self.seeds < SETTLED_SEEDS:
-            out.append(f"it rests on {self.seeds} seeds: likely low (the floor settles from "
-                       f"{SETTLED_SEEDS} seeds on)")
-        if self.differs:
-            shown = ", ".join(self.differs[:6]) + (", ..." if len(self.differs) > 6 else "")
-            out.append(f"measured on the preset, which this scenario changes ({shown})")
-        return "; ".join(out)
+            return (f"it rests on {self.seeds} seeds: likely low (the floor settles from "
+                    f"{SETTLED_SEEDS} seeds on)")
+        return ""
 
 
 def _flat(d: dict, prefix: str = "") -> dict:
@@ -97,6 +97,24 @@ def ensemble_limit(case: str, amplitude_factor: float) -> ELimit | None:
             return ELimit(e, se, n, f"ensemble figure of {case} at amplitude factor "
                           f"{amplitude_factor:g}, {where}")
     return None
+
+
+def preset_limit(scenario) -> tuple[ELimit | None, str | None]:
+    """(the ensemble limit a one-seed scenario is judged by, None; or None, why there is none):
+    the figure of its case at its amplitude factor, and only when the scenario changes no
+    setting of the flow from that preset (the module's docstring says why)."""
+    case, factor = scenario.case, float(scenario.motion.amplitude_factor)
+    lim = ensemble_limit(case, factor)
+    if lim is None:
+        return None, (f"no ensemble figure of the DEM's seed-to-seed E is known for {case} at "
+                      f"amplitude factor {factor:g} (docs/validation.md sections 15, 16)")
+    differs = differs_from_preset(scenario)
+    if differs:
+        shown = ", ".join(differs[:6]) + (", ..." if len(differs) > 6 else "")
+        return None, (f"the ensemble figure of {case} at amplitude factor {factor:g} is the "
+                      f"preset's, and this case changes {shown}: the seeds' E depends on the "
+                      "averaging window and the bed (docs/decisions/e-limit-seeds.md)")
+    return lim, None
 
 
 def seeds_limit(tables) -> ELimit:
@@ -147,10 +165,9 @@ def e_rows(data, tables: dict) -> dict:
     if len(seeds) >= 2:
         lim = seeds_limit(seeds)
     else:
-        lim = ensemble_limit(data.scenario.case, float(data.scenario.motion.amplitude_factor))
-        if lim is not None:
-            lim = ELimit(lim.e_seed, lim.stderr, lim.seeds, lim.source,
-                         differs_from_preset(data.scenario))
+        lim, why = preset_limit(data.scenario)
+        if why is not None:
+            note = "; ".join(n for n in (note, f"Not judged: {why}.") if n)
     rows = {}
     for name in data.continuum_methods:
         if len(seeds) >= 2:

@@ -44,9 +44,14 @@ def _ignorable(name: str) -> bool:
     return name == DIR_LOCK or name.startswith(".tmp-")
 
 
-def read_record(out: Path) -> dict | None:
+#: what `vibroflow sweep` advises for a folder it cannot use
+SWEEP_ADVICE = ("remove the folder or give another --out", "give a new or empty folder")
+
+
+def read_record(out: Path, advice: tuple[str, str] = SWEEP_ADVICE) -> dict | None:
     """DIR/sweep.json, or None for a new or empty folder; an InputError (one line) for a
-    file, a foreign folder or a corrupt marker."""
+    file, a foreign folder or a corrupt marker, ending with the caller's advice (for a
+    corrupt record, for a foreign one)."""
     out = Path(out)
     if not out.exists():
         check_not_under_a_file(out, "DIR")
@@ -62,16 +67,16 @@ def read_record(out: Path) -> dict | None:
     try:
         data = json.loads(marker.read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"{marker}: corrupt sweep record ({type(exc).__name__}); remove the "
-                         "folder or give another --out") from None
+        raise InputError(f"{marker}: corrupt sweep record ({type(exc).__name__}); "
+                         f"{advice[0]}") from None
     if not isinstance(data, dict) or data.get("kind") != KIND:
         kind = data.get("kind") if isinstance(data, dict) else None
-        raise InputError(f"{marker}: not a vibroflow sweep record (kind = {kind!r}); give a new "
-                         "or empty folder")
+        raise InputError(f"{marker}: not a vibroflow sweep record (kind = {kind!r}); "
+                         f"{advice[1]}")
     if not (isinstance(data.get("base"), dict) and isinstance(data.get("varied"), list)
             and isinstance(data.get("points"), dict)):
-        raise InputError(f"{marker}: corrupt sweep record (no base, varied or points); remove "
-                         "the folder or give another --out")
+        raise InputError(f"{marker}: corrupt sweep record (no base, varied or points); "
+                         f"{advice[0]}")
     return data
 
 

@@ -64,32 +64,29 @@ def _draw(ax, series, varied, column: str, scale: float = 1.0, errors: bool = Tr
                     label=_label(key, varied))
 
 
-def _one_panel(plt, path: Path, series, varied, column: str, scale: float, ylabel: str,
-               title: str, errors: bool = True) -> None:
-    """A one-axes picture of `column` against the amplitude factor."""
+def _one_panel(plt, series, varied, column: str, scale: float, ylabel: str, title: str,
+               errors: bool = True):
+    """A one-axes figure of `column` against the amplitude factor."""
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
     _draw(ax, series, varied, column, scale=scale, errors=errors)
     ax.set_xlabel(XLABEL)
     ax.set_ylabel(ylabel)
     ax.set_title(title)
-    _finish(plt, fig, ax, series, path)
+    return _legend(fig, ax, series)
 
 
-def _finish(plt, fig, legend_ax, series, path: Path) -> None:
-    """The legend on legend_ax (when a line is drawn), the layout, the picture written to path
-    and the figure closed."""
+def _legend(fig, legend_ax, series):
+    """The legend on legend_ax (when a line is drawn) and the layout; returns the figure."""
     if series:
         legend_ax.legend(fontsize=7)
     fig.tight_layout()
-    _save(fig, path)
-    plt.close(fig)
+    return fig
 
 
-def write_plots(folder: Path, rows: list[dict[str, Any]], varied: list[str]) -> list[str]:
-    """The four pictures in `folder` (made if missing); returns their file names."""
+def draw(rows: list[dict[str, Any]], varied: list[str]) -> dict[str, Any]:
+    """The four figures (matplotlib, open: the caller saves and closes them) by file name,
+    drawn from the rows' finished points."""
     plt = pyplot()
-
-    folder.mkdir(parents=True, exist_ok=True)
     series = _series(rows, varied)
     probes: list[str] = []
     for r in rows:
@@ -108,19 +105,31 @@ def write_plots(folder: Path, rows: list[dict[str, Any]], varied: list[str]) -> 
     for ax in axes[-1]:
         ax.set_xlabel(XLABEL)
     fig.suptitle("bulk velocity at the probes (tub frame), mean ± standard error")
-    _finish(plt, fig, axes[0][0], series, folder / NAMES[0])
+    out = {NAMES[0]: _legend(fig, axes[0][0], series)}
 
-    _one_panel(plt, folder / NAMES[1], series, varied, "circulation_strength", 1e4,
-               "circulation strength (1e-4 m²/s)", "circulation strength ± standard error")
+    out[NAMES[1]] = _one_panel(plt, series, varied, "circulation_strength", 1e4,
+                               "circulation strength (1e-4 m²/s)",
+                               "circulation strength ± standard error")
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), squeeze=False)
     for ax, kind in zip(axes[0], ("ball_ball", "ball_wall")):
         _draw(ax, series, varied, f"impact_{kind}")
         ax.set_xlabel(XLABEL)
         ax.set_ylabel(f"mean normal impact speed {kind.replace('_', '-')} (m/s)")
-    fig.suptitle("impact speeds (continuum: from the calibrated c0 + c1 d gamma_dot)")
-    _finish(plt, fig, axes[0][0], series, folder / NAMES[2])
+    fig.suptitle("impact speeds ± standard error (continuum: from the calibrated "
+                 "c0 + c1 d gamma_dot)")
+    out[NAMES[2]] = _legend(fig, axes[0][0], series)
 
-    _one_panel(plt, folder / NAMES[3], series, varied, "wall_time_s", 1.0, "wall time (s)",
-               "wall time per method and point", errors=False)
+    out[NAMES[3]] = _one_panel(plt, series, varied, "wall_time_s", 1.0, "wall time (s)",
+                               "wall time per method and point", errors=False)
+    return out
+
+
+def write_plots(folder: Path, rows: list[dict[str, Any]], varied: list[str]) -> list[str]:
+    """The four pictures in `folder` (made if missing); returns their file names."""
+    plt = pyplot()
+    folder.mkdir(parents=True, exist_ok=True)
+    for name, fig in draw(rows, varied).items():
+        _save(fig, folder / name)
+        plt.close(fig)
     return list(NAMES)
