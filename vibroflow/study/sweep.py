@@ -227,6 +227,9 @@ def run_sweep(plan: SweepPlan, out: Path, scheduler: str | None = None,
     try:
         out.mkdir(parents=True, exist_ok=True)
         _merge_record(out, plan)
+        # the table before any point runs: a point's page, written when it finishes, finds
+        # the sweep it belongs to (vibroflow.report) even on the sweep's first run
+        finish_outputs(out)
         concurrency = max(1, sum(client.nthreads().values()))
         pending = {client.submit(run_point, str(out), job, pure=False, retries=0): name
                    for name, job in jobs.items()}
