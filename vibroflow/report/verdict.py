@@ -31,8 +31,10 @@ SEEDS_DIR = "dem-seeds"
 ENSEMBLE_FLOORS = {
     ("tub47", 1.0): (0.206, 0.026, 10, "tub47.md: mean pairwise E over ten fill seeds "
                      "(docs/decisions/e-limit-seeds.md)"),
-    ("tub47", 0.5): (0.130, 0.010, 5, "docs/validation.md section 15: five fill seeds"),
-    ("tub47", 1.5): (0.149, 0.030, 5, "docs/validation.md section 15: five fill seeds"),
+    ("tub47", 0.5): (0.146, 0.013, 10, "docs/validation.md section 15: ten fill seeds "
+                     "(tests/data/tub47-f0.5-dem-seeds)"),
+    ("tub47", 1.5): (0.160, 0.012, 10, "docs/validation.md section 15: ten fill seeds "
+                     "(tests/data/tub47-f1.5-dem-seeds)"),
     ("tub47-quick", 1.0): (0.166, None, 2, "docs/validation.md section 16: two fill seeds "
                            "(LIGGGHTS' CDT)"),
 }
