@@ -230,3 +230,16 @@ def test_kinetic_energy_blocks_cover_every_whole_cycle_and_the_halves_their_own(
     (a1, z1), (a2, z2) = ke.half_spans
     assert (a1, z1, a2) == pytest.approx((0.1, 0.1 + 4 / f, 0.1 + 4 / f))
     assert z2 == pytest.approx(0.1 + 9 / f)
+
+
+def test_the_take_off_carries_its_batches_standard_error():
+    """Batches 0.10, 0.12, 0.11, 0.13: std (ddof 1) 0.012910 over sqrt(4); none where a batch
+    never leaves the floor."""
+    import math
+
+    from vibroflow.report.html import _take_off_stderr
+
+    se = _take_off_stderr({"take_off_phase_batches": [0.10, 0.12, 0.11, 0.13]})
+    assert se == pytest.approx(math.sqrt(0.0005 / 3) / 2, rel=1e-9)
+    assert math.isnan(_take_off_stderr({"take_off_phase_batches": [None, 0.2, 0.3, 0.25]}))
+    assert math.isnan(_take_off_stderr({}))

@@ -91,12 +91,14 @@ def _grid(table: CellTable, vx, vz, i0, k0, shape):
 @dataclass(frozen=True)
 class Turnover:
     """Turnover time T (s) and its batch-means standard error (NaN without batches), the core's
-    mean vorticity (1/s) and its number of cells."""
+    mean vorticity (1/s), its number of cells and the vorticity's batch-means standard error
+    (1/s, NaN without batches)."""
 
     time_s: float
     stderr_s: float
     mean_vorticity_1_s: float
     cells: int
+    mean_vorticity_stderr_1_s: float = math.nan
 
 
 def turnover_time(table: CellTable, min_solid_fraction: float) -> Turnover:
@@ -120,13 +122,14 @@ def turnover_time(table: CellTable, min_solid_fraction: float) -> Turnover:
 
     z, n = mean_zeta(table.vx, table.vz)
     T = 4.0 * math.pi / abs(z) if math.isfinite(z) and z != 0 else float("nan")
-    se = float("nan")
+    se = z_se = float("nan")
     if table.batch_vx is not None and table.n_batches >= 2:
-        tb = [4.0 * math.pi / abs(zb) if math.isfinite(zb) and zb != 0 else np.nan
-              for zb in (mean_zeta(table.batch_vx[b], table.batch_vz[b])[0]
-                         for b in range(table.n_batches))]
+        zb = np.array([mean_zeta(table.batch_vx[b], table.batch_vz[b])[0]
+                       for b in range(table.n_batches)])
+        tb = [4.0 * math.pi / abs(v) if math.isfinite(v) and v != 0 else np.nan for v in zb]
         se = float(stderr_of_batches(np.asarray(tb)))
-    return Turnover(T, se, z, n)
+        z_se = float(stderr_of_batches(zb))
+    return Turnover(T, se, z, n, z_se)
 
 
 @dataclass(frozen=True)

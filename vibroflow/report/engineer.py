@@ -112,7 +112,9 @@ class Engineer:
             rows.append([cell(name, cls="l"),
                          cell(t.time_s, t.stderr_s, ".3g", data_method=name,
                               data_q="turnover_s"),
-                         cell(t.mean_vorticity_1_s, None, ".3g"), cell(t.cells)])
+                         cell(t.mean_vorticity_1_s, t.mean_vorticity_stderr_1_s, ".3g",
+                              data_method=name, data_q="core_vorticity_1_s"),
+                         cell(t.cells)])
         ke = bed_state.dem_kinetic_energy(data.out / "dem" / "dem.h5", sc)
         out = {"gamma": cell(gam["vertical"], None, ".3g", data_q="gamma"),
                "gamma_text": f"{gam['vertical']:.3g}",

@@ -22,11 +22,13 @@ from functools import lru_cache
 from pathlib import Path
 
 import jinja2
+import numpy as np
 from markupsafe import Markup
 
 from vibroflow import __version__
 from vibroflow.report import figures
 from vibroflow.measure.floor_force import REGIONS, dem_wall_feed
+from vibroflow.measure.stats import stderr_of_batches
 from vibroflow.report.data import DEM, REPORT_STAGE, StudyData
 from vibroflow.report.impact_figures import impact_distribution_section
 from vibroflow.report.engineer import Engineer
@@ -238,7 +240,8 @@ def _impacts(data: StudyData) -> dict:
             probe_rows.append([_text(probe, "l"), _num(v), _text(k)]
                               + [_num(inferred[n].get(probe)) for n in data.continuum_methods])
         out.update(
-            fit={"c0": f"{fit['c0']:.3g}", "c1": f"{fit['c1']:.3g}", "which": fit["which"]},
+            fit={"c0": _pm(fit["c0"], fit["c0_stderr"]).text,
+                 "c1": _pm(fit["c1"], fit["c1_stderr"]).text, "which": fit["which"]},
             probe_head=["probe", "dem measured (m/s)", "impacts"]
             + [f"{n} inferred (m/s)" for n in data.continuum_methods],
             probe_rows=probe_rows)
@@ -314,7 +317,7 @@ def _floor(data: StudyData) -> dict:
     (measure.floor_force), the DEM first; `missing`: the methods whose run has none."""
     floors = {name: data.floor(name) for name in data.methods}
     have = {n: b for n, b in floors.items() if b}
-    rows = [[_text(n, "l"), _num(b.get("take_off_phase"), ".3f"),
+    rows = [[_text(n, "l"), _pm(b.get("take_off_phase"), _take_off_stderr(b), ".3f"),
              _text(", ".join("n/a" if t is None else f"{t:.3f}"
                              for t in b.get("take_off_phase_batches") or []), "l"),
              _pm(b.get("cycle_mean_over_weight"), b.get("cycle_mean_over_weight_stderr"),
@@ -342,6 +345,16 @@ def _without_feed(data: StudyData) -> list[dict]:
                "its summary.json holds no wall_feed block")
         out.append({"name": name, "why": why})
     return out
+
+
+def _take_off_stderr(block: dict) -> float:
+    """The batch-means standard error of a run's take-off (measure.stats.stderr_of_batches of
+    its batch values); NaN unless every batch leaves the floor (a batch that never does has no
+    phase to average)."""
+    b = block.get("take_off_phase_batches") or []
+    if len(b) < 2 or any(v is None for v in b):
+        return math.nan
+    return float(stderr_of_batches(np.asarray(b, dtype=float)))
 
 
 def _stress(data: StudyData) -> dict:
