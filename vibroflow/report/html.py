@@ -419,8 +419,10 @@ def _sweep(data: StudyData) -> dict | None:
     where = (data.sweep_table or data.sweep_images[0]).parent
     if where.name == "plots" and data.sweep_table is None:
         where = where.parent
-    out = {"where": str(where.resolve()) if where.resolve() != data.out.resolve() else None,
-           "images": [], "error": None, "head": None}
+    if where.resolve() != data.out.resolve():
+        # a point of a sweep: the page links to the sweep's own page (the template's sweep)
+        return {"where": str(where.resolve())}
+    out = {"where": None, "images": [], "error": None, "head": None}
     for p in data.sweep_images:
         stamp = time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime(p.stat().st_mtime))
         out["images"].append({"name": p.name, "stamp": stamp,
