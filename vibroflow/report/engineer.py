@@ -15,7 +15,7 @@ from markupsafe import Markup
 from vibroflow.calibration.tub_rheology import DENSE_SOLID_FRACTION
 from vibroflow.report import bed_state, flow_maps, mu_i_bins, profiles, verdict
 from vibroflow.report.cell_tables import batches_note, method_tables
-from vibroflow.report.numbers import plus_minus
+from vibroflow.rounding import plus_minus
 from vibroflow.tub.motion import TubMotion
 
 

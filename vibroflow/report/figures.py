@@ -20,8 +20,8 @@ from matplotlib.patches import Rectangle
 
 from vibroflow.io.pictures import pyplot
 from vibroflow.report.data import MIN_IMPACTS_PER_CELL, StudyData, mean_flow_shear_rate
-from vibroflow.report.numbers import plus_minus
 from vibroflow.report.temperature_maps import PHI_KEY, T_KEY, TemperatureMaps
+from vibroflow.rounding import plus_minus
 
 DPI = 90
 

@@ -32,11 +32,11 @@ from vibroflow.measure.stats import stderr_of_batches
 from vibroflow.report.data import DEM, REPORT_STAGE, StudyData
 from vibroflow.report.impact_figures import impact_distribution_section
 from vibroflow.report.engineer import Engineer
-from vibroflow.report.numbers import plus_minus
 from vibroflow.report.page_style import page_css
 from vibroflow.report.part_sections import part_sections
 from vibroflow.report.stress_section import stress_rows
 from vibroflow.report.temperature_maps import temperature_maps
+from vibroflow.rounding import plus_minus
 
 #: section id -> heading, in page order (tests check the headings)
 SECTIONS = {

@@ -26,13 +26,13 @@ from markupsafe import Markup
 from vibroflow import __version__
 from vibroflow.io.atomic import write_text_atomic
 from vibroflow.report.html import data_uri, environment
-from vibroflow.report.numbers import plus_minus
 from vibroflow.report.page_style import page_css
 from vibroflow.report.sweep_data import SweepData, created, describe, point_report
 from vibroflow.report.verdict import ELimit
 from vibroflow.report.verdict import verdict as e_verdict
 from vibroflow.report.sweep_figures import (e_figure, sense_figure, sense_offsets,
                                             strength_figure, table_plots)
+from vibroflow.rounding import plus_minus
 from vibroflow.study.sweep_folder import TABLE_FILE
 from vibroflow.study.sweep_points import FACTOR_KEY
 

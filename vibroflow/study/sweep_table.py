@@ -19,6 +19,7 @@ from typing import Any
 from rich.table import Table
 
 from vibroflow.io.atomic import write_text_atomic
+from vibroflow.rounding import plus_minus
 from vibroflow.study.sweep_folder import point_dir, point_state
 from vibroflow.study.sweep_points import FACTOR_KEY
 
@@ -116,8 +117,7 @@ def write_csv_atomic(path: Path, rows: list[dict[str, Any]], varied: list[str]) 
 def _pm(v, e, scale: float = 1.0, fmt: str = ".3g") -> str:
     if v is None:
         return "-"
-    text = format(v * scale, fmt)
-    return text + (f" ± {format(e * scale, '.2g')}" if e is not None else "")
+    return format(v * scale, fmt) if e is None else plus_minus(v * scale, e * scale, fmt)
 
 
 def rich_table(rows: list[dict[str, Any]], varied: list[str]):
@@ -144,7 +144,7 @@ def rich_table(rows: list[dict[str, Any]], varied: list[str]):
         t.add_row(*[_cell(r.get(k)) for k in varied], r["method"], r["status"],
                   _pm(r["circulation_strength"], r["circulation_strength_stderr"], 1e4) + sense,
                   "" if E is None else f"{E:.3f}",
-                  f"{'-' if bb is None else format(bb, '.3f')} / "
-                  f"{'-' if bw is None else format(bw, '.3f')}",
-                  "" if r["wall_time_s"] is None else f"{r['wall_time_s']:.1f}")
+                  f"{_pm(bb, r.get('impact_ball_ball_stderr'))} / "
+                  f"{_pm(bw, r.get('impact_ball_wall_stderr'))}",
+                  "" if r["wall_time_s"] is None else f"{r['wall_time_s']:.3g}")
     return t

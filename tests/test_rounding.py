@@ -1,4 +1,4 @@
-"""vibroflow.report.numbers: a value and its standard error rounded together (the error to two
+"""vibroflow.rounding: a value and its standard error rounded together (the error to two
 significant figures, the value to its last place: JCGM 100:2008 section 7.2.6), by hand."""
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from vibroflow.report.numbers import plus_minus
+from vibroflow.rounding import plus_minus
 
 
 @pytest.mark.parametrize("x, se, text", [
