@@ -68,6 +68,26 @@ def test_impacts_binned_by_analysis_cell():
     v, n = cells.at(-0.03, 0.03)
     assert math.isnan(v) and n == 0
     assert int(cells.count.sum()) == 4
+    assert math.isnan(cells.stderr_at(0.0, 0.0))  # no batches given: no error
+
+
+def test_impacts_binned_by_batch_carry_the_batch_means_error():
+    """Cell (0, 0) holds batch means 0.1, 0.3 and 0.5 (batches 0, 1, 2; two impacts in batch 1):
+    its mean is over the impacts (0.1 + 0.2 + 0.4 + 0.5) / 4 = 0.3, its standard error the
+    batch means' std / sqrt(3) = 0.2 / sqrt(3); a cell with impacts in one batch only has none."""
+    from vibroflow.report.data import bin_impacts
+
+    h = 0.015
+    pos = np.array([[0.0, 0.0, 0.0], [0.001, 0.0, 0.0], [0.0, 0.0, 0.001], [0.002, 0.0, 0.0],
+                    [0.03, 0.0, 0.0]])
+    speed = np.array([0.1, 0.2, 0.4, 0.5, 0.9])
+    batch = np.array([0, 1, 1, 2, 1])
+    cells = bin_impacts([(pos[:3], speed[:3], batch[:3]), (pos[3:], speed[3:], batch[3:])], h)
+    assert cells.at(0.0, 0.0) == (pytest.approx(0.3), 4)
+    assert cells.stderr_at(0.0, 0.0) == pytest.approx(0.2 / math.sqrt(3.0), rel=1e-12)
+    assert cells.at(0.03, 0.0) == (pytest.approx(0.9), 1)
+    assert math.isnan(cells.stderr_at(0.03, 0.0))
+    assert math.isnan(cells.stderr_at(0.3, 0.3))
 
 
 def test_report_impacts_are_the_summarys_impacts(study):

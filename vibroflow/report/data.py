@@ -31,7 +31,7 @@ from vibroflow.dem.walls import KIND_BALL_BALL
 from vibroflow.errors import InputError
 from vibroflow.io.calibration_file import Calibration, read_calibration
 from vibroflow.measure.contacts import mean_by_region
-from vibroflow.measure.stats import batches_of_whole_cycles
+from vibroflow.measure.stats import batches_of_whole_cycles, stderr_of_batches
 from vibroflow.scenario.io import dump_scenario, parse_scenario
 from vibroflow.study.results import load, read_summary
 from vibroflow.tub.geometry import geometry_of
@@ -49,45 +49,79 @@ MIN_IMPACTS_PER_CELL = 20
 @dataclass
 class ImpactCells:
     """Mean normal approach speed (m/s) of the DEM's ball-ball impacts of the averaging window,
-    by analysis cell (tub frame, cell centres x, z in m), with the impacts counted per cell."""
+    by analysis cell (tub frame, cell centres x, z in m), with the impacts counted per cell and
+    the mean's batch-means standard error (m/s; NaN where fewer than two batches hold an impact
+    in the cell, or the impacts came without their batch)."""
 
     x: np.ndarray
     z: np.ndarray
     mean_speed: np.ndarray
     count: np.ndarray
     cell_size: float
+    stderr: np.ndarray | None = None
 
-    def at(self, px: float, pz: float) -> tuple[float, int]:
-        """(mean speed m/s, count) of the cell holding the point (px, pz); (nan, 0) if none."""
+    def _cell(self, px: float, pz: float) -> int | None:
         h = self.cell_size
         i, k = math.floor(px / h + 0.5), math.floor(pz / h + 0.5)
         hit = (np.rint(self.x / h) == i) & (np.rint(self.z / h) == k)
-        if not hit.any():
+        return int(np.argmax(hit)) if hit.any() else None
+
+    def at(self, px: float, pz: float) -> tuple[float, int]:
+        """(mean speed m/s, count) of the cell holding the point (px, pz); (nan, 0) if none."""
+        j = self._cell(px, pz)
+        if j is None:
             return float("nan"), 0
-        j = int(np.argmax(hit))
         return float(self.mean_speed[j]), int(self.count[j])
+
+    def stderr_at(self, px: float, pz: float) -> float:
+        """The batch-means standard error (m/s) of the mean speed at (px, pz); NaN if none."""
+        j = self._cell(px, pz)
+        return math.nan if j is None or self.stderr is None else float(self.stderr[j])
 
 
 def bin_impacts(chunks, cell_size: float) -> ImpactCells:
     """Mean speed and count per square cell of side cell_size (m) centred on its multiples
     (the analysis cells of tub47.md "Bulk velocity"), from an iterable of (position_tub (M, 3)
-    m, normal_speed (M,) m/s) chunks of impacts (a tub47 run holds tens of millions: they are
-    never all in memory).  The per-chunk means are vibroflow.measure.contacts.mean_by_region."""
+    m, normal_speed (M,) m/s[, batch (M,)]) chunks of impacts (a tub47 run holds tens of
+    millions: they are never all in memory).  The per-chunk means are
+    vibroflow.measure.contacts.mean_by_region.  With each impact's batch of whole cycles
+    (measure.stats.batches_of_whole_cycles), each cell's mean also gets its batch-means
+    standard error over the batches that hold an impact there (measure.stats.stderr_of_batches)."""
     h = float(cell_size)
     acc: dict[tuple[int, int], list[float]] = {}
-    for pos, speed in chunks:
-        x, z, cnt, mean = mean_by_region(pos, speed, h)
-        for xi, zi, c, m in zip(np.rint(x / h).astype(int), np.rint(z / h).astype(int), cnt,
-                                mean):
-            a = acc.setdefault((int(xi), int(zi)), [0.0, 0.0])
-            a[0] += float(c)
-            a[1] += float(c) * float(m)
+    per_batch: dict[tuple[int, int, int], list[float]] = {}
+    batched = True
+    for chunk in chunks:
+        pos, speed = chunk[0], chunk[1]
+        batch = chunk[2] if len(chunk) > 2 else None
+        batched = batched and batch is not None
+        parts = [(None, pos, speed)] if batch is None else [
+            (int(b), pos[batch == b], speed[batch == b]) for b in np.unique(batch)]
+        for b, p, v in parts:
+            x, z, cnt, mean = mean_by_region(p, v, h)
+            for xi, zi, c, m in zip(np.rint(x / h).astype(int), np.rint(z / h).astype(int),
+                                    cnt, mean):
+                a = acc.setdefault((int(xi), int(zi)), [0.0, 0.0])
+                a[0] += float(c)
+                a[1] += float(c) * float(m)
+                if b is not None:
+                    q = per_batch.setdefault((int(xi), int(zi), b), [0.0, 0.0])
+                    q[0] += float(c)
+                    q[1] += float(c) * float(m)
     keys = sorted(acc)
     count = np.array([acc[k][0] for k in keys], dtype=np.int64)
     total = np.array([acc[k][1] for k in keys], dtype=float)
     x = np.array([k[0] for k in keys], dtype=float) * h
     z = np.array([k[1] for k in keys], dtype=float) * h
-    return ImpactCells(x, z, total / np.maximum(count, 1), count, h)
+    stderr = None
+    if batched and keys:
+        batches = sorted({k[2] for k in per_batch})
+        means = np.full((len(batches), len(keys)), np.nan)
+        col = {k: j for j, k in enumerate(keys)}
+        for (xi, zi, b), (c, tot) in per_batch.items():
+            means[batches.index(b), col[(xi, zi)]] = tot / c
+        stderr = np.asarray(stderr_of_batches(means, axis=0), dtype=float).reshape(len(keys))
+    return ImpactCells(x, z, total / np.maximum(count, 1), count, h, stderr)
 
 
 def mean_flow_shear_rate(vx: np.ndarray, vz: np.ndarray, h: float) -> np.ndarray:
@@ -489,9 +523,10 @@ def _dem_impacts(h5: Path, scenario, chunk: int = 2_000_000):
         for a in range(0, n, chunk):
             b = min(n, a + chunk)
             t = f["impacts/time"][a:b]
-            use = (batches_of_whole_cycles(t, t0, t1, f_hz, int(run.batches)) >= 0) & (
-                f["impacts/kind"][a:b] == KIND_BALL_BALL)
-            yield f["impacts/position_tub"][a:b][use], f["impacts/normal_speed"][a:b][use]
+            batch = batches_of_whole_cycles(t, t0, t1, f_hz, int(run.batches))
+            use = (batch >= 0) & (f["impacts/kind"][a:b] == KIND_BALL_BALL)
+            yield (f["impacts/position_tub"][a:b][use], f["impacts/normal_speed"][a:b][use],
+                   batch[use])
 
     try:
         with h5py.File(h5, "r") as f:

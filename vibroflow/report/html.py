@@ -237,7 +237,8 @@ def _impacts(data: StudyData) -> dict:
         probe_rows = []
         for probe, p in data.scenario.analysis.probes.items():
             v, k = data.impacts.at(p.x, p.z)
-            probe_rows.append([_text(probe, "l"), _num(v), _text(k)]
+            probe_rows.append([_text(probe, "l"), _pm(v, data.impacts.stderr_at(p.x, p.z)),
+                               _text(k)]
                               + [_num(inferred[n].get(probe)) for n in data.continuum_methods])
         out.update(
             fit={"c0": _pm(fit["c0"], fit["c0_stderr"]).text,

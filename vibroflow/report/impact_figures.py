@@ -163,8 +163,9 @@ def speed_comparisons(data: StudyData) -> list[dict]:
             m = v if count >= MIN_IMPACTS_PER_CELL else math.nan
             i = _num(inferred.get(probe))
             rel, flag = speed_flag(i, m)
+            se = data.impacts.stderr_at(p.x, p.z) if count >= MIN_IMPACTS_PER_CELL else math.nan
             rows.append({"where": f"probe {probe} cell", "kind": "ball-ball", "method": name,
-                         "measured": m, "measured_stderr": math.nan, "inferred": i,
+                         "measured": m, "measured_stderr": se, "inferred": i,
                          "inferred_stderr": math.nan, "relative": rel, "flagged": flag})
     return rows
 
