@@ -82,6 +82,21 @@ def test_each_ball_takes_its_cells_mean_velocity():
     assert uz.tolist() == [1.0, 1.0, -1.0]
 
 
+def test_the_choice_options_take_the_command_lines_hyphens():
+    """along-flow and unloading-law (the command line's spelling) are along_flow and
+    unloading_law, in a study's --set as in `vibroflow continuum`."""
+    from vibroflow.continuum.options import ContinuumOptions
+    from vibroflow.study.methods import method
+    from vibroflow.study.pipeline import split_settings
+
+    o = ContinuumOptions(transfer_cfl=None, partition_friction="along-flow",
+                         moduli="unloading-law")
+    assert (o.partition_friction, o.moduli) == ("along_flow", "unloading_law")
+    _, settings = split_settings(["lagrangian.partition_friction=along-flow"])
+    assert method("lagrangian").make_options(settings["lagrangian"]).partition_friction == \
+        "along_flow"
+
+
 def test_the_partition_friction_option_takes_the_calibrations_friction_along_the_flow():
     s = load_scenario("tub47-quick")
     cal = read_calibration(CALIBRATION)

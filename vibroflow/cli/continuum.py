@@ -187,8 +187,7 @@ def continuum(
                            stiffness_factor=stiffness_factor, compaction=compaction, flip=flip,
                            bed_viscosity=bed_viscosity, damping_length=damping_length,
                            temperature=temperature, initial_temperature=initial_temperature,
-                           landing=landing, partition_friction=partition_friction.replace("-", "_"),
-                           moduli=moduli.replace("-", "_"),
+                           landing=landing, partition_friction=partition_friction, moduli=moduli,
                            **step)
     material_for(s, cal, options)  # validates the parameters before --out is made
     boundary_friction(s, cal, options.partition_friction)

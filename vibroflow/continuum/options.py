@@ -222,6 +222,10 @@ class ContinuumOptions:
             raise InputError(f"landing = {self.landing!r}: only with the temperature "
                              "(--temperature, in a study METHOD.temperature=true); without it "
                              "only pairs")
+        for name in ("partition_friction", "moduli"):  # the command line's spelling, along-flow
+            value = getattr(self, name)
+            if isinstance(value, str) and "-" in value:
+                object.__setattr__(self, name, value.replace("-", "_"))
         if self.partition_friction not in PARTITION_FRICTIONS:
             raise InputError(f"partition_friction = {self.partition_friction!r}: must be "
                              f"{' or '.join(PARTITION_FRICTIONS)}")
