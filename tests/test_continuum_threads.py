@@ -83,6 +83,7 @@ def _eulerian(scenario, chunks, threads, steps=150):
     out = {f: getattr(state, f) for f in ("mass", "v", "C", "L", "stress", "density",
                                           "gamma_dot", "phase")}
     out.update({f"wall_{k}": a for k, a in state.wall.items()})
+    out["mass_error_max"] = np.array(state.mass_error_max)  # a sum over every cell
     return out
 
 

@@ -269,7 +269,12 @@ def _make_advance_kernel(parallel: bool):
             if not finite:
                 return s + 1, t, NON_FINITE, lowest, mass_error_max
             if mass0 > 0.0:
-                err = abs(mass.sum() - mass0) / mass0
+                # summed in order: in the parallel loop `mass.sum()` is a parallel reduction,
+                # whose rounding would differ from the one-thread loop's
+                total = 0.0
+                for icell in range(n):
+                    total += mass[icell]
+                err = abs(total - mass0) / mass0
                 if err > mass_error_max:
                     mass_error_max = err
         return nsteps, t, OK, 0.0, mass_error_max
