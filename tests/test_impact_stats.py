@@ -132,13 +132,24 @@ def test_rate_per_area_of_impacts_spread_uniformly_over_the_partitions():
 
 
 def test_speed_bins_and_quantile_of_a_single_bin():
-    assert speed_bin(np.array([0.0, 5e-7, -1.0, np.nan, 1e3]))[:4].tolist() == [0, 0, -1, -1]
+    assert speed_bin(np.array([0.0, 5e-7, -1e-5, np.nan, 1e3]))[:4].tolist() == [0, 0, 0, -1]
     assert speed_bin(np.array([1e3]))[0] == SPEED_EDGES_M_S.size - 2
     counts = np.zeros(SPEED_EDGES_M_S.size - 1)
     counts[10] = 4
     # linear within the bin: the median is its middle
     assert histogram_quantile(counts, 0.5) == pytest.approx(
         0.5 * (SPEED_EDGES_M_S[10] + SPEED_EDGES_M_S[11]))
+
+
+def test_an_impact_of_numerically_zero_approach_speed_is_counted_and_averaged():
+    # a contact's approach speed of -1e-5 m/s is round-off around zero: the distribution counts
+    # it in its lowest bin and its mean is the plain mean of the speeds, as the summary's
+    speed = np.array([0.2, 0.1, -1.0e-5, 0.3] * 50)
+    d = _distributions(speed, np.zeros(speed.size, int), np.zeros((speed.size, 3)))
+    st = d.stats["ball_ball"]
+    assert st.count == speed.size
+    assert st.mean == pytest.approx(speed.mean(), rel=1e-12)
+    assert d.histograms["ball_ball"].sum(axis=0)[0] == 50
 
 
 def test_an_inferred_speed_off_by_more_than_a_quarter_is_flagged():

@@ -1,7 +1,7 @@
 """The sweep report (DIR/report.html of a sweep, `vibroflow report SWEEP_DIR`) on sweep folders
 written by hand (points' summary.json with known numbers, a failed point): the limit on E from
-tub47.md's ten-seed figure and from the sweep's own seeds (tests/data/tub47-dem-seeds 1 - 3:
-0.106, docs/decisions/e-limit-seeds.md), the verdicts, the failed point's row, escaping, and the
+tub47.md's ten-seed figure and from the sweep's own seeds (uniform fields whose E is worked by
+hand), the verdicts, the failed point's row, escaping, and the
 page in headless Chromium (figures loaded, the table within the page's width)."""
 from __future__ import annotations
 
@@ -107,28 +107,38 @@ def test_limit_verdicts_and_failed_point_against_known_answers(sweep):
     assert "http" not in page.replace("http-equiv", "")  # no external link
 
 
+def _uniform_table(path: Path, vx: float, vz: float) -> None:
+    """A bulk_velocity.csv of a 6 x 4 grid of 15 mm cells, solid fraction 0.55 and velocity
+    (vx, vz) m/s in every cell."""
+    rows = ["x,z,solid_fraction,vx,vz,samples"]
+    rows += [f"{0.015 * i - 0.0375:.4f},{0.015 * k:.3f},0.55,{vx},{vz},1000"
+             for k in range(4) for i in range(6)]
+    path.write_text("\n".join(rows) + "\n")
+
+
 def test_limit_from_the_sweeps_own_seeds(tmp_path):
-    """Three points differing only in run.seed, whose DEMs are tub47's seeds 1 - 3: the limit is
-    1.5 x their mean E over the six ordered pairs (tub47.md; 0.106 for these three,
-    docs/decisions/e-limit-seeds.md), each pair's E the field difference of its two tables."""
-    from vibroflow.analysis.compare import field_difference
-    from vibroflow.measure.bulk import read_csv
+    """Three points differing only in run.seed, each DEM a uniform field (vx, vz): the limit is
+    1.5 x the mean E over the six ordered pairs (tub47.md), each pair's E = |v_a - v_b| / |v_b|
+    for uniform fields, worked by hand."""
     from vibroflow.report.sweep_data import SweepData
 
+    v = {1: (0.1, 0.0), 2: (0.1, 0.01), 3: (0.1, -0.01)}  # m/s
     dem = _method(5e-4, 2e-5, "counterclockwise")
-    out = make_sweep(tmp_path / "seeds", {(1.0, k): {"dem": dem} for k in (1, 2, 3)},
+    out = make_sweep(tmp_path / "seeds", {(1.0, k): {"dem": dem} for k in v},
                      varied=(FACTOR_KEY, "run.seed"))
-    for k in (1, 2, 3):
+    for k, (vx, vz) in v.items():
         dem_dir = out / "points" / point_name({FACTOR_KEY: 1.0, "run.seed": k}) / "dem"
         dem_dir.mkdir()
-        shutil.copy(SEEDS / f"seed{k}" / "bulk_velocity.csv", dem_dir)
+        _uniform_table(dem_dir / "bulk_velocity.csv", vx, vz)
     data = SweepData.read(out)
     (lim,) = data.limits.values()
-    tables = [read_csv(SEEDS / f"seed{k}" / "bulk_velocity.csv") for k in (1, 2, 3)]
-    pairs = [field_difference(a, b) for a in tables for b in tables if a is not b]
-    assert len(pairs) == 6
-    assert lim.e_seed == pytest.approx(np.mean(pairs), rel=1e-12)
-    assert lim.limit == pytest.approx(1.5 * lim.e_seed)
+    # (a, b): |dvz| / |v_b|; |v_1| = 0.1, |v_2| = |v_3| = sqrt(0.0101) m/s
+    s = np.sqrt(0.0101)
+    pairs = [0.01 / s, 0.01 / 0.1,   # (1, 2), (2, 1)
+             0.01 / s, 0.01 / 0.1,   # (1, 3), (3, 1)
+             0.02 / s, 0.02 / s]     # (2, 3), (3, 2)
+    assert lim.e_seed == pytest.approx(np.mean(pairs), rel=1e-9)
+    assert lim.limit == pytest.approx(1.5 * np.mean(pairs), rel=1e-9)
     assert "6 ordered pairs of this sweep's 3 seeds" in lim.source
 
 

@@ -42,12 +42,13 @@ KIND_U, KIND_PARTITION = 1, 2
 
 
 def speed_bin(v) -> np.ndarray:
-    """Index of each speed's bin in SPEED_EDGES_M_S (speeds above the last edge go to the last
-    bin; negative or NaN speeds get -1)."""
+    """Index of each speed's bin in SPEED_EDGES_M_S: speeds above the last edge go to the last
+    bin, speeds below 0 m/s to the first (an impact whose approach speed is numerically zero,
+    -1e-5 m/s, is still an impact, so every kind's count is the summary's); NaN gets -1."""
     v = np.asarray(v, dtype=float)
     j = np.searchsorted(SPEED_EDGES_M_S, v, side="right") - 1
-    j = np.minimum(j, SPEED_EDGES_M_S.size - 2)
-    return np.where(np.isfinite(v) & (v >= 0.0), j, -1)
+    j = np.clip(j, 0, SPEED_EDGES_M_S.size - 2)
+    return np.where(np.isfinite(v), j, -1)
 
 
 def histogram_quantile(counts, q: float, edges=SPEED_EDGES_M_S) -> float:

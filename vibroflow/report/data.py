@@ -450,8 +450,8 @@ def check_method_summary(path: Path, summary) -> None:
     wf = _table(path, summary.get("wall_feed"), "wall_feed")
     _numbers(path, wf, "wall_feed", ("u_wall_W_m2", "u_wall_W_m2_stderr"))
     for k in ("by_region_W_m2", "by_region_W_m2_stderr"):
-        _numbers(path, _table(path, wf.get(k), f"wall_feed.{k}"), f"wall_feed.{k}",
-                 list(_table(path, wf.get(k), f"wall_feed.{k}")))
+        regions = _table(path, wf.get(k), f"wall_feed.{k}")
+        _numbers(path, regions, f"wall_feed.{k}", list(regions))
 
 
 def check_finished(out: Path) -> None:

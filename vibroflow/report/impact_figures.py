@@ -29,19 +29,6 @@ DRAWN_BIN = 25
 COLOURS = {"ball_ball": "C0", "ball_wall": "C3", "ball_partition": "C2", "plane_wall": "C4"}
 
 
-class _AtLeastZero:
-    """dem.h5's normal speeds as impact_distributions reads them (rows by slice), a negative one
-    raised to 0 m/s: an impact whose approach speed is numerically zero (-1e-5 m/s) belongs in
-    the histogram's lowest bin [0, 1e-6] m/s, so that every kind's count is the summary's."""
-
-    def __init__(self, speeds):
-        self.speeds = speeds
-        self.shape = speeds.shape
-
-    def __getitem__(self, rows):
-        return np.maximum(np.asarray(self.speeds[rows], dtype=float), 0.0)
-
-
 def read_distributions(data: StudyData) -> tuple[ImpactDistributions | None, str | None]:
     """The DEM's impacts of the averaging window's whole cycles as distributions, or None and
     why (no dem.h5, no impacts, unreadable)."""
@@ -58,7 +45,7 @@ def read_distributions(data: StudyData) -> tuple[ImpactDistributions | None, str
                               "report them)")
             g = f["impacts"]
             return impact_distributions(
-                g["time"], g["kind"], g["position_tub"], _AtLeastZero(g["normal_speed"]),
+                g["time"], g["kind"], g["position_tub"], g["normal_speed"],
                 t_start=run.duration - run.average_last, t_end=run.duration,
                 frequency=float(data.scenario.motion.frequency), n_batches=int(run.batches),
                 geometry=data.geometry, bin_width=float(data.scenario.analysis.cell_size)), None
