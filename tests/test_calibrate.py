@@ -163,6 +163,13 @@ def test_calibrate_writes_its_files_and_reads_back(calibrated_run):
     assert ph["thermal_temperature"].attrs["units"] == "m2 s-2"
     assert "thermal_temperature_stderr" in ph
     assert ds["thermal_temperature_cycle_mean"].attrs["units"] == "m2 s-2"
+    # the cycle-mean shear rate's jackknife error, wherever the bed is dense and sampled in
+    # every batch, is a finite positive fraction of the value (tests/test_cycle_mean_errors.py)
+    se = ds["shear_rate_cycle_mean_stderr"].values
+    dense = (ds["solid_fraction"].values > 0.4) & np.isfinite(se)
+    assert dense.sum() > 20
+    assert np.all(se[dense] > 0.0)
+    assert np.median(se[dense] / ds["shear_rate_cycle_mean"].values[dense]) < 0.5
     assert not list(out.glob("*.tmp*"))
 
 

@@ -119,6 +119,7 @@ def _coarse_grain(res: DEMResult, kernel, width, cutoff, cell_size, n_phases, pr
                                                    "temperature", "inertial_number",
                                                    "friction_coefficient"))
     info["phase_leave_one_out"] = leave_one_out_dataset(cg, phases)
+    add_cycle_mean_errors(avg, info["phase_leave_one_out"])
     info["wall_time_s"] = time.perf_counter() - t_wall
     return avg, phases, info
 
@@ -164,6 +165,42 @@ def add_cycle_means(time_averaged: xr.Dataset, phase_resolved: xr.Dataset) -> No
         v = (phase_resolved[name].fillna(0.0) * rho).sum("phase") / w.where(w > 0)
         v.attrs.update(units=unit, long_name=desc + " (mass-weighted over the phase bins)")
         time_averaged[name + "_cycle_mean"] = v
+
+
+#: the cycle means whose delete-one-batch values and jackknife errors fields.nc holds
+CYCLE_MEAN_ERROR_FIELDS = ("shear_rate", "temperature")
+
+
+def add_cycle_mean_errors(time_averaged: xr.Dataset, leave_one_out: xr.Dataset | None) -> None:
+    """Add to the time averages, for the cycle-mean shear rate and temperature (add_cycle_means),
+    their values with each batch left out, <name>_cycle_mean_leave_one_out (batch, x, z), and
+    their delete-one-batch jackknife standard errors, <name>_cycle_mean_stderr (x, z; NaN where
+    a left-out value is not finite): the cycle mean of a phase-resolved field's shear rate is
+    not a batch mean (the gradient of a batch's velocity is not the batch's share of the
+    window's gradient), so its error is the jackknife's (measure.stats.jackknife_stderr), which
+    is the batch-means error for a mean.  A reader that averages the map over a region takes
+    the same average of every left-out map and the jackknife of those
+    (report.data.StudyData.dem_shear_rate_at).  Nothing is added with fewer than two batches."""
+    if leave_one_out is None:
+        return
+    sf = leave_one_out["solid_fraction"].fillna(0.0)
+    w = sf.sum("phase")
+    n = leave_one_out.sizes["batch"]
+    for name in CYCLE_MEAN_ERROR_FIELDS:
+        unit = time_averaged[name + "_cycle_mean"].attrs.get("units", "")
+        v = (leave_one_out[name].fillna(0.0) * sf).sum("phase") / w.where(w > 0)
+        v = v.transpose("batch", "x", "z")
+        v.attrs.update(units=unit, long_name=f"cycle mean of the phase-resolved {name} with "
+                                             "batch b left out (solid-fraction-weighted over "
+                                             "the phase bins)")
+        time_averaged[name + "_cycle_mean_leave_one_out"] = v
+        a = v.values
+        ok = np.isfinite(a).all(axis=0)
+        dev = np.where(ok, a - a.mean(axis=0), 0.0)
+        se = np.where(ok, np.sqrt((n - 1) / n * np.sum(dev**2, axis=0)), np.nan)
+        time_averaged[name + "_cycle_mean_stderr"] = (
+            ("x", "z"), se, {"units": unit, "long_name": "delete-one-batch jackknife standard "
+                                                         f"error of {name}_cycle_mean"})
 
 
 def write_fields(path, time_averaged: xr.Dataset, phase_resolved: xr.Dataset | None) -> Path:

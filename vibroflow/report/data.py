@@ -31,7 +31,7 @@ from vibroflow.dem.walls import KIND_BALL_BALL
 from vibroflow.errors import InputError
 from vibroflow.io.calibration_file import Calibration, read_calibration
 from vibroflow.measure.contacts import mean_by_region
-from vibroflow.measure.stats import batches_of_whole_cycles, stderr_of_batches
+from vibroflow.measure.stats import batches_of_whole_cycles, jackknife_stderr, stderr_of_batches
 from vibroflow.scenario.io import dump_scenario, parse_scenario
 from vibroflow.study.results import load, read_summary
 from vibroflow.tub.geometry import geometry_of
@@ -334,12 +334,17 @@ class StudyData:
         return (np.arange(ix.min(), ix.max() + 1) * h, np.arange(iz.min(), iz.max() + 1) * h,
                 grid)
 
-    def dem_shear_rate_at(self, px: float, pz: float) -> float:
-        """The DEM's cycle-mean shear rate (1/s) in the analysis cell holding (px, pz): the
-        mass-weighted mean of fields.nc's grid points inside that cell (NaN without fields)."""
+    def dem_shear_rate_at(self, px: float, pz: float) -> tuple[float, float]:
+        """The DEM's cycle-mean shear rate (1/s) in the analysis cell holding (px, pz), the
+        mass-weighted mean of fields.nc's grid points inside that cell, and its delete-one-batch
+        jackknife standard error: the same mean of each batch-left-out map
+        (shear_rate_cycle_mean_leave_one_out, calibration.run_fields.add_cycle_mean_errors),
+        under the window's weights.  (NaN, NaN) without fields; the error NaN for a fields.nc
+        without the left-out maps."""
+        nan = float("nan")
         ds = self.dem_fields
         if ds is None:
-            return float("nan")
+            return nan, nan
         name = "shear_rate_cycle_mean" if "shear_rate_cycle_mean" in ds else "shear_rate"
         h = float(self.scenario.analysis.cell_size)
         cx, cz = math.floor(px / h + 0.5) * h, math.floor(pz / h + 0.5) * h
@@ -352,8 +357,14 @@ class StudyData:
         w = ds["density"].values[np.ix_(sx, sz)]
         ok = np.isfinite(g) & (w > 0)
         if not ok.any():
-            return float("nan")
-        return float(np.sum(g[ok] * w[ok]) / np.sum(w[ok]))
+            return nan, nan
+        value = float(np.sum(g[ok] * w[ok]) / np.sum(w[ok]))
+        loo_name = "shear_rate_cycle_mean_leave_one_out"
+        if name != "shear_rate_cycle_mean" or loo_name not in ds:
+            return value, nan
+        loo = ds[loo_name].transpose("batch", "x", "z").values[:, sx][:, :, sz]
+        left_out = [np.sum(b[ok] * w[ok]) / np.sum(w[ok]) for b in loo]
+        return value, jackknife_stderr(left_out)
 
 
 # ----------------------------------------------------------------------------------------------

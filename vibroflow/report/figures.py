@@ -253,6 +253,23 @@ def inferred_impact_speeds(data: StudyData, name: str) -> dict:
     return out
 
 
+def inferred_impact_speed_errors(data: StudyData, name: str) -> dict:
+    """The standard errors (m/s) of inferred_impact_speeds: the run's batch-means error of the
+    shear rate through the relation, |c1| d se(gamma_dot), as the summary's bed means carry
+    (continuum.shear_outputs); the calibration's own errors on c0 and c1 are the relation's,
+    given beside it.  {} without a fit."""
+    fit = data.impact_fit("ball_ball")
+    if fit is None:
+        return {}
+    d = data.diameter
+    out = {}
+    for probe, rec in (data.continuum_block(name).get("probes") or {}).items():
+        se = rec.get("shear_rate_1_s_stderr")
+        if isinstance(se, (int, float)) and math.isfinite(se):
+            out[probe] = abs(fit["c1"]) * d * se
+    return out
+
+
 def impact_maps(data: StudyData) -> bytes:
     """Mean ball-ball normal impact speed: the DEM's measured impacts of the averaging window by
     cell (cells with at least MIN_IMPACTS_PER_CELL impacts), against each continuum method's

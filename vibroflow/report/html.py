@@ -196,7 +196,7 @@ def _shear(data: StudyData) -> dict:
     rows = []
     blocks = {n: data.continuum_block(n) for n in data.continuum_methods}
     for probe, p in data.scenario.analysis.probes.items():
-        cells = [_text(probe, "l"), _num(data.dem_shear_rate_at(p.x, p.z))]
+        cells = [_text(probe, "l"), _pm(*data.dem_shear_rate_at(p.x, p.z))]
         for n in data.continuum_methods:
             r = (blocks[n].get("probes") or {}).get(probe, {})
             cells.append(_pm(r.get("shear_rate_1_s"), r.get("shear_rate_1_s_stderr")))
@@ -234,12 +234,15 @@ def _impacts(data: StudyData) -> dict:
     fit = data.impact_fit("ball_ball")
     if fit is not None and data.impacts is not None:
         inferred = {n: figures.inferred_impact_speeds(data, n) for n in data.continuum_methods}
+        errors = {n: figures.inferred_impact_speed_errors(data, n)
+                  for n in data.continuum_methods}
         probe_rows = []
         for probe, p in data.scenario.analysis.probes.items():
             v, k = data.impacts.at(p.x, p.z)
             probe_rows.append([_text(probe, "l"), _pm(v, data.impacts.stderr_at(p.x, p.z)),
                                _text(k)]
-                              + [_num(inferred[n].get(probe)) for n in data.continuum_methods])
+                              + [_pm(inferred[n].get(probe), errors[n].get(probe))
+                                 for n in data.continuum_methods])
         out.update(
             fit={"c0": _pm(fit["c0"], fit["c0_stderr"]).text,
                  "c1": _pm(fit["c1"], fit["c1_stderr"]).text, "which": fit["which"]},

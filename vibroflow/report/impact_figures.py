@@ -17,7 +17,8 @@ from vibroflow.analysis.impact_stats import (SPEED_EDGES_M_S, ImpactDistribution
                                              impact_distributions, speed_flag)
 from vibroflow.io.pictures import pyplot
 from vibroflow.report.data import DEM, MIN_IMPACTS_PER_CELL, StudyData
-from vibroflow.report.figures import inferred_impact_speeds, png_bytes
+from vibroflow.report.figures import (inferred_impact_speed_errors, inferred_impact_speeds,
+                                      png_bytes)
 
 #: the kinds drawn and tabled, as the page names them (IMPACT_KINDS' names)
 KIND_LABELS = {"ball_ball": "ball-ball", "ball_wall": "ball-U wall",
@@ -145,6 +146,7 @@ def speed_comparisons(data: StudyData) -> list[dict]:
         if data.impacts is None:
             continue
         inferred = inferred_impact_speeds(data, name)
+        errors = inferred_impact_speed_errors(data, name)
         for probe, p in data.scenario.analysis.probes.items():
             v, count = data.impacts.at(p.x, p.z)
             m = v if count >= MIN_IMPACTS_PER_CELL else math.nan
@@ -153,7 +155,8 @@ def speed_comparisons(data: StudyData) -> list[dict]:
             se = data.impacts.stderr_at(p.x, p.z) if count >= MIN_IMPACTS_PER_CELL else math.nan
             rows.append({"where": f"probe {probe} cell", "kind": "ball-ball", "method": name,
                          "measured": m, "measured_stderr": se, "inferred": i,
-                         "inferred_stderr": math.nan, "relative": rel, "flagged": flag})
+                         "inferred_stderr": _num(errors.get(probe)), "relative": rel,
+                         "flagged": flag})
     return rows
 
 
