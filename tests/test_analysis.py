@@ -224,6 +224,22 @@ def test_csv_round_trip_and_probe(tmp_path):
     assert pv["P1"]["vx"] == pytest.approx(0.1) and pv["P1"]["cell_x"] == pytest.approx(-0.105)
     assert pv["P4"]["vz"] == pytest.approx(-0.03)
     assert math.isnan(pv["far"]["vx"]) and pv["far"]["samples"] == 0
+    # read back from the CSV the table has no batches: no error
+    assert math.isnan(pv["P1"]["solid_fraction_stderr"])
+
+
+def test_probe_solid_fraction_error_of_known_batches():
+    """Three batches of one cell at solid fraction 0.50, 0.56, 0.59: the error is their sd over
+    sqrt(3) = 0.04583 / 1.7321 = 0.02646."""
+    one = np.array([0.0])
+    t = CellTable(x=one, z=one + 0.15, solid_fraction=np.array([0.55]), vx=one, vz=one,
+                  samples=np.array([30]), cell_size=0.015,
+                  batch_phi=np.array([[0.50], [0.56], [0.59]]),
+                  batch_vx=np.zeros((3, 1)), batch_vz=np.zeros((3, 1)))
+    pv = probe_values(t, {"P": (0.0, 0.15)})
+    assert pv["P"]["solid_fraction_stderr"] == pytest.approx(
+        np.std([0.50, 0.56, 0.59], ddof=1) / math.sqrt(3), rel=1e-12)
+    assert pv["P"]["solid_fraction_stderr"] == pytest.approx(0.02646, abs=1e-5)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -235,8 +235,14 @@ def test_report_is_self_contained_and_shows_the_summary(study):
             want = methods[name]["probes"][probe][q]
             se = methods[name]["probes"][probe][q + "_stderr"]
         else:
-            want = methods[name]["against_dem"]["probe_differences_m_s"][probe][q]
-            se = None
+            d = methods[name]["against_dem"]["probe_differences_m_s"][probe]
+            want, se = d[q], d[q + "_stderr"]
+            # two independent runs: the difference's error is their errors in quadrature
+            a, b = methods[name]["probes"][probe], methods["dem"]["probes"][probe]
+            v = q[1:]
+            if se is not None:
+                assert se == pytest.approx(math.hypot(a[v + "_stderr"], b[v + "_stderr"]),
+                                           rel=1e-12)
         assert float(attrs["data-value"]) == want
         shown = text.split("±")[0].strip()
         # rounded to the error's place (report.numbers) or to four figures without an error

@@ -345,12 +345,12 @@ def probe_values(table: CellTable, probes) -> dict:
     probes : mapping name -> (x, z) in m, or an object with .x and .z (scenario Probe).
     Returns name -> {x, z (the probe point, m), cell_x, cell_z (its cell's centre, m),
     vx, vz (m/s), vx_stderr, vz_stderr (m/s, batch means; NaN without batches), solid_fraction,
-    samples}.  A probe in a cell that held no ball gets NaN velocities, 0 samples and a "note"
+    solid_fraction_stderr (-, batch means; NaN without batches), samples}.  A probe in a cell that held no ball gets NaN velocities, 0 samples and a "note"
     saying why (the probe lies above the bed's surface, or outside the tub).
     """
     h = table.cell_size
     lookup = {(int(a), int(b)): j for j, (a, b) in enumerate(zip(table.ix, table.iz))}
-    se_x, se_z = table.vx_stderr, table.vz_stderr
+    se_x, se_z, se_phi = table.vx_stderr, table.vz_stderr, table.solid_fraction_stderr
     out = {}
     for name, p in probes.items():
         px, pz = (p.x, p.z) if hasattr(p, "x") else (float(p[0]), float(p[1]))
@@ -359,11 +359,13 @@ def probe_values(table: CellTable, probes) -> dict:
         rec = {"x": float(px), "z": float(pz), "cell_x": key[0] * h, "cell_z": key[1] * h}
         if j is None:
             rec.update(vx=float("nan"), vz=float("nan"), vx_stderr=float("nan"),
-                       vz_stderr=float("nan"), solid_fraction=0.0, samples=0)
+                       vz_stderr=float("nan"), solid_fraction=0.0,
+                       solid_fraction_stderr=float("nan"), samples=0)
         else:
             rec.update(vx=float(table.vx[j]), vz=float(table.vz[j]),
                        vx_stderr=float(se_x[j]), vz_stderr=float(se_z[j]),
                        solid_fraction=float(table.solid_fraction[j]),
+                       solid_fraction_stderr=float(se_phi[j]),
                        samples=int(table.samples[j]))
         if rec["samples"] == 0:
             rec["note"] = (f"no ball entered its {h * 1e3:.0f} mm cell in the averaging window: "

@@ -155,7 +155,8 @@ class ImpactStats:
                 "ball_ball_mean_normal_speed_stderr": se["ball_ball"],
                 "ball_wall_mean_normal_speed_stderr": se["ball_wall"],
                 "count_by_kind": dict(self.count_by_kind),
-                "mean_normal_speed_by_kind": dict(m)}
+                "mean_normal_speed_by_kind": dict(m),
+                "mean_normal_speed_stderr_by_kind": dict(se)}
 
 
 def _accumulate_impacts(sums, counts, kind, v, batch) -> None:

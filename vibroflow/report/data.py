@@ -407,7 +407,7 @@ def check_summary(path: Path, summary: dict) -> None:
         for probe, q in _table(path, m.get("probes"), f"{w}.probes", required=True).items():
             _numbers(path, _table(path, q, f"{w}.probes.{probe}", required=True),
                      f"{w}.probes.{probe}", ("vx", "vz", "vx_stderr", "vz_stderr",
-                                             "solid_fraction"))
+                                             "solid_fraction", "solid_fraction_stderr"))
         c = _table(path, m.get("circulation"), f"{w}.circulation", required=True)
         _numbers(path, c, f"{w}.circulation", ("strength", "strength_stderr"))
         if c.get("sense") is not None and not isinstance(c["sense"], str):
@@ -424,7 +424,8 @@ def check_summary(path: Path, summary: dict) -> None:
                                f"{w}.against_dem.probe_differences_m_s").items():
             _numbers(path, _table(path, d, f"{w}.against_dem.probe_differences_m_s.{probe}",
                                   required=True),
-                     f"{w}.against_dem.probe_differences_m_s.{probe}", ("dvx", "dvz"))
+                     f"{w}.against_dem.probe_differences_m_s.{probe}",
+                     ("dvx", "dvz", "dvx_stderr", "dvz_stderr"))
         verdict = a.get("circulation_agrees")
         if verdict is not None and not isinstance(verdict, bool):
             raise _bad(path, f"{w}.against_dem.circulation_agrees", verdict, "true or false")

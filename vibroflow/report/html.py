@@ -164,7 +164,7 @@ def _probes(data: StudyData) -> dict:
                 dif = (methods[name].get("against_dem") or {}).get("probe_differences_m_s", {})
                 dq = dif.get(probe, {})
                 for k in ("dvx", "dvz"):
-                    cells.append(_num(dq.get(k)).tagged(
+                    cells.append(_pm(dq.get(k), dq.get(k + "_stderr")).tagged(
                         data_method=name, data_probe=probe, data_q=k))
         rows.append(cells)
     return {"head": head, "rows": rows}

@@ -227,8 +227,14 @@ def compare(study: Study) -> dict:
         for name, p in s["probes"].items():
             q = dem["probes"].get(name)
             if q is not None:
-                probes[name] = {"dvx": _finite(_nan(p["vx"]) - _nan(q["vx"])),
-                                "dvz": _finite(_nan(p["vz"]) - _nan(q["vz"]))}
+                # two independent runs: their batch-means errors add in quadrature
+                probes[name] = {
+                    k: _finite(_nan(p[v]) - _nan(q[v])) for k, v in (("dvx", "vx"),
+                                                                      ("dvz", "vz"))}
+                probes[name].update({
+                    k + "_stderr": _finite(math.hypot(_nan(p.get(v + "_stderr")),
+                                                      _nan(q.get(v + "_stderr"))))
+                    for k, v in (("dvx", "vx"), ("dvz", "vz"))})
         entry["against_dem"] = {
             "field_difference_E": E, "field_difference_note": E_note,
             "min_solid_fraction": sc.analysis.min_solid_fraction,
