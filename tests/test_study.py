@@ -258,6 +258,13 @@ def test_run_vtk_writes_the_paraview_files_of_the_dem_and_every_method(run_cli, 
     flags = ["--vtk", "--vtk-frame", "lab", "--vtk-every", "0.02"]
     r = run_cli("run", "tub47-quick", "--out", out, *flags, *sets, timeout=1200)
     assert r.returncode == 0, r.stderr
+    # the last lines: each method's strength with its error, as summary.json holds them
+    from vibroflow.rounding import plus_minus
+    summary = json.loads((out / "summary.json").read_text())
+    for name, m in summary["methods"].items():
+        c = m["circulation"]
+        assert (f"{name}: circulation {c['sense']} "
+                f"{plus_minus(c['strength'], c['strength_stderr'])} m^2/s") in r.stdout
     dem = out / "dem" / "vtk"
     entries = read_pvd(dem / "snapshots.pvd")
     # early frames at 0, 0.02 s before the window at 0.03 s, then 4 cycles x 8 snapshots

@@ -7,6 +7,7 @@ from typing import Annotated, Optional
 
 import typer
 
+from ..rounding import plus_minus
 from ..threads import use_threads
 from .after_run import warn_empty_probes
 from .apps import app
@@ -64,13 +65,15 @@ def run(
     for name, m in summary["methods"].items():
         warn_empty_probes(f"{name}:", m)
         c = m["circulation"]
-        line = (f"{name}: circulation {c['sense']} {c['strength']:.4g} m^2/s, wall time "
+        strength = plus_minus(c["strength"], c.get("strength_stderr"))
+        line = (f"{name}: circulation {c['sense']} {strength} m^2/s, wall time "
                 f"{m['wall_time_s']:.1f} s")
         a = m.get("against_dem")
         if a:
             E = a["field_difference_E"]
             line += (f", E vs DEM = {E:.3f}" if E is not None else ", E vs DEM: n/a")
-            line += (", circulation " + ("agrees" if a["circulation_agrees"] else "differs")
-                     + f", cost x{a['cost_ratio']:.3g}")
+            verdict = {True: "agrees", False: "differs"}.get(a["circulation_agrees"],
+                                                              "not judged")
+            line += f", circulation {verdict}, cost x{a['cost_ratio']:.3g}"
         typer.echo(line)
     typer.echo(f"results in {out}/summary.json")
