@@ -375,6 +375,49 @@ def test_seed_scatter_jackknife_error_matches_the_scatter_of_repeats():
     assert np.mean(errors) == pytest.approx(np.std(means, ddof=1), rel=0.25)
 
 
+def _batched(vx_b, vz_b, phi=0.55, h=0.015, samples=100):
+    """A table of 10 cells in a row whose batch k has velocity (vx_b[k], vz_b[k]) m/s in every
+    cell, equal samples a batch."""
+    nb, nc = len(vx_b), 10
+    x = np.arange(nc) * h
+    bvx = np.repeat(np.asarray(vx_b, float)[:, None], nc, axis=1)
+    bvz = np.repeat(np.asarray(vz_b, float)[:, None], nc, axis=1)
+    return CellTable(x=x, z=np.zeros(nc), solid_fraction=np.full(nc, phi), vx=bvx.mean(axis=0),
+                     vz=bvz.mean(axis=0), samples=np.full(nc, nb * samples), cell_size=h,
+                     batch_phi=np.full((nb, nc), phi), batch_vx=bvx, batch_vz=bvz,
+                     batch_samples=np.full((nb, nc), samples))
+
+
+def test_field_difference_error_over_the_batches_known_answers():
+    """Uniform fields.  b at (U, 0) in every batch, a at (U, c_k): E = mean(c) / U is linear in
+    a's batches, so its jackknife error is their batch-means error sd(c) / sqrt(n) / U.  a at
+    (Ua, 0), b's batches at (U_k, 0): E = Ua / mean(U) - 1, whose error is, to first order,
+    Ua / mean(U)^2 sd(U) / sqrt(n) (the delta method; within 1 % at a 2 % spread).  Both
+    sides' batches: the variances add."""
+    from vibroflow.analysis.compare import field_difference_stderr
+
+    U = 0.05
+    c = np.array([0.004, 0.006, 0.005, 0.009, 0.003, 0.007])
+    a, b = _batched(np.full(6, U), c), _batched(np.full(6, U), np.zeros(6))
+    assert field_difference(a, b) == pytest.approx(c.mean() / U, rel=1e-12)
+    se_a = np.std(c, ddof=1) / np.sqrt(6) / U
+    assert field_difference_stderr(a, b) == pytest.approx(se_a, rel=1e-9)
+    Ub = U * np.array([1.00, 1.02, 0.99, 0.98, 1.01, 1.00])
+    a2, b2 = _batched(np.full(6, 0.06), np.zeros(6)), _batched(Ub, np.zeros(6))
+    se_b = 0.06 / Ub.mean() ** 2 * np.std(Ub, ddof=1) / np.sqrt(6)
+    assert field_difference_stderr(a2, b2) == pytest.approx(se_b, rel=0.01)
+    # a with c_k and b with U_k: independent runs, the two variances add (to first order)
+    a3 = _batched(np.full(6, U), c)
+    both = field_difference_stderr(a3, b2)
+    assert both == pytest.approx(np.hypot(field_difference_stderr(a3, _batched(
+        np.full(6, Ub.mean()), np.zeros(6))), field_difference_stderr(_batched(
+            np.full(6, U), np.full(6, c.mean())), b2)), rel=1e-9)
+    # without batches on either side: unknown
+    plain = CellTable(x=a.x, z=a.z, solid_fraction=a.solid_fraction, vx=a.vx, vz=a.vz,
+                      samples=a.samples, cell_size=a.cell_size)
+    assert math.isnan(field_difference_stderr(plain, plain))
+
+
 def test_ensemble_mean_pools_the_samples_and_averages_the_noise_down():
     """The mean of n seeds' fields: in a cell, the pooled mean of all the runs' samples (a
     cell with 1 sample of vx = 1 and one with 3 of vx = 3 average to 2.5), the mean solid

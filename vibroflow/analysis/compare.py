@@ -80,6 +80,46 @@ def field_difference(a: CellTable, b: CellTable, min_solid_fraction: float = 0.3
     return float(rms / V_b)
 
 
+def without_batch(t: CellTable, k: int) -> CellTable:
+    """The table of every batch of t but batch k (no batches of its own): per cell the solid
+    fraction the mean of the other batches' (equal batches of whole cycles) and the velocity
+    their sample-weighted mean (a cell no other batch sampled: 0 m/s, 0 samples)."""
+    keep = np.arange(t.n_batches) != k
+    n = (t.batch_samples[keep] if t.batch_samples is not None
+         else np.ones((int(keep.sum()), len(t))))
+    total = n.sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        vx = np.where(total > 0, (n * np.nan_to_num(t.batch_vx[keep])).sum(axis=0) / total, 0.0)
+        vz = np.where(total > 0, (n * np.nan_to_num(t.batch_vz[keep])).sum(axis=0) / total, 0.0)
+    return CellTable(t.x, t.z, t.batch_phi[keep].mean(axis=0), vx, vz,
+                     total.astype(np.int64), t.cell_size)
+
+
+def field_difference_stderr(a: CellTable, b: CellTable, min_solid_fraction: float = 0.3) -> float:
+    """The standard error (-) of E(a, b) from the batches of both tables: the delete-one-batch
+    jackknife (Efron & Stein 1981) over a's batches with b whole, and over b's with a whole,
+    their variances added (the two runs are independent).  It is E's scatter over the window's
+    batches, not its bias: the batches' noise also raises E itself, which the seed-to-seed
+    limit carries.  NaN where neither table has two batches or a left-out E cannot be formed."""
+    var, used = 0.0, False
+    for side in (a, b):
+        if side.n_batches < 2:
+            continue
+        left_out = []
+        for k in range(side.n_batches):
+            t = without_batch(side, k)
+            try:
+                left_out.append(field_difference(t, b, min_solid_fraction) if side is a else
+                                field_difference(a, t, min_solid_fraction))
+            except InputError:
+                return float("nan")
+        e = np.asarray(left_out)
+        n = e.size
+        var += (n - 1) / n * float(np.sum((e - e.mean()) ** 2))
+        used = True
+    return float(np.sqrt(var)) if used else float("nan")
+
+
 @dataclass(frozen=True)
 class RegionDifference:
     """One region's part of E(a, b) (difference_by_region): x and z bounds of the cell centres

@@ -180,7 +180,8 @@ def _circulation(data: StudyData, eng: Engineer) -> dict:
         if name == "dem":
             e_cell = v_cell = _text("reference")
         else:
-            e_cell = _num(a.get("field_difference_E"), ".3f")
+            e_cell = _pm(a.get("field_difference_E"),
+                         eng.judged["rows"].get(name, {}).get("E_batches_stderr"), ".3f")
             v_cell = (_text("agrees", "ok") if verdict is True else
                       _text("differs", "bad") if verdict is False else _text("n/a"))
         rows.append([_text(name, "l"), _text(c.get("sense", "?")),
@@ -326,13 +327,24 @@ def _floor(data: StudyData) -> dict:
                              for t in b.get("take_off_phase_batches") or []), "l"),
              _pm(b.get("cycle_mean_over_weight"), b.get("cycle_mean_over_weight_stderr"),
                  ".3f"),
-             _num(min((v for v in b.get("force_over_weight") or [] if v is not None),
-                      default=None), ".3f")]
+             _pm(*_lowest_phase(b), ".3f")]
             for n, b in have.items()]
     return {"img": _img(figures.floor_cycle(have), "floor force over the cycle")
             if have else None, "rows": rows, "missing": [n for n in floors if not floors[n]],
             "feed_head": ["method"] + [f"{r} (W/m²)" for r in REGIONS] + ["whole U (W/m²)"],
             "feed_rows": _wall_feed_rows(data), "feed_without": _without_feed(data)}
+
+
+def _lowest_phase(floor: dict) -> tuple[float | None, float | None]:
+    """The floor force's lowest phase mean over the weight and that phase's batch-means
+    standard error (None where the floor block holds none)."""
+    f = floor.get("force_over_weight") or []
+    se = floor.get("force_over_weight_stderr") or []
+    phases = [k for k, v in enumerate(f) if isinstance(v, (int, float))]
+    if not phases:
+        return None, None
+    k = min(phases, key=lambda j: f[j])
+    return f[k], se[k] if k < len(se) else None
 
 
 def _without_feed(data: StudyData) -> list[dict]:

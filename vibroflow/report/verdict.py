@@ -20,7 +20,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from vibroflow.analysis.compare import FIELD_FACTOR, difference_to_seeds, seed_scatter
+from vibroflow.analysis.compare import (FIELD_FACTOR, difference_to_seeds,
+                                        field_difference_stderr, seed_scatter)
 from vibroflow.analysis.judge import read_result, run_folders
 from vibroflow.errors import InputError
 from vibroflow.scenario.io import load_scenario
@@ -162,7 +163,9 @@ def study_seed_tables(data, dem_table) -> tuple[list, str | None]:
 
 def e_rows(data, tables: dict) -> dict:
     """Per continuum method: E against the DEM (the study's, or the mean +- standard error
-    against every seed), the limit and the verdict; plus the limit and its source."""
+    against every seed), the limit and the verdict, and the standard error of E against the
+    study's DEM over both runs' batches (analysis.compare.field_difference_stderr); plus the
+    limit and its source."""
     seeds, note = study_seed_tables(data, tables["dem"])
     if len(seeds) >= 2:
         lim = seeds_limit(seeds)
@@ -182,5 +185,12 @@ def e_rows(data, tables: dict) -> dict:
         if len(seeds) >= 2:
             words += f" (E {e:.3f}" + (f" ± {se:.3f}" if se is not None else "") + (
                 f" against the {len(seeds)} seeds)")
-        rows[name] = {"E": e, "E_stderr": se, "words": words, "cls": cls}
+        # E against the study's DEM, its scatter over both runs' batches (the circulation table)
+        try:
+            e_batches = field_difference_stderr(tables[name], tables["dem"],
+                                                data.min_solid_fraction)
+        except InputError:
+            e_batches = float("nan")
+        rows[name] = {"E": e, "E_stderr": se, "E_batches_stderr": e_batches, "words": words,
+                      "cls": cls}
     return {"limit": lim, "rows": rows, "note": note, "seeds": len(seeds)}
