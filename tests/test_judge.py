@@ -247,3 +247,46 @@ def test_a_run_at_its_formulations_defaults_is_labelled_defaults():
         assert options_label({"options": record}, method) == "defaults"
     eul = asdict(formulation("eulerian").options())
     assert options_label({"options": eul}, "lagrangian") == "transfer_cfl=0.0375"
+
+
+def test_one_reference_gives_es_error_over_both_runs_batches(run_cli, tmp_path):
+    """A DEM run at (U, 0) in every batch and a continuum whose six batches sit at (U, c_k) in
+    every cell, both with their bulk_velocity_batches.csv: E = mean(c) / U, linear in the
+    continuum's batches, so its error is their batch-means error sd(c) / sqrt(6) / U; printed
+    and in the JSON.  Without the batches' files there is none."""
+    from vibroflow.measure.bulk_batches import BATCHES_CSV_NAME, write_batch_csvs
+
+    c = np.array([0.004, 0.006, 0.005, 0.009, 0.003, 0.007])
+    x, z = np.arange(10) * H, np.zeros(10)
+
+    def run(folder, vz_b, method=None):
+        nb = vz_b.size
+        bvz = np.repeat(vz_b[:, None], x.size, axis=1)
+        t = CellTable(x=x, z=z, solid_fraction=np.full(x.size, 0.55), vx=np.full(x.size, U),
+                      vz=bvz.mean(axis=0), samples=np.full(x.size, 100 * nb), cell_size=H,
+                      batch_phi=np.full((nb, x.size), 0.55), batch_vx=np.full((nb, x.size), U),
+                      batch_vz=bvz, batch_samples=np.full((nb, x.size), 100))
+        _write_run(folder, t.vx, t.vz, x, z, t.solid_fraction, 2.5e-3, 0.05e-3, method=method)
+        write_batch_csvs(t, folder)
+        return folder
+
+    dem = run(tmp_path / "dem", np.zeros(6))
+    cont = run(tmp_path / "lag", c, method="lagrangian")
+    r = run_cli("compare", cont, "-r", dem, "--e-seed", "0.1", "--json", tmp_path / "j.json")
+    assert r.returncode == 0, r.stderr
+    (res,) = json.loads((tmp_path / "j.json").read_text())["results"]
+    want = np.std(c, ddof=1) / np.sqrt(6) / U
+    assert res["E_mean"] == pytest.approx(c.mean() / U, rel=1e-9)
+    assert res["E_stderr"] == pytest.approx(want, rel=1e-6)
+    assert res["E_stderr_of"] == "batches"
+    assert f"E against the reference {c.mean() / U:.3f} +- {want:.3f}" in r.stdout
+    (cont / BATCHES_CSV_NAME).unlink()
+    (dem / BATCHES_CSV_NAME).unlink()
+    r = run_cli("compare", cont, "-r", dem, "--e-seed", "0.1", "--json", tmp_path / "j.json")
+    (res,) = json.loads((tmp_path / "j.json").read_text())["results"]
+    assert res["E_stderr"] is None
+    # a damaged batches' file is a one-line error naming it
+    (dem / BATCHES_CSV_NAME).write_text("batch,x\n0,abc\n")
+    r = run_cli("compare", cont, "-r", dem, "--e-seed", "0.1")
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert str(dem / BATCHES_CSV_NAME) in r.stderr.strip().splitlines()[-1]

@@ -237,8 +237,9 @@ def test_the_template_run_imports(run):
     summary = LG.import_run(post, None, out)
     assert summary["n_particles"] == 3 and summary["snapshots"] == len(steps)
     assert summary["bulk_velocity_csv"] == os.fspath(out / "bulk_velocity.csv")
-    assert sorted(p.name for p in out.iterdir()) == ["bulk_velocity.csv", "dem.h5",
-                                                     "floor.csv", "summary.json"]
+    assert sorted(p.name for p in out.iterdir()) == [
+        "bulk_velocity.csv", "bulk_velocity_batches.csv", "bulk_velocity_stderr.csv", "dem.h5",
+        "floor.csv", "summary.json"]
 
 
 def _lines_of(post: Path) -> list[str]:

@@ -41,9 +41,10 @@ import numpy as np
 from vibroflow.continuum.formulation import FORMULATIONS, formulation
 from vibroflow.continuum.options import ContinuumOptions
 from vibroflow.measure.bulk import CellTable, read_csv
+from vibroflow.measure.bulk_batches import BATCHES_CSV_NAME, with_batches
 from vibroflow.analysis.compare import (FIELD_FACTOR, difference_to_seeds, ensemble_mean,
-                                        field_difference, fields_agree, seed_scatter,
-                                        strengths_agree)
+                                        field_difference, field_difference_stderr,
+                                        fields_agree, seed_scatter, strengths_agree)
 from vibroflow.errors import InputError
 from vibroflow.io.atomic import json_safe, write_json_atomic
 
@@ -121,6 +122,12 @@ def read_result(folder) -> RunResult:
         table = read_csv(csv_path)
     except ValueError as e:
         raise InputError(f"{csv_path}: {e}") from None
+    batches = folder / BATCHES_CSV_NAME
+    if batches.is_file():  # the window's batches: the errors of E against one reference
+        try:
+            table = with_batches(table, batches)
+        except ValueError as e:
+            raise InputError(f"{batches}: {e}") from None
     if not math.isfinite(strength):
         raise InputError(f"{summary_path}: circulation strength {strength!r}: not a number")
     return result_from_summary(s, folder, table)
@@ -253,13 +260,20 @@ def judge(results: list[RunResult], references: list[RunResult],
         c = r.circulation
         s, se = float(c["strength"]), _se(c.get("strength_stderr"))
         d = difference_to_seeds(r.table, tables)
+        # one reference: E's error is its scatter over the two runs' batches
+        if n > 1:
+            e_se, e_se_of = d.stderr, "references"
+        else:
+            e_se = field_difference_stderr(r.table, tables[0])
+            e_se, e_se_of = (e_se, "batches") if math.isfinite(e_se) else (None, None)
         entry = {"folder": str(r.folder), "method": r.method, "strength": s,
                  "strength_stderr": c.get("strength_stderr"), "sense": c.get("sense"),
                  **_take_off_entry(r),
                  "strength_ratio": s / ref_strength if ref_strength else None,
                  "strengths_agree": strengths_agree(s, se, ref_strength, ref_strength_se,
                                                     c.get("sense"), ref_sense),
-                 "E_each": list(d.values), "E_mean": d.mean, "E_stderr": d.stderr,
+                 "E_each": list(d.values), "E_mean": d.mean, "E_stderr": e_se,
+                 "E_stderr_of": e_se_of,
                  "E_mean_field": (field_difference(r.table, mean_field)
                                   if mean_field is not None else None)}
         entry["fields_agree"] = fields_agree(d.mean, floor) if floor is not None else None
@@ -358,7 +372,12 @@ def format_judgement(j: dict) -> str:
                      f"{_pm(j['reference_strength'], j['reference_strength_stderr'], '{:.4e}')}"
                      f": strengths agree: {'yes' if r['strengths_agree'] else 'no'}")
         each = ", ".join(f"{e:.3f}" for e in r["E_each"])
-        line = f"  E against each reference {each}: mean {_pm(r['E_mean'], r['E_stderr'])}"
+        if len(r["E_each"]) == 1:
+            line = (f"  E against the reference {_pm(r['E_mean'], r['E_stderr'])}"
+                    + (" (its scatter over the two runs' batches)"
+                       if r["E_stderr"] is not None else ""))
+        else:
+            line = f"  E against each reference {each}: mean {_pm(r['E_mean'], r['E_stderr'])}"
         if r["E_mean_field"] is not None:
             line += f"; against their mean field {r['E_mean_field']:.3f}"
         lines.append(line)

@@ -45,6 +45,7 @@ from ..io.atomic import write_json_atomic
 from ..io.folder_lock import folder_lock
 from ..io.run_folder import claim_for_fresh_run
 from ..io.vtk_frame import VtkOptions, vtk_options
+from ..measure.bulk_batches import BATCHES_CSV_NAME, STDERR_CSV_NAME
 from ..progress import RunProgress
 from ..run_clock import RunClock
 from ..threads import requested_threads
@@ -65,8 +66,8 @@ from .summary import run_summary
 SMALL_RUN = 1500  # below this many balls one thread is faster than two (thread wake-ups)
 
 # what a fresh run removes before it writes: the previous run's results and checkpoint
-_PREVIOUS = (CHECKPOINT_NAME, SUMMARY_NAME, "bulk_velocity.csv", "dem.h5", "dem.h5.partial",
-             "parts.nc", "floor.csv")
+_PREVIOUS = (CHECKPOINT_NAME, SUMMARY_NAME, "bulk_velocity.csv", STDERR_CSV_NAME,
+             BATCHES_CSV_NAME, "dem.h5", "dem.h5.partial", "parts.nc", "floor.csv")
 
 
 def run_dem(scenario, out_dir: Path, vtk: VtkOptions | bool | None = None,

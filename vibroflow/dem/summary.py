@@ -59,7 +59,10 @@ def run_summary(scenario, system: DEMSystem, state: DEMState, h5path: Path, out_
             {"id": i, "position": state.pos[i].tolist(), "velocity": state.vel[i].tolist(),
              "angular_velocity": state.omg[i].tolist()} for i in range(state.n)]
         return summary
-    summary.update(tub_summary(h5path, scenario, bulk_csv=out_dir / "bulk_velocity.csv"))
+    # the cell table's batches beside it (measure.bulk_batches), as a continuum run writes
+    # them: a run folder alone gives each cell's error and E's (analysis.judge)
+    summary.update(tub_summary(h5path, scenario, bulk_csv=out_dir / "bulk_velocity.csv",
+                               batch_csvs=True))
     # the floor over the cycle (measure/floor_force.py): floor.csv and the take-off
     with h5py.File(h5path, "r") as f:
         floor = dem_floor_cycle(f, scenario, weight_of(scenario.gravity, state.mass.sum()))

@@ -36,6 +36,7 @@ from vibroflow.liggghts.part_contacts import (PartGeometry, check_outside, deck_
                                               part_impacts, part_load_rows, part_rolling)
 from vibroflow.liggghts.part_deck import PART_DUMP
 from vibroflow.liggghts.template import _short
+from vibroflow.measure.bulk_batches import BATCHES_CSV_NAME, STDERR_CSV_NAME
 from vibroflow.measure.floor_force import (FLOOR_CSV_NAME, dem_floor_cycle, weight_of,
                                            write_floor_csv)
 from vibroflow.measure.summary import tub_summary
@@ -49,7 +50,7 @@ BALL_COLUMNS = ("id", "x", "y", "z", "vx", "vy", "vz", "omegax", "omegay", "omeg
 BULK_CSV = "bulk_velocity.csv"
 #: what an import writes into its out folder, in the order they are moved into place (and
 #: PARTS_NC before summary.json for a scenario with parts)
-IMPORT_FILES = ("dem.h5", BULK_CSV, "summary.json")
+IMPORT_FILES = ("dem.h5", BULK_CSV, STDERR_CSV_NAME, BATCHES_CSV_NAME, "summary.json")
 #: dem.h5 stores positions and velocities as float32: larger magnitudes would be inf there
 FLOAT32_MAX = float(np.finfo(np.float32).max)
 #: a wall dump's snapshot without contacts (a step the dump has no entry for)
@@ -290,7 +291,7 @@ def _import(post: Path, scenario, n0: int, tmp_dir: Path) -> dict:
         ds = part_dataset(h5, scenario, parts)
         write_parts(tmp_dir / PARTS_NC, ds)
         summary["parts"] = json_safe(summary_lines(ds, parts))
-    summary.update(tub_summary(h5, scenario, bulk_csv=tmp_dir / BULK_CSV))
+    summary.update(tub_summary(h5, scenario, bulk_csv=tmp_dir / BULK_CSV, batch_csvs=True))
     # the floor over the cycle (measure.floor_force), from the wall contacts' forces
     mass = float(np.sum(4.0 / 3.0 * np.pi * np.asarray(radius, float) ** 3 * rho))
     with h5py.File(h5, "r") as hf:
