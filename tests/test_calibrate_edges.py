@@ -49,7 +49,9 @@ def run(tiny_run, tmp_path):
 
 def _written(run) -> set[str]:
     return {p.name for p in run.iterdir()} - {"dem.h5", "summary.json", "bulk_velocity.csv",
-                                               "floor.csv", ".vibroflow.lock"}
+                                               "bulk_velocity_stderr.csv",
+                                               "bulk_velocity_batches.csv", "floor.csv",
+                                               ".vibroflow.lock"}
 
 
 def test_too_small_a_bed_is_one_line_naming_the_measurement_and_the_remedies(run):

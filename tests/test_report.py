@@ -268,6 +268,14 @@ def test_report_is_self_contained_and_shows_the_summary(study):
     for name in timed:
         se = re.search(r'data-stderr="([^"]*)"', turnover[name])
         assert se and math.isfinite(float(se.group(1))) and float(se.group(1)) >= 0, name
+    # E's error over the two runs' batches: the study's from the DEM's bulk_velocity_batches.csv,
+    # the page's from the DEM's snapshots rebuilt: the same batches, so the same error
+    table = re.search(r'<table class="circulation">(.*?)</table>', html, re.S).group(1)
+    for name in [n for n in methods if n != "dem"]:
+        row = re.search(rf"<tr><td[^>]*>{name}</td>(.*?)</tr>", table, re.S).group(1)
+        shown = float(re.findall(r'data-stderr="([^"]*)"', row)[1])  # strength's, then E's
+        want = summary["methods"][name]["against_dem"]["field_difference_E_stderr"]
+        assert want > 0 and shown == pytest.approx(want, rel=1e-9), name
 
 
 def test_report_renders_in_headless_chromium(study):

@@ -123,6 +123,8 @@ def test_sweep_table_matches_points_and_tub_speed_scales_with_factor(swept):
             assert _num(row["wall_time_s"]) == m["wall_time_s"]
             if row["method"] != "dem":
                 assert _num(row["E_against_dem"]) == m["against_dem"]["field_difference_E"]
+                assert (_num(row["E_against_dem_stderr"])
+                        == m["against_dem"]["field_difference_E_stderr"])
 
     # a point's folder is a study folder like `vibroflow run`'s: vibroflow.load reads it
     import vibroflow

@@ -71,7 +71,8 @@ def run(
         a = m.get("against_dem")
         if a:
             E = a["field_difference_E"]
-            line += (f", E vs DEM = {E:.3f}" if E is not None else ", E vs DEM: n/a")
+            line += (f", E vs DEM = {plus_minus(E, a.get('field_difference_E_stderr'), '.3f')}"
+                     if E is not None else ", E vs DEM: n/a")
             verdict = {True: "agrees", False: "differs"}.get(a["circulation_agrees"],
                                                               "not judged")
             line += f", circulation {verdict}, cost x{a['cost_ratio']:.3g}"

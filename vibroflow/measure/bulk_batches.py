@@ -1,9 +1,9 @@
-"""The bulk velocity cell table's batches of whole cycles as files beside bulk_velocity.csv, for
-a method that keeps no snapshots (the continuum): the batch-means standard error of every cell
-(bulk_velocity_stderr.csv) and the per-batch cell means behind it (bulk_velocity_batches.csv),
-from which a reader rebuilds the table's batches (`with_batches`) and so any quantity's
-batch-means standard error over the same batches (stats.py; the report's profiles and turnover
-time).
+"""The bulk velocity cell table's batches of whole cycles as files beside bulk_velocity.csv,
+written by every method (a DEM run, a LIGGGHTS import, a continuum run): the batch-means
+standard error of every cell (bulk_velocity_stderr.csv) and the per-batch cell means behind it
+(bulk_velocity_batches.csv), from which a reader rebuilds the table's batches (`with_batches`)
+and so any quantity's batch-means standard error over the same batches (stats.py; the report's
+profiles and turnover time, E's error over two runs' batches).
 
 bulk_velocity_stderr.csv, one row per cell of bulk_velocity.csv in its order (z, then x):
 x, z (m, cell centre, tub frame), vx_stderr_m_s, vz_stderr_m_s (m/s),

@@ -418,7 +418,8 @@ def check_summary(path: Path, summary: dict) -> None:
         _numbers(path, im, f"{w}.impacts", ("count",), integer=True)
         _numbers(path, m, w, ("wall_time_s",))
         a = _table(path, m.get("against_dem"), f"{w}.against_dem")
-        _numbers(path, a, f"{w}.against_dem", ("field_difference_E", "circulation_strength",
+        _numbers(path, a, f"{w}.against_dem", ("field_difference_E", "field_difference_E_stderr",
+                                               "circulation_strength",
                                                "dem_circulation_strength", "cost_ratio"))
         for probe, d in _table(path, a.get("probe_differences_m_s"),
                                f"{w}.against_dem.probe_differences_m_s").items():

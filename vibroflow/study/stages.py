@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from vibroflow import __version__
-from vibroflow.analysis.compare import field_difference, strengths_agree
+from vibroflow.analysis.compare import field_difference, field_difference_stderr, strengths_agree
 from vibroflow.calibration.calibrate import calibrate
 from vibroflow.continuum.options import options_record
 from vibroflow.dem.fingerprint import scenario_record
@@ -29,6 +29,7 @@ from vibroflow.io.calibration_file import CALIBRATION_FILE, read_calibration
 from vibroflow.io.calibration_source import check_calibration_source
 from vibroflow.io.vtk_frame import VtkOptions, has_vtk
 from vibroflow.measure.bulk import read_csv
+from vibroflow.measure.bulk_batches import BATCHES_CSV_NAME, with_batches
 from vibroflow.study.methods import ContinuumMethod
 
 DEM = "dem"
@@ -207,18 +208,21 @@ def compare(study: Study) -> dict:
     sc = study.scenario
     h = sc.analysis.cell_size
     dem = json.loads((out / DEM / "summary.json").read_text())
-    dem_table = read_csv(out / DEM / "bulk_velocity.csv", cell_size=h)
+    dem_table = _with_batches(read_csv(out / DEM / "bulk_velocity.csv", cell_size=h), out / DEM)
     methods = {DEM: _method_entry(dem, DEM)}
     dc = dem["circulation"]
     for m, _ in study.methods:
         s = json.loads((out / m.name / "summary.json").read_text())
         entry = _method_entry(s, m.name)
-        table = read_csv(out / m.name / "bulk_velocity.csv", cell_size=h)
+        table = _with_batches(read_csv(out / m.name / "bulk_velocity.csv", cell_size=h),
+                              out / m.name)
         try:
             E = field_difference(table, dem_table, sc.analysis.min_solid_fraction)
             E_note = None
+            E_se = _finite(field_difference_stderr(table, dem_table,
+                                                   sc.analysis.min_solid_fraction))
         except ValueError as exc:
-            E, E_note = None, str(exc)
+            E, E_note, E_se = None, str(exc), None
         c = s["circulation"]
         agree = strengths_agree(c["strength"], _nan(c.get("strength_stderr")),
                                 dc["strength"], _nan(dc.get("strength_stderr")),
@@ -236,7 +240,8 @@ def compare(study: Study) -> dict:
                                                       _nan(q.get(v + "_stderr"))))
                     for k, v in (("dvx", "vx"), ("dvz", "vz"))})
         entry["against_dem"] = {
-            "field_difference_E": E, "field_difference_note": E_note,
+            "field_difference_E": E, "field_difference_E_stderr": E_se,
+            "field_difference_note": E_note,
             "min_solid_fraction": sc.analysis.min_solid_fraction,
             "circulation_strength": c["strength"], "dem_circulation_strength": dc["strength"],
             "circulation_agrees": agree,
@@ -248,6 +253,18 @@ def compare(study: Study) -> dict:
     return {"kind": "vibroflow study summary", "vibroflow_version": __version__,
             "case": sc.case, "units": "SI (m, m/s, m^2/s, s)",
             "reference": DEM, "methods": methods}
+
+
+def _with_batches(table, folder: Path):
+    """The table with the batches its run wrote beside it (measure.bulk_batches), or as it is
+    without a readable batches' file: then E has no error."""
+    path = folder / BATCHES_CSV_NAME
+    if not path.is_file():
+        return table
+    try:
+        return with_batches(table, path)
+    except (OSError, ValueError):
+        return table
 
 
 def _nan(x) -> float:

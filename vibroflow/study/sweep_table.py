@@ -65,6 +65,7 @@ def point_rows(out: Path, name: str, values: dict[str, Any]) -> list[dict[str, A
         row["wall_time_s"] = _num(m.get("wall_time_s"))
         a = m.get("against_dem")
         row["E_against_dem"] = _num(a.get("field_difference_E")) if a else None
+        row["E_against_dem_stderr"] = _num(a.get("field_difference_E_stderr")) if a else None
         row["circulation_agrees"] = a.get("circulation_agrees") if a else None
         rows.append(row)
     return rows
@@ -143,7 +144,7 @@ def rich_table(rows: list[dict[str, Any]], varied: list[str]):
         bb, bw = r.get("impact_ball_ball"), r.get("impact_ball_wall")
         t.add_row(*[_cell(r.get(k)) for k in varied], r["method"], r["status"],
                   _pm(r["circulation_strength"], r["circulation_strength_stderr"], 1e4) + sense,
-                  "" if E is None else f"{E:.3f}",
+                  "" if E is None else _pm(E, r.get("E_against_dem_stderr"), fmt=".3f"),
                   f"{_pm(bb, r.get('impact_ball_ball_stderr'))} / "
                   f"{_pm(bw, r.get('impact_ball_wall_stderr'))}",
                   "" if r["wall_time_s"] is None else f"{r['wall_time_s']:.3g}")
