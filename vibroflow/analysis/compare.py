@@ -102,14 +102,14 @@ def field_difference_stderr(a: CellTable, b: CellTable, min_solid_fraction: floa
     batches, not its bias: the batches' noise also raises E itself, which the seed-to-seed
     limit carries.  NaN where neither table has two batches or a left-out E cannot be formed."""
     var, used = 0.0, False
-    for side in (a, b):
+    for first, side in ((True, a), (False, b)):
         if side.n_batches < 2:
             continue
         left_out = []
         for k in range(side.n_batches):
             t = without_batch(side, k)
             try:
-                left_out.append(field_difference(t, b, min_solid_fraction) if side is a else
+                left_out.append(field_difference(t, b, min_solid_fraction) if first else
                                 field_difference(a, t, min_solid_fraction))
             except InputError:
                 return float("nan")

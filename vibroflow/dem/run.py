@@ -23,9 +23,9 @@ assembled from the parts (kept), summary.json, the checkpoint removed, the parts
 A fresh run removes the previous results first, so a summary.json is always its own run's.
 The checkpoint records a fingerprint of the scenario and its start (fingerprint.run_record),
 the sha256 of its own contents and of every result part it counts on: a resume of another
-scenario or from a damaged file is refused in one line (InputError).  Ctrl-C (SIGINT) during the vibration writes a
-checkpoint of the current state and raises errors.Interrupted; during the fill it raises
-Interrupted with nothing written.
+scenario or from a damaged file is refused in one line (InputError).  Ctrl-C (SIGINT) during
+the vibration writes a checkpoint of the current state and raises errors.Interrupted; during
+the fill it raises Interrupted with nothing written.
 """
 from __future__ import annotations
 

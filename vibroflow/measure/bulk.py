@@ -345,8 +345,9 @@ def probe_values(table: CellTable, probes) -> dict:
     probes : mapping name -> (x, z) in m, or an object with .x and .z (scenario Probe).
     Returns name -> {x, z (the probe point, m), cell_x, cell_z (its cell's centre, m),
     vx, vz (m/s), vx_stderr, vz_stderr (m/s, batch means; NaN without batches), solid_fraction,
-    solid_fraction_stderr (-, batch means; NaN without batches), samples}.  A probe in a cell that held no ball gets NaN velocities, 0 samples and a "note"
-    saying why (the probe lies above the bed's surface, or outside the tub).
+    solid_fraction_stderr (-, batch means; NaN without batches), samples}.  A probe in a cell
+    that held no ball gets NaN velocities, 0 samples and a "note" saying why (the probe lies
+    above the bed's surface, or outside the tub).
     """
     h = table.cell_size
     lookup = {(int(a), int(b)): j for j, (a, b) in enumerate(zip(table.ix, table.iz))}
