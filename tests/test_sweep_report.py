@@ -294,6 +294,25 @@ def test_seeds_pool_into_means_with_standard_errors_by_hand(seeded):
     assert [(r[FACTOR_KEY], r["run.seed"]) for r in failed] == [(1.0, 3)]
 
 
+def test_pooled_e_takes_the_larger_of_the_seeds_and_the_batches_errors():
+    """E 0.3 +- 0.02 (over its batches) at one seed: no scatter, so the batches' 0.02; two seeds
+    of E 0.3 each +- 0.02: no scatter, the batches' combined sqrt(2 x 0.02^2) / 2 = 0.01414;
+    E 0.2 and 0.4 +- 0.02: the seeds' scatter 0.1 is the larger."""
+    from vibroflow.report.sweep_pool import pool_group
+
+    def row(E, se, seed):
+        return {"method": "lagrangian", "status": "done", "point": f"p{seed}",
+                "run.seed": seed, "E_against_dem": E, "E_against_dem_stderr": se,
+                "circulation_strength": 1e-3, "circulation_strength_stderr": 1e-5}
+
+    one = pool_group([row(0.3, 0.02, 1)], {"method": "lagrangian"})
+    assert one["E_against_dem"] == 0.3 and one["E_against_dem_stderr"] == 0.02
+    two = pool_group([row(0.3, 0.02, 1), row(0.3, 0.02, 2)], {"method": "lagrangian"})
+    assert two["E_against_dem_stderr"] == pytest.approx(0.02 / 2 ** 0.5, rel=1e-12)
+    apart = pool_group([row(0.2, 0.02, 1), row(0.4, 0.02, 2)], {"method": "lagrangian"})
+    assert apart["E_against_dem_stderr"] == pytest.approx(0.1, rel=1e-12)
+
+
 def test_seeded_sweep_report_shows_pooled_rows_and_their_limit(seeded):
     """The page: one row per factor and method with n seeds, the pooled E judged against the
     limit from the two DEM seeds at 1.0 (1.5 x their E; tub47 seeds 1 and 2); at 0.5 no DEM

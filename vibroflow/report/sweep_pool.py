@@ -8,7 +8,8 @@ the mean over its seeds with standard errors:
   the report draws is the larger of the two: with two or three seeds s can fall below the runs'
   own noise by chance, and the mean is not known better than its runs are;
 - E against the DEM: the mean over seeds of each seed's continuum against that seed's DEM,
-  with its seed-to-seed standard error s / sqrt(n);
+  with the larger of its seed-to-seed standard error s / sqrt(n) and its runs' errors over
+  their batches combined (E_against_dem_stderr), as the strength's;
 - the sense: the seeds' common sense, or "mixed" with the count of each; `sense_mean` the mean
   of +1 (counterclockwise), 0, -1 (clockwise) over the seeds;
 - impact speeds: the mean over the seeds with the larger of the two errors, as the strength's;
@@ -71,8 +72,9 @@ def pool_group(rows: list[dict[str, Any]], keep: dict[str, Any]) -> dict[str, An
     varied values without the seed, its method)."""
     s_mean, s_seeds, s_batch = _pooled(rows, "circulation_strength")
     shown = [e for e in (s_seeds, s_batch) if e is not None]
-    E_mean, E_se = mean_stderr([r["E_against_dem"] for r in rows
-                                if r.get("E_against_dem") is not None])
+    E_mean, E_seeds, E_batch = _pooled(rows, "E_against_dem")
+    E_shown = [e for e in (E_seeds, E_batch) if e is not None]
+    E_se = max(E_shown) if E_shown else None
     senses = [r.get("circulation_sense") for r in rows]
     known = [SENSES[s] for s in senses if s in SENSES]
     row = {**keep, "status": "done", "error": "", "n_seeds": len(rows),
