@@ -237,20 +237,27 @@ def shear_rate_maps(data: StudyData) -> bytes:
     return png_bytes(fig)
 
 
+def _through_relation(data: StudyData, name: str, key: str, value) -> dict:
+    """value(fit, d, x) in each probe cell of a continuum method, x its summary's probe entry
+    `key` where finite, fit the calibrated ball-ball relation (StudyData.impact_fit) and d the
+    ball diameter (m); {} without a fit."""
+    fit = data.impact_fit("ball_ball")
+    if fit is None:
+        return {}
+    out = {}
+    for probe, rec in (data.continuum_block(name).get("probes") or {}).items():
+        x = rec.get(key)
+        if isinstance(x, (int, float)) and math.isfinite(x):
+            out[probe] = value(fit, data.diameter, x)
+    return out
+
+
 def inferred_impact_speeds(data: StudyData, name: str) -> dict:
     """A continuum method's ball-ball impact speeds (m/s) inferred in the probe cells from its
     shear rate there by the calibrated v = c0 + c1 d gamma_dot (calibration.toml
     [impacts.ball_ball], the relation its run uses for the bed mean); {} without a fit."""
-    fit = data.impact_fit("ball_ball")
-    if fit is None:
-        return {}
-    d = data.diameter
-    out = {}
-    for probe, rec in (data.continuum_block(name).get("probes") or {}).items():
-        g = rec.get("shear_rate_1_s")
-        if isinstance(g, (int, float)) and math.isfinite(g):
-            out[probe] = fit["c0"] + fit["c1"] * d * g
-    return out
+    return _through_relation(data, name, "shear_rate_1_s",
+                             lambda fit, d, g: fit["c0"] + fit["c1"] * d * g)
 
 
 def inferred_impact_speed_errors(data: StudyData, name: str) -> dict:
@@ -258,16 +265,8 @@ def inferred_impact_speed_errors(data: StudyData, name: str) -> dict:
     shear rate through the relation, |c1| d se(gamma_dot), as the summary's bed means carry
     (continuum.shear_outputs); the calibration's own errors on c0 and c1 are the relation's,
     given beside it.  {} without a fit."""
-    fit = data.impact_fit("ball_ball")
-    if fit is None:
-        return {}
-    d = data.diameter
-    out = {}
-    for probe, rec in (data.continuum_block(name).get("probes") or {}).items():
-        se = rec.get("shear_rate_1_s_stderr")
-        if isinstance(se, (int, float)) and math.isfinite(se):
-            out[probe] = abs(fit["c1"]) * d * se
-    return out
+    return _through_relation(data, name, "shear_rate_1_s_stderr",
+                             lambda fit, d, se: abs(fit["c1"]) * d * se)
 
 
 def impact_maps(data: StudyData) -> bytes:
