@@ -418,6 +418,35 @@ def test_field_difference_error_over_the_batches_known_answers():
     assert math.isnan(field_difference_stderr(plain, plain))
 
 
+def test_rms_difference_and_its_error_over_the_batches_known_answers():
+    """The report's plain rms of |v_a - v_b|: cells (0.03, 0.04) m/s apart read 0.05 m/s, a
+    cell below the solid fraction limit left out, each cell counted once whatever its solid
+    fraction.  b at (U, 0), a's batches at (U, c_k) with every c_k > 0: the rms is mean(c),
+    linear in a's batches, so its jackknife error is sd(c) / sqrt(n) (1e-9).  A statistic that
+    cannot be formed without some batch has no error."""
+    from vibroflow.analysis.compare import batches_stderr, rms_difference
+
+    h = 0.015
+    a = CellTable(x=np.arange(3) * h, z=np.zeros(3), solid_fraction=np.array([0.5, 0.9, 0.1]),
+                  vx=np.array([0.03, 0.0, 1.0]), vz=np.array([0.04, 0.05, 1.0]),
+                  samples=np.full(3, 10), cell_size=h)
+    b = CellTable(x=np.arange(3) * h, z=np.zeros(3), solid_fraction=np.array([0.4, 0.6, 0.5]),
+                  vx=np.zeros(3), vz=np.zeros(3), samples=np.full(3, 10), cell_size=h)
+    assert rms_difference(a, b, 0.3) == pytest.approx(0.05, rel=1e-12)
+    with pytest.raises(InputError):
+        rms_difference(a, b, 0.95)
+    U = 0.05
+    c = np.array([0.004, 0.006, 0.005, 0.009, 0.003, 0.007])
+    a2, b2 = _batched(np.full(6, U), c), _batched(np.full(6, U), np.zeros(6))
+    assert rms_difference(a2, b2) == pytest.approx(c.mean(), rel=1e-12)
+    assert batches_stderr(a2, b2, rms_difference) == pytest.approx(
+        np.std(c, ddof=1) / np.sqrt(6), rel=1e-9)
+    # a statistic that cannot be formed without some batch: unknown, not a number
+    def refuses(s, t):
+        raise InputError("no cell")
+    assert math.isnan(batches_stderr(a2, b2, refuses))
+
+
 def test_field_difference_error_matches_the_scatter_of_repeats():
     """A continuum whose six batches each carry independent noise of 0.01 m/s per cell and
     component about a field that differs from the reference's: E is nonlinear in the batches,

@@ -268,14 +268,35 @@ def test_report_is_self_contained_and_shows_the_summary(study):
     for name in timed:
         se = re.search(r'data-stderr="([^"]*)"', turnover[name])
         assert se and math.isfinite(float(se.group(1))) and float(se.group(1)) >= 0, name
-    # E's error over the two runs' batches: the study's from the DEM's bulk_velocity_batches.csv,
-    # the page's from the DEM's snapshots rebuilt: the same batches, so the same error
+    # the DEM's bulk_velocity_batches.csv holds its snapshots' batches: the table rebuilt from
+    # dem.h5 (cell_tables.dem_batch_table) has the file's cells and batch means, and E's error
+    # over the two runs' batches is the same from either
+    from vibroflow.analysis.compare import field_difference_stderr
+    from vibroflow.report.cell_tables import csv_table, dem_batch_table
+    from vibroflow.report.data import StudyData
+    data = StudyData.read(out)
+    filed, rebuilt = csv_table(data, "dem"), dem_batch_table(data)
+    assert filed.n_batches == rebuilt.n_batches == data.scenario.run.batches
+    assert np.array_equal(filed.ix, rebuilt.ix) and np.array_equal(filed.iz, rebuilt.iz)
+    for key in ("batch_vx", "batch_vz", "batch_phi"):
+        np.testing.assert_allclose(getattr(filed, key), getattr(rebuilt, key), rtol=1e-6,
+                                   atol=1e-12, equal_nan=True, err_msg=key)
     table = re.search(r'<table class="circulation">(.*?)</table>', html, re.S).group(1)
     for name in [n for n in methods if n != "dem"]:
         row = re.search(rf"<tr><td[^>]*>{name}</td>(.*?)</tr>", table, re.S).group(1)
         shown = float(re.findall(r'data-stderr="([^"]*)"', row)[1])  # strength's, then E's
         want = summary["methods"][name]["against_dem"]["field_difference_E_stderr"]
         assert want > 0 and shown == pytest.approx(want, rel=1e-9), name
+        cont = csv_table(data, name)
+        assert field_difference_stderr(cont, rebuilt, data.min_solid_fraction) == \
+            pytest.approx(want, rel=1e-4), name
+    # the difference table's rms carries its error over both runs' batches; the max none
+    for name in [n for n in methods if n != "dem"]:
+        rms = re.search(rf'<td[^>]*data-method="{name}"[^>]*data-q="rms_dv"[^>]*>', html) or \
+            re.search(rf'<td[^>]*data-q="rms_dv"[^>]*data-method="{name}"[^>]*>', html)
+        se = re.search(r'data-stderr="([^"]*)"', rms.group(0))
+        assert se and 0 < float(se.group(1)) < float(
+            re.search(r'data-value="([^"]*)"', rms.group(0)).group(1)), name
 
 
 def test_report_renders_in_headless_chromium(study):

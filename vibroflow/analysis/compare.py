@@ -95,12 +95,14 @@ def without_batch(t: CellTable, k: int) -> CellTable:
                      total.astype(np.int64), t.cell_size)
 
 
-def field_difference_stderr(a: CellTable, b: CellTable, min_solid_fraction: float = 0.3) -> float:
-    """The standard error (-) of E(a, b) from the batches of both tables: the delete-one-batch
-    jackknife (Efron & Stein 1981) over a's batches with b whole, and over b's with a whole,
-    their variances added (the two runs are independent).  It is E's scatter over the window's
-    batches, not its bias: the batches' noise also raises E itself, which the seed-to-seed
-    limit carries.  NaN where neither table has two batches or a left-out E cannot be formed."""
+def batches_stderr(a: CellTable, b: CellTable, statistic) -> float:
+    """The standard error of statistic(a, b) (a float of two cell tables) from the batches of
+    both tables: the delete-one-batch jackknife (Efron & Stein 1981) over a's batches with b
+    whole, and over b's with a whole, their variances added (the two runs are independent).
+    For a statistic smooth in the cell means (E, an rms difference); not for a maximum or a
+    median, where the delete-one jackknife is inconsistent (Efron 1982, section 3.4).  NaN
+    where neither table has two batches or a left-out statistic cannot be formed
+    (InputError or not finite)."""
     var, used = 0.0, False
     for first, side in ((True, a), (False, b)):
         if side.n_batches < 2:
@@ -109,15 +111,32 @@ def field_difference_stderr(a: CellTable, b: CellTable, min_solid_fraction: floa
         for k in range(side.n_batches):
             t = without_batch(side, k)
             try:
-                left_out.append(field_difference(t, b, min_solid_fraction) if first else
-                                field_difference(a, t, min_solid_fraction))
+                left_out.append(statistic(t, b) if first else statistic(a, t))
             except InputError:
                 return float("nan")
-        e = np.asarray(left_out)
+        e = np.asarray(left_out, dtype=float)
+        if not np.isfinite(e).all():
+            return float("nan")
         n = e.size
         var += (n - 1) / n * float(np.sum((e - e.mean()) ** 2))
         used = True
     return float(np.sqrt(var)) if used else float("nan")
+
+
+def field_difference_stderr(a: CellTable, b: CellTable, min_solid_fraction: float = 0.3) -> float:
+    """The standard error (-) of E(a, b) over both tables' batches (batches_stderr).  It is E's
+    scatter over the window's batches, not its bias: the batches' noise also raises E itself,
+    which the seed-to-seed limit carries."""
+    return batches_stderr(a, b, lambda s, t: field_difference(s, t, min_solid_fraction))
+
+
+def rms_difference(a: CellTable, b: CellTable, min_solid_fraction: float = 0.3) -> float:
+    """The plain root mean square of |v_a - v_b| (m/s) over the cells where both tables hold
+    solid fraction >= min_solid_fraction, each cell counted once (the report's difference
+    table; E weights the cells by b's solid fraction and divides by b's mean speed).  Raises
+    InputError when no cell is shared."""
+    _, _, _, dvx, dvz = _differences(a, b, min_solid_fraction)
+    return float(np.sqrt(np.mean(dvx ** 2 + dvz ** 2)))
 
 
 @dataclass(frozen=True)

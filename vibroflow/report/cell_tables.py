@@ -1,14 +1,11 @@
 """Every method's bulk-velocity cell table as the report's new sections use it, with one table
 per batch of whole cycles (so that its profiles and turnover time carry batch-means standard
-errors over the study's batches, stats.py): the DEM's rebuilt from its snapshots, a
-continuum's read from its bulk_velocity.csv with the batches its run wrote beside it
-(bulk_velocity_batches.csv, measure.bulk_batches); a table whose batches are missing (a
-continuum run older than that file) carries no errors.
-
-The DEM's rebuilt table is the one its run wrote (vibroflow.measure.bulk.cell_table over the
-snapshots of the averaging window's whole cycles, batches_of_whole_cycles), so its cell means
-equal bulk_velocity.csv's; a DEM result without snapshots (a LIGGGHTS import) falls back to
-its bulk_velocity.csv.
+errors over the study's batches, stats.py): each method's bulk_velocity.csv with the batches its
+run wrote beside it (bulk_velocity_batches.csv, measure.bulk_batches). A DEM folder without
+that file (written before the DEM wrote it) has its batches rebuilt from its snapshots
+(`dem_batch_table`: vibroflow.measure.bulk.cell_table over the snapshots of the averaging
+window's whole cycles, batches_of_whole_cycles, the table its run wrote); a table whose batches
+are missing and cannot be rebuilt (a LIGGGHTS import without them) carries no errors.
 """
 from __future__ import annotations
 
@@ -52,7 +49,8 @@ def batches_note(name: str) -> str:
 
 def dem_batch_table(data) -> CellTable | None:
     """The DEM's cell table with its batches, rebuilt from DIR/dem/dem.h5's snapshots of the
-    averaging window (module docstring); None without snapshots in the window."""
+    averaging window (module docstring): the table the DEM run wrote, with its batches; None
+    without snapshots in the window."""
     h5 = data.out / DEM / "dem.h5"
     if not h5.is_file():
         return None
@@ -77,11 +75,16 @@ def dem_batch_table(data) -> CellTable | None:
 
 
 def method_tables(data) -> dict[str, CellTable]:
-    """method -> its cell table, the DEM first (with batches when its snapshots allow)."""
+    """method -> its cell table, the DEM first (module docstring)."""
     out: dict[str, CellTable] = {}
     for name in data.methods:
-        table = dem_batch_table(data) if name == DEM else None
-        out[name] = table if table is not None else csv_table(data, name)
+        table = csv_table(data, name)
+        if name == DEM and table.n_batches < 2:
+            rebuilt = dem_batch_table(data)
+            if rebuilt is not None:
+                data.notes.pop(batches_note(name), None)
+                table = rebuilt
+        out[name] = table
     return out
 
 

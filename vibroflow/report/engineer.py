@@ -12,7 +12,9 @@ import math
 import numpy as np
 from markupsafe import Markup
 
+from vibroflow.analysis.compare import batches_stderr, rms_difference
 from vibroflow.calibration.tub_rheology import DENSE_SOLID_FRACTION
+from vibroflow.errors import InputError
 from vibroflow.report import bed_state, flow_maps, mu_i_bins, profiles, verdict
 from vibroflow.report.cell_tables import batches_note, method_tables
 from vibroflow.rounding import plus_minus
@@ -72,12 +74,17 @@ class Engineer:
             return {"img": None}
         dm = flow_maps.difference_maps(data, self.tables)
         rows = []
+        msf = data.min_solid_fraction
         for name, m in dm.maps.items():
             ok = np.isfinite(m["dspeed"])
+            a, b = self.tables[name], self.tables["dem"]
+            try:
+                rms = rms_difference(a, b, msf)
+            except InputError:
+                rms = float("nan")
+            rms_se = batches_stderr(a, b, lambda s, t: rms_difference(s, t, msf))
             rows.append([cell(name, cls="l"), cell(int(ok.sum())),
-                         cell(float(np.sqrt(np.mean(m["dspeed"][ok] ** 2))) if ok.any()
-                              else float("nan"), None, ".3g", data_method=name,
-                              data_q="rms_dv"),
+                         cell(rms, rms_se, ".3g", data_method=name, data_q="rms_dv"),
                          cell(float(np.max(m["dspeed"][ok])) if ok.any() else float("nan"),
                               None, ".3g", data_method=name, data_q="max_dv")])
         return {"img": image(flow_maps.figure(data, dm), "velocity difference maps"),
