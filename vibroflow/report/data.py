@@ -88,38 +88,38 @@ def bin_impacts(chunks, cell_size: float) -> ImpactCells:
     (measure.stats.batches_of_whole_cycles), each cell's mean also gets its batch-means
     standard error over the batches that hold an impact there (measure.stats.stderr_of_batches)."""
     h = float(cell_size)
-    acc: dict[tuple[int, int], list[float]] = {}
-    per_batch: dict[tuple[int, int, int], list[float]] = {}
+    # (ix, iz, batch) -> [count, sum of speeds]; batch -1 for impacts without one
+    acc: dict[tuple[int, int, int], list[float]] = {}
     batched = True
     for chunk in chunks:
         pos, speed = chunk[0], chunk[1]
         batch = chunk[2] if len(chunk) > 2 else None
         batched = batched and batch is not None
-        parts = [(None, pos, speed)] if batch is None else [
+        parts = [(-1, pos, speed)] if batch is None else [
             (int(b), pos[batch == b], speed[batch == b]) for b in np.unique(batch)]
         for b, p, v in parts:
             x, z, cnt, mean = mean_by_region(p, v, h)
             for xi, zi, c, m in zip(np.rint(x / h).astype(int), np.rint(z / h).astype(int),
                                     cnt, mean):
-                a = acc.setdefault((int(xi), int(zi)), [0.0, 0.0])
+                a = acc.setdefault((int(xi), int(zi), b), [0.0, 0.0])
                 a[0] += float(c)
                 a[1] += float(c) * float(m)
-                if b is not None:
-                    q = per_batch.setdefault((int(xi), int(zi), b), [0.0, 0.0])
-                    q[0] += float(c)
-                    q[1] += float(c) * float(m)
-    keys = sorted(acc)
-    count = np.array([acc[k][0] for k in keys], dtype=np.int64)
-    total = np.array([acc[k][1] for k in keys], dtype=float)
+    keys = sorted({k[:2] for k in acc})
+    col = {k: j for j, k in enumerate(keys)}
+    batches = sorted({k[2] for k in acc})
+    counts = np.zeros((len(batches), len(keys)))
+    sums = np.zeros((len(batches), len(keys)))
+    for (xi, zi, b), (c, tot) in acc.items():
+        counts[batches.index(b), col[(xi, zi)]] = c
+        sums[batches.index(b), col[(xi, zi)]] = tot
+    count = counts.sum(axis=0).astype(np.int64)
+    total = sums.sum(axis=0)
     x = np.array([k[0] for k in keys], dtype=float) * h
     z = np.array([k[1] for k in keys], dtype=float) * h
     stderr = None
     if batched and keys:
-        batches = sorted({k[2] for k in per_batch})
-        means = np.full((len(batches), len(keys)), np.nan)
-        col = {k: j for j, k in enumerate(keys)}
-        for (xi, zi, b), (c, tot) in per_batch.items():
-            means[batches.index(b), col[(xi, zi)]] = tot / c
+        with np.errstate(invalid="ignore", divide="ignore"):
+            means = np.where(counts > 0, sums / counts, np.nan)
         stderr = np.asarray(stderr_of_batches(means, axis=0), dtype=float).reshape(len(keys))
     return ImpactCells(x, z, total / np.maximum(count, 1), count, h, stderr)
 

@@ -185,12 +185,13 @@ def e_rows(data, tables: dict) -> dict:
         if len(seeds) >= 2:
             words += f" (E {e:.3f}" + (f" ± {se:.3f}" if se is not None else "") + (
                 f" against the {len(seeds)} seeds)")
-        # E against the study's DEM, its scatter over both runs' batches (the circulation table)
-        try:
+        # E against the study's DEM, its scatter over both runs' batches (the circulation
+        # table): the summary's, worked out here for a folder whose summary lacks it
+        against = data.summary["methods"][name].get("against_dem") or {}
+        e_batches = against.get("field_difference_E_stderr")
+        if e_batches is None:
             e_batches = field_difference_stderr(tables[name], tables["dem"],
                                                 data.min_solid_fraction)
-        except InputError:
-            e_batches = float("nan")
         rows[name] = {"E": e, "E_stderr": se, "E_batches_stderr": e_batches, "words": words,
                       "cls": cls}
     return {"limit": lim, "rows": rows, "note": note, "seeds": len(seeds)}
