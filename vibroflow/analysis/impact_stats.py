@@ -246,3 +246,15 @@ def speed_flag(inferred, measured) -> tuple[float, bool | None]:
         return float("nan"), None
     rel = (float(inferred) - float(measured)) / float(measured)
     return rel, bool(abs(rel) > FLAG_RELATIVE_DIFFERENCE)
+
+
+def relative_difference_stderr(inferred, inferred_stderr, measured, measured_stderr) -> float:
+    """The standard error of speed_flag's relative difference r = i / m - 1 from the two
+    speeds' independent errors (the delta method): hypot(se_i, (i / m) se_m) / m.  NaN when a
+    speed or an error is missing or measured is not positive."""
+    vals = (inferred, inferred_stderr, measured, measured_stderr)
+    if not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+               for x in vals) or measured <= 0:
+        return float("nan")
+    i, si, m, sm = (float(x) for x in vals)
+    return float(math.hypot(si, i / m * sm) / m)

@@ -127,14 +127,14 @@ def _num(x, fmt: str = ".4g", unit: str = "") -> Cell:
     return Cell(text=f"{format(x, fmt)}{unit}", value=repr(float(x)))
 
 
-def _pm(x, se, fmt: str = ".4g") -> Cell:
-    """A cell 'x ± se' (data-value x, data-stderr se)."""
+def _pm(x, se, fmt: str = ".4g", unit: str = "") -> Cell:
+    """A cell 'x ± se' (data-value x, data-stderr se), unit after it."""
     if not isinstance(x, (int, float)) or not math.isfinite(x):
         return Cell(text="n/a", value="nan")
     if isinstance(se, (int, float)) and math.isfinite(se):
-        return Cell(text=plus_minus(x, se, fmt), value=repr(float(x)),
+        return Cell(text=plus_minus(x, se, fmt) + unit, value=repr(float(x)),
                     stderr=repr(float(se)))
-    return Cell(text=format(x, fmt), value=repr(float(x)))
+    return Cell(text=format(x, fmt) + unit, value=repr(float(x)))
 
 
 def _picture(data: StudyData, rel: str, alt: str) -> dict:
@@ -278,7 +278,8 @@ def _impact_distributions(data: StudyData) -> dict:
         flags.append([_text(r["where"], "l"), _text(r["kind"], "l"), _text(r["method"], "l"),
                       _pm(r["measured"], r["measured_stderr"]),
                       _pm(r["inferred"], r["inferred_stderr"]),
-                      _num(100.0 * r["relative"], "+.0f", " %"),
+                      _pm(100.0 * r["relative"], 100.0 * r["relative_stderr"], "+.0f",
+                          " %"),
                       flag.tagged(data_flag=str(r["flagged"]).lower())])
     flagged = sum(r["flagged"] is True for r in s["comparisons"])
     compared = sum(r["flagged"] is not None for r in s["comparisons"])

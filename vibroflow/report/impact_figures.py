@@ -14,7 +14,8 @@ import h5py
 import numpy as np
 
 from vibroflow.analysis.impact_stats import (SPEED_EDGES_M_S, ImpactDistributions,
-                                             impact_distributions, speed_flag)
+                                             impact_distributions,
+                                             relative_difference_stderr, speed_flag)
 from vibroflow.io.pictures import pyplot
 from vibroflow.report.data import DEM, MIN_IMPACTS_PER_CELL, StudyData
 from vibroflow.report.figures import (inferred_impact_speed_errors, inferred_impact_speeds,
@@ -127,7 +128,8 @@ def speed_comparisons(data: StudyData) -> list[dict]:
     the summary (ball-ball, ball-U wall) and the ball-ball speed in each probe's cell (the DEM's
     when the cell holds at least MIN_IMPACTS_PER_CELL impacts).  A dict a row: where, kind,
     method, measured, measured_stderr, inferred, inferred_stderr (m/s), relative (the relative
-    difference) and flagged (True, False or None when not comparable)."""
+    difference), relative_stderr (its error from the two speeds') and flagged (True, False or
+    None when not comparable)."""
     dem = (data.summary["methods"].get(DEM) or {}).get("impacts") or {}
     rows = []
     for name in data.continuum_methods:
@@ -138,11 +140,13 @@ def speed_comparisons(data: StudyData) -> list[dict]:
             m, i = _num(dem.get(f"{key}_mean_normal_speed")), _num(
                 im.get(f"{key}_mean_normal_speed"))
             rel, flag = speed_flag(i, m)
+            sm = _num(dem.get(f"{key}_mean_normal_speed_stderr"))
+            si = _num(im.get(f"{key}_mean_normal_speed_stderr"))
             rows.append({"where": "bed mean", "kind": label, "method": name, "measured": m,
-                         "measured_stderr": _num(dem.get(f"{key}_mean_normal_speed_stderr")),
-                         "inferred": i,
-                         "inferred_stderr": _num(im.get(f"{key}_mean_normal_speed_stderr")),
-                         "relative": rel, "flagged": flag})
+                         "measured_stderr": sm, "inferred": i, "inferred_stderr": si,
+                         "relative": rel,
+                         "relative_stderr": relative_difference_stderr(i, si, m, sm),
+                         "flagged": flag})
         if data.impacts is None:
             continue
         inferred = inferred_impact_speeds(data, name)
@@ -153,9 +157,11 @@ def speed_comparisons(data: StudyData) -> list[dict]:
             i = _num(inferred.get(probe))
             rel, flag = speed_flag(i, m)
             se = data.impacts.stderr_at(p.x, p.z) if count >= MIN_IMPACTS_PER_CELL else math.nan
+            si = _num(errors.get(probe))
             rows.append({"where": f"probe {probe} cell", "kind": "ball-ball", "method": name,
                          "measured": m, "measured_stderr": se, "inferred": i,
-                         "inferred_stderr": _num(errors.get(probe)), "relative": rel,
+                         "inferred_stderr": si, "relative": rel,
+                         "relative_stderr": relative_difference_stderr(i, si, m, se),
                          "flagged": flag})
     return rows
 
