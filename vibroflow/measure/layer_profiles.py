@@ -28,7 +28,7 @@ import math
 
 import numpy as np
 
-from .stats import stderr_of_batches
+from .stats import phase_stderr, stderr_of_batches
 
 #: F / (M g) below which the floor no longer carries the layer (a twentieth of its weight: the
 #: bins' mean force of a layer in flight is zero up to a few grains still touching)
@@ -141,12 +141,5 @@ class LayerProfiles:
                 "floor_force_cycle_mean_over_weight": float(f_cycle),
                 "floor_force_cycle_mean_stderr": stderr_of_batches(f_cycle_b),
                 "take_off_phase": off,
-                "take_off_phase_stderr": _circular_stderr(off_b, off)}
+                "take_off_phase_stderr": phase_stderr(off_b, off)}
 
-
-def _circular_stderr(values, centre) -> float:
-    """Batch-means standard error of phases (cycle fractions) taken about `centre`."""
-    v = np.asarray(values, float)
-    if not math.isfinite(centre):
-        return math.nan
-    return stderr_of_batches(np.mod(v - centre + 0.5, 1.0) - 0.5)

@@ -130,6 +130,17 @@ def stderr_of_batches(batch_values, axis: int = 0):
     return float(se) if np.ndim(se) == 0 else se
 
 
+def phase_stderr(batch_phases, centre: float) -> float:
+    """The batch-means standard error (cycles) of phases, cycle fractions in [0, 1), about the
+    run's own phase `centre`: each batch's phase is taken as its signed distance to the centre
+    on the circle, (v - centre + 1/2) mod 1 - 1/2, so that batches at 0.99 and 0.09 are 0.10
+    apart, not 0.90.  NaN when the centre is not finite (stderr_of_batches otherwise)."""
+    v = np.asarray(batch_phases, dtype=float)
+    if not np.isfinite(centre):
+        return float("nan")
+    return stderr_of_batches(np.mod(v - float(centre) + 0.5, 1.0) - 0.5)
+
+
 def jackknife_stderr(leave_one_out) -> float:
     """Delete-one-batch jackknife standard error of a statistic from its values theta_k
     computed with batch k left out (Quenouille 1956, Tukey 1958; Efron & Stein 1981):

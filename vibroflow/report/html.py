@@ -28,7 +28,7 @@ from markupsafe import Markup
 from vibroflow import __version__
 from vibroflow.report import figures
 from vibroflow.measure.floor_force import REGIONS, dem_wall_feed
-from vibroflow.measure.stats import stderr_of_batches
+from vibroflow.measure.stats import phase_stderr
 from vibroflow.report.data import DEM, REPORT_STAGE, StudyData
 from vibroflow.report.impact_figures import impact_distribution_section
 from vibroflow.report.engineer import Engineer
@@ -365,13 +365,14 @@ def _without_feed(data: StudyData) -> list[dict]:
 
 
 def _take_off_stderr(block: dict) -> float:
-    """The batch-means standard error of a run's take-off (measure.stats.stderr_of_batches of
-    its batch values); NaN unless every batch leaves the floor (a batch that never does has no
-    phase to average)."""
+    """The batch-means standard error of a run's take-off, a phase: its batch values about the
+    run's take-off on the circle (measure.stats.phase_stderr); NaN unless every batch leaves
+    the floor (a batch that never does has no phase to average)."""
     b = block.get("take_off_phase_batches") or []
-    if len(b) < 2 or any(v is None for v in b):
+    off = block.get("take_off_phase")
+    if len(b) < 2 or any(v is None for v in b) or not isinstance(off, (int, float)):
         return math.nan
-    return float(stderr_of_batches(np.asarray(b, dtype=float)))
+    return float(phase_stderr(np.asarray(b, dtype=float), float(off)))
 
 
 def _stress(data: StudyData) -> dict:
