@@ -267,7 +267,7 @@ def test_continuum_resume_gives_the_uninterrupted_numbers_bit_for_bit(method, tm
         summary["continuum"].pop("wall_time_s")
     assert json.dumps(resumed, sort_keys=True) == json.dumps(full, sort_keys=True)
     for name in ("bulk_velocity.csv", "bulk_velocity_stderr.csv",
-                 "bulk_velocity_batches.csv", "stress.csv") + vtk_files:
+                 "bulk_velocity_batches.csv", "stress.csv", "stress_batches.csv") + vtk_files:
         assert (split / name).read_bytes() == (tmp_path / "full" / name).read_bytes(), name
 
 

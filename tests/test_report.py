@@ -577,10 +577,11 @@ def test_the_stress_section_shows_where_each_bed_sits_against_its_yield(study):
     within its law's yield cone (mu <= mu_2 where its points were return-mapped)."""
     import math
 
-    from vibroflow.analysis.stress_state import (continuum_points, dem_points,
+    from vibroflow.analysis.stress_state import (batch_errors, continuum_points, dem_points,
                                                  height_phase_table, share_at_yield)
     from vibroflow.calibration.run_fields import read_fields
     from vibroflow.io.calibration_file import read_calibration
+    from vibroflow.rounding import plus_minus
 
     scenario, out, summary, _ = study
     html = (out / "report.html").read_text(encoding="utf-8")
@@ -596,12 +597,22 @@ def test_the_stress_section_shows_where_each_bed_sits_against_its_yield(study):
         pts = dem_points(read_fields(out / "calibration" / "fields.nc", phase_resolved=True)) \
             if name == "dem" else continuum_points(out / name / "stress.csv")
         share = float(re.search(r'data-value="([^"]*)"', cells[4][0]).group(1))
-        assert share == share_at_yield(pts, mu_s)
+        assert share / 100.0 == pytest.approx(share_at_yield(pts, mu_s), rel=1e-12)
         assert float(re.search(r'data-value="([^"]*)"', cells[1][0]).group(1)) == pts["mu"].size
+        # every method's batches reach the table: the DEM's in fields.nc, a continuum's in its
+        # stress_batches.csv
+        se = batch_errors(pts, mu_s)
+        assert se is not None and pts["batch_mu"].shape == (scenario.run.batches,
+                                                           pts["mu"].size), name
+        for col, key in ((2, "median_mu"), (3, "median_pressure")):
+            shown = float(re.search(r'data-stderr="([^"]*)"', cells[col][0]).group(1))
+            assert shown == pytest.approx(se[key], rel=1e-12) and shown > 0, (name, key)
         by_phase = {r["phase"]: r for r in height_phase_table(pts)["rows"]}
         for k in range(scenario.run.phases_per_cycle):
             r = by_phase.get(k)
-            want = "n/a" if r is None else f"{r['mu_low']:.3f} / {r['mu_high']:.3f}"
+            lo, hi = se["thirds"].get(k, (math.nan, math.nan))
+            want = "n/a" if r is None else (f"{plus_minus(r['mu_low'], lo, '.3f')} / "
+                                            f"{plus_minus(r['mu_high'], hi, '.3f')}")
             assert cells[5 + k][1] == want
     for name in summary["methods"]:
         if name != "dem":

@@ -144,3 +144,76 @@ def test_height_phase_table_by_hand(tmp_path):
     assert np.array_equal(back["mu"], mu) and np.array_equal(back["phase"], phase)
     with pytest.raises(InputError, match="no such file"):
         continuum_points(tmp_path / "none.csv")
+
+
+def test_each_batchs_stress_is_written_beside_the_map_and_read_back(tmp_path):
+    """The hand case above (four phases, two batches, friction mu_k (1 + e) in the first batch
+    and mu_k (1 - e) in the second, pressure p_k in both): stress_batches.csv holds a row per
+    batch, cell and phase with that friction and pressure, and continuum_points reads them
+    back onto stress.csv's cells; a damaged file is a one-line error naming it; one batch
+    writes no file."""
+    from vibroflow.analysis.stress_state import continuum_points
+    from vibroflow.continuum.stress_outputs import (STRESS_BATCH_COLUMNS,
+                                                    write_stress_batches_csv)
+    from vibroflow.errors import InputError
+
+    f, P, e = 47.0, 4, 0.1
+    pk = np.array([1.0e3, 2.0e3, 500.0, 4.0e3])
+    muk = np.array([0.3, 0.4, 0.25, 0.5])
+
+    def stress_of(k, b):
+        tau = muk[k] * pk[k] * (1.0 + e if b == 0 else 1.0 - e)
+        return [-pk[k], -pk[k], -tau, -pk[k]]
+
+    s, times = _window_samples(f, P, 4, 2, stress_of)
+    phase = SimpleNamespace(x=np.array([-0.01, 0.0, 0.01]), z=np.array([0.0, 0.01]),
+                            phase_shear_rate=np.full((P, 2, 3), 3.0),
+                            phase_solid_fraction=np.full((P, 2, 3), 0.58))
+    ps = phase_stress(s, times, f, P, (0.0, 4.0 / f), 2, phase, 7800.0, 0.00635)
+    assert write_stress_csv(tmp_path / "stress.csv", ps)
+    assert write_stress_batches_csv(tmp_path / "stress_batches.csv", ps)
+    rows = np.genfromtxt(tmp_path / "stress_batches.csv", delimiter=",", names=True)
+    assert list(rows.dtype.names) == list(STRESS_BATCH_COLUMNS) and rows.size == 2 * P
+    for b, sign in ((0, 1.0), (1, -1.0)):
+        mine = rows[rows["batch"] == b]
+        assert mine["phase"] == pytest.approx(np.arange(P))
+        assert mine["friction_coefficient"] == pytest.approx(muk * (1 + sign * e), rel=1e-13)
+        assert mine["pressure"] == pytest.approx(pk, rel=1e-14)
+    pts = continuum_points(tmp_path / "stress.csv")
+    assert pts["batch_mu"] == pytest.approx(np.stack([muk * (1 + e), muk * (1 - e)]), rel=1e-13)
+    assert pts["batch_pressure"] == pytest.approx(np.stack([pk, pk]), rel=1e-14)
+    (tmp_path / "stress_batches.csv").write_text("batch,x\n0,0.0\n")
+    with pytest.raises(InputError, match="stress_batches.csv: not a continuum's"):
+        continuum_points(tmp_path / "stress.csv")
+    one = phase_stress(*_window_samples(f, P, 4, 1, stress_of), f, P, (0.0, 4.0 / f), 1, phase,
+                       7800.0, 0.00635)
+    assert not write_stress_batches_csv(tmp_path / "one.csv", one)
+    assert not (tmp_path / "one.csv").exists()
+
+
+def test_the_stress_tables_errors_are_the_batches_scatter():
+    """Four batches whose every cell reads mu = 0.40, 0.42, 0.44, 0.46 and p = 1, 2, 3, 4 kPa:
+    the median mu's error is sd(0.40 .. 0.46) / 2 = 0.012910, the median p's 645.50 Pa, the
+    share at or above mu_s = 0.43 (batches 0, 0, 1, 1) sd / 2 = 0.28868, and each phase's
+    thirds the median mu's; a batch's empty cells are left out (half of batch 0's cells
+    empty: the same); one batch gives none."""
+    from vibroflow.analysis.stress_state import batch_errors
+
+    n = 60
+    m = np.array([0.40, 0.42, 0.44, 0.46])
+    bm = np.repeat(m[:, None], n, axis=1)
+    bm[0, ::2] = np.nan
+    pts = {"mu": bm[1], "pressure": np.full(n, 2.0e3), "z": np.tile([0.01, 0.05, 0.09], n // 3),
+           "phase": np.repeat([0, 1], n // 2), "batch_mu": bm,
+           "batch_pressure": np.repeat(1.0e3 * np.arange(1, 5)[:, None], n, axis=1)}
+    se = batch_errors(pts, 0.43)
+    want = np.std(m, ddof=1) / 2.0
+    assert se["median_mu"] == pytest.approx(want, rel=1e-9)
+    assert se["median_pressure"] == pytest.approx(np.std([1e3, 2e3, 3e3, 4e3], ddof=1) / 2,
+                                                  rel=1e-12)
+    assert se["share"] == pytest.approx(np.std([0, 0, 1, 1], ddof=1) / 2, rel=1e-12)
+    assert set(se["thirds"]) == {0, 1}
+    for lo, hi in se["thirds"].values():
+        assert (lo, hi) == (pytest.approx(want, rel=1e-9), pytest.approx(want, rel=1e-9))
+    assert batch_errors({**pts, "batch_mu": bm[:1], "batch_pressure": bm[:1]}, 0.43) is None
+    assert batch_errors({k: v for k, v in pts.items() if not k.startswith("batch")}, 0.43) is None

@@ -75,7 +75,7 @@ from .kinetic import fit_cells, kinetic_table
 from .media_tests import cyclic_modulus, dem_tests, dilatancy_table
 from .shear_temperature import sliding_table
 from .rheology_fit import drucker_prager_equivalent
-from .run_fields import coarse_grain_run, write_fields
+from .run_fields import coarse_grain_run, with_batch_fields, write_fields
 from .unloading import unloading_of_run
 from .tub_rheology import (bed_pressure, check_dense_bed, check_tub_cells, fit_tub_cells,
                            median_dense, tub_mu_i_scatter)
@@ -197,7 +197,8 @@ def calibrate(run, shear_cell: bool = False, kernel: str = "gaussian",
         if not shear_cell:
             check_tub_cells(scatter, sc, avg, run_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
-        fields_path = write_fields(out_dir / FIELDS_FILE, avg, phases)
+        fields_path = write_fields(out_dir / FIELDS_FILE, avg,
+                                   with_batch_fields(phases, cg_info["phase_batches"]))
         prog.log(f"coarse-grained {cg_info['snapshots']} snapshots in "
                  f"{cg_info['wall_time_s']:.1f} s (contact stress: {cg_info['contact_stress']})"
                  f" -> {fields_path}")

@@ -145,6 +145,26 @@ def leave_one_out_dataset(cg, phases: xr.Dataset) -> xr.Dataset | None:
     return ds
 
 
+#: the phase-resolved fields whose value in each batch of whole cycles fields.nc holds
+#: (<name>_batches): the report's stress table takes its medians' batch-means errors from them
+BATCH_FIELDS = ("pressure", "friction_coefficient")
+
+
+def with_batch_fields(phases: xr.Dataset, phase_batches: dict) -> xr.Dataset:
+    """The phase-resolved Dataset with each batch's BATCH_FIELDS beside their pooled fields,
+    <name>_batches, dims (batch, phase, x, z) (coarse_grain_run's info["phase_batches"]; NaN
+    where a batch has no snapshot of that phase); as it is with fewer than two batches."""
+    first = np.asarray(phase_batches[BATCH_FIELDS[0]])
+    if first.shape[0] < 2:
+        return phases
+    dims = ("batch", "phase", "x", "z")
+    new = {f"{name}_batches": (dims, np.asarray(phase_batches[name], float),
+                               {**phases[name].attrs,
+                                "description": "each batch of whole cycles' own field"})
+           for name in BATCH_FIELDS}
+    return phases.assign(new).assign_coords(batch=np.arange(first.shape[0]))
+
+
 def add_cycle_means(time_averaged: xr.Dataset, phase_resolved: xr.Dataset) -> None:
     """Add to the time averages the cycle means of the phase-resolved shear rate, temperature
     and inertial number (mass-weighted over the phase bins).

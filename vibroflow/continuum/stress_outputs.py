@@ -26,12 +26,17 @@ from vibroflow.measure.stats import batches_of_whole_cycles, phase_bins
 from .sampling import Samples
 
 STRESS_CSV_NAME = "stress.csv"
+#: each batch's pressure and friction in the cells and phases of stress.csv
+STRESS_BATCHES_CSV_NAME = "stress_batches.csv"
 
 #: the map's columns and their units (SI; "1": a number)
 STRESS_COLUMNS = {"x": "m", "z": "m", "phase": "1", "solid_fraction": "1",
                   "shear_rate": "s-1", "pressure": "Pa", "shear_stress": "Pa",
                   "friction_coefficient": "1", "friction_coefficient_stderr": "1",
                   "inertial_number": "1", "samples": "1"}
+#: stress_batches.csv's columns and their units
+STRESS_BATCH_COLUMNS = {"batch": "1", "x": "m", "z": "m", "phase": "1", "pressure": "Pa",
+                        "friction_coefficient": "1"}
 
 
 def invariants(stress: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -52,7 +57,8 @@ class PhaseStress:
     no sample held material); pressure, shear_stress (Pa), friction (1), its batch-means
     standard error friction_stderr (from each batch's own phase mean), inertial_number (1, from
     the phase shear rate), shear_rate (1/s), solid_fraction (1), samples (the samples that held
-    material), each (n_phases, nz, nx)."""
+    material), each (n_phases, nz, nx); batch_pressure (Pa) and batch_friction (1), each batch
+    of whole cycles' own phase means, (n_batches, n_phases, nz, nx)."""
     x: np.ndarray
     z: np.ndarray
     stress: np.ndarray
@@ -64,6 +70,8 @@ class PhaseStress:
     shear_rate: np.ndarray
     solid_fraction: np.ndarray
     samples: np.ndarray
+    batch_pressure: np.ndarray
+    batch_friction: np.ndarray
 
 
 def _sums(stack: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -106,7 +114,8 @@ def phase_stress(samples: Samples, times: np.ndarray, frequency: float, n_phases
             total[b, k], count[b, k] = _sums(stack[(bins == k) & (batch == b)])
     # each batch's own phase mean gives its friction; a cell a batch never held makes the
     # error NaN (the standard deviation of a NaN)
-    per_batch = _friction(_mean(total, count))
+    batch_mean = _mean(total, count)
+    per_batch = _friction(batch_mean)
     held = count.sum(axis=0)
     mean = _mean(total.sum(axis=0), held)
     p, tau = invariants(mean)
@@ -122,7 +131,8 @@ def phase_stress(samples: Samples, times: np.ndarray, frequency: float, n_phases
                        stress=mean, pressure=p, shear_stress=tau, friction=mu,
                        friction_stderr=se, inertial_number=I, shear_rate=gd,
                        solid_fraction=np.asarray(phase.phase_solid_fraction, float),
-                       samples=held)
+                       samples=held, batch_pressure=invariants(batch_mean)[0],
+                       batch_friction=per_batch)
 
 
 def write_stress_csv(path: Path, ps: PhaseStress | None) -> bool:
@@ -148,5 +158,32 @@ def write_stress_csv(path: Path, ps: PhaseStress | None) -> bool:
                     num(ps.pressure[k, iz, ix]), num(ps.shear_stress[k, iz, ix]),
                     num(ps.friction[k, iz, ix]), num(ps.friction_stderr[k, iz, ix]),
                     num(ps.inertial_number[k, iz, ix]), str(int(ps.samples[k, iz, ix]))]))
+    write_text_atomic(path, "\n".join(lines) + "\n")
+    return True
+
+
+def write_stress_batches_csv(path: Path, ps: PhaseStress | None) -> bool:
+    """Write each batch's pressure and friction (STRESS_BATCH_COLUMNS, SI) atomically: a row
+    for each batch and each cell and phase of stress.csv, empty where the batch held no
+    material there.  False (nothing written) without the map or with fewer than two
+    batches: there is no batches' scatter to give."""
+    if ps is None or ps.batch_friction.shape[0] < 2:
+        return False
+
+    def num(v):
+        return repr(float(v)) if np.isfinite(v) else ""
+
+    lines = [",".join(STRESS_BATCH_COLUMNS)]
+    n_batches, n_phases, nz, nx = ps.batch_friction.shape
+    for b in range(n_batches):
+        for k in range(n_phases):
+            for iz in range(nz):
+                for ix in range(nx):
+                    if ps.samples[k, iz, ix] == 0:
+                        continue
+                    lines.append(",".join([
+                        str(b), repr(float(ps.x[ix])), repr(float(ps.z[iz])), str(k),
+                        num(ps.batch_pressure[b, k, iz, ix]),
+                        num(ps.batch_friction[b, k, iz, ix])]))
     write_text_atomic(path, "\n".join(lines) + "\n")
     return True

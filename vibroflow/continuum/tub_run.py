@@ -85,7 +85,8 @@ from .part_obstacle import continuum_parts
 from .part_outputs import part_dataset
 from .sampling import Samples, cell_grid_of, phase_shear_of_samples, sample_times, samples_source
 from .shear_outputs import shear_rate_outputs, write_shear_rate_csv
-from .stress_outputs import STRESS_CSV_NAME, phase_stress, write_stress_csv
+from .stress_outputs import (STRESS_BATCHES_CSV_NAME, STRESS_CSV_NAME, phase_stress,
+                             write_stress_batches_csv, write_stress_csv)
 from .temperature_impacts import impacts_from_temperature
 from .temperature_outputs import TEMPERATURE_CSV_NAME, temperature_outputs, write_temperature_csv
 from .timeline import (REPORT_EVERY, VibrationInterrupted, interrupted,
@@ -94,7 +95,7 @@ from .timeline import (REPORT_EVERY, VibrationInterrupted, interrupted,
 #: an earlier continuum run's files in its folder, which a fresh run removes first
 _PREVIOUS = (SUMMARY_NAME, BULK_CSV_NAME, BATCHES_CSV_NAME, STDERR_CSV_NAME, CHECKPOINT_NAME,
              SHEAR_RATE_CSV_NAME, TEMPERATURE_CSV_NAME, PARTS_NC_NAME, FLOOR_CSV_NAME,
-             WALL_FEED_CSV_NAME, STRESS_CSV_NAME)
+             WALL_FEED_CSV_NAME, STRESS_CSV_NAME, STRESS_BATCHES_CSV_NAME)
 
 
 def _gravity(scenario) -> tuple[float, float]:
@@ -343,10 +344,11 @@ def _results(form: Formulation, scenario, out: Path, calibration, options, vtk, 
         geo.radius, summary["impacts"]))
     write_shear_rate_csv(out / SHEAR_RATE_CSV_NAME, samples, phase, calibration,
                          material.diameter)
-    write_stress_csv(out / STRESS_CSV_NAME, phase_stress(
-        samples, times, scenario.motion.frequency, run.phases_per_cycle,
-        (run.duration - run.average_last, run.duration), run.batches, phase,
-        material.solid_density, material.diameter))
+    stress = phase_stress(samples, times, scenario.motion.frequency, run.phases_per_cycle,
+                          (run.duration - run.average_last, run.duration), run.batches, phase,
+                          material.solid_density, material.diameter)
+    write_stress_csv(out / STRESS_CSV_NAME, stress)
+    write_stress_batches_csv(out / STRESS_BATCHES_CSV_NAME, stress)
     wrote = write_temperature_csv(out / TEMPERATURE_CSV_NAME, samples, phase)
     summary["continuum"].update(temperature_outputs(samples, batch, run.batches, wrote))
     if options.temperature:

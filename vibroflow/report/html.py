@@ -379,9 +379,11 @@ def _stress(data: StudyData) -> dict:
     """Where each method's bed sits against its yield, by height and phase
     (report.stress_section)."""
     t = stress_rows(data)
-    rows = [[_text(name, "l"), _num(n, "d"), _num(mu, ".3f"), _num(p, ".0f"),
-             _num(share, ".1%")]
-            + [_text("n/a" if lh is None else f"{lh[0]:.3f} / {lh[1]:.3f}") for lh in thirds]
+    rows = [[_text(name, "l"), _num(n, "d"), _pm(*mu, ".3f"), _pm(*p, ".0f"),
+             _pm(100.0 * share[0], 100.0 * share[1], ".1f", " %")]
+            + [_text("n/a" if lh is None else
+                     f"{plus_minus(lh[0], lh[2], '.3f')} / {plus_minus(lh[1], lh[3], '.3f')}")
+               for lh in thirds]
             for name, n, mu, p, share, thirds in t.rows]
     return {"head": t.head, "rows": rows, "mu_s": _num(t.mu_s, ".3f").text,
             "missing": t.missing}
