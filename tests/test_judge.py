@@ -154,18 +154,24 @@ def test_compare_bad_input_is_one_line(run_cli, ensemble, tmp_path):
 
 def test_the_judgement_says_each_runs_take_off():
     """`vibroflow compare` prints the bed's take-off of a run's summary.json "floor" block
-    (measure.floor_force): the phase, that it never leaves the floor, or nothing without one."""
+    (measure.floor_force): the phase (± its batches' error, taken on the circle), that it never
+    leaves the floor, or nothing without one."""
     import math
 
     from vibroflow.analysis.judge import _take_off, _take_off_entry, result_from_summary
 
     base = {"window": {"t_start": 0.5, "t_end": 1.5}, "circulation": {"strength": 1e-3}}
     runs = [result_from_summary({**base, **extra}, "run", None) for extra in
-            ({"floor": {"take_off_phase": 0.1234}}, {"floor": {"take_off_phase": None}}, {})]
+            ({"floor": {"take_off_phase": 0.1234}}, {"floor": {"take_off_phase": None}}, {},
+             {"floor": {"take_off_phase": 0.064,
+                        "take_off_phase_batches": [0.993, 0.999, 0.099, 0.092]}})]
     assert runs[0].take_off == 0.1234 and math.isnan(runs[1].take_off)
     assert runs[2].take_off is None
     said = [_take_off(_take_off_entry(r)) for r in runs]
-    assert said == [", leaves the floor at t f 0.123", ", never leaves the floor", ""]
+    # batches either side of the cycle's end: -0.071, -0.065, 0.035, 0.028 about 0.064, whose
+    # sd over sqrt(4) is 0.0288
+    assert said == [", leaves the floor at t f 0.123", ", never leaves the floor", "",
+                    ", leaves the floor at t f 0.064 +- 0.029"]
 
 
 def test_runs_of_one_method_are_judged_as_an_ensemble_of_calibrations(run_cli, ensemble,

@@ -236,13 +236,13 @@ def test_kinetic_energy_blocks_cover_every_whole_cycle_and_the_halves_their_own(
 def test_the_take_off_carries_its_batches_standard_error():
     """Batches 0.10, 0.12, 0.11, 0.13 about 0.115: std (ddof 1) 0.012910 over sqrt(4).  A phase
     is on a circle: batches 0.993, 0.999, 0.099, 0.092 about the run's 0.064 lie at -0.071,
-    -0.065, +0.035, +0.028 from it (sd 0.0567 over sqrt(4)), where their plain sd would read
+    -0.065, +0.035, +0.028 from it (sd 0.0576 over sqrt(4)), where their plain sd would read
     0.52.  None where a batch never leaves the floor."""
     import math
 
     import numpy as np
 
-    from vibroflow.report.html import _take_off_stderr
+    from vibroflow.measure.floor_force import take_off_stderr as _take_off_stderr
 
     se = _take_off_stderr({"take_off_phase": 0.115,
                            "take_off_phase_batches": [0.10, 0.12, 0.11, 0.13]})

@@ -41,6 +41,7 @@ import numpy as np
 from vibroflow.continuum.formulation import FORMULATIONS, formulation
 from vibroflow.continuum.options import ContinuumOptions
 from vibroflow.measure.bulk import CellTable, read_csv
+from vibroflow.measure.floor_force import take_off_stderr
 from vibroflow.measure.bulk_batches import BATCHES_CSV_NAME, with_batches
 from vibroflow.analysis.compare import (FIELD_FACTOR, difference_to_seeds, ensemble_mean,
                                         field_difference, field_difference_stderr,
@@ -66,6 +67,7 @@ class RunResult:
     circulation: dict
     table: CellTable
     take_off: float | None = None
+    take_off_stderr: float = math.nan
     calibration: str | None = None
     options: str | None = None
 
@@ -144,6 +146,8 @@ def result_from_summary(summary: dict, folder, table: CellTable) -> RunResult:
                      window=(float(w["t_start"]), float(w["t_end"])),
                      circulation=summary["circulation"], table=table,
                      take_off=_take_off_of(summary.get("floor")),
+                     take_off_stderr=(take_off_stderr(summary["floor"])
+                                      if isinstance(summary.get("floor"), dict) else math.nan),
                      calibration=_calibration_of(summary.get("continuum")),
                      options=options_label(summary.get("continuum"), str(method)))
 
@@ -318,7 +322,11 @@ def ensembles(entries: list[dict], limit: float | None) -> list[dict]:
 
 
 def _take_off_entry(r: RunResult) -> dict:
-    return {} if r.take_off is None else {"take_off_phase": r.take_off}
+    if r.take_off is None:
+        return {}
+    se = r.take_off_stderr
+    return {"take_off_phase": r.take_off,
+            "take_off_phase_stderr": se if math.isfinite(se) else None}
 
 
 def _take_off(r: dict) -> str:
@@ -329,7 +337,8 @@ def _take_off(r: dict) -> str:
     t = r["take_off_phase"]
     if t is None or not math.isfinite(float(t)):
         return ", never leaves the floor"
-    return f", leaves the floor at t f {float(t):.3f}"
+    se = r.get("take_off_phase_stderr")
+    return f", leaves the floor at t f {_pm(float(t), se)}"
 
 
 def _pm(v, se, fmt="{:.3f}") -> str:

@@ -30,7 +30,7 @@ from vibroflow.io.atomic import write_text_atomic
 from vibroflow.tub.geometry import point_to_arc
 
 from .layer_profiles import TAKE_OFF_LEVEL, take_off_phase
-from .stats import batches_of_whole_cycles, phase_bins
+from .stats import batches_of_whole_cycles, phase_bins, phase_stderr
 
 FLOOR_CSV_NAME = "floor.csv"
 #: the floor: the U within this angle (degrees) of its bottom, either side
@@ -118,6 +118,18 @@ class FloorCycle:
                            f"{TAKE_OFF_LEVEL:g} of the weight after its maximum (cycle "
                            "fraction; null: never)"),
         }
+
+
+def take_off_stderr(floor: dict) -> float:
+    """The batch-means standard error (cycles) of a summary "floor" block's take-off, a phase:
+    its batches' take-offs about the run's on the circle (stats.phase_stderr); NaN unless
+    every batch leaves the floor (a batch that never does has no phase to average)."""
+    b = floor.get("take_off_phase_batches") or []
+    off = floor.get("take_off_phase")
+    if (len(b) < 2 or not isinstance(off, (int, float))
+            or any(not isinstance(v, (int, float)) or not math.isfinite(v) for v in b)):
+        return math.nan
+    return float(phase_stderr(np.asarray(b, dtype=float), float(off)))
 
 
 def sampled_take_off(force_over_weight, per: int) -> float:

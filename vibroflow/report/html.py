@@ -22,13 +22,11 @@ from functools import lru_cache
 from pathlib import Path
 
 import jinja2
-import numpy as np
 from markupsafe import Markup
 
 from vibroflow import __version__
 from vibroflow.report import figures
-from vibroflow.measure.floor_force import REGIONS, dem_wall_feed
-from vibroflow.measure.stats import phase_stderr
+from vibroflow.measure.floor_force import REGIONS, dem_wall_feed, take_off_stderr
 from vibroflow.report.data import DEM, REPORT_STAGE, StudyData
 from vibroflow.report.impact_figures import impact_distribution_section
 from vibroflow.report.engineer import Engineer
@@ -323,7 +321,7 @@ def _floor(data: StudyData) -> dict:
     (measure.floor_force), the DEM first; `missing`: the methods whose run has none."""
     floors = {name: data.floor(name) for name in data.methods}
     have = {n: b for n, b in floors.items() if b}
-    rows = [[_text(n, "l"), _pm(b.get("take_off_phase"), _take_off_stderr(b), ".3f"),
+    rows = [[_text(n, "l"), _pm(b.get("take_off_phase"), take_off_stderr(b), ".3f"),
              _text(", ".join("n/a" if t is None else f"{t:.3f}"
                              for t in b.get("take_off_phase_batches") or []), "l"),
              _pm(b.get("cycle_mean_over_weight"), b.get("cycle_mean_over_weight_stderr"),
@@ -362,17 +360,6 @@ def _without_feed(data: StudyData) -> list[dict]:
                "its summary.json holds no wall_feed block")
         out.append({"name": name, "why": why})
     return out
-
-
-def _take_off_stderr(block: dict) -> float:
-    """The batch-means standard error of a run's take-off, a phase: its batch values about the
-    run's take-off on the circle (measure.stats.phase_stderr); NaN unless every batch leaves
-    the floor (a batch that never does has no phase to average)."""
-    b = block.get("take_off_phase_batches") or []
-    off = block.get("take_off_phase")
-    if len(b) < 2 or any(v is None for v in b) or not isinstance(off, (int, float)):
-        return math.nan
-    return float(phase_stderr(np.asarray(b, dtype=float), float(off)))
 
 
 def _stress(data: StudyData) -> dict:
