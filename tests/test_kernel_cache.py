@@ -3,7 +3,11 @@ file's stamp only, so a kernel that inlines code from another file keeps stale m
 after that file changes; the guard drops the package's cache whenever any source changes."""
 from __future__ import annotations
 
+import os
+import sys
 from pathlib import Path
+
+import pytest
 
 from vibroflow import _kernel_cache as kc
 
@@ -106,3 +110,30 @@ def test_numba_imported_after_vibroflow_has_its_cache_files_locked():
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip() == "True"
+
+
+@pytest.mark.slow
+def test_a_cached_temperature_kernel_runs_in_a_process_that_starts_with_it(tmp_path):
+    """The MPM's temperature kernel (mpm/temperature_loop.advance_temperature_kernel) calls the
+    parallel fused.advance_kernel.  Compiled in a process whose threads run and which loaded
+    advance_kernel from the cache, it is saved without what starts numba's threading layer;
+    a later run that calls it first, loaded from the cache, must still start the layer
+    (fused.launch_threads) instead of crashing (exit -11).  Three processes on a cache of
+    their own: a run without T (advance_kernel compiled), one with T after starting the
+    threads (the kernel compiled over the cached advance_kernel), one with T from the start."""
+    import subprocess
+
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
+    short = ["--set", "run.duration=0.0639", "--set", "run.average_last=0.0426",
+             "--set", "run.batches=2"]
+    hot = ["--temperature", "--initial-temperature", "0.001"]
+    run = ("import sys; {pre}from vibroflow.cli import main; "
+           "sys.argv = ['vibroflow'] + sys.argv[1:]; main()")
+    steps = [(run.format(pre=""), []),
+             (run.format(pre="import numba; numba.get_num_threads(); "), hot),
+             (run.format(pre=""), hot)]
+    for k, (code, extra) in enumerate(steps):
+        r = subprocess.run([sys.executable, "-c", code, "continuum", "tub47-quick", "--out",
+                            str(tmp_path / f"run{k}"), "--method", "lagrangian", *extra,
+                            *short], capture_output=True, text=True, env=env, timeout=600)
+        assert r.returncode == 0, (k, r.returncode, r.stderr[-2000:])

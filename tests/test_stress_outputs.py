@@ -217,3 +217,46 @@ def test_the_stress_tables_errors_are_the_batches_scatter():
         assert (lo, hi) == (pytest.approx(want, rel=1e-9), pytest.approx(want, rel=1e-9))
     assert batch_errors({**pts, "batch_mu": bm[:1], "batch_pressure": bm[:1]}, 0.43) is None
     assert batch_errors({k: v for k, v in pts.items() if not k.startswith("batch")}, 0.43) is None
+
+
+def test_the_dems_batches_go_into_fields_nc_and_back_onto_the_same_cells(tmp_path):
+    """Phase fields of 2 phases on a 3 x 2 grid, every cell dense and sheared but one (dilute),
+    with four batches whose friction is 0.3, 0.4, 0.5, 0.6 everywhere: with_batch_fields puts
+    them in the phase-resolved group as friction_coefficient_batches (batch, phase, x, z),
+    fields.nc holds them, and dem_points gives each batch's friction at the same dense cells
+    as the pooled points; one batch adds nothing."""
+    import xarray as xr
+
+    from vibroflow.analysis.stress_state import dem_points
+    from vibroflow.calibration.run_fields import read_fields, with_batch_fields, write_fields
+
+    P, nx, nz, nb = 2, 3, 2, 4
+    shape = (P, nx, nz)
+    dims = ("phase", "x", "z")
+    phi = np.full(shape, 0.58)
+    phi[1, 2, 1] = 0.2
+    ph = xr.Dataset({"friction_coefficient": (dims, np.full(shape, 0.45)),
+                     "inertial_number": (dims, np.full(shape, 0.01)),
+                     "pressure": (dims, np.full(shape, 2.0e3), {"units": "Pa"}),
+                     "shear_rate": (dims, np.full(shape, 2.0)),
+                     "shear_rate_stderr": (dims, np.full(shape, 0.1)),
+                     "solid_fraction": (dims, phi)},
+                    coords={"phase": np.arange(P) * np.pi, "x": np.arange(nx) * 0.005,
+                            "z": np.arange(nz) * 0.005})
+    mu_b = np.array([0.3, 0.4, 0.5, 0.6])
+    batches = {"friction_coefficient": mu_b[:, None, None, None] * np.ones((nb,) + shape),
+               "pressure": 1.0e3 * np.arange(1, nb + 1)[:, None, None, None]
+               * np.ones((nb,) + shape)}
+    full = with_batch_fields(ph, batches)
+    assert full["friction_coefficient_batches"].dims == ("batch",) + dims
+    assert full["pressure_batches"].attrs["units"] == "Pa"
+    avg = xr.Dataset({"solid_fraction": (("x", "z"), np.full((nx, nz), 0.58))},
+                     coords={"x": ph["x"].values, "z": ph["z"].values})
+    write_fields(tmp_path / "fields.nc", avg, full)
+    pts = dem_points(read_fields(tmp_path / "fields.nc", phase_resolved=True))
+    n = P * nx * nz - 1
+    assert pts["mu"].size == n and pts["batch_mu"].shape == (nb, n)
+    assert pts["batch_mu"] == pytest.approx(np.repeat(mu_b[:, None], n, axis=1), rel=1e-15)
+    assert pts["batch_pressure"][:, 0] == pytest.approx([1e3, 2e3, 3e3, 4e3], rel=1e-15)
+    one = with_batch_fields(ph, {k: v[:1] for k, v in batches.items()})
+    assert "friction_coefficient_batches" not in one
