@@ -53,25 +53,36 @@ def _window_samples(frequency, n_phases, n_cycles, n_batches, stress_of):
     return s, times
 
 
+#: the hand case's frequency (Hz), phases, batches' offset e, pressures p_k (Pa), frictions mu_k
+F_HZ, P4, E_OFF = 47.0, 4, 0.1
+PK = np.array([1.0e3, 2.0e3, 500.0, 4.0e3])
+MUK = np.array([0.3, 0.4, 0.25, 0.5])
+
+
+def _two_batch_stress(n_batches: int = 2):
+    """The hand case's PhaseStress: four phases, four cycles in n_batches batches, at phase k an
+    isotropic pressure p_k with a shear sigma_xz = -mu_k p_k (1 + e) in the first batch and
+    (1 - e) in the others, in cell (0, 1) of a 3 x 2 map at a phase shear rate of 3 1/s."""
+    def stress_of(k, b):
+        tau = MUK[k] * PK[k] * (1.0 + E_OFF if b == 0 else 1.0 - E_OFF)
+        return [-PK[k], -PK[k], -tau, -PK[k]]
+
+    s, times = _window_samples(F_HZ, P4, 4, n_batches, stress_of)
+    phase = SimpleNamespace(x=np.array([-0.01, 0.0, 0.01]), z=np.array([0.0, 0.01]),
+                            phase_shear_rate=np.full((P4, 2, 3), 3.0),
+                            phase_solid_fraction=np.full((P4, 2, 3), 0.58))
+    return phase_stress(s, times, F_HZ, P4, (0.0, 4.0 / F_HZ), n_batches, phase, 7800.0,
+                        0.00635)
+
+
 def test_phase_means_their_friction_errors_and_inertial_number_by_hand():
     """Four phases, four cycles in two batches: at phase k an isotropic pressure p_k with a
     shear sigma_xz = -mu_k p_k (1 + e) in the first batch and (1 - e) in the second.  The phase
     mean's friction is mu_k; each batch's is mu_k (1 +- e), so its batch-means error is mu_k e;
     I = gamma_dot d / sqrt(p_k / rho_s) with the phase shear rate; cells that held nothing are
     NaN with no samples."""
-    f, P, e = 47.0, 4, 0.1
-    pk = np.array([1.0e3, 2.0e3, 500.0, 4.0e3])
-    muk = np.array([0.3, 0.4, 0.25, 0.5])
-
-    def stress_of(k, b):
-        tau = muk[k] * pk[k] * (1.0 + e if b == 0 else 1.0 - e)
-        return [-pk[k], -pk[k], -tau, -pk[k]]
-
-    s, times = _window_samples(f, P, 4, 2, stress_of)
-    gd = np.full((P, 2, 3), 3.0)
-    phase = SimpleNamespace(x=np.array([-0.01, 0.0, 0.01]), z=np.array([0.0, 0.01]),
-                            phase_shear_rate=gd, phase_solid_fraction=np.full((P, 2, 3), 0.58))
-    ps = phase_stress(s, times, f, P, (0.0, 4.0 / f), 2, phase, 7800.0, 0.00635)
+    e, pk, muk = E_OFF, PK, MUK
+    ps = _two_batch_stress()
     assert ps.pressure[:, 0, 1] == pytest.approx(pk, rel=1e-14)
     assert ps.friction[:, 0, 1] == pytest.approx(muk, rel=1e-13)
     assert ps.shear_stress[:, 0, 1] == pytest.approx(muk * pk, rel=1e-13)
@@ -157,19 +168,8 @@ def test_each_batchs_stress_is_written_beside_the_map_and_read_back(tmp_path):
                                                     write_stress_batches_csv)
     from vibroflow.errors import InputError
 
-    f, P, e = 47.0, 4, 0.1
-    pk = np.array([1.0e3, 2.0e3, 500.0, 4.0e3])
-    muk = np.array([0.3, 0.4, 0.25, 0.5])
-
-    def stress_of(k, b):
-        tau = muk[k] * pk[k] * (1.0 + e if b == 0 else 1.0 - e)
-        return [-pk[k], -pk[k], -tau, -pk[k]]
-
-    s, times = _window_samples(f, P, 4, 2, stress_of)
-    phase = SimpleNamespace(x=np.array([-0.01, 0.0, 0.01]), z=np.array([0.0, 0.01]),
-                            phase_shear_rate=np.full((P, 2, 3), 3.0),
-                            phase_solid_fraction=np.full((P, 2, 3), 0.58))
-    ps = phase_stress(s, times, f, P, (0.0, 4.0 / f), 2, phase, 7800.0, 0.00635)
+    P, e, pk, muk = P4, E_OFF, PK, MUK
+    ps = _two_batch_stress()
     assert write_stress_csv(tmp_path / "stress.csv", ps)
     assert write_stress_batches_csv(tmp_path / "stress_batches.csv", ps)
     rows = np.genfromtxt(tmp_path / "stress_batches.csv", delimiter=",", names=True)
@@ -185,8 +185,7 @@ def test_each_batchs_stress_is_written_beside_the_map_and_read_back(tmp_path):
     (tmp_path / "stress_batches.csv").write_text("batch,x\n0,0.0\n")
     with pytest.raises(InputError, match="stress_batches.csv: not a continuum's"):
         continuum_points(tmp_path / "stress.csv")
-    one = phase_stress(*_window_samples(f, P, 4, 1, stress_of), f, P, (0.0, 4.0 / f), 1, phase,
-                       7800.0, 0.00635)
+    one = _two_batch_stress(1)
     assert not write_stress_batches_csv(tmp_path / "one.csv", one)
     assert not (tmp_path / "one.csv").exists()
 

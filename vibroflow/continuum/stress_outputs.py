@@ -135,29 +135,29 @@ def phase_stress(samples: Samples, times: np.ndarray, frequency: float, n_phases
                        batch_friction=per_batch)
 
 
+def _num(v) -> str:
+    return repr(float(v)) if np.isfinite(v) else ""
+
+
+def _held(ps: PhaseStress) -> np.ndarray:
+    """(phase, iz, ix) of every cell and phase that held material, phase by phase, row by row:
+    the rows of stress.csv and of each batch's block of stress_batches.csv."""
+    return np.argwhere(ps.samples > 0)
+
+
 def write_stress_csv(path: Path, ps: PhaseStress | None) -> bool:
     """Write the phase-resolved stress map atomically (STRESS_COLUMNS, SI): a row for each
     analysis cell and phase at which the cell held material in some sample.  False (nothing
     written) without it."""
     if ps is None:
         return False
-
-    def num(v):
-        return repr(float(v)) if np.isfinite(v) else ""
-
-    lines = [",".join(STRESS_COLUMNS)]
-    n_phases, nz, nx = ps.friction.shape
-    for k in range(n_phases):
-        for iz in range(nz):
-            for ix in range(nx):
-                if ps.samples[k, iz, ix] == 0:
-                    continue
-                lines.append(",".join([
-                    repr(float(ps.x[ix])), repr(float(ps.z[iz])), str(k),
-                    num(ps.solid_fraction[k, iz, ix]), num(ps.shear_rate[k, iz, ix]),
-                    num(ps.pressure[k, iz, ix]), num(ps.shear_stress[k, iz, ix]),
-                    num(ps.friction[k, iz, ix]), num(ps.friction_stderr[k, iz, ix]),
-                    num(ps.inertial_number[k, iz, ix]), str(int(ps.samples[k, iz, ix]))]))
+    lines = [",".join(STRESS_COLUMNS)] + [",".join([
+        repr(float(ps.x[ix])), repr(float(ps.z[iz])), str(k),
+        _num(ps.solid_fraction[k, iz, ix]), _num(ps.shear_rate[k, iz, ix]),
+        _num(ps.pressure[k, iz, ix]), _num(ps.shear_stress[k, iz, ix]),
+        _num(ps.friction[k, iz, ix]), _num(ps.friction_stderr[k, iz, ix]),
+        _num(ps.inertial_number[k, iz, ix]), str(int(ps.samples[k, iz, ix]))])
+        for k, iz, ix in _held(ps)]
     write_text_atomic(path, "\n".join(lines) + "\n")
     return True
 
@@ -169,21 +169,10 @@ def write_stress_batches_csv(path: Path, ps: PhaseStress | None) -> bool:
     batches: there is no batches' scatter to give."""
     if ps is None or ps.batch_friction.shape[0] < 2:
         return False
-
-    def num(v):
-        return repr(float(v)) if np.isfinite(v) else ""
-
-    lines = [",".join(STRESS_BATCH_COLUMNS)]
-    n_batches, n_phases, nz, nx = ps.batch_friction.shape
-    for b in range(n_batches):
-        for k in range(n_phases):
-            for iz in range(nz):
-                for ix in range(nx):
-                    if ps.samples[k, iz, ix] == 0:
-                        continue
-                    lines.append(",".join([
-                        str(b), repr(float(ps.x[ix])), repr(float(ps.z[iz])), str(k),
-                        num(ps.batch_pressure[b, k, iz, ix]),
-                        num(ps.batch_friction[b, k, iz, ix])]))
+    held = _held(ps)
+    lines = [",".join(STRESS_BATCH_COLUMNS)] + [",".join([
+        str(b), repr(float(ps.x[ix])), repr(float(ps.z[iz])), str(k),
+        _num(ps.batch_pressure[b, k, iz, ix]), _num(ps.batch_friction[b, k, iz, ix])])
+        for b in range(ps.batch_friction.shape[0]) for k, iz, ix in held]
     write_text_atomic(path, "\n".join(lines) + "\n")
     return True

@@ -106,12 +106,12 @@ def bin_impacts(chunks, cell_size: float) -> ImpactCells:
                 a[1] += float(c) * float(m)
     keys = sorted({k[:2] for k in acc})
     col = {k: j for j, k in enumerate(keys)}
-    batches = sorted({k[2] for k in acc})
-    counts = np.zeros((len(batches), len(keys)))
-    sums = np.zeros((len(batches), len(keys)))
+    row = {b: i for i, b in enumerate(sorted({k[2] for k in acc}))}
+    counts = np.zeros((len(row), len(keys)))
+    sums = np.zeros((len(row), len(keys)))
     for (xi, zi, b), (c, tot) in acc.items():
-        counts[batches.index(b), col[(xi, zi)]] = c
-        sums[batches.index(b), col[(xi, zi)]] = tot
+        counts[row[b], col[(xi, zi)]] = c
+        sums[row[b], col[(xi, zi)]] = tot
     count = counts.sum(axis=0).astype(np.int64)
     total = sums.sum(axis=0)
     x = np.array([k[0] for k in keys], dtype=float) * h
