@@ -147,6 +147,16 @@ def test_calibrate_writes_its_files_and_reads_back(calibrated_run):
     p = cal.partitions
     assert 0.0 < p.friction_along_flow <= p.friction
     assert p.friction_along_flow_stderr >= 0.0
+    # each impact relation's intercept-slope covariance is one (|rho| <= 1): the jackknife's
+    # sums are a sample covariance's
+    rel = cal.impacts.ball_ball
+    assert math.isfinite(rel.c0_c1_cells_covariance_m_s)
+    for r in (cal.impacts.ball_ball, cal.impacts.ball_wall):
+        for e0, e1, cov in ((r.c0_cells_stderr_m_s, r.c1_cells_stderr,
+                             r.c0_c1_cells_covariance_m_s),
+                            (r.c0_stderr_m_s, r.c1_stderr, r.c0_c1_covariance_m_s)):
+            if math.isfinite(cov):
+                assert abs(cov) <= e0 * e1 * (1.0 + 1e-9)
     # the record written and read back is the same file
     write_calibration(out / "again.toml", cal)
     assert (out / "again.toml").read_bytes() == (out / "calibration.toml").read_bytes()

@@ -2,6 +2,7 @@
 (calibration.run_fields.add_cycle_mean_errors) and of the report's DEM shear rate in a probe's
 cell (report.data.StudyData.dem_shear_rate_at): the delete-one-batch jackknife, which for a
 mean over the batches is the batch-means standard error (known answers worked by hand)."""
+import math
 from types import SimpleNamespace
 
 import numpy as np
@@ -106,17 +107,21 @@ def test_a_probe_cells_shear_rate_and_its_error_by_hand():
     assert value2 == value and np.isnan(se2)
 
 
-def test_a_continuums_inferred_impact_speed_carries_its_shear_rates_error():
-    """v = c0 + c1 d gamma_dot: its error from the run's shear rate is |c1| d se(gamma_dot);
-    c0 = 0.05 m/s, c1 = 0.8, d = 6.35 mm, gamma_dot 4 +- 0.5 1/s: v = 0.07032 +- 0.00254 m/s;
-    a probe without an error gets none."""
+def test_a_continuums_inferred_impact_speed_carries_its_shear_rates_and_its_relations_error():
+    """v = c0 + c1 d gamma_dot: its error from the run's shear rate is |c1| d se(gamma_dot),
+    from the relation sqrt(se0^2 + (d gamma_dot)^2 se1^2 + 2 d gamma_dot cov), independent:
+    c0 = 0.05 +- 0.01 m/s, c1 = 0.8 +- 0.1, cov -5e-4 m/s, d = 6.35 mm, gamma_dot 4 +- 0.5
+    1/s: v = 0.07032 m/s, run 0.00254, relation sqrt(8.10516e-5), together 0.0093543 m/s; a
+    probe without the run's error gets none."""
     from vibroflow.report.figures import inferred_impact_speed_errors, inferred_impact_speeds
 
     probes = {"P1": {"shear_rate_1_s": 4.0, "shear_rate_1_s_stderr": 0.5},
               "P2": {"shear_rate_1_s": 2.0, "shear_rate_1_s_stderr": None}}
     data = SimpleNamespace(
-        impact_fit=lambda kind: {"c0": 0.05, "c1": 0.8, "c0_stderr": 0.01, "c1_stderr": 0.1},
+        impact_fit=lambda kind: {"c0": 0.05, "c1": 0.8, "c0_stderr": 0.01, "c1_stderr": 0.1,
+                                 "covariance": -5e-4},
         diameter=0.00635, continuum_block=lambda name: {"probes": probes})
     assert inferred_impact_speeds(data, "lagrangian")["P1"] == pytest.approx(0.07032)
     errors = inferred_impact_speed_errors(data, "lagrangian")
-    assert errors == {"P1": pytest.approx(0.00254)}
+    assert errors == {"P1": pytest.approx(math.sqrt(0.00254**2 + 8.10516e-5), rel=1e-9)}
+    assert errors["P1"] == pytest.approx(0.0093543, rel=1e-4)

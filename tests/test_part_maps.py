@@ -93,9 +93,20 @@ def test_a_known_shear_field_gives_the_hand_computed_map_around_the_bar():
     wet = np.setdiff1d(np.arange(36), dry)
     assert np.isnan(v[dry]).all() and np.isnan(se[dry]).all()
     assert v[wet] == pytest.approx(np.full(wet.size, 0.05 + 0.4 * 0.00635 * 20.0), rel=1e-12)
-    assert se[wet] == pytest.approx(np.full(wet.size, 0.4 * 0.00635 * math.sqrt(10.0 / 3.0)
-                                            / 2.0), rel=1e-9)
+    run = 0.4 * 0.00635 * math.sqrt(10.0 / 3.0) / 2.0
+    assert se[wet] == pytest.approx(np.full(wet.size, run), rel=1e-9)
     assert how.startswith("v = c0 + c1 d gamma_dot")
+    # with the relation's errors (se c0 4 mm/s, se c1 0.05, rho -0.6) the patch's error adds
+    # the prediction's at d gamma_dot = 0.127, sqrt(se0^2 + x^2 se1^2 + 2 x cov), in quadrature
+    calibration.impacts.ball_wall = ImpactRelation(
+        c0_cells_m_s=0.05, c1_cells=0.4, c0_cells_stderr_m_s=0.004, c1_cells_stderr=0.05,
+        c0_c1_cells_covariance_m_s=-0.6 * 0.004 * 0.05)
+    v2, se2, _ = inferred_speeds(weights, phase, 0.00635, calibration,
+                                 SimpleNamespace(temperature=False, cell_grid=None), None)
+    x = 0.00635 * 20.0
+    relation = math.sqrt(0.004**2 + (x * 0.05) ** 2 - 2 * x * 0.6 * 0.004 * 0.05)
+    assert np.array_equal(v2, v, equal_nan=True) and np.isnan(se2[dry]).all()
+    assert se2[wet] == pytest.approx(np.full(wet.size, math.hypot(run, relation)), rel=1e-9)
 
 
 @pytest.mark.slow

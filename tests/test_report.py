@@ -135,6 +135,12 @@ def test_impact_distributions_are_the_summarys_impacts(study):
             m = summary["methods"][row["method"]]["impacts"][f"{key}_mean_normal_speed"]
             d = im[f"{key}_mean_normal_speed"]
             assert row["flagged"] == (abs(m - d) > 0.25 * d)
+            # the inferred speed's error: the run's and the calibrated relation's, independent
+            own = summary["methods"][row["method"]]["impacts"]
+            run = own[f"{key}_mean_normal_speed_stderr"]
+            relation = own[f"{key}_mean_normal_speed_relation_stderr"]
+            assert relation > 0.0
+            assert row["inferred_stderr"] == pytest.approx(math.hypot(run, relation), rel=1e-12)
 
 
 # ----------------------------------------------------------------------------------------------

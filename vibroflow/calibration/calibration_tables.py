@@ -43,10 +43,12 @@ def _friction_keys(w: dict, measures, **text) -> dict:
 
 def _speed_fit_keys(g: dict, tag: str, points_key: str) -> dict:
     """The keys of an impact speed's fit v = c0 + c1 d gamma_dot (impacts.py's fit g): c0 (m/s)
-    and c1 with their standard errors, r^2, the relative rms error (tag after each name) and
-    the number of points fitted (points_key)."""
+    and c1 with their standard errors and covariance (m/s; what a prediction's error needs,
+    measure.stats.affine_prediction_stderr), r^2, the relative rms error (tag after each name)
+    and the number of points fitted (points_key)."""
     return {f"c0{tag}_m_s": toml_float(g["c0"]), f"c0{tag}_stderr_m_s": toml_float(g["c0_stderr"]),
             f"c1{tag}": toml_float(g["c1"]), f"c1{tag}_stderr": toml_float(g["c1_stderr"]),
+            f"c0_c1{tag}_covariance_m_s": toml_float(g.get("c0_c1_covariance", float("nan"))),
             f"r2{tag}": toml_float(g["r2"]),
             f"relative_rms_error{tag}": toml_float(g["relative_rms_error"]),
             points_key: int(g["points"])}

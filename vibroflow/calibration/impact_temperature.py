@@ -233,12 +233,15 @@ def temperature_relation_keys(rec: dict, rec_cells: dict | None = None,
         out = {"b0_temperature_cells_m_s": tc["c0"], "b0_temperature_cells_stderr_m_s":
                tc["c0_stderr"], "b1_temperature_cells": tc["c1"],
                "b1_temperature_cells_stderr": tc["c1_stderr"],
+               "b0_b1_temperature_cells_covariance_m_s": tc.get("c0_c1_covariance",
+                                                                 float("nan")),
                "r2_temperature_affine_cells": tc["r2"], "points_temperature_cells":
                tc["points"]}
         if r2_shear_cells is not None and math.isfinite(r2_shear_cells):
             winner = "temperature" if tc["r2"] > r2_shear_cells else "shear_rate"
     return {**out, "b0_temperature_m_s": ta["c0"], "b0_temperature_stderr_m_s": ta["c0_stderr"],
             "b1_temperature": ta["c1"], "b1_temperature_stderr": ta["c1_stderr"],
+            "b0_b1_temperature_covariance_m_s": ta.get("c0_c1_covariance", float("nan")),
             "r2_temperature_affine": ta["r2"],
             "within_0_8_1_25_temperature": t1["within_0_8_1_25"],
             "within_0_8_1_25_temperature_affine": ta["within_0_8_1_25"],

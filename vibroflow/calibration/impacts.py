@@ -29,7 +29,8 @@ import numpy as np
 
 from vibroflow.dem.walls import KIND_BALL_BALL, KIND_BALL_TUB
 from vibroflow.measure.phase_shear import near_wall_nodes, phase_shear_of_snapshots
-from vibroflow.measure.stats import batches_of_whole_cycles, jackknife_stderr, phase_bins
+from vibroflow.measure.stats import (batches_of_whole_cycles, jackknife_covariance,
+                                     jackknife_stderr, phase_bins)
 from vibroflow.tub.geometry import geometry_of
 
 from .dem_result import DEMResult
@@ -41,7 +42,8 @@ MIN_IMPACTS_PER_CELL = 50
 
 def weighted_linear_fit(x, y, w, intercept: bool = True) -> dict:
     """Weighted least squares y = c0 + c1 x (or y = c1 x): coefficients, their standard errors
-    (from the weighted residual variance), weighted R^2 and relative RMS error (dimensionless).
+    and covariance c0_c1_covariance (units of c0 times c1's; from the weighted residual
+    variance), weighted R^2 and relative RMS error (dimensionless).
     """
     x = np.asarray(x, float)
     y = np.asarray(y, float)
@@ -51,8 +53,9 @@ def weighted_linear_fit(x, y, w, intercept: bool = True) -> dict:
     p = 2 if intercept else 1
     nan = float("nan")
     if x.size <= p:
-        return {"c0": nan, "c1": nan, "c0_stderr": nan, "c1_stderr": nan, "r2": nan,
-                "relative_rms_error": nan, "points": int(x.size)}
+        return {"c0": nan, "c1": nan, "c0_stderr": nan, "c1_stderr": nan,
+                "c0_c1_covariance": nan, "r2": nan, "relative_rms_error": nan,
+                "points": int(x.size)}
     A = np.stack([np.ones_like(x), x], axis=1) if intercept else x[:, None]
     sw = np.sqrt(w)
     coef, *_ = np.linalg.lstsq(A * sw[:, None], y * sw, rcond=None)
@@ -70,11 +73,12 @@ def weighted_linear_fit(x, y, w, intercept: bool = True) -> dict:
     if intercept:
         c0, c1 = float(coef[0]), float(coef[1])
         e0, e1 = float(math.sqrt(cov[0, 0])), float(math.sqrt(cov[1, 1]))
+        c01 = float(cov[0, 1])
     else:
-        c0, e0 = 0.0, 0.0
+        c0, e0, c01 = 0.0, 0.0, 0.0
         c1, e1 = float(coef[0]), float(math.sqrt(cov[0, 0]))
-    return {"c0": c0, "c1": c1, "c0_stderr": e0, "c1_stderr": e1, "r2": r2,
-            "relative_rms_error": rel, "points": int(x.size)}
+    return {"c0": c0, "c1": c1, "c0_stderr": e0, "c1_stderr": e1, "c0_c1_covariance": c01,
+            "r2": r2, "relative_rms_error": rel, "points": int(x.size)}
 
 
 class BatchCounts:
@@ -108,10 +112,11 @@ class BatchCounts:
 
 
 def jackknife_of_refits(fits: dict, refit, n_batches: int) -> None:
-    """In place: each fit of `fits` ({tag: weighted_linear_fit's dict}) gets c0_stderr and
-    c1_stderr as the delete-one-batch jackknife (measure.stats.jackknife_stderr) of refit(b),
-    the same tags' fits made again without batch b; its own (the points taken as independent)
-    kept as c0_stderr_points and c1_stderr_points, and stderr_batches the batches used.
+    """In place: each fit of `fits` ({tag: weighted_linear_fit's dict}) gets c0_stderr,
+    c1_stderr and c0_c1_covariance as the delete-one-batch jackknife (measure.stats.
+    jackknife_stderr, jackknife_covariance) of refit(b), the same tags' fits made again without
+    batch b; its own (the points taken as independent) kept as c0_stderr_points,
+    c1_stderr_points and c0_c1_covariance_points, and stderr_batches the batches used.
 
     Why: one batch's cycles move the fields and the impact speeds of many points together, so
     the points are not independent and the least-squares errors understate the scatter.
@@ -119,8 +124,11 @@ def jackknife_of_refits(fits: dict, refit, n_batches: int) -> None:
     refits = [refit(b) for b in range(n_batches)] if n_batches >= 2 else []
     for tag, fit in fits.items():
         fit["c0_stderr_points"], fit["c1_stderr_points"] = fit["c0_stderr"], fit["c1_stderr"]
-        fit["c0_stderr"] = jackknife_stderr([r[tag]["c0"] for r in refits])
-        fit["c1_stderr"] = jackknife_stderr([r[tag]["c1"] for r in refits])
+        fit["c0_c1_covariance_points"] = fit.get("c0_c1_covariance", float("nan"))
+        c0s, c1s = [r[tag]["c0"] for r in refits], [r[tag]["c1"] for r in refits]
+        fit["c0_stderr"] = jackknife_stderr(c0s)
+        fit["c1_stderr"] = jackknife_stderr(c1s)
+        fit["c0_c1_covariance"] = jackknife_covariance(c0s, c1s)
         fit["stderr_batches"] = len(refits)
 
 
@@ -270,10 +278,11 @@ def _fine_refit(counts: BatchCounts, loo, shape, d: float, min_impacts: int, min
 
 def jackknife_of_batches_fit(fit: dict, c, total, c_b, sum_b, shear, d: float, min_impacts: int,
                              min_sf: float) -> dict:
-    """c0_stderr and c1_stderr of impact_relations_on_cells' fit as the delete-one-batch
-    jackknife: the fit made again without batch b's impacts (counts c - c_b[b], speed sums
+    """c0_stderr, c1_stderr and c0_c1_covariance of impact_relations_on_cells' fit as the
+    delete-one-batch jackknife: the fit made again without batch b's impacts (counts c - c_b[b], speed sums
     total - sum_b[b], each (n_phases, nz, nx)) on the phase fields without batch b
-    (PhaseShear.loo_*); the points' own errors kept as c0_stderr_points, c1_stderr_points.
+    (PhaseShear.loo_*); the points' own errors kept as c0_stderr_points, c1_stderr_points,
+    c0_c1_covariance_points.
     Without two batches (or when a fit without one fails) the jackknife errors are NaN."""
     nb = 0 if shear.loo_phase_shear_rate is None else c_b.shape[0]
 
@@ -287,8 +296,9 @@ def jackknife_of_batches_fit(fit: dict, c, total, c_b, sum_b, shear, d: float, m
 
     fits = {"fit": dict(fit)}
     jackknife_of_refits(fits, refit, nb)
-    return {key: fits["fit"][key] for key in ("c0_stderr", "c1_stderr", "c0_stderr_points",
-                                              "c1_stderr_points", "stderr_batches")}
+    return {key: fits["fit"][key] for key in (
+        "c0_stderr", "c1_stderr", "c0_c1_covariance", "c0_stderr_points", "c1_stderr_points",
+        "c0_c1_covariance_points", "stderr_batches")}
 
 
 def impact_relations_on_cells(run, cell_size: float | None = None,

@@ -13,7 +13,10 @@ max(0, 1 - r / (2 h)) of its distance r to the trace, averaged over the trace's 
 deeper in the part than h/2 left out).  Per patch: the weighted mean shear rate, its batch-means
 error from each batch's field weighted alike, put through the relation (error |c1| d se); from
 T, the nodes' speeds' weighted mean with the bed-mean T's error carried through, as
-temperature_impacts does.  Every patch with material within two node spacings gets a value; a
+temperature_impacts does.  The stderr adds the calibrated relation's own error at the patch's
+shear rate or T in quadrature (measure.stats.affine_prediction_stderr,
+temperature_impacts.temperature_prediction_stderr): parts.nc has one error a patch, and the
+comparison with the DEM's speed needs both.  Every patch with material within two node spacings gets a value; a
 patch with none (above the free surface, a box's faces at the slice's ends, which the plane
 does not cut) is NaN.  Impact rates, the speed distribution and the energy flux are NaN: the continuum infers no
 impact count.
@@ -34,12 +37,13 @@ import xarray as xr
 
 from vibroflow.io.parts_file import empty_parts_dataset
 from vibroflow.measure.phase_shear import PhaseShear
-from vibroflow.measure.stats import batch_means, phase_bins
+from vibroflow.measure.stats import (affine_prediction_stderr, batch_means, phase_bins,
+                                     quadrature_stderr)
 from vibroflow.tub.parts import Part, part_nearest, patch_layout, patch_of
 
 from .sampling import Samples
-from .shear_outputs import impact_relation
-from .temperature_impacts import RELATION, temperature_relation
+from .shear_outputs import impact_relation, impact_relation_errors
+from .temperature_impacts import RELATION, temperature_prediction_stderr, temperature_relation
 from .temperature_outputs import temperature_map
 
 #: a patch's value takes the nodes within REACH node spacings of its surface (module docstring)
@@ -130,12 +134,16 @@ def inferred_speeds(weights: np.ndarray, phase: PhaseShear, diameter: float, cal
         for j in range(n_patches):
             mean[j] = _weighted(v, phi, weights[j])
             if np.isfinite(mean[j]):
-                se[j] = abs(b1) * T_se / (2.0 * math.sqrt(T_bed)) if T_bed > 0 else np.nan
+                run = abs(b1) * T_se / (2.0 * math.sqrt(T_bed)) if T_bed > 0 else np.nan
+                on = np.isfinite(v) & (np.nan_to_num(phi) > 0) & (weights[j] > 0)
+                se[j] = quadrature_stderr(run, temperature_prediction_stderr(
+                    rel, np.sqrt(T[on]), weights[j][on] * phi[on]))
         return mean, se, (RELATION + " (calibration.toml [impacts.ball_wall], preferred_relation"
                           " = \"temperature\"), T the time-averaged map " + where)
     c0, c1, which = impact_relation(rel)
     if c0 is None:
         return mean, se, ""
+    errors = impact_relation_errors(rel)
     for j in range(n_patches):
         g = _weighted(phase.shear_rate, phi, weights[j])
         if not np.isfinite(g):
@@ -145,7 +153,8 @@ def inferred_speeds(weights: np.ndarray, phase: PhaseShear, diameter: float, cal
         per = [p for p in per if np.isfinite(p)]
         g_se = float(np.std(per, ddof=1) / math.sqrt(len(per))) if len(per) >= 2 else np.nan
         mean[j] = c0 + c1 * diameter * g
-        se[j] = abs(c1) * diameter * g_se
+        se[j] = quadrature_stderr(abs(c1) * diameter * g_se,
+                                  affine_prediction_stderr(diameter * g, *errors))
     return mean, se, (f"v = c0 + c1 d gamma_dot (calibration.toml [impacts.ball_wall] {which}), "
                       "gamma_dot the phase-resolved field's cycle mean " + where)
 
@@ -172,6 +181,8 @@ def part_dataset(method: str, scenario, parts: tuple[Part, ...], packed, calibra
         if text:
             how.add(text)
     inferred = ("normal_speed_mean and its stderr by patch: " + "; ".join(sorted(how))
+                + "; the stderr: the run's batch-means error through the relation and the "
+                "calibrated relation's own, in quadrature"
                 if how else "normal_speed_mean: NaN, the run has no calibrated impact relation")
     inferred += ("; force and torque: the wall law's contact forces on the part (their "
                  "reaction on the material summed; the torque about the part's centre, each "

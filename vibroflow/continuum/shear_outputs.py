@@ -12,7 +12,7 @@ import numpy as np
 from vibroflow.io.atomic import write_text_atomic
 from vibroflow.io.calibration_file import Calibration, ImpactRelation
 from vibroflow.measure.phase_shear import PhaseShear, near_wall_nodes
-from vibroflow.measure.stats import batch_means
+from vibroflow.measure.stats import affine_prediction_stderr, batch_means
 
 from .sampling import Samples
 
@@ -54,19 +54,55 @@ def write_shear_rate_csv(path: Path, samples: Samples, phase: PhaseShear | None,
 
 
 
+#: the two shear-rate relations of an [impacts.KIND] table, in the order impact_relation
+#: prefers them: the coefficients' keys, then their standard errors' and covariance's
+_SHEAR_RELATIONS = (("c0_cells_m_s", "c1_cells", "c0_cells_stderr_m_s", "c1_cells_stderr",
+                     "c0_c1_cells_covariance_m_s"),
+                    ("c0_m_s", "c1", "c0_stderr_m_s", "c1_stderr", "c0_c1_covariance_m_s"))
+
+
+def _num(x) -> float:
+    return float(x) if isinstance(x, (int, float)) and not isinstance(x, bool) else math.nan
+
+
+def chosen_keys(rel, candidates) -> tuple | None:
+    """The first of `candidates` (each the keys of a relation's two coefficients, then of
+    their errors) whose two coefficients `rel` ([impacts.KIND]) holds finite; None if none."""
+    if rel is None:
+        return None
+    for keys in candidates:
+        if all(math.isfinite(_num(getattr(rel, k, None))) for k in keys[:2]):
+            return keys
+    return None
+
+
+def relation_errors(rel, candidates) -> tuple[float, float, float]:
+    """(se of the intercept (m/s), se of the slope, their covariance (m/s)) of the relation
+    `candidates` choose in `rel` (as impact_relation or temperature_impacts.temperature_relation
+    choose it); NaN where the calibration holds none (an older calibration: no covariance,
+    measure.stats.affine_prediction_stderr then bounds the error)."""
+    keys = chosen_keys(rel, candidates)
+    if keys is None:
+        return math.nan, math.nan, math.nan
+    return tuple(_num(getattr(rel, k, None)) for k in keys[2:])
+
+
 def impact_relation(rel: ImpactRelation | None) -> tuple[float | None, float | None, str]:
     """(c0 m/s, c1, which) of a calibration's [impacts.KIND] table: the relation fitted on the
     continuum's own measure of the shear rate (c0_cells_m_s, c1_cells;
     calibration.impacts.impact_relations_on_cells) when the calibration has it, else the one
     fitted on the DEM's 5 mm coarse-grained field (c0_m_s, c1; a calibration without it); (None,
-    None, "") without either."""
-    if rel is None:
+    None, "") without either.  Its errors: impact_relation_errors."""
+    keys = chosen_keys(rel, _SHEAR_RELATIONS)
+    if keys is None:
         return None, None, ""
-    for c0, c1, which in ((rel.c0_cells_m_s, rel.c1_cells, "c0_cells, c1_cells"),
-                          (rel.c0_m_s, rel.c1, "c0, c1")):
-        if all(c is not None and math.isfinite(c) for c in (c0, c1)):
-            return float(c0), float(c1), which
-    return None, None, ""
+    c0, c1 = (float(getattr(rel, k)) for k in keys[:2])
+    return c0, c1, ("c0_cells, c1_cells" if keys is _SHEAR_RELATIONS[0] else "c0, c1")
+
+
+def impact_relation_errors(rel: ImpactRelation | None) -> tuple[float, float, float]:
+    """(se c0 m/s, se c1, cov(c0, c1) m/s) of the relation impact_relation chooses."""
+    return relation_errors(rel, _SHEAR_RELATIONS)
 
 
 
@@ -78,7 +114,11 @@ def shear_rate_outputs(material, calibration: Calibration | None, probes: dict, 
     (models.md, Bagnold scaling; a from [impacts] bagnold_sqrtT_over_d_gamma_dot) and the mean
     impact speeds v = c0 + c1 d gamma_dot ([impacts.ball_ball] over the bed,
     [impacts.ball_wall] near the wall), written into the DEM's impact keys (`impacts` is
-    updated in place; its counts stay 0: no impact is seen), by impact_relation.
+    updated in place; its counts stay 0: no impact is seen), by impact_relation: each
+    KIND_mean_normal_speed_stderr is the run's batch-means error carried through the relation,
+    |c1| d se(gamma_dot), and KIND_mean_normal_speed_relation_stderr the calibrated relation's
+    own at that shear rate (measure.stats.affine_prediction_stderr of its coefficients' errors);
+    the two are independent, so a comparison with the DEM adds them in quadrature.
 
     The shear rate is that of the phase-resolved velocity field (`phase`, the DEM
     calibration's definition, on which its impact relation was fitted; analysis.phase_shear
@@ -128,12 +168,15 @@ def shear_rate_outputs(material, calibration: Calibration | None, probes: dict, 
     inferred = {}
     which = set()
     for name, rate, rate_se in (("ball_ball", m, se), ("ball_wall", mw, sew)):
-        c0, c1, key = impact_relation(getattr(im, name) if im is not None else None)
+        rel = getattr(im, name) if im is not None else None
+        c0, c1, key = impact_relation(rel)
         if c0 is None:
             continue
         v = c0 + c1 * d * rate
         impacts[name + "_mean_normal_speed"] = v
         impacts[name + "_mean_normal_speed_stderr"] = abs(c1) * d * rate_se
+        impacts[name + "_mean_normal_speed_relation_stderr"] = affine_prediction_stderr(
+            d * rate, *impact_relation_errors(rel))
         inferred[name + "_mean_normal_speed_m_s"] = v
         which.add(key)
     if inferred:

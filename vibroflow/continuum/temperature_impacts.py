@@ -9,7 +9,9 @@ calibration prefers T for a kind infers that kind's mean from its time-averaged 
 analysis cells (temperature_outputs.temperature_map): v at each node, solid-fraction weighted
 over the bed (ball-ball) or the nodes within a node spacing of the U (ball-wall), as the shear
 rate's inference weights them.  Its standard error is the bed-mean temperature's batch-means
-error carried through the relation, b1 se(T) / (2 sqrt(T)).  Without T, or where the calibration
+error carried through the relation, b1 se(T) / (2 sqrt(T)); the relation's own error, from
+its coefficients' errors and covariance, is beside it as KIND_mean_normal_speed_relation_stderr
+(temperature_prediction_stderr).  Without T, or where the calibration
 prefers the shear rate, the shear rate's inference stands and nothing here is written.
 """
 from __future__ import annotations
@@ -20,25 +22,58 @@ import numpy as np
 
 from vibroflow.io.calibration_file import Calibration
 from vibroflow.measure.phase_shear import PhaseShear, near_wall_nodes
-from vibroflow.measure.stats import batch_means
+from vibroflow.measure.stats import affine_prediction_stderr, batch_means
 
 from .sampling import Samples
+from .shear_outputs import chosen_keys, relation_errors
 from .temperature_outputs import temperature_map
 
 RELATION = "v = max(b0 + b1 sqrt(T), 0)"
+
+
+#: the two temperature relations of an [impacts.KIND] table, in the order temperature_relation
+#: prefers them: the coefficients' keys, then their standard errors' and covariance's
+_TEMPERATURE_RELATIONS = (
+    ("b0_temperature_cells_m_s", "b1_temperature_cells", "b0_temperature_cells_stderr_m_s",
+     "b1_temperature_cells_stderr", "b0_b1_temperature_cells_covariance_m_s"),
+    ("b0_temperature_m_s", "b1_temperature", "b0_temperature_stderr_m_s",
+     "b1_temperature_stderr", "b0_b1_temperature_covariance_m_s"))
+
+
+def _prefers_temperature(rel) -> bool:
+    return rel is not None and rel.preferred_relation == "temperature"
 
 
 def temperature_relation(rel) -> tuple[float, float] | None:
     """(b0 m/s, b1) of an [impacts.KIND] table that prefers the temperature, else None: the
     relation fitted on the analysis cells' centres (b0_temperature_cells_m_s,
     b1_temperature_cells) where the calibration has it, else the coarse-grained points' one."""
-    if rel is None or rel.preferred_relation != "temperature":
-        return None
-    for b0, b1 in ((rel.b0_temperature_cells_m_s, rel.b1_temperature_cells),
-                   (rel.b0_temperature_m_s, rel.b1_temperature)):
-        if b0 is not None and b1 is not None and math.isfinite(b0) and math.isfinite(b1):
-            return float(b0), float(b1)
-    return None
+    keys = chosen_keys(rel, _TEMPERATURE_RELATIONS) if _prefers_temperature(rel) else None
+    return None if keys is None else (float(getattr(rel, keys[0])), float(getattr(rel, keys[1])))
+
+
+def temperature_relation_errors(rel) -> tuple[float, float, float]:
+    """(se b0 m/s, se b1, cov(b0, b1) m/s) of the relation temperature_relation chooses (NaN
+    where the calibration holds none)."""
+    if not _prefers_temperature(rel):
+        return math.nan, math.nan, math.nan
+    return relation_errors(rel, _TEMPERATURE_RELATIONS)
+
+
+def temperature_prediction_stderr(rel, sqrt_T, weight) -> float:
+    """The calibrated relation's own error (m/s) of the weighted mean of max(b0 + b1 sqrt(T),
+    0) over nodes (sqrt_T m/s, weight their weights): the relation's gradient in (b0, b1) is
+    (the share of the weight where the relation is positive, the weighted mean of sqrt(T)
+    there) (measure.stats.affine_prediction_stderr)."""
+    b = temperature_relation(rel)
+    w = np.asarray(weight, float)
+    if b is None or not np.sum(w) > 0:
+        return math.nan
+    on = (b[0] + b[1] * np.asarray(sqrt_T, float)) > 0
+    total = float(np.sum(w))
+    share = float(np.sum(w[on])) / total
+    x = float(np.sum(w[on] * np.asarray(sqrt_T, float)[on])) / total
+    return affine_prediction_stderr(x, *temperature_relation_errors(rel), intercept_share=share)
 
 
 def impacts_from_temperature(calibration: Calibration | None, samples: Samples,
@@ -70,10 +105,13 @@ def impacts_from_temperature(calibration: Calibration | None, samples: Samples,
         w = phi[region]
         v = float(np.sum(w * v_node) / np.sum(w))
         se = (abs(b1) * T_se / (2.0 * math.sqrt(T_bed)) if T_bed > 0 else float("nan"))
+        se_rel = temperature_prediction_stderr(getattr(im, name), np.sqrt(T[region]), w)
         impacts[name + "_mean_normal_speed"] = v
         impacts[name + "_mean_normal_speed_stderr"] = se
+        impacts[name + "_mean_normal_speed_relation_stderr"] = se_rel
         out[name + "_mean_normal_speed_m_s"] = v
         out[name + "_mean_normal_speed_m_s_stderr"] = se
+        out[name + "_mean_normal_speed_m_s_relation_stderr"] = se_rel
     if not out:
         return {}
     out["relation"] = (RELATION + " (calibration.toml [impacts.KIND] "

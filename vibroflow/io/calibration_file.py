@@ -158,15 +158,17 @@ class ImpactRelation(Table):
     (b0_temperature_cells_m_s, b1_temperature_cells), and which of the shear rate and the
     temperature the DEM supports better on the cells (preferred_relation); further keys (the
     p95 relations, the shares within 0.8 - 1.25) are kept as they are written.  The *_stderr
-    keys are the delete-one-batch jackknife's (calibration.impacts.jackknife_of_refits): one
-    batch's cycles move many points together, so the points' own least-squares errors would
-    understate them."""
+    keys and the *_covariance_m_s keys (of each pair's intercept and slope, what a prediction's
+    error needs: measure.stats.affine_prediction_stderr) are the delete-one-batch jackknife's
+    (calibration.impacts.jackknife_of_refits): one batch's cycles move many points together,
+    so the points' own least-squares errors would understate them."""
     count: Count | None = None
     mean_normal_speed_m_s: Number | None = None
     c0_m_s: Number | None = None
     c0_stderr_m_s: Number | None = None
     c1: Number | None = None
     c1_stderr: Number | None = None
+    c0_c1_covariance_m_s: Number | None = None
     r2: Number | None = None
     a_temperature: Number | None = None
     a_temperature_stderr: Number | None = None
@@ -174,13 +176,18 @@ class ImpactRelation(Table):
     c0_cells_stderr_m_s: Number | None = None
     c1_cells: Number | None = None
     c1_cells_stderr: Number | None = None
+    c0_c1_cells_covariance_m_s: Number | None = None
     b0_temperature_m_s: Number | None = None
     b0_temperature_stderr_m_s: Number | None = None
     b1_temperature: Number | None = None
     b1_temperature_stderr: Number | None = None
+    b0_b1_temperature_covariance_m_s: Number | None = None
     r2_temperature_affine: Number | None = None
     b0_temperature_cells_m_s: Number | None = None
+    b0_temperature_cells_stderr_m_s: Number | None = None
     b1_temperature_cells: Number | None = None
+    b1_temperature_cells_stderr: Number | None = None
+    b0_b1_temperature_cells_covariance_m_s: Number | None = None
     r2_temperature_affine_cells: Number | None = None
     preferred_relation: Text | None = None
 

@@ -155,6 +155,55 @@ def jackknife_stderr(leave_one_out) -> float:
     return float(np.sqrt((n - 1) / n * np.sum((a - a.mean()) ** 2)))
 
 
+def jackknife_covariance(left_out_a, left_out_b) -> float:
+    """Delete-one-batch jackknife covariance of two statistics from their values with batch k
+    left out, (n - 1) / n sum_k (a_k - mean a)(b_k - mean b) (Efron & Stein 1981): its
+    diagonal is jackknife_stderr squared.  The errors of a fitted pair's prediction need it
+    (affine_prediction_stderr).  NaN as jackknife_stderr."""
+    a = np.asarray(left_out_a, dtype=float).ravel()
+    b = np.asarray(left_out_b, dtype=float).ravel()
+    n = a.size
+    if n < 2 or b.size != n or not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+        return float("nan")
+    return float((n - 1) / n * np.sum((a - a.mean()) * (b - b.mean())))
+
+
+def affine_prediction_stderr(x, c0_stderr, c1_stderr, covariance=None,
+                             intercept_share: float = 1.0) -> float:
+    """The standard error of a prediction s c0 + c1 x of a fitted relation v = c0 + c1 x from
+    its coefficients' errors and covariance (units of c0): sqrt(s^2 se0^2 + x^2 se1^2 + 2 s x
+    cov), s the share of the prediction the intercept enters (1 for one point; the share of
+    the weight where the relation is used, for a weighted mean of it over points).  Without
+    the covariance (None or not finite) the bound that holds at any correlation of the two,
+    s se0 + |x| se1.  NaN when x or an error is missing."""
+    vals = (x, c0_stderr, c1_stderr, intercept_share)
+    if not all(_finite_number(v) for v in vals):
+        return float("nan")
+    x, e0, e1, s = (float(v) for v in vals)
+    if not _finite_number(covariance):
+        return abs(s) * e0 + abs(x) * e1
+    var = (s * e0) ** 2 + (x * e1) ** 2 + 2.0 * s * x * float(covariance)
+    # a covariance from another estimate than the errors can overshoot |rho| = 1 a little
+    return float(np.sqrt(max(var, 0.0)))
+
+
+def quadrature_stderr(stderr, other_stderr) -> float:
+    """A number's standard error with an independent second error added in quadrature (a
+    continuum's inferred impact speed: its run's batch-means error and its calibrated
+    relation's, affine_prediction_stderr); the first alone where the second is missing (an
+    older calibration without the relation's errors); NaN without the first."""
+    if not _finite_number(stderr):
+        return float("nan")
+    if not _finite_number(other_stderr):
+        return float(stderr)
+    return float(np.hypot(float(stderr), float(other_stderr)))
+
+
+def _finite_number(v) -> bool:
+    return (isinstance(v, (int, float, np.floating, np.integer)) and not isinstance(v, bool)
+            and bool(np.isfinite(v)))
+
+
 def jackknife_of_batches(statistic, batches, keys) -> dict:
     """Delete-one-batch jackknife errors {key: se} of the numbers `statistic(*means)` returns
     (a dict; {} or a missing key: that left-out value failed, so its error is NaN), where

@@ -26,7 +26,7 @@ import h5py
 import numpy as np
 
 from vibroflow.calibration.run_fields import read_fields
-from vibroflow.continuum.shear_outputs import impact_relation
+from vibroflow.continuum.shear_outputs import impact_relation, impact_relation_errors
 from vibroflow.dem.walls import KIND_BALL_BALL
 from vibroflow.errors import InputError
 from vibroflow.io.calibration_file import Calibration, read_calibration
@@ -257,20 +257,17 @@ class StudyData:
         """The calibrated v = c0 + c1 d gamma_dot of `kind` (calibration.toml [impacts.KIND])
         that the continuum runs use (continuum.shear_outputs.impact_relation: the one fitted on the
         continuum's measure of the shear rate when the calibration has it), or None when the
-        calibration has none with finite coefficients; with c0_stderr (m/s) and c1_stderr, the
-        fit's standard errors (NaN where the calibration holds none)."""
+        calibration has none with finite coefficients; with c0_stderr (m/s), c1_stderr and
+        covariance (of c0 and c1, m/s), the fit's errors (NaN where the calibration holds
+        none)."""
         impacts = self.calibration.impacts if self.calibration is not None else None
         rel = getattr(impacts, kind) if impacts is not None else None
         c0, c1, which = impact_relation(rel)
         if c0 is None:
             return None
-        # the errors of the pair impact_relation chose (NaN where the calibration has none)
-        cells = which.startswith("c0_cells")
-        se0 = getattr(rel, "c0_cells_stderr_m_s" if cells else "c0_stderr_m_s", None)
-        se1 = getattr(rel, "c1_cells_stderr" if cells else "c1_stderr", None)
-        return {"c0": c0, "c1": c1, "which": which,
-                "c0_stderr": math.nan if se0 is None else float(se0),
-                "c1_stderr": math.nan if se1 is None else float(se1)}
+        se0, se1, cov = impact_relation_errors(rel)
+        return {"c0": c0, "c1": c1, "which": which, "c0_stderr": se0, "c1_stderr": se1,
+                "covariance": cov}
 
     def method_dir(self, name: str) -> Path:
         """The folder of a method's run: that of its bulk_velocity.csv as the study's summary

@@ -19,6 +19,7 @@ from matplotlib.colors import LogNorm, Normalize, PowerNorm
 from matplotlib.patches import Rectangle
 
 from vibroflow.io.pictures import pyplot
+from vibroflow.measure.stats import affine_prediction_stderr, quadrature_stderr
 from vibroflow.report.data import MIN_IMPACTS_PER_CELL, StudyData, mean_flow_shear_rate
 from vibroflow.report.temperature_maps import PHI_KEY, T_KEY, TemperatureMaps
 from vibroflow.rounding import plus_minus
@@ -263,10 +264,20 @@ def inferred_impact_speeds(data: StudyData, name: str) -> dict:
 def inferred_impact_speed_errors(data: StudyData, name: str) -> dict:
     """The standard errors (m/s) of inferred_impact_speeds: the run's batch-means error of the
     shear rate through the relation, |c1| d se(gamma_dot), as the summary's bed means carry
-    (continuum.shear_outputs); the calibration's own errors on c0 and c1 are the relation's,
-    given beside it.  {} without a fit."""
-    return _through_relation(data, name, "shear_rate_1_s_stderr",
-                             lambda fit, d, se: abs(fit["c1"]) * d * se)
+    (continuum.shear_outputs), and the calibrated relation's own at that shear rate
+    (measure.stats.affine_prediction_stderr of c0's and c1's errors and covariance), in
+    quadrature: the continuum's run and the DEM's calibration are independent.  {} without a
+    fit."""
+    fit = data.impact_fit("ball_ball")
+    if fit is None:
+        return {}
+    run = _through_relation(data, name, "shear_rate_1_s_stderr",
+                            lambda fit, d, se: abs(fit["c1"]) * d * se)
+    relation = _through_relation(
+        data, name, "shear_rate_1_s",
+        lambda fit, d, g: affine_prediction_stderr(d * g, fit["c0_stderr"], fit["c1_stderr"],
+                                                   fit["covariance"]))
+    return {probe: quadrature_stderr(se, relation.get(probe)) for probe, se in run.items()}
 
 
 def impact_maps(data: StudyData) -> bytes:
