@@ -29,6 +29,15 @@ exclusively and its load shared (`lock_cache_files`, made when numba's caching m
 imported: `install`), so an index and its data are written together and read whole, and the
 removal of a stale cache holds it too.  `tests/test_kernel_cache.py` shows a second save wait
 for the first.
+
+Threads of a cached kernel: numba starts its threading layer when it loads a kernel with
+parallel loops from the cache (a reload hook in the kernel's library,
+numba.core.typed_passes._reload_parfors).  A kernel compiled over such a kernel that was itself
+loaded from the cache inlines its loops without that hook: loaded first in a process that has
+run no parallel loop yet, its first loop finds no threads and the process segfaults (exit -11;
+the MPM's temperature loop over fused.advance_kernel did).  So every load from the cache
+starts the layer (start_threads); `tests/test_kernel_cache.py` makes such a cache in three
+processes and runs it.
 """
 from __future__ import annotations
 
@@ -140,9 +149,20 @@ def folder_lock(folder: str, exclusive: bool):
             os.close(fd)  # releases the lock
 
 
+def start_threads() -> None:
+    """Start numba's threading layer (module docstring, "Threads of a cached kernel"); once
+    started it stays for the process, so every call after the first costs nothing."""
+    try:
+        from numba.np.ufunc.parallel import _launch_threads
+    except ImportError:  # a numba without it: its own reload hook is all there is
+        return
+    _launch_threads()
+
+
 def lock_cache_files(cache_file_class) -> None:
     """Make numba's cache file class (IndexDataCacheFile) save and flush under its folder's
-    exclusive lock and load under a shared one (module docstring); idempotent."""
+    exclusive lock and load under a shared one (module docstring), and start numba's
+    threading layer once an entry has loaded (start_threads); idempotent."""
     if getattr(cache_file_class, "_vibroflow_locked", False):
         return
     save, load, flush = cache_file_class.save, cache_file_class.load, cache_file_class.flush
@@ -153,7 +173,10 @@ def lock_cache_files(cache_file_class) -> None:
 
     def locked_load(self, key):
         with folder_lock(self._cache_path, exclusive=False):
-            return load(self, key)
+            data = load(self, key)
+        if data is not None:
+            start_threads()
+        return data
 
     def locked_flush(self):
         with folder_lock(self._cache_path, exclusive=True):

@@ -64,18 +64,6 @@ MPMStep = namedtuple("MPMStep", ["dt", "params", "frame", "box", "bounds", "flip
 Boundaries = namedtuple("Boundaries", ["records", "xi", "f", "fn", "ft", "state", "parts"])
 
 
-def launch_threads() -> None:
-    """Start numba's threading layer (numba.get_num_threads does) before a compiled caller of
-    advance_kernel runs.  A caller loaded from numba's cache (temperature_loop.
-    advance_temperature_kernel) holds advance_kernel's parallel loops, but when it was
-    compiled over an advance_kernel itself loaded from the cache, its load does not start the
-    layer as advance_kernel's own load does: in a process that has run no parallel loop yet,
-    its first loop then finds no threads and the process segfaults (exit -11;
-    tests/test_kernel_cache.py).  Once started, the layer stays for the process, so the call
-    costs nothing after the first."""
-    nb.get_num_threads()
-
-
 @nb.njit(cache=True)
 def _escaped_range(a, b, x, v, xmin, xmax, zmin, zmax):
     """Points of a:b outside the box or with a non-finite velocity."""

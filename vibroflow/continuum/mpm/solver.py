@@ -355,7 +355,6 @@ def _advance(system: MPMSystem, state: MPMState, n: int, p_kin, ts=None) -> None
     step = fused.MPMStep(float(system.dt), system.params, system.frame.as_array(), box,
                          chunk_bounds(state.n, system.chunks), float(system.flip))
     boundaries = fused.Boundaries(records, *hist, packed_parts(system))
-    fused.launch_threads()
     if ts is None:
         done, t, status, which = fused.advance_kernel(
             n, float(state.t), points, step, boundaries, system.grid_spec, system.work)
