@@ -36,8 +36,8 @@ numba.core.typed_passes._reload_parfors).  A kernel compiled over such a kernel 
 loaded from the cache inlines its loops without that hook: loaded first in a process that has
 run no parallel loop yet, its first loop finds no threads and the process segfaults (exit -11;
 the MPM's temperature loop over fused.advance_kernel did).  So every load from the cache
-starts the layer (start_threads); `tests/test_kernel_cache.py` makes such a cache in three
-processes and runs it.
+starts the layer (start_threads); `tests/test_kernel_cache.py` makes such caches, a pair of
+four-line kernels and the MPM's, and runs them.
 """
 from __future__ import annotations
 

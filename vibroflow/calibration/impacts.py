@@ -279,11 +279,11 @@ def _fine_refit(counts: BatchCounts, loo, shape, d: float, min_impacts: int, min
 def jackknife_of_batches_fit(fit: dict, c, total, c_b, sum_b, shear, d: float, min_impacts: int,
                              min_sf: float) -> dict:
     """c0_stderr, c1_stderr and c0_c1_covariance of impact_relations_on_cells' fit as the
-    delete-one-batch jackknife: the fit made again without batch b's impacts (counts c - c_b[b], speed sums
-    total - sum_b[b], each (n_phases, nz, nx)) on the phase fields without batch b
-    (PhaseShear.loo_*); the points' own errors kept as c0_stderr_points, c1_stderr_points,
-    c0_c1_covariance_points.
-    Without two batches (or when a fit without one fails) the jackknife errors are NaN."""
+    delete-one-batch jackknife: the fit made again without batch b's impacts (counts
+    c - c_b[b], speed sums total - sum_b[b], each (n_phases, nz, nx)) on the phase fields
+    without batch b (PhaseShear.loo_*); the points' own errors kept as c0_stderr_points,
+    c1_stderr_points, c0_c1_covariance_points.  Without two batches (or when a fit without one
+    fails) the jackknife errors are NaN."""
     nb = 0 if shear.loo_phase_shear_rate is None else c_b.shape[0]
 
     def refit(b):

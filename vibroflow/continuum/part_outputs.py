@@ -16,10 +16,10 @@ T, the nodes' speeds' weighted mean with the bed-mean T's error carried through,
 temperature_impacts does.  The stderr adds the calibrated relation's own error at the patch's
 shear rate or T in quadrature (measure.stats.affine_prediction_stderr,
 temperature_impacts.temperature_prediction_stderr): parts.nc has one error a patch, and the
-comparison with the DEM's speed needs both.  Every patch with material within two node spacings gets a value; a
-patch with none (above the free surface, a box's faces at the slice's ends, which the plane
-does not cut) is NaN.  Impact rates, the speed distribution and the energy flux are NaN: the continuum infers no
-impact count.
+comparison with the DEM's speed needs both.  Every patch with material within two node
+spacings gets a value; a patch with none (above the free surface, a box's faces at the slice's
+ends, which the plane does not cut) is NaN.  Impact rates, the speed distribution and the
+energy flux are NaN: the continuum infers no impact count.
 
 Force and torque by phase: the wall law's force on each part at each sample (sampling.Samples.
 part_force: the reaction of the contact forces on the material, N over the slice, tub axes) and
