@@ -17,7 +17,8 @@ For the DEM run in DIR (its dem.h5 and, by default, its calibration.toml) this p
 * for each continuum method, run on the same scenario with its default options: its shear
   rate on both definitions (the phase-resolved field's, which the runs report, and the mean
   of its points' instantaneous rates), and the mean ball-ball and
-  ball-wall impact speeds inferred from each, against the DEM's measured means;
+  ball-wall impact speeds inferred from each, against the DEM's measured means (the phase
+  field's ratio +- its error: the run's, the relation's and the DEM's, as the report's);
 * the shear rate of the time-averaged field (the slow roll alone), DEM and continua: the rest
   of the phase field's is the bed's deformation within each cycle;
 * the DEM's own inference (the cell relation applied to its own cell shear rate): the part of
@@ -45,7 +46,9 @@ def main(argv=None) -> int:
 
     from vibroflow.io.calibration_file import Calibration, read_calibration
     from vibroflow.calibration.dem_result import DEMResult
+    from vibroflow.analysis.impact_stats import relative_difference_stderr
     from vibroflow.calibration.impacts import impact_relations_on_cells
+    from vibroflow.measure.stats import quadrature_stderr
     from vibroflow.scenario.io import apply_overrides
 
     cal_path = args.calibration or args.dem_dir / "calibration.toml"
@@ -59,10 +62,13 @@ def main(argv=None) -> int:
     dem = json.loads((args.dem_dir / "summary.json").read_text())["impacts"]
     measured = {"ball_ball": dem["ball_ball_mean_normal_speed"],
                 "ball_wall": dem["ball_wall_mean_normal_speed"]}
-    # the relation the continuum uses: fitted on the continuum's measure
+    measured_se = {k: dem.get(f"{k}_mean_normal_speed_stderr") for k in measured}
+    # the relation the continuum uses: fitted on the continuum's measure, with its errors
     for name in ("ball_ball", "ball_wall"):
-        tables["impacts"][name].update(c0_cells_m_s=cells[name]["c0"],
-                                       c1_cells=cells[name]["c1"])
+        g = cells[name]
+        tables["impacts"][name].update(
+            c0_cells_m_s=g["c0"], c1_cells=g["c1"], c0_cells_stderr_m_s=g["c0_stderr"],
+            c1_cells_stderr=g["c1_stderr"], c0_c1_cells_covariance_m_s=g["c0_c1_covariance"])
     cal = Calibration.from_dict(tables, where=str(cal_path))
 
     print(f"DEM {args.dem_dir} ({scenario.case}): shear rate on the analysis cells "
@@ -107,8 +113,15 @@ def main(argv=None) -> int:
         bb, bw = cal.impacts.ball_ball, cal.impacts.ball_wall
         row["bb_old"] = bb.c0_m_s + bb.c1 * d * row["bed_inst"]
         row["bw_old"] = bw.c0_m_s + bw.c1 * d * row["wall_inst"]
-        row["bb"] = s["impacts"]["ball_ball_mean_normal_speed"]
-        row["bw"] = s["impacts"]["ball_wall_mean_normal_speed"]
+        for key, name in (("bb", "ball_ball"), ("bw", "ball_wall")):
+            im = s["impacts"]
+            v = im[f"{name}_mean_normal_speed"]
+            row[key] = v
+            # the ratio's error: the run's and the relation's errors, and the DEM's
+            se = quadrature_stderr(im[f"{name}_mean_normal_speed_stderr"],
+                                   im.get(f"{name}_mean_normal_speed_relation_stderr"))
+            row[key + "_se"] = relative_difference_stderr(v, se, measured[name],
+                                                          measured_se[name])
         rows.append(row)
 
     sw_bb = cells["ball_ball"]["mean_normal_speed_solid_weighted"]
@@ -126,9 +139,10 @@ def main(argv=None) -> int:
               f"({cells['bed_roll_shear_rate_1_s']:.2f}) | {r['bed_inst']:.2f} | "
               f"{r['wall']:.2f} +- {r['wall_se']:.2f} ({cells['near_wall_shear_rate_1_s']:.2f}) "
               f"| {r['wall_inst']:.2f} | {r['bb']:.4f} / {measured['ball_ball']:.4f} = "
-              f"{r['bb'] / measured['ball_ball']:.2f} ({r['bb'] / sw_bb:.2f}), "
-              f"{r['bb_old'] / measured['ball_ball']:.2f} "
-              f"| {r['bw'] / measured['ball_wall']:.2f} ({r['bw'] / sw_bw:.2f}), "
+              f"{r['bb'] / measured['ball_ball']:.2f} +- {r['bb_se']:.2f} "
+              f"({r['bb'] / sw_bb:.2f}), {r['bb_old'] / measured['ball_ball']:.2f} "
+              f"| {r['bw'] / measured['ball_wall']:.2f} +- {r['bw_se']:.2f} "
+              f"({r['bw'] / sw_bw:.2f}), "
               f"{r['bw_old'] / measured['ball_wall']:.2f} |")
     return 0
 
