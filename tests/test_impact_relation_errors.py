@@ -129,3 +129,29 @@ def test_the_relations_errors_are_those_of_the_pair_the_run_uses():
     e0, e1, cov = impact_relation_errors(fine)
     assert (e0, e1) == (0.001, 0.1) and math.isnan(cov)
     assert all(math.isnan(e) for e in impact_relation_errors(None))
+
+
+def test_the_sweep_table_gives_an_inferred_speed_both_errors(tmp_path):
+    """A sweep point's row: a continuum's inferred speed carries its run's and its relation's
+    errors in quadrature (3 and 4 mm/s: 5 mm/s), the DEM's measured speed its own; a missing
+    error is an empty cell (None), as every other column's."""
+    import json
+
+    from vibroflow.study.sweep_folder import point_dir
+    from vibroflow.study.sweep_table import point_rows
+
+    folder = point_dir(tmp_path, "p0")
+    folder.mkdir(parents=True)
+    summary = {"methods": {
+        "dem": {"impacts": {"ball_ball_mean_normal_speed": 0.045,
+                            "ball_ball_mean_normal_speed_stderr": 0.001,
+                            "ball_wall_mean_normal_speed": 0.156}},
+        "lagrangian": {"impacts": {"ball_ball_mean_normal_speed": 0.079,
+                                   "ball_ball_mean_normal_speed_stderr": 0.003,
+                                   "ball_ball_mean_normal_speed_relation_stderr": 0.004}}}}
+    (folder / "summary.json").write_text(json.dumps(summary))
+    rows = {r["method"]: r for r in point_rows(tmp_path, "p0", {"amplitude_factor": 1.0})}
+    assert rows["lagrangian"]["impact_ball_ball_stderr"] == pytest.approx(0.005, rel=1e-12)
+    assert rows["dem"]["impact_ball_ball_stderr"] == 0.001
+    assert rows["dem"]["impact_ball_wall_stderr"] is None
+    assert rows["lagrangian"]["impact_ball_wall_stderr"] is None

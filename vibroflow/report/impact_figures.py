@@ -144,7 +144,7 @@ def speed_comparisons(data: StudyData) -> list[dict]:
             rel, flag = speed_flag(i, m)
             sm = _num(dem.get(f"{key}_mean_normal_speed_stderr"))
             si = quadrature_stderr(im.get(f"{key}_mean_normal_speed_stderr"),
-                                       im.get(f"{key}_mean_normal_speed_relation_stderr"))
+                                   im.get(f"{key}_mean_normal_speed_relation_stderr"))
             rows.append({"where": "bed mean", "kind": label, "method": name, "measured": m,
                          "measured_stderr": sm, "inferred": i, "inferred_stderr": si,
                          "relative": rel,

@@ -6,7 +6,8 @@ circulation sense, strength and its standard error (m^2/s); mean normal impact s
 and ball-wall with their standard errors (m/s; a continuum's inferred speed: its run's error
 and its calibrated relation's, measure.stats.quadrature_stderr); the method's wall time (s); for
 a continuum method its field difference E against the DEM and whether the circulations agree
-(tub47.md "Judging a comparison").  A point that has no summary has one row with an empty method.
+(tub47.md "Judging a comparison").  A point that has no summary has one row with an empty
+method.
 """
 from __future__ import annotations
 
@@ -64,9 +65,9 @@ def point_rows(out: Path, name: str, values: dict[str, Any]) -> list[dict[str, A
         for kind in IMPACT_KINDS:
             row[f"impact_{kind}"] = _num(im.get(f"{kind}_mean_normal_speed"))
             # a continuum's inferred speed: its run's error and its calibrated relation's
-            row[f"impact_{kind}_stderr"] = quadrature_stderr(
+            row[f"impact_{kind}_stderr"] = _num(quadrature_stderr(
                 im.get(f"{kind}_mean_normal_speed_stderr"),
-                im.get(f"{kind}_mean_normal_speed_relation_stderr"))
+                im.get(f"{kind}_mean_normal_speed_relation_stderr")))
         row["wall_time_s"] = _num(m.get("wall_time_s"))
         a = m.get("against_dem")
         row["E_against_dem"] = _num(a.get("field_difference_E")) if a else None
