@@ -155,3 +155,32 @@ def test_the_sweep_table_gives_an_inferred_speed_both_errors(tmp_path):
     assert rows["dem"]["impact_ball_ball_stderr"] == 0.001
     assert rows["dem"]["impact_ball_wall_stderr"] is None
     assert rows["lagrangian"]["impact_ball_wall_stderr"] is None
+
+
+def test_a_speed_inferred_from_the_temperature_is_compared_too():
+    """The report's flag table compares every inferred bed mean, from the shear rate or from
+    the granular temperature (continuum.temperature_impacts drops inferred_from_shear_rate when
+    both kinds come from T), and the impact table says which."""
+    from types import SimpleNamespace
+
+    from vibroflow.report.impact_figures import inferred_from, speed_comparisons
+
+    dem = {"ball_ball_mean_normal_speed": 0.05, "ball_ball_mean_normal_speed_stderr": 0.001,
+           "ball_wall_mean_normal_speed": 0.15, "ball_wall_mean_normal_speed_stderr": 0.003}
+    hot = {"ball_ball_mean_normal_speed": 0.07, "ball_ball_mean_normal_speed_stderr": 0.003,
+           "ball_ball_mean_normal_speed_relation_stderr": 0.004,
+           "ball_wall_mean_normal_speed": 0.16, "ball_wall_mean_normal_speed_stderr": 0.002,
+           "inferred_from_temperature": "ball_ball, ball_wall: v = max(b0 + b1 sqrt(T), 0)"}
+    data = SimpleNamespace(summary={"methods": {"dem": {"impacts": dem},
+                                                "lagrangian": {"impacts": hot}}},
+                           continuum_methods=["lagrangian"], impacts=None)
+    rows = speed_comparisons(data)
+    assert [(r["kind"], r["method"]) for r in rows] == [("ball-ball", "lagrangian"),
+                                                        ("ball-U wall", "lagrangian")]
+    assert rows[0]["relative"] == pytest.approx(0.4)
+    assert rows[0]["inferred_stderr"] == pytest.approx(0.005)
+    assert rows[0]["flagged"] and not rows[1]["flagged"]
+    assert inferred_from(hot) == ["granular temperature"]
+    assert inferred_from({**hot, "inferred_from_shear_rate": "v = c0 + c1 d gamma_dot"}) == [
+        "shear rate", "granular temperature"]
+    assert inferred_from(dem) == []

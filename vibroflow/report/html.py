@@ -29,7 +29,7 @@ from vibroflow.report import figures
 from vibroflow.measure.floor_force import REGIONS, dem_wall_feed, take_off_stderr
 from vibroflow.measure.stats import quadrature_stderr
 from vibroflow.report.data import DEM, REPORT_STAGE, StudyData
-from vibroflow.report.impact_figures import impact_distribution_section
+from vibroflow.report.impact_figures import impact_distribution_section, inferred_from
 from vibroflow.report.engineer import Engineer
 from vibroflow.report.page_style import page_css
 from vibroflow.report.part_sections import part_sections
@@ -221,7 +221,8 @@ def _impacts(data: StudyData) -> dict:
     rows = []
     for name in data.methods:
         im = data.summary["methods"][name].get("impacts", {}) or {}
-        how = ("inferred from its shear rate" if im.get("inferred_from_shear_rate") else
+        sources = inferred_from(im)
+        how = ("inferred from its " + " and ".join(sources) if sources else
                "measured" if (im.get("count") or 0) > 0 else "none")
         rows.append([_text(name, "l")]
                     + [_pm(im.get(f"{kind}_mean_normal_speed"), quadrature_stderr(

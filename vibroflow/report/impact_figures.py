@@ -124,10 +124,21 @@ def _num(x) -> float:
     return float(x) if isinstance(x, (int, float)) and not isinstance(x, bool) else math.nan
 
 
+def inferred_from(impacts: dict) -> list[str]:
+    """What a method's summary `impacts` block says its mean speeds are inferred from: "shear
+    rate" (continuum.shear_outputs), "granular temperature" (continuum.temperature_impacts,
+    where the calibration prefers T and the run carries it; one kind or both), or nothing (a
+    DEM's measured impacts)."""
+    return [source for key, source in (("inferred_from_shear_rate", "shear rate"),
+                                       ("inferred_from_temperature", "granular temperature"))
+            if impacts.get(key)]
+
+
 def speed_comparisons(data: StudyData) -> list[dict]:
     """Each continuum's inferred impact speed against the DEM's measured one: the bed means of
-    the summary (ball-ball, ball-U wall) and the ball-ball speed in each probe's cell (the DEM's
-    when the cell holds at least MIN_IMPACTS_PER_CELL impacts).  A dict a row: where, kind,
+    the summary (ball-ball, ball-U wall; inferred from the shear rate or the granular
+    temperature, as the run's summary says) and the ball-ball speed in each probe's cell, from
+    its shear rate (the DEM's when the cell holds at least MIN_IMPACTS_PER_CELL impacts).  A dict a row: where, kind,
     method, measured, measured_stderr, inferred, inferred_stderr (m/s: the run's error and the
     calibrated relation's, measure.stats.quadrature_stderr), relative (the relative
     difference), relative_stderr (its error from the two speeds') and flagged (True, False or
@@ -136,7 +147,7 @@ def speed_comparisons(data: StudyData) -> list[dict]:
     rows = []
     for name in data.continuum_methods:
         im = data.summary["methods"][name].get("impacts") or {}
-        if not im.get("inferred_from_shear_rate"):
+        if not inferred_from(im):
             continue
         for key, label in SUMMARY_KINDS.items():
             m, i = _num(dem.get(f"{key}_mean_normal_speed")), _num(
