@@ -33,8 +33,8 @@ def test_the_jackknife_covariance_of_two_batch_means_is_their_covariance_over_n(
 
 def test_a_least_squares_prediction_has_the_textbook_error():
     """An unweighted straight-line fit's prediction at x has the standard error
-    s sqrt(1/n + (x - mean x)^2 / Sxx) (e.g. Draper & Smith, Applied Regression Analysis,
-    3rd ed., eq. 3.1.12); the fit's coefficient errors and covariance through
+    s sqrt(1/n + (x - mean x)^2 / Sxx) (the standard result, e.g. Draper & Smith, Applied
+    Regression Analysis, chapter 1); the fit's coefficient errors and covariance through
     affine_prediction_stderr give it, at the points' mean and far from it."""
     rng = np.random.default_rng(5)
     x = rng.uniform(0.0, 0.05, 40)
