@@ -66,13 +66,13 @@ def temperature_prediction_stderr(rel, sqrt_T, weight) -> float:
     (the share of the weight where the relation is positive, the weighted mean of sqrt(T)
     there) (measure.stats.affine_prediction_stderr)."""
     b = temperature_relation(rel)
-    w = np.asarray(weight, float)
-    if b is None or not np.sum(w) > 0:
-        return math.nan
-    on = (b[0] + b[1] * np.asarray(sqrt_T, float)) > 0
+    w, s = np.asarray(weight, float), np.asarray(sqrt_T, float)
     total = float(np.sum(w))
+    if b is None or not total > 0:
+        return math.nan
+    on = (b[0] + b[1] * s) > 0
     share = float(np.sum(w[on])) / total
-    x = float(np.sum(w[on] * np.asarray(sqrt_T, float)[on])) / total
+    x = float(np.sum(w[on] * s[on])) / total
     return affine_prediction_stderr(x, *temperature_relation_errors(rel), intercept_share=share)
 
 

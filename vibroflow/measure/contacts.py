@@ -20,7 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vibroflow.measure.stats import batch_means, batches_of_whole_cycles, stderr_of_batches
+from vibroflow.measure.stats import (batch_means, batches_of_whole_cycles, quadrature_stderr,
+                                     stderr_of_batches)
 
 IMPACT_KINDS = {0: "ball_ball", 1: "ball_wall", 2: "ball_partition", 3: "plane_wall"}
 
@@ -133,6 +134,16 @@ def wall_contact_stats(fn, ft, sliding, arc=None, batch=None, n_batches: int | N
         out.arc_count, out.arc_mean_ft_over_fn = binned_mean(s, ratio, arc_edges)
         _, out.arc_sliding_fraction = binned_mean(s, sl.astype(float), arc_edges)
     return out
+
+
+def mean_speed_stderr(impacts: dict, kind: str) -> float:
+    """The standard error (m/s) of a summary `impacts` block's KIND_mean_normal_speed (kind
+    "ball_ball" or "ball_wall"): the DEM's batch-means error (KIND_mean_normal_speed_stderr),
+    and for a continuum's inferred speed its calibrated relation's own beside it
+    (KIND_mean_normal_speed_relation_stderr), independent, in quadrature
+    (stats.quadrature_stderr); NaN without the first."""
+    return quadrature_stderr(impacts.get(f"{kind}_mean_normal_speed_stderr"),
+                             impacts.get(f"{kind}_mean_normal_speed_relation_stderr"))
 
 
 @dataclass

@@ -268,9 +268,6 @@ def inferred_impact_speed_errors(data: StudyData, name: str) -> dict:
     (measure.stats.affine_prediction_stderr of c0's and c1's errors and covariance), in
     quadrature: the continuum's run and the DEM's calibration are independent.  {} without a
     fit."""
-    fit = data.impact_fit("ball_ball")
-    if fit is None:
-        return {}
     run = _through_relation(data, name, "shear_rate_1_s_stderr",
                             lambda fit, d, se: abs(fit["c1"]) * d * se)
     relation = _through_relation(

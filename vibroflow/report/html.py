@@ -27,7 +27,7 @@ from markupsafe import Markup
 from vibroflow import __version__
 from vibroflow.report import figures
 from vibroflow.measure.floor_force import REGIONS, dem_wall_feed, take_off_stderr
-from vibroflow.measure.stats import quadrature_stderr
+from vibroflow.measure.contacts import mean_speed_stderr
 from vibroflow.report.data import DEM, REPORT_STAGE, StudyData
 from vibroflow.report.impact_figures import impact_distribution_section, inferred_from
 from vibroflow.report.engineer import Engineer
@@ -225,9 +225,7 @@ def _impacts(data: StudyData) -> dict:
         how = ("inferred from its " + " and ".join(sources) if sources else
                "measured" if (im.get("count") or 0) > 0 else "none")
         rows.append([_text(name, "l")]
-                    + [_pm(im.get(f"{kind}_mean_normal_speed"), quadrature_stderr(
-                        im.get(f"{kind}_mean_normal_speed_stderr"),
-                        im.get(f"{kind}_mean_normal_speed_relation_stderr")))
+                    + [_pm(im.get(f"{kind}_mean_normal_speed"), mean_speed_stderr(im, kind))
                        for kind in ("ball_ball", "ball_wall")]
                     + [_text(int(im.get("count") or 0)), _text(how, "l")])
     out = {"img": _img(figures.impact_maps(data), "impact-speed maps"), "rows": rows,

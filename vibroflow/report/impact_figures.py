@@ -17,7 +17,7 @@ from vibroflow.analysis.impact_stats import (SPEED_EDGES_M_S, ImpactDistribution
                                              impact_distributions,
                                              relative_difference_stderr, speed_flag)
 from vibroflow.io.pictures import pyplot
-from vibroflow.measure.stats import quadrature_stderr
+from vibroflow.measure.contacts import mean_speed_stderr
 from vibroflow.report.data import DEM, MIN_IMPACTS_PER_CELL, StudyData
 from vibroflow.report.figures import (inferred_impact_speed_errors, inferred_impact_speeds,
                                       png_bytes)
@@ -138,9 +138,10 @@ def speed_comparisons(data: StudyData) -> list[dict]:
     """Each continuum's inferred impact speed against the DEM's measured one: the bed means of
     the summary (ball-ball, ball-U wall; inferred from the shear rate or the granular
     temperature, as the run's summary says) and the ball-ball speed in each probe's cell, from
-    its shear rate (the DEM's when the cell holds at least MIN_IMPACTS_PER_CELL impacts).  A dict a row: where, kind,
-    method, measured, measured_stderr, inferred, inferred_stderr (m/s: the run's error and the
-    calibrated relation's, measure.stats.quadrature_stderr), relative (the relative
+    its shear rate (the DEM's when the cell holds at least MIN_IMPACTS_PER_CELL impacts).  A
+    dict a row: where, kind, method, measured, measured_stderr, inferred, inferred_stderr (m/s:
+    the run's error and the calibrated relation's, measure.contacts.mean_speed_stderr),
+    relative (the relative
     difference), relative_stderr (its error from the two speeds') and flagged (True, False or
     None when not comparable)."""
     dem = (data.summary["methods"].get(DEM) or {}).get("impacts") or {}
@@ -154,8 +155,7 @@ def speed_comparisons(data: StudyData) -> list[dict]:
                 im.get(f"{key}_mean_normal_speed"))
             rel, flag = speed_flag(i, m)
             sm = _num(dem.get(f"{key}_mean_normal_speed_stderr"))
-            si = quadrature_stderr(im.get(f"{key}_mean_normal_speed_stderr"),
-                                   im.get(f"{key}_mean_normal_speed_relation_stderr"))
+            si = mean_speed_stderr(im, key)
             rows.append({"where": "bed mean", "kind": label, "method": name, "measured": m,
                          "measured_stderr": sm, "inferred": i, "inferred_stderr": si,
                          "relative": rel,

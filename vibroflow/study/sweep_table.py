@@ -4,7 +4,7 @@ Columns (SI units): the varied values; method; status (done, failed, running, pe
 error of a failed point; per probe P: P_vx, P_vx_stderr, P_vz, P_vz_stderr (m/s, tub frame);
 circulation sense, strength and its standard error (m^2/s); mean normal impact speeds ball-ball
 and ball-wall with their standard errors (m/s; a continuum's inferred speed: its run's error
-and its calibrated relation's, measure.stats.quadrature_stderr); the method's wall time (s); for
+and its calibrated relation's, measure.contacts.mean_speed_stderr); the method's wall time (s); for
 a continuum method its field difference E against the DEM and whether the circulations agree
 (tub47.md "Judging a comparison").  A point that has no summary has one row with an empty
 method.
@@ -21,7 +21,7 @@ from typing import Any
 from rich.table import Table
 
 from vibroflow.io.atomic import write_text_atomic
-from vibroflow.measure.stats import quadrature_stderr
+from vibroflow.measure.contacts import mean_speed_stderr
 from vibroflow.rounding import plus_minus
 from vibroflow.study.sweep_folder import point_dir, point_state
 from vibroflow.study.sweep_points import FACTOR_KEY
@@ -64,10 +64,7 @@ def point_rows(out: Path, name: str, values: dict[str, Any]) -> list[dict[str, A
         im = m.get("impacts", {})
         for kind in IMPACT_KINDS:
             row[f"impact_{kind}"] = _num(im.get(f"{kind}_mean_normal_speed"))
-            # a continuum's inferred speed: its run's error and its calibrated relation's
-            row[f"impact_{kind}_stderr"] = _num(quadrature_stderr(
-                im.get(f"{kind}_mean_normal_speed_stderr"),
-                im.get(f"{kind}_mean_normal_speed_relation_stderr")))
+            row[f"impact_{kind}_stderr"] = _num(mean_speed_stderr(im, kind))
         row["wall_time_s"] = _num(m.get("wall_time_s"))
         a = m.get("against_dem")
         row["E_against_dem"] = _num(a.get("field_difference_E")) if a else None
