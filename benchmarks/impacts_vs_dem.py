@@ -18,7 +18,8 @@ For the DEM run in DIR (its dem.h5 and, by default, its calibration.toml) this p
   rate on both definitions (the phase-resolved field's, which the runs report, and the mean
   of its points' instantaneous rates), and the mean ball-ball and
   ball-wall impact speeds inferred from each, against the DEM's measured means (the phase
-  field's ratio +- its error: the run's, the relation's and the DEM's, as the report's);
+  field's ratio +- its error: the run's, the relation's and the DEM's, less the relation's
+  covariance with the DEM's mean, as the report's);
 * the shear rate of the time-averaged field (the slow roll alone), DEM and continua: the rest
   of the phase field's is the bed's deformation within each cycle;
 * the DEM's own inference (the cell relation applied to its own cell shear rate): the part of
@@ -48,7 +49,8 @@ def main(argv=None) -> int:
     from vibroflow.calibration.dem_result import DEMResult
     from vibroflow.analysis.impact_stats import relative_difference_stderr
     from vibroflow.calibration.impacts import impact_relations_on_cells
-    from vibroflow.measure.stats import quadrature_stderr
+    from vibroflow.measure.contacts import mean_speed_stderr
+    from vibroflow.report.impact_figures import measured_covariance
     from vibroflow.scenario.io import apply_overrides
 
     cal_path = args.calibration or args.dem_dir / "calibration.toml"
@@ -68,7 +70,9 @@ def main(argv=None) -> int:
         g = cells[name]
         tables["impacts"][name].update(
             c0_cells_m_s=g["c0"], c1_cells=g["c1"], c0_cells_stderr_m_s=g["c0_stderr"],
-            c1_cells_stderr=g["c1_stderr"], c0_c1_cells_covariance_m_s=g["c0_c1_covariance"])
+            c1_cells_stderr=g["c1_stderr"], c0_c1_cells_covariance_m_s=g["c0_c1_covariance"],
+            c0_cells_measured_covariance_m2_s2=g["c0_measured_covariance"],
+            c1_cells_measured_covariance_m_s=g["c1_measured_covariance"])
     cal = Calibration.from_dict(tables, where=str(cal_path))
 
     print(f"DEM {args.dem_dir} ({scenario.case}): shear rate on the analysis cells "
@@ -117,11 +121,11 @@ def main(argv=None) -> int:
             im = s["impacts"]
             v = im[f"{name}_mean_normal_speed"]
             row[key] = v
-            # the ratio's error: the run's and the relation's errors, and the DEM's
-            se = quadrature_stderr(im[f"{name}_mean_normal_speed_stderr"],
-                                   im.get(f"{name}_mean_normal_speed_relation_stderr"))
-            row[key + "_se"] = relative_difference_stderr(v, se, measured[name],
-                                                          measured_se[name])
+            # the ratio's error: the run's and the relation's errors, and the DEM's, less the
+            # relation's covariance with the DEM's mean where both are this run's
+            row[key + "_se"] = relative_difference_stderr(
+                v, mean_speed_stderr(im, name), measured[name], measured_se[name],
+                measured_covariance(im, name, measured[name]))
         rows.append(row)
 
     sw_bb = cells["ball_ball"]["mean_normal_speed_solid_weighted"]

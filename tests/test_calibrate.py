@@ -157,6 +157,9 @@ def test_calibrate_writes_its_files_and_reads_back(calibrated_run):
                             (r.c0_stderr_m_s, r.c1_stderr, r.c0_c1_covariance_m_s)):
             if math.isfinite(cov):
                 assert abs(cov) <= e0 * e1 * (1.0 + 1e-9)
+    # and each coefficient's covariance with the measured mean, which the same cycles move
+    assert math.isfinite(rel.c0_cells_measured_covariance_m2_s2)
+    assert math.isfinite(rel.c1_cells_measured_covariance_m_s)
     # the record written and read back is the same file
     write_calibration(out / "again.toml", cal)
     assert (out / "again.toml").read_bytes() == (out / "calibration.toml").read_bytes()

@@ -184,3 +184,47 @@ def test_a_speed_inferred_from_the_temperature_is_compared_too():
     assert inferred_from({**hot, "inferred_from_shear_rate": "v = c0 + c1 d gamma_dot"}) == [
         "shear rate", "granular temperature"]
     assert inferred_from(dem) == []
+
+
+def test_the_relative_differences_error_subtracts_the_covariance_by_hand():
+    """r = i / m - 1 with i 0.06 +- 0.004, m 0.05 +- 0.003 and cov(i, m) 5e-6 m^2/s^2:
+    sqrt(0.004^2 + 1.2^2 0.003^2 - 2 1.2 5e-6) / 0.05 = 0.08236; without the covariance
+    hypot(0.004, 1.2 0.003) / 0.05; a covariance past |rho| = 1 gives 0, not NaN."""
+    from vibroflow.analysis.impact_stats import relative_difference_stderr
+
+    want = math.sqrt(0.004**2 + 1.2**2 * 0.003**2 - 2 * 1.2 * 5e-6) / 0.05
+    assert relative_difference_stderr(0.06, 0.004, 0.05, 0.003, 5e-6) == pytest.approx(
+        want, rel=1e-12)
+    assert relative_difference_stderr(0.06, 0.004, 0.05, 0.003, None) == pytest.approx(
+        math.hypot(0.004, 1.2 * 0.003) / 0.05, rel=1e-12)
+    assert relative_difference_stderr(0.06, 0.004, 0.05, 0.003, 1.0) == 0.0
+
+
+def test_the_covariance_with_the_measured_mean_is_used_against_its_own_dem_run_only():
+    """A continuum's summary carries its relation's covariance with the mean its calibration
+    measured (shear_outputs.measured_covariance_keys: s cov(c0, m) + x cov(c1, m), worked by
+    hand) and that mean; the report uses the covariance against a DEM whose mean is that one to
+    round-off, and treats another run's mean as independent."""
+    from vibroflow.continuum.shear_outputs import _SHEAR_RELATIONS, measured_covariance_keys
+    from vibroflow.io.calibration_file import ImpactRelation
+    from vibroflow.report.impact_figures import measured_covariance
+
+    rel = ImpactRelation(mean_normal_speed_m_s=0.0446, c0_cells_m_s=0.011, c1_cells=2.55,
+                         c0_cells_measured_covariance_m2_s2=6e-7,
+                         c1_cells_measured_covariance_m_s=-4e-6)
+    impacts = {}
+    measured_covariance_keys(impacts, "ball_ball", rel, _SHEAR_RELATIONS, 0.0111)
+    cov = 6e-7 + 0.0111 * -4e-6
+    assert impacts["ball_ball_mean_normal_speed_relation_measured_covariance"] == pytest.approx(
+        cov, rel=1e-12)
+    assert impacts["ball_ball_mean_normal_speed_relation_measured_mean"] == 0.0446
+    assert measured_covariance(impacts, "ball_ball", 0.0446) == pytest.approx(cov, rel=1e-12)
+    assert measured_covariance(impacts, "ball_ball", 0.0446 * (1 + 1e-13)) is not None
+    assert measured_covariance(impacts, "ball_ball", 0.0431) is None
+    assert measured_covariance(impacts, "ball_wall", 0.156) is None
+    # an older calibration without the covariances writes neither key
+    older = {}
+    measured_covariance_keys(older, "ball_ball", ImpactRelation(
+        mean_normal_speed_m_s=0.0446, c0_cells_m_s=0.011, c1_cells=2.55), _SHEAR_RELATIONS,
+        0.0111)
+    assert older == {}

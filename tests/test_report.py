@@ -149,6 +149,15 @@ def test_impact_distributions_are_the_summarys_impacts(study):
                 relation, rel=1e-9)
             run = own[f"{key}_mean_normal_speed_stderr"]
             assert row["inferred_stderr"] == pytest.approx(math.hypot(run, relation), rel=1e-9)
+            # the relation was calibrated on this DEM run: its covariance with the measured
+            # mean, worked from calibration.toml, comes off the difference's variance
+            assert fit.mean_normal_speed_m_s == pytest.approx(d, rel=1e-12)
+            cov = (fit.c0_cells_measured_covariance_m2_s2
+                   + x * fit.c1_cells_measured_covariance_m_s)
+            q, sd = m / d, im[f"{key}_mean_normal_speed_stderr"]
+            var = row["inferred_stderr"] ** 2 + (q * sd) ** 2 - 2.0 * q * cov
+            assert row["relative_stderr"] == pytest.approx(math.sqrt(max(var, 0.0)) / d,
+                                                           rel=1e-9)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -248,13 +248,21 @@ def speed_flag(inferred, measured) -> tuple[float, bool | None]:
     return rel, bool(abs(rel) > FLAG_RELATIVE_DIFFERENCE)
 
 
-def relative_difference_stderr(inferred, inferred_stderr, measured, measured_stderr) -> float:
-    """The standard error of speed_flag's relative difference r = i / m - 1 from the two
-    speeds' independent errors (the delta method): hypot(se_i, (i / m) se_m) / m.  NaN when a
-    speed or an error is missing or measured is not positive."""
+def relative_difference_stderr(inferred, inferred_stderr, measured, measured_stderr,
+                               covariance=None) -> float:
+    """The standard error of speed_flag's relative difference r = i / m - 1 (the delta
+    method): sqrt(se_i^2 + (i / m)^2 se_m^2 - 2 (i / m) cov(i, m)) / m, with `covariance`
+    cov(i, m) (m^2/s^2) where the inferred speed's relation was calibrated on the run that
+    measured m (the same cycles move both: calibration.impacts.jackknife_of_refits), the two
+    independent without it (None or not finite).  NaN when a speed or an error is missing or
+    measured is not positive."""
     vals = (inferred, inferred_stderr, measured, measured_stderr)
     if not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
                for x in vals) or measured <= 0:
         return float("nan")
     i, si, m, sm = (float(x) for x in vals)
-    return float(math.hypot(si, i / m * sm) / m)
+    var = si**2 + (i / m * sm) ** 2
+    if isinstance(covariance, (int, float)) and math.isfinite(covariance):
+        # two covariance estimates of one set of batches can overshoot |rho| = 1 a little
+        var = max(var - 2.0 * i / m * float(covariance), 0.0)
+    return float(math.sqrt(var) / m)

@@ -174,7 +174,7 @@ def _compare(res, pf, min_impacts, min_sf, chunk, loo=None):
         rec = relations_of_points(mean, p95, T[idx], gam[idx], c[idx], d, name)
         if loo is not None:
             jackknife_of_refits(rec["mean"], _refit(counts[name], loo, min_impacts, min_sf, d),
-                                nb)
+                                nb, counts[name].bed_means_without())
         rec["count"] = int(c.sum())
         out[name] = rec
     return out
@@ -214,6 +214,16 @@ def relations_of_points(mean, p95, T, shear_rate, count, diameter: float,
 AFFINE_MODEL = "v = max(b0 + b1 sqrt(T), 0) (m/s), T the phase-resolved granular temperature"
 
 
+def _measured_covariance_keys(fit: dict, tag: str) -> dict:
+    """The affine relation's b0 and b1 covariances with the DEM's measured mean speed
+    (m^2/s^2, m/s; impacts.jackknife_of_refits), tag after "temperature" in each name."""
+    nan = float("nan")
+    return {f"b0_temperature{tag}_measured_covariance_m2_s2": fit.get("c0_measured_covariance",
+                                                                       nan),
+            f"b1_temperature{tag}_measured_covariance_m_s": fit.get("c1_measured_covariance",
+                                                                     nan)}
+
+
 def temperature_relation_keys(rec: dict, rec_cells: dict | None = None,
                               r2_shear_cells: float | None = None) -> dict:
     """The keys compare_impact_relations' record `rec` of one kind adds to calibration.toml's
@@ -235,6 +245,7 @@ def temperature_relation_keys(rec: dict, rec_cells: dict | None = None,
                "b1_temperature_cells_stderr": tc["c1_stderr"],
                "b0_b1_temperature_cells_covariance_m_s": tc.get("c0_c1_covariance",
                                                                  float("nan")),
+               **_measured_covariance_keys(tc, "_cells"),
                "r2_temperature_affine_cells": tc["r2"], "points_temperature_cells":
                tc["points"]}
         if r2_shear_cells is not None and math.isfinite(r2_shear_cells):
@@ -242,6 +253,7 @@ def temperature_relation_keys(rec: dict, rec_cells: dict | None = None,
     return {**out, "b0_temperature_m_s": ta["c0"], "b0_temperature_stderr_m_s": ta["c0_stderr"],
             "b1_temperature": ta["c1"], "b1_temperature_stderr": ta["c1_stderr"],
             "b0_b1_temperature_covariance_m_s": ta.get("c0_c1_covariance", float("nan")),
+            **_measured_covariance_keys(ta, ""),
             "r2_temperature_affine": ta["r2"],
             "within_0_8_1_25_temperature": t1["within_0_8_1_25"],
             "within_0_8_1_25_temperature_affine": ta["within_0_8_1_25"],

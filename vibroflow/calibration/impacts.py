@@ -102,6 +102,18 @@ class BatchCounts:
             self.count_b += np.bincount(fb, minlength=self.nb * self.ncell)
             self.total_b += np.bincount(fb, weights=speed, minlength=self.nb * self.ncell)
 
+    def bed_mean_without(self, b: int) -> float:
+        """The mean speed (m/s) of every impact binned, batch b's left out: the DEM's measured
+        bed mean as the jackknife's refit without b sees it (NaN where none is left)."""
+        lo = b * self.ncell
+        c = self.count.sum() - self.count_b[lo:lo + self.ncell].sum()
+        return float((self.total.sum() - self.total_b[lo:lo + self.ncell].sum()) / c) \
+            if c > 0 else float("nan")
+
+    def bed_means_without(self) -> list[float]:
+        """bed_mean_without of each batch (jackknife_of_refits' `measured`)."""
+        return [self.bed_mean_without(b) for b in range(self.nb)]
+
     def without(self, b: int, shape) -> tuple[np.ndarray, np.ndarray]:
         """The counts and mean speeds (m/s; NaN where none) of every batch but b, in `shape`."""
         lo = b * self.ncell
@@ -111,16 +123,23 @@ class BatchCounts:
         return c.reshape(shape), mean.reshape(shape)
 
 
-def jackknife_of_refits(fits: dict, refit, n_batches: int) -> None:
+def jackknife_of_refits(fits: dict, refit, n_batches: int, measured=None) -> None:
     """In place: each fit of `fits` ({tag: weighted_linear_fit's dict}) gets c0_stderr,
     c1_stderr and c0_c1_covariance as the delete-one-batch jackknife (measure.stats.
     jackknife_stderr, jackknife_covariance) of refit(b), the same tags' fits made again without
     batch b; its own (the points taken as independent) kept as c0_stderr_points,
     c1_stderr_points and c0_c1_covariance_points, and stderr_batches the batches used.
+    measured : the DEM's measured bed mean speed (m/s) without each batch
+    (BatchCounts.bed_means_without); with it, each fit also gets c0_measured_covariance (m^2/s^2)
+    and c1_measured_covariance (m/s), the jackknife covariances of its coefficients with that
+    mean.
 
     Why: one batch's cycles move the fields and the impact speeds of many points together, so
-    the points are not independent and the least-squares errors understate the scatter.
-    Without two batches, or where a refit fails, the jackknife errors are NaN."""
+    the points are not independent and the least-squares errors understate the scatter.  The
+    same cycles move the measured mean too, so a speed inferred through the relation and the
+    DEM's measured one are correlated when both come from one run (analysis.impact_stats.
+    relative_difference_stderr).  Without two batches, or where a refit fails, the jackknife
+    errors are NaN."""
     refits = [refit(b) for b in range(n_batches)] if n_batches >= 2 else []
     for tag, fit in fits.items():
         fit["c0_stderr_points"], fit["c1_stderr_points"] = fit["c0_stderr"], fit["c1_stderr"]
@@ -130,6 +149,10 @@ def jackknife_of_refits(fits: dict, refit, n_batches: int) -> None:
         fit["c1_stderr"] = jackknife_stderr(c1s)
         fit["c0_c1_covariance"] = jackknife_covariance(c0s, c1s)
         fit["stderr_batches"] = len(refits)
+        if measured is not None:
+            ms = list(measured)[:len(refits)]
+            fit["c0_measured_covariance"] = jackknife_covariance(c0s, ms)
+            fit["c1_measured_covariance"] = jackknife_covariance(c1s, ms)
 
 
 def impact_relations(run, phase_fields, time_fields=None,
@@ -251,7 +274,7 @@ def _relations(res: DEMResult, pf, min_impacts, min_sf, histogram_bins, chunk,
         if loo is not None:
             jackknife_of_refits({"g": fit_g, "t": fit_t},
                                 _fine_refit(counts[name], loo, shape, d, min_impacts, min_sf),
-                                nb)
+                                nb, counts[name].bed_means_without())
         fit_t["maxwell"] = MAXWELL[name]
         out[name] = {"count": int(c.sum()), "mean_normal_speed": float(s.sum() / c.sum()),
                      "histogram": {"edges": edges, "counts": hist[name]},
@@ -282,8 +305,9 @@ def jackknife_of_batches_fit(fit: dict, c, total, c_b, sum_b, shear, d: float, m
     delete-one-batch jackknife: the fit made again without batch b's impacts (counts
     c - c_b[b], speed sums total - sum_b[b], each (n_phases, nz, nx)) on the phase fields
     without batch b (PhaseShear.loo_*); the points' own errors kept as c0_stderr_points,
-    c1_stderr_points, c0_c1_covariance_points.  Without two batches (or when a fit without one
-    fails) the jackknife errors are NaN."""
+    c1_stderr_points, c0_c1_covariance_points; c0_measured_covariance and
+    c1_measured_covariance with the mean of the impacts binned (jackknife_of_refits).  Without
+    two batches (or when a fit without one fails) the jackknife errors are NaN."""
     nb = 0 if shear.loo_phase_shear_rate is None else c_b.shape[0]
 
     def refit(b):
@@ -294,11 +318,15 @@ def jackknife_of_batches_fit(fit: dict, c, total, c_b, sum_b, shear, d: float, m
         ok = (ck >= min_impacts) & np.isfinite(rate) & (shear.loo_phase_solid_fraction[b] >= min_sf)
         return {"fit": weighted_linear_fit(d * rate[ok], mean[ok], ck[ok])}
 
+    n_left = c.sum() - c_b.reshape(c_b.shape[0], -1).sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        measured = (total.sum() - sum_b.reshape(sum_b.shape[0], -1).sum(axis=1)) / n_left
     fits = {"fit": dict(fit)}
-    jackknife_of_refits(fits, refit, nb)
+    jackknife_of_refits(fits, refit, nb, measured)
     return {key: fits["fit"][key] for key in (
         "c0_stderr", "c1_stderr", "c0_c1_covariance", "c0_stderr_points", "c1_stderr_points",
-        "c0_c1_covariance_points", "stderr_batches")}
+        "c0_c1_covariance_points", "stderr_batches", "c0_measured_covariance",
+        "c1_measured_covariance") if key in fits["fit"]}
 
 
 def impact_relations_on_cells(run, cell_size: float | None = None,

@@ -12,7 +12,8 @@ import numpy as np
 from vibroflow.io.atomic import write_text_atomic
 from vibroflow.io.calibration_file import Calibration, ImpactRelation
 from vibroflow.measure.phase_shear import PhaseShear, near_wall_nodes
-from vibroflow.measure.stats import affine_prediction_stderr, batch_means
+from vibroflow.measure.stats import (affine_prediction_covariance, affine_prediction_stderr,
+                                     batch_means)
 
 from .sampling import Samples
 
@@ -55,10 +56,13 @@ def write_shear_rate_csv(path: Path, samples: Samples, phase: PhaseShear | None,
 
 
 #: the two shear-rate relations of an [impacts.KIND] table, in the order impact_relation
-#: prefers them: the coefficients' keys, then their standard errors' and covariance's
+#: prefers them: the coefficients' keys, then their standard errors' and covariance's, then
+#: their covariances with the DEM's measured mean speed
 _SHEAR_RELATIONS = (("c0_cells_m_s", "c1_cells", "c0_cells_stderr_m_s", "c1_cells_stderr",
-                     "c0_c1_cells_covariance_m_s"),
-                    ("c0_m_s", "c1", "c0_stderr_m_s", "c1_stderr", "c0_c1_covariance_m_s"))
+                     "c0_c1_cells_covariance_m_s", "c0_cells_measured_covariance_m2_s2",
+                     "c1_cells_measured_covariance_m_s"),
+                    ("c0_m_s", "c1", "c0_stderr_m_s", "c1_stderr", "c0_c1_covariance_m_s",
+                     "c0_measured_covariance_m2_s2", "c1_measured_covariance_m_s"))
 
 
 def _num(x) -> float:
@@ -84,7 +88,27 @@ def relation_errors(rel, candidates) -> tuple[float, float, float]:
     keys = chosen_keys(rel, candidates)
     if keys is None:
         return math.nan, math.nan, math.nan
-    return tuple(_num(getattr(rel, k, None)) for k in keys[2:])
+    return tuple(_num(getattr(rel, k, None)) for k in keys[2:5])
+
+
+def measured_covariance_keys(impacts: dict, kind: str, rel, candidates, x,
+                             intercept_share: float = 1.0) -> None:
+    """In place: `impacts`' KIND_mean_normal_speed_relation_measured_covariance (m^2/s^2), the
+    covariance of the prediction intercept_share c0 + c1 x of the relation `candidates` choose
+    in `rel` with the DEM's measured mean speed of its calibration run
+    (measure.stats.affine_prediction_covariance of the calibration's *_measured_covariance_*
+    keys), and KIND_mean_normal_speed_relation_measured_mean (m/s), that mean
+    (rel.mean_normal_speed_m_s), by which a comparison knows the run (report.impact_figures).
+    Nothing where the calibration holds neither (an older calibration)."""
+    keys = chosen_keys(rel, candidates)
+    if keys is None:
+        return
+    cov = affine_prediction_covariance(x, *(_num(getattr(rel, k, None)) for k in keys[5:7]),
+                                       intercept_share=intercept_share)
+    mean = _num(getattr(rel, "mean_normal_speed_m_s", None))
+    if math.isfinite(cov) and math.isfinite(mean):
+        impacts[kind + "_mean_normal_speed_relation_measured_covariance"] = cov
+        impacts[kind + "_mean_normal_speed_relation_measured_mean"] = mean
 
 
 def impact_relation(rel: ImpactRelation | None) -> tuple[float | None, float | None, str]:
@@ -118,7 +142,9 @@ def shear_rate_outputs(material, calibration: Calibration | None, probes: dict, 
     KIND_mean_normal_speed_stderr is the run's batch-means error carried through the relation,
     |c1| d se(gamma_dot), and KIND_mean_normal_speed_relation_stderr the calibrated relation's
     own at that shear rate (measure.stats.affine_prediction_stderr of its coefficients' errors);
-    the two are independent, so a comparison with the DEM adds them in quadrature.
+    the two are independent, so a comparison with the DEM adds them in quadrature.  The
+    relation's covariance with its DEM run's measured mean is beside them
+    (measured_covariance_keys): a comparison with that run's mean subtracts it.
 
     The shear rate is that of the phase-resolved velocity field (`phase`, the DEM
     calibration's definition, on which its impact relation was fitted; analysis.phase_shear
@@ -177,6 +203,7 @@ def shear_rate_outputs(material, calibration: Calibration | None, probes: dict, 
         impacts[name + "_mean_normal_speed_stderr"] = abs(c1) * d * rate_se
         impacts[name + "_mean_normal_speed_relation_stderr"] = affine_prediction_stderr(
             d * rate, *impact_relation_errors(rel))
+        measured_covariance_keys(impacts, name, rel, _SHEAR_RELATIONS, d * rate)
         inferred[name + "_mean_normal_speed_m_s"] = v
         which.add(key)
     if inferred:

@@ -11,7 +11,8 @@ over the bed (ball-ball) or the nodes within a node spacing of the U (ball-wall)
 rate's inference weights them.  Its standard error is the bed-mean temperature's batch-means
 error carried through the relation, b1 se(T) / (2 sqrt(T)); the relation's own error, from
 its coefficients' errors and covariance, is beside it as KIND_mean_normal_speed_relation_stderr
-(temperature_prediction_stderr).  Without T, or where the calibration
+(temperature_prediction_stderr), and its covariance with the DEM run's measured mean
+(shear_outputs.measured_covariance_keys).  Without T, or where the calibration
 prefers the shear rate, the shear rate's inference stands and nothing here is written.
 """
 from __future__ import annotations
@@ -25,7 +26,7 @@ from vibroflow.measure.phase_shear import PhaseShear, near_wall_nodes
 from vibroflow.measure.stats import affine_prediction_stderr, batch_means
 
 from .sampling import Samples
-from .shear_outputs import chosen_keys, relation_errors
+from .shear_outputs import chosen_keys, measured_covariance_keys, relation_errors
 from .temperature_outputs import temperature_map
 
 RELATION = "v = max(b0 + b1 sqrt(T), 0)"
@@ -35,9 +36,12 @@ RELATION = "v = max(b0 + b1 sqrt(T), 0)"
 #: prefers them: the coefficients' keys, then their standard errors' and covariance's
 _TEMPERATURE_RELATIONS = (
     ("b0_temperature_cells_m_s", "b1_temperature_cells", "b0_temperature_cells_stderr_m_s",
-     "b1_temperature_cells_stderr", "b0_b1_temperature_cells_covariance_m_s"),
+     "b1_temperature_cells_stderr", "b0_b1_temperature_cells_covariance_m_s",
+     "b0_temperature_cells_measured_covariance_m2_s2",
+     "b1_temperature_cells_measured_covariance_m_s"),
     ("b0_temperature_m_s", "b1_temperature", "b0_temperature_stderr_m_s",
-     "b1_temperature_stderr", "b0_b1_temperature_covariance_m_s"))
+     "b1_temperature_stderr", "b0_b1_temperature_covariance_m_s",
+     "b0_temperature_measured_covariance_m2_s2", "b1_temperature_measured_covariance_m_s"))
 
 
 def _prefers_temperature(rel) -> bool:
@@ -65,15 +69,23 @@ def temperature_prediction_stderr(rel, sqrt_T, weight) -> float:
     0) over nodes (sqrt_T m/s, weight their weights): the relation's gradient in (b0, b1) is
     (the share of the weight where the relation is positive, the weighted mean of sqrt(T)
     there) (measure.stats.affine_prediction_stderr)."""
+    gradient = _gradient(rel, sqrt_T, weight)
+    if gradient is None:
+        return math.nan
+    share, x = gradient
+    return affine_prediction_stderr(x, *temperature_relation_errors(rel), intercept_share=share)
+
+
+def _gradient(rel, sqrt_T, weight) -> tuple[float, float] | None:
+    """(share, x): the weighted mean of max(b0 + b1 sqrt(T), 0)'s gradient in (b0, b1) over
+    nodes (temperature_prediction_stderr); None without the relation or weight."""
     b = temperature_relation(rel)
     w, s = np.asarray(weight, float), np.asarray(sqrt_T, float)
     total = float(np.sum(w))
     if b is None or not total > 0:
-        return math.nan
+        return None
     on = (b[0] + b[1] * s) > 0
-    share = float(np.sum(w[on])) / total
-    x = float(np.sum(w[on] * s[on])) / total
-    return affine_prediction_stderr(x, *temperature_relation_errors(rel), intercept_share=share)
+    return float(np.sum(w[on])) / total, float(np.sum(w[on] * s[on])) / total
 
 
 def impacts_from_temperature(calibration: Calibration | None, samples: Samples,
@@ -109,6 +121,13 @@ def impacts_from_temperature(calibration: Calibration | None, samples: Samples,
         impacts[name + "_mean_normal_speed"] = v
         impacts[name + "_mean_normal_speed_stderr"] = se
         impacts[name + "_mean_normal_speed_relation_stderr"] = se_rel
+        for key in ("_mean_normal_speed_relation_measured_covariance",
+                    "_mean_normal_speed_relation_measured_mean"):
+            impacts.pop(name + key, None)  # the shear rate's relation's, if it set them
+        gradient = _gradient(getattr(im, name), np.sqrt(T[region]), w)
+        if gradient is not None:
+            measured_covariance_keys(impacts, name, getattr(im, name), _TEMPERATURE_RELATIONS,
+                                     gradient[1], intercept_share=gradient[0])
         out[name + "_mean_normal_speed_m_s"] = v
         out[name + "_mean_normal_speed_m_s_stderr"] = se
         out[name + "_mean_normal_speed_m_s_relation_stderr"] = se_rel

@@ -161,7 +161,11 @@ class ImpactRelation(Table):
     keys and the *_covariance_m_s keys (of each pair's intercept and slope, what a prediction's
     error needs: measure.stats.affine_prediction_stderr) are the delete-one-batch jackknife's
     (calibration.impacts.jackknife_of_refits): one batch's cycles move many points together,
-    so the points' own least-squares errors would understate them."""
+    so the points' own least-squares errors would understate them.  The same cycles move the
+    DEM's measured mean_normal_speed_m_s: the *_measured_covariance_* keys (m^2/s^2 for an
+    intercept, m/s for a slope) are each coefficient's jackknife covariance with it, what a
+    comparison of an inferred speed with that mean needs (analysis.impact_stats.
+    relative_difference_stderr)."""
     count: Count | None = None
     mean_normal_speed_m_s: Number | None = None
     c0_m_s: Number | None = None
@@ -169,6 +173,8 @@ class ImpactRelation(Table):
     c1: Number | None = None
     c1_stderr: Number | None = None
     c0_c1_covariance_m_s: Number | None = None
+    c0_measured_covariance_m2_s2: Number | None = None
+    c1_measured_covariance_m_s: Number | None = None
     r2: Number | None = None
     a_temperature: Number | None = None
     a_temperature_stderr: Number | None = None
@@ -177,17 +183,23 @@ class ImpactRelation(Table):
     c1_cells: Number | None = None
     c1_cells_stderr: Number | None = None
     c0_c1_cells_covariance_m_s: Number | None = None
+    c0_cells_measured_covariance_m2_s2: Number | None = None
+    c1_cells_measured_covariance_m_s: Number | None = None
     b0_temperature_m_s: Number | None = None
     b0_temperature_stderr_m_s: Number | None = None
     b1_temperature: Number | None = None
     b1_temperature_stderr: Number | None = None
     b0_b1_temperature_covariance_m_s: Number | None = None
+    b0_temperature_measured_covariance_m2_s2: Number | None = None
+    b1_temperature_measured_covariance_m_s: Number | None = None
     r2_temperature_affine: Number | None = None
     b0_temperature_cells_m_s: Number | None = None
     b0_temperature_cells_stderr_m_s: Number | None = None
     b1_temperature_cells: Number | None = None
     b1_temperature_cells_stderr: Number | None = None
     b0_b1_temperature_cells_covariance_m_s: Number | None = None
+    b0_temperature_cells_measured_covariance_m2_s2: Number | None = None
+    b1_temperature_cells_measured_covariance_m_s: Number | None = None
     r2_temperature_affine_cells: Number | None = None
     preferred_relation: Text | None = None
 

@@ -187,6 +187,18 @@ def affine_prediction_stderr(x, c0_stderr, c1_stderr, covariance=None,
     return float(np.sqrt(max(var, 0.0)))
 
 
+def affine_prediction_covariance(x, c0_covariance, c1_covariance,
+                                 intercept_share: float = 1.0) -> float:
+    """The covariance of a prediction s c0 + c1 x of a fitted relation with another statistic,
+    from its coefficients' covariances with that statistic: s cov(c0, .) + x cov(c1, .)
+    (s as in affine_prediction_stderr).  NaN when x or a covariance is missing."""
+    vals = (x, c0_covariance, c1_covariance, intercept_share)
+    if not all(_finite_number(v) for v in vals):
+        return float("nan")
+    x, k0, k1, s = (float(v) for v in vals)
+    return s * k0 + x * k1
+
+
 def quadrature_stderr(stderr, other_stderr) -> float:
     """A number's standard error with an independent second error added in quadrature (a
     continuum's inferred impact speed: its run's batch-means error and its calibrated

@@ -134,6 +134,20 @@ def inferred_from(impacts: dict) -> list[str]:
             if impacts.get(key)]
 
 
+def measured_covariance(impacts: dict, kind: str, measured: float) -> float | None:
+    """The covariance (m^2/s^2) of a continuum's inferred KIND mean speed with the DEM's
+    measured one, `measured` (m/s), where its relation was calibrated on that DEM run: the
+    summary's KIND_mean_normal_speed_relation_measured_covariance, when the mean its
+    calibration measured (_relation_measured_mean) is `measured` to round-off (the same
+    impacts; another run's mean differs in its leading digits).  None otherwise: the two are
+    independent."""
+    own = _num(impacts.get(f"{kind}_mean_normal_speed_relation_measured_mean"))
+    cov = _num(impacts.get(f"{kind}_mean_normal_speed_relation_measured_covariance"))
+    if not (math.isfinite(own) and math.isfinite(cov) and math.isfinite(measured)):
+        return None
+    return cov if abs(own - measured) <= 1e-9 * abs(measured) else None
+
+
 def speed_comparisons(data: StudyData) -> list[dict]:
     """Each continuum's inferred impact speed against the DEM's measured one: the bed means of
     the summary (ball-ball, ball-U wall; inferred from the shear rate or the granular
@@ -141,9 +155,9 @@ def speed_comparisons(data: StudyData) -> list[dict]:
     its shear rate (the DEM's when the cell holds at least MIN_IMPACTS_PER_CELL impacts).  A
     dict a row: where, kind, method, measured, measured_stderr, inferred, inferred_stderr (m/s:
     the run's error and the calibrated relation's, measure.contacts.mean_speed_stderr),
-    relative (the relative
-    difference), relative_stderr (its error from the two speeds') and flagged (True, False or
-    None when not comparable)."""
+    relative (the relative difference), relative_stderr (its error from the two speeds', less
+    their covariance where the relation was calibrated on this DEM run: measured_covariance)
+    and flagged (True, False or None when not comparable)."""
     dem = (data.summary["methods"].get(DEM) or {}).get("impacts") or {}
     rows = []
     for name in data.continuum_methods:
@@ -159,7 +173,8 @@ def speed_comparisons(data: StudyData) -> list[dict]:
             rows.append({"where": "bed mean", "kind": label, "method": name, "measured": m,
                          "measured_stderr": sm, "inferred": i, "inferred_stderr": si,
                          "relative": rel,
-                         "relative_stderr": relative_difference_stderr(i, si, m, sm),
+                         "relative_stderr": relative_difference_stderr(
+                             i, si, m, sm, measured_covariance(im, key, m)),
                          "flagged": flag})
         if data.impacts is None:
             continue
