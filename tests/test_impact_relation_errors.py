@@ -228,3 +228,41 @@ def test_the_covariance_with_the_measured_mean_is_used_against_its_own_dem_run_o
         mean_normal_speed_m_s=0.0446, c0_cells_m_s=0.011, c1_cells=2.55), _SHEAR_RELATIONS,
         0.0111)
     assert older == {}
+
+
+def _probe_study(measured_mean, left_out=True):
+    """A study's pieces that inferred_impact_speed_covariances reads: one probe whose cell the
+    continuum shears at 2 1/s, a relation c0 + c1 d gamma_dot with its four refits, the DEM's
+    cell mean without each batch, and the DEM's bed mean 0.0446 m/s."""
+    from types import SimpleNamespace
+
+    c0s, c1s = np.array([0.010, 0.012, 0.011, 0.009]), np.array([2.6, 2.4, 2.5, 2.7])
+    fit = {"c0": 0.0105, "c1": 2.55, "c0_stderr": 0.001, "c1_stderr": 0.1, "covariance": 0.0,
+           "left_out": (c0s, c1s) if left_out else None, "measured_mean": measured_mean}
+    cell = np.array([0.050, 0.054, 0.051, 0.049])
+    probe = SimpleNamespace(x=0.0, z=0.05)
+    return SimpleNamespace(
+        impact_fit=lambda kind: fit, diameter=0.004,
+        summary={"methods": {"dem": {"impacts": {"ball_ball_mean_normal_speed": 0.0446}}}},
+        continuum_block=lambda name: {"probes": {"P1": {"shear_rate_1_s": 2.0}}},
+        scenario=SimpleNamespace(analysis=SimpleNamespace(probes={"P1": probe})),
+        impacts=SimpleNamespace(left_out_at=lambda x, z: cell)), c0s, c1s, cell
+
+
+def test_a_probe_cells_covariance_is_the_jackknifes_of_the_refits_and_the_cells_mean():
+    """A probe cell's inferred speed against the DEM's speed in that cell (report.figures.
+    inferred_impact_speed_covariances): (n - 1) / n sum_b (p_b - mean p)(m_b - mean m) with
+    p_b = c0_b + c1_b d gamma_dot, worked by hand, where the calibration's run is the study's
+    DEM (its measured mean the DEM's to round-off); nothing against another run or without the
+    refits."""
+    from vibroflow.report.figures import inferred_impact_speed_covariances
+
+    data, c0s, c1s, cell = _probe_study(0.0446)
+    p = c0s + c1s * 0.004 * 2.0
+    want = 3.0 / 4.0 * float(np.sum((p - p.mean()) * (cell - cell.mean())))
+    got = inferred_impact_speed_covariances(data, "lagrangian")
+    assert got["P1"] == pytest.approx(want, rel=1e-12)
+    assert want > 0.0
+    assert inferred_impact_speed_covariances(_probe_study(0.0431)[0], "lagrangian") == {}
+    assert inferred_impact_speed_covariances(_probe_study(0.0446, left_out=False)[0],
+                                             "lagrangian") == {}

@@ -74,7 +74,9 @@ def test_impacts_binned_by_analysis_cell():
 def test_impacts_binned_by_batch_carry_the_batch_means_error():
     """Cell (0, 0) holds batch means 0.1, 0.3 and 0.5 (batches 0, 1, 2; two impacts in batch 1):
     its mean is over the impacts (0.1 + 0.2 + 0.4 + 0.5) / 4 = 0.3, its standard error the
-    batch means' std / sqrt(3) = 0.2 / sqrt(3); a cell with impacts in one batch only has none."""
+    batch means' std / sqrt(3) = 0.2 / sqrt(3); a cell with impacts in one batch only has none.
+    Without each batch in turn the cell's mean is (0.2 + 0.4 + 0.5) / 3, (0.1 + 0.5) / 2 and
+    (0.1 + 0.2 + 0.4) / 3; the other cell, whose only batch is 1, has none without it."""
     from vibroflow.report.data import bin_impacts
 
     h = 0.015
@@ -88,6 +90,10 @@ def test_impacts_binned_by_batch_carry_the_batch_means_error():
     assert cells.at(0.03, 0.0) == (pytest.approx(0.9), 1)
     assert math.isnan(cells.stderr_at(0.03, 0.0))
     assert math.isnan(cells.stderr_at(0.3, 0.3))
+    np.testing.assert_allclose(cells.left_out_at(0.0, 0.0), [1.1 / 3, 0.3, 0.7 / 3], rtol=1e-12)
+    far = cells.left_out_at(0.03, 0.0)
+    assert far[0] == pytest.approx(0.9) and math.isnan(far[1]) and far[2] == pytest.approx(0.9)
+    assert cells.left_out_at(0.3, 0.3) is None
 
 
 def test_report_impacts_are_the_summarys_impacts(study):
@@ -110,6 +116,7 @@ def test_impact_distributions_are_the_summarys_impacts(study):
     U's and the partitions' profiles hold all of theirs; the flags compare the summary's
     inferred and measured speeds."""
     from vibroflow.report.data import StudyData
+    from vibroflow.measure.stats import jackknife_stderr
     from vibroflow.report.impact_figures import read_distributions, speed_comparisons
 
     _, out, summary, _ = study
@@ -158,6 +165,13 @@ def test_impact_distributions_are_the_summarys_impacts(study):
             var = row["inferred_stderr"] ** 2 + (q * sd) ** 2 - 2.0 * q * cov
             assert row["relative_stderr"] == pytest.approx(math.sqrt(max(var, 0.0)) / d,
                                                            rel=1e-9)
+            # the refits without each batch that the probe cells' covariance needs give back
+            # the jackknife's errors they come from
+            assert len(fit.c0_cells_left_out_m_s) == data.scenario.run.batches
+            assert jackknife_stderr(fit.c0_cells_left_out_m_s) == pytest.approx(
+                fit.c0_cells_stderr_m_s, rel=1e-9)
+            assert jackknife_stderr(fit.c1_cells_left_out) == pytest.approx(
+                fit.c1_cells_stderr, rel=1e-9)
 
 
 # ----------------------------------------------------------------------------------------------

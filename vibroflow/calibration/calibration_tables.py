@@ -45,14 +45,18 @@ def _speed_fit_keys(g: dict, tag: str, points_key: str) -> dict:
     """The keys of an impact speed's fit v = c0 + c1 d gamma_dot (impacts.py's fit g): c0 (m/s)
     and c1 with their standard errors and covariance (m/s; what a prediction's error needs,
     measure.stats.affine_prediction_stderr), each one's covariance with the DEM's measured mean
-    speed (m^2/s^2, m/s; what a comparison with that mean needs), r^2, the relative rms error
-    (tag after each name) and the number of points fitted (points_key)."""
+    speed (m^2/s^2, m/s; what a comparison with that mean needs), c0 and c1 with each batch left
+    out (the jackknife's refits, batch order: what a comparison with another statistic of the
+    same run needs), r^2, the relative rms error (tag after each name) and the number of points
+    fitted (points_key)."""
     nan = float("nan")
     return {f"c0{tag}_m_s": toml_float(g["c0"]), f"c0{tag}_stderr_m_s": toml_float(g["c0_stderr"]),
             f"c1{tag}": toml_float(g["c1"]), f"c1{tag}_stderr": toml_float(g["c1_stderr"]),
             f"c0_c1{tag}_covariance_m_s": toml_float(g.get("c0_c1_covariance", nan)),
             f"c0{tag}_measured_covariance_m2_s2": toml_float(g.get("c0_measured_covariance", nan)),
             f"c1{tag}_measured_covariance_m_s": toml_float(g.get("c1_measured_covariance", nan)),
+            f"c0{tag}_left_out_m_s": [toml_float(v) for v in g.get("c0_left_out", [])],
+            f"c1{tag}_left_out": [toml_float(v) for v in g.get("c1_left_out", [])],
             f"r2{tag}": toml_float(g["r2"]),
             f"relative_rms_error{tag}": toml_float(g["relative_rms_error"]),
             points_key: int(g["points"])}

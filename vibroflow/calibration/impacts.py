@@ -132,7 +132,8 @@ def jackknife_of_refits(fits: dict, refit, n_batches: int, measured=None) -> Non
     measured : the DEM's measured bed mean speed (m/s) without each batch
     (BatchCounts.bed_means_without); with it, each fit also gets c0_measured_covariance (m^2/s^2)
     and c1_measured_covariance (m/s), the jackknife covariances of its coefficients with that
-    mean.
+    mean.  The refits' coefficients themselves are kept as c0_left_out and c1_left_out (batch
+    order), for the covariance with any other statistic of the same batches.
 
     Why: one batch's cycles move the fields and the impact speeds of many points together, so
     the points are not independent and the least-squares errors understate the scatter.  The
@@ -149,6 +150,7 @@ def jackknife_of_refits(fits: dict, refit, n_batches: int, measured=None) -> Non
         fit["c1_stderr"] = jackknife_stderr(c1s)
         fit["c0_c1_covariance"] = jackknife_covariance(c0s, c1s)
         fit["stderr_batches"] = len(refits)
+        fit["c0_left_out"], fit["c1_left_out"] = c0s, c1s
         if measured is not None:
             ms = list(measured)[:len(refits)]
             fit["c0_measured_covariance"] = jackknife_covariance(c0s, ms)
@@ -306,7 +308,8 @@ def jackknife_of_batches_fit(fit: dict, c, total, c_b, sum_b, shear, d: float, m
     c - c_b[b], speed sums total - sum_b[b], each (n_phases, nz, nx)) on the phase fields
     without batch b (PhaseShear.loo_*); the points' own errors kept as c0_stderr_points,
     c1_stderr_points, c0_c1_covariance_points; c0_measured_covariance and
-    c1_measured_covariance with the mean of the impacts binned (jackknife_of_refits).  Without
+    c1_measured_covariance with the mean of the impacts binned, and the refits' c0_left_out and
+    c1_left_out (jackknife_of_refits).  Without
     two batches (or when a fit without one fails) the jackknife errors are NaN."""
     nb = 0 if shear.loo_phase_shear_rate is None else c_b.shape[0]
 
@@ -326,7 +329,7 @@ def jackknife_of_batches_fit(fit: dict, c, total, c_b, sum_b, shear, d: float, m
     return {key: fits["fit"][key] for key in (
         "c0_stderr", "c1_stderr", "c0_c1_covariance", "c0_stderr_points", "c1_stderr_points",
         "c0_c1_covariance_points", "stderr_batches", "c0_measured_covariance",
-        "c1_measured_covariance") if key in fits["fit"]}
+        "c1_measured_covariance", "c0_left_out", "c1_left_out") if key in fits["fit"]}
 
 
 def impact_relations_on_cells(run, cell_size: float | None = None,

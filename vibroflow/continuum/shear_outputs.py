@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -55,27 +56,50 @@ def write_shear_rate_csv(path: Path, samples: Samples, phase: PhaseShear | None,
 
 
 
+class RelationKeys(NamedTuple):
+    """The [impacts.KIND] keys of one fitted relation v = c0 + c1 x: its coefficients, their
+    standard errors and covariance, their covariances with the DEM's measured mean speed, and
+    their values with each batch left out (the jackknife's; None where not written)."""
+    c0: str
+    c1: str
+    c0_stderr: str
+    c1_stderr: str
+    covariance: str
+    c0_measured_covariance: str
+    c1_measured_covariance: str
+    c0_left_out: str | None = None
+    c1_left_out: str | None = None
+
+    @property
+    def which(self) -> str:
+        return f"{self.c0.removesuffix('_m_s')}, {self.c1}"
+
+
+def shear_relation_keys(tag: str) -> RelationKeys:
+    """The keys of v = c0 + c1 d gamma_dot, tag "_cells" (fitted on the continuum's measure of
+    the shear rate) or "" (on the DEM's coarse-grained field)."""
+    return RelationKeys(f"c0{tag}_m_s", f"c1{tag}", f"c0{tag}_stderr_m_s", f"c1{tag}_stderr",
+                        f"c0_c1{tag}_covariance_m_s", f"c0{tag}_measured_covariance_m2_s2",
+                        f"c1{tag}_measured_covariance_m_s", f"c0{tag}_left_out_m_s",
+                        f"c1{tag}_left_out")
+
+
 #: the two shear-rate relations of an [impacts.KIND] table, in the order impact_relation
-#: prefers them: the coefficients' keys, then their standard errors' and covariance's, then
-#: their covariances with the DEM's measured mean speed
-_SHEAR_RELATIONS = (("c0_cells_m_s", "c1_cells", "c0_cells_stderr_m_s", "c1_cells_stderr",
-                     "c0_c1_cells_covariance_m_s", "c0_cells_measured_covariance_m2_s2",
-                     "c1_cells_measured_covariance_m_s"),
-                    ("c0_m_s", "c1", "c0_stderr_m_s", "c1_stderr", "c0_c1_covariance_m_s",
-                     "c0_measured_covariance_m2_s2", "c1_measured_covariance_m_s"))
+#: prefers them
+_SHEAR_RELATIONS = (shear_relation_keys("_cells"), shear_relation_keys(""))
 
 
 def _num(x) -> float:
     return float(x) if isinstance(x, (int, float)) and not isinstance(x, bool) else math.nan
 
 
-def chosen_keys(rel, candidates) -> tuple | None:
-    """The first of `candidates` (each the keys of a relation's two coefficients, then of
-    their errors) whose two coefficients `rel` ([impacts.KIND]) holds finite; None if none."""
+def chosen_keys(rel, candidates) -> RelationKeys | None:
+    """The first of `candidates` (RelationKeys) whose two coefficients `rel` ([impacts.KIND])
+    holds finite; None if none."""
     if rel is None:
         return None
     for keys in candidates:
-        if all(math.isfinite(_num(getattr(rel, k, None))) for k in keys[:2]):
+        if all(math.isfinite(_num(getattr(rel, k, None))) for k in (keys.c0, keys.c1)):
             return keys
     return None
 
@@ -88,7 +112,21 @@ def relation_errors(rel, candidates) -> tuple[float, float, float]:
     keys = chosen_keys(rel, candidates)
     if keys is None:
         return math.nan, math.nan, math.nan
-    return tuple(_num(getattr(rel, k, None)) for k in keys[2:5])
+    return tuple(_num(getattr(rel, k, None))
+                 for k in (keys.c0_stderr, keys.c1_stderr, keys.covariance))
+
+
+def relation_left_out(rel, candidates) -> tuple[np.ndarray, np.ndarray] | None:
+    """(c0 m/s, c1) of the relation `candidates` choose in `rel`, each batch of its DEM run
+    left out in turn (the jackknife's refits, in batch order); None where the calibration holds
+    none or they do not pair up."""
+    keys = chosen_keys(rel, candidates)
+    if keys is None or keys.c0_left_out is None:
+        return None
+    c0, c1 = (getattr(rel, k, None) for k in (keys.c0_left_out, keys.c1_left_out))
+    if not c0 or not c1 or len(c0) != len(c1):
+        return None
+    return np.asarray(c0, float), np.asarray(c1, float)
 
 
 def measured_covariance_keys(impacts: dict, kind: str, rel, candidates, x,
@@ -103,8 +141,10 @@ def measured_covariance_keys(impacts: dict, kind: str, rel, candidates, x,
     keys = chosen_keys(rel, candidates)
     if keys is None:
         return
-    cov = affine_prediction_covariance(x, *(_num(getattr(rel, k, None)) for k in keys[5:7]),
-                                       intercept_share=intercept_share)
+    cov = affine_prediction_covariance(
+        x, *(_num(getattr(rel, k, None))
+             for k in (keys.c0_measured_covariance, keys.c1_measured_covariance)),
+        intercept_share=intercept_share)
     mean = _num(getattr(rel, "mean_normal_speed_m_s", None))
     if math.isfinite(cov) and math.isfinite(mean):
         impacts[kind + "_mean_normal_speed_relation_measured_covariance"] = cov
@@ -120,13 +160,18 @@ def impact_relation(rel: ImpactRelation | None) -> tuple[float | None, float | N
     keys = chosen_keys(rel, _SHEAR_RELATIONS)
     if keys is None:
         return None, None, ""
-    c0, c1 = (float(getattr(rel, k)) for k in keys[:2])
-    return c0, c1, ("c0_cells, c1_cells" if keys is _SHEAR_RELATIONS[0] else "c0, c1")
+    return float(getattr(rel, keys.c0)), float(getattr(rel, keys.c1)), keys.which
 
 
 def impact_relation_errors(rel: ImpactRelation | None) -> tuple[float, float, float]:
     """(se c0 m/s, se c1, cov(c0, c1) m/s) of the relation impact_relation chooses."""
     return relation_errors(rel, _SHEAR_RELATIONS)
+
+
+def impact_relation_left_out(rel: ImpactRelation | None):
+    """(c0 m/s, c1) of the relation impact_relation chooses with each batch left out
+    (relation_left_out), or None."""
+    return relation_left_out(rel, _SHEAR_RELATIONS)
 
 
 

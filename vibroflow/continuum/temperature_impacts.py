@@ -26,22 +26,20 @@ from vibroflow.measure.phase_shear import PhaseShear, near_wall_nodes
 from vibroflow.measure.stats import affine_prediction_stderr, batch_means
 
 from .sampling import Samples
-from .shear_outputs import chosen_keys, measured_covariance_keys, relation_errors
+from .shear_outputs import RelationKeys, chosen_keys, measured_covariance_keys, relation_errors
 from .temperature_outputs import temperature_map
 
 RELATION = "v = max(b0 + b1 sqrt(T), 0)"
 
 
 #: the two temperature relations of an [impacts.KIND] table, in the order temperature_relation
-#: prefers them: the coefficients' keys, then their standard errors' and covariance's
-_TEMPERATURE_RELATIONS = (
-    ("b0_temperature_cells_m_s", "b1_temperature_cells", "b0_temperature_cells_stderr_m_s",
-     "b1_temperature_cells_stderr", "b0_b1_temperature_cells_covariance_m_s",
-     "b0_temperature_cells_measured_covariance_m2_s2",
-     "b1_temperature_cells_measured_covariance_m_s"),
-    ("b0_temperature_m_s", "b1_temperature", "b0_temperature_stderr_m_s",
-     "b1_temperature_stderr", "b0_b1_temperature_covariance_m_s",
-     "b0_temperature_measured_covariance_m2_s2", "b1_temperature_measured_covariance_m_s"))
+#: prefers them
+_TEMPERATURE_RELATIONS = tuple(
+    RelationKeys(f"b0_temperature{tag}_m_s", f"b1_temperature{tag}",
+                 f"b0_temperature{tag}_stderr_m_s", f"b1_temperature{tag}_stderr",
+                 f"b0_b1_temperature{tag}_covariance_m_s",
+                 f"b0_temperature{tag}_measured_covariance_m2_s2",
+                 f"b1_temperature{tag}_measured_covariance_m_s") for tag in ("_cells", ""))
 
 
 def _prefers_temperature(rel) -> bool:
@@ -53,7 +51,7 @@ def temperature_relation(rel) -> tuple[float, float] | None:
     relation fitted on the analysis cells' centres (b0_temperature_cells_m_s,
     b1_temperature_cells) where the calibration has it, else the coarse-grained points' one."""
     keys = chosen_keys(rel, _TEMPERATURE_RELATIONS) if _prefers_temperature(rel) else None
-    return None if keys is None else (float(getattr(rel, keys[0])), float(getattr(rel, keys[1])))
+    return None if keys is None else (float(getattr(rel, keys.c0)), float(getattr(rel, keys.c1)))
 
 
 def temperature_relation_errors(rel) -> tuple[float, float, float]:

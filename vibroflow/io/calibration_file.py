@@ -165,7 +165,9 @@ class ImpactRelation(Table):
     DEM's measured mean_normal_speed_m_s: the *_measured_covariance_* keys (m^2/s^2 for an
     intercept, m/s for a slope) are each coefficient's jackknife covariance with it, what a
     comparison of an inferred speed with that mean needs (analysis.impact_stats.
-    relative_difference_stderr)."""
+    relative_difference_stderr); the shear-rate relations' *_left_out keys are their
+    coefficients with each batch left out, in batch order, for the covariance with any other
+    statistic of those batches (a probe cell's measured speed: report.figures)."""
     count: Count | None = None
     mean_normal_speed_m_s: Number | None = None
     c0_m_s: Number | None = None
@@ -175,6 +177,8 @@ class ImpactRelation(Table):
     c0_c1_covariance_m_s: Number | None = None
     c0_measured_covariance_m2_s2: Number | None = None
     c1_measured_covariance_m_s: Number | None = None
+    c0_left_out_m_s: list[Number] | None = None
+    c1_left_out: list[Number] | None = None
     r2: Number | None = None
     a_temperature: Number | None = None
     a_temperature_stderr: Number | None = None
@@ -185,6 +189,8 @@ class ImpactRelation(Table):
     c0_c1_cells_covariance_m_s: Number | None = None
     c0_cells_measured_covariance_m2_s2: Number | None = None
     c1_cells_measured_covariance_m_s: Number | None = None
+    c0_cells_left_out_m_s: list[Number] | None = None
+    c1_cells_left_out: list[Number] | None = None
     b0_temperature_m_s: Number | None = None
     b0_temperature_stderr_m_s: Number | None = None
     b1_temperature: Number | None = None

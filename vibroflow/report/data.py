@@ -26,7 +26,8 @@ import h5py
 import numpy as np
 
 from vibroflow.calibration.run_fields import read_fields
-from vibroflow.continuum.shear_outputs import impact_relation, impact_relation_errors
+from vibroflow.continuum.shear_outputs import (impact_relation, impact_relation_errors,
+                                               impact_relation_left_out)
 from vibroflow.dem.walls import KIND_BALL_BALL
 from vibroflow.errors import InputError
 from vibroflow.io.calibration_file import Calibration, read_calibration
@@ -51,7 +52,9 @@ class ImpactCells:
     """Mean normal approach speed (m/s) of the DEM's ball-ball impacts of the averaging window,
     by analysis cell (tub frame, cell centres x, z in m), with the impacts counted per cell and
     the mean's batch-means standard error (m/s; NaN where fewer than two batches hold an impact
-    in the cell, or the impacts came without their batch)."""
+    in the cell, or the impacts came without their batch) and its values with each batch of
+    whole cycles left out, left_out (n_batches, cells; m/s; NaN where none is left), what the
+    jackknife's covariance with another statistic of the same batches needs."""
 
     x: np.ndarray
     z: np.ndarray
@@ -59,6 +62,7 @@ class ImpactCells:
     count: np.ndarray
     cell_size: float
     stderr: np.ndarray | None = None
+    left_out: np.ndarray | None = None
 
     def _cell(self, px: float, pz: float) -> int | None:
         h = self.cell_size
@@ -77,6 +81,12 @@ class ImpactCells:
         """The batch-means standard error (m/s) of the mean speed at (px, pz); NaN if none."""
         j = self._cell(px, pz)
         return math.nan if j is None or self.stderr is None else float(self.stderr[j])
+
+    def left_out_at(self, px: float, pz: float) -> np.ndarray | None:
+        """The mean speed (m/s) at (px, pz) with each batch left out, batch order; None if
+        none."""
+        j = self._cell(px, pz)
+        return None if j is None or self.left_out is None else self.left_out[:, j]
 
 
 def bin_impacts(chunks, cell_size: float) -> ImpactCells:
@@ -116,12 +126,17 @@ def bin_impacts(chunks, cell_size: float) -> ImpactCells:
     total = sums.sum(axis=0)
     x = np.array([k[0] for k in keys], dtype=float) * h
     z = np.array([k[1] for k in keys], dtype=float) * h
-    stderr = None
+    stderr = left_out = None
     if batched and keys:
         with np.errstate(invalid="ignore", divide="ignore"):
             means = np.where(counts > 0, sums / counts, np.nan)
+            # a batch with no impact anywhere has no row: the rows are batches 0, 1, ... only
+            # when every batch holds one
+            if sorted(row) == list(range(len(row))):
+                rest = count[None, :] - counts
+                left_out = np.where(rest > 0, (total[None, :] - sums) / rest, np.nan)
         stderr = np.asarray(stderr_of_batches(means, axis=0), dtype=float).reshape(len(keys))
-    return ImpactCells(x, z, total / np.maximum(count, 1), count, h, stderr)
+    return ImpactCells(x, z, total / np.maximum(count, 1), count, h, stderr, left_out)
 
 
 def mean_flow_shear_rate(vx: np.ndarray, vz: np.ndarray, h: float) -> np.ndarray:
@@ -259,7 +274,8 @@ class StudyData:
         continuum's measure of the shear rate when the calibration has it), or None when the
         calibration has none with finite coefficients; with c0_stderr (m/s), c1_stderr and
         covariance (of c0 and c1, m/s), the fit's errors (NaN where the calibration holds
-        none)."""
+        none); left_out, (c0s, c1s) with each batch of its DEM run left out, or None; and
+        measured_mean (m/s), the mean speed its DEM run measured, by which that run is known."""
         impacts = self.calibration.impacts if self.calibration is not None else None
         rel = getattr(impacts, kind) if impacts is not None else None
         c0, c1, which = impact_relation(rel)
@@ -267,7 +283,8 @@ class StudyData:
             return None
         se0, se1, cov = impact_relation_errors(rel)
         return {"c0": c0, "c1": c1, "which": which, "c0_stderr": se0, "c1_stderr": se1,
-                "covariance": cov}
+                "covariance": cov, "left_out": impact_relation_left_out(rel),
+                "measured_mean": rel.mean_normal_speed_m_s}
 
     def method_dir(self, name: str) -> Path:
         """The folder of a method's run: that of its bulk_velocity.csv as the study's summary

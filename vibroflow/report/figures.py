@@ -19,8 +19,9 @@ from matplotlib.colors import LogNorm, Normalize, PowerNorm
 from matplotlib.patches import Rectangle
 
 from vibroflow.io.pictures import pyplot
-from vibroflow.measure.stats import affine_prediction_stderr, quadrature_stderr
-from vibroflow.report.data import MIN_IMPACTS_PER_CELL, StudyData, mean_flow_shear_rate
+from vibroflow.measure.stats import (affine_prediction_stderr, jackknife_covariance,
+                                     quadrature_stderr)
+from vibroflow.report.data import DEM, MIN_IMPACTS_PER_CELL, StudyData, mean_flow_shear_rate
 from vibroflow.report.temperature_maps import PHI_KEY, T_KEY, TemperatureMaps
 from vibroflow.rounding import plus_minus
 
@@ -275,6 +276,35 @@ def inferred_impact_speed_errors(data: StudyData, name: str) -> dict:
         lambda fit, d, g: affine_prediction_stderr(d * g, fit["c0_stderr"], fit["c1_stderr"],
                                                    fit["covariance"]))
     return {probe: quadrature_stderr(se, relation.get(probe)) for probe, se in run.items()}
+
+
+def inferred_impact_speed_covariances(data: StudyData, name: str) -> dict:
+    """The covariance (m^2/s^2) of each probe cell's inferred_impact_speeds with the DEM's
+    measured mean speed in that cell, where the relation was calibrated on this study's DEM run
+    (its measured mean, the impact fit's measured_mean, is the DEM summary's to round-off): the
+    same cycles move both, and the delete-one-batch jackknife covariance
+    (measure.stats.jackknife_covariance) of the prediction c0_b + c1_b d gamma_dot, with the
+    calibration's refits without batch b, and the cell's mean without batch b
+    (ImpactCells.left_out_at) gives it.  Probes left out where either is unknown or their
+    batches differ in number: there the two are independent."""
+    fit = data.impact_fit("ball_ball")
+    dem = (data.summary["methods"].get(DEM) or {}).get("impacts") or {}
+    measured = dem.get("ball_ball_mean_normal_speed")
+    if (fit is None or fit["left_out"] is None or data.impacts is None
+            or not all(isinstance(v, (int, float)) and math.isfinite(v)
+                       for v in (fit["measured_mean"], measured))
+            or abs(fit["measured_mean"] - measured) > 1e-9 * abs(measured)):
+        return {}
+    c0s, c1s = fit["left_out"]
+    out = {}
+    for probe, g in _through_relation(data, name, "shear_rate_1_s", lambda f, d, g: d * g).items():
+        p = data.scenario.analysis.probes[probe]
+        cell = data.impacts.left_out_at(p.x, p.z)
+        if cell is not None and cell.size == c0s.size:
+            cov = jackknife_covariance(c0s + c1s * g, cell)
+            if math.isfinite(cov):
+                out[probe] = cov
+    return out
 
 
 def impact_maps(data: StudyData) -> bytes:

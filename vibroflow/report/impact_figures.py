@@ -19,7 +19,8 @@ from vibroflow.analysis.impact_stats import (SPEED_EDGES_M_S, ImpactDistribution
 from vibroflow.io.pictures import pyplot
 from vibroflow.measure.contacts import mean_speed_stderr
 from vibroflow.report.data import DEM, MIN_IMPACTS_PER_CELL, StudyData
-from vibroflow.report.figures import (inferred_impact_speed_errors, inferred_impact_speeds,
+from vibroflow.report.figures import (inferred_impact_speed_covariances,
+                                      inferred_impact_speed_errors, inferred_impact_speeds,
                                       png_bytes)
 
 #: the kinds drawn and tabled, as the page names them (IMPACT_KINDS' names)
@@ -156,8 +157,9 @@ def speed_comparisons(data: StudyData) -> list[dict]:
     dict a row: where, kind, method, measured, measured_stderr, inferred, inferred_stderr (m/s:
     the run's error and the calibrated relation's, measure.contacts.mean_speed_stderr),
     relative (the relative difference), relative_stderr (its error from the two speeds', less
-    their covariance where the relation was calibrated on this DEM run: measured_covariance)
-    and flagged (True, False or None when not comparable)."""
+    their covariance where the relation was calibrated on this DEM run: measured_covariance for
+    a bed mean, figures.inferred_impact_speed_covariances for a probe cell) and flagged (True,
+    False or None when not comparable)."""
     dem = (data.summary["methods"].get(DEM) or {}).get("impacts") or {}
     rows = []
     for name in data.continuum_methods:
@@ -180,6 +182,7 @@ def speed_comparisons(data: StudyData) -> list[dict]:
             continue
         inferred = inferred_impact_speeds(data, name)
         errors = inferred_impact_speed_errors(data, name)
+        covariances = inferred_impact_speed_covariances(data, name)
         for probe, p in data.scenario.analysis.probes.items():
             v, count = data.impacts.at(p.x, p.z)
             m = v if count >= MIN_IMPACTS_PER_CELL else math.nan
@@ -190,7 +193,8 @@ def speed_comparisons(data: StudyData) -> list[dict]:
             rows.append({"where": f"probe {probe} cell", "kind": "ball-ball", "method": name,
                          "measured": m, "measured_stderr": se, "inferred": i,
                          "inferred_stderr": si, "relative": rel,
-                         "relative_stderr": relative_difference_stderr(i, si, m, se),
+                         "relative_stderr": relative_difference_stderr(
+                             i, si, m, se, covariances.get(probe)),
                          "flagged": flag})
     return rows
 
