@@ -107,8 +107,9 @@ class BatchCounts:
         bed mean as the jackknife's refit without b sees it (NaN where none is left)."""
         lo = b * self.ncell
         c = self.count.sum() - self.count_b[lo:lo + self.ncell].sum()
-        return float((self.total.sum() - self.total_b[lo:lo + self.ncell].sum()) / c) \
-            if c > 0 else float("nan")
+        if not c > 0:
+            return float("nan")
+        return float((self.total.sum() - self.total_b[lo:lo + self.ncell].sum()) / c)
 
     def bed_means_without(self) -> list[float]:
         """bed_mean_without of each batch (jackknife_of_refits' `measured`)."""
@@ -309,8 +310,8 @@ def jackknife_of_batches_fit(fit: dict, c, total, c_b, sum_b, shear, d: float, m
     without batch b (PhaseShear.loo_*); the points' own errors kept as c0_stderr_points,
     c1_stderr_points, c0_c1_covariance_points; c0_measured_covariance and
     c1_measured_covariance with the mean of the impacts binned, and the refits' c0_left_out and
-    c1_left_out (jackknife_of_refits).  Without
-    two batches (or when a fit without one fails) the jackknife errors are NaN."""
+    c1_left_out (jackknife_of_refits).  Without two batches (or when a fit without one fails)
+    the jackknife errors are NaN."""
     nb = 0 if shear.loo_phase_shear_rate is None else c_b.shape[0]
 
     def refit(b):
