@@ -248,6 +248,18 @@ def speed_flag(inferred, measured) -> tuple[float, bool | None]:
     return rel, bool(abs(rel) > FLAG_RELATIVE_DIFFERENCE)
 
 
+def same_measured_mean(calibrated_mean, measured) -> bool:
+    """Whether a calibration's measured mean speed (m/s) is a DEM run's `measured` one to
+    round-off: the calibration was made on that run (the same impacts), so its relation and
+    the run's measured speeds move together from batch to batch.  Another fill seed's or case's
+    mean differs in its leading digits."""
+    vals = (calibrated_mean, measured)
+    if not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+               for x in vals):
+        return False
+    return abs(float(calibrated_mean) - float(measured)) <= 1e-9 * abs(float(measured))
+
+
 def relative_difference_stderr(inferred, inferred_stderr, measured, measured_stderr,
                                covariance=None) -> float:
     """The standard error of speed_flag's relative difference r = i / m - 1 (the delta

@@ -110,13 +110,12 @@ def _batch_columns(path: Path, x, z, phase) -> tuple[np.ndarray, np.ndarray]:
 def batch_errors(points: dict, mu_yield: float) -> dict | None:
     """The batch-means standard errors (measure.stats.stderr_of_batches) of the stress table's
     statistics, each taken again on every batch's own mu and p in the same cells and phases
-    (points["batch_mu"], points["batch_pressure"]; a batch's empty cells left out), the cells
-    those the pooled field selects (one of _select's tests, the shear rate resolved above its
-    batch-means error, exists for the pooled field only): the
-    median mu, the median p (Pa), the share at or above mu_yield, and by phase the lowest
-    and the highest third's median mu (height_phase_table's thirds):
-    {"median_mu", "median_pressure", "share", "thirds": {phase: (low, high)}}.  None
-    without two batches."""
+    (points["batch_mu"], points["batch_pressure"]; a batch's empty cells left out), in the
+    cells the pooled field selects (one of _select's tests, the shear rate resolved above its
+    batch-means error, exists for the pooled field only): the median mu, the median p (Pa),
+    the share at or above mu_yield, and by phase the lowest and the highest third's median mu
+    (height_phase_table's thirds): {"median_mu", "median_pressure", "share", "thirds":
+    {phase: (low, high)}}.  None without two batches."""
     if "batch_mu" not in points or np.shape(points["batch_mu"])[0] < 2:
         return None
     bm, bp = np.asarray(points["batch_mu"], float), np.asarray(points["batch_pressure"], float)

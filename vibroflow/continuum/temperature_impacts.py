@@ -4,16 +4,17 @@ prefers the temperature to the shear rate (docs/decisions/impact-speed.md).
 The calibration's [impacts.KIND] relation v = max(b0 + b1 sqrt(T), 0)
 (b0_temperature_cells_m_s, b1_temperature_cells; calibration.impact_temperature) is fitted on
 the DEM's impacts against its phase-resolved coarse-grained T at the analysis cells' centres;
-its preferred_relation says which of T and the shear rate the DEM's impacts follow better there.  A run that carries T (ContinuumOptions.temperature) and whose
-calibration prefers T for a kind infers that kind's mean from its time-averaged T map on the
-analysis cells (temperature_outputs.temperature_map): v at each node, solid-fraction weighted
-over the bed (ball-ball) or the nodes within a node spacing of the U (ball-wall), as the shear
-rate's inference weights them.  Its standard error is the bed-mean temperature's batch-means
-error carried through the relation, b1 se(T) / (2 sqrt(T)); the relation's own error, from
-its coefficients' errors and covariance, is beside it as KIND_mean_normal_speed_relation_stderr
+its preferred_relation says which of T and the shear rate the DEM's impacts follow better
+there.  A run that carries T (ContinuumOptions.temperature) and whose calibration prefers T
+for a kind infers that kind's mean from its time-averaged T map on the analysis cells
+(temperature_outputs.temperature_map): v at each node, solid-fraction weighted over the bed
+(ball-ball) or the nodes within a node spacing of the U (ball-wall), as the shear rate's
+inference weights them.  Its standard error is the bed-mean temperature's batch-means error
+carried through the relation, b1 se(T) / (2 sqrt(T)); the relation's own error, from its
+coefficients' errors and covariance, is beside it as KIND_mean_normal_speed_relation_stderr
 (temperature_prediction_stderr), and its covariance with the DEM run's measured mean
-(shear_outputs.measured_covariance_keys).  Without T, or where the calibration
-prefers the shear rate, the shear rate's inference stands and nothing here is written.
+(shear_outputs.measured_covariance_keys).  Without T, or where the calibration prefers the
+shear rate, the shear rate's inference stands and nothing here is written.
 """
 from __future__ import annotations
 

@@ -18,6 +18,7 @@ from matplotlib.collections import PatchCollection
 from matplotlib.colors import LogNorm, Normalize, PowerNorm
 from matplotlib.patches import Rectangle
 
+from vibroflow.analysis.impact_stats import same_measured_mean
 from vibroflow.io.pictures import pyplot
 from vibroflow.measure.stats import (affine_prediction_stderr, jackknife_covariance,
                                      quadrature_stderr)
@@ -281,19 +282,17 @@ def inferred_impact_speed_errors(data: StudyData, name: str) -> dict:
 def inferred_impact_speed_covariances(data: StudyData, name: str) -> dict:
     """The covariance (m^2/s^2) of each probe cell's inferred_impact_speeds with the DEM's
     measured mean speed in that cell, where the relation was calibrated on this study's DEM run
-    (its measured mean, the impact fit's measured_mean, is the DEM summary's to round-off): the
-    same cycles move both, and the delete-one-batch jackknife covariance
+    (the impact fit's measured_mean is the DEM summary's: analysis.impact_stats.
+    same_measured_mean): the same cycles move both, and the delete-one-batch jackknife covariance
     (measure.stats.jackknife_covariance) of the prediction c0_b + c1_b d gamma_dot, with the
     calibration's refits without batch b, and the cell's mean without batch b
     (ImpactCells.left_out_at) gives it.  Probes left out where either is unknown or their
     batches differ in number: there the two are independent."""
     fit = data.impact_fit("ball_ball")
     dem = (data.summary["methods"].get(DEM) or {}).get("impacts") or {}
-    measured = dem.get("ball_ball_mean_normal_speed")
     if (fit is None or fit["left_out"] is None or data.impacts is None
-            or not all(isinstance(v, (int, float)) and math.isfinite(v)
-                       for v in (fit["measured_mean"], measured))
-            or abs(fit["measured_mean"] - measured) > 1e-9 * abs(measured)):
+            or not same_measured_mean(fit["measured_mean"],
+                                      dem.get("ball_ball_mean_normal_speed"))):
         return {}
     c0s, c1s = fit["left_out"]
     out = {}

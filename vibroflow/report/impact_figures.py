@@ -15,7 +15,8 @@ import numpy as np
 
 from vibroflow.analysis.impact_stats import (SPEED_EDGES_M_S, ImpactDistributions,
                                              impact_distributions,
-                                             relative_difference_stderr, speed_flag)
+                                             relative_difference_stderr, same_measured_mean,
+                                             speed_flag)
 from vibroflow.io.pictures import pyplot
 from vibroflow.measure.contacts import mean_speed_stderr
 from vibroflow.report.data import DEM, MIN_IMPACTS_PER_CELL, StudyData
@@ -139,14 +140,11 @@ def measured_covariance(impacts: dict, kind: str, measured: float) -> float | No
     """The covariance (m^2/s^2) of a continuum's inferred KIND mean speed with the DEM's
     measured one, `measured` (m/s), where its relation was calibrated on that DEM run: the
     summary's KIND_mean_normal_speed_relation_measured_covariance, when the mean its
-    calibration measured (_relation_measured_mean) is `measured` to round-off (the same
-    impacts; another run's mean differs in its leading digits).  None otherwise: the two are
-    independent."""
+    calibration measured (_relation_measured_mean) is `measured` (same_measured_mean).  None
+    otherwise: the two are independent."""
     own = _num(impacts.get(f"{kind}_mean_normal_speed_relation_measured_mean"))
     cov = _num(impacts.get(f"{kind}_mean_normal_speed_relation_measured_covariance"))
-    if not (math.isfinite(own) and math.isfinite(cov) and math.isfinite(measured)):
-        return None
-    return cov if abs(own - measured) <= 1e-9 * abs(measured) else None
+    return cov if math.isfinite(cov) and same_measured_mean(own, measured) else None
 
 
 def speed_comparisons(data: StudyData) -> list[dict]:
