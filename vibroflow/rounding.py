@@ -16,22 +16,20 @@ from __future__ import annotations
 
 import math
 
+from vibroflow.numbers import is_finite_number
+
 #: the error's significant figures
 ERROR_FIGURES = 2
 #: beyond these decimal exponents of the error, the text takes the exponent form
 SMALLEST_FIXED, LARGEST_FIXED = -6, 4
 
 
-def _finite(x) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-
-
 def plus_minus(x: float, se: float | None, fmt: str = ".4g") -> str:
     """'x ± se' rounded as the module says; 'x' in `fmt` where se is missing, zero or not
     finite; 'n/a' where x is not a finite number."""
-    if not _finite(x):
+    if not is_finite_number(x):
         return "n/a"
-    if not _finite(se) or se <= 0.0:
+    if not is_finite_number(se) or se <= 0.0:
         return format(x, fmt)
     exponent = math.floor(math.log10(se))
     if round(se / 10.0 ** (exponent - ERROR_FIGURES + 1)) >= 10 ** ERROR_FIGURES:

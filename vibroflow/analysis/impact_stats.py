@@ -30,6 +30,7 @@ import numpy as np
 
 from vibroflow.measure.contacts import IMPACT_KINDS, impact_chunks
 from vibroflow.measure.stats import cycles_in_window, stderr_of_batches
+from vibroflow.numbers import is_finite_number
 from vibroflow.tub.geometry import TubGeometry, cross_section_area, point_to_arc
 
 #: speed bin edges (m/s): 0, then 500 log-spaced bins a decade from 1e-6 to 100 m/s
@@ -241,8 +242,7 @@ def speed_flag(inferred, measured) -> tuple[float, bool | None]:
     """(relative difference (inferred - measured) / measured, flagged): flagged when it exceeds
     FLAG_RELATIVE_DIFFERENCE in size; (NaN, None) when either is missing or measured is not
     positive."""
-    if not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-               for x in (inferred, measured)) or measured <= 0:
+    if not all(is_finite_number(x) for x in (inferred, measured)) or measured <= 0:
         return float("nan"), None
     rel = (float(inferred) - float(measured)) / float(measured)
     return rel, bool(abs(rel) > FLAG_RELATIVE_DIFFERENCE)
@@ -254,8 +254,7 @@ def same_measured_mean(calibrated_mean, measured) -> bool:
     the run's measured speeds move together from batch to batch.  Another fill seed's or case's
     mean differs in its leading digits."""
     vals = (calibrated_mean, measured)
-    if not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-               for x in vals):
+    if not all(is_finite_number(x) for x in vals):
         return False
     return abs(float(calibrated_mean) - float(measured)) <= 1e-9 * abs(float(measured))
 
@@ -269,8 +268,7 @@ def relative_difference_stderr(inferred, inferred_stderr, measured, measured_std
     independent without it (None or not finite).  NaN when a speed or an error is missing or
     measured is not positive."""
     vals = (inferred, inferred_stderr, measured, measured_stderr)
-    if not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-               for x in vals) or measured <= 0:
+    if not all(is_finite_number(x) for x in vals) or measured <= 0:
         return float("nan")
     i, si, m, sm = (float(x) for x in vals)
     var = si**2 + (i / m * sm) ** 2

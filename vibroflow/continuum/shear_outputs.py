@@ -15,6 +15,7 @@ from vibroflow.io.calibration_file import Calibration, ImpactRelation
 from vibroflow.measure.phase_shear import PhaseShear, near_wall_nodes
 from vibroflow.measure.stats import (affine_prediction_covariance, affine_prediction_stderr,
                                      batch_means)
+from vibroflow.numbers import number_or_nan
 
 from .sampling import Samples
 
@@ -89,17 +90,13 @@ def shear_relation_keys(tag: str) -> RelationKeys:
 _SHEAR_RELATIONS = (shear_relation_keys("_cells"), shear_relation_keys(""))
 
 
-def _num(x) -> float:
-    return float(x) if isinstance(x, (int, float)) and not isinstance(x, bool) else math.nan
-
-
 def chosen_keys(rel, candidates) -> RelationKeys | None:
     """The first of `candidates` (RelationKeys) whose two coefficients `rel` ([impacts.KIND])
     holds finite; None if none."""
     if rel is None:
         return None
     for keys in candidates:
-        if all(math.isfinite(_num(getattr(rel, k, None))) for k in (keys.c0, keys.c1)):
+        if all(math.isfinite(number_or_nan(getattr(rel, k, None))) for k in (keys.c0, keys.c1)):
             return keys
     return None
 
@@ -112,7 +109,7 @@ def relation_errors(rel, candidates) -> tuple[float, float, float]:
     keys = chosen_keys(rel, candidates)
     if keys is None:
         return math.nan, math.nan, math.nan
-    return tuple(_num(getattr(rel, k, None))
+    return tuple(number_or_nan(getattr(rel, k, None))
                  for k in (keys.c0_stderr, keys.c1_stderr, keys.covariance))
 
 
@@ -142,10 +139,10 @@ def measured_covariance_keys(impacts: dict, kind: str, rel, candidates, x,
     if keys is None:
         return
     cov = affine_prediction_covariance(
-        x, *(_num(getattr(rel, k, None))
+        x, *(number_or_nan(getattr(rel, k, None))
              for k in (keys.c0_measured_covariance, keys.c1_measured_covariance)),
         intercept_share=intercept_share)
-    mean = _num(getattr(rel, "mean_normal_speed_m_s", None))
+    mean = number_or_nan(getattr(rel, "mean_normal_speed_m_s", None))
     if math.isfinite(cov) and math.isfinite(mean):
         impacts[kind + "_mean_normal_speed_relation_measured_covariance"] = cov
         impacts[kind + "_mean_normal_speed_relation_measured_mean"] = mean

@@ -25,6 +25,8 @@ import warnings
 
 import numpy as np
 
+from vibroflow.numbers import is_finite_number
+
 #: tolerance (in cycles) when placing a sample on a cycle boundary: a snapshot written at
 #: t_start + k/f with round-off still belongs to cycle k.
 CYCLE_TOLERANCE = 1.0e-6
@@ -177,10 +179,10 @@ def affine_prediction_stderr(x, c0_stderr, c1_stderr, covariance=None,
     the covariance (None or not finite) the bound that holds at any correlation of the two,
     s se0 + |x| se1.  NaN when x or an error is missing."""
     vals = (x, c0_stderr, c1_stderr, intercept_share)
-    if not all(_finite_number(v) for v in vals):
+    if not all(is_finite_number(v) for v in vals):
         return float("nan")
     x, e0, e1, s = (float(v) for v in vals)
-    if not _finite_number(covariance):
+    if not is_finite_number(covariance):
         return abs(s) * e0 + abs(x) * e1
     var = (s * e0) ** 2 + (x * e1) ** 2 + 2.0 * s * x * float(covariance)
     # a covariance from another estimate than the errors can overshoot |rho| = 1 a little
@@ -193,7 +195,7 @@ def affine_prediction_covariance(x, c0_covariance, c1_covariance,
     from its coefficients' covariances with that statistic: s cov(c0, .) + x cov(c1, .)
     (s as in affine_prediction_stderr).  NaN when x or a covariance is missing."""
     vals = (x, c0_covariance, c1_covariance, intercept_share)
-    if not all(_finite_number(v) for v in vals):
+    if not all(is_finite_number(v) for v in vals):
         return float("nan")
     x, k0, k1, s = (float(v) for v in vals)
     return s * k0 + x * k1
@@ -204,16 +206,11 @@ def quadrature_stderr(stderr, other_stderr) -> float:
     continuum's inferred impact speed: its run's batch-means error and its calibrated
     relation's, affine_prediction_stderr); the first alone where the second is missing (an
     older calibration without the relation's errors); NaN without the first."""
-    if not _finite_number(stderr):
+    if not is_finite_number(stderr):
         return float("nan")
-    if not _finite_number(other_stderr):
+    if not is_finite_number(other_stderr):
         return float(stderr)
     return float(np.hypot(float(stderr), float(other_stderr)))
-
-
-def _finite_number(v) -> bool:
-    return (isinstance(v, (int, float, np.floating, np.integer)) and not isinstance(v, bool)
-            and bool(np.isfinite(v)))
 
 
 def jackknife_of_batches(statistic, batches, keys) -> dict:

@@ -19,6 +19,7 @@ from vibroflow.analysis.impact_stats import (SPEED_EDGES_M_S, ImpactDistribution
                                              speed_flag)
 from vibroflow.io.pictures import pyplot
 from vibroflow.measure.contacts import mean_speed_stderr
+from vibroflow.numbers import number_or_nan
 from vibroflow.report.data import DEM, MIN_IMPACTS_PER_CELL, StudyData
 from vibroflow.report.figures import (inferred_impact_speed_covariances,
                                       inferred_impact_speed_errors, inferred_impact_speeds,
@@ -122,10 +123,6 @@ def wall_map(dist: ImpactDistributions) -> bytes:
     return png_bytes(fig)
 
 
-def _num(x) -> float:
-    return float(x) if isinstance(x, (int, float)) and not isinstance(x, bool) else math.nan
-
-
 def inferred_from(impacts: dict) -> list[str]:
     """What a method's summary `impacts` block says its mean speeds are inferred from: "shear
     rate" (continuum.shear_outputs), "granular temperature" (continuum.temperature_impacts,
@@ -142,8 +139,8 @@ def measured_covariance(impacts: dict, kind: str, measured: float) -> float | No
     summary's KIND_mean_normal_speed_relation_measured_covariance, when the mean its
     calibration measured (_relation_measured_mean) is `measured` (same_measured_mean).  None
     otherwise: the two are independent."""
-    own = _num(impacts.get(f"{kind}_mean_normal_speed_relation_measured_mean"))
-    cov = _num(impacts.get(f"{kind}_mean_normal_speed_relation_measured_covariance"))
+    own = number_or_nan(impacts.get(f"{kind}_mean_normal_speed_relation_measured_mean"))
+    cov = number_or_nan(impacts.get(f"{kind}_mean_normal_speed_relation_measured_covariance"))
     return cov if math.isfinite(cov) and same_measured_mean(own, measured) else None
 
 
@@ -165,10 +162,10 @@ def speed_comparisons(data: StudyData) -> list[dict]:
         if not inferred_from(im):
             continue
         for key, label in SUMMARY_KINDS.items():
-            m, i = _num(dem.get(f"{key}_mean_normal_speed")), _num(
+            m, i = number_or_nan(dem.get(f"{key}_mean_normal_speed")), number_or_nan(
                 im.get(f"{key}_mean_normal_speed"))
             rel, flag = speed_flag(i, m)
-            sm = _num(dem.get(f"{key}_mean_normal_speed_stderr"))
+            sm = number_or_nan(dem.get(f"{key}_mean_normal_speed_stderr"))
             si = mean_speed_stderr(im, key)
             rows.append({"where": "bed mean", "kind": label, "method": name, "measured": m,
                          "measured_stderr": sm, "inferred": i, "inferred_stderr": si,
@@ -184,10 +181,10 @@ def speed_comparisons(data: StudyData) -> list[dict]:
         for probe, p in data.scenario.analysis.probes.items():
             v, count = data.impacts.at(p.x, p.z)
             m = v if count >= MIN_IMPACTS_PER_CELL else math.nan
-            i = _num(inferred.get(probe))
+            i = number_or_nan(inferred.get(probe))
             rel, flag = speed_flag(i, m)
             se = data.impacts.stderr_at(p.x, p.z) if count >= MIN_IMPACTS_PER_CELL else math.nan
-            si = _num(errors.get(probe))
+            si = number_or_nan(errors.get(probe))
             rows.append({"where": f"probe {probe} cell", "kind": "ball-ball", "method": name,
                          "measured": m, "measured_stderr": se, "inferred": i,
                          "inferred_stderr": si, "relative": rel,
