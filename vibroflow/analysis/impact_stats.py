@@ -272,7 +272,7 @@ def relative_difference_stderr(inferred, inferred_stderr, measured, measured_std
         return float("nan")
     i, si, m, sm = (float(x) for x in vals)
     var = si**2 + (i / m * sm) ** 2
-    if isinstance(covariance, (int, float)) and math.isfinite(covariance):
+    if is_finite_number(covariance):
         # two covariance estimates of one set of batches can overshoot |rho| = 1 a little
         var = max(var - 2.0 * i / m * float(covariance), 0.0)
     return float(math.sqrt(var) / m)

@@ -153,9 +153,8 @@ def jackknife_of_refits(fits: dict, refit, n_batches: int, measured=None) -> Non
         fit["stderr_batches"] = len(refits)
         fit["c0_left_out"], fit["c1_left_out"] = c0s, c1s
         if measured is not None:
-            ms = list(measured)[:len(refits)]
-            fit["c0_measured_covariance"] = jackknife_covariance(c0s, ms)
-            fit["c1_measured_covariance"] = jackknife_covariance(c1s, ms)
+            fit["c0_measured_covariance"] = jackknife_covariance(c0s, measured)
+            fit["c1_measured_covariance"] = jackknife_covariance(c1s, measured)
 
 
 def impact_relations(run, phase_fields, time_fields=None,
